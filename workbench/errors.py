@@ -1,0 +1,46 @@
+"""The workbench's exceptions.
+
+Every failure a user can cause (a bad file, bad data, an ill-posed model) raises a subclass of
+:class:`WorkbenchError` whose message names the file, the place and the cause, so that the CLI can print one
+clear line instead of a traceback.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "WorkbenchError",
+    "DataError",
+    "FormatError",
+    "MappingError",
+    "ModelError",
+    "SolverError",
+    "ConvergenceWarning",
+]
+
+
+class WorkbenchError(Exception):
+    """Base class of every error the workbench raises on purpose."""
+
+
+class DataError(WorkbenchError, ValueError):
+    """Demonstration data or a data file is invalid (lengths, non-finite values, time, format)."""
+
+
+class FormatError(DataError):
+    """A file is not of the format it claims to be, or is of a newer format version."""
+
+
+class MappingError(DataError):
+    """A channel mapping names something the log does not contain, or is malformed."""
+
+
+class ModelError(WorkbenchError, ValueError):
+    """A model cannot be fitted or used: rank-deficient data, a non-stabilizing gain, a bad model file."""
+
+
+class SolverError(ModelError):
+    """Every solver in the chain failed or returned a solution that did not pass the post-checks."""
+
+
+class ConvergenceWarning(UserWarning):
+    """An iterative fit (EM) stopped at ``max_iter`` before meeting its tolerance."""

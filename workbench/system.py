@@ -1,0 +1,220 @@
+"""The plant: a discrete-time linear system ``x[k+1] = A x[k] + B u[k]`` (eq. (1) of the method paper).
+
+The method needs (A, B) known and stabilizable (Assumption 1) with ``rank B = m < n`` (Assumption 2);
+:class:`LinearSystem` checks both on construction. :func:`planar_quadrotor` is the paper's landing testbed
+(eqs. (34)–(35)); :meth:`LinearSystem.identify` estimates (A, B) from logs that come without a model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from workbench.errors import ModelError
+
+if TYPE_CHECKING:
+    from workbench.demos import DemonstrationSet
+
+__all__ = ["LinearSystem", "planar_quadrotor", "is_stabilizable"]
+
+
+def _rank(M: np.ndarray, rtol: float = 1e-10) -> int:
+    s = np.linalg.svd(M, compute_uv=False)
+    return int((s > rtol * max(M.shape) * (s[0] if s.size else 0.0)).sum()) if s.size and s[0] > 0 else 0
+
+
+def is_stabilizable(A: np.ndarray, B: np.ndarray, rtol: float = 1e-9) -> tuple[bool, complex | None]:
+    """PBH test: (A, B) is stabilizable iff rank [A − λI, B] = n for every eigenvalue |λ| ≥ 1.
+
+    Returns ``(ok, λ)`` with the first offending eigenvalue, or ``None``.
+    """
+    n = A.shape[0]
+    for lam in np.linalg.eigvals(A):
+        if abs(lam) >= 1 - 1e-12 and _rank(np.hstack([A - lam * np.eye(n), B]).astype(complex), rtol) < n:
+            return False, complex(lam)
+    return True, None
+
+
+@dataclass(frozen=True, eq=False)
+class LinearSystem:
+    """A validated discrete-time linear plant ``x[k+1] = A x[k] + B u[k]``.
+
+    Parameters
+    ----------
+    A : (n, n) array
+    B : (n, m) array
+    dt : float
+        Sampling step in seconds.
+    state_names, input_names : sequence of str
+        Default ``x0…`` and ``u0…``.
+    u_min, u_max : (m,) arrays, optional
+        Input bounds (e.g. stick limits), used when a prediction clips its inputs.
+    fit_residual : float, optional
+        For an identified system, the RMS one-step prediction residual of the fit.
+
+    Raises
+    ------
+    ModelError
+        Bad shapes, non-finite entries, (A, B) not stabilizable (Assumption 1), rank B ≠ m or m ≥ n
+        (Assumption 2).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    dt: float
+    state_names: tuple[str, ...] = ()
+    input_names: tuple[str, ...] = ()
+    u_min: np.ndarray | None = None
+    u_max: np.ndarray | None = None
+    fit_residual: float | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        A = np.array(self.A, dtype=np.float64)
+        B = np.array(self.B, dtype=np.float64)
+        if B.ndim == 1:
+            B = B.reshape(-1, 1)
+        if A.ndim != 2 or A.shape[0] != A.shape[1]:
+            raise ModelError(f"A must be square, got shape {A.shape}")
+        if B.ndim != 2 or B.shape[0] != A.shape[0]:
+            raise ModelError(f"B must have {A.shape[0]} rows like A, got shape {B.shape}")
+        for name, M in (("A", A), ("B", B)):
+            if not np.isfinite(M).all():
+                i, j = np.argwhere(~np.isfinite(M))[0]
+                raise ModelError(f"{name}[{i}, {j}] is not finite ({M[i, j]})")
+        n, m = B.shape
+        if not m < n:
+            raise ModelError(f"Assumption 2 needs fewer inputs than states: m = {m}, n = {n}")
+        if (r := _rank(B)) != m:
+            raise ModelError(f"Assumption 2 needs rank B = m = {m}, but rank B = {r}")
+        ok, lam = is_stabilizable(A, B)
+        if not ok:
+            raise ModelError(
+                f"(A, B) is not stabilizable (Assumption 1): the mode λ = {lam:.6g} (|λ| = {abs(lam):.6g}) "
+                "cannot be reached by the inputs (PBH test)"
+            )
+        if not (self.dt > 0 and np.isfinite(self.dt)):
+            raise ModelError(f"dt must be a positive finite number, got {self.dt!r}")
+        state_names = tuple(self.state_names) or tuple(f"x{i}" for i in range(n))
+        input_names = tuple(self.input_names) or tuple(f"u{i}" for i in range(m))
+        if len(state_names) != n or len(input_names) != m:
+            raise ModelError(
+                f"{len(state_names)} state names and {len(input_names)} input names for a system with n={n}, m={m}"
+            )
+        bounds = []
+        for b in (self.u_min, self.u_max):
+            if b is not None:
+                b = np.broadcast_to(np.asarray(b, dtype=np.float64), (m,)).copy()
+                b.setflags(write=False)
+            bounds.append(b)
+        if bounds[0] is not None and bounds[1] is not None and not (bounds[0] < bounds[1]).all():
+            raise ModelError(f"u_min {bounds[0]} must be below u_max {bounds[1]}")
+        A.setflags(write=False)
+        B.setflags(write=False)
+        object.__setattr__(self, "A", A)
+        object.__setattr__(self, "B", B)
+        object.__setattr__(self, "dt", float(self.dt))
+        object.__setattr__(self, "state_names", state_names)
+        object.__setattr__(self, "input_names", input_names)
+        object.__setattr__(self, "u_min", bounds[0])
+        object.__setattr__(self, "u_max", bounds[1])
+
+    @property
+    def n(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.B.shape[1]
+
+    def step(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``A x + B u``, vectorized over leading batch dimensions."""
+        return x @ self.A.T + u @ self.B.T
+
+    def clip(self, u: np.ndarray) -> np.ndarray:
+        """Inputs clipped to the bounds, where the system has them."""
+        if self.u_min is None and self.u_max is None:
+            return u
+        return np.clip(u, self.u_min, self.u_max)
+
+    @classmethod
+    def identify(
+        cls,
+        demos: DemonstrationSet,
+        *,
+        u_min: Sequence[float] | None = None,
+        u_max: Sequence[float] | None = None,
+    ) -> LinearSystem:
+        """Least-squares estimate of (A, B) from consecutive samples of every demonstration.
+
+        Solves ``min ‖X' − [A B] [X; U]‖_F`` over all pairs (x[k], u[k]) → x[k+1] within each demonstration
+        (never across two). The RMS one-step residual is stored in ``fit_residual``.
+
+        Raises
+        ------
+        ModelError
+            When the data do not excite every state and input direction (rank of [X; U] < n + m).
+        """
+        Z, Xn = [], []
+        for d in demos:
+            Z.append(np.hstack([d.x[:-1], d.u[:-1]]))
+            Xn.append(d.x[1:])
+        if not Z:
+            raise ModelError("identify needs at least one demonstration")
+        Z_all, Xn_all = np.concatenate(Z), np.concatenate(Xn)
+        n, m = demos.n_states, demos.n_inputs
+        rank = _rank(Z_all)
+        if rank < n + m:
+            cond = np.linalg.cond(Z_all)
+            raise ModelError(
+                f"identify: the data excite only {rank} of {n + m} state and input directions "
+                f"(cond [X; U] = {cond:.3g}); record more varied demonstrations"
+            )
+        theta, *_ = np.linalg.lstsq(Z_all, Xn_all, rcond=None)
+        AB = theta.T
+        residual = Xn_all - Z_all @ theta
+        return cls(
+            AB[:, :n],
+            AB[:, n:],
+            demos.dt,
+            demos.state_names,
+            demos.input_names,
+            u_min=u_min,
+            u_max=u_max,
+            fit_residual=float(np.sqrt(np.mean(residual**2))),
+        )
+
+
+def planar_quadrotor(
+    dt: float = 0.05,
+    g: float = 9.8,
+    k: tuple[float, float, float] = (-0.1, -1.0, -30.0),
+    mass: float = 0.25,
+    Ix: float = 0.01,
+) -> LinearSystem:
+    """The paper's linearized planar quadrotor, eqs. (34)–(35) of the method paper.
+
+    State ``[x, y, phi, xdot, ydot, phidot]`` (m, m, rad, m/s, m/s, rad/s; y up, gravity compensated),
+    input ``[u1, u2]`` = [angular acceleration, thrust] in [−1, 1]²; ``k = (k1, k2, k3)`` are the inner
+    stabilizing loop's parameters.
+    """
+    k1, k2, k3 = k
+    Ac = np.zeros((6, 6))
+    Ac[0, 3] = Ac[1, 4] = Ac[2, 5] = 1.0
+    Ac[3, 2] = g
+    Ac[4, 4] = k1
+    Ac[5, 2], Ac[5, 5] = k2, k3
+    Bc = np.zeros((6, 2))
+    Bc[4, 1] = 1.0 / mass
+    Bc[5, 0] = 1.0 / Ix
+    return LinearSystem(
+        np.eye(6) + dt * Ac,
+        dt * Bc,
+        dt,
+        ("x", "y", "phi", "xdot", "ydot", "phidot"),
+        ("u1", "u2"),
+        u_min=np.array([-1.0, -1.0]),
+        u_max=np.array([1.0, 1.0]),
+    )
