@@ -12,7 +12,7 @@ from workbench.system import planar_quadrotor
 
 def test_planar_quadrotor_matches_paper_entry_by_entry():
     dt, g, (k1, k2, k3), mass, Ix = 0.05, 9.8, (-0.1, -1.0, -30.0), 0.25, 0.01
-    # eq. (34): A = I6 + dt * [...]; written out row by row as printed in the paper
+    # eq. (31): A = I6 + dt * [...]; written out row by row as printed in the paper
     A = np.eye(6) + dt * np.array(
         [
             [0, 0, 0, 1, 0, 0],
@@ -23,7 +23,7 @@ def test_planar_quadrotor_matches_paper_entry_by_entry():
             [0, 0, k2, 0, 0, k3],
         ]
     )
-    # eq. (35)
+    # eq. (32)
     B = dt * np.array([[0, 0], [0, 0], [0, 0], [0, 0], [0, 1 / mass], [1 / Ix, 0]])
     sys_ = planar_quadrotor()
     for i in range(6):

@@ -2,7 +2,7 @@
 
 The method needs (A, B) known and stabilizable (Assumption 1) with ``rank B = m < n`` (Assumption 2);
 :class:`LinearSystem` checks both on construction. :func:`planar_quadrotor` is the paper's landing testbed
-(eqs. (34)–(35)); :meth:`LinearSystem.identify` estimates (A, B) from logs that come without a model.
+(eqs. (31)–(32), counted in order in the LaTeX source); :meth:`LinearSystem.identify` estimates (A, B) from logs that come without a model.
 """
 
 from __future__ import annotations
@@ -194,7 +194,7 @@ def planar_quadrotor(
     mass: float = 0.25,
     Ix: float = 0.01,
 ) -> LinearSystem:
-    """The paper's linearized planar quadrotor, eqs. (34)–(35) of the method paper.
+    """The paper's linearized planar quadrotor, eqs. (31)–(32) of the method paper (`simulator_dynamics_A`, `_B`).
 
     State ``[x, y, phi, xdot, ydot, phidot]`` (m, m, rad, m/s, m/s, rad/s; y up, gravity compensated),
     input ``[u1, u2]`` = [angular acceleration, thrust] in [−1, 1]²; ``k = (k1, k2, k3)`` are the inner

@@ -1,0 +1,861 @@
+"""Task objective by inverse LQR: steps 1 and 2 of Algorithm 1 of the method paper.
+
+Step 1 estimates the task-objective-based gain ``K̂`` of ``u = K x`` from the demonstrations, either as in the
+paper by dynamic mode decomposition, eqs. (12)-(14) of the method paper (``Ã = X' X⁺``, ``K̂ = B⁺(Ã − A)``),
+or by the direct regression ``K̂ = U X⁺``, which is algebraically identical for exact (A, B) and more accurate
+under process noise or model mismatch.
+
+Step 2 finds a quadratic cost ``M = [[Q, S], [Sᵀ, R]]`` for which ``K̂`` is the LQR gain, by the SDP of
+eqs. (15)-(19) of the method paper (``minimize α`` subject to ``P ⪰ 0``, the two Riccati equalities and
+``I ⪯ M ⪯ αI``).
+
+Equation numbers count every ``\\begin{equation}`` of the paper's LaTeX in order (labels ``eq:DMD_argue``,
+``eq:DMD_variables``, ``eq:K_hat_computation`` for (12)-(14) and ``eq:convex_optimization`` to
+``eq:LMI_constraints4`` for (15)-(19)).
+
+Convention: ``u = K x``; SciPy / MATLAB ``dlqr`` return the gain of ``u = -K x``, so ``K_here = -K_dlqr``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import warnings
+from collections import OrderedDict
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import cvxpy as cp
+import numpy as np
+import scipy.linalg
+
+from workbench.errors import ConvergenceWarning, DataError, ModelError, SolverError
+
+try:  # a dependency of scikit-learn, so normally present
+    from threadpoolctl import ThreadpoolController
+except ImportError:  # pragma: no cover
+    ThreadpoolController = None
+
+__all__ = [
+    "GainMethod",
+    "Structure",
+    "TaskObjective",
+    "BootstrapResult",
+    "InverseLQR",
+    "stack_demonstrations",
+    "gain_from_arrays",
+    "estimate_gain",
+    "check_stabilizing",
+    "spectral_radius",
+    "forward_gain",
+    "inverse_lqr",
+    "bootstrap",
+]
+
+GainMethod = Literal["direct", "dmd"]
+Structure = Literal["full", "S=0", "diagonal"]
+
+_METHODS = ("direct", "dmd")
+_STRUCTURES = ("full", "S=0", "diagonal")
+
+# Post-check tolerances a solution must meet before it is accepted (see `InverseLQR.solve`).
+LAMBDA_MIN_TOL = 1e-6
+FORWARD_GAIN_TOL = 1e-6
+P_PSD_TOL = 1e-7
+# A raw λmin(M) this close below 1 is rescaled to 1 before the checks (see `InverseLQR._attempt`).
+RESCALE_MAX = 1e-3
+# The second stage may give up this much of the optimal α to pick the member closest to I.
+SECOND_STAGE_SLACK = 1.001
+
+# Tighter Clarabel tolerances than 1e-8 do not buy accuracy here: on 40 random 6x2 gains they make it stop
+# at "almost solved" more often, and the second-stage M then varies by ~1e-6 between near-identical gains.
+_SOLVER_OPTIONS: dict[str, dict[str, Any]] = {
+    "CLARABEL": {"tol_gap_abs": 1e-8, "tol_gap_rel": 1e-8, "tol_feas": 1e-8, "max_iter": 200},
+    "SCS": {"eps_abs": 1e-8, "eps_rel": 1e-8, "max_iters": 200_000},
+    "CVXOPT": {"abstol": 1e-9, "reltol": 1e-9, "feastol": 1e-9},
+}
+_SOLVER_CHAIN = ("CLARABEL", "SCS", "CVXOPT")
+_ACCEPTED_STATUS = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+# Errors a solver backend may raise on a hard instance; anything else is a bug and propagates.
+_SOLVER_EXCEPTIONS = (cp.error.SolverError, ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
+
+
+_THREADPOOL: Any = None
+
+
+def _single_threaded_blas() -> contextlib.AbstractContextManager:
+    """Run small dense algebra with one BLAS thread.
+
+    On a loaded 2-core machine a threaded OpenBLAS spends its time spinning: a 6x6 DARE took 10 ms instead
+    of 0.8 ms, and an inverse LQR re-solve 73 ms instead of 19 ms.
+    """
+    global _THREADPOOL
+    if ThreadpoolController is None:
+        return contextlib.nullcontext()
+    if _THREADPOOL is None:
+        _THREADPOOL = ThreadpoolController()
+    return _THREADPOOL.limit(limits=1, user_api="blas")
+
+
+# --------------------------------------------------------------------------------------------- validation
+
+
+def _as_matrix(a: Any, name: str, shape: tuple[int | None, int | None] | None = None) -> np.ndarray:
+    try:
+        arr = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{name} is not a numeric array: {exc}") from exc
+    if arr.ndim != 2:
+        raise DataError(f"{name} must be a 2-D array, got shape {arr.shape}")
+    if shape is not None:
+        for axis, want in enumerate(shape):
+            if want is not None and arr.shape[axis] != want:
+                raise DataError(f"{name} has shape {arr.shape}, expected {shape} (None = any)")
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise DataError(f"{name} has a non-finite value at index {tuple(int(i) for i in bad)}")
+    return arr
+
+
+def _system_matrices(A: Any, B: Any) -> tuple[np.ndarray, np.ndarray]:
+    A = _as_matrix(A, "A")
+    if A.shape[0] != A.shape[1]:
+        raise DataError(f"A must be square, got shape {A.shape}")
+    B = _as_matrix(B, "B", (A.shape[0], None))
+    return A, B
+
+
+def spectral_radius(A_cl: np.ndarray) -> float:
+    """Spectral radius ``ρ`` (largest eigenvalue modulus) of a square matrix."""
+    return float(np.max(np.abs(np.linalg.eigvals(A_cl)))) if A_cl.size else 0.0
+
+
+def check_stabilizing(A: Any, B: Any, K: Any) -> float:
+    """Check Assumption 3 of the method paper: ``ρ(A + B K) < 1``.
+
+    Parameters
+    ----------
+    A, B : array_like, shapes (n, n) and (n, m)
+        Plant ``x[k+1] = A x[k] + B u[k]`` (eq. (1) of the method paper).
+    K : array_like, shape (m, n)
+        Gain of ``u = K x`` (eq. (3)).
+
+    Returns
+    -------
+    float
+        The spectral radius ``ρ(A + B K)``.
+
+    Raises
+    ------
+    ModelError
+        If ``ρ(A + B K) ≥ 1``; the message names ρ. No SDP is solved for such a gain: the inverse LQR
+        problem, eqs. (15)-(19), is feasible only for stabilizing gains.
+    """
+    A, B = _system_matrices(A, B)
+    K = _as_matrix(K, "K", (B.shape[1], A.shape[0]))
+    rho = spectral_radius(A + B @ K)
+    if not rho < 1.0:
+        raise ModelError(
+            f"the gain is not stabilizing: spectral radius ρ(A + B K) = {rho:.6g} ≥ 1 (Assumption 3 of the "
+            "method paper); no quadratic cost has this gain as its LQR gain. Check the sign convention "
+            "(u = K x, i.e. K = -K_dlqr), the state/input units, or whether the demonstrations hold the "
+            "closed-loop behavior at all"
+        )
+    return rho
+
+
+# ------------------------------------------------------------------------------------------ step 1: K̂
+
+
+def _demo_name(d: Any, j: int) -> str:
+    ident = getattr(d, "id", None)
+    if ident is None:
+        meta = getattr(d, "meta", None)
+        ident = meta.get("id") if isinstance(meta, dict) else None
+    return f"demonstration {j}" + (f" ({ident!r})" if ident is not None else "")
+
+
+def _demo_blocks(demos: Iterable[Any], n: int, m: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per demonstration, the column blocks (X_j, U_j, X'_j) of eq. (13) of the method paper."""
+    blocks = []
+    for j, d in enumerate(demos):
+        name = _demo_name(d, j)
+        x = _as_matrix(getattr(d, "x", None), f"{name}: x", (None, n))
+        u = _as_matrix(getattr(d, "u", None), f"{name}: u", (None, m))
+        if x.shape[0] != u.shape[0]:
+            raise DataError(f"{name}: x has {x.shape[0]} samples but u has {u.shape[0]}")
+        if x.shape[0] < 2:
+            continue  # a single sample has no transition to contribute
+        blocks.append((x[:-1].T, u[:-1].T, x[1:].T))
+    return blocks
+
+
+def stack_demonstrations(demos: Iterable[Any], n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stack demonstrations into the data matrices of eq. (13) of the method paper.
+
+    Parameters
+    ----------
+    demos : iterable of Demonstration
+        Each with ``.x`` (N_j, n) and ``.u`` (N_j, m), ``u[k]`` applied between ``x[k]`` and ``x[k+1]``.
+    n, m : int
+        Numbers of states and inputs.
+
+    Returns
+    -------
+    X, U, X_next : ndarray, shapes (n, T), (m, T), (n, T)
+        Columns ``x_1 … x_{N_j - 1}``, the inputs at the same steps, and ``x_2 … x_{N_j}`` of every
+        demonstration in turn, ``T = Σ_j (N_j − 1)``.
+    """
+    blocks = _demo_blocks(demos, n, m)
+    if not blocks:
+        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
+    return tuple(np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))  # type: ignore[return-value]
+
+
+def gain_from_arrays(X: Any, U: Any, X_next: Any, A: Any, B: Any, method: GainMethod = "direct") -> np.ndarray:
+    """Estimate the gain ``K̂`` of ``u = K x`` from stacked data (step 1 of Algorithm 1).
+
+    Parameters
+    ----------
+    X, U, X_next : array_like, shapes (n, T), (m, T), (n, T)
+        States, inputs at the same steps and next states as columns (eq. (13) of the method paper).
+        ``U`` is used by ``"direct"`` only, ``X_next`` by ``"dmd"`` only.
+    A, B : array_like, shapes (n, n) and (n, m)
+        The known plant (Assumption 1).
+    method : {"direct", "dmd"}
+        ``"dmd"``: ``Ã = X' X⁺`` (eq. (12)) and ``K̂ = B⁺(Ã − A)`` (eq. (14)), valid under rank B = m
+        (Assumption 2). ``"direct"``: the least-squares regression ``K̂ = U X⁺``; identical to DMD for exact
+        dynamics, more accurate under process noise or model mismatch.
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+
+    Raises
+    ------
+    ModelError
+        If rank(X) < n (the message reports rank and cond(X)), if rank B < m for ``"dmd"``, or if the
+        estimate is not stabilizing (Assumption 3; the message names ρ).
+    """
+    if method not in _METHODS:
+        raise DataError(f"method must be one of {_METHODS}, got {method!r}")
+    A, B = _system_matrices(A, B)
+    n, m = B.shape
+    X = _as_matrix(X, "X", (n, None))
+    T = X.shape[1]
+    sv = np.linalg.svd(X, compute_uv=False)
+    tol = sv[0] * max(X.shape) * np.finfo(float).eps if sv.size else 0.0
+    rank = int(np.sum(sv > tol))
+    if rank < n:
+        cond = float(sv[0] / sv[-1]) if sv.size == n and sv[-1] > 0 else math.inf
+        raise ModelError(
+            f"state data are rank-deficient: rank(X) = {rank} < n = {n} over {T} transitions "
+            f"(cond(X) = {cond:.3g}); the demonstrations do not excite every state direction, so K̂ "
+            "(eqs. (12)-(14) of the method paper) is not determined. Add demonstrations, or drop states "
+            "that never change"
+        )
+    cond_X = float(sv[0] / sv[-1])
+    if method == "direct":
+        U = _as_matrix(U, "U", (m, T))
+        # lstsq on Xᵀ Kᵀ = Uᵀ: the minimum-norm least-squares solution, i.e. K̂ = U X⁺, without forming X⁺.
+        K = np.linalg.lstsq(X.T, U.T, rcond=None)[0].T
+    else:
+        X_next = _as_matrix(X_next, "X_next", (n, T))
+        if np.linalg.matrix_rank(B) < m:
+            raise ModelError(
+                f"rank B = {np.linalg.matrix_rank(B)} < m = {m} (Assumption 2 of the method paper): B⁺B ≠ I, "
+                "so the DMD gain of eq. (14) is not defined; use method='direct'"
+            )
+        A_tilde = np.linalg.lstsq(X.T, X_next.T, rcond=None)[0].T  # eq. (12)
+        K = np.linalg.lstsq(B, A_tilde - A, rcond=None)[0]  # eq. (14)
+    try:
+        check_stabilizing(A, B, K)
+    except ModelError as exc:
+        raise ModelError(f"estimated gain ({method}, cond(X) = {cond_X:.3g}): {exc}") from None
+    return K
+
+
+def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direct") -> np.ndarray:
+    """Estimate ``K̂`` of ``u = K x`` from demonstrations (Algorithm 1, step 1; eqs. (12)-(14)).
+
+    Parameters
+    ----------
+    demos : DemonstrationSet or iterable of Demonstration
+        Each demonstration has ``.x`` (N, n) and ``.u`` (N, m).
+    system : LinearSystem
+        Anything with ``.A`` (n, n) and ``.B`` (n, m).
+    method : {"direct", "dmd"}
+        See :func:`gain_from_arrays`.
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+        The gain, checked to be stabilizing (Assumption 3 of the method paper).
+    """
+    A, B = _system_matrices(system.A, system.B)
+    X, U, X_next = stack_demonstrations(demos, *B.shape)
+    return gain_from_arrays(X, U, X_next, A, B, method)
+
+
+# ---------------------------------------------------------------------------------- step 2: inverse LQR
+
+
+def forward_gain(A: Any, B: Any, Q: Any, R: Any, S: Any | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The LQR gain of a cost (eqs. (5)-(6) of the method paper), convention ``u = K x``.
+
+    Returns
+    -------
+    K : ndarray, shape (m, n)
+        ``K = −(R + BᵀPB)⁻¹(BᵀPA + Sᵀ)``.
+    P : ndarray, shape (n, n)
+        The stabilizing solution of the DARE (eq. (6)).
+
+    Raises
+    ------
+    ModelError
+        If the DARE has no stabilizing solution for this cost.
+    """
+    A, B = _system_matrices(A, B)
+    n, m = B.shape
+    Q = _as_matrix(Q, "Q", (n, n))
+    R = _as_matrix(R, "R", (m, m))
+    S = np.zeros((n, m)) if S is None else _as_matrix(S, "S", (n, m))
+    try:
+        P = scipy.linalg.solve_discrete_are(A, B, Q, R, e=None, s=S)
+        K = -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A + S.T)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ModelError(f"the DARE (eq. (6) of the method paper) has no stabilizing solution: {exc}") from exc
+    return K, P
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=np.float64, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class TaskObjective:
+    """A quadratic task objective found by inverse LQR (eqs. (15)-(19) of the method paper).
+
+    Attributes
+    ----------
+    Q, R, S : ndarray
+        Blocks of the raw solution ``M = [[Q, S], [Sᵀ, R]]`` (I ⪯ M ⪯ αI).
+    P : ndarray, shape (n, n)
+        Cost-to-go matrix of the SDP solution.
+    alpha : float
+        Optimal value α* of eq. (15): the smallest condition-number bound of any cost with gain K.
+    M : ndarray, shape (n+m, n+m)
+        The raw cost matrix.
+    M_normalized : ndarray
+        ``M / λmax(M)``, the normalization the paper uses for its figures.
+    K : ndarray, shape (m, n)
+        The gain the objective was fitted to.
+    K_forward : ndarray, shape (m, n)
+        The LQR gain of (Q, R, S) from the DARE; reproduces ``K`` to ``forward_gain_error``.
+    forward_gain_error : float
+        ``‖K_forward − K‖_F / ‖K‖_F``.
+    lambda_min : float
+        ``λmin(M)`` (≥ 1 up to solver tolerance).
+    solver, status, structure : str
+        Solver that produced the accepted solution, its status, and the cost structure imposed.
+    second_stage : bool
+        Whether M is the member of the α-optimal face closest to I (solver-independent) or the raw α-optimum.
+    """
+
+    Q: np.ndarray
+    R: np.ndarray
+    S: np.ndarray
+    P: np.ndarray
+    alpha: float
+    M: np.ndarray
+    M_normalized: np.ndarray
+    K: np.ndarray
+    K_forward: np.ndarray
+    forward_gain_error: float
+    lambda_min: float
+    solver: str
+    status: str
+    structure: str
+    second_stage: bool
+
+    @property
+    def n(self) -> int:
+        return self.Q.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.R.shape[0]
+
+    @property
+    def Q_normalized(self) -> np.ndarray:
+        return self.M_normalized[: self.n, : self.n]
+
+    @property
+    def R_normalized(self) -> np.ndarray:
+        return self.M_normalized[self.n :, self.n :]
+
+    @property
+    def S_normalized(self) -> np.ndarray:
+        return self.M_normalized[: self.n, self.n :]
+
+    @property
+    def P_normalized(self) -> np.ndarray:
+        """``P`` scaled like ``M_normalized`` (the DARE is homogeneous in (P, Q, R, S))."""
+        return self.P / float(np.linalg.eigvalsh(self.M)[-1])
+
+    @property
+    def condition_number(self) -> float:
+        """``cond(M) = λmax / λmin``."""
+        ev = np.linalg.eigvalsh(self.M)
+        return float(ev[-1] / ev[0])
+
+    def forward_gain(self) -> np.ndarray:
+        """The gain this objective reproduces (``u = K x``), from the DARE with (Q, R, S)."""
+        return self.K_forward
+
+
+@dataclass(frozen=True)
+class _Attempt:
+    solver: str
+    stage: int
+    status: str
+    lambda_min: float = math.nan
+    error: float = math.nan
+    note: str = ""
+
+    def describe(self) -> str:
+        return (
+            f"{self.solver} stage {self.stage}: status={self.status}, λmin(M)={self.lambda_min:.3g}, "
+            f"forward-gain error={self.error:.3g}" + (f" ({self.note})" if self.note else "")
+        )
+
+
+class InverseLQR:
+    """The inverse LQR SDP of eqs. (15)-(19) of the method paper, compiled once per (A, B, structure).
+
+    ``K`` is a ``cvxpy.Parameter``, so :meth:`solve` with a new gain reuses the compiled problem (fast
+    re-solves for bootstrap resampling).
+
+    Parameters
+    ----------
+    A, B : array_like, shapes (n, n) and (n, m)
+        The known plant.
+    structure : {"full", "S=0", "diagonal"}
+        ``"full"``: Q, R, S free (always feasible for a stabilizing K, but not identifiable: the SDP picks
+        the minimum-condition-number member). ``"S=0"``: S fixed to zero. ``"diagonal"``: S = 0 and Q
+        diagonal, the identifiable case (unique up to scale). The structured variants may be infeasible.
+    second_stage : bool
+        After the α-minimization, minimize ``‖M − I‖_F`` subject to the same constraints and
+        ``α ≤ 1.001 α*``; the α-optimal face can hold many M, and this picks one independent of the solver.
+    solvers : sequence of str, optional
+        Solver chain, default Clarabel → SCS → CVXOPT (those installed).
+
+    Notes
+    -----
+    Written literally, eq. (18) has n(n−1)/2 antisymmetric rows that eq. (17) already implies
+    (eq. (17) makes ``(AᵀPB + S)K = −Kᵀ(R + BᵀPB)K`` symmetric); interior-point solvers often fail on the
+    redundant rows, so only the upper triangle of its symmetric part is imposed.
+    """
+
+    def __init__(
+        self,
+        A: Any,
+        B: Any,
+        structure: Structure = "full",
+        second_stage: bool = True,
+        solvers: Iterable[str] | None = None,
+    ) -> None:
+        if structure not in _STRUCTURES:
+            raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
+        self.A, self.B = _system_matrices(A, B)
+        self.structure = structure
+        self.second_stage = bool(second_stage)
+        installed = set(cp.installed_solvers())
+        chain = tuple(s.upper() for s in (solvers if solvers is not None else _SOLVER_CHAIN))
+        self.solvers = tuple(s for s in chain if s in installed)
+        if not self.solvers:
+            raise SolverError(f"none of the solvers {chain} is installed (installed: {sorted(installed)})")
+        self._built = False
+
+    # The problem is compiled lazily: building cvxpy expressions is cheap, the first solve compiles.
+    def _build(self) -> None:
+        A, B = self.A, self.B
+        n, m = B.shape
+        self._K = cp.Parameter((m, n), name="K")
+        self._alpha_bound = cp.Parameter(nonneg=True, name="alpha_bound")
+        self._P = cp.Variable((n, n), symmetric=True, name="P")
+        # One symmetric variable for M keeps the LMI of eq. (19) structurally symmetric.
+        self._M = cp.Variable((n + m, n + m), symmetric=True, name="M")
+        self._alpha = cp.Variable(name="alpha")
+        P, M, K = self._P, self._M, self._K
+        Q, S, R = M[:n, :n], M[:n, n:], M[n:, n:]
+        I = np.eye(n + m)
+        eq17 = (R + B.T @ P @ B) @ K + B.T @ P @ A + S.T
+        eq18 = A.T @ P @ A - P + (A.T @ P @ B + S) @ K + Q
+        eq18_sym = (eq18 + eq18.T) / 2
+        iu = np.triu_indices(n)
+        select = np.zeros((len(iu[0]), n * n))
+        select[np.arange(len(iu[0])), iu[1] * n + iu[0]] = 1.0  # cp.vec is column-major
+        constraints = [
+            P >> 0,  # eq. (16)
+            eq17 == 0,  # eq. (17)
+            select @ cp.vec(eq18_sym, order="F") == 0,  # eq. (18), upper triangle of its symmetric part
+            M - I >> 0,  # eq. (19), left
+            self._alpha * I - M >> 0,  # eq. (19), right
+        ]
+        if self.structure in ("S=0", "diagonal"):
+            constraints.append(S == 0)
+        if self.structure == "diagonal" and n > 1:
+            off = np.ones((n, n)) - np.eye(n)
+            constraints.append(cp.multiply(off, Q) == 0)
+        # α ≥ 1 at any feasible point, so minimizing α is minimizing the α² of eq. (15).
+        self._stage1 = cp.Problem(cp.Minimize(self._alpha), constraints)
+        # ‖M − I‖²_F rather than ‖M − I‖_F: a quadratic objective (native in Clarabel) converges to
+        # "optimal" far more often than the second-order-cone form, and M is then reproducible to ~1e-8.
+        self._stage2 = cp.Problem(
+            cp.Minimize(cp.sum_squares(M - I)),
+            [*constraints, self._alpha <= SECOND_STAGE_SLACK * self._alpha_bound],
+        )
+        self._built = True
+
+    def _run(self, problem: cp.Problem, solver: str) -> str:
+        with warnings.catch_warnings():
+            # cvxpy warns on inaccurate solutions; the post-checks below decide on those.
+            warnings.simplefilter("ignore", UserWarning)
+            problem.solve(solver=solver, **_SOLVER_OPTIONS.get(solver, {}))
+        return str(problem.status)
+
+    def _values(self) -> tuple[np.ndarray, np.ndarray] | None:
+        M, P = self._M.value, self._P.value
+        if M is None or P is None or not (np.all(np.isfinite(M)) and np.all(np.isfinite(P))):
+            return None
+        return (M + M.T) / 2, (P + P.T) / 2
+
+    def _check(self, K: np.ndarray, M: np.ndarray, P: np.ndarray) -> tuple[float, float, np.ndarray | None, str]:
+        """Post-checks: λmin(P)/max(1, λmax(P)), and the forward gain (DARE of (Q, R, S)) and its error."""
+        n = self.A.shape[0]
+        ev_P = np.linalg.eigvalsh(P)
+        p_rel = float(ev_P[0] / max(1.0, abs(ev_P[-1])))
+        try:
+            K_fwd, _ = forward_gain(self.A, self.B, M[:n, :n], M[n:, n:], M[:n, n:])
+        except ModelError as exc:
+            return p_rel, math.nan, None, str(exc)[:200]
+        scale = float(np.linalg.norm(K))
+        err = float(np.linalg.norm(K_fwd - K) / (scale if scale > 0 else 1.0))
+        return p_rel, err, K_fwd, ""
+
+    def solve(self, K: Any) -> TaskObjective:
+        """Find the task objective whose LQR gain is ``K`` (eqs. (15)-(19) of the method paper).
+
+        Parameters
+        ----------
+        K : array_like, shape (m, n)
+            A stabilizing gain of ``u = K x``.
+
+        Returns
+        -------
+        TaskObjective
+
+        Raises
+        ------
+        ModelError
+            If K is not stabilizing (checked before any solver runs; the message names ρ), or if a
+            structured variant is infeasible for this K.
+        SolverError
+            If no solver in the chain returns a solution that passes the post-checks
+            (λmin(M) ≥ 1 − 1e-6, P ⪰ 0, forward-gain error ≤ 1e-6); the message lists every attempt.
+        """
+        n, m = self.B.shape
+        K = _as_matrix(K, "K", (m, n))
+        check_stabilizing(self.A, self.B, K)
+        with _single_threaded_blas():
+            return self._solve(K)
+
+    def _solve(self, K: np.ndarray) -> TaskObjective:
+        n, m = self.B.shape
+        if not self._built:
+            self._build()
+        self._K.value = K
+        attempts: list[_Attempt] = []
+        stage1: TaskObjective | None = None
+        for solver in self.solvers:
+            stage1 = self._attempt(self._stage1, solver, 1, K, attempts)
+            if stage1 is not None:
+                break
+            if solver == "CLARABEL" and attempts[-1].status == cp.INFEASIBLE and self.structure != "full":
+                break  # an interior-point infeasibility certificate; SCS would only iterate to its limit
+        if stage1 is not None and not self.second_stage:
+            return stage1
+        if stage1 is not None:
+            self._alpha_bound.value = stage1.alpha
+            # The solver that found α* first: its stage 2 usually starts from a well-scaled problem.
+            order = (stage1.solver, *(s for s in self.solvers if s != stage1.solver))
+            for solver in order:
+                stage2 = self._attempt(self._stage2, solver, 2, K, attempts, alpha_star=stage1.alpha)
+                if stage2 is not None:
+                    return stage2
+            warnings.warn(
+                "inverse LQR: the second stage (closest-to-I member of the α-optimal face) failed with every "
+                "solver; returning the stage-1 α-optimum, which may depend on the solver. Attempts: "
+                + "; ".join(a.describe() for a in attempts),
+                ConvergenceWarning,
+                stacklevel=3,
+            )
+            return stage1
+        if self.structure != "full" and any(a.status in (cp.INFEASIBLE, cp.INFEASIBLE_INACCURATE) for a in attempts):
+            raise ModelError(
+                f"the cost structure {self.structure!r} is infeasible for this K: no cost with "
+                + ("S = 0" if self.structure == "S=0" else "S = 0 and diagonal Q")
+                + " has it as its LQR gain (Remark 2 of the method paper); use structure='full'. "
+                + "Attempts: "
+                + "; ".join(a.describe() for a in attempts)
+            )
+        raise SolverError(
+            f"inverse LQR (eqs. (15)-(19) of the method paper, structure {self.structure!r}, n={n}, m={m}) "
+            f"found no solution passing the post-checks (λmin(M) ≥ {1 - LAMBDA_MIN_TOL:g}, P ⪰ 0, "
+            f"forward-gain error ≤ {FORWARD_GAIN_TOL:g}). Attempts: " + "; ".join(a.describe() for a in attempts)
+        )
+
+    def _attempt(
+        self,
+        problem: cp.Problem,
+        solver: str,
+        stage: int,
+        K: np.ndarray,
+        attempts: list[_Attempt],
+        alpha_star: float | None = None,
+    ) -> TaskObjective | None:
+        try:
+            status = self._run(problem, solver)
+        except _SOLVER_EXCEPTIONS as exc:
+            attempts.append(_Attempt(solver, stage, "error", note=f"{type(exc).__name__}: {exc}"[:200]))
+            return None
+        if status not in _ACCEPTED_STATUS:
+            attempts.append(_Attempt(solver, stage, status))
+            return None
+        values = self._values()
+        if values is None:
+            attempts.append(_Attempt(solver, stage, status, note="no solution values"))
+            return None
+        M, P = values
+        lam_raw = float(np.linalg.eigvalsh(M)[0])
+        if 1.0 - RESCALE_MAX <= lam_raw < 1.0:
+            # Eqs. (17)-(18) are homogeneous in (P, M): scaling both keeps K_forward exactly and repairs the
+            # solver's absolute violation of M ⪰ I (its tolerance is relative to ‖M‖ ≈ α).
+            M, P = M / lam_raw, P / lam_raw
+        lam_min = float(np.linalg.eigvalsh(M)[0])
+        p_rel, err, K_fwd, note = self._check(K, M, P)
+        if not note and p_rel < -P_PSD_TOL:
+            note = f"λmin(P)/max(1, λmax(P)) = {p_rel:.3g}"
+        attempts.append(_Attempt(solver, stage, status, lam_raw, err, note))
+        ok = K_fwd is not None and lam_min >= 1.0 - LAMBDA_MIN_TOL and p_rel >= -P_PSD_TOL and err <= FORWARD_GAIN_TOL
+        if not ok:
+            return None
+        n = self.A.shape[0]
+        alpha = float(alpha_star if alpha_star is not None else self._alpha.value)
+        lam_max = float(np.linalg.eigvalsh(M)[-1])
+        return TaskObjective(
+            Q=_readonly(M[:n, :n]),
+            R=_readonly(M[n:, n:]),
+            S=_readonly(M[:n, n:]),
+            P=_readonly(P),
+            alpha=alpha,
+            M=_readonly(M),
+            M_normalized=_readonly(M / lam_max),
+            K=_readonly(K),
+            K_forward=_readonly(K_fwd),
+            forward_gain_error=err,
+            lambda_min=lam_min,
+            solver=solver,
+            status=status,
+            structure=self.structure,
+            second_stage=stage == 2,
+        )
+
+
+_CACHE: OrderedDict[tuple, InverseLQR] = OrderedDict()
+_CACHE_SIZE = 8
+
+
+def _cached_problem(A: np.ndarray, B: np.ndarray, structure: Structure, second_stage: bool) -> InverseLQR:
+    key = (A.shape, B.shape, A.tobytes(), B.tobytes(), structure, bool(second_stage))
+    problem = _CACHE.get(key)
+    if problem is None:
+        problem = InverseLQR(A, B, structure=structure, second_stage=second_stage)
+        _CACHE[key] = problem
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    else:
+        _CACHE.move_to_end(key)
+    return problem
+
+
+def inverse_lqr(A: Any, B: Any, K: Any, structure: Structure = "full", second_stage: bool = True) -> TaskObjective:
+    """Task objective whose LQR gain is ``K`` (Algorithm 1, step 2; eqs. (15)-(19) of the method paper).
+
+    Solves ``min α`` s.t. ``P ⪰ 0``, ``(R + BᵀPB)K + BᵀPA + Sᵀ = 0``,
+    ``AᵀPA − P + (AᵀPB + S)K + Q = 0``, ``I ⪯ M ⪯ αI`` with ``M = [[Q, S], [Sᵀ, R]]``, through a compiled
+    problem cached per (A, B, structure) so that repeated calls with new gains are fast. See
+    :class:`InverseLQR` for the parameters, the post-checks and the errors raised.
+    """
+    A, B = _system_matrices(A, B)
+    if structure not in _STRUCTURES:
+        raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
+    return _cached_problem(A, B, structure, second_stage).solve(K)
+
+
+# ------------------------------------------------------------------------------------------- bootstrap
+
+
+@dataclass(frozen=True, eq=False)
+class BootstrapResult:
+    """Percentile intervals of K̂ and of the normalized objective over demonstration resamples.
+
+    Attributes
+    ----------
+    K : ndarray, shape (m, n)
+        Point estimate from all demonstrations.
+    objective : TaskObjective
+        Point estimate of the task objective.
+    K_samples : ndarray, shape (n_ok, m, n)
+    Q_diag_samples, R_diag_samples : ndarray, shapes (n_ok, n) and (n_ok, m)
+        Diagonals of ``Q_normalized`` and ``R_normalized`` per successful resample.
+    K_lo, K_hi : ndarray, shape (m, n)
+    Q_diag_lo, Q_diag_hi : ndarray, shape (n,)
+    R_diag_lo, R_diag_hi : ndarray, shape (m,)
+        Lower and upper percentile bounds of the ``ci`` % interval.
+    n_boot, n_failed : int
+        Resamples drawn, and resamples whose gain or objective could not be fitted.
+    failures : tuple of str
+        One message per failed resample (index: reason).
+    ci : float
+    method, structure : str
+    seed : int
+    """
+
+    K: np.ndarray
+    objective: TaskObjective
+    K_samples: np.ndarray
+    Q_diag_samples: np.ndarray
+    R_diag_samples: np.ndarray
+    K_lo: np.ndarray
+    K_hi: np.ndarray
+    Q_diag_lo: np.ndarray
+    Q_diag_hi: np.ndarray
+    R_diag_lo: np.ndarray
+    R_diag_hi: np.ndarray
+    n_boot: int
+    n_failed: int
+    failures: tuple[str, ...]
+    ci: float
+    method: str
+    structure: str
+    seed: int
+
+    @property
+    def n_ok(self) -> int:
+        return self.n_boot - self.n_failed
+
+
+def bootstrap(
+    demos: Any,
+    system: Any,
+    n_boot: int = 200,
+    method: GainMethod = "direct",
+    structure: Structure = "full",
+    seed: int = 0,
+    ci: float = 95,
+    progress: Callable[[int, int], None] | None = None,
+) -> BootstrapResult:
+    """Bootstrap intervals of the gain (eqs. (12)-(14)) and the task objective (eqs. (15)-(19)).
+
+    Demonstrations (whole trials, not samples: samples within a trial are correlated) are drawn with
+    replacement; each resample is refitted with :func:`gain_from_arrays` and the cached :class:`InverseLQR`
+    problem. Resamples that fail (rank-deficient, non-stabilizing, solver failure, infeasible structure)
+    are counted and reported, not raised.
+
+    Parameters
+    ----------
+    demos : DemonstrationSet or sequence of Demonstration
+    system : LinearSystem (anything with ``.A`` and ``.B``)
+    n_boot : int
+        Number of resamples.
+    method, structure
+        As in :func:`estimate_gain` and :func:`inverse_lqr`.
+    seed : int
+        Seed of the resampling generator.
+    ci : float
+        Interval coverage in percent (percentile method).
+    progress : callable(i, n), optional
+        Called after each resample with the count done and ``n_boot``.
+
+    Raises
+    ------
+    ModelError
+        If the point estimate on all demonstrations fails, or every resample fails.
+    """
+    if not 0 < ci < 100:
+        raise DataError(f"ci must be a percentage in (0, 100), got {ci}")
+    if int(n_boot) < 1:
+        raise DataError(f"n_boot must be ≥ 1, got {n_boot}")
+    n_boot = int(n_boot)
+    A, B = _system_matrices(system.A, system.B)
+    n, m = B.shape
+    demo_list = list(demos)
+    blocks = _demo_blocks(demo_list, n, m)
+    if not blocks:
+        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
+    solver = _cached_problem(A, B, structure, True) if structure in _STRUCTURES else None
+    if solver is None:
+        raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
+
+    def fit(idx: np.ndarray) -> tuple[np.ndarray, TaskObjective]:
+        X, U, X_next = (np.concatenate([blocks[i][k] for i in idx], axis=1) for k in range(3))
+        K = gain_from_arrays(X, U, X_next, A, B, method)
+        return K, solver.solve(K)
+
+    K0, obj0 = fit(np.arange(len(blocks)))
+    rng = np.random.default_rng(seed)
+    Ks, Qd, Rd, failures = [], [], [], []
+    for b in range(n_boot):
+        idx = rng.integers(0, len(blocks), size=len(blocks))
+        try:
+            K, obj = fit(idx)
+        except ModelError as exc:
+            failures.append(f"resample {b}: {exc}")
+        else:
+            Ks.append(K)
+            Qd.append(np.diag(obj.Q_normalized))
+            Rd.append(np.diag(obj.R_normalized))
+        if progress is not None:
+            progress(b + 1, n_boot)
+    if not Ks:
+        raise ModelError(f"all {n_boot} bootstrap resamples failed; first failure: {failures[0]}")
+    K_s, Q_s, R_s = np.array(Ks), np.array(Qd), np.array(Rd)
+    q = [(100 - ci) / 2, 100 - (100 - ci) / 2]
+    K_lo, K_hi = np.percentile(K_s, q, axis=0)
+    Q_lo, Q_hi = np.percentile(Q_s, q, axis=0)
+    R_lo, R_hi = np.percentile(R_s, q, axis=0)
+    return BootstrapResult(
+        K=_readonly(K0),
+        objective=obj0,
+        K_samples=_readonly(K_s),
+        Q_diag_samples=_readonly(Q_s),
+        R_diag_samples=_readonly(R_s),
+        K_lo=_readonly(K_lo),
+        K_hi=_readonly(K_hi),
+        Q_diag_lo=_readonly(Q_lo),
+        Q_diag_hi=_readonly(Q_hi),
+        R_diag_lo=_readonly(R_lo),
+        R_diag_hi=_readonly(R_hi),
+        n_boot=n_boot,
+        n_failed=len(failures),
+        failures=tuple(failures),
+        ci=float(ci),
+        method=method,
+        structure=structure,
+        seed=int(seed),
+    )
