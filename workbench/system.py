@@ -2,7 +2,8 @@
 
 The method needs (A, B) known and stabilizable (Assumption 1) with ``rank B = m < n`` (Assumption 2);
 :class:`LinearSystem` checks both on construction. :func:`planar_quadrotor` is the paper's landing testbed
-(eqs. (31)–(32), counted in order in the LaTeX source); :meth:`LinearSystem.identify` estimates (A, B) from logs that come without a model.
+(eqs. (31)–(32), counted in order in the LaTeX source); :meth:`LinearSystem.identify` estimates (A, B)
+from logs that come without a model.
 """
 
 from __future__ import annotations
