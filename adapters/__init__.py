@@ -1,0 +1,104 @@
+"""Adapters: flight and teleoperation logs in, :class:`~workbench.demos.DemonstrationSet` out (and back).
+
+Each format's reader turns a file into *streams* (:mod:`adapters.streams`): per message type or topic, a time
+column and field columns. Everything after that is shared: a *mapping* (:mod:`adapters.mapping`, TOML files in
+``adapters/mappings/``) picks the state and input channels, the *aligner* (:mod:`adapters.align`) puts them
+on a uniform ``dt`` grid, the *segmenter* (:mod:`adapters.segment`) cuts the result into demonstrations.
+
+>>> import adapters
+>>> streams = adapters.read_streams("flight.tlog")                      # doctest: +SKIP
+>>> ds = adapters.load("flight.tlog", mapping="ardupilot_manual")       # doctest: +SKIP
+>>> print(adapters.inspect("flight.tlog"))                              # doctest: +SKIP
+
+Formats: MAVLink ``.tlog``, MCAP, PX4 ULog, CSV (:mod:`adapters.formats`), recognised by their first bytes.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+
+import pandas as pd
+
+from adapters.formats import FORMATS, Format, detect_format, get_format
+from adapters.mapping import ChannelMapping, load_mapping, shipped_mappings
+from adapters.pipeline import build
+from adapters.streams import Streams
+from adapters.summary import LogSummary, summarize
+from adapters.writer import demo_streams, write
+from workbench.demos import DemonstrationSet
+
+__all__ = [
+    "FORMATS",
+    "Format",
+    "Streams",
+    "ChannelMapping",
+    "LogSummary",
+    "detect_format",
+    "read",
+    "read_streams",
+    "load",
+    "build",
+    "inspect",
+    "write",
+    "demo_streams",
+    "load_mapping",
+    "shipped_mappings",
+]
+
+
+def _format(path: str | os.PathLike, format: str | None) -> Format:
+    return get_format(format) if format is not None else detect_format(path)
+
+
+def read(path: str | os.PathLike, topics: Iterable[str] | None = None, *, format: str | None = None) -> Streams:
+    """Read a log into :class:`Streams` (streams + what was skipped + per-stream counts).
+
+    Parameters
+    ----------
+    path : path-like
+        The log; its format is recognised from its first bytes unless ``format`` names it.
+    topics : iterable of str, optional
+        Stream names to read (message types, topics); all by default.
+    """
+    fmt = _format(path, format)
+    return fmt.read(path, None if topics is None else list(topics))
+
+
+def read_streams(path: str | os.PathLike, topics: Iterable[str] | None = None) -> dict[str, pd.DataFrame]:
+    """A log's streams: stream name (``"ATTITUDE"``, ``"/topic"``) -> DataFrame with a float64 ``t`` (seconds)
+    and one column per field."""
+    return dict(read(path, topics).frames)
+
+
+def load(
+    path: str | os.PathLike,
+    mapping: str | os.PathLike | ChannelMapping = "planar_quadrotor",
+    *,
+    format: str | None = None,
+) -> DemonstrationSet:
+    """Load a log as demonstrations with a mapping (a shipped name, a TOML path, or a ChannelMapping).
+
+    Only the streams the mapping names are read. Each demonstration's ``meta`` has ``id``, ``source``,
+    ``format``, ``mapping``, ``t0`` (its start on the log clock), ``skipped`` (counts by cause for the file)
+    and, where the log carries them, ``label``, ``subject``, ``target``, ``success``, ``mode``.
+
+    Raises
+    ------
+    FormatError
+        Unknown format (the message lists the known ones).
+    MappingError
+        The mapping is invalid or names a stream or field the log lacks (listing the nearest it has).
+    DataError
+        The file is damaged beyond reading, or holds no demonstration under the mapping's rules.
+    """
+    fmt = _format(path, format)
+    m = load_mapping(mapping).for_format(fmt.name)
+    m.check_complete()
+    streams = fmt.read(path, m.stream_candidates())
+    return build(streams, m)
+
+
+def inspect(path: str | os.PathLike, *, format: str | None = None) -> LogSummary:
+    """What a log holds: streams with counts, rates, fields and time spans; flight modes; skipped data."""
+    return summarize(read(path, format=format))
