@@ -1,0 +1,585 @@
+"""Mappings: which fields of a log are the states and inputs, how to segment it, where its metadata are.
+
+A mapping is a TOML file (read with the standard library's :mod:`tomllib`). Shipped mappings live in
+``adapters/mappings/`` and are named without the suffix (``"planar_quadrotor"``); any other is a path.
+
+Schema
+------
+::
+
+    name = "ardupilot_manual"           # optional, defaults to the file's stem
+    description = "…"                   # optional
+    dt = 0.1                            # s, the grid step of the demonstrations (required)
+    states = ["x", "y", "phi", …]       # channel names, in order (required)
+    inputs = ["u1", "u2"]               # (required)
+    clock = "log"                       # or { field = "time_boot_ms", scale = 0.001 }: see adapters.clock
+
+    [channels]                          # one entry per state and input
+    x = "LOCAL_POSITION_NED.y"          # a source: "STREAM.FIELD" or "STREAM:FIELD" (for topics with dots)
+    y = { source = "LOCAL_POSITION_NED.z", transform = "ned_up" }
+    phi = { source = "vehicle_attitude.q", transform = "quaternion_roll" }    # q[0] … q[3]
+    u1 = { source = "RC_CHANNELS.chan1_raw", transform = "pwm", pwm_min = 1000, pwm_max = 2000 }
+    u2 = { source = "MANUAL_CONTROL.z", scale = 0.001, offset = 0.0, sign = 1 }
+    # value = sign * scale * transform(field) + offset; `where = { sysid = 1 }` keeps matching rows only
+
+    [segment]                           # every rule given must hold (their spans are intersected)
+    gap = 0.5                           # s; a mapped channel silent for longer splits (never interpolated)
+    min_duration = 1.0                  # s; shorter pieces are dropped and counted
+    demo = { source = "NAMED_VALUE_INT.value", where = { name = "demo" } }   # explicit demo field
+    mode = { source = "HEARTBEAT.custom_mode", where = { autopilot = 3 }, names = "arducopter",
+             keep = ["STABILIZE"] }     # flight-mode spans (names from adapters.modes, or numbers)
+    armed = { source = "HEARTBEAT.base_mode", bitmask = 128 }   # or equals = 2; truthy otherwise
+    landing = { state = "y", below = 0.0 }   # end at touchdown; or { source = "…landed" } (true = landed)
+
+    [meta]                              # where per-demonstration metadata come from (all optional)
+    source = "/workbench/demo"          # a stream with one row per demonstration …
+    key = "demo"                        # … whose `key` column holds the demo field's value
+    text = "STATUSTEXT.text"            # or text markers "wb demo=3 label=CS1 subject=s00 target[0]=0"
+    fields = ["id", "label", …]         # which columns / keys to take (default: id label subject target
+                                        # success outcome)
+
+    [tlog.channels]                     # per-format overrides: [<format>.channels], [<format>.segment],
+    x = "LOCAL_POSITION_NED.y"          # [<format>.meta], <format>.clock — merged over the tables above
+                                        # when a file of that format is read (tlog, mcap, ulog, csv)
+
+Errors in a mapping file are :class:`~workbench.errors.MappingError` naming the file and the key; a source
+that names a stream or field the log lacks is one too, listing the nearest names the log does contain.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from adapters.modes import MODE_TABLES, mode_number
+from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
+from adapters.transforms import TRANSFORMS
+from workbench.errors import MappingError
+
+__all__ = [
+    "ChannelMapping",
+    "Channel",
+    "Selector",
+    "SegmentRules",
+    "MetaRules",
+    "ClockSpec",
+    "load_mapping",
+    "shipped_mappings",
+    "MAPPINGS_DIR",
+    "FORMAT_NAMES",
+]
+
+MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
+FORMAT_NAMES = ("tlog", "mcap", "ulog", "csv")
+DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
+_TOP_KEYS = {"name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", *FORMAT_NAMES}
+_CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
+_SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
+_META_KEYS = {"source", "key", "text", "fields", "prefix"}
+
+
+@dataclass(frozen=True)
+class Selector:
+    """A field of a stream, optionally restricted to rows whose columns equal given values (``where``).
+
+    ``alternatives`` are further sources tried in order when ``source`` is not in a file (e.g. RC_CHANNELS,
+    else RC_CHANNELS_RAW); writers use ``source``.
+    """
+
+    source: str
+    where: tuple[tuple[str, Any], ...] = ()
+    alternatives: tuple[str, ...] = ()
+
+    @property
+    def sources(self) -> tuple[str, ...]:
+        return (self.source, *self.alternatives)
+
+    def describe(self) -> str:
+        cond = ", ".join(f"{k} = {v!r}" for k, v in self.where)
+        return " or ".join(self.sources) + (f" where {cond}" if cond else "")
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One state or input: ``sign * scale * transform(source) + offset``."""
+
+    name: str
+    selector: Selector
+    transform: str = "identity"
+    scale: float = 1.0
+    offset: float = 0.0
+    sign: float = 1.0
+    params: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def gain(self) -> float:
+        return self.sign * self.scale
+
+
+@dataclass(frozen=True)
+class ModeRule:
+    selector: Selector
+    keep: tuple[int, ...]
+    names: str | None = None
+
+
+@dataclass(frozen=True)
+class FlagRule:
+    """A truthy stream: ``value & bitmask`` when a bitmask is given, ``value == equals``, else ``value != 0``."""
+
+    selector: Selector
+    bitmask: int | None = None
+    equals: float | None = None
+
+    def truth(self, values: np.ndarray) -> np.ndarray:
+        v = np.nan_to_num(np.asarray(values, dtype=np.float64))
+        if self.bitmask is not None:
+            return (v.astype(np.int64) & self.bitmask) != 0
+        if self.equals is not None:
+            return v == self.equals
+        return v != 0
+
+
+@dataclass(frozen=True)
+class LandingRule:
+    """Touchdown: a state at or below ``below`` (``state``), or a truthy landed flag (``flag``)."""
+
+    state: str | None = None
+    below: float = 0.0
+    flag: FlagRule | None = None
+
+
+@dataclass(frozen=True)
+class SegmentRules:
+    gap: float
+    min_duration: float
+    demo: Selector | None = None
+    mode: ModeRule | None = None
+    armed: FlagRule | None = None
+    landing: LandingRule | None = None
+
+
+@dataclass(frozen=True)
+class MetaRules:
+    source: Selector | None = None
+    key: str = "demo"
+    text: Selector | None = None
+    fields: tuple[str, ...] = DEFAULT_META_FIELDS
+    prefix: str = "wb"
+
+
+@dataclass(frozen=True)
+class ClockSpec:
+    """``field=None``: the stream's own ``t``; else that field × ``scale``, anchored on ``t`` (adapters.clock)."""
+
+    field: str | None = None
+    scale: float = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class ChannelMapping:
+    """A validated mapping (see the module docstring for the TOML schema).
+
+    ``for_format(name)`` gives the mapping with that format's overrides applied.
+    """
+
+    name: str
+    path: str
+    dt: float
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    channels: tuple[Channel, ...]
+    segment: SegmentRules
+    meta: MetaRules
+    clock: ClockSpec
+    description: str = ""
+    format: str | None = None
+    raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
+
+    def for_format(self, fmt: str) -> ChannelMapping:
+        """This mapping with the ``[<fmt>.…]`` overrides merged in (itself when there are none)."""
+        override = self.raw.get(fmt)
+        if override is None:
+            return replace(self, format=fmt)
+        merged = {k: v for k, v in self.raw.items() if k not in FORMAT_NAMES}
+        for key, value in override.items():
+            if isinstance(value, dict) and isinstance(merged.get(key), dict):
+                merged[key] = {**merged[key], **value}
+            else:
+                merged[key] = value
+        out = _parse(merged, self.path, where=f"[{fmt}]")
+        return replace(out, format=fmt, raw=self.raw)
+
+    def check_complete(self) -> None:
+        """Raise a MappingError unless every state and input has a source (for this mapping's format)."""
+        have = {c.name for c in self.channels}
+        missing = [n for n in (*self.state_names, *self.input_names) if n not in have]
+        if missing:
+            formats = [f for f in FORMAT_NAMES if isinstance(self.raw.get(f), dict) and "channels" in self.raw[f]]
+            raise MappingError(
+                f"{self.path}: no source for {missing} in files of format {self.format!r}"
+                + (f"; this mapping has channels for: {', '.join(formats)}" if formats else "")
+            )
+
+    def channel(self, name: str) -> Channel:
+        for c in self.channels:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+    def selectors(self) -> list[Selector]:
+        """Every stream field this mapping reads: channels, segmentation rules, metadata."""
+        out = [c.selector for c in self.channels]
+        seg = self.segment
+        out += [s for s in (seg.demo, seg.mode and seg.mode.selector, seg.armed and seg.armed.selector) if s]
+        if seg.landing is not None and seg.landing.flag is not None:
+            out.append(seg.landing.flag.selector)
+        out += [s for s in (self.meta.source, self.meta.text) if s]
+        return out
+
+    def stream_candidates(self) -> list[str]:
+        """Names a reader should read (a superset: for ``a.b.c`` both ``a`` and ``a.b``)."""
+        names: dict[str, None] = {}
+        for sel in self.selectors():
+            for source in sel.sources:
+                names.update(dict.fromkeys(candidate_streams(source)))
+                if ":" not in source and "." not in source:
+                    names[source] = None  # a whole stream (a meta table)
+        return list(names)
+
+
+# ------------------------------------------------------------------------------------------------ loading
+
+
+def shipped_mappings() -> list[str]:
+    """Names of the mappings shipped in ``adapters/mappings/``."""
+    return sorted(p.stem for p in MAPPINGS_DIR.glob("*.toml"))
+
+
+def load_mapping(mapping: str | os.PathLike | ChannelMapping) -> ChannelMapping:
+    """A mapping from a shipped name (``"ardupilot_manual"``), a TOML file path, or a mapping itself.
+
+    Raises
+    ------
+    MappingError
+        Unknown name (listing the shipped ones), unreadable TOML (with line), or an invalid entry (naming it).
+    """
+    if isinstance(mapping, ChannelMapping):
+        return mapping
+    text = os.fspath(mapping)
+    path = Path(text)
+    if not path.is_file():
+        shipped = MAPPINGS_DIR / f"{text}.toml"
+        if path.suffix == "" and shipped.is_file():
+            path = shipped
+        else:
+            raise MappingError(
+                f"mapping {text!r}: no such file and not a shipped mapping; shipped: {', '.join(shipped_mappings())}"
+            )
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise MappingError(f"{path}: not valid TOML ({exc})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MappingError(f"{path}: cannot read mapping ({exc})") from None
+    raw.setdefault("name", path.stem)
+    return _parse(raw, str(path))
+
+
+def _fail(path: str, where: str, message: str) -> MappingError:
+    return MappingError(f"{path}: {where}: {message}")
+
+
+def _number(value: Any, path: str, where: str, *, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise _fail(path, where, f"must be a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise _fail(path, where, f"must be positive, got {value!r}")
+    return float(value)
+
+
+def _sources(value: Any) -> tuple[str, ...] | None:
+    """A source string, or a non-empty list of alternative source strings."""
+    if isinstance(value, str) and value:
+        return (value,)
+    if isinstance(value, list) and value and all(isinstance(v, str) and v for v in value):
+        return tuple(value)
+    return None
+
+
+def _selector(value: Any, path: str, where: str, extra: Iterable[str] = ()) -> Selector:
+    if _sources(value) is not None:
+        first, *rest = _sources(value)
+        return Selector(first, (), tuple(rest))
+    if not isinstance(value, dict) or _sources(value.get("source")) is None:
+        raise _fail(path, where, f"must be a source (or list of them) or a table with a 'source', got {value!r}")
+    allowed = {"source", "where", *extra}
+    if unknown := sorted(set(value) - allowed):
+        raise _fail(path, where, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+    cond = value.get("where", {})
+    if not isinstance(cond, dict) or not all(isinstance(v, str | int | float) for v in cond.values()):
+        raise _fail(path, f"{where}.where", f"must be a table of column = value, got {cond!r}")
+    first, *rest = _sources(value["source"])
+    return Selector(first, tuple(sorted(cond.items())), tuple(rest))
+
+
+def _channel(name: str, value: Any, path: str) -> Channel:
+    where = f"channels.{name}"
+    if _sources(value) is not None:
+        return Channel(name, _selector(value, path, where))
+    if not isinstance(value, dict):
+        raise _fail(path, where, f"must be a source string or a table, got {value!r}")
+    transform = value.get("transform", "identity")
+    if transform not in TRANSFORMS:
+        raise _fail(path, f"{where}.transform", f"unknown transform {transform!r}; known: {sorted(TRANSFORMS)}")
+    params = TRANSFORMS[transform].params
+    sel = _selector(value, path, where, extra=(_CHANNEL_KEYS | set(params)) - {"source", "where"})
+    sign = _number(value.get("sign", 1), path, f"{where}.sign")
+    if sign not in (1.0, -1.0):
+        raise _fail(path, f"{where}.sign", f"must be 1 or -1, got {sign!r}")
+    scale = _number(value.get("scale", 1.0), path, f"{where}.scale")
+    if scale == 0:
+        raise _fail(path, f"{where}.scale", "must not be zero")
+    return Channel(
+        name,
+        sel,
+        transform=transform,
+        scale=scale,
+        offset=_number(value.get("offset", 0.0), path, f"{where}.offset"),
+        sign=sign,
+        params=tuple((p, _number(value[p], path, f"{where}.{p}")) for p in params if p in value),
+    )
+
+
+def _flag(value: Any, path: str, where: str) -> FlagRule:
+    sel = _selector(value, path, where, extra=("bitmask", "equals"))
+    bitmask = value.get("bitmask") if isinstance(value, dict) else None
+    equals = value.get("equals") if isinstance(value, dict) else None
+    if bitmask is not None and (isinstance(bitmask, bool) or not isinstance(bitmask, int) or bitmask <= 0):
+        raise _fail(path, f"{where}.bitmask", f"must be a positive integer, got {bitmask!r}")
+    if equals is not None:
+        equals = _number(equals, path, f"{where}.equals")
+    return FlagRule(sel, bitmask, equals)
+
+
+def _segment(raw: Any, path: str, states: tuple[str, ...], dt: float) -> SegmentRules:
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise _fail(path, "segment", f"must be a table, got {raw!r}")
+    if unknown := sorted(set(raw) - _SEGMENT_KEYS):
+        raise _fail(path, "segment", f"unknown key(s) {unknown}; allowed: {sorted(_SEGMENT_KEYS)}")
+    gap = _number(raw.get("gap", max(0.5, 10 * dt)), path, "segment.gap", positive=True)
+    min_duration = _number(raw.get("min_duration", 1.0), path, "segment.min_duration")
+    demo = _selector(raw["demo"], path, "segment.demo") if "demo" in raw else None
+    mode = None
+    if "mode" in raw:
+        m = raw["mode"]
+        sel = _selector(m, path, "segment.mode", extra=("keep", "names"))
+        names = m.get("names") if isinstance(m, dict) else None
+        if names is not None and names not in MODE_TABLES:
+            raise _fail(path, "segment.mode.names", f"unknown mode table {names!r}; known: {sorted(MODE_TABLES)}")
+        keep_raw = m.get("keep") if isinstance(m, dict) else None
+        if not isinstance(keep_raw, list) or not keep_raw:
+            raise _fail(path, "segment.mode.keep", "must be a non-empty list of mode names or numbers")
+        keep = []
+        for k in keep_raw:
+            number = mode_number(names, k)
+            if number is None:
+                known = ", ".join(MODE_TABLES.get(names or "", {}).values())
+                raise _fail(path, "segment.mode.keep", f"unknown mode {k!r} in table {names!r}; known: {known}")
+            keep.append(number)
+        mode = ModeRule(sel, tuple(keep), names)
+    armed = _flag(raw["armed"], path, "segment.armed") if "armed" in raw else None
+    landing = None
+    if "landing" in raw:
+        lr = raw["landing"]
+        if isinstance(lr, dict) and "state" in lr:
+            if lr["state"] not in states:
+                raise _fail(path, "segment.landing.state", f"{lr['state']!r} is not one of the states {list(states)}")
+            if unknown := sorted(set(lr) - {"state", "below"}):
+                raise _fail(path, "segment.landing", f"unknown key(s) {unknown}")
+            landing = LandingRule(state=lr["state"], below=_number(lr.get("below", 0.0), path, "segment.landing.below"))
+        else:
+            landing = LandingRule(flag=_flag(lr, path, "segment.landing"))
+    return SegmentRules(gap, min_duration, demo, mode, armed, landing)
+
+
+def _meta(raw: Any, path: str) -> MetaRules:
+    if raw is None:
+        return MetaRules()
+    if not isinstance(raw, dict):
+        raise _fail(path, "meta", f"must be a table, got {raw!r}")
+    if unknown := sorted(set(raw) - _META_KEYS):
+        raise _fail(path, "meta", f"unknown key(s) {unknown}; allowed: {sorted(_META_KEYS)}")
+    fields = raw.get("fields", list(DEFAULT_META_FIELDS))
+    if not isinstance(fields, list) or not all(isinstance(f, str) for f in fields):
+        raise _fail(path, "meta.fields", f"must be a list of names, got {fields!r}")
+    for key in ("key", "prefix"):
+        if key in raw and not isinstance(raw[key], str):
+            raise _fail(path, f"meta.{key}", f"must be a string, got {raw[key]!r}")
+    return MetaRules(
+        source=_selector(raw["source"], path, "meta.source") if "source" in raw else None,
+        key=raw.get("key", "demo"),
+        text=_selector(raw["text"], path, "meta.text") if "text" in raw else None,
+        fields=tuple(fields),
+        prefix=raw.get("prefix", "wb"),
+    )
+
+
+def _clock(raw: Any, path: str) -> ClockSpec:
+    if raw is None or raw in ("log", "arrival"):
+        return ClockSpec()
+    if isinstance(raw, dict) and isinstance(raw.get("field"), str) and set(raw) <= {"field", "scale"}:
+        return ClockSpec(raw["field"], _number(raw.get("scale", 1.0), path, "clock.scale", positive=True))
+    raise _fail(path, "clock", f"must be \"log\" or {{ field = \"…\", scale = … }}, got {raw!r}")
+
+
+def _names(raw: Any, path: str, key: str) -> tuple[str, ...]:
+    if not isinstance(raw, list) or not raw or not all(isinstance(s, str) and s for s in raw):
+        raise _fail(path, key, f"must be a non-empty list of names, got {raw!r}")
+    if len(set(raw)) != len(raw):
+        raise _fail(path, key, f"names repeat: {raw}")
+    return tuple(raw)
+
+
+def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping:
+    at = f"{path}{' ' + where if where else ''}"
+    if unknown := sorted(set(raw) - _TOP_KEYS):
+        raise _fail(at, "top level", f"unknown key(s) {unknown}; allowed: {sorted(_TOP_KEYS)}")
+    if "dt" not in raw:
+        raise _fail(at, "dt", "missing (the grid step in seconds)")
+    dt = _number(raw["dt"], at, "dt", positive=True)
+    states = _names(raw.get("states"), at, "states")
+    inputs = _names(raw.get("inputs"), at, "inputs")
+    if clash := sorted(set(states) & set(inputs)):
+        raise _fail(at, "inputs", f"{clash} are also states")
+    chans = raw.get("channels", {})
+    if not isinstance(chans, dict):
+        raise _fail(at, "channels", f"must be a table, got {chans!r}")
+    per_format = any(isinstance(raw.get(f), dict) and "channels" in raw[f] for f in FORMAT_NAMES)
+    missing = [n for n in (*states, *inputs) if n not in chans]
+    if missing and not (per_format and not where):
+        raise _fail(at, "channels", f"no source for {missing}")
+    extra = sorted(set(chans) - set(states) - set(inputs))
+    if extra:
+        raise _fail(at, "channels", f"{extra} are neither states nor inputs")
+    channels = tuple(_channel(n, chans[n], at) for n in (*states, *inputs) if n in chans)
+    return ChannelMapping(
+        name=str(raw.get("name", Path(path).stem)),
+        path=path,
+        dt=dt,
+        state_names=states,
+        input_names=inputs,
+        channels=channels,
+        segment=_segment(raw.get("segment"), at, states, dt),
+        meta=_meta(raw.get("meta"), at),
+        clock=_clock(raw.get("clock"), at),
+        description=str(raw.get("description", "")),
+        raw=dict(raw),
+    )
+
+
+# ---------------------------------------------------------------------------------------------- resolving
+
+
+def _missing_stream(sel: Selector, streams: Streams, what: str, mapping: str) -> MappingError:
+    head = sel.source.split(":")[0] if ":" in sel.source else sel.source.split(".")[0]
+    names = streams.names
+    near = nearest(head, names)
+    listing = ", ".join(names[:40]) + (f", … ({len(names)} in all)" if len(names) > 40 else "")
+    return MappingError(
+        f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but {streams.path} "
+        f"({streams.format}) has no such stream{'; nearest: ' + ', '.join(near) if near else ''}; "
+        f"it has: {listing or 'no streams'}"
+    )
+
+
+def _missing_field(name: str, stream: str, frame: pd.DataFrame, streams: Streams, what: str, mapping: str):
+    fields = [c for c in frame.columns if c != "t"]
+    near = nearest(name, fields)
+    return MappingError(
+        f"mapping {mapping!r}: {what}: stream {stream!r} of {streams.path} has no field {name!r}"
+        f"{'; nearest: ' + ', '.join(near) if near else ''}; its fields: {', '.join(map(str, fields))}"
+    )
+
+
+@dataclass(frozen=True)
+class Selected:
+    """Rows of one stream picked by a selector: the stream's name and frame, a row mask and the field columns."""
+
+    stream: str
+    frame: pd.DataFrame
+    rows: np.ndarray
+    columns: tuple[str, ...]
+    dropped_other_systems: int = 0
+
+
+def select(sel: Selector, streams: Streams, what: str, mapping: str, *, n_columns: int | None = None) -> Selected:
+    """Find a selector's stream, rows and field columns in ``streams``; a MappingError names what is missing.
+
+    Where a MAVLink stream carries several (sysid, compid) sources and ``where`` picks none, the most frequent
+    source is kept, so two vehicles (or a ground station) are never mixed into one channel.
+    """
+    split = None
+    for source in sel.sources:
+        split = split_source(source, streams.frames)
+        if split is None and source in streams.frames and n_columns is None:
+            split = (source, "")
+        if split is not None:
+            break
+    if split is None:
+        raise _missing_stream(sel, streams, what, mapping)
+    stream, fld = split
+    frame = streams.frames[stream]
+    rows = np.ones(len(frame), dtype=bool)
+    for col, value in sel.where:
+        if col not in frame.columns:
+            raise _missing_field(col, stream, frame, streams, f"{what} (where)", mapping)
+        series = frame[col]
+        if isinstance(value, str):
+            rows &= series.astype(str).to_numpy() == value
+        else:
+            rows &= numeric(frame, col) == float(value)
+    dropped = 0
+    where_cols = {c for c, _ in sel.where}
+    if {"sysid", "compid"} <= set(frame.columns) and not where_cols & {"sysid", "compid"} and rows.any():
+        key = frame["sysid"].to_numpy().astype(np.int64) * 256 + frame["compid"].to_numpy().astype(np.int64)
+        values, counts = np.unique(key[rows], return_counts=True)
+        if values.size > 1:
+            keep = rows & (key == values[np.argmax(counts)])
+            dropped = int(rows.sum() - keep.sum())
+            rows = keep
+    if fld == "":
+        return Selected(stream, frame, rows, (), dropped)
+    cols = field_columns(frame, fld)
+    if not cols:
+        raise _missing_field(fld, stream, frame, streams, what, mapping)
+    if n_columns is not None and len(cols) != n_columns:
+        raise MappingError(
+            f"mapping {mapping!r}: {what} needs {n_columns} column(s) from {sel.source!r}, "
+            f"but stream {stream!r} has {len(cols)}: {cols}"
+        )
+    return Selected(stream, frame, rows, tuple(cols), dropped)
+
+
+def channel_values(ch: Channel, sel: Selected) -> np.ndarray:
+    """The channel's values for the selected rows: ``sign * scale * transform(columns) + offset``."""
+    tr = TRANSFORMS[ch.transform]
+    raw = np.column_stack([numeric(sel.frame, c)[sel.rows] for c in sel.columns])
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        return ch.gain * tr.forward(raw, dict(ch.params)) + ch.offset
+
+
+def channel_inverse(ch: Channel, values: np.ndarray) -> np.ndarray:
+    """Field columns that :func:`channel_values` maps back onto ``values`` (for the writers)."""
+    tr = TRANSFORMS[ch.transform]
+    return tr.inverse((np.asarray(values, dtype=np.float64) - ch.offset) / ch.gain, dict(ch.params))

@@ -1,0 +1,631 @@
+"""MCAP (``.mcap``): a reader into streams and a JSON writer, on the ``mcap`` library.
+
+Reading
+-------
+A topic becomes a stream: ``t`` = the message's ``log_time`` in seconds, then its fields, nested ones
+flattened to dotted names (``pose.position.x``) and fixed-size arrays to indexed names (``q[0]``); arrays
+whose length varies from message to message (or exceeds :data:`MAX_ARRAY`) are left out. Rows are in
+``log_time`` order. Message encodings:
+
+* ``json`` (schema ``jsonschema`` or none) — decoded in bulk by pyarrow's JSON reader with a schema
+  derived from the JSON Schema (numbers stay float64 even when a value looks integral), falling back to
+  :class:`JsonDecoderFactory`'s per-message decoder where the bulk path cannot (odd layouts, bad messages);
+* ``cdr`` with ``ros2msg`` schemas — ``mcap_ros2.decoder.DecoderFactory``;
+* ``protobuf`` — ``mcap_protobuf.decoder.DecoderFactory``.
+
+The summary section's chunk indexes are used to read only the chunks that hold the requested topics. A file
+without a usable summary (a recording cut short, a damaged index) is scanned from the start instead, up to
+the first record that cannot be read. Chunks are checked before use: a compressed chunk must declare a sane
+size and match its CRC, else it is skipped whole (its bytes counted in ``skipped["bytes"]``, never its
+values used). Messages that do not decode are skipped and counted.
+
+Writing
+-------
+:func:`write` writes streams as JSON channels, each with a JSON Schema generated from its columns (dotted names
+become nested objects, indexed names fixed-size arrays), zstd-compressed chunks of 64 KiB (so damage costs little)
+with CRCs, a summary and indexes — a file Foxglove opens as is. Output depends only on the input (no wall-clock
+time).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import struct
+import zlib
+from collections import defaultdict
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.json as pajson
+from mcap.data_stream import ReadDataStream
+from mcap.decoder import DecoderFactory
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from adapters.streams import Streams
+from workbench.atomic import atomic_path
+from workbench.errors import DataError, FormatError
+
+__all__ = ["MAGIC", "JsonDecoderFactory", "decoder_factories", "read", "write", "MAX_ARRAY"]
+
+MAGIC = b"\x89MCAP0\r\n"
+#: Longest array flattened into indexed columns; longer ones (images, point clouds) are not numeric channels.
+MAX_ARRAY = 256
+_REC = struct.Struct("<BQ")
+_MSG = struct.Struct("<HIQQ")
+_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x03, 0x04, 0x05, 0x06
+# A chunk may not claim to decompress to more than this many times its stored size (zstd's best case on
+# constant data is ~30000×): a corrupt size field must not make us allocate gigabytes.
+_MAX_RATIO = 40_000
+_INDEX_TOKEN = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
+
+
+class JsonDecoderFactory(DecoderFactory):
+    """Decodes ``json`` messages (with a ``jsonschema`` schema or none) to Python objects."""
+
+    def decoder_for(self, message_encoding: str, schema: Schema | None) -> Callable[[bytes], Any] | None:
+        if message_encoding != "json" or (schema is not None and schema.encoding not in ("jsonschema", "")):
+            return None
+        return json.loads
+
+
+def decoder_factories() -> list[DecoderFactory]:
+    """The decoder factories the workbench reads MCAP with: JSON, ROS 2 CDR, protobuf."""
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufFactory
+    from mcap_ros2.decoder import DecoderFactory as Ros2Factory
+
+    return [JsonDecoderFactory(), Ros2Factory(), ProtobufFactory()]
+
+
+# ------------------------------------------------------------------------------------------------ reading
+
+
+class _Scan:
+    """What a pass over the file collected: channels, schemas, raw messages per channel, skips."""
+
+    def __init__(self) -> None:
+        self.schemas: dict[int, Schema] = {}
+        self.channels: dict[int, Channel] = {}
+        self.messages: dict[int, tuple[list[int], list[bytes]]] = defaultdict(lambda: ([], []))
+        self.counts: dict[int, int] = defaultdict(int)
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.skipped: dict[str, int] = defaultdict(int)
+        self.notes: list[str] = []
+
+
+def _decompress(chunk: Chunk, size_limit: int) -> bytes:
+    declared = chunk.uncompressed_size
+    if declared > max(size_limit, _MAX_RATIO * len(chunk.data) + 4096):
+        raise ValueError(f"chunk claims {declared} uncompressed bytes")
+    if chunk.compression == "":
+        data = chunk.data
+    elif chunk.compression == "zstd":
+        import zstandard
+
+        content = zstandard.frame_content_size(chunk.data)
+        if content not in (-1, declared):
+            raise ValueError("zstd frame size disagrees with the chunk's")
+        data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=declared)
+    elif chunk.compression == "lz4":
+        import lz4.frame
+
+        data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=declared)
+    else:
+        raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
+    if len(data) != declared:
+        raise ValueError(f"chunk decompressed to {len(data)} bytes, not {declared}")
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise ValueError("chunk CRC mismatch")
+    return data
+
+
+def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
+    """Collect a decompressed chunk's records; all or nothing (a damaged chunk adds no message)."""
+    pos, n = 0, len(buf)
+    found: list[tuple[int, int, bytes]] = []
+    counted: dict[int, int] = defaultdict(int)
+    new_channels, new_schemas = [], []
+    unpack_rec, unpack_msg = _REC.unpack_from, _MSG.unpack_from
+    while pos < n:
+        if pos + 9 > n:
+            raise ValueError("record header cut off")
+        op, length = unpack_rec(buf, pos)
+        body, end = pos + 9, pos + 9 + length
+        if end > n:
+            raise ValueError("record runs past its chunk")
+        if op == _OP_MESSAGE:
+            if length < _MSG.size:
+                raise ValueError("message record too short")
+            cid, _seq, log_time, _pub = unpack_msg(buf, body)
+            counted[cid] += 1
+            if wanted is None or cid in wanted:
+                found.append((cid, log_time, buf[body + _MSG.size : end]))
+        elif op == _OP_CHANNEL:
+            new_channels.append(Channel.read(ReadDataStream(io.BytesIO(buf[body:end]))))
+        elif op == _OP_SCHEMA:
+            new_schemas.append(Schema.read(ReadDataStream(io.BytesIO(buf[body:end]))))
+        pos = end
+    for s in new_schemas:
+        scan.schemas.setdefault(s.id, s)
+    for c in new_channels:
+        scan.channels.setdefault(c.id, c)
+    for cid, k in counted.items():
+        scan.counts[cid] += k
+    for cid, log_time, data in found:
+        times, datas = scan.messages[cid]
+        times.append(log_time)
+        datas.append(data)
+
+
+def _read_indexed(f, size: int, topics: set[str] | None, scan: _Scan) -> bool:
+    """Read through the summary's chunk indexes; False when the file has no usable index."""
+    try:
+        f.seek(0)
+        summary = SeekingReader(f, record_size_limit=size).get_summary()
+    except Exception:  # noqa: BLE001 - any damage in footer or summary: fall back to a linear scan
+        return False
+    if summary is None or not summary.chunk_indexes:
+        return False
+    scan.schemas.update(summary.schemas)
+    scan.channels.update(summary.channels)
+    if summary.statistics is not None:
+        scan.counts.update(summary.statistics.channel_message_counts)
+    wanted = None if topics is None else {cid for cid, c in summary.channels.items() if c.topic in topics}
+    for ci in summary.chunk_indexes:
+        offsets = ci.message_index_offsets
+        if wanted is not None and offsets and not (set(offsets) & wanted):
+            continue
+        try:
+            if not 0 <= ci.chunk_start_offset < size or ci.chunk_length > size:
+                raise ValueError("chunk index points outside the file")
+            f.seek(ci.chunk_start_offset)
+            head = f.read(9)
+            op, length = _REC.unpack(head)
+            if op != _OP_CHUNK or length > size:
+                raise ValueError("no chunk where the index points")
+            chunk = Chunk.read(ReadDataStream(io.BytesIO(f.read(length))))
+            saved = dict(scan.counts)
+            _chunk_records(_decompress(chunk, size * _MAX_RATIO), scan, wanted)
+            if summary.statistics is not None:
+                scan.counts.clear()
+                scan.counts.update(saved)
+        except Exception:  # noqa: BLE001 - a damaged chunk is skipped whole, never half-used
+            scan.skipped["bytes"] += int(min(ci.chunk_length, size))
+            scan.skipped["chunks"] += 1
+    for mi in summary.metadata_indexes:
+        try:
+            f.seek(mi.offset + 9)
+            record = Metadata.read(ReadDataStream(io.BytesIO(f.read(min(mi.length, size)))))
+            scan.metadata[record.name] = dict(record.metadata)
+        except Exception:  # noqa: BLE001 - metadata are optional extras
+            scan.skipped["metadata records"] += 1
+    return True
+
+
+def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan) -> None:
+    """Scan records from the start; stop at the first that cannot be read and count the rest as skipped."""
+    f.seek(0)
+    reader = StreamReader(f, skip_magic=False, emit_chunks=True, record_size_limit=size)
+    good = 8
+    try:
+        for record in reader.records:
+            if isinstance(record, Schema):
+                scan.schemas.setdefault(record.id, record)
+            elif isinstance(record, Channel):
+                scan.channels.setdefault(record.id, record)
+            elif isinstance(record, Chunk):
+                try:
+                    _chunk_records(_decompress(record, size * _MAX_RATIO), scan, None)
+                except Exception:  # noqa: BLE001 - damaged chunk skipped whole
+                    scan.skipped["bytes"] += len(record.data)
+                    scan.skipped["chunks"] += 1
+            elif isinstance(record, Metadata):
+                scan.metadata[record.name] = dict(record.metadata)
+            elif isinstance(record, Message):
+                scan.counts[record.channel_id] += 1
+                times, datas = scan.messages[record.channel_id]
+                times.append(record.log_time)
+                datas.append(record.data)
+            good = f.tell()
+    except Exception as exc:  # noqa: BLE001 - truncated or damaged data section: keep what came before
+        scan.skipped["bytes"] += max(0, size - good)
+        scan.notes.append(f"stopped at byte {good}: {type(exc).__name__}: {exc}")
+    if topics is not None:
+        keep = {cid for cid, c in scan.channels.items() if c.topic in topics}
+        for cid in list(scan.messages):
+            if cid not in keep:
+                del scan.messages[cid]
+
+
+def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Streams:
+    """Read an MCAP file into streams (one per topic; only ``topics`` when given).
+
+    Raises
+    ------
+    FormatError
+        Not an MCAP file (no magic).
+    DataError
+        The file cannot be opened or is empty.
+    """
+    where = os.fspath(path)
+    topic_set = None if topics is None else set(topics)
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if size == 0:
+                raise DataError(f"{where}: empty file, not an MCAP file")
+            if f.read(8) != MAGIC:
+                raise FormatError(f"{where}: not an MCAP file (the first 8 bytes are not the MCAP magic)")
+            scan = _Scan()
+            indexed = _read_indexed(f, size, topic_set, scan)
+            if not indexed:
+                scan = _Scan()
+                _read_linear(f, size, topic_set, scan)
+    except OSError as exc:
+        raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
+    if not scan.channels and scan.skipped:
+        raise DataError(f"{where}: no readable MCAP records ({'; '.join(scan.notes) or 'damaged file'})")
+    return _to_streams(where, scan, indexed)
+
+
+def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:
+    skipped: dict[str, int] = dict(scan.skipped)
+    by_topic: dict[str, list[pd.DataFrame]] = defaultdict(list)
+    counts: dict[str, int] = defaultdict(int)
+    for cid, k in scan.counts.items():
+        ch = scan.channels.get(cid)
+        if ch is None:
+            skipped["messages without a channel"] = skipped.get("messages without a channel", 0) + k
+        else:
+            counts[ch.topic] += k
+    factories = decoder_factories()
+    for cid, (times, datas) in scan.messages.items():
+        ch = scan.channels.get(cid)
+        if ch is None:
+            continue
+        schema = scan.schemas.get(ch.schema_id) if ch.schema_id else None
+        frame, bad = _decode_channel(ch, schema, times, datas, factories)
+        if bad:
+            key = f"{ch.topic}: undecodable messages"
+            skipped[key] = skipped.get(key, 0) + bad
+        if frame is not None:
+            by_topic[ch.topic].append(frame)
+    frames = {}
+    for topic, parts in by_topic.items():
+        frame = parts[0] if len(parts) == 1 else pd.concat(parts, ignore_index=True)
+        frames[topic] = frame.sort_values("t", kind="stable", ignore_index=True)
+    info = {
+        "indexed": indexed,
+        "metadata": scan.metadata,
+        "channels": {c.topic: {"encoding": c.message_encoding,
+                               "schema": scan.schemas[c.schema_id].name if c.schema_id in scan.schemas else ""}
+                     for c in scan.channels.values()},
+        "notes": scan.notes,
+    }
+    return Streams(where, "mcap", frames, counts=dict(counts), skipped={k: v for k, v in skipped.items() if v},
+                   info=info)
+
+
+def _decode_channel(
+    ch: Channel, schema: Schema | None, times: list[int], datas: list[bytes], factories: list[DecoderFactory]
+) -> tuple[pd.DataFrame | None, int]:
+    """One channel's messages as a frame (``t`` + flattened fields) and the number that did not decode."""
+    t_ns = np.asarray(times, dtype=np.uint64)
+    if ch.message_encoding == "json" and (schema is None or schema.encoding in ("jsonschema", "")):
+        table = _json_bulk(datas, schema)
+        if table is not None:
+            return _frame(t_ns, _arrow_columns(table)), 0
+        objects, keep = [], []
+        for i, data in enumerate(datas):
+            try:
+                obj = json.loads(data)
+            except (ValueError, UnicodeDecodeError):
+                continue
+            if isinstance(obj, dict):
+                objects.append(obj)
+                keep.append(i)
+        return _records_frame(t_ns[keep], objects), len(datas) - len(keep)
+    decoder = None
+    for factory in factories:
+        try:
+            decoder = factory.decoder_for(ch.message_encoding, schema)
+        except Exception:  # noqa: BLE001 - a schema the decoder cannot parse: nothing of it decodes
+            decoder = None
+        if decoder is not None:
+            break
+    if decoder is None:
+        return None, len(datas)
+    objects, keep = [], []
+    for i, data in enumerate(datas):
+        try:
+            objects.append(_plain(decoder(data)))
+        except Exception:  # noqa: BLE001 - third-party decoders raise anything on bad bytes
+            continue
+        keep.append(i)
+    return _records_frame(t_ns[keep], objects), len(datas) - len(keep)
+
+
+def _frame(t_ns: np.ndarray, columns: dict[str, Any]) -> pd.DataFrame:
+    data = {"t": t_ns.astype(np.float64) * 1e-9}
+    data.update((k, v) for k, v in columns.items() if k != "t")
+    return pd.DataFrame(data)
+
+
+def _records_frame(t_ns: np.ndarray, objects: list[Any]) -> pd.DataFrame:
+    if not objects:
+        return pd.DataFrame({"t": np.empty(0)})
+    try:
+        table = pa.Table.from_pylist([o if isinstance(o, dict) else {"value": o} for o in objects])
+        return _frame(t_ns, _arrow_columns(table))
+    except (pa.ArrowException, TypeError, ValueError, OverflowError):
+        flat = [_flatten_py(o if isinstance(o, dict) else {"value": o}) for o in objects]
+        frame = pd.DataFrame.from_records(flat)
+        return _frame(t_ns, {str(c): frame[c].to_numpy() for c in frame.columns})
+
+
+def _plain(obj: Any) -> Any:
+    """A decoded ROS 2 / protobuf message as plain dicts, lists and scalars."""
+    if obj is None or isinstance(obj, bool | int | float | str):
+        return obj
+    if isinstance(obj, bytes | bytearray | memoryview):
+        return list(bytes(obj)) if len(obj) <= MAX_ARRAY else None
+    if isinstance(obj, np.ndarray):
+        return obj.tolist() if obj.size <= MAX_ARRAY else None
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, list | tuple) or type(obj).__name__ in ("array", "RepeatedScalarContainer",
+                                                                "RepeatedCompositeContainer"):
+        items = list(obj)
+        return [_plain(v) for v in items] if len(items) <= MAX_ARRAY else None
+    slots = getattr(type(obj), "__slots__", None)
+    if slots and not isinstance(obj, dict):
+        return {s: _plain(getattr(obj, s)) for s in slots}
+    descriptor = getattr(obj, "DESCRIPTOR", None)
+    if descriptor is not None and hasattr(descriptor, "fields"):
+        return {fd.name: _plain(getattr(obj, fd.name)) for fd in descriptor.fields}
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    return None
+
+
+def _flatten_py(obj: dict, prefix: str = "", out: dict | None = None) -> dict:
+    out = {} if out is None else out
+    for key, value in obj.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            _flatten_py(value, name + ".", out)
+        elif isinstance(value, list):
+            if len(value) <= MAX_ARRAY:
+                for i, item in enumerate(value):
+                    if isinstance(item, dict):
+                        _flatten_py(item, f"{name}[{i}].", out)
+                    elif not isinstance(item, list):
+                        out[f"{name}[{i}]"] = item
+        else:
+            out[name] = value
+    return out
+
+
+def _arrow_type(schema: Any) -> pa.DataType | None:
+    """The pyarrow type a JSON Schema node decodes to, or None to let pyarrow infer it."""
+    if not isinstance(schema, dict):
+        return None
+    kind = schema.get("type")
+    if isinstance(kind, list):
+        kinds = [k for k in kind if k != "null"]
+        kind = kinds[0] if len(kinds) == 1 else None
+    if kind == "number":
+        return pa.float64()
+    if kind == "integer":
+        return pa.int64()
+    if kind == "boolean":
+        return pa.bool_()
+    if kind == "string":
+        return pa.string()
+    if kind == "array":
+        item = _arrow_type(schema.get("items"))
+        return pa.list_(item) if item is not None else None
+    if kind == "object":
+        props = schema.get("properties")
+        if not isinstance(props, dict):
+            return None
+        fields = [(str(k), _arrow_type(v)) for k, v in props.items()]
+        if any(t is None for _, t in fields) or not fields:
+            return None
+        return pa.struct(fields)
+    return None
+
+
+def _json_bulk(datas: list[bytes], schema: Schema | None) -> pa.Table | None:
+    """All messages of a JSON channel parsed in one go by pyarrow, or None where that cannot be trusted."""
+    if not datas:
+        return None
+    explicit = None
+    if schema is not None and schema.data:
+        try:
+            typ = _arrow_type(json.loads(schema.data))
+        except (ValueError, UnicodeDecodeError, RecursionError):
+            typ = None
+        if isinstance(typ, pa.StructType):
+            explicit = pa.schema(list(typ))
+    # one message per line: raw newlines can only be whitespace between tokens in valid JSON
+    blob = b"\n".join(d.replace(b"\n", b" ").replace(b"\r", b" ") for d in datas)
+    if any(not d.strip() for d in datas):
+        return None
+    try:
+        table = pajson.read_json(
+            io.BytesIO(blob),
+            read_options=pajson.ReadOptions(use_threads=True, block_size=max(1 << 20, len(blob) // 4 + 1)),
+            parse_options=pajson.ParseOptions(explicit_schema=explicit, unexpected_field_behavior="infer"),
+        )
+    except (pa.ArrowException, ValueError):
+        return None
+    return table if table.num_rows == len(datas) else None
+
+
+def _arrow_columns(table: pa.Table) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for name, column in zip(table.column_names, table.columns, strict=True):
+        _flatten_arrow(str(name), column.combine_chunks(), out)
+    return out
+
+
+def _flatten_arrow(name: str, arr: pa.Array, out: dict[str, Any]) -> None:
+    typ = arr.type
+    if pa.types.is_struct(typ):
+        for i, child in enumerate(arr.flatten()):
+            _flatten_arrow(f"{name}.{typ.field(i).name}", child, out)
+    elif pa.types.is_list(typ) or pa.types.is_large_list(typ) or pa.types.is_fixed_size_list(typ):
+        lengths = pc.list_value_length(arr).drop_null()
+        if len(lengths) == 0:
+            return
+        bounds = pc.min_max(lengths).as_py()
+        if bounds["min"] != bounds["max"] or bounds["max"] > MAX_ARRAY:
+            return
+        for i in range(bounds["max"]):
+            _flatten_arrow(f"{name}[{i}]", pc.list_element(arr, i), out)
+    elif pa.types.is_integer(typ) or pa.types.is_floating(typ) or pa.types.is_boolean(typ):
+        if arr.null_count:
+            out[name] = pc.cast(arr, pa.float64()).to_numpy(zero_copy_only=False)
+        else:
+            out[name] = arr.to_numpy(zero_copy_only=False)
+    elif pa.types.is_string(typ) or pa.types.is_large_string(typ):
+        out[name] = np.array(arr.to_pylist(), dtype=object)
+    elif pa.types.is_null(typ):
+        out[name] = np.full(len(arr), np.nan)
+
+
+# ------------------------------------------------------------------------------------------------ writing
+
+
+def _tokens(column: str) -> list[str | int]:
+    return [int(i) if i else k for k, i in _INDEX_TOKEN.findall(column)]
+
+
+def _json_kind(values: np.ndarray) -> str:
+    kind = values.dtype.kind
+    return {"f": "number", "i": "integer", "u": "integer", "b": "boolean"}.get(kind, "string")
+
+
+def _schema_for(columns: list[str], kinds: list[str], title: str) -> dict:
+    root: dict = {"type": "object", "properties": {}}
+    for column, kind in zip(columns, kinds, strict=True):
+        node = root
+        toks = _tokens(column)
+        for tok, nxt in zip(toks, toks[1:] + [None], strict=True):
+            if isinstance(tok, int):
+                node.setdefault("items", {})
+                node["minItems"] = node["maxItems"] = max(node.get("maxItems", 0), tok + 1)
+                child = node["items"]
+            else:
+                child = node["properties"].setdefault(tok, {})
+            if nxt is None:
+                child["type"] = kind
+            elif isinstance(nxt, int):
+                child["type"] = "array"
+            else:
+                child.setdefault("type", "object")
+                child.setdefault("properties", {})
+            node = child
+    return {"title": title, **root}
+
+
+def _nest(columns: list[list[str | int]], row: tuple) -> dict:
+    root: dict = {}
+    for toks, value in zip(columns, row, strict=True):
+        node: Any = root
+        for tok, nxt in zip(toks[:-1], toks[1:], strict=True):
+            if isinstance(node, list):
+                while len(node) <= tok:
+                    node.append(None)
+                if node[tok] is None:
+                    node[tok] = [] if isinstance(nxt, int) else {}
+                node = node[tok]
+            else:
+                node = node.setdefault(tok, [] if isinstance(nxt, int) else {})
+        last = toks[-1]
+        if isinstance(node, list):
+            while len(node) <= last:
+                node.append(None)
+            node[last] = value
+        else:
+            node[last] = value
+    return root
+
+
+def _schema_name(topic: str) -> str:
+    return ".".join(p for p in re.split(r"[/.]", topic) if p) or "message"
+
+
+def write(
+    path: str | os.PathLike,
+    streams: Mapping[str, pd.DataFrame | Mapping[str, Any]],
+    *,
+    metadata: Mapping[str, Mapping[str, str]] | None = None,
+    profile: str = "",
+    chunk_size: int = 64 * 1024,
+) -> Path:
+    """Write streams (topic -> frame with ``t`` seconds and field columns) as an MCAP file of JSON channels.
+
+    Messages of all topics are interleaved by time (ties keep the order of ``streams`` and of rows); NaN
+    values are written as JSON ``null``. ``metadata`` become MCAP metadata records. Written atomically.
+
+    Raises
+    ------
+    DataError
+        A stream without ``t``, with non-finite or negative times, or with columns of unequal length.
+    """
+    where = os.fspath(path)
+    prepared = []
+    for topic, data in streams.items():
+        frame = data if isinstance(data, pd.DataFrame) else pd.DataFrame(dict(data))
+        if "t" not in frame.columns:
+            raise DataError(f"{where}: stream {topic!r} has no 't' column")
+        t = frame["t"].to_numpy(dtype=np.float64)
+        if not np.isfinite(t).all() or (t < 0).any():
+            raise DataError(f"{where}: stream {topic!r}: times must be finite and non-negative")
+        cols = [str(c) for c in frame.columns if c != "t"]
+        arrays = [frame[c].to_numpy() for c in cols]
+        kinds = [_json_kind(a) for a in arrays]
+        values = []
+        for a, kind in zip(arrays, kinds, strict=True):
+            if kind == "number":
+                a = a.astype(np.float64)
+                values.append([None if not np.isfinite(v) else v for v in a.tolist()])
+            elif kind == "string":
+                values.append([None if v is None or (isinstance(v, float) and v != v) else str(v) for v in a.tolist()])
+            else:
+                values.append(a.tolist())
+        schema = _schema_for(cols, kinds, _schema_name(topic))
+        prepared.append((topic, np.rint(t * 1e9).astype(np.uint64), [_tokens(c) for c in cols], values, schema))
+
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        writer.start(profile=profile, library="workbench")
+        events = []
+        for k, (topic, t_ns, toks, values, schema) in enumerate(prepared):
+            sid = writer.register_schema(
+                name=schema["title"], encoding="jsonschema", data=json.dumps(schema, sort_keys=True).encode()
+            )
+            cid = writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+            rows = list(zip(*values, strict=True)) if values else [()] * len(t_ns)
+            for i, (time, row) in enumerate(zip(t_ns.tolist(), rows, strict=True)):
+                events.append((time, k, i, cid, row, toks))
+        events.sort(key=lambda e: (e[0], e[1], e[2]))
+        for time, _k, i, cid, row, toks in events:
+            data = json.dumps(_nest(toks, row), separators=(",", ":"), allow_nan=False).encode()
+            writer.add_message(channel_id=cid, log_time=time, data=data, publish_time=time, sequence=i)
+        for name, record in (metadata or {}).items():
+            writer.add_metadata(name, {str(k): str(v) for k, v in record.items()})
+        writer.finish()
+    return Path(path)

@@ -1,0 +1,154 @@
+"""Streams: what every reader turns a file into, and the only thing the shared pipeline reads.
+
+A stream is one message type (``"ATTITUDE"``) or topic (``"/quadrotor/state"``) of a log: a
+:class:`pandas.DataFrame` whose first column ``t`` is float64 seconds on the log's own clock (tlog: the ground
+station's arrival time; MCAP: ``log_time``; ULog: the autopilot's ``timestamp``; CSV: the ``t`` column), followed
+by one column per field. Nested fields are flattened to dotted names (``pose.position.x``), fixed-size arrays to
+indexed names (``q[0]``); text fields stay ``str`` columns. Readers keep a file's rows as they are: cleaning
+(non-finite values, time going backwards) is the pipeline's job, and it counts what it drops.
+
+:class:`Streams` bundles the streams of one file with what the reader skipped (bad bytes, failed checksums,
+undecodable messages) and how many messages every stream in the file has, read or not, so that a mapping error
+can list what the file does contain.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["Streams", "split_source", "candidate_streams", "nearest", "clean_series"]
+
+_INDEX = re.compile(r"\[(\d+)\]$")
+
+
+@dataclass(frozen=True, eq=False)
+class Streams(Mapping[str, pd.DataFrame]):
+    """The streams of one log file (a read-only mapping: stream name -> DataFrame).
+
+    Attributes
+    ----------
+    path : str
+        The file read.
+    format : str
+        Its format's name (``"tlog"``, ``"mcap"``, ``"ulog"``, ``"csv"``).
+    frames : dict of str to pandas.DataFrame
+        The streams read (all, or those asked for), each with a float64 ``t`` column first.
+    counts : dict of str to int
+        Messages per stream in the whole file, including streams that were not read.
+    skipped : dict of str to int
+        What the reader could not use, by cause (``"bytes"``, ``"crc_failures"``, ``"messages"``, …).
+    info : dict
+        Format-specific facts (dialect, ULog info, MCAP profile and metadata records, …).
+    """
+
+    path: str
+    format: str
+    frames: Mapping[str, pd.DataFrame]
+    counts: Mapping[str, int] = field(default_factory=dict)
+    skipped: Mapping[str, int] = field(default_factory=dict)
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> pd.DataFrame:
+        return self.frames[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.frames)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    @property
+    def names(self) -> list[str]:
+        """Every stream in the file (read or not), most frequent first."""
+        names = dict.fromkeys(sorted(self.counts, key=lambda s: (-self.counts[s], s)))
+        names.update(dict.fromkeys(self.frames))
+        return list(names)
+
+    @property
+    def n_skipped(self) -> int:
+        return int(sum(self.skipped.values()))
+
+
+def split_source(source: str, known: Iterable[str]) -> tuple[str, str] | None:
+    """Split ``"stream.field"`` or ``"stream:field"`` into (stream, field) against the streams ``known``.
+
+    ``:`` separates unambiguously (``/quadrotor/state:pose.x``). Otherwise the longest known stream name that
+    the source starts with, followed by ``.``, wins (``vehicle_attitude.q[0]``, ``/quadrotor/state.pose.x``).
+    Returns ``None`` when no known stream fits.
+    """
+    known = set(known)
+    if ":" in source:
+        stream, fld = source.rsplit(":", 1)
+        return (stream, fld) if stream in known else None
+    best = None
+    for i, ch in enumerate(source):
+        if ch == "." and source[:i] in known:
+            best = (source[:i], source[i + 1 :])
+    return best
+
+
+def candidate_streams(source: str) -> list[str]:
+    """The stream names a source could refer to, before the file's streams are known (for topic filters)."""
+    if ":" in source:
+        return [source.rsplit(":", 1)[0]]
+    return [source[:i] for i, ch in enumerate(source) if ch == "."]
+
+
+def nearest(name: str, choices: Iterable[str], n: int = 5) -> list[str]:
+    """Up to ``n`` of ``choices`` closest to ``name`` (difflib), best first; case-insensitive."""
+    choices = list(dict.fromkeys(choices))
+    lowered = {c.lower(): c for c in choices}
+    hits = difflib.get_close_matches(name.lower(), list(lowered), n=n, cutoff=0.4)
+    return [lowered[h] for h in hits]
+
+
+def field_columns(frame: pd.DataFrame, name: str) -> list[str]:
+    """The columns of a field: itself, or ``name[0]``, ``name[1]``, … for an array field."""
+    if name in frame.columns:
+        return [name]
+    cols = [c for c in frame.columns if isinstance(c, str) and c.startswith(name + "[") and _INDEX.search(c)]
+    return sorted(cols, key=lambda c: int(_INDEX.search(c).group(1)))
+
+
+def clean_series(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """Drop samples with a non-finite time or value and samples whose time does not increase.
+
+    Time must increase strictly for interpolation; a sample at or before the latest time seen so far is
+    dropped (a clock jump backwards, a duplicate). ``values`` may be 2-D (samples × components).
+
+    Returns
+    -------
+    t, values, dropped
+        The kept samples and ``{"non-finite values": k, "non-increasing time": j}`` (zero counts omitted).
+    """
+    t = np.asarray(t, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    finite = np.isfinite(t) & (np.isfinite(values) if values.ndim == 1 else np.isfinite(values).all(axis=1))
+    dropped: dict[str, int] = {}
+    if not finite.all():
+        dropped["non-finite values"] = int((~finite).sum())
+        t, values = t[finite], values[finite]
+    if t.size > 1:
+        running = np.maximum.accumulate(t)
+        keep = np.ones(t.size, dtype=bool)
+        keep[1:] = t[1:] > running[:-1]
+        if not keep.all():
+            dropped["non-increasing time"] = int((~keep).sum())
+            t, values = t[keep], values[keep]
+    return t, values, dropped
+
+
+def numeric(frame: pd.DataFrame, column: str) -> np.ndarray:
+    """A column as float64; text that is not a number becomes NaN (and is then dropped and counted)."""
+    col = frame[column]
+    if col.dtype.kind in "biuf":
+        return col.to_numpy(dtype=np.float64, na_value=np.nan)
+    return pd.to_numeric(col, errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
+

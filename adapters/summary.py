@@ -1,0 +1,157 @@
+"""``workbench inspect LOG``: what is in a log — streams, rates, fields, time span, flight modes, skips.
+
+The first things a PlotJuggler user looks at, as one frozen :class:`LogSummary` (``str()`` renders it as text).
+Flight modes are shown where the log says them in a known way: ArduPilot ``HEARTBEAT.custom_mode`` (from the
+vehicle, not the ground station) and PX4 ``vehicle_status.nav_state``; armed spans likewise.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from adapters.modes import mode_name
+from adapters.segment import Span, flag_spans
+from adapters.streams import Streams
+
+__all__ = ["LogSummary", "StreamSummary", "ModeSpan", "summarize"]
+
+_ARDUPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA
+_COPTER_TYPES = {2, 3, 4, 13, 14, 15}  # MAV_TYPE quadrotor, coaxial, helicopter, hexa, octo, tricopter
+
+
+@dataclass(frozen=True)
+class StreamSummary:
+    """One stream: message count, median rate, time span and field names."""
+
+    name: str
+    count: int
+    rate_hz: float
+    t_start: float
+    t_end: float
+    fields: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ModeSpan:
+    """A flight-mode span ``[start, end]`` (log clock, seconds)."""
+
+    start: float
+    end: float
+    mode: str
+
+
+@dataclass(frozen=True)
+class LogSummary:
+    """What :func:`summarize` found in a log."""
+
+    path: str
+    format: str
+    size_bytes: int
+    t_start: float
+    t_end: float
+    streams: tuple[StreamSummary, ...]
+    modes: tuple[ModeSpan, ...]
+    armed: tuple[tuple[float, float], ...]
+    skipped: tuple[tuple[str, int], ...]
+    info: tuple[tuple[str, Any], ...]
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start if math.isfinite(self.t_end - self.t_start) else 0.0
+
+    def __str__(self) -> str:
+        lines = [
+            f"{self.path}: {self.format}, {self.size_bytes} bytes, {len(self.streams)} streams, "
+            f"{self.duration:.1f} s ({self.t_start:.3f} … {self.t_end:.3f})",
+        ]
+        if self.skipped:
+            lines.append("skipped: " + ", ".join(f"{k}: {v}" for k, v in self.skipped))
+        width = max((len(s.name) for s in self.streams), default=6)
+        lines.append(f"{'stream':<{width}}  {'count':>8}  {'rate Hz':>8}  {'from':>10}  {'to':>10}  fields")
+        for s in self.streams:
+            fields = ", ".join(s.fields[:12]) + (f", … ({len(s.fields)})" if len(s.fields) > 12 else "")
+            lines.append(
+                f"{s.name:<{width}}  {s.count:>8}  {s.rate_hz:>8.2f}  {s.t_start - self.t_start:>10.2f}  "
+                f"{s.t_end - self.t_start:>10.2f}  {fields}"
+            )
+        if self.modes:
+            lines.append("modes: " + "; ".join(
+                f"{m.mode} {m.start - self.t_start:.1f}–{min(m.end, self.t_end) - self.t_start:.1f} s"
+                for m in self.modes))
+        if self.armed:
+            lines.append("armed: " + "; ".join(
+                f"{a - self.t_start:.1f}–{min(b, self.t_end) - self.t_start:.1f} s" for a, b in self.armed))
+        return "\n".join(lines)
+
+
+def _stream_summary(name: str, frame, count: int) -> StreamSummary:
+    t = frame["t"].to_numpy(dtype=np.float64, na_value=np.nan)
+    t = t[np.isfinite(t)]
+    d = np.diff(t)
+    d = d[d > 0]
+    rate = float(1.0 / np.median(d)) if d.size else 0.0
+    fields = tuple(str(c) for c in frame.columns if c != "t")
+    return StreamSummary(name, int(count), rate, float(t.min()) if t.size else math.nan,
+                         float(t.max()) if t.size else math.nan, fields)
+
+
+def _mode_spans(t: np.ndarray, modes: np.ndarray, table: str) -> list[ModeSpan]:
+    out = []
+    for i in range(len(modes)):
+        if i == 0 or modes[i] != modes[i - 1]:
+            out.append([float(t[i]), math.inf, mode_name(table, modes[i])])
+            if len(out) > 1:
+                out[-2][1] = float(t[i])
+    if out:
+        out[-1][1] = float(t[-1])
+    return [ModeSpan(a, b, n) for a, b, n in out]
+
+
+def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span]]:
+    hb = streams.frames.get("HEARTBEAT")
+    if hb is not None and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb.columns):
+        rows = (hb["autopilot"].to_numpy() == _ARDUPILOT) & np.isin(hb["type"].to_numpy(), list(_COPTER_TYPES))
+        if rows.any():
+            t = hb["t"].to_numpy(dtype=np.float64)[rows]
+            modes = hb["custom_mode"].to_numpy()[rows]
+            armed = (hb["base_mode"].to_numpy()[rows].astype(np.int64) & 128) != 0
+            return _mode_spans(t, modes, "arducopter"), flag_spans(t, armed)
+    vs = streams.frames.get("vehicle_status")
+    if vs is not None and "nav_state" in vs.columns:
+        t = vs["t"].to_numpy(dtype=np.float64)
+        armed = vs["arming_state"].to_numpy() == 2 if "arming_state" in vs.columns else np.zeros(len(t), bool)
+        return _mode_spans(t, vs["nav_state"].to_numpy(), "px4_nav_state"), flag_spans(t, armed)
+    return [], []
+
+
+def summarize(streams: Streams) -> LogSummary:
+    """The summary of a file's streams (read them all for a complete picture)."""
+    summaries = tuple(
+        _stream_summary(name, frame, streams.counts.get(name, len(frame))) for name, frame in streams.frames.items()
+    )
+    starts = [s.t_start for s in summaries if math.isfinite(s.t_start)]
+    ends = [s.t_end for s in summaries if math.isfinite(s.t_end)]
+    modes, armed = _modes(streams)
+    t_end = max(ends) if ends else 0.0
+    try:
+        size = os.path.getsize(streams.path)
+    except OSError:
+        size = 0
+    info = tuple((str(k), v) for k, v in streams.info.items() if isinstance(v, int | float | str | bool))
+    return LogSummary(
+        path=streams.path,
+        format=streams.format,
+        size_bytes=int(size),
+        t_start=min(starts) if starts else 0.0,
+        t_end=t_end,
+        streams=tuple(sorted(summaries, key=lambda s: s.name)),
+        modes=tuple(modes),
+        armed=tuple((s.start, min(s.end, t_end)) for s in armed),
+        skipped=tuple(sorted((str(k), int(v)) for k, v in streams.skipped.items() if v)),
+        info=info,
+    )

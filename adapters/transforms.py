@@ -1,0 +1,95 @@
+"""Named channel transforms: the few conversions a mapping cannot express with scale, offset and sign.
+
+Each transform takes the source field's columns (one column, or four for a quaternion) and returns one
+channel; its inverse is what the writers use to put a demonstration back into a log's native fields, so a
+written log maps back onto the same channel values.
+
+========================  =========  ======================================================================
+name                      columns    channel
+========================  =========  ======================================================================
+``identity``              1          the field as it is
+``ned_up``                1          ``-v``: NED's down-positive z (or its rate) as the paper's up-positive y
+``pwm``                   1          RC pulse width ``pwm_min``–``pwm_max`` µs (default 1000–2000) → [−1, 1],
+                                     clipped (sticks beyond their calibrated end points saturate)
+``quaternion_roll``       4          roll of the unit quaternion ``[w, x, y, z]`` (rad, ZYX Euler angles)
+``quaternion_pitch``      4          pitch, likewise
+``quaternion_yaw``        4          yaw, likewise
+========================  =========  ======================================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Transform", "TRANSFORMS", "get_transform"]
+
+
+@dataclass(frozen=True)
+class Transform:
+    """A named conversion from ``n_columns`` field columns to one channel, with its inverse."""
+
+    name: str
+    n_columns: int
+    forward: Callable[[np.ndarray, Mapping[str, Any]], np.ndarray]
+    inverse: Callable[[np.ndarray, Mapping[str, Any]], np.ndarray]
+    params: tuple[str, ...] = ()
+
+
+def _pwm_range(p: Mapping[str, Any]) -> tuple[float, float]:
+    return float(p.get("pwm_min", 1000.0)), float(p.get("pwm_max", 2000.0))
+
+
+def _pwm(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    lo, hi = _pwm_range(p)
+    return np.clip(2.0 * (v[:, 0] - lo) / (hi - lo) - 1.0, -1.0, 1.0)
+
+
+def _pwm_inv(u: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    lo, hi = _pwm_range(p)
+    return (lo + (np.clip(u, -1.0, 1.0) + 1.0) * 0.5 * (hi - lo))[:, None]
+
+
+def _roll(q: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    w, x, y, z = q.T
+    return np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+
+
+def _pitch(q: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    w, x, y, z = q.T
+    return np.arcsin(np.clip(2.0 * (w * y - z * x), -1.0, 1.0))
+
+
+def _yaw(q: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    w, x, y, z = q.T
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _axis_quaternion(axis: int) -> Callable[[np.ndarray, Mapping[str, Any]], np.ndarray]:
+    def inverse(angle: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        q = np.zeros((angle.size, 4))
+        q[:, 0] = np.cos(angle / 2.0)
+        q[:, axis] = np.sin(angle / 2.0)
+        return q
+
+    return inverse
+
+
+TRANSFORMS: dict[str, Transform] = {
+    t.name: t
+    for t in (
+        Transform("identity", 1, lambda v, p: v[:, 0], lambda u, p: u[:, None]),
+        Transform("ned_up", 1, lambda v, p: -v[:, 0], lambda u, p: -u[:, None]),
+        Transform("pwm", 1, _pwm, _pwm_inv, ("pwm_min", "pwm_max")),
+        Transform("quaternion_roll", 4, _roll, _axis_quaternion(1)),
+        Transform("quaternion_pitch", 4, _pitch, _axis_quaternion(2)),
+        Transform("quaternion_yaw", 4, _yaw, _axis_quaternion(3)),
+    )
+}
+
+
+def get_transform(name: str) -> Transform | None:
+    return TRANSFORMS.get(name)
