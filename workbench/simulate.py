@@ -19,6 +19,7 @@ state-dependent (larger and biased far from the pad, tighter near it), temporall
 
 from __future__ import annotations
 
+import math
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -80,7 +81,7 @@ class OperatorProfile:
             "k_pos", "v_max", "k_vel", "phi_max", "k_phi", "k_alt", "sink_max", "k_vy", "centre_gate",
             "sigma_far", "sigma_near", "bias_far", "burst_rate", "burst_gain",
         ):
-            changes[name] = getattr(self, name) * float(np.exp(spread * rng.standard_normal()))
+            changes[name] = getattr(self, name) * math.exp(spread * rng.standard_normal())
         changes["rho"] = float(np.clip(self.rho + 0.04 * rng.standard_normal(), 0.7, 0.97))
         return replace(self, **changes)
 
@@ -107,21 +108,27 @@ def _operator_command(
         # descend, easing into it through a softened gate as a pilot does
         phi_max = p.phi_max
         vx_des = -np.clip(p.k_pos * px, -p.v_max, p.v_max)
-        gate = 1.0 / (1.0 + np.exp((abs(px) - p.centre_gate) / 0.06))
+        gate = 1.0 / (1.0 + math.exp((abs(px) - p.centre_gate) / 0.06))
         vy_des = -gate * min(p.sink_max, p.k_alt * py + 0.04)
     else:
         # straight line: one speed along the line of sight to the pad, so both axes arrive together,
         # with a small bank limit ("little attitude") and a slow final sink
         phi_max = 0.4 * p.phi_max
-        dist = np.hypot(px, py) + 1e-9
+        dist = math.hypot(px, py) + 1e-9
         speed = min(0.8 * p.v_max, 0.8 * p.k_alt * dist)
         vx_des = -speed * px / dist
-        vy_des = -speed * py / dist - 0.04 * np.exp(-py / 0.3)
+        vy_des = -speed * py / dist - 0.04 * math.exp(-py / 0.3)
     # the horizontal axis is flown through the attitude: x'' = g phi
     phi_des = np.clip(p.k_vel * (vx_des - vx) / 9.8, -phi_max, phi_max)
     u1 = p.k_phi * (phi_des - phi) - p.k_phidot * phidot
     u2 = p.k_vy * (vy_des - vy)
     return np.array([u1, u2])
+
+
+def _step(system: LinearSystem, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``A x + B u`` without BLAS: sample logs must regenerate bit-identically on any CPU, and BLAS kernels
+    (chosen per processor) may order the sums differently. Elementwise products summed along rows do not."""
+    return np.add.reduce(system.A * x, axis=1) + np.add.reduce(system.B * u, axis=1)
 
 
 def simulate_trial(
@@ -159,8 +166,8 @@ def simulate_trial(
     outcome = "time limit"
     for _ in range(n_max + 1):
         rel = x - target_vec
-        dist = float(np.hypot(rel[0], rel[1]))
-        closeness = np.exp(-dist / 0.8)  # 1 at the pad, → 0 far away
+        dist = math.hypot(rel[0], rel[1])
+        closeness = math.exp(-dist / 0.8)  # 1 at the pad, → 0 far away
         sigma = p.sigma_near + (p.sigma_far - p.sigma_near) * (1.0 - closeness)
         # temporally correlated hand drift (AR(1)); the roll stick is the sensitive one, so it drifts less
         innovation = rng.standard_normal(2) * np.array([0.3, 1.0])
@@ -179,7 +186,7 @@ def simulate_trial(
         xs.append(x.copy())
         us.append(u)
         if rel[1] <= 0.0:
-            speed = float(np.hypot(rel[3], rel[4]))
+            speed = math.hypot(rel[3], rel[4])
             landed = speed < LANDING_SPEED and abs(rel[2]) < LANDING_ATTITUDE and abs(rel[0]) <= PAD_HALF_WIDTH
             outcome = "landed" if landed else "crashed"
             break
@@ -187,7 +194,7 @@ def simulate_trial(
         if not (x_lo <= x[0] <= x_hi and x[1] <= y_hi):
             outcome = "left the domain"
             break
-        x = sys_.A @ x + sys_.B @ u
+        x = _step(sys_, x, u)
     X, U = np.array(xs), np.array(us)
     return Demonstration(
         sys_.dt * np.arange(len(X)),
