@@ -1,0 +1,273 @@
+"""The rerun recordings: read the .rrd back and check entity paths, row counts and values against the model.
+
+Every expected number is computed here from the demonstrations and the fitted model (``model.variability``,
+``model.predict``), never copied from a run. No test opens a viewer.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+import rerun as rr
+from rerun.chunk import RrdReader
+
+from workbench import viewer
+from workbench.errors import DataError, WorkbenchError
+from workbench.model import HumanBehaviorModel, IOCOnlyModel
+from workbench.replay import replay, replay_blueprint
+from workbench.simulate import simulate_landings
+from workbench.system import planar_quadrotor
+
+HORIZON = 15
+SAMPLES = 40
+STARTS = (0, 25)
+
+rr.set_strict_mode(True)  # a bad call must fail the test, not log a warning
+
+
+def read_rrd(path: Path) -> dict[str, dict[str, list]]:
+    """Per entity path: every column of every recording chunk, static ones under key ``static:<column>``."""
+    out: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if name == "rerun.controls.RowId":
+                continue
+            key = f"static:{name}" if chunk.is_static else name
+            col = batch.column(name)
+            if pa.types.is_duration(col.type):
+                out[chunk.entity_path][key].extend(col.cast(pa.int64()).to_numpy() / 1e9)
+            else:
+                out[chunk.entity_path][key].extend(col.to_pylist())
+    return out
+
+
+def series(entities, path: str, column: str = "Scalars:scalars") -> tuple[np.ndarray, np.ndarray]:
+    """(time, values) of a temporal entity, sorted by time; values (rows, width)."""
+    e = entities[path]
+    t = np.asarray(e["time"], dtype=float)
+    v = np.asarray(e[column], dtype=float)
+    order = np.argsort(t, kind="stable")
+    return t[order], v[order]
+
+
+def rrd_verify(path: Path) -> subprocess.CompletedProcess:
+    exe = Path(sys.executable).with_name("rerun")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "rerun"]
+    return subprocess.run([*cmd, "rrd", "verify", str(path)], capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    system = planar_quadrotor()
+    demos = simulate_landings("CS1", 8, seed=3) + simulate_landings("CS2", 4, seed=3)
+    cs1 = demos.by_label("CS1")
+    model = HumanBehaviorModel(system, n_components=3).fit(cs1)
+    ioc = IOCOnlyModel(system).fit(cs1)
+    focus = cs1[1].id
+    path = tmp_path_factory.mktemp("viewer") / "session.rrd"
+    _, session = viewer.record_session(
+        path, demos, models={"CS1": model}, baselines={"CS1": {"ioc_only": ioc}}, focus=[focus],
+        horizon=HORIZON, samples=SAMPLES, starts=STARTS, seed=7,
+    )
+    return {"demos": demos, "model": model, "ioc": ioc, "focus": focus, "path": path, "session": session,
+            "entities": read_rrd(path)}
+
+
+def test_rrd_verifies(setup):
+    result = rrd_verify(setup["path"])
+    assert result.returncode == 0, result.stderr
+
+
+def test_entity_paths_and_row_counts(setup):
+    ents, demos = setup["entities"], setup["demos"]
+    for d in demos:
+        for s in demos.state_names:
+            t, v = series(ents, f"/demos/{d.id}/states/{s}")
+            assert len(t) == len(d)
+        for u in demos.input_names:
+            t, v = series(ents, f"/demos/{d.id}/inputs/{u}")
+            assert len(t) == len(d)
+        assert f"/scene/demos/{d.id}/path" in ents
+        assert len(ents[f"/scene/demos/{d.id}/vehicle"]["time"]) == len(d)
+    for p in ("/scene/domain", "/scene/pad", "/scene/starts", "/models/CS1/K", "/models/CS1/Q", "/models/CS1/R",
+              "/models/CS1/S", "/models/CS1/summary"):
+        assert p in ents, p
+    # only the strategy with a model gets variability; CS2 has none
+    cs2 = next(d for d in demos if d.label == "CS2")
+    assert not any(k.startswith(f"/demos/{cs2.id}/variability") for k in ents)
+    for start in STARTS:
+        for method in ("proposed", "ioc_only", "band"):
+            for s in demos.state_names:
+                t, _ = series(ents, f"/demos/{setup['focus']}/predictions/from_{start}/{method}/{s}")
+                assert len(t) == HORIZON + 1
+        assert f"/scene/predictions/{setup['focus']}/from_{start}/proposed" in ents
+
+
+def test_states_inputs_and_time_columns(setup):
+    ents, demos = setup["entities"], setup["demos"]
+    d = demos[2]
+    for j, s in enumerate(demos.state_names):
+        t, v = series(ents, f"/demos/{d.id}/states/{s}")
+        np.testing.assert_allclose(t, d.t - d.t[0], atol=1e-9)
+        np.testing.assert_array_equal(v[:, 0], d.x[:, j])
+    steps = np.asarray(ents[f"/demos/{d.id}/inputs/u1"]["step"])
+    np.testing.assert_array_equal(np.sort(steps), np.arange(len(d)))
+    # inputs are drawn as a zero-order hold
+    style = ents[f"/demos/{d.id}/inputs/u1"]
+    assert any(style[k] for k in style if k.startswith("static:SeriesLines:interpolation_mode"))
+
+
+def test_logged_gmr_equals_model_variability(setup):
+    ents, demos, model = setup["entities"], setup["demos"], setup["model"]
+    for d in demos.by_label("CS1"):
+        mu, Sigma = model.variability(d.x, x0=d.x[0], target=d.target)
+        sigma = np.sqrt(np.diagonal(Sigma, axis1=1, axis2=2))
+        w = d.u - d.x @ model.K_.T
+        for j, u in enumerate(demos.input_names):
+            base = f"/demos/{d.id}/variability/{u}"
+            _, w_logged = series(ents, f"{base}/w")
+            np.testing.assert_allclose(w_logged[:, 0], w[:, j], rtol=0, atol=1e-12)
+            _, m1 = series(ents, f"{base}/gmr", "Measurements:values")
+            _, v1 = series(ents, f"{base}/gmr", "Measurements:variances")
+            _, v3 = series(ents, f"{base}/gmr_3sigma", "Measurements:variances")
+            np.testing.assert_allclose(m1[:, 0], mu[:, j], rtol=1e-12, atol=1e-14)
+            np.testing.assert_allclose(v1[:, 0], sigma[:, j] ** 2, rtol=1e-12, atol=1e-16)
+            np.testing.assert_allclose(v3[:, 0], 9 * sigma[:, j] ** 2, rtol=1e-12, atol=1e-16)
+            outside = np.flatnonzero(np.abs(w[:, j] - mu[:, j]) > 3 * sigma[:, j])
+            t_out = np.asarray(ents[f"{base}/outside_3sigma"]["time"])
+            np.testing.assert_allclose(np.sort(t_out), (d.t - d.t[0])[outside], atol=1e-9)
+
+
+def test_logged_predictions_equal_model_predict(setup):
+    ents, demos, model, ioc = setup["entities"], setup["demos"], setup["model"], setup["ioc"]
+    d = next(x for x in demos if x.id == setup["focus"])
+    for start in STARTS:
+        base = f"/demos/{d.id}/predictions/from_{start}"
+        expected = {
+            "proposed": model.predict(d.x[start], HORIZON, target=d.target, task_x0=d.x[0]),
+            "ioc_only": ioc.predict(d.x[start], HORIZON, target=d.target, task_x0=d.x[0]),
+        }
+        mc = model.predict(d.x[start], HORIZON, target=d.target, task_x0=d.x[0], samples=SAMPLES, seed=7)
+        for j, s in enumerate(demos.state_names):
+            for method, pred in expected.items():
+                t, v = series(ents, f"{base}/{method}/{s}")
+                np.testing.assert_allclose(v[:, 0], pred.x[:, j], rtol=1e-12, atol=1e-12)
+                np.testing.assert_allclose(t, d.t[start] - d.t[0] + demos.dt * np.arange(HORIZON + 1), atol=1e-9)
+            _, band = series(ents, f"{base}/band/{s}")
+            np.testing.assert_allclose(band[:, 0], mc.x_lower[:, j], rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(band[:, 1], mc.x_upper[:, j], rtol=1e-12, atol=1e-12)
+        strip = ents[f"/scene/predictions/{d.id}/from_{start}/proposed"]["static:LineStrips3D:strips"][0]
+        np.testing.assert_allclose(np.asarray(strip[0])[:, [0, 2]], expected["proposed"].x[:, :2], atol=1e-6)
+
+
+def test_model_tensors(setup):
+    ents, model = setup["entities"], setup["model"]
+    K = ents["/models/CS1/K"]["static:Tensor:data"][0][0]
+    np.testing.assert_allclose(np.asarray(K["buffer"], dtype=float).reshape(model.K_.shape), model.K_)
+    Q = ents["/models/CS1/Q"]["static:Tensor:data"][0][0]
+    n = model.system.n
+    np.testing.assert_allclose(np.asarray(Q["buffer"], dtype=float).reshape(n, n),
+                               model.objective_.M_normalized[:n, :n])
+    text = ents["/models/CS1/summary"]["static:TextDocument:text"][0][0]
+    assert f"{model.objective_.alpha:.4g}" in text
+
+
+def test_blueprint_has_the_five_tabs(setup):
+    reader = RrdReader(setup["path"])
+    assert reader.blueprints(), "the recording carries no default blueprint"
+    names = []
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        batch = chunk.to_record_batch()
+        for col in batch.schema.names:
+            if col.endswith("display_name"):
+                names += [str(v[0] if isinstance(v, list) else v) for v in batch.column(col).to_pylist() if v]
+    for tab in ("scene", "states", "inputs & variability", "predictions", "objective"):
+        assert tab in names, (tab, names)
+
+
+def test_measurements_fallback_logs_two_lines(tmp_path, setup, monkeypatch):
+    monkeypatch.setattr(viewer, "HAS_MEASUREMENTS", False)
+    demos, model = setup["demos"], setup["model"]
+    d = demos[0]
+    rec = viewer.new_recording()
+    path = tmp_path / "fallback.rrd"
+    with viewer.open_output(rec, save=path):
+        viewer.SessionLogger(rec, demos).log_variability(d, model)
+    ents = read_rrd(path)
+    mu, Sigma = model.variability(d.x, x0=d.x[0], target=d.target)
+    sigma = np.sqrt(np.diagonal(Sigma, axis1=1, axis2=2))
+    _, band = series(ents, f"/demos/{d.id}/variability/u2/gmr_3sigma")
+    np.testing.assert_allclose(band[:, 0], mu[:, 1] - 3 * sigma[:, 1], rtol=1e-12)
+    np.testing.assert_allclose(band[:, 1], mu[:, 1] + 3 * sigma[:, 1], rtol=1e-12)
+
+
+def test_replay_streams_online_predictions(tmp_path, setup):
+    demos, model = setup["demos"], setup["model"]
+    d = demos[0]
+    path = tmp_path / "replay.rrd"
+    rec = viewer.new_recording()
+    horizon = 6
+    with viewer.open_output(rec, save=path) as out:
+        stats = replay(d, model, rec, state_names=demos.state_names, input_names=demos.input_names, wait=False,
+                       horizon=horizon)
+        out.blueprint = replay_blueprint([d.id], demos.state_names, demos.input_names)
+    assert rrd_verify(path).returncode == 0
+    ents = read_rrd(path)
+    assert stats.n_steps == len(d)
+    t, x = series(ents, f"/demos/{d.id}/states/x")
+    np.testing.assert_array_equal(x[:, 0], d.x[:, 0])
+    mean, cov = model.input_distribution(d.x, x0=d.x[0], target=d.target)  # K̂x + μ(x), Σ(x)
+    for j, u in enumerate(demos.input_names):
+        _, v = series(ents, f"/demos/{d.id}/online/{u}/gmr", "Measurements:values")
+        _, var = series(ents, f"/demos/{d.id}/online/{u}/gmr", "Measurements:variances")
+        np.testing.assert_allclose(v, np.column_stack([mean[:, j], mean[:, j]]), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(var, np.column_stack([cov[:, j, j], 9 * cov[:, j, j]]), rtol=1e-10, atol=1e-14)
+        inside = np.abs(d.u[:, j] - mean[:, j]) <= 3 * np.sqrt(cov[:, j, j])
+        assert stats.coverage_3sigma[j] == pytest.approx(inside.mean())
+    # the forecast of state k + H made at sample k, stamped at k + H
+    _, ends = series(ents, f"/demos/{d.id}/online/rollout_end/y")
+    steps = np.sort(np.asarray(ents[f"/demos/{d.id}/online/rollout_end/y"]["step"]))
+    np.testing.assert_array_equal(steps, np.arange(len(d)) + horizon)
+    for k in (0, len(d) // 2, len(d) - 1):
+        expected = model.predict(d.x[k], horizon, target=d.target, task_x0=d.x[0]).x[-1, 1]
+        assert ends[k, 0] == pytest.approx(expected, rel=1e-10, abs=1e-12)
+    assert np.isfinite(stats.realtime_factor) and stats.realtime_factor > 0
+
+
+def test_replay_paces_to_wall_time(setup):
+    """With an injected clock: at speed 2 the replay sleeps until (t_k − t_0) / 2 after its start."""
+    demos, model = setup["demos"], setup["model"]
+    d = demos[0]
+    now = [100.0]
+    sleeps: list[float] = []
+
+    def sleep(s: float) -> None:
+        sleeps.append(s)
+        now[0] += s
+
+    rec = viewer.new_recording()
+    rec.memory_recording()
+    replay(d, model, rec, speed=2.0, horizon=0, clock=lambda: now[0], sleep=sleep)
+    # the clock only moves by sleeping, so the sleeps add up to the trial's duration at twice real time
+    assert sum(sleeps) == pytest.approx((d.t[-1] - d.t[0]) / 2.0)
+    assert len(sleeps) == len(d) - 1
+
+
+def test_bad_arguments_are_clear_errors(setup):
+    demos, model = setup["demos"], setup["model"]
+    rec = viewer.new_recording()
+    with pytest.raises(WorkbenchError, match="exactly one output"):
+        viewer.open_output(rec, save="a.rrd", spawn=True)
+    with pytest.raises(DataError, match="start index"):
+        viewer.SessionLogger(rec, demos).log_predictions(demos[0], {"proposed": model}, start=10_000)
+    with pytest.raises(DataError, match="speed"):
+        replay(demos[0], model, rec, speed=0.0)
+    with pytest.raises(DataError, match="no demonstration"):
+        viewer.log_session(rec, demos, models=model, focus=["nope"])

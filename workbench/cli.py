@@ -1,0 +1,838 @@
+"""The ``workbench`` command: from flight logs to a model of how a human flies, its report and a rerun view.
+
+Run ``workbench demo`` first: it imports the sample logs, fits one model per control strategy, compares it with
+its two baselines, and writes a report and a rerun recording. Every command has ``--help`` with an example.
+
+Bad input (a missing file, a corrupt log, a wrong mapping, a model file from a newer version) prints one line,
+``error: <what>: <cause>``, and exits with status 1; ``--debug`` shows the traceback instead. Every output file
+is written atomically (a temp file renamed into place), so a failed run never leaves half a file behind.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import traceback
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from workbench.errors import DataError, WorkbenchError
+
+__all__ = ["main", "build_parser", "SAMPLE_LOGS"]
+
+SAMPLE_LOGS = Path(__file__).resolve().parents[1] / "sample_logs"
+DEFAULT_MAPPING = "planar_quadrotor"
+EXIT_ERROR = 1
+EXIT_INTERNAL = 3
+
+
+class _Context:
+    """What every command gets: parsed options, consoles and a progress factory."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        from rich.console import Console
+
+        self.args = args
+        self.quiet = bool(getattr(args, "quiet", False))
+        self.out = Console(highlight=False, quiet=self.quiet)
+        if not self.out.is_terminal:  # piped or captured: wide tables instead of 80 columns
+            self.out = Console(highlight=False, quiet=self.quiet, width=140)
+        self.err = Console(stderr=True, highlight=False)
+
+    def say(self, *parts: Any, markup: bool = False) -> None:
+        self.out.print(*parts, soft_wrap=True, markup=markup)
+
+    def progress(self):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        return Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=self.err,
+            transient=True,
+            disable=self.quiet or not self.err.is_terminal,  # no bars (or blank lines) in logs and pipes
+        )
+
+
+# -- input helpers -----------------------------------------------------------------------------------------
+def _existing(path: str | os.PathLike, what: str = "file") -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise DataError(f"{p}: no such {what}")
+    return p
+
+
+def _is_demo_file(path: Path) -> bool:
+    return path.suffix.lower() in (".parquet", ".pq")
+
+
+def _load_one(path: Path, mapping: str | None) -> Any:
+    from workbench.demos import DemonstrationSet
+
+    if _is_demo_file(path):
+        return DemonstrationSet.load(path)
+    import adapters
+
+    return adapters.load(path, mapping=mapping or DEFAULT_MAPPING)
+
+
+def _join(sets: Sequence[Any], names: Sequence[str]) -> Any:
+    """One set from several files; a trial id seen twice is prefixed with its file's name."""
+    from workbench.demos import DemonstrationSet
+
+    if not sets:
+        raise DataError("no demonstrations to join")
+    first = sets[0]
+    seen: set[str] = set()
+    demos = []
+    for ds, name in zip(sets, names, strict=True):
+        if (ds.state_names, ds.input_names) != (first.state_names, first.input_names):
+            raise DataError(
+                f"{name}: states {list(ds.state_names)} / inputs {list(ds.input_names)} differ from "
+                f"{names[0]}'s {list(first.state_names)} / {list(first.input_names)}; use one mapping for all"
+            )
+        if abs(ds.dt - first.dt) > 1e-9 * first.dt:
+            raise DataError(f"{name}: dt {ds.dt} differs from {names[0]}'s {first.dt}")
+        for d in ds:
+            if d.id in seen:
+                d = d.with_meta(id=f"{Path(name).stem}-{d.id}")
+            seen.add(d.id)
+            demos.append(d)
+    return DemonstrationSet(demos, first.state_names, first.input_names, first.dt)
+
+
+def _load_demos(ctx: _Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None):
+    files = [_existing(p) for p in paths]
+    sets = []
+    with ctx.progress() as progress:
+        task = progress.add_task("reading logs", total=len(files))
+        for f in files:
+            ds = _load_one(f, mapping)
+            skipped = {k: v for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v} if len(ds) else {}
+            if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
+                what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())
+                print(f"warning: {f}: skipped {what}", file=sys.stderr)
+            sets.append(ds)
+            progress.advance(task)
+    ds = _join(sets, [str(f) for f in files])
+    if labels:
+        parts = [ds.by_label(label) for label in labels]
+        ds = parts[0]
+        for p in parts[1:]:
+            ds = ds + p
+    if not len(ds):
+        raise DataError(f"{', '.join(paths)}: no demonstrations")
+    return ds
+
+
+def _system_for(ds: Any, choice: str = "auto"):
+    """The plant (A, B): the paper's planar quadrotor, or identified from the data by least squares.
+
+    ``auto`` takes the paper's model for data in its layout and at its step (the sample logs), and identifies
+    (A, B) otherwise — a real vehicle is not the paper's linearized 0.25 kg quadrotor.
+    """
+    from workbench.system import LinearSystem, planar_quadrotor
+
+    paper = planar_quadrotor()
+    layout = tuple(ds.state_names) == paper.state_names and len(ds.input_names) == paper.m
+    if choice == "paper" or (choice == "auto" and layout and abs(ds.dt - paper.dt) < 1e-9):
+        if not layout:
+            raise DataError(
+                f"--system paper needs states {list(paper.state_names)} and {paper.m} inputs; "
+                f"the data have {list(ds.state_names)} and {list(ds.input_names)}"
+            )
+        return planar_quadrotor(dt=ds.dt)
+    return LinearSystem.identify(ds, u_min=paper.u_min if layout else None, u_max=paper.u_max if layout else None)
+
+
+def _load_model(path: str):
+    from workbench.model import load_model
+
+    return load_model(_existing(path))
+
+
+def _components(value: str) -> int | str:
+    if value == "auto":
+        return "auto"
+    try:
+        g = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--components must be a positive integer or 'auto', got {value!r}") from None
+    if g < 1:
+        raise argparse.ArgumentTypeError(f"--components must be at least 1, got {g}")
+    return g
+
+
+def _positive_float(value: str) -> float:
+    try:
+        v = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {value!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {value!r}")
+    return v
+
+
+def _int_list(value: str) -> list[int]:
+    try:
+        out = [int(v) for v in value.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {value!r}") from None
+    if not out or min(out) < 1:
+        raise argparse.ArgumentTypeError(f"expected positive integers, got {value!r}")
+    return out
+
+
+def _steps(seconds: float, dt: float) -> int:
+    return max(1, int(round(seconds / dt)))
+
+
+# -- commands ----------------------------------------------------------------------------------------------
+def cmd_simulate(ctx: _Context) -> int:
+    a = ctx.args
+    if a.sample_logs:
+        from workbench.sample_logs import write_sample_logs
+
+        written = write_sample_logs(a.sample_logs, seed=a.seed)
+        files = list(written) if written is not None else sorted(Path(a.sample_logs).iterdir())
+        ctx.say(f"wrote {len(files)} sample logs to {a.sample_logs}")
+        return 0
+    if not a.output:
+        raise WorkbenchError("simulate needs -o FILE (.parquet, .csv, .tlog or .mcap) or --sample-logs DIR")
+    from workbench.simulate import simulate_landings
+
+    subjects = [None] if a.subjects == 0 else [f"s{i + 1:02d}" for i in range(a.subjects)]
+    sets = []
+    with ctx.progress() as progress:
+        task = progress.add_task("simulating", total=len(a.strategy) * len(subjects))
+        for strategy in a.strategy:
+            for subject in subjects:
+                sets.append(simulate_landings(strategy, a.trials, seed=a.seed, subject=subject))
+                progress.advance(task)
+    ds = sets[0]
+    for s in sets[1:]:
+        ds = ds + s
+    out = Path(a.output)
+    _write_demos(ds, out)
+    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples) to {out}")
+    return 0
+
+
+def _write_demos(ds: Any, out: Path, mapping: str | None = None) -> None:
+    if out.suffix.lower() in (".parquet", ".pq"):
+        ds.save(out)
+        return
+    import adapters
+
+    adapters.write(ds, out, mapping or DEFAULT_MAPPING)
+
+
+def cmd_inspect(ctx: _Context) -> int:
+    from rich.markup import escape
+    from rich.table import Table
+
+    path = _existing(ctx.args.log)
+    if _is_demo_file(path):
+        from workbench.demos import DemonstrationSet
+
+        ds = DemonstrationSet.load(path)
+        ctx.say(f"[bold]{escape(str(path))}[/bold]: workbench demonstrations, {len(ds)} trials, "
+                f"{ds.n_samples} samples, dt {ds.dt} s", markup=True)
+        ctx.say(f"states {list(ds.state_names)}, inputs {list(ds.input_names)}")
+        table = Table("id", "label", "subject", "samples", "duration [s]", "success", "source")
+        for d in ds:
+            table.add_row(d.id, str(d.label), str(d.meta.get("subject")), str(len(d)), f"{d.duration:.2f}",
+                          str(d.meta.get("success")), Path(str(d.meta.get("source", ""))).name)
+        ctx.say(table)
+        return 0
+    import adapters
+
+    summary = adapters.inspect(path)
+    t0 = summary.t_start
+    ctx.say(
+        f"[bold]{escape(str(summary.path))}[/bold]: {summary.format}, {summary.size_bytes} bytes, "
+        f"{len(summary.streams)} streams, {summary.duration:.1f} s",
+        markup=True,
+    )
+    table = Table("stream", "messages", "rate [Hz]", "from [s]", "to [s]", "fields")
+    for st in summary.streams:
+        fields = ", ".join(st.fields[:8]) + (f", … (+{len(st.fields) - 8})" if len(st.fields) > 8 else "")
+        table.add_row(st.name, str(st.count), f"{st.rate_hz:.1f}", f"{st.t_start - t0:.2f}", f"{st.t_end - t0:.2f}",
+                      fields)
+    ctx.say(table)
+    if summary.modes:
+        ctx.say("flight modes: " + "; ".join(
+            f"{m.mode} {m.start - t0:.1f}–{min(m.end, summary.t_end) - t0:.1f} s" for m in summary.modes))
+    if summary.armed:
+        ctx.say("armed: " + "; ".join(f"{a - t0:.1f}–{min(b, summary.t_end) - t0:.1f} s" for a, b in summary.armed))
+    if summary.skipped:
+        ctx.say("skipped: " + ", ".join(f"{k} {v}" for k, v in summary.skipped))
+    return 0
+
+
+def cmd_import(ctx: _Context) -> int:
+    a = ctx.args
+    ds = _load_demos(ctx, a.logs, a.mapping)
+    if a.label:
+        ds = type(ds)([d.with_meta(label=a.label) for d in ds], ds.state_names, ds.input_names, ds.dt)
+    out = Path(a.output)
+    _write_demos(ds, out, a.mapping)
+    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples, labels {ds.labels}) to {out}")
+    return 0
+
+
+def _make_model(kind: str, system: Any, components: int | str, seed: int):
+    from workbench import model as wm
+
+    if kind == "ioc-only":
+        return wm.IOCOnlyModel(system)
+    cls = wm.HumanBehaviorModel if kind == "proposed" else wm.GMROnlyModel
+    return cls(system, n_components=components, random_state=seed)
+
+
+def cmd_fit(ctx: _Context) -> int:
+    a = ctx.args
+    ds = _load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None)
+    system = _system_for(ds, a.system)
+    t0 = time.perf_counter()
+    with ctx.progress() as progress:
+        components = a.components
+        if components == "auto" and a.method != "ioc-only":
+            from workbench.study import select_components
+
+            progress.add_task("choosing the number of components by BIC", total=None)
+            components = select_components(ds, system, seed=a.seed)
+            ctx.say(f"chose {components} components by BIC")
+        progress.add_task(f"fitting {a.method} model on {len(ds)} demonstrations", total=None)
+        model = _make_model(a.method, system, components, a.seed).fit(ds)
+    model.save(a.output)
+    ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
+    _print_model(ctx, model, ds)
+    ctx.say(f"wrote {a.output}")
+    return 0
+
+
+def _print_model(ctx: _Context, model: Any, ds: Any) -> None:
+    import numpy as np
+
+    K = getattr(model, "K_", None)
+    if K is not None:
+        ctx.say("K̂ (u = K̂ x): " + np.array2string(np.asarray(K), precision=3, suppress_small=True))
+    o = getattr(model, "objective_", None)
+    if o is not None:
+        n = ds.n_states
+        q = np.diag(np.asarray(o.M_normalized)[:n, :n])
+        r = np.diag(np.asarray(o.M_normalized)[n:, n:])
+        ctx.say(f"α* = {o.alpha:.4g}, forward-gain error {o.forward_gain_error:.1e}")
+        ctx.say("diag Q/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.state_names, q, strict=True)))
+        ctx.say("diag R/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.input_names, r, strict=True)))
+    g = getattr(model, "n_components_", None) or getattr(model, "n_components", None)
+    if g is not None:
+        ctx.say(f"GMM components: {g}")
+
+
+def cmd_predict(ctx: _Context) -> int:
+    import numpy as np
+    import pandas as pd
+
+    from workbench.atomic import atomic_path
+
+    a = ctx.args
+    model = _load_model(a.model)
+    if a.x0 is not None:
+        try:
+            x0 = np.array([float(v) for v in a.x0.split(",")])
+        except ValueError:
+            raise DataError(f"--x0 must be comma-separated numbers, got {a.x0!r}") from None
+        target, t0, demo_id, task_x0 = None, 0.0, "x0", None
+        dt, names, in_names = model.system.dt, model.system.state_names, model.system.input_names
+    else:
+        if not a.demos:
+            raise WorkbenchError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
+        ds = _load_demos(ctx, [a.demos], a.mapping)
+        ids = ds.ids
+        if a.demo and a.demo not in ids:
+            raise DataError(f"{a.demos}: no demonstration {a.demo!r}; ids present: {ids[:10]}")
+        demo = ds[ids.index(a.demo)] if a.demo else ds[0]
+        if not 0 <= a.start < len(demo):
+            raise DataError(f"{a.demos}: --start {a.start} outside trial {demo.id!r} (0…{len(demo) - 1})")
+        x0, target, demo_id, task_x0 = demo.x[a.start], demo.target, demo.id, demo.x[0]
+        t0, dt, names, in_names = float(demo.t[a.start]), ds.dt, ds.state_names, ds.input_names
+    horizon = _steps(a.horizon, dt)
+    # from inside a trial, the task's start frame stays at the trial's first state
+    kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0}
+    if a.samples:
+        kwargs.update(samples=a.samples, seed=a.seed)
+    pred = model.predict(x0, horizon, **kwargs)
+    x, u = np.asarray(pred.x), np.asarray(pred.u)
+    names = list(names or [f"x{i}" for i in range(x.shape[1])])
+    in_names = list(in_names or [f"u{i}" for i in range(u.shape[1])])
+    cols: dict[str, Any] = {"demo": demo_id, "step": np.arange(len(x)), "t": t0 + dt * np.arange(len(x))}
+    cols.update({s: x[:, j] for j, s in enumerate(names)})
+    u_full = np.vstack([u, np.full((1, u.shape[1]), np.nan)])  # the last state has no input yet
+    cols.update({s: u_full[:, j] for j, s in enumerate(in_names)})
+    from workbench.viewer import _prediction_band
+
+    band = _prediction_band(pred)
+    if band is not None:
+        lo, hi, _ = band
+        cols.update({f"{s}_lower": lo[:, j] for j, s in enumerate(names)})
+        cols.update({f"{s}_upper": hi[:, j] for j, s in enumerate(names)})
+    df = pd.DataFrame(cols)
+    out = Path(a.output)
+    with atomic_path(out) as tmp:
+        if out.suffix.lower() in (".parquet", ".pq"):
+            df.to_parquet(tmp, index=False)
+        else:
+            df.to_csv(tmp, index=False)
+    ix = names.index("x") if "x" in names else 0
+    iy = names.index("y") if "y" in names else 1
+    ctx.say(
+        f"predicted {horizon} steps ({horizon * dt:.2f} s) from {demo_id} step {a.start if a.x0 is None else 0}: "
+        f"end {names[ix]} = {x[-1, ix]:.3f}, {names[iy]} = {x[-1, iy]:.3f}"
+    )
+    ctx.say(f"wrote {out}")
+    return 0
+
+
+def cmd_evaluate(ctx: _Context) -> int:
+    from workbench import study
+
+    a = ctx.args
+    ds = _load_demos(ctx, a.demos, a.mapping, a.label)
+    result = study.run_study(
+        ds,
+        _system_for(ds, a.system),
+        test_size=a.test_size,
+        horizon=_steps(a.horizon, ds.dt),
+        components=a.components,
+        samples=a.samples,
+        efficiency=a.efficiency,
+        repeats=a.repeats,
+        seed=a.seed,
+        progress=ctx.progress,
+    )
+    _print_study(ctx, result)
+    if a.output:
+        result.save_tables(a.output)
+        ctx.say(f"wrote {a.output}")
+    return 0
+
+
+def _print_study(ctx: _Context, result: Any) -> None:
+    from rich.table import Table
+
+    summary = result.summary()
+    table = Table(*[str(c) for c in summary.columns], title="mean horizon RMSE on the test trials")
+    for row in summary.itertuples(index=False):
+        table.add_row(*[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row])
+    ctx.say(table)
+    if result.coverage is not None and len(result.coverage):
+        cov = Table(*[str(c) for c in result.coverage.columns], title="one-step coverage of ŵ by GMR bands [%]")
+        for row in result.coverage.itertuples(index=False):
+            cov.add_row(*[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row])
+        ctx.say(cov)
+    if result.stats_text:
+        ctx.say(result.stats_text)
+
+
+def _output_kwargs(a: argparse.Namespace, default: Path) -> dict[str, Any]:
+    from workbench.viewer import has_display
+
+    if a.spawn or a.serve or a.save:
+        return {"save": a.save, "spawn": a.spawn, "serve": a.serve}
+    # headless by default when nothing could show a window
+    return {"save": str(default), "spawn": False, "serve": False} if not has_display() else {
+        "save": None, "spawn": True, "serve": False}
+
+
+def cmd_view(ctx: _Context) -> int:
+    from workbench import viewer
+
+    a = ctx.args
+    ds = _load_demos(ctx, a.inputs, a.mapping, a.label)
+    models, named = None, None
+    if a.model:
+        by_label: dict[str, Any] = {}
+        for spec in a.model:
+            label, _, path = spec.rpartition("=")
+            by_label[label] = _load_model(path)
+        if "" in by_label:
+            if len(by_label) > 1:
+                raise WorkbenchError("give every --model a LABEL= (e.g. --model CS1=cs1.npz) or pass only one")
+            models = by_label[""]
+            named = {Path(a.model[0]).stem: models}
+        else:
+            models = named = by_label
+    horizon = _steps(a.horizon, ds.dt)
+    default = Path(Path(a.inputs[0]).stem + ".rrd")  # in the working directory, never beside the input
+    out = _output_kwargs(a, default)
+    rec = viewer.new_recording()
+    with ctx.progress() as progress:
+        progress.add_task(f"logging {len(ds)} demonstrations", total=None)
+        with viewer.open_output(rec, **out) as sink:
+            session = viewer.log_session(
+                rec, ds, models=models, named_models=named, focus=a.focus or None, horizon=horizon,
+                samples=a.samples, starts=a.starts or (0,), seed=a.seed,
+            )
+            sink.blueprint = viewer.default_blueprint(session)
+    _announce(ctx, out, sink, f"{len(ds)} demonstrations")
+    return 0
+
+
+def _announce(ctx: _Context, out: dict[str, Any], sink: Any, what: str) -> None:
+    if out["save"]:
+        ctx.say(f"wrote {out['save']} ({what}); open it with:  rerun {out['save']}")
+    elif out["spawn"]:
+        ctx.say(f"sent {what} to the rerun viewer")
+    else:
+        ctx.say(f"serving {what} on 127.0.0.1 only: open {sink.url}  (Ctrl-C to stop)")
+        sink.wait()
+
+
+def cmd_replay(ctx: _Context) -> int:
+    from workbench import viewer
+    from workbench.replay import replay, replay_blueprint
+
+    a = ctx.args
+    ds = _load_demos(ctx, [a.log], a.mapping)
+    model = _load_model(a.model)
+    ids = ds.ids
+    chosen = a.demo or [ids[0]]
+    missing = [i for i in chosen if i not in ids]
+    if missing:
+        raise DataError(f"{a.log}: no demonstration {missing[0]!r}; ids present: {ids[:10]}")
+    out = _output_kwargs(a, Path(Path(a.log).stem + ".replay.rrd"))
+    rec = viewer.new_recording()
+    stats = []
+    with viewer.open_output(rec, **out) as sink:
+        sink.blueprint = replay_blueprint(chosen, ds.state_names, ds.input_names)
+        if not out["save"]:
+            rec.send_blueprint(sink.blueprint)
+        with ctx.progress() as progress:
+            for demo_id in chosen:
+                demo = ds[ids.index(demo_id)]
+                task = progress.add_task(f"replaying {demo_id} at {a.speed:g}×", total=len(demo))
+                stats.append(
+                    replay(demo, model, rec, state_names=ds.state_names, input_names=ds.input_names,
+                           speed=a.speed, wait=not a.no_wait, horizon=_steps(a.horizon, ds.dt) if a.horizon else 0,
+                           on_step=lambda k, task=task: progress.update(task, completed=k + 1))
+                )
+    for s in stats:
+        cover = ", ".join(f"{n} {100 * c:.1f} %" for n, c in zip(ds.input_names, s.coverage_3sigma, strict=True))
+        ctx.say(f"{s.demo_id}: {s.n_steps} steps, {s.sim_time:.1f} s of flight in {s.wall_time:.2f} s "
+                f"({s.realtime_factor:.1f}× real time); actual input inside the online 3σ band: {cover}")
+    _announce(ctx, out, sink, f"replay of {', '.join(chosen)}")
+    return 0
+
+
+def cmd_report(ctx: _Context) -> int:
+    from workbench import study
+
+    a = ctx.args
+    ds = _load_demos(ctx, a.demos, a.mapping, a.label)
+    result = study.run_study(
+        ds, _system_for(ds, a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
+        samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
+    )
+    path = study.write_study_report(result, a.output, title=a.title)
+    _print_study(ctx, result)
+    ctx.say(f"wrote {path} with figures in {Path(a.output) / 'figures'}")
+    return 0
+
+
+def cmd_demo(ctx: _Context) -> int:
+    from rich.markup import escape
+
+    from workbench import study
+
+    a = ctx.args
+    t_start = time.perf_counter()
+    out = Path(a.out)
+    logs = Path(a.logs) if a.logs else SAMPLE_LOGS
+    files = sorted(p for p in logs.iterdir() if p.is_file() and not p.name.startswith(".")) if logs.is_dir() else []
+    files = [p for p in files if p.suffix.lower() in (".tlog", ".mcap", ".csv", ".ulg", ".parquet")]
+    if not files:
+        if a.logs:
+            raise DataError(f"{logs}: no logs (.tlog, .mcap, .csv, .ulg) to import")
+        from workbench.sample_logs import write_sample_logs
+
+        logs = out / "sample_logs"
+        ctx.say(f"{SAMPLE_LOGS} is empty; generating the sample logs into {logs}")
+        write_sample_logs(logs, seed=0)
+        files = sorted(p for p in logs.iterdir() if p.suffix.lower() in (".tlog", ".mcap", ".csv", ".ulg"))
+    timings = {}
+    t0 = time.perf_counter()
+    ds = _load_demos(ctx, [str(f) for f in files], a.mapping)
+    timings["import"] = time.perf_counter() - t0
+    by_format: dict[str, int] = {}
+    for f in files:
+        by_format[f.suffix.lstrip(".")] = by_format.get(f.suffix.lstrip("."), 0) + 1
+    ctx.say(
+        f"imported {len(ds)} demonstrations ({ds.n_samples} samples; labels {ds.labels}) from {len(files)} logs "
+        f"({', '.join(f'{v} {k}' for k, v in by_format.items())}) in {logs}"
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    ds.save(out / "demos.parquet")
+    result = study.run_study(
+        ds, _system_for(ds, a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
+        samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
+    )
+    timings["fit + compare"] = time.perf_counter() - t0 - timings["import"]
+    model_dir = out / "models"
+    for label, model in result.models.items():
+        model.save(model_dir / f"{label}.npz")
+    result.save_tables(out / "results.csv")
+    t1 = time.perf_counter()
+    report = study.write_study_report(result, out, title="Workbench demo: sample logs")
+    timings["report"] = time.perf_counter() - t1
+    rrd = out / "demo.rrd"
+    t1 = time.perf_counter()
+    study.write_study_recording(result, rrd, progress=ctx.progress)
+    timings["recording"] = time.perf_counter() - t1
+    _print_study(ctx, result)
+    ctx.say("")
+    rows = [
+        ("report", f"{report}  (figures in {out / 'figures'})"),
+        ("recording", f"{rrd}   open it with:  rerun {rrd}"),
+        ("models", ", ".join(str(model_dir / f"{k}.npz") for k in result.models)),
+        ("data", f"{out / 'demos.parquet'}, {out / 'results.csv'}"),
+    ]
+    for key, value in rows:
+        ctx.say(f"[bold]{key:<10}[/bold] {escape(value)}", markup=True)
+    parts = ", ".join(f"{k} {v:.1f} s" for k, v in timings.items())
+    ctx.say(f"done in {time.perf_counter() - t_start:.1f} s ({parts})")
+    return 0
+
+
+# -- parser ------------------------------------------------------------------------------------------------
+_EPILOG = """\
+examples:
+  workbench demo                                   # sample logs → models, report and out/demo.rrd
+  workbench inspect sample_logs/cs1_s01.tlog       # streams, rates, fields, time span
+  workbench import sample_logs/*.tlog --mapping planar_quadrotor -o demos.parquet
+  workbench fit demos.parquet --label CS1 -o cs1.npz
+  workbench view demos.parquet --model CS1=cs1.npz --save session.rrd && rerun session.rrd
+  workbench replay demos.parquet --model cs1.npz --speed 2
+"""
+
+
+def _common(p: argparse.ArgumentParser, *, top: bool = False) -> None:
+    default = False if top else argparse.SUPPRESS
+    p.add_argument("--debug", action="store_true", default=default, help="show the traceback of an error")
+    p.add_argument("-q", "--quiet", action="store_true", default=default, help="print nothing but errors")
+
+
+def _study_options(
+    p: argparse.ArgumentParser, *, samples: int = 100, efficiency: str | None = "2,5,10,20", repeats: int = 2
+) -> None:
+    p.add_argument("--test-size", type=float, default=0.2, metavar="F",
+                   help="fraction of each strategy's trials held out for testing (default 0.2)")
+    p.add_argument("--horizon", type=_positive_float, default=3.0, metavar="SECONDS",
+                   help="prediction horizon in seconds (default 3.0, the paper's 60 steps)")
+    p.add_argument("--components", type=_components, default=5, metavar="G|auto",
+                   help="GMM components, or 'auto' to pick by BIC (default 5, the paper's)")
+    p.add_argument("--samples", type=int, default=samples, metavar="N",
+                   help=f"Monte Carlo rollouts for the prediction band; 0 turns it off (default {samples})")
+    p.add_argument("--efficiency", type=_int_list, default=_int_list(efficiency) if efficiency else None,
+                   metavar="N,N,…", help=f"training-set sizes of the data-efficiency curve (default {efficiency})")
+    p.add_argument("--no-efficiency", dest="efficiency", action="store_const", const=None,
+                   help="skip the data-efficiency curve")
+    p.add_argument("--repeats", type=int, default=repeats, metavar="R",
+                   help=f"random training subsets per size on the data-efficiency curve (default {repeats})")
+    p.add_argument("--seed", type=int, default=0, help="seed of the split, EM and Monte Carlo (default 0)")
+    _system_option(p)
+
+
+def _system_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--system", choices=["auto", "paper", "identify"], default="auto",
+                   help="plant (A, B): the paper's planar quadrotor, identified from the data by least squares, "
+                   "or auto (the paper's for its state layout at dt 0.05 s, else identified)")
+
+
+def _output_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--save", metavar="FILE.rrd",
+                   help="write a rerun recording (without a display the default is <input>.rrd here)")
+    g.add_argument("--spawn", action="store_true", help="stream to a native rerun viewer")
+    g.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1 (localhost only)")
+
+
+def _mapping_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mapping", metavar="M",
+                   help=f"channel mapping for raw logs: a shipped name or a TOML file (default {DEFAULT_MAPPING})")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from workbench import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="workbench",
+        description="Models of how a human operator flies, from teleoperation and flight logs: u = K x + w, "
+        "K from inverse optimal control, w from a task-parameterized GMM read out by GMR.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"workbench {__version__}")
+    _common(parser, top=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    def add(name: str, func: Callable[[_Context], int], help: str, example: str) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help, description=help, epilog=f"example:\n  {example}",
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        _common(p)
+        p.set_defaults(func=func)
+        return p
+
+    p = add("simulate", cmd_simulate, "simulate landing demonstrations with synthetic operators",
+            "workbench simulate --strategy CS1 CS2 --trials 30 -o demos.parquet")
+    p.add_argument("-o", "--output", metavar="FILE", help="demonstrations file: .parquet, .csv, .tlog or .mcap")
+    p.add_argument("--strategy", nargs="+", default=["CS1", "CS2"], choices=["CS1", "CS2"],
+                   help="control strategies: CS1 centre first, CS2 straight line (default both)")
+    p.add_argument("--trials", type=int, default=30, help="trials per strategy and subject (default 30)")
+    p.add_argument("--subjects", type=int, default=0, help="number of synthetic subjects; 0 = the reference expert")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sample-logs", metavar="DIR", help="instead: regenerate the sample logs into DIR")
+
+    p = add("inspect", cmd_inspect, "show what a log contains: streams, rates, fields, time span",
+            "workbench inspect flight.tlog")
+    p.add_argument("log", help="a .tlog, .mcap, .ulg, .csv log or a demonstrations .parquet")
+
+    p = add("import", cmd_import, "turn logs into one demonstrations file through a channel mapping",
+            "workbench import a.tlog b.mcap --mapping planar_quadrotor -o demos.parquet")
+    p.add_argument("logs", nargs="+", metavar="LOG")
+    _mapping_option(p)
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help="demonstrations file (.parquet, .csv, …)")
+    p.add_argument("--label", help="set every trial's strategy label")
+
+    p = add("fit", cmd_fit, "fit a human behavior model (task objective + variability) to demonstrations",
+            "workbench fit demos.parquet --label CS1 --components 5 -o cs1.npz")
+    p.add_argument("demos", metavar="DEMOS", help="demonstrations (.parquet) or a raw log (with --mapping)")
+    p.add_argument("-o", "--output", required=True, metavar="MODEL.npz")
+    p.add_argument("--label", help="fit only the trials of this strategy label")
+    p.add_argument("--components", type=_components, default=5, metavar="G|auto")
+    p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
+                   help="the proposed model (default) or one of its baselines")
+    p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialization (default 0)")
+    _system_option(p)
+    _mapping_option(p)
+
+    p = add("predict", cmd_predict, "predict a trajectory with a fitted model from a recorded or given state",
+            "workbench predict --model cs1.npz demos.parquet --demo s00-cs1-003 --horizon 3 --samples 200 -o p.csv")
+    p.add_argument("demos", nargs="?", metavar="DEMOS", help="demonstrations to take the start state from")
+    p.add_argument("--model", required=True, metavar="MODEL.npz")
+    p.add_argument("--demo", metavar="ID", help="trial to start from (default the first)")
+    p.add_argument("--start", type=int, default=0, metavar="K", help="sample of the trial to start from (default 0)")
+    p.add_argument("--x0", metavar="X,Y,…", help="instead of a trial: the start state, comma-separated")
+    p.add_argument("--horizon", type=_positive_float, default=3.0, metavar="SECONDS",
+                   help="prediction horizon in seconds (default 3.0)")
+    p.add_argument("--samples", type=int, default=0, metavar="N",
+                   help="Monte Carlo rollouts: adds <state>_lower/_upper band columns (5–95 %%)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet")
+    _mapping_option(p)
+
+    p = add("evaluate", cmd_evaluate,
+            "compare the proposed model with IOC-only and GMR-only on held-out trials; data-efficiency curve",
+            "workbench evaluate demos.parquet --horizon 3 -o results.csv")
+    p.add_argument("demos", nargs="+", metavar="DEMOS")
+    p.add_argument("--label", nargs="+", help="strategy labels to evaluate (default all)")
+    p.add_argument("-o", "--output", metavar="FILE", help="tidy results table (.csv or .parquet)")
+    _study_options(p)
+    _mapping_option(p)
+
+    p = add("view", cmd_view, "log demonstrations (and a model's variability and predictions) to rerun",
+            "workbench view demos.parquet --model CS1=cs1.npz --model CS2=cs2.npz --save session.rrd")
+    p.add_argument("inputs", nargs="+", metavar="DEMOS_OR_LOG")
+    p.add_argument("--model", action="append", metavar="[LABEL=]MODEL.npz",
+                   help="a fitted model; with LABEL= it explains the trials of that strategy (repeatable)")
+    p.add_argument("--label", nargs="+", help="show only these strategy labels")
+    p.add_argument("--focus", nargs="+", metavar="ID", help="trials to predict from (default the first per label)")
+    p.add_argument("--starts", nargs="+", type=int, metavar="K", help="samples to predict from (default 0)")
+    p.add_argument("--horizon", type=_positive_float, default=3.0, metavar="SECONDS",
+                   help="prediction horizon in seconds (default 3.0)")
+    p.add_argument("--samples", type=int, default=0, metavar="N", help="Monte Carlo rollouts for the band")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    _mapping_option(p)
+    _output_options(p)
+
+    p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",
+            "workbench replay demos.parquet --model cs1.npz --speed 1.0 --spawn")
+    p.add_argument("log", metavar="LOG", help="demonstrations (.parquet) or a raw log (with --mapping)")
+    p.add_argument("--model", required=True, metavar="MODEL.npz")
+    p.add_argument("--demo", nargs="+", metavar="ID", help="trials to replay (default the first)")
+    p.add_argument("--speed", type=_positive_float, default=1.0, help="multiple of real time (default 1.0)")
+    p.add_argument("--no-wait", action="store_true", help="stream as fast as possible")
+    p.add_argument("--horizon", type=float, default=1.0, metavar="SECONDS",
+                   help="rollout horizon of the online prediction (default 1.0 s; 0 turns rollouts off)")
+    _mapping_option(p)
+    _output_options(p)
+
+    p = add("report", cmd_report, "fit, compare and write a Markdown report with PNG figures",
+            "workbench report demos.parquet -o report/")
+    p.add_argument("demos", nargs="+", metavar="DEMOS")
+    p.add_argument("-o", "--output", required=True, metavar="DIR")
+    p.add_argument("--label", nargs="+", help="strategy labels to include (default all)")
+    p.add_argument("--title", default="Workbench report")
+    _study_options(p)
+    _mapping_option(p)
+
+    p = add("demo", cmd_demo, "the whole pipeline on the sample logs: import, fit CS1 and CS2, compare, report, .rrd",
+            "workbench demo --out out/ && rerun out/demo.rrd")
+    p.add_argument("--out", default="out", metavar="DIR", help="output directory (default out/)")
+    p.add_argument("--logs", metavar="DIR", help=f"logs to import (default {SAMPLE_LOGS})")
+    _study_options(p, repeats=1)  # one subset per size keeps the demo well under a minute on two cores
+    _mapping_option(p)
+    return parser
+
+
+# -- entry point -------------------------------------------------------------------------------------------
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    debug = bool(getattr(args, "debug", False))
+    previous = warnings.showwarning
+    if not debug:
+        warnings.showwarning = _show_warning
+    try:
+        return int(args.func(_Context(args)) or 0)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return EXIT_ERROR
+    except Exception as exc:
+        if debug:
+            traceback.print_exc()
+        if isinstance(exc, WorkbenchError):
+            print(f"error: {_one_line(exc)}", file=sys.stderr)
+            return EXIT_ERROR
+        if isinstance(exc, OSError):
+            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+            print(f"error: {where}{exc.strerror or _one_line(exc)}", file=sys.stderr)
+            return EXIT_ERROR
+        hint = "" if debug else " (run with --debug for the traceback)"
+        print(f"error: {type(exc).__name__}: {_one_line(exc)}{hint}", file=sys.stderr)
+        return EXIT_INTERNAL
+    finally:
+        warnings.showwarning = previous
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
+

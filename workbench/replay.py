@@ -1,0 +1,231 @@
+"""Replay a recorded session as if live, with the model's online predictions at every step.
+
+This is the paper's online use of the variability model: at each sample ``k`` of a trial the stream carries
+the recorded state and input and, computed from the state alone,
+
+* the one-step input prediction ``û[k] = K̂ x[k] + μ(x[k])`` with its GMR covariance ``Σ(x[k])``
+  (eqs. (24)–(27) of the method paper; ``demos/<id>/online/<input>/gmr``, two series: the ±1σ and ±3σ bands),
+  and a marker where the operator's actual input leaves the 3σ band (``…/outside_3sigma``);
+* a short-horizon rollout from ``x[k]`` (the paper's section "Trajectory Prediction"; ``scene/replay/<id>/rollout``,
+  a line strip that moves with the vehicle, and its end point ``demos/<id>/online/rollout_end/<state>``, stamped
+  with the time it forecasts so the plot reads as recorded vs. forecast).
+
+Samples are logged one by one with ``rr.log`` — a live stream has no columns to send — paced to wall time at
+``speed`` × real time, or as fast as possible with ``wait=False``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from workbench.demos import Demonstration
+from workbench.errors import DataError
+from workbench.viewer import HAS_MEASUREMENTS, _safe, _scene_axes
+
+__all__ = ["ReplayStats", "replay", "replay_blueprint"]
+
+_COLOR_REC = (40, 40, 40)
+_COLOR_PRED = (44, 160, 44)
+_COLOR_BAND = (255, 187, 120)
+_COLOR_OUT = (214, 39, 40)
+
+
+@dataclass(frozen=True)
+class ReplayStats:
+    """How a replay went: samples streamed, simulated and wall time, and the online-prediction quality."""
+
+    demo_id: str
+    n_steps: int
+    sim_time: float
+    wall_time: float
+    one_step_rmse: np.ndarray
+    coverage_3sigma: np.ndarray
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per wall-clock second (≥ 1 keeps up with a live stream)."""
+        return self.sim_time / self.wall_time if self.wall_time > 0 else float("inf")
+
+
+def replay(
+    demo: Demonstration,
+    model: Any,
+    rec: rr.RecordingStream,
+    *,
+    state_names: tuple[str, ...] | None = None,
+    input_names: tuple[str, ...] | None = None,
+    speed: float = 1.0,
+    wait: bool = True,
+    horizon: int = 20,
+    rollout_every: int = 1,
+    clock: Callable[[], float] = time.perf_counter,
+    sleep: Callable[[float], None] = time.sleep,
+    on_step: Callable[[int], None] | None = None,
+) -> ReplayStats:
+    """Stream ``demo`` into ``rec`` sample by sample with the model's online predictions.
+
+    Parameters
+    ----------
+    demo : Demonstration
+    model : fitted HumanBehaviorModel
+        Needs ``K_``, ``variability(X, x0, target)`` and ``predict(x0, horizon, target)``.
+    speed : float
+        Multiple of real time (``2.0`` plays twice as fast).
+    wait : bool
+        ``False`` streams as fast as possible (tests, benchmarks).
+    horizon : int
+        Steps of the rollout from each state; ``0`` turns rollouts off.
+    rollout_every : int
+        Roll out at every k-th sample only (the one-step prediction runs at every sample).
+    """
+    if not speed > 0:
+        raise DataError(f"replay speed must be positive, got {speed!r}")
+    if rollout_every < 1:
+        raise DataError(f"rollout_every must be at least 1, got {rollout_every!r}")
+    n, m = demo.x.shape[1], demo.u.shape[1]
+    state_names = tuple(state_names or (f"x{i}" for i in range(n)))
+    input_names = tuple(input_names or (f"u{i}" for i in range(m)))
+    base = f"demos/{_safe(demo.id)}"
+    sbase = f"scene/replay/{_safe(demo.id)}"
+    K = np.asarray(model.K_)
+    x_start, target = demo.x[0], demo.target
+    axes = _scene_axes(state_names)
+    _log_styles(rec, demo, base, sbase, state_names, input_names, axes)
+
+    t_rel = demo.t - demo.t[0]
+    dt = float(np.median(np.diff(demo.t))) if len(demo) > 1 else 0.0
+    err = np.zeros((len(demo), m))
+    inside = np.zeros((len(demo), m), dtype=bool)
+    wall0 = clock()
+    for k in range(len(demo)):
+        if wait:
+            delay = wall0 + t_rel[k] / speed - clock()
+            if delay > 0:
+                sleep(delay)
+        x, u = demo.x[k], demo.u[k]
+        rec.set_time("time", duration=float(t_rel[k]))
+        rec.set_time("step", sequence=k)
+        for j, name in enumerate(state_names):
+            rec.log(f"{base}/states/{_safe(name)}", rr.Scalars(x[j]))
+        for j, name in enumerate(input_names):
+            rec.log(f"{base}/inputs/{_safe(name)}", rr.Scalars(u[j]))
+        mu, Sigma = model.variability(x[None, :], x0=x_start, target=target)
+        u_hat = K @ x + mu[0]
+        sigma = np.sqrt(np.clip(np.diagonal(Sigma[0]), 0.0, None))
+        err[k] = u - u_hat
+        inside[k] = np.abs(u - u_hat) <= 3.0 * sigma
+        for j, name in enumerate(input_names):
+            p = f"{base}/online/{_safe(name)}"
+            # one entity, two series (±1σ and ±3σ bands): half the log calls of two entities per step
+            if HAS_MEASUREMENTS:
+                rec.log(f"{p}/gmr", rr.Measurements(values=[u_hat[j], u_hat[j]],
+                                                    variances=[sigma[j] ** 2, (3 * sigma[j]) ** 2]))
+            else:
+                rec.log(f"{p}/gmr", rr.Scalars([u_hat[j] - 3 * sigma[j], u_hat[j] - sigma[j], u_hat[j] + sigma[j],
+                                                u_hat[j] + 3 * sigma[j]]))
+            if not inside[k, j]:
+                rec.log(f"{p}/outside_3sigma", rr.Scalars(u[j]))
+        if axes is not None:
+            ix, iy, iphi = axes
+            phi = x[iphi] if iphi is not None else 0.0
+            rec.log(
+                f"{sbase}/vehicle",
+                rr.Transform3D(
+                    translation=[x[ix], 0.0, x[iy]], quaternion=[0.0, np.sin(phi / 2), 0.0, np.cos(phi / 2)]
+                ),
+            )
+        if horizon > 0 and k % rollout_every == 0:
+            pred = model.predict(x, horizon, target=target, task_x0=x_start)
+            xp = np.asarray(pred.x)
+            # stamped with the time it forecasts, so the plot compares x(t) with its forecast from t − H·dt
+            rec.set_time("time", duration=float(t_rel[k] + horizon * dt))
+            rec.set_time("step", sequence=k + horizon)
+            for j, name in enumerate(state_names):
+                rec.log(f"{base}/online/rollout_end/{_safe(name)}", rr.Scalars(xp[-1, j]))
+            rec.set_time("time", duration=float(t_rel[k]))
+            rec.set_time("step", sequence=k)
+            if axes is not None:
+                ix, iy, _ = axes
+                strip = np.column_stack([xp[:, ix], np.zeros(len(xp)), xp[:, iy]])
+                rec.log(f"{sbase}/rollout", rr.LineStrips3D([strip], colors=[_COLOR_PRED], radii=0.015))
+        if on_step is not None:
+            on_step(k)
+    wall = clock() - wall0
+    rec.reset_time()
+    return ReplayStats(
+        demo_id=demo.id,
+        n_steps=len(demo),
+        sim_time=float(t_rel[-1] + dt),
+        wall_time=float(wall),
+        one_step_rmse=np.sqrt(np.mean(err**2, axis=0)),
+        coverage_3sigma=inside.mean(axis=0),
+    )
+
+
+def _log_styles(rec, demo, base, sbase, state_names, input_names, axes) -> None:
+    for name in state_names:
+        rec.log(f"{base}/states/{_safe(name)}", rr.SeriesLines(names=[f"{name} recorded"], colors=[_COLOR_REC]),
+                static=True)
+        rec.log(f"{base}/online/rollout_end/{_safe(name)}",
+                rr.SeriesLines(names=[f"{name} forecast (rollout end)"], colors=[_COLOR_PRED]), static=True)
+    for name in input_names:
+        rec.log(f"{base}/inputs/{_safe(name)}",
+                rr.SeriesLines(names=[f"{name} recorded"], colors=[_COLOR_REC], interpolation_mode="StepAfter"),
+                static=True)
+        p = f"{base}/online/{_safe(name)}"
+        label = f"{name}: K̂x + μ(x)"
+        if HAS_MEASUREMENTS:
+            rec.log(f"{p}/gmr", rr.Measurements.from_fields(names=[f"{label} ± 1σ", f"{label} ± 3σ"],
+                                                            colors=[_COLOR_PRED, _COLOR_BAND],
+                                                            interpolation_mode="StepAfter"), static=True)
+        else:
+            rec.log(f"{p}/gmr", rr.SeriesLines(names=[f"{label} − 3σ", f"{label} − 1σ", f"{label} + 1σ",
+                                                      f"{label} + 3σ"],
+                                               colors=[_COLOR_BAND, _COLOR_PRED, _COLOR_PRED, _COLOR_BAND]),
+                    static=True)
+        rec.log(f"{p}/outside_3sigma", rr.SeriesPoints(names=[f"{name} outside 3σ"], colors=[_COLOR_OUT],
+                                                       markers=["cross"], marker_sizes=[4.0]), static=True)
+    if axes is not None:
+        ix, iy, _ = axes
+        rec.log("scene", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        path = np.column_stack([demo.x[:, ix], np.zeros(len(demo)), demo.x[:, iy]])
+        rec.log(f"{sbase}/path", rr.LineStrips3D([path], colors=[(170, 170, 170)], radii=0.006), static=True)
+        rec.log(
+            f"{sbase}/vehicle",
+            rr.LineStrips3D([[[-0.18, 0, 0], [0.18, 0, 0]], [[0, 0, 0], [0, 0, 0.12]]], colors=[_COLOR_REC, _COLOR_REC],
+                            radii=[0.02, 0.01]),
+            static=True,
+        )
+
+
+def replay_blueprint(demo_ids: list[str], state_names: tuple[str, ...], input_names: tuple[str, ...]) -> rrb.Blueprint:
+    """The replay's layout: the scene with the online inputs beside it, then the states."""
+    eye = rrb.EyeControls3D(position=[0.0, -9.0, 1.75], look_target=[0.0, 0.0, 1.75], eye_up=[0.0, 0.0, 1.0])
+    inputs = [
+        rrb.TimeSeriesView(
+            origin="/",
+            contents=[f"+ /demos/{_safe(i)}/inputs/{_safe(name)}" for i in demo_ids]
+            + [f"+ /demos/{_safe(i)}/online/{_safe(name)}/**" for i in demo_ids],
+            name=f"{name}: recorded vs online GMR prediction",
+        )
+        for name in input_names
+    ]
+    states = [
+        rrb.TimeSeriesView(
+            origin="/",
+            contents=[f"+ /demos/{_safe(i)}/states/{_safe(name)}" for i in demo_ids]
+            + [f"+ /demos/{_safe(i)}/online/rollout_end/{_safe(name)}" for i in demo_ids],
+            name=name,
+        )
+        for name in state_names
+    ]
+    live = rrb.Horizontal(rrb.Spatial3DView(origin="scene", name="scene", eye_controls=eye), rrb.Vertical(*inputs),
+                          column_shares=[3, 2], name="live")
+    return rrb.Blueprint(rrb.Tabs(live, rrb.Grid(*states, name="states")), rrb.TimePanel(timeline="time"))

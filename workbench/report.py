@@ -1,0 +1,443 @@
+"""The workbench's report: one Markdown file with PNG figures in the spirit of the method paper's figures.
+
+Figures (``figures/`` beside the report), each drawn on a matplotlib :class:`~matplotlib.figure.Figure` with the
+Agg canvas — no pyplot, no global backend, so the report runs headless and never touches a user's session:
+
+* ``demonstrations.png`` — the flown paths per strategy;
+* ``objective.png`` — normalized Q and R side by side per strategy, the attitude term called out;
+* ``variability.png`` — ŵ on a test trial with the GMR mean and 3σ band (eqs. (24)–(27));
+* ``predictions.png`` — predicted vs recorded trajectories of the three methods, with the Monte Carlo band;
+* ``rmse.png`` — horizon RMSE (eq. (35)) per method as box plots;
+* ``data_efficiency.png`` — RMSE against the number of training demonstrations;
+
+and for multi-subject data the ANOVA / pairwise t-test table.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+
+from workbench.atomic import atomic_path, atomic_write_text
+from workbench.demos import Demonstration, DemonstrationSet
+
+__all__ = [
+    "ReportInputs",
+    "fig_data_efficiency",
+    "fig_demonstrations",
+    "fig_objective",
+    "fig_predictions",
+    "fig_rmse",
+    "fig_variability",
+    "save_figure",
+    "write_report",
+]
+
+_PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
+METHOD_COLORS = {"proposed": "#2ca02c", "ioc_only": "#d62728", "gmr_only": "#9467bd", "recorded": "#282828"}
+METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only"}
+DPI = 110
+
+
+def _label_color(label: str, labels: Sequence[str]) -> str:
+    return _PALETTE[list(labels).index(label) % len(_PALETTE)] if label in labels else "#7f7f7f"
+
+
+def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
+    """Render ``fig`` to a PNG at ``path`` atomically."""
+    path = Path(path)
+    FigureCanvasAgg(fig)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
+    return path
+
+
+def _pos_idx(state_names: Sequence[str]) -> tuple[int, int]:
+    names = list(state_names)
+    return (names.index("x"), names.index("y")) if "x" in names and "y" in names else (0, 1)
+
+
+# -- figures ----------------------------------------------------------------------------------------------
+def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
+    """Flown paths (horizontal position vs altitude) of every trial, one panel per strategy."""
+    labels = list(sets)
+    fig = Figure(figsize=(4.6 * len(labels), 3.8), layout="constrained")
+    axs = fig.subplots(1, len(labels), squeeze=False, sharey=True)[0]
+    for ax, label in zip(axs, labels, strict=True):
+        ds = sets[label]
+        ix, iy = _pos_idx(ds.state_names)
+        color = _label_color(label, labels)
+        for d in ds:
+            ax.plot(d.x[:, ix], d.x[:, iy], color=color, lw=0.9, alpha=0.55)
+            ax.plot(d.x[0, ix], d.x[0, iy], "o", color=color, ms=3)
+        targets = [d.target for d in ds if d.target is not None]
+        tx, ty = (targets[0][ix], targets[0][iy]) if targets else (0.0, 0.0)
+        ax.plot([tx - 0.5, tx + 0.5], [ty, ty], color="k", lw=4, solid_capstyle="butt", label="pad")
+        ax.set_title(f"{label}: {len(ds)} demonstrations")
+        ax.set_xlabel(f"{ds.state_names[ix]} [m]")
+        ax.grid(alpha=0.3)
+        ax.set_aspect("equal", adjustable="datalim")
+    axs[0].set_ylabel(f"{sets[labels[0]].state_names[_pos_idx(sets[labels[0]].state_names)[1]]} [m]")
+    axs[0].legend(loc="upper right", fontsize=8)
+    return fig
+
+
+def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_names: Sequence[str]) -> Figure:
+    """Normalized Q and R heatmaps side by side per strategy, the attitude weight Q_φφ outlined.
+
+    Each block has its own color scale: R usually dominates M, and on a shared scale the structure of Q — which
+    states the operator cares about, the paper's point — would vanish.
+    """
+    labels = [k for k, m in models.items() if getattr(m, "objective_", None) is not None]
+    n, m = len(state_names), len(input_names)
+    fig = Figure(figsize=(10.0, 3.9 * max(1, len(labels))), layout="constrained")
+    axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
+    att = list(state_names).index("phi") if "phi" in state_names else None
+    for row, label in zip(axs, labels, strict=True):
+        Mn = np.asarray(models[label].objective_.M_normalized)
+        for ax, block, names, title in (
+            (row[0], Mn[:n, :n], state_names, "Q / λmax(M)"),
+            (row[1], Mn[n:, n:], input_names, "R / λmax(M)"),
+        ):
+            vmax = max(float(np.abs(block).max()), 1e-12)
+            image = ax.imshow(block, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
+            ax.set_xticks(range(len(names)), names)
+            ax.set_yticks(range(len(names)), names)
+            for (i, j), v in np.ndenumerate(block):
+                text = "0" if abs(v) < 5e-4 * vmax else f"{v:.2g}"
+                ax.text(j, i, text, ha="center", va="center", fontsize=7,
+                        color="white" if abs(v) > 0.6 * vmax else "black")
+            fig.colorbar(image, ax=ax, shrink=0.8)
+            ax.set_title(f"{label}: {title}", fontsize=10)
+        if att is not None:
+            row[0].add_patch(Rectangle((att - 0.5, att - 0.5), 1, 1, fill=False, ec="gold", lw=2.5))
+            q = np.diag(Mn[:n, :n])
+            rank = int((q > q[att]).sum()) + 1
+            row[0].set_title(
+                f"{label}: Q / λmax(M) — attitude weight Q_φφ = {q[att]:.3g} (rank {rank} of {n})", fontsize=10
+            )
+    return fig
+
+
+def fig_variability(cases: Mapping[str, tuple[Demonstration, Any]], input_names: Sequence[str]) -> Figure:
+    """ŵ = u − K̂x on a test trial per strategy with the GMR mean and ±3σ band; samples outside marked."""
+    labels = list(cases)
+    m = len(input_names)
+    fig = Figure(figsize=(5.2 * len(labels), 2.6 * m), layout="constrained")
+    axs = fig.subplots(m, len(labels), squeeze=False, sharex="col")
+    for c, label in enumerate(labels):
+        demo, model = cases[label]
+        t = demo.t - demo.t[0]
+        w = demo.u - demo.x @ np.asarray(model.K_).T
+        mu, Sigma = model.variability(demo.x, x0=demo.x[0], target=demo.target)
+        sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
+        for j in range(m):
+            ax = axs[j, c]
+            ax.fill_between(t, mu[:, j] - 3 * sigma[:, j], mu[:, j] + 3 * sigma[:, j], step="post",
+                            color="#ffbb78", alpha=0.6, lw=0, label="GMR μ ± 3σ")
+            ax.step(t, mu[:, j], where="post", color="#ff7f0e", lw=1.2, label="GMR μ")
+            ax.step(t, w[:, j], where="post", color="#1f77b4", lw=1.0, label="ŵ")
+            out = np.abs(w[:, j] - mu[:, j]) > 3 * sigma[:, j]
+            cover = 100.0 * (1.0 - out.mean())
+            if out.any():
+                ax.plot(t[out], w[out, j], "x", color="#d62728", ms=5, label="outside 3σ")
+            ax.set_title(f"{label} {demo.id}: ŵ {input_names[j]} — {cover:.1f} % inside 3σ", fontsize=9)
+            ax.grid(alpha=0.3)
+            ax.set_ylabel(f"ŵ {input_names[j]}")
+        axs[-1, c].set_xlabel("time since start [s]")
+    axs[0, 0].legend(fontsize=7, loc="best")
+    return fig
+
+
+def _band(pred: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    for lo, hi in (("x_lower", "x_upper"), ("x_lo", "x_hi"), ("x_low", "x_high")):
+        if getattr(pred, lo, None) is not None and getattr(pred, hi, None) is not None:
+            return np.asarray(getattr(pred, lo)), np.asarray(getattr(pred, hi))
+    return None
+
+
+def fig_predictions(
+    cases: Mapping[str, tuple[Demonstration, Mapping[str, Any]]],
+    state_names: Sequence[str],
+    dt: float,
+) -> Figure:
+    """Predicted vs recorded trajectory on a test trial per strategy: path, horizontal position and altitude.
+
+    ``cases[label] = (demo, {method: Prediction})`` with every prediction starting at the trial's first state.
+    """
+    labels = list(cases)
+    ix, iy = _pos_idx(state_names)
+    fig = Figure(figsize=(13.0, 3.5 * len(labels)), layout="constrained")
+    axs = fig.subplots(len(labels), 3, squeeze=False)
+    for r, label in enumerate(labels):
+        demo, preds = cases[label]
+        t = demo.t - demo.t[0]
+        horizon = max(len(np.asarray(p.x)) for p in preds.values()) - 1
+        tp = np.arange(horizon + 1) * dt
+        n_rec = min(len(demo), horizon + 1)
+        ax_path, ax_x, ax_y = axs[r]
+        ax_path.plot(demo.x[:, ix], demo.x[:, iy], color="#9a9a9a", lw=1.0, label="recorded (whole trial)")
+        ax_path.plot(demo.x[:n_rec, ix], demo.x[:n_rec, iy], color=METHOD_COLORS["recorded"], lw=2.0,
+                     label="recorded (horizon)")
+        ax_x.plot(t[:n_rec], demo.x[:n_rec, ix], color=METHOD_COLORS["recorded"], lw=2.0, label="recorded")
+        ax_y.plot(t[:n_rec], demo.x[:n_rec, iy], color=METHOD_COLORS["recorded"], lw=2.0, label="recorded")
+        for method, pred in preds.items():
+            x = np.asarray(pred.x)
+            color = METHOD_COLORS.get(method, "k")
+            title = METHOD_TITLES.get(method, method)
+            band = _band(pred)
+            if band is not None:
+                lo, hi = band
+                level = getattr(pred, "band_level", None)
+                name = f"{title} {100 * level:.0f} % MC band" if level else f"{title} MC band"
+                ax_x.fill_between(tp[: len(lo)], lo[:, ix], hi[:, ix], color=color, alpha=0.18, lw=0, label=name)
+                ax_y.fill_between(tp[: len(lo)], lo[:, iy], hi[:, iy], color=color, alpha=0.18, lw=0)
+            ax_path.plot(x[:, ix], x[:, iy], color=color, lw=1.4, ls="--", label=title)
+            ax_x.plot(tp[: len(x)], x[:, ix], color=color, lw=1.4, ls="--", label=title)
+            ax_y.plot(tp[: len(x)], x[:, iy], color=color, lw=1.4, ls="--")
+        ax_path.plot(demo.x[0, ix], demo.x[0, iy], "o", color="k", ms=5)
+        ax_path.set_title(f"{label} {demo.id}: path ({horizon * dt:.1f} s horizon)", fontsize=9)
+        ax_path.set_xlabel(f"{state_names[ix]} [m]")
+        ax_path.set_ylabel(f"{state_names[iy]} [m]")
+        ax_x.set_title(f"{state_names[ix]}(t)", fontsize=9)
+        ax_y.set_title(f"{state_names[iy]}(t)", fontsize=9)
+        for ax in (ax_x, ax_y):
+            ax.set_xlabel("time since start [s]")
+        for ax in axs[r]:
+            ax.grid(alpha=0.3)
+    axs[0, 1].legend(fontsize=7, loc="best")
+    axs[0, 0].legend(fontsize=7, loc="best")
+    return fig
+
+
+def fig_rmse(table: pd.DataFrame, metrics: Sequence[tuple[str, str]]) -> Figure:
+    """Box plots of per-trial horizon RMSE (eq. (35)) per method, one panel per (metric, label).
+
+    ``table`` has columns ``label``, ``method``, ``metric``, ``value`` (one row per trial and start).
+    """
+    labels = list(dict.fromkeys(table["label"]))
+    methods = [m for m in METHOD_TITLES if m in set(table["method"])] + sorted(
+        set(table["method"]) - set(METHOD_TITLES)
+    )
+    fig = Figure(figsize=(4.0 * len(labels) * len(metrics) / 1.3, 3.6), layout="constrained")
+    axs = fig.subplots(1, len(labels) * len(metrics), squeeze=False)[0]
+    k = 0
+    for metric, unit in metrics:
+        for label in labels:
+            ax = axs[k]
+            k += 1
+            sub = table[(table["label"] == label) & (table["metric"] == metric)]
+            data = [sub.loc[sub["method"] == m, "value"].to_numpy(dtype=float) for m in methods]
+            # no fliers: every trial is drawn as a dot on top
+            bp = ax.boxplot(data, tick_labels=[METHOD_TITLES.get(m, m) for m in methods], patch_artist=True,
+                            widths=0.6, showfliers=False, medianprops={"color": "k"})
+            for patch, m in zip(bp["boxes"], methods, strict=True):
+                patch.set_facecolor(METHOD_COLORS.get(m, "#cccccc"))
+                patch.set_alpha(0.55)
+            for j, d in enumerate(data):
+                if len(d):
+                    ax.plot(np.full(len(d), j + 1) + np.linspace(-0.12, 0.12, len(d)), d, ".", color="k", ms=3)
+            ax.set_title(f"{label}: {metric.replace('_', ' ')}", fontsize=9)
+            ax.set_ylabel(f"RMSE [{unit}]")
+            ax.grid(alpha=0.3, axis="y")
+    return fig
+
+
+def fig_data_efficiency(table: pd.DataFrame, unit: str = "m") -> Figure:
+    """Mean RMSE (± standard error) against the number of training demonstrations, per method and label.
+
+    ``table`` has columns ``label``, ``method``, ``n_train`` and ``value`` (one row per trial and repeat).
+    """
+    labels = list(dict.fromkeys(table["label"]))
+    fig = Figure(figsize=(4.8 * len(labels), 3.6), layout="constrained")
+    axs = fig.subplots(1, len(labels), squeeze=False, sharey=True)[0]
+    for ax, label in zip(axs, labels, strict=True):
+        sub = table[table["label"] == label]
+        for method, g in sub.groupby("method", sort=False):
+            stats = g.groupby("n_train")["value"].agg(["mean", "std", "count"]).sort_index()
+            se = stats["std"].fillna(0.0) / np.sqrt(stats["count"])
+            color = METHOD_COLORS.get(method, "k")
+            ax.errorbar(stats.index, stats["mean"], yerr=se, marker="o", ms=4, capsize=3, color=color,
+                        label=METHOD_TITLES.get(method, method))
+        ax.set_xscale("log")
+        ax.minorticks_off()  # the log axis's minor labels (3×10⁰, …) only clutter a handful of sizes
+        ax.set_xticks(sorted(set(sub["n_train"])), [str(v) for v in sorted(set(sub["n_train"]))])
+        ax.set_xlabel("training demonstrations")
+        ax.set_title(f"{label}: data efficiency", fontsize=9)
+        ax.grid(alpha=0.3)
+    axs[0].set_ylabel(f"position RMSE [{unit}]")
+    axs[0].legend(fontsize=8)
+    return fig
+
+
+# -- the report -------------------------------------------------------------------------------------------
+@dataclass
+class ReportInputs:
+    """Everything the report shows, computed by the caller (the CLI) so figures and numbers agree.
+
+    ``models[label]`` is the proposed model per strategy; ``baselines[label]`` maps method → model;
+    ``train``/``test`` the demonstrations per label; ``rmse`` a tidy table (label, method, metric, value, …);
+    ``efficiency`` a tidy table (label, method, n_train, value); ``coverage`` a table per label and input;
+    ``stats`` Markdown of a multi-subject test; ``notes`` free lines for the header.
+    """
+
+    train: Mapping[str, DemonstrationSet]
+    test: Mapping[str, DemonstrationSet]
+    models: Mapping[str, Any]
+    baselines: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    rmse: pd.DataFrame | None = None
+    efficiency: pd.DataFrame | None = None
+    coverage: pd.DataFrame | None = None
+    band: pd.DataFrame | None = None
+    stats: str | None = None
+    horizon: int = 60
+    samples: int = 0
+    seed: int = 0
+    notes: list[str] = field(default_factory=list)
+    title: str = "Workbench report"
+
+
+def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
+    cols = [str(c) for c in df.columns]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for row in df.itertuples(index=False):
+        cells = [format(v, floatfmt) if isinstance(v, float | np.floating) else str(v) for v in row]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _improvement_table(rmse: pd.DataFrame) -> pd.DataFrame:
+    """Mean RMSE per label, metric and method, and how much lower the proposed model's is (the paper's %)."""
+    mean = rmse.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
+    rows = []
+    for (label, metric), r in mean.iterrows():
+        row: dict[str, Any] = {"label": label, "metric": metric}
+        for m in r.index:
+            row[METHOD_TITLES.get(m, m)] = float(r[m])
+        if "proposed" in r.index:
+            for base in ("ioc_only", "gmr_only"):
+                if base in r.index and r[base] > 0:
+                    change = 100 * (1 - r["proposed"] / r[base])
+                    row[f"vs {METHOD_TITLES[base]}"] = f"{abs(change):.1f} % {'lower' if change >= 0 else 'higher'}"
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
+    """Write ``out_dir/report.md`` and ``out_dir/figures/*.png``; returns the report's path."""
+    out_dir = Path(out_dir)
+    fig_dir = out_dir / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    labels = list(inputs.models)
+    any_set = next(iter(inputs.train.values()))
+    state_names, input_names, dt = any_set.state_names, any_set.input_names, any_set.dt
+    md: list[str] = [f"# {inputs.title}", ""]
+    md += [f"- {line}" for line in inputs.notes]
+    md += [""]
+
+    # data
+    rows = []
+    for label in labels:
+        tr, te = inputs.train[label], inputs.test.get(label)
+        rows.append({
+            "strategy": label,
+            "train": len(tr),
+            "test": 0 if te is None else len(te),
+            "samples": tr.n_samples + (0 if te is None else te.n_samples),
+            "subjects": len({d.meta.get("subject") for d in tr}),
+            "sources": ", ".join(sorted({Path(str(d.meta.get("source", "?"))).name for d in tr}))[:80],
+        })
+    md += ["## Demonstrations", "", _md_table(pd.DataFrame(rows)), ""]
+    all_sets = {label: inputs.train[label] + inputs.test[label] if label in inputs.test else inputs.train[label]
+                for label in labels}
+    save_figure(fig_demonstrations(all_sets), fig_dir / "demonstrations.png")
+    md += ["![Demonstrations per strategy](figures/demonstrations.png)", "",
+           "*Flown paths per strategy; dots are start points, the bar is the pad.*", ""]
+
+    # objective
+    md += ["## Task objective (inverse LQR)", ""]
+    obj_rows = []
+    for label in labels:
+        o = getattr(inputs.models[label], "objective_", None)
+        if o is None:
+            continue
+        n = len(state_names)
+        Mn = np.asarray(o.M_normalized)
+        row = {"strategy": label, "α*": float(o.alpha), "forward-gain error": float(o.forward_gain_error)}
+        row.update({f"Q {s}": float(v) for s, v in zip(state_names, np.diag(Mn[:n, :n]), strict=True)})
+        row.update({f"R {s}": float(v) for s, v in zip(input_names, np.diag(Mn[n:, n:]), strict=True)})
+        obj_rows.append(row)
+    if obj_rows:
+        md += [_md_table(pd.DataFrame(obj_rows), ".3g"), ""]
+        save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
+        md += ["![Normalized Q and R](figures/objective.png)", "",
+               "*Normalized cost blocks (M / λmax(M)) per strategy; the attitude weight is outlined. The SDP returns "
+               "the minimum-condition-number cost with the fitted gain, not a unique cost (see METHOD.md).*", ""]
+
+    # variability and predictions on one test trial per label
+    cases_w, cases_p = {}, {}
+    for label in labels:
+        te = inputs.test.get(label)
+        if te is None or not len(te):
+            continue
+        demo = te[0]
+        model = inputs.models[label]
+        if callable(getattr(model, "variability", None)):
+            cases_w[label] = (demo, model)
+        preds = {"proposed": _predict(model, demo, inputs.horizon, inputs.samples, inputs.seed)}
+        for method, bm in inputs.baselines.get(label, {}).items():
+            preds[method] = _predict(bm, demo, inputs.horizon, 0, inputs.seed)
+        cases_p[label] = (demo, preds)
+    md += ["## Variability (TP-GMM + GMR)", ""]
+    if inputs.coverage is not None and len(inputs.coverage):
+        md += ["One-step coverage of ŵ by the GMR bands on the test trials:", "",
+               _md_table(inputs.coverage, ".1f"), ""]
+    if cases_w:
+        save_figure(fig_variability(cases_w, input_names), fig_dir / "variability.png")
+        md += ["![Residual variability with GMR bands](figures/variability.png)", "",
+               "*ŵ = u − K̂x on a test trial with the GMR mean μ(x) and its ±3σ band (eqs. (24)–(27)).*", ""]
+    md += ["## Predictions", ""]
+    if cases_p:
+        save_figure(fig_predictions(cases_p, state_names, dt), fig_dir / "predictions.png")
+        band = f", shaded: the proposed model's Monte Carlo band ({inputs.samples} rollouts)" if inputs.samples else ""
+        md += ["![Predicted vs recorded trajectories](figures/predictions.png)", "",
+               f"*{inputs.horizon * dt:.1f} s predictions from the test trial's start{band}.*", ""]
+    if inputs.rmse is not None and len(inputs.rmse):
+        metrics = [(m, "m" if "pos" in m else "m/s") for m in dict.fromkeys(inputs.rmse["metric"])]
+        save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
+        md += [_md_table(_improvement_table(inputs.rmse)), "",
+               "![RMSE per method](figures/rmse.png)", "",
+               "*Horizon RMSE (eq. (35)) per test trial and start point.*", ""]
+    if inputs.band is not None and len(inputs.band):
+        b = inputs.band.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
+        b = (100.0 * b).rename(columns=METHOD_TITLES).reset_index()
+        md += [f"Monte Carlo trajectory bands (5–95 %, {inputs.samples} rollouts): share of the horizon's steps "
+               "at which the recorded position (both axes) lies inside the band [%]:", "", _md_table(b, ".1f"), ""]
+    if inputs.efficiency is not None and len(inputs.efficiency):
+        save_figure(fig_data_efficiency(inputs.efficiency), fig_dir / "data_efficiency.png")
+        eff = inputs.efficiency.groupby(["label", "n_train", "method"], sort=False)["value"].mean().unstack("method")
+        eff = eff.rename(columns=METHOD_TITLES).reset_index()
+        md += ["## Data efficiency", "", _md_table(eff), "",
+               "![Data efficiency](figures/data_efficiency.png)", "",
+               "*Mean position RMSE on the test trials against the number of training demonstrations.*", ""]
+    if inputs.stats:
+        md += ["## Multi-subject statistics", "", inputs.stats, ""]
+    path = out_dir / "report.md"
+    atomic_write_text(path, "\n".join(md).rstrip() + "\n")
+    return path
+
+
+def _predict(model: Any, demo: Demonstration, horizon: int, samples: int, seed: int) -> Any:
+    kwargs: dict[str, Any] = {"target": demo.target}
+    if samples:
+        kwargs.update(samples=samples, seed=seed)
+    return model.predict(demo.x[0], horizon, **kwargs)

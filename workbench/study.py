@@ -1,0 +1,275 @@
+"""A study: per control strategy, split trials, fit the proposed model and its baselines, compare, report.
+
+This is what ``workbench evaluate``, ``workbench report`` and ``workbench demo`` share, so the numbers printed,
+the report's figures and the rerun recording come from one computation.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from workbench.atomic import atomic_path
+from workbench.demos import DemonstrationSet
+from workbench.errors import ConvergenceWarning, DataError
+
+__all__ = ["StudyResult", "run_study", "write_study_report", "write_study_recording"]
+
+METHODS = ("proposed", "ioc_only", "gmr_only")
+
+
+@dataclass
+class StudyResult:
+    """Everything a study computed, per strategy label."""
+
+    demos: DemonstrationSet
+    system: Any
+    train: dict[str, DemonstrationSet]
+    test: dict[str, DemonstrationSet]
+    models: dict[str, Any]
+    baselines: dict[str, dict[str, Any]]
+    table: pd.DataFrame
+    coverage: pd.DataFrame | None
+    efficiency: pd.DataFrame | None
+    stats_text: str | None
+    horizon: int
+    samples: int
+    seed: int
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def rmse(self) -> pd.DataFrame:
+        """The RMSE rows of the comparison (``trial, label, start, method, metric, value``)."""
+        return self.table[self.table["metric"].str.startswith("rmse_")]
+
+    @property
+    def band(self) -> pd.DataFrame:
+        """Monte Carlo band coverage rows (joint per block), when predictions had samples."""
+        t = self.table
+        return t[t["metric"].isin(["band_position", "band_velocity"])]
+
+    def summary(self) -> pd.DataFrame:
+        """Mean RMSE per label, metric and method, with the proposed model's improvement over each baseline."""
+        from workbench.report import _improvement_table
+
+        return _improvement_table(self.rmse)
+
+    def save_tables(self, path: str | os.PathLike) -> Path:
+        """The tidy RMSE table (plus the data-efficiency rows, ``table`` column) as CSV or Parquet, atomically."""
+        parts = [self.table.assign(table="comparison")]
+        if self.efficiency is not None:
+            parts.append(self.efficiency.assign(table="data_efficiency"))
+        df = pd.concat(parts, ignore_index=True)
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            if path.suffix.lower() in (".parquet", ".pq"):
+                df.to_parquet(tmp, index=False)
+            else:
+                df.to_csv(tmp, index=False)
+        return path
+
+
+def _split(ds: DemonstrationSet, test_size: float, seed: int) -> tuple[DemonstrationSet, DemonstrationSet]:
+    if len(ds) < 3:
+        raise DataError(f"strategy {ds[0].label!r} has {len(ds)} trial(s); at least 3 are needed to train and test")
+    n_test = max(1, min(len(ds) - 2, int(round(test_size * len(ds)))))
+    return ds.split(n_test, seed=seed)
+
+
+def select_components(
+    train: DemonstrationSet, system: Any, candidates: Sequence[int] = range(2, 9), seed: int = 0
+) -> int:
+    """G by BIC (TP-GMM parameter count) of the proposed model's variability fit: ``--components auto``."""
+    from workbench.frames import Frame, frames_for_demo
+    from workbench.model import HumanBehaviorModel
+
+    best: tuple[float, int] | None = None
+    for G in candidates:
+        if G * 20 > train.n_samples:  # far fewer samples than parameters: BIC is meaningless there
+            break
+        m = HumanBehaviorModel(system, n_components=int(G), random_state=seed, fit_objective=False).fit(train)
+        gmr, scale = m.variability_, m.variability_.scale_
+        inv = 1.0 / scale
+        xi, frames = [], []
+        for d in train:
+            xi.append(np.hstack([d.x, d.u - d.x @ m.K_.T]) * inv)
+            fs = frames_for_demo(m.frame_spec_, d.x, system.m, d.target)
+            # the same coordinate scaling TaskGMR fits in: (S T S⁻¹, S b)
+            frames.append([Frame((scale[:, None] * f.T) * inv[None, :], scale * f.b) for f in fs])
+        bic = gmr.tpgmm_.bic(xi, frames)
+        if best is None or bic < best[0]:
+            best = (bic, int(G))
+    if best is None:
+        raise DataError(f"too few samples ({train.n_samples}) to choose the number of components")
+    return best[1]
+
+
+def _fit_all(system: Any, train: DemonstrationSet, components: int, seed: int) -> dict[str, Any]:
+    from workbench import model as wm
+
+    return {
+        "proposed": wm.HumanBehaviorModel(system, n_components=components, random_state=seed).fit(train),
+        "ioc_only": wm.IOCOnlyModel(system).fit(train),
+        "gmr_only": wm.GMROnlyModel(system, n_components=components, random_state=seed).fit(train),
+    }
+
+
+def run_study(
+    demos: DemonstrationSet,
+    system: Any,
+    *,
+    test_size: float = 0.2,
+    horizon: int = 60,
+    components: int | str = 5,
+    samples: int = 100,
+    efficiency: Sequence[int] | None = (2, 5, 10, 20),
+    repeats: int = 2,
+    seed: int = 0,
+    progress: Callable[[], Any] | None = None,
+) -> StudyResult:
+    """Fit and compare the three methods per strategy label (see the module docstring)."""
+    from workbench import evaluate as ev
+
+    labels = demos.labels or [None]
+    timings: dict[str, float] = {}
+    train, test, models, baselines = {}, {}, {}, {}
+    rmse_parts, cov_parts, eff_parts = [], [], []
+    bar = progress() if progress is not None else nullcontext()
+    with bar as p:
+        task = p.add_task("fitting and comparing", total=len(labels)) if p is not None else None
+        for label in labels:
+            ds = demos if label is None else demos.by_label(label)
+            label = str(label)
+            tr, te = _split(ds, test_size, seed)
+            t0 = time.perf_counter()
+            G = select_components(tr, system, seed=seed) if components == "auto" else int(components)
+            fitted = _fit_all(system, tr, G, seed)
+            timings[f"fit {label}"] = time.perf_counter() - t0
+            train[label], test[label] = tr, te
+            models[label] = fitted["proposed"]
+            baselines[label] = {k: v for k, v in fitted.items() if k != "proposed"}
+            t0 = time.perf_counter()
+            table = ev.compare(fitted, te, horizon=horizon, samples=samples, seed=seed)
+            rmse_parts.append(table.assign(label=label))
+            cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, method="proposed"))
+            cov_parts.append(cov.assign(label=label))
+            timings[f"compare {label}"] = time.perf_counter() - t0
+            if efficiency:
+                t0 = time.perf_counter()
+                sizes = [n for n in efficiency if n <= len(tr)]
+                if sizes:
+                    # small training subsets often stop EM at max_iter: one summary line, not one per fit
+                    with warnings.catch_warnings(record=True) as caught:
+                        warnings.simplefilter("always", ConvergenceWarning)
+                        sub = p.add_task(f"{label}: data efficiency", total=None) if p is not None else None
+                        eff = ev.data_efficiency(
+                            system, tr, te, sizes=sizes, horizon=horizon, repeats=repeats, seed=seed, n_components=G,
+                            progress=None if p is None else lambda d, t, sub=sub: p.update(sub, completed=d, total=t),
+                        )
+                        if p is not None:
+                            p.remove_task(sub)
+                    n_warn = sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+                    if n_warn:
+                        warnings.warn(
+                            f"{label} data efficiency: EM stopped at max_iter in {n_warn} of the subset fits",
+                            ConvergenceWarning, stacklevel=2,
+                        )
+                    failures = eff.attrs.get("failures") or []
+                    if failures:
+                        warnings.warn(f"{label} data efficiency: {len(failures)} fits failed, e.g. {failures[0]}",
+                                      stacklevel=2)
+                    eff = eff[eff["metric"] == "rmse_position"].assign(label=label)
+                    eff_parts.append(eff)
+                timings[f"efficiency {label}"] = time.perf_counter() - t0
+            if p is not None:
+                p.advance(task)
+    table = pd.concat(rmse_parts, ignore_index=True)
+    stats_text = _subject_stats(ev, table, demos)
+    return StudyResult(
+        demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
+        coverage=_coverage_table(pd.concat(cov_parts, ignore_index=True)) if cov_parts else None,
+        efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
+        stats_text=stats_text, horizon=horizon, samples=samples, seed=seed, timings=timings,
+    )
+
+
+def _coverage_table(cov: pd.DataFrame) -> pd.DataFrame:
+    """Pooled one-step coverage as one row per label and input: % inside 1σ, 2σ, 3σ."""
+    wide = cov.pivot_table(index=["label", "input"], columns="n_sigma", values="coverage", sort=False)
+    wide.columns = [f"inside {c:g}σ [%]" for c in wide.columns]
+    return (100.0 * wide).reset_index()
+
+
+def _subject_stats(ev: Any, table: pd.DataFrame, demos: DemonstrationSet) -> str | None:
+    """For multi-subject data: one-way ANOVA of per-trial position RMSE across methods, paired t-tests."""
+    subjects = sorted({str(d.meta.get("subject")) for d in demos if d.meta.get("subject") is not None})
+    if len(subjects) < 2:
+        return None
+    groups = ev.method_groups(table, "rmse_position")
+    if len(groups) < 2 or min(len(v) for v in groups.values()) < 2:
+        return None
+    anova = ev.anova_oneway(groups)
+    lines = [
+        f"{len(subjects)} subjects ({', '.join(subjects)}); {len(next(iter(groups.values())))} test trials. "
+        f"One-way ANOVA of the per-trial position RMSE across methods: {anova}.",
+        "",
+        "| pair | t | df | p | p (Holm) | mean difference [m] |",
+        "|---|---|---|---|---|---|",
+    ]
+    for (a, b), r in ev.pairwise_ttests(groups).items():
+        lines.append(f"| {a} vs {b} | {r.t:.3g} | {r.df:.3g} | {r.p:.3g} | {r.p_adjusted:.3g} | "
+                     f"{r.mean_difference:+.3g} |")
+    return "\n".join(lines)
+
+
+def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str = "Workbench report") -> Path:
+    """``out_dir/report.md`` with figures under ``out_dir/figures``."""
+    from workbench.report import ReportInputs, write_report
+
+    notes = [
+        f"{len(result.demos)} demonstrations, {result.demos.n_samples} samples, dt = {result.demos.dt:g} s; "
+        f"states {list(result.demos.state_names)}, inputs {list(result.demos.input_names)}",
+        f"prediction horizon {result.horizon} steps ({result.horizon * result.demos.dt:.2f} s); "
+        f"{result.samples} Monte Carlo rollouts per band; seed {result.seed}",
+    ]
+    cov = None
+    if result.coverage is not None:
+        cov = result.coverage.copy()
+        front = [c for c in ("label",) if c in cov.columns]
+        cov = cov[front + [c for c in cov.columns if c not in front]]
+    return write_report(
+        out_dir,
+        ReportInputs(
+            train=result.train, test=result.test, models=result.models, baselines=result.baselines,
+            rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
+            stats=result.stats_text,
+            horizon=result.horizon, samples=result.samples, seed=result.seed, notes=notes, title=title,
+        ),
+    )
+
+
+def write_study_recording(
+    result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
+) -> Path:
+    """One ``.rrd`` with every trial, both models' variability on the test trials and the three predictions."""
+    from workbench import viewer
+
+    focus = [te[0].id for te in result.test.values() if len(te)]
+    bar = progress() if progress is not None else nullcontext()
+    with bar as p:
+        if p is not None:
+            p.add_task(f"writing {path}", total=None)
+        out, _ = viewer.record_session(
+            path, result.demos, models=result.models, baselines=result.baselines, focus=focus,
+            horizon=result.horizon, samples=result.samples, seed=result.seed,
+        )
+    return out
