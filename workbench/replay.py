@@ -94,7 +94,6 @@ def replay(
     input_names = tuple(input_names or (f"u{i}" for i in range(m)))
     base = f"demos/{_safe(demo.id)}"
     sbase = f"scene/replay/{_safe(demo.id)}"
-    K = np.asarray(model.K_)
     x_start, target = demo.x[0], demo.target
     axes = _scene_axes(state_names)
     _log_styles(rec, demo, base, sbase, state_names, input_names, axes)
@@ -116,8 +115,9 @@ def replay(
             rec.log(f"{base}/states/{_safe(name)}", rr.Scalars(x[j]))
         for j, name in enumerate(input_names):
             rec.log(f"{base}/inputs/{_safe(name)}", rr.Scalars(u[j]))
-        mu, Sigma = model.variability(x[None, :], x0=x_start, target=target)
-        u_hat = K @ x + mu[0]
+        # the model's one-step input Gaussian: K̂(x − r) + μ̂(x) and Σ̂(x), r the goal where the model is goal-relative
+        u_mean, Sigma = model.input_distribution(x[None, :], x0=x_start, target=target)
+        u_hat = u_mean[0]
         sigma = np.sqrt(np.clip(np.diagonal(Sigma[0]), 0.0, None))
         err[k] = u - u_hat
         inside[k] = np.abs(u - u_hat) <= 3.0 * sigma

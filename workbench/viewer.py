@@ -310,8 +310,8 @@ class SessionLogger:
         """
         s = self.session
         base = f"demos/{_safe(demo.id)}/variability"
-        K = np.asarray(model.K_)
-        w = demo.u - demo.x @ K.T
+        residuals = getattr(model, "residuals", None)
+        w = residuals(demo) if callable(residuals) else demo.u - demo.x @ np.asarray(model.K_).T
         out: dict[str, np.ndarray] = {"w": w}
         has_gmr = callable(getattr(model, "variability", None))
         if has_gmr:
