@@ -615,7 +615,7 @@ def cmd_demo(ctx: _Context) -> int:
 _EPILOG = """\
 examples:
   workbench demo                                   # sample logs → models, report and out/demo.rrd
-  workbench inspect sample_logs/cs1_s01.tlog       # streams, rates, fields, time span
+  workbench inspect sample_logs/landing_s00.tlog   # streams, rates, fields, time span
   workbench import sample_logs/*.tlog --mapping planar_quadrotor -o demos.parquet
   workbench fit demos.parquet --label CS1 -o cs1.npz
   workbench view demos.parquet --model CS1=cs1.npz --save session.rrd && rerun session.rrd
