@@ -85,7 +85,12 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     try:
         if os.path.getsize(path) == 0:
             raise DataError(f"{where}: empty file, not a CSV file")
-        frame = pd.read_csv(path, engine="pyarrow", dtype={"demo": "string"})
+        try:
+            frame = pd.read_csv(path, engine="pyarrow", dtype={"demo": "string"})
+        except (ValueError, TypeError):
+            # pyarrow infers a column's type from its first block and gives up on a later odd cell ("nan" in
+            # an integer column); read as text, every cell is converted below and a bad one's line named
+            frame = pd.read_csv(path, engine="pyarrow", dtype=str)
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError, TypeError) as exc:
@@ -165,7 +170,8 @@ def _column(series: pd.Series, name: str, line: np.ndarray, where: str) -> np.nd
     flags = np.array([lowered.get(str(v).lower(), np.nan) if v is not None else np.nan for v in stripped])
     values = np.where(np.isnan(values), flags, values)
     is_number = filled & ~np.isnan(values)
-    is_text = filled & np.isnan(values) & np.array([str(v).lower() not in ("nan", "na", "null") for v in stripped])
+    not_na = np.array([str(v).lower() not in ("nan", "na", "null") for v in stripped], dtype=bool)
+    is_text = filled & np.isnan(values) & not_na
     if not is_number.any():
         return np.array([None if v == "" else v for v in stripped], dtype=object) if is_text.any() else values
     if is_text.any():
