@@ -61,6 +61,7 @@ def test_text_columns_stay_text_and_flags_become_bool(tmp_path):
         ("demo,t,x\na,0,1\na,0.1\n", "line 3"),  # a missing field
         ("demo,t,x\na,0,1\na,0.1,2,9\n", "line 3"),  # an extra field
         ("demo,t,x\na,0,1\na,0.1,2\na,0.2,oops\n", "line 4, column 'x'"),  # text among numbers
+        ("demo,t,x\na,0,1\na,0.1,nan\na,0.2,oops\n", "line 4, column 'x'"),  # pyarrow cannot type the column
         ("demo,t,x\na,0,1\na,0.2,2\na,0.1,3\n", "line 4, column 't'"),  # time going backwards
         ("demo,t,x\na,0,1\na,0,2\n", "line 3, column 't'"),  # time standing still
         ("demo,x\na,1\n", "line 1 (header): missing column(s) ['t']"),
