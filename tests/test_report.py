@@ -9,8 +9,9 @@ from matplotlib.image import imread
 
 from workbench import evaluate as ev
 from workbench.model import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel
-from workbench.report import ReportInputs, _improvement_table, write_report
+from workbench.report import ReportInputs, write_report
 from workbench.simulate import simulate_landings
+from workbench.study import improvement_table
 from workbench.system import planar_quadrotor
 
 FIGURES = ("demonstrations", "objective", "variability", "predictions", "rmse", "data_efficiency")
@@ -79,7 +80,7 @@ def test_figures_are_non_trivial_images(report, name):
 
 def test_improvement_table_is_computed_from_the_rmse(report):
     rmse = report["rmse"]
-    tab = _improvement_table(rmse)
+    tab = improvement_table(rmse)
     row = tab[(tab["label"] == "CS1") & (tab["metric"] == "rmse_position")].iloc[0]
     sel = rmse[(rmse["label"] == "CS1") & (rmse["metric"] == "rmse_position")]
     means = sel.groupby("method")["value"].mean()

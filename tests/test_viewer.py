@@ -20,9 +20,9 @@ from rerun.chunk import RrdReader
 from workbench import viewer
 from workbench.errors import DataError, WorkbenchError
 from workbench.model import HumanBehaviorModel, IOCOnlyModel
-from workbench.replay import replay, replay_blueprint
 from workbench.simulate import simulate_landings
 from workbench.system import planar_quadrotor
+from workbench.viewer import replay, replay_blueprint, session
 
 HORIZON = 15
 SAMPLES = 40
@@ -193,7 +193,7 @@ def test_blueprint_has_the_five_tabs(setup):
 
 
 def test_measurements_fallback_logs_two_lines(tmp_path, setup, monkeypatch):
-    monkeypatch.setattr(viewer, "HAS_MEASUREMENTS", False)
+    monkeypatch.setattr(session, "HAS_MEASUREMENTS", False)
     demos, model = setup["demos"], setup["model"]
     d = demos[0]
     rec = viewer.new_recording()

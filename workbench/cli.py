@@ -377,13 +377,9 @@ def cmd_predict(ctx: _Context) -> int:
     cols.update({s: x[:, j] for j, s in enumerate(names)})
     u_full = np.vstack([u, np.full((1, u.shape[1]), np.nan)])  # the last state has no input yet
     cols.update({s: u_full[:, j] for j, s in enumerate(in_names)})
-    from workbench.viewer import _prediction_band
-
-    band = _prediction_band(pred)
-    if band is not None:
-        lo, hi, _ = band
-        cols.update({f"{s}_lower": lo[:, j] for j, s in enumerate(names)})
-        cols.update({f"{s}_upper": hi[:, j] for j, s in enumerate(names)})
+    if pred.x_lower is not None:
+        cols.update({f"{s}_lower": pred.x_lower[:, j] for j, s in enumerate(names)})
+        cols.update({f"{s}_upper": pred.x_upper[:, j] for j, s in enumerate(names)})
     df = pd.DataFrame(cols)
     out = Path(a.output)
     with atomic_path(out) as tmp:
@@ -498,7 +494,7 @@ def _announce(ctx: _Context, out: dict[str, Any], sink: Any, what: str) -> None:
 
 def cmd_replay(ctx: _Context) -> int:
     from workbench import viewer
-    from workbench.replay import replay, replay_blueprint
+    from workbench.viewer import replay, replay_blueprint
 
     a = ctx.args
     ds = _load_demos(ctx, [a.log], a.mapping)
@@ -534,6 +530,7 @@ def cmd_replay(ctx: _Context) -> int:
 
 def cmd_report(ctx: _Context) -> int:
     from workbench import study
+    from workbench.report import write_study_report
 
     a = ctx.args
     ds = _load_demos(ctx, a.demos, a.mapping, a.label)
@@ -541,7 +538,7 @@ def cmd_report(ctx: _Context) -> int:
         ds, _system_for(ds, a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
         samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
     )
-    path = study.write_study_report(result, a.output, title=a.title)
+    path = write_study_report(result, a.output, title=a.title)
     _print_study(ctx, result)
     ctx.say(f"wrote {path} with figures in {Path(a.output) / 'figures'}")
     return 0
@@ -551,6 +548,8 @@ def cmd_demo(ctx: _Context) -> int:
     from rich.markup import escape
 
     from workbench import study
+    from workbench.report import write_study_report
+    from workbench.viewer import record_study
 
     a = ctx.args
     t_start = time.perf_counter()
@@ -590,11 +589,11 @@ def cmd_demo(ctx: _Context) -> int:
         model.save(model_dir / f"{label}.npz")
     result.save_tables(out / "results.csv")
     t1 = time.perf_counter()
-    report = study.write_study_report(result, out, title="Workbench demo: sample logs")
+    report = write_study_report(result, out, title="Workbench demo: sample logs")
     timings["report"] = time.perf_counter() - t1
     rrd = out / "demo.rrd"
     t1 = time.perf_counter()
-    study.write_study_recording(result, rrd, progress=ctx.progress)
+    record_study(result, rrd, progress=ctx.progress)
     timings["recording"] = time.perf_counter() - t1
     _print_study(ctx, result)
     ctx.say("")

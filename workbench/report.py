@@ -29,6 +29,7 @@ from matplotlib.patches import Rectangle
 
 from workbench.atomic import atomic_path, atomic_write_text
 from workbench.demos import Demonstration, DemonstrationSet
+from workbench.study import METHOD_TITLES, StudyResult, improvement_table
 
 __all__ = [
     "ReportInputs",
@@ -44,7 +45,6 @@ __all__ = [
 
 _PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
 METHOD_COLORS = {"proposed": "#2ca02c", "ioc_only": "#d62728", "gmr_only": "#9467bd", "recorded": "#282828"}
-METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only"}
 DPI = 110
 
 
@@ -315,23 +315,6 @@ def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
     return "\n".join(lines)
 
 
-def _improvement_table(rmse: pd.DataFrame) -> pd.DataFrame:
-    """Mean RMSE per label, metric and method, and how much lower the proposed model's is (the paper's %)."""
-    mean = rmse.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
-    rows = []
-    for (label, metric), r in mean.iterrows():
-        row: dict[str, Any] = {"label": label, "metric": metric}
-        for m in r.index:
-            row[METHOD_TITLES.get(m, m)] = float(r[m])
-        if "proposed" in r.index:
-            for base in ("ioc_only", "gmr_only"):
-                if base in r.index and r[base] > 0:
-                    change = 100 * (1 - r["proposed"] / r[base])
-                    row[f"vs {METHOD_TITLES[base]}"] = f"{abs(change):.1f} % {'lower' if change >= 0 else 'higher'}"
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
 def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     """Write ``out_dir/report.md`` and ``out_dir/figures/*.png``; returns the report's path."""
     out_dir = Path(out_dir)
@@ -414,7 +397,7 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     if inputs.rmse is not None and len(inputs.rmse):
         metrics = [(m, "m" if "pos" in m else "m/s") for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
-        md += [_md_table(_improvement_table(inputs.rmse)), "",
+        md += [_md_table(improvement_table(inputs.rmse)), "",
                "![RMSE per method](figures/rmse.png)", "",
                "*Horizon RMSE (eq. (35)) per test trial and start point.*", ""]
     if inputs.band is not None and len(inputs.band):
@@ -441,3 +424,27 @@ def _predict(model: Any, demo: Demonstration, horizon: int, samples: int, seed: 
     if samples:
         kwargs.update(samples=samples, seed=seed)
     return model.predict(demo.x[0], horizon, **kwargs)
+
+
+def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str = "Workbench report") -> Path:
+    """``out_dir/report.md`` with figures under ``out_dir/figures``."""
+    notes = [
+        f"{len(result.demos)} demonstrations, {result.demos.n_samples} samples, dt = {result.demos.dt:g} s; "
+        f"states {list(result.demos.state_names)}, inputs {list(result.demos.input_names)}",
+        f"prediction horizon {result.horizon} steps ({result.horizon * result.demos.dt:.2f} s); "
+        f"{result.samples} Monte Carlo rollouts per band; seed {result.seed}",
+    ]
+    cov = None
+    if result.coverage is not None:
+        cov = result.coverage.copy()
+        front = [c for c in ("label",) if c in cov.columns]
+        cov = cov[front + [c for c in cov.columns if c not in front]]
+    return write_report(
+        out_dir,
+        ReportInputs(
+            train=result.train, test=result.test, models=result.models, baselines=result.baselines,
+            rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
+            stats=result.stats_text,
+            horizon=result.horizon, samples=result.samples, seed=result.seed, notes=notes, title=title,
+        ),
+    )

@@ -1,7 +1,9 @@
-"""A study: per control strategy, split trials, fit the proposed model and its baselines, compare, report.
+"""A study: per control strategy, split trials, fit the proposed model and its baselines, compare.
 
 This is what ``workbench evaluate``, ``workbench report`` and ``workbench demo`` share, so the numbers printed,
-the report's figures and the rerun recording come from one computation.
+the report's figures and the rerun recording come from one computation. It sits beside
+:mod:`workbench.evaluate` and imports neither the report nor the viewer: they take a :class:`StudyResult`
+(``report.write_study_report``, ``viewer.record_study``).
 """
 
 from __future__ import annotations
@@ -22,9 +24,10 @@ from workbench.atomic import atomic_path
 from workbench.demos import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError
 
-__all__ = ["StudyResult", "run_study", "write_study_report", "write_study_recording"]
+__all__ = ["StudyResult", "run_study", "improvement_table", "METHOD_TITLES"]
 
 METHODS = ("proposed", "ioc_only", "gmr_only")
+METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only"}
 
 
 @dataclass
@@ -59,9 +62,7 @@ class StudyResult:
 
     def summary(self) -> pd.DataFrame:
         """Mean RMSE per label, metric and method, with the proposed model's improvement over each baseline."""
-        from workbench.report import _improvement_table
-
-        return _improvement_table(self.rmse)
+        return improvement_table(self.rmse)
 
     def save_tables(self, path: str | os.PathLike) -> Path:
         """The tidy RMSE table (plus the data-efficiency rows, ``table`` column) as CSV or Parquet, atomically."""
@@ -231,45 +232,18 @@ def _subject_stats(ev: Any, table: pd.DataFrame, demos: DemonstrationSet) -> str
     return "\n".join(lines)
 
 
-def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str = "Workbench report") -> Path:
-    """``out_dir/report.md`` with figures under ``out_dir/figures``."""
-    from workbench.report import ReportInputs, write_report
-
-    notes = [
-        f"{len(result.demos)} demonstrations, {result.demos.n_samples} samples, dt = {result.demos.dt:g} s; "
-        f"states {list(result.demos.state_names)}, inputs {list(result.demos.input_names)}",
-        f"prediction horizon {result.horizon} steps ({result.horizon * result.demos.dt:.2f} s); "
-        f"{result.samples} Monte Carlo rollouts per band; seed {result.seed}",
-    ]
-    cov = None
-    if result.coverage is not None:
-        cov = result.coverage.copy()
-        front = [c for c in ("label",) if c in cov.columns]
-        cov = cov[front + [c for c in cov.columns if c not in front]]
-    return write_report(
-        out_dir,
-        ReportInputs(
-            train=result.train, test=result.test, models=result.models, baselines=result.baselines,
-            rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
-            stats=result.stats_text,
-            horizon=result.horizon, samples=result.samples, seed=result.seed, notes=notes, title=title,
-        ),
-    )
-
-
-def write_study_recording(
-    result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
-) -> Path:
-    """One ``.rrd`` with every trial, both models' variability on the test trials and the three predictions."""
-    from workbench import viewer
-
-    focus = [te[0].id for te in result.test.values() if len(te)]
-    bar = progress() if progress is not None else nullcontext()
-    with bar as p:
-        if p is not None:
-            p.add_task(f"writing {path}", total=None)
-        out, _ = viewer.record_session(
-            path, result.demos, models=result.models, baselines=result.baselines, focus=focus,
-            horizon=result.horizon, samples=result.samples, seed=result.seed,
-        )
-    return out
+def improvement_table(rmse: pd.DataFrame) -> pd.DataFrame:
+    """Mean RMSE per label, metric and method, and how much lower the proposed model's is (the paper's %)."""
+    mean = rmse.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
+    rows = []
+    for (label, metric), r in mean.iterrows():
+        row: dict[str, Any] = {"label": label, "metric": metric}
+        for m in r.index:
+            row[METHOD_TITLES.get(m, m)] = float(r[m])
+        if "proposed" in r.index:
+            for base in ("ioc_only", "gmr_only"):
+                if base in r.index and r[base] > 0:
+                    change = 100 * (1 - r["proposed"] / r[base])
+                    row[f"vs {METHOD_TITLES[base]}"] = f"{abs(change):.1f} % {'lower' if change >= 0 else 'higher'}"
+        rows.append(row)
+    return pd.DataFrame(rows)

@@ -27,7 +27,7 @@ import rerun.blueprint as rrb
 
 from workbench.demos import Demonstration
 from workbench.errors import DataError
-from workbench.viewer import HAS_MEASUREMENTS, _safe, _scene_axes
+from workbench.viewer.session import HAS_MEASUREMENTS, _safe, _scene_axes
 
 __all__ = ["ReplayStats", "replay", "replay_blueprint"]
 

@@ -1,26 +1,5 @@
-"""Rerun recordings of demonstrations, fitted models and their predictions.
-
-What the user sees first. A session is logged into a rerun recording as:
-
-* ``demos/<id>/states/<state>`` and ``demos/<id>/inputs/<input>`` — the recorded trial (inputs drawn step-after,
-  i.e. zero-order hold, because a stick command stays in force until the next sample);
-* ``demos/<id>/variability/<input>/{w,gmr,gmr_3sigma,outside_3sigma}`` — the residual variability
-  ``ŵ = u − K̂ x`` (eq. (20) of the method paper), the GMR mean of ``w`` given ``x`` (eqs. (24)–(27)) drawn with a
-  ±1σ band (``gmr``) and a ±3σ band (``gmr_3sigma``), and the samples where ``ŵ`` leaves the 3σ band;
-* ``demos/<id>/predictions/from_<k>/<method>/<state>`` — predictions (``û = K̂ x̂ + μ̂(x̂)``, the paper's section
-  "Trajectory Prediction"; the IOC-only and GMR-only baselines) from state ``k`` of the trial, and
-  ``…/band/<state>`` the Monte Carlo percentile band;
-* ``demos/<id>/mode`` — flight-mode / manual-engaged lanes where the log has them;
-* ``scene/…`` — a spatial view of the landing: domain box, pad, start points, flown paths, the vehicle's pose
-  over time and the predicted paths as line strips (x right, altitude up, in the plane ``y = 0`` of a 3-D view,
-  because rerun's 2-D views point their y axis down);
-* ``models/<name>/{K,Q,R,S,summary}`` — the gain, the normalized cost blocks as tensors (heatmaps) and α with the
-  fit diagnostics as text.
-
-Bulk data go through ``send_columns`` only (timeline ``time`` in seconds since the trial's start and sequence
-``step``); styling is logged once, static. :func:`default_blueprint` arranges the views in tabs (scene, states,
-inputs & variability, predictions, objective) so the first view is already the useful one.
-"""
+"""Logging a session (demonstrations, fitted models, predictions) into a rerun recording; the entity layout and
+the blueprint are described in :mod:`workbench.viewer`."""
 
 from __future__ import annotations
 
@@ -28,7 +7,8 @@ import os
 import shutil
 import subprocess
 import sys
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,6 +20,7 @@ import rerun.blueprint as rrb
 from workbench.atomic import atomic_path
 from workbench.demos import Demonstration, DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
+from workbench.study import StudyResult
 
 __all__ = [
     "APPLICATION_ID",
@@ -459,14 +440,10 @@ class SessionLogger:
 
 
 def _prediction_band(pred: Any) -> tuple[np.ndarray, np.ndarray, str] | None:
-    """The Monte Carlo trajectory band of a prediction, whatever the model names it, as (lower, upper, level)."""
-    for lo_name, hi_name in (("x_lower", "x_upper"), ("x_lo", "x_hi"), ("x_low", "x_high")):
-        lo, hi = getattr(pred, lo_name, None), getattr(pred, hi_name, None)
-        if lo is not None and hi is not None:
-            level = getattr(pred, "band_level", None) or getattr(pred, "level", None)
-            text = f"{100 * float(level):g} %" if level is not None else "band"
-            return np.asarray(lo), np.asarray(hi), text
-    return None
+    """The Monte Carlo trajectory band of a prediction as (lower, upper, level text), or None without samples."""
+    if pred.x_lower is None:
+        return None
+    return np.asarray(pred.x_lower), np.asarray(pred.x_upper), f"{100 * float(pred.band_level):g} %"
 
 
 def _fmt_matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
@@ -775,3 +752,19 @@ def _start_local_server(grpc_port: int, web_port: int) -> subprocess.Popen:
     cmd = [*_rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port),
            "--web-viewer-port", str(web_port)]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+
+
+def record_study(
+    result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
+) -> Path:
+    """One ``.rrd`` with every trial, both models' variability on the test trials and the three predictions."""
+    focus = [te[0].id for te in result.test.values() if len(te)]
+    bar = progress() if progress is not None else nullcontext()
+    with bar as p:
+        if p is not None:
+            p.add_task(f"writing {path}", total=None)
+        out, _ = record_session(
+            path, result.demos, models=result.models, baselines=result.baselines, focus=focus,
+            horizon=result.horizon, samples=result.samples, seed=result.seed,
+        )
+    return out

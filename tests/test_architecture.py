@@ -1,0 +1,73 @@
+"""The layout of ../shared/DESIGN.md, checked: imports point down, and the core runs headless."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+# floor 4: what a user touches; nothing below may import it
+TOP = ("workbench.cli", "workbench.__main__", "workbench.viewer", "workbench.report", "workbench.sample_logs")
+# the common format: the only part of workbench the adapters may use
+COMMON = ("workbench.demos", "workbench.errors", "workbench.atomic")
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _imports(path: Path) -> set[str]:
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+            found.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return {name for name in found if name.split(".")[0] in ("workbench", "adapters")}
+
+
+def _under(name: str, prefixes) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
+
+
+MODULES = {
+    _module_name(p): _imports(p) for pkg in ("workbench", "adapters") for p in sorted((REPO / pkg).rglob("*.py"))
+}
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if not _under(m, TOP)))
+def test_nothing_below_the_top_floor_imports_it(module):
+    assert not {i for i in MODULES[module] if _under(i, TOP)}, f"{module} imports the CLI, viewer or report"
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if _under(m, TOP) and m != "workbench.__main__"))
+def test_nothing_imports_the_cli(module):
+    assert not {i for i in MODULES[module] if _under(i, ("workbench.cli",))}
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if m.startswith("adapters")))
+def test_adapters_meet_the_core_only_in_the_common_format(module):
+    other = {i for i in MODULES[module] if i.startswith("workbench") and not _under(i, COMMON)}
+    assert not other, f"{module} imports {sorted(other)}"
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if m.startswith("workbench") and not _under(m, TOP)))
+def test_the_core_never_imports_adapters(module):
+    assert not {i for i in MODULES[module] if i.startswith("adapters")}
+
+
+def test_core_runs_headless_without_rerun_or_matplotlib():
+    code = (
+        "import sys, adapters, workbench.model, workbench.evaluate, workbench.study, workbench.simulate\n"
+        "print(sorted(m for m in ('rerun', 'matplotlib') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
+    assert out.stdout.strip() == "[]"
