@@ -258,3 +258,20 @@ def test_bad_options_are_one_line(work, tmp_path):
     not_a_model.write_text("hello")
     one_line_error(wb("predict", "--model", str(not_a_model), "--x0", "0,1,0,0,0,0", "-o", str(tmp_path / "p.csv")),
                    "not_a_model.npz")
+
+
+def test_fit_bootstrap_prints_the_intervals_of_ioc_bootstrap(tmp_path):
+    from workbench.ioc import bootstrap
+    from workbench.system import planar_quadrotor
+
+    ok(wb("simulate", "--strategy", "CS1", "--trials", "8", "-o", str(tmp_path / "s.parquet")))
+    r = ok(wb("fit", str(tmp_path / "s.parquet"), "--components", "2", "--bootstrap", "12",
+              "-o", str(tmp_path / "m.npz")))
+    assert "resamples fitted, 95 % percentile intervals" in r.stdout
+    expected = bootstrap(DemonstrationSet.load(tmp_path / "s.parquet"), planar_quadrotor(), n_boot=12, seed=0)
+    lines = {line.split(":")[0].strip(): line for line in r.stdout.splitlines() if ": " in line}
+    names = ("x", "y", "phi", "xdot", "ydot", "phidot")
+    for key, lo, hi in (("diag Q/λmax", expected.Q_diag_lo, expected.Q_diag_hi),
+                        ("K̂ row u1", expected.K_lo[0], expected.K_hi[0])):
+        for name, a, b in zip(names, lo, hi, strict=True):
+            assert f"{name} [{a:.3g}, {b:.3g}]" in lines[key]

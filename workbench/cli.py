@@ -314,8 +314,28 @@ def cmd_fit(ctx: _Context) -> int:
     model.save(a.output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
+    if a.bootstrap > 0:
+        _print_bootstrap(ctx, ds, system, a.bootstrap, a.seed)
     ctx.say(f"wrote {a.output}")
     return 0
+
+
+def _print_bootstrap(ctx: _Context, ds: Any, system: Any, n_boot: int, seed: int) -> None:
+    from workbench.ioc import bootstrap
+
+    with ctx.progress() as progress:
+        task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
+        result = bootstrap(ds, system, n_boot=n_boot, seed=seed,
+                           progress=lambda done, total: progress.update(task, completed=done))
+    ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
+            f"{result.ci:g} % percentile intervals):")
+    for names, lo, hi, what in ((ds.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
+                                (ds.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
+        ctx.say(f"  diag {what}: " + ", ".join(
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(names, lo, hi, strict=True)))
+    for i, u in enumerate(ds.input_names):
+        ctx.say(f"  K̂ row {u}: " + ", ".join(
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(ds.state_names, result.K_lo[i], result.K_hi[i], strict=True)))
 
 
 def _print_model(ctx: _Context, model: Any, ds: Any) -> None:
@@ -719,6 +739,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
                    help="the proposed model (default) or one of its baselines")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialization (default 0)")
+    p.add_argument("--bootstrap", type=int, default=0, metavar="N",
+                   help="also resample the trials N times and print 95 %% intervals of K̂ and the normalized Q, R "
+                        "diagonals (the paper gives none)")
     _system_option(p)
     _mapping_option(p)
 
