@@ -275,3 +275,17 @@ def test_fit_bootstrap_prints_the_intervals_of_ioc_bootstrap(tmp_path):
                         ("K̂ row u1", expected.K_lo[0], expected.K_hi[0])):
         for name, a, b in zip(names, lo, hi, strict=True):
             assert f"{name} [{a:.3g}, {b:.3g}]" in lines[key]
+
+
+def test_evaluate_per_subject_prints_the_anova(tmp_path):
+    from workbench import evaluate
+    from workbench.system import planar_quadrotor
+
+    ok(wb("simulate", "--strategy", "CS2", "--trials", "5", "--subjects", "3", "-o", str(tmp_path / "s.parquet")))
+    r = ok(wb("evaluate", str(tmp_path / "s.parquet"), "--per-subject", "--components", "2", "--horizon", "2",
+              "-o", str(tmp_path / "ps.csv")))
+    system = planar_quadrotor()
+    expected = evaluate.per_subject(lambda: evaluate.default_models(system, 2, 0),
+                                    DemonstrationSet.load(tmp_path / "s.parquet"), horizon=40, seed=0)
+    assert f"one-way ANOVA across methods: {expected.anova}" in r.stdout
+    assert set(pd.read_csv(tmp_path / "ps.csv")["subject"]) == set(expected.subjects)

@@ -195,3 +195,32 @@ def test_multi_subject_study_statistics(quadrotor):
     print(f"\n4 simulated subjects, position RMSE: proposed {groups['proposed'].mean():.3f}, IOC-only "
           f"{groups['ioc_only'].mean():.3f}; ANOVA {res}; paired t = {tt.t:.3g}, p = {tt.p:.3g}")
     assert np.isfinite(res.F) and 0 <= res.p <= 1 and res.df_within == 6
+
+
+def test_per_subject_study_matches_an_independent_anova(quadrotor):
+    """The paper's multi-subject design: a model per subject, one held-out trial each, ANOVA across methods."""
+    study = simulate_study(n_subjects=4, n_trials=8, strategy="CS2", seed=2)
+
+    def models():
+        return {"proposed": HumanBehaviorModel(quadrotor, n_components=3, fit_objective=False, noise="gmr"),
+                "ioc_only": IOCOnlyModel(quadrotor)}
+
+    calls = []
+    res = ev.per_subject(models, study, n_test=1, horizon=40, seed=0, progress=lambda i, n: calls.append((i, n)))
+    assert calls[-1] == (4, 4) and res.subjects == ("s01", "s02", "s03", "s04")
+    assert set(res.table["subject"]) == set(res.subjects)
+    assert res.table.groupby("subject")["trial"].nunique().eq(1).all()
+    rows = res.table[res.table["metric"] == "rmse_position"]
+    for method, values in res.groups.items():
+        expected = [rows[(rows.subject == s) & (rows.method == method)]["value"].mean() for s in res.subjects]
+        np.testing.assert_allclose(values, expected)
+    F, p = sps.f_oneway(*res.groups.values())
+    assert res.anova.F == pytest.approx(F) and res.anova.p == pytest.approx(p)
+    allv = np.concatenate(list(res.groups.values()))
+    ss_between = sum(len(g) * (g.mean() - allv.mean()) ** 2 for g in res.groups.values())
+    assert res.anova.eta_squared == pytest.approx(ss_between / ((allv - allv.mean()) ** 2).sum())
+    paired = sps.ttest_rel(res.groups["proposed"], res.groups["ioc_only"])
+    assert res.ttests[("proposed", "ioc_only")].p == pytest.approx(paired.pvalue)
+    print(f"\n4 simulated subjects (CS2): {res.anova}; {res.ttests[('proposed', 'ioc_only')]}")
+    with pytest.raises(DataError, match="at least two subjects"):
+        ev.per_subject(models, study.select(subject="s01"))

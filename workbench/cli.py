@@ -20,6 +20,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from workbench.atomic import atomic_write_table
 from workbench.errors import DataError, WorkbenchError
 
 __all__ = ["main", "build_parser", "SAMPLE_LOGS"]
@@ -361,8 +362,6 @@ def cmd_predict(ctx: _Context) -> int:
     import numpy as np
     import pandas as pd
 
-    from workbench.atomic import atomic_path
-
     a = ctx.args
     model = _load_model(a.model)
     if a.x0 is not None:
@@ -400,13 +399,7 @@ def cmd_predict(ctx: _Context) -> int:
     if pred.x_lower is not None:
         cols.update({f"{s}_lower": pred.x_lower[:, j] for j, s in enumerate(names)})
         cols.update({f"{s}_upper": pred.x_upper[:, j] for j, s in enumerate(names)})
-    df = pd.DataFrame(cols)
-    out = Path(a.output)
-    with atomic_path(out) as tmp:
-        if out.suffix.lower() in (".parquet", ".pq"):
-            df.to_parquet(tmp, index=False)
-        else:
-            df.to_csv(tmp, index=False)
+    out = atomic_write_table(pd.DataFrame(cols), a.output)
     ix = names.index("x") if "x" in names else 0
     iy = names.index("y") if "y" in names else 1
     ctx.say(
@@ -422,6 +415,8 @@ def cmd_evaluate(ctx: _Context) -> int:
 
     a = ctx.args
     ds = _load_demos(ctx, a.demos, a.mapping, a.label)
+    if a.per_subject:
+        return _evaluate_per_subject(ctx, ds)
     result = study.run_study(
         ds,
         _system_for(ds, a.system),
@@ -437,6 +432,39 @@ def cmd_evaluate(ctx: _Context) -> int:
     _print_study(ctx, result)
     if a.output:
         result.save_tables(a.output)
+        ctx.say(f"wrote {a.output}")
+    return 0
+
+
+def _evaluate_per_subject(ctx: _Context, ds: Any) -> int:
+    from rich.table import Table
+
+    from workbench import evaluate
+    from workbench.study import METHOD_TITLES
+
+    a = ctx.args
+    system = _system_for(ds, a.system)
+    components = 5 if a.components == "auto" else a.components
+    subjects = sorted({str(d.meta.get("subject")) for d in ds if d.meta.get("subject") is not None})
+    with ctx.progress() as progress:
+        task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
+        res = evaluate.per_subject(
+            lambda: evaluate.default_models(system, components, a.seed), ds, n_test=a.n_test,
+            horizon=_steps(a.horizon, ds.dt), seed=a.seed,
+            progress=lambda done, total: progress.update(task, completed=done),
+        )
+    for failure in res.failures:
+        print(f"warning: {failure}", file=sys.stderr)
+    table = Table("subject", *[METHOD_TITLES.get(m, m) for m in res.groups],
+                  title=f"per-subject {res.metric} ({a.n_test} held-out trial(s) each, {a.horizon:g} s horizon)")
+    for i, subject in enumerate(res.subjects):
+        table.add_row(subject, *[f"{g[i]:.4g}" for g in res.groups.values()])
+    ctx.say(table)
+    ctx.say(f"one-way ANOVA across methods: {res.anova}")
+    for r in res.ttests.values():
+        ctx.say(f"  {r}")
+    if a.output:
+        atomic_write_table(res.table, a.output)
         ctx.say(f"wrote {a.output}")
     return 0
 
@@ -766,6 +794,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("demos", nargs="+", metavar="DEMOS")
     p.add_argument("--label", nargs="+", help="strategy labels to evaluate (default all)")
     p.add_argument("-o", "--output", metavar="FILE", help="tidy results table (.csv or .parquet)")
+    p.add_argument("--per-subject", action="store_true",
+                   help="the paper's multi-subject design: a model per subject, --n-test held-out trials each, "
+                        "ANOVA and paired t-tests across the methods (use --horizon 5 for the paper's)")
+    p.add_argument("--n-test", type=int, default=1, metavar="N",
+                   help="held-out trials per subject with --per-subject (default 1)")
     _study_options(p)
     _mapping_option(p)
 

@@ -15,13 +15,15 @@ the RMSE eq. (36)):
   per state axis (``band_<block>_<state>``) and jointly, all axes of the block at once (``band_<block>``).
 
 :func:`compare` returns a tidy table (``trial, label, start, method, metric, value``); :func:`data_efficiency`
-refits every method on growing subsets of the training trials; :mod:`workbench.stats` has the ANOVA and
-t-tests for multi-subject studies (re-exported here).
+refits every method on growing subsets of the training trials; :func:`per_subject` runs the paper's
+multi-subject design (a model per subject, held-out trials, ANOVA and paired t-tests across the methods, from
+:mod:`workbench.stats`, re-exported here).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,6 +44,8 @@ __all__ = [
     "improvement",
     "method_groups",
     "data_efficiency",
+    "per_subject",
+    "SubjectStudy",
     "default_models",
     "anova_oneway",
     "pairwise_ttests",
@@ -354,3 +358,101 @@ def data_efficiency(
     df = pd.concat(parts, ignore_index=True)[cols]
     df.attrs["failures"] = failures
     return df
+
+
+@dataclass(frozen=True)
+class SubjectStudy:
+    """The paper's multi-subject comparison: per-subject models scored on each subject's held-out trials.
+
+    Attributes
+    ----------
+    table : DataFrame
+        :func:`compare` rows with a ``subject`` column.
+    groups : dict
+        Per method, the per-subject mean of ``metric`` (subjects in one order): the ANOVA's groups.
+    anova : AnovaResult
+        One-way ANOVA across the methods, with η².
+    ttests : dict
+        Paired t-tests per pair of methods (Holm-corrected).
+    metric : str
+    subjects : tuple of str
+    failures : tuple of str
+        Subjects or methods that could not be fitted (left out of the statistics).
+    """
+
+    table: pd.DataFrame
+    groups: dict[str, np.ndarray]
+    anova: AnovaResult
+    ttests: dict[tuple[str, str], TTestResult]
+    metric: str
+    subjects: tuple[str, ...]
+    failures: tuple[str, ...] = ()
+
+
+def per_subject(
+    make_models: Callable[[], Mapping[str, Any]] | Any,
+    demos: DemonstrationSet,
+    n_test: int = 1,
+    horizon: int = 100,
+    metric: str = "rmse_position",
+    seed: int = 0,
+    starts: str | int = "initial",
+    n_components: int = 5,
+    progress: Progress | None = None,
+) -> SubjectStudy:
+    """The multi-subject study of the paper: for every subject, fit each method on all but ``n_test`` of its
+    trials (chosen at random, seeded), predict the held-out ones, then compare the methods across subjects.
+
+    The paper's design is 10 training trials and 1 test trial per subject with a 5 s (100-step) horizon,
+    reporting a one-way ANOVA of the position RMSE across the methods (F(2, 27) for 10 subjects) and pairwise
+    t-tests; the t-tests here are paired by subject.
+
+    Parameters
+    ----------
+    make_models : callable() → mapping name → unfitted model, or a LinearSystem
+        Called afresh for every subject; a system stands for :func:`default_models` (with ``n_components``).
+    demos : DemonstrationSet
+        Trials with ``meta["subject"]``; at least two subjects with more than ``n_test`` trials each.
+    """
+    if not callable(make_models):
+        system = make_models
+        make_models = lambda: default_models(system, n_components)  # noqa: E731
+    subjects = sorted({str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None})
+    if len(subjects) < 2:
+        raise DataError(f"a multi-subject study needs trials of at least two subjects; found {subjects}")
+    rng = np.random.default_rng(seed)
+    parts, failures = [], []
+    for i, subject in enumerate(subjects):
+        ds = demos.select(subject=subject)
+        if len(ds) <= n_test:
+            raise DataError(f"subject {subject!r} has {len(ds)} trials; needs more than n_test={n_test}")
+        test_idx = set(rng.choice(len(ds), n_test, replace=False).tolist())
+        train = ds.filter(lambda d, ids={ds[j].id for j in test_idx}: d.id not in ids)
+        test = ds.filter(lambda d, ids={ds[j].id for j in test_idx}: d.id in ids)
+        fitted = {}
+        for name, model in make_models().items():
+            try:
+                fitted[name] = model.fit(train)
+            except WorkbenchError as exc:
+                failures.append(f"subject {subject} {name}: {exc}")
+        if fitted:
+            parts.append(compare(fitted, test, horizon=horizon, starts=starts).assign(subject=subject))
+        if progress is not None:
+            progress(i + 1, len(subjects))
+    if not parts:
+        raise DataError("no subject could be fitted: " + "; ".join(failures))
+    table = pd.concat(parts, ignore_index=True)
+    per = table[table["metric"] == metric].groupby(["subject", "method"], sort=False)["value"].mean()
+    wide = per.unstack("method").dropna()
+    if len(wide) < 2:
+        raise DataError(f"fewer than two subjects have {metric!r} for every method; failures: {failures}")
+    groups = {str(m): wide[m].to_numpy(dtype=float) for m in wide.columns}
+    return SubjectStudy(
+        table=table,
+        groups=groups,
+        anova=anova_oneway(groups),
+        ttests=pairwise_ttests(groups, paired=True),
+        metric=metric,
+        subjects=tuple(str(s) for s in wide.index),
+        failures=tuple(failures),
+    )

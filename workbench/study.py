@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from workbench.atomic import atomic_path
+from workbench.atomic import atomic_write_table
 from workbench.demos import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError
 
@@ -69,14 +69,7 @@ class StudyResult:
         parts = [self.table.assign(table="comparison")]
         if self.efficiency is not None:
             parts.append(self.efficiency.assign(table="data_efficiency"))
-        df = pd.concat(parts, ignore_index=True)
-        path = Path(path)
-        with atomic_path(path) as tmp:
-            if path.suffix.lower() in (".parquet", ".pq"):
-                df.to_parquet(tmp, index=False)
-            else:
-                df.to_csv(tmp, index=False)
-        return path
+        return atomic_write_table(pd.concat(parts, ignore_index=True), path)
 
 
 def _split(ds: DemonstrationSet, test_size: float, seed: int) -> tuple[DemonstrationSet, DemonstrationSet]:
