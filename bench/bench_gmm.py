@@ -27,18 +27,11 @@ from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from harness import best_time  # noqa: E402
+
 from workbench.errors import ConvergenceWarning  # noqa: E402
 from workbench.gmr import ConditionalGMM  # noqa: E402
 from workbench.tpgmm import TPGMM, identity_frame, start_frame  # noqa: E402
-
-
-def _best_time(fn, repeats: int = 3) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def _em_data(rng: np.random.Generator, N: int = 14_000, D: int = 8, G: int = 5) -> np.ndarray:
@@ -86,7 +79,7 @@ def bench_em(n_iter: int = 50, seed: int = 0) -> list[dict]:
     if a.n_iter_ != b.n_iter_:
         raise AssertionError(f"iteration counts differ: {a.n_iter_} vs {b.n_iter_}")
     ll_a, ll_b = a.score(xi_list, frames), b.score(X)
-    t_ours, t_sk = _best_time(ours), _best_time(sk)
+    t_ours, t_sk = best_time(ours), best_time(sk)
     rows = [
         {
             "case": f"(a) EM, N={len(X)}, D={D}, G={G}, P=1, {a.n_iter_} iterations",
@@ -107,7 +100,7 @@ def bench_em(n_iter: int = 50, seed: int = 0) -> list[dict]:
             warnings.simplefilter("ignore", ConvergenceWarning)
             return TPGMM(n_components=G, max_iter=n_iter, tol=0.0, random_state=seed).fit(xi_list, frames2)
 
-    t_p2 = _best_time(ours_p2, repeats=2)
+    t_p2 = best_time(ours_p2, repeats=2)
     rows.append(
         {
             "case": f"(a') TP-GMM EM incl. k-means init, P=2, {n_iter} iterations",
@@ -144,7 +137,7 @@ def bench_gmr(n_queries: int = 100_000, n_reference: int = 2_000) -> list[dict]:
     rows = []
 
     # (b) mean + covariance
-    t_batch = _best_time(lambda: model.predict(X))
+    t_batch = best_time(lambda: model.predict(X))
     sub = X[:n_reference]
     t0 = time.perf_counter()
     ref_out = [ref.condition(in_idx, x).to_mvn() for x in sub]
@@ -170,8 +163,8 @@ def bench_gmr(n_queries: int = 100_000, n_reference: int = 2_000) -> list[dict]:
     )
 
     # (c) mean only, batched both
-    t_mean = _best_time(lambda: model.predict_mean(X), repeats=5)
-    t_ref_mean = _best_time(lambda: ref.predict(in_idx, X), repeats=5)
+    t_mean = best_time(lambda: model.predict_mean(X), repeats=5)
+    t_ref_mean = best_time(lambda: ref.predict(in_idx, X), repeats=5)
     err_mean = np.abs(model.predict_mean(X) - ref.predict(in_idx, X)).max()
     rows.append(
         {
@@ -191,7 +184,7 @@ def bench_gmr(n_queries: int = 100_000, n_reference: int = 2_000) -> list[dict]:
     calls = 20_000
     for name, fn in (("predict (mean+cov)", model.predict), ("predict_mean", model.predict_mean)):
         fn(x)
-        t = _best_time(lambda fn=fn: [fn(x) for _ in range(calls)]) / calls
+        t = best_time(lambda fn=fn: [fn(x) for _ in range(calls)]) / calls
         rows.append(
             {
                 "case": f"(d) one online query, {name}",
@@ -221,7 +214,7 @@ def bench_gmr(n_queries: int = 100_000, n_reference: int = 2_000) -> list[dict]:
             "check": "",
         }
     )
-    t_build = _best_time(lambda: ConditionalGMM(w, mu, S, in_idx, out_idx), repeats=20)
+    t_build = best_time(lambda: ConditionalGMM(w, mu, S, in_idx, out_idx), repeats=20)
     rows.append(
         {
             "case": "(d'') building the precomputed ConditionalGMM once",

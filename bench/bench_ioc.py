@@ -17,6 +17,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from harness import markdown_table  # noqa: E402
+
 from workbench.ioc import InverseLQR, forward_gain  # noqa: E402
 from workbench.system import planar_quadrotor  # noqa: E402
 
@@ -77,18 +79,7 @@ def run() -> list[dict]:
 
 
 def main() -> None:
-    rows = run()
-    cols: list[str] = []
-    for row in rows:
-        cols += [c for c in row if c not in cols]
-
-    def fmt(v) -> str:
-        return f"{v:.4g}" if isinstance(v, float) else str(v)
-
-    print("| " + " | ".join(cols) + " |")
-    print("|" + "---|" * len(cols))
-    for row in rows:
-        print("| " + " | ".join(fmt(row.get(c, "")) for c in cols) + " |")
+    print(markdown_table(run()))
 
 
 if __name__ == "__main__":

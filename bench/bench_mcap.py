@@ -10,16 +10,16 @@ Usage: ``python bench/bench_mcap.py [n_messages]`` prints a Markdown table.
 
 from __future__ import annotations
 
-import gc
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from harness import best_time, markdown_table  # noqa: E402
 
 from adapters import mcap  # noqa: E402
 
@@ -40,16 +40,6 @@ def _generate(path: Path, n: int) -> Path:
     return mcap.write(path, {"/quadrotor/state": state, "/quadrotor/input": sticks})
 
 
-def _best(fn) -> float:
-    times = []
-    for _ in range(REPEATS):
-        gc.collect()
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
 def _library_loop(path: Path) -> int:
     from mcap.reader import make_reader
 
@@ -67,9 +57,9 @@ def run(n_messages: int = N_MESSAGES) -> list[dict]:
         size = path.stat().st_size
         n = sum(len(f) for f in mcap.read(path).frames.values())
         assert n == _library_loop(path) == n_messages
-        ours = _best(lambda: mcap.read(path))
-        theirs = _best(lambda: _library_loop(path))
-        one_topic = _best(lambda: mcap.read(path, topics=["/quadrotor/input"]))
+        ours = best_time(lambda: mcap.read(path), REPEATS, collect=True)
+        theirs = best_time(lambda: _library_loop(path), REPEATS, collect=True)
+        one_topic = best_time(lambda: mcap.read(path, topics=["/quadrotor/input"]), REPEATS, collect=True)
     return [
         {
             "benchmark": "MCAP read (JSON channels, zstd)",
@@ -94,13 +84,5 @@ def run(n_messages: int = N_MESSAGES) -> list[dict]:
     ]
 
 
-def _table(rows: list[dict]) -> str:
-    cols = list(rows[0])
-    fmt = lambda v: f"{v:.4g}" if isinstance(v, float) else str(v)  # noqa: E731
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in cols) + " |" for r in rows]
-    return "\n".join(lines)
-
-
 if __name__ == "__main__":
-    print(_table(run(int(sys.argv[1]) if len(sys.argv) > 1 else N_MESSAGES)))
+    print(markdown_table(run(int(sys.argv[1]) if len(sys.argv) > 1 else N_MESSAGES)))

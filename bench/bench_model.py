@@ -18,7 +18,6 @@ Cases
 from __future__ import annotations
 
 import sys
-import time
 import warnings
 from pathlib import Path
 
@@ -27,20 +26,13 @@ from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from harness import best_time, markdown_table  # noqa: E402
+
 from workbench import evaluate as ev  # noqa: E402
 from workbench.ioc import InverseLQR, estimate_gain  # noqa: E402
 from workbench.model import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel  # noqa: E402
 from workbench.simulate import simulate_landings  # noqa: E402
 from workbench.system import planar_quadrotor  # noqa: E402
-
-
-def _best(fn, repeats: int = 3) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def _row(case: str, value: float, unit: str, note: str = "") -> dict:
@@ -52,17 +44,17 @@ def _timings() -> list[dict]:
     demos = simulate_landings("CS1", 30, seed=0) + simulate_landings("CS2", 30, seed=0)
     rows = []
     note = f"{len(demos)} trials, {demos.n_samples} samples"
-    rows.append(_row("fit, gain K̂ (direct)", _best(lambda: estimate_gain(demos, system)), "s", note))
+    rows.append(_row("fit, gain K̂ (direct)", best_time(lambda: estimate_gain(demos, system)), "s", note))
     K = estimate_gain(demos, system)
     rows.append(_row("fit, inverse LQR first solve (compile)",
-                     _best(lambda: InverseLQR(system.A, system.B).solve(K), 1), "s"))
+                     best_time(lambda: InverseLQR(system.A, system.B).solve(K), 1), "s"))
     problem = InverseLQR(system.A, system.B)
     problem.solve(K)
-    rows.append(_row("fit, inverse LQR re-solve (cached)", _best(lambda: problem.solve(K)), "s"))
+    rows.append(_row("fit, inverse LQR re-solve (cached)", best_time(lambda: problem.solve(K)), "s"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        t_gmm = _best(lambda: HumanBehaviorModel(system, fit_objective=False, noise="gmr").fit(demos))
-        t_all = _best(lambda: HumanBehaviorModel(system).fit(demos), 2)
+        t_gmm = best_time(lambda: HumanBehaviorModel(system, fit_objective=False, noise="gmr").fit(demos))
+        t_all = best_time(lambda: HumanBehaviorModel(system).fit(demos), 2)
         model = HumanBehaviorModel(system).fit(demos)
     tp = model.variability_.tpgmm_
     rows.append(_row("fit, gain + TP-GMM EM (no objective, no noise calibration)", t_gmm, "s",
@@ -74,18 +66,18 @@ def _timings() -> list[dict]:
     d = simulate_landings("CS1", 1, seed=1)[0]
     x0, target = d.x[0], d.target
     S, H = 1000, 60
-    t_mc = _best(lambda: model.predict(x0, H, target, samples=S, seed=0))
+    t_mc = best_time(lambda: model.predict(x0, H, target, samples=S, seed=0))
     rows.append(_row("Monte Carlo rollout, 1000 × 60", S * H / t_mc, "trajectory-steps/s", f"{1e3 * t_mc:.1f} ms"))
     model.variability(x0[None], x0=x0, target=target)  # builds and caches the task conditional
     n_q = 2000
-    t_q = _best(lambda: [model.variability(x0[None], x0=x0, target=target) for _ in range(n_q)])
+    t_q = best_time(lambda: [model.variability(x0[None], x0=x0, target=target) for _ in range(n_q)])
     rows.append(_row("online variability query (1 state, cached task)", 1e6 * t_q / n_q, "µs"))
     cond = model.variability_.conditional(x0, target)
-    t_raw = _best(lambda: [cond.predict(x0[None]) for _ in range(n_q)])
+    t_raw = best_time(lambda: [cond.predict(x0[None]) for _ in range(n_q)])
     rows.append(_row("online query, precomputed GMR only", 1e6 * t_raw / n_q, "µs"))
-    t_new = _best(lambda: [model.variability_.product(x0 + 1e-3 * i, target) for i in range(50)])
+    t_new = best_time(lambda: [model.variability_.product(x0 + 1e-3 * i, target) for i in range(50)])
     rows.append(_row("new task: product of frames (eq. (30))", 1e6 * t_new / 50, "µs"))
-    t_pred = _best(lambda: [model.predict(x0, H, target) for _ in range(50)])
+    t_pred = best_time(lambda: [model.predict(x0, H, target) for _ in range(50)])
     rows.append(_row("mean prediction, 60 steps", 1e3 * t_pred / 50, "ms"))
     return rows
 
@@ -139,18 +131,7 @@ def run() -> list[dict]:
 
 
 def main() -> None:
-    rows = run()
-    cols: list[str] = []
-    for row in rows:
-        cols += [c for c in row if c not in cols]
-
-    def fmt(v) -> str:
-        return f"{v:.4g}" if isinstance(v, float) else str(v)
-
-    print("| " + " | ".join(cols) + " |")
-    print("|" + "---|" * len(cols))
-    for row in rows:
-        print("| " + " | ".join(fmt(row.get(c, "")) for c in cols) + " |")
+    print(markdown_table(run()))
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import rerun as rr  # noqa: E402
+from harness import markdown_table  # noqa: E402
 
 from workbench import viewer  # noqa: E402
 from workbench.demos import DemonstrationSet  # noqa: E402
@@ -128,5 +129,4 @@ def run() -> list[dict]:
 
 
 if __name__ == "__main__":
-    for row in run():
-        print(row)
+    print(markdown_table(run()))

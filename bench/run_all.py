@@ -19,6 +19,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
+from harness import markdown_table  # noqa: E402
+
 from workbench.atomic import atomic_write_text  # noqa: E402
 
 
@@ -27,21 +29,6 @@ def _load(path: Path):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-
-def _fmt(value) -> str:
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)
-
-
-def _table(rows: list[dict]) -> str:
-    cols: list[str] = []
-    for row in rows:
-        cols += [c for c in row if c not in cols]
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    lines += ["| " + " | ".join(_fmt(row.get(c, "")) for c in cols) + " |" for row in rows]
-    return "\n".join(lines)
 
 
 def main(argv: list[str]) -> int:
@@ -66,7 +53,7 @@ def main(argv: list[str]) -> int:
             sections += ["", f"## {path.stem}", "", "```", traceback.format_exc(), "```"]
             traceback.print_exc()
             continue
-        table = _table(rows)
+        table = markdown_table(rows)
         print(table, flush=True)
         sections += ["", f"## {path.stem} ({time.perf_counter() - t0:.0f} s)", "", table]
     atomic_write_text(HERE / "results.md", "\n".join(sections) + "\n")
