@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from workbench.errors import ModelError
+from workbench.frozen import readonly
 
 __all__ = [
     "Frame",
@@ -39,12 +40,6 @@ FRAME_KINDS = ("identity", "start", "goal")
 
 # T^p must be safely invertible: Z^p = (T^p)^{-1}(xi - b^p) amplifies errors by cond(T^p).
 _MAX_COND = 1e12
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=float, copy=True)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,8 +82,8 @@ class Frame:
             raise ModelError(
                 f"Frame: T is singular or nearly so (condition number {cond:.3g} > {_MAX_COND:.0e})"
             )
-        object.__setattr__(self, "T", _readonly(T))
-        object.__setattr__(self, "b", _readonly(b))
+        object.__setattr__(self, "T", readonly(T))
+        object.__setattr__(self, "b", readonly(b))
 
     @property
     def dim(self) -> int:

@@ -31,6 +31,7 @@ import numpy as np
 import scipy.linalg
 
 from workbench.errors import ConvergenceWarning, DataError, ModelError, SolverError
+from workbench.frozen import readonly
 
 try:  # a dependency of scikit-learn, so normally present
     from threadpoolctl import ThreadpoolController
@@ -327,12 +328,6 @@ def forward_gain(A: Any, B: Any, Q: Any, R: Any, S: Any | None = None) -> tuple[
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ModelError(f"the DARE (eq. (6) of the method paper) has no stabilizing solution: {exc}") from exc
     return K, P
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=np.float64, copy=True)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -658,15 +653,15 @@ class InverseLQR:
         alpha = float(alpha_star if alpha_star is not None else self._alpha.value)
         lam_max = float(np.linalg.eigvalsh(M)[-1])
         return TaskObjective(
-            Q=_readonly(M[:n, :n]),
-            R=_readonly(M[n:, n:]),
-            S=_readonly(M[:n, n:]),
-            P=_readonly(P),
+            Q=readonly(M[:n, :n]),
+            R=readonly(M[n:, n:]),
+            S=readonly(M[:n, n:]),
+            P=readonly(P),
             alpha=alpha,
-            M=_readonly(M),
-            M_normalized=_readonly(M / lam_max),
-            K=_readonly(K),
-            K_forward=_readonly(K_fwd),
+            M=readonly(M),
+            M_normalized=readonly(M / lam_max),
+            K=readonly(K),
+            K_forward=readonly(K_fwd),
             forward_gain_error=err,
             lambda_min=lam_min,
             solver=solver,
@@ -840,17 +835,17 @@ def bootstrap(
     Q_lo, Q_hi = np.percentile(Q_s, q, axis=0)
     R_lo, R_hi = np.percentile(R_s, q, axis=0)
     return BootstrapResult(
-        K=_readonly(K0),
+        K=readonly(K0),
         objective=obj0,
-        K_samples=_readonly(K_s),
-        Q_diag_samples=_readonly(Q_s),
-        R_diag_samples=_readonly(R_s),
-        K_lo=_readonly(K_lo),
-        K_hi=_readonly(K_hi),
-        Q_diag_lo=_readonly(Q_lo),
-        Q_diag_hi=_readonly(Q_hi),
-        R_diag_lo=_readonly(R_lo),
-        R_diag_hi=_readonly(R_hi),
+        K_samples=readonly(K_s),
+        Q_diag_samples=readonly(Q_s),
+        R_diag_samples=readonly(R_s),
+        K_lo=readonly(K_lo),
+        K_hi=readonly(K_hi),
+        Q_diag_lo=readonly(Q_lo),
+        Q_diag_hi=readonly(Q_hi),
+        R_diag_lo=readonly(R_lo),
+        R_diag_hi=readonly(R_hi),
         n_boot=n_boot,
         n_failed=len(failures),
         failures=tuple(failures),

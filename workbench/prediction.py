@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from workbench.errors import ModelError
+from workbench.frozen import readonly
 
 __all__ = [
     "Prediction",
@@ -46,14 +47,6 @@ RHO_MAX = 0.99
 
 #: ``policy(X (B, n)) -> (mean (B, m), covariance (B, m, m))``: the input distribution at a batch of states.
 Policy = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
-
-
-def _readonly(a: np.ndarray | None) -> np.ndarray | None:
-    if a is None:
-        return None
-    a = np.array(a, dtype=np.float64, copy=True)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,7 +95,7 @@ class Prediction:
 
     def __post_init__(self) -> None:
         for name in ("x", "u", "Sigma_u", "x_bands", "u_bands", "x_samples", "u_samples"):
-            object.__setattr__(self, name, _readonly(getattr(self, name)))
+            object.__setattr__(self, name, readonly(getattr(self, name)))
         object.__setattr__(self, "percentiles", tuple(float(p) for p in self.percentiles))
 
     @property
