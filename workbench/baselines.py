@@ -87,7 +87,13 @@ class GMROnlyModel(TaskGMRModel):
         return self
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
-        return self._conditional(x0, target).predict
+        cond = self._conditional(x0, target)
+
+        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return cond.predict(X)
+
+        policy.mean = cond.predict_mean
+        return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         return self._gmr_state()

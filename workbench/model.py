@@ -215,6 +215,7 @@ class HumanBehaviorModel(TaskGMRModel):
             mu, Sigma = cond.predict(X)
             return X @ KT - offset + mu, Sigma
 
+        policy.mean = lambda X: X @ KT - offset + cond.predict_mean(X)
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

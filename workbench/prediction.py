@@ -46,6 +46,8 @@ __all__ = [
 RHO_MAX = 0.99
 
 #: ``policy(X (B, n)) -> (mean (B, m), covariance (B, m, m))``: the input distribution at a batch of states.
+#: ``policy(X) -> (mean (N, m), covariance (N, m, m))`` of the input at states X; a policy may also carry a
+#: ``policy.mean(X) -> (N, m)`` attribute, the mean alone, which the mean rollout then uses step by step.
 Policy = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
@@ -182,12 +184,26 @@ def rollout_mean(
     S = np.empty((Bt, horizon, m, m))
     X[:, 0] = x
     AT, BT = A.T, B.T
+    mean_only = getattr(policy, "mean", None)
+    if mean_only is None:
+        for k in range(horizon):
+            mean, cov = policy(x)
+            u = clip(mean) if clip is not None else mean
+            U[:, k], S[:, k] = u, cov
+            x = x @ AT + u @ BT
+            X[:, k + 1] = x
+        return X, U, S
+    # The covariance does not steer the mean rollout: step with the mean alone (half a GMR query), then get
+    # every step's covariance in one batched query, which costs about as much as a single one (Remark 3).
     for k in range(horizon):
-        mean, cov = policy(x)
+        mean = mean_only(x)
         u = clip(mean) if clip is not None else mean
-        U[:, k], S[:, k] = u, cov
+        U[:, k] = u
         x = x @ AT + u @ BT
         X[:, k + 1] = x
+    if horizon:
+        _, cov = policy(X[:, :horizon].reshape(Bt * horizon, n))
+        S[:] = np.asarray(cov).reshape(Bt, horizon, m, m)
     return X, U, S
 
 

@@ -154,7 +154,8 @@ def replay(
             if axes is not None:
                 ix, iy, _ = axes
                 strip = np.column_stack([xp[:, ix], np.zeros(len(xp)), xp[:, iy]])
-                rec.log(f"{sbase}/rollout", rr.LineStrips3D([strip], colors=[_COLOR_PRED], radii=0.015))
+                # color and radius are logged once, static: per call they would cost ten times the strip itself
+                rec.log(f"{sbase}/rollout", rr.LineStrips3D(strip[np.newaxis]))
         if on_step is not None:
             on_step(k)
     wall = clock() - wall0
@@ -195,6 +196,7 @@ def _log_styles(rec, demo, base, sbase, state_names, input_names, axes) -> None:
     if axes is not None:
         ix, iy, _ = axes
         rec.log("scene", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        rec.log(f"{sbase}/rollout", rr.LineStrips3D.from_fields(colors=[_COLOR_PRED], radii=[0.015]), static=True)
         path = np.column_stack([demo.x[:, ix], np.zeros(len(demo)), demo.x[:, iy]])
         rec.log(f"{sbase}/path", rr.LineStrips3D([path], colors=[(170, 170, 170)], radii=0.006), static=True)
         rec.log(
