@@ -291,6 +291,18 @@ def default_models(system: Any, n_components: int = 5, random_state: int | None 
     }
 
 
+def _fit_each(models: Mapping[str, Any], train: DemonstrationSet, where: str, failures: list[str]) -> dict[str, Any]:
+    """Fit every model on ``train``; one that cannot be fitted is left out and its reason appended to
+    ``failures`` (prefixed with ``where``), so one bad fit does not end a whole study."""
+    fitted = {}
+    for name, model in models.items():
+        try:
+            fitted[name] = model.fit(train)
+        except WorkbenchError as exc:
+            failures.append(f"{where} {name}: {exc}")
+    return fitted
+
+
 def data_efficiency(
     make_models: Callable[[], Mapping[str, Any]] | Any,
     train: DemonstrationSet,
@@ -339,16 +351,13 @@ def data_efficiency(
     test_list = _demos(test)
     for i, (size, r, idx) in enumerate(plan):
         subset = DemonstrationSet([demos[j] for j in idx], train.state_names, train.input_names, train.dt)
-        fitted = {}
-        for name, model in make_models().items():
-            try:
-                fitted[name] = model.fit(subset)
-            except WorkbenchError as exc:
-                failures.append(f"n_train={size} repeat={r} {name}: {exc}")
-                parts.append(pd.DataFrame({
-                    "n_train": [size], "repeat": [r], "trial": [None], "label": [None], "start": [0],
-                    "method": [name], "metric": [f"rmse_{next(iter(DEFAULT_BLOCKS))}"], "value": [np.nan],
-                }))
+        models = make_models()
+        fitted = _fit_each(models, subset, f"n_train={size} repeat={r}", failures)
+        for name in (n for n in models if n not in fitted):
+            parts.append(pd.DataFrame({
+                "n_train": [size], "repeat": [r], "trial": [None], "label": [None], "start": [0],
+                "method": [name], "metric": [f"rmse_{next(iter(DEFAULT_BLOCKS))}"], "value": [np.nan],
+            }))
         if fitted:
             table = compare(fitted, test_list, horizon=horizon, starts=starts)
             parts.append(table.assign(n_train=size, repeat=r))
@@ -426,15 +435,10 @@ def per_subject(
         ds = demos.select(subject=subject)
         if len(ds) <= n_test:
             raise DataError(f"subject {subject!r} has {len(ds)} trials; needs more than n_test={n_test}")
-        test_idx = set(rng.choice(len(ds), n_test, replace=False).tolist())
-        train = ds.filter(lambda d, ids={ds[j].id for j in test_idx}: d.id not in ids)
-        test = ds.filter(lambda d, ids={ds[j].id for j in test_idx}: d.id in ids)
-        fitted = {}
-        for name, model in make_models().items():
-            try:
-                fitted[name] = model.fit(train)
-            except WorkbenchError as exc:
-                failures.append(f"subject {subject} {name}: {exc}")
+        test_ids = {ds[int(j)].id for j in rng.choice(len(ds), n_test, replace=False)}
+        train = ds.filter(lambda d, ids=test_ids: d.id not in ids)
+        test = ds.filter(lambda d, ids=test_ids: d.id in ids)
+        fitted = _fit_each(make_models(), train, f"subject {subject}", failures)
         if fitted:
             parts.append(compare(fitted, test, horizon=horizon, starts=starts).assign(subject=subject))
         if progress is not None:

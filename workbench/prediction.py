@@ -184,17 +184,9 @@ def rollout_mean(
     S = np.empty((Bt, horizon, m, m))
     X[:, 0] = x
     AT, BT = A.T, B.T
-    mean_only = getattr(policy, "mean", None)
-    if mean_only is None:
-        for k in range(horizon):
-            mean, cov = policy(x)
-            u = clip(mean) if clip is not None else mean
-            U[:, k], S[:, k] = u, cov
-            x = x @ AT + u @ BT
-            X[:, k + 1] = x
-        return X, U, S
-    # The covariance does not steer the mean rollout: step with the mean alone (half a GMR query), then get
-    # every step's covariance in one batched query, which costs about as much as a single one (Remark 3).
+    # The covariance does not steer the mean rollout: step with the mean alone (half a GMR query where the
+    # policy offers ``policy.mean``), then get every step's covariance in one batched query (Remark 3).
+    mean_only = getattr(policy, "mean", None) or (lambda X: policy(X)[0])
     for k in range(horizon):
         mean = mean_only(x)
         u = clip(mean) if clip is not None else mean
