@@ -62,7 +62,8 @@ import pandas as pd
 from adapters.modes import MODE_TABLES, mode_number
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
 from adapters.transforms import TRANSFORMS
-from workbench.errors import MappingError
+from workbench.errors import DataError, MappingError
+from workbench.roles import Roles
 
 __all__ = [
     "ChannelMapping",
@@ -80,7 +81,9 @@ __all__ = [
 MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
 FORMAT_NAMES = ("tlog", "mcap", "ulog", "csv")
 DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
-_TOP_KEYS = {"name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", *FORMAT_NAMES}
+_TOP_KEYS = {
+    "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", *FORMAT_NAMES
+}
 _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
 _META_KEYS = {"source", "key", "text", "fields", "prefix"}
@@ -203,6 +206,7 @@ class ChannelMapping:
     description: str = ""
     format: str | None = None
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
+    roles: Roles = field(default_factory=Roles)
 
     def for_format(self, fmt: str) -> ChannelMapping:
         """This mapping with the ``[<fmt>.…]`` overrides merged in (itself when there are none)."""
@@ -473,6 +477,11 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
     if extra:
         raise _fail(at, "channels", f"{extra} are neither states nor inputs")
     channels = tuple(_channel(n, chans[n], at) for n in (*states, *inputs) if n in chans)
+    try:
+        roles = Roles.from_json(raw.get("roles"), f"{at}: [roles]")
+        roles.check(states, f"{at}: [roles]")
+    except DataError as exc:
+        raise MappingError(str(exc)) from None
     return ChannelMapping(
         name=str(raw.get("name", Path(path).stem)),
         path=path,
@@ -485,6 +494,7 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
         clock=_clock(raw.get("clock"), at),
         description=str(raw.get("description", "")),
         raw=dict(raw),
+        roles=roles,
     )
 
 

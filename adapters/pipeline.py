@@ -222,7 +222,7 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
         except DataError as exc:
             raise DataError(f"{streams.path}: {exc}") from None
     try:
-        return DemonstrationSet(demos, m.state_names, m.input_names, m.dt)
+        return DemonstrationSet(demos, m.state_names, m.input_names, m.dt, roles=m.roles)
     except DataError as exc:
         raise DataError(f"{streams.path}: {exc}") from None
 

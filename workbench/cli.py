@@ -105,7 +105,7 @@ def _join(sets: Sequence[Any], names: Sequence[str]) -> Any:
                 d = d.with_meta(id=f"{Path(name).stem}-{d.id}")
             seen.add(d.id)
             demos.append(d)
-    return DemonstrationSet(demos, first.state_names, first.input_names, first.dt)
+    return DemonstrationSet(demos, first.state_names, first.input_names, first.dt, roles=first.roles)
 
 
 def _load_demos(ctx: _Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None):

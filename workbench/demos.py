@@ -24,6 +24,7 @@ import pandas as pd
 
 from workbench.atomic import atomic_path
 from workbench.errors import DataError, FormatError
+from workbench.roles import Roles
 
 __all__ = ["Demonstration", "DemonstrationSet", "FORMAT_NAME", "FORMAT_VERSION"]
 
@@ -190,10 +191,12 @@ class DemonstrationSet(Sequence[Demonstration]):
         dt: float,
         *,
         dt_tolerance: float = DT_TOLERANCE,
+        roles: Roles | None = None,
     ) -> None:
         self._demos = tuple(demos)
         self.state_names = tuple(str(s) for s in state_names)
         self.input_names = tuple(str(s) for s in input_names)
+        self.roles = roles if isinstance(roles, Roles) else Roles.from_json(roles)
         try:
             self.dt = float(dt)
         except (TypeError, ValueError):
@@ -208,6 +211,7 @@ class DemonstrationSet(Sequence[Demonstration]):
             raise DataError(f"names {clash} are reserved for the demo and time columns")
         if not self.state_names or not self.input_names:
             raise DataError("a demonstration set needs at least one state and one input")
+        self.roles.check(self.state_names, "demonstration set roles")
         seen: dict[str, int] = {}
         for j, d in enumerate(self._demos):
             if not isinstance(d, Demonstration):
@@ -249,7 +253,11 @@ class DemonstrationSet(Sequence[Demonstration]):
         )
 
     def _like(self, demos: Iterable[Demonstration]) -> DemonstrationSet:
-        return DemonstrationSet(demos, self.state_names, self.input_names, self.dt)
+        return DemonstrationSet(demos, self.state_names, self.input_names, self.dt, roles=self.roles)
+
+    def with_roles(self, roles: Roles | None) -> DemonstrationSet:
+        """The same demonstrations with other vehicle roles."""
+        return DemonstrationSet(self._demos, self.state_names, self.input_names, self.dt, roles=roles)
 
     # -- properties --------------------------------------------------------------------------------------
     @property
@@ -318,7 +326,9 @@ class DemonstrationSet(Sequence[Demonstration]):
 
     def resample(self, dt: float) -> DemonstrationSet:
         """Every demonstration on a uniform grid of step ``dt`` (linear states, zero-order-hold inputs)."""
-        return DemonstrationSet([d.resample(dt) for d in self._demos], self.state_names, self.input_names, dt)
+        return DemonstrationSet(
+            [d.resample(dt) for d in self._demos], self.state_names, self.input_names, dt, roles=self.roles
+        )
 
     # -- stacked arrays ----------------------------------------------------------------------------------
     def stacked(self) -> tuple[np.ndarray, np.ndarray]:
@@ -343,6 +353,7 @@ class DemonstrationSet(Sequence[Demonstration]):
             input_names=list(self.input_names),
             dt=self.dt,
             demos={d.id: dict(d.meta) for d in self._demos},
+            roles=self.roles.to_json(),
         )
         return df
 
@@ -356,6 +367,7 @@ class DemonstrationSet(Sequence[Demonstration]):
         meta: Mapping[str, Mapping[str, Any]] | None = None,
         *,
         source: str = "DataFrame",
+        roles: Roles | None = None,
     ) -> DemonstrationSet:
         """Build a set from a long table with columns ``demo``, ``t``, states and inputs.
 
@@ -368,6 +380,7 @@ class DemonstrationSet(Sequence[Demonstration]):
         if dt is None:
             raise DataError(f"{source}: dt is not given and not in the table's attributes")
         meta = meta if meta is not None else df.attrs.get("demos", {})
+        roles = roles if roles is not None else df.attrs.get("roles")
         missing = [c for c in ["demo", "t", *state_names, *input_names] if c not in df.columns]
         if missing:
             raise DataError(f"{source}: missing column(s) {missing}; columns present: {list(df.columns)}")
@@ -394,7 +407,7 @@ class DemonstrationSet(Sequence[Demonstration]):
                     m,
                 )
             )
-        return cls(demos, state_names, input_names, dt)
+        return cls(demos, state_names, input_names, dt, roles=roles)
 
     # -- Parquet -----------------------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> Path:
@@ -409,6 +422,7 @@ class DemonstrationSet(Sequence[Demonstration]):
             "state_names": list(self.state_names),
             "input_names": list(self.input_names),
             "dt": self.dt,
+            "roles": self.roles.to_json() if self.roles else None,
             "demos": [dict(d.meta) for d in self._demos],
         }
         table = pa.Table.from_pandas(df, preserve_index=False)
@@ -443,6 +457,7 @@ class DemonstrationSet(Sequence[Demonstration]):
             version = int(header["version"])
             names = (list(header["state_names"]), list(header["input_names"]), float(header["dt"]))
             metas = list(header["demos"])
+            roles = Roles.from_json(header.get("roles"), f"{path}: roles")
         except (ValueError, KeyError, TypeError) as exc:
             raise FormatError(f"{path}: damaged workbench metadata ({exc})") from None
         if version > FORMAT_VERSION:
@@ -451,5 +466,5 @@ class DemonstrationSet(Sequence[Demonstration]):
             )
         df = table.to_pandas()
         return cls.from_pandas(
-            df, *names, meta={str(m.get("id")): m for m in metas}, source=str(path)
+            df, *names, meta={str(m.get("id")): m for m in metas}, source=str(path), roles=roles
         )

@@ -350,7 +350,7 @@ def data_efficiency(
     parts, failures = [], []
     test_list = _demos(test)
     for i, (size, r, idx) in enumerate(plan):
-        subset = DemonstrationSet([demos[j] for j in idx], train.state_names, train.input_names, train.dt)
+        subset = train._like(demos[j] for j in idx)
         models = make_models()
         fitted = _fit_each(models, subset, f"n_train={size} repeat={r}", failures)
         for name in (n for n in models if n not in fitted):

@@ -251,7 +251,7 @@ def simulate_landings(
         )
         for j in range(n_trials)
     ]
-    return DemonstrationSet(demos, system.state_names, system.input_names, system.dt)
+    return DemonstrationSet(demos, system.state_names, system.input_names, system.dt, roles=system.roles)
 
 
 def simulate_study(

@@ -14,12 +14,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from workbench.errors import ModelError
+from workbench.errors import DataError, ModelError
+from workbench.roles import ResolvedRoles, Roles
 
 if TYPE_CHECKING:
     from workbench.demos import DemonstrationSet
 
-__all__ = ["LinearSystem", "planar_quadrotor", "is_stabilizable"]
+__all__ = ["LinearSystem", "planar_quadrotor", "is_stabilizable", "PLANAR_QUADROTOR_ROLES"]
 
 
 def _rank(M: np.ndarray, rtol: float = 1e-10) -> int:
@@ -55,6 +56,8 @@ class LinearSystem:
         Input bounds (e.g. stick limits), used when a prediction clips its inputs.
     fit_residual : float, optional
         For an identified system, the RMS one-step prediction residual of the fit.
+    roles : Roles, optional
+        Which states are positions, velocities and the heading angle (:mod:`workbench.roles`); none by default.
 
     Raises
     ------
@@ -71,6 +74,7 @@ class LinearSystem:
     u_min: np.ndarray | None = None
     u_max: np.ndarray | None = None
     fit_residual: float | None = field(default=None)
+    roles: Roles = field(default_factory=Roles)
 
     def __post_init__(self) -> None:
         A = np.array(self.A, dtype=np.float64)
@@ -121,6 +125,17 @@ class LinearSystem:
         object.__setattr__(self, "input_names", input_names)
         object.__setattr__(self, "u_min", bounds[0])
         object.__setattr__(self, "u_max", bounds[1])
+        roles = self.roles if isinstance(self.roles, Roles) else Roles.from_json(self.roles)
+        try:
+            roles.check(state_names, "LinearSystem roles")
+        except DataError as exc:
+            raise ModelError(str(exc)) from None
+        object.__setattr__(self, "roles", roles)
+
+    @property
+    def r(self) -> ResolvedRoles:
+        """The roles as state indices (``r.position``, ``r.velocity``, ``r.heading``, ``r.plane``)."""
+        return self.roles.resolve(self.state_names)
 
     @property
     def n(self) -> int:
@@ -185,7 +200,18 @@ class LinearSystem:
             u_min=u_min,
             u_max=u_max,
             fit_residual=float(np.sqrt(np.mean(residual**2))),
+            roles=demos.roles,
         )
+
+
+PLANAR_QUADROTOR_ROLES = Roles(
+    position=("x", "y"),
+    velocity=("xdot", "ydot"),
+    heading="phi",
+    vertical="y",
+    units={"x": "m", "y": "m", "phi": "rad", "xdot": "m/s", "ydot": "m/s", "phidot": "rad/s", "u1": "stick",
+           "u2": "stick"},
+)
 
 
 def planar_quadrotor(
@@ -218,4 +244,5 @@ def planar_quadrotor(
         ("u1", "u2"),
         u_min=np.array([-1.0, -1.0]),
         u_max=np.array([1.0, 1.0]),
+        roles=PLANAR_QUADROTOR_ROLES,
     )
