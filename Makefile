@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 OUT    ?= out
 
-.PHONY: demo test lint bench sample-logs clean
+.PHONY: demo test test-all lint bench sample-logs clean
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -20,6 +20,10 @@ demo: $(STAMP)
 ## test: set up .venv, then the whole test suite (headless)
 test: $(STAMP)
 	$(BIN)/python -m pytest
+
+## test-all: the suite including the slow tests (full fuzz runs, large studies)
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -m ''
 
 lint: $(STAMP)
 	$(BIN)/ruff check workbench adapters tests bench
