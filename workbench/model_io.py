@@ -8,17 +8,22 @@ Layout (format ``workbench.model``, version 1):
   array below, checked on load);
 - numeric arrays by name, e.g. ``system/A``, ``K``, ``objective/Q``, ``tpgmm/means``, ``scale``.
 
-Arrays are float64 or int64 only; :func:`read_model_file` opens the archive with ``allow_pickle=False``, so
-loading never executes code. A file that is not a zip archive, lacks the header, names another format, comes
-from a newer version or whose arrays disagree with the header raises :class:`ModelFileError` naming the file
-and the cause. Writes are atomic (a temp file beside the target, renamed into place).
+Arrays are float64 or int64 only; :func:`read_model_file` reads each ``.npy`` header itself and accepts numeric
+dtypes only (no pickle), so loading never executes code, and it checks the size a header declares against the
+archive before allocating. A file that is not a zip archive, is damaged (bad zip structure, deflate stream,
+CRC-32 or ``.npy`` header), lacks the header, names another format, comes from a newer version or whose arrays
+disagree with the header raises :class:`ModelFileError` naming the file and the cause. Writes are atomic (a temp
+file beside the target, renamed into place).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,6 +39,7 @@ FORMAT_NAME = "workbench.model"
 FORMAT_VERSION = 1
 _HEADER = "__header__"
 _ALLOWED_KINDS = ("f", "i", "b")
+_MAX_DEFLATE_RATIO = 1032  # deflate cannot expand a byte to more than ~1032 bytes (zlib's technical details)
 
 
 class ModelFileError(FormatError, ModelError):
@@ -71,6 +77,43 @@ class ModelFile:
         return self.arrays.get(name)
 
 
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path, file_size: int) -> np.ndarray:
+    """One ``.npy`` member, its declared size checked against the archive before anything is allocated."""
+    where = f"{path}: damaged model file: member {info.filename!r}"
+    limit = min(info.compress_size, file_size) * (1 if info.compress_type == zipfile.ZIP_STORED else _MAX_DEFLATE_RATIO)
+    if info.file_size > limit:
+        raise ModelFileError(
+            f"{where} claims {info.file_size} bytes, more than its {info.compress_size} stored bytes can hold"
+        )
+    with zf.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+        elif version in ((2, 0), (3, 0)):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+        else:
+            raise ModelFileError(f"{where}: unknown .npy version {version}")
+        if dtype.hasobject or dtype.kind not in (*_ALLOWED_KINDS, "u") or dtype.fields is not None:
+            raise ModelFileError(f"{where}: non-numeric dtype {dtype}")
+        count = math.prod(shape)
+        need = count * dtype.itemsize
+        if need > info.file_size - fh.tell():
+            raise ModelFileError(
+                f"{where}: its header declares shape {shape} ({need} bytes), but the member holds "
+                f"{info.file_size - fh.tell()} bytes of data"
+            )
+        data = fh.read(need)
+        if len(data) != need:
+            raise ModelFileError(f"{where}: truncated ({len(data)} of {need} bytes)")
+        fh.read()  # to the end of the member, so that zipfile checks its CRC-32
+    a = np.frombuffer(bytearray(data), dtype=dtype, count=count)
+    return a.reshape(shape, order="F" if fortran else "C").astype(dtype.newbyteorder("="), copy=False)
+
+
 def write_model_file(
     path: str | os.PathLike,
     model_class: str,
@@ -106,23 +149,34 @@ def write_model_file(
 
 
 def read_model_file(path: str | os.PathLike) -> ModelFile:
-    """Read and check a model file's header and arrays (no pickle, no code)."""
+    """Read and check a model file's header and arrays (no pickle, no code).
+
+    Every array's ``.npy`` header is read before its data: the bytes its declared shape and dtype need are
+    checked against the member's size in the archive, and that size against what its compressed size can
+    expand to (:data:`_MAX_DEFLATE_RATIO`) and the file's size, so a damaged header cannot make the reader
+    allocate more than a bounded multiple of the file. Every zip, zlib or ``.npy`` failure is a
+    :class:`ModelFileError` naming the file and the member.
+    """
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: no such model file")
-    if not zipfile.is_zipfile(path):
-        raise ModelFileError(f"{path}: not a workbench model file (not an .npz / zip archive)")
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            names = list(npz.files)
-            if _HEADER not in names:
+        if not zipfile.is_zipfile(path):
+            raise ModelFileError(f"{path}: not a workbench model file (not an .npz / zip archive)")
+        with zipfile.ZipFile(path) as zf:
+            members = {info.filename.removesuffix(".npy"): info for info in zf.infolist()}
+            if _HEADER not in members:
                 raise ModelFileError(f"{path}: an .npz archive, but not a workbench model file (no {_HEADER!r})")
-            raw = npz[_HEADER]
-            arrays = {k: npz[k] for k in names if k != _HEADER}
+            size = path.stat().st_size
+            raw = _read_member(zf, members[_HEADER], path, size)
+            arrays = {k: _read_member(zf, info, path, size) for k, info in members.items() if k != _HEADER}
     except ModelFileError:
         raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        raise ModelFileError(f"{path}: damaged model file ({type(exc).__name__}: {exc})") from None
+    except (zipfile.BadZipFile, zlib.error, OSError, ValueError, EOFError, NotImplementedError, RuntimeError,
+            KeyError, struct.error, OverflowError) as exc:
+        # zipfile and zlib report damage with many exception types (zlib.error, NotImplementedError for an
+        # unsupported flag, RuntimeError for an "encrypted" member): one error that names the file for all
+        raise ModelFileError(f"{path}: damaged model file ({type(exc).__name__}: {_one_line(exc)})") from None
     if raw.dtype != np.uint8 or raw.ndim != 1:
         raise ModelFileError(f"{path}: damaged model file: header has dtype {raw.dtype}, shape {raw.shape}")
     try:
