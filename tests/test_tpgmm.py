@@ -56,20 +56,20 @@ def test_frame_builders():
     f = start_frame(x0, 2)
     np.testing.assert_array_equal(f.T, np.eye(8))
     np.testing.assert_array_equal(f.b, np.r_[x0, 0.0, 0.0])
-    g = goal_frame(x0, 2, phi=0.3)
+    g = goal_frame(x0, 2, phi=0.3, position_idx=(0, 1))
     R = np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]])
     np.testing.assert_allclose(g.T[:2, :2], R)
     np.testing.assert_array_equal(g.T[2:, 2:], np.eye(6))
     np.testing.assert_array_equal(goal_frame(x0, 2).T, np.eye(8))
     np.testing.assert_array_equal(identity_frame(8).b, np.zeros(8))
     # The quadrotor convention: goal angle phi_N is the 3rd state entry.
-    spec = FrameSpec(("start", "goal"), angle_index=2)
+    spec = FrameSpec(("start", "goal"), angle_index=2, position_idx=(0, 1))
     x = np.cumsum(np.ones((5, 6)), axis=0)
     target = np.array([0.5, 0.0, 0.2, 0, 0, 0])
     fs = frames_for_demo(spec, x, 2, target=target)
     np.testing.assert_array_equal(fs[0].b[:6], x[0])
     np.testing.assert_array_equal(fs[1].b[:6], target)
-    np.testing.assert_allclose(fs[1].T[:2, :2], goal_frame(target, 2, phi=0.2).T[:2, :2])
+    np.testing.assert_allclose(fs[1].T[:2, :2], goal_frame(target, 2, phi=0.2, position_idx=(0, 1)).T[:2, :2])
     no_target = frames_for_demo(spec, x, 2)
     np.testing.assert_array_equal(no_target[1].b[:6], x[-1])
     task = frames_for_task(spec, x[0], target, 2)
@@ -130,7 +130,8 @@ def test_tp_likelihood_equals_block_diagonal_stacked_gmm():
     rng = np.random.default_rng(2)
     xi_list, frames_list, _, _ = landing_demos(rng, M=6, N=40)
     # Rotate the goal frames too, so T is not the identity.
-    frames_list = [[f[0], Frame(goal_frame(f[1].b[:4], 2, phi=0.4).T, f[1].b)] for f in frames_list]
+    frames_list = [[f[0], Frame(goal_frame(f[1].b[:4], 2, phi=0.4, position_idx=(0, 1)).T, f[1].b)]
+                   for f in frames_list]
     model = TPGMM(n_components=3, random_state=0).fit(xi_list, frames_list)
     ll_tp = model.score_samples(xi_list, frames_list)
 

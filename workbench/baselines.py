@@ -4,12 +4,14 @@
   constant Gaussian of the residuals.
 * :class:`GMROnlyModel`: a TP-GMM on ``[x; u]`` with the same frames as the proposed model (the paper's
   appendix, eqs. (36)-(37)); ``û`` is the GMR mean of ``u`` given ``x`` (eqs. (24)-(27)).
+* :class:`PersistenceModel`: no operator at all — the vehicle keeps its velocity (or its state). Not in the
+  paper; it is the floor a model of the operator must beat before its predictions mean anything.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -27,10 +29,10 @@ from workbench.demos import Demonstration, DemonstrationSet
 from workbench.frames import FrameSpec
 from workbench.ioc import inverse_lqr
 from workbench.model_io import ModelFile
-from workbench.prediction import Policy
+from workbench.prediction import Policy, Prediction
 from workbench.system import LinearSystem
 
-__all__ = ["IOCOnlyModel", "GMROnlyModel"]
+__all__ = ["IOCOnlyModel", "GMROnlyModel", "PersistenceModel"]
 
 
 class GMROnlyModel(TaskGMRModel):
@@ -54,7 +56,7 @@ class GMROnlyModel(TaskGMRModel):
         tol: float = 1e-6,
         n_init: int = 1,
         angle_index: int | str | None = "auto",
-        position_idx: tuple[int, int] = (0, 1),
+        position_idx: tuple[int, int] | None = None,
         noise: str = "calibrated",
         noise_window: float = 2.0,
         noise_folds: int = 3,
@@ -171,7 +173,7 @@ class IOCOnlyModel(BehaviorModel):
     def _task(self, x0: Any, target: Any) -> tuple[np.ndarray, np.ndarray]:
         n = self.system.n
         x0 = np.zeros(n) if x0 is None else as_vector(x0, n, "start state x0")
-        return x0, self.target_ if target is None else as_vector(target, n, "target")
+        return x0, self.default_target(x0) if target is None else as_vector(target, n, "target")
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
         KT, cov, m = self.K_.T, self.residual_cov_, self.system.m
@@ -193,3 +195,68 @@ class IOCOnlyModel(BehaviorModel):
         self.objective_ = objective_restore(mf)
 
 
+class PersistenceModel(BehaviorModel):
+    """Baseline without an operator: the vehicle keeps its velocity, or its whole state.
+
+    With velocity roles (:mod:`workbench.roles`) it is a constant-velocity guess: every position advances by
+    ``dt`` times its velocity and every other state is held, ``x̂[k+1] = F x̂[k]`` with ``F = I + dt E``
+    (``E`` picks each position's velocity). Without velocity roles ``F = I``: the state is held. It ignores
+    the plant (A, B) and the inputs, so it predicts no input (zero mean and covariance) and has no Monte Carlo
+    band; ``predict(…, samples=S)`` returns the mean alone.
+
+    Attributes
+    ----------
+    transition_ : ndarray, shape (n, n)
+        ``F``.
+    target_ : ndarray, shape (n,)
+        As for the other models (unused by the prediction).
+    """
+
+    _fitted_attr = "transition_"
+    #: No input distribution: one-step input coverage does not apply.
+    models_inputs: ClassVar[bool] = False
+
+    def __init__(self, system: LinearSystem) -> None:
+        super().__init__(system)
+
+    def _transition(self) -> np.ndarray:
+        r = self.system.r
+        F = np.eye(self.system.n)
+        for p, v in zip(r.position, r.velocity, strict=False):
+            F[p, v] += self.system.dt
+        return F
+
+    def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> PersistenceModel:
+        """Nothing to learn but the shapes and the default target; checks the demonstrations like the others."""
+        ds = demo_list(demos, self.system, "PersistenceModel.fit")
+        m = self.system.m
+        self._fit_common(ds, getattr(demos, "labels", []))
+        self.noise_scale_, self.noise_rho_ = np.ones(m), np.zeros(m)
+        self.noise_band_factor_, self.noise_band_coverage_ = 1.0, float("nan")
+        self.transition_ = self._transition()
+        return self
+
+    def _dynamics(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.transition_, np.zeros_like(self.system.B)
+
+    def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
+        m = self.system.m
+
+        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return np.zeros((X.shape[0], m)), np.zeros((X.shape[0], m, m))
+
+        policy.mean = lambda X: np.zeros((X.shape[0], m))
+        return policy
+
+    def predict_many(self, x0s: Any, horizon: int, targets: Any = None, **kwargs: Any) -> list[Prediction]:
+        """As :meth:`BehaviorModel.predict_many`, without samples: a band of zero width would claim certainty."""
+        kwargs["samples"] = 0
+        kwargs.pop("return_samples", None)
+        return super().predict_many(x0s, horizon, targets, **kwargs)
+
+    def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return {}, {"transition": self.transition_}
+
+    def _restore(self, mf: ModelFile) -> None:
+        n = self.system.n
+        self.transition_ = np.array(mf.array("transition", (n, n)))

@@ -181,8 +181,30 @@ class BehaviorModel:
     def _task(self, x0: Any, target: Any) -> tuple[np.ndarray, np.ndarray]:
         n = self.system.n
         x0 = as_vector(x0, n, "start state x0")
-        target = self.target_ if target is None else as_vector(target, n, "target")
+        target = self.default_target(x0) if target is None else as_vector(target, n, "target")
         return x0, target
+
+    def default_target(self, x0: Any) -> np.ndarray:
+        """The goal state of a task whose target is unknown, from its start state ``x0`` (the goal frame, eq. (33)).
+
+        Trained on known targets (a fixed pad), it is their mean ``target_``. Trained on last states, the
+        plant's position roles (:mod:`workbench.roles`) say which states are places: those are set to ``x0``
+        moved by the training trials' mean displacement from start to end, the rest to their mean end value
+        (velocities at rest, a level attitude). A plant without position roles gets the mean end state.
+        """
+        self._check_fitted("default_target")
+        offset = getattr(self, "goal_offset_", None)
+        pos = list(self.system.r.position)
+        if offset is None or not pos:
+            return self.target_
+        x0 = as_vector(x0, self.system.n, "start state x0")
+        target = np.array(self.target_, dtype=float)
+        target[pos] = x0[pos] + offset[pos]
+        return target
+
+    def _dynamics(self) -> tuple[np.ndarray, np.ndarray]:
+        """The (A, B) a rollout steps with: the plant's (the persistence baseline replaces it)."""
+        return self.system.A, self.system.B
 
     def _reference(self, target: np.ndarray) -> np.ndarray:
         """The state the linear term regulates to for a task: its target if fitted goal-relative, else 0."""
@@ -223,6 +245,10 @@ class BehaviorModel:
     def _fit_common(self, demos: list[Demonstration], labels: Sequence[str]) -> None:
         goals = np.array([goal_of(d) for d in demos])
         self.target_ = goals.mean(axis=0)
+        # Where the training goals are last states (no known target), a place in the world means nothing to a new
+        # trial; how far the vehicle went from its start does (see default_target).
+        known = all(d.target is not None for d in demos)
+        self.goal_offset_ = None if known else (goals - np.array([d.x[0] for d in demos])).mean(axis=0)
         self.n_features_in_ = self.system.n
         self.n_outputs_ = self.system.m
         self.n_demos_ = len(demos)
@@ -259,8 +285,8 @@ class BehaviorModel:
         models, each fitted without the trials it is scored on (in-sample residuals are smaller and would
         make the band too narrow): first the scale and AR(1) coefficient of the whitened residuals
         (:func:`~workbench.prediction.fit_noise`), then the factor on the scale for which 90 % Monte Carlo
-        bands over ``noise_horizon`` seconds cover the held-out trials' positions (``position_idx``, else
-        the first two states) 90 % of the time (:func:`~workbench.prediction.calibrate_band_scale`). With too
+        bands over ``noise_horizon`` seconds cover the held-out trials' positions (the plant's position roles,
+        else every state) 90 % of the time (:func:`~workbench.prediction.calibrate_band_scale`). With too
         few demonstrations for the folds, or a fold that cannot be fitted, the in-sample residuals are used
         and the band is not calibrated (``noise_band_coverage_`` is NaN).
         """
@@ -308,7 +334,7 @@ class BehaviorModel:
                     cases.append((sub._policy(d.x[0], goal_of(d)), d.x[starts], X_true))
         self.noise_scale_, self.noise_rho_ = scale, rho
         if cases:
-            idx = tuple(getattr(self, "position_idx", (0, 1)))
+            idx = self.system.r.position or tuple(range(self.system.n))
             factor, cov = calibrate_band_scale(cases, self.system.A, self.system.B, scale, rho, idx)
             self.noise_scale_ = scale * factor
             self.noise_band_factor_, self.noise_band_coverage_ = factor, cov
@@ -403,9 +429,7 @@ class BehaviorModel:
         pct = tuple(float(p) for p in percentiles)
         if samples and (not pct or any(not 0 <= p <= 100 for p in pct) or list(pct) != sorted(pct)):
             raise ModelError(f"{where}: percentiles must be increasing numbers in [0, 100], got {percentiles!r}")
-        if targets is None:
-            T = np.repeat(self.target_[None, :], Bn, axis=0)
-        else:
+        if targets is not None:
             T = np.asarray(targets, dtype=float)
             T = np.repeat(T.reshape(1, -1), Bn, axis=0) if T.ndim == 1 else T
             if T.shape != (Bn, n) or not np.isfinite(T).all():
@@ -417,7 +441,10 @@ class BehaviorModel:
             T0 = np.repeat(T0.reshape(1, -1), Bn, axis=0) if T0.ndim == 1 else T0
             if T0.shape != (Bn, n) or not np.isfinite(T0).all():
                 raise ModelError(f"{where}: task_x0s must be ({Bn}, {n}), got {np.shape(task_x0s)}")
+        if targets is None:
+            T = np.array([self.default_target(t0) for t0 in T0])
         sys_ = self.system
+        A, B = self._dynamics()
         clip_fn = sys_.clip if clip else None
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         groups: dict[bytes, list[int]] = {}
@@ -427,12 +454,12 @@ class BehaviorModel:
         method = type(self).__name__
         for idx in groups.values():
             policy = self._policy(T0[idx[0]], T[idx[0]])
-            Xm, Um, Sm = rollout_mean(sys_.A, sys_.B, policy, X0[idx], int(horizon), clip_fn)
+            Xm, Um, Sm = rollout_mean(A, B, policy, X0[idx], int(horizon), clip_fn)
             for j, b in enumerate(idx):
                 extra: dict[str, Any] = {}
                 if samples:
                     Xs, Us = rollout_samples(
-                        sys_.A, sys_.B, policy, X0[b], int(horizon), int(samples), rng, self.noise_rho_, clip_fn,
+                        A, B, policy, X0[b], int(horizon), int(samples), rng, self.noise_rho_, clip_fn,
                         self.noise_scale_,
                     )
                     extra = {
@@ -457,6 +484,8 @@ class BehaviorModel:
         sys_ = self.system
         arrays = {"system/A": sys_.A, "system/B": sys_.B, "target": self.target_, "noise_rho": self.noise_rho_,
                   "noise_scale": self.noise_scale_, **arrays}
+        if getattr(self, "goal_offset_", None) is not None:
+            arrays["goal_offset"] = self.goal_offset_
         if sys_.u_min is not None:
             arrays["system/u_min"] = sys_.u_min
         if sys_.u_max is not None:
@@ -468,6 +497,7 @@ class BehaviorModel:
                 "state_names": list(sys_.state_names),
                 "input_names": list(sys_.input_names),
                 "fit_residual": sys_.fit_residual,
+                "roles": sys_.roles.to_json(),
             },
             "fit": {
                 "n_demos": self.n_demos_,
@@ -504,7 +534,7 @@ class TaskGMRModel(BehaviorModel):
 
     def _make_gmr(self) -> TaskGMR:
         self.frame_spec_ = resolve_frame_spec(
-            self.frames, self.system.state_names, self.angle_index, self.position_idx
+            self.frames, self.system.state_names, self.angle_index, self.position_idx, self.system.r
         )
         return TaskGMR(
             self.frame_spec_,

@@ -22,6 +22,7 @@ multi-subject design (a model per subject, held-out trials, ANOVA and paired t-t
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -34,7 +35,9 @@ from workbench.errors import DataError, WorkbenchError
 from workbench.stats import AnovaResult, TTestResult, anova_oneway, pairwise_ttests
 
 __all__ = [
-    "DEFAULT_BLOCKS",
+    "STATE_BLOCK",
+    "metric_blocks",
+    "primary_metric",
     "horizon_rmse",
     "band_coverage",
     "one_step_coverage",
@@ -47,16 +50,40 @@ __all__ = [
     "per_subject",
     "SubjectStudy",
     "default_models",
+    "models_for",
     "anova_oneway",
     "pairwise_ttests",
     "AnovaResult",
     "TTestResult",
 ]
 
-#: State blocks of the planar quadrotor ``[x, y, phi, xdot, ydot, phidot]``: position and velocity.
-DEFAULT_BLOCKS: dict[str, tuple[int, ...]] = {"position": (0, 1), "velocity": (3, 4)}
+#: The overall block of a plant without position roles (every state), and the prefix of its per-state blocks.
+STATE_BLOCK = "state"
 
 Progress = Callable[[int, int], Any]
+
+
+def metric_blocks(system: Any) -> dict[str, tuple[int, ...]]:
+    """The state blocks a plant's predictions are scored on, from its roles (:mod:`workbench.roles`).
+
+    With position roles: ``position`` and, where declared, ``velocity`` (the paper's two metrics). Without:
+    every state at once (``state``) and each state alone (``state_<name>``), so a plant that declares nothing
+    still gets full-state metrics.
+    """
+    r = system.r
+    if r.has_position:
+        blocks = {"position": tuple(r.position)}
+        if r.has_velocity:
+            blocks["velocity"] = tuple(r.velocity)
+        return blocks
+    blocks = {STATE_BLOCK: tuple(range(system.n))}
+    blocks.update({f"{STATE_BLOCK}_{name}": (j,) for j, name in enumerate(system.state_names)})
+    return blocks
+
+
+def primary_metric(system: Any) -> str:
+    """The headline metric of a plant: ``rmse_position`` with position roles, else ``rmse_state``."""
+    return f"rmse_{next(iter(metric_blocks(system)))}"
 
 
 def _idx(idx: Sequence[int] | None, n: int) -> np.ndarray:
@@ -190,7 +217,8 @@ def compare(
     seed : int, optional
         Seed of the Monte Carlo draws.
     blocks : mapping name → state indices
-        Default :data:`DEFAULT_BLOCKS` (quadrotor position and velocity).
+        Default :func:`metric_blocks` of the first model's plant (its position and velocity roles, else every
+        state at once and each alone).
     band : (lower, upper) percentiles
         The trajectory band (default 5 and 95: a 90 % band).
     one_step : bool
@@ -210,11 +238,11 @@ def compare(
         raise DataError("compare needs at least one model")
     if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 1:
         raise DataError(f"horizon must be a positive number of steps, got {horizon!r}")
-    blocks = dict(DEFAULT_BLOCKS if blocks is None else blocks)
+    first = next(iter(models.values()))
+    blocks = dict(metric_blocks(first.system) if blocks is None else blocks)
     lo_q, hi_q = (float(b) for b in band)
     if not 0 <= lo_q < hi_q <= 100:
         raise DataError(f"band must be two increasing percentiles in [0, 100], got {band!r}")
-    first = next(iter(models.values()))
     n = first.system.n
     state_names = list(first.system.state_names)
     blocks = {k: tuple(int(i) for i in _idx(v, n)) for k, v in blocks.items()}
@@ -236,14 +264,21 @@ def compare(
                 x_pred = p.x[: h + 1]
                 for block, idx in blocks.items():
                     rows.append((d.id, _label(d), s, method, f"rmse_{block}", horizon_rmse(x_pred, x_true, idx)))
-                if samples:
+                # a model without a Monte Carlo band (persistence) has no band rows rather than a zero-width band
+                if samples and p.x_bands is not None:
                     lo, hi = p.x_bands[0, : h + 1], p.x_bands[-1, : h + 1]
+                    done: set[str] = set()
                     for block, idx in blocks.items():
                         per_axis, joint = band_coverage(lo, hi, x_true, idx)
-                        rows.append((d.id, _label(d), s, method, f"band_{block}", joint))
-                        for j, frac in zip(idx, per_axis, strict=True):
-                            rows.append((d.id, _label(d), s, method, f"band_{block}_{state_names[j]}", float(frac)))
-            if one_step:
+                        named = [(f"band_{block}", joint)]
+                        if len(idx) > 1:
+                            named += [(f"band_{block}_{state_names[j]}", float(f)) for j, f in zip(idx, per_axis,
+                                                                                                 strict=True)]
+                        for metric, value in named:
+                            if metric not in done:  # a one-state block repeats a per-axis row of another
+                                done.add(metric)
+                                rows.append((d.id, _label(d), s, method, metric, value))
+            if one_step and getattr(model, "models_inputs", True):  # persistence has no input distribution
                 cov = one_step_coverage(model, [d], method=method)
                 for r in cov.itertuples(index=False):
                     rows.append((d.id, _label(d), 0, method, f"coverage_{r.n_sigma:g}sigma_{r.input}", r.coverage))
@@ -280,15 +315,36 @@ def method_groups(table: pd.DataFrame, metric: str) -> dict[str, np.ndarray]:
 
 
 def default_models(system: Any, n_components: int = 5, random_state: int | None = 0) -> dict[str, Any]:
-    """Unfitted ``{"proposed", "ioc_only", "gmr_only"}`` with the paper's settings (G, start/goal frames)."""
-    from workbench.model import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel
+    """Unfitted ``{"proposed", "ioc_only", "gmr_only", "persistence"}`` with the paper's settings (G, start/goal
+    frames); persistence (:class:`~workbench.baselines.PersistenceModel`) is the floor every model must beat."""
+    from workbench.model import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel, PersistenceModel
 
     return {
         "proposed": HumanBehaviorModel(system, n_components=n_components, random_state=random_state,
                                        fit_objective=False),
         "ioc_only": IOCOnlyModel(system),
         "gmr_only": GMROnlyModel(system, n_components=n_components, random_state=random_state),
+        "persistence": PersistenceModel(system),
     }
+
+
+def models_for(make_models: Any, train: DemonstrationSet, n_components: int = 5) -> dict[str, Any]:
+    """Unfitted models for one training set.
+
+    ``make_models`` is a plant (:func:`default_models` of it), a ``callable()`` returning the models, or a
+    ``callable(train)`` returning them for that training set — the way to identify the plant from the
+    training trials alone (never from the trials a study scores).
+    """
+    if not callable(make_models):
+        return default_models(make_models, n_components)
+    try:
+        params = inspect.signature(make_models).parameters.values()
+    except (TypeError, ValueError):  # a builtin without a signature: the documented zero-argument form
+        params = []
+    takes_train = any(
+        p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) and p.default is p.empty for p in params
+    )
+    return dict(make_models(train) if takes_train else make_models())
 
 
 def _fit_each(models: Mapping[str, Any], train: DemonstrationSet, where: str, failures: list[str]) -> dict[str, Any]:
@@ -324,16 +380,14 @@ def data_efficiency(
 
     Parameters
     ----------
-    make_models : callable() → mapping name → unfitted model, or a LinearSystem
-        Called afresh for every subset; a system stands for :func:`default_models` (with ``n_components``).
+    make_models : callable() or callable(train) → mapping name → unfitted model, or a LinearSystem
+        Called afresh for every subset (:func:`models_for`); a system stands for :func:`default_models` (with
+        ``n_components``).
 
     Returns
     -------
     DataFrame with columns ``n_train, repeat, trial, label, start, method, metric, value``.
     """
-    if not callable(make_models):
-        system = make_models
-        make_models = lambda: default_models(system, n_components)  # noqa: E731
     demos = list(train)
     if not demos:
         raise DataError("data_efficiency needs training demonstrations")
@@ -351,12 +405,12 @@ def data_efficiency(
     test_list = _demos(test)
     for i, (size, r, idx) in enumerate(plan):
         subset = train._like(demos[j] for j in idx)
-        models = make_models()
+        models = models_for(make_models, subset, n_components)
         fitted = _fit_each(models, subset, f"n_train={size} repeat={r}", failures)
         for name in (n for n in models if n not in fitted):
             parts.append(pd.DataFrame({
                 "n_train": [size], "repeat": [r], "trial": [None], "label": [None], "start": [0],
-                "method": [name], "metric": [f"rmse_{next(iter(DEFAULT_BLOCKS))}"], "value": [np.nan],
+                "method": [name], "metric": [primary_metric(models[name].system)], "value": [np.nan],
             }))
         if fitted:
             table = compare(fitted, test_list, horizon=horizon, starts=starts)
@@ -403,7 +457,7 @@ def per_subject(
     demos: DemonstrationSet,
     n_test: int = 1,
     horizon: int = 100,
-    metric: str = "rmse_position",
+    metric: str | None = None,
     seed: int = 0,
     starts: str | int = "initial",
     n_components: int = 5,
@@ -418,14 +472,15 @@ def per_subject(
 
     Parameters
     ----------
-    make_models : callable() → mapping name → unfitted model, or a LinearSystem
-        Called afresh for every subject; a system stands for :func:`default_models` (with ``n_components``).
+    make_models : callable() or callable(train) → mapping name → unfitted model, or a LinearSystem
+        Called afresh for every subject (:func:`models_for`), with the subject's training trials when it takes
+        them (identify the plant there, never on the held-out trials); a system stands for
+        :func:`default_models` (with ``n_components``).
+    metric : str, optional
+        The compared metric; default :func:`primary_metric` of the plant (position RMSE with position roles).
     demos : DemonstrationSet
         Trials with ``meta["subject"]``; at least two subjects with more than ``n_test`` trials each.
     """
-    if not callable(make_models):
-        system = make_models
-        make_models = lambda: default_models(system, n_components)  # noqa: E731
     subjects = sorted({str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None})
     if len(subjects) < 2:
         raise DataError(f"a multi-subject study needs trials of at least two subjects; found {subjects}")
@@ -438,7 +493,9 @@ def per_subject(
         test_ids = {ds[int(j)].id for j in rng.choice(len(ds), n_test, replace=False)}
         train = ds.filter(lambda d, ids=test_ids: d.id not in ids)
         test = ds.filter(lambda d, ids=test_ids: d.id in ids)
-        fitted = _fit_each(make_models(), train, f"subject {subject}", failures)
+        models = models_for(make_models, train, n_components)
+        metric = metric or primary_metric(next(iter(models.values())).system)
+        fitted = _fit_each(models, train, f"subject {subject}", failures)
         if fitted:
             parts.append(compare(fitted, test, horizon=horizon, starts=starts).assign(subject=subject))
         if progress is not None:

@@ -173,7 +173,7 @@ def goal_frame(
     x_goal: np.ndarray,
     m: int,
     phi: float | None = None,
-    position_idx: tuple[int, int] = (0, 1),
+    position_idx: tuple[int, int] | None = None,
 ) -> Frame:
     """Goal frame of eqs. (33)-(34): ``b = [x_N; 0_m]``, ``T`` = rotation by ``phi`` on the position block.
 
@@ -187,7 +187,8 @@ def goal_frame(
         Rotation angle ``phi_N`` (radians) applied to the two coordinates ``position_idx``; ``None`` or 0
         means no rotation (``T = I``).
     position_idx : (int, int)
-        Indices of the planar position coordinates the rotation acts on.
+        Indices of the planar position coordinates the rotation acts on (the plant's ``roles.plane``);
+        required with ``phi``.
     """
     x_goal = _state_vector(x_goal, "goal_frame")
     if int(m) < 0:
@@ -198,6 +199,11 @@ def goal_frame(
         phi = float(phi)
         if not np.isfinite(phi):
             raise ModelError("goal_frame: rotation angle phi is not finite")
+        if position_idx is None or len(position_idx) != 2:
+            raise ModelError(
+                f"goal_frame: a rotation by phi needs position_idx, the two position states it turns, "
+                f"got {position_idx}"
+            )
         i, j = (int(k) for k in position_idx)
         if not (0 <= i < x_goal.size and 0 <= j < x_goal.size and i != j):
             raise ModelError(
@@ -219,15 +225,16 @@ class FrameSpec:
         Frame names in order, each one of ``"identity"``, ``"start"``, ``"goal"``. The paper's quadrotor study
         uses ``("start", "goal")``, eq. (33).
     angle_index : int or None
-        Index into the goal state of the angle ``phi_N`` by which the goal frame is rotated, eq. (34)
-        (2 for the planar quadrotor ``[x, y, phi, ...]``). ``None`` means no rotation.
-    position_idx : (int, int)
-        The two state coordinates the goal rotation acts on.
+        Index into the goal state of the angle ``phi_N`` by which the goal frame is rotated, eq. (34) (the
+        plant's heading role). ``None`` means no rotation.
+    position_idx : (int, int) or ()
+        The two state coordinates the goal rotation acts on (the plant's ``roles.plane``); needed only with
+        ``angle_index``.
     """
 
     kinds: tuple[str, ...] = ("start", "goal")
     angle_index: int | None = None
-    position_idx: tuple[int, int] = field(default=(0, 1))
+    position_idx: tuple[int, ...] = field(default=())
 
     def __post_init__(self) -> None:
         kinds = (self.kinds,) if isinstance(self.kinds, str) else tuple(self.kinds)
@@ -240,6 +247,11 @@ class FrameSpec:
         object.__setattr__(self, "position_idx", tuple(int(i) for i in self.position_idx))
         if self.angle_index is not None:
             object.__setattr__(self, "angle_index", int(self.angle_index))
+            if len(self.position_idx) != 2:
+                raise ModelError(
+                    f"FrameSpec: a goal rotation (angle_index {self.angle_index}) needs the two position states it "
+                    f"turns as position_idx, got {self.position_idx}"
+                )
 
     @classmethod
     def coerce(cls, spec: FrameSpec | str | Sequence[str]) -> FrameSpec:

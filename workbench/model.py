@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from workbench.baselines import GMROnlyModel, IOCOnlyModel
+from workbench.baselines import GMROnlyModel, IOCOnlyModel, PersistenceModel
 from workbench.behavior import (
     BehaviorModel,
     TaskGMRModel,
@@ -40,10 +40,12 @@ from workbench.behavior import (
     references,
 )
 from workbench.demos import Demonstration, DemonstrationSet
+from workbench.errors import DataError, ModelError
 from workbench.frames import FrameSpec
 from workbench.ioc import inverse_lqr
 from workbench.model_io import ModelFile, ModelFileError, read_model_file
 from workbench.prediction import RHO_MAX, Policy, Prediction
+from workbench.roles import Roles
 from workbench.system import LinearSystem
 
 __all__ = [
@@ -51,6 +53,7 @@ __all__ = [
     "HumanBehaviorModel",
     "IOCOnlyModel",
     "GMROnlyModel",
+    "PersistenceModel",
     "Prediction",
     "load_model",
     "MODEL_CLASSES",
@@ -68,8 +71,9 @@ class HumanBehaviorModel(TaskGMRModel):
         Number of Gaussian components G (the paper uses 5).
     frames : sequence of str or FrameSpec
         Task frames; default the paper's start and goal frames, eqs. (33)-(34).
-    gain_method : {"direct", "dmd"}
-        How K̂ is estimated (:func:`workbench.ioc.estimate_gain`).
+    gain_method : {"direct", "dmd", "iv"}
+        How K̂ is estimated (:func:`workbench.ioc.estimate_gain`); "iv" is consistent in closed loop with
+        autocorrelated variability, where the least-squares "direct" and "dmd" stay biased.
     structure : {"full", "S=0", "diagonal"}
         Cost structure of the inverse LQR (:func:`workbench.ioc.inverse_lqr`).
     reg_covar : float
@@ -87,9 +91,10 @@ class HumanBehaviorModel(TaskGMRModel):
     max_iter, tol, n_init
         EM settings of :class:`~workbench.tpgmm.TPGMM`.
     angle_index : int, "auto" or None
-        State by which the goal frame is rotated (eq. (34)); "auto" = the state named ``phi`` if any.
-    position_idx : (int, int)
-        The planar position states the goal rotation acts on.
+        State by which the goal frame is rotated (eq. (34)); "auto" = the plant's heading role, where it also
+        declares a plane of two positions (:mod:`workbench.roles`), else no rotation.
+    position_idx : (int, int) or None
+        The planar position states the goal rotation acts on; None = the plant's ``roles.plane``.
     noise : {"calibrated", "gmr"}
         Monte Carlo draws (:mod:`workbench.prediction`): "gmr" draws independently from the GMR Gaussian
         ``N(K̂x + μ̂(x), Σ̂(x))`` at every step; "calibrated" (default) scales it and correlates it in time
@@ -143,7 +148,7 @@ class HumanBehaviorModel(TaskGMRModel):
         tol: float = 1e-6,
         n_init: int = 1,
         angle_index: int | str | None = "auto",
-        position_idx: tuple[int, int] = (0, 1),
+        position_idx: tuple[int, int] | None = None,
         noise: str = "calibrated",
         noise_window: float = 2.0,
         noise_folds: int = 3,
@@ -232,12 +237,12 @@ class HumanBehaviorModel(TaskGMRModel):
 
 
 MODEL_CLASSES: dict[str, type[BehaviorModel]] = {
-    cls.__name__: cls for cls in (HumanBehaviorModel, IOCOnlyModel, GMROnlyModel)
+    cls.__name__: cls for cls in (HumanBehaviorModel, IOCOnlyModel, GMROnlyModel, PersistenceModel)
 }
 
 
 def load_model(path: str | os.PathLike) -> BehaviorModel:
-    """Read a model written by ``save`` (any of the three classes); never executes code from the file.
+    """Read a model written by ``save`` (any of :data:`MODEL_CLASSES`); never executes code from the file.
 
     Raises
     ------
@@ -257,10 +262,11 @@ def load_model(path: str | os.PathLike) -> BehaviorModel:
         system = LinearSystem(
             A, B, float(s["dt"]), tuple(s["state_names"]), tuple(s["input_names"]),
             u_min=mf.get("system/u_min"), u_max=mf.get("system/u_max"), fit_residual=s.get("fit_residual"),
+            roles=Roles.from_json(s.get("roles"), f"{mf.path}: roles"),
         )
     except ModelFileError:
         raise
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, DataError, ModelError) as exc:
         raise ModelFileError(f"{mf.path}: damaged model file: system ({type(exc).__name__}: {exc})") from None
     settings = dict(h.get("settings") or {})
     unknown = sorted(set(settings) - set(cls._param_names()))
@@ -273,6 +279,7 @@ def load_model(path: str | os.PathLike) -> BehaviorModel:
     n, m = system.n, system.m
     try:
         model.target_ = np.array(mf.array("target", (n,)))
+        model.goal_offset_ = np.array(mf.array("goal_offset", (n,))) if "goal_offset" in mf.arrays else None
         model.noise_rho_ = np.array(mf.array("noise_rho", (m,)))
         model.noise_scale_ = np.array(mf.array("noise_scale", (m,)))
         fit = h.get("fit") or {}

@@ -30,6 +30,7 @@ import numpy as np
 from workbench.errors import ConvergenceWarning, ModelError
 from workbench.frames import Frame, FrameSpec, frames_for_demo, frames_for_task
 from workbench.gmr import ConditionalGMM
+from workbench.roles import ResolvedRoles
 from workbench.tpgmm import TPGMM
 
 __all__ = ["TaskGMR", "TaskConditional", "resolve_frame_spec"]
@@ -43,23 +44,31 @@ def resolve_frame_spec(
     frames: FrameSpec | str | Sequence[str],
     state_names: Sequence[str],
     angle_index: int | str | None = "auto",
-    position_idx: tuple[int, int] = (0, 1),
+    position_idx: tuple[int, int] | None = None,
+    roles: ResolvedRoles | None = None,
 ) -> FrameSpec:
     """The frame specification of a model: names plus where the goal rotation angle and position sit.
 
-    ``angle_index="auto"`` picks the state named ``phi`` (the planar quadrotor's attitude, by which the paper
-    rotates the goal frame, eq. (34)) if there is one, else no rotation.
+    ``angle_index="auto"`` takes the plant's heading role (the planar quadrotor's attitude, by which the paper
+    rotates the goal frame, eq. (34)) and ``position_idx=None`` its plane of two positions (:mod:`workbench.roles`);
+    a plant without them gets no rotation.
     """
     if isinstance(frames, FrameSpec):
         return frames
+    roles = roles or ResolvedRoles()
+    pos = roles.plane if position_idx is None else tuple(int(i) for i in position_idx)
     if angle_index == "auto":
-        angle_index = list(state_names).index("phi") if "phi" in state_names else None
+        angle_index = roles.heading if pos is not None else None
     spec = FrameSpec.coerce(frames)
     n = len(state_names)
-    pos = tuple(int(i) for i in position_idx)
-    if "goal" in spec.kinds and (len(pos) != 2 or not all(0 <= i < n for i in pos) or pos[0] == pos[1]):
-        raise ModelError(f"position_idx {position_idx} must name two distinct states of {n}")
-    return FrameSpec(spec.kinds, angle_index=angle_index, position_idx=pos)
+    if angle_index is None:
+        return FrameSpec(spec.kinds, angle_index=None, position_idx=pos or ())
+    if "goal" in spec.kinds and (pos is None or len(pos) != 2 or not all(0 <= i < n for i in pos) or pos[0] == pos[1]):
+        raise ModelError(
+            f"a goal frame rotated by state {angle_index} needs position_idx naming two distinct states of {n} "
+            f"(or position roles), got {position_idx}"
+        )
+    return FrameSpec(spec.kinds, angle_index=int(angle_index), position_idx=pos)
 
 
 def _scaled(frames: Sequence[Frame], scale: np.ndarray) -> list[Frame]:
