@@ -21,6 +21,7 @@ from workbench.atomic import atomic_path
 from workbench.demos import Demonstration, DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
 from workbench.study import StudyResult
+from workbench.viewer.columns import send_columns
 
 __all__ = [
     "APPLICATION_ID",
@@ -171,8 +172,9 @@ class SessionLogger:
 
     # -- low-level helpers --------------------------------------------------------------------------------
     def _send(self, path: str, index: list[rr.TimeColumn], columns: Any) -> None:
-        self.rec.send_columns(path, indexes=index, columns=columns)
-        self.session.entities.append(path)
+        # every bulk send goes through the guard: a chunk without rows crashes the viewer
+        if send_columns(self.rec, path, index, columns):
+            self.session.entities.append(path)
 
     def _static(self, path: str, archetype: Any) -> None:
         self.rec.log(path, archetype, static=True)
