@@ -13,7 +13,7 @@ REPO = Path(__file__).resolve().parents[1]
 # floor 4: what a user touches; nothing below may import it
 TOP = ("workbench.cli", "workbench.__main__", "workbench.viewer", "workbench.report", "workbench.sample_logs")
 # the common format: the only part of workbench the adapters may use
-COMMON = ("workbench.demos", "workbench.errors", "workbench.atomic", "workbench.roles")
+COMMON = ("workbench.demos", "workbench.dataset", "workbench.errors", "workbench.atomic", "workbench.roles")
 
 
 def _module_name(path: Path) -> str:

@@ -11,6 +11,7 @@ version, the state and input names, ``dt`` and the per-demonstration metadata.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -34,6 +35,28 @@ _SCHEMA_KEY = b"workbench"
 _RESERVED = ("demo", "t")
 MIN_SAMPLES = 2
 DT_TOLERANCE = 1e-3  # relative deviation of a sampling interval from dt that is still "uniform"
+
+
+def _checksum(header: Mapping[str, Any], table: Any, where: str = "table") -> str:
+    """SHA-256 of a set's metadata (canonical JSON, without the checksum itself) and of its decoded columns.
+
+    Computed from the values as read, it catches damage that the Parquet page CRCs do not cover: the footer,
+    the schema, column statistics or a page whose CRC was damaged along with it.
+    """
+    h = hashlib.sha256()
+    h.update(json.dumps({k: v for k, v in header.items() if k != "sha256"}, sort_keys=True).encode())
+    names = ["demo", "t", *header["state_names"], *header["input_names"]]
+    try:
+        for name in names:
+            column = table.column(name)
+            h.update(b"\0" + name.encode())
+            if name == "demo":
+                h.update("\0".join(map(str, column.to_pylist())).encode())
+            else:
+                h.update(np.ascontiguousarray(column.to_numpy(), dtype="<f8").tobytes())
+    except (KeyError, ValueError, TypeError, AttributeError) as exc:
+        raise FormatError(f"{where}: damaged file: column data unreadable ({exc})") from None
+    return h.hexdigest()
 
 
 def _as_float_matrix(a: Any, name: str, where: str, width: int | None = None) -> np.ndarray:
@@ -426,25 +449,32 @@ class DemonstrationSet(Sequence[Demonstration]):
             "demos": [dict(d.meta) for d in self._demos],
         }
         table = pa.Table.from_pandas(df, preserve_index=False)
+        header["sha256"] = _checksum(header, table)
         table = table.replace_schema_metadata({_SCHEMA_KEY: json.dumps(header).encode()})
         path = Path(path)
         with atomic_path(path) as tmp:
-            pq.write_table(table, tmp, compression="zstd")
+            # page CRCs let the reader reject a damaged data page before decoding it
+            pq.write_table(table, tmp, compression="zstd", write_page_checksum=True)
         return path
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> DemonstrationSet:
-        """Read a set written by :meth:`save`; a foreign or newer file is a :class:`FormatError`."""
+        """Read a set written by :meth:`save`, or a dataset directory (:mod:`workbench.dataset`) as one set; a
+        foreign or newer file is a :class:`FormatError`."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
         path = Path(path)
+        if path.is_dir():  # a partitioned dataset (many logs, one file per source and subject)
+            from workbench.dataset import load_dataset
+
+            return load_dataset(path)
         if not path.is_file():
             raise DataError(f"{path}: no such file")
         try:
-            table = pq.read_table(path)
+            table = pq.read_table(path, page_checksum_verification=True)
         except (pa.ArrowException, OSError) as exc:
-            raise FormatError(f"{path}: not a readable Parquet file ({exc})") from None
+            raise FormatError(f"{path}: not a readable Parquet file ({' '.join(str(exc).split())})") from None
         raw = (table.schema.metadata or {}).get(_SCHEMA_KEY)
         if raw is None:
             raise FormatError(
@@ -458,13 +488,23 @@ class DemonstrationSet(Sequence[Demonstration]):
             names = (list(header["state_names"]), list(header["input_names"]), float(header["dt"]))
             metas = list(header["demos"])
             roles = Roles.from_json(header.get("roles"), f"{path}: roles")
-        except (ValueError, KeyError, TypeError) as exc:
+            meta = {str(m.get("id")): m for m in metas}
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
             raise FormatError(f"{path}: damaged workbench metadata ({exc})") from None
         if version > FORMAT_VERSION:
             raise FormatError(
                 f"{path}: format version {version} is newer than this workbench reads ({FORMAT_VERSION}); upgrade"
             )
-        df = table.to_pandas()
-        return cls.from_pandas(
-            df, *names, meta={str(m.get("id")): m for m in metas}, source=str(path), roles=roles
-        )
+        stored = header.get("sha256")
+        if stored is not None and stored != _checksum(header, table, str(path)):
+            raise FormatError(f"{path}: damaged file: its values or metadata do not match the checksum written with it")
+        try:
+            df = table.to_pandas()
+        except (pa.ArrowException, ValueError, TypeError) as exc:
+            raise FormatError(f"{path}: not a readable Parquet file ({' '.join(str(exc).split())})") from None
+        try:
+            return cls.from_pandas(df, *names, meta=meta, source=str(path), roles=roles)
+        except DataError as exc:
+            if str(path) in str(exc):
+                raise
+            raise DataError(f"{path}: {exc}") from None
