@@ -16,6 +16,7 @@ Schema
 
     [channels]                          # one entry per state and input
     x = "LOCAL_POSITION_NED.y"          # a source: "STREAM.FIELD" or "STREAM:FIELD" (for topics with dots)
+    phi = { source = "ATTITUDE.roll,pitch,yaw", transform = "euler_tilt_east" }   # fields of one stream
     y = { source = "LOCAL_POSITION_NED.z", transform = "ned_up" }
     phi = { source = "vehicle_attitude.q", transform = "quaternion_roll" }    # q[0] … q[3]
     u1 = { source = "RC_CHANNELS.chan1_raw", transform = "pwm", pwm_min = 1000, pwm_max = 2000 }
@@ -570,9 +571,12 @@ def select(sel: Selector, streams: Streams, what: str, mapping: str, *, n_column
             rows = keep
     if fld == "":
         return Selected(stream, frame, rows, (), dropped)
-    cols = field_columns(frame, fld)
-    if not cols:
-        raise _missing_field(fld, stream, frame, streams, what, mapping)
+    cols = []
+    for name in fld.split(","):  # "roll,pitch,yaw": several fields of one stream, for one transform
+        found = field_columns(frame, name.strip())
+        if not found:
+            raise _missing_field(name.strip(), stream, frame, streams, what, mapping)
+        cols += found
     if n_columns is not None and len(cols) != n_columns:
         raise MappingError(
             f"mapping {mapping!r}: {what} needs {n_columns} column(s) from {sel.source!r}, "

@@ -14,7 +14,17 @@ name                      columns    channel
 ``quaternion_roll``       4          roll of the unit quaternion ``[w, x, y, z]`` (rad, ZYX Euler angles)
 ``quaternion_pitch``      4          pitch, likewise
 ``quaternion_yaw``        4          yaw, likewise
+``euler_tilt_east``       3          ``roll, pitch, yaw`` (rad, ZYX) → the thrust axis's tilt from the vertical
+                                     in the east–up plane (rad, positive toward east): the angle whose
+                                     tangent times g is the east acceleration of a hovering multirotor,
+                                     whatever its heading
+``euler_tilt_east_rate``  5          ``roll, pitch, yaw, rollspeed, pitchspeed`` (rad, rad/s body rates) → the
+                                     rate of ``euler_tilt_east`` (rad/s); yaw rate does not move the axis
 ========================  =========  ======================================================================
+
+A vehicle that turns while it flies (the real ArduCopter flight in ``../shared/external`` yaws through several
+full turns) leans east with its roll only when it points north: a planar east–up model needs the tilt, not
+the body roll, or the east velocity's response to the angle comes out a fraction of g·dt.
 """
 
 from __future__ import annotations
@@ -68,6 +78,40 @@ def _yaw(q: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
     return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
+def _rotation(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Body → NED rotation matrices ``Rz(yaw) Ry(pitch) Rx(roll)``, shape (N, 3, 3)."""
+    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
+    return np.stack([
+        np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+        np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+        np.stack([-sp, cp * sr, cp * cr], -1),
+    ], -2)
+
+
+def _tilt_east(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    R = _rotation(v[:, 0], v[:, 1], v[:, 2])
+    east, up = -R[:, 1, 2], R[:, 2, 2]  # thrust along −z_body: its east and up (−down) components
+    return np.arctan2(east, up)
+
+
+def _tilt_east_rate(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    R = _rotation(v[:, 0], v[:, 1], v[:, 2])
+    # d/dt (−R e3) = −R (ω × e3) = −R [q, −p, 0]: only roll and pitch rates move the thrust axis
+    w = np.stack([v[:, 4], -v[:, 3], np.zeros(len(v))], -1)
+    d = -np.einsum("nij,nj->ni", R, w)
+    east, up, d_east, d_up = -R[:, 1, 2], R[:, 2, 2], d[:, 1], -d[:, 2]
+    return (up * d_east - east * d_up) / (east**2 + up**2)
+
+
+def _tilt_inv(angle: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    return np.column_stack([angle, np.zeros_like(angle), np.zeros_like(angle)])  # heading north: tilt = roll
+
+
+def _tilt_rate_inv(rate: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    z = np.zeros_like(rate)
+    return np.column_stack([z, z, z, rate, z])  # level, north: the rate is the roll rate
+
+
 def _axis_quaternion(axis: int) -> Callable[[np.ndarray, Mapping[str, Any]], np.ndarray]:
     def inverse(angle: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
         q = np.zeros((angle.size, 4))
@@ -87,6 +131,8 @@ TRANSFORMS: dict[str, Transform] = {
         Transform("quaternion_roll", 4, _roll, _axis_quaternion(1)),
         Transform("quaternion_pitch", 4, _pitch, _axis_quaternion(2)),
         Transform("quaternion_yaw", 4, _yaw, _axis_quaternion(3)),
+        Transform("euler_tilt_east", 3, _tilt_east, _tilt_inv),
+        Transform("euler_tilt_east_rate", 5, _tilt_east_rate, _tilt_rate_inv),
     )
 }
 

@@ -8,7 +8,8 @@ sticks, …) — the round trip the tests check.
 
 Demonstrations are laid end to end on the log clock from ``epoch`` (seconds), ``pause`` seconds apart;
 a CSV keeps each demonstration's own ``t``. Sources must name their stream unambiguously for writing:
-``STREAM:FIELD``, or ``STREAM.FIELD`` with a stream name free of dots.
+``STREAM:FIELD``, or ``STREAM.FIELD`` with a stream name free of dots. Where two channels read one field
+(``ATTITUDE.roll,pitch,yaw`` for a tilt and ``…,rollspeed,pitchspeed`` for its rate), the first one writes it.
 """
 
 from __future__ import annotations
@@ -109,6 +110,9 @@ def demo_streams(
             fields = channel_inverse(ch, values[:, k])
             if fields.shape[1] == 1:
                 cols[stream][fld] = fields[:, 0]
+            elif "," in fld:  # several fields of one stream; a field an earlier channel wrote keeps its value
+                for i, name in enumerate(fld.split(",")):
+                    cols[stream].setdefault(name.strip(), fields[:, i])
             else:
                 cols[stream].update({f"{fld}[{i}]": fields[:, i] for i in range(fields.shape[1])})
             cols[stream].update(_where_cols(ch.selector))

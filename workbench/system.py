@@ -19,6 +19,7 @@ from workbench.roles import ResolvedRoles, Roles
 
 if TYPE_CHECKING:
     from workbench.demos import DemonstrationSet
+    from workbench.identification import IdentificationReport
 
 __all__ = ["LinearSystem", "planar_quadrotor", "is_stabilizable", "PLANAR_QUADROTOR_ROLES"]
 
@@ -58,6 +59,8 @@ class LinearSystem:
         For an identified system, the RMS one-step prediction residual of the fit.
     roles : Roles, optional
         Which states are positions, velocities and the heading angle (:mod:`workbench.roles`); none by default.
+    identification : IdentificationReport, optional
+        For a plant from :meth:`identify`: its held-out errors, ρ(A), conditioning and physical checks.
 
     Raises
     ------
@@ -75,6 +78,7 @@ class LinearSystem:
     u_max: np.ndarray | None = None
     fit_residual: float | None = field(default=None)
     roles: Roles = field(default_factory=Roles)
+    identification: IdentificationReport | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         A = np.array(self.A, dtype=np.float64)
@@ -162,45 +166,41 @@ class LinearSystem:
         *,
         u_min: Sequence[float] | None = None,
         u_max: Sequence[float] | None = None,
+        structure: str = "auto",
+        horizon: float = 3.0,
     ) -> LinearSystem:
-        """Least-squares estimate of (A, B) from consecutive samples of every demonstration.
+        """Least-squares estimate of (A, B) from consecutive samples of every demonstration, with a report.
 
-        Solves ``min ‖X' − [A B] [X; U]‖_F`` over all pairs (x[k], u[k]) → x[k+1] within each demonstration
-        (never across two). The RMS one-step residual is stored in ``fit_residual``.
+        Pairs (x[k], u[k]) → x[k+1] are taken within each demonstration, never across two. With
+        ``structure="kinematic"`` the position rows are fixed by kinematics, ``p[k+1] = p[k] + dt·v[k]`` for the
+        roles' position / velocity pairs (no input moves a position directly, no state depends on an absolute
+        position), and the other rows are fitted; ``"free"`` fits every entry of ``[A B]``; ``"auto"`` (the
+        default) is kinematic when ``demos.roles`` pair positions with velocities, else free — so data without
+        roles are identified as before. The RMS one-step residual on all data is ``fit_residual``; the held-out
+        check (leave-one-segment-out, ``horizon`` seconds ahead, against persistence), ρ(A), conditioning,
+        physical checks and a one-line warning are in ``identification``
+        (:class:`~workbench.identification.IdentificationReport`).
 
         Raises
         ------
         ModelError
-            When the data do not excite every state and input direction (rank of [X; U] < n + m).
+            When the data do not excite every state and input direction the fitted rows use, or the structure
+            is unknown or needs roles the data lack.
         """
-        Z, Xn = [], []
-        for d in demos:
-            Z.append(np.hstack([d.x[:-1], d.u[:-1]]))
-            Xn.append(d.x[1:])
-        if not Z:
-            raise ModelError("identify needs at least one demonstration")
-        Z_all, Xn_all = np.concatenate(Z), np.concatenate(Xn)
-        n, m = demos.n_states, demos.n_inputs
-        rank = _rank(Z_all)
-        if rank < n + m:
-            cond = np.linalg.cond(Z_all)
-            raise ModelError(
-                f"identify: the data excite only {rank} of {n + m} state and input directions "
-                f"(cond [X; U] = {cond:.3g}); record more varied demonstrations"
-            )
-        theta, *_ = np.linalg.lstsq(Z_all, Xn_all, rcond=None)
-        AB = theta.T
-        residual = Xn_all - Z_all @ theta
+        from workbench.identification import identify_plant
+
+        A, B, residual, report = identify_plant(demos, structure=structure, horizon=horizon)
         return cls(
-            AB[:, :n],
-            AB[:, n:],
+            A,
+            B,
             demos.dt,
             demos.state_names,
             demos.input_names,
             u_min=u_min,
             u_max=u_max,
-            fit_residual=float(np.sqrt(np.mean(residual**2))),
+            fit_residual=residual,
             roles=demos.roles,
+            identification=report,
         )
 
 
