@@ -152,6 +152,12 @@ def _system_for(ds: Any, choice: str = "auto"):
     return LinearSystem.identify(ds, u_min=paper.u_min if layout else None, u_max=paper.u_max if layout else None)
 
 
+def _plant(choice: str) -> Callable[[Any], Any]:
+    """The plant of a study as a function of its training trials (``_system_for`` on them), so that (A, B) is
+    never identified from a trial the study then scores."""
+    return lambda train: _system_for(train, choice)
+
+
 def _load_model(path: str):
     from workbench.model import load_model
 
@@ -288,13 +294,14 @@ def cmd_import(ctx: _Context) -> int:
     return 0
 
 
-def _make_model(kind: str, system: Any, components: int | str, seed: int):
+def _make_model(kind: str, system: Any, components: int | str, seed: int, gain: str = "direct"):
     from workbench import model as wm
 
     if kind == "ioc-only":
-        return wm.IOCOnlyModel(system)
-    cls = wm.HumanBehaviorModel if kind == "proposed" else wm.GMROnlyModel
-    return cls(system, n_components=components, random_state=seed)
+        return wm.IOCOnlyModel(system, gain_method=gain)
+    if kind == "proposed":
+        return wm.HumanBehaviorModel(system, n_components=components, random_state=seed, gain_method=gain)
+    return wm.GMROnlyModel(system, n_components=components, random_state=seed)
 
 
 def cmd_fit(ctx: _Context) -> int:
@@ -311,22 +318,22 @@ def cmd_fit(ctx: _Context) -> int:
             components = select_components(ds, system, seed=a.seed)
             ctx.say(f"chose {components} components by BIC")
         progress.add_task(f"fitting {a.method} model on {len(ds)} demonstrations", total=None)
-        model = _make_model(a.method, system, components, a.seed).fit(ds)
+        model = _make_model(a.method, system, components, a.seed, a.gain).fit(ds)
     model.save(a.output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
     if a.bootstrap > 0:
-        _print_bootstrap(ctx, ds, system, a.bootstrap, a.seed)
+        _print_bootstrap(ctx, ds, system, a.bootstrap, a.seed, a.gain)
     ctx.say(f"wrote {a.output}")
     return 0
 
 
-def _print_bootstrap(ctx: _Context, ds: Any, system: Any, n_boot: int, seed: int) -> None:
+def _print_bootstrap(ctx: _Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct") -> None:
     from workbench.ioc import bootstrap
 
     with ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
-        result = bootstrap(ds, system, n_boot=n_boot, seed=seed,
+        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain,
                            progress=lambda done, total: progress.update(task, completed=done))
     ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
             f"{result.ci:g} % percentile intervals):")
@@ -400,11 +407,11 @@ def cmd_predict(ctx: _Context) -> int:
         cols.update({f"{s}_lower": pred.x_lower[:, j] for j, s in enumerate(names)})
         cols.update({f"{s}_upper": pred.x_upper[:, j] for j, s in enumerate(names)})
     out = atomic_write_table(pd.DataFrame(cols), a.output)
-    ix = names.index("x") if "x" in names else 0
-    iy = names.index("y") if "y" in names else 1
+    # the end position where the plant declares positions, else the whole end state
+    shown = model.system.r.position or range(len(names))
     ctx.say(
         f"predicted {horizon} steps ({horizon * dt:.2f} s) from {demo_id} step {a.start if a.x0 is None else 0}: "
-        f"end {names[ix]} = {x[-1, ix]:.3f}, {names[iy]} = {x[-1, iy]:.3f}"
+        "end " + ", ".join(f"{names[j]} = {x[-1, j]:.3f}" for j in shown)
     )
     ctx.say(f"wrote {out}")
     return 0
@@ -419,7 +426,7 @@ def cmd_evaluate(ctx: _Context) -> int:
         return _evaluate_per_subject(ctx, ds)
     result = study.run_study(
         ds,
-        _system_for(ds, a.system),
+        _plant(a.system),
         test_size=a.test_size,
         horizon=_steps(a.horizon, ds.dt),
         components=a.components,
@@ -437,19 +444,21 @@ def cmd_evaluate(ctx: _Context) -> int:
 
 
 def _evaluate_per_subject(ctx: _Context, ds: Any) -> int:
+    from rich.markup import escape
     from rich.table import Table
 
     from workbench import evaluate
-    from workbench.study import METHOD_TITLES
+    from workbench.study import METHOD_TITLES, verdicts
 
     a = ctx.args
-    system = _system_for(ds, a.system)
     components = 5 if a.components == "auto" else a.components
+    plant = _plant(a.system)
     subjects = sorted({str(d.meta.get("subject")) for d in ds if d.meta.get("subject") is not None})
     with ctx.progress() as progress:
         task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
         res = evaluate.per_subject(
-            lambda: evaluate.default_models(system, components, a.seed), ds, n_test=a.n_test,
+            # each subject's plant from its training trials only, never from the held-out ones
+            lambda train: evaluate.default_models(plant(train), components, a.seed), ds, n_test=a.n_test,
             horizon=_steps(a.horizon, ds.dt), seed=a.seed,
             progress=lambda done, total: progress.update(task, completed=done),
         )
@@ -463,6 +472,8 @@ def _evaluate_per_subject(ctx: _Context, ds: Any) -> int:
     ctx.say(f"one-way ANOVA across methods: {res.anova}")
     for r in res.ttests.values():
         ctx.say(f"  {r}")
+    for line in verdicts(res.table.assign(label=""), res.metric):
+        ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
     if a.output:
         atomic_write_table(res.table, a.output)
         ctx.say(f"wrote {a.output}")
@@ -470,6 +481,7 @@ def _evaluate_per_subject(ctx: _Context, ds: Any) -> int:
 
 
 def _print_study(ctx: _Context, result: Any) -> None:
+    from rich.markup import escape
     from rich.table import Table
 
     summary = result.summary()
@@ -484,6 +496,8 @@ def _print_study(ctx: _Context, result: Any) -> None:
         ctx.say(cov)
     if result.stats_text:
         ctx.say(result.stats_text)
+    for line in result.verdicts():
+        ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
 
 
 def _output_kwargs(a: argparse.Namespace, default: Path) -> dict[str, Any]:
@@ -583,7 +597,7 @@ def cmd_report(ctx: _Context) -> int:
     a = ctx.args
     ds = _load_demos(ctx, a.demos, a.mapping, a.label)
     result = study.run_study(
-        ds, _system_for(ds, a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
+        ds, _plant(a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
         samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
     )
     path = write_study_report(result, a.output, title=a.title)
@@ -628,7 +642,7 @@ def cmd_demo(ctx: _Context) -> int:
     out.mkdir(parents=True, exist_ok=True)
     ds.save(out / "demos.parquet")
     result = study.run_study(
-        ds, _system_for(ds, a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
+        ds, _plant(a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
         samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
     )
     timings["fit + compare"] = time.perf_counter() - t0 - timings["import"]
@@ -766,6 +780,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--components", type=_components, default=5, metavar="G|auto")
     p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
                    help="the proposed model (default) or one of its baselines")
+    p.add_argument("--gain", choices=["direct", "dmd", "iv"], default="direct",
+                   help="how K̂ is estimated: least squares (direct, default), the paper's DMD, or instrumental "
+                        "variables (iv: consistent when the operator's variability is autocorrelated)")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialization (default 0)")
     p.add_argument("--bootstrap", type=int, default=0, metavar="N",
                    help="also resample the trials N times and print 95 %% intervals of K̂ and the normalized Q, R "
@@ -789,7 +806,7 @@ def build_parser() -> argparse.ArgumentParser:
     _mapping_option(p)
 
     p = add("evaluate", cmd_evaluate,
-            "compare the proposed model with IOC-only and GMR-only on held-out trials; data-efficiency curve",
+            "compare the proposed model with IOC-only, GMR-only and persistence on held-out trials; data efficiency",
             "workbench evaluate demos.parquet --horizon 3 -o results.csv")
     p.add_argument("demos", nargs="+", metavar="DEMOS")
     p.add_argument("--label", nargs="+", help="strategy labels to evaluate (default all)")

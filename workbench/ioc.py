@@ -3,7 +3,8 @@
 Step 1 estimates the task-objective-based gain ``K̂`` of ``u = K x`` from the demonstrations, either as in the
 paper by dynamic mode decomposition, eqs. (12)-(14) of the method paper (``Ã = X' X⁺``, ``K̂ = B⁺(Ã − A)``),
 or by the direct regression ``K̂ = U X⁺``, which is algebraically identical for exact (A, B) and more accurate
-under process noise or model mismatch.
+under process noise or model mismatch, or by instrumental variables (``"iv"``), the one of the three that is
+consistent in closed loop with autocorrelated variability.
 
 Step 2 finds a quadratic cost ``M = [[Q, S], [Sᵀ, R]]`` for which ``K̂`` is the LQR gain, by the SDP of
 eqs. (15)-(19) of the method paper (``minimize α`` subject to ``P ⪰ 0``, the two Riccati equalities and
@@ -22,7 +23,7 @@ import contextlib
 import math
 import warnings
 from collections import OrderedDict
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -46,6 +47,7 @@ __all__ = [
     "InverseLQR",
     "stack_demonstrations",
     "gain_from_arrays",
+    "iv_instruments",
     "estimate_gain",
     "check_stabilizing",
     "spectral_radius",
@@ -54,10 +56,14 @@ __all__ = [
     "bootstrap",
 ]
 
-GainMethod = Literal["direct", "dmd"]
+GainMethod = Literal["direct", "dmd", "iv"]
 Structure = Literal["full", "S=0", "diagonal"]
 
-_METHODS = ("direct", "dmd")
+_METHODS = ("direct", "dmd", "iv")
+# Instruments of method "iv": each demonstration's first state times this many decaying exponentials of time.
+IV_BASIS = 8
+# Smallest squared canonical correlation between states and instruments accepted by "iv" (see `_iv_gain`).
+IV_MIN_RELEVANCE = 0.05
 _STRUCTURES = ("full", "S=0", "diagonal")
 
 # Post-check tolerances a solution must meet before it is accepted (see `InverseLQR.solve`).
@@ -214,7 +220,72 @@ def stack_demonstrations(demos: Iterable[Any], n: int, m: int) -> tuple[np.ndarr
     return tuple(np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))  # type: ignore[return-value]
 
 
-def gain_from_arrays(X: Any, U: Any, X_next: Any, A: Any, B: Any, method: GainMethod = "direct") -> np.ndarray:
+def iv_instruments(X: np.ndarray, lengths: Sequence[int], n_basis: int = IV_BASIS) -> np.ndarray:
+    """Instruments of the ``"iv"`` gain: each demonstration's first state times decaying exponentials of time.
+
+    The state a demonstration starts in was not made by its operator's variability, and (for zero-mean
+    variability) neither is ``x₀ e^{−k/τ}``; yet the closed loop carries ``x₀`` into every later state through
+    its decaying modes, which a few exponentials with time constants from 2 steps to half the longest
+    demonstration span. States several steps back are no substitute: an AR(1) variability with ρ = 0.9 still
+    correlates 0.35 over 10 steps, and on the known-gain operators of :mod:`workbench.operators` lagged-state
+    instruments (lags 5-40) gave larger errors than least squares (0.7-6 against 0.3 relative), the
+    initial-state ones 0.02-0.04 at 30 demonstrations.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, T)
+        Stacked states, demonstration after demonstration.
+    lengths : sequence of int
+        Columns per demonstration, summing to T.
+    n_basis : int
+        Number of time constants.
+
+    Returns
+    -------
+    ndarray, shape (n · n_basis, T)
+    """
+    n, T = X.shape
+    lengths = [int(L) for L in lengths]
+    if sum(lengths) != T or min(lengths, default=0) < 1:
+        raise DataError(f"demonstration lengths {lengths[:5]}… do not add up to the {T} stacked transitions")
+    taus = np.geomspace(2.0, max(4.0, max(lengths) / 2.0), n_basis)
+    blocks = []
+    for start, L in zip(np.cumsum([0, *lengths[:-1]]), lengths, strict=True):
+        basis = np.exp(-np.arange(L)[:, None] / taus[None, :])  # (L, n_basis)
+        x0 = X[:, start]
+        blocks.append((basis[:, :, None] * x0[None, None, :]).reshape(L, -1).T)
+    return np.concatenate(blocks, axis=1)
+
+
+def _iv_gain(X: np.ndarray, U: np.ndarray, lengths: Sequence[int]) -> np.ndarray:
+    """Two-stage least squares: regress U on the projection of X onto the instruments."""
+    Z = iv_instruments(X, lengths)
+    X_hat = np.linalg.lstsq(Z.T, X.T, rcond=None)[0].T @ Z  # first stage: E[x | instruments]
+    # Relevance: the smallest squared canonical correlation between the states and the instruments. A state
+    # direction the starts do not move is "explained" only by chance (≈ 0.02 on 6 demonstrations, less on
+    # more); on the known-gain operators every direction reached ≥ 0.3.
+    L = np.linalg.cholesky(X @ X.T)
+    W = scipy.linalg.solve_triangular(L, X_hat, lower=True)
+    relevance = float(np.linalg.eigvalsh(W @ W.T)[0])
+    if relevance < IV_MIN_RELEVANCE:
+        raise ModelError(
+            f"the instruments of the 'iv' gain (initial states × time) leave a state direction unexcited: its "
+            f"squared canonical correlation with them is {relevance:.3g} < {IV_MIN_RELEVANCE:g}, so the starts "
+            "of the demonstrations do not move every state (e.g. all start at the same height). Use "
+            "demonstrations from more varied start states, or method='direct'"
+        )
+    return np.linalg.lstsq(X_hat.T, U.T, rcond=None)[0].T
+
+
+def gain_from_arrays(
+    X: Any,
+    U: Any,
+    X_next: Any,
+    A: Any,
+    B: Any,
+    method: GainMethod = "direct",
+    lengths: Sequence[int] | None = None,
+) -> np.ndarray:
     """Estimate the gain ``K̂`` of ``u = K x`` from stacked data (step 1 of Algorithm 1).
 
     Parameters
@@ -224,10 +295,15 @@ def gain_from_arrays(X: Any, U: Any, X_next: Any, A: Any, B: Any, method: GainMe
         ``U`` is used by ``"direct"`` only, ``X_next`` by ``"dmd"`` only.
     A, B : array_like, shapes (n, n) and (n, m)
         The known plant (Assumption 1).
-    method : {"direct", "dmd"}
+    method : {"direct", "dmd", "iv"}
         ``"dmd"``: ``Ã = X' X⁺`` (eq. (12)) and ``K̂ = B⁺(Ã − A)`` (eq. (14)), valid under rank B = m
         (Assumption 2). ``"direct"``: the least-squares regression ``K̂ = U X⁺``; identical to DMD for exact
-        dynamics, more accurate under process noise or model mismatch.
+        dynamics, more accurate under process noise or model mismatch. ``"iv"``: instrumental variables
+        (two-stage least squares, instruments :func:`iv_instruments`), consistent when the variability is
+        autocorrelated and the state was made by the operator's own earlier inputs (closed loop), where both
+        least-squares estimates stay biased however many demonstrations there are.
+    lengths : sequence of int, optional
+        Columns of each demonstration in X (required by ``"iv"``).
 
     Returns
     -------
@@ -261,6 +337,11 @@ def gain_from_arrays(X: Any, U: Any, X_next: Any, A: Any, B: Any, method: GainMe
         U = _as_matrix(U, "U", (m, T))
         # lstsq on Xᵀ Kᵀ = Uᵀ: the minimum-norm least-squares solution, i.e. K̂ = U X⁺, without forming X⁺.
         K = np.linalg.lstsq(X.T, U.T, rcond=None)[0].T
+    elif method == "iv":
+        U = _as_matrix(U, "U", (m, T))
+        if lengths is None:
+            raise DataError("method 'iv' needs the demonstrations' lengths (its instruments are per demonstration)")
+        K = _iv_gain(X, U, lengths)
     else:
         X_next = _as_matrix(X_next, "X_next", (n, T))
         if np.linalg.matrix_rank(B) < m:
@@ -286,8 +367,8 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
         Each demonstration has ``.x`` (N, n) and ``.u`` (N, m).
     system : LinearSystem
         Anything with ``.A`` (n, n) and ``.B`` (n, m).
-    method : {"direct", "dmd"}
-        See :func:`gain_from_arrays`.
+    method : {"direct", "dmd", "iv"}
+        See :func:`gain_from_arrays`; ``"iv"`` for closed-loop data with autocorrelated variability.
 
     Returns
     -------
@@ -295,8 +376,11 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
         The gain, checked to be stabilizing (Assumption 3 of the method paper).
     """
     A, B = _system_matrices(system.A, system.B)
-    X, U, X_next = stack_demonstrations(demos, *B.shape)
-    return gain_from_arrays(X, U, X_next, A, B, method)
+    blocks = _demo_blocks(demos, *B.shape)
+    if not blocks:
+        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
+    X, U, X_next = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))
+    return gain_from_arrays(X, U, X_next, A, B, method, lengths=[b[0].shape[1] for b in blocks])
 
 
 # ---------------------------------------------------------------------------------- step 2: inverse LQR
@@ -809,7 +893,7 @@ def bootstrap(
 
     def fit(idx: np.ndarray) -> tuple[np.ndarray, TaskObjective]:
         X, U, X_next = (np.concatenate([blocks[i][k] for i in idx], axis=1) for k in range(3))
-        K = gain_from_arrays(X, U, X_next, A, B, method)
+        K = gain_from_arrays(X, U, X_next, A, B, method, lengths=[blocks[i][0].shape[1] for i in idx])
         return K, solver.solve(K)
 
     K0, obj0 = fit(np.arange(len(blocks)))
