@@ -15,18 +15,48 @@ Formats: MAVLink ``.tlog``, MCAP, PX4 ULog, CSV (:mod:`adapters.formats`), recog
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
-import pandas as pd
+if TYPE_CHECKING:
+    import pandas as pd
 
-from adapters.formats import FORMATS, Format, detect_format, get_format
-from adapters.mapping import ChannelMapping, load_mapping, shipped_mappings
-from adapters.pipeline import build
-from adapters.streams import Streams
-from adapters.summary import LogSummary, summarize
-from adapters.writer import demo_streams, write
-from workbench.demos import DemonstrationSet
+    from adapters.formats import FORMATS, Format, detect_format
+    from adapters.mapping import ChannelMapping, load_mapping, shipped_mappings
+    from adapters.pipeline import build
+    from adapters.streams import Streams
+    from adapters.summary import LogSummary
+    from adapters.writer import demo_streams, write
+    from workbench.demos import DemonstrationSet
+
+# The names below load their module (and numpy, pandas, pyarrow behind it) on first use, so that importing
+# the package, or a command that never reads a log, starts fast.
+_LAZY = {
+    "FORMATS": "adapters.formats",
+    "Format": "adapters.formats",
+    "detect_format": "adapters.formats",
+    "get_format": "adapters.formats",
+    "ChannelMapping": "adapters.mapping",
+    "load_mapping": "adapters.mapping",
+    "shipped_mappings": "adapters.mapping",
+    "build": "adapters.pipeline",
+    "Streams": "adapters.streams",
+    "LogSummary": "adapters.summary",
+    "summarize": "adapters.summary",
+    "demo_streams": "adapters.writer",
+    "write": "adapters.writer",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'adapters' has no attribute {name!r}")
+
 
 __all__ = [
     "FORMATS",
@@ -48,6 +78,8 @@ __all__ = [
 
 
 def _format(path: str | os.PathLike, format: str | None) -> Format:
+    from adapters.formats import detect_format, get_format
+
     return get_format(format) if format is not None else detect_format(path)
 
 
@@ -92,6 +124,9 @@ def load(
     DataError
         The file is damaged beyond reading, or holds no demonstration under the mapping's rules.
     """
+    from adapters.mapping import load_mapping
+    from adapters.pipeline import build
+
     fmt = _format(path, format)
     m = load_mapping(mapping).for_format(fmt.name)
     m.check_complete()
@@ -101,4 +136,6 @@ def load(
 
 def inspect(path: str | os.PathLike, *, format: str | None = None) -> LogSummary:
     """What a log holds: streams with counts, rates, fields and time spans; flight modes; skipped data."""
+    from adapters.summary import summarize
+
     return summarize(read(path, format=format))

@@ -15,13 +15,14 @@ A header line, then one row per sample::
   ``outcome``, ``target[0]``, ``target[1]``, … (the metadata of :mod:`adapters.meta`).
 
 This is :meth:`workbench.demos.DemonstrationSet.to_pandas`'s layout, so a set exported with pandas reads
-back. The reader (pandas with the pyarrow engine) returns one stream, ``"csv"``. Its ``t`` is one clock for
-the whole file: when the demonstrations' own times already follow each other it is ``t`` itself, otherwise
-the demonstrations are laid end to end, :data:`SEPARATION` seconds apart, so the shared pipeline (which
-segments and aligns on one clock) sees each demonstration as its own span.
+back. The reader (``pyarrow.csv``, multi-threaded, every check vectorized) returns one stream, ``"csv"``. Its
+``t`` is one clock for the whole file: when the demonstrations' own times already follow each other it is
+``t`` itself, otherwise the demonstrations are laid end to end, :data:`SEPARATION` seconds apart, so the shared
+pipeline (which segments and aligns on one clock) sees each demonstration as its own span.
 
 Errors name the file, the line (the header is line 1) and the column: a row with the wrong number of fields,
-text in a numeric column, time not increasing within a demonstration, missing ``demo`` / ``t`` columns.
+text in a numeric column, a byte that is not UTF-8, a magnitude beyond :data:`MAX_MAGNITUDE` (``1e308`` is
+finite but no measurement), time not increasing within a demonstration, missing ``demo`` / ``t`` columns.
 Rows without a time are skipped and counted.
 """
 
@@ -31,21 +32,31 @@ import csv as _csv
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from adapters.streams import Streams
 from workbench.atomic import atomic_path
-from workbench.errors import DataError, FormatError
+from workbench.errors import DataError
 
-__all__ = ["read", "write", "looks_like_csv", "STREAM", "SEPARATION", "REQUIRED"]
+if TYPE_CHECKING:
+    import pandas as pd
+    import pyarrow as pa
+
+__all__ = ["read", "write", "looks_like_csv", "STREAM", "SEPARATION", "REQUIRED", "MAX_MAGNITUDE"]
 
 STREAM = "csv"
 REQUIRED = ("demo", "t")
 #: Seconds between demonstrations laid end to end on the file's clock (longer than any sensible gap).
 SEPARATION = 60.0
+#: Largest magnitude a numeric cell may have. Beyond it a value is a damaged or mistyped number (``1e308``), not a
+#: measurement in any unit; below it squares and sums of squares (covariances, costs) stay finite in float64.
+MAX_MAGNITUDE = 1e100
+
+# A number as text (what a numeric cell pyarrow read as text because of some other cell looks like).
+_NUMBER = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|^\s*[-+]?(?i:nan|inf|infinity)\s*$"
+_FLAGS = {"true": True, "false": False}
 
 
 def looks_like_csv(head: bytes) -> bool:
@@ -62,18 +73,64 @@ def looks_like_csv(head: bytes) -> bool:
     return first.count(",") >= 1 and all(ch.isprintable() or ch == "\t" for ch in first)
 
 
-def _bad_row(path: str) -> str:
-    """Where a structural parse error is: the first row whose field count differs from the header's."""
-    try:
-        with open(path, newline="", encoding="utf-8", errors="replace") as f:
-            rows = _csv.reader(f)
-            header = next(rows, [])
-            for row in rows:
-                if row and len(row) != len(header):
-                    return f"line {rows.line_num}: {len(row)} fields, the header has {len(header)}"
-    except (OSError, _csv.Error) as exc:
-        return str(exc)
-    return "unknown line"
+class _Lines:
+    """Where data rows are in the file (error messages only: the fast path never needs line numbers).
+
+    pyarrow skips blank lines and lets quoted fields span lines, so row ``k`` is not always line ``k + 2``; the
+    standard library's reader, run only when an error must be placed, counts lines exactly.
+    """
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self._lines: list[int] | None = None
+
+    def of_row(self, k: int) -> int:
+        if self._lines is None:
+            lines = []
+            try:
+                with open(self.path, newline="", encoding="utf-8", errors="replace") as f:
+                    rows = _csv.reader(f)
+                    next(rows, None)
+                    start = rows.line_num + 1
+                    for row in rows:
+                        if any(cell.strip() for cell in row) or len(row) > 1:
+                            lines.append(start)
+                        start = rows.line_num + 1
+            except (OSError, _csv.Error):
+                pass
+            self._lines = lines
+        return self._lines[k] if k < len(self._lines) else k + 2
+
+    def bad_row(self) -> str:
+        """Where a structural parse error is: the first row whose field count differs from the header's."""
+        try:
+            with open(self.path, newline="", encoding="utf-8", errors="replace") as f:
+                rows = _csv.reader(f)
+                header = next(rows, [])
+                for row in rows:
+                    if row and len(row) != len(header):
+                        return f"line {rows.line_num}: {len(row)} fields, the header has {len(header)}"
+        except (OSError, _csv.Error) as exc:
+            return str(exc)
+        return "unknown line"
+
+    def bad_utf8(self) -> str | None:
+        """Line and column of the first byte that is not UTF-8, or None when the file is valid UTF-8."""
+        try:
+            with open(self.path, "rb") as f:
+                data = f.read()
+        except OSError:
+            return None
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            line_start = data.rfind(b"\n", 0, exc.start) + 1
+            line = data.count(b"\n", 0, exc.start) + 1
+            field = data.count(b",", line_start, exc.start)
+            header = data[: data.find(b"\n")].decode("utf-8", "replace").split(",") if line > 1 else []
+            name = f"column {header[field].strip()!r}" if field < len(header) else f"field {field + 1}"
+            return f"line {line}, {name}: byte 0x{data[exc.start]:02x} is not UTF-8 text"
+        return None
 
 
 def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Streams:
@@ -81,102 +138,168 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
 
     ``topics`` is accepted for symmetry with the other readers and ignored (a CSV has one stream).
     """
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pcsv
+
     where = os.fspath(path)
+    lines = _Lines(where)
     try:
         if os.path.getsize(path) == 0:
             raise DataError(f"{where}: empty file, not a CSV file")
-        try:
-            frame = pd.read_csv(path, engine="pyarrow", dtype={"demo": "string"})
-        except (ValueError, TypeError):
-            # pyarrow infers a column's type from its first block and gives up on a later odd cell ("nan" in
-            # an integer column); read as text, every cell is converted below and a bad one's line named
-            frame = pd.read_csv(path, engine="pyarrow", dtype=str)
+        with open(path, "rb") as f:
+            header = f.readline()
+        names = [c.strip() for c in header.decode("utf-8", "replace").lstrip("\ufeff").rstrip("\r\n").split(",")]
+        table = pcsv.read_csv(
+            where,
+            # Text arrives dictionary-encoded: labels and ids repeat, so checks run on the distinct values.
+            convert_options=pcsv.ConvertOptions(
+                column_types={"demo": pa.dictionary(pa.int32(), pa.string())} if "demo" in names else None,
+                strings_can_be_null=True,
+                auto_dict_encode=True,
+            ),
+        ).unify_dictionaries()
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError, TypeError) as exc:
-        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise DataError(f"{where}, {_bad_row(where)}: not a readable CSV ({detail})") from None
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"{where}: not UTF-8 text ({exc})") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
-    missing = [c for c in REQUIRED if c not in frame.columns]
+    except pa.ArrowInvalid as exc:
+        detail = str(exc).splitlines()[0]
+        place = lines.bad_utf8() if "UTF8" in detail else None
+        if place is None and "column" in detail.lower() and "expected" in detail.lower():
+            place = lines.bad_row()
+        if place is None:
+            place = lines.bad_utf8() or lines.bad_row()
+        raise DataError(f"{where}, {place}: not a readable CSV ({detail})") from None
+    columns = [str(c).strip() for c in table.column_names]
+    missing = [c for c in REQUIRED if c not in columns]
     if missing:
         raise DataError(
             f"{where}, line 1 (header): missing column(s) {missing}; the long format needs demo, t, then one "
-            f"column per state and input; columns present: {list(frame.columns)}"
+            f"column per state and input; columns present: {columns}"
         )
-    if len(set(frame.columns)) != len(frame.columns):
-        raise DataError(f"{where}, line 1 (header): repeated column names {list(frame.columns)}")
-    line = np.arange(len(frame)) + 2
-    columns: dict[str, Any] = {}
-    for name in frame.columns:
-        if name == "demo":
-            continue
-        columns[name] = _column(frame[name], name, line, where)
-    t = columns.pop("t")
-    if t.dtype == object:
-        raise DataError(f"{where}, column 't': not numeric")
+    if len(set(columns)) != len(columns):
+        raise DataError(f"{where}, line 1 (header): repeated column names {columns}")
+    n_rows = table.num_rows
+    if n_rows == 0:
+        raise DataError(f"{where}, line 2: no data rows, only the header")
+    values: dict[str, Any] = {}
+    for name, col in zip(columns, table.columns, strict=True):
+        if name != "demo":
+            values[name] = _column(col, name, lines, where, pa, pc)
+    t = values.pop("t")
+    if not isinstance(t, np.ndarray):  # a text column: no cell is a number
+        k = int(np.argmax(t.is_valid().to_numpy(zero_copy_only=False))) if len(t) else 0
+        raise DataError(f"{where}, line {lines.of_row(k)}, column 't': not numeric")
+
+    encoded = _encoded(table.column(columns.index("demo")), pa)
+    ids = pc.utf8_trim_whitespace(encoded.dictionary)
+    ids = pc.if_else(pc.equal(ids, ""), pa.scalar(None, pa.string()), ids)
+    if ids.null_count or len(pc.unique(ids)) != len(ids):  # ids equal up to blanks, or blank ids: merge them
+        encoded = ids.take(encoded.indices).dictionary_encode()
+        ids = encoded.dictionary
+    # Dictionary indices number the demonstrations in order of first appearance.
+    rank = pc.fill_null(encoded.indices, -1).to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
+    keep = np.isfinite(t) & (rank >= 0)
     skipped = {}
-    demo = frame["demo"].astype(object).where(frame["demo"].notna(), None).to_numpy()
-    keep = np.isfinite(t) & np.array([d is not None and str(d).strip() != "" for d in demo], dtype=bool)
     if not keep.all():
         skipped["rows without time or demo"] = int((~keep).sum())
-    rows = np.flatnonzero(keep)
-    if rows.size == 0:
-        raise DataError(f"{where}, line 2: no data rows with a time and a demo ({len(frame)} rows in all)")
-    ids = np.array([str(d).strip() for d in demo[rows]], dtype=object)
-    # group rows by demonstration, demonstrations in order of first appearance, rows in file order
-    _, first, inverse = np.unique(ids, return_index=True, return_inverse=True)
-    rank = np.argsort(np.argsort(first))[inverse]
-    order = np.argsort(rank, kind="stable")
-    rows, ids, rank = rows[order], ids[order], rank[order]
-    t_rows = t[rows]
+    rows = np.flatnonzero(keep) if not keep.all() else None
+    if rows is not None and rows.size == 0:
+        raise DataError(f"{where}, line 2: no data rows with a time and a demo ({n_rows} rows in all)")
+    if rows is not None:
+        rank = rank[rows]
+    in_file_order = bool(np.all(rank[1:] >= rank[:-1])) if rank.size else True
+    order = None if in_file_order else np.argsort(rank, kind="stable")
+    if order is not None:
+        rank = rank[order]
+        rows = order if rows is None else rows[order]
+    t_rows = t if rows is None else t[rows]
     starts = np.flatnonzero(np.r_[True, rank[1:] != rank[:-1]])
-    ends = np.r_[starts[1:], len(rows)]
-    for a, b in zip(starts, ends, strict=True):
-        d = np.diff(t_rows[a:b])
-        if (d <= 0).any():
-            k = a + int(np.argmax(d <= 0)) + 1
-            raise DataError(
-                f"{where}, line {line[rows[k]]}, column 't': time does not increase within demonstration "
-                f"{ids[k]!r} ({t_rows[k - 1]!r} then {t_rows[k]!r})"
-            )
-    clock = t_rows.copy()
+    ends = np.r_[starts[1:], rank.size]
+    step_ok = np.diff(t_rows) > 0
+    step_ok |= rank[1:] != rank[:-1]
+    if not step_ok.all():
+        k = int(np.argmax(~step_ok)) + 1
+        row = k if rows is None else int(rows[k])
+        raise DataError(
+            f"{where}, line {lines.of_row(row)}, column 't': time does not increase within demonstration "
+            f"{ids[int(rank[k])].as_py()!r} ({t_rows[k - 1]!r} then {t_rows[k]!r})"
+        )
     firsts, lasts = t_rows[starts], t_rows[ends - 1]
     overlapping = len(starts) > 1 and not (firsts[1:] > lasts[:-1]).all()
-    if overlapping or not (np.diff(rows) > 0).all():
-        cursor = 0.0
-        for a, b in zip(starts, ends, strict=True):
-            clock[a:b] = t_rows[a:b] - t_rows[a] + cursor
-            cursor = clock[b - 1] + SEPARATION
-    out = {"t": clock, "demo": ids}
-    out.update((name, values[rows]) for name, values in columns.items())
-    stream = pd.DataFrame(out)
+    clock = t_rows if rows is None else t_rows.copy()
+    if overlapping or not in_file_order:
+        span = lasts - firsts
+        offset = np.r_[0.0, np.cumsum(span[:-1] + SEPARATION)]
+        clock = t_rows - np.repeat(firsts - offset, ends - starts)
+    out: dict[str, Any] = {"t": clock, "demo": ids.take(pa.array(rank, pa.int32())).to_pandas()}
+    for name, v in values.items():
+        if isinstance(v, np.ndarray):
+            out[name] = v if rows is None else v[rows]
+        else:
+            out[name] = (v if rows is None else v.take(pa.array(rows))).to_pandas()
+    stream = pd.DataFrame(out, copy=False)
     return Streams(where, "csv", {STREAM: stream}, counts={STREAM: len(stream)}, skipped=skipped,
-                   info={"demos": int(len(starts)), "columns": list(frame.columns)})
+                   info={"demos": int(len(starts)), "columns": columns})
 
 
-def _column(series: pd.Series, name: str, line: np.ndarray, where: str) -> np.ndarray:
-    """A column as float64 when it is numeric, as text when it is text; mixed is an error naming the line."""
-    if series.dtype.kind == "b" and not series.isna().any():
-        return series.to_numpy(dtype=bool)
-    if series.dtype.kind in "biuf":
-        return series.to_numpy(dtype=np.float64, na_value=np.nan)
-    text = series.astype(object).where(series.notna(), None).to_numpy()
-    stripped = np.array([None if v is None else str(v).strip() for v in text], dtype=object)
-    lowered = {"true": 1.0, "false": 0.0}
-    filled = np.array([v is not None and v != "" for v in stripped], dtype=bool)
-    values = pd.to_numeric(pd.Series(stripped), errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
-    flags = np.array([lowered.get(str(v).lower(), np.nan) if v is not None else np.nan for v in stripped])
-    values = np.where(np.isnan(values), flags, values)
-    is_number = filled & ~np.isnan(values)
-    not_na = np.array([str(v).lower() not in ("nan", "na", "null") for v in stripped], dtype=bool)
-    is_text = filled & np.isnan(values) & not_na
-    if not is_number.any():
-        return np.array([None if v == "" else v for v in stripped], dtype=object) if is_text.any() else values
-    if is_text.any():
-        k = int(np.argmax(is_text))
-        raise DataError(f"{where}, line {line[k]}, column {name!r}: not a number ({stripped[k]!r})")
+def _column(col: pa.ChunkedArray, name: str, lines: _Lines, where: str, pa, pc) -> Any:
+    """A column as float64 when it is numeric, bool for flags, else text (an Arrow string array, trimmed).
+
+    A text column holding numbers and words is an error at the first word; a byte that is not UTF-8 and a
+    magnitude beyond :data:`MAX_MAGNITUDE` are errors at their line.
+    """
+    kind = col.type.value_type if pa.types.is_dictionary(col.type) else col.type
+    if pa.types.is_boolean(kind):
+        if col.null_count == 0:
+            return col.to_numpy(zero_copy_only=False)
+        kind, col = pa.float64(), col.cast(pa.float64())
+    if pa.types.is_binary(kind) or pa.types.is_large_binary(kind):
+        raise DataError(f"{where}, {lines.bad_utf8() or f'column {name!r}: not UTF-8 text'}")
+    if pa.types.is_integer(kind) or pa.types.is_floating(kind) or pa.types.is_decimal(kind):
+        values = col.to_numpy(zero_copy_only=False).astype(np.float64, copy=False)
+        return _checked_magnitude(values, name, lines, where)
+    if not (pa.types.is_string(kind) or pa.types.is_large_string(kind)):
+        col = col.cast(pa.string())  # dates and times pyarrow recognised: the long format has no such column
+    # Text columns hold few distinct values (labels, subjects): every test runs on the distinct values only.
+    encoded = _encoded(col, pa)
+    words = pc.utf8_trim_whitespace(encoded.dictionary)
+    words = pc.if_else(pc.equal(words, ""), pa.scalar(None, pa.string()), words)
+    lowered = pc.utf8_lower(words)
+    is_flag = pc.fill_null(pc.is_in(lowered, value_set=pa.array(list(_FLAGS))), False)
+    is_number = pc.fill_null(pc.match_substring_regex(words, _NUMBER), False)
+    is_word = pc.and_(pc.invert(pc.or_(is_number, is_flag)), pc.is_valid(words))
+    n_number, n_flag, n_word = (pc.sum(x).as_py() or 0 for x in (is_number, is_flag, is_word))
+    if n_number == 0 and (n_flag == 0 or n_word > 0):  # a text column (labels, subjects, outcomes)
+        return words.take(encoded.indices)
+    if n_word:
+        k = int(np.argmax(pc.fill_null(is_word.take(encoded.indices), False).to_numpy(zero_copy_only=False)))
+        word = words[encoded.indices[k].as_py()].as_py()
+        raise DataError(f"{where}, line {lines.of_row(k)}, column {name!r}: not a number ({word!r})")
+    numbers = pc.if_else(is_number, words, pa.scalar(None, pa.string())).cast(pa.float64())
+    flags = pc.if_else(is_flag, pc.equal(lowered, "true"), pa.scalar(None, pa.bool_())).cast(pa.float64())
+    values = pc.coalesce(numbers, flags).take(encoded.indices).to_numpy(zero_copy_only=False)
+    return _checked_magnitude(values, name, lines, where)
+
+
+def _encoded(col: pa.ChunkedArray, pa) -> pa.DictionaryArray:
+    """A text column as one dictionary array (pyarrow gives unified dictionaries, or plain text past 50 values)."""
+    whole = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
+    return whole if pa.types.is_dictionary(whole.type) else whole.dictionary_encode()
+
+
+def _checked_magnitude(values: np.ndarray, name: str, lines: _Lines, where: str) -> np.ndarray:
+    with np.errstate(invalid="ignore"):
+        absurd = np.abs(values) > MAX_MAGNITUDE
+    if absurd.any():
+        bad = np.isfinite(values) & absurd
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise DataError(
+                f"{where}, line {lines.of_row(k)}, column {name!r}: {float(values[k])!r} is beyond "
+                f"±{MAX_MAGNITUDE:g}, "
+                "not a plausible value (a damaged or mistyped number)"
+            )
     return values
 
 
@@ -185,6 +308,8 @@ def write(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame] | pd.Data
 
     Floats are written with the shortest text that reads back to the same float64.
     """
+    import pandas as pd
+
     where = os.fspath(path)
     if isinstance(streams, pd.DataFrame):
         frame = streams

@@ -4,9 +4,15 @@ A human's input is modeled as ``u = K x + w``: ``K`` from a task objective (Q, R
 control, and ``w`` a state-dependent Gaussian learned by a task-parameterized GMM and read out by GMR.
 """
 
-from workbench.demos import Demonstration, DemonstrationSet
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 from workbench.errors import DataError, ModelError, WorkbenchError
-from workbench.system import LinearSystem
+
+if TYPE_CHECKING:
+    from workbench.demos import Demonstration, DemonstrationSet
+    from workbench.system import LinearSystem
 
 __version__ = "0.1.0"
 
@@ -19,3 +25,16 @@ __all__ = [
     "ModelError",
     "__version__",
 ]
+
+# numpy and pandas load on first use of these names, so that ``workbench --help`` starts without them.
+_LAZY = {"Demonstration": "workbench.demos", "DemonstrationSet": "workbench.demos", "LinearSystem": "workbench.system"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'workbench' has no attribute {name!r}")

@@ -104,3 +104,76 @@ def test_integer_column_with_a_missing_cell_reads_as_float(tmp_path):
     path.write_text("demo,t,x\na,0,1\na,0.1,\na,0.2,3\n")
     x = adapters.read_streams(path)["csv"]["x"].to_numpy()
     assert x[0] == 1.0 and np.isnan(x[1]) and x[2] == 3.0
+
+
+def _long_format(n_demos: int = 3, n: int = 40, seed: int = 0) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    frames = []
+    for d in range(n_demos):
+        frames.append(pd.DataFrame({
+            "demo": f"d{d:03d}", "t": np.arange(n) * 0.05, "x": rng.standard_normal(n),
+            "k": rng.integers(-5, 5, n), "label": f"CS{d % 2}", "success": bool(d % 2),
+        }))
+    return pd.concat(frames, ignore_index=True)
+
+
+def test_same_values_as_pandas_read_csv(tmp_path):
+    frame = _long_format()
+    frame.loc[5, "x"] = np.nan
+    path = tmp_path / "long.csv"
+    frame.to_csv(path, index=False)
+    ours = csv.read(path)["csv"]
+    peer = pd.read_csv(path)
+    assert list(ours.columns) == ["t", "demo", *[c for c in peer.columns if c not in ("demo", "t")]]
+    for name in ("x", "k"):
+        np.testing.assert_array_equal(ours[name].to_numpy(), peer[name].to_numpy(dtype=float))
+    shift = (ours["t"] - peer["t"]).groupby(peer["demo"]).agg(["min", "max"])  # the file clock: one shift a demo
+    np.testing.assert_allclose(shift["min"], shift["max"], atol=1e-9)
+    for name in ("demo", "label", "success"):
+        assert ours[name].tolist() == peer[name].tolist()
+
+
+@pytest.mark.parametrize("column", ["x", "label", "demo"])
+def test_a_byte_that_is_not_utf8_is_reported_at_its_line_and_column(tmp_path, column):
+    frame = _long_format(n_demos=2, n=3000)
+    text = frame.to_csv(index=False).encode()
+    lines = text.split(b"\n")
+    row = 4321  # far past pyarrow's first block of type inference
+    cells = lines[row].split(b",")
+    at = list(frame.columns).index(column)
+    cells[at] = cells[at][:1] + b"\xff" + cells[at][1:]
+    lines[row] = b",".join(cells)
+    path = tmp_path / "bad.csv"
+    path.write_bytes(b"\n".join(lines))
+    with pytest.raises(DataError) as info:
+        csv.read(path)
+    assert f"line {row + 1}, column {column!r}" in str(info.value) and "UTF-8" in str(info.value)
+
+
+def test_an_absurd_magnitude_is_reported_at_its_line_and_column(tmp_path):
+    frame = _long_format()
+    frame.loc[17, "x"] = 1e308  # finite, but no measurement
+    path = tmp_path / "huge.csv"
+    frame.to_csv(path, index=False)
+    with pytest.raises(DataError) as info:
+        csv.read(path)
+    assert f"line {17 + 2}, column 'x'" in str(info.value) and "1e+308" in str(info.value)
+
+
+def test_text_late_in_a_long_numeric_column_names_its_line_despite_blank_lines(tmp_path):
+    frame = _long_format(n_demos=2, n=3000)
+    lines = frame.to_csv(index=False).split("\n")
+    cells = lines[5000].split(",")
+    cells[2] = "oops"
+    lines[5000] = ",".join(cells)
+    lines.insert(10, "")  # a blank line shifts every later line by one; pyarrow skips it
+    path = _write(tmp_path, "\n".join(lines))
+    with pytest.raises(DataError, match=r"line 5002, column 'x': not a number \('oops'\)"):
+        csv.read(path)
+
+
+def test_blanks_around_ids_and_labels_are_trimmed_and_ids_merge(tmp_path):
+    path = _write(tmp_path, "demo,t,label\na,0,CS1\n a ,1, CS1 \nb,0,CS2\n")
+    frame = csv.read(path)["csv"]
+    assert frame["demo"].tolist() == ["a", "a", "b"]
+    assert frame["label"].tolist() == ["CS1", "CS1", "CS2"]
