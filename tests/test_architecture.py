@@ -71,3 +71,22 @@ def test_core_runs_headless_without_rerun_or_matplotlib():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
     assert out.stdout.strip() == "[]"
+
+
+HEAVY = ("pandas", "pyarrow", "cvxpy", "sklearn", "scipy", "numpy")
+
+
+@pytest.mark.parametrize(
+    "code",
+    [
+        "import adapters, workbench",
+        "import sys; from workbench.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass",
+        "import sys; from workbench.cli import main\ntry:\n    main(['fit', '--help'])\nexcept SystemExit:\n    pass",
+    ],
+    ids=["import adapters", "workbench --help", "workbench fit --help"],
+)
+def test_startup_imports_no_heavy_library(code):
+    """Startup stays fast only while the heavy libraries load where they are used (issue 11: --help <= 0.25 s)."""
+    probe = f"{code}\nimport sys\nprint(sorted({{m.split('.')[0] for m in sys.modules}} & set({HEAVY!r})))"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=REPO)
+    assert out.stdout.strip().splitlines()[-1] == "[]"
