@@ -10,7 +10,8 @@ Every format goes through the same steps once its reader has produced :class:`~a
    touchdown for a state landing rule; pieces shorter than ``min_duration`` are dropped and counted;
 4. **metadata** — from the log's demo table or text markers (:mod:`adapters.meta`), plus where it came from.
 
-Each demonstration's ``t`` starts at 0; ``meta["t0"]`` is its start on the log clock and ``meta["skipped"]``
+Each demonstration's ``t`` starts at 0; ``meta["t0"]`` is its start on the log clock, ``meta["t_start"]`` its
+start in seconds since the log's first mapped sample (the viewer's flight clock), and ``meta["skipped"]``
 counts what the reader and the pipeline could not use in the file (by cause), so a user sees at once whether
 a load was clean.
 """
@@ -143,6 +144,8 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
     landing = m.segment.landing
     y_index = m.state_names.index(landing.state) if landing is not None and landing.state else None
     stem = Path(streams.path).stem
+    # the log's own clock starts at its first mapped sample: the viewer draws segments as time since then
+    log_start = min(float(s.t[0]) for s in series)
 
     found: list[tuple[Span, list[np.ndarray], list[np.ndarray]]] = []
     n_pieces = 0
@@ -198,6 +201,7 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
                 "format": streams.format,
                 "mapping": m.name,
                 "t0": float(t[0]),
+                "t_start": float(t[0]) - log_start,
                 "skipped": report,
             }
             if "mode" in span.meta:
