@@ -32,6 +32,7 @@ import pandas as pd
 
 from workbench.demos import Demonstration, DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
+from workbench.executor import serial, task_seed
 from workbench.stats import AnovaResult, TTestResult, anova_oneway, pairwise_ttests
 
 __all__ = [
@@ -359,6 +360,26 @@ def _fit_each(models: Mapping[str, Any], train: DemonstrationSet, where: str, fa
     return fitted
 
 
+def _efficiency_point(task: tuple) -> tuple[list[pd.DataFrame], list[str]]:
+    """One point of the data-efficiency curve (a task of :func:`data_efficiency`): fit every method on one
+    subset of the training trials, score it on the test trials."""
+    train_ref, test_ref, size, r, idx, make_models, n_components, horizon, starts = task
+    train = train_ref.load()
+    subset = train._like(train[j] for j in idx)
+    models = models_for(make_models, subset, n_components)
+    parts, failures = [], []
+    fitted = _fit_each(models, subset, f"n_train={size} repeat={r}", failures)
+    for name in (n for n in models if n not in fitted):
+        parts.append(pd.DataFrame({
+            "n_train": [size], "repeat": [r], "trial": [None], "label": [None], "start": [0],
+            "method": [name], "metric": [primary_metric(models[name].system)], "value": [np.nan],
+        }))
+    if fitted:
+        table = compare(fitted, list(test_ref.load()), horizon=horizon, starts=starts)
+        parts.append(table.assign(n_train=size, repeat=r))
+    return parts, failures
+
+
 def data_efficiency(
     make_models: Callable[[], Mapping[str, Any]] | Any,
     train: DemonstrationSet,
@@ -370,6 +391,8 @@ def data_efficiency(
     starts: str | int = "initial",
     n_components: int = 5,
     progress: Progress | None = None,
+    *,
+    executor: Any = None,
 ) -> pd.DataFrame:
     """Horizon RMSE of every method against the number of training demonstrations.
 
@@ -383,6 +406,9 @@ def data_efficiency(
     make_models : callable() or callable(train) → mapping name → unfitted model, or a LinearSystem
         Called afresh for every subset (:func:`models_for`); a system stands for :func:`default_models` (with
         ``n_components``).
+    executor : Executor, optional
+        Where the points of the curve run (:mod:`workbench.executor`; default here, in order). The subsets are
+        drawn here, so the table is the same whatever runs them.
 
     Returns
     -------
@@ -401,22 +427,16 @@ def data_efficiency(
         for r in range(reps):
             idx = np.arange(len(demos)) if size >= len(demos) else np.sort(rng.choice(len(demos), size, replace=False))
             plan.append((min(size, len(demos)), r, idx))
-    parts, failures = [], []
     test_list = _demos(test)
-    for i, (size, r, idx) in enumerate(plan):
-        subset = train._like(demos[j] for j in idx)
-        models = models_for(make_models, subset, n_components)
-        fitted = _fit_each(models, subset, f"n_train={size} repeat={r}", failures)
-        for name in (n for n in models if n not in fitted):
-            parts.append(pd.DataFrame({
-                "n_train": [size], "repeat": [r], "trial": [None], "label": [None], "start": [0],
-                "method": [name], "metric": [primary_metric(models[name].system)], "value": [np.nan],
-            }))
-        if fitted:
-            table = compare(fitted, test_list, horizon=horizon, starts=starts)
-            parts.append(table.assign(n_train=size, repeat=r))
-        if progress is not None:
-            progress(i + 1, len(plan))
+    ex = executor if executor is not None else serial
+    train_ref = ex.share(train)
+    test_ref = ex.share(test if isinstance(test, DemonstrationSet) else train._like(test_list))
+    tasks = [(train_ref, test_ref, size, r, [int(j) for j in idx], make_models, n_components, horizon, starts)
+             for size, r, idx in plan]
+    parts, failures = [], []
+    for task_parts, task_failures in ex.map(_efficiency_point, tasks, progress=progress):
+        parts.extend(task_parts)
+        failures.extend(task_failures)
     cols = ["n_train", "repeat", "trial", "label", "start", "method", "metric", "value"]
     df = pd.concat(parts, ignore_index=True)[cols]
     df.attrs["failures"] = failures
@@ -452,6 +472,25 @@ class SubjectStudy:
     failures: tuple[str, ...] = ()
 
 
+def _subject_task(task: tuple) -> tuple[pd.DataFrame | None, list[str], str]:
+    """One subject of :func:`per_subject`: read its trials, hold ``n_test`` out (seeded by the subject's name),
+    fit every method on the rest and score the held-out ones. Returns (table or None, failures, the plant's
+    primary metric)."""
+    ref, subject, n_test, seed, make_models, n_components, horizon, starts = task
+    ds = ref.load(subject=subject)
+    if len(ds) <= n_test:
+        raise DataError(f"subject {subject!r} has {len(ds)} trials; needs more than n_test={n_test}")
+    rng = np.random.default_rng(task_seed(seed, "per_subject", subject))
+    test_ids = {ds[int(j)].id for j in rng.choice(len(ds), n_test, replace=False)}
+    train = ds.filter(lambda d: d.id not in test_ids)
+    test = ds.filter(lambda d: d.id in test_ids)
+    models = models_for(make_models, train, n_components)
+    failures: list[str] = []
+    fitted = _fit_each(models, train, f"subject {subject}", failures)
+    table = compare(fitted, test, horizon=horizon, starts=starts).assign(subject=subject) if fitted else None
+    return table, failures, primary_metric(next(iter(models.values())).system)
+
+
 def per_subject(
     make_models: Callable[[], Mapping[str, Any]] | Any,
     demos: DemonstrationSet,
@@ -462,6 +501,8 @@ def per_subject(
     starts: str | int = "initial",
     n_components: int = 5,
     progress: Progress | None = None,
+    *,
+    executor: Any = None,
 ) -> SubjectStudy:
     """The multi-subject study of the paper: for every subject, fit each method on all but ``n_test`` of its
     trials (chosen at random, seeded), predict the held-out ones, then compare the methods across subjects.
@@ -480,26 +521,24 @@ def per_subject(
         The compared metric; default :func:`primary_metric` of the plant (position RMSE with position roles).
     demos : DemonstrationSet
         Trials with ``meta["subject"]``; at least two subjects with more than ``n_test`` trials each.
+    executor : Executor, optional
+        Where the subjects run, one task each (:mod:`workbench.executor`; default here, in order). A subject's
+        held-out trials are drawn with a seed of its own (``seed`` and its name, :func:`~workbench.executor.
+        task_seed`), so the study is the same whatever runs it, and a subject's split does not depend on the
+        others.
     """
     subjects = sorted({str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None})
     if len(subjects) < 2:
         raise DataError(f"a multi-subject study needs trials of at least two subjects; found {subjects}")
-    rng = np.random.default_rng(seed)
+    ex = executor if executor is not None else serial
+    ref = ex.share(demos, by_subject=True)
+    tasks = [(ref, subject, n_test, seed, make_models, n_components, horizon, starts) for subject in subjects]
     parts, failures = [], []
-    for i, subject in enumerate(subjects):
-        ds = demos.select(subject=subject)
-        if len(ds) <= n_test:
-            raise DataError(f"subject {subject!r} has {len(ds)} trials; needs more than n_test={n_test}")
-        test_ids = {ds[int(j)].id for j in rng.choice(len(ds), n_test, replace=False)}
-        train = ds.filter(lambda d, ids=test_ids: d.id not in ids)
-        test = ds.filter(lambda d, ids=test_ids: d.id in ids)
-        models = models_for(make_models, train, n_components)
-        metric = metric or primary_metric(next(iter(models.values())).system)
-        fitted = _fit_each(models, train, f"subject {subject}", failures)
-        if fitted:
-            parts.append(compare(fitted, test, horizon=horizon, starts=starts).assign(subject=subject))
-        if progress is not None:
-            progress(i + 1, len(subjects))
+    for table, subject_failures, subject_metric in ex.map(_subject_task, tasks, progress=progress):
+        metric = metric or subject_metric
+        failures.extend(subject_failures)
+        if table is not None:
+            parts.append(table)
     if not parts:
         raise DataError("no subject could be fitted: " + "; ".join(failures))
     table = pd.concat(parts, ignore_index=True)

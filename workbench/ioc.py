@@ -839,6 +839,36 @@ class BootstrapResult:
         return self.n_boot - self.n_failed
 
 
+def _resample_fit(
+    blocks: list, idx: np.ndarray, A: np.ndarray, B: np.ndarray, method: GainMethod, solver: InverseLQR
+) -> tuple[np.ndarray, TaskObjective]:
+    """Gain and task objective of the demonstrations ``idx`` (with repeats) of ``blocks``."""
+    X, U, X_next = (np.concatenate([blocks[i][k] for i in idx], axis=1) for k in range(3))
+    K = gain_from_arrays(X, U, X_next, A, B, method, lengths=[blocks[i][0].shape[1] for i in idx])
+    return K, solver.solve(K)
+
+
+def _resamples(blocks: list, draws: list, A: np.ndarray, B: np.ndarray, method: GainMethod,
+               solver: InverseLQR) -> list[tuple]:
+    """Per resample ``(b, idx)``: ``(b, K, diag Q, diag R, None)``, or ``(b, None, None, None, reason)``."""
+    out = []
+    for b, idx in draws:
+        try:
+            K, obj = _resample_fit(blocks, idx, A, B, method, solver)
+        except ModelError as exc:
+            out.append((b, None, None, None, str(exc)))
+        else:
+            out.append((b, K, np.diag(obj.Q_normalized), np.diag(obj.R_normalized), None))
+    return out
+
+
+def _bootstrap_block(task: tuple) -> list[tuple]:
+    """A block of bootstrap resamples, run by a worker: it reads the demonstrations from their file."""
+    ref, A, B, method, structure, draws = task
+    blocks = _demo_blocks(list(ref.load()), *B.shape)
+    return _resamples(blocks, draws, A, B, method, _cached_problem(A, B, structure, True))
+
+
 def bootstrap(
     demos: Any,
     system: Any,
@@ -848,6 +878,8 @@ def bootstrap(
     seed: int = 0,
     ci: float = 95,
     progress: Callable[[int, int], None] | None = None,
+    *,
+    executor: Any = None,
 ) -> BootstrapResult:
     """Bootstrap intervals of the gain (eqs. (12)-(14)) and the task objective (eqs. (15)-(19)).
 
@@ -869,7 +901,11 @@ def bootstrap(
     ci : float
         Interval coverage in percent (percentile method).
     progress : callable(i, n), optional
-        Called after each resample with the count done and ``n_boot``.
+        Called after each resample with the count done and ``n_boot`` (after each block with workers).
+    executor : Executor, optional
+        Where blocks of resamples run (``workbench.executor``; default here, in order); with workers, ``demos``
+        must be a DemonstrationSet (they read it from a shared Parquet file). Every resample's trials are drawn
+        here from one generator, so the intervals are the same whatever runs them.
 
     Raises
     ------
@@ -891,26 +927,31 @@ def bootstrap(
     if solver is None:
         raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
 
-    def fit(idx: np.ndarray) -> tuple[np.ndarray, TaskObjective]:
-        X, U, X_next = (np.concatenate([blocks[i][k] for i in idx], axis=1) for k in range(3))
-        K = gain_from_arrays(X, U, X_next, A, B, method, lengths=[blocks[i][0].shape[1] for i in idx])
-        return K, solver.solve(K)
-
-    K0, obj0 = fit(np.arange(len(blocks)))
+    K0, obj0 = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, solver)
     rng = np.random.default_rng(seed)
+    draws = [(b, rng.integers(0, len(blocks), size=len(blocks))) for b in range(n_boot)]
+    if executor is None:
+        results = []
+        with _single_threaded_blas():  # as on a worker: the same reductions, so the same intervals
+            for b, idx in draws:
+                results.extend(_resamples(blocks, [(b, idx)], A, B, method, solver))
+                if progress is not None:
+                    progress(b + 1, n_boot)
+    else:
+        # one resample per task in process (progress per resample); on workers ~4 blocks each amortize the setup
+        size = max(1, math.ceil(n_boot / (4 * executor.workers))) if executor.parallel else 1
+        ref = executor.share(demos)
+        tasks = [(ref, A, B, method, structure, draws[i : i + size]) for i in range(0, n_boot, size)]
+        report = None if progress is None else lambda done, total: progress(min(n_boot, done * size), n_boot)
+        results = [r for block in executor.map(_bootstrap_block, tasks, progress=report) for r in block]
     Ks, Qd, Rd, failures = [], [], [], []
-    for b in range(n_boot):
-        idx = rng.integers(0, len(blocks), size=len(blocks))
-        try:
-            K, obj = fit(idx)
-        except ModelError as exc:
-            failures.append(f"resample {b}: {exc}")
+    for b, K, q_diag, r_diag, error in results:
+        if error is not None:
+            failures.append(f"resample {b}: {error}")
         else:
             Ks.append(K)
-            Qd.append(np.diag(obj.Q_normalized))
-            Rd.append(np.diag(obj.R_normalized))
-        if progress is not None:
-            progress(b + 1, n_boot)
+            Qd.append(q_diag)
+            Rd.append(r_diag)
     if not Ks:
         raise ModelError(f"all {n_boot} bootstrap resamples failed; first failure: {failures[0]}")
     K_s, Q_s, R_s = np.array(Ks), np.array(Qd), np.array(Rd)

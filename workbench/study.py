@@ -24,10 +24,18 @@ from workbench.atomic import atomic_write_table
 from workbench.demos import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError
 
-__all__ = ["StudyResult", "run_study", "improvement_table", "METHOD_TITLES"]
+__all__ = [
+    "StudyResult", "run_study", "improvement_table", "verdicts", "metric_unit", "plant_for", "METHOD_TITLES",
+    "FLOOR_METHODS",
+]
 
-METHODS = ("proposed", "ioc_only", "gmr_only")
-METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only"}
+METHODS = ("proposed", "ioc_only", "gmr_only", "persistence")
+METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence"}
+#: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator.
+FLOOR_METHODS = ("ioc_only", "persistence")
+
+#: The plant of a study: fixed, or identified from a training set (``LinearSystem.identify``-like).
+PlantSpec = Any
 
 
 @dataclass
@@ -55,14 +63,29 @@ class StudyResult:
         return self.table[self.table["metric"].str.startswith("rmse_")]
 
     @property
+    def metric(self) -> str:
+        """The headline metric (position RMSE with position roles, else full-state RMSE)."""
+        from workbench.evaluate import primary_metric
+
+        return primary_metric(self.system)
+
+    @property
     def band(self) -> pd.DataFrame:
-        """Monte Carlo band coverage rows (joint per block), when predictions had samples."""
+        """Monte Carlo band coverage rows (joint, per block of several states), when predictions had samples."""
+        from workbench.evaluate import metric_blocks
+
+        blocks = metric_blocks(self.system)
+        joint = [f"band_{b}" for b, idx in blocks.items() if len(idx) > 1] or [f"band_{b}" for b in blocks]
         t = self.table
-        return t[t["metric"].isin(["band_position", "band_velocity"])]
+        return t[t["metric"].isin(joint)]
 
     def summary(self) -> pd.DataFrame:
         """Mean RMSE per label, metric and method, with the proposed model's improvement over each baseline."""
         return improvement_table(self.rmse)
+
+    def verdicts(self) -> list[str]:
+        """One plain sentence per label where the proposed model does not beat IOC-only or persistence."""
+        return verdicts(self.rmse, self.metric, metric_unit(self.system, self.metric))
 
     def save_tables(self, path: str | os.PathLike) -> Path:
         """The tidy RMSE table (plus the data-efficiency rows, ``table`` column) as CSV or Parquet, atomically."""
@@ -114,7 +137,22 @@ def _fit_all(system: Any, train: DemonstrationSet, components: int, seed: int) -
         "proposed": wm.HumanBehaviorModel(system, n_components=components, random_state=seed).fit(train),
         "ioc_only": wm.IOCOnlyModel(system).fit(train),
         "gmr_only": wm.GMROnlyModel(system, n_components=components, random_state=seed).fit(train),
+        "persistence": wm.PersistenceModel(system).fit(train),
     }
+
+
+def plant_for(system: PlantSpec, train: DemonstrationSet) -> Any:
+    """The plant of a study from its training trials: ``system`` itself, or ``system(train)`` for a callable
+    (e.g. ``LinearSystem.identify``), so (A, B) never sees a trial the study scores."""
+    return system(train) if callable(system) else system
+
+
+def metric_unit(system: Any, metric: str) -> str:
+    """The unit of an RMSE metric, from the roles' units of its block's first state ("" where none is declared)."""
+    from workbench.evaluate import metric_blocks
+
+    idx = metric_blocks(system).get(metric.removeprefix("rmse_"))
+    return system.roles.unit(system.state_names[idx[0]]) if idx else ""
 
 
 def run_study(
@@ -129,21 +167,33 @@ def run_study(
     repeats: int = 2,
     seed: int = 0,
     progress: Callable[[], Any] | None = None,
+    executor: Any = None,
 ) -> StudyResult:
-    """Fit and compare the three methods per strategy label (see the module docstring)."""
+    """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
+
+    ``executor`` (:mod:`workbench.executor`) runs the points of the data-efficiency curves; default here.
+
+    ``system`` is the plant, or a callable that makes it from a :class:`DemonstrationSet` (e.g.
+    ``LinearSystem.identify``): it is then called once, on the training trials of every label together, so no
+    test trial shapes (A, B). ``StudyResult.system`` is the plant used.
+    """
     from workbench import evaluate as ev
 
     labels = demos.labels or [None]
     timings: dict[str, float] = {}
     train, test, models, baselines = {}, {}, {}, {}
     rmse_parts, cov_parts, eff_parts = [], [], []
+    splits = {}
+    for label in labels:
+        splits[str(label)] = _split(demos if label is None else demos.by_label(label), test_size, seed)
+    all_train = [d for tr, _ in splits.values() for d in tr]
+    system = plant_for(system, demos._like(all_train))
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
         task = p.add_task("fitting and comparing", total=len(labels)) if p is not None else None
         for label in labels:
-            ds = demos if label is None else demos.by_label(label)
             label = str(label)
-            tr, te = _split(ds, test_size, seed)
+            tr, te = splits[label]
             t0 = time.perf_counter()
             G = select_components(tr, system, seed=seed) if components == "auto" else int(components)
             fitted = _fit_all(system, tr, G, seed)
@@ -168,6 +218,7 @@ def run_study(
                         eff = ev.data_efficiency(
                             system, tr, te, sizes=sizes, horizon=horizon, repeats=repeats, seed=seed, n_components=G,
                             progress=None if p is None else lambda d, t, sub=sub: p.update(sub, completed=d, total=t),
+                            executor=executor,
                         )
                         if p is not None:
                             p.remove_task(sub)
@@ -181,13 +232,14 @@ def run_study(
                     if failures:
                         warnings.warn(f"{label} data efficiency: {len(failures)} fits failed, e.g. {failures[0]}",
                                       stacklevel=2)
-                    eff = eff[eff["metric"] == "rmse_position"].assign(label=label)
+                    eff = eff[eff["metric"] == ev.primary_metric(system)].assign(label=label)
                     eff_parts.append(eff)
                 timings[f"efficiency {label}"] = time.perf_counter() - t0
             if p is not None:
                 p.advance(task)
     table = pd.concat(rmse_parts, ignore_index=True)
-    stats_text = _subject_stats(ev, table, demos)
+    metric = ev.primary_metric(system)
+    stats_text = _subject_stats(ev, table, demos, metric, metric_unit(system, metric))
     return StudyResult(
         demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
         coverage=_coverage_table(pd.concat(cov_parts, ignore_index=True)) if cov_parts else None,
@@ -203,20 +255,23 @@ def _coverage_table(cov: pd.DataFrame) -> pd.DataFrame:
     return (100.0 * wide).reset_index()
 
 
-def _subject_stats(ev: Any, table: pd.DataFrame, demos: DemonstrationSet) -> str | None:
-    """For multi-subject data: one-way ANOVA of per-trial position RMSE across methods, paired t-tests."""
+def _subject_stats(
+    ev: Any, table: pd.DataFrame, demos: DemonstrationSet, metric: str = "rmse_position", unit: str = ""
+) -> str | None:
+    """For multi-subject data: one-way ANOVA of the per-trial headline RMSE across methods, paired t-tests."""
     subjects = sorted({str(d.meta.get("subject")) for d in demos if d.meta.get("subject") is not None})
     if len(subjects) < 2:
         return None
-    groups = ev.method_groups(table, "rmse_position")
+    groups = ev.method_groups(table, metric)
     if len(groups) < 2 or min(len(v) for v in groups.values()) < 2:
         return None
     anova = ev.anova_oneway(groups)
     lines = [
         f"{len(subjects)} subjects ({', '.join(subjects)}); {len(next(iter(groups.values())))} test trials. "
-        f"One-way ANOVA of the per-trial position RMSE across methods: {anova}.",
+        f"One-way ANOVA of the per-trial {metric.removeprefix('rmse_').replace('_', ' ')} RMSE across methods: "
+        f"{anova}.",
         "",
-        "| pair | t | df | p | p (Holm) | mean difference [m] |",
+        f"| pair | t | df | p | p (Holm) | mean difference{f' [{unit}]' if unit else ''} |",
         "|---|---|---|---|---|---|",
     ]
     for (a, b), r in ev.pairwise_ttests(groups).items():
@@ -234,9 +289,37 @@ def improvement_table(rmse: pd.DataFrame) -> pd.DataFrame:
         for m in r.index:
             row[METHOD_TITLES.get(m, m)] = float(r[m])
         if "proposed" in r.index:
-            for base in ("ioc_only", "gmr_only"):
+            for base in ("ioc_only", "gmr_only", "persistence"):
                 if base in r.index and r[base] > 0:
                     change = 100 * (1 - r["proposed"] / r[base])
                     row[f"vs {METHOD_TITLES[base]}"] = f"{abs(change):.1f} % {'lower' if change >= 0 else 'higher'}"
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def verdicts(rmse: pd.DataFrame, metric: str, unit: str = "") -> list[str]:
+    """One plain sentence per label where the proposed model's mean ``metric`` is not lower than IOC-only's or
+    persistence's (:data:`FLOOR_METHODS`): then its predictions gain nothing on these data, and the user must
+    read that before any other number.
+
+    ``rmse`` is a tidy table (``label, method, metric, value``); labels where it beats both give no sentence.
+    """
+    t = rmse[rmse["metric"] == metric]
+    if t.empty:
+        return []
+    label_col = t["label"] if "label" in t.columns else pd.Series("", index=t.index)
+    mean = t.assign(label=label_col.fillna("")).groupby(["label", "method"], sort=False)["value"].mean()
+    u = f" {unit}" if unit else ""
+    what = metric.removeprefix("rmse_").replace("_", " ")
+    out = []
+    for label in dict.fromkeys(mean.index.get_level_values("label")):
+        m = mean.loc[label]
+        if "proposed" not in m.index or not np.isfinite(m["proposed"]):
+            continue
+        worse = [f"{METHOD_TITLES.get(b, b)} ({m['proposed']:.3g} vs {m[b]:.3g}{u})"
+                 for b in FLOOR_METHODS if b in m.index and np.isfinite(m[b]) and m["proposed"] >= m[b]]
+        if worse:
+            where = f"On {label}, the" if label else "The"
+            out.append(f"{where} proposed model is not better than {' nor than '.join(worse)} in mean {what} RMSE "
+                       "on the test trials: its predictions gain nothing over that baseline on these data.")
+    return out
