@@ -1,20 +1,20 @@
 """Flight-mode names: the numbers autopilots log, and the names people know them by.
 
 A mapping's mode rule (``[segment] mode = { …, names = "arducopter", keep = ["STABILIZE"] }``) and
-``workbench inspect`` translate with these tables.
+``workbench inspect`` translate with these tables. The MAVLink ones are pymavlink's (``mavutil``), never
+copied: ArduPilot's ``HEARTBEAT.custom_mode`` per vehicle type (the HEARTBEAT's ``type``: copters, planes and
+QuadPlanes — which report a VTOL type —, rovers and boats, subs, …) and PX4's custom mode (main mode in bits
+16–23, auto sub-mode in bits 24–31). PX4's ULog ``vehicle_status.nav_state`` is PX4's own enumeration, which
+pymavlink does not carry; it is listed here from PX4's ``vehicle_status.msg``.
 """
 
 from __future__ import annotations
 
-__all__ = ["MODE_TABLES", "mode_name", "mode_number"]
+from pymavlink import mavutil
 
-#: ArduCopter's ``HEARTBEAT.custom_mode`` (ArduCopter ``mode.h``).
-ARDUCOPTER = {
-    0: "STABILIZE", 1: "ACRO", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER", 6: "RTL", 7: "CIRCLE",
-    9: "LAND", 11: "DRIFT", 13: "SPORT", 14: "FLIP", 15: "AUTOTUNE", 16: "POSHOLD", 17: "BRAKE", 18: "THROW",
-    19: "AVOID_ADSB", 20: "GUIDED_NOGPS", 21: "SMART_RTL", 22: "FLOWHOLD", 23: "FOLLOW", 24: "ZIGZAG",
-    25: "SYSTEMID", 26: "AUTOROTATE", 27: "AUTO_RTL",
-}  # fmt: skip
+__all__ = ["MODE_TABLES", "mode_name", "mode_number", "heartbeat_table", "vehicle_kind"]
+
+_ML = mavutil.mavlink
 
 #: PX4's ``vehicle_status.nav_state`` (``vehicle_status.msg``).
 PX4_NAV_STATE = {
@@ -24,7 +24,57 @@ PX4_NAV_STATE = {
     19: "AUTO_FOLLOW_TARGET", 20: "AUTO_PRECLAND", 21: "ORBIT", 22: "AUTO_VTOL_TAKEOFF",
 }  # fmt: skip
 
-MODE_TABLES: dict[str, dict[int, str]] = {"arducopter": ARDUCOPTER, "px4_nav_state": PX4_NAV_STATE}
+
+def _px4_custom_modes() -> dict[int, str]:
+    """PX4's MAVLink custom modes, named by pymavlink's own decoder for every main / auto sub-mode it knows."""
+    mains = [v for k, v in vars(mavutil).items() if k.startswith("PX4_CUSTOM_MAIN_MODE_")]
+    subs = [v for k, v in vars(mavutil).items() if k.startswith("PX4_CUSTOM_SUB_MODE_AUTO_")]
+    out = {}
+    for main in mains:
+        for sub in [0, *subs] if main == mavutil.PX4_CUSTOM_MAIN_MODE_AUTO else [0]:
+            number = (main << 16) | (sub << 24)
+            name = mavutil.interpret_px4_mode(0, number)
+            if name != "UNKNOWN":
+                out[number] = name
+    return out
+
+
+MODE_TABLES: dict[str, dict[int, str]] = {
+    "arducopter": dict(mavutil.mode_mapping_acm),
+    "arduplane": dict(mavutil.mode_mapping_apm),  # ArduPlane and QuadPlane (Q… modes)
+    "ardurover": dict(mavutil.mode_mapping_rover),
+    "ardusub": dict(mavutil.mode_mapping_sub),
+    "antennatracker": dict(mavutil.mode_mapping_tracker),
+    "blimp": dict(mavutil.mode_mapping_blimp),
+    "px4": _px4_custom_modes(),
+    "px4_nav_state": PX4_NAV_STATE,
+}
+
+_BY_TABLE = {id(v): k for k, v in (
+    ("arducopter", mavutil.mode_mapping_acm), ("arduplane", mavutil.mode_mapping_apm),
+    ("ardurover", mavutil.mode_mapping_rover), ("ardusub", mavutil.mode_mapping_sub),
+    ("antennatracker", mavutil.mode_mapping_tracker), ("blimp", mavutil.mode_mapping_blimp))}
+# QuadPlanes report a VTOL type; pymavlink maps only some of them to ArduPlane's modes
+_VTOL_TYPES = {k for k, e in _ML.enums["MAV_TYPE"].items() if e.name.startswith("MAV_TYPE_VTOL")}
+
+
+def heartbeat_table(autopilot: int, mav_type: int) -> str | None:
+    """The mode table for a HEARTBEAT's ``autopilot`` and ``type``; ``None`` when neither says one."""
+    if int(autopilot) == _ML.MAV_AUTOPILOT_PX4:
+        return "px4"
+    if int(autopilot) != _ML.MAV_AUTOPILOT_ARDUPILOTMEGA:
+        return None
+    table = mavutil.mode_mapping_bynumber(int(mav_type))
+    if table is not None:
+        return _BY_TABLE.get(id(table))
+    return "arduplane" if int(mav_type) in _VTOL_TYPES else None
+
+
+def vehicle_kind(autopilot: int, mav_type: int) -> str:
+    """``"ArduPilot MAV_TYPE_VTOL_QUADROTOR"``-style text for a HEARTBEAT (pymavlink's enum names)."""
+    ap = _ML.enums["MAV_AUTOPILOT"].get(int(autopilot))
+    ty = _ML.enums["MAV_TYPE"].get(int(mav_type))
+    return f"{ap.name if ap else autopilot} {ty.name if ty else mav_type}"
 
 
 def mode_name(table: str | None, number: float) -> str:

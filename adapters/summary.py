@@ -1,8 +1,11 @@
 """``workbench inspect LOG``: what is in a log — streams, rates, fields, time span, flight modes, skips.
 
 The first things a PlotJuggler user looks at, as one frozen :class:`LogSummary` (``str()`` renders it as text).
-Flight modes are shown where the log says them in a known way: ArduPilot ``HEARTBEAT.custom_mode`` (from the
-vehicle, not the ground station) and PX4 ``vehicle_status.nav_state``; armed spans likewise.
+A stream's rate is its mean rate, ``(count − 1) / span``: telemetry arrives in bursts, so the median gap
+between two messages says little about how often one comes. Flight modes are shown, as spans with their
+durations, where the log says them in a known way: MAVLink ``HEARTBEAT.custom_mode`` from the vehicle (not
+the ground station), named by the vehicle's type (ArduCopter, ArduPlane / QuadPlane, Rover, Sub, PX4; see
+:mod:`adapters.modes`), and PX4 ULog ``vehicle_status.nav_state``; armed spans likewise.
 """
 
 from __future__ import annotations
@@ -14,19 +17,17 @@ from typing import Any
 
 import numpy as np
 
-from adapters.modes import mode_name
+from adapters.modes import heartbeat_table, mode_name, vehicle_kind
 from adapters.segment import Span, flag_spans
 from adapters.streams import Streams
 
 __all__ = ["LogSummary", "StreamSummary", "ModeSpan", "summarize"]
 
-_ARDUPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA
-_COPTER_TYPES = {2, 3, 4, 13, 14, 15}  # MAV_TYPE quadrotor, coaxial, helicopter, hexa, octo, tricopter
 
 
 @dataclass(frozen=True)
 class StreamSummary:
-    """One stream: message count, median rate, time span and field names."""
+    """One stream: message count, mean rate ``(count − 1) / span``, time span and field names."""
 
     name: str
     count: int
@@ -44,6 +45,10 @@ class ModeSpan:
     end: float
     mode: str
 
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
 
 @dataclass(frozen=True)
 class LogSummary:
@@ -59,6 +64,7 @@ class LogSummary:
     armed: tuple[tuple[float, float], ...]
     skipped: tuple[tuple[str, int], ...]
     info: tuple[tuple[str, Any], ...]
+    vehicle: str = ""  # what the modes were named by, e.g. "MAV_AUTOPILOT_ARDUPILOTMEGA MAV_TYPE_FIXED_WING"
 
     @property
     def duration(self) -> float:
@@ -80,9 +86,9 @@ class LogSummary:
                 f"{s.t_end - self.t_start:>10.2f}  {fields}"
             )
         if self.modes:
-            lines.append("modes: " + "; ".join(
-                f"{m.mode} {m.start - self.t_start:.1f}–{min(m.end, self.t_end) - self.t_start:.1f} s"
-                for m in self.modes))
+            lines.append(f"modes{f' ({self.vehicle})' if self.vehicle else ''}: " + "; ".join(
+                f"{m.mode} {m.start - self.t_start:.1f}–{min(m.end, self.t_end) - self.t_start:.1f} s "
+                f"({m.duration:.1f} s)" for m in self.modes))
         if self.armed:
             lines.append("armed: " + "; ".join(
                 f"{a - self.t_start:.1f}–{min(b, self.t_end) - self.t_start:.1f} s" for a, b in self.armed))
@@ -92,9 +98,8 @@ class LogSummary:
 def _stream_summary(name: str, frame, count: int) -> StreamSummary:
     t = frame["t"].to_numpy(dtype=np.float64, na_value=np.nan)
     t = t[np.isfinite(t)]
-    d = np.diff(t)
-    d = d[d > 0]
-    rate = float(1.0 / np.median(d)) if d.size else 0.0
+    span = float(t.max() - t.min()) if t.size else 0.0
+    rate = (t.size - 1) / span if t.size > 1 and span > 0 else 0.0
     fields = tuple(str(c) for c in frame.columns if c != "t")
     return StreamSummary(name, int(count), rate, float(t.min()) if t.size else math.nan,
                          float(t.max()) if t.size else math.nan, fields)
@@ -112,21 +117,41 @@ def _mode_spans(t: np.ndarray, modes: np.ndarray, table: str) -> list[ModeSpan]:
     return [ModeSpan(a, b, n) for a, b, n in out]
 
 
-def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span]]:
+def _heartbeat_rows(hb) -> tuple[np.ndarray, str | None, str]:
+    """The vehicle's HEARTBEAT rows (the most frequent vehicle source), its mode table and its description."""
+    autopilot = hb["autopilot"].to_numpy().astype(np.int64)
+    kind = hb["type"].to_numpy().astype(np.int64)
+    tables = np.array([heartbeat_table(a, k) or "" for a, k in zip(autopilot, kind, strict=True)])
+    rows = tables != ""
+    if not rows.any():
+        return rows, None, ""
+    if {"sysid", "compid"} <= set(hb.columns):  # two vehicles (or a companion) are never mixed
+        key = hb["sysid"].to_numpy().astype(np.int64) * 256 + hb["compid"].to_numpy().astype(np.int64)
+        values, counts = np.unique(key[rows], return_counts=True)
+        rows &= key == values[np.argmax(counts)]
+    # a vehicle reports one type; the most frequent wins over a stray message
+    values, counts = np.unique(kind[rows], return_counts=True)
+    main = int(values[np.argmax(counts)])
+    rows &= kind == main
+    first = int(np.argmax(rows))
+    return rows, str(tables[first]), vehicle_kind(int(autopilot[first]), main)
+
+
+def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
     hb = streams.frames.get("HEARTBEAT")
-    if hb is not None and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb.columns):
-        rows = (hb["autopilot"].to_numpy() == _ARDUPILOT) & np.isin(hb["type"].to_numpy(), list(_COPTER_TYPES))
+    if hb is not None and len(hb) and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb.columns):
+        rows, table, vehicle = _heartbeat_rows(hb)
         if rows.any():
             t = hb["t"].to_numpy(dtype=np.float64)[rows]
             modes = hb["custom_mode"].to_numpy()[rows]
-            armed = (hb["base_mode"].to_numpy()[rows].astype(np.int64) & 128) != 0
-            return _mode_spans(t, modes, "arducopter"), flag_spans(t, armed)
+            armed = (hb["base_mode"].to_numpy()[rows].astype(np.int64) & 128) != 0  # MAV_MODE_FLAG_SAFETY_ARMED
+            return _mode_spans(t, modes, table), flag_spans(t, armed), vehicle
     vs = streams.frames.get("vehicle_status")
     if vs is not None and "nav_state" in vs.columns:
         t = vs["t"].to_numpy(dtype=np.float64)
         armed = vs["arming_state"].to_numpy() == 2 if "arming_state" in vs.columns else np.zeros(len(t), bool)
-        return _mode_spans(t, vs["nav_state"].to_numpy(), "px4_nav_state"), flag_spans(t, armed)
-    return [], []
+        return _mode_spans(t, vs["nav_state"].to_numpy(), "px4_nav_state"), flag_spans(t, armed), "PX4 (nav_state)"
+    return [], [], ""
 
 
 def summarize(streams: Streams) -> LogSummary:
@@ -136,7 +161,7 @@ def summarize(streams: Streams) -> LogSummary:
     )
     starts = [s.t_start for s in summaries if math.isfinite(s.t_start)]
     ends = [s.t_end for s in summaries if math.isfinite(s.t_end)]
-    modes, armed = _modes(streams)
+    modes, armed, vehicle = _modes(streams)
     t_end = max(ends) if ends else 0.0
     try:
         size = os.path.getsize(streams.path)
@@ -154,4 +179,5 @@ def summarize(streams: Streams) -> LogSummary:
         armed=tuple((s.start, min(s.end, t_end)) for s in armed),
         skipped=tuple(sorted((str(k), int(v)) for k, v in streams.skipped.items() if v)),
         info=info,
+        vehicle=vehicle,
     )

@@ -22,6 +22,7 @@ from typing import Any
 
 from workbench.atomic import atomic_write_table
 from workbench.errors import DataError, WorkbenchError
+from workbench.threads import limit_threads
 
 __all__ = ["main", "build_parser", "SAMPLE_LOGS"]
 
@@ -60,6 +61,17 @@ class _Context:
             disable=self.quiet or not self.err.is_terminal,  # no bars (or blank lines) in logs and pipes
         )
 
+    def executor(self):
+        """Serial by default; a Dask ``LocalCluster`` with ``--workers N``; the cluster at ``--scheduler``."""
+        from workbench.executor import make_executor
+
+        a = self.args
+        ex = make_executor(getattr(a, "workers", None), getattr(a, "scheduler", None),
+                           staging=getattr(a, "staging", None))
+        if ex.parallel:
+            print(f"running tasks on {ex}", file=sys.stderr) if not self.quiet else None
+        return ex
+
 
 # -- input helpers -----------------------------------------------------------------------------------------
 def _existing(path: str | os.PathLike, what: str = "file") -> Path:
@@ -70,7 +82,9 @@ def _existing(path: str | os.PathLike, what: str = "file") -> Path:
 
 
 def _is_demo_file(path: Path) -> bool:
-    return path.suffix.lower() in (".parquet", ".pq")
+    from workbench.dataset import is_dataset
+
+    return path.suffix.lower() in (".parquet", ".pq") or is_dataset(path)
 
 
 def _load_one(path: Path, mapping: str | None) -> Any:
@@ -267,15 +281,16 @@ def cmd_inspect(ctx: _Context) -> int:
         f"{len(summary.streams)} streams, {summary.duration:.1f} s",
         markup=True,
     )
-    table = Table("stream", "messages", "rate [Hz]", "from [s]", "to [s]", "fields")
+    table = Table("stream", "messages", "mean rate [Hz]", "from [s]", "to [s]", "fields")
     for st in summary.streams:
         fields = ", ".join(st.fields[:8]) + (f", … (+{len(st.fields) - 8})" if len(st.fields) > 8 else "")
-        table.add_row(st.name, str(st.count), f"{st.rate_hz:.1f}", f"{st.t_start - t0:.2f}", f"{st.t_end - t0:.2f}",
+        table.add_row(st.name, str(st.count), f"{st.rate_hz:.3g}", f"{st.t_start - t0:.2f}", f"{st.t_end - t0:.2f}",
                       fields)
     ctx.say(table)
     if summary.modes:
-        ctx.say("flight modes: " + "; ".join(
-            f"{m.mode} {m.start - t0:.1f}–{min(m.end, summary.t_end) - t0:.1f} s" for m in summary.modes))
+        ctx.say(f"flight modes{f' ({summary.vehicle})' if summary.vehicle else ''}: " + "; ".join(
+            f"{m.mode} {m.start - t0:.1f}–{min(m.end, summary.t_end) - t0:.1f} s "
+            f"({min(m.end, summary.t_end) - m.start:.1f} s)" for m in summary.modes))
     if summary.armed:
         ctx.say("armed: " + "; ".join(f"{a - t0:.1f}–{min(b, summary.t_end) - t0:.1f} s" for a, b in summary.armed))
     if summary.skipped:
@@ -283,9 +298,39 @@ def cmd_inspect(ctx: _Context) -> int:
     return 0
 
 
+def _is_dataset_output(output: str) -> bool:
+    """``-o DIR/`` (or an existing directory, or a name without a suffix) asks for a partitioned dataset."""
+    return output.endswith(("/", os.sep)) or Path(output).is_dir() or not Path(output).suffix
+
+
+def _import_dataset(ctx: _Context) -> int:
+    from adapters.batch import expand_logs, import_logs
+
+    a = ctx.args
+    files = expand_logs(a.logs)
+    with ctx.executor() as ex, ctx.progress() as progress:
+        task = progress.add_task(f"importing {len(files)} logs", total=len(files))
+        report = import_logs(files, a.output, a.mapping, label=a.label, executor=ex,
+                             progress=lambda done, total: progress.update(task, completed=done))
+    for log in report.imported:
+        if log.skipped:  # a damaged or partly unmapped file still gave data: say what was left out
+            what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in log.skipped)
+            print(f"warning: {log.source}: skipped {what}", file=sys.stderr)
+    for source, cause in report.failures:
+        print(f"error: {source}: not imported: {cause}", file=sys.stderr)
+    subjects = {p.subject for log in report.imported for p in log.partitions if p.subject is not None}
+    ctx.say(f"wrote {report.n_demos} demonstrations ({report.n_samples} samples, {len(subjects)} subjects) from "
+            f"{len(report.imported)} of {len(files)} logs to the dataset {report.path}/")
+    return EXIT_ERROR if report.failures else 0
+
+
 def cmd_import(ctx: _Context) -> int:
     a = ctx.args
-    ds = _load_demos(ctx, a.logs, a.mapping)
+    if _is_dataset_output(a.output):
+        return _import_dataset(ctx)
+    from adapters.batch import expand_logs
+
+    ds = _load_demos(ctx, [str(f) for f in expand_logs(a.logs)], a.mapping)
     if a.label:
         ds = type(ds)([d.with_meta(label=a.label) for d in ds], ds.state_names, ds.input_names, ds.dt)
     out = Path(a.output)
@@ -882,7 +927,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not debug:
         warnings.showwarning = _show_warning
     try:
-        return int(args.func(_Context(args)) or 0)
+        with limit_threads():  # small matrices: one BLAS thread is faster than many (workbench.threads)
+            return int(args.func(_Context(args)) or 0)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
