@@ -25,7 +25,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.demos import Demonstration, DemonstrationSet
-from workbench.errors import ConvergenceWarning, ModelError, WorkbenchError
+from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError, WorkbenchError
 from workbench.frames import FrameSpec
 from workbench.ioc import TaskObjective, estimate_gain
 from workbench.model_io import ModelFile, ModelFileError, write_model_file
@@ -64,6 +64,8 @@ _CALIBRATION_STARTS = 3
 _CALIBRATION_TRIALS = 30
 # EM iterations of the auxiliary fold models: their likelihood has long flattened out by then.
 _FOLD_MAX_ITER = 200
+# Fewer distinct demonstrations than this fit with a DegenerateFitWarning.
+MIN_DISTINCT_DEMOS = 3
 
 
 # ------------------------------------------------------------------------------------------------ helpers
@@ -95,6 +97,16 @@ def demo_list(demos: DemonstrationSet | Iterable[Demonstration], system: LinearS
         raise ModelError(
             f"{where}: the demonstrations are sampled at dt={dt:g} s but the system is discretized at "
             f"dt={system.dt:g} s; resample the demonstrations or rebuild the system"
+        )
+    # identical copies (a file loaded twice, one trial repeated) add samples but no information
+    distinct = len({(d.x.tobytes(), d.u.tobytes()) for d in out})
+    if distinct < MIN_DISTINCT_DEMOS:
+        copies = f" ({len(out)} given; identical copies count once)" if distinct < len(out) else ""
+        warnings.warn(
+            f"{where}: fitting on {distinct} distinct demonstration(s){copies}; the gain, the variability's "
+            f"mixture and its noise rest on fewer than {MIN_DISTINCT_DEMOS} trials and will not generalize",
+            DegenerateFitWarning,
+            stacklevel=3,
         )
     return out
 
@@ -313,6 +325,7 @@ class BehaviorModel:
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore", ConvergenceWarning)
+                        warnings.simplefilter("ignore", DegenerateFitWarning)  # the outer fit has warned
                         sub.fit([d for j, d in enumerate(demos) if j not in held])
                 except WorkbenchError:
                     held_out = None

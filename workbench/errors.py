@@ -14,7 +14,9 @@ __all__ = [
     "MappingError",
     "ModelError",
     "SolverError",
+    "WorkbenchWarning",
     "ConvergenceWarning",
+    "DegenerateFitWarning",
 ]
 
 
@@ -42,5 +44,13 @@ class SolverError(ModelError):
     """Every solver in the chain failed or returned a solution that did not pass the post-checks."""
 
 
-class ConvergenceWarning(UserWarning):
+class WorkbenchWarning(UserWarning):
+    """Base class of every warning the workbench gives on purpose (the result exists, but look at it)."""
+
+
+class ConvergenceWarning(WorkbenchWarning):
     """An iterative fit (EM) stopped at ``max_iter`` before meeting its tolerance."""
+
+
+class DegenerateFitWarning(WorkbenchWarning):
+    """A model was fitted on too few distinct demonstrations to say much about how an operator flies."""
