@@ -68,8 +68,8 @@ class _Context:
         a = self.args
         ex = make_executor(getattr(a, "workers", None), getattr(a, "scheduler", None),
                            staging=getattr(a, "staging", None))
-        if ex.parallel:
-            print(f"running tasks on {ex}", file=sys.stderr) if not self.quiet else None
+        if ex.parallel and not self.quiet:
+            print(f"running tasks on {ex}", file=sys.stderr)
         return ex
 
 
@@ -376,10 +376,10 @@ def cmd_fit(ctx: _Context) -> int:
 def _print_bootstrap(ctx: _Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct") -> None:
     from workbench.ioc import bootstrap
 
-    with ctx.progress() as progress:
+    with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
         result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain,
-                           progress=lambda done, total: progress.update(task, completed=done))
+                           progress=lambda done, total: progress.update(task, completed=done), executor=ex)
     ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
             f"{result.ci:g} % percentile intervals):")
     for names, lo, hi, what in ((ds.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
@@ -421,8 +421,8 @@ def cmd_predict(ctx: _Context) -> int:
             x0 = np.array([float(v) for v in a.x0.split(",")])
         except ValueError:
             raise DataError(f"--x0 must be comma-separated numbers, got {a.x0!r}") from None
-        target, t0, demo_id, task_x0 = None, 0.0, "x0", None
-        dt, names, in_names = model.system.dt, model.system.state_names, model.system.input_names
+        target, t0, demo_id, task_x0, start = None, 0.0, "x0", None, 0
+        names, in_names = model.system.state_names, model.system.input_names
     else:
         if not a.demos:
             raise WorkbenchError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
@@ -433,8 +433,23 @@ def cmd_predict(ctx: _Context) -> int:
         demo = ds[ids.index(a.demo)] if a.demo else ds[0]
         if not 0 <= a.start < len(demo):
             raise DataError(f"{a.demos}: --start {a.start} outside trial {demo.id!r} (0…{len(demo) - 1})")
-        x0, target, demo_id, task_x0 = demo.x[a.start], demo.target, demo.id, demo.x[0]
-        t0, dt, names, in_names = float(demo.t[a.start]), ds.dt, ds.state_names, ds.input_names
+        t0 = float(demo.t[a.start])
+        try:
+            at_dt = model.demos_at_model_dt(ds, resample=a.resample)
+        except WorkbenchError as exc:
+            raise type(exc)(f"{a.demos}: {exc}") from None
+        if at_dt is not ds:
+            # --start counts samples of the file; on the model's grid the start is the sample nearest its time
+            demo = at_dt[ids.index(demo.id)]
+            start = int(np.argmin(np.abs(demo.t - t0)))
+            ctx.say(f"resampled {a.demos} from dt = {ds.dt:g} s to the model's dt = {model.system.dt:g} s "
+                    f"(states linear, inputs held); step {a.start} (t = {t0:.3f} s) is step {start} there")
+            t0 = float(demo.t[start])
+        else:
+            start = a.start
+        x0, target, demo_id, task_x0 = demo.x[start], demo.target, demo.id, demo.x[0]
+        names, in_names = ds.state_names, ds.input_names
+    dt = model.system.dt  # the model steps at its own dt, whatever the demonstrations' sampling
     horizon = _steps(a.horizon, dt)
     # from inside a trial, the task's start frame stays at the trial's first state
     kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0}
@@ -455,7 +470,7 @@ def cmd_predict(ctx: _Context) -> int:
     # the end position where the plant declares positions, else the whole end state
     shown = model.system.r.position or range(len(names))
     ctx.say(
-        f"predicted {horizon} steps ({horizon * dt:.2f} s) from {demo_id} step {a.start if a.x0 is None else 0}: "
+        f"predicted {horizon} steps ({horizon * dt:.2f} s) from {demo_id} step {start}: "
         "end " + ", ".join(f"{names[j]} = {x[-1, j]:.3f}" for j in shown)
     )
     ctx.say(f"wrote {out}")
@@ -469,18 +484,20 @@ def cmd_evaluate(ctx: _Context) -> int:
     ds = _load_demos(ctx, a.demos, a.mapping, a.label)
     if a.per_subject:
         return _evaluate_per_subject(ctx, ds)
-    result = study.run_study(
-        ds,
-        _plant(a.system),
-        test_size=a.test_size,
-        horizon=_steps(a.horizon, ds.dt),
-        components=a.components,
-        samples=a.samples,
-        efficiency=a.efficiency,
-        repeats=a.repeats,
-        seed=a.seed,
-        progress=ctx.progress,
-    )
+    with ctx.executor() as ex:
+        result = study.run_study(
+            ds,
+            _plant(a.system),
+            test_size=a.test_size,
+            horizon=_steps(a.horizon, ds.dt),
+            components=a.components,
+            samples=a.samples,
+            efficiency=a.efficiency,
+            repeats=a.repeats,
+            seed=a.seed,
+            progress=ctx.progress,
+            executor=ex,
+        )
     _print_study(ctx, result)
     if a.output:
         result.save_tables(a.output)
@@ -499,13 +516,14 @@ def _evaluate_per_subject(ctx: _Context, ds: Any) -> int:
     components = 5 if a.components == "auto" else a.components
     plant = _plant(a.system)
     subjects = sorted({str(d.meta.get("subject")) for d in ds if d.meta.get("subject") is not None})
-    with ctx.progress() as progress:
+    seed = a.seed
+    with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
         res = evaluate.per_subject(
             # each subject's plant from its training trials only, never from the held-out ones
-            lambda train: evaluate.default_models(plant(train), components, a.seed), ds, n_test=a.n_test,
+            lambda train: evaluate.default_models(plant(train), components, seed), ds, n_test=a.n_test,
             horizon=_steps(a.horizon, ds.dt), seed=a.seed,
-            progress=lambda done, total: progress.update(task, completed=done),
+            progress=lambda done, total: progress.update(task, completed=done), executor=ex,
         )
     for failure in res.failures:
         print(f"warning: {failure}", file=sys.stderr)
@@ -641,10 +659,12 @@ def cmd_report(ctx: _Context) -> int:
 
     a = ctx.args
     ds = _load_demos(ctx, a.demos, a.mapping, a.label)
-    result = study.run_study(
-        ds, _plant(a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
-        samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
-    )
+    with ctx.executor() as ex:
+        result = study.run_study(
+            ds, _plant(a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt),
+            components=a.components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
+            progress=ctx.progress, executor=ex,
+        )
     path = write_study_report(result, a.output, title=a.title)
     _print_study(ctx, result)
     ctx.say(f"wrote {path} with figures in {Path(a.output) / 'figures'}")
@@ -770,6 +790,20 @@ def _output_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1 (localhost only)")
 
 
+def _executor_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("scaling out (Dask)")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("--workers", type=int, metavar="N",
+                   help="run independent tasks on a local Dask cluster of N worker processes (default: serial, "
+                        "in this process)")
+    x.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run them on a running Dask cluster, e.g. tcp://10.0.0.5:8786 (its workers need the "
+                        "workbench and must reach the input files and --staging)")
+    g.add_argument("--staging", metavar="DIR",
+                   help="folder where data for the workers is written (default a temporary folder; on a cluster, "
+                        "a path every worker reaches)")
+
+
 def _mapping_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mapping", metavar="M",
                    help=f"channel mapping for raw logs: a shipped name or a TOML file (default {DEFAULT_MAPPING})")
@@ -810,12 +844,16 @@ def build_parser() -> argparse.ArgumentParser:
             "workbench inspect flight.tlog")
     p.add_argument("log", help="a .tlog, .mcap, .ulg, .csv log or a demonstrations .parquet")
 
-    p = add("import", cmd_import, "turn logs into one demonstrations file through a channel mapping",
-            "workbench import a.tlog b.mcap --mapping planar_quadrotor -o demos.parquet")
-    p.add_argument("logs", nargs="+", metavar="LOG")
+    p = add("import", cmd_import, "turn logs into one demonstrations file, or many logs into a partitioned dataset",
+            "workbench import 'logs/*.tlog' --mapping planar_quadrotor -o dataset/ --workers 2")
+    p.add_argument("logs", nargs="+", metavar="LOG|DIR|GLOB",
+                   help="log files, directories of logs, or quoted glob patterns")
     _mapping_option(p)
-    p.add_argument("-o", "--output", required=True, metavar="FILE", help="demonstrations file (.parquet, .csv, …)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE|DIR/",
+                   help="a demonstrations file (.parquet, .csv, …), or DIR/ for a dataset with one Parquet file per "
+                        "log and subject, imported in parallel; a log that fails is reported and the rest imported")
     p.add_argument("--label", help="set every trial's strategy label")
+    _executor_options(p)
 
     p = add("fit", cmd_fit, "fit a human behavior model (task objective + variability) to demonstrations",
             "workbench fit demos.parquet --label CS1 --components 5 -o cs1.npz")
@@ -834,6 +872,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "diagonals (the paper gives none)")
     _system_option(p)
     _mapping_option(p)
+    _executor_options(p)
 
     p = add("predict", cmd_predict, "predict a trajectory with a fitted model from a recorded or given state",
             "workbench predict --model cs1.npz demos.parquet --demo s00-cs1-003 --horizon 3 --samples 200 -o p.csv")
@@ -842,6 +881,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--demo", metavar="ID", help="trial to start from (default the first)")
     p.add_argument("--start", type=int, default=0, metavar="K", help="sample of the trial to start from (default 0)")
     p.add_argument("--x0", metavar="X,Y,…", help="instead of a trial: the start state, comma-separated")
+    p.add_argument("--resample", action="store_true",
+                   help="resample demonstrations sampled at another dt than the model's to the model's dt "
+                        "(default: refuse them)")
     p.add_argument("--horizon", type=_positive_float, default=3.0, metavar="SECONDS",
                    help="prediction horizon in seconds (default 3.0)")
     p.add_argument("--samples", type=int, default=0, metavar="N",
@@ -863,6 +905,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="held-out trials per subject with --per-subject (default 1)")
     _study_options(p)
     _mapping_option(p)
+    _executor_options(p)
 
     p = add("view", cmd_view, "log demonstrations (and a model's variability and predictions) to rerun",
             "workbench view demos.parquet --model CS1=cs1.npz --model CS2=cs2.npz --save session.rrd")
@@ -899,6 +942,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--title", default="Workbench report")
     _study_options(p)
     _mapping_option(p)
+    _executor_options(p)
 
     p = add("demo", cmd_demo, "the whole pipeline on the sample logs: import, fit CS1 and CS2, compare, report, .rrd",
             "workbench demo --out out/ && rerun out/demo.rrd")
