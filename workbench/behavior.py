@@ -214,6 +214,33 @@ class BehaviorModel:
         target[pos] = x0[pos] + offset[pos]
         return target
 
+    def demos_at_model_dt(self, demos: DemonstrationSet, *, resample: bool = False) -> DemonstrationSet:
+        """``demos`` checked against the model's sampling step ``system.dt``, resampled to it on request.
+
+        A model steps ``x̂⁺ = A x̂ + B û`` once per ``system.dt``: a start state from demonstrations at
+        another step would be labelled with the wrong times and compared with the wrong samples.
+
+        Raises
+        ------
+        ModelError
+            ``demos`` are sampled at another step and ``resample`` is false, or have other states / inputs.
+        """
+        self._check_fitted("demos_at_model_dt")
+        sys_ = self.system
+        if (demos.n_states, demos.n_inputs) != (sys_.n, sys_.m):
+            raise ModelError(
+                f"demonstrations {demos!r} have {demos.n_states} states and {demos.n_inputs} inputs; the model "
+                f"has n={sys_.n}, m={sys_.m}"
+            )
+        if math.isclose(float(demos.dt), sys_.dt, rel_tol=1e-6):
+            return demos
+        if not resample:
+            raise ModelError(
+                f"the demonstrations are sampled at dt = {demos.dt:g} s but the model steps at dt = {sys_.dt:g} s; "
+                f"resample them to the model's dt (CLI: --resample) or fit a model at their dt"
+            )
+        return demos.resample(sys_.dt)
+
     def _dynamics(self) -> tuple[np.ndarray, np.ndarray]:
         """The (A, B) a rollout steps with: the plant's (the persistence baseline replaces it)."""
         return self.system.A, self.system.B
