@@ -428,6 +428,14 @@ def _meta(raw: Any, path: str) -> MetaRules:
     fields = raw.get("fields", list(DEFAULT_META_FIELDS))
     if not isinstance(fields, list) or not all(isinstance(f, str) for f in fields):
         raise _fail(path, "meta.fields", f"must be a list of names, got {fields!r}")
+    # a misspelt field would silently drop that metadata from every demonstration: the names are a closed set
+    for name in fields:
+        if name not in DEFAULT_META_FIELDS:
+            near = nearest(name, DEFAULT_META_FIELDS, n=1)
+            raise _fail(
+                path, "meta.fields", f"unknown field {name!r}{f' (did you mean {near[0]!r}?)' if near else ''}; "
+                f"known: {', '.join(DEFAULT_META_FIELDS)}"
+            )
     for key in ("key", "prefix"):
         if key in raw and not isinstance(raw[key], str):
             raise _fail(path, f"meta.{key}", f"must be a string, got {raw[key]!r}")
@@ -587,8 +595,13 @@ def select(sel: Selector, streams: Streams, what: str, mapping: str, *, n_column
 
 def channel_values(ch: Channel, sel: Selected) -> np.ndarray:
     """The channel's values for the selected rows: ``sign * scale * transform(columns) + offset``."""
-    tr = TRANSFORMS[ch.transform]
     raw = np.column_stack([numeric(sel.frame, c)[sel.rows] for c in sel.columns])
+    return channel_convert(ch, raw)
+
+
+def channel_convert(ch: Channel, raw: np.ndarray) -> np.ndarray:
+    """``sign * scale * transform(raw) + offset`` of raw field columns (rows × columns), offline and online."""
+    tr = TRANSFORMS[ch.transform]
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         return ch.gain * tr.forward(raw, dict(ch.params)) + ch.offset
 

@@ -41,7 +41,7 @@ def test_shipped_mappings_load_for_their_formats():
         m.check_complete()
         assert m.state_names == ("x", "y", "phi", "xdot", "ydot", "phidot") and m.input_names == ("u1", "u2")
     ardupilot = load_mapping("ardupilot_manual").for_format("tlog")
-    assert ardupilot.segment.mode.keep == (0,)  # STABILIZE
+    assert ardupilot.segment.mode.keep == (0, 2, 5)  # STABILIZE, ALT_HOLD, LOITER
     assert ardupilot.channel("u1").selector.alternatives == ("RC_CHANNELS_RAW.chan1_raw",)
     px4 = load_mapping("px4_manual").for_format("ulog")
     assert px4.channel("phi").transform == "quaternion_roll"
@@ -76,6 +76,8 @@ def test_an_unknown_mapping_name_lists_the_shipped_ones():
          "unknown mode 'STABILISE'"),
         (BASE + "[segment]\nlanding = { state = \"z\" }\n", "'z' is not one of the states"),
         (BASE + "[meta]\nfields = 3\n", "meta.fields"),
+        (BASE + '[meta]\nfields = ["id", "lable"]\n', "meta.fields: unknown field 'lable' (did you mean 'label'?)"),
+        (BASE + '[meta]\nfields = ["id", "pilot"]\n', "unknown field 'pilot'; known: id, label, subject"),
         (BASE.replace('inputs = ["u"]', 'inputs = ["a"]'), "are also states"),
     ],
 )
