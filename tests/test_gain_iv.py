@@ -94,7 +94,7 @@ def test_iv_reaches_models_and_bootstrap(quad):
     np.testing.assert_allclose(ioc.K_, K_iv, atol=1e-10)
     hbm = HumanBehaviorModel(quad, gain_method="iv", n_components=2, fit_objective=False, noise_folds=0).fit(ds)
     np.testing.assert_allclose(hbm.K_, K_iv, atol=1e-10)
-    boot = bootstrap(ds, quad, n_boot=4, method="iv", seed=0)
+    boot = bootstrap(ds, quad, n_boot=4, method="iv", structure="diagonal", seed=0)
     assert boot.method == "iv" and boot.n_ok >= 1
     np.testing.assert_allclose(boot.K, K_iv, atol=1e-12)
 

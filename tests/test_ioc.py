@@ -117,7 +117,7 @@ def test_diagonal_structure_recovers_a_diagonal_cost():
     rng = np.random.default_rng(3)
     for n, m in [(4, 1), (6, 2)]:
         sys_ = random_system(rng, n, m)
-        M_true = scipy.linalg.block_diag(np.diag(rng.uniform(0.2, 5.0, n)), random_spd(rng, m))
+        M_true = np.diag(rng.uniform(0.2, 5.0, n + m))
         K = dare_gain(sys_.A, sys_.B, M_true)
         obj = inverse_lqr(sys_.A, sys_.B, K, structure="diagonal")
         err = np.abs(obj.M_normalized - normalized(M_true)).max()
@@ -202,16 +202,20 @@ def test_quadrotor_dare_gain_solves(quadrotor):
     assert np.allclose(obj.P_normalized, obj.P / np.linalg.eigvalsh(obj.M)[-1])
 
 
-def test_infeasible_structure_is_a_model_error():
+def test_infeasible_structure_is_a_model_error_for_the_exact_sdp():
     # With A = 0 the LQR gain is −(R + BᵀPB)⁻¹Sᵀ, so S = 0 forces K = 0: any other gain is infeasible.
     A = np.zeros((2, 2))
     B = np.array([[1.0], [0.0]])
     K = np.array([[0.1, 0.2]])
     with pytest.raises(ModelError, match="infeasible") as info:
-        inverse_lqr(A, B, K, structure="S=0")
+        InverseLQR(A, B, structure="S=0", closest=False).solve(K)
     assert not isinstance(info.value, SolverError)
     print(f"S=0 infeasible: {str(info.value)[:160]}")
     assert inverse_lqr(A, B, K).forward_gain_error <= 1e-6  # S free: feasible
+    # the default answers with the closest S = 0 cost, whose gain is 0: a mismatch of 100 %
+    closest = inverse_lqr(A, B, K, structure="S=0")
+    assert closest.status == "approximate"
+    assert abs(closest.forward_gain_error - 1.0) <= 1e-6
 
 
 def test_non_stabilizing_gain_is_refused_before_any_solver(monkeypatch):

@@ -30,6 +30,8 @@ from typing import Any, Literal
 import cvxpy as cp
 import numpy as np
 import scipy.linalg
+import scipy.optimize
+import scipy.sparse.csgraph
 
 from workbench.errors import ConvergenceWarning, DataError, ModelError, SolverError
 from workbench.frozen import readonly
@@ -51,8 +53,11 @@ __all__ = [
     "estimate_gain",
     "check_stabilizing",
     "spectral_radius",
+    "forward_gain_tolerance",
     "forward_gain",
     "inverse_lqr",
+    "closest_structured_objective",
+    "decoupled_parts",
     "bootstrap",
 ]
 
@@ -70,6 +75,9 @@ _STRUCTURES = ("full", "S=0", "diagonal")
 LAMBDA_MIN_TOL = 1e-6
 FORWARD_GAIN_TOL = 1e-6
 P_PSD_TOL = 1e-7
+# The solvers meet eqs. (17)-(18) to ~1e-8 relative to ‖M‖ ≤ α, so the forward-gain error they can reach grows
+# with α: the accepted error is FORWARD_GAIN_TOL · max(1, α), at most this (see `forward_gain_tolerance`).
+FORWARD_GAIN_TOL_MAX = 1e-4
 # A raw λmin(M) this close below 1 is rescaled to 1 before the checks (see `InverseLQR._attempt`).
 RESCALE_MAX = 1e-3
 # The second stage may give up this much of the optimal α to pick the member closest to I.
@@ -386,6 +394,17 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
 # ---------------------------------------------------------------------------------- step 2: inverse LQR
 
 
+def forward_gain_tolerance(alpha: float) -> float:
+    """Forward-gain error an SDP solution with condition bound ``alpha`` must meet to be accepted.
+
+    A solution whose error exceeds the fixed 1e-6 by a hair (1.3e-6 on a 300-demonstration fit with α in the
+    tens) used to send the chain on to SCS for seconds; the bound scales with the problem instead:
+    ``FORWARD_GAIN_TOL · max(1, α)``, capped at ``FORWARD_GAIN_TOL_MAX``.
+    """
+    a = float(alpha) if math.isfinite(alpha) else math.inf
+    return min(FORWARD_GAIN_TOL_MAX, FORWARD_GAIN_TOL * max(1.0, a))
+
+
 def forward_gain(A: Any, B: Any, Q: Any, R: Any, S: Any | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The LQR gain of a cost (eqs. (5)-(6) of the method paper), convention ``u = K x``.
 
@@ -442,6 +461,9 @@ class TaskObjective:
         Solver that produced the accepted solution, its status, and the cost structure imposed.
     second_stage : bool
         Whether M is the member of the α-optimal face closest to I (solver-independent) or the raw α-optimum.
+    parts : tuple of (states, inputs)
+        For the closest structured cost (:func:`closest_structured_objective`), the decoupled parts of the plant
+        each scaled separately; empty for the SDP's answer.
     """
 
     Q: np.ndarray
@@ -459,6 +481,7 @@ class TaskObjective:
     status: str
     structure: str
     second_stage: bool
+    parts: tuple = ()
 
     @property
     def n(self) -> int:
@@ -531,6 +554,10 @@ class InverseLQR:
         ``α ≤ 1.001 α*``; the α-optimal face can hold many M, and this picks one independent of the solver.
     solvers : sequence of str, optional
         Solver chain, default Clarabel → SCS → CVXOPT (those installed).
+    closest : bool
+        For ``"S=0"`` and ``"diagonal"``: return the structured cost whose LQR gain is closest to K
+        (:func:`closest_structured_objective`, always an answer, with its ``forward_gain_error``) rather than
+        solve the exact SDP with the structure imposed (infeasible for almost every estimated gain).
 
     Notes
     -----
@@ -546,12 +573,14 @@ class InverseLQR:
         structure: Structure = "full",
         second_stage: bool = True,
         solvers: Iterable[str] | None = None,
+        closest: bool = True,
     ) -> None:
         if structure not in _STRUCTURES:
             raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
         self.A, self.B = _system_matrices(A, B)
         self.structure = structure
         self.second_stage = bool(second_stage)
+        self.closest = bool(closest)
         installed = set(cp.installed_solvers())
         chain = tuple(s.upper() for s in (solvers if solvers is not None else _SOLVER_CHAIN))
         self.solvers = tuple(s for s in chain if s in installed)
@@ -604,7 +633,9 @@ class InverseLQR:
         with warnings.catch_warnings():
             # cvxpy warns on inaccurate solutions; the post-checks below decide on those.
             warnings.simplefilter("ignore", UserWarning)
-            problem.solve(solver=solver, **_SOLVER_OPTIONS.get(solver, {}))
+            # No warm start: Clarabel would otherwise update the solver cached from the previous gain, and the
+            # answer for a gain would depend on which gain was solved before it.
+            problem.solve(solver=solver, warm_start=False, **_SOLVER_OPTIONS.get(solver, {}))
         return str(problem.status)
 
     def _values(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -645,11 +676,14 @@ class InverseLQR:
             structured variant is infeasible for this K.
         SolverError
             If no solver in the chain returns a solution that passes the post-checks
-            (λmin(M) ≥ 1 − 1e-6, P ⪰ 0, forward-gain error ≤ 1e-6); the message lists every attempt.
+            (λmin(M) ≥ 1 − 1e-6, P ⪰ 0, forward-gain error ≤ :func:`forward_gain_tolerance` of α); the
+            message lists every attempt.
         """
         n, m = self.B.shape
         K = _as_matrix(K, "K", (m, n))
         check_stabilizing(self.A, self.B, K)
+        if self.structure != "full" and self.closest:
+            return closest_structured_objective(self.A, self.B, K, self.structure)
         with _single_threaded_blas():
             return self._solve(K)
 
@@ -695,7 +729,8 @@ class InverseLQR:
         raise SolverError(
             f"inverse LQR (eqs. (15)-(19) of the method paper, structure {self.structure!r}, n={n}, m={m}) "
             f"found no solution passing the post-checks (λmin(M) ≥ {1 - LAMBDA_MIN_TOL:g}, P ⪰ 0, "
-            f"forward-gain error ≤ {FORWARD_GAIN_TOL:g}). Attempts: " + "; ".join(a.describe() for a in attempts)
+            f"forward-gain error ≤ {FORWARD_GAIN_TOL:g}·max(1, α)). Attempts: "
+            + "; ".join(a.describe() for a in attempts)
         )
 
     def _attempt(
@@ -730,11 +765,16 @@ class InverseLQR:
         if not note and p_rel < -P_PSD_TOL:
             note = f"λmin(P)/max(1, λmax(P)) = {p_rel:.3g}"
         attempts.append(_Attempt(solver, stage, status, lam_raw, err, note))
-        ok = K_fwd is not None and lam_min >= 1.0 - LAMBDA_MIN_TOL and p_rel >= -P_PSD_TOL and err <= FORWARD_GAIN_TOL
+        alpha = float(alpha_star if alpha_star is not None else self._alpha.value)
+        ok = (
+            K_fwd is not None
+            and lam_min >= 1.0 - LAMBDA_MIN_TOL
+            and p_rel >= -P_PSD_TOL
+            and err <= forward_gain_tolerance(alpha)
+        )
         if not ok:
             return None
         n = self.A.shape[0]
-        alpha = float(alpha_star if alpha_star is not None else self._alpha.value)
         lam_max = float(np.linalg.eigvalsh(M)[-1])
         return TaskObjective(
             Q=readonly(M[:n, :n]),
@@ -753,6 +793,204 @@ class InverseLQR:
             structure=self.structure,
             second_stage=stage == 2,
         )
+
+
+# ------------------------------------------------------------------- step 2 on data: the closest structured cost
+
+
+def decoupled_parts(A: Any, B: Any) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]:
+    """The decoupled parts of a plant: groups of (states, inputs) that no entry of (A, B) connects.
+
+    A state and a state are connected by a nonzero ``A[i, j]`` (either way), a state and an input by a nonzero
+    ``B[i, k]``. The planar quadrotor has two parts, lateral ``(x, φ, ẋ, φ̇; u1)`` and vertical ``(y, ẏ; u2)``.
+    With ``S = 0`` and diagonal ``Q``, ``R`` each part's LQR gain depends on its own weights only, and on them
+    only up to a common scale: ratios of weights *inside* a part are what the demonstrations can determine.
+
+    Returns
+    -------
+    tuple of (states, inputs)
+        Sorted index tuples, one pair per part, ordered by their first state.
+    """
+    A, B = _system_matrices(A, B)
+    n, m = B.shape
+    tol_a = 1e-12 * max(1.0, float(np.abs(A).max(initial=0.0)))
+    tol_b = 1e-12 * max(1.0, float(np.abs(B).max(initial=0.0)))
+    adj = np.zeros((n + m, n + m), dtype=bool)
+    adj[:n, :n] = (np.abs(A) > tol_a) | (np.abs(A.T) > tol_a)
+    adj[:n, n:] = np.abs(B) > tol_b
+    adj[n:, :n] = adj[:n, n:].T
+    _, labels = scipy.sparse.csgraph.connected_components(adj, directed=False)
+    parts = []
+    for lab in sorted(set(labels.tolist()), key=lambda c: int(np.argmax(labels == c))):
+        idx = np.flatnonzero(labels == lab)
+        states = tuple(int(i) for i in idx if i < n)
+        inputs = tuple(int(i - n) for i in idx if i >= n)
+        if states:
+            parts.append((states, inputs))
+    return tuple(parts)
+
+
+def _gain_error(K_fwd: np.ndarray, K: np.ndarray) -> float:
+    scale = float(np.linalg.norm(K))
+    return float(np.linalg.norm(K_fwd - K) / (scale if scale > 0 else 1.0))
+
+
+def _diag_start(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Weights ``(q, r)`` whose optimality residual at ``K`` is smallest (Priess et al., TCST 2015).
+
+    With S = 0 and the closed loop ``A + B K`` stable, eq. (18) makes P linear in the weights (a Lyapunov
+    equation per weight), so the residual of eq. (17), ``(R + BᵀPB)K + BᵀPA``, is linear too: a
+    nonnegative least-squares problem with the weights summing to one, solved twice, the second time with
+    the residual premultiplied by ``(R + BᵀPB)⁻¹`` of the first solution so that it measures gain error.
+    """
+    n, m = B.shape
+    A_cl = A + B @ K
+    if spectral_radius(A_cl) >= 1.0:
+        return np.ones(n + m)
+    Ps, Rs = [], []
+    for i in range(n + m):
+        E = np.zeros((n, n))
+        Ri = np.zeros((m, m))
+        if i < n:
+            E[i, i] = 1.0
+        else:
+            Ri[i - n, i - n] = 1.0
+            E = K.T @ Ri @ K
+        Ps.append(scipy.linalg.solve_discrete_lyapunov(A_cl.T, E))
+        Rs.append(Ri)
+    H_inv = np.eye(m)
+    theta = np.ones(n + m) / (n + m)
+    for _ in range(2):
+        G = np.stack(
+            [(H_inv @ ((Ri + B.T @ Pi @ B) @ K + B.T @ Pi @ A)).ravel() for Pi, Ri in zip(Ps, Rs, strict=True)],
+            axis=1,
+        )
+        w = max(1.0, float(np.linalg.norm(G)))
+        res = scipy.optimize.lsq_linear(
+            np.vstack([G, w * np.ones((1, n + m))]), np.r_[np.zeros(G.shape[0]), w], bounds=(0.0, np.inf)
+        )
+        theta = np.maximum(res.x, 1e-6 * max(float(res.x.max()), 1e-12))
+        P = sum(t * Pi for t, Pi in zip(theta, Ps, strict=True))
+        H = np.diag(theta[n:]) + B.T @ P @ B
+        try:
+            H_inv = np.linalg.inv(H)
+        except np.linalg.LinAlgError:
+            break
+    return theta
+
+
+def _fit_diagonal_part(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Diagonal ``(q, r)`` whose LQR gain is closest to K in Frobenius norm; scaled so that max = 1."""
+    n, m = B.shape
+    theta0 = _diag_start(A, B, K)
+    big = 10.0 * (float(np.linalg.norm(K)) + 1.0)
+
+    def residual(log_theta: np.ndarray) -> np.ndarray:
+        theta = np.exp(log_theta)
+        try:
+            P = scipy.linalg.solve_discrete_are(A, B, np.diag(theta[:n]), np.diag(theta[n:]))
+            K_fwd = -np.linalg.solve(np.diag(theta[n:]) + B.T @ P @ B, B.T @ P @ A)
+        except (np.linalg.LinAlgError, ValueError):
+            return np.full(K.size, big)
+        return (K_fwd - K).ravel()
+
+    x0 = np.log(theta0 / theta0.max())
+    # log-weights within ±30 keep every DARE well posed; the common scale is free (the gain ignores it)
+    fit = scipy.optimize.least_squares(residual, x0, bounds=(-30.0, 30.0), x_scale=1.0, xtol=1e-10, ftol=1e-12)
+    theta = np.exp(fit.x if fit.cost <= 0.5 * float(residual(x0) @ residual(x0)) else x0)
+    return theta / theta.max()
+
+
+def _fit_s0(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(Q, R)`` (S = 0, Q ⪰ 0, R ≻ 0 through Cholesky factors) whose LQR gain is closest to K."""
+    n, m = B.shape
+    iq, ir = np.tril_indices(n), np.tril_indices(m)
+    q0 = _diag_start(A, B, K)
+    big = 10.0 * (float(np.linalg.norm(K)) + 1.0)
+
+    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Lq, Lr = np.zeros((n, n)), np.zeros((m, m))
+        Lq[iq] = p[: len(iq[0])]
+        Lr[ir] = p[len(iq[0]) :]
+        return Lq @ Lq.T, Lr @ Lr.T + 1e-9 * np.eye(m)
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        Q, R = unpack(p)
+        try:
+            P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+            K_fwd = -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+        except (np.linalg.LinAlgError, ValueError):
+            return np.full(K.size, big)
+        return (K_fwd - K).ravel()
+
+    q0 = q0 / q0.max()
+    p0 = np.r_[np.sqrt(np.diag(q0[:n]))[iq], np.sqrt(np.diag(q0[n:]))[ir]]
+    fit = scipy.optimize.least_squares(residual, p0, xtol=1e-10, ftol=1e-12)
+    Q, R = unpack(fit.x if fit.cost <= 0.5 * float(residual(p0) @ residual(p0)) else p0)
+    scale = float(np.linalg.eigvalsh(scipy.linalg.block_diag(Q, R))[-1])
+    return Q / scale, R / scale
+
+
+def closest_structured_objective(A: Any, B: Any, K: Any, structure: Structure = "diagonal") -> TaskObjective:
+    """The structured cost whose LQR gain is closest to ``K``: inverse LQR that answers on estimated gains.
+
+    An estimated gain is almost never exactly the LQR gain of a cost with ``S = 0`` (let alone diagonal Q, R),
+    so the exact SDP of eqs. (15)-(19) with the structure imposed is infeasible on data. This returns instead
+    the cost of that structure minimizing ``‖K_LQR(Q, R) − K‖_F`` (an approximate inverse LQR in the sense of
+    Priess et al., IEEE TCST 2015: a convex start from the optimality conditions, then a nonlinear
+    least-squares refinement through the DARE), with the mismatch it leaves as ``forward_gain_error``,
+    computed by ``scipy.linalg.solve_discrete_are`` on the returned (Q, R).
+
+    Parameters
+    ----------
+    A, B : array_like
+        The plant.
+    K : array_like, shape (m, n)
+        A stabilizing gain (checked, Assumption 3).
+    structure : {"diagonal", "S=0"}
+        ``"diagonal"``: S = 0, Q and R diagonal; fitted per decoupled part of the plant
+        (:func:`decoupled_parts`), each part scaled so that its largest weight is 1 (the only scale it is
+        determined up to), so ratios inside a part are comparable between operators. ``"S=0"``: Q ⪰ 0 and R
+        full, scaled so that ``λmax(M) = 1``.
+
+    Returns
+    -------
+    TaskObjective
+        ``M = M_normalized`` (scaled as above), ``alpha = cond(M)``, ``solver = "closest-gain"``, ``status``
+        ``"exact"`` if the forward-gain error is ≤ 1e-6, else ``"approximate"``; ``parts`` the decoupled parts.
+    """
+    A, B = _system_matrices(A, B)
+    n, m = B.shape
+    K = _as_matrix(K, "K", (m, n))
+    if structure not in ("diagonal", "S=0"):
+        raise DataError(f"structure must be 'diagonal' or 'S=0' for the closest structured cost, got {structure!r}")
+    check_stabilizing(A, B, K)
+    parts = decoupled_parts(A, B)
+    with _single_threaded_blas():
+        if structure == "diagonal":
+            q, r = np.ones(n), np.ones(m)
+            for states, inputs in parts:
+                s, c = list(states), list(inputs)
+                if not c:
+                    continue  # a part no input reaches: its weights do not affect the gain
+                theta = _fit_diagonal_part(A[np.ix_(s, s)], B[np.ix_(s, c)], K[np.ix_(c, s)])
+                q[s], r[c] = theta[: len(s)], theta[len(s) :]
+            Q, R = np.diag(q), np.diag(r)
+        else:
+            Q, R = _fit_s0(A, B, K)
+        S = np.zeros((n, m))
+        K_fwd, P = forward_gain(A, B, Q, R, S)
+    M = scipy.linalg.block_diag(Q, R)
+    ev = np.linalg.eigvalsh(M)
+    err = _gain_error(K_fwd, K)
+    return TaskObjective(
+        Q=readonly(Q), R=readonly(R), S=readonly(S), P=readonly(P),
+        alpha=float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf,
+        M=readonly(M), M_normalized=readonly(M.copy()), K=readonly(K), K_forward=readonly(K_fwd),
+        forward_gain_error=err, lambda_min=float(ev[0]), solver="closest-gain",
+        status="exact" if err <= FORWARD_GAIN_TOL else "approximate", structure=structure, second_stage=False,
+        parts=parts,
+    )
 
 
 _CACHE: OrderedDict[tuple, InverseLQR] = OrderedDict()
@@ -779,6 +1017,10 @@ def inverse_lqr(A: Any, B: Any, K: Any, structure: Structure = "full", second_st
     ``AᵀPA − P + (AᵀPB + S)K + Q = 0``, ``I ⪯ M ⪯ αI`` with ``M = [[Q, S], [Sᵀ, R]]``, through a compiled
     problem cached per (A, B, structure) so that repeated calls with new gains are fast. See
     :class:`InverseLQR` for the parameters, the post-checks and the errors raised.
+
+    For ``structure="S=0"`` or ``"diagonal"`` this is the paper's SDP only where the gain is exactly the LQR
+    gain of such a cost; in general (every estimated gain) it is the structured cost whose LQR gain is
+    closest to K (:func:`closest_structured_objective`), returned with its ``forward_gain_error``.
     """
     A, B = _system_matrices(A, B)
     if structure not in _STRUCTURES:
