@@ -132,9 +132,9 @@ def test_evaluate_prints_the_comparison(work):
     out = work / "results.csv"
     r = ok(wb("evaluate", str(work / "demos.parquet"), "--label", "CS2", "--components", "3", "--samples", "0",
               "--no-efficiency", "--horizon", "2", "-o", str(out)))
-    assert "rmse_position" in r.stdout and "IOC-only" in r.stdout
+    assert "rmse_position" in r.stdout and "IOC-only" in r.stdout and "persistence" in r.stdout
     df = pd.read_csv(out)
-    assert set(df["method"]) == {"proposed", "ioc_only", "gmr_only"}
+    assert set(df["method"]) == {"proposed", "ioc_only", "gmr_only", "persistence"}
     assert set(df["label"]) == {"CS2"}
 
 

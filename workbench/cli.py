@@ -592,9 +592,9 @@ def cmd_view(ctx: _Context) -> int:
         else:
             models = named = by_label
     horizon = _steps(a.horizon, ds.dt)
-    default = Path(Path(a.inputs[0]).stem + ".rrd")  # in the working directory, never beside the input
+    default = Path("out") / (Path(a.inputs[0]).stem + ".rrd")  # under out/, never beside the input
     out = _output_kwargs(a, default)
-    rec = viewer.new_recording()
+    rec = viewer.new_recording(viewer.APPLICATION_IDS["session" if models is not None else "log"])
     with ctx.progress() as progress:
         progress.add_task(f"logging {len(ds)} demonstrations", total=None)
         with viewer.open_output(rec, **out) as sink:
@@ -629,11 +629,12 @@ def cmd_replay(ctx: _Context) -> int:
     missing = [i for i in chosen if i not in ids]
     if missing:
         raise DataError(f"{a.log}: no demonstration {missing[0]!r}; ids present: {ids[:10]}")
-    out = _output_kwargs(a, Path(Path(a.log).stem + ".replay.rrd"))
-    rec = viewer.new_recording()
+    out = _output_kwargs(a, Path("out") / (Path(a.log).stem + ".replay.rrd"))
+    rec = viewer.new_recording(viewer.APPLICATION_IDS["replay"])
     stats = []
     with viewer.open_output(rec, **out) as sink:
-        sink.blueprint = replay_blueprint(chosen, ds.state_names, ds.input_names)
+        sink.blueprint = replay_blueprint(chosen, ds.state_names, ds.input_names, roles=ds.roles,
+                                          demos=[ds[ids.index(i)] for i in chosen])
         if not out["save"]:
             rec.send_blueprint(sink.blueprint)
         with ctx.progress() as progress:
@@ -641,7 +642,7 @@ def cmd_replay(ctx: _Context) -> int:
                 demo = ds[ids.index(demo_id)]
                 task = progress.add_task(f"replaying {demo_id} at {a.speed:g}×", total=len(demo))
                 stats.append(
-                    replay(demo, model, rec, state_names=ds.state_names, input_names=ds.input_names,
+                    replay(demo, model, rec, state_names=ds.state_names, input_names=ds.input_names, roles=ds.roles,
                            speed=a.speed, wait=not a.no_wait, horizon=_steps(a.horizon, ds.dt) if a.horizon else 0,
                            on_step=lambda k, task=task: progress.update(task, completed=k + 1))
                 )
@@ -785,7 +786,7 @@ def _system_option(p: argparse.ArgumentParser) -> None:
 def _output_options(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--save", metavar="FILE.rrd",
-                   help="write a rerun recording (without a display the default is <input>.rrd here)")
+                   help="write a rerun recording (without a display the default is out/<input>.rrd)")
     g.add_argument("--spawn", action="store_true", help="stream to a native rerun viewer")
     g.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1 (localhost only)")
 

@@ -29,7 +29,7 @@ from matplotlib.patches import Rectangle
 
 from workbench.atomic import atomic_path, atomic_write_text
 from workbench.demos import Demonstration, DemonstrationSet
-from workbench.study import METHOD_TITLES, StudyResult, improvement_table
+from workbench.study import METHOD_TITLES, StudyResult, improvement_table, metric_unit
 
 __all__ = [
     "ReportInputs",
@@ -44,7 +44,8 @@ __all__ = [
 ]
 
 _PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
-METHOD_COLORS = {"proposed": "#2ca02c", "ioc_only": "#d62728", "gmr_only": "#9467bd", "recorded": "#282828"}
+METHOD_COLORS = {"proposed": "#2ca02c", "ioc_only": "#d62728", "gmr_only": "#9467bd", "persistence": "#8c564b",
+                 "recorded": "#282828"}
 DPI = 110
 
 
@@ -247,12 +248,17 @@ def fig_rmse(table: pd.DataFrame, metrics: Sequence[tuple[str, str]]) -> Figure:
                 if len(d):
                     ax.plot(np.full(len(d), j + 1) + np.linspace(-0.12, 0.12, len(d)), d, ".", color="k", ms=3)
             ax.set_title(f"{label}: {metric.replace('_', ' ')}", fontsize=9)
-            ax.set_ylabel(f"RMSE [{unit}]")
+            ax.set_ylabel(f"RMSE [{unit}]" if unit else "RMSE")
             ax.grid(alpha=0.3, axis="y")
     return fig
 
 
-def fig_data_efficiency(table: pd.DataFrame, unit: str = "m") -> Figure:
+def _metric_words(metric: str) -> str:
+    """``rmse_position`` → ``position RMSE``."""
+    return f"{metric.removeprefix('rmse_').replace('_', ' ')} RMSE"
+
+
+def fig_data_efficiency(table: pd.DataFrame, unit: str = "m", what: str = "position RMSE") -> Figure:
     """Mean RMSE (± standard error) against the number of training demonstrations, per method and label.
 
     ``table`` has columns ``label``, ``method``, ``n_train`` and ``value`` (one row per trial and repeat).
@@ -274,7 +280,7 @@ def fig_data_efficiency(table: pd.DataFrame, unit: str = "m") -> Figure:
         ax.set_xlabel("training demonstrations")
         ax.set_title(f"{label}: data efficiency", fontsize=9)
         ax.grid(alpha=0.3)
-    axs[0].set_ylabel(f"position RMSE [{unit}]")
+    axs[0].set_ylabel(f"{what} [{unit}]" if unit else what)
     axs[0].legend(fontsize=8)
     return fig
 
@@ -287,7 +293,8 @@ class ReportInputs:
     ``models[label]`` is the proposed model per strategy; ``baselines[label]`` maps method → model;
     ``train``/``test`` the demonstrations per label; ``rmse`` a tidy table (label, method, metric, value, …);
     ``efficiency`` a tidy table (label, method, n_train, value); ``coverage`` a table per label and input;
-    ``stats`` Markdown of a multi-subject test; ``notes`` free lines for the header.
+    ``stats`` Markdown of a multi-subject test; ``notes`` free lines for the header; ``verdicts`` plain
+    sentences saying where the proposed model is not better than IOC-only or persistence (shown first).
     """
 
     train: Mapping[str, DemonstrationSet]
@@ -304,6 +311,7 @@ class ReportInputs:
     seed: int = 0
     notes: list[str] = field(default_factory=list)
     title: str = "Workbench report"
+    verdicts: list[str] = field(default_factory=list)
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -326,6 +334,8 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     md: list[str] = [f"# {inputs.title}", ""]
     md += [f"- {line}" for line in inputs.notes]
     md += [""]
+    md += [f"**{line}**\n" for line in inputs.verdicts]
+    system = inputs.models[labels[0]].system
 
     # data
     rows = []
@@ -395,23 +405,29 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
         md += ["![Predicted vs recorded trajectories](figures/predictions.png)", "",
                f"*{inputs.horizon * dt:.1f} s predictions from the test trial's start{band}.*", ""]
     if inputs.rmse is not None and len(inputs.rmse):
-        metrics = [(m, "m" if "pos" in m else "m/s") for m in dict.fromkeys(inputs.rmse["metric"])]
+        metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
-        md += [_md_table(improvement_table(inputs.rmse)), "",
+        md += [_md_table(improvement_table(inputs.rmse)), ""]
+        md += [f"**{line}**\n" for line in inputs.verdicts]
+        md += [
                "![RMSE per method](figures/rmse.png)", "",
                "*Horizon RMSE (eq. (35)) per test trial and start point.*", ""]
     if inputs.band is not None and len(inputs.band):
         b = inputs.band.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
         b = (100.0 * b).rename(columns=METHOD_TITLES).reset_index()
         md += [f"Monte Carlo trajectory bands (5–95 %, {inputs.samples} rollouts): share of the horizon's steps "
-               "at which the recorded position (both axes) lies inside the band [%]:", "", _md_table(b, ".1f"), ""]
+               "at which every state of the block lies inside the band [%] (persistence has no band):", "",
+               _md_table(b, ".1f"), ""]
     if inputs.efficiency is not None and len(inputs.efficiency):
-        save_figure(fig_data_efficiency(inputs.efficiency), fig_dir / "data_efficiency.png")
+        what = str(inputs.efficiency["metric"].iloc[0]) if "metric" in inputs.efficiency else "rmse_position"
+        save_figure(fig_data_efficiency(inputs.efficiency, metric_unit(system, what), _metric_words(what)),
+                    fig_dir / "data_efficiency.png")
         eff = inputs.efficiency.groupby(["label", "n_train", "method"], sort=False)["value"].mean().unstack("method")
         eff = eff.rename(columns=METHOD_TITLES).reset_index()
         md += ["## Data efficiency", "", _md_table(eff), "",
                "![Data efficiency](figures/data_efficiency.png)", "",
-               "*Mean position RMSE on the test trials against the number of training demonstrations.*", ""]
+               f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations.*",
+               ""]
     if inputs.stats:
         md += ["## Multi-subject statistics", "", inputs.stats, ""]
     path = out_dir / "report.md"
@@ -444,7 +460,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
         ReportInputs(
             train=result.train, test=result.test, models=result.models, baselines=result.baselines,
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
-            stats=result.stats_text,
+            stats=result.stats_text, verdicts=result.verdicts(),
             horizon=result.horizon, samples=result.samples, seed=result.seed, notes=notes, title=title,
         ),
     )

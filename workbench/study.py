@@ -105,24 +105,21 @@ def _split(ds: DemonstrationSet, test_size: float, seed: int) -> tuple[Demonstra
 def select_components(
     train: DemonstrationSet, system: Any, candidates: Sequence[int] = range(2, 9), seed: int = 0
 ) -> int:
-    """G by BIC (TP-GMM parameter count) of the proposed model's variability fit: ``--components auto``."""
-    from workbench.frames import Frame, frames_for_demo
+    """G by BIC (TP-GMM parameter count) of the proposed model's variability fit: ``--components auto``.
+
+    Each candidate model scores its own training data through :meth:`HumanBehaviorModel.bic`, i.e. with the
+    residuals, frames and standardization it was fitted with (one path for fitting and scoring).
+    """
     from workbench.model import HumanBehaviorModel
 
     best: tuple[float, int] | None = None
     for G in candidates:
         if G * 20 > train.n_samples:  # far fewer samples than parameters: BIC is meaningless there
             break
-        m = HumanBehaviorModel(system, n_components=int(G), random_state=seed, fit_objective=False).fit(train)
-        gmr, scale = m.variability_, m.variability_.scale_
-        inv = 1.0 / scale
-        xi, frames = [], []
-        for d in train:
-            xi.append(np.hstack([d.x, d.u - d.x @ m.K_.T]) * inv)
-            fs = frames_for_demo(m.frame_spec_, d.x, system.m, d.target)
-            # the same coordinate scaling TaskGMR fits in: (S T S⁻¹, S b)
-            frames.append([Frame((scale[:, None] * f.T) * inv[None, :], scale * f.b) for f in fs])
-        bic = gmr.tpgmm_.bic(xi, frames)
+        m = HumanBehaviorModel(
+            system, n_components=int(G), random_state=seed, fit_objective=False, noise_folds=0
+        ).fit(train)
+        bic = m.bic(train)
         if best is None or bic < best[0]:
             best = (bic, int(G))
     if best is None:
