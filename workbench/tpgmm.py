@@ -23,8 +23,6 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import logsumexp
-from sklearn.cluster import KMeans
 
 from workbench.errors import ConvergenceWarning, ModelError
 from workbench.frames import (
@@ -114,6 +112,18 @@ def _stack_frames(xi_list, frames_list, where: str, D: int | None = None, P: int
         blocks.append(project(xi, frames))
     # Frame-major and contiguous: every EM step works on one frame's (N, D) block at a time.
     return np.ascontiguousarray(np.transpose(np.concatenate(blocks, axis=0), (1, 0, 2)))
+
+
+#: Values per block of the whitened points in the E-step (8 MB of float64).
+_BLOCK_VALUES = 1 << 20
+
+
+def _log_sum_exp(a: np.ndarray) -> np.ndarray:
+    """``log Σ_g exp(a[:, g])`` per row, stable (scipy's array-API logsumexp costs 3× more per EM step)."""
+    top = a.max(axis=1)
+    top = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        return np.log(np.exp(a - top[:, None]).sum(axis=1)) + top
 
 
 def _precision_cholesky(covs: np.ndarray, where: str) -> np.ndarray:
@@ -262,13 +272,18 @@ class TPGMM:
         P, N, D = Z.shape
         G = means.shape[1]
         log_prob = np.zeros((N, G))
+        # Blocks of rows keep the whitened points (rows x G x D) in cache and out of the peak memory.
+        step = max(1, _BLOCK_VALUES // (G * D))
         for p in range(P):
             # One matrix product whitens the points for all G components of frame p at once.
             U = prec_chol[p]  # (G, D, D)
-            Y = Z[p] @ np.transpose(U, (1, 0, 2)).reshape(D, G * D)
-            Y -= np.einsum("gd,gde->ge", means[p], U).reshape(1, G * D)
-            Y = Y.reshape(N, G, D)
-            log_prob -= 0.5 * np.einsum("ngd,ngd->ng", Y, Y)
+            UU = np.transpose(U, (1, 0, 2)).reshape(D, G * D)
+            shift = np.einsum("gd,gde->ge", means[p], U).reshape(1, G * D)
+            for a in range(0, N, step):
+                Y = Z[p, a : a + step] @ UU
+                Y -= shift
+                Y *= Y
+                log_prob[a : a + step] -= 0.5 * Y.reshape(-1, G, D).sum(axis=2)
         log_det = np.log(np.diagonal(prec_chol, axis1=-2, axis2=-1)).sum(axis=(0, 2))  # sum_p log|U^{i,p}|
         return log_prob + log_det - 0.5 * P * D * _LOG_2PI
 
@@ -276,8 +291,9 @@ class TPGMM:
         """Per-sample log-likelihood (N,) and log responsibilities (N, G), in log space."""
         with np.errstate(divide="ignore"):
             weighted = self._estimate_log_prob(Z, means, prec_chol) + np.log(weights)
-        log_norm = logsumexp(weighted, axis=1)
-        return log_norm, weighted - log_norm[:, None]
+        log_norm = _log_sum_exp(weighted)
+        weighted -= log_norm[:, None]
+        return log_norm, weighted
 
     def _m_step(self, Z: np.ndarray, resp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Shared priors; per-frame means and covariances (+ reg_covar on the diagonal)."""
@@ -289,11 +305,13 @@ class TPGMM:
         means = np.ascontiguousarray(np.transpose(means, (1, 0, 2))) / nk[None, :, None]
         covs = np.empty((P, G, D, D))
         reg = self.reg_covar * np.eye(D)
+        root = np.sqrt(resp)
         for p in range(P):
             Zp = Z[p]
             for i in range(G):
                 diff = Zp - means[p, i]
-                covs[p, i] = (resp[:, i, None] * diff).T @ diff / nk[i] + reg
+                diff *= root[:, i, None]  # one temporary of the data's size, not two
+                covs[p, i] = diff.T @ diff / nk[i] + reg
         return weights, means, covs
 
     def _kmeans_init(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -304,6 +322,8 @@ class TPGMM:
         scale = flat.std(axis=0)
         # A coordinate constant in some frame has zero spread: leave it unscaled rather than divide by 0.
         scale = np.where(scale > 1e-12 * np.maximum(1.0, np.abs(center)), scale, 1.0)
+        from sklearn.cluster import KMeans  # scikit-learn loads only when a fit needs it
+
         km = KMeans(n_clusters=self.n_components, n_init=self.n_init, random_state=self.random_state)
         labels = km.fit((flat - center) / scale).labels_
         resp = np.zeros((N, self.n_components))
