@@ -35,6 +35,7 @@ from workbench.behavior import (
     TaskGMRModel,
     demo_list,
     fit_gain,
+    goal_of,
     objective_restore,
     objective_state,
     references,
@@ -182,19 +183,39 @@ class HumanBehaviorModel(TaskGMRModel):
         objective = None
         if self.fit_objective:
             objective = inverse_lqr(self.system.A, self.system.B, K, structure=self.structure)
-        W = [d.u - (d.x - r) @ K.T for d, r in zip(ds, refs, strict=True)]  # eq. (20)
         self.K_ = K
         self.objective_ = objective
         self._fit_common(ds, getattr(demos, "labels", []))
-        self._fit_gmr(ds, W)
+        self._fit_gmr(ds, [self._residual(d) for d in ds])
         self._fit_noise(ds)
         return self
 
     def residuals(self, demo: Demonstration) -> np.ndarray:
         """``ŵ = u − K̂(x − r)`` of a demonstration, eq. (20), shape (N, m) (``r``: see ``goal_relative_``)."""
         self._check_fitted("residuals")
+        return self._residual(demo)
+
+    def _residual(self, demo: Demonstration) -> np.ndarray:
+        # the one computation of eq. (20) that fitting and scoring share
         target = self.target_ if demo.target is None else demo.target
         return demo.u - (demo.x - self._reference(target)) @ self.K_.T
+
+    def score_samples(self, demos: DemonstrationSet | Iterable[Demonstration]) -> np.ndarray:
+        """Log-likelihood of every sample's ``[x; ŵ]`` under the TP-GMM, each demonstration in its own frames.
+
+        Residuals (eq. (20)), frames (eq. (33)) and the standardization are those of :meth:`fit`, so scoring
+        the training data reproduces EM's objective. Values are in the model's standardized coordinates.
+        """
+        self._check_fitted("score_samples")
+        ds = demo_list(demos, self.system, "HumanBehaviorModel.score_samples")
+        return self.variability_.score_samples(
+            [d.x for d in ds], [self._residual(d) for d in ds], [goal_of(d) for d in ds]
+        )
+
+    def bic(self, demos: DemonstrationSet | Iterable[Demonstration]) -> float:
+        """BIC ``−2 log L + k log N`` of the variability model on demonstrations (lower is better)."""
+        ll = self.score_samples(demos)
+        return float(-2.0 * ll.sum() + self.variability_.tpgmm_.n_parameters() * np.log(ll.size))
 
     def variability(self, X: Any, x0: Any, target: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """GMR of ``ŵ`` given the states ``X`` (N, n) for the task (``x0``, ``target``).

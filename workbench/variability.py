@@ -158,11 +158,7 @@ class TaskGMR:
         if not X_list:
             raise ModelError("TaskGMR.fit: no demonstrations")
         n, d_out = X_list[0].shape[1], Y_list[0].shape[1]
-        xi_list = [np.hstack([X, Y]) for X, Y in zip(X_list, Y_list, strict=True)]
-        frames_list = [
-            frames_for_demo(self.spec, X, d_out, target) for X, target in zip(X_list, targets, strict=True)
-        ]
-        stacked = np.concatenate(xi_list)
+        stacked = np.concatenate([np.hstack([X, Y]) for X, Y in zip(X_list, Y_list, strict=True)])
         if self.standardize:
             scale = stacked.std(axis=0)
             scale = np.where(scale > _MIN_SCALE * np.maximum(1.0, np.abs(stacked).max(axis=0)), scale, 1.0)
@@ -180,10 +176,41 @@ class TaskGMR:
         )
         with warnings.catch_warnings():
             warnings.simplefilter("always", ConvergenceWarning)
-            tp.fit([xi / scale for xi in xi_list], [_scaled(f, scale) for f in frames_list])
+            tp.fit(*self._model_data(X_list, Y_list, targets))
         self.tpgmm_ = tp
         self._cache: OrderedDict[bytes, TaskConditional] = OrderedDict()
         return self
+
+    def _model_data(
+        self, X_list: Sequence[np.ndarray], Y_list: Sequence[np.ndarray], targets: Sequence[np.ndarray | None]
+    ) -> tuple[list[np.ndarray], list[list[Frame]]]:
+        """Data ``xi / scale`` and frames ``(S T S⁻¹, S b)`` in the model's coordinates: the one path that fitting
+        and scoring share."""
+        d_out = np.asarray(Y_list[0]).shape[1]
+        xi = [np.hstack([np.asarray(X, dtype=float), np.asarray(Y, dtype=float)]) / self.scale_
+              for X, Y in zip(X_list, Y_list, strict=True)]
+        frames = [_scaled(frames_for_demo(self.spec, np.asarray(X, dtype=float), d_out, target), self.scale_)
+                  for X, target in zip(X_list, targets, strict=True)]
+        return xi, frames
+
+    def score_samples(
+        self, X_list: Sequence[np.ndarray], Y_list: Sequence[np.ndarray], targets: Sequence[np.ndarray | None]
+    ) -> np.ndarray:
+        """Log-likelihood of every sample of demonstrations (frames from their own data, as in :meth:`fit`).
+
+        In the model's (standardized) coordinates: the product of the frame likelihoods, eq. (29), mixed over
+        the components; on the user's units it differs by ``P Σ log scale`` per sample, the same for every G.
+        """
+        if not hasattr(self, "tpgmm_"):
+            raise ModelError("TaskGMR: not fitted yet; call fit first")
+        return self.tpgmm_.score_samples(*self._model_data(X_list, Y_list, targets))
+
+    def bic(
+        self, X_list: Sequence[np.ndarray], Y_list: Sequence[np.ndarray], targets: Sequence[np.ndarray | None]
+    ) -> float:
+        """BIC ``−2 log L + k log N`` (TP-GMM parameter count) of demonstrations, lower is better."""
+        ll = self.score_samples(X_list, Y_list, targets)
+        return float(-2.0 * ll.sum() + self.tpgmm_.n_parameters() * np.log(ll.size))
 
     @classmethod
     def from_parameters(
