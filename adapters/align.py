@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Series", "Piece", "align"]
+__all__ = ["Series", "Piece", "align", "sample"]
 
 #: Fraction of ``dt`` within which a sample time counts as equal to a grid time.
 GRID_TOLERANCE = 1e-3
@@ -94,17 +94,21 @@ def align(series: list[Series], start: float, end: float, dt: float, gap: float)
         if q < p:
             continue
         grid = _grid(p, q, dt)
-        cols = []
-        for s in series:
-            if s.hold:
-                idx = np.searchsorted(s.t, grid + tol, side="right") - 1
-                cols.append(s.v[np.clip(idx, 0, s.t.size - 1)])
-            else:
-                values = np.interp(grid, s.t, s.v)
-                # a sample at a grid point (within the tolerance) is taken as it is, not re-interpolated
-                idx = np.clip(np.searchsorted(s.t, grid - tol, side="left"), 0, s.t.size - 1)
-                exact = np.abs(s.t[idx] - grid) <= tol
-                values[exact] = s.v[idx[exact]]
-                cols.append(values)
-        pieces.append(Piece(grid, np.column_stack(cols)))
+        pieces.append(Piece(grid, np.column_stack([sample(s, grid, tol) for s in series])))
     return pieces
+
+
+def sample(s: Series, grid: np.ndarray, tol: float) -> np.ndarray:
+    """One channel's values at the grid times: held (inputs) or interpolated (states), exact within ``tol``.
+
+    The single rule both the offline :func:`align` and the online aligner (:mod:`adapters.online`) apply.
+    """
+    if s.hold:
+        idx = np.searchsorted(s.t, grid + tol, side="right") - 1
+        return s.v[np.clip(idx, 0, s.t.size - 1)]
+    values = np.interp(grid, s.t, s.v)
+    # a sample at a grid point (within the tolerance) is taken as it is, not re-interpolated
+    idx = np.clip(np.searchsorted(s.t, grid - tol, side="left"), 0, s.t.size - 1)
+    exact = np.abs(s.t[idx] - grid) <= tol
+    values[exact] = s.v[idx[exact]]
+    return values

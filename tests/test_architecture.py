@@ -11,7 +11,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 # floor 4: what a user touches; nothing below may import it
-TOP = ("workbench.cli", "workbench.__main__", "workbench.viewer", "workbench.report", "workbench.sample_logs")
+TOP = ("workbench.cli", "workbench.__main__", "workbench.viewer", "workbench.report", "workbench.sample_logs",
+       "workbench.live")  # live joins the adapters' online path and a model, like the CLI joins them offline
 # the common format: the only part of workbench the adapters may use
 COMMON = ("workbench.demos", "workbench.dataset", "workbench.errors", "workbench.atomic", "workbench.roles")
 
