@@ -29,6 +29,7 @@ from matplotlib.patches import Rectangle
 
 from workbench.atomic import atomic_path, atomic_write_text
 from workbench.demos import Demonstration, DemonstrationSet
+from workbench.roles import Roles
 from workbench.study import METHOD_TITLES, StudyResult, improvement_table, metric_unit
 
 __all__ = [
@@ -62,33 +63,56 @@ def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
     return path
 
 
-def _pos_idx(state_names: Sequence[str]) -> tuple[int, int]:
-    names = list(state_names)
-    return (names.index("x"), names.index("y")) if "x" in names and "y" in names else (0, 1)
+def _plane(roles: Roles | None, state_names: Sequence[str]) -> tuple[int, int] | None:
+    """The (across, up) position states of the plant's roles, or None: then there is no path to draw."""
+    return (roles or Roles()).resolve(state_names).plane
+
+
+def _titled(name: str, roles: Roles | None) -> str:
+    """``name [unit]`` with the roles' unit, the bare name where none is declared."""
+    unit = roles.unit(name) if roles else ""
+    return f"{name} [{unit}]" if unit else name
 
 
 # -- figures ----------------------------------------------------------------------------------------------
 def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
-    """Flown paths (horizontal position vs altitude) of every trial, one panel per strategy."""
+    """Flown paths of every trial in the plane of the position roles, one panel per strategy; a plant without
+    a plane gets every state against time instead."""
     labels = list(sets)
-    fig = Figure(figsize=(4.6 * len(labels), 3.8), layout="constrained")
-    axs = fig.subplots(1, len(labels), squeeze=False, sharey=True)[0]
-    for ax, label in zip(axs, labels, strict=True):
+    first = sets[labels[0]]
+    plane = _plane(first.roles, first.state_names)
+    rows = 1 if plane is not None else first.n_states
+    fig = Figure(figsize=(4.6 * len(labels), 3.8 if plane is not None else 1.9 * rows), layout="constrained")
+    axs = fig.subplots(rows, len(labels), squeeze=False, sharey="row")
+    for c, label in enumerate(labels):
         ds = sets[label]
-        ix, iy = _pos_idx(ds.state_names)
         color = _label_color(label, labels)
+        if plane is None:
+            for j, name in enumerate(ds.state_names):
+                ax = axs[j, c]
+                for d in ds:
+                    ax.plot(d.t - d.t[0], d.x[:, j], color=color, lw=0.9, alpha=0.55)
+                ax.set_ylabel(_titled(name, ds.roles))
+                ax.grid(alpha=0.3)
+            axs[0, c].set_title(f"{label}: {len(ds)} demonstrations")
+            axs[-1, c].set_xlabel("time since start [s]")
+            continue
+        ix, iy = plane
+        ax = axs[0, c]
         for d in ds:
             ax.plot(d.x[:, ix], d.x[:, iy], color=color, lw=0.9, alpha=0.55)
             ax.plot(d.x[0, ix], d.x[0, iy], "o", color=color, ms=3)
         targets = [d.target for d in ds if d.target is not None]
-        tx, ty = (targets[0][ix], targets[0][iy]) if targets else (0.0, 0.0)
-        ax.plot([tx - 0.5, tx + 0.5], [ty, ty], color="k", lw=4, solid_capstyle="butt", label="pad")
+        if targets:
+            tx, ty = targets[0][ix], targets[0][iy]
+            ax.plot([tx - 0.5, tx + 0.5], [ty, ty], color="k", lw=4, solid_capstyle="butt", label="pad")
+            ax.legend(loc="upper right", fontsize=8)
         ax.set_title(f"{label}: {len(ds)} demonstrations")
-        ax.set_xlabel(f"{ds.state_names[ix]} [m]")
+        ax.set_xlabel(_titled(ds.state_names[ix], ds.roles))
         ax.grid(alpha=0.3)
         ax.set_aspect("equal", adjustable="datalim")
-    axs[0].set_ylabel(f"{sets[labels[0]].state_names[_pos_idx(sets[labels[0]].state_names)[1]]} [m]")
-    axs[0].legend(loc="upper right", fontsize=8)
+    if plane is not None:
+        axs[0, 0].set_ylabel(_titled(first.state_names[plane[1]], first.roles))
     return fig
 
 
@@ -102,7 +126,8 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
     n, m = len(state_names), len(input_names)
     fig = Figure(figsize=(10.0, 3.9 * max(1, len(labels))), layout="constrained")
     axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
-    att = list(state_names).index("phi") if "phi" in state_names else None
+    # the attitude weight is the plant's heading role, where it declares one
+    att = models[labels[0]].system.r.heading if labels else None
     for row, label in zip(axs, labels, strict=True):
         Mn = np.asarray(models[label].objective_.M_normalized)
         for ax, block, names, title in (
@@ -170,27 +195,34 @@ def fig_predictions(
     cases: Mapping[str, tuple[Demonstration, Mapping[str, Any]]],
     state_names: Sequence[str],
     dt: float,
+    roles: Roles | None = None,
 ) -> Figure:
-    """Predicted vs recorded trajectory on a test trial per strategy: path, horizontal position and altitude.
+    """Predicted vs recorded trajectory on a test trial per strategy: the path in the plane of the position
+    roles and each position against time; without a plane, every state against time.
 
     ``cases[label] = (demo, {method: Prediction})`` with every prediction starting at the trial's first state.
     """
     labels = list(cases)
-    ix, iy = _pos_idx(state_names)
-    fig = Figure(figsize=(13.0, 3.5 * len(labels)), layout="constrained")
-    axs = fig.subplots(len(labels), 3, squeeze=False)
+    plane = _plane(roles, state_names)
+    shown = list(plane) if plane is not None else list(range(len(state_names)))
+    n_cols = len(shown) + (plane is not None)
+    fig = Figure(figsize=(max(13.0, 3.4 * n_cols), 3.5 * len(labels)), layout="constrained")
+    axs = fig.subplots(len(labels), n_cols, squeeze=False)
     for r, label in enumerate(labels):
         demo, preds = cases[label]
         t = demo.t - demo.t[0]
         horizon = max(len(np.asarray(p.x)) for p in preds.values()) - 1
         tp = np.arange(horizon + 1) * dt
         n_rec = min(len(demo), horizon + 1)
-        ax_path, ax_x, ax_y = axs[r]
-        ax_path.plot(demo.x[:, ix], demo.x[:, iy], color="#9a9a9a", lw=1.0, label="recorded (whole trial)")
-        ax_path.plot(demo.x[:n_rec, ix], demo.x[:n_rec, iy], color=METHOD_COLORS["recorded"], lw=2.0,
-                     label="recorded (horizon)")
-        ax_x.plot(t[:n_rec], demo.x[:n_rec, ix], color=METHOD_COLORS["recorded"], lw=2.0, label="recorded")
-        ax_y.plot(t[:n_rec], demo.x[:n_rec, iy], color=METHOD_COLORS["recorded"], lw=2.0, label="recorded")
+        ax_path = axs[r, 0] if plane is not None else None
+        ax_time = list(axs[r, 1:] if plane is not None else axs[r])
+        if ax_path is not None:
+            ix, iy = plane
+            ax_path.plot(demo.x[:, ix], demo.x[:, iy], color="#9a9a9a", lw=1.0, label="recorded (whole trial)")
+            ax_path.plot(demo.x[:n_rec, ix], demo.x[:n_rec, iy], color=METHOD_COLORS["recorded"], lw=2.0,
+                         label="recorded (horizon)")
+        for ax, j in zip(ax_time, shown, strict=True):
+            ax.plot(t[:n_rec], demo.x[:n_rec, j], color=METHOD_COLORS["recorded"], lw=2.0, label="recorded")
         for method, pred in preds.items():
             x = np.asarray(pred.x)
             color = METHOD_COLORS.get(method, "k")
@@ -200,23 +232,27 @@ def fig_predictions(
                 lo, hi = band
                 level = getattr(pred, "band_level", None)
                 name = f"{title} {100 * level:.0f} % MC band" if level else f"{title} MC band"
-                ax_x.fill_between(tp[: len(lo)], lo[:, ix], hi[:, ix], color=color, alpha=0.18, lw=0, label=name)
-                ax_y.fill_between(tp[: len(lo)], lo[:, iy], hi[:, iy], color=color, alpha=0.18, lw=0)
-            ax_path.plot(x[:, ix], x[:, iy], color=color, lw=1.4, ls="--", label=title)
-            ax_x.plot(tp[: len(x)], x[:, ix], color=color, lw=1.4, ls="--", label=title)
-            ax_y.plot(tp[: len(x)], x[:, iy], color=color, lw=1.4, ls="--")
-        ax_path.plot(demo.x[0, ix], demo.x[0, iy], "o", color="k", ms=5)
-        ax_path.set_title(f"{label} {demo.id}: path ({horizon * dt:.1f} s horizon)", fontsize=9)
-        ax_path.set_xlabel(f"{state_names[ix]} [m]")
-        ax_path.set_ylabel(f"{state_names[iy]} [m]")
-        ax_x.set_title(f"{state_names[ix]}(t)", fontsize=9)
-        ax_y.set_title(f"{state_names[iy]}(t)", fontsize=9)
-        for ax in (ax_x, ax_y):
+                for k, (ax, j) in enumerate(zip(ax_time, shown, strict=True)):
+                    ax.fill_between(tp[: len(lo)], lo[:, j], hi[:, j], color=color, alpha=0.18, lw=0,
+                                    label=name if k == 0 else None)
+            if ax_path is not None:
+                ax_path.plot(x[:, plane[0]], x[:, plane[1]], color=color, lw=1.4, ls="--", label=title)
+            for k, (ax, j) in enumerate(zip(ax_time, shown, strict=True)):
+                ax.plot(tp[: len(x)], x[:, j], color=color, lw=1.4, ls="--", label=title if k == 0 else None)
+        if ax_path is not None:
+            ax_path.plot(demo.x[0, plane[0]], demo.x[0, plane[1]], "o", color="k", ms=5)
+            ax_path.set_title(f"{label} {demo.id}: path ({horizon * dt:.1f} s horizon)", fontsize=9)
+            ax_path.set_xlabel(_titled(state_names[plane[0]], roles))
+            ax_path.set_ylabel(_titled(state_names[plane[1]], roles))
+        for ax, j in zip(ax_time, shown, strict=True):
+            ax.set_title(f"{label} {demo.id}: {state_names[j]}(t)" if ax_path is None and j == shown[0]
+                         else f"{state_names[j]}(t)", fontsize=9)
+            ax.set_ylabel(_titled(state_names[j], roles))
             ax.set_xlabel("time since start [s]")
         for ax in axs[r]:
             ax.grid(alpha=0.3)
-    axs[0, 1].legend(fontsize=7, loc="best")
-    axs[0, 0].legend(fontsize=7, loc="best")
+    for ax in axs[0, : min(2, n_cols)]:
+        ax.legend(fontsize=7, loc="best")
     return fig
 
 
@@ -400,7 +436,7 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
                "*ŵ = u − K̂x on a test trial with the GMR mean μ(x) and its ±3σ band (eqs. (24)–(27)).*", ""]
     md += ["## Predictions", ""]
     if cases_p:
-        save_figure(fig_predictions(cases_p, state_names, dt), fig_dir / "predictions.png")
+        save_figure(fig_predictions(cases_p, state_names, dt, any_set.roles), fig_dir / "predictions.png")
         band = f", shaded: the proposed model's Monte Carlo band ({inputs.samples} rollouts)" if inputs.samples else ""
         md += ["![Predicted vs recorded trajectories](figures/predictions.png)", "",
                f"*{inputs.horizon * dt:.1f} s predictions from the test trial's start{band}.*", ""]
