@@ -120,9 +120,13 @@ def test_kinematic_identification_fixes_the_position_rows_and_recovers_the_paper
         row[p], row[v] = 1.0, ds.dt
         np.testing.assert_array_equal(est.A[p], row)  # exactly kinematic, not approximately
         np.testing.assert_array_equal(est.B[p], 0.0)  # no direct input → position term
-        others = [i for i in range(true.n) if i != p]
-        np.testing.assert_array_equal(est.A[others][:, p], 0.0)  # nothing depends on an absolute position
     np.testing.assert_allclose(est.A, true.A, atol=1e-9)
+    assert rep.position_pull < 1e-9  # the paper's plant does not depend on where it is
+    invariant = LinearSystem.identify(ds, translation_invariant=True)
+    others = [i for i in range(true.n) if i not in r.position]
+    np.testing.assert_array_equal(invariant.A[np.ix_(others, r.position)], 0.0)  # by construction
+    assert invariant.identification.position_pull == 0.0
+    np.testing.assert_allclose(invariant.A, true.A, atol=1e-9)
     np.testing.assert_allclose(est.B, true.B, atol=1e-9)
     # held out, the exact plant predicts exactly; persistence does not
     assert rep.horizon_score < 1e-6 < rep.horizon_score_persistence
@@ -219,3 +223,7 @@ def test_real_flight_kinematic_plant_from_training_spans(external):
     assert check.expected == pytest.approx(g_dt)
     assert g_dt / 2 <= check.value <= 2 * g_dt
     assert rep.horizon_score < rep.horizon_score_persistence  # the tilt makes the plant worth having
+    # the pull toward where the flights were that least squares ascribes to the plant is reported, and small
+    assert 0 < rep.position_pull < 0.05 and "absolute position in the other rows" in str(rep)
+    strict = LinearSystem.identify(train, structure="kinematic", translation_invariant=True).identification
+    assert strict.position_pull == 0.0 and strict.checks[0].within()

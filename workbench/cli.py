@@ -146,11 +146,13 @@ def _load_demos(ctx: _Context, paths: Sequence[str], mapping: str | None, labels
     return ds
 
 
-def _system_for(ds: Any, choice: str = "auto"):
+def _system_for(ds: Any, choice: str = "auto", horizon: float = 3.0):
     """The plant (A, B): the paper's planar quadrotor, or identified from the data by least squares.
 
     ``auto`` takes the paper's model for data in its layout and at its step (the sample logs), and identifies
-    (A, B) otherwise — a real vehicle is not the paper's linearized 0.25 kg quadrotor.
+    (A, B) otherwise — a real vehicle is not the paper's linearized 0.25 kg quadrotor. Identification is
+    kinematic (position rows fixed, :mod:`workbench.identification`) whenever the data's roles pair positions
+    with velocities, and its report checks ``horizon`` seconds ahead.
     """
     from workbench.system import LinearSystem, planar_quadrotor
 
@@ -163,13 +165,25 @@ def _system_for(ds: Any, choice: str = "auto"):
                 f"the data have {list(ds.state_names)} and {list(ds.input_names)}"
             )
         return planar_quadrotor(dt=ds.dt)
-    return LinearSystem.identify(ds, u_min=paper.u_min if layout else None, u_max=paper.u_max if layout else None)
+    return LinearSystem.identify(ds, u_min=paper.u_min if layout else None, u_max=paper.u_max if layout else None,
+                                 structure="auto", horizon=horizon)
 
 
-def _plant(choice: str) -> Callable[[Any], Any]:
+def _plant(choice: str, horizon: float = 3.0) -> Callable[[Any], Any]:
     """The plant of a study as a function of its training trials (``_system_for`` on them), so that (A, B) is
     never identified from a trial the study then scores."""
-    return lambda train: _system_for(train, choice)
+    return lambda train: _system_for(train, choice, horizon)
+
+
+def _print_plant(ctx: _Context, system: Any, note: str = "") -> None:
+    """An identified plant's report (held-out errors vs persistence, ρ, conditioning, checks); its warning on
+    stderr too, where a user looks for problems."""
+    report = getattr(system, "identification", None)
+    if report is None:
+        return
+    ctx.say(str(report) + (f"\n  {note}" if note else ""))
+    if report.warning:
+        print(f"warning: {report.warning}", file=sys.stderr)
 
 
 def _load_model(path: str):
@@ -353,6 +367,7 @@ def cmd_fit(ctx: _Context) -> int:
     a = ctx.args
     ds = _load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None)
     system = _system_for(ds, a.system)
+    _print_plant(ctx, system)
     t0 = time.perf_counter()
     with ctx.progress() as progress:
         components = a.components
@@ -484,20 +499,40 @@ def cmd_evaluate(ctx: _Context) -> int:
     ds = _load_demos(ctx, a.demos, a.mapping, a.label)
     if a.per_subject:
         return _evaluate_per_subject(ctx, ds)
+    smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
+    loso = a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW)
     with ctx.executor() as ex:
-        result = study.run_study(
-            ds,
-            _plant(a.system),
-            test_size=a.test_size,
-            horizon=_steps(a.horizon, ds.dt),
-            components=a.components,
-            samples=a.samples,
-            efficiency=a.efficiency,
-            repeats=a.repeats,
-            seed=a.seed,
-            progress=ctx.progress,
-            executor=ex,
-        )
+        if loso:
+            ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
+                    "the others)")
+            result = study.run_loso(
+                ds, _plant(a.system, a.horizon), horizon=_steps(a.horizon, ds.dt), components=a.components,
+                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex,
+            )
+        else:
+            result = study.run_study(
+                ds,
+                _plant(a.system, a.horizon),
+                test_size=a.test_size,
+                horizon=_steps(a.horizon, ds.dt),
+                components=a.components,
+                samples=a.samples,
+                efficiency=a.efficiency,
+                repeats=a.repeats,
+                seed=a.seed,
+                progress=ctx.progress,
+                executor=ex,
+            )
+    if loso and getattr(result.system, "identification", None) is not None:
+        # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
+        # spread of the folds' plants, which the scores below used
+        checks = [c for p in result.plants.values() for c in p.identification.checks]
+        spread = (f"each fold's plant from its training segments: {checks[0].name} "
+                  f"{min(c.value for c in checks):.4g}–{max(c.value for c in checks):.4g} over {len(checks)} folds"
+                  if checks else "each fold's plant is identified from its training segments only")
+        _print_plant(ctx, _system_for(ds, a.system, a.horizon), f"(plant from all {len(ds)} segments; {spread})")
+    else:
+        _print_plant(ctx, result.system, "(plant from the training trials)")
     _print_study(ctx, result)
     if a.output:
         result.save_tables(a.output)
@@ -618,10 +653,14 @@ def _announce(ctx: _Context, out: dict[str, Any], sink: Any, what: str) -> None:
 
 
 def cmd_replay(ctx: _Context) -> int:
+    if getattr(ctx.args, "to", None):  # a stand-in vehicle: the log's raw MAVLink frames, no model
+        return _replay_to(ctx)
     from workbench import viewer
     from workbench.viewer import replay, replay_blueprint
 
     a = ctx.args
+    if not a.model:
+        raise WorkbenchError("replay needs --model MODEL.npz (predictions) or --to CONNECTION (send the log to a link)")
     ds = _load_demos(ctx, [a.log], a.mapping)
     model = _load_model(a.model)
     ids = ds.ids
@@ -651,6 +690,80 @@ def cmd_replay(ctx: _Context) -> int:
         ctx.say(f"{s.demo_id}: {s.n_steps} steps, {s.sim_time:.1f} s of flight in {s.wall_time:.2f} s "
                 f"({s.realtime_factor:.1f}× real time); actual input inside the online 3σ band: {cover}")
     _announce(ctx, out, sink, f"replay of {', '.join(chosen)}")
+    return 0
+
+
+def _replay_to(ctx: _Context) -> int:
+    from adapters.mavlink_link import send_tlog
+
+    a = ctx.args
+    log = _existing(a.log)
+    ctx.say(f"sending {log} to {a.to} at {a.speed:g}× real time (Ctrl-C to stop)")
+    with ctx.progress() as progress:
+        task = progress.add_task(f"replaying {log.name} to {a.to}", total=None)
+        try:
+            report = send_tlog(log, a.to, speed=a.speed,
+                               on_frame=lambda n, t: progress.update(task, completed=n) if n % 200 == 0 else None)
+        except KeyboardInterrupt:
+            ctx.say("stopped")
+            return 130
+    ctx.say(f"sent {report.n_frames} MAVLink frames ({report.log_seconds:.1f} s of log) in {report.wall_seconds:.1f} s "
+            f"({report.speed:.1f}× real time)")
+    return 0
+
+
+def cmd_live(ctx: _Context) -> int:
+    from adapters.mavlink_link import open_link
+    from workbench import viewer
+    from workbench.live import OnlinePredictor, listen
+    from workbench.viewer.live import LIVE_APPLICATION_ID, LiveLogger, live_blueprint
+
+    a = ctx.args
+    model = _load_model(a.model)
+    predictor = OnlinePredictor(model, a.mapping or DEFAULT_MAPPING, horizon=a.horizon, system=a.sysid,
+                                clock=a.clock, silence=a.silence)
+    m = predictor.mapping
+    plane = None
+    if m.roles:
+        resolved = m.roles.resolve(m.state_names)
+        plane = None if resolved.plane is None else (*resolved.plane, resolved.heading)
+    out = _output_kwargs(a, Path("out") / "live.rrd")
+    rec = viewer.new_recording(LIVE_APPLICATION_ID)
+    link = open_link(a.connection)
+    logger: Any = None
+    shown: list[str] = []
+
+    def on_prediction(p: Any) -> None:
+        logger.log(p)
+        if not out["save"] and logger.demo_ids[-1:] != shown[-1:]:  # a new segment: show it in the viewer
+            shown.append(p.demo_id)
+            rec.send_blueprint(live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None))
+
+    def on_event(ev: Any) -> None:
+        logger.event(ev)
+        print(f"{ev.kind}: {ev.text}", file=sys.stderr)
+
+    with link, viewer.open_output(rec, **out) as sink:
+        logger = LiveLogger(rec, m.state_names, m.input_names, plane=plane)
+        if not out["save"]:
+            rec.send_blueprint(live_blueprint([], m.state_names, m.input_names, scene=plane is not None))
+        ctx.say(f"listening on {a.connection} (mapping {m.name}, dt {m.dt:g} s, rollout {a.horizon:g} s)"
+                + (f" for {a.duration:g} s" if a.duration else "; Ctrl-C to stop"))
+        summary = listen(link, predictor, duration=a.duration, on_prediction=on_prediction, on_event=on_event,
+                         on_tick=logger.status)
+        sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None)
+    c50, c99 = summary.percentiles("compute")
+    l50, l99 = summary.percentiles("latency")
+    ctx.say(f"{summary.n_steps} steps in {summary.n_segments} segment(s) over {summary.wall_seconds:.1f} s "
+            f"({'interrupted' if summary.ended_by == 'interrupt' else 'duration reached'}); per step "
+            f"p50 {c50:.2f} ms, p99 {c99:.2f} ms; message to prediction p50 {l50:.2f} ms, p99 {l99:.2f} ms")
+    counts = summary.stats.counts
+    ctx.say("link: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if v) or "nothing received"))
+    if summary.stats.waiting_for and not summary.n_steps:
+        ctx.say(f"never received: {', '.join(summary.stats.waiting_for)}")
+    if summary.ended_by == "interrupt" and out["serve"]:
+        return 0
+    _announce(ctx, out, sink, f"live session ({summary.n_steps} steps)")
     return 0
 
 
@@ -904,6 +1017,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "ANOVA and paired t-tests across the methods (use --horizon 5 for the paper's)")
     p.add_argument("--n-test", type=int, default=1, metavar="N",
                    help="held-out trials per subject with --per-subject (default 1)")
+    p.add_argument("--holdout", choices=["auto", "split", "loso"], default="auto",
+                   help="test trials: one random split (--test-size), leave-one-segment-out (every trial tested "
+                        "once by models fitted on the others; no data-efficiency curve), or auto: leave-one-out "
+                        "when a label has fewer than 10 trials (default)")
     _study_options(p)
     _mapping_option(p)
     _executor_options(p)
@@ -926,12 +1043,31 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",
             "workbench replay demos.parquet --model cs1.npz --speed 1.0 --spawn")
     p.add_argument("log", metavar="LOG", help="demonstrations (.parquet) or a raw log (with --mapping)")
-    p.add_argument("--model", required=True, metavar="MODEL.npz")
+    p.add_argument("--model", metavar="MODEL.npz", help="the model whose online predictions are shown")
+    p.add_argument("--to", metavar="CONNECTION",
+                   help="instead: send a .tlog's raw MAVLink frames to a link with their recorded timing (a stand-in "
+                        "vehicle for `workbench live`), e.g. udpout:127.0.0.1:14550; no model needed")
     p.add_argument("--demo", nargs="+", metavar="ID", help="trials to replay (default the first)")
     p.add_argument("--speed", type=_positive_float, default=1.0, help="multiple of real time (default 1.0)")
     p.add_argument("--no-wait", action="store_true", help="stream as fast as possible")
     p.add_argument("--horizon", type=float, default=1.0, metavar="SECONDS",
                    help="rollout horizon of the online prediction (default 1.0 s; 0 turns rollouts off)")
+    _mapping_option(p)
+    _output_options(p)
+
+    p = add("live", cmd_live, "predict the pilot online from a vehicle's live MAVLink telemetry, into rerun",
+            "workbench live udpin:0.0.0.0:14550 --mapping planar_quadrotor --model cs1.npz --spawn")
+    p.add_argument("connection", metavar="CONNECTION",
+                   help="a pymavlink connection: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device")
+    p.add_argument("--model", required=True, metavar="MODEL.npz")
+    p.add_argument("--duration", type=_positive_float, metavar="SECONDS", help="stop after this long (default: Ctrl-C)")
+    p.add_argument("--horizon", type=float, default=1.0, metavar="SECONDS",
+                   help="rollout horizon at every step (default 1.0 s; 0 turns rollouts off)")
+    p.add_argument("--sysid", type=int, metavar="N", help="follow this MAVLink system (default: the first vehicle)")
+    p.add_argument("--clock", choices=["vehicle", "arrival"], default="vehicle",
+                   help="time samples by the vehicle's time_boot_ms (default) or by their arrival")
+    p.add_argument("--silence", type=_positive_float, default=2.0, metavar="SECONDS",
+                   help="report the link silent after this long without data (default 2 s)")
     _mapping_option(p)
     _output_options(p)
 

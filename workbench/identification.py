@@ -4,9 +4,12 @@
 
 ``"kinematic"``
     For every position / velocity pair of the roles (:mod:`workbench.roles`) the position row is fixed by
-    kinematics, ``p[k+1] = p[k] + dt·v[k]`` (no input enters a position directly), and no other state depends
-    on an absolute position (translation invariance, as in the paper's plant, eq. (31)); so the positions are
-    exact integrators and the remaining rows are fitted by least squares on the other states and the inputs.
+    kinematics, ``p[k+1] = p[k] + dt·v[k]`` (no input and no other state enters a position directly), and the
+    remaining rows are fitted by least squares. With ``translation_invariant=True`` no other state may depend
+    on an absolute position either (as in the paper's plant, eq. (31)), so the positions are exact integrators.
+    That is the physics of free flight, but then a pilot who does not hold an absolute position leaves the
+    closed loop marginal and the inverse LQR refuses the gain (Assumption 3); by default the fit may keep the
+    small pull toward where the flights were, and the report shows how large it is.
 ``"free"``
     Every entry of ``[A B]`` by least squares, ``min ‖X' − [A B] [X; U]‖_F`` (eq. (1) read as a regression).
 
@@ -110,6 +113,7 @@ class IdentificationReport:
     fixed: tuple[str, ...] = ()
     checks: tuple[PhysicalCheck, ...] = ()
     warnings: tuple[str, ...] = ()
+    position_pull: float = 0.0  # max |A[i, p]| over positions p and the other rows i (0 when translation invariant)
 
     def __post_init__(self) -> None:
         for name in ("one_step_rmse", "one_step_rmse_persistence", "horizon_rmse", "horizon_rmse_persistence"):
@@ -143,6 +147,9 @@ class IdentificationReport:
                 f"  {s:<{width}}  {self.one_step_rmse[i]:>9.4g}  {self.one_step_rmse_persistence[i]:>9.4g}  "
                 f"{self.horizon_rmse[i]:>9.4g}  {self.horizon_rmse_persistence[i]:>9.4g}"
             )
+        if self.n_integrators:
+            lines.append(f"  absolute position in the other rows: max |A[i, position]| = {self.position_pull:.3g} "
+                         "(0 in free-flight physics; a pull the data ascribe to the plant)")
         lines.append(
             f"  ρ(A) = {self.spectral_radius:.6g}; without the {self.n_integrators} integrator(s) "
             f"{self.spectral_radius_beyond_integrators:.6g}; cond of the normalized regressor "
@@ -191,6 +198,7 @@ class _Layout:
     m: int
     dt: float
     pairs: tuple[tuple[int, int], ...]  # (position, velocity) state indices with kinematic rows
+    invariant: bool = False  # no row but a position's own depends on an absolute position
 
     @property
     def fixed_rows(self) -> list[int]:
@@ -203,8 +211,8 @@ class _Layout:
 
     @property
     def columns(self) -> list[int]:
-        """Columns of ``[X U]`` the fitted rows regress on: every one but the positions (translation invariance)."""
-        fixed = set(self.fixed_rows)
+        """Columns of ``[X U]`` the fitted rows regress on: all, or all but the positions (translation invariance)."""
+        fixed = set(self.fixed_rows) if self.invariant else set()
         return [j for j in range(self.n + self.m) if j not in fixed]
 
     def base(self) -> np.ndarray:
@@ -313,7 +321,7 @@ def _checks(A: np.ndarray, r: ResolvedRoles, roles: Roles, state_names: Sequence
 
 
 def identify_plant(
-    demos: DemonstrationSet, structure: str = "auto", horizon: float = 3.0
+    demos: DemonstrationSet, structure: str = "auto", horizon: float = 3.0, translation_invariant: bool = False
 ) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
     """(A, B), the RMS one-step residual of the fit on all data, and the report (see the module docstring).
 
@@ -324,6 +332,8 @@ def identify_plant(
         ``"auto"`` is ``"kinematic"`` when ``demos.roles`` pair positions with velocities, else ``"free"``.
     horizon : float
         Seconds of the multi-step check (the model's prediction horizon; the paper's is 3 s).
+    translation_invariant : bool
+        With ``"kinematic"``: also keep absolute positions out of every other row.
 
     Raises
     ------
@@ -339,10 +349,10 @@ def identify_plant(
     structure = resolve_structure(structure, roles, names)
     r = roles.resolve(names) if roles else ResolvedRoles()
     pairs = tuple(_pairs_of(r)) if structure == "kinematic" else ()
-    layout = _Layout(n, m, dt, pairs)
+    layout = _Layout(n, m, dt, pairs, invariant=translation_invariant)
 
     Z, Xn = _pairs([(d.x, d.u) for d in demos])
-    cols = layout.columns if structure == "kinematic" else list(range(n + m))
+    cols = layout.columns
     rank = _rank(Z[:, cols])
     if rank < len(cols):
         raise ModelError(
@@ -386,8 +396,11 @@ def identify_plant(
     rho_free = _beyond_integrators(A, n_int)
     cond = _normalized_cond(Z[:, cols])
     checks = _checks(A, r, roles, names, dt)
-    fixed = tuple(f"{names[p]}[k+1] = {names[p]}[k] + dt·{names[v]}[k] (no input, no position elsewhere)"
-                  for p, v in pairs)
+    elsewhere = ", no position elsewhere" if translation_invariant else ""
+    fixed = tuple(f"{names[p]}[k+1] = {names[p]}[k] + dt·{names[v]}[k] (no input{elsewhere})" for p, v in pairs)
+    positions = list(r.position) if n_int else []
+    others = [i for i in range(n) if i not in positions]
+    pull = float(np.abs(A[np.ix_(others, positions)]).max()) if positions and others else 0.0
 
     scores = {k: _score(v, sigma) for k, v in rm.items()}
     warns = []
@@ -407,6 +420,6 @@ def identify_plant(
         horizon_rmse_persistence=rm["h_p"], one_step_score=scores["one"], one_step_score_persistence=scores["one_p"],
         horizon_score=scores["h"], horizon_score_persistence=scores["h_p"], spectral_radius=rho,
         spectral_radius_beyond_integrators=rho_free, n_integrators=n_int, condition_number=cond, fixed=fixed,
-        checks=checks, warnings=tuple(warns),
+        checks=checks, warnings=tuple(warns), position_pull=pull,
     )
     return A, B, residual, report

@@ -22,11 +22,11 @@ import pandas as pd
 
 from workbench.atomic import atomic_write_table
 from workbench.demos import DemonstrationSet
-from workbench.errors import ConvergenceWarning, DataError
+from workbench.errors import ConvergenceWarning, DataError, ModelError
 
 __all__ = [
-    "StudyResult", "run_study", "improvement_table", "verdicts", "metric_unit", "plant_for", "METHOD_TITLES",
-    "FLOOR_METHODS",
+    "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "improvement_table", "verdicts", "metric_unit", "plant_for",
+    "METHOD_TITLES", "FLOOR_METHODS",
 ]
 
 METHODS = ("proposed", "ioc_only", "gmr_only", "persistence")
@@ -56,6 +56,11 @@ class StudyResult:
     samples: int
     seed: int
     timings: dict[str, float] = field(default_factory=dict)
+    #: Methods that could not be fitted, per label: ``{label: {method: reason}}`` (e.g. a gain that does not
+    #: stabilize the identified plant, so no task objective exists); they are left out of the comparison.
+    failures: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: With :func:`run_loso`: the plant of each fold, by the trial it left out (``system`` is the last one).
+    plants: dict[str, Any] = field(default_factory=dict)
 
     @property
     def rmse(self) -> pd.DataFrame:
@@ -84,8 +89,14 @@ class StudyResult:
         return improvement_table(self.rmse)
 
     def verdicts(self) -> list[str]:
-        """One plain sentence per label where the proposed model does not beat IOC-only or persistence."""
-        return verdicts(self.rmse, self.metric, metric_unit(self.system, self.metric))
+        """One plain sentence per label where the proposed model does not beat IOC-only or persistence, or a
+        method could not be fitted at all."""
+        lines = [
+            f"{'On ' + label + ', ' if label not in ('', 'None') else ''}{METHOD_TITLES.get(m, m)} could not be "
+            f"fitted and is left out of the comparison: {reason}"
+            for label, by_method in self.failures.items() for m, reason in by_method.items()
+        ]
+        return lines + verdicts(self.rmse, self.metric, metric_unit(self.system, self.metric))
 
     def save_tables(self, path: str | os.PathLike) -> Path:
         """The tidy RMSE table (plus the data-efficiency rows, ``table`` column) as CSV or Parquet, atomically."""
@@ -127,15 +138,30 @@ def select_components(
     return best[1]
 
 
-def _fit_all(system: Any, train: DemonstrationSet, components: int, seed: int) -> dict[str, Any]:
+def _fit_each(
+    system: Any, train: DemonstrationSet, components: int, seed: int
+) -> tuple[dict[str, Any], dict[str, str]]:
+    """Every method that can be fitted, and why the others cannot (a ModelError's message).
+
+    On a real log the operator's estimated gain may not stabilize an honest plant (a pilot who does not hold an
+    absolute position leaves its integrators marginal, Assumption 3): then the proposed model and IOC-only do
+    not exist, and the study says so and compares the rest instead of stopping.
+    """
     from workbench import model as wm
 
-    return {
-        "proposed": wm.HumanBehaviorModel(system, n_components=components, random_state=seed).fit(train),
-        "ioc_only": wm.IOCOnlyModel(system).fit(train),
-        "gmr_only": wm.GMROnlyModel(system, n_components=components, random_state=seed).fit(train),
-        "persistence": wm.PersistenceModel(system).fit(train),
+    makers = {
+        "proposed": lambda: wm.HumanBehaviorModel(system, n_components=components, random_state=seed),
+        "ioc_only": lambda: wm.IOCOnlyModel(system),
+        "gmr_only": lambda: wm.GMROnlyModel(system, n_components=components, random_state=seed),
+        "persistence": lambda: wm.PersistenceModel(system),
     }
+    fitted, failures = {}, {}
+    for name, make in makers.items():
+        try:
+            fitted[name] = make().fit(train)
+        except ModelError as exc:
+            failures[name] = " ".join(str(exc).split())
+    return fitted, failures
 
 
 def plant_for(system: PlantSpec, train: DemonstrationSet) -> Any:
@@ -165,8 +191,13 @@ def run_study(
     seed: int = 0,
     progress: Callable[[], Any] | None = None,
     executor: Any = None,
+    test_ids: Sequence[str] | None = None,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
+
+    ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
+    without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
+    cannot be fitted is left out of the comparison and named in ``failures`` and :meth:`StudyResult.verdicts`.
 
     ``executor`` (:mod:`workbench.executor`) runs the points of the data-efficiency curves; default here.
 
@@ -182,27 +213,37 @@ def run_study(
     rmse_parts, cov_parts, eff_parts = [], [], []
     splits = {}
     for label in labels:
-        splits[str(label)] = _split(demos if label is None else demos.by_label(label), test_size, seed)
+        ds = demos if label is None else demos.by_label(label)
+        if test_ids is None:
+            splits[str(label)] = _split(ds, test_size, seed)
+        elif any(d.id in test_ids for d in ds):
+            splits[str(label)] = (ds._like([d for d in ds if d.id not in test_ids]),
+                                  ds._like([d for d in ds if d.id in test_ids]))
+    if not splits:
+        raise DataError(f"no trial among {list(demos.ids)} has a test id of {list(test_ids or [])}")
+    failures: dict[str, dict[str, str]] = {}
     all_train = [d for tr, _ in splits.values() for d in tr]
     system = plant_for(system, demos._like(all_train))
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
-        task = p.add_task("fitting and comparing", total=len(labels)) if p is not None else None
-        for label in labels:
-            label = str(label)
-            tr, te = splits[label]
+        task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
+        for label, (tr, te) in splits.items():
             t0 = time.perf_counter()
             G = select_components(tr, system, seed=seed) if components == "auto" else int(components)
-            fitted = _fit_all(system, tr, G, seed)
+            fitted, failed = _fit_each(system, tr, G, seed)
+            if failed:
+                failures[label] = failed
             timings[f"fit {label}"] = time.perf_counter() - t0
             train[label], test[label] = tr, te
-            models[label] = fitted["proposed"]
+            if "proposed" in fitted:
+                models[label] = fitted["proposed"]
             baselines[label] = {k: v for k, v in fitted.items() if k != "proposed"}
             t0 = time.perf_counter()
             table = ev.compare(fitted, te, horizon=horizon, samples=samples, seed=seed)
             rmse_parts.append(table.assign(label=label))
-            cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, method="proposed"))
-            cov_parts.append(cov.assign(label=label))
+            if "proposed" in fitted:
+                cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, method="proposed"))
+                cov_parts.append(cov.assign(label=label))
             timings[f"compare {label}"] = time.perf_counter() - t0
             if efficiency:
                 t0 = time.perf_counter()
@@ -241,7 +282,70 @@ def run_study(
         demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
         coverage=_coverage_table(pd.concat(cov_parts, ignore_index=True)) if cov_parts else None,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
-        stats_text=stats_text, horizon=horizon, samples=samples, seed=seed, timings=timings,
+        stats_text=stats_text, horizon=horizon, samples=samples, seed=seed, timings=timings, failures=failures,
+    )
+
+
+#: Below this many trials in a label, ``evaluate`` leaves one trial out at a time instead of one random split.
+LOSO_BELOW = 10
+
+
+def run_loso(
+    demos: DemonstrationSet,
+    system: Any,
+    *,
+    horizon: int = 60,
+    components: int | str = 5,
+    samples: int = 100,
+    seed: int = 0,
+    progress: Callable[[], Any] | None = None,
+    executor: Any = None,
+) -> StudyResult:
+    """Leave-one-segment-out: every trial is the test set once, the others train (:func:`run_study` per fold).
+
+    For a log that gives a few segments (a real flight cut by its flight modes), where one random split would
+    score one or two trials. With a callable ``system`` every fold identifies its own plant from its training
+    trials (``plants`` holds them by the left-out trial), so no trial is scored by a plant that saw it. The
+    comparison table holds every trial once; a method that could not be fitted in some fold is left out for
+    its label altogether (a mean over other folds would not be comparable) and named in ``failures``. One-step
+    coverage is the mean over the folds; there is no data-efficiency curve. ``models`` and ``baselines`` are
+    the last fold's; ``train`` is every trial of a label (each trains in all folds but its own).
+    """
+    from workbench import evaluate as ev
+
+    folds: list[tuple[str, StudyResult]] = []
+    bar = progress() if progress is not None else nullcontext()
+    with bar as p:
+        task = p.add_task(f"leave-one-segment-out: {len(demos)} folds", total=len(demos)) if p is not None else None
+        for d in demos:
+            res = run_study(demos, system, horizon=horizon, components=components, samples=samples,
+                            efficiency=None, seed=seed, executor=executor, test_ids=[d.id])
+            folds.append((d.id, res))
+            if p is not None:
+                p.advance(task)
+    failures: dict[str, dict[str, str]] = {}
+    for trial, res in folds:
+        for label, by_method in res.failures.items():
+            for method, reason in by_method.items():
+                failures.setdefault(label, {}).setdefault(method, f"(first in the fold leaving out {trial}) {reason}")
+    table = pd.concat([r.table for _, r in folds], ignore_index=True)
+    for label, by_method in failures.items():
+        table = table[~((table["label"] == label) & table["method"].isin(list(by_method)))]
+    table = table.reset_index(drop=True)
+    covs = [r.coverage for _, r in folds if r.coverage is not None and len(r.coverage)]
+    coverage = (pd.concat(covs).groupby(["label", "input"], sort=False).mean().reset_index() if covs else None)
+    last = folds[-1][1]
+    labels = list(dict.fromkeys(str(lbl) for _, r in folds for lbl in r.test))
+    test = {lbl: demos._like([d for _, r in folds for d in r.test.get(lbl, [])]) for lbl in labels}
+    train = {lbl: test[lbl] for lbl in labels}
+    plant = last.system
+    metric = ev.primary_metric(plant)
+    return StudyResult(
+        demos=demos, system=plant, train=train, test=test, models=last.models, baselines=last.baselines,
+        table=table, coverage=coverage, efficiency=None,
+        stats_text=_subject_stats(ev, table, demos, metric, metric_unit(plant, metric)), horizon=horizon,
+        samples=samples, seed=seed, timings={k: v for _, r in folds for k, v in r.timings.items()},
+        failures=failures, plants={trial: r.system for trial, r in folds},
     )
 
 

@@ -168,13 +168,15 @@ class LinearSystem:
         u_max: Sequence[float] | None = None,
         structure: str = "auto",
         horizon: float = 3.0,
+        translation_invariant: bool = False,
     ) -> LinearSystem:
         """Least-squares estimate of (A, B) from consecutive samples of every demonstration, with a report.
 
         Pairs (x[k], u[k]) → x[k+1] are taken within each demonstration, never across two. With
         ``structure="kinematic"`` the position rows are fixed by kinematics, ``p[k+1] = p[k] + dt·v[k]`` for the
-        roles' position / velocity pairs (no input moves a position directly, no state depends on an absolute
-        position), and the other rows are fitted; ``"free"`` fits every entry of ``[A B]``; ``"auto"`` (the
+        roles' position / velocity pairs (no input moves a position directly), and the other rows are fitted
+        (with ``translation_invariant=True`` on everything but the positions, so no state depends on an absolute
+        position); ``"free"`` fits every entry of ``[A B]``; ``"auto"`` (the
         default) is kinematic when ``demos.roles`` pair positions with velocities, else free — so data without
         roles are identified as before. The RMS one-step residual on all data is ``fit_residual``; the held-out
         check (leave-one-segment-out, ``horizon`` seconds ahead, against persistence), ρ(A), conditioning,
@@ -189,7 +191,9 @@ class LinearSystem:
         """
         from workbench.identification import identify_plant
 
-        A, B, residual, report = identify_plant(demos, structure=structure, horizon=horizon)
+        A, B, residual, report = identify_plant(
+            demos, structure=structure, horizon=horizon, translation_invariant=translation_invariant
+        )
         return cls(
             A,
             B,
