@@ -737,7 +737,8 @@ def cmd_live(ctx: _Context) -> int:
         logger.log(p)
         if not out["save"] and logger.demo_ids[-1:] != shown[-1:]:  # a new segment: show it in the viewer
             shown.append(p.demo_id)
-            rec.send_blueprint(live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None))
+            rec.send_blueprint(live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
+                                              bounds=logger.scene_bounds()))
 
     def on_event(ev: Any) -> None:
         logger.event(ev)
@@ -751,7 +752,8 @@ def cmd_live(ctx: _Context) -> int:
                 + (f" for {a.duration:g} s" if a.duration else "; Ctrl-C to stop"))
         summary = listen(link, predictor, duration=a.duration, on_prediction=on_prediction, on_event=on_event,
                          on_tick=logger.status)
-        sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None)
+        sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
+                                        bounds=logger.scene_bounds())
     c50, c99 = summary.percentiles("compute")
     l50, l99 = summary.percentiles("latency")
     ctx.say(f"{summary.n_steps} steps in {summary.n_segments} segment(s) over {summary.wall_seconds:.1f} s "

@@ -1,0 +1,259 @@
+"""The rerun side of live prediction: each grid step of a live link drawn as it is completed.
+
+:class:`LiveLogger` takes the :class:`~workbench.live.LivePrediction` of every step (from
+:func:`workbench.live.listen`) and logs, with ``rr.log`` (a live stream has no columns to send), under the same
+entity layout as the offline replay (:mod:`workbench.viewer.replay`), so a live recording and a replayed one
+read alike:
+
+* ``demos/<id>/states/<state>`` and ``demos/<id>/inputs/<input>`` — the aligned state and the operator's input;
+* ``demos/<id>/online/<input>/gmr`` — the one-step input prediction ``K̂(x − r) + μ̂(x)`` with its ±1σ and ±3σ
+  bands (eqs. (20), (24)–(27) of the method paper), and ``…/outside_3sigma`` where the actual input leaves it;
+* ``demos/<id>/variability/<input>/{w,gmr}`` — ``ŵ = u − K̂(x − r)`` and its GMR mean with ±1σ / ±3σ bands;
+* ``demos/<id>/online/rollout_end/<state>`` — the end of the short-horizon rollout, stamped at the time it
+  forecasts; ``scene/live/{vehicle,rollout}`` — the vehicle and its rollout in the plane of flight (roles);
+* ``live/status`` (the link's counts: messages, garbage, CRC failures, duplicates, other systems …),
+  ``live/events`` (silence, resumption, clock resets, segments), ``live/compute_ms`` and ``live/latency_ms``.
+
+Timelines: ``link_time`` (the vehicle's clock, continuous: what the time panel follows), ``time`` (seconds since
+the segment's first step, as the replay) and ``step``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from workbench.live import LinkStats, LiveEvent, LivePrediction
+from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS
+
+__all__ = ["LIVE_APPLICATION_ID", "LiveLogger", "live_blueprint"]
+
+LIVE_APPLICATION_ID = "workbench_live"
+_RECORDED = (200, 200, 200)
+_PRED = METHOD_COLORS["proposed"]
+_BAND = (255, 187, 120)
+_W = (110, 190, 255)
+_OUT = (255, 60, 60)
+_RECENT = 3
+
+
+def _part(name: str) -> str:
+    """An entity-path part (rerun splits on '/'; odd characters make paths hard to type)."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in str(name)) or "_"
+
+
+class LiveLogger:
+    """Logs live predictions into a rerun recording, one grid step at a time.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+    state_names, input_names : sequence of str
+    plane : (int, int, int or None), optional
+        State indices of the plane of flight (across, up) and the heading angle, from the mapping's roles;
+        without it there is no scene.
+    """
+
+    def __init__(self, rec: rr.RecordingStream, state_names: Sequence[str], input_names: Sequence[str], *,
+                 plane: tuple[int, int, int | None] | None = None) -> None:
+        self.rec = rec
+        self.state_names = tuple(state_names)
+        self.input_names = tuple(input_names)
+        self.plane = plane
+        self.demo_ids: list[str] = []
+        self._styled: set[str] = set()
+        self.n_logged = 0
+        self.bounds = np.array([np.inf, np.inf, -np.inf, -np.inf])  # the view's x, y extents seen so far
+        self._path: list[np.ndarray] = []
+        rec.log("live/events", rr.TextLog("waiting for the link", level="INFO"))
+        rec.log("live/compute_ms", rr.SeriesLines(names=["align + predict [ms]"], colors=[_PRED]), static=True)
+        rec.log("live/latency_ms", rr.SeriesLines(names=["message → prediction [ms]"], colors=[_W]), static=True)
+        if plane is not None:
+            rec.log("scene/live/rollout", rr.LineStrips2D.from_fields(colors=[_PRED], radii=[0.015]), static=True)
+
+    # -- styling, once per segment ---------------------------------------------------------------------------
+    def _style(self, demo_id: str) -> None:
+        if demo_id in self._styled:
+            return
+        self._styled.add(demo_id)
+        self.demo_ids.append(demo_id)
+        base, rec = f"demos/{_part(demo_id)}", self.rec
+        for name in self.state_names:
+            rec.log(f"{base}/states/{_part(name)}", rr.SeriesLines(names=[name], colors=[_RECORDED]), static=True)
+            rec.log(f"{base}/online/rollout_end/{_part(name)}",
+                    rr.SeriesLines(names=[f"{name} forecast (rollout end)"], colors=[_PRED]), static=True)
+        for name in self.input_names:
+            rec.log(f"{base}/inputs/{_part(name)}",
+                    rr.SeriesLines(names=[f"{name} recorded"], colors=[_RECORDED], interpolation_mode="StepAfter"),
+                    static=True)
+            p = f"{base}/online/{_part(name)}"
+            label = f"{name}: K̂x + μ(x)"
+            self._bands(f"{p}/gmr", [f"{label} ± 1σ", f"{label} ± 3σ"], [_PRED, _BAND])
+            rec.log(f"{p}/outside_3sigma", rr.SeriesPoints(names=[f"{name} outside 3σ"], colors=[_OUT],
+                                                           markers=["cross"], marker_sizes=[4.0]), static=True)
+            v = f"{base}/variability/{_part(name)}"
+            rec.log(f"{v}/w", rr.SeriesLines(names=[f"ŵ {name}"], colors=[_W], interpolation_mode="StepAfter"),
+                    static=True)
+            self._bands(f"{v}/gmr", ["GMR μ ± 1σ", "GMR μ ± 3σ"], [(255, 170, 90), (255, 225, 190)])
+
+    def _bands(self, path: str, names: list[str], colors: list[tuple[int, int, int]]) -> None:
+        if HAS_MEASUREMENTS:
+            self.rec.log(path, rr.Measurements.from_fields(names=names, colors=colors, interpolation_mode="StepAfter"),
+                         static=True)
+        else:  # older SDKs: each band as its two edges
+            edges = [f"{n} {side}" for n in names for side in ("low", "high")]
+            self.rec.log(path, rr.SeriesLines(names=edges, colors=[c for c in colors for _ in (0, 1)]), static=True)
+
+    def _band(self, path: str, mean: float, sigma: float) -> None:
+        if HAS_MEASUREMENTS:
+            self.rec.log(path, rr.Measurements(values=[mean, mean], variances=[sigma**2, (3 * sigma) ** 2]))
+        else:
+            self.rec.log(path, rr.Scalars([mean - sigma, mean + sigma, mean - 3 * sigma, mean + 3 * sigma]))
+
+    # -- one step ----------------------------------------------------------------------------------------------
+    def log(self, p: LivePrediction) -> None:
+        """Log one step's state, input, predictions, ŵ bands and rollout."""
+        rec = self.rec
+        new = p.demo_id not in self._styled
+        self._style(p.demo_id)
+        if new:
+            label = p.meta.get("label")
+            self.event(LiveEvent("segment", p.t, f"segment {p.demo_id} started" + (f" ({label})" if label else "")))
+        base = f"demos/{_part(p.demo_id)}"
+        self._at(p.t, p.t_rel, p.k)
+        for j, name in enumerate(self.state_names):
+            rec.log(f"{base}/states/{_part(name)}", rr.Scalars(p.x[j]))
+        sigma = p.u_std
+        for j, name in enumerate(self.input_names):
+            rec.log(f"{base}/inputs/{_part(name)}", rr.Scalars(p.u[j]))
+            o = f"{base}/online/{_part(name)}"
+            self._band(f"{o}/gmr", float(p.u_mean[j]), float(sigma[j]))
+            if abs(p.u[j] - p.u_mean[j]) > 3.0 * sigma[j]:
+                rec.log(f"{o}/outside_3sigma", rr.Scalars(p.u[j]))
+            if p.w is not None:
+                v = f"{base}/variability/{_part(name)}"
+                rec.log(f"{v}/w", rr.Scalars(p.w[j]))
+                self._band(f"{v}/gmr", float(p.w_mean[j]), float(np.sqrt(max(p.w_cov[j, j], 0.0))))
+        rec.log("live/compute_ms", rr.Scalars(1e3 * p.compute_seconds))
+        if np.isfinite(p.latency):
+            rec.log("live/latency_ms", rr.Scalars(1e3 * p.latency))
+        if self.plane is not None:
+            across, up, heading = self.plane
+            phi = float(p.x[heading]) if heading is not None else 0.0
+            c, s = np.cos(phi), np.sin(phi)
+            center = np.array([p.x[across], -p.x[up]])
+            if new:
+                self._path = []
+                if p.target is not None:
+                    pad = np.array([[p.target[across], -p.target[up]]])
+                    rec.log("scene/live/target",
+                            rr.Points2D(pad, radii=[0.06], colors=[(90, 90, 90)], labels=["target"]))
+                    self._grow(pad[0])
+            self._path = [*self._path[-400:], center]
+            self._grow(center)
+            if p.k % 5 == 0:  # the flown path so far, redrawn every few steps (not every step: it grows)
+                rec.log("scene/live/path", rr.LineStrips2D([np.array(self._path)], colors=[(120, 120, 120)],
+                                                           radii=[0.008], labels=[p.demo_id]))
+            # body drawn in the view (up negated): arms along the tilted body axis, thrust axis perpendicular
+            arm, mast = np.array([0.18 * c, 0.18 * s]), np.array([0.12 * s, -0.12 * c])
+            rec.log("scene/live/vehicle", rr.LineStrips2D([[center - arm, center + arm], [center, center + mast]],
+                                                          colors=[_RECORDED, _RECORDED], radii=[0.02, 0.01]))
+            if p.rollout_x is not None:
+                xp = p.rollout_x
+                rec.log("scene/live/rollout", rr.LineStrips2D([np.column_stack([xp[:, across], -xp[:, up]])]))
+        if p.rollout_x is not None:
+            h = p.horizon
+            self._at(p.t + h * p.dt, p.t_rel + h * p.dt, p.k + h)
+            for j, name in enumerate(self.state_names):
+                rec.log(f"{base}/online/rollout_end/{_part(name)}", rr.Scalars(p.rollout_x[-1, j]))
+        self.n_logged += 1
+
+    def _grow(self, point: np.ndarray) -> None:
+        self.bounds[:2] = np.minimum(self.bounds[:2], point)
+        self.bounds[2:] = np.maximum(self.bounds[2:], point)
+
+    def scene_bounds(self, margin: float = 0.1) -> tuple[list[float], list[float]] | None:
+        """The view's ranges fitting everything flown so far (None before the first step)."""
+        if not np.isfinite(self.bounds).all():
+            return None
+        lo, hi = self.bounds[:2], self.bounds[2:]
+        pad = margin * max(float(np.max(hi - lo)), 0.5)
+        return [float(lo[0] - pad), float(hi[0] + pad)], [float(lo[1] - pad), float(hi[1] + pad)]
+
+    def _at(self, link_time: float, t_rel: float, step: int) -> None:
+        self.rec.set_time("link_time", duration=float(link_time))
+        self.rec.set_time("time", duration=float(t_rel))
+        self.rec.set_time("step", sequence=int(step))
+
+    # -- the link ----------------------------------------------------------------------------------------------
+    def event(self, ev: LiveEvent) -> None:
+        """A link event as a log line (on the link clock where it has a time there)."""
+        level = "WARN" if ev.kind in ("silent", "reset") else "INFO"
+        self.rec.log("live/events", rr.TextLog(ev.text, level=level))
+
+    def status(self, stats: LinkStats) -> None:
+        """The link's counts as a small Markdown table (what was received, what was dropped and why)."""
+        rows = [f"| {k} | {v} |" for k, v in sorted(stats.counts.items())]
+        text = "\n".join([
+            "# Link", "",
+            f"- steps predicted: **{stats.n_steps}** in {stats.n_segments} segment(s)",
+            f"- link: {'**silent**' if stats.silent else 'receiving'} (silences so far: {stats.silences})",
+            *([f"- waiting for: {', '.join(stats.waiting_for)}"] if stats.waiting_for else []),
+            "", "| count | n |", "|---|---|", *rows,
+        ])
+        self.rec.log("live/status", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
+
+
+def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_names: Sequence[str], *,
+                   scene: bool = True, bounds: tuple[list[float], list[float]] | None = None) -> rrb.Blueprint:
+    """The live layout: the scene with the online input predictions beside it; states; ŵ; the link.
+
+    ``bounds`` (x range, y range) fixes the scene's view (:meth:`LiveLogger.scene_bounds`); the viewer would
+    otherwise zoom onto the vehicle alone.
+    """
+    ids = [_part(i) for i in list(demo_ids)[-_RECENT:]]
+    inputs = [
+        rrb.TimeSeriesView(
+            origin="/",
+            contents=[f"+ /demos/{i}/inputs/{_part(n)}" for i in ids]
+            + [f"+ /demos/{i}/online/{_part(n)}/**" for i in ids],
+            name=f"{n}: operator vs online prediction",
+        )
+        for n in input_names
+    ]
+    states = [
+        rrb.TimeSeriesView(
+            origin="/",
+            contents=[f"+ /demos/{i}/states/{_part(n)}" for i in ids]
+            + [f"+ /demos/{i}/online/rollout_end/{_part(n)}" for i in ids],
+            name=n,
+        )
+        for n in state_names
+    ]
+    variability = [
+        rrb.TimeSeriesView(origin="/", contents=[f"+ /demos/{i}/variability/{_part(n)}/**" for i in ids],
+                           name=f"ŵ {n} with GMR bands")
+        for n in input_names
+    ]
+    link = rrb.Horizontal(
+        rrb.Vertical(rrb.TextDocumentView(origin="/live/status", name="link status"),
+                     rrb.TextLogView(origin="/live/events", name="events")),
+        rrb.Vertical(rrb.TimeSeriesView(origin="/live/compute_ms", name="compute per step [ms]"),
+                     rrb.TimeSeriesView(origin="/live/latency_ms", name="message → prediction [ms]")),
+        name="link",
+    )
+    first: Any = rrb.Vertical(*inputs, name="live")
+    if scene:
+        fit = rrb.VisualBounds2D(x_range=bounds[0], y_range=bounds[1]) if bounds else None
+        view = rrb.Spatial2DView(origin="/scene/live", name="scene", visual_bounds=fit)
+        first = rrb.Horizontal(view, rrb.Vertical(*inputs),
+                               column_shares=[3, 2], name="live")
+    return rrb.Blueprint(
+        rrb.Tabs(first, rrb.Grid(*states, name="states"), rrb.Grid(*variability, name="variability"), link),
+        rrb.TimePanel(timeline="link_time"),
+        collapse_panels=False,
+    )
