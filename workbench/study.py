@@ -266,10 +266,10 @@ def run_study(
                             f"{label} data efficiency: EM stopped at max_iter in {n_warn} of the subset fits",
                             ConvergenceWarning, stacklevel=2,
                         )
-                    failures = eff.attrs.get("failures") or []
-                    if failures:
-                        warnings.warn(f"{label} data efficiency: {len(failures)} fits failed, e.g. {failures[0]}",
-                                      stacklevel=2)
+                    eff_failures = eff.attrs.get("failures") or []
+                    if eff_failures:
+                        warnings.warn(f"{label} data efficiency: {len(eff_failures)} fits failed, e.g. "
+                                      f"{eff_failures[0]}", stacklevel=2)
                     eff = eff[eff["metric"] == ev.primary_metric(system)].assign(label=label)
                     eff_parts.append(eff)
                 timings[f"efficiency {label}"] = time.perf_counter() - t0
@@ -316,7 +316,8 @@ def run_loso(
     folds: list[tuple[str, StudyResult]] = []
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
-        task = p.add_task(f"leave-one-segment-out: {len(demos)} folds", total=len(demos)) if p is not None else None
+        what = f"fitting and comparing, leave-one-segment-out ({len(demos)} folds)"
+        task = p.add_task(what, total=len(demos)) if p is not None else None
         for d in demos:
             res = run_study(demos, system, horizon=horizon, components=components, samples=samples,
                             efficiency=None, seed=seed, executor=executor, test_ids=[d.id])
