@@ -175,6 +175,17 @@ def _plant(choice: str, horizon: float = 3.0) -> Callable[[Any], Any]:
     return lambda train: _system_for(train, choice, horizon)
 
 
+def _require_proposed(result: Any) -> None:
+    """A report and the demo show the proposed model: say why it is missing instead of failing inside them."""
+    from workbench.errors import ModelError
+
+    for label in result.test:
+        if label not in result.models:
+            reason = result.failures.get(label, {}).get("proposed", "unknown cause")
+            raise ModelError(f"the proposed model could not be fitted on {label!r} (so no report): {reason}; "
+                             "`workbench evaluate` compares the methods that can be")
+
+
 def _print_plant(ctx: _Context, system: Any, note: str = "") -> None:
     """An identified plant's report (held-out errors vs persistence, ρ, conditioning, checks); its warning on
     stderr too, where a user looks for problems."""
@@ -382,8 +393,11 @@ def cmd_fit(ctx: _Context) -> int:
     model.save(a.output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
-    if a.bootstrap > 0:
+    if a.bootstrap > 0 and getattr(model, "K_", None) is not None:
         _print_bootstrap(ctx, ds, system, a.bootstrap, a.seed, a.gain)
+        _print_ratios(ctx, model, ds, a.bootstrap, a.seed)
+    elif getattr(model, "objective_", None) is not None:
+        ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
     ctx.say(f"wrote {a.output}")
     return 0
 
@@ -404,6 +418,23 @@ def _print_bootstrap(ctx: _Context, ds: Any, system: Any, n_boot: int, seed: int
     for i, u in enumerate(ds.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(ds.state_names, result.K_lo[i], result.K_hi[i], strict=True)))
+
+
+def _print_ratios(ctx: _Context, model: Any, ds: Any, n_boot: int, seed: int) -> None:
+    """Weight ratios inside each coupled part of the plant (closest diagonal cost), with intervals."""
+    from workbench.weights import ratio_bootstrap, weight_ratios
+
+    with ctx.progress() as progress:
+        progress.add_task(f"bootstrap of the weight ratios: {n_boot} resamples", total=None)
+        boot, gain, note = ratio_bootstrap(model, ds, n_boot=n_boot, seed=seed)
+    if boot is None:
+        ctx.say(f"weight ratios: none ({note})")
+        return
+    ctx.say(f"weight ratios inside coupled parts (closest S = 0, diagonal cost to the {gain} gain; "
+            f"{boot.n_ok} of {boot.n_boot} resamples, {boot.ci:g} % intervals; forward-gain error "
+            f"{boot.objective.forward_gain_error:.2g}):")
+    for r in weight_ratios(boot, ds.state_names, ds.input_names):
+        ctx.say(f"  {r.describe()}")
 
 
 def _print_model(ctx: _Context, model: Any, ds: Any) -> None:
@@ -552,11 +583,14 @@ def _evaluate_per_subject(ctx: _Context, ds: Any) -> int:
     plant = _plant(a.system)
     subjects = sorted({str(d.meta.get("subject")) for d in ds if d.meta.get("subject") is not None})
     seed = a.seed
+    # a dataset is read where it lies, each subject's partition by its own task: nothing to stage for workers
+    source = a.demos[0] if len(a.demos) == 1 and not a.label and _is_demo_file(Path(a.demos[0])) and Path(
+        a.demos[0]).is_dir() else ds
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
         res = evaluate.per_subject(
             # each subject's plant from its training trials only, never from the held-out ones
-            lambda train: evaluate.default_models(plant(train), components, seed), ds, n_test=a.n_test,
+            lambda train: evaluate.default_models(plant(train), components, seed), source, n_test=a.n_test,
             horizon=_steps(a.horizon, ds.dt), seed=a.seed,
             progress=lambda done, total: progress.update(task, completed=done), executor=ex,
         )
@@ -777,10 +811,12 @@ def cmd_report(ctx: _Context) -> int:
     ds = _load_demos(ctx, a.demos, a.mapping, a.label)
     with ctx.executor() as ex:
         result = study.run_study(
-            ds, _plant(a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt),
+            ds, _plant(a.system, a.horizon), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt),
             components=a.components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
             progress=ctx.progress, executor=ex,
         )
+    _print_plant(ctx, result.system, "(plant from the training trials)")
+    _require_proposed(result)
     path = write_study_report(result, a.output, title=a.title)
     _print_study(ctx, result)
     ctx.say(f"wrote {path} with figures in {Path(a.output) / 'figures'}")
@@ -827,6 +863,7 @@ def cmd_demo(ctx: _Context) -> int:
         samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
     )
     timings["fit + compare"] = time.perf_counter() - t0 - timings["import"]
+    _require_proposed(result)
     model_dir = out / "models"
     for label, model in result.models.items():
         model.save(model_dir / f"{label}.npz")
@@ -983,9 +1020,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="how K̂ is estimated: least squares (direct, default), the paper's DMD, or instrumental "
                         "variables (iv: consistent when the operator's variability is autocorrelated)")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialization (default 0)")
-    p.add_argument("--bootstrap", type=int, default=0, metavar="N",
-                   help="also resample the trials N times and print 95 %% intervals of K̂ and the normalized Q, R "
-                        "diagonals (the paper gives none)")
+    p.add_argument("--bootstrap", type=int, default=100, metavar="N",
+                   help="resample the trials N times (default 100; 0: no intervals) and print 95 %% intervals of "
+                        "K̂, the normalized Q, R diagonals and the weight ratios inside coupled parts (the paper "
+                        "gives none)")
     _system_option(p)
     _mapping_option(p)
     _executor_options(p)
