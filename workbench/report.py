@@ -390,7 +390,9 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
                 for label in labels}
     save_figure(fig_demonstrations(all_sets), fig_dir / "demonstrations.png")
     md += ["![Demonstrations per strategy](figures/demonstrations.png)", "",
-           "*Flown paths per strategy; dots are start points, the bar is the pad.*", ""]
+           "*Flown paths per strategy in the plane of the position roles; dots are start points, the bar is the pad "
+           "(where known).*" if _plane(any_set.roles, state_names) is not None else
+           "*Every state against time per strategy (the plant declares no plane of positions).*", ""]
 
     # objective
     md += ["## Task objective (inverse LQR)", ""]

@@ -422,6 +422,7 @@ def verdicts(rmse: pd.DataFrame, metric: str, unit: str = "") -> list[str]:
                  for b in FLOOR_METHODS if b in m.index and np.isfinite(m[b]) and m["proposed"] >= m[b]]
         if worse:
             where = f"On {label}, the" if label else "The"
+            which = "that baseline" if len(worse) == 1 else "those baselines"
             out.append(f"{where} proposed model is not better than {' nor than '.join(worse)} in mean {what} RMSE "
-                       "on the test trials: its predictions gain nothing over that baseline on these data.")
+                       f"on the test trials: its predictions gain nothing over {which} on these data.")
     return out
