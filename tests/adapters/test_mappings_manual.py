@@ -205,3 +205,33 @@ def test_tilt_east_rate_is_the_derivative_of_the_tilt():
     tilt = TRANSFORMS["euler_tilt_east"].forward(v[:, :3], {})
     rate = TRANSFORMS["euler_tilt_east_rate"].forward(v, {})
     np.testing.assert_allclose(np.gradient(tilt, dt)[1:-1], rate[1:-1], rtol=1e-3, atol=1e-5)
+
+
+def test_workbench_inspect_prints_the_plane_modes_with_durations(flights, tmp_path, capsys):
+    from workbench.cli import main
+
+    spans = layout(flights, EPOCH, PAUSE)
+    ml = mavutil.mavlink
+    modes = [mode_number("arduplane", "QSTABILIZE"), mode_number("arduplane", "QLOITER")]
+    hb = _heartbeats(spans, modes, autopilot=ml.MAV_AUTOPILOT_ARDUPILOTMEGA, mav_type=ml.MAV_TYPE_FIXED_WING)
+    path = _write_tlog(tmp_path / "plane.tlog", flights, "arduplane_manual", hb)
+    assert main(["inspect", str(path)]) == 0
+    out = capsys.readouterr().out
+    summary = adapters.inspect(path)
+    first = summary.modes[0]
+    assert "flight modes (MAV_AUTOPILOT_ARDUPILOTMEGA MAV_TYPE_FIXED_WING)" in out
+    assert f"QSTABILIZE 0.0–{first.duration:.1f} s ({first.duration:.1f} s)" in out and "QLOITER" in out
+
+
+def test_a_multi_field_source_names_the_missing_field(tmp_path):
+    from workbench.errors import MappingError
+
+    text = tmp_path / "m.toml"
+    text.write_text('dt = 0.2\nstates = ["phi", "v"]\ninputs = ["u"]\n[channels]\n'
+                    'phi = { source = "ATTITUDE.roll,pitch,yawz", transform = "euler_tilt_east" }\n'
+                    'v = "ATTITUDE.rollspeed"\nu = "ATTITUDE.pitchspeed"\n')
+    frame = pd.DataFrame({"t": np.arange(30) * 0.1, "roll": 0.1, "pitch": 0.0, "yaw": 0.0, "rollspeed": 0.0,
+                          "pitchspeed": 0.0})
+    streams = Streams("a.tlog", "tlog", {"ATTITUDE": frame}, {"ATTITUDE": 30})
+    with pytest.raises(MappingError, match=r"no field 'yawz'.*nearest: yaw"):
+        adapters.build(streams, load_mapping(text).for_format("tlog"))
