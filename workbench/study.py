@@ -421,7 +421,7 @@ def verdicts(rmse: pd.DataFrame, metric: str, unit: str = "") -> list[str]:
         worse = [f"{METHOD_TITLES.get(b, b)} ({m['proposed']:.3g} vs {m[b]:.3g}{u})"
                  for b in FLOOR_METHODS if b in m.index and np.isfinite(m[b]) and m["proposed"] >= m[b]]
         if worse:
-            where = f"On {label}, the" if label else "The"
+            where = f"On {label}, the" if label not in ("", "None") else "The"  # "None": a study without labels
             which = "that baseline" if len(worse) == 1 else "those baselines"
             out.append(f"{where} proposed model is not better than {' nor than '.join(worse)} in mean {what} RMSE "
                        f"on the test trials: its predictions gain nothing over {which} on these data.")
