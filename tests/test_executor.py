@@ -17,6 +17,7 @@ import pandas as pd
 import pytest
 
 from workbench import evaluate as ev
+from workbench.dataset import write_dataset
 from workbench.demos import DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
 from workbench.executor import DaskExecutor, SerialExecutor, make_executor, task_seed
@@ -49,8 +50,17 @@ def _models(system, train=None):
             "ioc_only": IOCOnlyModel(system)}
 
 
+# Same trials, splits, seeds and rows; the values may differ in the last bits only, because SIMD reductions
+# (numpy sums, BLAS kernels) group their terms by the memory alignment of arrays, which differs from process to
+# process (seen: 1 ulp).
+RTOL = 1e-9
+
+
 def _same_table(a: pd.DataFrame, b: pd.DataFrame) -> None:
-    pd.testing.assert_frame_equal(a.reset_index(drop=True), b.reset_index(drop=True), check_exact=True)
+    a, b = a.reset_index(drop=True), b.reset_index(drop=True)
+    rest = [c for c in a.columns if c != "value"]
+    pd.testing.assert_frame_equal(a[rest], b[rest], check_exact=True)
+    np.testing.assert_allclose(b["value"].to_numpy(), a["value"].to_numpy(), rtol=RTOL, atol=0)
 
 
 # ------------------------------------------------------------------------------------------ seeds, threads
@@ -99,15 +109,18 @@ def test_serial_is_the_default_and_imports_no_dask():
 # ----------------------------------------------------------------------------- serial == 2 workers
 
 
-def test_per_subject_study_is_the_same_on_two_workers(cluster, study, quadrotor):
+def test_per_subject_study_is_the_same_on_two_workers(cluster, study, quadrotor, tmp_path):
     make = functools.partial(_models, quadrotor)
     calls = []
     serial = ev.per_subject(make, study, horizon=20, seed=1)
     parallel = ev.per_subject(make, study, horizon=20, seed=1, executor=cluster,
                               progress=lambda d, n: calls.append((d, n)))
     _same_table(serial.table, parallel.table)
+    # from a dataset on disk: this process reads the manifest only, each worker its subject's partition
+    from_disk = ev.per_subject(make, write_dataset(study, tmp_path / "ds"), horizon=20, seed=1, executor=cluster)
+    _same_table(serial.table, from_disk.table)
     assert serial.subjects == parallel.subjects == ("s01", "s02", "s03")
-    assert serial.anova == parallel.anova
+    assert parallel.anova.F == pytest.approx(serial.anova.F, rel=RTOL)
     assert calls[-1] == (3, 3) and len(calls) == 3  # the progress bar counts tasks: one per subject
     # a subject's held-out trial comes from its own seed, not from the other subjects' draws
     one = ev.per_subject(make, study.filter(lambda d: d.meta["subject"] != "s02"), horizon=20, seed=1)
@@ -120,9 +133,9 @@ def test_bootstrap_is_the_same_on_two_workers(cluster, quadrotor):
     serial = bootstrap(demos, quadrotor, n_boot=12, seed=2)
     parallel = bootstrap(demos, quadrotor, n_boot=12, seed=2, executor=cluster,
                          progress=lambda d, n: calls.append((d, n)))
-    np.testing.assert_array_equal(serial.K_samples, parallel.K_samples)
-    np.testing.assert_array_equal(serial.Q_diag_samples, parallel.Q_diag_samples)
-    np.testing.assert_array_equal(serial.K_lo, parallel.K_lo)
+    np.testing.assert_allclose(parallel.K_samples, serial.K_samples, rtol=RTOL, atol=1e-12)
+    np.testing.assert_allclose(parallel.Q_diag_samples, serial.Q_diag_samples, rtol=RTOL, atol=1e-12)
+    np.testing.assert_allclose(parallel.K_lo, serial.K_lo, rtol=RTOL, atol=1e-12)
     assert serial.failures == parallel.failures
     assert calls[-1] == (12, 12) and len(calls) < 12  # blocks of resamples, not one task per resample
 
@@ -234,6 +247,15 @@ def test_an_unexpected_error_is_retried_and_bad_data_is_not(cluster, tmp_path):
         cluster.map(_bad_data, [1, 2, 3])
     serial = SerialExecutor().map_outcomes(_bad_data, [1, 2, 3], keys=["a", "b", "c"])
     assert serial == out
+    broken = cluster.map_outcomes(_always_broken, [str(tmp_path / "count")], keys=["x"])
+    assert broken[0].error.startswith("OSError: always broken")
+    assert len((tmp_path / "count").read_text()) == 1 + cluster.retries  # tried, then retried, then reported
+
+
+def _always_broken(counter: str) -> None:
+    with open(counter, "a") as f:
+        f.write("x")
+    raise OSError("always broken")
 
 
 def _bad_data(i: int) -> int:

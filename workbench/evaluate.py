@@ -23,6 +23,7 @@ multi-subject design (a model per subject, held-out trials, ANOVA and paired t-t
 from __future__ import annotations
 
 import inspect
+import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -30,6 +31,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from workbench.dataset import read_manifest
 from workbench.demos import Demonstration, DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
 from workbench.executor import serial, task_seed
@@ -493,7 +495,7 @@ def _subject_task(task: tuple) -> tuple[pd.DataFrame | None, list[str], str]:
 
 def per_subject(
     make_models: Callable[[], Mapping[str, Any]] | Any,
-    demos: DemonstrationSet,
+    demos: DemonstrationSet | str | os.PathLike,
     n_test: int = 1,
     horizon: int = 100,
     metric: str | None = None,
@@ -519,15 +521,20 @@ def per_subject(
         :func:`default_models` (with ``n_components``).
     metric : str, optional
         The compared metric; default :func:`primary_metric` of the plant (position RMSE with position roles).
-    demos : DemonstrationSet
-        Trials with ``meta["subject"]``; at least two subjects with more than ``n_test`` trials each.
+    demos : DemonstrationSet or path of a dataset directory
+        Trials with ``meta["subject"]``; at least two subjects with more than ``n_test`` trials each. Given a
+        dataset (:mod:`workbench.dataset`), this process reads only its manifest and every task reads its own
+        subject's partition: the way to run a study too large for one machine's memory.
     executor : Executor, optional
         Where the subjects run, one task each (:mod:`workbench.executor`; default here, in order). A subject's
         held-out trials are drawn with a seed of its own (``seed`` and its name, :func:`~workbench.executor.
         task_seed`), so the study is the same whatever runs it, and a subject's split does not depend on the
         others.
     """
-    subjects = sorted({str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None})
+    if isinstance(demos, str | os.PathLike):
+        subjects = sorted(read_manifest(demos).subjects)
+    else:
+        subjects = sorted({str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None})
     if len(subjects) < 2:
         raise DataError(f"a multi-subject study needs trials of at least two subjects; found {subjects}")
     ex = executor if executor is not None else serial

@@ -340,24 +340,27 @@ class DaskExecutor:
 
         token = uuid.uuid4().hex[:8]
         label = getattr(fn, "__name__", "task").strip("_") or "task"
-        futures = [
-            self._client.submit(_run_task, fn, item, key=f"{label}-{token}-{i}", pure=False, retries=self.retries)
-            for i, item in enumerate(items)
-        ]
+        # one batched submission: the scheduler hears of every task in one message, not one message per task
+        futures = self._client.map(_run_task, [fn] * len(items), items, key=[f"{label}-{token}-{i}" for i in
+                                                                              range(len(items))],
+                                   pure=False, retries=self.retries)
         position = {f.key: i for i, f in enumerate(futures)}
         results: list[Outcome | None] = [None] * len(items)
         emitted: list[list[tuple[type[Warning], str]]] = [[] for _ in items]
         done = 0
         try:
-            for fut in as_completed(futures):
+            # results come in batches as they finish (one round trip per batch, not per task)
+            for fut, result in as_completed(futures, with_results=True, raise_errors=False):
                 i = position[fut.key]
-                try:
-                    value, caught, error = fut.result()
-                except Exception as exc:  # retries used up, every worker that tried it died, or it was cancelled
+                if fut.status != "finished":  # retries used up, every worker that tried it died, or cancelled
+                    if isinstance(result, tuple) and len(result) == 3:  # dask gives (type, exception, traceback)
+                        result = result[1]
+                    exc = result if isinstance(result, BaseException) else RuntimeError(f"task {fut.status}")
                     if not contain:
-                        raise
+                        raise exc
                     results[i] = Outcome(names[i], error=_describe(exc))
                 else:
+                    value, caught, error = result
                     emitted[i] = caught
                     if error is not None:
                         if not contain:
