@@ -241,6 +241,11 @@ class BehaviorModel:
             )
         return demos.resample(sys_.dt)
 
+    def _goal_for(self, d: Demonstration) -> np.ndarray:
+        """The goal of a trial the model has not seen, as a prediction of it gets it: its known target, else the
+        default target from its start (its recorded end is the future a prediction does not know)."""
+        return d.target if d.target is not None else self.default_target(d.x[0])
+
     def _dynamics(self) -> tuple[np.ndarray, np.ndarray]:
         """The (A, B) a rollout steps with: the plant's (the persistence baseline replaces it)."""
         return self.system.A, self.system.B
@@ -307,12 +312,13 @@ class BehaviorModel:
         if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 0:
             raise ModelError(f"{type(self).__name__}: noise_folds must be a non-negative integer, got {k!r}")
 
-    def _whitened(self, demos: Sequence[Demonstration]) -> list[np.ndarray]:
-        """``L(x)⁻¹(u − m(x))`` along every demonstration, in its own task frames."""
+    def _whitened(self, demos: Sequence[Demonstration], unseen: bool = False) -> list[np.ndarray]:
+        """``L(x)⁻¹(u − m(x))`` along every demonstration, in its own task frames (for ``unseen`` trials, the goal
+        a prediction would use: the known target, else :meth:`default_target`, never the recorded end)."""
         m = self.system.m
         out = []
         for d in demos:
-            mean, Sigma = self._policy(d.x[0], goal_of(d))(d.x)
+            mean, Sigma = self._policy(d.x[0], self._goal_for(d) if unseen else goal_of(d))(d.x)
             L = psd_sqrt(Sigma + 1e-12 * np.eye(m))
             out.append(np.linalg.solve(L, (d.u - mean)[..., None])[..., 0])
         return out
@@ -325,7 +331,9 @@ class BehaviorModel:
         make the band too narrow): first the scale and AR(1) coefficient of the whitened residuals
         (:func:`~workbench.prediction.fit_noise`), then the factor on the scale for which 90 % Monte Carlo
         bands over ``noise_horizon`` seconds cover the held-out trials' positions (the plant's position roles,
-        else every state) 90 % of the time (:func:`~workbench.prediction.calibrate_band_scale`). With too
+        else every state) 90 % of the time (:func:`~workbench.prediction.calibrate_band_scale`). A held-out
+        trial's goal frame sits where a prediction would put it (its target, else :meth:`default_target`), not at
+        its recorded end, which a prediction cannot know. With too
         few demonstrations for the folds, or a fold that cannot be fitted, the in-sample residuals are used
         and the band is not calibrated (``noise_band_coverage_`` is NaN).
         """
@@ -361,7 +369,7 @@ class BehaviorModel:
         if held_out is None:
             self.noise_scale_, self.noise_rho_ = fit_noise(self._whitened(demos), window)
             return
-        E_list = [e for sub, ds in held_out for e in sub._whitened(ds)]
+        E_list = [e for sub, ds in held_out for e in sub._whitened(ds, unseen=True)]
         scale, rho = fit_noise(E_list, window)
         H = max(1, int(round(self.noise_horizon / self.system.dt)))
         cases = []
@@ -371,7 +379,7 @@ class BehaviorModel:
                 starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CALIBRATION_STARTS]
                 if starts:
                     X_true = np.stack([d.x[s : s + H + 1] for s in starts])
-                    cases.append((sub._policy(d.x[0], goal_of(d)), d.x[starts], X_true))
+                    cases.append((sub._policy(d.x[0], sub._goal_for(d)), d.x[starts], X_true))
         self.noise_scale_, self.noise_rho_ = scale, rho
         if cases:
             idx = self.system.r.position or tuple(range(self.system.n))
