@@ -237,6 +237,32 @@ def test_study_identifies_the_plant_from_training_trials_only():
     assert "persistence" in base.baselines["A"]
 
 
+def test_cli_identifies_the_plant_from_training_trials_only(tmp_path, monkeypatch):
+    """``evaluate`` (split and per subject) hands ``_system_for`` training trials only: no scored trial among them."""
+    import workbench.cli as cli
+
+    system = roleless_plant()
+    ds = _demos(system, n_trials=8, n_steps=30, seed=8)
+    ds = ds._like(d.with_meta(subject=f"s{j % 2}") for j, d in enumerate(ds))
+    path = tmp_path / "demos.parquet"
+    ds.save(path)
+    seen: list[set[str]] = []
+    real = cli._system_for
+
+    def spy(data, *args, **kwargs):
+        seen.append(set(data.ids))
+        return real(data, *args, **kwargs)
+
+    monkeypatch.setattr(cli, "_system_for", spy)
+    quick = ("--components", "2", "--system", "identify", "--samples", "0", "--no-efficiency", "--horizon", "1")
+    for extra in (("--holdout", "split"), ("--per-subject",)):
+        seen.clear()
+        out = tmp_path / f"results{len(extra)}.csv"
+        _cli("evaluate", str(path), *quick, *extra, "-o", str(out))
+        scored = set(pd.read_csv(out)["trial"])
+        assert seen and scored and all(not ids & scored for ids in seen), (extra, seen, scored)
+
+
 def test_per_subject_identifies_each_plant_without_the_held_out_trials():
     system = double_integrators()
     parts = []
