@@ -151,6 +151,18 @@ def test_data_efficiency_is_the_same_on_two_workers(cluster, quadrotor):
     assert parallel.attrs["failures"] == serial.attrs["failures"]
 
 
+def test_cross_validation_folds_are_the_same_on_two_workers(cluster, quadrotor):
+    demos = simulate_landings("CS1", n_trials=6, seed=6)
+    make = functools.partial(_models, quadrotor)
+    serial = ev.cross_validate(make, demos, n_folds=3, horizon=20, seed=2)
+    parallel = ev.cross_validate(make, demos, n_folds=3, horizon=20, seed=2, executor=cluster)
+    _same_table(serial, parallel)
+    rmse = parallel[parallel["metric"] == "rmse_position"]
+    # every trial predicted exactly once per method, by the models of the one fold that held it out
+    assert sorted(rmse.groupby("method")["trial"].apply(sorted).iloc[0]) == sorted(demos.ids)
+    assert rmse.groupby("trial")["fold"].nunique().eq(1).all() and set(rmse["fold"]) == {0, 1, 2}
+
+
 # -------------------------------------------------------------------------------------------- failures
 
 

@@ -51,6 +51,7 @@ __all__ = [
     "method_groups",
     "data_efficiency",
     "per_subject",
+    "cross_validate",
     "SubjectStudy",
     "default_models",
     "models_for",
@@ -563,3 +564,59 @@ def per_subject(
         subjects=tuple(str(s) for s in wide.index),
         failures=tuple(failures),
     )
+
+
+def _fold_task(task: tuple) -> tuple[pd.DataFrame | None, list[str]]:
+    """One fold of :func:`cross_validate`: fit every method on the other folds, score the held-out trials."""
+    ref, fold, test_idx, make_models, n_components, horizon, starts = task
+    ds = ref.load()
+    held = set(test_idx)
+    train = ds._like(d for j, d in enumerate(ds) if j not in held)
+    test = ds._like(ds[j] for j in test_idx)
+    failures: list[str] = []
+    fitted = _fit_each(models_for(make_models, train, n_components), train, f"fold {fold}", failures)
+    table = compare(fitted, test, horizon=horizon, starts=starts).assign(fold=fold) if fitted else None
+    return table, failures
+
+
+def cross_validate(
+    make_models: Callable[[], Mapping[str, Any]] | Any,
+    demos: DemonstrationSet,
+    n_folds: int = 5,
+    horizon: int = 60,
+    seed: int = 0,
+    starts: str | int = "initial",
+    n_components: int = 5,
+    progress: Progress | None = None,
+    *,
+    executor: Any = None,
+) -> pd.DataFrame:
+    """K-fold cross-validation over demonstrations: every trial is predicted once, by models that never saw it.
+
+    The trials are shuffled (seeded) and dealt into ``n_folds`` folds; each fold is one task (an ``executor``
+    from :mod:`workbench.executor` runs them anywhere, with the same table): fit every method on the other
+    folds, score the fold's trials with :func:`compare`. Whole trials, never samples, are held out: samples
+    within a trial are correlated.
+
+    Returns
+    -------
+    DataFrame of :func:`compare` rows with a ``fold`` column; the messages of fits that failed are in
+    ``df.attrs["failures"]``.
+    """
+    if isinstance(n_folds, bool) or not isinstance(n_folds, int | np.integer) or not 2 <= n_folds <= len(demos):
+        raise DataError(f"n_folds must be an integer from 2 to the {len(demos)} trials, got {n_folds!r}")
+    order = np.random.default_rng(seed).permutation(len(demos))
+    folds = [sorted(int(j) for j in order[k::n_folds]) for k in range(int(n_folds))]
+    ex = executor if executor is not None else serial
+    ref = ex.share(demos)
+    tasks = [(ref, k, idx, make_models, n_components, horizon, starts) for k, idx in enumerate(folds)]
+    parts, failures = [], []
+    for table, fold_failures in ex.map(_fold_task, tasks, progress=progress):
+        failures.extend(fold_failures)
+        if table is not None:
+            parts.append(table)
+    if not parts:
+        raise DataError("no fold could be fitted: " + "; ".join(failures))
+    df = pd.concat(parts, ignore_index=True)
+    df.attrs["failures"] = failures
+    return df
