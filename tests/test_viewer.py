@@ -1,7 +1,9 @@
 """The rerun recordings: read the .rrd back and check entity paths, row counts and values against the model.
 
 Every expected number is computed here from the demonstrations and the fitted model (``model.variability``,
-``model.predict``), never copied from a run. No test opens a viewer.
+``model.predict``), never copied from a run. No test here opens a viewer (``test_viewer_real.py`` does); every
+chunk of every kind of recording the CLI writes is read back and must have rows, because a chunk without rows
+crashes the rerun 0.41 viewer while ``rerun rrd verify`` passes.
 """
 
 from __future__ import annotations
@@ -96,16 +98,17 @@ def test_entity_paths_and_row_counts(setup):
             assert len(t) == len(d)
         assert f"/scene/demos/{d.id}/path" in ents
         assert len(ents[f"/scene/demos/{d.id}/vehicle"]["time"]) == len(d)
-    for p in ("/scene/domain", "/scene/pad", "/scene/starts", "/models/CS1/K", "/models/CS1/Q", "/models/CS1/R",
+    for p in ("/scene/ground", "/scene/pad", "/scene/starts", "/models/CS1/K", "/models/CS1/Q", "/models/CS1/R",
               "/models/CS1/S", "/models/CS1/summary"):
         assert p in ents, p
     # only the strategy with a model gets variability; CS2 has none
     cs2 = next(d for d in demos if d.label == "CS2")
     assert not any(k.startswith(f"/demos/{cs2.id}/variability") for k in ents)
     for start in STARTS:
-        for method in ("proposed", "ioc_only", "band"):
+        for method, column in (("proposed", "Scalars:scalars"), ("ioc_only", "Scalars:scalars"),
+                               ("proposed_band", "Measurements:values")):
             for s in demos.state_names:
-                t, _ = series(ents, f"/demos/{setup['focus']}/predictions/from_{start}/{method}/{s}")
+                t, _ = series(ents, f"/demos/{setup['focus']}/predictions/from_{start}/{method}/{s}", column)
                 assert len(t) == HORIZON + 1
         assert f"/scene/predictions/{setup['focus']}/from_{start}/proposed" in ents
 
@@ -160,11 +163,16 @@ def test_logged_predictions_equal_model_predict(setup):
                 t, v = series(ents, f"{base}/{method}/{s}")
                 np.testing.assert_allclose(v[:, 0], pred.x[:, j], rtol=1e-12, atol=1e-12)
                 np.testing.assert_allclose(t, d.t[start] - d.t[0] + demos.dt * np.arange(HORIZON + 1), atol=1e-9)
-            _, band = series(ents, f"{base}/band/{s}")
-            np.testing.assert_allclose(band[:, 0], mc.x_lower[:, j], rtol=1e-12, atol=1e-12)
-            np.testing.assert_allclose(band[:, 1], mc.x_upper[:, j], rtol=1e-12, atol=1e-12)
-        strip = ents[f"/scene/predictions/{d.id}/from_{start}/proposed"]["static:LineStrips3D:strips"][0]
-        np.testing.assert_allclose(np.asarray(strip[0])[:, [0, 2]], expected["proposed"].x[:, :2], atol=1e-6)
+            # the band is drawn as an area: value ± √variance spans the Monte Carlo percentiles
+            _, mid = series(ents, f"{base}/proposed_band/{s}", "Measurements:values")
+            _, var = series(ents, f"{base}/proposed_band/{s}", "Measurements:variances")
+            np.testing.assert_allclose(mid[:, 0] - np.sqrt(var[:, 0]), mc.x_lower[:, j], rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(mid[:, 0] + np.sqrt(var[:, 0]), mc.x_upper[:, j], rtol=1e-9, atol=1e-12)
+        # the plane of flight from the roles, up drawn up on rerun's y-down screen
+        across, up = demos.roles.resolve(demos.state_names).plane
+        strip = ents[f"/scene/predictions/{d.id}/from_{start}/proposed"]["static:LineStrips2D:strips"][0]
+        x = expected["proposed"].x
+        np.testing.assert_allclose(np.asarray(strip[0]), np.column_stack([x[:, across], -x[:, up]]), atol=1e-6)
 
 
 def test_model_tensors(setup):

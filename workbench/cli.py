@@ -99,27 +99,9 @@ def _load_one(path: Path, mapping: str | None) -> Any:
 
 def _join(sets: Sequence[Any], names: Sequence[str]) -> Any:
     """One set from several files; a trial id seen twice is prefixed with its file's name."""
-    from workbench.demos import DemonstrationSet
+    from workbench.dataset import join_sets
 
-    if not sets:
-        raise DataError("no demonstrations to join")
-    first = sets[0]
-    seen: set[str] = set()
-    demos = []
-    for ds, name in zip(sets, names, strict=True):
-        if (ds.state_names, ds.input_names) != (first.state_names, first.input_names):
-            raise DataError(
-                f"{name}: states {list(ds.state_names)} / inputs {list(ds.input_names)} differ from "
-                f"{names[0]}'s {list(first.state_names)} / {list(first.input_names)}; use one mapping for all"
-            )
-        if abs(ds.dt - first.dt) > 1e-9 * first.dt:
-            raise DataError(f"{name}: dt {ds.dt} differs from {names[0]}'s {first.dt}")
-        for d in ds:
-            if d.id in seen:
-                d = d.with_meta(id=f"{Path(name).stem}-{d.id}")
-            seen.add(d.id)
-            demos.append(d)
-    return DemonstrationSet(demos, first.state_names, first.input_names, first.dt, roles=first.roles)
+    return join_sets(sets, names)
 
 
 def _load_demos(ctx: _Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None):
@@ -784,8 +766,12 @@ def cmd_live(ctx: _Context) -> int:
             rec.send_blueprint(live_blueprint([], m.state_names, m.input_names, scene=plane is not None))
         ctx.say(f"listening on {a.connection} (mapping {m.name}, dt {m.dt:g} s, rollout {a.horizon:g} s)"
                 + (f" for {a.duration:g} s" if a.duration else "; Ctrl-C to stop"))
+        def on_tick(stats: Any) -> None:  # the viewer gets the steps in batches, a few times a second
+            logger.flush()
+            logger.status(stats)
+
         summary = listen(link, predictor, duration=a.duration, on_prediction=on_prediction, on_event=on_event,
-                         on_tick=logger.status)
+                         on_tick=on_tick, tick=0.2)
         sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
                                         bounds=logger.scene_bounds())
     c50, c99 = summary.percentiles("compute")
@@ -813,7 +799,7 @@ def cmd_report(ctx: _Context) -> int:
         result = study.run_study(
             ds, _plant(a.system, a.horizon), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt),
             components=a.components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
-            progress=ctx.progress, executor=ex,
+            progress=ctx.progress, executor=ex, bootstrap=a.bootstrap,
         )
     _print_plant(ctx, result.system, "(plant from the training trials)")
     _require_proposed(result)
@@ -861,6 +847,7 @@ def cmd_demo(ctx: _Context) -> int:
     result = study.run_study(
         ds, _plant(a.system), test_size=a.test_size, horizon=_steps(a.horizon, ds.dt), components=a.components,
         samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
+        bootstrap=a.bootstrap,
     )
     timings["fit + compare"] = time.perf_counter() - t0 - timings["import"]
     _require_proposed(result)
@@ -1117,6 +1104,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="DIR")
     p.add_argument("--label", nargs="+", help="strategy labels to include (default all)")
     p.add_argument("--title", default="Workbench report")
+    _bootstrap_option(p)
     _study_options(p)
     _mapping_option(p)
     _executor_options(p)
@@ -1126,8 +1114,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out", metavar="DIR", help="output directory (default out/)")
     p.add_argument("--logs", metavar="DIR", help=f"logs to import (default {SAMPLE_LOGS})")
     _study_options(p, repeats=1)  # one subset per size keeps the demo well under a minute on two cores
+    _bootstrap_option(p)
     _mapping_option(p)
     return parser
+
+
+def _bootstrap_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bootstrap", type=int, default=100, metavar="N",
+                   help="resamples of each strategy's training trials for the intervals of its task objective and "
+                        "weight ratios (default 100; 0: point estimates only)")
 
 
 # -- entry point -------------------------------------------------------------------------------------------

@@ -1,9 +1,9 @@
 """The rerun side of live prediction: each grid step of a live link drawn as it is completed.
 
 :class:`LiveLogger` takes the :class:`~workbench.live.LivePrediction` of every step (from
-:func:`workbench.live.listen`) and logs, with ``rr.log`` (a live stream has no columns to send), under the same
-entity layout as the offline replay (:mod:`workbench.viewer.replay`), so a live recording and a replayed one
-read alike:
+:func:`workbench.live.listen`) and sends them in small batches (:meth:`LiveLogger.flush`, a few times a second:
+a ``rr.log`` per value and step would cost more than the prediction), under the same entity layout as the
+offline replay (:mod:`workbench.viewer.replay`), so a live recording and a replayed one read alike:
 
 * ``demos/<id>/states/<state>`` and ``demos/<id>/inputs/<input>`` — the aligned state and the operator's input;
 * ``demos/<id>/online/<input>/gmr`` — the one-step input prediction ``K̂(x − r) + μ̂(x)`` with its ±1σ and ±3σ
@@ -69,6 +69,8 @@ class LiveLogger:
         self.n_logged = 0
         self.bounds = np.array([np.inf, np.inf, -np.inf, -np.inf])  # the view's x, y extents seen so far
         self._path: list[np.ndarray] = []
+        self._rows: dict[str, tuple[list, list, list, list, bool]] = {}
+        self._latest: LivePrediction | None = None
         rec.log("live/events", rr.TextLog("waiting for the link", level="INFO"))
         rec.log("live/compute_ms", rr.SeriesLines(names=["align + predict [ms]"], colors=[_PRED]), static=True)
         rec.log("live/latency_ms", rr.SeriesLines(names=["message → prediction [ms]"], colors=[_W]), static=True)
@@ -108,69 +110,106 @@ class LiveLogger:
             edges = [f"{n} {side}" for n in names for side in ("low", "high")]
             self.rec.log(path, rr.SeriesLines(names=edges, colors=[c for c in colors for _ in (0, 1)]), static=True)
 
-    def _band(self, path: str, mean: float, sigma: float) -> None:
-        if HAS_MEASUREMENTS:
-            self.rec.log(path, rr.Measurements(values=[mean, mean], variances=[sigma**2, (3 * sigma) ** 2]))
-        else:
-            self.rec.log(path, rr.Scalars([mean - sigma, mean + sigma, mean - 3 * sigma, mean + 3 * sigma]))
-
     # -- one step ----------------------------------------------------------------------------------------------
     def log(self, p: LivePrediction) -> None:
-        """Log one step's state, input, predictions, ŵ bands and rollout."""
-        rec = self.rec
+        """Take one step's state, input, predictions, ŵ bands and rollout; sent at the next :meth:`flush`."""
         new = p.demo_id not in self._styled
         self._style(p.demo_id)
         if new:
+            self.flush()  # the previous segment's rows first, so events and plots stay in order
             label = p.meta.get("label")
             self.event(LiveEvent("segment", p.t, f"segment {p.demo_id} started" + (f" ({label})" if label else "")))
         base = f"demos/{_part(p.demo_id)}"
-        self._at(p.t, p.t_rel, p.k)
+        now = (p.t, p.t_rel, p.k)
         for j, name in enumerate(self.state_names):
-            rec.log(f"{base}/states/{_part(name)}", rr.Scalars(p.x[j]))
+            self._row(f"{base}/states/{_part(name)}", now, p.x[j])
         sigma = p.u_std
         for j, name in enumerate(self.input_names):
-            rec.log(f"{base}/inputs/{_part(name)}", rr.Scalars(p.u[j]))
+            self._row(f"{base}/inputs/{_part(name)}", now, p.u[j])
             o = f"{base}/online/{_part(name)}"
-            self._band(f"{o}/gmr", float(p.u_mean[j]), float(sigma[j]))
+            self._row(f"{o}/gmr", now, (p.u_mean[j], sigma[j]), band=True)
             if abs(p.u[j] - p.u_mean[j]) > 3.0 * sigma[j]:
-                rec.log(f"{o}/outside_3sigma", rr.Scalars(p.u[j]))
+                self._row(f"{o}/outside_3sigma", now, p.u[j])
             if p.w is not None:
                 v = f"{base}/variability/{_part(name)}"
-                rec.log(f"{v}/w", rr.Scalars(p.w[j]))
-                self._band(f"{v}/gmr", float(p.w_mean[j]), float(np.sqrt(max(p.w_cov[j, j], 0.0))))
-        rec.log("live/compute_ms", rr.Scalars(1e3 * p.compute_seconds))
+                self._row(f"{v}/w", now, p.w[j])
+                self._row(f"{v}/gmr", now, (p.w_mean[j], np.sqrt(max(p.w_cov[j, j], 0.0))), band=True)
+        self._row("live/compute_ms", now, 1e3 * p.compute_seconds)
         if np.isfinite(p.latency):
-            rec.log("live/latency_ms", rr.Scalars(1e3 * p.latency))
+            self._row("live/latency_ms", now, 1e3 * p.latency)
+        if p.rollout_x is not None:
+            h = p.horizon
+            ahead = (p.t + h * p.dt, p.t_rel + h * p.dt, p.k + h)  # stamped with the time it forecasts
+            for j, name in enumerate(self.state_names):
+                self._row(f"{base}/online/rollout_end/{_part(name)}", ahead, p.rollout_x[-1, j])
         if self.plane is not None:
-            across, up, heading = self.plane
-            phi = float(p.x[heading]) if heading is not None else 0.0
-            c, s = np.cos(phi), np.sin(phi)
+            across, up, _ = self.plane
             center = np.array([p.x[across], -p.x[up]])
             if new:
                 self._path = []
                 if p.target is not None:
                     pad = np.array([[p.target[across], -p.target[up]]])
-                    rec.log("scene/live/target",
-                            rr.Points2D(pad, radii=[0.06], colors=[(90, 90, 90)], labels=["target"]))
+                    self._at(p.t, p.t_rel, p.k)
+                    self.rec.log("scene/live/target",
+                                 rr.Points2D(pad, radii=[0.06], colors=[(90, 90, 90)], labels=["target"]))
                     self._grow(pad[0])
             self._path = [*self._path[-400:], center]
             self._grow(center)
-            if p.k % 5 == 0:  # the flown path so far, redrawn every few steps (not every step: it grows)
-                rec.log("scene/live/path", rr.LineStrips2D([np.array(self._path)], colors=[(120, 120, 120)],
-                                                           radii=[0.008], labels=[p.demo_id]))
-            # body drawn in the view (up negated): arms along the tilted body axis, thrust axis perpendicular
-            arm, mast = np.array([0.18 * c, 0.18 * s]), np.array([0.12 * s, -0.12 * c])
-            rec.log("scene/live/vehicle", rr.LineStrips2D([[center - arm, center + arm], [center, center + mast]],
-                                                          colors=[_RECORDED, _RECORDED], radii=[0.02, 0.01]))
-            if p.rollout_x is not None:
-                xp = p.rollout_x
-                rec.log("scene/live/rollout", rr.LineStrips2D([np.column_stack([xp[:, across], -xp[:, up]])]))
-        if p.rollout_x is not None:
-            h = p.horizon
-            self._at(p.t + h * p.dt, p.t_rel + h * p.dt, p.k + h)
-            for j, name in enumerate(self.state_names):
-                rec.log(f"{base}/online/rollout_end/{_part(name)}", rr.Scalars(p.rollout_x[-1, j]))
+        self._latest = p
         self.n_logged += 1
+
+    def _row(self, path: str, at: tuple[float, float, int], value: Any, *, band: bool = False) -> None:
+        rows = self._rows.get(path)
+        if rows is None:
+            rows = self._rows[path] = ([], [], [], [], band)
+        rows[0].append(at[0])
+        rows[1].append(at[1])
+        rows[2].append(at[2])
+        rows[3].append(value)
+
+    def flush(self) -> None:
+        """Send the rows taken since the last flush, one ``send_columns`` per entity, and the scene's newest pose.
+
+        Per-step ``rr.log`` calls cost more than the prediction itself; batching keeps a step well under a
+        millisecond, and the viewer lags by at most one flush interval.
+        """
+        for path, (link_t, rel_t, step, values, band) in self._rows.items():
+            if not values:  # never a chunk without rows: the viewer crashes on them
+                continue
+            index = [rr.TimeColumn("link_time", duration=np.asarray(link_t)),
+                     rr.TimeColumn("time", duration=np.asarray(rel_t)),
+                     rr.TimeColumn("step", sequence=np.asarray(step, dtype=np.int64))]
+            v = np.asarray(values, dtype=np.float64)
+            if band and HAS_MEASUREMENTS:
+                mean, sd = np.repeat(v[:, :1], 2, axis=1), v[:, 1:] * np.array([1.0, 3.0])
+                cols = rr.Measurements.columns(values=mean, variances=sd**2)
+            elif band:
+                m, sd = v[:, :1], v[:, 1:]
+                cols = rr.Scalars.columns(scalars=np.column_stack([m - sd, m + sd, m - 3 * sd, m + 3 * sd]))
+            else:
+                cols = rr.Scalars.columns(scalars=v)
+            self.rec.send_columns(path, indexes=index, columns=cols)
+            for lst in (link_t, rel_t, step, values):
+                lst.clear()
+        p = self._latest
+        if p is None or self.plane is None:
+            return
+        self._latest = None
+        across, up, heading = self.plane
+        self._at(p.t, p.t_rel, p.k)
+        phi = float(p.x[heading]) if heading is not None else 0.0
+        c, s = np.cos(phi), np.sin(phi)
+        center = np.array([p.x[across], -p.x[up]])
+        # body drawn in the view (up negated): arms along the tilted body axis, thrust axis perpendicular
+        arm, mast = np.array([0.18 * c, 0.18 * s]), np.array([0.12 * s, -0.12 * c])
+        self.rec.log("scene/live/vehicle", rr.LineStrips2D([[center - arm, center + arm], [center, center + mast]],
+                                                           colors=[_RECORDED, _RECORDED], radii=[0.02, 0.01]))
+        if p.rollout_x is not None:
+            xp = p.rollout_x
+            self.rec.log("scene/live/rollout", rr.LineStrips2D([np.column_stack([xp[:, across], -xp[:, up]])]))
+        if len(self._path) > 1:
+            self.rec.log("scene/live/path", rr.LineStrips2D([np.array(self._path)], colors=[(120, 120, 120)],
+                                                            radii=[0.008], labels=[p.demo_id]))
 
     def _grow(self, point: np.ndarray) -> None:
         self.bounds[:2] = np.minimum(self.bounds[:2], point)

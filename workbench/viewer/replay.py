@@ -10,6 +10,9 @@ the recorded state and input and, computed from the state alone,
   a line strip that moves with the vehicle, and its end point ``demos/<id>/online/rollout_end/<state>``, stamped
   with the time it forecasts so the plot reads as recorded vs. forecast).
 
+The scene is the plane of flight from the vehicle roles (as in :mod:`workbench.viewer.scene`); a plant without
+position roles gets plots only.
+
 Samples are logged one by one with ``rr.log`` — a live stream has no columns to send — paced to wall time at
 ``speed`` × real time, or as fast as possible with ``wait=False``.
 """
@@ -27,14 +30,17 @@ import rerun.blueprint as rrb
 
 from workbench.demos import Demonstration
 from workbench.errors import DataError
-from workbench.viewer.session import HAS_MEASUREMENTS, _safe, _scene_axes
+from workbench.viewer import style
+from workbench.viewer.blueprint import time_panel
+from workbench.viewer.scene import Plane, plane_of
+from workbench.viewer.session import HAS_MEASUREMENTS, UI, _safe
 
 __all__ = ["ReplayStats", "replay", "replay_blueprint"]
 
-_COLOR_REC = (40, 40, 40)
-_COLOR_PRED = (44, 160, 44)
-_COLOR_BAND = (255, 187, 120)
-_COLOR_OUT = (214, 39, 40)
+_COLOR_REC = style.RECORDED_COLOR
+_COLOR_PRED = style.method_color("proposed")
+_COLOR_BAND = style.light(_COLOR_PRED, 0.55)
+_COLOR_OUT = style.OUTLIER_COLOR
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,7 @@ def replay(
     clock: Callable[[], float] = time.perf_counter,
     sleep: Callable[[float], None] = time.sleep,
     on_step: Callable[[int], None] | None = None,
+    roles: Any = None,
 ) -> ReplayStats:
     """Stream ``demo`` into ``rec`` sample by sample with the model's online predictions.
 
@@ -84,6 +91,8 @@ def replay(
         Steps of the rollout from each state; ``0`` turns rollouts off.
     rollout_every : int
         Roll out at every k-th sample only (the one-step prediction runs at every sample).
+    roles : workbench.roles.Roles, optional
+        The vehicle roles that place the scene (default the model's plant's); none, no scene.
     """
     if not speed > 0:
         raise DataError(f"replay speed must be positive, got {speed!r}")
@@ -95,8 +104,10 @@ def replay(
     base = f"demos/{_safe(demo.id)}"
     sbase = f"scene/replay/{_safe(demo.id)}"
     x_start, target = demo.x[0], demo.target
-    axes = _scene_axes(state_names)
-    _log_styles(rec, demo, base, sbase, state_names, input_names, axes)
+    if roles is None:
+        roles = getattr(getattr(model, "system", None), "roles", None)
+    plane = plane_of(roles, state_names) if roles else None
+    _log_styles(rec, demo, base, sbase, state_names, input_names, plane)
 
     t_rel = demo.t - demo.t[0]
     dt = float(np.median(np.diff(demo.t))) if len(demo) > 1 else 0.0
@@ -132,15 +143,10 @@ def replay(
                                                 u_hat[j] + 3 * sigma[j]]))
             if not inside[k, j]:
                 rec.log(f"{p}/outside_3sigma", rr.Scalars(u[j]))
-        if axes is not None:
-            ix, iy, iphi = axes
-            phi = x[iphi] if iphi is not None else 0.0
-            rec.log(
-                f"{sbase}/vehicle",
-                rr.Transform3D(
-                    translation=[x[ix], 0.0, x[iy]], quaternion=[0.0, np.sin(phi / 2), 0.0, np.cos(phi / 2)]
-                ),
-            )
+        if plane is not None:
+            (px, py), phi = plane.view(x)[0], float(plane.angle(x)[0])
+            rec.log(f"{sbase}/vehicle",
+                    rr.Transform3D(translation=[px, py, 0.0], quaternion=[0.0, 0.0, np.sin(phi / 2), np.cos(phi / 2)]))
         if horizon > 0 and k % rollout_every == 0:
             pred = model.predict(x, horizon, target=target, task_x0=x_start)
             xp = np.asarray(pred.x)
@@ -151,11 +157,9 @@ def replay(
                 rec.log(f"{base}/online/rollout_end/{_safe(name)}", rr.Scalars(xp[-1, j]))
             rec.set_time("time", duration=float(t_rel[k]))
             rec.set_time("step", sequence=k)
-            if axes is not None:
-                ix, iy, _ = axes
-                strip = np.column_stack([xp[:, ix], np.zeros(len(xp)), xp[:, iy]])
+            if plane is not None:
                 # color and radius are logged once, static: per call they would cost ten times the strip itself
-                rec.log(f"{sbase}/rollout", rr.LineStrips3D(strip[np.newaxis]))
+                rec.log(f"{sbase}/rollout", rr.LineStrips2D(plane.view(xp)[np.newaxis]))
         if on_step is not None:
             on_step(k)
     wall = clock() - wall0
@@ -170,18 +174,17 @@ def replay(
     )
 
 
-def _log_styles(rec, demo, base, sbase, state_names, input_names, axes) -> None:
+
+def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane | None) -> None:
     for name in state_names:
-        rec.log(f"{base}/states/{_safe(name)}", rr.SeriesLines(names=[f"{name} recorded"], colors=[_COLOR_REC]),
-                static=True)
+        rec.log(f"{base}/states/{_safe(name)}", rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC]), static=True)
         rec.log(f"{base}/online/rollout_end/{_safe(name)}",
-                rr.SeriesLines(names=[f"{name} forecast (rollout end)"], colors=[_COLOR_PRED]), static=True)
+                rr.SeriesLines(names=["forecast (rollout end)"], colors=[_COLOR_PRED], widths=[1.5]), static=True)
     for name in input_names:
         rec.log(f"{base}/inputs/{_safe(name)}",
-                rr.SeriesLines(names=[f"{name} recorded"], colors=[_COLOR_REC], interpolation_mode="StepAfter"),
-                static=True)
+                rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC], interpolation_mode="StepAfter"), static=True)
         p = f"{base}/online/{_safe(name)}"
-        label = f"{name}: K̂x + μ(x)"
+        label = "K̂x + μ(x)"
         if HAS_MEASUREMENTS:
             rec.log(f"{p}/gmr", rr.Measurements.from_fields(names=[f"{label} ± 1σ", f"{label} ± 3σ"],
                                                             colors=[_COLOR_PRED, _COLOR_BAND],
@@ -191,43 +194,71 @@ def _log_styles(rec, demo, base, sbase, state_names, input_names, axes) -> None:
                                                       f"{label} + 3σ"],
                                                colors=[_COLOR_BAND, _COLOR_PRED, _COLOR_PRED, _COLOR_BAND]),
                     static=True)
-        rec.log(f"{p}/outside_3sigma", rr.SeriesPoints(names=[f"{name} outside 3σ"], colors=[_COLOR_OUT],
-                                                       markers=["cross"], marker_sizes=[4.0]), static=True)
-    if axes is not None:
-        ix, iy, _ = axes
-        rec.log("scene", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        rec.log(f"{sbase}/rollout", rr.LineStrips3D.from_fields(colors=[_COLOR_PRED], radii=[0.015]), static=True)
-        path = np.column_stack([demo.x[:, ix], np.zeros(len(demo)), demo.x[:, iy]])
-        rec.log(f"{sbase}/path", rr.LineStrips3D([path], colors=[(170, 170, 170)], radii=0.006), static=True)
-        rec.log(
-            f"{sbase}/vehicle",
-            rr.LineStrips3D([[[-0.18, 0, 0], [0.18, 0, 0]], [[0, 0, 0], [0, 0, 0.12]]], colors=[_COLOR_REC, _COLOR_REC],
-                            radii=[0.02, 0.01]),
-            static=True,
-        )
+        rec.log(f"{p}/outside_3sigma", rr.SeriesPoints(names=["outside 3σ"], colors=[_COLOR_OUT],
+                                                       markers=["cross"], marker_sizes=[6.0]), static=True)
+    if plane is not None:
+        path = plane.view(demo.x)
+        (x_lo, x_hi), (y_lo, y_hi) = plane.bounds([path])
+        size = 0.03 * max(x_hi - x_lo, y_hi - y_lo)
+        rec.log(f"{sbase}/rollout", rr.LineStrips2D.from_fields(colors=[_COLOR_PRED], radii=[UI(2.0)],
+                                                                draw_order=[6.0]), static=True)
+        rec.log(f"{sbase}/path", rr.LineStrips2D([path], colors=[(150, 150, 150)], radii=UI(1.0), draw_order=3.0),
+                static=True)
+        if demo.target is not None:  # a pad only where the data declare a landing target
+            from workbench.simulate import PAD_HALF_WIDTH
+
+            tx, ty = plane.view(np.asarray(demo.target))[0]
+            rec.log("scene/pad", rr.LineStrips2D([[[tx - PAD_HALF_WIDTH, ty], [tx + PAD_HALF_WIDTH, ty]]],
+                                                 colors=[(200, 200, 200)], radii=UI(4.0), draw_order=2.0), static=True)
+        rec.log(f"{sbase}/vehicle", rr.LineStrips2D([[[-size, 0], [size, 0]], [[0, 0], [0, -0.6 * size]]],
+                                                    colors=[_COLOR_REC, _COLOR_REC], radii=[UI(3.0), UI(1.5)],
+                                                    draw_order=10.0), static=True)
 
 
-def replay_blueprint(demo_ids: list[str], state_names: tuple[str, ...], input_names: tuple[str, ...]) -> rrb.Blueprint:
-    """The replay's layout: the scene with the online inputs beside it, then the states."""
-    eye = rrb.EyeControls3D(position=[0.0, -9.0, 1.75], look_target=[0.0, 0.0, 1.75], eye_up=[0.0, 0.0, 1.0])
+def replay_blueprint(
+    demo_ids: list[str],
+    state_names: tuple[str, ...],
+    input_names: tuple[str, ...],
+    *,
+    roles: Any = None,
+    demos: list[Demonstration] | None = None,
+) -> rrb.Blueprint:
+    """The replay's layout: the plane of flight (fitted to ``demos``' tracks) beside the inputs with the online
+    GMR prediction, then the states with the forecast. Without position ``roles`` the plots only."""
+    def unit(name: str) -> str:
+        return style.with_unit(name, roles.unit(name) if roles else "")
+
     inputs = [
         rrb.TimeSeriesView(
             origin="/",
             contents=[f"+ /demos/{_safe(i)}/inputs/{_safe(name)}" for i in demo_ids]
             + [f"+ /demos/{_safe(i)}/online/{_safe(name)}/**" for i in demo_ids],
-            name=f"{name}: recorded vs online GMR prediction",
+            name=f"{unit(name)}: recorded vs online K̂x + μ(x) ± σ",
+            plot_legend=rrb.PlotLegend("LeftTop", visible=k == 0 and len(demo_ids) == 1),
         )
-        for name in input_names
+        for k, name in enumerate(input_names)
     ]
     states = [
         rrb.TimeSeriesView(
             origin="/",
             contents=[f"+ /demos/{_safe(i)}/states/{_safe(name)}" for i in demo_ids]
             + [f"+ /demos/{_safe(i)}/online/rollout_end/{_safe(name)}" for i in demo_ids],
-            name=name,
+            name=unit(name),
+            plot_legend=rrb.PlotLegend("LeftTop", visible=k == 0 and len(demo_ids) == 1),
         )
-        for name in state_names
+        for k, name in enumerate(state_names)
     ]
-    live = rrb.Horizontal(rrb.Spatial3DView(origin="scene", name="scene", eye_controls=eye), rrb.Vertical(*inputs),
-                          column_shares=[3, 2], name="live")
-    return rrb.Blueprint(rrb.Tabs(live, rrb.Grid(*states, name="states")), rrb.TimePanel(timeline="time"))
+    plane = plane_of(roles, state_names) if roles else None
+    if plane is not None:
+        bounds = None
+        if demos:
+            targets = [plane.view(np.asarray(d.target)) for d in demos if d.target is not None]
+            x_range, y_range = plane.bounds([*(plane.view(d.x) for d in demos), *targets])
+            bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
+        title = (f"plane of flight: {unit(state_names[plane.across])} → / {unit(state_names[plane.up])} ↑ — "
+                 "online rollout green")
+        live = rrb.Horizontal(rrb.Spatial2DView(origin="/scene", name=title, visual_bounds=bounds),
+                              rrb.Vertical(*inputs), column_shares=[3, 2], name="live")
+    else:
+        live = rrb.Vertical(*inputs, name="live")
+    return rrb.Blueprint(rrb.Tabs(live, rrb.Grid(*states, name="states")), time_panel(), collapse_panels=True)

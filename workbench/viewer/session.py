@@ -4,9 +4,6 @@ the blueprint are described in :mod:`workbench.viewer`."""
 from __future__ import annotations
 
 import os
-import shutil
-import subprocess
-import sys
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field
@@ -19,59 +16,41 @@ import rerun.blueprint as rrb
 
 from workbench.atomic import atomic_path
 from workbench.demos import Demonstration, DemonstrationSet
-from workbench.errors import DataError, WorkbenchError
+from workbench.errors import DataError
 from workbench.study import StudyResult
+from workbench.viewer import style
 from workbench.viewer.columns import send_columns
+from workbench.viewer.objective import Heatmap, colors, heatmaps, model_summary, shared_scales, value_text
+from workbench.viewer.output import has_display, open_output
+from workbench.viewer.scene import Plane, plane_of
+from workbench.viewer.style import METHOD_COLORS, label_color
 
 __all__ = [
     "APPLICATION_ID",
+    "APPLICATION_IDS",
     "LoggedSession",
     "METHOD_COLORS",
     "SessionLogger",
     "default_blueprint",
+    "has_display",
     "label_color",
     "log_session",
+    "model_summary",
     "new_recording",
     "open_output",
     "record_session",
+    "record_study",
 ]
 
-APPLICATION_ID = "workbench"
+# one application id per kind of recording: the viewer keeps a layout per id, so a flight opened after the
+# demo gets its own tabs instead of the study's
+APPLICATION_IDS = {"study": "workbench_study", "session": "workbench_session", "log": "workbench_log",
+                   "replay": "workbench_replay"}
+APPLICATION_ID = APPLICATION_IDS["session"]
 HAS_MEASUREMENTS = hasattr(rr, "Measurements")
-
-# tab10, so the report's matplotlib figures and the viewer agree on colors
-_PALETTE = np.array(
-    [
-        [31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189],
-        [140, 86, 75], [227, 119, 194], [127, 127, 127], [188, 189, 34], [23, 190, 207],
-    ],
-    dtype=np.uint8,
-)
-METHOD_COLORS = {
-    "recorded": (40, 40, 40),
-    "proposed": (44, 160, 44),
-    "ioc_only": (214, 39, 40),
-    "gmr_only": (148, 103, 189),
-    "band": (44, 160, 44),
-}
-METHOD_TITLES = {"proposed": "proposed (K̂x + GMR)", "ioc_only": "IOC-only (K̂x)", "gmr_only": "GMR-only"}
-_W_COLOR = (31, 119, 180)
-_BAND1_COLOR = (255, 127, 14)
-_BAND3_COLOR = (255, 187, 120)
-_OUTLIER_COLOR = (214, 39, 40)
-
-
-def _packed(*colors: Sequence[int]) -> np.ndarray:
-    """Colors as packed 0xRRGGBBAA — rerun's fast path; tuples go through a slow per-call conversion."""
-    c = np.asarray(colors, dtype=np.uint32).reshape(-1, 3)
-    return (c[:, 0] << 24) | (c[:, 1] << 16) | (c[:, 2] << 8) | np.uint32(255)
-
-
-def label_color(label: str | None, labels: Sequence[str]) -> tuple[int, int, int]:
-    """A stable color per strategy label (the order of ``labels``), gray for an unlabeled trial."""
-    if label is None or label not in labels:
-        return (127, 127, 127)
-    return tuple(int(c) for c in _PALETTE[list(labels).index(label) % len(_PALETTE)])
+UI = rr.components.Radius.ui_points  # widths in screen points, whatever the scale of the data
+MAX_VEHICLES = 12  # more animated vehicles than this only clutter the scene; the focus trials keep theirs
+MAX_LABELS = 8
 
 
 def _safe(name: str) -> str:
@@ -94,7 +73,10 @@ def _time_index(t: np.ndarray, step: np.ndarray | None = None) -> list[rr.TimeCo
 class LoggedSession:
     """What was logged, so a blueprint (and a user) can find it.
 
-    ``focus`` are the trials with variability and predictions, the ones the detail tabs show.
+    ``focus`` are the trials with variability and predictions, the ones the detail tabs show. ``ranges`` are
+    y-ranges of plots set by the data (key: the plot's entity base path), ``windows`` the time span of each focus
+    trial's predictions, ``bounds`` the scene's visual bounds, ``scales`` the shared color scale of each
+    objective block.
     """
 
     state_names: tuple[str, ...]
@@ -108,16 +90,22 @@ class LoggedSession:
     modes: list[str] = field(default_factory=list)
     scene: bool = False
     entities: list[str] = field(default_factory=list)
+    units: dict[str, str] = field(default_factory=dict)
+    methods: list[str] = field(default_factory=list)
+    bands: list[str] = field(default_factory=list)
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    windows: dict[str, tuple[float, float]] = field(default_factory=dict)
+    bounds: tuple[list[float], list[float]] | None = None
+    heatmaps: dict[str, list[tuple[str, str]]] = field(default_factory=dict)
+    scales: dict[str, float] = field(default_factory=dict)
+    clock: str = "trial"
+    plane_names: tuple[str, str] | None = None
+    span: tuple[float, float] | None = None
+    heatmap_shapes: dict[tuple[str, str], tuple[int, int]] = field(default_factory=dict)
 
-
-def _scene_axes(state_names: Sequence[str]) -> tuple[int, int, int | None] | None:
-    """Indices of horizontal position, altitude and attitude in the state: the paper's names, else the first two."""
-    names = list(state_names)
-    if "x" in names and "y" in names:
-        return names.index("x"), names.index("y"), names.index("phi") if "phi" in names else None
-    if len(names) >= 2:
-        return 0, 1, None
-    return None
+    def title(self, name: str) -> str:
+        """``name [unit]`` for a state or input."""
+        return style.with_unit(name, self.units.get(name, ""))
 
 
 def _model_for(models: Any, demo: Demonstration) -> Any:
@@ -152,6 +140,45 @@ def _readable_modes(meta: Mapping[str, Any]) -> tuple[np.ndarray, list[str]] | N
     return t_arr, names
 
 
+def resolve_clock(demos: Iterable[Demonstration], clock: str = "auto") -> str:
+    """``"log"`` (time since the log's start) or ``"trial"`` (time since each trial's start).
+
+    ``"auto"`` picks the log's clock for the segments of a flight — every trial knows its start in the log
+    (``meta["t_start"]``, set by the adapters) and none declares a landing target — and overlays repeated
+    trials of a task (they declare its target) on the trial's clock.
+    """
+    if clock in ("log", "trial"):
+        return clock
+    if clock != "auto":
+        raise DataError(f"viewer clock must be 'auto', 'log' or 'trial', got {clock!r}")
+    demos = list(demos)
+    if demos and all(_t_start(d) is not None for d in demos) and all(d.target is None for d in demos):
+        return "log"
+    return "trial"
+
+
+def _t_start(demo: Demonstration) -> float | None:
+    try:
+        v = float(demo.meta.get("t_start"))
+    except (TypeError, ValueError):
+        return None
+    return v if np.isfinite(v) else None
+
+
+def _data_range(*arrays: Any, margin: float = 0.08) -> tuple[float, float]:
+    """A y-range holding every finite value of ``arrays``, with ``margin`` of its extent on each side."""
+    lo, hi = np.inf, -np.inf
+    for a in arrays:
+        a = np.asarray(a, dtype=float).ravel()
+        a = a[np.isfinite(a)]
+        if a.size:
+            lo, hi = min(lo, a.min()), max(hi, a.max())
+    if not np.isfinite(lo) or not np.isfinite(hi):
+        return -1.0, 1.0
+    pad = margin * max(hi - lo, 1e-9, 1e-3 * max(abs(lo), abs(hi)))
+    return float(lo - pad), float(hi + pad)
+
+
 class SessionLogger:
     """Logs trials, models and predictions of one :class:`DemonstrationSet` into a rerun recording.
 
@@ -159,16 +186,43 @@ class SessionLogger:
     ----------
     rec : rerun.RecordingStream
     demos : DemonstrationSet
-        Fixes the state and input names, ``dt`` and the label colors.
+        Fixes the state and input names, ``dt``, the colors, units and the plane of flight (its roles).
+    clock : {"auto", "log", "trial"}
+        Time axis: since each trial's start (trials overlaid) or since the log's start (a flight's segments
+        one after another); see :func:`resolve_clock`.
     """
 
-    def __init__(self, rec: rr.RecordingStream, demos: DemonstrationSet) -> None:
+    def __init__(self, rec: rr.RecordingStream, demos: DemonstrationSet, *, clock: str = "trial") -> None:
         self.rec = rec
         self.demos = demos
-        self.session = LoggedSession(tuple(demos.state_names), tuple(demos.input_names))
-        self.session.labels = list(demos.labels)
+        s = self.session = LoggedSession(tuple(demos.state_names), tuple(demos.input_names))
+        s.labels = list(demos.labels)
+        s.clock = resolve_clock(demos, clock)
+        roles = getattr(demos, "roles", None)
+        self.plane: Plane | None = plane_of(roles, demos.state_names)
+        if self.plane is not None:
+            s.plane_names = (s.state_names[self.plane.across], s.state_names[self.plane.up])
+        s.units = {n: roles.unit(n) for n in (*s.state_names, *s.input_names)} if roles else {}
+        ids = [d.id for d in demos]
+        self.colors = style.trial_colors(ids, [d.label for d in demos], s.labels)
+        self.offsets = {d.id: (_t_start(d) or 0.0) if s.clock == "log" else 0.0 for d in demos}
+        # every mode of the set, so one mode has one color in every lane
+        seen: dict[str, None] = {}
+        for d in demos:
+            m = _readable_modes(d.meta)
+            if m is not None:
+                seen.update(dict.fromkeys(m[1]))
+        self.mode_colors = style.mode_colors(list(seen))
+        self.labelled: set[str] = set(ids) if len(ids) <= MAX_LABELS else set()
+        self.animated: set[str] = set(ids) if len(ids) <= MAX_VEHICLES else set()
         self._styled: set[str] = set()
-        self._styles: dict[tuple, Any] = {}
+
+    def set_focus(self, ids: Iterable[str]) -> None:
+        """The trials that get labels and an animated vehicle in the scene (besides small sets, where all do)."""
+        ids = list(ids)
+        if ids:
+            self.labelled = set(ids)
+            self.animated = set(ids) | (self.animated if len(self.demos) <= MAX_VEHICLES else set())
 
     # -- low-level helpers --------------------------------------------------------------------------------
     def _send(self, path: str, index: list[rr.TimeColumn], columns: Any) -> None:
@@ -181,71 +235,82 @@ class SessionLogger:
         if path not in self.session.entities:
             self.session.entities.append(path)
 
-    def _shared_style(self, key: tuple, make: Any) -> Any:
-        """One styling archetype per key, reused for every trial: building one costs more than logging it."""
-        style = self._styles.get(key)
-        if style is None:
-            style = self._styles[key] = make()
-        return style
-
     def _style(self, path: str, archetype: Any) -> None:
         if path not in self._styled:
             self._styled.add(path)
             self.rec.log(path, archetype, static=True)
 
+    def _t(self, demo: Demonstration) -> np.ndarray:
+        return demo.t - demo.t[0] + self.offsets.get(demo.id, 0.0)
+
     # -- scene ---------------------------------------------------------------------------------------------
     def log_scene(self, demos: Iterable[Demonstration] | None = None) -> None:
-        """Domain box, landing pad and start points (static), in a z-up 3-D view of the vertical plane."""
-        axes = _scene_axes(self.session.state_names)
-        if axes is None:
+        """The plane of flight seen from the side (or above): the flown tracks set the view; a pad, a ground line
+        and the start points where the data set declares a landing target. Nothing without position roles."""
+        if self.plane is None:
             return
-        from workbench.simulate import DOMAIN, PAD_HALF_WIDTH
-
-        ix, iy, _ = axes
         demos = list(self.demos if demos is None else demos)
-        self.rec.log("scene", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        paper_states = tuple(self.session.state_names[:3]) == ("x", "y", "phi")
-        if paper_states:
-            (x_lo, x_hi), (y_lo, y_hi) = DOMAIN
-        else:
-            xs = np.concatenate([d.x[:, ix] for d in demos])
-            ys = np.concatenate([d.x[:, iy] for d in demos])
-            pad = 0.05 * max(np.ptp(xs), np.ptp(ys), 1e-9)
-            x_lo, x_hi, y_lo, y_hi = xs.min() - pad, xs.max() + pad, ys.min() - pad, ys.max() + pad
-        box = [[x_lo, 0, y_lo], [x_hi, 0, y_lo], [x_hi, 0, y_hi], [x_lo, 0, y_hi], [x_lo, 0, y_lo]]
-        self._static("scene/domain", rr.LineStrips3D([box], colors=[(160, 160, 160)], radii=0.01, labels=["domain"]))
-        targets = [d.target for d in demos if d.target is not None]
-        tx, ty = (float(targets[0][ix]), float(targets[0][iy])) if targets else (0.0, 0.0)
-        half = PAD_HALF_WIDTH if paper_states else 0.05 * (x_hi - x_lo)
-        self._static(
-            "scene/pad",
-            rr.Boxes3D(
-                centers=[[tx, 0.0, ty - 0.02]], half_sizes=[[half, 0.25, 0.02]], colors=[(90, 90, 90)], labels=["pad"]
-            ),
-        )
-        if demos:
-            starts = np.array([[d.x[0, ix], 0.0, d.x[0, iy]] for d in demos])
-            colors = [label_color(d.label, self.session.labels) for d in demos]
-            self._static(
-                "scene/starts",
-                rr.Points3D(starts, colors=colors, radii=0.04, labels=[d.id for d in demos], show_labels=False),
-            )
+        if not demos:
+            return
+        p = self.plane
+        points = [p.view(d.x) for d in demos]
+        targets = [p.view(np.asarray(d.target))[0] for d in demos if d.target is not None]
+        self.session.bounds = p.bounds([*points, *(np.atleast_2d(t) for t in targets)])
+        if targets:
+            from workbench.simulate import PAD_HALF_WIDTH
+
+            tx, ty = targets[0]
+            (x_lo, x_hi), _ = self.session.bounds
+            self._static("scene/ground", rr.LineStrips2D([[[x_lo, ty], [x_hi, ty]]], colors=[(90, 90, 90)],
+                                                         radii=UI(0.75), draw_order=1.0))
+            self._static("scene/pad", rr.LineStrips2D([[[tx - PAD_HALF_WIDTH, ty], [tx + PAD_HALF_WIDTH, ty]]],
+                                                      colors=[(200, 200, 200)], radii=UI(4.0), labels=["pad"],
+                                                      show_labels=False, draw_order=2.0))
+            starts = np.array([pts[0] for pts in points])
+            self._static("scene/starts", rr.Points2D(starts, colors=[self.colors[d.id] for d in demos], radii=UI(3.0),
+                                                     labels=[d.id for d in demos], show_labels=False, draw_order=4.0))
         self.session.scene = True
+
+    def _log_track(self, demo: Demonstration) -> None:
+        p = self.plane
+        assert p is not None
+        sbase = f"scene/demos/{_safe(demo.id)}"
+        color = self.colors[demo.id]
+        pts = p.view(demo.x)
+        focus = demo.id in self.labelled
+        self._static(f"{sbase}/path", rr.LineStrips2D([pts], colors=style.packed(color),
+                                                      radii=UI(1.6 if focus else 1.0), labels=[demo.id],
+                                                      show_labels=False, draw_order=3.0))
+        if focus:  # a strip's label sits at its middle, where the tracks pile up; the start is where it is clear
+            self._static(f"{sbase}/start", rr.Points2D(pts[:1], colors=style.packed(color), radii=UI(4.0),
+                                                       labels=[demo.id], show_labels=True, draw_order=8.0))
+        if demo.id not in self.animated:
+            return
+        if self.session.bounds is None:
+            self.session.bounds = p.bounds([p.view(d.x) for d in self.demos])
+        # the vehicle: a bar across and a mast up, a few percent of the scene wide
+        (x_lo, x_hi), (y_lo, y_hi) = self.session.bounds
+        size = 0.03 * max(x_hi - x_lo, y_hi - y_lo)
+        self._static(f"{sbase}/vehicle", rr.LineStrips2D([[[-size, 0], [size, 0]], [[0, 0], [0, -0.6 * size]]],
+                                                         colors=style.packed(color, style.RECORDED_COLOR),
+                                                         radii=[UI(3.0), UI(1.5)], draw_order=10.0))
+        angle = p.angle(demo.x)
+        quat = np.column_stack([np.zeros(len(demo)), np.zeros(len(demo)), np.sin(angle / 2), np.cos(angle / 2)])
+        translation = np.column_stack([pts, np.zeros(len(demo))])
+        self._send(f"{sbase}/vehicle", _time_index(self._t(demo)),
+                   rr.Transform3D.columns(translation=translation, quaternion=quat))
 
     # -- one trial -----------------------------------------------------------------------------------------
     def log_demonstration(self, demo: Demonstration, model: Any = None, *, variability: bool = True) -> None:
-        """States, inputs, the flown path and pose, mode lanes; with a model, ŵ and its GMR bands."""
+        """States, inputs, the flown track and vehicle, mode lanes; with a model, ŵ and its GMR bands."""
         s = self.session
         base = f"demos/{_safe(demo.id)}"
-        color = label_color(demo.label, s.labels)
-        packed = _packed(color)
-        t = demo.t - demo.t[0]
+        packed = style.packed(self.colors[demo.id])
+        t = self._t(demo)
         index = _time_index(t)  # one pair of time columns serves every entity of the trial
-        # series are named by their entity path (demos/<id>/states/<state>); the color tells the strategy
-        state_style = self._shared_style(("state", color), lambda: rr.SeriesLines(colors=packed, widths=[1.5]))
-        input_style = self._shared_style(
-            ("input", color), lambda: rr.SeriesLines(colors=packed, widths=[1.5], interpolation_mode="StepAfter")
-        )
+        # a series is named by its trial; one styling archetype per trial serves all its states
+        state_style = rr.SeriesLines(colors=packed, widths=[1.5], names=[demo.id])
+        input_style = rr.SeriesLines(colors=packed, widths=[1.5], names=[demo.id], interpolation_mode="StepAfter")
         for j, name in enumerate(s.state_names):
             path = f"{base}/states/{_safe(name)}"
             self._style(path, state_style)
@@ -257,32 +322,19 @@ class SessionLogger:
         modes = _readable_modes(demo.meta)
         if modes is not None:
             mt, names = modes
-            self._send(
-                f"{base}/mode",
-                [rr.TimeColumn("time", duration=mt)],
-                rr.StateChange.columns(state=names),
-            )
+            # overlaid trials get a lane each; on a flight's clock its segments share the one lane of the flight
+            lane = "flight/mode" if s.clock == "log" else f"{base}/mode"
+            self._style(lane, rr.StateConfiguration(values=list(self.mode_colors),
+                                                    colors=style.packed(*self.mode_colors.values())))
+            # the lane ends with the trial (a null state): the gaps between a flight's segments stay empty
+            self._send(lane, [rr.TimeColumn("time", duration=np.append(mt + t[0], t[-1]))],
+                       rr.StateChange.columns(state=[*names, None]))
             s.modes.append(demo.id)
-        axes = _scene_axes(s.state_names)
-        if axes is not None:
-            ix, iy, iphi = axes
-            pos = np.column_stack([demo.x[:, ix], np.zeros(len(demo)), demo.x[:, iy]])
-            sbase = f"scene/demos/{_safe(demo.id)}"
-            self._static(f"{sbase}/path", rr.LineStrips3D([pos], colors=packed, radii=0.008, labels=[demo.id]))
-            phi = demo.x[:, iphi] if iphi is not None else np.zeros(len(demo))
-            # a positive bank tilts thrust toward +x (ẍ = g φ): a rotation by +φ about the view's y axis
-            quat = np.column_stack([np.zeros(len(demo)), np.sin(phi / 2), np.zeros(len(demo)), np.cos(phi / 2)])
-            body = self._shared_style(
-                ("vehicle", color),
-                lambda: rr.LineStrips3D(
-                    [[[-0.18, 0, 0], [0.18, 0, 0]], [[0, 0, 0], [0, 0, 0.12]]],
-                    colors=_packed(color, (40, 40, 40)),
-                    radii=[0.02, 0.01],
-                ),
-            )
-            self._static(f"{sbase}/vehicle", body)
-            self._send(f"{sbase}/vehicle", index, rr.Transform3D.columns(translation=pos, quaternion=quat))
+        if self.plane is not None:
+            self._log_track(demo)
         s.demo_ids.append(demo.id)
+        lo, hi = s.span or (float(t[0]), float(t[-1]))
+        s.span = (min(lo, float(t[0])), max(hi, float(t[-1])))
         if model is not None and variability:
             self.log_variability(demo, model)
 
@@ -302,44 +354,33 @@ class SessionLogger:
             sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
             outside = np.abs(w - mu) > 3.0 * sigma
             out.update(mu=mu, sigma=sigma, outside=outside)
-        t = demo.t - demo.t[0]
+        t = self._t(demo)
         for j, name in enumerate(s.input_names):
             p = f"{base}/{_safe(name)}"
-            self._style(
-                f"{p}/w",
-                rr.SeriesLines(names=[f"ŵ {name}"], colors=[_W_COLOR], widths=[1.5], interpolation_mode="StepAfter"),
-            )
+            self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[style.W_COLOR], widths=[1.75],
+                                                 interpolation_mode="StepAfter"))
             self._send(f"{p}/w", _time_index(t), rr.Scalars.columns(scalars=w[:, j]))
             if not has_gmr:
+                s.ranges[p] = _data_range(w[:, j])
                 continue
             m_j, s_j = out["mu"][:, j], out["sigma"][:, j]
-            for suffix, k, color in (("gmr", 1.0, _BAND1_COLOR), ("gmr_3sigma", 3.0, _BAND3_COLOR)):
-                label = f"GMR μ ± {k:g}σ"
+            # ŵ, μ and the typical 3σ band set the scale; the band's start-up transient may run off the plot
+            s.ranges[p] = _data_range(w[:, j], m_j, np.median(m_j - 3 * s_j), np.median(m_j + 3 * s_j))
+            for suffix, k, color in (("gmr", 1.0, style.SIGMA1_COLOR), ("gmr_3sigma", 3.0, style.SIGMA3_COLOR)):
+                label = f"μ ± {k:g}σ"
                 if HAS_MEASUREMENTS:
-                    self._style(
-                        f"{p}/{suffix}",
-                        rr.Measurements.from_fields(names=[label], colors=[color], interpolation_mode="StepAfter"),
-                    )
-                    self._send(
-                        f"{p}/{suffix}",
-                        _time_index(t),
-                        rr.Measurements.columns(values=m_j, variances=(k * s_j) ** 2),
-                    )
+                    self._style(f"{p}/{suffix}", rr.Measurements.from_fields(
+                        names=[label], colors=[color], widths=[1.0], interpolation_mode="StepAfter"))
+                    self._send(f"{p}/{suffix}", _time_index(t),
+                               rr.Measurements.columns(values=m_j, variances=(k * s_j) ** 2))
                 else:  # older SDKs: the band as two lines
-                    self._style(
-                        f"{p}/{suffix}",
-                        rr.SeriesLines(names=[f"μ − {k:g}σ", f"μ + {k:g}σ"], colors=[color, color]),
-                    )
-                    self._send(
-                        f"{p}/{suffix}",
-                        _time_index(t),
-                        rr.Scalars.columns(scalars=np.column_stack([m_j - k * s_j, m_j + k * s_j])),
-                    )
+                    self._style(f"{p}/{suffix}", rr.SeriesLines(names=[f"μ − {k:g}σ", f"μ + {k:g}σ"],
+                                                                colors=[color, color], widths=[1.0, 1.0]))
+                    self._send(f"{p}/{suffix}", _time_index(t),
+                               rr.Scalars.columns(scalars=np.column_stack([m_j - k * s_j, m_j + k * s_j])))
             idx = np.flatnonzero(out["outside"][:, j])
-            self._style(
-                f"{p}/outside_3sigma",
-                rr.SeriesPoints(names=["ŵ outside 3σ"], colors=[_OUTLIER_COLOR], markers=["cross"], marker_sizes=[4.0]),
-            )
+            self._style(f"{p}/outside_3sigma", rr.SeriesPoints(names=["outside 3σ"], colors=[style.OUTLIER_COLOR],
+                                                               markers=["cross"], marker_sizes=[9.0]))
             self._send(f"{p}/outside_3sigma", _time_index(t[idx], idx), rr.Scalars.columns(scalars=w[idx, j]))
         if demo.id not in s.variability:
             s.variability.append(demo.id)
@@ -360,18 +401,23 @@ class SessionLogger:
 
         Time series under ``demos/<id>/predictions/from_<start>/<method>/<state>``, predicted paths as line
         strips under ``scene/predictions/<id>/from_<start>/<method>``; the proposed model's Monte Carlo
-        percentile band (``samples > 0``) under ``…/band/<state>``. Returns the predictions by method.
+        percentile band (``samples > 0``) under ``…/<method>_band/<state>`` (a filled band in the method's light
+        color) and as a sweep of boxes in the scene. Returns the predictions by method.
         """
         s = self.session
         if not 0 <= start < len(demo):
             raise DataError(f"demonstration {demo.id!r}: start index {start} outside 0…{len(demo) - 1}")
         x0 = demo.x[start]
-        t0 = demo.t[start] - demo.t[0]
+        t_rel = self._t(demo)
+        t0 = t_rel[start]
         base = f"demos/{_safe(demo.id)}/predictions/from_{start}"
         sbase = f"scene/predictions/{_safe(demo.id)}/from_{start}"
-        axes = _scene_axes(s.state_names)
         results: dict[str, Any] = {}
+        spans: dict[str, list[np.ndarray]] = {}
+        t_end = t0
         for method, model in models.items():
+            if method not in s.methods:
+                s.methods.append(method)
             mc = samples if method == "proposed" else 0
             # the task's start frame stays at the trial's first state when predicting from later on
             kwargs: dict[str, Any] = {"target": demo.target, "task_x0": demo.x[0]}
@@ -382,197 +428,120 @@ class SessionLogger:
             x = np.asarray(pred.x)
             steps = start + np.arange(len(x))
             tp = t0 + np.arange(len(x)) * self.demos.dt
-            color = METHOD_COLORS.get(method, (0, 0, 0))
-            title = METHOD_TITLES.get(method, method)
+            t_end = max(t_end, float(tp[-1]))
+            color = style.method_color(method)
+            title = style.method_title(method)
             for j, name in enumerate(s.state_names):
                 path = f"{base}/{_safe(method)}/{_safe(name)}"
-                self._style(path, rr.SeriesLines(names=[f"{title} {name}"], colors=[color], widths=[2.0]))
+                self._style(path, rr.SeriesLines(names=[title], colors=[color], widths=[2.0]))
                 self._send(path, _time_index(tp, steps), rr.Scalars.columns(scalars=x[:, j]))
-            if axes is not None:
-                ix, iy, _ = axes
-                strip = np.column_stack([x[:, ix], np.zeros(len(x)), x[:, iy]])
-                self._static(f"{sbase}/{_safe(method)}", rr.LineStrips3D([strip], colors=[color], radii=0.012,
-                                                                        labels=[title]))
+                spans.setdefault(name, []).append(x[:, j])
+            if self.plane is not None:
+                self._static(f"{sbase}/{_safe(method)}", rr.LineStrips2D(
+                    [self.plane.view(x)], colors=[color], radii=UI(2.0), labels=[title], show_labels=False,
+                    draw_order=6.0))
             band = _prediction_band(pred)
-            if band is not None:
-                lo, hi, level = band
-                for j, name in enumerate(s.state_names):
-                    path = f"{base}/band/{_safe(name)}"
-                    self._style(
-                        path,
-                        rr.SeriesLines(
-                            names=[f"MC {level} lower {name}", f"MC {level} upper {name}"],
-                            colors=[METHOD_COLORS["band"], METHOD_COLORS["band"]],
-                            widths=[1.0, 1.0],
-                        ),
-                    )
-                    self._send(path, _time_index(tp, steps), rr.Scalars.columns(scalars=np.column_stack([lo[:, j],
-                                                                                                         hi[:, j]])))
-                if axes is not None:
-                    ix, iy, _ = axes
-                    strips = [np.column_stack([b[:, ix], np.zeros(len(b)), b[:, iy]]) for b in (lo, hi)]
-                    self._static(
-                        f"{sbase}/band",
-                        rr.LineStrips3D(strips, colors=[_BAND3_COLOR, _BAND3_COLOR], radii=0.006,
-                                        labels=[f"MC {level} lower", f"MC {level} upper"]),
-                    )
+            if band is None:
+                continue
+            lo, hi, level = band
+            tint = style.light(color, 0.45)
+            if method not in s.bands:
+                s.bands.append(method)
+            for j, name in enumerate(s.state_names):
+                path = f"{base}/{_safe(method)}_band/{_safe(name)}"
+                mid, half = (lo[:, j] + hi[:, j]) / 2, np.abs(hi[:, j] - lo[:, j]) / 2
+                if HAS_MEASUREMENTS:
+                    # the band is an area: value ± one "σ" spans exactly [lower, upper]; its centre line is hidden
+                    self._style(path, rr.Measurements.from_fields(names=[f"{title} MC {level}"], colors=[tint],
+                                                                 widths=[0.0]))
+                    self._send(path, _time_index(tp, steps), rr.Measurements.columns(values=mid, variances=half**2))
+                else:
+                    self._style(path, rr.SeriesLines(names=[f"{title} MC {level} lower", f"{title} MC {level} upper"],
+                                                     colors=[tint, tint], widths=[1.0, 1.0]))
+                    self._send(path, _time_index(tp, steps),
+                               rr.Scalars.columns(scalars=np.column_stack([lo[:, j], hi[:, j]])))
+                spans.setdefault(name, []).extend([lo[:, j], hi[:, j]])
+            if self.plane is not None:
+                # the band in the plane: the percentile box at every few steps, a light tube around the path
+                vlo, vhi = self.plane.view(lo), self.plane.view(hi)
+                every = max(1, len(vlo) // 20)
+                centers, halves = ((vlo + vhi) / 2)[::every], (np.abs(vhi - vlo) / 2)[::every]
+                self._static(f"{sbase}/{_safe(method)}_band", rr.Boxes2D(
+                    centers=centers, half_sizes=halves, colors=[tint], radii=UI(0.6),
+                    labels=[f"{title} MC {level}"], show_labels=False, draw_order=5.0))
+        # the prediction plots are zoomed to the predictions; their y-range is set by what is visible there
+        lo_t, hi_t = s.windows.get(demo.id, (t0, t_end))
+        s.windows[demo.id] = (min(lo_t, t0), max(hi_t, t_end))
+        w_lo, w_hi = s.windows[demo.id]
+        seen = (t_rel >= w_lo - 1e-9) & (t_rel <= w_hi + 1e-9)
+        for j, name in enumerate(s.state_names):
+            key = f"demos/{_safe(demo.id)}/predictions/{_safe(name)}"
+            earlier = [np.asarray(s.ranges[key])] if key in s.ranges else []  # another start of the same trial
+            s.ranges[key] = _data_range(demo.x[seen, j], *spans.get(name, []), *earlier, margin=0.05)
         s.predictions.setdefault(demo.id, []).append((start, list(models)))
         if demo.id not in s.focus:
             s.focus.append(demo.id)
         return results
 
-    # -- model ---------------------------------------------------------------------------------------------
-    def log_model(self, name: str, model: Any) -> None:
-        """K̂, the normalized Q, R, S as tensors (heatmaps) and α with the fit diagnostics as a text document."""
+    # -- models --------------------------------------------------------------------------------------------
+    def log_models(self, models: Mapping[str, Any]) -> None:
+        """Every model's gain and objective blocks, as tensors and as heatmaps on one color scale per block."""
+        s = self.session
+        maps = {str(name): heatmaps(m, s.state_names, s.input_names) for name, m in models.items()}
+        scales = shared_scales(maps)
+        s.scales.update(scales)
+        for name, m in models.items():
+            self.log_model(str(name), m, scales=scales)
+
+    def log_model(self, name: str, model: Any, *, scales: Mapping[str, float] | None = None) -> None:
+        """K̂, the normalized Q, R, S as tensors and labelled heatmaps, and α with the fit diagnostics as text.
+
+        ``scales`` (block → largest |entry|) puts several models on one color scale; by default the model's own.
+        """
         s = self.session
         base = f"models/{_safe(name)}"
-        K = getattr(model, "K_", None)
-        if K is not None:
-            self._static(f"{base}/K", rr.Tensor(np.asarray(K), dim_names=["input", "state"]))
-        objective = getattr(model, "objective_", None)
-        if objective is not None:
-            n = len(s.state_names)
-            Mn = np.asarray(objective.M_normalized)
-            self._static(f"{base}/Q", rr.Tensor(Mn[:n, :n], dim_names=["state", "state"]))
-            self._static(f"{base}/R", rr.Tensor(Mn[n:, n:], dim_names=["input", "input"]))
-            self._static(f"{base}/S", rr.Tensor(Mn[:n, n:], dim_names=["state", "input"]))
+        blocks = heatmaps(model, s.state_names, s.input_names)
+        scales = dict(scales) if scales is not None else shared_scales({name: blocks})
+        for h in blocks:
+            dims = ["input" if r in s.input_names else "state" for r in (h.rows[0], h.cols[0])]
+            self._static(f"{base}/{h.block}", rr.Tensor(h.values, dim_names=dims))
+            self._log_heatmap(f"{base}/heatmap/{h.block}", h, scales.get(h.block, 1.0))
+            s.scales.setdefault(h.block, scales.get(h.block, 1.0))
+            s.heatmap_shapes[(name, h.block)] = h.values.shape
+        s.heatmaps[name] = [(h.block, h.title) for h in blocks]
         self._static(f"{base}/summary", rr.TextDocument(model_summary(name, model, s.state_names, s.input_names),
                                                         media_type=rr.MediaType.MARKDOWN))
         s.models.append(name)
 
+    def _log_heatmap(self, path: str, h: Heatmap, vmax: float) -> None:
+        """Cell (i, j) covers [j, j+1] × [i, i+1] of the 2-D view; values centred in the cells, names outside."""
+        rows, cols = h.values.shape
+        self._static(f"{path}/cells", rr.Image(colors(h.values, vmax), magnification_filter="Nearest", draw_order=0.0))
+        ii, jj = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+        centres = np.column_stack([jj.ravel() + 0.5, ii.ravel() + 0.5])
+        texts = [value_text(v, vmax) for v in h.values.ravel()]
+        self._static(f"{path}/values", rr.Points2D(centres, radii=UI(0.1), colors=[(20, 20, 20)], labels=texts,
+                                                   show_labels=True, draw_order=5.0))
+        row_pts = np.column_stack([np.full(rows, -0.7), np.arange(rows) + 0.5])
+        col_pts = np.column_stack([np.arange(cols) + 0.5, np.full(cols, -0.3)])
+        self._static(f"{path}/rows", rr.Points2D(row_pts, radii=UI(0.1), colors=[(230, 230, 230)],
+                                                 labels=list(h.rows), show_labels=True, draw_order=5.0))
+        self._static(f"{path}/cols", rr.Points2D(col_pts, radii=UI(0.1), colors=[(230, 230, 230)],
+                                                 labels=list(h.cols), show_labels=True, draw_order=5.0))
+
 
 def _prediction_band(pred: Any) -> tuple[np.ndarray, np.ndarray, str] | None:
     """The Monte Carlo trajectory band of a prediction as (lower, upper, level text), or None without samples."""
-    if pred.x_lower is None:
+    if getattr(pred, "x_lower", None) is None:
         return None
     return np.asarray(pred.x_lower), np.asarray(pred.x_upper), f"{100 * float(pred.band_level):g} %"
 
 
-def _fmt_matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
-    head = "| | " + " | ".join(cols) + " |\n|---|" + "---|" * len(cols) + "\n"
-    body = [f"| **{r}** | " + " | ".join(f"{v:.3g}" for v in row) + " |" for r, row in zip(rows, M, strict=True)]
-    return head + "\n".join(body)
+def default_blueprint(session: LoggedSession, **kwargs: Any) -> rrb.Blueprint:
+    """The first view of a session recording; see :func:`workbench.viewer.blueprint.session_blueprint`."""
+    from workbench.viewer.blueprint import session_blueprint
 
-
-def model_summary(name: str, model: Any, state_names: Sequence[str], input_names: Sequence[str]) -> str:
-    """A Markdown summary of a fitted model: gain, task objective (α, diagonal of normalized Q and R), GMM fit."""
-    lines = [f"# Model {name}", "", f"`{type(model).__name__}`", ""]
-    K = getattr(model, "K_", None)
-    if K is not None:
-        lines += ["## Gain K̂ (u = K̂ x)", "", _fmt_matrix(np.asarray(K), input_names, state_names), ""]
-    objective = getattr(model, "objective_", None)
-    if objective is not None:
-        n = len(state_names)
-        Mn = np.asarray(objective.M_normalized)
-        lines += [
-            "## Task objective (inverse LQR, eqs. (15)–(19))",
-            "",
-            f"- α* = {float(objective.alpha):.4g} (condition-number bound of M)",
-            f"- forward-gain error ‖K_DARE − K̂‖/‖K̂‖ = {float(objective.forward_gain_error):.2e}",
-            f"- solver {getattr(objective, 'solver', '?')}, status {getattr(objective, 'status', '?')}, "
-            f"structure {getattr(objective, 'structure', '?')}",
-            "",
-            "diag normalized Q: "
-            + ", ".join(f"{s} {v:.3g}" for s, v in zip(state_names, np.diag(Mn[:n, :n]), strict=True)),
-            "",
-            "diag normalized R: "
-            + ", ".join(f"{s} {v:.3g}" for s, v in zip(input_names, np.diag(Mn[n:, n:]), strict=True)),
-            "",
-        ]
-    diag = []
-    for attr, title in (("n_components_", "components G"), ("frames", "frames"), ("n_demos_", "training trials"),
-                        ("n_samples_", "training samples"), ("labels_", "labels"), ("noise_rho_", "noise lag-1 ρ")):
-        value = getattr(model, attr, None)
-        if value is not None:
-            diag.append(f"- {title}: {np.array2string(value, precision=3) if isinstance(value, np.ndarray) else value}")
-    tp = getattr(getattr(model, "variability_", None), "tpgmm_", None)
-    if tp is not None:
-        for attr, title in (("n_iter_", "EM iterations"), ("converged_", "EM converged"),
-                            ("lower_bound_", "mean log-likelihood")):
-            value = getattr(tp, attr, None)
-            if value is not None:
-                diag.append(f"- {title}: {value:.4g}" if isinstance(value, float) else f"- {title}: {value}")
-    if diag:
-        lines += ["## Fit", "", *diag, ""]
-    return "\n".join(lines)
-
-
-# -- blueprint ---------------------------------------------------------------------------------------------
-def default_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.Blueprint:
-    """Tabs scene, states, inputs & variability, predictions, objective — the first view already useful.
-
-    Trials are overlaid on one time axis (time since each trial's start); the detail tabs show the focus trials
-    (those with predictions or variability), at most a handful at a time.
-    """
-    s = session
-    ids = s.demo_ids[:max_overlay]
-    focus = (s.focus or s.variability or s.demo_ids)[:3]
-    tabs: list[Any] = []
-    axes = _scene_axes(s.state_names)
-    if s.scene:
-        eye = rrb.EyeControls3D(position=[0.0, -9.0, 1.75], look_target=[0.0, 0.0, 1.75], eye_up=[0.0, 0.0, 1.0])
-        scene_view = rrb.Spatial3DView(origin="scene", name="landing scene", eye_controls=eye)
-        side: list[Any] = []
-        if axes is not None and focus:
-            for j in axes[:2]:
-                name = s.state_names[j]
-                side.append(_series_view(name, _state_and_prediction_paths(s, focus, name)))
-        tabs.append(rrb.Horizontal(scene_view, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
-                    if side else rrb.Horizontal(scene_view, name="scene"))
-    state_views = [
-        _series_view(name, [f"+ /demos/{_safe(i)}/states/{_safe(name)}" for i in ids]) for name in s.state_names
-    ]
-    if s.modes:
-        state_views.append(
-            rrb.StateTimelineView(origin="/demos", contents=[f"+ /demos/{_safe(i)}/mode" for i in s.modes],
-                                  name="flight mode")
-        )
-    tabs.append(rrb.Grid(*state_views, name="states"))
-    input_views = []
-    for name in s.input_names:
-        input_views.append(_series_view(f"input {name}", [f"+ /demos/{_safe(i)}/inputs/{_safe(name)}" for i in ids]))
-    for i in [f for f in focus if f in s.variability]:
-        for name in s.input_names:
-            input_views.append(
-                _series_view(f"ŵ {name} — {i}", [f"+ /demos/{_safe(i)}/variability/{_safe(name)}/**"])
-            )
-    tabs.append(rrb.Grid(*input_views, name="inputs & variability"))
-    if s.predictions:
-        pred_views = []
-        for i in [f for f in focus if f in s.predictions]:
-            for name in s.state_names:
-                pred_views.append(_series_view(f"{name} — {i}", _state_and_prediction_paths(s, [i], name)))
-        tabs.append(rrb.Grid(*pred_views, name="predictions"))
-    if s.models:
-        model_rows = []
-        for m in s.models:
-            base = f"models/{_safe(m)}"
-            model_rows.append(
-                rrb.Horizontal(
-                    rrb.TensorView(origin=f"{base}/K", name=f"{m}: K̂"),
-                    rrb.TensorView(origin=f"{base}/Q", name=f"{m}: Q / λmax(M)"),
-                    rrb.TensorView(origin=f"{base}/R", name=f"{m}: R / λmax(M)"),
-                    rrb.TensorView(origin=f"{base}/S", name=f"{m}: S / λmax(M)"),
-                    rrb.TextDocumentView(origin=f"{base}/summary", name=f"{m}: summary"),
-                    column_shares=[2, 2, 1, 1, 3],
-                )
-            )
-        tabs.append(rrb.Vertical(*model_rows, name="objective"))
-    return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), rrb.TimePanel(timeline="time"), collapse_panels=False)
-
-
-def _series_view(name: str, contents: list[str]) -> rrb.TimeSeriesView:
-    return rrb.TimeSeriesView(origin="/", contents=contents, name=name)
-
-
-def _state_and_prediction_paths(s: LoggedSession, ids: Sequence[str], name: str) -> list[str]:
-    out = []
-    for i in ids:
-        out.append(f"+ /demos/{_safe(i)}/states/{_safe(name)}")
-        for start, methods in s.predictions.get(i, []):
-            for method in [*methods, "band"]:
-                out.append(f"+ /demos/{_safe(i)}/predictions/from_{start}/{_safe(method)}/{_safe(name)}")
-    return out
+    return session_blueprint(session, **kwargs)
 
 
 # -- one call for a whole session ----------------------------------------------------------------------------
@@ -588,6 +557,7 @@ def log_session(
     samples: int = 0,
     starts: Sequence[int] = (0,),
     seed: int | None = 0,
+    clock: str = "auto",
 ) -> LoggedSession:
     """Log a whole session and return what was logged (for :func:`default_blueprint`).
 
@@ -598,28 +568,33 @@ def log_session(
     named_models : mapping name → model, optional
         Models to show in the objective tab (default: ``models``).
     baselines : mapping label → {method: model}, optional
-        Extra methods to predict with (``ioc_only``, ``gmr_only``), per label (or under key ``None`` for all).
+        Extra methods to predict with (``ioc_only``, ``gmr_only``, ``persistence``, …), per label (or under key
+        ``None`` for all); every method passed is drawn, each in its own color.
     focus : ids, optional
         Trials to predict from (at ``starts``); default the first trial of each label.
+    clock : {"auto", "log", "trial"}
+        See :func:`resolve_clock`.
     """
-    logger = SessionLogger(rec, demos)
-    logger.log_scene()
-    for d in demos:
-        logger.log_demonstration(d, _model_for(models, d))
-    if named_models is None and models is not None:
-        named_models = models if isinstance(models, Mapping) else {"model": models}
-    for name, m in (named_models or {}).items():
-        logger.log_model(str(name), m)
+    logger = SessionLogger(rec, demos, clock=clock)
+    by_id = {d.id: d for d in demos}
     if models is not None:
         if focus is None:
             seen: dict[str | None, str] = {}
             for d in demos:
                 seen.setdefault(d.label, d.id)
             focus = list(seen.values())
-        by_id = {d.id: d for d in demos}
         for fid in focus:
             if fid not in by_id:
                 raise DataError(f"no demonstration {fid!r} to predict from; ids present: {demos.ids[:10]}…")
+        logger.set_focus(focus)
+    logger.log_scene()
+    for d in demos:
+        logger.log_demonstration(d, _model_for(models, d))
+    if named_models is None and models is not None:
+        named_models = models if isinstance(models, Mapping) else {"model": models}
+    logger.log_models({str(k): v for k, v in (named_models or {}).items()})
+    if models is not None:
+        for fid in focus or ():
             d = by_id[fid]
             proposed = _model_for(models, d)
             if proposed is None:
@@ -634,139 +609,33 @@ def log_session(
 
 
 # -- outputs ---------------------------------------------------------------------------------------------
-def has_display() -> bool:
-    """Whether a native viewer could open a window here."""
-    if sys.platform in ("darwin", "win32"):
-        return True
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-
-
-def record_session(path: str | os.PathLike, demos: DemonstrationSet, **kwargs: Any) -> tuple[Path, LoggedSession]:
+def record_session(
+    path: str | os.PathLike, demos: DemonstrationSet, *, application_id: str = APPLICATION_ID, **kwargs: Any
+) -> tuple[Path, LoggedSession]:
     """Log a session (see :func:`log_session`) into an ``.rrd`` file, atomically, with its default blueprint."""
     path = Path(path)
-    rec = new_recording()
+    rec = new_recording(application_id)
     with atomic_path(path) as tmp:
         rec.save(tmp)
         session = log_session(rec, demos, **kwargs)
-        rec.send_blueprint(default_blueprint(session))
+        rec.send_blueprint(default_blueprint(session), make_active=True, make_default=True)
         rec.flush()
         rec.disconnect()
     return path, session
 
 
-class open_output:
-    """Attach the chosen output to a recording: ``save`` (an .rrd, atomically), ``spawn`` or ``serve``.
-
-    Use as a context manager around the logging; on exit the blueprint (if any) is sent, the stream flushed,
-    and a saved file moved into place. ``serve`` hosts a web viewer and gRPC proxy on 127.0.0.1 only (the rerun
-    SDK's own server binds every interface) and keeps serving until interrupted.
-    """
-
-    def __init__(
-        self,
-        rec: rr.RecordingStream,
-        *,
-        save: str | os.PathLike | None = None,
-        spawn: bool = False,
-        serve: bool = False,
-        web_port: int = 9090,
-        grpc_port: int = 9876,
-    ) -> None:
-        if sum((save is not None, spawn, serve)) != 1:
-            raise WorkbenchError("choose exactly one output: --save FILE.rrd, --spawn or --serve")
-        self.rec = rec
-        self.save = None if save is None else Path(save)
-        self.spawn = spawn
-        self.serve = serve
-        self.web_port = web_port
-        self.grpc_port = grpc_port
-        self.blueprint: rrb.Blueprint | None = None
-        self._atomic: atomic_path | None = None
-        self._server: subprocess.Popen | None = None
-
-    def __enter__(self) -> open_output:
-        if self.save is not None:
-            self._atomic = atomic_path(self.save)
-            self.rec.save(self._atomic.__enter__())
-        elif self.spawn:
-            self.rec.spawn(connect=True)
-        else:
-            self._server = _start_local_server(self.grpc_port, self.web_port)
-            self.rec.connect_grpc(f"rerun+http://127.0.0.1:{self.grpc_port}/proxy")
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        try:
-            if exc_type is None and self.blueprint is not None:
-                self.rec.send_blueprint(self.blueprint)
-            self.rec.flush()
-            if self.save is not None:
-                self.rec.disconnect()
-        finally:
-            if self._atomic is not None:
-                self._atomic.__exit__(exc_type, exc, tb)
-
-    @property
-    def url(self) -> str:
-        """For ``serve``: the web viewer's address, connected to the local gRPC proxy."""
-        from urllib.parse import quote
-
-        proxy = quote(f"rerun+http://127.0.0.1:{self.grpc_port}/proxy", safe="")
-        return f"http://127.0.0.1:{self.web_port}?url={proxy}"
-
-    def wait(self) -> None:
-        """For ``serve``: keep the local server up until Ctrl-C (or SIGTERM), then stop it."""
-        if self._server is None:
-            return
-        _wait_then_stop(self._server)
-
-
-def _wait_then_stop(proc: subprocess.Popen) -> None:
-    import signal
-
-    def _interrupt(signum, frame):  # a SIGTERM must stop the server too, not orphan it
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, _interrupt)
-    try:
-        proc.wait()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-
-
-def _rerun_executable() -> list[str]:
-    exe = Path(sys.executable).with_name("rerun")
-    if exe.exists():
-        return [str(exe)]
-    found = shutil.which("rerun")
-    return [found] if found else [sys.executable, "-m", "rerun"]
-
-
-def _start_local_server(grpc_port: int, web_port: int) -> subprocess.Popen:
-    """A rerun gRPC proxy with a web viewer, bound to 127.0.0.1 (never every interface)."""
-    cmd = [*_rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port),
-           "--web-viewer-port", str(web_port)]
-    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
-
-
 def record_study(
     result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
 ) -> Path:
-    """One ``.rrd`` with every trial, both models' variability on the test trials and the three predictions."""
+    """One ``.rrd`` with every trial, both models' variability on the test trials and every method's predictions."""
     focus = [te[0].id for te in result.test.values() if len(te)]
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
         if p is not None:
             p.add_task(f"writing {path}", total=None)
         out, _ = record_session(
-            path, result.demos, models=result.models, baselines=result.baselines, focus=focus,
-            horizon=result.horizon, samples=result.samples, seed=result.seed,
+            path, result.demos, application_id=APPLICATION_IDS["study"], models=result.models,
+            baselines=result.baselines, focus=focus, horizon=result.horizon, samples=result.samples,
+            seed=result.seed, clock="trial",
         )
     return out

@@ -1,0 +1,124 @@
+"""The objective tab: a fitted model's gain and normalized cost blocks as labelled heatmaps, and its summary.
+
+Each block (``K̂``, ``Q``, ``R``, ``S``) is drawn as an image in a 2-D view: one cell per entry, a diverging color
+map symmetric about zero (blue negative, red positive, white zero) on one scale per block shared by every model,
+so two strategies can be compared cell by cell; state and input names label the rows and columns and every cell
+shows its value.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Heatmap", "heatmaps", "model_summary", "shared_scales"]
+
+CMAP = "RdBu_r"
+
+
+@dataclass(frozen=True)
+class Heatmap:
+    """One block of one model: the matrix, its row and column names and its title."""
+
+    block: str
+    title: str
+    values: np.ndarray
+    rows: tuple[str, ...]
+    cols: tuple[str, ...]
+
+
+def heatmaps(model: Any, state_names: Sequence[str], input_names: Sequence[str]) -> list[Heatmap]:
+    """The gain ``K̂`` (u = K̂ x) and, with an inverse-LQR objective, ``Q``, ``R``, ``S`` of ``M / λmax(M)``
+    (eqs. (15)–(19) of the method paper)."""
+    out = []
+    states, inputs = tuple(state_names), tuple(input_names)
+    K = getattr(model, "K_", None)
+    if K is not None:
+        out.append(Heatmap("K", "K̂ (u = K̂x)", np.asarray(K, dtype=float), inputs, states))
+    objective = getattr(model, "objective_", None)
+    if objective is not None:
+        n = len(states)
+        Mn = np.asarray(objective.M_normalized, dtype=float)
+        out += [
+            Heatmap("Q", "Q / λmax(M)", Mn[:n, :n], states, states),
+            Heatmap("R", "R / λmax(M)", Mn[n:, n:], inputs, inputs),
+            Heatmap("S", "S / λmax(M)", Mn[:n, n:], states, inputs),
+        ]
+    return out
+
+
+def shared_scales(maps: Mapping[str, Sequence[Heatmap]]) -> dict[str, float]:
+    """Per block, the largest |entry| over every model: the one symmetric color scale the block is drawn on."""
+    scales: dict[str, float] = {}
+    for blocks in maps.values():
+        for h in blocks:
+            finite = h.values[np.isfinite(h.values)]
+            vmax = float(np.abs(finite).max()) if finite.size else 0.0
+            scales[h.block] = max(scales.get(h.block, 0.0), vmax)
+    return {k: (v if v > 0 else 1.0) for k, v in scales.items()}
+
+
+def colors(values: np.ndarray, vmax: float) -> np.ndarray:
+    """RGB (rows, cols, 3) uint8 of ``values`` on the diverging map over ``[-vmax, vmax]``."""
+    from matplotlib import colormaps
+
+    frac = np.clip((np.nan_to_num(values) / vmax + 1.0) / 2.0, 0.0, 1.0)
+    return (255 * colormaps[CMAP](frac)[..., :3]).round().astype(np.uint8)
+
+
+def value_text(v: float, vmax: float) -> str:
+    """A cell's value, short: ``0`` where it is negligible on the block's scale."""
+    return "0" if abs(v) < 5e-4 * vmax else f"{v:.2g}"
+
+
+def _fmt_matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
+    head = "| | " + " | ".join(cols) + " |\n|---|" + "---|" * len(cols) + "\n"
+    body = [f"| **{r}** | " + " | ".join(f"{v:.3g}" for v in row) + " |" for r, row in zip(rows, M, strict=True)]
+    return head + "\n".join(body)
+
+
+def model_summary(name: str, model: Any, state_names: Sequence[str], input_names: Sequence[str]) -> str:
+    """A Markdown summary of a fitted model: gain, task objective (α, diagonal of normalized Q and R), GMM fit."""
+    lines = [f"# Model {name}", "", f"`{type(model).__name__}`", ""]
+    K = getattr(model, "K_", None)
+    if K is not None:
+        lines += ["## Gain K̂ (u = K̂ x)", "", _fmt_matrix(np.asarray(K), input_names, state_names), ""]
+    objective = getattr(model, "objective_", None)
+    if objective is not None:
+        n = len(state_names)
+        Mn = np.asarray(objective.M_normalized)
+        lines += [
+            "## Task objective (inverse LQR, eqs. (15)–(19))",
+            "",
+            f"- α* = {float(objective.alpha):.4g} (condition-number bound of M)",
+            f"- forward-gain error ‖K_DARE − K̂‖/‖K̂‖ = {float(objective.forward_gain_error):.2e}",
+            f"- solver {getattr(objective, 'solver', '?')}, status {getattr(objective, 'status', '?')}, "
+            f"structure {getattr(objective, 'structure', '?')}",
+            "",
+            "diag normalized Q: "
+            + ", ".join(f"{s} {v:.3g}" for s, v in zip(state_names, np.diag(Mn[:n, :n]), strict=True)),
+            "",
+            "diag normalized R: "
+            + ", ".join(f"{s} {v:.3g}" for s, v in zip(input_names, np.diag(Mn[n:, n:]), strict=True)),
+            "",
+        ]
+    diag = []
+    for attr, title in (("n_components_", "components G"), ("frames", "frames"), ("n_demos_", "training trials"),
+                        ("n_samples_", "training samples"), ("labels_", "labels"), ("noise_rho_", "noise lag-1 ρ")):
+        value = getattr(model, attr, None)
+        if value is not None:
+            diag.append(f"- {title}: {np.array2string(value, precision=3) if isinstance(value, np.ndarray) else value}")
+    tp = getattr(getattr(model, "variability_", None), "tpgmm_", None)
+    if tp is not None:
+        for attr, title in (("n_iter_", "EM iterations"), ("converged_", "EM converged"),
+                            ("lower_bound_", "mean log-likelihood")):
+            value = getattr(tp, attr, None)
+            if value is not None:
+                diag.append(f"- {title}: {value:.4g}" if isinstance(value, float) else f"- {title}: {value}")
+    if diag:
+        lines += ["## Fit", "", *diag, ""]
+    return "\n".join(lines)
+

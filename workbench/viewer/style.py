@@ -1,0 +1,100 @@
+"""Colors and display names of the viewer: one color per method, per strategy label or flight segment, per mode.
+
+The viewer's background is dark, so "recorded" is a light gray (the report, on white paper, draws it dark) and a
+band is drawn in the light tint of its method's color. Method colors agree with the report's (tab10).
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = [
+    "METHOD_COLORS",
+    "METHOD_TITLES",
+    "RECORDED_COLOR",
+    "W_COLOR",
+    "OUTLIER_COLOR",
+    "label_color",
+    "light",
+    "method_color",
+    "method_title",
+    "mode_colors",
+    "packed",
+    "trial_colors",
+    "with_unit",
+]
+
+# tab10, so the report's matplotlib figures and the viewer agree on colors
+PALETTE: tuple[tuple[int, int, int], ...] = (
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
+)
+RECORDED_COLOR = (225, 225, 225)
+METHOD_COLORS: dict[str, tuple[int, int, int]] = {
+    "recorded": RECORDED_COLOR,
+    "proposed": (44, 160, 44),
+    "ioc_only": (214, 39, 40),
+    "gmr_only": (148, 103, 189),
+    "persistence": (140, 86, 75),
+}
+METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence",
+                 "recorded": "recorded"}
+# methods nobody named above get one of the colors no named method uses, the same one on every run
+_SPARE = ((227, 119, 194), (188, 189, 34), (23, 190, 207), (255, 127, 14), (31, 119, 180))
+W_COLOR = (110, 190, 255)  # ŵ: bright enough to read on top of its σ bands
+SIGMA1_COLOR = (255, 170, 90)
+SIGMA3_COLOR = (255, 225, 190)
+OUTLIER_COLOR = (255, 60, 60)
+_MODE_PALETTE = ((76, 175, 80), (66, 165, 245), (255, 167, 38), (171, 71, 188), (239, 83, 80), (38, 198, 218),
+                 (212, 225, 87), (141, 110, 99))
+
+
+def packed(*colors: Sequence[int]) -> np.ndarray:
+    """Colors as packed 0xRRGGBBAA — rerun's fast path; tuples go through a slow per-call conversion."""
+    c = np.asarray([tuple(col)[:3] for col in colors], dtype=np.uint32).reshape(-1, 3)
+    return (c[:, 0] << 24) | (c[:, 1] << 16) | (c[:, 2] << 8) | np.uint32(255)
+
+
+def light(color: Sequence[int], amount: float = 0.5) -> tuple[int, int, int]:
+    """``color`` mixed with white by ``amount`` (0 keeps it, 1 is white): the tint of a method's band."""
+    c = np.asarray(tuple(color)[:3], dtype=float)
+    return tuple(int(round(v)) for v in c + amount * (255.0 - c))
+
+
+def method_color(method: str) -> tuple[int, int, int]:
+    """The color of a prediction method, the same in the scene and every plot."""
+    if method in METHOD_COLORS:
+        return METHOD_COLORS[method]
+    return _SPARE[zlib.crc32(method.encode()) % len(_SPARE)]
+
+
+def method_title(method: str) -> str:
+    """A short display name of a method (legends, labels)."""
+    return METHOD_TITLES.get(method, method.replace("_", " "))
+
+
+def label_color(label: str | None, labels: Sequence[str]) -> tuple[int, int, int]:
+    """A stable color per strategy label (the order of ``labels``), gray for an unlabeled trial."""
+    if label is None or label not in labels:
+        return (127, 127, 127)
+    return PALETTE[list(labels).index(label) % len(PALETTE)]
+
+
+def trial_colors(ids: Sequence[str], labels: Sequence[str | None], known: Sequence[str]) -> dict[str, tuple]:
+    """One color per strategy label; without labels one color per trial (the segments of a flight)."""
+    if any(lab is not None and lab in known for lab in labels):
+        return {i: label_color(lab, known) for i, lab in zip(ids, labels, strict=True)}
+    return {i: PALETTE[k % len(PALETTE)] for k, i in enumerate(ids)}
+
+
+def mode_colors(modes: Sequence[str]) -> dict[str, tuple[int, int, int]]:
+    """One color per flight mode, in the order the modes are given."""
+    return {m: _MODE_PALETTE[k % len(_MODE_PALETTE)] for k, m in enumerate(modes)}
+
+
+def with_unit(name: str, unit: str) -> str:
+    """``"x [m]"``, or just the name without a unit."""
+    return f"{name} [{unit}]" if unit else name
