@@ -5,11 +5,16 @@ Reading
 Each logged topic instance is a stream named after the topic (``vehicle_attitude``), with ``/<multi_id>``
 appended for second and further instances (``sensor_accel/1``). ``t`` is the topic's ``timestamp`` (µs since
 boot) in seconds; the other fields keep pyulog's names, which already flatten arrays (``q[0]``) and nested
-types (``esc[0].esc_rpm``). Only the requested topics are parsed (pyulog's ``message_name_filter_list``).
+types (``esc[0].esc_rpm``). Only the requested topics are decoded.
 
-pyulog resynchronises on corrupt data by itself; the reader reports that (``skipped["corrupt regions"]``)
-and the logger's own dropouts (``skipped["logger dropouts"]``). A file pyulog cannot parse at all is a
-:class:`~workbench.errors.DataError` naming the file and the byte offset where parsing stopped.
+A well-formed file is read by a vectorized reader: one pass over the message headers (a short Python loop
+that only adds sizes), then every data message of a topic gathered from the file into one byte array and
+decoded through a numpy structured dtype built like pyulog's, so the values are pyulog's bit for bit. Anything
+unusual — an unknown message type, a size that does not match its topic, data before its subscription,
+appended data, a truncated definition — hands the file to ``pyulog``, which resynchronises on corrupt data by
+itself; the reader reports that (``skipped["corrupt regions"]``) and the logger's own dropouts
+(``skipped["logger dropouts"]``). A file pyulog cannot parse at all is a :class:`~workbench.errors.DataError`
+naming the file and the byte offset where parsing stopped.
 
 Writing
 -------
@@ -26,13 +31,16 @@ import re
 import struct
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from adapters.streams import Streams
 from workbench.atomic import atomic_path
 from workbench.errors import DataError, FormatError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["MAGIC", "read", "write"]
 
@@ -50,21 +58,28 @@ def _stream_name(name: str, multi_id: int) -> str:
 
 def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Streams:
     """Read a ULog file into streams (only ``topics``, by topic name, when given)."""
-    from pyulog import ULog
-
     where = os.fspath(path)
     names = None if topics is None else sorted({t.split("/")[0] for t in topics})
     try:
-        f = open(path, "rb")
+        with open(path, "rb") as f:
+            data = f.read()
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
-    with f:
-        head = f.read(16)
-        if not head:
-            raise DataError(f"{where}: empty file, not a ULog file")
-        if not head.startswith(MAGIC):
-            raise FormatError(f"{where}: not a ULog file (the first bytes are not the ULog magic)")
-        f.seek(0)
+    if not data:
+        raise DataError(f"{where}: empty file, not a ULog file")
+    if not data.startswith(MAGIC):
+        raise FormatError(f"{where}: not a ULog file (the first bytes are not the ULog magic)")
+    try:
+        return _read_fast(where, data, None if names is None else set(names))
+    except _Unusual:
+        return _read_pyulog(where, data, names)
+
+
+def _read_pyulog(where: str, data: bytes, names: list[str] | None) -> Streams:
+    """pyulog's reader, for files the vectorized reader leaves to it (corrupt or unusual ones)."""
+    from pyulog import ULog
+
+    with io.BytesIO(data) as f:
         # pyulog reports corruption with print(); keep it off the user's terminal
         with contextlib.redirect_stdout(io.StringIO()):
             try:
@@ -74,6 +89,8 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
                 raise DataError(
                     f"{where}: damaged ULog file, parsing stopped near byte {at} ({type(exc).__name__}: {exc})"
                 ) from None
+    import pandas as pd
+
     frames: dict[str, pd.DataFrame] = {}
     for d in ulog.data_list:
         data = d.data
@@ -93,6 +110,182 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
         "start_timestamp": int(ulog.start_timestamp),
         "last_timestamp": int(ulog.last_timestamp),
         "msg_info": {k: (v if isinstance(v, int | float | str) else str(v)) for k, v in ulog.msg_info_dict.items()},
+    }
+    return Streams(where, "ulog", frames, counts=counts, skipped=skipped, info=info)
+
+
+class _Unusual(Exception):
+    """The vectorized reader met something only pyulog handles (corruption, appended data, …)."""
+
+
+# pyulog's element types (``ULog._UNPACK_TYPES``): size and numpy dtype; bool and char are int8 as in pyulog.
+_TYPES = {
+    "int8_t": "<i1", "uint8_t": "<u1", "int16_t": "<i2", "uint16_t": "<u2", "int32_t": "<i4", "uint32_t": "<u4",
+    "int64_t": "<i8", "uint64_t": "<u8", "float": "<f4", "double": "<f8", "bool": "<i1", "char": "<i1",
+}  # fmt: skip
+_STRUCT = {
+    "int8_t": "b", "uint8_t": "B", "int16_t": "h", "uint16_t": "H", "int32_t": "i", "uint32_t": "I",
+    "int64_t": "q", "uint64_t": "Q", "float": "f", "double": "d", "bool": "?", "char": "c",
+}  # fmt: skip
+# Message types the vectorized reader knows in the data section; any other one is left to pyulog.
+_DATA_TYPES = frozenset(b"ADLCSOIMPQ")
+
+
+def _formats(text: str) -> tuple[str, list[tuple[str, int, str]]]:
+    name, _, body = text.partition(":")
+    fields = []
+    for item in body.split(";"):
+        if not item:
+            continue
+        type_str, field = item.split(" ")[:2]
+        if "[" in type_str:
+            base, count = type_str[: type_str.index("[")], int(type_str[type_str.index("[") + 1 : type_str.index("]")])
+            if not 0 <= count <= 0xFFFF:
+                raise _Unusual
+        else:
+            base, count = type_str, 0
+        fields.append((base, count, field))
+    return name, fields
+
+
+def _flatten(formats: dict, type_name: str, prefix: str, out: list[tuple[str, str]], depth: int = 0) -> None:
+    """pyulog's flattening of nested types and arrays into (field name, element type)."""
+    if depth > 32 or type_name not in formats:
+        raise _Unusual
+    for base, count, field in formats[type_name]:
+        if base in _TYPES:
+            if count > 0:
+                out.extend((f"{prefix}{field}[{i}]", base) for i in range(count))
+            else:
+                out.append((prefix + field, base))
+        elif count > 0:
+            for i in range(count):
+                _flatten(formats, base, f"{prefix}{field}[{i}].", out, depth + 1)
+        else:
+            _flatten(formats, base, f"{prefix}{field}.", out, depth + 1)
+
+
+def _info_message(payload: bytes) -> tuple[str, Any]:
+    """An information message's key and value, decoded as pyulog decodes them."""
+    key_len = payload[0]
+    type_key = payload[1 : 1 + key_len].decode("utf-8", "ignore").split(" ")
+    type_str, key = type_key[0], type_key[1]
+    raw = payload[1 + key_len :]
+    if type_str.startswith("char["):
+        return key, raw.decode("utf-8", "ignore")
+    if type_str in _STRUCT:
+        return key, struct.unpack("<" + _STRUCT[type_str], raw)[0]
+    return key, raw
+
+
+def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
+    """The vectorized reader of well-formed files (see the module docstring); raises _Unusual otherwise."""
+    import pandas as pd
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    try:
+        start_timestamp = struct.unpack_from("<Q", data, 8)[0]
+        n = len(data)
+        formats: dict[str, list] = {}
+        msg_info: dict[str, Any] = {}
+        pos = 16
+        # Definitions: few messages, parsed one by one like pyulog does.
+        while pos + 3 <= n:
+            size, kind = data[pos] | data[pos + 1] << 8, data[pos + 2]
+            end = pos + 3 + size
+            if end > n:
+                raise _Unusual
+            payload = data[pos + 3 : end]
+            if kind == 0x46:  # F
+                name, fields = _formats(payload.decode("utf-8", "ignore"))
+                formats[name] = fields
+            elif kind == 0x49:  # I
+                key, value = _info_message(payload)
+                msg_info[key] = value
+            elif kind == 0x42:  # B: flag bits; appended data or unknown incompatible flags are pyulog's
+                if pos != 16 or any(payload[8:16]):
+                    raise _Unusual
+            elif kind in b"ALC":
+                break
+            elif kind not in b"MPQ":
+                raise _Unusual
+            pos = end
+        # Data section: one pass over the headers (sizes only), then everything vectorized.
+        starts = []
+        append = starts.append
+        while pos + 3 <= n:
+            append(pos)
+            pos += 3 + (data[pos] | data[pos + 1] << 8)
+        if pos > n:
+            starts.pop()  # a message cut off at the end of the file: pyulog stops before it, silently
+        buf = np.frombuffer(data, dtype=np.uint8)
+        at = np.asarray(starts, dtype=np.int64)
+        kinds = buf[at + 2]
+        sizes = buf[at].astype(np.int64) | buf[at + 1].astype(np.int64) << 8
+        if not np.isin(kinds, np.frombuffer(bytes(_DATA_TYPES), dtype=np.uint8)).all():
+            raise _Unusual
+        is_data = kinds == 0x44
+        if (sizes[is_data] < 2).any():
+            raise _Unusual
+        d_at = at[is_data]
+        d_id = buf[d_at + 3].astype(np.int64) | buf[d_at + 4].astype(np.int64) << 8
+        d_size = sizes[is_data] - 2
+
+        dropouts = int(np.count_nonzero(kinds == 0x4F))
+        subs: dict[int, tuple[str, int, np.dtype, int | None, int]] = {}
+        for k in np.flatnonzero((kinds == 0x41) | (kinds == 0x49)).tolist():
+            p, size = int(at[k]), int(sizes[k])
+            payload = data[p + 3 : p + 3 + size]
+            if kinds[k] == 0x49:
+                key, value = _info_message(payload)
+                msg_info[key] = value
+                continue
+            multi_id, msg_id = payload[0], payload[1] | payload[2] << 8
+            name = payload[3:].decode("utf-8", "ignore")
+            if msg_id in subs:
+                raise _Unusual  # a re-used id: pyulog drops the earlier data
+            flat: list[tuple[str, str]] = []
+            _flatten(formats, name, "", flat)
+            while flat and flat[-1][0].startswith("_padding"):
+                flat.pop()
+            dtype = np.dtype([(f, _TYPES[t]) for f, t in flat])
+            offsets = {f: dtype.fields[f][1] for f, _ in flat}
+            ts = offsets.get("timestamp") if dict(flat).get("timestamp") == "uint64_t" else None
+            subs[msg_id] = (name, multi_id, dtype, ts, p)
+    except (IndexError, KeyError, ValueError, TypeError, struct.error, UnicodeDecodeError):
+        raise _Unusual from None
+
+    if not np.isin(d_id, np.fromiter(subs, dtype=np.int64, count=len(subs))).all():
+        raise _Unusual  # data of a topic never subscribed
+    order = np.argsort(d_id, kind="stable")
+    ids_sorted = d_id[order]
+    bounds = np.searchsorted(ids_sorted, np.fromiter(subs, dtype=np.int64, count=len(subs)), side="left")
+    bounds_hi = np.searchsorted(ids_sorted, np.fromiter(subs, dtype=np.int64, count=len(subs)), side="right")
+    last_timestamp = start_timestamp
+    items = []
+    for (name, multi_id, dtype, ts, sub_at), lo, hi in zip(subs.values(), bounds, bounds_hi, strict=True):
+        if hi == lo or (names is not None and name not in names):
+            continue
+        rows = order[lo:hi]
+        if (d_size[rows] != dtype.itemsize).any() or (d_at[rows] < sub_at).any() or ts is None:
+            raise _Unusual  # a size pyulog would reject, data before its subscription, no timestamp
+        payload = sliding_window_view(buf, dtype.itemsize)[d_at[rows] + 5] if dtype.itemsize else None
+        if payload is None:
+            raise _Unusual
+        rec = np.ascontiguousarray(payload).view(dtype).ravel()
+        stamps = rec["timestamp"]
+        last_timestamp = max(last_timestamp, int(stamps.max()))
+        columns: dict[str, Any] = {"t": stamps.astype(np.float64) * 1e-6}
+        columns.update((f, rec[f]) for f in dtype.names if f != "timestamp")
+        items.append(((name, multi_id), _stream_name(name, multi_id), columns))
+    frames = {stream: pd.DataFrame(columns) for _, stream, columns in sorted(items, key=lambda i: i[0])}
+    counts = dict.fromkeys(formats, 0)
+    counts.update({k: len(v) for k, v in frames.items()})
+    skipped = {"logger dropouts": dropouts} if dropouts else {}
+    info = {
+        "start_timestamp": int(start_timestamp),
+        "last_timestamp": int(last_timestamp),
+        "msg_info": {k: (v if isinstance(v, int | float | str) else str(v)) for k, v in msg_info.items()},
     }
     return Streams(where, "ulog", frames, counts=counts, skipped=skipped, info=info)
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -63,3 +65,47 @@ def test_not_a_ulog_and_a_damaged_header(tmp_path):
     path.write_bytes(ulog.MAGIC + b"\x01")
     with pytest.raises(DataError, match=str(path)):
         ulog.read(path)
+
+
+PX4_SAMPLE = Path(__file__).resolve().parents[3] / "shared" / "external" / "px4_sample_log_small.ulg"
+
+
+def _same_as_pyulog(path, data: bytes, topics=None):
+    """The vectorized reader against pyulog's on the same bytes: frames, counts, skips and info all equal."""
+    fast = ulog._read_fast(str(path), data, None if topics is None else set(topics))
+    peer = ulog._read_pyulog(str(path), data, topics)
+    assert list(fast.frames) == list(peer.frames)
+    for name in peer.frames:
+        pd.testing.assert_frame_equal(fast.frames[name], peer.frames[name])
+    assert (fast.counts, fast.skipped, fast.info) == (peer.counts, peer.skipped, peer.info)
+    return fast
+
+
+def test_the_vectorized_reader_gives_pyulogs_values_on_a_written_file(tmp_path):
+    path = ulog.write(tmp_path / "a.ulg", _streams())
+    data = path.read_bytes()
+    assert set(_same_as_pyulog(path, data).frames) == set(_streams())
+    _same_as_pyulog(path, data, ["battery"])
+    cut = data[: len(data) - 7]  # the last message cut off: pyulog stops before it without a word
+    _same_as_pyulog(path, cut)
+
+
+@pytest.mark.skipif(not PX4_SAMPLE.exists(), reason="the PX4 sample log (shared/external) is not here")
+def test_the_vectorized_reader_gives_pyulogs_values_on_a_real_px4_log():
+    data = PX4_SAMPLE.read_bytes()
+    streams = _same_as_pyulog(PX4_SAMPLE, data)
+    assert len(streams.frames) > 50 and any("." in c for f in streams.frames.values() for c in f.columns)
+    _same_as_pyulog(PX4_SAMPLE, data, ["vehicle_attitude", "vehicle_local_position", "manual_control_setpoint"])
+
+
+def test_a_damaged_file_goes_to_pyulog_and_reads_as_pyulog_reads_it(tmp_path):
+    data = ulog.write(tmp_path / "a.ulg", _streams()).read_bytes()
+    middle = len(data) // 2
+    damaged = data[:middle] + b"\xff\x00\x5a" + data[middle:]  # a header no message type has
+    path = tmp_path / "damaged.ulg"
+    path.write_bytes(damaged)
+    with pytest.raises(ulog._Unusual):
+        ulog._read_fast(str(path), damaged, None)
+    streams = ulog.read(path)
+    peer = ulog._read_pyulog(str(path), damaged, None)
+    assert streams.skipped == peer.skipped and list(streams.frames) == list(peer.frames)
