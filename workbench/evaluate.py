@@ -3,9 +3,12 @@
 Metrics (equation numbers count every ``\\begin{equation}`` of the method paper's LaTeX in order; issue 3 calls
 the RMSE eq. (36)):
 
-* **Horizon RMSE**, eq. (35): ``sqrt(1/H Σ_{k=1..H} ‖x̂_k − x̃_k‖²)`` over a block of states (position
-  ``(x, y)`` and velocity ``(ẋ, ẏ)`` for the quadrotor), the prediction started at the recorded state
-  ``x̂_0 = x̃_0``.
+* **Horizon RMSE**, eq. (35): ``sqrt(1/H Σ_{k=1..H} ‖x̂_k − x̃_k‖²)`` over a block of states, the prediction
+  started at the recorded state ``x̂_0 = x̃_0``. The blocks come from the plant's roles (:func:`metric_blocks`):
+  its positions and velocities, or — for a plant that declares none — every state at once and each alone.
+* **Persistence**: every comparison of :func:`default_models` includes
+  :class:`~workbench.baselines.PersistenceModel` (constant velocity, or the state held), the floor below which a
+  model of the operator predicts nothing.
 * **One-step coverage**: at every recorded sample ``x_k`` of a test trial, the model's input Gaussian
   ``N(m(x_k), Σ_u(x_k))`` (for the proposed model ``m = K̂x + μ̂(x)``, ``Σ_u = Σ̂(x)``, so ``u_k − m(x_k) =
   ŵ_k − μ̂(x_k)`` with ``ŵ`` of eq. (20)); the fraction of samples with ``|u_k − m_k| ≤ c σ_k`` per input axis,
