@@ -32,7 +32,7 @@ import socket
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -46,9 +46,7 @@ __all__ = ["LinkError", "MavlinkReader", "Link", "open_link", "dialect_streams",
 _RECENT = 64
 _RECEIVE_BUFFER = 4 << 20
 _BATCH = 512
-# MAVLink component and vehicle types that are not the vehicle (pymavlink's probably_vehicle_heartbeat)
-_NOT_VEHICLE_TYPES = {6, 26, 27, 18}  # GCS, gimbal, ADS-B, onboard controller
-_AUTOPILOT_INVALID = 8
+_PENDING = 4096
 
 
 class LinkError(WorkbenchError, OSError):
@@ -80,8 +78,13 @@ class MavlinkReader:
     ----------
     streams : collection of str
         Message types to turn into samples (those a mapping reads); the others are only counted.
+    required : sequence of sets of str, optional
+        What a system must send before it is followed: from each set (alternatives) one message type; default
+        every type of ``streams``. Until a system has, its samples are held back (bounded), so a stray vehicle
+        or a ground station sending a few of the same messages first is never mistaken for the one flown.
     system, component : int, optional
-        Accept only this system (and component); default: lock onto the first vehicle seen.
+        Accept only this system (and component); default: the first system that sends what ``required`` names,
+        and per message type its first component.
     clock : {"vehicle", "arrival"}
         Stamp samples with the vehicle's clock (default) or with the arrival (wall-clock) time.
     clock_field, clock_scale : str, float
@@ -103,7 +106,7 @@ class MavlinkReader:
         Set when the vehicle clock restarted since the caller last cleared it.
     """
 
-    def __init__(self, streams, *, system: int | None = None, component: int | None = None,
+    def __init__(self, streams, *, required=None, system: int | None = None, component: int | None = None,
                  clock: str = "vehicle", clock_field: str = "time_boot_ms", clock_scale: float = 1e-3,
                  reset_after: float = 10.0, dialect: str = "ardupilotmega") -> None:
         if clock not in ("vehicle", "arrival"):
@@ -114,18 +117,16 @@ class MavlinkReader:
         self._streams = set(streams)
         self._getters = {s: _getters(dialect, s) for s in self._streams if s in load_dialect(dialect).by_name}
         self.system = system
-        self._fixed_system = system is not None
         self.component = component
-        self._components: dict[str, int] = {}
+        self._required = [set(r) for r in required] if required is not None else [{x} for x in self._streams]
+        self._sources: dict[int, _Source] = {}
         self.clock = clock
         self.clock_field, self.clock_scale = clock_field, float(clock_scale)
         self.reset_after = float(reset_after)
         self.counts: Counter = Counter()
-        self.vehicle_time = -math.inf
         self.reset = False
         self._seq: dict[tuple[int, int], int] = {}
         self._recent: dict[tuple[int, int], deque] = {}
-        self._untimed: list[tuple[Any, float]] = []
 
     def _new_parser(self):
         parser = self._module.MAVLink(None)
@@ -165,35 +166,66 @@ class MavlinkReader:
             self.counts["unknown messages"] += 1
             return []
         src = (int(msg.get_srcSystem()), int(msg.get_srcComponent()))
-        if not self._accept(msg, kind, src):
+        if self.system is not None and src[0] != self.system:
+            self.counts["other systems"] += 1
+            return []
+        source = self._sources.setdefault(src[0], _Source())
+        want = self.component if self.component is not None else source.components.setdefault(kind, src[1])
+        if src[1] != want:
+            self.counts["other components"] += 1
             return []
         if self._duplicate(msg, src):
             self.counts["duplicates"] += 1
             return []
+        samples = self._samples(msg, kind, src, source, arrival)
+        if self.system is None:  # not locked yet: hold this system's samples until it sends all the mapping reads
+            source.seen.add(kind)
+            source.n_messages += 1
+            source.pending = [*source.pending[len(source.pending) + len(samples) - _PENDING:], *samples]
+            if not all(need & source.seen for need in self._required):
+                return []
+            self.system = src[0]
+            self.counts["messages"] += source.n_messages
+            self.counts["other systems"] += sum(o.n_messages for k, o in self._sources.items() if k != src[0])
+            self._sources = {src[0]: source}
+            samples, source.pending = source.pending, []
+            self.counts["samples"] += len(samples)
+            return samples
         self.counts["messages"] += 1
+        self.counts["samples"] += len(samples)
+        return samples
+
+    def _samples(self, msg: Any, kind: str, src: tuple[int, int], source: _Source, arrival: float) -> list[Sample]:
         t_own = self._own_time(msg)
         if t_own is not None:
-            if t_own < self.vehicle_time - self.reset_after:
-                self.counts["clock resets"] += 1
-                self.reset = True
-                self.vehicle_time = t_own
-            elif t_own > self.vehicle_time:
-                self.vehicle_time = t_own
+            if t_own < source.vehicle_time - self.reset_after:
+                source.vehicle_time = t_own
+                source.pending = []
+                if src[0] == self.system:
+                    self.counts["clock resets"] += 1
+                    self.reset = True
+            elif t_own > source.vehicle_time:
+                source.vehicle_time = t_own
         if kind not in self._getters:
             return []
         fields = {c: (getattr(msg, a)[i] if i is not None else getattr(msg, a)) for c, a, i in self._getters[kind]}
         fields["sysid"], fields["compid"] = src
-        self.counts["samples"] += 1
         if self.clock == "arrival":
             return [Sample(kind, arrival, fields, arrival, True)]
         if t_own is not None:
-            out = [Sample(k, t_own, f, a, False) for k, f, a in self._untimed]
-            self._untimed = []
+            out = [Sample(k, t_own, f, a, False) for k, f, a in source.untimed]
+            source.untimed = []
             return [*out, Sample(kind, t_own, fields, arrival, True)]
-        if not math.isfinite(self.vehicle_time):  # no vehicle time yet: wait for the first one (bounded)
-            self._untimed = [*self._untimed[-255:], (kind, fields, arrival)]
+        if not math.isfinite(source.vehicle_time):  # no vehicle time yet: wait for the first one (bounded)
+            source.untimed = [*source.untimed[-255:], (kind, fields, arrival)]
             return []
-        return [Sample(kind, self.vehicle_time, fields, arrival, False)]
+        return [Sample(kind, source.vehicle_time, fields, arrival, False)]
+
+    @property
+    def vehicle_time(self) -> float:
+        """The latest time on the followed vehicle's clock (−inf before any)."""
+        source = self._sources.get(self.system) if self.system is not None else None
+        return source.vehicle_time if source is not None else -math.inf
 
     def _own_time(self, msg: Any) -> float | None:
         value = getattr(msg, self.clock_field, None)
@@ -204,23 +236,6 @@ class MavlinkReader:
         except (TypeError, ValueError):
             return None
         return t if math.isfinite(t) else None
-
-    def _accept(self, msg: Any, kind: str, src: tuple[int, int]) -> bool:
-        if self.system is None:
-            vehicle_heartbeat = (kind == "HEARTBEAT" and getattr(msg, "type", None) not in _NOT_VEHICLE_TYPES
-                                 and getattr(msg, "autopilot", None) != _AUTOPILOT_INVALID)
-            if kind in self._streams or vehicle_heartbeat:
-                self.system = src[0]
-            else:
-                return True  # not ours to judge yet: counted, but it gives no sample
-        if src[0] != self.system:
-            self.counts["other systems"] += 1
-            return False
-        want = self.component if self.component is not None else self._components.setdefault(kind, src[1])
-        if src[1] != want:
-            self.counts["other components"] += 1
-            return False
-        return True
 
     def _duplicate(self, msg: Any, src: tuple[int, int]) -> bool:
         seq = int(msg.get_seq())
@@ -235,6 +250,19 @@ class MavlinkReader:
         else:
             self._seq[src] = seq
         return False
+
+
+@dataclass
+class _Source:
+    """What the reader keeps per system: its clock, untimed messages waiting for it, and (before the lock) the
+    message types seen and the samples held back."""
+
+    vehicle_time: float = -math.inf
+    untimed: list = field(default_factory=list)
+    components: dict = field(default_factory=dict)
+    seen: set = field(default_factory=set)
+    pending: list = field(default_factory=list)
+    n_messages: int = 0
 
 
 # ------------------------------------------------------------------------------------------------- links

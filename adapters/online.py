@@ -283,6 +283,12 @@ class _Runs:
             self.runs.append([t, t, value])
         return True
 
+    def before(self, run: list) -> list | None:
+        """The run before ``run``, if still kept."""
+        runs = list(self.runs)
+        i = next((j for j, r in enumerate(runs) if r is run), 0)
+        return runs[i - 1] if i > 0 else None
+
     def at(self, t: float, tol: float) -> list | None:
         """The run in force at ``t`` (the newest starting at or before it)."""
         for run in reversed(self.runs):
@@ -321,6 +327,8 @@ class OnlineAligner:
         self.skipped: Counter = Counter()
         self._by_stream: dict[str, list[tuple[_Reader, Callable[[Sample, _Reader], None]]]] = {}
         self._chosen: dict[int, str] = {}
+        #: What a source must send for steps to be possible: per channel and rule, one of its streams.
+        self.required: list[set[str]] = []
         inputs = set(m.input_names)
         order = {name: i for i, name in enumerate((*m.state_names, *m.input_names))}
         self._channels = [_Buffer(c.name, c.name in inputs) for c in sorted(m.channels, key=lambda c: order[c.name])]
@@ -363,8 +371,11 @@ class OnlineAligner:
 
     # -- wiring ------------------------------------------------------------------------------------------------
     def _listen(self, sel: Selector, streams, what: str, n_columns: int | None, handler) -> None:
-        for reader in _resolve(sel, streams, what, self.mapping.name, n_columns):
+        readers = _resolve(sel, streams, what, self.mapping.name, n_columns)
+        for reader in readers:
             self._by_stream.setdefault(reader.stream, []).append((reader, handler))
+        if not what.startswith("meta"):
+            self.required.append({r.stream for r in readers})
 
     def _raw(self, s: Sample, r: _Reader) -> Any | None:
         """The reader's field of a sample, or None when its row condition or alternative does not hold."""
@@ -487,6 +498,10 @@ class OnlineAligner:
                 if self.now < t - self.tol or not runs.runs:
                     return None
                 run = runs.at(t, self.tol)
+                if run is not None and not run[2][0] and run[0] >= t - self.tol:
+                    # offline spans are closed: the step where a kept run gives way still belongs to it
+                    before = runs.before(run)
+                    run = before if before is not None and before[2][0] else run
                 if run is None or not run[2][0]:
                     return False
             key.append(run[0])

@@ -223,7 +223,8 @@ class OnlinePredictor:
         self.aligner = OnlineAligner(m, dialect_streams())
         clock_field = m.clock.field or "time_boot_ms"
         clock_scale = m.clock.scale if m.clock.field else 1e-3
-        self.reader = MavlinkReader(self.aligner.streams, system=system, component=component, clock=clock,
+        self.reader = MavlinkReader(self.aligner.streams, required=self.aligner.required, system=system,
+                                    component=component, clock=clock,
                                     clock_field=clock_field, clock_scale=clock_scale)
         self._has_w = callable(getattr(model, "variability", None))
         self._pending: deque[tuple[AlignedStep, float]] = deque()
@@ -239,18 +240,17 @@ class OnlinePredictor:
     # -- input -------------------------------------------------------------------------------------------------
     def push(self, message: Any, arrival: float | None = None) -> int:
         """Take one pymavlink message (``BAD_DATA`` ones are counted); return the grid steps it completed."""
-        start = time.perf_counter()
+        start, before = time.perf_counter(), self.reader.counts["messages"]
         arrival = self.now() if arrival is None else float(arrival)
-        return self._take(self.reader.message(message, arrival), arrival, start)
+        return self._take(self.reader.message(message, arrival), arrival, start, before)
 
     def feed(self, data: bytes, arrival: float | None = None, *, datagram: bool = True) -> int:
         """Take received bytes (one UDP datagram, or a chunk of a byte stream); return the steps completed."""
-        start = time.perf_counter()
+        start, before = time.perf_counter(), self.reader.counts["messages"]
         arrival = self.now() if arrival is None else float(arrival)
-        return self._take(self.reader.feed(data, arrival, datagram=datagram), arrival, start)
+        return self._take(self.reader.feed(data, arrival, datagram=datagram), arrival, start, before)
 
-    def _take(self, samples: list, arrival: float, start: float) -> int:
-        before = self.reader.counts["messages"]
+    def _take(self, samples: list, arrival: float, start: float, before: int) -> int:
         steps: list[AlignedStep] = []
         for s in samples:
             if self.reader.reset:
