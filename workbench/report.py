@@ -348,6 +348,7 @@ class ReportInputs:
     notes: list[str] = field(default_factory=list)
     title: str = "Workbench report"
     verdicts: list[str] = field(default_factory=list)
+    objectives: Mapping[str, Any] = field(default_factory=dict)
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -403,12 +404,22 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
             continue
         n = len(state_names)
         Mn = np.asarray(o.M_normalized)
+        oi = inputs.objectives.get(label)
         row = {"strategy": label, "α*": float(o.alpha), "forward-gain error": float(o.forward_gain_error)}
-        row.update({f"Q {s}": float(v) for s, v in zip(state_names, np.diag(Mn[:n, :n]), strict=True)})
-        row.update({f"R {s}": float(v) for s, v in zip(input_names, np.diag(Mn[n:, n:]), strict=True)})
+        q, r = np.diag(Mn[:n, :n]), np.diag(Mn[n:, n:])
+        if oi is None:
+            row.update({f"Q {s}": float(v) for s, v in zip(state_names, q, strict=True)})
+            row.update({f"R {s}": float(v) for s, v in zip(input_names, r, strict=True)})
+        else:
+            b = oi.boot
+            row.update({f"Q {s}": f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
+                        for s, v, lo, hi in zip(state_names, q, b.Q_diag_lo, b.Q_diag_hi, strict=True)})
+            row.update({f"R {s}": f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
+                        for s, v, lo, hi in zip(input_names, r, b.R_diag_lo, b.R_diag_hi, strict=True)})
         obj_rows.append(row)
     if obj_rows:
         md += [_md_table(pd.DataFrame(obj_rows), ".3g"), ""]
+        md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names)
         save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
         md += ["![Normalized Q and R](figures/objective.png)", "",
                "*Normalized cost blocks (M / λmax(M)) per strategy; the attitude weight is outlined. The SDP returns "
@@ -473,6 +484,43 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     return path
 
 
+def _objective_interval_notes(
+    objectives: Mapping[str, Any], labels: Sequence[str], state_names: Sequence[str], input_names: Sequence[str]
+) -> list[str]:
+    """What the intervals are, and the weight ratios inside coupled parts compared between strategies."""
+    from workbench.weights import compare_strategies
+
+    if not objectives:
+        return ["*No intervals: the study ran without bootstrap resamples (`--bootstrap 0`); the values above "
+                "are point estimates.*", ""]
+    first = next(iter(objectives.values())).boot
+    md = [f"*In brackets: {first.ci:g} % percentile intervals over {first.n_boot} bootstrap resamples of the "
+          "training trials.*", ""]
+    boots = {lb: objectives[lb].ratio_boot for lb in labels if lb in objectives and objectives[lb].ratio_boot}
+    if not boots:
+        return md
+    table = compare_strategies(boots, state_names, input_names)
+    gains = sorted({objectives[lb].ratio_gain for lb in boots})
+    rows = []
+    for r in table.itertuples():
+        row = {"ratio": r.ratio, "strategy": r.strategy, "estimate [interval]": f"{r.estimate:.3g} [{r.lo:.3g}, "
+               f"{r.hi:.3g}]", "note": r.note}
+        if len(boots) > 1:
+            factor = getattr(r, "factor", float("nan"))
+            row[f"× vs {labels[0] if labels[0] in boots else next(iter(boots))}"] = (
+                "" if not np.isfinite(factor) else f"{factor:.3g} [{r.factor_lo:.3g}, {r.factor_hi:.3g}]"
+                + ("" if r.factor_identifiable else " — not identifiable from these data"))
+        rows.append(row)
+    fwd = ", ".join(f"{lb} {boots[lb].objective.forward_gain_error:.2g}" for lb in boots)
+    md += ["### Weight ratios inside coupled parts", "",
+           "The cost above is the SDP's minimum-condition-number member and keeps no ratio between strategies. "
+           "The closest cost with S = 0 and diagonal Q, R is unique up to one scale per decoupled part of the "
+           f"plant, so its ratios inside a part compare between strategies (gain: {', '.join(gains)}; "
+           f"forward-gain error of the closest diagonal cost: {fwd}). An interval wider than ×10 is marked "
+           "not identifiable from these data.", "", _md_table(pd.DataFrame(rows)), ""]
+    return md
+
+
 def _predict(model: Any, demo: Demonstration, horizon: int, samples: int, seed: int) -> Any:
     kwargs: dict[str, Any] = {"target": demo.target}
     if samples:
@@ -498,7 +546,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
         ReportInputs(
             train=result.train, test=result.test, models=result.models, baselines=result.baselines,
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
-            stats=result.stats_text, verdicts=result.verdicts(),
+            stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,
             horizon=result.horizon, samples=result.samples, seed=result.seed, notes=notes, title=title,
         ),
     )

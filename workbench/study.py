@@ -61,6 +61,9 @@ class StudyResult:
     failures: dict[str, dict[str, str]] = field(default_factory=dict)
     #: With :func:`run_loso`: the plant of each fold, by the trial it left out (``system`` is the last one).
     plants: dict[str, Any] = field(default_factory=dict)
+    #: With ``bootstrap > 0``: per label, the bootstrap intervals of the proposed model's task objective and of its
+    #: weight ratios (:class:`workbench.weights.ObjectiveIntervals`).
+    objectives: dict[str, Any] = field(default_factory=dict)
 
     @property
     def rmse(self) -> pd.DataFrame:
@@ -192,8 +195,12 @@ def run_study(
     progress: Callable[[], Any] | None = None,
     executor: Any = None,
     test_ids: Sequence[str] | None = None,
+    bootstrap: int = 0,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
+
+    ``bootstrap``: resamples of each label's training trials for intervals of the proposed model's task objective
+    and its weight ratios (``StudyResult.objectives``); 0 computes none.
 
     ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
@@ -278,12 +285,34 @@ def run_study(
     table = pd.concat(rmse_parts, ignore_index=True)
     metric = ev.primary_metric(system)
     stats_text = _subject_stats(ev, table, demos, metric, metric_unit(system, metric))
+    objectives = _objective_intervals(models, train, int(bootstrap), seed)
     return StudyResult(
         demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
         coverage=_coverage_table(pd.concat(cov_parts, ignore_index=True)) if cov_parts else None,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
         stats_text=stats_text, horizon=horizon, samples=samples, seed=seed, timings=timings, failures=failures,
+        objectives=objectives,
     )
+
+
+def _objective_intervals(
+    models: dict[str, Any], train: dict[str, DemonstrationSet], n_boot: int, seed: int
+) -> dict[str, Any]:
+    """Bootstrap intervals of each label's task objective (:func:`workbench.weights.objective_intervals`)."""
+    from workbench.errors import ModelError
+    from workbench.weights import objective_intervals
+
+    out: dict[str, Any] = {}
+    if n_boot <= 0:
+        return out
+    for label, model in models.items():
+        if getattr(model, "objective_", None) is None:
+            continue
+        try:
+            out[label] = objective_intervals(model, train[label], n_boot=n_boot, seed=seed)
+        except ModelError as exc:  # the report then shows the point estimate and says it has no interval
+            warnings.warn(f"{label}: no bootstrap intervals of the task objective: {exc}", stacklevel=3)
+    return out
 
 
 #: Below this many trials in a label, ``evaluate`` leaves one trial out at a time instead of one random split.
