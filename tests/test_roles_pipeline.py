@@ -152,6 +152,27 @@ def test_persistence_is_constant_velocity_with_roles_and_holds_the_state_without
     assert p.x_bands is None  # no noise model: no band rather than a zero-width one
 
 
+def test_persistence_model_file_round_trip(tmp_path):
+    system = double_integrators()
+    ds = _demos(system, n_trials=3, n_steps=20, seed=10)
+    model = PersistenceModel(system).fit(ds)
+    back = load_model(model.save(tmp_path / "p.npz"))
+    assert isinstance(back, PersistenceModel) and back.system.roles == system.roles
+    x0 = ds[2].x[3]
+    np.testing.assert_array_equal(back.predict(x0, 9).x, model.predict(x0, 9).x)
+
+
+def test_a_goal_rotation_needs_the_plane_it_turns():
+    from workbench.errors import ModelError
+    from workbench.frames import FrameSpec, goal_frame
+
+    with pytest.raises(ModelError, match="position_idx"):
+        goal_frame(np.zeros(4), 1, phi=0.3)
+    with pytest.raises(ModelError, match="position_idx"):
+        FrameSpec(("start", "goal"), angle_index=2)
+    np.testing.assert_array_equal(goal_frame(np.zeros(4), 1).T, np.eye(5))  # no angle: no rotation, no plane
+
+
 def test_full_state_rmse_without_roles():
     system = roleless_plant()
     ds = _demos(system, n_trials=4, n_steps=30, seed=2)
