@@ -8,6 +8,8 @@ crashes the rerun 0.41 viewer while ``rerun rrd verify`` passes.
 
 from __future__ import annotations
 
+import importlib.util
+import os
 import subprocess
 import sys
 from collections import defaultdict
@@ -24,7 +26,12 @@ from workbench.errors import DataError, WorkbenchError
 from workbench.model import HumanBehaviorModel, IOCOnlyModel
 from workbench.simulate import simulate_landings
 from workbench.system import planar_quadrotor
-from workbench.viewer import replay, replay_blueprint, session
+from workbench.viewer import columns, objective, output, replay, replay_blueprint, session
+
+_spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
+_loader = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_loader)
+recordings = _loader.load()  # one shared instance, so test_viewer_real.py reuses the same recordings
 
 HORIZON = 15
 SAMPLES = 40
@@ -279,3 +286,196 @@ def test_bad_arguments_are_clear_errors(setup):
         replay(demos[0], model, rec, speed=0.0)
     with pytest.raises(DataError, match="no demonstration"):
         viewer.log_session(rec, demos, models=model, focus=["nope"])
+
+
+# -- every recording the CLI writes ------------------------------------------------------------------------------
+KINDS = ("demo", "view", "view_model", "replay", "flight")
+
+
+def _recording(kind: str) -> Path:
+    paths = recordings.cli_recordings()
+    if kind not in paths:
+        reason = f"{recordings.FLIGHT_LOG} is absent (the shared/external folder beside the repository holds it)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"CI must have the external logs: {reason}")
+        pytest.skip(reason)
+    return paths[kind]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_no_chunk_of_a_cli_recording_is_empty(kind):
+    """Two chunks without rows on one timeline crash the rerun 0.41 viewer; every chunk of every store must have
+    rows (recording and blueprint)."""
+    reader = RrdReader(_recording(kind))
+    n_chunks = 0
+    for store in [*reader.recordings(), *reader.blueprints()]:
+        for chunk in reader.stream(store=store):
+            n_chunks += 1
+            assert chunk.num_rows > 0, f"{kind}: empty chunk at {chunk.entity_path}"
+    assert n_chunks > 0
+
+
+def test_the_guard_drops_a_send_without_rows(tmp_path, setup):
+    rec = viewer.new_recording()
+    path = tmp_path / "guard.rrd"
+    empty = np.array([], dtype=np.float64)
+    with viewer.open_output(rec, save=path):
+        sent = columns.send_columns(rec, "nothing", [rr.TimeColumn("time", duration=empty)],
+                                    rr.Scalars.columns(scalars=empty))
+        kept = columns.send_columns(rec, "something", [rr.TimeColumn("time", duration=[0.0, 1.0])],
+                                    rr.Scalars.columns(scalars=[1.0, 2.0]))
+    assert (sent, kept) == (False, True)
+    ents = read_rrd(path)
+    assert "/nothing" not in ents and len(ents["/something"]["time"]) == 2
+    # an input of a trial without a single sample outside 3σ gets its style but no rows (it was an empty chunk)
+    ents, model, none_outside = setup["entities"], setup["model"], 0
+    for d in setup["demos"].by_label("CS1"):
+        mu, Sigma = model.variability(d.x, x0=d.x[0], target=d.target)
+        outside = np.abs(model.residuals(d) - mu) > 3 * np.sqrt(np.diagonal(Sigma, axis1=1, axis2=2))
+        for j, u in enumerate(setup["demos"].input_names):
+            assert len(ents[f"/demos/{d.id}/variability/{u}/outside_3sigma"]["time"]) == outside[:, j].sum()
+            none_outside += not outside[:, j].any()
+    assert none_outside > 0, "no input without outliers: the case the guard exists for is not exercised"
+
+
+def test_each_kind_of_recording_has_its_own_application_id():
+    expected = {"demo": "workbench_study", "view": "workbench_log", "view_model": "workbench_session",
+                "replay": "workbench_replay", "flight": "workbench_log"}
+    found = {}
+    for kind, path in recordings.cli_recordings().items():
+        reader = RrdReader(path)
+        ids = {s.application_id for s in [*reader.recordings(), *reader.blueprints()]}
+        assert len(ids) == 1, (kind, ids)
+        found[kind] = ids.pop()
+    assert found == {k: v for k, v in expected.items() if k in found}
+    assert len({found["demo"], found["view"], found["replay"]}) == 3
+
+
+def _blueprint_names(path: Path) -> list[str]:
+    reader = RrdReader(path)
+    names = []
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        batch = chunk.to_record_batch()
+        for col in batch.schema.names:
+            if col.endswith("display_name"):
+                names += [str(v[0] if isinstance(v, list) else v) for v in batch.column(col).to_pylist() if v]
+    return names
+
+
+def test_a_flight_is_drawn_on_its_own_clock_one_color_per_segment():
+    from adapters import load
+
+    path = _recording("flight")
+    ds = load(recordings.FLIGHT_LOG, mapping="ardupilot_manual")
+    ents = read_rrd(path)
+    colors = set()
+    for d in ds:
+        t, x = series(ents, f"/demos/{d.id}/states/{ds.state_names[0]}")
+        np.testing.assert_allclose(t, d.meta["t_start"] + d.t - d.t[0], atol=1e-6)
+        colors.add(tuple(ents[f"/demos/{d.id}/states/{ds.state_names[0]}"]["static:SeriesLines:colors"][0]))
+    assert len(colors) == len(ds)
+    # segments follow each other on the log's clock
+    starts = sorted(d.meta["t_start"] for d in ds)
+    assert starts[0] >= 0 and all(b > a for a, b in zip(starts, starts[1:], strict=False))
+    # no landing target declared: the scene is the flown tracks only, no pad
+    assert "/scene/pad" not in ents and all(f"/scene/demos/{d.id}/path" in ents for d in ds)
+    assert len(ents["/flight/mode"]["time"]) == 2 * len(ds)  # each segment's mode, then its end
+    names = _blueprint_names(path)
+    assert "scene" in names and "states" in names and "predictions" not in names and "objective" not in names
+
+
+def test_a_plant_without_roles_has_plots_but_no_scene(tmp_path, setup):
+    demos = setup["demos"].with_roles(None)
+    path = tmp_path / "noroles.rrd"
+    _, logged = viewer.record_session(path, demos, models={"CS1": setup["model"]}, focus=[setup["focus"]],
+                                      horizon=HORIZON, samples=0)
+    ents = read_rrd(path)
+    assert not any(k.startswith("/scene") for k in ents)
+    assert not logged.scene and logged.predictions
+    d = demos[0]
+    t, v = series(ents, f"/demos/{d.id}/states/x")
+    np.testing.assert_array_equal(v[:, 0], d.x[:, 0])
+    names = _blueprint_names(path)
+    assert "scene" not in names and "predictions" in names
+
+
+def test_heatmaps_of_two_models_share_one_diverging_scale(tmp_path, setup):
+    model, ioc = setup["model"], setup["ioc"]
+    demos = setup["demos"]
+    rec = viewer.new_recording()
+    path = tmp_path / "objective.rrd"
+    with viewer.open_output(rec, save=path):
+        viewer.SessionLogger(rec, demos).log_models({"CS1": model, "IOC": ioc})
+    ents = read_rrd(path)
+    vmax = max(np.abs(model.K_).max(), np.abs(ioc.K_).max())
+    for name, m in (("CS1", model), ("IOC", ioc)):
+        img = ents[f"/models/{name}/heatmap/K/cells"]["static:Image:buffer"][0][0]
+        rgb = np.asarray(img, dtype=np.uint8).reshape(*m.K_.shape, 3)
+        # blue below zero, red above, white at zero, on the one scale ±vmax of both models
+        np.testing.assert_array_equal(rgb, objective.colors(m.K_, vmax))
+        i, j = np.unravel_index(np.argmax(m.K_), m.K_.shape)
+        assert rgb[i, j, 0] > rgb[i, j, 2]
+        i, j = np.unravel_index(np.argmin(m.K_), m.K_.shape)
+        assert rgb[i, j, 2] > rgb[i, j, 0]
+        labels = ents[f"/models/{name}/heatmap/K/values"]["static:Points2D:labels"][0]
+        assert labels == [objective.value_text(v, vmax) for v in m.K_.ravel()]
+        assert ents[f"/models/{name}/heatmap/K/cols"]["static:Points2D:labels"][0] == list(demos.state_names)
+        assert ents[f"/models/{name}/heatmap/K/rows"]["static:Points2D:labels"][0] == list(demos.input_names)
+    white = objective.colors(np.zeros((1, 1)), 1.0)[0, 0]
+    assert white.min() > 240
+
+
+# -- the command's outputs -----------------------------------------------------------------------------------------
+def _workbench(*argv: str, env: dict[str, str], cwd: Path | None = None, timeout: float = 120):
+    return subprocess.run([sys.executable, "-m", "workbench", *argv], capture_output=True, text=True, env=env,
+                          cwd=cwd, timeout=timeout)
+
+
+def _headless_env(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env["PATH"] = "/usr/bin:/bin"  # the venv's bin is not on PATH: the viewer must be found beside the python
+    env.update(extra)
+    return env
+
+
+def test_spawn_without_a_display_is_one_clear_line_not_a_hang(tmp_path):
+    recordings.cli_recordings()
+    demos = recordings.workdir() / "demo" / "demos.parquet"
+    result = _workbench("view", str(demos), "--spawn", env=_headless_env(), timeout=60)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and "display" in lines[0], result.stderr
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="an unreachable X display is a Linux notion")
+def test_spawn_with_a_viewer_that_cannot_open_a_window_fails_fast(tmp_path):
+    if not Path(sys.executable).with_name("rerun").exists():
+        pytest.skip("no rerun viewer beside this python")
+    recordings.cli_recordings()
+    demos = recordings.workdir() / "demo" / "demos.parquet"
+    # a display that does not exist: the viewer starts, listens, then dies opening its window
+    result = _workbench("view", str(demos), "--spawn", env=_headless_env(DISPLAY=":977"), timeout=90)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "could not open a window" in lines[0], result.stderr
+
+
+def test_the_viewer_is_found_beside_python_without_path(monkeypatch):
+    monkeypatch.setenv("PATH", "")
+    exe = Path(sys.executable).with_name("rerun")
+    expected = [str(exe)] if exe.exists() else [sys.executable, "-m", "rerun"]
+    assert output.rerun_executable() == expected
+
+
+def test_default_outputs_go_under_out(tmp_path):
+    recordings.cli_recordings()
+    work = recordings.workdir()
+    demos, model = work / "demo" / "demos.parquet", work / "demo" / "models" / "CS1.npz"
+    env = _headless_env()
+    view = _workbench("view", str(demos), "-q", env=env, cwd=tmp_path)
+    assert view.returncode == 0, view.stderr
+    replayed = _workbench("replay", str(demos), "--model", str(model), "--no-wait", "--horizon", "0", "-q",
+                          env=env, cwd=tmp_path)
+    assert replayed.returncode == 0, replayed.stderr
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.rrd")) == [
+        "out/demos.replay.rrd", "out/demos.rrd"]

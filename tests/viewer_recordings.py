@@ -40,11 +40,18 @@ def _run(*argv: str) -> None:
 
 
 @functools.cache
+def workdir() -> Path:
+    """The folder of this session's recordings; ``demo/demos.parquet`` and ``demo/models/CS1.npz`` are in it."""
+    out = Path(tempfile.mkdtemp(prefix="workbench-viewer-"))
+    atexit.register(shutil.rmtree, out, ignore_errors=True)
+    return out
+
+
+@functools.cache
 def cli_recordings() -> dict[str, Path]:
     """Name → ``.rrd`` written by the CLI: ``demo``, ``view``, ``view_model``, ``replay`` and, where the shared
     real log is present, ``flight`` (``view dronekit_flight.tlog --mapping ardupilot_manual``)."""
-    out = Path(tempfile.mkdtemp(prefix="workbench-viewer-"))
-    atexit.register(shutil.rmtree, out, ignore_errors=True)
+    out = workdir()
     logs = out / "logs"
     logs.mkdir()
     shutil.copy(SAMPLE_LOG, logs / SAMPLE_LOG.name)
