@@ -1,7 +1,8 @@
 """Seeded fuzzing of every input kind: a corrupt file loads or raises a WorkbenchError, never anything else.
 
 Kinds: MAVLink tlog, MCAP, ULog, CSV, the Parquet demonstration file, the ``.npz`` model file and a mapping TOML.
-Each is written once from a small simulated set (and a model fitted on it), then damaged by one of seven
+Each is written once from a small simulated set (and a model fitted on it; every other model file uncompressed,
+as ``np.savez`` writes them, so that damage reaches the ``.npy`` headers directly), then damaged by one of seven
 mutations — truncation, bit flips, an inserted chunk, a deleted chunk, a zeroed region, a huge length field
 (a 32- or 64-bit integer near its maximum written over the bytes) and random bytes behind the file's valid magic —
 and loaded the way the CLI loads it. Per call the outcome must be a successful load or a
@@ -24,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -105,6 +107,11 @@ def _write_originals(folder: Path) -> dict[str, Path]:
         warnings.simplefilter("ignore")
         model = HumanBehaviorModel(planar_quadrotor(dt=ds.dt), n_components=2, noise_folds=0).fit(ds)
     out["npz"] = model.save(folder / "original.npz")
+    # the same archive uncompressed (np.savez writes such files): damage then lands on .npy headers directly
+    out["npz_stored"] = folder / "original-stored.npz"
+    with zipfile.ZipFile(out["npz"]) as zin, zipfile.ZipFile(out["npz_stored"], "w", zipfile.ZIP_STORED) as zout:
+        for info in zin.infolist():
+            zout.writestr(info.filename, zin.read(info))
     shipped = Path(adapters.mapping.MAPPINGS_DIR) / "planar_quadrotor.toml"
     out["mapping"] = folder / "original.toml"
     out["mapping"].write_bytes(shipped.read_bytes())
@@ -112,13 +119,20 @@ def _write_originals(folder: Path) -> dict[str, Path]:
 
 
 def _loader(kind: str, originals: dict[str, Path]):
-    """The call that loads a file of a kind, as the CLI does (logs: the shipped mapping; mappings: on a log)."""
+    """The call that loads a file of a kind, as the CLI does (logs: ``import`` and ``inspect``; mappings: on a log)."""
     import adapters
     from workbench.demos import DemonstrationSet
     from workbench.model import load_model
 
     if kind in ("tlog", "mcap", "ulog", "csv"):
-        return lambda path, i: adapters.load(path, "planar_quadrotor", format=kind if i % 2 else None)
+        # in turn: load with the shipped mapping or inspect (every stream), the format detected or named
+        def log(path: Path, i: int) -> object:
+            fmt = kind if i % 2 else None
+            if i % 4 < 2:
+                return adapters.load(path, "planar_quadrotor", format=fmt)
+            return str(adapters.inspect(path, format=fmt))
+
+        return log
     if kind == "parquet":
         return lambda path, i: DemonstrationSet.load(path)
     if kind == "npz":
@@ -165,9 +179,10 @@ def worker(kinds: list[str], n: int, seed: int, folder: Path, budget_mb: int, ti
     signal.signal(signal.SIGALRM, alarm)
     for kind in kinds:
         data = originals[kind].read_bytes()
+        stored = originals["npz_stored"].read_bytes()
         for i, mutation, rng in cases(kind, n, seed):
             path = folder / f"{kind}-{i:03d}{_EXT[kind]}"
-            path.write_bytes(mutate(data, mutation, rng))
+            path.write_bytes(mutate(stored if kind == "npz" and i % 2 else data, mutation, rng))
             record = {"kind": kind, "i": i, "mutation": mutation, "path": str(path)}
             t0 = time.perf_counter()
             signal.setitimer(signal.ITIMER_REAL, timeout)
