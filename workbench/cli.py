@@ -771,7 +771,7 @@ def cmd_live(ctx: _Context) -> int:
             logger.status(stats)
 
         summary = listen(link, predictor, duration=a.duration, on_prediction=on_prediction, on_event=on_event,
-                         on_tick=on_tick, tick=0.2)
+                         on_tick=on_tick, tick=0.25)
         sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
                                         bounds=logger.scene_bounds())
     c50, c99 = summary.percentiles("compute")

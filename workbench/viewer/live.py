@@ -173,12 +173,16 @@ class LiveLogger:
         Per-step ``rr.log`` calls cost more than the prediction itself; batching keeps a step well under a
         millisecond, and the viewer lags by at most one flush interval.
         """
+        indexes: dict[tuple, list[rr.TimeColumn]] = {}  # most entities share their rows' times: build them once
         for path, (link_t, rel_t, step, values, band) in self._rows.items():
             if not values:  # never a chunk without rows: the viewer crashes on them
                 continue
-            index = [rr.TimeColumn("link_time", duration=np.asarray(link_t)),
-                     rr.TimeColumn("time", duration=np.asarray(rel_t)),
-                     rr.TimeColumn("step", sequence=np.asarray(step, dtype=np.int64))]
+            key = (tuple(link_t), tuple(step))
+            index = indexes.get(key)
+            if index is None:
+                index = indexes[key] = [rr.TimeColumn("link_time", duration=np.asarray(link_t)),
+                                        rr.TimeColumn("time", duration=np.asarray(rel_t)),
+                                        rr.TimeColumn("step", sequence=np.asarray(step, dtype=np.int64))]
             v = np.asarray(values, dtype=np.float64)
             if band and HAS_MEASUREMENTS:
                 mean, sd = np.repeat(v[:, :1], 2, axis=1), v[:, 1:] * np.array([1.0, 3.0])
