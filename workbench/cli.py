@@ -335,6 +335,9 @@ def cmd_import(ctx: _Context) -> int:
     a = ctx.args
     if _is_dataset_output(a.output):
         return _import_dataset(ctx)
+    if a.workers or a.scheduler:
+        print(f"warning: --workers and --scheduler import in parallel into a dataset (-o DIR/); {a.output} is one "
+              "file, so the logs are read here, one after another", file=sys.stderr)
     from adapters.batch import expand_logs
 
     ds = _load_demos(ctx, [str(f) for f in expand_logs(a.logs)], a.mapping)
@@ -729,6 +732,8 @@ def _replay_to(ctx: _Context) -> int:
 
 
 def cmd_live(ctx: _Context) -> int:
+    import signal
+
     from adapters.mavlink_link import open_link
     from workbench import viewer
     from workbench.live import OnlinePredictor, listen
@@ -770,8 +775,15 @@ def cmd_live(ctx: _Context) -> int:
             logger.flush()
             logger.status(stats)
 
-        summary = listen(link, predictor, duration=a.duration, on_prediction=on_prediction, on_event=on_event,
-                         on_tick=on_tick, tick=0.25)
+        def on_term(signum: int, frame: Any) -> None:  # a SIGTERM ends the session as cleanly as Ctrl-C
+            raise KeyboardInterrupt
+
+        previous = signal.signal(signal.SIGTERM, on_term)
+        try:
+            summary = listen(link, predictor, duration=a.duration, on_prediction=on_prediction, on_event=on_event,
+                             on_tick=on_tick, tick=0.25)
+        finally:
+            signal.signal(signal.SIGTERM, previous)
         sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
                                         bounds=logger.scene_bounds())
     c50, c99 = summary.percentiles("compute")
