@@ -184,7 +184,7 @@ class SerialExecutor:
 
     def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
         """``[fn(item) for item in items]``, one BLAS thread each, reporting ``progress(done, total)``."""
-        out = []
+        items, out = list(items), []
         with _controller().limit(limits=1):
             for i, item in enumerate(items):
                 out.append(fn(item))
@@ -197,6 +197,7 @@ class SerialExecutor:
         progress: Progress | None = None,
     ) -> list[Outcome]:
         """As :meth:`map`, but a task that raises is an :class:`Outcome` with its error; the others still run."""
+        items = list(items)
         names = _keys(items, keys)
         out = []
         with _controller().limit(limits=1):
@@ -381,14 +382,16 @@ class DaskExecutor:
 
     def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
         """``[fn(item) for item in items]`` on the workers, in task order; the first failure is raised."""
-        return [o.value for o in self._run(fn, list(items), _keys(items, None), progress, contain=False)]
+        items = list(items)
+        return [o.value for o in self._run(fn, items, _keys(items, None), progress, contain=False)]
 
     def map_outcomes(
         self, fn: Callable[[Any], Any], items: Sequence[Any], *, keys: Sequence[str] | None = None,
         progress: Progress | None = None,
     ) -> list[Outcome]:
         """One :class:`Outcome` per task, in task order; a failed task is reported, the others complete."""
-        return self._run(fn, list(items), _keys(items, keys), progress, contain=True)
+        items = list(items)
+        return self._run(fn, items, _keys(items, keys), progress, contain=True)
 
 
 def make_executor(
