@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import socket
 import struct
 import subprocess
@@ -239,6 +240,26 @@ def test_mode_and_armed_rules_segment_as_offline(fitted, records, tmp_path):
         assert got[live_id][0].meta.get("mode") == d.meta.get("mode") == "STABILIZE"
 
 
+def test_the_landing_rule_ends_each_flight_at_touchdown_as_offline(fitted, records, tmp_path):
+    _, model, _ = fitted
+    mapping = tmp_path / "landing.toml"
+    rules = MODE_MAPPING.index("mode = {")
+    mapping.write_text(MODE_MAPPING[:rules] + 'landing = { state = "y", below = 0.3 }\n')
+    part = [(t, f) for t, f in records if t < records[0][0] + 35.0]
+    offline = adapters.load(write_tlog(tmp_path / "land.tlog", part), mapping=str(mapping))
+    _, preds = online(model, part, mapping=str(mapping))
+    got = by_demo(preds)
+    assert len(got) == len(offline) >= 3
+    y = list(offline.state_names).index("y")
+    for live_id, d in zip(got, offline, strict=True):
+        steps = got[live_id]
+        assert len(steps) == len(d)
+        np.testing.assert_array_equal(np.array([p.x for p in steps]), d.x)
+        np.testing.assert_array_equal(steps[0].x0, d.x[0])
+        if live_id != list(got)[-1]:  # the last flight was cut by the end of the records, not by touchdown
+            assert d.x[-1, y] <= 0.3 < d.x[-2, y]
+
+
 def test_a_silent_link_is_reported_once_and_resumes(fitted, records):
     _, model, _ = fitted
     now = [0.0]
@@ -382,6 +403,34 @@ def test_live_recording_verifies(live_run):
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "rerun"]
     result = subprocess.run([*cmd, "rrd", "verify", str(live_run["rrd"])], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
+
+
+def test_ctrl_c_ends_live_with_a_complete_recording(fitted, records, tmp_path):
+    _, _, model_path = fitted
+    port = free_udp_port()
+    live = subprocess.Popen(
+        [*WB, "live", f"udpin:127.0.0.1:{port}", "--model", str(model_path), "--save", str(tmp_path / "c.rrd")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        assert "listening on" in live.stdout.readline()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for _, frame in records[:400]:
+                s.sendto(frame, ("127.0.0.1", port))
+                time.sleep(0.001)
+        time.sleep(1.0)
+        live.send_signal(signal.SIGINT)
+        stdout, stderr = live.communicate(timeout=60)
+    finally:
+        if live.poll() is None:
+            live.kill()
+    assert live.returncode == 0, stderr
+    assert "interrupted" in stdout
+    n_steps = int(re.search(r"(\d+) steps in", stdout).group(1))
+    assert n_steps > 0
+    ents = read_rrd(tmp_path / "c.rrd")
+    logged = sum(len(c["step"]) for path, c in ents.items() if path.endswith("/states/x"))
+    assert logged == n_steps  # every completed step is in the recording
 
 
 def test_replay_needs_a_model_or_a_link(tmp_path):
