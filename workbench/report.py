@@ -119,8 +119,10 @@ def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
 def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_names: Sequence[str]) -> Figure:
     """Normalized Q and R heatmaps side by side per strategy, the attitude weight Q_φφ outlined.
 
-    Each block has its own color scale: R usually dominates M, and on a shared scale the structure of Q — which
-    states the operator cares about, the paper's point — would vanish.
+    A diverging color map symmetric about zero, every cell labelled with its value. Each block has one color scale
+    shared by every strategy, so two strategies compare cell by cell; Q and R keep separate scales: R usually
+    dominates M, and on one scale the structure of Q — which states the operator cares about, the paper's point —
+    would vanish.
     """
     labels = [k for k, m in models.items() if getattr(m, "objective_", None) is not None]
     n, m = len(state_names), len(input_names)
@@ -128,13 +130,15 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
     axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
     # the attitude weight is the plant's heading role, where it declares one
     att = models[labels[0]].system.r.heading if labels else None
+    blocks = {k: [np.asarray(models[lab].objective_.M_normalized)[sl, sl] for lab in labels]
+              for k, sl in (("Q", slice(0, n)), ("R", slice(n, n + m)))}
+    vmaxes = {k: max([float(np.abs(b).max()) for b in v] + [1e-12]) for k, v in blocks.items()}
     for row, label in zip(axs, labels, strict=True):
         Mn = np.asarray(models[label].objective_.M_normalized)
-        for ax, block, names, title in (
-            (row[0], Mn[:n, :n], state_names, "Q / λmax(M)"),
-            (row[1], Mn[n:, n:], input_names, "R / λmax(M)"),
+        for ax, block, names, title, vmax in (
+            (row[0], Mn[:n, :n], state_names, "Q / λmax(M)", vmaxes["Q"]),
+            (row[1], Mn[n:, n:], input_names, "R / λmax(M)", vmaxes["R"]),
         ):
-            vmax = max(float(np.abs(block).max()), 1e-12)
             image = ax.imshow(block, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
             ax.set_xticks(range(len(names)), names)
             ax.set_yticks(range(len(names)), names)
