@@ -197,10 +197,10 @@ def looks_like_tlog(head: bytes) -> bool:
 
 
 def read_streams(
-    path: str | os.PathLike[str], message_types: Iterable[str] | None = None
+    path: str | os.PathLike[str], message_types: Iterable[str] | None = None, *, types: Iterable[str] | None = None
 ) -> dict[str, pd.DataFrame]:
-    """Read a tlog into one DataFrame per message type; see :func:`read_tlog`."""
-    return read_tlog(path, message_types).streams
+    """Read a tlog into one DataFrame per message type; see :func:`read_tlog` (``types``: ``message_types``)."""
+    return read_tlog(path, message_types if message_types is not None else types).streams
 
 
 def read_tlog(

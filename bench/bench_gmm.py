@@ -155,9 +155,10 @@ def bench_gmr(n_queries: int = 100_000, n_reference: int = 2_000) -> list[dict]:
             "ours": f"{t_batch * 1e3:.1f} ms (batched)",
             "reference": f"{t_ref:.1f} s (gmr condition().to_mvn() per query, from {n_reference})",
             "ratio": t_ref / t_batch,
-            "ratio_meaning": "speed-up",
-            "target": ">= 100",
-            "met": t_ref / t_batch >= 100,
+            "ratio_meaning": "batched ours vs gmr's per-query loop: NOT like for like (gmr has no batched "
+            "covariance query); like for like see (c) batched mean and (d) vs (d') one query",
+            "target": "-",
+            "met": "-",
             "check": f"max abs diff {err:.1e} on {n_reference} queries",
         }
     )

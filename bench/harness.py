@@ -1,22 +1,123 @@
-"""What every benchmark shares: best-of-N wall-clock timing and the Markdown table its rows print as."""
+"""What every benchmark shares: like-for-like timing, whole-process timing, peak memory, and the Markdown table.
+
+Rules the helpers enforce (issue 11, "a bench that tells the truth"):
+
+* both sides of a ratio run the same number of times, interleaved (A B A B …), and each side is summarised by
+  its median — never a best-of-N of ours against a single run of the peer;
+* *cold* is the first call in a fresh interpreter after the reader's module is imported (a lazy import or a
+  table built on first use counts), *whole process* is the wall time of ``python -c <script>`` from start to
+  exit, *warm* is a repeated call in one process;
+* peak memory is measured in a fresh interpreter after the imports: the high-water mark of the resident set
+  (Linux ``VmHWM``, reset just before the call) and tracemalloc's peak of traced allocations (numpy, pyarrow
+  and Python objects report theirs; a memory-mapped file's pages do not count there).
+"""
 
 from __future__ import annotations
 
 import gc
+import json
+import os
+import statistics
+import subprocess
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PYTHON = sys.executable
 
 
-def best_time(fn: Callable[[], object], repeats: int = 3, *, collect: bool = False) -> float:
-    """The shortest of ``repeats`` wall-clock runs of ``fn`` in seconds (the least disturbed by the machine)."""
-    best = float("inf")
-    for _ in range(repeats):
-        if collect:
-            gc.collect()
-        t0 = time.perf_counter()
+def interleaved(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
+    """Median wall-clock seconds of each function, run alternately ``repeats`` times each (after one warm-up)."""
+    for fn in fns.values():
         fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+    times: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            gc.collect()
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+def run_script(code: str, *args: str, env: dict[str, str] | None = None) -> tuple[float, str]:
+    """Wall seconds of a fresh ``python -c code args…`` (start to exit) and its stdout."""
+    t0 = time.perf_counter()
+    out = subprocess.run([PYTHON, "-c", code, *args], capture_output=True, text=True, cwd=ROOT,
+                         env={**os.environ, **(env or {})})
+    wall = time.perf_counter() - t0
+    if out.returncode:
+        raise RuntimeError(f"benchmark script failed:\n{out.stderr[-2000:]}")
+    return wall, out.stdout
+
+
+def processes(codes: dict[str, str], repeats: int, *args: str) -> dict[str, float]:
+    """Median whole-process wall seconds of each script, interleaved."""
+    times: dict[str, list[float]] = {k: [] for k in codes}
+    for _ in range(repeats):
+        for name, code in codes.items():
+            times[name].append(run_script(code, *args)[0])
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+_FIRST_CALL = """
+import json, sys, time
+{imports}
+t0 = time.perf_counter()
+{call}
+print(json.dumps({{"first_call_s": time.perf_counter() - t0}}))
+"""
+
+
+def first_calls(cases: dict[str, tuple[str, str]], repeats: int, *args: str) -> dict[str, float]:
+    """Median seconds of the first call in a fresh process (imports done before the clock starts), interleaved.
+
+    ``cases`` maps a name to (imports, call) source lines; ``sys.argv[1:]`` are ``args``.
+    """
+    times: dict[str, list[float]] = {k: [] for k in cases}
+    for _ in range(repeats):
+        for name, (imports, call) in cases.items():
+            out = run_script(_FIRST_CALL.format(imports=imports, call=call), *args)[1]
+            times[name].append(json.loads(out.strip().splitlines()[-1])["first_call_s"])
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+_MEMORY = """
+import json, sys, tracemalloc
+{imports}
+def status(key):
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith(key))
+{warm}
+import gc; gc.collect()
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # reset VmHWM to the current resident size
+before = status("VmRSS:")
+tracemalloc.start()
+result = {call}
+traced = tracemalloc.get_traced_memory()[1]
+tracemalloc.stop()
+print(json.dumps({{"rss_MB": (status("VmHWM:") - before) / 1024, "traced_MB": traced / 2**20}}))
+"""
+
+
+def peak_memory(imports: str, call: str, *args: str, warm: str = "") -> dict[str, float]:
+    """Peak memory above the import baseline of one call in a fresh process: RSS high-water mark and traced."""
+    out = run_script(_MEMORY.format(imports=imports, call=call, warm=warm), *args)[1]
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def load() -> str:
+    """The machine's load averages (1, 5, 15 min) and core count: context for every absolute time."""
+    one, five, fifteen = os.getloadavg()
+    return f"load {one:.2f} / {five:.2f} / {fifteen:.2f} on {os.cpu_count()} cores"
+
+
+def verdict(value: float, bar: float, higher_is_better: bool) -> str:
+    ok = value >= bar if higher_is_better else value <= bar
+    return "met" if ok else "NOT met"
 
 
 def _cell(value: object) -> str:
@@ -31,3 +132,15 @@ def markdown_table(rows: list[dict]) -> str:
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(_cell(row.get(c, "")) for c in cols) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def best_time(fn: Callable[[], object], repeats: int = 3, *, collect: bool = False) -> float:
+    """Median of ``repeats`` runs (kept under its old name for the benchmarks that time ours alone)."""
+    times = []
+    for _ in range(repeats):
+        if collect:
+            gc.collect()
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)

@@ -1,8 +1,10 @@
 """Run every benchmark in bench/ in one process run and write bench/results.md.
 
 Each ``bench/bench_*.py`` exposes ``run() -> list[dict]``; a row has at least ``benchmark`` and whatever
-figures it measured (times, rates, ratios against the peer library on the same data, in the same run).
-Speed is reported as ratios, never asserted: the machine is shared and timings drift.
+figures it measured (times, rates, ratios against the peer library on the same data, in the same run). Rows
+that carry a ``target`` and a ``met`` verdict (``"met"`` / ``"NOT met"``) are gathered into the summary at the
+top of ``bench/results.md``, with the machine's load before and after: the machine is shared and absolute
+times drift with it, ratios much less.
 
 Usage: ``python bench/run_all.py [name ...]`` (names like ``tlog`` select ``bench_tlog.py``).
 """
@@ -19,7 +21,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from harness import markdown_table  # noqa: E402
+from harness import load, markdown_table  # noqa: E402
 
 from workbench.atomic import atomic_write_text  # noqa: E402
 
@@ -40,8 +42,12 @@ def main(argv: list[str]) -> int:
         "",
         f"Written by `python bench/run_all.py` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
         f"Python {platform.python_version()}, {platform.machine()}, {sys.platform}. "
-        "Ratios compare against the peer library on the same data in the same run.",
+        "Ratios compare against the peer library on the same data in the same run "
+        "(peer seconds / our seconds: above 1 ours is faster).",
+        "",
+        f"Machine at the start: {load()}.",
     ]
+    summary: list[dict] = []
     failed = 0
     for path in files:
         print(f"== {path.name}", flush=True)
@@ -53,9 +59,17 @@ def main(argv: list[str]) -> int:
             sections += ["", f"## {path.stem}", "", "```", traceback.format_exc(), "```"]
             traceback.print_exc()
             continue
+        for row in rows:
+            if row.get("met") in ("met", "NOT met") or str(row.get("met", "")).startswith("met ("):
+                value = next((row[k] for k in ("speed_ratio", "seconds", "rss_x_file", "ratio (×)") if k in row), "")
+                summary.append({"bench": path.stem, "what": " · ".join(
+                    str(row[k]) for k in ("reader", "benchmark", "case", "mode") if k in row),
+                    "value": value, "target": row.get("target", ""), "verdict": row["met"]})
         table = markdown_table(rows)
         print(table, flush=True)
         sections += ["", f"## {path.stem} ({time.perf_counter() - t0:.0f} s)", "", table]
+    sections[5:5] = ["", f"Machine at the end: {load()}.", "", "## Targets (issue 11)", "",
+                     markdown_table(summary) if summary else "(none measured)"]
     atomic_write_text(HERE / "results.md", "\n".join(sections) + "\n")
     print(f"wrote {HERE / 'results.md'}")
     return 1 if failed else 0
