@@ -79,7 +79,7 @@ def _read_pyulog(where: str, data: bytes, names: list[str] | None) -> Streams:
     """pyulog's reader, for files the vectorized reader leaves to it (corrupt or unusual ones)."""
     from pyulog import ULog
 
-    with io.BytesIO(data) as f:
+    with _BoundedReads(data) as f:
         # pyulog reports corruption with print(); keep it off the user's terminal
         with contextlib.redirect_stdout(io.StringIO()):
             try:
@@ -112,6 +112,25 @@ def _read_pyulog(where: str, data: bytes, names: list[str] | None) -> Streams:
         "msg_info": {k: (v if isinstance(v, int | float | str) else str(v)) for k, v in ulog.msg_info_dict.items()},
     }
     return Streams(where, "ulog", frames, counts=counts, skipped=skipped, info=info)
+
+
+class _BoundedReads(io.BytesIO):
+    """The file for pyulog, with a budget of ``read`` calls that stops its recovery loops.
+
+    On some damage pyulog seeks back to where it was (a message longer than the rest of the file, a seek before
+    the start) and loops forever. Recovering from damage it advances at least one byte per header and body
+    read, so a well-behaved parse makes fewer than two reads per byte of the file.
+    """
+
+    def __init__(self, data: bytes) -> None:
+        super().__init__(data)
+        self._budget = 4 * len(data) + 10_000
+
+    def read(self, size: int | None = -1) -> bytes:
+        self._budget -= 1
+        if self._budget < 0:
+            raise RuntimeError("the parser stopped advancing (it re-read the same bytes over and over)")
+        return super().read(size)
 
 
 class _Unusual(Exception):

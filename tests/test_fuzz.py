@@ -262,6 +262,29 @@ def test_mutations_are_seeded_and_change_the_bytes():
         assert any(x != data for x in a), kind
 
 
+def test_ulog_whose_first_message_runs_past_the_end_does_not_hang(tmp_path):
+    """Found by the fuzzer: on a message longer than the rest of the file pyulog seeks back and loops forever."""
+    import adapters
+    from adapters.ulog import MAGIC
+    from workbench.errors import DataError
+
+    path = tmp_path / "loop.ulg"
+    path.write_bytes(MAGIC + bytes(16 - len(MAGIC)) + (0xFFFF).to_bytes(2, "little") + b"\0")
+
+    def alarm(signum, frame):
+        raise _Hang()
+
+    previous = signal.signal(signal.SIGALRM, alarm)
+    signal.setitimer(signal.ITIMER_REAL, CALL_TIMEOUT)
+    try:
+        with pytest.raises(DataError, match="damaged ULog file") as info:
+            adapters.read(path)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert str(path) in str(info.value)
+
+
 def test_fuzz_fast_subset():
     """Ten damaged files per kind (every mutation at least once): loads or WorkbenchErrors only."""
     n = len(MUTATIONS) + 3
