@@ -354,7 +354,6 @@ class OnlineAligner:
             self._landing_index = m.state_names.index(seg.landing.state)
         self._markers: list[tuple[float, str]] = []
         self._by_key: dict[str, dict] = {}
-        self._loose: list[tuple[float, dict]] = []
         if m.meta.text is not None:
             self._listen(m.meta.text, streams, "meta.text", 1, self._marker_handler)
         self._n_loose = 0
