@@ -479,3 +479,27 @@ def test_default_outputs_go_under_out(tmp_path):
     assert replayed.returncode == 0, replayed.stderr
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.rrd")) == [
         "out/demos.replay.rrd", "out/demos.rrd"]
+
+
+def test_flight_modes_get_one_color_each_and_lanes_end_with_their_trial(tmp_path, setup):
+    demos = setup["demos"][:3]
+    modes = [["STABILIZE", "ALT_HOLD"], ["LOITER"], ["ALT_HOLD"]]
+    for d, names in zip(demos, modes, strict=True):
+        d.meta["modes"] = {"t": list(np.linspace(0.0, d.t[-1] - d.t[0], len(names), endpoint=False)), "mode": names}
+    path = tmp_path / "modes.rrd"
+    try:
+        viewer.record_session(path, demos, clock="trial")
+    finally:
+        for d in demos:
+            d.meta.pop("modes")
+    ents = read_rrd(path)
+    lanes = [ents[f"/demos/{d.id}/mode"] for d in demos]
+    config = lanes[0]
+    values = config["static:StateConfiguration:values"][0]
+    colors = config["static:StateConfiguration:colors"][0]
+    assert sorted(values) == ["ALT_HOLD", "LOITER", "STABILIZE"] and len(set(colors)) == 3
+    assert all(lane["static:StateConfiguration:colors"][0] == colors for lane in lanes)  # same mode, same color
+    for d, lane, names in zip(demos, lanes, modes, strict=True):
+        states = [s[0] if s else None for s in lane["StateChange:state"]]
+        assert states == [*names, None]  # a null state closes the lane at the trial's end
+        assert max(lane["time"]) == pytest.approx(d.t[-1] - d.t[0])

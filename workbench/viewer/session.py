@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 import rerun as rr
 import rerun.blueprint as rrb
 
@@ -328,7 +329,7 @@ class SessionLogger:
                                                     colors=style.packed(*self.mode_colors.values())))
             # the lane ends with the trial (a null state): the gaps between a flight's segments stay empty
             self._send(lane, [rr.TimeColumn("time", duration=np.append(mt + t[0], t[-1]))],
-                       rr.StateChange.columns(state=[*names, None]))
+                       rr.StateChange.columns(state=pa.array([*names, None], type=pa.string())))
             s.modes.append(demo.id)
         if self.plane is not None:
             self._log_track(demo)
