@@ -168,6 +168,10 @@ def read_model_file(path: str | os.PathLike) -> ModelFile:
             if _HEADER not in members:
                 raise ModelFileError(f"{path}: an .npz archive, but not a workbench model file (no {_HEADER!r})")
             size = path.stat().st_size
+            claimed = sum(info.file_size for info in zf.infolist())
+            if claimed > _MAX_DEFLATE_RATIO * size:  # members overlapping in a forged directory
+                raise ModelFileError(f"{path}: damaged model file: its members claim {claimed} bytes in all, more "
+                                     f"than {size} bytes of archive can hold")
             raw = _read_member(zf, members[_HEADER], path, size)
             arrays = {k: _read_member(zf, info, path, size) for k, info in members.items() if k != _HEADER}
     except ModelFileError:
