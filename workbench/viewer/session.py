@@ -292,14 +292,24 @@ class SessionLogger:
         # the vehicle: a bar across and a mast up, a few percent of the scene wide
         (x_lo, x_hi), (y_lo, y_hi) = self.session.bounds
         size = 0.03 * max(x_hi - x_lo, y_hi - y_lo)
-        self._static(f"{sbase}/vehicle", rr.LineStrips2D([[[-size, 0], [size, 0]], [[0, 0], [0, -0.6 * size]]],
-                                                         colors=style.packed(color, style.RECORDED_COLOR),
-                                                         radii=[UI(3.0), UI(1.5)], draw_order=10.0))
+        body = rr.LineStrips2D([[[-size, 0], [size, 0]], [[0, 0], [0, -0.6 * size]]],
+                               colors=style.packed(color, style.RECORDED_COLOR), radii=[UI(3.0), UI(1.5)],
+                               draw_order=10.0)
+        t = self._t(demo)
+        if self.session.clock == "log":
+            # on a flight's clock a segment's vehicle exists only while it flies: before its first pose it would
+            # sit untransformed at the origin, after its last one it would hover over the next segment
+            self.rec.set_time("time", duration=float(t[0]))
+            self.rec.log(f"{sbase}/vehicle", body)
+            self.rec.set_time("time", duration=float(t[-1]) + 1e-6)
+            self.rec.log(f"{sbase}/vehicle", rr.Clear(recursive=False))
+            self.rec.reset_time()
+        else:
+            self._static(f"{sbase}/vehicle", body)
         angle = p.angle(demo.x)
         quat = np.column_stack([np.zeros(len(demo)), np.zeros(len(demo)), np.sin(angle / 2), np.cos(angle / 2)])
         translation = np.column_stack([pts, np.zeros(len(demo))])
-        self._send(f"{sbase}/vehicle", _time_index(self._t(demo)),
-                   rr.Transform3D.columns(translation=translation, quaternion=quat))
+        self._send(f"{sbase}/vehicle", _time_index(t), rr.Transform3D.columns(translation=translation, quaternion=quat))
 
     # -- one trial -----------------------------------------------------------------------------------------
     def log_demonstration(self, demo: Demonstration, model: Any = None, *, variability: bool = True) -> None:
