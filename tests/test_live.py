@@ -391,6 +391,27 @@ def test_live_cli_predictions_equal_the_offline_replay(fitted, live_run):
     assert re.search(r"(\d+) steps in (\d+) segment", live_run["stdout"])
 
 
+def test_live_cli_predictions_equal_the_replay_commands_recording(fitted, live_run, tmp_path):
+    """The same steps as ``workbench replay LOG --model M`` streams, read back from both recordings."""
+    ds, _, model_path = fitted
+    live = read_rrd(live_run["rrd"])
+    ids = [d.id for d in ds if f"/demos/{d.id}/online/u1/gmr" in live][:2]
+    assert len(ids) == 2
+    r = subprocess.run([*WB, "replay", str(TLOG), "--model", str(model_path), "--demo", *ids, "--no-wait",
+                        "--horizon", "0", "--save", str(tmp_path / "replay.rrd")],
+                       capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    offline = read_rrd(tmp_path / "replay.rrd")
+    for demo_id in ids:
+        for u in ds.input_names:
+            path = f"/demos/{demo_id}/online/{u}/gmr"
+            on = dict(zip(live[path]["step"], live[path]["Measurements:values"], strict=True))
+            off = dict(zip(offline[path]["step"], offline[path]["Measurements:values"], strict=True))
+            assert set(on) <= set(off) and len(on) >= 100
+            steps = sorted(on)
+            np.testing.assert_allclose([on[k] for k in steps], [off[k] for k in steps], rtol=0, atol=1e-9)
+
+
 def test_live_cli_survives_and_counts_a_bad_link(live_run):
     assert live_run["code"] == 0, live_run["stderr"]
     counts = dict(re.findall(r"([a-zA-Z][a-zA-Z ]+?) (\d+)(?:,|$)", live_run["stdout"].split("link: ")[-1].strip()))
