@@ -170,6 +170,23 @@ def test_a_bad_link_is_counted_and_changes_nothing(fitted, records):
         assert_equal_to_offline(model, d, got[d.id])
 
 
+def test_a_byte_stream_cut_anywhere_gives_the_same_steps(fitted, records):
+    """TCP and serial links deliver bytes, not frames: chunks cut at random places, frames split across them."""
+    ds, model, _ = fitted
+    part = first_demos(ds, records, 1)
+    stream = b"".join(f for _, f in part)
+    cuts = np.sort(np.random.default_rng(5).choice(np.arange(1, len(stream)), size=len(part) // 2, replace=False))
+    pr = OnlinePredictor(model, "planar_quadrotor")
+    preds = []
+    for chunk in np.split(np.frombuffer(stream, dtype=np.uint8), cuts):
+        pr.feed(chunk.tobytes(), datagram=False)
+        preds += pr.pop()
+    assert pr.stats.rejected == {}
+    got = by_demo(preds)
+    assert list(got) == [ds[0].id] and len(got[ds[0].id]) == len(ds[0])
+    assert_equal_to_offline(model, ds[0], got[ds[0].id])
+
+
 def test_a_gap_longer_than_the_mappings_ends_the_segment_as_offline(fitted, records, tmp_path):
     ds, model, _ = fitted
     part = first_demos(ds, records, 1)
