@@ -283,6 +283,7 @@ class Link:
 
     def wait(self, timeout: float) -> bool:
         """Wait up to ``timeout`` seconds for data; True when some may be there."""
+        self._beat()
         return bool(self.conn.select(timeout))
 
     def read(self) -> list[bytes]:
