@@ -57,6 +57,7 @@ MAX_MAGNITUDE = 1e100
 # A number as text (what a numeric cell pyarrow read as text because of some other cell looks like).
 _NUMBER = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|^\s*[-+]?(?i:nan|inf|infinity)\s*$"
 _FLAGS = {"true": True, "false": False}
+_THREADED_BYTES = 4 << 20
 
 
 def looks_like_csv(head: bytes) -> bool:
@@ -146,20 +147,29 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     where = os.fspath(path)
     lines = _Lines(where)
     try:
-        if os.path.getsize(path) == 0:
+        size = os.path.getsize(path)
+        if size == 0:
             raise DataError(f"{where}: empty file, not a CSV file")
         with open(path, "rb") as f:
             header = f.readline()
         names = [c.strip() for c in header.decode("utf-8", "replace").lstrip("\ufeff").rstrip("\r\n").split(",")]
-        table = pcsv.read_csv(
-            where,
-            # Text arrives dictionary-encoded: labels and ids repeat, so checks run on the distinct values.
-            convert_options=pcsv.ConvertOptions(
-                column_types={"demo": pa.dictionary(pa.int32(), pa.string())} if "demo" in names else None,
-                strings_can_be_null=True,
-                auto_dict_encode=True,
-            ),
-        ).unify_dictionaries()
+        # Text arrives dictionary-encoded: labels and ids repeat, so checks run on the distinct values.
+        convert = pcsv.ConvertOptions(
+            column_types={"demo": pa.dictionary(pa.int32(), pa.string())} if "demo" in names else None,
+            strings_can_be_null=True,
+            auto_dict_encode=True,
+        )
+        try:
+            # Threads pay off on large files only; on a small one starting them costs more than they save. The
+            # serial reader types a column from its first block; the threaded one widens a type a later block
+            # needs (an integer column with "nan" or "1.5" further down), so a conversion error is read again.
+            table = pcsv.read_csv(where, read_options=pcsv.ReadOptions(use_threads=size > _THREADED_BYTES),
+                                  convert_options=convert)
+        except pa.ArrowInvalid:
+            if size > _THREADED_BYTES:
+                raise
+            table = pcsv.read_csv(where, read_options=pcsv.ReadOptions(use_threads=True), convert_options=convert)
+        table = table.unify_dictionaries()
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
     except pa.ArrowInvalid as exc:
