@@ -46,6 +46,7 @@ __all__ = ["LinkError", "MavlinkReader", "Link", "open_link", "dialect_streams",
 _RECENT = 64
 _RECEIVE_BUFFER = 4 << 20
 _BATCH = 512
+_CHUNK = 65536
 _PENDING = 4096
 
 
@@ -292,7 +293,8 @@ class Link:
         out = []
         for _ in range(_BATCH):
             try:
-                data = self.conn.recv()
+                # a byte stream reads what is there (pymavlink would read only the next frame's bytes)
+                data = self.conn.recv() if self.datagram else self.conn.recv(_CHUNK)
             except (OSError, ValueError) as exc:
                 raise LinkError(f"{self.description}: cannot read ({exc})") from None
             if not data:
