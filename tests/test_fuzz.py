@@ -37,7 +37,8 @@ _EXT = {"tlog": ".tlog", "mcap": ".mcap", "ulog": ".ulg", "csv": ".csv", "parque
         "mapping": ".toml"}
 _MAGIC = 16  # bytes kept by "random_behind_magic": every format's signature fits in them
 CALL_TIMEOUT = 30.0  # s per load; a tiny file loads in well under one even on a loaded machine
-MEMORY_BUDGET_MB = 1024  # address space a worker may add after start-up (RLIMIT_AS) and resident growth allowed
+MEMORY_BUDGET_MB = 1024  # address space a worker may add after start-up (RLIMIT_AS): a hard stop
+RSS_GROWTH_MB = 256  # peak resident growth allowed over all loads of files of 3-20 kB (observed: under 25 MB)
 
 
 # -- mutations ---------------------------------------------------------------------------------------------
@@ -258,7 +259,7 @@ def _check(records: list[dict], n: int, kinds: tuple[str, ...]) -> None:
     unnamed = [r for r in records if r["outcome"] == "error" and not r["names_file"] and r["kind"] != "mapping"]
     assert not unnamed, "errors that do not name the file:\n" + "\n".join(r["message"] for r in unnamed)
     growth = max(r["rss_growth_mb"] for r in records)
-    assert growth < MEMORY_BUDGET_MB, f"peak resident memory grew by {growth} MB while loading small corrupt files"
+    assert growth < RSS_GROWTH_MB, f"peak resident memory grew by {growth} MB while loading small corrupt files"
 
 
 def test_mutations_are_seeded_and_change_the_bytes():
