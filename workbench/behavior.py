@@ -663,12 +663,14 @@ class TaskGMRModel(BehaviorModel):
         covs = mf.array("tpgmm/covariances", (spec.n_frames, G, D, D))
         prec = mf.array("tpgmm/precisions_cholesky", (spec.n_frames, G, D, D))
         scale = mf.array("scale", (D,))
-        if G != self.n_components or np.any(w < 0) or abs(w.sum() - 1) > 1e-6 or np.any(scale <= 0):
+        wrong_G = self.n_components != "auto" and G != self.n_components
+        if wrong_G or np.any(w < 0) or abs(w.sum() - 1) > 1e-6 or np.any(scale <= 0):
             raise ModelFileError(f"{mf.path}: damaged model file: inconsistent TP-GMM parameters")
         self.frame_spec_ = spec
         try:
             self.variability_ = TaskGMR.from_parameters(
-                spec, w, means, covs, scale, n, precisions_cholesky=prec, n_components=G, reg_covar=self.reg_covar,
+                spec, w, means, covs, scale, n, precisions_cholesky=prec, n_components=G,
+                reg_covar=getattr(self, "reg_covar_", self.reg_covar),
                 standardize=self.standardize, random_state=self.random_state,
             )
         except ModelError as exc:

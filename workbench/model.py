@@ -68,8 +68,9 @@ class HumanBehaviorModel(TaskGMRModel):
     ----------
     system : LinearSystem
         The known plant (A, B), Assumptions 1-2.
-    n_components : int
-        Number of Gaussian components G (the paper uses 5).
+    n_components : int or "auto"
+        Number of Gaussian components G (the paper uses 5); "auto" chooses it by cross-validation over the
+        demonstrations (:func:`workbench.autoconfig.choose_settings`), recorded in ``auto_``.
     frames : sequence of str or FrameSpec
         Task frames; default the paper's start and goal frames, eqs. (33)-(34).
     gain_method : {"direct", "dmd", "iv"}
@@ -77,7 +78,8 @@ class HumanBehaviorModel(TaskGMRModel):
         autocorrelated variability, where the least-squares "direct" and "dmd" stay biased.
     structure : {"full", "S=0", "diagonal"}
         Cost structure of the inverse LQR (:func:`workbench.ioc.inverse_lqr`).
-    reg_covar : float
+    reg_covar : float or "auto"
+        ("auto": chosen by cross-validation with ``n_components``, recorded in ``auto_``.)
         Added to every TP-GMM covariance in each M-step; with ``standardize`` a fraction of each coordinate's
         training variance. The default 0.5 was chosen on simulated validation data (training seed 2, test
         seed 3, both strategies, 30 trials; seeds the acceptance tests do not use) as the value minimizing the
@@ -108,7 +110,10 @@ class HumanBehaviorModel(TaskGMRModel):
     noise_folds : int
         Cross-fitting folds for the calibration (0 or 1: in-sample residuals, no band calibration).
     noise_horizon : float
-        Seconds of the held-out Monte Carlo rollouts on which the band is calibrated to 90 % coverage.
+        Seconds of the held-out Monte Carlo rollouts on which the band is calibrated to 90 % coverage (and of
+        the held-out rollouts that score the "auto" candidates).
+    auto_criterion : {"prediction", "likelihood"}
+        How "auto" settings are scored on held-out demonstrations: rollout RMSE or TP-GMM log-likelihood.
 
     Attributes
     ----------
@@ -129,6 +134,10 @@ class HumanBehaviorModel(TaskGMRModel):
     goal_relative_ : bool
         Whether the linear term is ``K̂(x − x_target)`` (every training target known) or ``K̂x``.
     n_features_in_, n_outputs_, n_components_, n_demos_, n_samples_ : int
+    reg_covar_ : float
+        The regularizer used (``reg_covar``, or the one "auto" chose).
+    auto_ : AutoSettings or None
+        With an "auto" setting: what was chosen, by which criterion, and every candidate's held-out scores.
     labels_ : tuple of str
     """
 
@@ -137,11 +146,11 @@ class HumanBehaviorModel(TaskGMRModel):
     def __init__(
         self,
         system: LinearSystem,
-        n_components: int = 5,
+        n_components: int | str = 5,
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
         gain_method: str = "direct",
         structure: str = "full",
-        reg_covar: float = 0.5,
+        reg_covar: float | str = 0.5,
         standardize: bool = True,
         random_state: int | None = 0,
         fit_objective: bool = True,
@@ -154,6 +163,7 @@ class HumanBehaviorModel(TaskGMRModel):
         noise_window: float = 2.0,
         noise_folds: int = 3,
         noise_horizon: float = 3.0,
+        auto_criterion: str = "prediction",
     ) -> None:
         super().__init__(system)
         self.n_components = n_components
@@ -173,10 +183,15 @@ class HumanBehaviorModel(TaskGMRModel):
         self.noise_window = noise_window
         self.noise_folds = noise_folds
         self.noise_horizon = noise_horizon
+        self.auto_criterion = auto_criterion
 
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Algorithm 1: K̂ (eqs. (12)-(14)), the task objective (eqs. (15)-(19)), ŵ (eq. (20)), the TP-GMM."""
+        if self.n_components == "auto" or self.reg_covar == "auto":
+            return self._fit_auto(demos)
         self._check_settings()
+        self.auto_ = None
+        self.reg_covar_ = float(self.reg_covar)
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
         refs, self.goal_relative_ = references(ds, self.system.n)
         K = fit_gain(ds, refs, self.system, self.gain_method)
@@ -188,6 +203,18 @@ class HumanBehaviorModel(TaskGMRModel):
         self._fit_common(ds, getattr(demos, "labels", []))
         self._fit_gmr(ds, [self._residual(d) for d in ds])
         self._fit_noise(ds)
+        return self
+
+    def _fit_auto(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
+        """Choose the "auto" settings by cross-validation, then fit with them (the settings stay "auto")."""
+        from workbench.autoconfig import choose_settings
+
+        ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
+        auto = choose_settings(self, ds, criterion=self.auto_criterion)
+        chosen = type(self)(self.system, **{**self.get_params(), "n_components": auto.n_components,
+                                            "reg_covar": auto.reg_covar}).fit(demos)
+        self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
+        self.auto_ = auto
         return self
 
     def residuals(self, demo: Demonstration) -> np.ndarray:
@@ -207,7 +234,7 @@ class HumanBehaviorModel(TaskGMRModel):
         the training data reproduces EM's objective. Values are in the model's standardized coordinates.
         """
         self._check_fitted("score_samples")
-        ds = demo_list(demos, self.system, "HumanBehaviorModel.score_samples")
+        ds = [demos] if isinstance(demos, Demonstration) else list(demos)
         return self.variability_.score_samples(
             [d.x for d in ds], [self._residual(d) for d in ds], [goal_of(d) for d in ds]
         )
@@ -247,12 +274,24 @@ class HumanBehaviorModel(TaskGMRModel):
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         header, arrays = self._gmr_state()
         obj_header, obj_arrays = objective_state(self.objective_)
-        return {**header, "objective": obj_header}, {"K": self.K_, **arrays, **obj_arrays}
+        auto = getattr(self, "auto_", None)
+        header = {**header, "objective": obj_header, "reg_covar_chosen": getattr(self, "reg_covar_", None),
+                  "auto": None if auto is None else auto.as_json()}
+        return header, {"K": self.K_, **arrays, **obj_arrays}
 
     def _restore(self, mf: ModelFile) -> None:
         n, m = self.system.n, self.system.m
         self.K_ = np.array(mf.array("K", (m, n)))
         self.objective_ = objective_restore(mf)
+        from workbench.autoconfig import AutoSettings
+
+        auto = mf.header.get("auto")
+        try:
+            self.auto_ = None if auto is None else AutoSettings.from_json(auto)
+            chosen = mf.header.get("reg_covar_chosen")
+            self.reg_covar_ = float(self.reg_covar if chosen is None else chosen)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ModelFileError(f"{mf.path}: damaged model file: auto settings ({exc})") from None
         self._gmr_restore(mf, m)
 
 

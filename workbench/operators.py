@@ -18,6 +18,7 @@ not make the proposed model worse than its task-objective-only baseline.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -123,20 +124,20 @@ class ErraticOperator:
     corrections as full pulses of ``pulse`` once the error exceeds a dead band.
     """
 
-    delay: float = 0.25
-    hesitation_rate: float = 0.02
-    hesitation: float = 0.4
-    pulse: float = 0.25
-    dead_band: float = 0.04
-    detour: float = 1.2
+    delay: float = 0.15
+    hesitation_rate: float = 0.01
+    hesitation: float = 0.3
+    pulse: float = 0.06
+    dead_band: float = 0.03
+    detour: float = 1.0
     waypoint_height: float = 1.5
-    k_pos: float = 0.6
-    k_vel: float = 2.0
+    k_pos: float = 0.5
+    k_vel: float = 1.5
     k_alt: float = 0.5
     k_vy: float = 0.9
     phi_max: float = 0.25
     sigma: Sequence[float] = field(default=(0.01, 0.03))
-    duration: float = 10.0
+    duration: float = 15.0
 
 
 def erratic_operator_demos(
@@ -161,9 +162,12 @@ def erratic_operator_demos(
         held, hold_left = np.zeros(2), 0
         xs, us = np.empty((steps, n)), np.empty((steps, 2))
         drift = np.zeros(2)
+        via = True
         for k in range(steps):
             seen = history[0]
-            via = seen[iy] > op.waypoint_height + 0.2 and abs(seen[ix] - side * op.detour) > 0.3
+            # first the waypoint beside the obstacle, then (once near it, or below it) the pad
+            via = via and seen[iy] > op.waypoint_height and math.hypot(
+                seen[ix] - side * op.detour, seen[iy] - op.waypoint_height) > 0.3
             goal_x = side * op.detour if via else 0.0
             goal_y = op.waypoint_height if via else 0.0
             vx_des = float(np.clip(-op.k_pos * (seen[ix] - goal_x), -0.8, 0.8))
@@ -182,11 +186,14 @@ def erratic_operator_demos(
                 held = u
             u = sys_.clip(u)
             xs[k], us[k] = x, u
+            if x[iy] <= 0.0 or abs(x[ix]) > 3.0 or x[iy] > 3.5:  # touched down, or left the domain
+                break
             x = sys_.A @ x + sys_.B @ u
             history = [*history[1:], x.copy()]
+        xs, us = xs[: k + 1], us[: k + 1]
         demos.append(
             Demonstration(
-                sys_.dt * np.arange(steps), xs, us,
+                sys_.dt * np.arange(k + 1), xs, us,
                 {"id": f"{label.lower()}-{j:03d}", "label": label, "source": "erratic operator", "target": [0.0] * n},
             )
         )
