@@ -29,6 +29,7 @@ time).
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -338,7 +339,9 @@ def _decode_channel(
     decoder = None
     for factory in factories:
         try:
-            decoder = factory.decoder_for(ch.message_encoding, schema)
+            # the ROS 2 schema parser prints a damaged schema's lines to stderr before it raises
+            with contextlib.redirect_stderr(io.StringIO()):
+                decoder = factory.decoder_for(ch.message_encoding, schema)
         except Exception:  # noqa: BLE001 - a schema the decoder cannot parse: nothing of it decodes
             decoder = None
         if decoder is not None:

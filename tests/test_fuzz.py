@@ -294,6 +294,23 @@ def test_ulog_whose_first_message_runs_past_the_end_does_not_hang(tmp_path):
     assert str(path) in str(info.value)
 
 
+EXTERNAL_MCAP = Path(__file__).resolve().parents[2] / "shared" / "external" / "rosbag2_talker.mcap"
+
+
+@pytest.mark.skipif(not EXTERNAL_MCAP.is_file(), reason=f"{EXTERNAL_MCAP} is not there")
+def test_damaged_ros2_schema_is_skipped_without_printing(tmp_path, capfd):
+    """Found by the fuzzer: the ROS 2 schema parser printed a damaged schema's lines to stderr."""
+    import adapters
+
+    data = EXTERNAL_MCAP.read_bytes()
+    assert data.count(b"uint8 level") == 1
+    path = tmp_path / "schema.mcap"
+    path.write_bytes(data.replace(b"uint8 level", b"uint8 l%vel"))  # not a valid ROS 2 field name
+    summary = str(adapters.inspect(path))
+    assert "/rosout: undecodable messages" in summary
+    assert capfd.readouterr().err == ""
+
+
 def test_fuzz_fast_subset():
     """Ten damaged files per kind (every mutation at least once): loads or WorkbenchErrors only."""
     n = len(MUTATIONS) + 3
