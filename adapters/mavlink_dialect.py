@@ -17,8 +17,13 @@ from __future__ import annotations
 
 import functools
 import importlib
+import importlib.util
+import json
+import os
 import re
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -118,15 +123,25 @@ def _column_name(field: str) -> str:
     return field + "_" if field in RESERVED_COLUMNS else field
 
 
-def _layout_from_class(cls) -> MessageLayout:
+def _spec_of_class(cls) -> list:
+    """What a layout is derived from, as plain data (cached between processes, see :func:`load_dialect`)."""
     fmt = cls.unpacker.format
     fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+    return [int(cls.id), str(cls.msgname), int(cls.crc_extra), fmt, list(cls.ordered_fieldnames),
+            list(cls.fieldnames), int(cls.unpacker.size)]
+
+
+def _layout_from_class(cls) -> MessageLayout:
+    return _layout_from_spec(_spec_of_class(cls))
+
+
+def _layout_from_spec(spec: list) -> MessageLayout:
+    msgid, msgname, crc_extra, fmt, wire_names, fieldnames, unpacked_size = spec
     if fmt[:1] != "<":
-        raise ValueError(f"MAVLink message {cls.msgname}: unexpected struct byte order in {fmt!r}")
+        raise ValueError(f"MAVLink message {msgname}: unexpected struct byte order in {fmt!r}")
     tokens = _TOKEN.findall(fmt[1:])
-    wire_names = list(cls.ordered_fieldnames)
     if len(tokens) != len(wire_names):
-        raise ValueError(f"MAVLink message {cls.msgname}: format {fmt!r} does not match its fields")
+        raise ValueError(f"MAVLink message {msgname}: format {fmt!r} does not match its fields")
     specs: dict[str, FieldSpec] = {}
     names, formats, offsets = [], [], []
     offset = 0
@@ -148,17 +163,39 @@ def _layout_from_class(cls) -> MessageLayout:
         formats.append(item)
         offsets.append(offset)
         offset += item.itemsize
-    if offset != cls.unpacker.size:
-        raise ValueError(f"MAVLink message {cls.msgname}: layout size {offset} != {cls.unpacker.size}")
+    if offset != unpacked_size:
+        raise ValueError(f"MAVLink message {msgname}: layout size {offset} != {unpacked_size}")
     dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": offset})
     return MessageLayout(
-        msgid=int(cls.id),
-        name=str(cls.msgname),
-        crc_extra=int(cls.crc_extra),
+        msgid=int(msgid),
+        name=str(msgname),
+        crc_extra=int(crc_extra),
         size=offset,
         dtype=dtype,
-        fields=tuple(specs[n] for n in cls.fieldnames),
+        fields=tuple(specs[n] for n in fieldnames),
     )
+
+
+class _Layouts(Mapping):
+    """Layouts by message id or name, each built on first use (a log holds a few dozen of ~300 types)."""
+
+    def __init__(self, specs: dict) -> None:
+        self._specs = specs
+        self._built: dict = {}
+
+    def __getitem__(self, k):
+        if k not in self._built:
+            self._built[k] = _layout_from_spec(self._specs[k])
+        return self._built[k]
+
+    def __contains__(self, k) -> bool:
+        return k in self._specs
+
+    def __iter__(self) -> Iterator:
+        return iter(self._specs)
+
+    def __len__(self) -> int:
+        return len(self._specs)
 
 
 @dataclass(frozen=True)
@@ -178,22 +215,28 @@ class Dialect:
     ids : numpy.ndarray
         The defined message ids, increasing.
     module : module
-        The pymavlink dialect module the layouts were derived from.
+        The pymavlink dialect module the layouts were derived from (imported on first use).
     """
 
     name: str
-    by_id: dict[int, MessageLayout]
-    by_name: dict[str, MessageLayout]
+    by_id: Mapping[int, MessageLayout]
+    by_name: Mapping[str, MessageLayout]
     known: np.ndarray
     crc_extra: np.ndarray
     size: np.ndarray
     rank: np.ndarray
     ids: np.ndarray
-    module: object
+    _module: list = field(default_factory=list, repr=False, compare=False)
 
     @property
     def max_id(self) -> int:
         return self.known.shape[0] - 1
+
+    @property
+    def module(self):
+        if not self._module:
+            self._module.append(importlib.import_module(f"pymavlink.dialects.v20.{self.name}"))
+        return self._module[0]
 
 
 @functools.cache
@@ -206,31 +249,89 @@ def load_dialect(name: str = "ardupilotmega") -> Dialect:
         A dialect pymavlink ships, e.g. ``"ardupilotmega"`` (the superset of ``common`` that pymavlink reads
         tlogs with by default) or ``"common"``.
     """
-    module = importlib.import_module(f"pymavlink.dialects.v20.{name}")
-    layouts = [_layout_from_class(cls) for cls in module.mavlink_map.values()]
-    by_id = {lay.msgid: lay for lay in layouts}
-    max_id = max(by_id)
+    specs = _dialect_specs(name)
+    by_id_specs = {s[0]: s for s in specs}
+    max_id = max(by_id_specs)
     known = np.zeros(max_id + 1, dtype=bool)
     crc_extra = np.zeros(max_id + 1, dtype=np.uint8)
     size = np.zeros(max_id + 1, dtype=np.int64)
-    for lay in layouts:
-        known[lay.msgid] = True
-        crc_extra[lay.msgid] = lay.crc_extra
-        size[lay.msgid] = lay.size
+    for msgid, _, extra, _, _, _, payload in specs:
+        known[msgid] = True
+        crc_extra[msgid] = extra
+        size[msgid] = payload
     ids = np.flatnonzero(known)
     rank = np.zeros(max_id + 1, dtype=np.uint16)
     rank[ids] = np.arange(ids.size)
+    by_id = _Layouts(by_id_specs)
     return Dialect(
         name=name,
         by_id=by_id,
-        by_name={lay.name: lay for lay in layouts},
+        by_name=_ByName({s[1]: s[0] for s in specs}, by_id),
         known=known,
         crc_extra=crc_extra,
         size=size,
         rank=rank,
         ids=ids,
-        module=module,
     )
+
+
+class _ByName(Mapping):
+    """Layouts by message name, sharing the layouts built by id."""
+
+    def __init__(self, ids: dict[str, int], by_id: _Layouts) -> None:
+        self._ids = ids
+        self._by_id = by_id
+
+    def __getitem__(self, name: str) -> MessageLayout:
+        return self._by_id[self._ids[name]]
+
+    def __contains__(self, name) -> bool:
+        return name in self._ids
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._ids)
+
+    def __len__(self) -> int:
+        return len(self._ids)
+
+
+def _cache_file(name: str) -> Path | None:
+    """Where the specs of a dialect are cached: keyed by the dialect module file's size and time, so a pymavlink
+    upgrade rebuilds them. None when the module cannot be located."""
+    try:
+        spec = importlib.util.find_spec(f"pymavlink.dialects.v20.{name}")
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.origin:
+        return None
+    st = os.stat(spec.origin)
+    root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "workbench"
+    return root / f"mavlink-{name}-{st.st_size}-{st.st_mtime_ns}.json"
+
+
+def _dialect_specs(name: str) -> list[list]:
+    """The per-message specs of a dialect: from the cache, or derived from pymavlink's module and cached.
+
+    Importing pymavlink's generated module (300 classes) cost more than reading a small log; the specs are the
+    same data, taken from the same classes, so the first read in a process skips that import.
+    """
+    path = _cache_file(name)
+    if path is not None:
+        try:
+            return json.loads(path.read_text())
+        except (OSError, ValueError):
+            pass
+    module = importlib.import_module(f"pymavlink.dialects.v20.{name}")
+    specs = [_spec_of_class(cls) for cls in module.mavlink_map.values()]
+    if path is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+            tmp.write_text(json.dumps(specs))
+            os.replace(tmp, path)
+        except OSError:
+            pass  # a read-only home: derive again next time
+    return specs
 
 
 def _crc_byte_table() -> np.ndarray:

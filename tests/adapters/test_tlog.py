@@ -636,3 +636,19 @@ def test_timestamps_low_bits_and_zero_times_are_kept(tmp_path):
     read = read_tlog(path)
     np.testing.assert_array_equal(read.time_us["HEARTBEAT"], stamps)
     np.testing.assert_array_equal(read.streams["HEARTBEAT"]["t"], np.array(stamps, dtype=np.uint64) * 1e-6)
+
+
+def test_dialect_specs_are_cached_between_processes_and_equal_pymavlinks(tmp_path, monkeypatch):
+    import importlib
+
+    from adapters import mavlink_dialect as md
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    module = importlib.import_module("pymavlink.dialects.v20.common")
+    derived = [md._spec_of_class(cls) for cls in module.mavlink_map.values()]
+    first = md._dialect_specs("common")  # no cache yet: derived from the module, then written
+    assert first == derived
+    (cache,) = (tmp_path / "workbench").glob("mavlink-common-*.json")
+    assert md._dialect_specs("common") == derived  # read back from the cache
+    cache.write_text("not json")
+    assert md._dialect_specs("common") == derived  # a damaged cache is derived again
