@@ -4,7 +4,7 @@ Kinds: MAVLink tlog, MCAP, ULog, CSV, the Parquet demonstration file, the ``.npz
 Each is written once from a small simulated set (and a model fitted on it; every other model file uncompressed,
 as ``np.savez`` writes them, so that damage reaches the ``.npy`` headers directly), then damaged by one of seven
 mutations — truncation, bit flips, an inserted chunk, a deleted chunk, a zeroed region, a huge length field
-(a 32- or 64-bit integer near its maximum written over the bytes) and random bytes behind the file's valid magic —
+(a 16-, 32- or 64-bit integer near its maximum written over the bytes) and random bytes behind the valid magic —
 and loaded the way the CLI loads it. Per call the outcome must be a successful load or a
 :class:`~workbench.errors.WorkbenchError`; a call may not outlast a timeout (a hang) and the worker process runs
 under an address-space limit (``RLIMIT_AS``) with its peak resident memory reported, so that a damaged length
