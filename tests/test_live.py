@@ -187,6 +187,25 @@ def test_a_byte_stream_cut_anywhere_gives_the_same_steps(fitted, records):
     assert_equal_to_offline(model, ds[0], got[ds[0].id])
 
 
+def test_pymavlink_messages_pushed_by_a_users_loop_give_the_same_steps(fitted, records):
+    """``push(msg)``: what a loop that reads the link with pymavlink itself hands over (BAD_DATA included)."""
+    ds, model, _ = fitted
+    part = first_demos(ds, records, 1)
+    parser = mav.MAVLink(None)
+    parser.robust_parsing = True
+    pr = OnlinePredictor(model, "planar_quadrotor")
+    preds = []
+    for i, (t, frame) in enumerate(part):
+        data = frame if i % 100 != 50 else b"\x01\x02\x03" + frame  # now and then a few bad bytes first
+        for msg in parser.parse_buffer(data) or []:
+            pr.push(msg, arrival=t)
+        preds += pr.pop()
+    assert pr.stats.counts["garbage bytes"] == 3 * sum(1 for i in range(len(part)) if i % 100 == 50)
+    got = by_demo(preds)
+    assert list(got) == [ds[0].id] and len(got[ds[0].id]) == len(ds[0])
+    assert_equal_to_offline(model, ds[0], got[ds[0].id])
+
+
 def test_a_gap_longer_than_the_mappings_ends_the_segment_as_offline(fitted, records, tmp_path):
     ds, model, _ = fitted
     part = first_demos(ds, records, 1)
