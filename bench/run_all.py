@@ -60,8 +60,11 @@ def main(argv: list[str]) -> int:
             traceback.print_exc()
             continue
         for row in rows:
+            if isinstance(row.get("met"), bool | __import__("numpy").bool_):
+                row = {**row, "met": "met" if row["met"] else "NOT met"}
             if row.get("met") in ("met", "NOT met") or str(row.get("met", "")).startswith("met ("):
-                value = next((row[k] for k in ("speed_ratio", "seconds", "rss_x_file", "ratio (×)") if k in row), "")
+                value = next((row[k] for k in ("speed_ratio", "seconds", "rss_x_file", "ratio (×)", "ratio", "speedup")
+                              if k in row), "")
                 summary.append({"bench": path.stem, "what": " · ".join(
                     str(row[k]) for k in ("reader", "benchmark", "case", "mode") if k in row),
                     "value": value, "target": row.get("target", ""), "verdict": row["met"]})
