@@ -206,6 +206,16 @@ def test_pymavlink_messages_pushed_by_a_users_loop_give_the_same_steps(fitted, r
     assert_equal_to_offline(model, ds[0], got[ds[0].id])
 
 
+def test_the_arrival_clock_is_the_tlogs_clock(fitted, records):
+    """``clock="arrival"``: samples timed by when they arrived, which is what a tlog records (its "log" clock)."""
+    ds, model, _ = fitted
+    pr, preds = online(model, first_demos(ds, records, 1), clock="arrival")
+    got = by_demo(preds)
+    assert list(got) == [ds[0].id] and len(got[ds[0].id]) == len(ds[0])
+    assert_equal_to_offline(model, ds[0], got[ds[0].id])
+    np.testing.assert_array_equal([p.t for p in got[ds[0].id]], ds[0].meta["t0"] + ds[0].t)
+
+
 def test_a_gap_longer_than_the_mappings_ends_the_segment_as_offline(fitted, records, tmp_path):
     ds, model, _ = fitted
     part = first_demos(ds, records, 1)
