@@ -503,3 +503,13 @@ def test_flight_modes_get_one_color_each_and_lanes_end_with_their_trial(tmp_path
         states = [s[0] if s else None for s in lane["StateChange:state"]]
         assert states == [*names, None]  # a null state closes the lane at the trial's end
         assert max(lane["time"]) == pytest.approx(d.t[-1] - d.t[0])
+
+
+def test_a_legend_goes_to_the_corner_without_data():
+    t = np.linspace(0.0, 3.0, 61)
+    falling = 1.0 - t / 3.0  # from the top left to the bottom right: both other corners are free
+    assert session.quiet_corner([(t, falling)], (0.0, 3.0), (0.0, 1.0)) in ("RightTop", "LeftBottom")
+    rising = t / 3.0
+    assert session.quiet_corner([(t, rising)], (0.0, 3.0), (0.0, 1.0)) in ("LeftTop", "RightBottom")
+    high = np.full_like(t, 0.95)
+    assert session.quiet_corner([(t, high)], (0.0, 3.0), (0.0, 1.0)) == "LeftBottom"

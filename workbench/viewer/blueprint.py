@@ -97,8 +97,9 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     for k, name in enumerate(plane):
         if focus and focus[0] in s.predictions:
             fid = focus[0]
+            key = f"demos/{_safe(fid)}/predictions/{_safe(name)}"
             side.append(_plot(f"{s.title(name)} · {fid}", _prediction_paths(s, fid, name),
-                              legend=rrb.PlotLegend("RightTop", visible=k == 0),
+                              legend=rrb.PlotLegend(s.corners.get(key, "RightTop"), visible=k == 0),
                               y_range=s.ranges.get(f"demos/{_safe(fid)}/predictions/{_safe(name)}"),
                               window=s.windows.get(fid)))
         else:
@@ -147,15 +148,16 @@ def session_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.B
         for j, name in enumerate(s.input_names):
             p = f"demos/{_safe(i)}/variability/{_safe(name)}"
             input_views.append(_plot(f"ŵ {s.title(name)} · {i}", [f"+ /{p}/**"],
-                                     legend=rrb.PlotLegend("LeftTop", visible=k == 0 and j == 0),
+                                     legend=rrb.PlotLegend(s.corners.get(p, "LeftTop"), visible=k == 0 and j == 0),
                                      y_range=s.ranges.get(p)))
     tabs.append(rrb.Grid(*input_views, name="inputs & variability"))
     if s.predictions:
         pred_views = []
         for i in [f for f in focus if f in s.predictions]:
             for j, name in enumerate(s.state_names):
+                key = f"demos/{_safe(i)}/predictions/{_safe(name)}"
                 pred_views.append(_plot(f"{s.title(name)} · {i}", _prediction_paths(s, i, name),
-                                        legend=rrb.PlotLegend("LeftTop", visible=j == 0),
+                                        legend=rrb.PlotLegend(s.corners.get(key, "LeftTop"), visible=j == 0),
                                         y_range=s.ranges.get(f"demos/{_safe(i)}/predictions/{_safe(name)}"),
                                         window=s.windows.get(i)))
         tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1, name="predictions"))

@@ -103,6 +103,7 @@ class LoggedSession:
     plane_names: tuple[str, str] | None = None
     span: tuple[float, float] | None = None
     heatmap_shapes: dict[tuple[str, str], tuple[int, int]] = field(default_factory=dict)
+    corners: dict[str, str] = field(default_factory=dict)
 
     def title(self, name: str) -> str:
         """``name [unit]`` for a state or input."""
@@ -178,6 +179,22 @@ def _data_range(*arrays: Any, margin: float = 0.08) -> tuple[float, float]:
         return -1.0, 1.0
     pad = margin * max(hi - lo, 1e-9, 1e-3 * max(abs(lo), abs(hi)))
     return float(lo - pad), float(hi + pad)
+
+
+def quiet_corner(series: Sequence[tuple[np.ndarray, np.ndarray]], t_range: tuple[float, float],
+                 y_range: tuple[float, float]) -> str:
+    """The corner of a plot (``"LeftTop"``, …) holding the fewest of its points: where a legend hides nothing."""
+    (t0, t1), (y0, y1) = t_range, y_range
+    counts = dict.fromkeys(("LeftTop", "RightTop", "LeftBottom", "RightBottom"), 0)
+    for t, y in series:
+        t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+        # a legend covers about a third of the width and height
+        left, right = t <= t0 + (t1 - t0) / 3, t >= t1 - (t1 - t0) / 3
+        top, bottom = y >= y1 - (y1 - y0) / 3, y <= y0 + (y1 - y0) / 3
+        for name, mask in (("LeftTop", left & top), ("RightTop", right & top), ("LeftBottom", left & bottom),
+                           ("RightBottom", right & bottom)):
+            counts[name] += int(mask.sum())
+    return min(counts, key=lambda k: counts[k])  # ties keep the order above: top left first
 
 
 class SessionLogger:
@@ -377,6 +394,8 @@ class SessionLogger:
             m_j, s_j = out["mu"][:, j], out["sigma"][:, j]
             # ŵ, μ and the typical 3σ band set the scale; the band's start-up transient may run off the plot
             s.ranges[p] = _data_range(w[:, j], m_j, np.median(m_j - 3 * s_j), np.median(m_j + 3 * s_j))
+            s.corners[p] = quiet_corner([(t, w[:, j]), (t, m_j - 3 * s_j), (t, m_j + 3 * s_j)],
+                                        (float(t[0]), float(t[-1])), s.ranges[p])
             for suffix, k, color in (("gmr", 1.0, style.SIGMA1_COLOR), ("gmr_3sigma", 3.0, style.SIGMA3_COLOR)):
                 label = f"μ ± {k:g}σ"
                 if HAS_MEASUREMENTS:
@@ -425,6 +444,7 @@ class SessionLogger:
         sbase = f"scene/predictions/{_safe(demo.id)}/from_{start}"
         results: dict[str, Any] = {}
         spans: dict[str, list[np.ndarray]] = {}
+        points: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         t_end = t0
         for method, model in models.items():
             if method not in s.methods:
@@ -447,6 +467,7 @@ class SessionLogger:
                 self._style(path, rr.SeriesLines(names=[title], colors=[color], widths=[2.0]))
                 self._send(path, _time_index(tp, steps), rr.Scalars.columns(scalars=x[:, j]))
                 spans.setdefault(name, []).append(x[:, j])
+                points.setdefault(name, []).append((tp, x[:, j]))
             if self.plane is not None:
                 self._static(f"{sbase}/{_safe(method)}", rr.LineStrips2D(
                     [self.plane.view(x)], colors=[color], radii=UI(2.0), labels=[title], show_labels=False,
@@ -472,6 +493,7 @@ class SessionLogger:
                     self._send(path, _time_index(tp, steps),
                                rr.Scalars.columns(scalars=np.column_stack([lo[:, j], hi[:, j]])))
                 spans.setdefault(name, []).extend([lo[:, j], hi[:, j]])
+                points.setdefault(name, []).extend([(tp, lo[:, j]), (tp, hi[:, j])])
             if self.plane is not None:
                 # the band in the plane: the percentile box at every few steps, a light tube around the path
                 vlo, vhi = self.plane.view(lo), self.plane.view(hi)
@@ -489,6 +511,8 @@ class SessionLogger:
             key = f"demos/{_safe(demo.id)}/predictions/{_safe(name)}"
             earlier = [np.asarray(s.ranges[key])] if key in s.ranges else []  # another start of the same trial
             s.ranges[key] = _data_range(demo.x[seen, j], *spans.get(name, []), *earlier, margin=0.05)
+            s.corners[key] = quiet_corner([(t_rel[seen], demo.x[seen, j]), *points.get(name, [])],
+                                          s.windows[demo.id], s.ranges[key])
         s.predictions.setdefault(demo.id, []).append((start, list(models)))
         if demo.id not in s.focus:
             s.focus.append(demo.id)
