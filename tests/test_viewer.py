@@ -438,7 +438,13 @@ def _headless_env(**extra: str) -> dict[str, str]:
     return env
 
 
+def _spawn_port_free() -> None:
+    if output._listening(9876):
+        pytest.skip("a rerun viewer already listens on 127.0.0.1:9876; --spawn would reuse it")
+
+
 def test_spawn_without_a_display_is_one_clear_line_not_a_hang(tmp_path):
+    _spawn_port_free()
     recordings.cli_recordings()
     demos = recordings.workdir() / "demo" / "demos.parquet"
     result = _workbench("view", str(demos), "--spawn", env=_headless_env(), timeout=60)
@@ -451,6 +457,7 @@ def test_spawn_without_a_display_is_one_clear_line_not_a_hang(tmp_path):
 def test_spawn_with_a_viewer_that_cannot_open_a_window_fails_fast(tmp_path):
     if not Path(sys.executable).with_name("rerun").exists():
         pytest.skip("no rerun viewer beside this python")
+    _spawn_port_free()
     recordings.cli_recordings()
     demos = recordings.workdir() / "demo" / "demos.parquet"
     # a display that does not exist: the viewer starts, listens, then dies opening its window
