@@ -58,6 +58,8 @@ __all__ = [
 ]
 
 _NOISE_KINDS = ("calibrated", "gmr")
+# Margin of the training-state envelope, as a fraction of each state's training range (see `state_envelope`).
+ENVELOPE_MARGIN = 0.1
 # Starts per held-out trial in the band calibration (every half horizon from the first state), and at most
 # this many held-out trials (spread evenly over the folds): enough for a coverage to ±0.5 %, and cheap.
 _CALIBRATION_STARTS = 3
@@ -136,6 +138,26 @@ def fit_gain(
     """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.ioc.estimate_gain` on the shifted states."""
     shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(demos, refs, strict=True)]
     return np.ascontiguousarray(estimate_gain(shifted, system, method))
+
+
+def state_envelope(demos: Sequence[Demonstration]) -> np.ndarray:
+    """The box ``[lo; hi]`` (2, n) the training states span, widened by ``ENVELOPE_MARGIN`` of its width per state.
+
+    A rollout outside it asks the model (the gain, the GMR's components, the residual statistics) about states it
+    has never seen: the prediction says so (``Prediction.envelope_exit``) and evaluations count it.
+    """
+    X = np.concatenate([d.x for d in demos])
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    pad = ENVELOPE_MARGIN * np.maximum(hi - lo, 1e-9)
+    return np.stack([lo - pad, hi + pad])
+
+
+def envelope_exit(X: np.ndarray, envelope: np.ndarray | None) -> int:
+    """First row of the trajectory ``X`` (H+1, n) outside the envelope, -1 if none (or no envelope)."""
+    if envelope is None:
+        return -1
+    outside = np.any((X < envelope[0]) | (X > envelope[1]), axis=1)
+    return int(np.argmax(outside)) if outside.any() else -1
 
 
 def as_vector(v: Any, n: int, what: str) -> np.ndarray:
@@ -295,6 +317,7 @@ class BehaviorModel:
         # trial; how far the vehicle went from its start does (see default_target).
         known = all(d.target is not None for d in demos)
         self.goal_offset_ = None if known else (goals - np.array([d.x[0] for d in demos])).mean(axis=0)
+        self.state_envelope_ = state_envelope(demos)
         self.n_features_in_ = self.system.n
         self.n_outputs_ = self.system.m
         self.n_demos_ = len(demos)
@@ -522,7 +545,8 @@ class BehaviorModel:
                         extra.update(x_samples=Xs, u_samples=Us)
                 out[b] = Prediction(
                     x=Xm[j], u=Um[j], Sigma_u=Sm[j], dt=sys_.dt, clipped=bool(clip), method=method,
-                    state_names=sys_.state_names, input_names=sys_.input_names, **extra,
+                    state_names=sys_.state_names, input_names=sys_.input_names,
+                    envelope_exit=envelope_exit(Xm[j], getattr(self, "state_envelope_", None)), **extra,
                 )
         return out  # type: ignore[return-value]
 
@@ -536,6 +560,8 @@ class BehaviorModel:
                   "noise_scale": self.noise_scale_, **arrays}
         if getattr(self, "goal_offset_", None) is not None:
             arrays["goal_offset"] = self.goal_offset_
+        if getattr(self, "state_envelope_", None) is not None:
+            arrays["state_envelope"] = self.state_envelope_
         if sys_.u_min is not None:
             arrays["system/u_min"] = sys_.u_min
         if sys_.u_max is not None:

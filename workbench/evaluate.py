@@ -237,8 +237,9 @@ def compare(
 
     Returns
     -------
-    DataFrame with columns ``trial, label, start, method, metric, value``: metrics ``rmse_<block>``, and with
-    samples ``band_<block>`` (joint) and ``band_<block>_<state>``.
+    DataFrame with columns ``trial, label, start, method, metric, value``: metrics ``rmse_<block>``,
+    ``left_envelope`` (1 where the mean rollout left the model's training-state envelope), and with samples
+    ``band_<block>`` (joint) and ``band_<block>_<state>``.
     """
     demos = _demos(test)
     if not models:
@@ -271,6 +272,8 @@ def compare(
                 x_pred = p.x[: h + 1]
                 for block, idx in blocks.items():
                     rows.append((d.id, _label(d), s, method, f"rmse_{block}", horizon_rmse(x_pred, x_true, idx)))
+                # 1 where the mean rollout left the training-state envelope within the scored steps
+                rows.append((d.id, _label(d), s, method, "left_envelope", float(0 <= p.envelope_exit <= h)))
                 # a model without a Monte Carlo band (persistence) has no band rows rather than a zero-width band
                 if samples and p.x_bands is not None:
                     lo, hi = p.x_bands[0, : h + 1], p.x_bands[-1, : h + 1]

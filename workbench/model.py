@@ -340,6 +340,8 @@ def load_model(path: str | os.PathLike) -> BehaviorModel:
     try:
         model.target_ = np.array(mf.array("target", (n,)))
         model.goal_offset_ = np.array(mf.array("goal_offset", (n,))) if "goal_offset" in mf.arrays else None
+        if "state_envelope" in mf.arrays:  # files written before the envelope existed predict without the flag
+            model.state_envelope_ = np.array(mf.array("state_envelope", (2, n)))
         model.noise_rho_ = np.array(mf.array("noise_rho", (m,)))
         model.noise_scale_ = np.array(mf.array("noise_scale", (m,)))
         fit = h.get("fit") or {}

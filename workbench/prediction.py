@@ -78,6 +78,8 @@ class Prediction:
     method : str
         The model class that made the prediction.
     state_names, input_names : tuple of str
+    envelope_exit : int
+        First step of the mean rollout outside the model's training-state envelope, -1 if none.
     """
 
     x: np.ndarray
@@ -94,6 +96,14 @@ class Prediction:
     method: str = ""
     state_names: tuple[str, ...] = field(default=())
     input_names: tuple[str, ...] = field(default=())
+    #: First step at which the mean rollout left the envelope of the training states (-1: it never did, or the
+    #: model has no envelope); beyond it the model extrapolates.
+    envelope_exit: int = -1
+
+    @property
+    def left_envelope(self) -> bool:
+        """Whether the mean rollout left the envelope of the training states (see ``envelope_exit``)."""
+        return self.envelope_exit >= 0
 
     def __post_init__(self) -> None:
         for name in ("x", "u", "Sigma_u", "x_bands", "u_bands", "x_samples", "u_samples"):

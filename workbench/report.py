@@ -353,6 +353,7 @@ class ReportInputs:
     title: str = "Workbench report"
     verdicts: list[str] = field(default_factory=list)
     objectives: Mapping[str, Any] = field(default_factory=dict)
+    envelope: pd.DataFrame | None = None
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -461,6 +462,7 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
         metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
         md += [_md_table(improvement_table(inputs.rmse)), ""]
+        md += _envelope_line(inputs.envelope)
         md += [f"**{line}**\n" for line in inputs.verdicts]
         md += [
                "![RMSE per method](figures/rmse.png)", "",
@@ -486,6 +488,16 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(md).rstrip() + "\n")
     return path
+
+
+def _envelope_line(envelope: pd.DataFrame | None) -> list[str]:
+    """How many predictions left the envelope of their model's training states (``left_envelope`` rows)."""
+    if envelope is None or not len(envelope):
+        return []
+    counts = envelope.groupby("method", sort=False)["value"].agg(["sum", "count"])
+    parts = [f"{METHOD_TITLES.get(m, m)} {int(r['sum'])} of {int(r['count'])}" for m, r in counts.iterrows()]
+    return ["Predictions whose mean rollout left the envelope of the training states (the model extrapolates "
+            "there): " + ", ".join(parts) + ".", ""]
 
 
 def _objective_interval_notes(
@@ -551,6 +563,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
             train=result.train, test=result.test, models=result.models, baselines=result.baselines,
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
             stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,
+            envelope=result.table[result.table["metric"] == "left_envelope"],
             horizon=result.horizon, samples=result.samples, seed=result.seed, notes=notes, title=title,
         ),
     )
