@@ -151,6 +151,8 @@ _DATA_TYPES = frozenset(b"ADLCSOIMPQ")
 
 
 def _formats(text: str) -> tuple[str, list[tuple[str, int, str]]]:
+    if ":" not in text:
+        raise _Unusual  # pyulog calls that corruption
     name, _, body = text.partition(":")
     fields = []
     for item in body.split(";"):
@@ -226,7 +228,9 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
                     raise _Unusual
             elif kind in b"ALC":
                 break
-            elif kind not in b"MPQ":
+            elif kind in b"MPQ":
+                _info_message(payload if kind == 0x50 else payload[1:])  # parsed as pyulog does: same failures
+            else:
                 raise _Unusual
             pos = end
         # Data section: one pass over the headers (sizes only), then everything vectorized.
@@ -252,12 +256,16 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
 
         dropouts = int(np.count_nonzero(kinds == 0x4F))
         subs: dict[int, tuple[str, int, np.dtype, int | None, int]] = {}
-        for k in np.flatnonzero((kinds == 0x41) | (kinds == 0x49)).tolist():
+        parsed = np.isin(kinds, np.frombuffer(b"AIMPQ", dtype=np.uint8))
+        for k in np.flatnonzero(parsed).tolist():
             p, size = int(at[k]), int(sizes[k])
             payload = data[p + 3 : p + 3 + size]
             if kinds[k] == 0x49:
                 key, value = _info_message(payload)
                 msg_info[key] = value
+                continue
+            if kinds[k] != 0x41:
+                _info_message(payload if kinds[k] == 0x50 else payload[1:])
                 continue
             multi_id, msg_id = payload[0], payload[1] | payload[2] << 8
             name = payload[3:].decode("utf-8", "ignore")

@@ -109,3 +109,25 @@ def test_a_damaged_file_goes_to_pyulog_and_reads_as_pyulog_reads_it(tmp_path):
     streams = ulog.read(path)
     peer = ulog._read_pyulog(str(path), damaged, None)
     assert streams.skipped == peer.skipped and list(streams.frames) == list(peer.frames)
+
+
+def test_on_damaged_bytes_the_vectorized_reader_agrees_with_pyulog_or_hands_over(tmp_path):
+    """Seeded bit flips, cuts and zeroed runs: the fast path either gives pyulog's result or leaves the file to it."""
+    data = ulog.write(tmp_path / "a.ulg", _streams()).read_bytes()
+    rng = np.random.default_rng(0)
+    fast = 0
+    for i in range(60):
+        b = bytearray(data)
+        at = int(rng.integers(16, len(b)))
+        if i % 3 == 0:
+            b[at] ^= 1 << int(rng.integers(8))
+        elif i % 3 == 1:
+            b = b[:at]
+        else:
+            b[at : at + 20] = bytes(len(b[at : at + 20]))
+        try:
+            _same_as_pyulog(tmp_path / "d.ulg", bytes(b))
+            fast += 1
+        except ulog._Unusual:
+            pass
+    assert 0 < fast < 60  # both paths were taken
