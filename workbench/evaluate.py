@@ -26,6 +26,7 @@ multi-subject design (a model per subject, held-out trials, ANOVA and paired t-t
 from __future__ import annotations
 
 import inspect
+import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -33,6 +34,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import scipy.special
 
 from workbench.dataset import read_manifest
 from workbench.demos import Demonstration, DemonstrationSet
@@ -48,6 +50,7 @@ __all__ = [
     "band_coverage",
     "one_step_coverage",
     "coverage_summary",
+    "nominal_coverage",
     "compare",
     "summarize",
     "improvement",
@@ -176,11 +179,19 @@ def one_step_coverage(
     return pd.DataFrame(rows, columns=["trial", "label", "method", "input", "n_sigma", "coverage", "n_samples"])
 
 
+def nominal_coverage(n_sigma: float | np.ndarray) -> float | np.ndarray:
+    """Share of a Gaussian within ``±n_sigma`` standard deviations, ``erf(c / √2)`` (68.3 %, 95.4 %, 99.7 %)."""
+    return scipy.special.erf(np.asarray(n_sigma, dtype=float) / math.sqrt(2.0))
+
+
 def coverage_summary(table: pd.DataFrame) -> pd.DataFrame:
-    """Pooled one-step coverage (every sample of every trial counts once) per method, input and n_sigma."""
+    """Pooled one-step coverage (every sample of every trial counts once) per method, input and n_sigma, with the
+    ``nominal`` coverage of a Gaussian at that n_sigma: a calibrated band has ``coverage ≈ nominal`` at every
+    level, not only at 3σ."""
     t = table.assign(_hits=table["coverage"] * table["n_samples"])
     g = t.groupby(["method", "input", "n_sigma"], sort=False)
-    return (g["_hits"].sum() / g["n_samples"].sum()).rename("coverage").reset_index()
+    out = (g["_hits"].sum() / g["n_samples"].sum()).rename("coverage").reset_index()
+    return out.assign(nominal=nominal_coverage(out["n_sigma"].to_numpy()))
 
 
 def _starts(n_samples: int, horizon: int, starts: str | int) -> list[int]:

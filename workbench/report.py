@@ -6,6 +6,7 @@ Agg canvas — no pyplot, no global backend, so the report runs headless and nev
 * ``demonstrations.png`` — the flown paths per strategy;
 * ``objective.png`` — normalized Q and R side by side per strategy, the attitude term called out;
 * ``variability.png`` — ŵ on a test trial with the GMR mean and 3σ band (eqs. (24)–(27));
+* ``calibration.png`` — one-step band coverage against the Gaussian nominal at 0.25σ … 3σ (the calibration curve);
 * ``predictions.png`` — predicted vs recorded trajectories of the three methods, with the Monte Carlo band;
 * ``rmse.png`` — horizon RMSE (eq. (35)) per method as box plots;
 * ``data_efficiency.png`` — RMSE against the number of training demonstrations;
@@ -37,6 +38,7 @@ __all__ = [
     "fig_data_efficiency",
     "fig_demonstrations",
     "fig_objective",
+    "fig_calibration",
     "fig_predictions",
     "fig_rmse",
     "fig_variability",
@@ -155,6 +157,37 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
             row[0].set_title(
                 f"{label}: Q / λmax(M) — attitude weight Q_φφ = {q[att]:.3g} (rank {rank} of {n})", fontsize=10
             )
+    return fig
+
+
+def fig_calibration(calibration: pd.DataFrame) -> Figure:
+    """One-step band calibration: share of recorded inputs inside ``μ̂ ± cσ̂`` against the Gaussian nominal.
+
+    One panel per strategy, one line per input, points at every level ``c`` of the study (1σ, 2σ, 3σ marked);
+    on the diagonal the band is calibrated, below it too narrow, above it too wide.
+    """
+    labels = list(dict.fromkeys(calibration["label"]))
+    fig = Figure(figsize=(3.6 * max(1, len(labels)), 3.6), layout="constrained")
+    axs = fig.subplots(1, max(1, len(labels)), squeeze=False)[0]
+    for ax, label in zip(axs, labels, strict=True):
+        t = calibration[calibration["label"] == label]
+        ax.plot([0, 100], [0, 100], color="0.6", lw=1, ls="--", label="nominal")
+        for inp, g in t.groupby("input", sort=False):
+            g = g.sort_values("n_sigma")
+            line = ax.plot(100 * g["nominal"], 100 * g["coverage"], marker=".", label=str(inp))[0]
+            marks = g[g["n_sigma"].isin([1.0, 2.0, 3.0])]
+            ax.scatter(100 * marks["nominal"], 100 * marks["coverage"], s=36, color=line.get_color(), zorder=3)
+            for r in marks.itertuples():
+                ax.annotate(f"{r.n_sigma:g}σ", (100 * r.nominal, 100 * r.coverage), fontsize=7,
+                            xytext=(3, -9), textcoords="offset points")
+        ax.set_xlim(0, 100)
+        ax.set_ylim(0, 100)
+        ax.set_aspect("equal")
+        ax.set_xlabel("nominal coverage [%]")
+        ax.set_title(f"{label}: one-step band calibration", fontsize=9)
+        ax.grid(alpha=0.3)
+    axs[0].set_ylabel("observed coverage [%]")
+    axs[0].legend(fontsize=8)
     return fig
 
 
@@ -354,6 +387,7 @@ class ReportInputs:
     verdicts: list[str] = field(default_factory=list)
     objectives: Mapping[str, Any] = field(default_factory=dict)
     envelope: pd.DataFrame | None = None
+    calibration: pd.DataFrame | None = None
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -448,6 +482,12 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     if inputs.coverage is not None and len(inputs.coverage):
         md += ["One-step coverage of ŵ by the GMR bands on the test trials:", "",
                _md_table(inputs.coverage, ".1f"), ""]
+    if inputs.calibration is not None and len(inputs.calibration):
+        save_figure(fig_calibration(inputs.calibration), fig_dir / "calibration.png")
+        md += ["![One-step band calibration](figures/calibration.png)", "",
+               "*Share of the test trials' inputs inside the model's one-step band μ̂ ± cσ̂ against the share a "
+               "Gaussian puts there, for c from 0.25σ to 3σ: on the diagonal the band is calibrated at every level, "
+               "below it too narrow.*", ""]
     if cases_w:
         save_figure(fig_variability(cases_w, input_names), fig_dir / "variability.png")
         md += ["![Residual variability with GMR bands](figures/variability.png)", "",
@@ -563,7 +603,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
             train=result.train, test=result.test, models=result.models, baselines=result.baselines,
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
             stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,
-            envelope=result.table[result.table["metric"] == "left_envelope"],
+            envelope=result.table[result.table["metric"] == "left_envelope"], calibration=result.calibration,
             horizon=result.horizon, samples=result.samples, seed=result.seed, notes=notes, title=title,
         ),
     )

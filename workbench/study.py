@@ -29,6 +29,8 @@ __all__ = [
     "METHOD_TITLES", "FLOOR_METHODS",
 ]
 
+# Band widths (in σ) of the one-step calibration curve; 1, 2 and 3 also make the coverage table.
+CALIBRATION_LEVELS = tuple(float(c) for c in np.arange(0.25, 3.01, 0.25))
 METHODS = ("proposed", "ioc_only", "gmr_only", "persistence")
 METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence"}
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator.
@@ -61,6 +63,9 @@ class StudyResult:
     failures: dict[str, dict[str, str]] = field(default_factory=dict)
     #: With :func:`run_loso`: the plant of each fold, by the trial it left out (``system`` is the last one).
     plants: dict[str, Any] = field(default_factory=dict)
+    #: Pooled one-step coverage of the proposed model's input band at every level of ``CALIBRATION_LEVELS``
+    #: against the Gaussian nominal (``label, method, input, n_sigma, coverage, nominal``): the calibration curve.
+    calibration: pd.DataFrame | None = None
     #: With ``bootstrap > 0``: per label, the bootstrap intervals of the proposed model's task objective and of its
     #: weight ratios (:class:`workbench.weights.ObjectiveIntervals`).
     objectives: dict[str, Any] = field(default_factory=dict)
@@ -249,7 +254,8 @@ def run_study(
             table = ev.compare(fitted, te, horizon=horizon, samples=samples, seed=seed)
             rmse_parts.append(table.assign(label=label))
             if "proposed" in fitted:
-                cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, method="proposed"))
+                cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, CALIBRATION_LEVELS,
+                                                               method="proposed"))
                 cov_parts.append(cov.assign(label=label))
             timings[f"compare {label}"] = time.perf_counter() - t0
             if efficiency:
@@ -289,6 +295,7 @@ def run_study(
     return StudyResult(
         demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
         coverage=_coverage_table(pd.concat(cov_parts, ignore_index=True)) if cov_parts else None,
+        calibration=pd.concat(cov_parts, ignore_index=True) if cov_parts else None,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
         stats_text=stats_text, horizon=horizon, samples=samples, seed=seed, timings=timings, failures=failures,
         objectives=objectives,
@@ -364,6 +371,9 @@ def run_loso(
     table = table.reset_index(drop=True)
     covs = [r.coverage for _, r in folds if r.coverage is not None and len(r.coverage)]
     coverage = (pd.concat(covs).groupby(["label", "input"], sort=False).mean().reset_index() if covs else None)
+    cals = [r.calibration for _, r in folds if r.calibration is not None and len(r.calibration)]
+    calibration = (pd.concat(cals).groupby(["label", "method", "input", "n_sigma"], sort=False)[["coverage", "nominal"]]
+                   .mean().reset_index() if cals else None)
     last = folds[-1][1]
     labels = list(dict.fromkeys(str(lbl) for _, r in folds for lbl in r.test))
     test = {lbl: demos._like([d for _, r in folds for d in r.test.get(lbl, [])]) for lbl in labels}
@@ -372,7 +382,7 @@ def run_loso(
     metric = ev.primary_metric(plant)
     return StudyResult(
         demos=demos, system=plant, train=train, test=test, models=last.models, baselines=last.baselines,
-        table=table, coverage=coverage, efficiency=None,
+        table=table, coverage=coverage, efficiency=None, calibration=calibration,
         stats_text=_subject_stats(ev, table, demos, metric, metric_unit(plant, metric)), horizon=horizon,
         samples=samples, seed=seed, timings={k: v for _, r in folds for k, v in r.timings.items()},
         failures=failures, plants={trial: r.system for trial, r in folds},
@@ -380,9 +390,11 @@ def run_loso(
 
 
 def _coverage_table(cov: pd.DataFrame) -> pd.DataFrame:
-    """Pooled one-step coverage as one row per label and input: % inside 1σ, 2σ, 3σ."""
+    """Pooled one-step coverage as one row per label and input: % inside 1σ, 2σ, 3σ (nominal in the header)."""
+    cov = cov[cov["n_sigma"].isin([1.0, 2.0, 3.0])]
     wide = cov.pivot_table(index=["label", "input"], columns="n_sigma", values="coverage", sort=False)
-    wide.columns = [f"inside {c:g}σ [%]" for c in wide.columns]
+    nominal = dict(zip(cov["n_sigma"], cov["nominal"], strict=True))
+    wide.columns = [f"inside {c:g}σ [%] (nominal {100 * nominal[c]:.1f})" for c in wide.columns]
     return (100.0 * wide).reset_index()
 
 
