@@ -300,8 +300,10 @@ class SessionLogger:
                                                       radii=UI(1.6 if focus else 1.0), labels=[demo.id],
                                                       show_labels=False, draw_order=3.0))
         if focus:  # a strip's label sits at its middle, where the tracks pile up; the start is where it is clear
-            self._static(f"{sbase}/start", rr.Points2D(pts[:1], colors=style.packed(color), radii=UI(4.0),
-                                                       labels=[demo.id], show_labels=True, draw_order=8.0))
+            # a label is written in its point's color: a light tint reads over tracks of the same color
+            self._static(f"{sbase}/start", rr.Points2D(pts[:1], colors=style.packed(style.light(color, 0.45)),
+                                                       radii=UI(4.0),
+                                                       labels=[demo.id], show_labels=True, draw_order=20.0))
         if demo.id not in self.animated:
             return
         if self.session.bounds is None:
