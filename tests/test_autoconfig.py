@@ -37,6 +37,7 @@ def test_choice_is_the_best_cross_validated_candidate(quad, small):
     by_rmse = ac.choose_settings(model, small, components=(1, 2), reg_covars=(0.3, 1.0), folds=2)
     rows = by_rmse.scores
     assert len(rows) == 4 and sum(r["chosen"] for r in rows) == 1
+    assert by_rmse.criterion == "prediction" and by_rmse.folds == 2
     best = min((r for r in rows if math.isfinite(r["heldout_rmse"])), key=lambda r: r["heldout_rmse"])
     assert (by_rmse.n_components, by_rmse.reg_covar) == (best["n_components"], best["reg_covar"])
     by_ll = ac.choose_settings(model, small, components=(1, 2), reg_covars=(0.3, 1.0), folds=2,
@@ -51,7 +52,7 @@ def test_choice_is_the_best_cross_validated_candidate(quad, small):
 
 def test_auto_model_records_its_choice_and_survives_a_round_trip(quad, small, tmp_path, monkeypatch):
     monkeypatch.setattr(ac, "COMPONENT_GRID", (1, 2))
-    monkeypatch.setattr(ac, "REG_COVAR_GRID", (0.3, 1.0))
+    monkeypatch.setattr(ac, "REG_COVAR_GRID", (1.0,))
     model = HumanBehaviorModel(quad, n_components="auto", reg_covar="auto", noise_folds=0,
                                fit_objective=False).fit(small)
     assert model.n_components == "auto" and model.reg_covar == "auto"  # settings stay as given

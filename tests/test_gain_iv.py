@@ -106,7 +106,8 @@ def test_cli_fit_takes_gain_iv(tmp_path, quad):
     out = tmp_path / "m.npz"
     env = {**os.environ, "COLUMNS": "160", "PYTHONWARNINGS": "ignore"}
     r = subprocess.run(
-        [sys.executable, "-m", "workbench", "fit", str(demos), "--method", "ioc-only", "--gain", "iv", "-o", str(out)],
+        [sys.executable, "-m", "workbench", "fit", str(demos), "--method", "ioc-only", "--gain", "iv",
+         "--bootstrap", "0", "-o", str(out)],
         capture_output=True, text=True, timeout=300, cwd=REPO, env=env,
     )
     assert r.returncode == 0, r.stderr

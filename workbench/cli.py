@@ -197,6 +197,10 @@ def _components(value: str) -> int | str:
     return g
 
 
+def _fit_components(value: str) -> int | str:
+    return "cv" if value == "cv" else _components(value)
+
+
 def _positive_float(value: str) -> float:
     try:
         v = float(value)
@@ -355,7 +359,9 @@ def _make_model(kind: str, system: Any, components: int | str, seed: int, gain: 
     if kind == "ioc-only":
         return wm.IOCOnlyModel(system, gain_method=gain)
     if kind == "proposed":
-        return wm.HumanBehaviorModel(system, n_components=components, random_state=seed, gain_method=gain)
+        reg: float | str = "auto" if components == "cv" else 0.5
+        return wm.HumanBehaviorModel(system, n_components="auto" if components == "cv" else components,
+                                     reg_covar=reg, random_state=seed, gain_method=gain)
     return wm.GMROnlyModel(system, n_components=components, random_state=seed)
 
 
@@ -367,6 +373,9 @@ def cmd_fit(ctx: _Context) -> int:
     t0 = time.perf_counter()
     with ctx.progress() as progress:
         components = a.components
+        if components == "cv" and a.method != "proposed":
+            raise DataError("--components cv chooses the proposed model's settings; use a number or 'auto' with "
+                            f"--method {a.method}")
         if components == "auto" and a.method != "ioc-only":
             from workbench.study import select_components
 
@@ -439,6 +448,11 @@ def _print_model(ctx: _Context, model: Any, ds: Any) -> None:
     g = getattr(model, "n_components_", None) or getattr(model, "n_components", None)
     if g is not None:
         ctx.say(f"GMM components: {g}")
+    auto = getattr(model, "auto_", None)
+    if auto is not None:
+        ctx.say(f"chose G = {auto.n_components}, reg_covar = {auto.reg_covar:g} by {auto.folds}-fold cross-validation "
+                f"over the trials ({auto.criterion}); held-out 3 s RMSE per candidate: " + ", ".join(
+                    f"G{r['n_components']}/{r['reg_covar']:g} {r['heldout_rmse']:.3g}" for r in auto.scores))
 
 
 def cmd_predict(ctx: _Context) -> int:
@@ -1012,7 +1026,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("demos", metavar="DEMOS", help="demonstrations (.parquet) or a raw log (with --mapping)")
     p.add_argument("-o", "--output", required=True, metavar="MODEL.npz")
     p.add_argument("--label", help="fit only the trials of this strategy label")
-    p.add_argument("--components", type=_components, default=5, metavar="G|auto")
+    p.add_argument("--components", type=_fit_components, default=5, metavar="G|auto|cv",
+                   help="GMM components (default 5, the paper's); auto: by BIC; cv: the proposed model chooses G and "
+                        "reg_covar by cross-validation over the trials (held-out 3 s predictions)")
     p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
                    help="the proposed model (default) or one of its baselines")
     p.add_argument("--gain", choices=["direct", "dmd", "iv"], default="direct",
