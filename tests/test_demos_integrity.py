@@ -108,3 +108,25 @@ def test_single_bit_flips_are_detected_or_harmless(small, tmp_path):
     # the page CRCs alone leave ~1 % changed; with the checksum every changed value or metadata entry is caught
     assert outcomes["changed"] == 0, outcomes
     assert outcomes["error"] > 0 and outcomes["identical"] > 0, outcomes  # the sample reaches data and slack
+
+
+@pytest.mark.parametrize(
+    ("where", "value"),
+    [(("state_names",), []), (("state_names", 0), ["x", "y"]), (("input_names", 0), {}), (("dt",), "fast"),
+     (("demos",), [1, 2]), (("demos", 0, "target"), {}), (("demos", 0, "target", 1), "x"), (("version",), None)],
+)
+def test_metadata_with_values_of_the_wrong_kind_is_a_format_error(small, tmp_path, where, value):
+    """A file without the checksum (older, or written by hand) whose metadata hold the wrong kinds of values."""
+    path = small.save(tmp_path / "a.parquet")
+    table = pq.read_table(path)
+    header = json.loads(table.schema.metadata[b"workbench"])
+    del header["sha256"]
+    node = header
+    for key in where[:-1]:
+        node = node[key]
+    node[where[-1]] = value
+    bad = tmp_path / "bad.parquet"
+    pq.write_table(table.replace_schema_metadata({b"workbench": json.dumps(header).encode()}), bad)
+    with pytest.raises(DataError) as info:
+        DemonstrationSet.load(bad)
+    assert str(bad) in str(info.value)

@@ -487,6 +487,8 @@ class DemonstrationSet(Sequence[Demonstration]):
                 raise FormatError(f"{path}: metadata names format {header.get('format')!r}, not {FORMAT_NAME!r}")
             version = int(header["version"])
             names = (list(header["state_names"]), list(header["input_names"]), float(header["dt"]))
+            if not all(isinstance(s, str) for s in names[0] + names[1]):
+                raise TypeError(f"state and input names must be text, got {names[0] + names[1]}")
             metas = list(header["demos"])
             roles = Roles.from_json(header.get("roles"), f"{path}: roles")
             meta = {str(m.get("id")): m for m in metas}
@@ -509,3 +511,5 @@ class DemonstrationSet(Sequence[Demonstration]):
             if str(path) in str(exc):
                 raise
             raise DataError(f"{path}: {exc}") from None
+        except (ValueError, TypeError) as exc:  # metadata of the right JSON shape holding the wrong kinds of values
+            raise FormatError(f"{path}: damaged workbench metadata ({type(exc).__name__}: {exc})") from None
