@@ -102,7 +102,8 @@ def speedup(n_subjects: int = 20, workers: int = 2) -> dict:
     max_rel = float(np.nanmax(np.abs(a - b) / np.maximum(np.abs(a), 1e-300)))
     return {
         "subjects": n_subjects, "workers": workers, "serial_s": t_serial, "parallel_s": t_parallel,
-        "speedup": t_serial / t_parallel, "cluster_start_s": t_start, "task_s": task_s,
+        "speedup": t_serial / t_parallel, "cluster_start_s": t_start, "task_mean_s": statistics.mean(task_s),
+        "task_max_s": max(task_s),
         "load_serial": f"{load0} → {load1}", "load_parallel": f"{load2} → {load3}",
         "scheduler_ms_per_task": overhead_ms, "max_rel_diff": max_rel, "cpus": os.cpu_count(),
     }
@@ -157,8 +158,7 @@ def large(n_subjects: int = 200, workers: int = 2) -> dict:
 def estimate(sp: dict, sizes: dict, n_subjects: int = 2000, nodes: int = 32, cores_per_node: int = 16) -> dict:
     """2,000 subjects on ``nodes`` × ``cores_per_node`` single-threaded workers, from the measured numbers."""
     workers = nodes * cores_per_node
-    t_task = statistics.mean(sp["task_s"])
-    t_max = max(sp["task_s"])
+    t_task, t_max = sp["task_mean_s"], sp["task_max_s"]
     waves = math.ceil(n_subjects / workers)
     compute = waves * t_task + (t_max - t_task)  # full waves, and the slowest task as the tail
     scheduler = n_subjects * sp["scheduler_ms_per_task"] / 1000.0
@@ -208,6 +208,11 @@ def _report(sp: dict, sizes: dict, lg: dict, est: dict) -> str:
          "value": ", ".join(f"{v:.0f}" for v in lg["worker_peak_mb"]), "unit": "MB"},
     ]
     t = est
+    per_task_20 = sp["parallel_s"] * sp["workers"] / sp["subjects"]
+    waves_200 = math.ceil(lg["subjects"] / lg["workers"])
+    staging_200 = lg["subjects"] * sizes["stage_s_per_subject"]
+    per_task_200 = (lg["wall_s"] - lg["cluster_start_s"] - staging_200) / waves_200
+    predicted_200 = lg["cluster_start_s"] + staging_200 + waves_200 * per_task_20
     lines = [
         "# Scaling out (bench/bench_scale.py)",
         "",
@@ -262,7 +267,16 @@ def _report(sp: dict, sizes: dict, lg: dict, est: dict) -> str:
         "plus the cluster's start-up (workers importing the workbench: "
         f"{sp['cluster_start_s']:.0f} s here, in parallel on every node). The run is compute-bound: "
         f"{t['waves']} waves of single-subject tasks; more nodes shorten it until W ≈ {t['subjects']:,} "
-        f"(one wave, ≈ {t['t_task_max_s']:.0f} s, the slowest subject).",
+        f"(one wave, ≈ {t['t_task_max_s']:.0f} s, the slowest subject). Each node needs "
+        f"{t['cores_per_node']} × {max(lg['worker_peak_mb']):.0f} MB ≈ "
+        f"{t['cores_per_node'] * max(lg['worker_peak_mb']) / 1024:.1f} GB for its workers.",
+        "",
+        "How far the machine's load moves such an estimate, from the two runs above: a task took "
+        f"{per_task_20:.1f} s per worker in the {sp['subjects']}-subject run on {sp['workers']} workers and "
+        f"{per_task_200:.1f} s in the {lg['subjects']}-subject run (its wall time less start-up and staging, over "
+        f"{math.ceil(lg['subjects'] / lg['workers'])} waves); the same model with the first figure predicts "
+        f"{predicted_200:.0f} s for the {lg['subjects']}-subject run, which took {lg['wall_s']:.0f} s. On a shared "
+        "machine per-task times vary by tens of percent; the estimate scales linearly with whichever is taken.",
     ]
     return "\n".join(lines) + "\n"
 
@@ -273,18 +287,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--large", type=int, default=200)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--large-only", type=int, metavar="N", help=argparse.SUPPRESS)
+    parser.add_argument("--render", action="store_true",
+                        help="write results_scale.md again from results_scale.json (the last run's measurements)")
     a = parser.parse_args(argv)
     if a.large_only:
         print(json.dumps(large(a.large_only, a.workers)))
         return 0
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        sp = speedup(a.subjects, a.workers)
-        print(json.dumps({k: v for k, v in sp.items() if k != "task_s"}), flush=True)
-        sizes = task_sizes(a.subjects)
-        print(json.dumps(sizes), flush=True)
-    lg = _large_in_subprocess(a.large, a.workers)
-    print(json.dumps(lg), flush=True)
+    raw = HERE / "results_scale.json"
+    if a.render:  # the report again from the measurements of the last run
+        sp, sizes, lg = (json.loads(raw.read_text())[k] for k in ("speedup", "sizes", "large"))
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sp = speedup(a.subjects, a.workers)
+            print(json.dumps(sp), flush=True)
+            sizes = task_sizes(a.subjects)
+            print(json.dumps(sizes), flush=True)
+        lg = _large_in_subprocess(a.large, a.workers)
+        print(json.dumps(lg), flush=True)
+        atomic_write_text(raw, json.dumps({"speedup": sp, "sizes": sizes, "large": lg}, indent=1))
     est = estimate(sp, sizes)
     text = _report(sp, sizes, lg, est)
     atomic_write_text(HERE / "results_scale.md", text)
