@@ -142,3 +142,40 @@ def test_cli_prints_one_line_naming_the_file(good, tmp_path, capsys, damage):
     assert code == 1
     assert len(err) == 1 and err[0].startswith("error: ") and str(bad) in err[0], err
     assert "error: error" not in err[0]
+
+
+@pytest.fixture(scope="module")
+def ioc_model(tmp_path_factory) -> Path:
+    from workbench.model import IOCOnlyModel
+    from workbench.simulate import simulate_landings
+    from workbench.system import planar_quadrotor
+
+    ds = simulate_landings("CS1", 3, seed=5)
+    return IOCOnlyModel(planar_quadrotor(dt=ds.dt)).fit(ds).save(tmp_path_factory.mktemp("ioc") / "m.npz")
+
+
+@pytest.mark.parametrize(
+    ("where", "value"),
+    [(("settings",), [1, 2]), (("settings",), 3), (("fit",), 2.5), (("arrays", "K", "shape"), None),
+     (("arrays", "K"), "x"), (("system",), "x"), (("system", "dt"), "fast")],
+)
+def test_header_entries_of_the_wrong_kind_are_model_file_errors(ioc_model, tmp_path, where, value):
+    """A header rewritten by hand (the zip's CRCs intact) whose entries hold the wrong kinds of values."""
+    import json
+
+    from workbench.model import load_model
+
+    with np.load(ioc_model) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    header = json.loads(arrays["__header__"].tobytes())
+    node = header
+    for key in where[:-1]:
+        node = node[key]
+    node[where[-1]] = value
+    arrays["__header__"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    bad = tmp_path / "bad.npz"
+    with open(bad, "wb") as fh:
+        np.savez(fh, **arrays)
+    with pytest.raises(ModelFileError) as info:
+        load_model(bad)
+    assert str(bad) in str(info.value)

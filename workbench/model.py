@@ -328,7 +328,10 @@ def load_model(path: str | os.PathLike) -> BehaviorModel:
         raise
     except (KeyError, TypeError, ValueError, DataError, ModelError) as exc:
         raise ModelFileError(f"{mf.path}: damaged model file: system ({type(exc).__name__}: {exc})") from None
-    settings = dict(h.get("settings") or {})
+    settings = h.get("settings") or {}
+    if not isinstance(settings, dict):
+        raise ModelFileError(f"{mf.path}: damaged model file: settings are a {type(settings).__name__}, not a table")
+    settings = dict(settings)
     unknown = sorted(set(settings) - set(cls._param_names()))
     if unknown:
         raise ModelFileError(f"{mf.path}: damaged model file: unknown {cls.__name__} settings {unknown}")
@@ -357,7 +360,7 @@ def load_model(path: str | os.PathLike) -> BehaviorModel:
         model._restore(mf)
     except ModelFileError:
         raise
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # AttributeError: a header entry not a table
         raise ModelFileError(f"{mf.path}: damaged model file ({type(exc).__name__}: {exc})") from None
     if np.any(model.noise_rho_ < 0) or np.any(model.noise_rho_ > RHO_MAX) or np.any(model.noise_scale_ < 0):
         raise ModelFileError(

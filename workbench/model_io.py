@@ -207,7 +207,9 @@ def read_model_file(path: str | os.PathLike) -> ModelFile:
         if a.dtype.kind not in _ALLOWED_KINDS:
             raise ModelFileError(f"{path}: damaged model file: array {name!r} has non-numeric dtype {a.dtype}")
         spec = declared.get(name)
-        if spec is None or list(a.shape) != list(spec.get("shape", [])):
+        if spec is not None and not (isinstance(spec, dict) and isinstance(spec.get("shape"), list)):
+            raise ModelFileError(f"{path}: damaged model file: the header's entry of array {name!r} is {spec!r}")
+        if spec is None or list(a.shape) != spec["shape"]:
             raise ModelFileError(
                 f"{path}: damaged model file: array {name!r} has shape {a.shape}, header says "
                 f"{None if spec is None else spec.get('shape')}"
