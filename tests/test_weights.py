@@ -107,6 +107,8 @@ def test_factor_and_identifiability_are_computed_from_paired_resamples():
     assert [iv.name for iv in intervals] == ["Q_p / R_u", "Q_s / R_u"]
     assert NOT_IDENTIFIABLE in RatioInterval("r", 1.0, 0.5, 6.0, 95).describe()
     assert NOT_IDENTIFIABLE not in RatioInterval("r", 1.0, 0.5, 4.9, 95).describe()
+    # a weight at the bottom of the search (zero) is no finite ratio, however narrow its interval
+    assert not RatioInterval("r", 1e-13, 1e-13, 2e-13, 95).identifiable
 
 
 def test_ratios_need_the_diagonal_structure():

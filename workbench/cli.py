@@ -388,7 +388,7 @@ def cmd_fit(ctx: _Context) -> int:
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and getattr(model, "K_", None) is not None:
-        _print_bootstrap(ctx, ds, system, a.bootstrap, a.seed, a.gain)
+        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, a.gain)
         _print_ratios(ctx, model, ds, a.bootstrap, a.seed)
     elif getattr(model, "objective_", None) is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
@@ -412,6 +412,16 @@ def _print_bootstrap(ctx: _Context, ds: Any, system: Any, n_boot: int, seed: int
     for i, u in enumerate(ds.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(ds.state_names, result.K_lo[i], result.K_hi[i], strict=True)))
+
+
+def _as_fitted(ds: Any, model: Any) -> Any:
+    """The trials as a goal-relative model fitted them (states minus their targets), so the bootstrap's point
+    estimate is the model's own gain and objective; unchanged for a model of ``u = K̂x``."""
+    from workbench.demos import Demonstration
+
+    if not getattr(model, "goal_relative_", False):
+        return ds
+    return ds._like([Demonstration(d.t, d.x - d.target, d.u, d.meta) for d in ds])
 
 
 def _print_ratios(ctx: _Context, model: Any, ds: Any, n_boot: int, seed: int) -> None:

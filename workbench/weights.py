@@ -31,6 +31,9 @@ __all__ = [
 ]
 
 IDENTIFIABLE_SPAN = 10.0
+# Weights are scaled to a largest weight of 1 per part and searched down to e^-30 ≈ 1e-13: a ratio below this is a
+# weight at the bottom of the search, i.e. zero, and an interval reaching it is not a finite ratio.
+ZERO_RATIO = 1e-9
 NOT_IDENTIFIABLE = "not identifiable from these data"
 
 
@@ -46,8 +49,8 @@ class RatioInterval:
 
     @property
     def span(self) -> float:
-        """``hi / lo``: how many-fold the interval stretches (``inf`` if it reaches 0)."""
-        return float(self.hi / self.lo) if self.lo > 0 else float("inf")
+        """``hi / lo``: how many-fold the interval stretches (``inf`` if it reaches 0, i.e. ``ZERO_RATIO``)."""
+        return float(self.hi / self.lo) if self.lo > ZERO_RATIO else float("inf")
 
     @property
     def identifiable(self) -> bool:
