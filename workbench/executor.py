@@ -276,7 +276,8 @@ class DaskExecutor:
             self.address = str(scheduler)
         else:
             self._cluster = LocalCluster(
-                n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None,
+                # any free port for the scheduler's HTTP endpoint: two studies at once must not collide on 8787
+                n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0",
                 silence_logs=logging.ERROR,
             )
             self._client = Client(self._cluster)
