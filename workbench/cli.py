@@ -637,8 +637,33 @@ def _print_study(ctx: _Context, result: Any) -> None:
         ctx.say(cov)
     if result.stats_text:
         ctx.say(result.stats_text)
+    _print_objective_comparison(ctx, result)
     for line in result.verdicts():
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
+
+
+def _print_objective_comparison(ctx: _Context, result: Any) -> None:
+    """Weight ratios inside coupled parts per strategy, and each one's factor against the first strategy."""
+    from rich.table import Table
+
+    from workbench.weights import NOT_IDENTIFIABLE, compare_strategies
+
+    boots = {lb: oi.ratio_boot for lb, oi in getattr(result, "objectives", {}).items() if oi.ratio_boot is not None}
+    if not boots:
+        return
+    table = compare_strategies(boots, result.demos.state_names, result.demos.input_names)
+    first = next(iter(boots))
+    out = Table("ratio", "strategy", "estimate [95 % interval]", f"× vs {first}", "",
+                title="task-objective weight ratios inside coupled parts (closest diagonal cost, bootstrap)")
+    for r in table.itertuples():
+        factor = getattr(r, "factor", float("nan"))
+        note = r.note if r.strategy == first or factor != factor else (r.factor_note or r.note)
+        out.add_row(r.ratio, str(r.strategy), f"{r.estimate:.3g} [{r.lo:.3g}, {r.hi:.3g}]",
+                    "" if factor != factor else f"{factor:.3g} [{r.factor_lo:.3g}, {r.factor_hi:.3g}]",
+                    note if note else "")
+    ctx.say(out)
+    if (table["note"] == NOT_IDENTIFIABLE).any():
+        ctx.say(f"(\"{NOT_IDENTIFIABLE}\": the 95 % interval spans more than ×10)")
 
 
 def _output_kwargs(a: argparse.Namespace, default: Path) -> dict[str, Any]:
