@@ -343,7 +343,7 @@ def _channel(name: str, value: Any, path: str) -> Channel:
     if not isinstance(value, dict):
         raise _fail(path, where, f"must be a source string or a table, got {value!r}")
     transform = value.get("transform", "identity")
-    if transform not in TRANSFORMS:
+    if not isinstance(transform, str) or transform not in TRANSFORMS:
         raise _fail(path, f"{where}.transform", f"unknown transform {transform!r}; known: {sorted(TRANSFORMS)}")
     params = TRANSFORMS[transform].params
     sel = _selector(value, path, where, extra=(_CHANNEL_KEYS | set(params)) - {"source", "where"})
@@ -471,6 +471,9 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
     if "dt" not in raw:
         raise _fail(at, "dt", "missing (the grid step in seconds)")
     dt = _number(raw["dt"], at, "dt", positive=True)
+    for fmt in FORMAT_NAMES:
+        if fmt in raw and not isinstance(raw[fmt], dict):
+            raise _fail(at, fmt, f"must be a table of overrides ([{fmt}.channels], …), got {raw[fmt]!r}")
     states = _names(raw.get("states"), at, "states")
     inputs = _names(raw.get("inputs"), at, "inputs")
     if clash := sorted(set(states) & set(inputs)):

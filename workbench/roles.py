@@ -147,7 +147,7 @@ class Roles:
             v = doc.get(key) or ()
             if isinstance(v, str):
                 v = (v,)
-            if not all(isinstance(s, str) for s in v):
+            if not isinstance(v, list | tuple) or not all(isinstance(s, str) for s in v):
                 raise DataError(f"{where}: {key} must be a list of state names, got {v!r}")
             return tuple(v)
 

@@ -78,6 +78,9 @@ def test_an_unknown_mapping_name_lists_the_shipped_ones():
         (BASE + "[meta]\nfields = 3\n", "meta.fields"),
         (BASE + '[meta]\nfields = ["id", "lable"]\n', "meta.fields: unknown field 'lable' (did you mean 'label'?)"),
         (BASE + '[meta]\nfields = ["id", "pilot"]\n', "unknown field 'pilot'; known: id, label, subject"),
+        ('tlog = 3\n' + BASE, "tlog: must be a table of overrides"),
+        (BASE.replace('u = "T.stick"', 'u = { source = "T.stick", transform = ["a"] }'), "unknown transform ['a']"),
+        (BASE + "[roles]\nposition = 3\n", "position must be a list of state names"),
         (BASE.replace('inputs = ["u"]', 'inputs = ["a"]'), "are also states"),
     ],
 )
