@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import csv as _csv
 import os
+import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -55,9 +56,8 @@ SEPARATION = 60.0
 MAX_MAGNITUDE = 1e100
 
 # A number as text (what a numeric cell pyarrow read as text because of some other cell looks like).
-_NUMBER = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|^\s*[-+]?(?i:nan|inf|infinity)\s*$"
+_NUMBER = re.compile(r"\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|\s*[-+]?(nan|inf|infinity)\s*$", re.I | re.A)
 _FLAGS = {"true": True, "false": False}
-_THREADED_BYTES = 4 << 20
 
 
 def looks_like_csv(head: bytes) -> bool:
@@ -147,8 +147,7 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     where = os.fspath(path)
     lines = _Lines(where)
     try:
-        size = os.path.getsize(path)
-        if size == 0:
+        if os.path.getsize(path) == 0:
             raise DataError(f"{where}: empty file, not a CSV file")
         with open(path, "rb") as f:
             header = f.readline()
@@ -159,16 +158,9 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
             strings_can_be_null=True,
             auto_dict_encode=True,
         )
-        try:
-            # Threads pay off on large files only; on a small one starting them costs more than they save. The
-            # serial reader types a column from its first block; the threaded one widens a type a later block
-            # needs (an integer column with "nan" or "1.5" further down), so a conversion error is read again.
-            table = pcsv.read_csv(where, read_options=pcsv.ReadOptions(use_threads=size > _THREADED_BYTES),
-                                  convert_options=convert)
-        except pa.ArrowInvalid:
-            if size > _THREADED_BYTES:
-                raise
-            table = pcsv.read_csv(where, read_options=pcsv.ReadOptions(use_threads=True), convert_options=convert)
+        # The threaded reader widens a type a later block needs (an integer column with "nan" or "1.5" further
+        # down), where the serial one fails: it is used for every size.
+        table = pcsv.read_csv(where, convert_options=convert)
         table = table.unify_dictionaries()
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
@@ -202,13 +194,16 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
         raise DataError(f"{where}, line {lines.of_row(k)}, column 't': not numeric")
 
     encoded = _encoded(table.column(columns.index("demo")), pa)
-    ids = pc.utf8_trim_whitespace(encoded.dictionary)
-    ids = pc.if_else(pc.equal(ids, ""), pa.scalar(None, pa.string()), ids)
-    if ids.null_count or len(pc.unique(ids)) != len(ids):  # ids equal up to blanks, or blank ids: merge them
-        encoded = ids.take(encoded.indices).dictionary_encode()
-        ids = encoded.dictionary
-    # Dictionary indices number the demonstrations in order of first appearance.
-    rank = pc.fill_null(encoded.indices, -1).to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
+    # Ids equal up to blanks are one demonstration and a blank id is none; the dictionary is in order of first
+    # appearance, so the merged numbering is too.
+    merged: dict[str, int] = {}
+    remap = np.full(len(encoded.dictionary) + 1, -1, dtype=np.int64)
+    for i, word in enumerate(encoded.dictionary.to_pylist()):
+        word = word.strip() if word is not None else ""
+        if word:
+            remap[i] = merged.setdefault(word, len(merged))
+    ids = pa.array(list(merged), pa.string())
+    rank = remap[_indices(encoded, pc)]
     keep = np.isfinite(t) & (rank >= 0)
     skipped = {}
     if not keep.all():
@@ -273,22 +268,21 @@ def _column(col: pa.ChunkedArray, name: str, lines: _Lines, where: str, pa, pc) 
         col = col.cast(pa.string())  # dates and times pyarrow recognised: the long format has no such column
     # Text columns hold few distinct values (labels, subjects): every test runs on the distinct values only.
     encoded = _encoded(col, pa)
-    words = pc.utf8_trim_whitespace(encoded.dictionary)
-    words = pc.if_else(pc.equal(words, ""), pa.scalar(None, pa.string()), words)
-    lowered = pc.utf8_lower(words)
-    is_flag = pc.fill_null(pc.is_in(lowered, value_set=pa.array(list(_FLAGS))), False)
-    is_number = pc.fill_null(pc.match_substring_regex(words, _NUMBER), False)
-    is_word = pc.and_(pc.invert(pc.or_(is_number, is_flag)), pc.is_valid(words))
-    n_number, n_flag, n_word = (pc.sum(x).as_py() or 0 for x in (is_number, is_flag, is_word))
-    if n_number == 0 and (n_flag == 0 or n_word > 0):  # a text column (labels, subjects, outcomes)
-        return words.take(encoded.indices)
-    if n_word:
-        k = int(np.argmax(pc.fill_null(is_word.take(encoded.indices), False).to_numpy(zero_copy_only=False)))
-        word = words[encoded.indices[k].as_py()].as_py()
-        raise DataError(f"{where}, line {lines.of_row(k)}, column {name!r}: not a number ({word!r})")
-    numbers = pc.if_else(is_number, words, pa.scalar(None, pa.string())).cast(pa.float64())
-    flags = pc.if_else(is_flag, pc.equal(lowered, "true"), pa.scalar(None, pa.bool_())).cast(pa.float64())
-    values = pc.coalesce(numbers, flags).take(encoded.indices).to_numpy(zero_copy_only=False)
+    raw = encoded.dictionary.to_pylist()
+    words = [w.strip() or None if w is not None else None for w in raw]
+    is_number = [w is not None and _NUMBER.match(w) is not None for w in words]
+    is_flag = [w is not None and w.lower() in _FLAGS for w in words]
+    is_word = [w is not None and not (n or f) for w, n, f in zip(words, is_number, is_flag, strict=True)]
+    if not any(is_number) and (not any(is_flag) or any(is_word)):  # a text column (labels, subjects, outcomes)
+        dictionary = encoded.dictionary if words == raw else pa.array(words, pa.string())
+        return dictionary.take(encoded.indices)
+    index = _indices(encoded, pc)
+    if any(is_word):
+        k = int(np.argmax(np.asarray(is_word + [False])[index]))
+        raise DataError(f"{where}, line {lines.of_row(k)}, column {name!r}: not a number ({words[index[k]]!r})")
+    table = [float(w) if n else float(_FLAGS[w.lower()]) if f else np.nan
+             for w, n, f in zip(words, is_number, is_flag, strict=True)]
+    values = np.asarray(table + [np.nan])[index]
     return _checked_magnitude(values, name, lines, where)
 
 
@@ -296,6 +290,12 @@ def _encoded(col: pa.ChunkedArray, pa) -> pa.DictionaryArray:
     """A text column as one dictionary array (pyarrow gives unified dictionaries, or plain text past 50 values)."""
     whole = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
     return whole if pa.types.is_dictionary(whole.type) else whole.dictionary_encode()
+
+
+def _indices(encoded: pa.DictionaryArray, pc) -> np.ndarray:
+    """Dictionary indices as int64, a missing cell as -1 (the last entry of a table one longer)."""
+    indices = pc.fill_null(encoded.indices, -1) if encoded.indices.null_count else encoded.indices
+    return indices.to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
 
 
 def _checked_magnitude(values: np.ndarray, name: str, lines: _Lines, where: str) -> np.ndarray:

@@ -181,8 +181,8 @@ def test_blanks_around_ids_and_labels_are_trimmed_and_ids_merge(tmp_path):
 
 @pytest.mark.parametrize(("cell", "expected"), [("nan", np.nan), ("1.5", 1.5)])
 def test_an_integer_column_widened_past_the_first_block_reads_as_float(tmp_path, cell, expected):
-    """pyarrow's serial reader types a column from its first 1 MB; a later "nan" or "1.5" must still read."""
-    n = 80_000  # about 2 MB: past the first block, below the size where the reader uses threads
+    """pyarrow infers a column's type from its first 1 MB block; a later "nan" or "1.5" must still read."""
+    n = 80_000  # about 2 MB: past the first block
     lines = ["demo,t,k", *(f"a,{i * 0.1},{i}" for i in range(n))]
     lines[n - 10] = f"a,{(n - 11) * 0.1},{cell}"
     path = _write(tmp_path, "\n".join(lines) + "\n")
