@@ -62,6 +62,8 @@ def main(argv: list[str]) -> int:
         for row in rows:
             if type(row.get("met")).__name__ in ("bool", "bool_"):  # older benchmarks give True / False
                 row = {**row, "met": "met" if row["met"] else "NOT met"}
+            if str(row.get("target", "-")) in ("-", ""):
+                continue  # a figure without a target: in its section only
             if row.get("met") in ("met", "NOT met") or str(row.get("met", "")).startswith("met ("):
                 value = next((row[k] for k in ("speed_ratio", "seconds", "rss_x_file", "ratio (×)", "ratio", "speedup")
                               if k in row), "")
