@@ -16,6 +16,7 @@ Formats: MAVLink ``.tlog``, MCAP, PX4 ULog, CSV (:mod:`adapters.formats`), recog
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import os
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
@@ -55,6 +56,8 @@ def __getattr__(name: str):
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value
+    if not name.startswith("_") and importlib.util.find_spec(f"adapters.{name}") is not None:
+        return importlib.import_module(f"adapters.{name}")  # a submodule, as when the package imported them all
     raise AttributeError(f"module 'adapters' has no attribute {name!r}")
 
 
