@@ -683,6 +683,10 @@ class TaskGMRModel(BehaviorModel):
             spec = FrameSpec(tuple(fr["kinds"]), fr["angle_index"], tuple(fr["position_idx"]))
         except (KeyError, TypeError, ValueError, ModelError) as exc:
             raise ModelFileError(f"{mf.path}: damaged model file: frame specification {fr!r} ({exc})") from None
+        named = [*spec.position_idx, *([] if spec.angle_index is None else [spec.angle_index])]
+        if any(not 0 <= i < n for i in named) or len(set(spec.position_idx)) != len(spec.position_idx):
+            raise ModelFileError(f"{mf.path}: damaged model file: frame specification {fr!r} names states outside "
+                                 f"0…{n - 1} or one state twice")
         w = mf.array("tpgmm/weights", (None,))
         G = w.shape[0]
         means = mf.array("tpgmm/means", (spec.n_frames, G, D))

@@ -159,4 +159,7 @@ class Roles:
                 raise DataError(f"{where}: {key} must be one state name, got {v!r}")
         if not isinstance(units, Mapping):
             raise DataError(f"{where}: units must be a table of name = \"unit\", got {units!r}")
-        return cls(names("position"), names("velocity"), heading, vertical, tuple(units.items()))
+        try:
+            return cls(names("position"), names("velocity"), heading, vertical, tuple(units.items()))
+        except DataError as exc:  # the roles' own checks do not know where they were read from
+            raise DataError(f"{where}: {exc}") from None

@@ -1,0 +1,155 @@
+"""Seeded fuzzing of the documents inside files: every entry may be replaced by a value of another kind.
+
+Byte damage (tests/test_fuzz.py) is caught by CRCs and checksums before a parser sees odd values; a file written
+by hand or by another program is not. Here a mapping's TOML tables, a demonstration file's ``workbench`` metadata
+(without its checksum, as an older file) and a model file's JSON header get one entry replaced by a number, a
+string, a list, a table, … or deleted, and are then loaded the way the CLI loads them. The outcome must be a
+load or a :class:`~workbench.errors.WorkbenchError` naming the file.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import tomllib
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+VALUES: tuple[Any, ...] = (0, -1, 2.5, 1e308, 10**30, float("nan"), True, "", "x", "S.x", [], [1, 2], ["x", "y"],
+                           [[1]], ["a", 1], {}, {"a": 1}, {"source": 3})
+
+
+def _paths(doc: Any, prefix: tuple = ()) -> Iterator[tuple]:
+    if prefix:
+        yield prefix
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            yield from _paths(v, (*prefix, k))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            yield from _paths(v, (*prefix, i))
+
+
+def mutations(doc: dict, n: int, seed: int, skip: tuple[str, ...] = ()) -> Iterator[tuple[tuple, Any, dict]]:
+    """``n`` copies of ``doc``, each with one entry replaced by a value from :data:`VALUES` or deleted."""
+    rng = np.random.default_rng(seed)
+    paths = [p for p in _paths(doc) if p[0] not in skip]
+    for _ in range(n):
+        where = paths[int(rng.integers(len(paths)))]
+        out = copy.deepcopy(doc)
+        node = out
+        for key in where[:-1]:
+            node = node[key]
+        if isinstance(node, dict) and rng.random() < 0.15:
+            del node[where[-1]]
+            value: Any = "<deleted>"
+        else:
+            value = VALUES[int(rng.integers(len(VALUES)))]
+            node[where[-1]] = value
+        yield where, value, out
+
+
+def _outcome(call, path: Path, where: tuple, value: Any, found: list, also: Path | None = None) -> None:
+    """Run ``call``; a foreign exception or an error naming neither ``path`` nor ``also`` is a finding."""
+    from workbench.errors import WorkbenchError
+
+    try:
+        call()
+    except WorkbenchError as exc:
+        if not any(p is not None and (str(p) in str(exc) or p.name in str(exc)) for p in (path, also)):
+            found.append(f"{where} = {value!r}: error without the file name: {exc}")
+    except Exception as exc:  # noqa: BLE001 - the point: anything else is a finding
+        found.append(f"{where} = {value!r}: {type(exc).__name__}: {exc}")
+
+
+@pytest.fixture(scope="module")
+def originals(tmp_path_factory) -> dict[str, Path]:
+    import adapters
+    from workbench.demos import DemonstrationSet
+    from workbench.model import HumanBehaviorModel
+    from workbench.simulate import simulate_landings
+    from workbench.system import planar_quadrotor
+
+    folder = tmp_path_factory.mktemp("fuzz_values")
+    ds = simulate_landings("CS1", 2, seed=5, time_limit=3.0) + simulate_landings("CS2", 1, seed=5, time_limit=3.0)
+    ds = DemonstrationSet([d.with_meta(outcome=None) for d in ds], ds.state_names, ds.input_names, ds.dt,
+                          roles=ds.roles)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = HumanBehaviorModel(planar_quadrotor(dt=ds.dt), n_components=2, noise_folds=0).fit(ds)
+    return {"mcap": adapters.write(ds, folder / "a.mcap"), "csv": adapters.write(ds, folder / "a.csv"),
+            "parquet": ds.save(folder / "a.parquet"), "npz": model.save(folder / "m.npz"), "folder": folder}
+
+
+def fuzz_mapping(originals: dict[str, Path], n: int, seed: int) -> list[str]:
+    import adapters
+    from adapters.mapping import MAPPINGS_DIR, _parse
+
+    doc = tomllib.loads((MAPPINGS_DIR / "planar_quadrotor.toml").read_text())
+    path = originals["folder"] / "fuzzed.toml"
+    found: list[str] = []
+    for i, (where, value, raw) in enumerate(mutations(doc, n, seed)):
+        log = originals["mcap" if i % 2 else "csv"]
+        # TOML cannot be written back without a dependency; _parse is what load_mapping runs on the parsed text
+        # a mapping naming a stream the log lacks is the log's error: either file may be named
+        _outcome(lambda raw=raw, log=log: adapters.load(log, _parse(raw, str(path))), path, where, value, found, log)
+    return found
+
+
+def fuzz_parquet_metadata(originals: dict[str, Path], n: int, seed: int) -> list[str]:
+    import pyarrow.parquet as pq
+
+    from workbench.demos import DemonstrationSet
+
+    table = pq.read_table(originals["parquet"])
+    doc = json.loads(table.schema.metadata[b"workbench"])
+    del doc["sha256"]  # as a file written before the checksum: the parser alone must stand
+    path = originals["folder"] / "fuzzed.parquet"
+    found: list[str] = []
+    for where, value, header in mutations(doc, n, seed):
+        pq.write_table(table.replace_schema_metadata({b"workbench": json.dumps(header).encode()}), path)
+        _outcome(lambda: DemonstrationSet.load(path), path, where, value, found)
+    return found
+
+
+def fuzz_model_header(originals: dict[str, Path], n: int, seed: int) -> list[str]:
+    from workbench.model import load_model
+
+    with np.load(originals["npz"]) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    doc = json.loads(arrays["__header__"].tobytes())
+    path = originals["folder"] / "fuzzed.npz"
+    x0 = np.zeros(len(doc["system"]["state_names"]))
+    found: list[str] = []
+    for where, value, header in mutations(doc, n, seed):
+        with open(path, "wb") as fh:
+            np.savez(fh, **{**arrays, "__header__": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)})
+
+        def load_and_predict():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                load_model(path).predict(x0, 5, samples=3, seed=0)
+
+        _outcome(load_and_predict, path, where, value, found)
+    return found
+
+
+FUZZERS = {"mapping": fuzz_mapping, "parquet metadata": fuzz_parquet_metadata, "model header": fuzz_model_header}
+
+
+@pytest.mark.parametrize("kind", list(FUZZERS))
+def test_documents_with_values_of_another_kind_fast(originals, kind):
+    found = FUZZERS[kind](originals, 60, seed=0)
+    assert not found, "\n".join(found[:20])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", list(FUZZERS))
+def test_documents_with_values_of_another_kind_full(originals, kind):
+    found = FUZZERS[kind](originals, 1000, seed=1)
+    assert not found, "\n".join(found[:20])
