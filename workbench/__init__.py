@@ -31,10 +31,13 @@ _LAZY = {"Demonstration": "workbench.demos", "DemonstrationSet": "workbench.demo
 
 
 def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
+    import importlib
+    import importlib.util
 
+    if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value
+    if not name.startswith("_") and importlib.util.find_spec(f"workbench.{name}") is not None:
+        return importlib.import_module(f"workbench.{name}")  # a submodule, as when the package imported it
     raise AttributeError(f"module 'workbench' has no attribute {name!r}")
