@@ -166,13 +166,13 @@ def test_cross_validation_folds_are_the_same_on_two_workers(cluster, quadrotor):
 # -------------------------------------------------------------------------------------------- failures
 
 
-def _logs(folder: Path, n_good: int) -> list[Path]:
+def _logs(folder: Path, n_good: int, n_trials: int = 2) -> list[Path]:
     import adapters
 
     folder.mkdir()
     paths = []
     for i in range(n_good):
-        ds = simulate_landings("CS1" if i % 2 else "CS2", n_trials=2, seed=i, subject=f"s{i:02d}")
+        ds = simulate_landings("CS1" if i % 2 else "CS2", n_trials=n_trials, seed=i, subject=f"s{i:02d}")
         paths.append(adapters.write(ds, folder / f"log{i:02d}.csv", "planar_quadrotor"))
     (folder / "corrupt.tlog").write_bytes(b"\x00\x01 not a mavlink log " * 50)
     (folder / "empty.mcap").write_bytes(b"")
@@ -207,18 +207,23 @@ def test_a_corrupt_log_among_many_is_reported_and_the_rest_imported(cluster, tmp
     assert DemonstrationSet.load(tmp_path / "serial").ids == ds.ids
 
 
-def test_cli_import_reports_the_corrupt_log_and_the_dataset_works_like_a_file(tmp_path):
-    _logs(tmp_path / "logs", 3)
-    out = subprocess.run(
-        [sys.executable, "-m", "workbench", "import", str(tmp_path / "logs" / "*.*"), "-o", f"{tmp_path / 'ds'}/"],
-        capture_output=True, text=True, cwd=tmp_path,
-    )
+def _wb(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "workbench", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def test_cli_workers_2_imports_around_a_corrupt_log_and_studies_the_dataset_as_serial_does(tmp_path):
+    _logs(tmp_path / "logs", 3, n_trials=3)
+    out = _wb("import", str(tmp_path / "logs" / "*.*"), "-o", f"{tmp_path / 'ds'}/", "--workers", "2", cwd=tmp_path)
     assert out.returncode == 1, out.stderr
     assert f"{tmp_path / 'logs' / 'corrupt.tlog'}: not imported" in out.stderr
-    assert "from 3 of 5 logs" in out.stdout
-    insp = subprocess.run([sys.executable, "-m", "workbench", "inspect", str(tmp_path / "ds")],
-                          capture_output=True, text=True, cwd=tmp_path, check=True)
-    assert f"{len(DemonstrationSet.load(tmp_path / 'ds'))} trials" in insp.stdout
+    assert "from 3 of 5 logs" in out.stdout and "DaskExecutor" in out.stderr
+    study = ["evaluate", str(tmp_path / "ds"), "--per-subject", "--components", "2", "--horizon", "1", "-q"]
+    serial = _wb(*study, "-o", "serial.csv", cwd=tmp_path)
+    parallel = _wb(*study, "-o", "parallel.csv", "--workers", "2", cwd=tmp_path)
+    assert serial.returncode == parallel.returncode == 0, serial.stderr + parallel.stderr
+    a, b = pd.read_csv(tmp_path / "serial.csv"), pd.read_csv(tmp_path / "parallel.csv")
+    _same_table(a, b)
+    assert sorted(set(b["subject"])) == ["s00", "s01", "s02"]
 
 
 def _kill_once(marker: str, system, train=None):
