@@ -101,3 +101,11 @@ def test_an_in_process_reference_refuses_to_travel(study):
     with pytest.raises(DataError, match="cannot be sent"):
         pickle.dumps(DataRef(demos=study))
     assert pickle.loads(pickle.dumps(DataRef(path="x.parquet"))).path == "x.parquet"
+
+
+def test_commands_take_a_dataset_like_a_file(study, tmp_path, capsys):
+    from workbench.cli import main
+
+    path = write_dataset(study, tmp_path / "ds")
+    assert main(["inspect", str(path)]) == 0
+    assert f"{len(study)} trials" in capsys.readouterr().out
