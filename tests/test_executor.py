@@ -281,6 +281,15 @@ def _bad_data(i: int) -> int:
     return i
 
 
+def test_a_running_cluster_is_reached_by_its_scheduler_address(cluster, tmp_path):
+    with make_executor(scheduler=cluster.address, staging=tmp_path / "staging") as remote:
+        assert remote.workers == 2 and remote.map(_seed_state, [(1, "a")])[0].tolist() == _seed_state(
+            (1, "a")).tolist()
+    assert cluster.map(_bad_data, [1]) == [1]  # closing a client leaves the cluster running
+    with pytest.raises(WorkbenchError, match="cannot reach the Dask scheduler"):
+        DaskExecutor(scheduler="tcp://127.0.0.1:9", timeout=1)
+
+
 def test_shared_sets_travel_as_paths_not_as_data(cluster, study):
     import pickle
 

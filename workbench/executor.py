@@ -241,6 +241,8 @@ class DaskExecutor:
         :meth:`close`), which only a local cluster can see; on a real cluster give a shared file system path.
     retries : int
         Re-runs of a task that raised an unexpected exception (a ``WorkbenchError`` is not retried).
+    timeout : float
+        Seconds to wait for the scheduler at ``scheduler``.
 
     Raises
     ------
@@ -253,7 +255,7 @@ class DaskExecutor:
 
     def __init__(
         self, workers: int | None = None, scheduler: str | None = None, *, staging: str | os.PathLike | None = None,
-        retries: int = DEFAULT_RETRIES,
+        retries: int = DEFAULT_RETRIES, timeout: float = 15.0,
     ) -> None:
         if (workers is None) == (scheduler is None):
             raise WorkbenchError("give either a number of local workers or a scheduler address")
@@ -270,7 +272,7 @@ class DaskExecutor:
         self._n_shared = 0
         if scheduler is not None:
             try:
-                self._client = Client(scheduler, timeout="15s")
+                self._client = Client(scheduler, timeout=f"{float(timeout)}s")
             except (OSError, TimeoutError, ValueError) as exc:
                 raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: {_describe(exc)}") from None
             self.address = str(scheduler)
