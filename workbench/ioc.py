@@ -547,8 +547,10 @@ class InverseLQR:
         The known plant.
     structure : {"full", "S=0", "diagonal"}
         ``"full"``: Q, R, S free (always feasible for a stabilizing K, but not identifiable: the SDP picks
-        the minimum-condition-number member). ``"S=0"``: S fixed to zero. ``"diagonal"``: S = 0 and Q
-        diagonal, the identifiable case (unique up to scale). The structured variants may be infeasible.
+        the minimum-condition-number member). ``"S=0"``: S fixed to zero. ``"diagonal"``: S = 0 and diagonal
+        Q (and, with ``closest``, diagonal R), the identifiable case (unique up to one scale per decoupled part
+        of the plant). Imposed exactly (``closest=False``) the structured variants are infeasible for almost
+        every estimated gain.
     second_stage : bool
         After the α-minimization, minimize ``‖M − I‖_F`` subject to the same constraints and
         ``α ≤ 1.001 α*``; the α-optimal face can hold many M, and this picks one independent of the solver.
