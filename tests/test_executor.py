@@ -283,6 +283,7 @@ def _bad_data(i: int) -> int:
 
 def test_a_running_cluster_is_reached_by_its_scheduler_address(cluster, tmp_path):
     with make_executor(scheduler=cluster.address, staging=tmp_path / "staging") as remote:
+        remote.client.wait_for_workers(2, timeout=60)  # a worker killed by an earlier test may still be restarting
         assert remote.workers == 2 and remote.map(_seed_state, [(1, "a")])[0].tolist() == _seed_state(
             (1, "a")).tolist()
     assert cluster.map(_bad_data, [1]) == [1]  # closing a client leaves the cluster running
