@@ -274,6 +274,7 @@ class TPGMM:
         log_prob = np.zeros((N, G))
         # Blocks of rows keep the whitened points (rows x G x D) in cache and out of the peak memory.
         step = max(1, _BLOCK_VALUES // (G * D))
+        half = np.full(D, 0.5)
         for p in range(P):
             # One matrix product whitens the points for all G components of frame p at once.
             U = prec_chol[p]  # (G, D, D)
@@ -283,7 +284,9 @@ class TPGMM:
                 Y = Z[p, a : a + step] @ UU
                 Y -= shift
                 Y *= Y
-                log_prob[a : a + step] -= 0.5 * Y.reshape(-1, G, D).sum(axis=2)
+                # The sum over the D coordinates as a matrix-vector product: numpy's reduction over a short
+                # inner axis was half of the E-step.
+                log_prob[a : a + step] -= (Y.reshape(-1, D) @ half).reshape(-1, G)
         log_det = np.log(np.diagonal(prec_chol, axis1=-2, axis2=-1)).sum(axis=(0, 2))  # sum_p log|U^{i,p}|
         return log_prob + log_det - 0.5 * P * D * _LOG_2PI
 
