@@ -93,6 +93,9 @@ _HEADER_LEN = {1: 6, 2: 10}
 _PAD = 512
 # Longest run of consecutive frames with unknown message ids that is accepted (see _scan_records).
 _MAX_UNKNOWN_RUN = 16
+# Bounds on the passes of the typed reader's walk (see _scan_wanted, _walk); beyond them the full scan runs.
+_MAX_RESCANS = 8
+_MAX_PEELS = 16
 
 
 @dataclass(frozen=True)
@@ -199,8 +202,12 @@ def looks_like_tlog(head: bytes) -> bool:
 def read_streams(
     path: str | os.PathLike[str], message_types: Iterable[str] | None = None, *, types: Iterable[str] | None = None
 ) -> dict[str, pd.DataFrame]:
-    """Read a tlog into one DataFrame per message type; see :func:`read_tlog` (``types``: ``message_types``)."""
-    return read_tlog(path, message_types if message_types is not None else types).streams
+    """Read a tlog into one DataFrame per message type; see :func:`read_tlog` (``types``: ``message_types``).
+
+    The same values as ``read_tlog(path, message_types).streams``; with a type filter, faster: only the frames
+    that decide the selected messages are checksummed (no report is made).
+    """
+    return _read(path, message_types if message_types is not None else types, "ardupilotmega", False).streams
 
 
 def read_tlog(
@@ -235,10 +242,22 @@ def read_tlog(
     FormatError
         The file holds no valid MAVLink record at all (not a tlog); the message gives the skipped bytes.
     """
+    return _read(path, message_types, dialect, True)
+
+
+def _read(path: str | os.PathLike[str], message_types: Iterable[str] | None, dialect: str, report: bool) -> TlogRead:
+    """:func:`read_tlog`; without ``report`` a typed read checksums only what its streams depend on (the
+    returned report then counts only the selected types, with zero skipped bytes and checksum failures)."""
     dial = load_dialect(dialect)
     wanted = _select_types(dial, message_types)
     buf, n = _read_file(path)
-    rec = _scan_records(buf, n, dial)
+    rec = None
+    if wanted is not None and not report:
+        wanted_ids = np.zeros(dial.max_id + 1, dtype=bool)
+        wanted_ids[[dial.by_name[name].msgid for name in wanted]] = True
+        rec = _scan_wanted(buf, n, dial, wanted_ids)
+    if rec is None:
+        rec = _scan_records(buf, n, dial)
     if rec.start.size == 0:
         raise FormatError(
             f"{os.fspath(path)}: not a MAVLink telemetry log (.tlog): no valid MAVLink record found "
@@ -346,10 +365,11 @@ def _unaligned(buf: np.ndarray, dtype: str) -> np.ndarray:
     return np.ndarray(shape=(buf.size - dt.itemsize + 1,), dtype=dt, buffer=buf, strides=(1,))
 
 
-def _candidate_starts(buf: np.ndarray, n: int, block: int = 1 << 22) -> np.ndarray:
+def _candidate_starts(buf: np.ndarray, n: int, block: int = 1 << 20) -> np.ndarray:
     """Offsets of every possible record: a magic byte 8 bytes in, after a plausible timestamp.
 
-    Scanned in blocks so that the temporaries stay small next to the file.
+    Scanned in blocks so that the temporaries stay small next to the file (and are reused from block to block:
+    fresh multi-megabyte temporaries cost more in page faults than the comparisons themselves).
     """
     found = []
     u64 = _unaligned(buf, ">u8")
@@ -361,9 +381,22 @@ def _candidate_starts(buf: np.ndarray, n: int, block: int = 1 << 22) -> np.ndarr
     return np.concatenate(found) if found else np.zeros(0, dtype=np.intp)
 
 
-def _scan_records(buf: np.ndarray, n: int, dial: Dialect) -> _Records:
-    s = _candidate_starts(buf, n)
+@dataclass(frozen=True)
+class _Candidates:
+    """Every structurally possible record of a file, sorted by offset (internal; see :func:`_candidates`)."""
 
+    s: np.ndarray  # offset of the timestamp's first byte
+    v2: np.ndarray
+    plen: np.ndarray
+    signed: np.ndarray
+    end: np.ndarray
+    msgid: np.ndarray
+    known: np.ndarray
+
+
+def _candidates(buf: np.ndarray, n: int, dial: Dialect) -> _Candidates:
+    """Candidates that hold a complete frame with valid incompatibility flags (no checksum checked yet)."""
+    s = _candidate_starts(buf, n)
     v2 = buf[s + 8] == MAGIC_V2
     plen = buf[s + 9].astype(np.int16)
     incompat = buf[s + 10] * v2
@@ -373,47 +406,72 @@ def _scan_records(buf: np.ndarray, n: int, dial: Dialect) -> _Records:
     del incompat
     s, v2, plen, signed, end = s[ok], v2[ok], plen[ok], signed[ok], end[ok]
     msgid = np.where(v2, _unaligned(buf, "<u4")[s + 15] & 0xFFFFFF, buf[s + 13].astype(np.uint32))
-
     known = np.zeros(s.size, dtype=bool)
     in_range = msgid <= dial.max_id
     known[in_range] = dial.known[msgid[in_range]]
+    return _Candidates(s=s, v2=v2, plen=plen, signed=signed, end=end, msgid=msgid, known=known)
 
-    # Checksums of all known-id candidates (the X.25 span runs from the byte after the magic to the end of
-    # the payload; the stored checksum follows it).
+
+def _crc_ok(buf: np.ndarray, c: _Candidates, idx: np.ndarray, dial: Dialect) -> np.ndarray:
+    """Whether the checksums of the known-id candidates ``idx`` match.
+
+    The X.25 span runs from the byte after the magic to the end of the payload; the stored checksum follows it.
+    """
+    if idx.size == 0:
+        return np.zeros(0, dtype=bool)
+    span = np.where(c.v2[idx], 9, 5) + c.plen[idx]
+    at = c.s[idx] + 9
+    stored = _unaligned(buf, "<u2")[at + span]
+    return crc_spans(buf, at, span.astype(np.uint16), dial.crc_extra[c.msgid[idx]]) == stored
+
+
+def _link_unknown(c: _Candidates, strong: np.ndarray, n: int) -> np.ndarray:
+    """``strong`` plus the unknown-id candidates chained to it on both sides.
+
+    Unknown ids cannot be checksummed: accept one only where it is chained on both sides, i.e. it starts at the
+    file's start or where an accepted record ends, and it ends at the file's end or where an accepted record
+    starts (runs of unknown frames are confirmed one link per pass, a bounded number of passes). The result only
+    grows with ``strong``.
+    """
+    accepted = strong.copy()
+    weak = np.flatnonzero(~c.known)
+    if weak.size == 0:
+        return accepted
+    s, end = c.s, c.end
+    w_start, w_end = s[weak], end[weak]
+    # Starts are unique and sorted: the candidate starting at a frame's end, if any, is found by one search.
+    at = np.minimum(np.searchsorted(s, w_end), s.size - 1)
+    ends_at_strong = (s[at] == w_end) & strong[at]
+    linked = np.zeros(weak.size, dtype=bool)
+    for _ in range(_MAX_UNKNOWN_RUN):
+        new = ~linked & (ends_at_strong | _member(w_end, w_start[linked]) | (w_end == n))
+        if not new.any():
+            break
+        linked |= new
+    weak, w_start, w_end = weak[linked], w_start[linked], w_end[linked]
+    if weak.size == 0:
+        return accepted
+    ends_ok = np.sort(end[strong])
+    linked = np.zeros(weak.size, dtype=bool)
+    for _ in range(_MAX_UNKNOWN_RUN):
+        new = ~linked & (
+            _member(w_start, ends_ok) | _member(w_start, np.sort(w_end[linked])) | (w_start == 0)
+        )
+        if not new.any():
+            break
+        linked |= new
+    accepted[weak[linked]] = True
+    return accepted
+
+
+def _scan_records(buf: np.ndarray, n: int, dial: Dialect) -> _Records:
+    c = _candidates(buf, n, dial)
+    s, end, known = c.s, c.end, c.known
+
     crc_ok = np.zeros(s.size, dtype=bool)
     kidx = np.flatnonzero(known)
-    if kidx.size:
-        span = np.where(v2[kidx], 9, 5) + plen[kidx]
-        at = s[kidx] + 9
-        stored = _unaligned(buf, "<u2")[at + span]
-        crc = crc_spans(buf, at, span.astype(np.uint16), dial.crc_extra[msgid[kidx]])
-        crc_ok[kidx] = crc == stored
-
-    strong = known & crc_ok
-    # Unknown ids cannot be checksummed: accept one only where it is chained on both sides, i.e. it starts at
-    # the file's start or where an accepted record ends, and it ends at the file's end or where an accepted
-    # record starts (runs of unknown frames are confirmed one link per pass, a bounded number of passes).
-    accepted = strong.copy()
-    weak = np.flatnonzero(~known)
-    if weak.size:
-        starts_ok, ends_ok = s[strong], np.sort(end[strong])
-        w_start, w_end = s[weak], end[weak]
-        linked = np.zeros(weak.size, dtype=bool)
-        for _ in range(_MAX_UNKNOWN_RUN):
-            new = ~linked & (_member(w_end, starts_ok) | _member(w_end, w_start[linked]) | (w_end == n))
-            if not new.any():
-                break
-            linked |= new
-        weak, w_start, w_end = weak[linked], w_start[linked], w_end[linked]
-        linked = np.zeros(weak.size, dtype=bool)
-        for _ in range(_MAX_UNKNOWN_RUN):
-            new = ~linked & (
-                _member(w_start, ends_ok) | _member(w_start, np.sort(w_end[linked])) | (w_start == 0)
-            )
-            if not new.any():
-                break
-            linked |= new
-        accepted[weak[linked]] = True
+    crc_ok[kidx] = _crc_ok(buf, c, kidx, dial)
+    accepted = _link_unknown(c, known & crc_ok, n)
 
     cand = np.flatnonzero(accepted)
     path = _follow_chain(s[cand], end[cand])
@@ -427,22 +485,98 @@ def _scan_records(buf: np.ndarray, n: int, dial: Dialect) -> _Records:
     skipped = int(np.sum(run_to - run_from))
     failed = known & ~crc_ok
     crc_failures = _count_crc_failures(run_from[gap], run_to[gap], s[failed], end[failed])
-    v2_p = v2[sel]
+    return _records_of(buf, c, sel, skipped, int(np.count_nonzero(gap)), crc_failures)
+
+
+def _records_of(buf: np.ndarray, c: _Candidates, sel: np.ndarray, skipped: int, runs: int, failures: int) -> _Records:
+    start_p = c.s[sel]
+    v2_p = c.v2[sel]
     return _Records(
         start=start_p,
         version=np.where(v2_p, 2, 1).astype(np.uint8),
-        plen=plen[sel],
-        msgid=msgid[sel],
-        known=known[sel],
-        signed=signed[sel],
+        plen=c.plen[sel],
+        msgid=c.msgid[sel],
+        known=c.known[sel],
+        signed=c.signed[sel],
         time_us=_unaligned(buf, ">u8")[start_p].astype(np.uint64),
         sysid=buf[start_p + np.where(v2_p, 13, 11)],
         compid=buf[start_p + np.where(v2_p, 14, 12)],
         payload_at=start_p + np.where(v2_p, 8 + _HEADER_LEN[2], 8 + _HEADER_LEN[1]),
         skipped_bytes=skipped,
-        skipped_runs=int(np.count_nonzero(gap)),
-        crc_failures=crc_failures,
+        skipped_runs=runs,
+        crc_failures=failures,
     )
+
+
+def _scan_wanted(buf: np.ndarray, n: int, dial: Dialect, wanted_ids: np.ndarray) -> _Records | None:
+    """The records of the wanted message ids, checksumming only what decides them; None: use :func:`_scan_records`.
+
+    :func:`_scan_records` checks every candidate's checksum, then walks the chain of valid ones (from a record to
+    the first valid candidate starting at or after its end). Here the walk runs over a superset ``T`` of the
+    valid candidates: every known-id candidate not yet found invalid, and the unknown ids chained to those. The
+    walk over the valid set ``A ⊆ T`` is then the walk over ``T`` without its invalid records, as long as every
+    record of the ``T`` walk is either valid or has no candidate of ``T`` starting inside it (skipping such a
+    record leads to the first candidate at or after its end either way). So only these are checksummed: the
+    walk's records of a wanted id (their values are returned) and its records with a ``T`` candidate inside
+    (where a resynchronisation could go another way). An invalid one of the latter leaves ``T`` and the walk is
+    redone. The values are those of the full scan; the counts of other types, skipped bytes and checksum
+    failures are not computed (the caller needs no report).
+    """
+    c = _candidates(buf, n, dial)
+    wanted = np.zeros(c.s.size, dtype=bool)
+    wanted[c.known] = wanted_ids[c.msgid[c.known]]
+    status = np.zeros(c.s.size, dtype=np.int8)  # known ids: 0 not checked, 1 checksum matches, -1 it does not
+    for _ in range(_MAX_RESCANS):
+        in_t = np.flatnonzero(_link_unknown(c, c.known & (status >= 0), n))
+        on = _walk(c.s[in_t], c.end[in_t])
+        path = in_t[on]
+        inside = np.ones(in_t.size, dtype=bool)
+        inside[on] = False
+        holds = np.zeros(path.size, dtype=bool)  # a candidate of T starts inside the record
+        holds[np.searchsorted(c.s[path], c.s[in_t[inside]], side="right") - 1] = True
+        check = path[c.known[path] & (status[path] == 0) & (wanted[path] | holds)]
+        status[check] = np.where(_crc_ok(buf, c, check, dial), 1, -1)
+        if np.any(holds & (status[path] < 0)):
+            continue  # a resynchronisation inside an invalid record may go elsewhere: walk again without it
+        unknown = path[holds & ~c.known[path]]
+        if unknown.size and not _link_unknown(c, c.known & (status > 0), n)[unknown].all():
+            return None  # an unknown id is a record only if its neighbours are: not settled here
+        if not np.any(status[path] > 0):
+            return None  # possibly no valid record at all: the full scan gives the error
+        sel = path[wanted[path] & (status[path] > 0)]
+        return _records_of(buf, c, sel, 0, 0, 0)
+    return None
+
+
+def _walk(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Same as :func:`_follow_chain`, vectorized for sets with many overlapping candidates.
+
+    ``nxt[i]`` is the first candidate starting at or after ``end[i]`` (always after ``i``). The walk from the first
+    candidate is the largest set containing it in which every other member is the ``nxt`` of a member: members
+    without an in-edge from a member are dropped until none is left (each pass peels one layer of the false
+    chains hanging off the walk, which merge into it after a few links). A long false chain falls back to the
+    loop of :func:`_follow_chain` on the candidates that remain (the walk is unchanged by dropping non-members).
+    """
+    m = start.size
+    if m == 0:
+        return np.zeros(0, dtype=np.intp)
+    nxt = np.arange(1, m + 1)
+    breaks = np.flatnonzero(start[1:] != end[:-1])
+    nxt[breaks] = np.searchsorted(start, end[breaks], side="left")
+    indeg = np.bincount(nxt, minlength=m + 1)
+    keep = indeg[:m] > 0
+    keep[0] = True
+    dropped = np.flatnonzero(~keep)
+    for _ in range(_MAX_PEELS):
+        if dropped.size == 0:
+            return np.flatnonzero(keep)
+        hit = nxt[dropped]
+        np.subtract.at(indeg, hit, 1)
+        hit = np.unique(hit[hit < m])
+        dropped = hit[(indeg[hit] == 0) & keep[hit]]
+        keep[dropped] = False
+    rest = np.flatnonzero(keep)
+    return rest[_follow_chain(start[rest], end[rest])]
 
 
 def _member(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:

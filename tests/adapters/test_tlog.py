@@ -264,6 +264,59 @@ def test_dronekit_selected_types_and_columns():
     pd.testing.assert_frame_equal(streams["ATTITUDE"], att)
 
 
+def test_typed_reads_equal_the_full_read_and_checksum_fewer_frames(monkeypatch):
+    """``read_streams(types=...)`` checksums only the frames its streams depend on, with the full read's values."""
+    import adapters.tlog as tlog_module
+
+    path = _external(DRONEKIT)
+    full = read_tlog(path)
+    checked = []
+    real = tlog_module.crc_spans
+
+    def counting(buf, offsets, *args, **kwargs):
+        checked.append(offsets.size)
+        return real(buf, offsets, *args, **kwargs)
+
+    monkeypatch.setattr(tlog_module, "crc_spans", counting)
+    for name in full.streams:
+        checked.clear()
+        alone = read_streams(path, types=[name])
+        assert list(alone) == [name]
+        pd.testing.assert_frame_equal(alone[name], full.streams[name])
+        # The real flight has 1314 frames failing their checksum, so the typed walk meets invalid frames; still
+        # far fewer frames are checksummed than the records the full read checks.
+        assert sum(checked) < full.report.n_records / 2, (name, sum(checked))
+    several = ["ATTITUDE", "STATUSTEXT", "GPS_RAW_INT"]
+    got = read_streams(path, types=several)
+    assert list(got) == [n for n in full.streams if n in several]
+
+
+@pytest.mark.parametrize("container_valid", [True, False])
+def test_typed_read_resynchronises_inside_an_invalid_frame_like_the_full_read(tmp_path, container_valid):
+    """A STATUSTEXT whose text holds a whole ATTITUDE record: the record is real only if the STATUSTEXT is not."""
+    att, text = mav.MAVLink_attitude_message, mav.MAVLink_statustext_message
+    hb = mav.MAVLink_heartbeat_message
+
+    def attitude(i: int) -> bytes:
+        return frame_v1(att.id, struct.pack("<I6f", i, *(0.1 * i + np.arange(6))), att.crc_extra)
+
+    inner = stamp(1_000_002) + attitude(2)
+    container = bytearray(frame_v1(text.id, b"\x06" + inner.ljust(50, b"\0"), text.crc_extra))
+    if not container_valid:
+        container[-1] ^= 0x55
+    heartbeat = frame_v1(hb.id, bytes(9), hb.crc_extra)
+    data = (stamp(1_000_000) + heartbeat + stamp(1_000_001) + attitude(1) + stamp(1_000_002) + bytes(container)
+            + stamp(1_000_003) + attitude(3) + stamp(1_000_004) + heartbeat)
+    path = tmp_path / "inner.tlog"
+    path.write_bytes(data)
+    full = read_tlog(path)
+    expected = [1, 3] if container_valid else [1, 2, 3]
+    assert full.streams["ATTITUDE"]["time_boot_ms"].tolist() == expected
+    typed = read_streams(path, types=["ATTITUDE"])
+    pd.testing.assert_frame_equal(typed["ATTITUDE"], full.streams["ATTITUDE"])
+    assert ("STATUSTEXT" in read_streams(path, types=["STATUSTEXT"])) == container_valid
+
+
 def test_looks_like_tlog_on_real_and_foreign_files():
     path = _external(DRONEKIT)
     head = path.read_bytes()[:64]
@@ -554,6 +607,12 @@ def read_mutated(data: bytes, folder: Path, originals: Counter):
     # Nothing invented: every decoded message is one of the messages written.
     rows = stream_rows(read)
     assert not rows - originals
+    # A typed read (checksumming only what decides its streams) gives the full read's values.
+    for name in ("ATTITUDE", "STATUSTEXT"):
+        typed = read_streams(path, types=[name])
+        assert (name in typed) == (name in read.streams)
+        if name in typed:
+            pd.testing.assert_frame_equal(typed[name], read.streams[name])
     return read
 
 
