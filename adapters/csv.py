@@ -15,7 +15,8 @@ A header line, then one row per sample::
   ``outcome``, ``target[0]``, ``target[1]``, … (the metadata of :mod:`adapters.meta`).
 
 This is :meth:`workbench.demos.DemonstrationSet.to_pandas`'s layout, so a set exported with pandas reads
-back. The reader (``pyarrow.csv``, multi-threaded, every check vectorized) returns one stream, ``"csv"``. Its
+back. The reader (pandas' C parser, the peer's own, with every check on the parsed columns vectorized or run on a
+text column's distinct values) returns one stream, ``"csv"``. Its
 ``t`` is one clock for the whole file: when the demonstrations' own times already follow each other it is
 ``t`` itself, otherwise the demonstrations are laid end to end, :data:`SEPARATION` seconds apart, so the shared
 pipeline (which segments and aligns on one clock) sees each demonstration as its own span.
@@ -43,7 +44,6 @@ from workbench.errors import DataError
 
 if TYPE_CHECKING:
     import pandas as pd
-    import pyarrow as pa
 
 __all__ = ["read", "write", "looks_like_csv", "STREAM", "SEPARATION", "REQUIRED", "MAX_MAGNITUDE"]
 
@@ -55,7 +55,7 @@ SEPARATION = 60.0
 #: measurement in any unit; below it squares and sums of squares (covariances, costs) stay finite in float64.
 MAX_MAGNITUDE = 1e100
 
-# A number as text (what a numeric cell pyarrow read as text because of some other cell looks like).
+# A number as text (what a numeric cell the parser read as text because of some other cell looks like).
 _NUMBER = re.compile(r"\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|\s*[-+]?(nan|inf|infinity)\s*$", re.I | re.A)
 _FLAGS = {"true": True, "false": False}
 
@@ -77,7 +77,7 @@ def looks_like_csv(head: bytes) -> bool:
 class _Lines:
     """Where data rows are in the file (error messages only: the fast path never needs line numbers).
 
-    pyarrow skips blank lines and lets quoted fields span lines, so row ``k`` is not always line ``k + 2``; the
+    The parser skips blank lines and lets quoted fields span lines, so row ``k`` is not always line ``k + 2``; the
     standard library's reader, run only when an error must be placed, counts lines exactly.
     """
 
@@ -140,9 +140,6 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     ``topics`` is accepted for symmetry with the other readers and ignored (a CSV has one stream).
     """
     import pandas as pd
-    import pyarrow as pa
-    import pyarrow.compute as pc
-    import pyarrow.csv as pcsv
 
     where = os.fspath(path)
     lines = _Lines(where)
@@ -151,59 +148,69 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
             raise DataError(f"{where}: empty file, not a CSV file")
         with open(path, "rb") as f:
             header = f.readline()
-        names = [c.strip() for c in header.decode("utf-8", "replace").lstrip("\ufeff").rstrip("\r\n").split(",")]
-        # Text arrives dictionary-encoded: labels and ids repeat, so checks run on the distinct values.
-        convert = pcsv.ConvertOptions(
-            column_types={"demo": pa.dictionary(pa.int32(), pa.string())} if "demo" in names else None,
-            strings_can_be_null=True,
-            auto_dict_encode=True,
-        )
-        # The threaded reader widens a type a later block needs (an integer column with "nan" or "1.5" further
-        # down), where the serial one fails: it is used for every size.
-        table = pcsv.read_csv(where, convert_options=convert)
-        table = table.unify_dictionaries()
+        header_text = header.decode("utf-8", "replace").lstrip("\ufeff").rstrip("\r\n")
+        columns = [c.strip() for c in next(_csv.reader([header_text]), [])]
+        if len(set(columns)) != len(columns):  # checked here: pandas would rename a repeated name
+            raise DataError(f"{where}, line 1 (header): repeated column names {columns}")
+        # pandas' C parser (the peer's own); ids stay text even when they look like numbers (read again as text).
+        table = pd.read_csv(where, encoding="utf-8")
+        if "demo" in columns and table.shape[1] == len(columns):
+            at = columns.index("demo")
+            if table.dtypes.iloc[at].kind not in "OT":
+                ids = pd.read_csv(where, usecols=[at], dtype=object, encoding="utf-8").iloc[:, 0]
+                table[table.columns[at]] = ids.to_numpy()
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
-    except pa.ArrowInvalid as exc:
-        detail = str(exc).splitlines()[0]
-        place = lines.bad_utf8() if "UTF8" in detail else None
-        if place is None and "column" in detail.lower() and "expected" in detail.lower():
-            place = lines.bad_row()
-        if place is None:
-            place = lines.bad_utf8() or lines.bad_row()
-        raise DataError(f"{where}, {place}: not a readable CSV ({detail})") from None
-    columns = [str(c).strip() for c in table.column_names]
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{where}, {lines.bad_utf8() or 'unknown line'}: not a readable CSV ({exc.reason})") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:  # pandas fails some shapes so
+        detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DataError(f"{where}, {lines.bad_row()}: not a readable CSV ({detail})") from None
+    if not isinstance(table.index, pd.RangeIndex) or table.shape[1] != len(columns):
+        # More fields than names in every row: pandas would take the first as an index; the format refuses.
+        raise DataError(f"{where}, {lines.bad_row()}: not a readable CSV (rows and header differ in length)")
     missing = [c for c in REQUIRED if c not in columns]
     if missing:
         raise DataError(
             f"{where}, line 1 (header): missing column(s) {missing}; the long format needs demo, t, then one "
             f"column per state and input; columns present: {columns}"
         )
-    if len(set(columns)) != len(columns):
-        raise DataError(f"{where}, line 1 (header): repeated column names {columns}")
-    n_rows = table.num_rows
+    n_rows = len(table)
     if n_rows == 0:
         raise DataError(f"{where}, line 2: no data rows, only the header")
+    if table.iloc[:, -1].isna().any():
+        # A short row is padded with missing cells by pandas: the last cell of such a row is missing.
+        place = lines.bad_row()
+        if place != "unknown line":
+            raise DataError(f"{where}, {place}: not a readable CSV (a row with too few fields)")
+    if list(table.columns) != columns:
+        table.columns = columns
     values: dict[str, Any] = {}
-    for name, col in zip(columns, table.columns, strict=True):
+    changed: dict[str, Any] = {}  # columns whose values differ from the parsed ones (integers, flags, trimmed text)
+    for name, col in table.items():
         if name != "demo":
-            values[name] = _column(col, name, lines, where, pa, pc)
+            values[name] = _column(col, name, lines, where, pd)
+            if values[name] is not col:
+                changed[name] = values[name]
     t = values.pop("t")
+    if isinstance(t, pd.Series) and t.dtype.kind in "bf":
+        t = t.to_numpy(dtype=np.float64)
     if not isinstance(t, np.ndarray):  # a text column: no cell is a number
-        k = int(np.argmax(t.is_valid().to_numpy(zero_copy_only=False))) if len(t) else 0
+        k = int(np.argmax(pd.notna(np.asarray(t, dtype=object)))) if len(t) else 0
         raise DataError(f"{where}, line {lines.of_row(k)}, column 't': not numeric")
 
-    encoded = _encoded(table.column(columns.index("demo")), pa)
-    # Ids equal up to blanks are one demonstration and a blank id is none; the dictionary is in order of first
-    # appearance, so the merged numbering is too.
+    demo = table[table.columns[columns.index("demo")]]
+    codes, uniques = pd.factorize(demo)
+    # Ids equal up to blanks are one demonstration and a blank id is none; factorize numbers ids in order of
+    # first appearance, so the merged numbering is too.
     merged: dict[str, int] = {}
-    remap = np.full(len(encoded.dictionary) + 1, -1, dtype=np.int64)
-    for i, word in enumerate(encoded.dictionary.to_pylist()):
-        word = word.strip() if word is not None else ""
+    remap = np.full(len(uniques) + 1, -1, dtype=np.int64)
+    for i, word in enumerate(uniques.tolist()):
+        word = str(word).strip()
         if word:
             remap[i] = merged.setdefault(word, len(merged))
-    ids = pa.array(list(merged), pa.string())
-    rank = remap[_indices(encoded, pc)]
+    ids = list(merged)
+    rank = remap[codes]
     keep = np.isfinite(t) & (rank >= 0)
     skipped = {}
     if not keep.all():
@@ -228,7 +235,7 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
         row = k if rows is None else int(rows[k])
         raise DataError(
             f"{where}, line {lines.of_row(row)}, column 't': time does not increase within demonstration "
-            f"{ids[int(rank[k])].as_py()!r} ({t_rows[k - 1]!r} then {t_rows[k]!r})"
+            f"{ids[int(rank[k])]!r} ({t_rows[k - 1]!r} then {t_rows[k]!r})"
         )
     firsts, lasts = t_rows[starts], t_rows[ends - 1]
     overlapping = len(starts) > 1 and not (firsts[1:] > lasts[:-1]).all()
@@ -237,46 +244,54 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
         span = lasts - firsts
         offset = np.r_[0.0, np.cumsum(span[:-1] + SEPARATION)]
         clock = t_rows - np.repeat(firsts - offset, ends - starts)
-    out: dict[str, Any] = {"t": clock, "demo": ids.take(pa.array(rank, pa.int32())).to_pandas()}
-    for name, v in values.items():
-        if isinstance(v, np.ndarray):
-            out[name] = v if rows is None else v[rows]
-        else:
-            out[name] = (v if rows is None else v.take(pa.array(rows))).to_pandas()
-    stream = pd.DataFrame(out, copy=False)
+    if rows is None and demo.dtype == "str" and ids == uniques.tolist():
+        demo_out = demo  # every id already trimmed and distinct: the column as read
+    else:
+        demo_out = pd.array(np.asarray(ids, dtype=object)[rank], dtype="str")
+    # The output is the parsed table itself (building a new frame costs as much as the checks): columns whose
+    # values changed are replaced, rows dropped or regrouped are taken, then time and ids lead.
+    stream = table
+    for name, v in changed.items():
+        stream[name] = v
+    del stream["t"], stream["demo"]
+    if rows is not None:
+        stream = stream.take(rows).reset_index(drop=True)
+    stream.insert(0, "demo", demo_out)
+    stream.insert(0, "t", clock)
     return Streams(where, "csv", {STREAM: stream}, counts={STREAM: len(stream)}, skipped=skipped,
                    info={"demos": int(len(starts)), "columns": columns})
 
 
-def _column(col: pa.ChunkedArray, name: str, lines: _Lines, where: str, pa, pc) -> Any:
-    """A column as float64 when it is numeric, bool for flags, else text (an Arrow string array, trimmed).
+def _column(col: pd.Series, name: str, lines: _Lines, where: str, pd) -> Any:
+    """A column as float64 when it is numeric, bool for flags, else text (pandas' string dtype, trimmed).
 
-    A text column holding numbers and words is an error at the first word; a byte that is not UTF-8 and a
-    magnitude beyond :data:`MAX_MAGNITUDE` are errors at their line.
+    A text column holding numbers and words is an error at the first word; a magnitude beyond
+    :data:`MAX_MAGNITUDE` is an error at its line.
     """
-    kind = col.type.value_type if pa.types.is_dictionary(col.type) else col.type
-    if pa.types.is_boolean(kind):
-        if col.null_count == 0:
-            return col.to_numpy(zero_copy_only=False)
-        kind, col = pa.float64(), col.cast(pa.float64())
-    if pa.types.is_binary(kind) or pa.types.is_large_binary(kind):
-        raise DataError(f"{where}, {lines.bad_utf8() or f'column {name!r}: not UTF-8 text'}")
-    if pa.types.is_integer(kind) or pa.types.is_floating(kind) or pa.types.is_decimal(kind):
-        values = col.to_numpy(zero_copy_only=False).astype(np.float64, copy=False)
-        return _checked_magnitude(values, name, lines, where)
-    if not (pa.types.is_string(kind) or pa.types.is_large_string(kind)):
-        col = col.cast(pa.string())  # dates and times pyarrow recognised: the long format has no such column
+    kind = col.dtype.kind
+    if kind == "b":
+        return col
+    if kind == "f":
+        _checked_magnitude(col.to_numpy(), name, lines, where)
+        return col
+    if kind in "iu":
+        return _checked_magnitude(col.to_numpy(dtype=np.float64), name, lines, where)
     # Text columns hold few distinct values (labels, subjects): every test runs on the distinct values only.
-    encoded = _encoded(col, pa)
-    raw = encoded.dictionary.to_pylist()
-    words = [w.strip() or None if w is not None else None for w in raw]
+    raw = [None if w is None or w != w else w for w in col.unique().tolist()]  # NaN marks a missing cell
+    words = [str(w).strip() or None if w is not None else None for w in raw]
     is_number = [w is not None and _NUMBER.match(w) is not None for w in words]
     is_flag = [w is not None and w.lower() in _FLAGS for w in words]
     is_word = [w is not None and not (n or f) for w, n, f in zip(words, is_number, is_flag, strict=True)]
-    if not any(is_number) and (not any(is_flag) or any(is_word)):  # a text column (labels, subjects, outcomes)
-        dictionary = encoded.dictionary if words == raw else pa.array(words, pa.string())
-        return dictionary.take(encoded.indices)
-    index = _indices(encoded, pc)
+    text = not any(is_number) and (not any(is_flag) or any(is_word))  # labels, subjects, outcomes
+    if text and words == raw and col.dtype == "str":
+        return col
+    index, uniques = pd.factorize(col)
+    words = [str(w).strip() or None for w in uniques.tolist()]
+    is_number = [w is not None and _NUMBER.match(w) is not None for w in words]
+    is_flag = [w is not None and w.lower() in _FLAGS for w in words]
+    is_word = [w is not None and not (n or f) for w, n, f in zip(words, is_number, is_flag, strict=True)]
+    if text:
+        return pd.array(np.asarray(words + [None], dtype=object)[index], dtype="str")
     if any(is_word):
         k = int(np.argmax(np.asarray(is_word + [False])[index]))
         raise DataError(f"{where}, line {lines.of_row(k)}, column {name!r}: not a number ({words[index[k]]!r})")
@@ -284,18 +299,6 @@ def _column(col: pa.ChunkedArray, name: str, lines: _Lines, where: str, pa, pc) 
              for w, n, f in zip(words, is_number, is_flag, strict=True)]
     values = np.asarray(table + [np.nan])[index]
     return _checked_magnitude(values, name, lines, where)
-
-
-def _encoded(col: pa.ChunkedArray, pa) -> pa.DictionaryArray:
-    """A text column as one dictionary array (pyarrow gives unified dictionaries, or plain text past 50 values)."""
-    whole = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
-    return whole if pa.types.is_dictionary(whole.type) else whole.dictionary_encode()
-
-
-def _indices(encoded: pa.DictionaryArray, pc) -> np.ndarray:
-    """Dictionary indices as int64, a missing cell as -1 (the last entry of a table one longer)."""
-    indices = pc.fill_null(encoded.indices, -1) if encoded.indices.null_count else encoded.indices
-    return indices.to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
 
 
 def _checked_magnitude(values: np.ndarray, name: str, lines: _Lines, where: str) -> np.ndarray:

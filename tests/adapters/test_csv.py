@@ -60,6 +60,8 @@ def test_text_columns_stay_text_and_flags_become_bool(tmp_path):
     [
         ("demo,t,x\na,0,1\na,0.1\n", "line 3"),  # a missing field
         ("demo,t,x\na,0,1\na,0.1,2,9\n", "line 3"),  # an extra field
+        ("demo,t,x\na,0,1,\na,0.1,2,\n", "line 2"),  # an extra field on every row (pandas would make it an index)
+        ("demo,t,x\na,0,1,5\n", "line 2"),  # the same on a single row
         ("demo,t,x\na,0,1\na,0.1,2\na,0.2,oops\n", "line 4, column 'x'"),  # text among numbers
         ("demo,t,x\na,0,1\na,0.2,2\na,0.1,3\n", "line 4, column 't'"),  # time going backwards
         ("demo,t,x\na,0,1\na,0,2\n", "line 3, column 't'"),  # time standing still
@@ -170,6 +172,13 @@ def test_text_late_in_a_long_numeric_column_names_its_line_despite_blank_lines(t
     path = _write(tmp_path, "\n".join(lines))
     with pytest.raises(DataError, match=r"line 5002, column 'x': not a number \('oops'\)"):
         csv.read(path)
+
+
+def test_ids_that_look_like_numbers_stay_text_as_written(tmp_path):
+    path = _write(tmp_path, "demo,t,x\n001,0,1\n001,1,2\n2.50,0,3\n")
+    frame = csv.read(path)["csv"]
+    assert frame["demo"].tolist() == ["001", "001", "2.50"]
+    np.testing.assert_array_equal(frame["x"], [1.0, 2.0, 3.0])
 
 
 def test_blanks_around_ids_and_labels_are_trimmed_and_ids_merge(tmp_path):
