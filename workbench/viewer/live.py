@@ -29,6 +29,8 @@ import rerun.blueprint as rrb
 
 from workbench.live import LinkStats, LiveEvent, LivePrediction
 from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS
+from workbench.viewer.columns import send_columns
+from workbench.viewer.session import _safe as _part  # the replay's entity names: both layouts read alike
 
 __all__ = ["LIVE_APPLICATION_ID", "LiveLogger", "live_blueprint"]
 
@@ -39,11 +41,6 @@ _BAND = (255, 187, 120)
 _W = (110, 190, 255)
 _OUT = (255, 60, 60)
 _RECENT = 3
-
-
-def _part(name: str) -> str:
-    """An entity-path part (rerun splits on '/'; odd characters make paths hard to type)."""
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in str(name)) or "_"
 
 
 class LiveLogger:
@@ -175,7 +172,7 @@ class LiveLogger:
         """
         indexes: dict[tuple, list[rr.TimeColumn]] = {}  # most entities share their rows' times: build them once
         for path, (link_t, rel_t, step, values, band) in self._rows.items():
-            if not values:  # never a chunk without rows: the viewer crashes on them
+            if not values:  # nothing since the last flush (send_columns would drop the send anyway)
                 continue
             key = (tuple(link_t), tuple(step))
             index = indexes.get(key)
@@ -192,7 +189,7 @@ class LiveLogger:
                 cols = rr.Scalars.columns(scalars=np.column_stack([m - sd, m + sd, m - 3 * sd, m + 3 * sd]))
             else:
                 cols = rr.Scalars.columns(scalars=v)
-            self.rec.send_columns(path, indexes=index, columns=cols)
+            send_columns(self.rec, path, index, cols)
             for lst in (link_t, rel_t, step, values):
                 lst.clear()
         p = self._latest
