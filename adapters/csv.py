@@ -156,7 +156,7 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
         table = pd.read_csv(where, encoding="utf-8")
         if "demo" in columns and table.shape[1] == len(columns):
             at = columns.index("demo")
-            if table.dtypes.iloc[at].kind not in "OT":
+            if table.iloc[:, at].dtype.kind not in "OT":
                 ids = pd.read_csv(where, usecols=[at], dtype=object, encoding="utf-8").iloc[:, 0]
                 table[table.columns[at]] = ids.to_numpy()
     except OSError as exc:
@@ -178,7 +178,8 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     n_rows = len(table)
     if n_rows == 0:
         raise DataError(f"{where}, line 2: no data rows, only the header")
-    if table.iloc[:, -1].isna().any():
+    parsed = [col for _, col in table.items()]  # one pass: items() is far cheaper than indexing column by column
+    if parsed[-1].isna().any():
         # A short row is padded with missing cells by pandas: the last cell of such a row is missing.
         place = lines.bad_row()
         if place != "unknown line":
@@ -186,12 +187,13 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     if list(table.columns) != columns:
         table.columns = columns
     values: dict[str, Any] = {}
-    changed: dict[str, Any] = {}  # columns whose values differ from the parsed ones (integers, flags, trimmed text)
-    for name, col in table.items():
-        if name != "demo":
-            values[name] = _column(col, name, lines, where, pd)
-            if values[name] is not col:
-                changed[name] = values[name]
+    changed: dict[int, Any] = {}  # positions of columns whose values differ from the parsed ones
+    for i, (name, col) in enumerate(zip(columns, parsed, strict=True)):
+        if name == "demo":
+            continue
+        values[name] = _column(col, name, lines, where, pd)
+        if values[name] is not col:
+            changed[i] = values[name]
     t = values.pop("t")
     if isinstance(t, pd.Series) and t.dtype.kind in "bf":
         t = t.to_numpy(dtype=np.float64)
@@ -199,7 +201,7 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
         k = int(np.argmax(pd.notna(np.asarray(t, dtype=object)))) if len(t) else 0
         raise DataError(f"{where}, line {lines.of_row(k)}, column 't': not numeric")
 
-    demo = table[table.columns[columns.index("demo")]]
+    demo = parsed[columns.index("demo")]
     codes, uniques = pd.factorize(demo)
     # Ids equal up to blanks are one demonstration and a blank id is none; factorize numbers ids in order of
     # first appearance, so the merged numbering is too.
@@ -251,13 +253,20 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     # The output is the parsed table itself (building a new frame costs as much as the checks): columns whose
     # values changed are replaced, rows dropped or regrouped are taken, then time and ids lead.
     stream = table
-    for name, v in changed.items():
-        stream[name] = v
-    del stream["t"], stream["demo"]
-    if rows is not None:
-        stream = stream.take(rows).reset_index(drop=True)
-    stream.insert(0, "demo", demo_out)
-    stream.insert(0, "t", clock)
+    for i, v in changed.items():
+        stream.isetitem(i, v)
+    at_t, at_demo = columns.index("t"), columns.index("demo")
+    if {at_t, at_demo} == {0, 1} and rows is None:
+        # The usual layout (demo, t, …): the two leading columns change places by position, no block is rebuilt.
+        stream.isetitem(0, clock)
+        stream.isetitem(1, demo_out)
+        stream.columns = ["t", "demo", *columns[2:]]
+    else:
+        del stream["t"], stream["demo"]
+        if rows is not None:
+            stream = stream.take(rows).reset_index(drop=True)
+        stream.insert(0, "demo", demo_out)
+        stream.insert(0, "t", clock)
     return Streams(where, "csv", {STREAM: stream}, counts={STREAM: len(stream)}, skipped=skipped,
                    info={"demos": int(len(starts)), "columns": columns})
 
@@ -272,7 +281,10 @@ def _column(col: pd.Series, name: str, lines: _Lines, where: str, pd) -> Any:
     if kind == "b":
         return col
     if kind == "f":
-        _checked_magnitude(col.to_numpy(), name, lines, where)
+        values = col.to_numpy()
+        with np.errstate(invalid="ignore"):
+            if (np.abs(values) > MAX_MAGNITUDE).any():  # the full check (which names the line) only then
+                _checked_magnitude(values, name, lines, where)
         return col
     if kind in "iu":
         return _checked_magnitude(col.to_numpy(dtype=np.float64), name, lines, where)

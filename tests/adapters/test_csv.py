@@ -199,3 +199,13 @@ def test_an_integer_column_widened_past_the_first_block_reads_as_float(tmp_path,
     k = csv.read(path)["csv"]["k"].to_numpy()
     np.testing.assert_array_equal(k[n - 11], expected)
     assert k[0] == 0.0 and k[-1] == n - 1
+
+
+def test_an_absurd_magnitude_is_found_in_a_column_with_missing_cells(tmp_path):
+    frame = _long_format()
+    frame.loc[3, "x"] = np.nan
+    frame.loc[29, "x"] = -2e200
+    path = tmp_path / "huge_gap.csv"
+    frame.to_csv(path, index=False)
+    with pytest.raises(DataError, match=rf"line {29 + 2}, column 'x': -2e\+200 is beyond"):
+        csv.read(path)
