@@ -881,53 +881,80 @@ def _diag_start(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarray:
     return theta
 
 
+def _memo_lqr(
+    A: np.ndarray, B: np.ndarray, weights: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray] | None]:
+    """``lqr(p)``: the LQR gain ``K`` (u = K x) and ``H = R + Bᵀ P B`` of the cost ``weights(p) = (Q, R)``, or None
+    where the DARE has no solution; the last solved point is kept, as least_squares asks for the residual and
+    the Jacobian at the same point."""
+    memo: dict[bytes, tuple[np.ndarray, np.ndarray] | None] = {}
+
+    def lqr(p: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        key = p.tobytes()
+        if key not in memo:
+            Q, R = weights(p)
+            try:
+                P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+                H = R + B.T @ P @ B
+                memo.clear()
+                memo[key] = (-np.linalg.solve(H, B.T @ P @ A), H)
+            except (np.linalg.LinAlgError, ValueError):
+                memo[key] = None
+        return memo[key]
+
+    return lqr
+
+
+def _gain_jacobian(
+    A: np.ndarray, B: np.ndarray, K: np.ndarray, H: np.ndarray, directions: Iterable[tuple[np.ndarray, np.ndarray]]
+) -> np.ndarray:
+    """Columns ``dK`` of the LQR gain ``K`` (with ``H = R + Bᵀ P B``) along each ``(dQ, dR)`` of ``directions``.
+
+    Implicit differentiation of the DARE: dP = A_clᵀ dP A_cl + dQ + Kᵀ dR K (envelope theorem) and
+    dK = −H⁻¹(dR K + Bᵀ dP A_cl).
+    """
+    n = A.shape[0]
+    A_cl = A + B @ K
+    lyap = np.eye(n * n) - np.kron(A_cl.T, A_cl.T)
+    cols = []
+    for dQ, dR in directions:
+        dP = np.linalg.solve(lyap, (dQ + K.T @ dR @ K).ravel()).reshape(n, n)
+        cols.append(-np.linalg.solve(H, dR @ K + B.T @ dP @ A_cl).ravel())
+    return np.stack(cols, axis=1)
+
+
 def _fit_diagonal_part(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Diagonal ``(q, r)`` whose LQR gain is closest to K in Frobenius norm; scaled so that max = 1."""
     n, m = B.shape
     theta0 = _diag_start(A, B, K)
     big = 10.0 * (float(np.linalg.norm(K)) + 1.0)
-    memo: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray] | None] = {}
 
-    def lqr(log_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        key = log_theta.tobytes()
-        if key not in memo:
-            theta = np.exp(log_theta)
-            R = np.diag(theta[n:])
-            try:
-                P = scipy.linalg.solve_discrete_are(A, B, np.diag(theta[:n]), R)
-                H = R + B.T @ P @ B
-                memo.clear()
-                memo[key] = (-np.linalg.solve(H, B.T @ P @ A), P, H)
-            except (np.linalg.LinAlgError, ValueError):
-                memo[key] = None
-        return memo[key]
+    def weights(log_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        theta = np.exp(log_theta)
+        return np.diag(theta[:n]), np.diag(theta[n:])
+
+    lqr = _memo_lqr(A, B, weights)
 
     def residual(log_theta: np.ndarray) -> np.ndarray:
         out = lqr(log_theta)
         return np.full(K.size, big) if out is None else (out[0] - K).ravel()
 
     def jacobian(log_theta: np.ndarray) -> np.ndarray:
-        # Implicit differentiation of the DARE: dP = A_clᵀ dP A_cl + dQ + Kᵀ dR K (envelope theorem) and
-        # dK = −H⁻¹(dR K + Bᵀ dP A_cl), one column per log-weight.
         out = lqr(log_theta)
         if out is None:
             return np.zeros((K.size, n + m))
-        K_f, _, H = out
         theta = np.exp(log_theta)
-        A_cl = A + B @ K_f
-        lyap = np.eye(n * n) - np.kron(A_cl.T, A_cl.T)
-        cols = []
-        for i in range(n + m):
-            dR = np.zeros((m, m))
-            if i < n:
-                C = np.zeros((n, n))
-                C[i, i] = theta[i]
-            else:
-                dR[i - n, i - n] = theta[i]
-                C = K_f.T @ dR @ K_f
-            dP = np.linalg.solve(lyap, C.ravel()).reshape(n, n)
-            cols.append(-np.linalg.solve(H, dR @ K_f + B.T @ dP @ A_cl).ravel())
-        return np.stack(cols, axis=1)
+
+        def directions():  # one per log-weight: d(diag θ)/d log θ_i
+            for i in range(n + m):
+                dQ, dR = np.zeros((n, n)), np.zeros((m, m))
+                if i < n:
+                    dQ[i, i] = theta[i]
+                else:
+                    dR[i - n, i - n] = theta[i]
+                yield dQ, dR
+
+        return _gain_jacobian(A, B, *out, directions())
 
     x0 = np.log(theta0 / theta0.max())
     # log-weights within ±30 keep every DARE well posed; the common scale is free (the gain ignores it)
@@ -951,51 +978,35 @@ def _fit_s0(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
         Lr[ir] = p[len(iq[0]) :]
         return Lq @ Lq.T, Lr @ Lr.T + 1e-9 * np.eye(m)
 
-    memo: dict[bytes, tuple[np.ndarray, np.ndarray] | None] = {}
-
-    def lqr(p: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        key = p.tobytes()
-        if key not in memo:
-            Q, R = unpack(p)
-            try:
-                P = scipy.linalg.solve_discrete_are(A, B, Q, R)
-                H = R + B.T @ P @ B
-                memo.clear()
-                memo[key] = (-np.linalg.solve(H, B.T @ P @ A), H)
-            except (np.linalg.LinAlgError, ValueError):
-                memo[key] = None
-        return memo[key]
+    lqr = _memo_lqr(A, B, unpack)
 
     def residual(p: np.ndarray) -> np.ndarray:
         out = lqr(p)
         return np.full(K.size, big) if out is None else (out[0] - K).ravel()
 
     def jacobian(p: np.ndarray) -> np.ndarray:
-        # as in `_fit_diagonal_part`: dP = A_clᵀ dP A_cl + dQ + Kᵀ dR K, dK = −H⁻¹(dR K + Bᵀ dP A_cl)
         out = lqr(p)
         if out is None:
             return np.zeros((K.size, p.size))
-        K_f, H = out
         Lq, Lr = np.zeros((n, n)), np.zeros((m, m))
         Lq[iq] = p[: len(iq[0])]
         Lr[ir] = p[len(iq[0]) :]
-        A_cl = A + B @ K_f
-        lyap = np.eye(n * n) - np.kron(A_cl.T, A_cl.T)
-        cols = []
-        for j in range(p.size):
-            dQ, dR = np.zeros((n, n)), np.zeros((m, m))
-            if j < len(iq[0]):
-                E = np.zeros((n, n))
-                E[iq[0][j], iq[1][j]] = 1.0
-                dQ = E @ Lq.T + Lq @ E.T
-            else:
-                E = np.zeros((m, m))
-                k = j - len(iq[0])
-                E[ir[0][k], ir[1][k]] = 1.0
-                dR = E @ Lr.T + Lr @ E.T
-            dP = np.linalg.solve(lyap, (dQ + K_f.T @ dR @ K_f).ravel()).reshape(n, n)
-            cols.append(-np.linalg.solve(H, dR @ K_f + B.T @ dP @ A_cl).ravel())
-        return np.stack(cols, axis=1)
+
+        def directions():  # one per Cholesky entry: d(L Lᵀ) = E Lᵀ + L Eᵀ
+            for j in range(p.size):
+                dQ, dR = np.zeros((n, n)), np.zeros((m, m))
+                if j < len(iq[0]):
+                    E = np.zeros((n, n))
+                    E[iq[0][j], iq[1][j]] = 1.0
+                    dQ = E @ Lq.T + Lq @ E.T
+                else:
+                    E = np.zeros((m, m))
+                    k = j - len(iq[0])
+                    E[ir[0][k], ir[1][k]] = 1.0
+                    dR = E @ Lr.T + Lr @ E.T
+                yield dQ, dR
+
+        return _gain_jacobian(A, B, *out, directions())
 
     q0 = q0 / q0.max()
     p0 = np.r_[np.sqrt(np.diag(q0[:n]))[iq], np.sqrt(np.diag(q0[n:]))[ir]]
