@@ -787,16 +787,15 @@ def cmd_live(ctx: _Context) -> int:
     from workbench import viewer
     from workbench.live import OnlinePredictor, listen
     from workbench.viewer.live import LIVE_APPLICATION_ID, LiveLogger, live_blueprint
+    from workbench.viewer.scene import plane_of
 
     a = ctx.args
     model = _load_model(a.model)
     predictor = OnlinePredictor(model, a.mapping or DEFAULT_MAPPING, horizon=a.horizon, system=a.sysid,
                                 clock=a.clock, silence=a.silence)
     m = predictor.mapping
-    plane = None
-    if m.roles:
-        resolved = m.roles.resolve(m.state_names)
-        plane = None if resolved.plane is None else (*resolved.plane, resolved.heading)
+    scene = plane_of(m.roles, m.state_names)  # the plane of flight the replay and the session draw
+    plane = None if scene is None else (scene.across, scene.up, scene.heading)
     out = _output_kwargs(a, Path("out") / "live.rrd")
     rec = viewer.new_recording(LIVE_APPLICATION_ID)
     link = open_link(a.connection)
