@@ -91,7 +91,7 @@ def lqr_operator_demos(
     K = op.gain(sys_)
     rng = np.random.default_rng(seed)
     s_near, s_far = np.asarray(op.sigma_near, dtype=float), np.asarray(op.sigma_far, dtype=float)
-    plane = sys_.r.plane if sys_.roles is not None else None
+    plane = sys_.r.plane  # None without two position roles (a plant always has roles, maybe empty)
     steps = int(round(op.duration / sys_.dt))
     demos = []
     for j in range(n_trials):
