@@ -142,11 +142,14 @@ def choose_settings(
     rmse = {(G, r): [] for G in Gs for r in regs}
     loglik = {(G, r): [] for G in Gs for r in regs}
     for test_idx in parts:
-        train = [demos[j] for j in range(len(demos)) if j not in set(test_idx)]
+        held = set(test_idx.tolist())
+        train = [demos[j] for j in range(len(demos)) if j not in held]
         test = [demos[j] for j in test_idx]
         n_train = sum(len(d) for d in train)
-        X = np.concatenate([d.x for d in train])
-        spread = X[:, idx].std(axis=0) if not system.r.position else np.ones(len(idx))
+        if system.r.position:
+            spread = np.ones(len(idx))
+        else:
+            spread = np.concatenate([d.x for d in train])[:, idx].std(axis=0)
         spread = np.where(spread > 0, spread, 1.0)
         for G in Gs:
             if G * _SAMPLES_PER_COMPONENT > n_train:
