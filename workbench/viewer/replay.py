@@ -106,7 +106,7 @@ def replay(
     x_start, target = demo.x[0], demo.target
     if roles is None:
         roles = getattr(getattr(model, "system", None), "roles", None)
-    plane = plane_of(roles, state_names) if roles else None
+    plane = plane_of(roles, state_names)
     _log_styles(rec, demo, base, sbase, state_names, input_names, plane)
 
     t_rel = demo.t - demo.t[0]
@@ -248,7 +248,7 @@ def replay_blueprint(
         )
         for k, name in enumerate(state_names)
     ]
-    plane = plane_of(roles, state_names) if roles else None
+    plane = plane_of(roles, state_names)
     if plane is not None:
         bounds = None
         if demos:
