@@ -292,10 +292,11 @@ def run_study(
     metric = ev.primary_metric(system)
     stats_text = _subject_stats(ev, table, demos, metric, metric_unit(system, metric))
     objectives = _objective_intervals(models, train, int(bootstrap), seed)
+    calibration = pd.concat(cov_parts, ignore_index=True) if cov_parts else None
     return StudyResult(
         demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
-        coverage=_coverage_table(pd.concat(cov_parts, ignore_index=True)) if cov_parts else None,
-        calibration=pd.concat(cov_parts, ignore_index=True) if cov_parts else None,
+        coverage=_coverage_table(calibration) if calibration is not None else None,
+        calibration=calibration,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
         stats_text=stats_text, horizon=horizon, samples=samples, seed=seed, timings=timings, failures=failures,
         objectives=objectives,
