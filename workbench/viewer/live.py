@@ -28,7 +28,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from workbench.live import LinkStats, LiveEvent, LivePrediction
-from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS
+from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS, style
 from workbench.viewer.columns import send_columns
 from workbench.viewer.session import _safe as _part  # the replay's entity names: both layouts read alike
 
@@ -38,8 +38,8 @@ LIVE_APPLICATION_ID = "workbench_live"
 _RECORDED = (200, 200, 200)
 _PRED = METHOD_COLORS["proposed"]
 _BAND = (255, 187, 120)
-_W = (110, 190, 255)
-_OUT = (255, 60, 60)
+_W = style.W_COLOR
+_OUT = style.OUTLIER_COLOR
 _RECENT = 3
 
 
