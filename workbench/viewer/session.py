@@ -385,11 +385,12 @@ class SessionLogger:
             outside = np.abs(w - mu) > 3.0 * sigma
             out.update(mu=mu, sigma=sigma, outside=outside)
         t = self._t(demo)
+        index = _time_index(t)  # one pair of time columns serves every series of the trial
         for j, name in enumerate(s.input_names):
             p = f"{base}/{_safe(name)}"
             self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[style.W_COLOR], widths=[1.75],
                                                  interpolation_mode="StepAfter"))
-            self._send(f"{p}/w", _time_index(t), rr.Scalars.columns(scalars=w[:, j]))
+            self._send(f"{p}/w", index, rr.Scalars.columns(scalars=w[:, j]))
             if not has_gmr:
                 s.ranges[p] = _data_range(w[:, j])
                 continue
@@ -403,12 +404,12 @@ class SessionLogger:
                 if HAS_MEASUREMENTS:
                     self._style(f"{p}/{suffix}", rr.Measurements.from_fields(
                         names=[label], colors=[color], widths=[1.0], interpolation_mode="StepAfter"))
-                    self._send(f"{p}/{suffix}", _time_index(t),
+                    self._send(f"{p}/{suffix}", index,
                                rr.Measurements.columns(values=m_j, variances=(k * s_j) ** 2))
                 else:  # older SDKs: the band as two lines
                     self._style(f"{p}/{suffix}", rr.SeriesLines(names=[f"μ − {k:g}σ", f"μ + {k:g}σ"],
                                                                 colors=[color, color], widths=[1.0, 1.0]))
-                    self._send(f"{p}/{suffix}", _time_index(t),
+                    self._send(f"{p}/{suffix}", index,
                                rr.Scalars.columns(scalars=np.column_stack([m_j - k * s_j, m_j + k * s_j])))
             idx = np.flatnonzero(out["outside"][:, j])
             self._style(f"{p}/outside_3sigma", rr.SeriesPoints(names=["outside 3σ"], colors=[style.OUTLIER_COLOR],
