@@ -95,6 +95,14 @@ _PAD = 512
 _MAX_UNKNOWN_RUN = 16
 # Bounds on the passes of the typed reader's walk (see _scan_wanted, _walk); beyond them the full scan runs.
 _MAX_RESCANS = 8
+# A full read scans and decodes the file in blocks of _BLOCK bytes (each read with the _OVERLAP bytes after it,
+# more than the longest record), so its memory is the records' and the result's, not the file's.
+_BLOCK = 1 << 20
+_OVERLAP = 512
+# Rank of records decoded into no stream (unknown ids, types not selected).
+_NO_STREAM = 0xFFFF
+# Files from this size on return the scan's freed memory before decoding (see _return_free_memory).
+_TRIM_ABOVE = 1 << 23
 _MAX_PEELS = 16
 
 
@@ -250,14 +258,20 @@ def _read(path: str | os.PathLike[str], message_types: Iterable[str] | None, dia
     returned report then counts only the selected types, with zero skipped bytes and checksum failures)."""
     dial = load_dialect(dialect)
     wanted = _select_types(dial, message_types)
-    buf, n = _read_file(path)
     rec = None
     if wanted is not None and not report:
+        buf, n = _read_file(path)
         wanted_ids = np.zeros(dial.max_id + 1, dtype=bool)
         wanted_ids[[dial.by_name[name].msgid for name in wanted]] = True
         rec = _scan_wanted(buf, n, dial, wanted_ids)
-    if rec is None:
-        rec = _scan_records(buf, n, dial)
+        if rec is None:
+            rec = _scan_records(buf, n, dial)
+        blocks: Iterable = [(buf, 0, n, n)]
+    else:
+        rec, n = _scan_file(path, dial)
+        blocks = _blocks(path)  # read again for the decoding: the file is never held whole
+        if n >= _TRIM_ABOVE:
+            _return_free_memory()
     if rec.start.size == 0:
         raise FormatError(
             f"{os.fspath(path)}: not a MAVLink telemetry log (.tlog): no valid MAVLink record found "
@@ -265,25 +279,20 @@ def _read(path: str | os.PathLike[str], message_types: Iterable[str] | None, dia
         )
 
     is_known = rec.known
-    known_rows = np.flatnonzero(is_known)
-    order, ranks, bounds = _group(dial.rank[rec.msgid[is_known]])
-    ids = dial.ids[ranks]
-
-    streams: dict[str, pd.DataFrame] = {}
-    time_us: dict[str, np.ndarray] = {}
-    counts: dict[str, int] = {}
-    for k, msgid in enumerate(ids.tolist()):
-        layout = dial.by_id[msgid]
-        rows = known_rows[order[bounds[k] : bounds[k + 1]]]
-        counts[layout.name] = int(rows.size)
-        if wanted is not None and layout.name not in wanted:
-            continue
-        streams[layout.name], time_us[layout.name] = _decode_stream(buf, rec, rows, layout)
+    rank = np.full(rec.start.size, _NO_STREAM, dtype=np.uint16)
+    rank[is_known] = dial.rank[rec.msgid[is_known]]
+    per_rank = np.bincount(rank[is_known], minlength=dial.ids.size)
+    present = np.flatnonzero(per_rank)
+    counts = {dial.by_id[int(dial.ids[k])].name: int(per_rank[k]) for k in present.tolist()}
+    if wanted is not None:
+        decode = np.zeros(dial.ids.size + 1, dtype=bool)
+        decode[[int(dial.rank[dial.by_name[name].msgid]) for name in wanted]] = True
+        rank[~decode[np.minimum(rank, dial.ids.size)]] = _NO_STREAM
+        present = present[decode[present]]
 
     _, unknown_ids, unknown_bounds = _group(rec.msgid[~is_known])
     unknown_counts = np.diff(unknown_bounds)
-    v2 = rec.version == 2
-    report = ReadReport(
+    report_ = ReadReport(
         path=os.fspath(path),
         n_bytes=n,
         n_records=int(rec.start.size),
@@ -292,12 +301,22 @@ def _read(path: str | os.PathLike[str], message_types: Iterable[str] | None, dia
         skipped_runs=rec.skipped_runs,
         crc_failures=rec.crc_failures,
         unknown_msgids={int(i): int(c) for i, c in zip(unknown_ids, unknown_counts, strict=True)},
-        mavlink1_frames=int(np.count_nonzero(~v2)),
-        mavlink2_frames=int(np.count_nonzero(v2)),
+        mavlink1_frames=int(np.count_nonzero(~rec.v2)),
+        mavlink2_frames=int(np.count_nonzero(rec.v2)),
         signed_frames=int(np.count_nonzero(rec.signed)),
         dialect=dial.name,
     )
-    return TlogRead(streams=streams, report=report, time_us=time_us)
+    start, v2, plen = rec.start, rec.v2, rec.plen
+    del rec, is_known  # only what the decoding needs stays
+    layouts = {int(k): dial.by_id[int(dial.ids[k])] for k in present.tolist()}
+    outs = {k: _StreamOut(layout, int(per_rank[k])) for k, layout in layouts.items()}
+    for buf, a, _, own in blocks:
+        _decode_block(buf, a, own, start, v2, plen, rank, outs)
+    streams: dict[str, pd.DataFrame] = {}
+    time_us: dict[str, np.ndarray] = {}
+    for out in outs.values():
+        streams[out.layout.name], time_us[out.layout.name] = out.frame()
+    return TlogRead(streams=streams, report=report_, time_us=time_us)
 
 
 def _group(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -340,15 +359,11 @@ class _Records:
     """The accepted records of a file, in file order (internal)."""
 
     start: np.ndarray  # record offset (timestamp's first byte)
-    version: np.ndarray  # 1 or 2
+    v2: np.ndarray  # MAVLink 2 (else 1)
     plen: np.ndarray  # payload length on the wire
     msgid: np.ndarray
     known: np.ndarray  # msgid defined by the dialect (checksum verified)
     signed: np.ndarray
-    time_us: np.ndarray  # raw uint64 timestamps
-    sysid: np.ndarray
-    compid: np.ndarray
-    payload_at: np.ndarray  # offset of the payload's first byte
     skipped_bytes: int
     skipped_runs: int
     crc_failures: int
@@ -466,42 +481,48 @@ def _link_unknown(c: _Candidates, strong: np.ndarray, n: int) -> np.ndarray:
 
 def _scan_records(buf: np.ndarray, n: int, dial: Dialect) -> _Records:
     c = _candidates(buf, n, dial)
-    s, end, known = c.s, c.end, c.known
-
-    crc_ok = np.zeros(s.size, dtype=bool)
-    kidx = np.flatnonzero(known)
+    crc_ok = np.zeros(c.s.size, dtype=bool)
+    kidx = np.flatnonzero(c.known)
     crc_ok[kidx] = _crc_ok(buf, c, kidx, dial)
+    return _select_records(c, crc_ok, n)
+
+
+def _select_records(c: _Candidates, crc_ok: np.ndarray, n: int) -> _Records:
+    """The chain of valid candidates from the file's start, with the skipped bytes and checksum failures."""
+    s, end, known = c.s, c.end, c.known
     accepted = _link_unknown(c, known & crc_ok, n)
 
     cand = np.flatnonzero(accepted)
-    path = _follow_chain(s[cand], end[cand])
-    sel = cand[path]
-    start_p, end_p = s[sel], end[sel]
+    del accepted
+    sel = cand[_follow_chain(s[cand], end[cand])]
+    del cand
 
-    # Runs of skipped bytes: before the first record, between records that do not touch, after the last.
-    run_from = np.concatenate(([0], end_p))
-    run_to = np.concatenate((start_p, [n]))
+    # Runs of skipped bytes: before the first record, between records that do not touch, after the last
+    # (records never overlap, so the skipped bytes are the file less the records' bytes). Only the gaps are
+    # gathered: arrays as long as the records would outweigh everything else here.
+    if sel.size:
+        start_p, end_p = s[sel], end[sel]
+        skipped = n - int(np.sum(end_p - start_p))
+        inner = np.flatnonzero(start_p[1:] != end_p[:-1])
+        run_from = np.concatenate(([0], end_p[inner], [end_p[-1]]))
+        run_to = np.concatenate(([start_p[0]], start_p[inner + 1], [n]))
+        del start_p, end_p, inner
+    else:
+        skipped, run_from, run_to = n, np.array([0]), np.array([n])
     gap = run_to > run_from
-    skipped = int(np.sum(run_to - run_from))
     failed = known & ~crc_ok
     crc_failures = _count_crc_failures(run_from[gap], run_to[gap], s[failed], end[failed])
-    return _records_of(buf, c, sel, skipped, int(np.count_nonzero(gap)), crc_failures)
+    return _records_of(c, sel, skipped, int(np.count_nonzero(gap)), crc_failures)
 
 
-def _records_of(buf: np.ndarray, c: _Candidates, sel: np.ndarray, skipped: int, runs: int, failures: int) -> _Records:
-    start_p = c.s[sel]
-    v2_p = c.v2[sel]
+def _records_of(c: _Candidates, sel: np.ndarray, skipped: int, runs: int, failures: int) -> _Records:
     return _Records(
-        start=start_p,
-        version=np.where(v2_p, 2, 1).astype(np.uint8),
-        plen=c.plen[sel],
+        start=c.s[sel],
+        v2=c.v2[sel],
+        plen=c.plen[sel].astype(np.uint8),
         msgid=c.msgid[sel],
         known=c.known[sel],
         signed=c.signed[sel],
-        time_us=_unaligned(buf, ">u8")[start_p].astype(np.uint64),
-        sysid=buf[start_p + np.where(v2_p, 13, 11)],
-        compid=buf[start_p + np.where(v2_p, 14, 12)],
-        payload_at=start_p + np.where(v2_p, 8 + _HEADER_LEN[2], 8 + _HEADER_LEN[1]),
         skipped_bytes=skipped,
         skipped_runs=runs,
         crc_failures=failures,
@@ -544,8 +565,79 @@ def _scan_wanted(buf: np.ndarray, n: int, dial: Dialect, wanted_ids: np.ndarray)
         if not np.any(status[path] > 0):
             return None  # possibly no valid record at all: the full scan gives the error
         sel = path[wanted[path] & (status[path] > 0)]
-        return _records_of(buf, c, sel, 0, 0, 0)
+        return _records_of(c, sel, 0, 0, 0)
     return None
+
+
+def _scan_file(path: str | os.PathLike[str], dial: Dialect) -> tuple[_Records, int]:
+    """:func:`_scan_records` over the file read block by block (never the whole file in memory at once).
+
+    A candidate belongs to the block its first byte lies in; each block is read with :data:`_OVERLAP` bytes of the
+    next so that its candidates' frames are complete. Checksums and the candidates' fields are computed per block;
+    the chain and the counts run on the candidates of the whole file, exactly as for one buffer.
+    """
+    parts = []
+    n = 0
+    for buf, a, got, own in _blocks(path):
+        n = max(n, a + got)
+        c = _candidates(buf, got, dial)
+        mine = np.flatnonzero(c.s < own)
+        crc_ok = np.zeros(mine.size, dtype=bool)
+        kidx = np.flatnonzero(c.known[mine])
+        crc_ok[kidx] = _crc_ok(buf, c, mine[kidx], dial)
+        parts.append((c.s[mine] + a, c.v2[mine], c.plen[mine], c.signed[mine], c.end[mine] + a, c.msgid[mine],
+                      c.known[mine], crc_ok))
+        del c
+    if not parts:
+        raise DataError(f"{os.fspath(path)}: empty file, not a MAVLink telemetry log (.tlog)")
+    # Joined field by field, each field's pieces dropped as soon as it is joined (never two copies of all).
+    pieces = [list(p) for p in zip(*parts, strict=True)]
+    del parts
+    cols = []
+    for field_pieces in pieces:
+        cols.append(np.concatenate(field_pieces))
+        field_pieces.clear()
+    c = _Candidates(*cols[:7])
+    crc_ok = cols[7]
+    del cols, pieces
+    return _select_records(c, crc_ok, n), n
+
+
+def _return_free_memory() -> None:
+    """Hand the scan's freed temporaries back to the system (glibc keeps freed heap pages otherwise).
+
+    Without it the decoded columns are laid out beyond pages the allocator still holds, and a large log's
+    peak memory is the scan's and the result's together. A no-op where the C library has no ``malloc_trim``.
+    """
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _blocks(path: str | os.PathLike[str], size: int | None = None):
+    """``(buffer, offset, bytes read, bytes owned)`` for each block of the file, in one reused buffer.
+
+    The buffer holds the block's ``size`` bytes (:data:`_BLOCK` by default) plus :data:`_OVERLAP` bytes of the
+    next block, then zeros.
+    """
+    size = size or _BLOCK
+    try:
+        with open(path, "rb") as f:
+            total = os.fstat(f.fileno()).st_size
+            buf = np.zeros(min(total, size + _OVERLAP) + _PAD, dtype=np.uint8)
+            view = memoryview(buf)
+            for a in range(0, total, size):
+                f.seek(a)
+                got = f.readinto(view[: min(total - a, size + _OVERLAP)])
+                if not got:
+                    break
+                buf[got : got + _PAD] = 0
+                yield buf, a, got, min(size, got)
+    except OSError as e:
+        raise DataError(f"{os.fspath(path)}: cannot read MAVLink telemetry log: {e.strerror or e}") from e
 
 
 def _walk(start: np.ndarray, end: np.ndarray) -> np.ndarray:
@@ -632,42 +724,83 @@ def _count_crc_failures(
     return count
 
 
-def _decode_stream(
-    buf: np.ndarray, rec: _Records, rows: np.ndarray, layout: MessageLayout
-) -> tuple[pd.DataFrame, np.ndarray]:
-    plen = rec.plen[rows]
-    payload = _gather(buf, rec.payload_at[rows], layout.size)
-    short = plen < layout.size
-    if short.any():
-        # Zero-truncated (MAVLink 2) or extension-less (MAVLink 1) payloads: the missing tail is zero.
-        sub = np.flatnonzero(short)
-        payload[sub] *= np.arange(layout.size)[None, :] < plen[sub, None]
-    values = payload.view(layout.dtype).ravel()
+class _StreamOut:
+    """The columns of one message type, allocated at their final length and filled block by block (internal)."""
 
-    t_us = rec.time_us[rows]
-    columns: dict[str, Any] = {"t": t_us * 1e-6}
-    for f in layout.fields:
-        col = values[f.name]
-        if f.is_text:
-            columns[f.columns[0]] = pd.array(
-                [b.split(b"\0", 1)[0].decode("ascii", "replace") for b in col.tolist()], dtype="str"
-            )
-        elif f.wire_dtype.kind == "f":
-            with np.errstate(invalid="ignore"):  # signalling NaNs arrive quiet, as in pymavlink
-                col = col.astype(np.float64)
-            if f.is_array:
-                columns.update(zip(f.columns, col.T, strict=True))
+    def __init__(self, layout: MessageLayout, n: int) -> None:
+        self.layout = layout
+        self.pos = 0
+        self.time_us = np.empty(n, dtype=np.uint64)
+        self.sysid = np.empty(n, dtype=np.uint8)
+        self.compid = np.empty(n, dtype=np.uint8)
+        self.fields: list[Any] = []
+        for f in layout.fields:
+            if f.is_text:
+                self.fields.append([])
+                continue
+            # Floats widen to float64 (exact), integers keep their wire type in native byte order; an array
+            # field is stored one row per element so that each column is contiguous.
+            dtype = np.float64 if f.wire_dtype.kind == "f" else f.wire_dtype.newbyteorder("=")
+            self.fields.append(np.empty((f.count, n) if f.is_array else n, dtype=dtype))
+
+    def add(self, buf: np.ndarray, at: np.ndarray, v2: np.ndarray, plen: np.ndarray) -> None:
+        """Decode the records starting at ``buf[at]`` (all of this type, in file order) into the next rows."""
+        layout = self.layout
+        lo, hi = self.pos, self.pos + at.size
+        self.time_us[lo:hi] = _unaligned(buf, ">u8")[at]
+        self.sysid[lo:hi] = buf[at + np.where(v2, 13, 11)]
+        self.compid[lo:hi] = buf[at + np.where(v2, 14, 12)]
+        payload = _gather(buf, at + np.where(v2, 8 + _HEADER_LEN[2], 8 + _HEADER_LEN[1]), layout.size)
+        short = plen < layout.size
+        if short.any():
+            # Zero-truncated (MAVLink 2) or extension-less (MAVLink 1) payloads: the missing tail is zero.
+            sub = np.flatnonzero(short)
+            payload[sub] *= np.arange(layout.size)[None, :] < plen[sub, None]
+        values = payload.view(layout.dtype).ravel()
+        for f, out in zip(layout.fields, self.fields, strict=True):
+            col = values[f.name]
+            if f.is_text:
+                out.extend(b.split(b"\0", 1)[0].decode("ascii", "replace") for b in col.tolist())
             else:
-                columns[f.columns[0]] = col
-        else:
-            col = col.astype(f.wire_dtype.newbyteorder("="))
-            if f.is_array:
-                columns.update(zip(f.columns, col.T, strict=True))
+                with np.errstate(invalid="ignore"):  # signalling NaNs arrive quiet, as in pymavlink
+                    if f.is_array:
+                        out[:, lo:hi] = col.T
+                    else:
+                        out[lo:hi] = col
+        self.pos = hi
+
+    def frame(self) -> tuple[pd.DataFrame, np.ndarray]:
+        columns: dict[str, Any] = {"t": self.time_us * 1e-6}
+        for f, out in zip(self.layout.fields, self.fields, strict=True):
+            if f.is_text:
+                columns[f.columns[0]] = pd.array(out, dtype="str")
+            elif f.is_array:
+                columns.update(zip(f.columns, out, strict=True))
             else:
-                columns[f.columns[0]] = col
-    columns["sysid"] = rec.sysid[rows]
-    columns["compid"] = rec.compid[rows]
-    return pd.DataFrame(columns, copy=False), t_us
+                columns[f.columns[0]] = out
+        columns["sysid"] = self.sysid
+        columns["compid"] = self.compid
+        return pd.DataFrame(columns, copy=False), self.time_us
+
+
+def _decode_block(
+    buf: np.ndarray, a: int, own: int, start: np.ndarray, v2: np.ndarray, plen: np.ndarray, rank: np.ndarray,
+    outs: dict[int, _StreamOut],
+) -> None:
+    """Decode the records starting in the block ``[a, a + own)`` of the file (``buf`` holds it from ``a``)."""
+    i0, i1 = np.searchsorted(start, [a, a + own]).tolist()
+    if i0 == i1:
+        return
+    r = rank[i0:i1]
+    sel = np.flatnonzero(r != _NO_STREAM)
+    if sel.size == 0:
+        return
+    at = start[i0:i1][sel] - a
+    v2_b, plen_b = v2[i0:i1][sel], plen[i0:i1][sel]
+    order, ks, bounds = _group(r[sel])
+    for j, k in enumerate(ks.tolist()):
+        rows = order[bounds[j] : bounds[j + 1]]
+        outs[k].add(buf, at[rows], v2_b[rows], plen_b[rows])
 
 
 # ----------------------------------------------------------------------------------------------- writing
