@@ -15,6 +15,10 @@ TOP = ("workbench.cli", "workbench.__main__", "workbench.viewer", "workbench.rep
        "workbench.live")  # live joins the adapters' online path and a model, like the CLI joins them offline
 # the common format: the only part of workbench the adapters may use
 COMMON = ("workbench.demos", "workbench.dataset", "workbench.errors", "workbench.atomic", "workbench.roles")
+# floor 1: the common format and the plant; it imports nothing above it
+FLOOR1 = (*COMMON, "workbench.system", "workbench.identification", "workbench.frozen")
+# floor 3: the pipelines over models; the method and the models (floor 2) never import them
+FLOOR3 = ("workbench.study", "workbench.evaluate", "workbench.stats", "workbench.executor")
 
 
 def _module_name(path: Path) -> str:
@@ -52,6 +56,19 @@ def test_nothing_below_the_top_floor_imports_it(module):
 @pytest.mark.parametrize("module", sorted(m for m in MODULES if _under(m, TOP) and m != "workbench.__main__"))
 def test_nothing_imports_the_cli(module):
     assert not {i for i in MODULES[module] if _under(i, ("workbench.cli",))}
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if _under(m, FLOOR1)))
+def test_floor_one_imports_nothing_above_it(module):
+    above = {i for i in MODULES[module] if i.startswith("workbench.") and not _under(i, FLOOR1)}
+    assert not above, f"{module} imports {sorted(above)}"
+
+
+@pytest.mark.parametrize(
+    "module", sorted(m for m in MODULES if m.startswith("workbench.") and not _under(m, (*TOP, *FLOOR1, *FLOOR3)))
+)
+def test_the_method_and_models_never_import_the_pipelines(module):
+    assert not {i for i in MODULES[module] if _under(i, FLOOR3)}, f"{module} imports a study pipeline"
 
 
 @pytest.mark.parametrize("module", sorted(m for m in MODULES if m.startswith("adapters")))
