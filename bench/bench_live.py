@@ -35,6 +35,7 @@ from adapters.mavlink_link import open_link, tlog_frames  # noqa: E402
 from workbench.live import OnlinePredictor  # noqa: E402
 from workbench.model import HumanBehaviorModel  # noqa: E402
 from workbench.system import planar_quadrotor  # noqa: E402
+from workbench.viewer.scene import plane_of  # noqa: E402
 
 TLOG = ROOT / "sample_logs" / "landing_s00.tlog"
 HORIZON = 1.0
@@ -81,7 +82,9 @@ def in_process(model: HumanBehaviorModel) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         rec = viewer.new_recording("bench_live")
         rec.save(Path(tmp) / "live.rrd")
-        logger = LiveLogger(rec, pr.mapping.state_names, pr.mapping.input_names, plane=(0, 1, 2))
+        plane = plane_of(pr.mapping.roles, pr.mapping.state_names)
+        logger = LiveLogger(rec, pr.mapping.state_names, pr.mapping.input_names,
+                            plane=None if plane is None else (plane.across, plane.up, plane.heading))
         costs = []
         for i, p in enumerate(preds):
             a = time.perf_counter()
