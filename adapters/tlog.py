@@ -310,8 +310,12 @@ def _read(path: str | os.PathLike[str], message_types: Iterable[str] | None, dia
     del rec, is_known  # only what the decoding needs stays
     layouts = {int(k): dial.by_id[int(dial.ids[k])] for k in present.tolist()}
     outs = {k: _StreamOut(layout, int(per_rank[k])) for k, layout in layouts.items()}
+    buf = None
     for buf, a, _, own in blocks:
         _decode_block(buf, a, own, start, v2, plen, rank, outs)
+    del start, v2, plen, rank, blocks, buf  # before the frames are built
+    if n >= _TRIM_ABOVE:
+        _return_free_memory()
     streams: dict[str, pd.DataFrame] = {}
     time_us: dict[str, np.ndarray] = {}
     for out in outs.values():
@@ -600,6 +604,8 @@ def _scan_file(path: str | os.PathLike[str], dial: Dialect) -> tuple[_Records, i
     c = _Candidates(*cols[:7])
     crc_ok = cols[7]
     del cols, pieces
+    if n >= _TRIM_ABOVE:
+        _return_free_memory()  # the blocks' temporaries, before the chain's
     return _select_records(c, crc_ok, n), n
 
 
