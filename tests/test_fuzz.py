@@ -250,8 +250,9 @@ def summarize(records: list[dict]) -> dict[str, dict[str, int]]:
 
 
 # -- tests -------------------------------------------------------------------------------------------------
-# CSV is read by adapters/csv.py, another engineer's slice; findings there are listed, not hidden.
-_CSV_KNOWN: tuple[str, ...] = ()
+# CSV is read by adapters/csv.py, another engineer's slice: its known escapes (exception name, message part)
+# turn a fuzz run that finds nothing else into an xfail that names them, instead of hiding them.
+_CSV_KNOWN: tuple[tuple[str, str], ...] = ()
 
 
 def _check(records: list[dict], n: int, kinds: tuple[str, ...]) -> None:
@@ -260,6 +261,9 @@ def _check(records: list[dict], n: int, kinds: tuple[str, ...]) -> None:
     counts = summarize(records)
     assert set(counts) == set(kinds) and all(sum(c.values()) == n for c in counts.values()), counts
     bad = [r for r in records if r["outcome"] in ("foreign", "hang")]
+    known = [r for r in bad if r["kind"] == "csv"
+             and any(r.get("exception") == e and m in r.get("message", "") for e, m in _CSV_KNOWN)]
+    bad = [r for r in bad if r not in known]
     assert not bad, "foreign exceptions or hangs:\n" + "\n".join(
         f"{r['kind']} #{r['i']} ({r['mutation']}): {r['outcome']} {r.get('exception', '')}: {r.get('message', '')}"
         for r in bad
@@ -268,6 +272,9 @@ def _check(records: list[dict], n: int, kinds: tuple[str, ...]) -> None:
     assert not unnamed, "errors that do not name the file:\n" + "\n".join(r["message"] for r in unnamed)
     growth = max(r["rss_growth_mb"] for r in records)
     assert growth < RSS_GROWTH_MB, f"peak resident memory grew by {growth} MB while loading small corrupt files"
+    if known:
+        pytest.xfail(f"{len(known)} damaged CSV files raise {known[0]['exception']} ({known[0]['message']}) from "
+                     f"adapters/csv.py, another engineer's slice; every other load passed")
 
 
 def test_mutations_are_seeded_and_change_the_bytes():
@@ -317,6 +324,23 @@ def test_damaged_ros2_schema_is_skipped_without_printing(tmp_path, capfd):
     summary = str(adapters.inspect(path))
     assert "/rosout: undecodable messages" in summary
     assert capfd.readouterr().err == ""
+
+
+@pytest.mark.parametrize(
+    ("header", "cause"),
+    [(b"demo,t,x\xe4y,y", "not UTF-8"),  # found by the fuzzer (seeds 8, 11): a UnicodeDecodeError from pyarrow
+     (b"demo,t,x\rz,y", "not a readable CSV")],  # found by the fuzzer (seed 1): a _csv.Error from the header
+    ids=["not-utf8", "carriage-return"],
+)
+def test_csv_header_damage_is_a_data_error(tmp_path, header, cause):
+    import adapters
+    from workbench.errors import DataError
+
+    path = tmp_path / "header.csv"
+    path.write_bytes(header + b"\na,0,1,2\na,0.1,1,2\n")
+    with pytest.raises(DataError, match=cause) as info:
+        adapters.load(path, format="csv")
+    assert str(path) in str(info.value)
 
 
 def test_fuzz_fast_subset():
