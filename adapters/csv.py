@@ -154,11 +154,13 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
             raise DataError(f"{where}, line 1 (header): repeated column names {columns}")
         # pandas' C parser (the peer's own); ids stay text even when they look like numbers (read again as text).
         table = pd.read_csv(where, encoding="utf-8")
-        if "demo" in columns and table.shape[1] == len(columns):
+        parsed = [col for _, col in table.items()]  # one pass: items() is far cheaper than indexing by column
+        if "demo" in columns and len(parsed) == len(columns):
             at = columns.index("demo")
-            if table.iloc[:, at].dtype.kind not in "OT":
+            if parsed[at].dtype.kind not in "OT":
                 ids = pd.read_csv(where, usecols=[at], dtype=object, encoding="utf-8").iloc[:, 0]
-                table[table.columns[at]] = ids.to_numpy()
+                table.isetitem(at, ids.to_numpy())
+                parsed[at] = table.iloc[:, at]
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
     except UnicodeDecodeError as exc:
@@ -178,8 +180,8 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     n_rows = len(table)
     if n_rows == 0:
         raise DataError(f"{where}, line 2: no data rows, only the header")
-    parsed = [col for _, col in table.items()]  # one pass: items() is far cheaper than indexing column by column
-    if parsed[-1].isna().any():
+    last = parsed[-1]
+    if np.isnan(last.to_numpy()).any() if last.dtype.kind == "f" else last.isna().any():
         # A short row is padded with missing cells by pandas: the last cell of such a row is missing.
         place = lines.bad_row()
         if place != "unknown line":
