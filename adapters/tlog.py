@@ -24,9 +24,13 @@ that starts where it ends; where that is not a valid record, the bytes up to the
 skipped and counted (resynchronisation). Frames with a known message id are only ever accepted when their
 checksum matches. Frames with an id the dialect does not define cannot be checked; they are accepted
 (and counted, not decoded) only when a valid record or the end of the file follows them directly.
-Finally the payloads of each message type are gathered into one 2-D byte array and decoded in one go
-through a numpy structured dtype derived from pymavlink's own message classes
-(:mod:`adapters.mavlink_dialect`).
+Finally the payloads of each message type are gathered into 2-D byte arrays and decoded through a numpy
+structured dtype derived from pymavlink's own message classes (:mod:`adapters.mavlink_dialect`).
+
+The file is scanned, then decoded, in blocks of 1 MiB (each read with a little of the next, more than the longest
+record), into columns allocated at their final length: a read holds the records' offsets and its result, never
+the whole file (peak memory below twice the file's size). A typed read through :func:`read_streams` checksums
+only the frames its streams depend on, with the same values (see :func:`_scan_wanted`).
 
 Columns of a stream (one ``pandas.DataFrame`` per message type, in file order):
 
