@@ -3,7 +3,8 @@
 Two LQR operators (:mod:`workbench.operators`) with known diagonal costs and zero-mean, AR(1), state-dependent
 variability: B weights the attitude 46× and the horizontal and vertical positions 4× and 2× more than A.
 The gain is estimated by instrumental variables (least squares is biased in closed loop), the cost is the
-closest diagonal one, and each ratio's factor B/A gets a 95 % percentile interval from 2 × n_boot resamples.
+closest diagonal one, and each ratio's factor B/A gets a 95 % percentile interval from 2 × n_boot resamples,
+each operator's trials resampled with its own seed (independent resamples).
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ def coverage(seeds, n_boot: int, n_demos: int = 30) -> pd.DataFrame:
             "A": bootstrap(lqr_operator_demos(OP_A, n_demos, seed=1000 + seed, system=system), system,
                            n_boot=n_boot, method="iv", structure="diagonal", seed=seed),
             "B": bootstrap(lqr_operator_demos(OP_B, n_demos, seed=2000 + seed, system=system), system,
-                           n_boot=n_boot, method="iv", structure="diagonal", seed=seed),
+                           n_boot=n_boot, method="iv", structure="diagonal", seed=50000 + seed),
         }
         table = compare_strategies(boots, system.state_names, system.input_names)
         for r in table[table["strategy"] == "B"].itertuples():
@@ -71,14 +72,17 @@ def test_attitude_ratio_interval_covers_the_truth_on_a_few_seeds():
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 10's bar (every ratio covered in >= 90 % of seeds) is not met: with independent resamples the 95 % "
+    "percentile intervals (100 resamples, 30 trials per operator) cover Q_x/R_u1 in 0.80 and Q_phidot/R_u1 in 0.76 "
+    "of seeds 100-124 (seeds 20-44: all >= 0.92); the bootstrap spread of log Q_x/R_u1 (0.099) is below its spread "
+    "across seeds (0.115), and BC/BCa or basic intervals on the log scale do not fix it (Q_x 0.80-0.84)"))
 def test_ratio_intervals_cover_the_truth_in_ninety_percent_of_seeds():
-    # 25 seeds × 2 operators × 100 resamples: ~10 min on an idle 2-core machine. Measured (seeds 20-44):
-    # Q_phi/R_u1 0.96, Q_x/R_u1 0.96, Q_xdot/R_u1 0.92, Q_phidot/R_u1 0.92, Q_y/R_u2 0.88, Q_ydot/R_u2 1.00.
-    s = summarize(coverage(seeds=range(20, 45), n_boot=100))
-    assert s.loc["Q_phi / R_u1", "coverage"] >= 0.9
-    assert s.loc["Q_x / R_u1", "coverage"] >= 0.9
-    # percentile intervals from 30 trials run slightly short on the sharpest ratio
-    assert s.loc["Q_y / R_u2", "coverage"] >= 0.85
+    # 2 × 25 seeds × 2 operators × 100 resamples: ~12 min on an idle 2-core machine. The first 25 seeds are the
+    # ones the intervals were examined on, the second 25 were not looked at before the measurement.
+    s = summarize(coverage(seeds=[*range(20, 45), *range(100, 125)], n_boot=100))
+    for name, row in s.iterrows():
+        assert row["coverage"] >= 0.9, f"{name}: coverage {row['coverage']:.2f} < 0.9"
 
 
 def fake_boot(q_samples, r_samples, q, r, parts, ci=95.0, structure="diagonal"):
@@ -109,6 +113,17 @@ def test_factor_and_identifiability_are_computed_from_paired_resamples():
     assert NOT_IDENTIFIABLE not in RatioInterval("r", 1.0, 0.5, 4.9, 95).describe()
     # a weight at the bottom of the search (zero) is no finite ratio, however narrow its interval
     assert not RatioInterval("r", 1e-13, 1e-13, 2e-13, 95).identifiable
+
+
+def test_factor_needs_independent_resamples():
+    parts = (((0,), (0,)),)
+    a = fake_boot(np.ones((3, 1)), np.ones((3, 1)), [1.0], [1.0], parts)
+    b = fake_boot(np.ones((3, 1)), np.ones((3, 1)), [2.0], [1.0], parts)
+    same = {"a": SimpleNamespace(**vars(a), seed=7), "b": SimpleNamespace(**vars(b), seed=7)}
+    with pytest.raises(ModelError, match="same seed"):
+        compare_strategies(same, ["p"], ["u"])
+    apart = {"a": SimpleNamespace(**vars(a), seed=7), "b": SimpleNamespace(**vars(b), seed=8)}
+    assert compare_strategies(apart, ["p"], ["u"]).query("strategy == 'b'").factor.iloc[0] == pytest.approx(2.0)
 
 
 def test_ratios_need_the_diagonal_structure():

@@ -313,11 +313,13 @@ def _objective_intervals(
     out: dict[str, Any] = {}
     if n_boot <= 0:
         return out
-    for label, model in models.items():
+    for i, (label, model) in enumerate(models.items()):
         if getattr(model, "objective_", None) is None:
             continue
         try:
-            out[label] = objective_intervals(model, train[label], n_boot=n_boot, seed=seed)
+            # a seed per label: with one seed, resample j of every label draws the same trial positions, and the
+            # factor between two labels' ratios (weights.compare_strategies) needs independent resamples
+            out[label] = objective_intervals(model, train[label], n_boot=n_boot, seed=seed + i)
         except ModelError as exc:  # the report then shows the point estimate and says it has no interval
             warnings.warn(f"{label}: no bootstrap intervals of the task objective: {exc}", stacklevel=3)
     return out

@@ -117,8 +117,9 @@ def compare_strategies(
 ) -> pd.DataFrame:
     """Weight ratios per strategy and, for two or more, the factor between each strategy's and the first one's.
 
-    The bootstraps resample each strategy's demonstrations independently, so resample ``j`` of one strategy
-    paired with resample ``j`` of another is a draw of the factor; its percentiles are the interval.
+    The bootstraps resample each strategy's demonstrations independently (each with its own seed), so resample
+    ``j`` of one strategy paired with resample ``j`` of another is a draw of the factor; its percentiles are the
+    interval.
 
     Returns
     -------
@@ -126,10 +127,24 @@ def compare_strategies(
         One row per ratio and strategy: ``ratio``, ``strategy``, ``estimate``, ``lo``, ``hi``, ``identifiable``,
         ``note``, and for the second strategy on: ``factor`` (its ratio over the first's), ``factor_lo``,
         ``factor_hi``, ``factor_identifiable``, ``factor_note``.
+
+    Raises
+    ------
+    ModelError
+        If two strategies were bootstrapped with the same seed (their resamples would not be independent).
     """
     labels = list(boots)
     if not labels:
         raise ModelError("compare_strategies: no strategies")
+    seeds = {lb: getattr(boots[lb], "seed", None) for lb in labels}
+    shared = [lb for lb in labels[1:] if seeds[lb] is not None and seeds[lb] == seeds[labels[0]]]
+    if shared:
+        # one generator seed draws the same trial positions in resample j of both, so the paired factor is not a
+        # draw from independent resamples of the two strategies (measured: it can narrow or widen the interval)
+        raise ModelError(
+            f"compare_strategies: strategies {labels[0]!r} and {shared[0]!r} were bootstrapped with the same seed "
+            f"({seeds[labels[0]]}); bootstrap each strategy with its own seed so their resamples are independent"
+        )
     per = {lb: ratio_samples(boots[lb], state_names, input_names) for lb in labels}
     names = per[labels[0]][0]
     rows = []
