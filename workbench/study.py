@@ -35,6 +35,7 @@ METHODS = ("proposed", "ioc_only", "gmr_only", "persistence")
 METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence"}
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator.
 FLOOR_METHODS = ("ioc_only", "persistence")
+UNLABELED = "all"  # the one group of a study whose trials carry no strategy label
 
 #: The plant of a study: fixed, or identified from a training set (``LinearSystem.identify``-like).
 PlantSpec = Any
@@ -226,10 +227,11 @@ def run_study(
     splits = {}
     for label in labels:
         ds = demos if label is None else demos.by_label(label)
+        key = UNLABELED if label is None else str(label)
         if test_ids is None:
-            splits[str(label)] = _split(ds, test_size, seed)
+            splits[key] = _split(ds, test_size, seed)
         elif any(d.id in test_ids for d in ds):
-            splits[str(label)] = (ds._like([d for d in ds if d.id not in test_ids]),
+            splits[key] = (ds._like([d for d in ds if d.id not in test_ids]),
                                   ds._like([d for d in ds if d.id in test_ids]))
     if not splits:
         raise DataError(f"no trial among {list(demos.ids)} has a test id of {list(test_ids or [])}")
@@ -465,7 +467,7 @@ def verdicts(rmse: pd.DataFrame, metric: str, unit: str = "") -> list[str]:
         worse = [f"{METHOD_TITLES.get(b, b)} ({m['proposed']:.3g} vs {m[b]:.3g}{u})"
                  for b in FLOOR_METHODS if b in m.index and np.isfinite(m[b]) and m["proposed"] >= m[b]]
         if worse:
-            where = f"On {label}, the" if label not in ("", "None") else "The"  # "None": a study without labels
+            where = f"On {label}, the" if label not in ("", UNLABELED) else "The"
             which = "that baseline" if len(worse) == 1 else "those baselines"
             out.append(f"{where} proposed model is not better than {' nor than '.join(worse)} in mean {what} RMSE "
                        f"on the test trials: its predictions gain nothing over {which} on these data.")
