@@ -621,6 +621,19 @@ def _evaluate_per_subject(ctx: _Context, ds: Any) -> int:
     return 0
 
 
+def _viewer_command(path: str | os.PathLike) -> str:
+    """How to open a recording, with the viewer this workbench would start (the venv's, found without PATH)."""
+    import shlex
+
+    from workbench.viewer.output import rerun_executable
+
+    def short(p: str) -> str:  # .venv/bin/rerun when run from the project, the full path from anywhere else
+        rel = os.path.relpath(p) if os.path.isabs(p) else p
+        return p if rel.startswith("..") else rel
+
+    return shlex.join([*(short(p) for p in rerun_executable()), str(path)])
+
+
 def _print_study(ctx: _Context, result: Any) -> None:
     from rich.markup import escape
     from rich.table import Table
@@ -712,7 +725,7 @@ def cmd_view(ctx: _Context) -> int:
 
 def _announce(ctx: _Context, out: dict[str, Any], sink: Any, what: str) -> None:
     if out["save"]:
-        ctx.say(f"wrote {out['save']} ({what}); open it with:  rerun {out['save']}")
+        ctx.say(f"wrote {out['save']} ({what}); open it with:  {_viewer_command(out['save'])}")
     elif out["spawn"]:
         ctx.say(f"sent {what} to the rerun viewer")
     else:
@@ -926,7 +939,7 @@ def cmd_demo(ctx: _Context) -> int:
     ctx.say("")
     rows = [
         ("report", f"{report}  (figures in {out / 'figures'})"),
-        ("recording", f"{rrd}   open it with:  rerun {rrd}"),
+        ("recording", f"{rrd}   open it with:  {_viewer_command(rrd)}"),
         ("models", ", ".join(str(model_dir / f"{k}.npz") for k in result.models)),
         ("data", f"{out / 'demos.parquet'}, {out / 'results.csv'}"),
     ]
