@@ -972,10 +972,14 @@ def _fit_s0(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
     q0 = _diag_start(A, B, K)
     big = 10.0 * (float(np.linalg.norm(K)) + 1.0)
 
-    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def factors(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Lq, Lr = np.zeros((n, n)), np.zeros((m, m))
         Lq[iq] = p[: len(iq[0])]
         Lr[ir] = p[len(iq[0]) :]
+        return Lq, Lr
+
+    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Lq, Lr = factors(p)
         return Lq @ Lq.T, Lr @ Lr.T + 1e-9 * np.eye(m)
 
     lqr = _memo_lqr(A, B, unpack)
@@ -988,9 +992,7 @@ def _fit_s0(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
         out = lqr(p)
         if out is None:
             return np.zeros((K.size, p.size))
-        Lq, Lr = np.zeros((n, n)), np.zeros((m, m))
-        Lq[iq] = p[: len(iq[0])]
-        Lr[ir] = p[len(iq[0]) :]
+        Lq, Lr = factors(p)
 
         def directions():  # one per Cholesky entry: d(L Lᵀ) = E Lᵀ + L Eᵀ
             for j in range(p.size):
