@@ -195,14 +195,8 @@ def test_model_tensors(setup):
 
 
 def test_blueprint_has_the_five_tabs(setup):
-    reader = RrdReader(setup["path"])
-    assert reader.blueprints(), "the recording carries no default blueprint"
-    names = []
-    for chunk in reader.stream(store=reader.blueprints()[0]):
-        batch = chunk.to_record_batch()
-        for col in batch.schema.names:
-            if col.endswith("display_name"):
-                names += [str(v[0] if isinstance(v, list) else v) for v in batch.column(col).to_pylist() if v]
+    assert RrdReader(setup["path"]).blueprints(), "the recording carries no default blueprint"
+    names = _blueprint_names(setup["path"])
     for tab in ("scene", "states", "inputs & variability", "predictions", "objective"):
         assert tab in names, (tab, names)
 
@@ -293,13 +287,7 @@ KINDS = ("demo", "view", "view_model", "replay", "flight")
 
 
 def _recording(kind: str) -> Path:
-    paths = recordings.cli_recordings()
-    if kind not in paths:
-        reason = f"{recordings.FLIGHT_LOG} is absent (the shared/external folder beside the repository holds it)"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"CI must have the external logs: {reason}")
-        pytest.skip(reason)
-    return paths[kind]
+    return recordings.cli_recording(kind)
 
 
 @pytest.mark.parametrize("kind", KINDS)
