@@ -220,11 +220,7 @@ class PersistenceModel(BehaviorModel):
         super().__init__(system)
 
     def _transition(self) -> np.ndarray:
-        r = self.system.r
-        F = np.eye(self.system.n)
-        for p, v in zip(r.position, r.velocity, strict=False):
-            F[p, v] += self.system.dt
-        return F
+        return self.system.r.constant_velocity(self.system.n, self.system.dt)
 
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> PersistenceModel:
         """Nothing to learn but the shapes and the default target; checks the demonstrations like the others."""

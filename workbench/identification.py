@@ -223,12 +223,6 @@ class _Layout:
             AB[p, v] = self.dt
         return AB
 
-    def persistence(self) -> np.ndarray:
-        """The persistence guess as a plant: every state held, each position moved on at its velocity."""
-        P = np.eye(self.n)
-        for p, v in self.pairs:
-            P[p, v] = self.dt
-        return P
 
 
 def _fit(layout: _Layout, Z: np.ndarray, Xn: np.ndarray) -> np.ndarray:
@@ -366,9 +360,7 @@ def identify_plant(
     # held out: each segment predicted by the plant fitted on the others
     segs, cut = _segments(demos)
     h = max(1, int(round(horizon / dt)))
-    P = layout.persistence() if pairs else np.eye(n)
-    if not pairs and r.has_velocity:  # a free plant is still compared with constant velocity where known
-        P = _Layout(n, m, dt, tuple(_pairs_of(r))).persistence()
+    P = r.constant_velocity(n, dt)  # a free plant too is compared with constant velocity where roles know it
     zero_B = np.zeros((n, m))
     errs: dict[str, list[np.ndarray]] = {"one": [], "h": [], "one_p": [], "h_p": []}
     n_folds = 0

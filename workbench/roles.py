@@ -43,6 +43,18 @@ class ResolvedRoles:
     def has_velocity(self) -> bool:
         return bool(self.velocity)
 
+    def constant_velocity(self, n: int, dt: float) -> Any:
+        """The persistence plant ``F`` (n, n): every state held, each position moved on at its velocity over ``dt``.
+
+        Without velocity roles it is the identity (hold every state).
+        """
+        import numpy as np  # here, not at import: the roles are read where startup time counts (mappings, CLI)
+
+        F = np.eye(n)
+        for p, v in zip(self.position, self.velocity, strict=False):  # no velocities: no pairs, F = I
+            F[p, v] = dt
+        return F
+
     @property
     def plane(self) -> tuple[int, int] | None:
         """The two position states spanning the plane of flight (horizontal, vertical), or ``None``."""
