@@ -322,6 +322,7 @@ def fig_rmse(table: pd.DataFrame, metrics: Sequence[tuple[str, str]]) -> Figure:
                     ax.plot(np.full(len(d), j + 1) + np.linspace(-0.12, 0.12, len(d)), d, ".", color="k", ms=3)
             ax.set_title(f"{label}: {metric.replace('_', ' ')}", fontsize=9)
             ax.set_ylabel(f"RMSE [{unit}]" if unit else "RMSE")
+            ax.tick_params(axis="x", labelrotation=30)  # four or more method names overlap when horizontal
             ax.grid(alpha=0.3, axis="y")
     return fig
 
