@@ -26,7 +26,7 @@ def test_study_bootstraps_each_strategy_objective(result):
         model = result.models[label]
         # resampled as the model saw its trials: the bootstrap's point estimate is the model's objective
         np.testing.assert_allclose(oi.boot.objective.M_normalized, model.objective_.M_normalized, atol=1e-6)
-        assert oi.boot.n_boot == 12 and oi.ratio_boot.structure == "diagonal"
+        assert oi.boot.n_boot == 12 and oi.ratios.gains.n_boot == 12 and oi.ratios.gains.method == "iv"
         assert oi.ratio_gain == "iv"
 
 
@@ -36,8 +36,7 @@ def test_report_shows_intervals_and_the_ratio_comparison(result, tmp_path):
     boot = result.objectives["A"].boot
     assert f"[{boot.Q_diag_lo[2]:.3g}, {boot.Q_diag_hi[2]:.3g}]" in section
     assert "### Weight ratios inside coupled parts" in section
-    names = result.demos.state_names, result.demos.input_names
-    table = compare_strategies({lb: oi.ratio_boot for lb, oi in result.objectives.items()}, *names)
+    table = compare_strategies({lb: oi.ratios for lb, oi in result.objectives.items()})
     row = table[(table.strategy == "B") & (table.ratio == "Q_phi / R_u1")].iloc[0]
     assert f"{row.factor:.3g} [{row.factor_lo:.3g}, {row.factor_hi:.3g}]" in section
     flagged = (table["factor_identifiable"] == False).any()  # noqa: E712 - NaN rows of the first strategy

@@ -425,19 +425,21 @@ def _as_fitted(ds: Any, model: Any) -> Any:
 
 
 def _print_ratios(ctx: _Context, model: Any, ds: Any, n_boot: int, seed: int) -> None:
-    """Weight ratios inside each coupled part of the plant (closest diagonal cost), with intervals."""
-    from workbench.weights import ratio_bootstrap, weight_ratios
+    """Weight ratios inside each coupled part of the plant (minimum-distance diagonal cost), with intervals."""
+    from workbench.weights import ratio_bootstrap
 
     with ctx.progress() as progress:
-        progress.add_task(f"bootstrap of the weight ratios: {n_boot} resamples", total=None)
-        boot, gain, note = ratio_bootstrap(model, ds, n_boot=n_boot, seed=seed)
-    if boot is None:
+        task = progress.add_task(f"weight ratios: {n_boot} resampled gains", total=n_boot)
+        ratios, gain, note = ratio_bootstrap(model, ds, n_boot=n_boot, seed=seed,
+                                             progress=lambda done, total: progress.update(task, completed=done))
+    if ratios is None:
         ctx.say(f"weight ratios: none ({note})")
         return
-    ctx.say(f"weight ratios inside coupled parts (closest S = 0, diagonal cost to the {gain} gain; "
-            f"{boot.n_ok} of {boot.n_boot} resamples, {boot.ci:g} % intervals; forward-gain error "
-            f"{boot.objective.forward_gain_error:.2g}):")
-    for r in weight_ratios(boot, ds.state_names, ds.input_names):
+    g = ratios.gains
+    ctx.say(f"weight ratios inside coupled parts (S = 0, diagonal cost closest to the {gain} gain in the metric of "
+            f"its covariance over {g.n_ok} of {g.n_boot} resamples; {ratios.ci:g} % profile intervals; "
+            f"forward-gain error {ratios.forward_gain_error:.2g}):")
+    for r in ratios.intervals:
         ctx.say(f"  {r.describe()}")
 
 
@@ -661,13 +663,13 @@ def _print_objective_comparison(ctx: _Context, result: Any) -> None:
 
     from workbench.weights import NOT_IDENTIFIABLE, compare_strategies
 
-    boots = {lb: oi.ratio_boot for lb, oi in getattr(result, "objectives", {}).items() if oi.ratio_boot is not None}
-    if not boots:
+    ratios = {lb: oi.ratios for lb, oi in getattr(result, "objectives", {}).items() if oi.ratios is not None}
+    if not ratios:
         return
-    table = compare_strategies(boots, result.demos.state_names, result.demos.input_names)
-    first = next(iter(boots))
+    table = compare_strategies(ratios)
+    first = next(iter(ratios))
     out = Table("ratio", "strategy", "estimate [95 % interval]", f"× vs {first}", "",
-                title="task-objective weight ratios inside coupled parts (closest diagonal cost, bootstrap)")
+                title="task-objective weight ratios inside coupled parts (diagonal cost, profile intervals)")
     for r in table.itertuples():
         factor = getattr(r, "factor", float("nan"))
         note = r.note if r.strategy == first or factor != factor else (r.factor_note or r.note)

@@ -59,6 +59,10 @@ __all__ = [
     "closest_structured_objective",
     "decoupled_parts",
     "bootstrap",
+    "GainBootstrap",
+    "bootstrap_gain",
+    "memo_lqr",
+    "gain_jacobian",
 ]
 
 GainMethod = Literal["direct", "dmd", "iv"]
@@ -881,7 +885,7 @@ def _diag_start(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarray:
     return theta
 
 
-def _memo_lqr(
+def memo_lqr(
     A: np.ndarray, B: np.ndarray, weights: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray] | None]:
     """``lqr(p)``: the LQR gain ``K`` (u = K x) and ``H = R + Bᵀ P B`` of the cost ``weights(p) = (Q, R)``, or None
@@ -905,7 +909,7 @@ def _memo_lqr(
     return lqr
 
 
-def _gain_jacobian(
+def gain_jacobian(
     A: np.ndarray, B: np.ndarray, K: np.ndarray, H: np.ndarray, directions: Iterable[tuple[np.ndarray, np.ndarray]]
 ) -> np.ndarray:
     """Columns ``dK`` of the LQR gain ``K`` (with ``H = R + Bᵀ P B``) along each ``(dQ, dR)`` of ``directions``.
@@ -933,7 +937,7 @@ def _fit_diagonal_part(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarra
         theta = np.exp(log_theta)
         return np.diag(theta[:n]), np.diag(theta[n:])
 
-    lqr = _memo_lqr(A, B, weights)
+    lqr = memo_lqr(A, B, weights)
 
     def residual(log_theta: np.ndarray) -> np.ndarray:
         out = lqr(log_theta)
@@ -954,7 +958,7 @@ def _fit_diagonal_part(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarra
                     dR[i - n, i - n] = theta[i]
                 yield dQ, dR
 
-        return _gain_jacobian(A, B, *out, directions())
+        return gain_jacobian(A, B, *out, directions())
 
     x0 = np.log(theta0 / theta0.max())
     # log-weights within ±30 keep every DARE well posed; the common scale is free (the gain ignores it)
@@ -982,7 +986,7 @@ def _fit_s0(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
         Lq, Lr = factors(p)
         return Lq @ Lq.T, Lr @ Lr.T + 1e-9 * np.eye(m)
 
-    lqr = _memo_lqr(A, B, unpack)
+    lqr = memo_lqr(A, B, unpack)
 
     def residual(p: np.ndarray) -> np.ndarray:
         out = lqr(p)
@@ -1008,7 +1012,7 @@ def _fit_s0(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
                     dR = E @ Lr.T + Lr @ E.T
                 yield dQ, dR
 
-        return _gain_jacobian(A, B, *out, directions())
+        return gain_jacobian(A, B, *out, directions())
 
     q0 = q0 / q0.max()
     p0 = np.r_[np.sqrt(np.diag(q0[:n]))[iq], np.sqrt(np.diag(q0[n:]))[ir]]
@@ -1169,17 +1173,18 @@ class BootstrapResult:
 
 
 def _resample_fit(
-    blocks: list, idx: np.ndarray, A: np.ndarray, B: np.ndarray, method: GainMethod, solver: InverseLQR
-) -> tuple[np.ndarray, TaskObjective]:
-    """Gain and task objective of the demonstrations ``idx`` (with repeats) of ``blocks``."""
+    blocks: list, idx: np.ndarray, A: np.ndarray, B: np.ndarray, method: GainMethod, solver: InverseLQR | None
+) -> tuple[np.ndarray, TaskObjective | None]:
+    """Gain and (with a solver) task objective of the demonstrations ``idx`` (with repeats) of ``blocks``."""
     X, U, X_next = (np.concatenate([blocks[i][k] for i in idx], axis=1) for k in range(3))
     K = gain_from_arrays(X, U, X_next, A, B, method, lengths=[blocks[i][0].shape[1] for i in idx])
-    return K, solver.solve(K)
+    return K, (None if solver is None else solver.solve(K))
 
 
 def _resamples(blocks: list, draws: list, A: np.ndarray, B: np.ndarray, method: GainMethod,
-               solver: InverseLQR) -> list[tuple]:
-    """Per resample ``(b, idx)``: ``(b, K, diag Q, diag R, None)``, or ``(b, None, None, None, reason)``."""
+               solver: InverseLQR | None) -> list[tuple]:
+    """Per resample ``(b, idx)``: ``(b, K, diag Q, diag R, None)`` (Q, R None without a solver), or
+    ``(b, None, None, None, reason)``."""
     out = []
     for b, idx in draws:
         try:
@@ -1187,7 +1192,8 @@ def _resamples(blocks: list, draws: list, A: np.ndarray, B: np.ndarray, method: 
         except ModelError as exc:
             out.append((b, None, None, None, str(exc)))
         else:
-            out.append((b, K, np.diag(obj.Q_normalized), np.diag(obj.R_normalized), None))
+            q, r = (None, None) if obj is None else (np.diag(obj.Q_normalized), np.diag(obj.R_normalized))
+            out.append((b, K, q, r, None))
     return out
 
 
@@ -1195,7 +1201,104 @@ def _bootstrap_block(task: tuple) -> list[tuple]:
     """A block of bootstrap resamples, run by a worker: it reads the demonstrations from their file."""
     ref, A, B, method, structure, draws = task
     blocks = _demo_blocks(list(ref.load()), *B.shape)
-    return _resamples(blocks, draws, A, B, method, _cached_problem(A, B, structure, True))
+    solver = None if structure is None else _cached_problem(A, B, structure, True)
+    return _resamples(blocks, draws, A, B, method, solver)
+
+
+def _checked_n_boot(n_boot: int) -> int:
+    if int(n_boot) < 1:
+        raise DataError(f"n_boot must be ≥ 1, got {n_boot}")
+    return int(n_boot)
+
+
+def _run_resamples(
+    demos: Any, blocks: list, A: np.ndarray, B: np.ndarray, method: GainMethod, structure: Structure | None,
+    n_boot: int, seed: int, progress: Callable[[int, int], None] | None, executor: Any,
+) -> list[tuple]:
+    """Draw ``n_boot`` resamples of whole trials from one generator and fit each (see :func:`bootstrap`)."""
+    solver = None if structure is None else _cached_problem(A, B, structure, True)
+    rng = np.random.default_rng(seed)
+    draws = [(b, rng.integers(0, len(blocks), size=len(blocks))) for b in range(n_boot)]
+    if executor is None:
+        results = []
+        with _single_threaded_blas():  # as on a worker: the same reductions, so the same intervals
+            for b, idx in draws:
+                results.extend(_resamples(blocks, [(b, idx)], A, B, method, solver))
+                if progress is not None:
+                    progress(b + 1, n_boot)
+        return results
+    # one resample per task in process (progress per resample); on workers ~4 blocks each amortize the setup
+    size = max(1, math.ceil(n_boot / (4 * executor.workers))) if executor.parallel else 1
+    ref = executor.share(demos)
+    tasks = [(ref, A, B, method, structure, draws[i : i + size]) for i in range(0, n_boot, size)]
+    report = None if progress is None else lambda done, total: progress(min(n_boot, done * size), n_boot)
+    return [r for block in executor.map(_bootstrap_block, tasks, progress=report) for r in block]
+
+
+@dataclass(frozen=True, eq=False)
+class GainBootstrap:
+    """Gains ``K̂`` of demonstration resamples, without a task objective per resample.
+
+    Attributes
+    ----------
+    K : ndarray, shape (m, n)
+        Point estimate from all demonstrations.
+    K_samples : ndarray, shape (n_ok, m, n)
+    n_trials : int
+        Demonstrations resampled (each resample draws this many, with repeats).
+    n_boot, n_failed : int
+    failures : tuple of str
+    method : str
+    seed : int
+    """
+
+    K: np.ndarray
+    K_samples: np.ndarray
+    n_trials: int
+    n_boot: int
+    n_failed: int
+    failures: tuple[str, ...]
+    method: str
+    seed: int
+
+    @property
+    def n_ok(self) -> int:
+        return self.n_boot - self.n_failed
+
+
+def bootstrap_gain(
+    demos: Any,
+    system: Any,
+    n_boot: int = 200,
+    method: GainMethod = "direct",
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    executor: Any = None,
+) -> GainBootstrap:
+    """The sampling distribution of ``K̂`` (eqs. (12)-(14)) over resamples of whole demonstrations.
+
+    What :func:`bootstrap` draws, without solving an inverse LQR per resample: the source of the gain's
+    covariance for :mod:`workbench.ratio_profile`. Same draws as :func:`bootstrap` for the same ``seed``.
+
+    Raises
+    ------
+    ModelError
+        If the point estimate on all demonstrations fails, or every resample fails.
+    """
+    n_boot = _checked_n_boot(n_boot)
+    A, B = _system_matrices(system.A, system.B)
+    blocks = _demo_blocks(list(demos), *B.shape)
+    if not blocks:
+        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
+    K0, _ = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, None)
+    results = _run_resamples(demos, blocks, A, B, method, None, n_boot, seed, progress, executor)
+    Ks = [K for _, K, _, _, error in results if error is None]
+    failures = tuple(f"resample {b}: {error}" for b, _, _, _, error in results if error is not None)
+    if not Ks:
+        raise ModelError(f"all {n_boot} bootstrap resamples failed; first failure: {failures[0]}")
+    return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array(Ks)), n_trials=len(blocks), n_boot=n_boot,
+                         n_failed=len(failures), failures=failures, method=method, seed=int(seed))
 
 
 def bootstrap(
@@ -1243,36 +1346,17 @@ def bootstrap(
     """
     if not 0 < ci < 100:
         raise DataError(f"ci must be a percentage in (0, 100), got {ci}")
-    if int(n_boot) < 1:
-        raise DataError(f"n_boot must be ≥ 1, got {n_boot}")
-    n_boot = int(n_boot)
+    n_boot = _checked_n_boot(n_boot)
     A, B = _system_matrices(system.A, system.B)
     n, m = B.shape
     demo_list = list(demos)
     blocks = _demo_blocks(demo_list, n, m)
     if not blocks:
         raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
-    solver = _cached_problem(A, B, structure, True) if structure in _STRUCTURES else None
-    if solver is None:
+    if structure not in _STRUCTURES:
         raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
-
-    K0, obj0 = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, solver)
-    rng = np.random.default_rng(seed)
-    draws = [(b, rng.integers(0, len(blocks), size=len(blocks))) for b in range(n_boot)]
-    if executor is None:
-        results = []
-        with _single_threaded_blas():  # as on a worker: the same reductions, so the same intervals
-            for b, idx in draws:
-                results.extend(_resamples(blocks, [(b, idx)], A, B, method, solver))
-                if progress is not None:
-                    progress(b + 1, n_boot)
-    else:
-        # one resample per task in process (progress per resample); on workers ~4 blocks each amortize the setup
-        size = max(1, math.ceil(n_boot / (4 * executor.workers))) if executor.parallel else 1
-        ref = executor.share(demos)
-        tasks = [(ref, A, B, method, structure, draws[i : i + size]) for i in range(0, n_boot, size)]
-        report = None if progress is None else lambda done, total: progress(min(n_boot, done * size), n_boot)
-        results = [r for block in executor.map(_bootstrap_block, tasks, progress=report) for r in block]
+    K0, obj0 = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, _cached_problem(A, B, structure, True))
+    results = _run_resamples(demos, blocks, A, B, method, structure, n_boot, seed, progress, executor)
     Ks, Qd, Rd, failures = [], [], [], []
     for b, K, q_diag, r_diag, error in results:
         if error is not None:

@@ -553,28 +553,31 @@ def _objective_interval_notes(
     first = next(iter(objectives.values())).boot
     md = [f"*In brackets: {first.ci:g} % percentile intervals over {first.n_boot} bootstrap resamples of the "
           "training trials.*", ""]
-    boots = {lb: objectives[lb].ratio_boot for lb in labels if lb in objectives and objectives[lb].ratio_boot}
-    if not boots:
+    ratios = {lb: objectives[lb].ratios for lb in labels if lb in objectives and objectives[lb].ratios}
+    if not ratios:
         return md
-    table = compare_strategies(boots, state_names, input_names)
-    gains = sorted({objectives[lb].ratio_gain for lb in boots})
+    table = compare_strategies(ratios)
+    gains = sorted({objectives[lb].ratio_gain for lb in ratios})
     rows = []
     for r in table.itertuples():
         row = {"ratio": r.ratio, "strategy": r.strategy, "estimate [interval]": f"{r.estimate:.3g} [{r.lo:.3g}, "
                f"{r.hi:.3g}]", "note": r.note}
-        if len(boots) > 1:
+        if len(ratios) > 1:
             factor = getattr(r, "factor", float("nan"))
-            row[f"× vs {labels[0] if labels[0] in boots else next(iter(boots))}"] = (
+            row[f"× vs {labels[0] if labels[0] in ratios else next(iter(ratios))}"] = (
                 "" if not np.isfinite(factor) else f"{factor:.3g} [{r.factor_lo:.3g}, {r.factor_hi:.3g}]"
                 + ("" if r.factor_identifiable else " — not identifiable from these data"))
         rows.append(row)
-    fwd = ", ".join(f"{lb} {boots[lb].objective.forward_gain_error:.2g}" for lb in boots)
+    fwd = ", ".join(f"{lb} {ratios[lb].forward_gain_error:.2g}" for lb in ratios)
     md += ["### Weight ratios inside coupled parts", "",
            "The cost above is the SDP's minimum-condition-number member and keeps no ratio between strategies. "
-           "The closest cost with S = 0 and diagonal Q, R is unique up to one scale per decoupled part of the "
-           f"plant, so its ratios inside a part compare between strategies (gain: {', '.join(gains)}; "
-           f"forward-gain error of the closest diagonal cost: {fwd}). An interval wider than ×10 is marked "
-           "not identifiable from these data.", "", _md_table(pd.DataFrame(rows)), ""]
+           "A cost with S = 0 and diagonal Q, R is unique up to one scale per decoupled part of the plant, so its "
+           "ratios inside a part compare between strategies. Each strategy's ratios are those whose LQR gain is "
+           f"closest to its estimated gain ({', '.join(gains)}) in the metric of that gain's bootstrap "
+           "covariance; the intervals are profile intervals of that distance (a ratio is kept while the gain it "
+           "implies stays statistically compatible with the estimate), and a factor's interval profiles both "
+           f"strategies' distances together (forward-gain error of each diagonal cost: {fwd}). An interval wider "
+           "than ×10 is marked not identifiable from these data.", "", _md_table(pd.DataFrame(rows)), ""]
     return md
 
 

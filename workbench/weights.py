@@ -1,45 +1,46 @@
 """Weight ratios inside the coupled parts of a plant: what a task objective can say about an operator.
 
 The full inverse-LQR SDP returns the minimum-condition-number cost with the fitted gain, which keeps no ratio
-between two operators' weights. With ``S = 0`` and diagonal Q, R (:func:`workbench.ioc.closest_structured_objective`)
-a cost is determined up to one scale per decoupled part of the plant (:func:`workbench.ioc.decoupled_parts`), so
-the interpretable quantities are ratios inside one part, e.g. ``Q_φφ / R_u1`` of the quadrotor's lateral part. This
-module turns bootstrap samples (:func:`workbench.ioc.bootstrap` with ``structure="diagonal"``) into those ratios
-with percentile intervals, and compares two strategies ratio by ratio, saying "not identifiable from these data"
-where an interval spans more than a factor of :data:`IDENTIFIABLE_SPAN`.
+between two operators' weights. With ``S = 0`` and diagonal Q, R a cost is determined up to one scale per
+decoupled part of the plant (:func:`workbench.ioc.decoupled_parts`), so the interpretable quantities are ratios
+inside one part, e.g. ``Q_φφ / R_u1`` of the quadrotor's lateral part. This module estimates them from a gain
+and its bootstrap distribution (:func:`workbench.ioc.bootstrap_gain`) by minimum distance, with profile
+intervals (:mod:`workbench.ratio_profile`), and compares two strategies ratio by ratio, saying "not
+identifiable from these data" where an interval spans more than a factor of :data:`IDENTIFIABLE_SPAN`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
+from workbench import ratio_profile
 from workbench.errors import ModelError
 
 __all__ = [
     "IDENTIFIABLE_SPAN",
     "RatioInterval",
+    "WeightRatios",
     "ObjectiveIntervals",
     "objective_intervals",
     "ratio_bootstrap",
     "weight_ratios",
-    "ratio_samples",
     "compare_strategies",
 ]
 
 IDENTIFIABLE_SPAN = 10.0
-# Weights are scaled to a largest weight of 1 per part and searched down to e^-30 ≈ 1e-13: a ratio below this is a
-# weight at the bottom of the search, i.e. zero, and an interval reaching it is not a finite ratio.
+# Log ratios are searched down to -ratio_profile.LOG_BOUND (e^-30 ≈ 1e-13): a ratio below this is a weight at the
+# bottom of the search, i.e. zero, and an interval reaching it is not a finite ratio.
 ZERO_RATIO = 1e-9
 NOT_IDENTIFIABLE = "not identifiable from these data"
 
 
 @dataclass(frozen=True)
 class RatioInterval:
-    """One weight ratio (or a factor between two strategies' ratios) with its percentile interval."""
+    """One weight ratio (or a factor between two strategies' ratios) with its interval."""
 
     name: str
     estimate: float
@@ -76,50 +77,88 @@ def _ratio_names(
     return out
 
 
-def _ratios(q: np.ndarray, r: np.ndarray, spec: list[tuple[str, int, int]]) -> np.ndarray:
-    """Ratios of weight samples ``q`` (S, n), ``r`` (S, m) per ``spec``, shape (S, len(spec))."""
-    num = np.stack([q[:, i] if i >= 0 else r[:, -1 - i] for _, i, _ in spec], axis=1)
-    den = np.stack([r[:, k] for _, _, k in spec], axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return num / den
+@dataclass(frozen=True, eq=False)
+class WeightRatios:
+    """One operator's weight ratios inside the coupled parts of its plant, with profile intervals.
+
+    Attributes
+    ----------
+    intervals : tuple of RatioInterval
+        Every ``Q_ii / R_kk`` (and ``R_jj / R_kk``) inside a part, ``R_kk`` the part's first input.
+    Q_diag, R_diag : ndarray
+        The minimum-distance diagonal cost, each part scaled so that its largest weight is 1.
+    forward_gain_error : float
+        ``‖K_LQR(Q, R) − K̂‖_F / ‖K̂‖_F`` of that cost (DARE).
+    gains : GainBootstrap
+        The gain estimate and its resamples.
+    ci : float
+    """
+
+    intervals: tuple[RatioInterval, ...]
+    Q_diag: np.ndarray
+    R_diag: np.ndarray
+    forward_gain_error: float
+    gains: object
+    ci: float
+    _parts: tuple  # (PartDistance, θ̂, D(θ̂)) per part with an input
+    _index: tuple  # (part, j) per interval
+
+    @property
+    def names(self) -> list[str]:
+        return [iv.name for iv in self.intervals]
 
 
-def ratio_samples(boot, state_names: Sequence[str], input_names: Sequence[str]) -> tuple[list[str], np.ndarray,
-                                                                                          np.ndarray]:
-    """Weight ratios of a diagonal-structure bootstrap: names, point estimates (K,), samples (n_ok, K)."""
-    obj = boot.objective
-    if boot.structure != "diagonal" or not obj.parts:
-        raise ModelError(
-            f"weight ratios need a bootstrap with structure='diagonal' (S = 0, diagonal Q and R), got "
-            f"{boot.structure!r}: the full SDP's cost keeps no ratio between operators"
-        )
-    spec = _ratio_names(obj.parts, state_names, input_names)
-    point = _ratios(np.diag(obj.Q)[None], np.diag(obj.R)[None], spec)[0]
-    return [s[0] for s in spec], point, _ratios(np.asarray(boot.Q_diag_samples), np.asarray(boot.R_diag_samples), spec)
+def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
+    """Minimum-distance weight ratios and their profile intervals from a gain bootstrap (see
+    :mod:`workbench.ratio_profile`).
+
+    Parameters
+    ----------
+    gains : GainBootstrap
+        From :func:`workbench.ioc.bootstrap_gain` (or anything with ``K``, ``K_samples``, ``n_trials``).
+    system : LinearSystem
+        The plant, with ``state_names`` and ``input_names``.
+    ci : float
+        Interval level in percent.
+    """
+    from workbench.ioc import closest_structured_objective, decoupled_parts, forward_gain
+
+    A, B = np.asarray(system.A, dtype=float), np.asarray(system.B, dtype=float)
+    n, m = B.shape
+    K, K_s = np.asarray(gains.K, dtype=float), np.asarray(gains.K_samples, dtype=float)
+    parts = decoupled_parts(A, B)
+    spec = _ratio_names(parts, system.state_names, system.input_names)
+    q, r = np.ones(n), np.ones(m)
+    fitted, index, intervals = [], [], []
+    for states, inputs in parts:
+        if not inputs:
+            continue  # a part no input reaches: its weights do not affect the gain
+        s, c = list(states), list(inputs)
+        part = ratio_profile.PartDistance.from_samples(
+            A[np.ix_(s, s)], B[np.ix_(s, c)], K[np.ix_(c, s)], K_s[:, c][:, :, s], gains.n_trials)
+        start = closest_structured_objective(part.A, part.B, K[np.ix_(c, s)], "diagonal")
+        w0 = np.r_[np.diag(start.Q), np.diag(start.R)[1:]] / start.R[0, 0]
+        theta, d_min = ratio_profile.fit(part, np.log(np.maximum(w0, 1e-300)))
+        Qp, Rp = part.weights(theta)
+        scale = max(float(Qp.max()), float(Rp.max()))
+        q[s], r[c] = np.diag(Qp) / scale, np.diag(Rp) / scale
+        for j in range(part.d):
+            lo, hi = ratio_profile.interval(part, theta, d_min, j, ci)
+            name = spec[len(index)][0]
+            intervals.append(RatioInterval(name, float(np.exp(theta[j])), float(np.exp(lo)), float(np.exp(hi)), ci))
+            index.append((len(fitted), j))
+        fitted.append((part, theta, d_min))
+    K_fwd, _ = forward_gain(A, B, np.diag(q), np.diag(r))
+    err = float(np.linalg.norm(K_fwd - K) / max(float(np.linalg.norm(K)), 1e-300))
+    return WeightRatios(intervals=tuple(intervals), Q_diag=q, R_diag=r, forward_gain_error=err, gains=gains,
+                        ci=float(ci), _parts=tuple(fitted), _index=tuple(index))
 
 
-def _interval(name: str, estimate: float, samples: np.ndarray, ci: float) -> RatioInterval:
-    finite = samples[np.isfinite(samples)]
-    if finite.size == 0:
-        return RatioInterval(name, float(estimate), 0.0, float("inf"), ci)
-    lo, hi = np.percentile(finite, [(100 - ci) / 2, 100 - (100 - ci) / 2])
-    return RatioInterval(name, float(estimate), float(lo), float(hi), ci)
-
-
-def weight_ratios(boot, state_names: Sequence[str], input_names: Sequence[str]) -> list[RatioInterval]:
-    """Every weight ratio inside a coupled part, with the bootstrap's percentile interval."""
-    names, point, samples = ratio_samples(boot, state_names, input_names)
-    return [_interval(nm, point[j], samples[:, j], boot.ci) for j, nm in enumerate(names)]
-
-
-def compare_strategies(
-    boots: dict[str, object], state_names: Sequence[str], input_names: Sequence[str]
-) -> pd.DataFrame:
+def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
     """Weight ratios per strategy and, for two or more, the factor between each strategy's and the first one's.
 
-    The bootstraps resample each strategy's demonstrations independently (each with its own seed), so resample
-    ``j`` of one strategy paired with resample ``j`` of another is a draw of the factor; its percentiles are the
-    interval.
+    A factor's interval is the profile interval of the difference of one log ratio between two strategies
+    (:func:`workbench.ratio_profile.factor_interval`), each strategy with its own gain and covariance.
 
     Returns
     -------
@@ -131,35 +170,38 @@ def compare_strategies(
     Raises
     ------
     ModelError
-        If two strategies were bootstrapped with the same seed (their resamples would not be independent).
+        If two strategies' gains were resampled with the same seed (their resamples would not be independent),
+        or their plants have different ratios.
     """
-    labels = list(boots)
+    labels = list(ratios)
     if not labels:
         raise ModelError("compare_strategies: no strategies")
-    seeds = {lb: getattr(boots[lb], "seed", None) for lb in labels}
-    shared = [lb for lb in labels[1:] if seeds[lb] is not None and seeds[lb] == seeds[labels[0]]]
-    if shared:
-        # one generator seed draws the same trial positions in resample j of both, so the paired factor is not a
-        # draw from independent resamples of the two strategies (measured: it can narrow or widen the interval)
-        raise ModelError(
-            f"compare_strategies: strategies {labels[0]!r} and {shared[0]!r} were bootstrapped with the same seed "
-            f"({seeds[labels[0]]}); bootstrap each strategy with its own seed so their resamples are independent"
-        )
-    per = {lb: ratio_samples(boots[lb], state_names, input_names) for lb in labels}
-    names = per[labels[0]][0]
+    first = ratios[labels[0]]
+    seed0 = getattr(first.gains, "seed", None)
+    for lb in labels[1:]:
+        if seed0 is not None and getattr(ratios[lb].gains, "seed", None) == seed0:
+            # one generator seed draws the same trial positions in resample j of both strategies: their
+            # covariances would share the resampling noise
+            raise ModelError(
+                f"compare_strategies: strategies {labels[0]!r} and {lb!r} were bootstrapped with the same seed "
+                f"({seed0}); bootstrap each strategy with its own seed so their resamples are independent"
+            )
+        if ratios[lb].names != first.names:
+            raise ModelError(f"compare_strategies: {labels[0]!r} and {lb!r} have different weight ratios "
+                             f"({first.names} against {ratios[lb].names}): not the same plant")
     rows = []
-    base_point, base_samples = per[labels[0]][1], per[labels[0]][2]
     for lb in labels:
-        _, point, samples = per[lb]
-        ci = float(boots[lb].ci)
-        for j, nm in enumerate(names):
-            iv = _interval(nm, point[j], samples[:, j], ci)
-            row = {"ratio": nm, "strategy": lb, "estimate": iv.estimate, "lo": iv.lo, "hi": iv.hi,
+        wr = ratios[lb]
+        for k, iv in enumerate(wr.intervals):
+            row = {"ratio": iv.name, "strategy": lb, "estimate": iv.estimate, "lo": iv.lo, "hi": iv.hi,
                    "identifiable": iv.identifiable, "note": "" if iv.identifiable else NOT_IDENTIFIABLE}
             if lb != labels[0]:
-                k = min(len(samples), len(base_samples))
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    f = _interval(nm, point[j] / base_point[j], samples[:k, j] / base_samples[:k, j], ci)
+                p, j = wr._index[k]
+                part_a, theta_a, d_a = first._parts[p]
+                part_b, theta_b, d_b = wr._parts[p]
+                lo, hi = ratio_profile.factor_interval(part_a, theta_a, d_a, part_b, theta_b, d_b, j, wr.ci)
+                f = RatioInterval(iv.name, float(np.exp(theta_b[j] - theta_a[j])), float(np.exp(lo)),
+                                  float(np.exp(hi)), wr.ci)
                 row.update(factor=f.estimate, factor_lo=f.lo, factor_hi=f.hi, factor_identifiable=f.identifiable,
                            factor_note="" if f.identifiable else NOT_IDENTIFIABLE)
             rows.append(row)
@@ -168,23 +210,23 @@ def compare_strategies(
 
 @dataclass(frozen=True, eq=False)
 class ObjectiveIntervals:
-    """Bootstrap intervals of a fitted model's task objective, and of its weight ratios.
+    """Bootstrap intervals of a fitted model's task objective, and its weight ratios.
 
     Attributes
     ----------
     boot : BootstrapResult
         Resamples of the model's own objective (its gain method and cost structure).
-    ratio_boot : BootstrapResult or None
-        Resamples of the closest diagonal cost (``structure="diagonal"``) from the ``ratio_gain`` estimate, the
-        source of the weight ratios; None where it could not be fitted (``note`` says why).
+    ratios : WeightRatios or None
+        Weight ratios from the ``ratio_gain`` estimate; None where they could not be estimated (``note`` says
+        why).
     ratio_gain : str
-        Gain method of ``ratio_boot``: ``"iv"`` where the demonstrations' starts excite every state (least
-        squares is biased in closed loop), else the model's.
+        Gain method of ``ratios``: ``"iv"`` where the demonstrations' starts excite every state (least squares is
+        biased in closed loop), else the model's.
     note : str
     """
 
     boot: object
-    ratio_boot: object | None
+    ratios: WeightRatios | None
     ratio_gain: str
     note: str = ""
 
@@ -200,23 +242,24 @@ def _as_fitted(model, demos) -> list:
     return [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(ds, refs, strict=True)]
 
 
-def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv"):
-    """Bootstrap of the closest diagonal cost, the source of weight ratios: ``(boot or None, gain, note)``.
+def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv", ci: float = 95.0,
+                    progress: Callable[[int, int], None] | None = None) -> tuple[WeightRatios | None, str, str]:
+    """Weight ratios of a fitted model's demonstrations: ``(ratios or None, gain method, note)``.
 
     The gain is estimated by ``ratio_gain`` (default instrumental variables: least squares is biased in closed
-    loop), falling back to the model's own method where that fails (e.g. all trials start alike).
+    loop), falling back to the model's own method where that fails (e.g. all trials start alike); its
+    covariance comes from ``n_boot`` resamples of whole trials.
     """
-    from workbench.ioc import bootstrap
+    from workbench.ioc import bootstrap_gain
 
     shifted = _as_fitted(model, demos)
     note = ""
     for gain in dict.fromkeys((ratio_gain, getattr(model, "gain_method", "direct"))):
         try:
-            boot = bootstrap(shifted, model.system, n_boot=n_boot, method=gain, structure="diagonal", seed=seed)
+            gains = bootstrap_gain(shifted, model.system, n_boot=n_boot, method=gain, seed=seed, progress=progress)
+            return weight_ratios(gains, model.system, ci), gain, note.strip()
         except ModelError as exc:
             note += f"weight ratios with gain {gain!r} failed: {exc}. "
-            continue
-        return boot, gain, note.strip()
     return None, ratio_gain, note.strip()
 
 
@@ -233,7 +276,5 @@ def objective_intervals(model, demos, n_boot: int = 100, seed: int = 0, ratio_ga
     structure = getattr(model, "structure", "full")
     boot = bootstrap(_as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
                      seed=seed)
-    if structure == "diagonal" and method == ratio_gain:
-        return ObjectiveIntervals(boot=boot, ratio_boot=boot, ratio_gain=method)
-    ratio_boot, gain, note = ratio_bootstrap(model, demos, n_boot, seed, ratio_gain)
-    return ObjectiveIntervals(boot=boot, ratio_boot=ratio_boot, ratio_gain=gain, note=note)
+    ratios, gain, note = ratio_bootstrap(model, demos, n_boot, seed, ratio_gain, boot.ci)
+    return ObjectiveIntervals(boot=boot, ratios=ratios, ratio_gain=gain, note=note)
