@@ -9,7 +9,7 @@ from workbench.operators import LQROperator, lqr_operator_demos
 from workbench.report import write_study_report
 from workbench.study import run_study
 from workbench.system import planar_quadrotor
-from workbench.weights import NOT_IDENTIFIABLE, compare_strategies
+from workbench.weights import NOT_IDENTIFIABLE, compare_strategies, format_interval
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,7 @@ def test_report_shows_intervals_and_the_ratio_comparison(result, tmp_path):
     assert "### Weight ratios inside coupled parts" in section
     table = compare_strategies({lb: oi.ratios for lb, oi in result.objectives.items()})
     row = table[(table.strategy == "B") & (table.ratio == "Q_phi / R_u1")].iloc[0]
-    assert f"{row.factor:.3g} [{row.factor_lo:.3g}, {row.factor_hi:.3g}]" in section
+    assert format_interval(row.factor, row.factor_lo, row.factor_hi) in section
     flagged = (table["factor_identifiable"] == False).any()  # noqa: E712 - NaN rows of the first strategy
     assert (NOT_IDENTIFIABLE in section) == (flagged or (~table["identifiable"]).any())
 

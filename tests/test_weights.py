@@ -20,7 +20,7 @@ from workbench.errors import ModelError
 from workbench.ioc import bootstrap_gain, decoupled_parts, forward_gain
 from workbench.operators import LQROperator, lqr_operator_demos
 from workbench.system import planar_quadrotor
-from workbench.weights import NOT_IDENTIFIABLE, RatioInterval, compare_strategies, weight_ratios
+from workbench.weights import NOT_IDENTIFIABLE, RatioInterval, compare_strategies, format_interval, weight_ratios
 
 OP_A = LQROperator(q=(1.0, 1.0, 1.0, 0.3, 0.3, 0.01), r=(10.0, 10.0))
 OP_B = LQROperator(q=(4.0, 2.0, 46.0, 0.3, 0.3, 0.01), r=(10.0, 10.0))
@@ -159,6 +159,9 @@ def test_identifiability_of_an_interval():
     assert NOT_IDENTIFIABLE not in RatioInterval("r", 1.0, 0.5, 4.9, 95).describe()
     # a weight at the bottom of the search (zero) is no finite ratio, however narrow its interval
     assert not RatioInterval("r", 1e-13, 1e-13, 2e-13, 95).identifiable
+    # the ends of the searched range are no numbers the data gave
+    assert format_interval(0.5, np.exp(-ratio_profile.LOG_BOUND), np.exp(ratio_profile.LOG_BOUND)) == "0.5 [0, ∞]"
+    assert format_interval(0.5, 0.25, 1.0) == "0.5 [0.25, 1]"
 
 
 def test_factor_needs_independent_resamples():

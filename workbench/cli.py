@@ -661,7 +661,7 @@ def _print_objective_comparison(ctx: _Context, result: Any) -> None:
     """Weight ratios inside coupled parts per strategy, and each one's factor against the first strategy."""
     from rich.table import Table
 
-    from workbench.weights import NOT_IDENTIFIABLE, compare_strategies
+    from workbench.weights import NOT_IDENTIFIABLE, compare_strategies, format_interval
 
     ratios = {lb: oi.ratios for lb, oi in getattr(result, "objectives", {}).items() if oi.ratios is not None}
     if not ratios:
@@ -673,8 +673,8 @@ def _print_objective_comparison(ctx: _Context, result: Any) -> None:
     for r in table.itertuples():
         factor = getattr(r, "factor", float("nan"))
         note = r.note if r.strategy == first or factor != factor else (r.factor_note or r.note)
-        out.add_row(r.ratio, str(r.strategy), f"{r.estimate:.3g} [{r.lo:.3g}, {r.hi:.3g}]",
-                    "" if factor != factor else f"{factor:.3g} [{r.factor_lo:.3g}, {r.factor_hi:.3g}]",
+        out.add_row(r.ratio, str(r.strategy), format_interval(r.estimate, r.lo, r.hi),
+                    "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi),
                     note if note else "")
     ctx.say(out)
     if (table["note"] == NOT_IDENTIFIABLE).any():

@@ -545,7 +545,7 @@ def _objective_interval_notes(
     objectives: Mapping[str, Any], labels: Sequence[str], state_names: Sequence[str], input_names: Sequence[str]
 ) -> list[str]:
     """What the intervals are, and the weight ratios inside coupled parts compared between strategies."""
-    from workbench.weights import compare_strategies
+    from workbench.weights import compare_strategies, format_interval
 
     if not objectives:
         return ["*No intervals: the study ran without bootstrap resamples (`--bootstrap 0`); the values above "
@@ -560,12 +560,12 @@ def _objective_interval_notes(
     gains = sorted({objectives[lb].ratio_gain for lb in ratios})
     rows = []
     for r in table.itertuples():
-        row = {"ratio": r.ratio, "strategy": r.strategy, "estimate [interval]": f"{r.estimate:.3g} [{r.lo:.3g}, "
-               f"{r.hi:.3g}]", "note": r.note}
+        row = {"ratio": r.ratio, "strategy": r.strategy, "estimate [interval]": format_interval(r.estimate, r.lo, r.hi),
+               "note": r.note}
         if len(ratios) > 1:
             factor = getattr(r, "factor", float("nan"))
             row[f"× vs {labels[0] if labels[0] in ratios else next(iter(ratios))}"] = (
-                "" if not np.isfinite(factor) else f"{factor:.3g} [{r.factor_lo:.3g}, {r.factor_hi:.3g}]"
+                "" if not np.isfinite(factor) else format_interval(factor, r.factor_lo, r.factor_hi)
                 + ("" if r.factor_identifiable else " — not identifiable from these data"))
         rows.append(row)
     fwd = ", ".join(f"{lb} {ratios[lb].forward_gain_error:.2g}" for lb in ratios)

@@ -23,6 +23,7 @@ from workbench.errors import ModelError
 __all__ = [
     "IDENTIFIABLE_SPAN",
     "RatioInterval",
+    "format_interval",
     "WeightRatios",
     "ObjectiveIntervals",
     "objective_intervals",
@@ -58,8 +59,20 @@ class RatioInterval:
         return bool(np.isfinite(self.span) and self.span <= IDENTIFIABLE_SPAN)
 
     def describe(self) -> str:
-        text = f"{self.name} = {self.estimate:.3g} [{self.lo:.3g}, {self.hi:.3g}]"
+        text = f"{self.name} = {format_interval(self.estimate, self.lo, self.hi)}"
         return text if self.identifiable else f"{text}: {NOT_IDENTIFIABLE}"
+
+
+def format_interval(estimate: float, lo: float, hi: float) -> str:
+    """``estimate [lo, hi]`` to 3 digits; a bound at the end of the search reads 0 or ∞ (it is not a number the
+    data gave, only the edge of the searched range)."""
+
+    def bound(v: float) -> str:
+        if v <= ZERO_RATIO:
+            return "0"
+        return "∞" if v >= 1 / ZERO_RATIO else f"{v:.3g}"
+
+    return f"{bound(estimate)} [{bound(lo)}, {bound(hi)}]"
 
 
 def _ratio_names(
