@@ -17,7 +17,7 @@ import workbench.autoconfig as ac
 from workbench import evaluate as ev
 from workbench.errors import ModelError
 from workbench.model import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel, load_model
-from workbench.operators import erratic_operator_demos
+from workbench.operators import ErraticOperator, erratic_operator_demos
 from workbench.simulate import simulate_landings
 from workbench.system import planar_quadrotor
 
@@ -93,3 +93,29 @@ def test_auto_configured_model_earns_its_place(quad, case):
         assert r["proposed"] <= 1.03 * r["ioc_only"]
     else:
         assert r["proposed"] < r["ioc_only"] and r["proposed"] < r["gmr_only"]
+
+
+ERRATIC_VARIANTS = {
+    "late": ErraticOperator(delay=0.3),
+    "pulsy": ErraticOperator(pulse=0.1, dead_band=0.05),
+    "hesitant": ErraticOperator(hesitation_rate=0.03, hesitation=0.6),
+    "wide": ErraticOperator(detour=1.6, sigma=(0.02, 0.05)),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [501, 502])
+@pytest.mark.parametrize("variant", sorted(ERRATIC_VARIANTS))
+def test_auto_configured_model_holds_on_other_erratic_operators(quad, variant, seed):
+    # operators the settings grid was never looked at on: later reactions, harder pulses, longer hesitations,
+    # a wider detour with more drift
+    op = ERRATIC_VARIANTS[variant]
+    train, test = erratic_operator_demos(op, 30, seed=seed), erratic_operator_demos(op, 20, seed=seed + 1000)
+    models = {
+        "proposed": HumanBehaviorModel(quad, n_components="auto", reg_covar="auto", noise_folds=0,
+                                       fit_objective=False).fit(train),
+        "ioc_only": IOCOnlyModel(quad, noise_folds=0).fit(train),
+    }
+    r = mean_position_rmse(models, test)
+    print(f"{variant} {seed}: G={models['proposed'].n_components_}, reg_covar={models['proposed'].reg_covar_}; {r}")
+    assert r["proposed"] <= 1.03 * r["ioc_only"]
