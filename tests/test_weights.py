@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from workbench import ratio_profile
-from workbench.errors import ModelError
+from workbench.errors import DataError, ModelError
 from workbench.ioc import bootstrap_gain, decoupled_parts, forward_gain
 from workbench.operators import LQROperator, lqr_operator_demos
 from workbench.system import planar_quadrotor
@@ -159,6 +159,7 @@ def test_identifiability_of_an_interval():
     assert NOT_IDENTIFIABLE not in RatioInterval("r", 1.0, 0.5, 4.9, 95).describe()
     # a weight at the bottom of the search (zero) is no finite ratio, however narrow its interval
     assert not RatioInterval("r", 1e-13, 1e-13, 2e-13, 95).identifiable
+    assert not RatioInterval("r", 1e13, 1e13, 1e13, 95).identifiable  # ... or at its top (infinite)
     # the ends of the searched range are no numbers the data gave
     assert format_interval(0.5, np.exp(-ratio_profile.LOG_BOUND), np.exp(ratio_profile.LOG_BOUND)) == "0.5 [0, ∞]"
     assert format_interval(0.5, 0.25, 1.0) == "0.5 [0.25, 1]"
@@ -172,6 +173,58 @@ def test_factor_needs_independent_resamples():
         compare_strategies({"a": a, "b": b})
     c = weight_ratios(gains(plant, scalar_gain(plant, 2.0), 0.02, seed=8), plant)
     assert compare_strategies({"a": a, "c": c}).query("strategy == 'c'").factor.iloc[0] == pytest.approx(2.0, rel=1e-3)
+
+
+def test_gains_that_do_not_vary_give_no_interval():
+    plant = scalar_plant()
+    k = scalar_gain(plant, 2.0)
+    same = SimpleNamespace(K=np.array([[k]]), K_samples=np.full((50, 1, 1), k), n_trials=30, seed=0)
+    with pytest.raises(ModelError, match="do not vary"):
+        weight_ratios(same, plant)
+    with pytest.raises(ModelError, match="two or more"):
+        weight_ratios(gains(plant, k, 0.02, n_trials=1), plant)
+    with pytest.raises(DataError, match="percentage"):
+        weight_ratios(gains(plant, k, 0.02), plant, ci=120)
+
+
+def continuation_end(joint, theta, value, excess, direction, step=0.25):
+    """An interval end by small steps, each fit started from the previous one, then bisection: slow and plain."""
+    inside, theta_in = value, theta
+    while True:
+        nxt = float(np.clip(inside + direction * step, -ratio_profile.LOG_BOUND, ratio_profile.LOG_BOUND))
+        dist, th = joint.fit(nxt, theta_in)
+        if excess(dist) > 0:
+            break
+        inside, theta_in = nxt, th
+        if abs(nxt) >= ratio_profile.LOG_BOUND:
+            return nxt
+    outside = nxt
+    while abs(outside - inside) > 1e-3:
+        mid = 0.5 * (inside + outside)
+        dist, th = joint.fit(mid, theta_in)
+        inside, theta_in, outside = (inside, theta_in, mid) if excess(dist) > 0 else (mid, th, outside)
+    return inside
+
+
+def test_an_interval_end_is_not_taken_from_one_fit_that_fell_into_another_minimum():
+    # a fully coupled 3-state, 2-input plant with wide gain noise: a long, flat profile where a far-started fit
+    # can land in another local minimum (found by review: R_v / R_u ended at log 14.0, where the profile was
+    # still inside; followed in small steps it stays inside to log 26.6)
+    rng = np.random.default_rng(3)
+    M = rng.standard_normal((3, 3))
+    plant = SimpleNamespace(A=0.9 * M / np.max(np.abs(np.linalg.eigvals(M))), B=rng.standard_normal((3, 2)),
+                            state_names=("a", "b", "c"), input_names=("u", "v"))
+    K = forward_gain(plant.A, plant.B, np.diag([1.0, 0.2, 5.0]), np.diag([2.0, 0.5]))[0]
+    noise = np.random.default_rng(4).standard_normal((400, *K.shape)) * 0.1 * np.maximum(np.abs(K), 1e-3)
+    samples = K + noise
+    wr = weight_ratios(SimpleNamespace(K=samples[7], K_samples=samples, n_trials=30, seed=4), plant)
+    iv = wr.intervals[-1]
+    assert iv.name == "R_v / R_u"
+    (part, theta, d_min), (_, j) = wr._parts[0], wr._index[-1]
+    crit = ratio_profile.critical_value(95, 30)
+    reference = continuation_end(ratio_profile._Joint([part], {j: 1.0}), theta, theta[j],
+                                 lambda dist: dist - d_min - crit, +1)
+    assert np.log(iv.hi) == pytest.approx(reference, abs=0.05)
 
 
 def test_too_few_resamples_for_the_covariance_is_an_error():

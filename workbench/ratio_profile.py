@@ -41,9 +41,9 @@ __all__ = ["LOG_BOUND", "PartDistance", "critical_value", "fit", "interval", "fa
 # Log ratios are searched within ±LOG_BOUND: a ratio at -LOG_BOUND (≈ 1e-13) is a zero weight, and the DAREs
 # stay well posed inside.
 LOG_BOUND = 30.0
-# The profile is followed outward from the estimate with steps growing from _STEP by _GROWTH, and an end point
-# is bisected to _TOL (log units: 0.1 % of the ratio).
-_STEP, _GROWTH, _TOL = 0.02, 1.6, 1e-3
+# The profile is followed outward from the estimate with steps growing from _STEP by _GROWTH up to _MAX_STEP, and
+# an end point is bisected to _TOL (log units: 0.1 % of the ratio).
+_STEP, _GROWTH, _MAX_STEP, _TOL = 0.02, 1.6, 1.0, 1e-3
 
 
 def critical_value(ci: float, n_trials: int) -> float:
@@ -79,16 +79,29 @@ class PartDistance:
     def from_samples(cls, A: np.ndarray, B: np.ndarray, K_hat: np.ndarray, K_samples: np.ndarray,
                      n_trials: int) -> PartDistance:
         """Σ from resampled gains ``K_samples`` (S, m, n) of ``n_trials`` trials, times ``n / (n − 1)``."""
-        S = K_samples.reshape(len(K_samples), -1)
+        S = np.asarray(K_samples, dtype=float).reshape(len(K_samples), -1)
+        if int(n_trials) < 2:
+            raise ModelError(f"{n_trials} demonstration(s): resampling needs two or more to estimate how the gain "
+                             "varies, so no interval can be given")
+        if not np.isfinite(S).all() or not np.isfinite(K_hat).all():
+            raise ModelError("the resampled gains contain NaN or inf")
         if len(S) < S.shape[1] + 1:
             raise ModelError(
                 f"{len(S)} resampled gains cannot estimate the covariance of {S.shape[1]} gain entries; "
                 "use more bootstrap resamples"
             )
-        n = max(2, int(n_trials))
+        n = int(n_trials)
         cov = np.atleast_2d(np.cov(S.T)) * n / (n - 1)
-        # a gain entry that never varies (a state the part's input cannot reach) would make Σ singular
-        cov += 1e-12 * max(float(np.trace(cov)), 1e-300) * np.eye(len(cov))
+        sd = np.sqrt(np.diag(cov))
+        # gains that do not vary in some direction (repeated or too few distinct trials) would make every interval
+        # collapse onto the estimate: the distance test needs a covariance of full rank
+        rank_ok = bool(np.all(sd > 0)) and float(np.linalg.eigvalsh(cov / np.outer(sd, sd))[0]) > 1e-10
+        if not rank_ok:
+            raise ModelError(
+                f"the {len(S)} resampled gains do not vary in every direction of the part's {S.shape[1]} gain "
+                "entries (too few distinct demonstrations), so the gain's covariance is singular and no interval "
+                "can be given"
+            )
         L = np.linalg.cholesky(cov)
         W = scipy.linalg.solve_triangular(L, np.eye(len(cov)), lower=True)
         return cls(A=A, B=B, k_hat=np.asarray(K_hat, dtype=float).ravel(), W=W, n_trials=int(n_trials))
@@ -211,8 +224,9 @@ def _least_squares(residual: Callable, jacobian: Callable, z0: np.ndarray,
                    bounds: tuple[np.ndarray, np.ndarray] | tuple[float, float]) -> tuple[np.ndarray, float]:
     """``(z, Σ residual²)`` at the bounded least-squares minimum from ``z0``.
 
-    Solved in coordinates ``y = z − z0 + 1``: SciPy's trust region starts with the radius ``‖z0‖∞``, which near
-    ``z0 = 0`` (a ratio of 1) is so small that the first step already meets ``xtol`` and the fit stays put.
+    Solved in coordinates ``y = z − z0 + 1``: SciPy's trust region starts with the radius ``‖z0‖`` (1 only where
+    z0 is exactly 0), which near ``z0 = 0`` (ratios of 1) is so small that the first step already meets ``xtol``
+    and the fit stays put.
     """
     shift = z0 - 1.0
     lo, hi = (np.broadcast_to(b, z0.shape) - shift for b in bounds)
@@ -223,29 +237,39 @@ def _least_squares(residual: Callable, jacobian: Callable, z0: np.ndarray,
 
 def _end(joint: _Joint, value0: float, theta0: np.ndarray, excess: Callable[[float], float], direction: int,
          limit: float) -> float:
-    """The last value of ``c`` from ``value0`` towards ``limit`` whose profile stays within the critical value:
-    steps growing outward, then bisection between the last value inside and the first outside."""
-    inside, theta_in, step = value0, theta0, _STEP
+    """The last value of ``c`` from ``value0`` towards ``limit`` whose profile stays within the critical value.
+
+    Steps grow outward (at most ``_MAX_STEP``: each fit starts from the last inside θ, and a start far from the
+    new value can land in another local minimum and read as outside), then bisect between the last value inside
+    and the first outside. The outside end is fitted again from the closest inside θ before it is believed; if it
+    is inside after all, the walk goes on from there.
+    """
+    inside, theta_in = value0, theta0
     while True:
-        value = inside + direction * step
-        if (value - limit) * direction >= 0:
-            value = limit
-        dist, theta = joint.fit(value, theta_in)
+        step = _STEP
+        while True:
+            value = inside + direction * step
+            if (value - limit) * direction >= 0:
+                value = limit
+            dist, theta = joint.fit(value, theta_in)
+            if excess(dist) > 0:
+                break
+            inside, theta_in = value, theta
+            if value == limit:
+                return limit
+            step = min(step * _GROWTH, _MAX_STEP)
+        outside = value
+        while abs(outside - inside) > _TOL:
+            mid = 0.5 * (inside + outside)
+            dist, theta = joint.fit(mid, theta_in)
+            if excess(dist) > 0:
+                outside = mid
+            else:
+                inside, theta_in = mid, theta
+        dist, theta = joint.fit(outside, theta_in)
         if excess(dist) > 0:
-            break
-        inside, theta_in = value, theta
-        if value == limit:
-            return limit
-        step *= _GROWTH
-    outside = value
-    while abs(outside - inside) > _TOL:
-        mid = 0.5 * (inside + outside)
-        dist, theta = joint.fit(mid, theta_in)
-        if excess(dist) > 0:
-            outside = mid
-        else:
-            inside, theta_in = mid, theta
-    return inside
+            return inside
+        inside, theta_in = outside, theta
 
 
 def fit(part: PartDistance, theta0: np.ndarray) -> tuple[np.ndarray, float]:

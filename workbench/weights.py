@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from workbench import ratio_profile
-from workbench.errors import ModelError
+from workbench.errors import DataError, ModelError
 
 __all__ = [
     "IDENTIFIABLE_SPAN",
@@ -51,8 +51,11 @@ class RatioInterval:
 
     @property
     def span(self) -> float:
-        """``hi / lo``: how many-fold the interval stretches (``inf`` if it reaches 0, i.e. ``ZERO_RATIO``)."""
-        return float(self.hi / self.lo) if self.lo > ZERO_RATIO else float("inf")
+        """``hi / lo``: how many-fold the interval stretches (``inf`` if it reaches 0 or ∞, i.e. an end of the
+        search: ``ZERO_RATIO`` or ``1 / ZERO_RATIO``)."""
+        if self.lo <= ZERO_RATIO or self.hi >= 1 / ZERO_RATIO:
+            return float("inf")
+        return float(self.hi / self.lo)
 
     @property
     def identifiable(self) -> bool:
@@ -136,6 +139,8 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     """
     from workbench.ioc import closest_structured_objective, decoupled_parts, forward_gain
 
+    if not 0 < ci < 100:
+        raise DataError(f"ci must be a percentage in (0, 100), got {ci}")
     A, B = np.asarray(system.A, dtype=float), np.asarray(system.B, dtype=float)
     n, m = B.shape
     K, K_s = np.asarray(gains.K, dtype=float), np.asarray(gains.K_samples, dtype=float)
