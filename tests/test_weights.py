@@ -20,7 +20,14 @@ from workbench.errors import DataError, ModelError
 from workbench.ioc import bootstrap_gain, decoupled_parts, forward_gain
 from workbench.operators import LQROperator, lqr_operator_demos
 from workbench.system import planar_quadrotor
-from workbench.weights import NOT_IDENTIFIABLE, RatioInterval, compare_strategies, format_interval, weight_ratios
+from workbench.weights import (
+    NOT_EXPLAINED,
+    NOT_IDENTIFIABLE,
+    RatioInterval,
+    compare_strategies,
+    format_interval,
+    weight_ratios,
+)
 
 OP_A = LQROperator(q=(1.0, 1.0, 1.0, 0.3, 0.3, 0.01), r=(10.0, 10.0))
 OP_B = LQROperator(q=(4.0, 2.0, 46.0, 0.3, 0.3, 0.01), r=(10.0, 10.0))
@@ -49,6 +56,7 @@ def coverage(seeds, n_boot: int, n_demos: int = 30) -> pd.DataFrame:
                                               system, n_boot=n_boot, method="iv", seed=50000 + seed), system),
         }
         table = compare_strategies(ratios)
+        assert all(f.explained for wr in ratios.values() for f in wr.fits)  # they are LQR operators
         for r in table[table["strategy"] == "B"].itertuples():
             t = truth[r.ratio]
             rows.append({"seed": seed, "ratio": r.ratio, "truth": t, "factor": r.factor, "lo": r.factor_lo,
@@ -152,6 +160,22 @@ def test_factor_interval_covers_at_its_level_when_the_gain_is_gaussian():
         covered.append(row.factor_lo <= truth <= row.factor_hi)
     # nominal 95 %; 60 draws: below 0.88 has probability < 1 %
     assert np.mean(covered) >= 0.88
+
+
+def test_a_gain_no_diagonal_cost_reaches_is_flagged():
+    # scalar plant x+ = x + 0.1 u: LQR gains run from 0 (zero state weight) to -10 (deadbeat, infinite ratio); -15
+    # still stabilizes but is the gain of no cost
+    plant = scalar_plant()
+    sigma, n = 0.5, 30
+    wr = weight_ratios(gains(plant, -15.0, sigma, n), plant)
+    (fit,), (iv,) = wr.fits, wr.intervals
+    nearest = scalar_gain(plant, np.exp(ratio_profile.LOG_BOUND))
+    assert fit.distance == pytest.approx((nearest + 15.0) ** 2 / (sigma**2 * n / (n - 1)), rel=1e-6)
+    assert fit.restrictions == 0 and fit.critical == pytest.approx(ratio_profile.critical_value(95, n))
+    assert not fit.explained and not iv.explained and iv.note == NOT_EXPLAINED and NOT_EXPLAINED in iv.describe()
+    # inside the reachable range the same spread is explained
+    inside = weight_ratios(gains(plant, scalar_gain(plant, 2.0), sigma, n), plant)
+    assert inside.fits[0].explained and inside.fits[0].distance < 1e-12 and inside.intervals[0].note != NOT_EXPLAINED
 
 
 def test_identifiability_of_an_interval():

@@ -441,6 +441,9 @@ def _print_ratios(ctx: _Context, model: Any, ds: Any, n_boot: int, seed: int) ->
             f"forward-gain error {ratios.forward_gain_error:.2g}):")
     for r in ratios.intervals:
         ctx.say(f"  {r.describe()}")
+    for f in ratios.fits:
+        if not f.explained:
+            ctx.say(f"  {f.describe()}: its ratios describe no objective the operator could have had")
 
 
 def _print_model(ctx: _Context, model: Any, ds: Any) -> None:
@@ -661,7 +664,7 @@ def _print_objective_comparison(ctx: _Context, result: Any) -> None:
     """Weight ratios inside coupled parts per strategy, and each one's factor against the first strategy."""
     from rich.table import Table
 
-    from workbench.weights import NOT_IDENTIFIABLE, compare_strategies, format_interval
+    from workbench.weights import NOT_EXPLAINED, NOT_IDENTIFIABLE, compare_strategies, format_interval
 
     ratios = {lb: oi.ratios for lb, oi in getattr(result, "objectives", {}).items() if oi.ratios is not None}
     if not ratios:
@@ -677,8 +680,12 @@ def _print_objective_comparison(ctx: _Context, result: Any) -> None:
                     "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi),
                     note if note else "")
     ctx.say(out)
-    if (table["note"] == NOT_IDENTIFIABLE).any():
+    notes = set(table["note"]) | (set(table["factor_note"].dropna()) if "factor_note" in table else set())
+    if NOT_IDENTIFIABLE in notes:
         ctx.say(f"(\"{NOT_IDENTIFIABLE}\": the 95 % interval spans more than ×10)")
+    if NOT_EXPLAINED in notes:
+        ctx.say(f"(\"{NOT_EXPLAINED}\": the estimated gain is farther from every diagonal-cost LQR gain than its "
+                "spread allows, so the operator's objective is not of that form and these ratios describe none)")
 
 
 def _output_kwargs(a: argparse.Namespace, default: Path) -> dict[str, Any]:

@@ -36,7 +36,7 @@ import scipy.stats
 from workbench.errors import ModelError
 from workbench.ioc import gain_jacobian, memo_lqr
 
-__all__ = ["LOG_BOUND", "PartDistance", "critical_value", "fit", "interval", "factor_interval"]
+__all__ = ["LOG_BOUND", "PartDistance", "critical_value", "fit", "explains", "interval", "factor_interval"]
 
 # Log ratios are searched within ±LOG_BOUND: a ratio at -LOG_BOUND (≈ 1e-13) is a zero weight, and the DAREs
 # stay well posed inside.
@@ -46,11 +46,14 @@ LOG_BOUND = 30.0
 _STEP, _GROWTH, _MAX_STEP, _TOL = 0.02, 1.6, 1.0, 1e-3
 
 
-def critical_value(ci: float, n_trials: int) -> float:
-    """``t²`` of the profile test: the two-sided Student quantile of level ``ci`` % with ``n_trials − 1``
-    degrees of freedom, squared (``Σ`` is estimated from the same ``n_trials`` trials)."""
-    dof = max(1, int(n_trials) - 1)
-    return float(scipy.stats.t.ppf(0.5 + ci / 200.0, dof) ** 2)
+def critical_value(ci: float, n_trials: int, q: int = 1) -> float:
+    """Critical value of a distance test of ``q`` restrictions at level ``ci`` % with Σ estimated from ``n_trials``
+    trials: Hotelling's ``q (n − 1) / (n − q) · F(q, n − q)``, which for ``q = 1`` (a profile interval) is the
+    squared two-sided Student quantile with ``n − 1`` degrees of freedom; ``inf`` where ``n ≤ q``."""
+    n, q = int(n_trials), max(1, int(q))
+    if n <= q:
+        return float("inf")
+    return float(q * (n - 1) / (n - q) * scipy.stats.f.ppf(ci / 100.0, q, n - q))
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,6 +117,12 @@ class PartDistance:
     def d(self) -> int:
         """Number of log ratios: one per state and per input but the first."""
         return self.A.shape[0] + self.B.shape[1] - 1
+
+    @property
+    def restrictions(self) -> int:
+        """Gain entries beyond the log ratios that must match them: the overidentifying restrictions of the
+        distance test of the diagonal structure (0 for a part with one input and as many ratios as gains)."""
+        return self.k_hat.size - self.d
 
     def weights(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(Q, R)`` of log ratios ``θ``, with ``R_00 = 1``."""
@@ -279,6 +288,18 @@ def fit(part: PartDistance, theta0: np.ndarray) -> tuple[np.ndarray, float]:
     theta, cost = _least_squares(residual, jacobian, start, (-LOG_BOUND, LOG_BOUND))
     r0 = residual(start)
     return (start, float(r0 @ r0)) if cost > float(r0 @ r0) else (theta, cost)
+
+
+def explains(part: PartDistance, d_min: float, ci: float) -> bool:
+    """Whether a diagonal cost explains the part's gain: ``D(θ̂)`` within the critical value of its
+    overidentifying restrictions (at least one: where there are none, ``D(θ̂) > 0`` only at the bounds of the
+    search, i.e. no finite cost reaches the gain).
+
+    This is the test of overidentifying restrictions of minimum-distance estimation (Hansen, Econometrica 1982):
+    when it fails, the estimated gain is not the LQR gain of any diagonal cost, and the ratios of the closest one
+    describe no objective the operator could have had.
+    """
+    return bool(d_min <= critical_value(ci, part.n_trials, part.restrictions))
 
 
 def interval(part: PartDistance, theta_hat: np.ndarray, d_min: float, j: int, ci: float) -> tuple[float, float]:

@@ -566,7 +566,7 @@ def _objective_interval_notes(
             factor = getattr(r, "factor", float("nan"))
             row[f"× vs {labels[0] if labels[0] in ratios else next(iter(ratios))}"] = (
                 "" if not np.isfinite(factor) else format_interval(factor, r.factor_lo, r.factor_hi)
-                + ("" if r.factor_identifiable else " — not identifiable from these data"))
+                + (f" — {r.factor_note}" if r.factor_note else ""))
         rows.append(row)
     fwd = ", ".join(f"{lb} {ratios[lb].forward_gain_error:.2g}" for lb in ratios)
     md += ["### Weight ratios inside coupled parts", "",
@@ -577,7 +577,13 @@ def _objective_interval_notes(
            "covariance; the intervals are profile intervals of that distance (a ratio is kept while the gain it "
            "implies stays statistically compatible with the estimate), and a factor's interval profiles both "
            f"strategies' distances together (forward-gain error of each diagonal cost: {fwd}). An interval wider "
-           "than ×10 is marked not identifiable from these data.", "", _md_table(pd.DataFrame(rows)), ""]
+           "than ×10 is marked not identifiable from these data. Where even the closest diagonal cost's gain is "
+           "farther from the estimate than its spread allows (the distance test of the diagonal structure), the "
+           "operator's objective is not of that form: those ratios are marked and describe no objective.", "",
+           _md_table(pd.DataFrame(rows)), ""]
+    failing = [f"- {lb}: {f.describe()}" for lb in ratios for f in ratios[lb].fits if not f.explained]
+    if failing:
+        md += [*failing, ""]
     return md
 
 

@@ -25,6 +25,7 @@ __all__ = [
     "RatioInterval",
     "format_interval",
     "WeightRatios",
+    "PartFit",
     "ObjectiveIntervals",
     "objective_intervals",
     "ratio_bootstrap",
@@ -37,17 +38,23 @@ IDENTIFIABLE_SPAN = 10.0
 # bottom of the search, i.e. zero, and an interval reaching it is not a finite ratio.
 ZERO_RATIO = 1e-9
 NOT_IDENTIFIABLE = "not identifiable from these data"
+NOT_EXPLAINED = "no diagonal cost explains this part's gain"
 
 
 @dataclass(frozen=True)
 class RatioInterval:
-    """One weight ratio (or a factor between two strategies' ratios) with its interval."""
+    """One weight ratio (or a factor between two strategies' ratios) with its interval.
+
+    ``explained`` is False where no diagonal cost explains the gain of the ratio's part
+    (:func:`workbench.ratio_profile.explains`): the ratio then describes no objective the operator could have had.
+    """
 
     name: str
     estimate: float
     lo: float
     hi: float
     ci: float
+    explained: bool = True
 
     @property
     def span(self) -> float:
@@ -61,9 +68,16 @@ class RatioInterval:
     def identifiable(self) -> bool:
         return bool(np.isfinite(self.span) and self.span <= IDENTIFIABLE_SPAN)
 
+    @property
+    def note(self) -> str:
+        """Why the interval says little: the part's gain is not that of a diagonal cost, or it spans > ×10."""
+        if not self.explained:
+            return NOT_EXPLAINED
+        return "" if self.identifiable else NOT_IDENTIFIABLE
+
     def describe(self) -> str:
         text = f"{self.name} = {format_interval(self.estimate, self.lo, self.hi)}"
-        return text if self.identifiable else f"{text}: {NOT_IDENTIFIABLE}"
+        return f"{text}: {self.note}" if self.note else text
 
 
 def format_interval(estimate: float, lo: float, hi: float) -> str:
@@ -93,6 +107,36 @@ def _ratio_names(
     return out
 
 
+@dataclass(frozen=True)
+class PartFit:
+    """The distance test of the diagonal structure on one decoupled part (:func:`ratio_profile.explains`).
+
+    Attributes
+    ----------
+    states, inputs : tuple of str
+    distance : float
+        ``D(θ̂)``: the whitened squared distance from the estimated gain to the closest diagonal cost's gain.
+    restrictions : int
+        Gain entries beyond the part's ratios.
+    critical : float
+        The test's critical value at the ratios' level.
+    explained : bool
+        ``distance ≤ critical``.
+    """
+
+    states: tuple[str, ...]
+    inputs: tuple[str, ...]
+    distance: float
+    restrictions: int
+    critical: float
+    explained: bool
+
+    def describe(self) -> str:
+        verdict = "explains" if self.explained else "does not explain"
+        return (f"part ({', '.join(self.states)}; {', '.join(self.inputs)}): a diagonal cost {verdict} the gain "
+                f"(distance {self.distance:.3g}, critical value {self.critical:.3g})")
+
+
 @dataclass(frozen=True, eq=False)
 class WeightRatios:
     """One operator's weight ratios inside the coupled parts of its plant, with profile intervals.
@@ -108,6 +152,8 @@ class WeightRatios:
     gains : GainBootstrap
         The gain estimate and its resamples.
     ci : float
+    fits : tuple of PartFit
+        Per part with an input: whether a diagonal cost explains its gain.
     """
 
     intervals: tuple[RatioInterval, ...]
@@ -116,6 +162,7 @@ class WeightRatios:
     forward_gain_error: float
     gains: object
     ci: float
+    fits: tuple[PartFit, ...]
     _parts: tuple  # (PartDistance, θ̂, D(θ̂)) per part with an input
     _index: tuple  # (part, j) per interval
 
@@ -147,7 +194,7 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     parts = decoupled_parts(A, B)
     spec = _ratio_names(parts, system.state_names, system.input_names)
     q, r = np.ones(n), np.ones(m)
-    fitted, index, intervals = [], [], []
+    fitted, index, intervals, fits = [], [], [], []
     for states, inputs in parts:
         if not inputs:
             continue  # a part no input reaches: its weights do not affect the gain
@@ -157,19 +204,24 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
         start = closest_structured_objective(part.A, part.B, K[np.ix_(c, s)], "diagonal")
         w0 = np.r_[np.diag(start.Q), np.diag(start.R)[1:]] / start.R[0, 0]
         theta, d_min = ratio_profile.fit(part, np.log(np.maximum(w0, 1e-300)))
+        explained = ratio_profile.explains(part, d_min, ci)
+        fits.append(PartFit(tuple(system.state_names[i] for i in s), tuple(system.input_names[k] for k in c),
+                            float(d_min), part.restrictions,
+                            ratio_profile.critical_value(ci, part.n_trials, part.restrictions), explained))
         Qp, Rp = part.weights(theta)
         scale = max(float(Qp.max()), float(Rp.max()))
         q[s], r[c] = np.diag(Qp) / scale, np.diag(Rp) / scale
         for j in range(part.d):
             lo, hi = ratio_profile.interval(part, theta, d_min, j, ci)
             name = spec[len(index)][0]
-            intervals.append(RatioInterval(name, float(np.exp(theta[j])), float(np.exp(lo)), float(np.exp(hi)), ci))
+            intervals.append(RatioInterval(name, float(np.exp(theta[j])), float(np.exp(lo)), float(np.exp(hi)), ci,
+                                           explained))
             index.append((len(fitted), j))
         fitted.append((part, theta, d_min))
     K_fwd, _ = forward_gain(A, B, np.diag(q), np.diag(r))
     err = float(np.linalg.norm(K_fwd - K) / max(float(np.linalg.norm(K)), 1e-300))
     return WeightRatios(intervals=tuple(intervals), Q_diag=q, R_diag=r, forward_gain_error=err, gains=gains,
-                        ci=float(ci), _parts=tuple(fitted), _index=tuple(index))
+                        ci=float(ci), fits=tuple(fits), _parts=tuple(fitted), _index=tuple(index))
 
 
 def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
@@ -182,8 +234,8 @@ def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
     -------
     DataFrame
         One row per ratio and strategy: ``ratio``, ``strategy``, ``estimate``, ``lo``, ``hi``, ``identifiable``,
-        ``note``, and for the second strategy on: ``factor`` (its ratio over the first's), ``factor_lo``,
-        ``factor_hi``, ``factor_identifiable``, ``factor_note``.
+        ``explained``, ``note`` (:attr:`RatioInterval.note`), and for the second strategy on: ``factor`` (its
+        ratio over the first's), ``factor_lo``, ``factor_hi``, ``factor_identifiable``, ``factor_note``.
 
     Raises
     ------
@@ -212,16 +264,16 @@ def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
         wr = ratios[lb]
         for k, iv in enumerate(wr.intervals):
             row = {"ratio": iv.name, "strategy": lb, "estimate": iv.estimate, "lo": iv.lo, "hi": iv.hi,
-                   "identifiable": iv.identifiable, "note": "" if iv.identifiable else NOT_IDENTIFIABLE}
+                   "identifiable": iv.identifiable, "explained": iv.explained, "note": iv.note}
             if lb != labels[0]:
                 p, j = wr._index[k]
                 part_a, theta_a, d_a = first._parts[p]
                 part_b, theta_b, d_b = wr._parts[p]
                 lo, hi = ratio_profile.factor_interval(part_a, theta_a, d_a, part_b, theta_b, d_b, j, wr.ci)
                 f = RatioInterval(iv.name, float(np.exp(theta_b[j] - theta_a[j])), float(np.exp(lo)),
-                                  float(np.exp(hi)), wr.ci)
+                                  float(np.exp(hi)), wr.ci, iv.explained and first.intervals[k].explained)
                 row.update(factor=f.estimate, factor_lo=f.lo, factor_hi=f.hi, factor_identifiable=f.identifiable,
-                           factor_note="" if f.identifiable else NOT_IDENTIFIABLE)
+                           factor_note=f.note)
             rows.append(row)
     return pd.DataFrame(rows)
 
