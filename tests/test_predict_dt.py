@@ -74,3 +74,21 @@ def test_cli_accepts_demonstrations_at_the_models_dt(files, tmp_path, capsys):
                  str(out)]) == 0
     stdout = capsys.readouterr().out
     assert "resampled" not in stdout and "predicted 20 steps (2.00 s)" in stdout
+
+
+@pytest.mark.parametrize("command", ["view", "replay"])
+def test_view_and_replay_refuse_demonstrations_at_another_dt(files, tmp_path, capsys, command):
+    # their predictions step at the model's dt: drawn against a file at another dt they would be at the wrong times
+    out = tmp_path / f"{command}.rrd"
+    args = [command, str(files["fine"]), "--model", str(files["model"]), "--save", str(out)]
+    if command == "replay":
+        args += ["--no-wait"]
+    code = main(args)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1, err
+    assert str(files["fine"]) in err[0] and "dt = 0.05 s" in err[0] and "--resample" in err[0]
+    assert not out.exists()
+    assert main([*args, "--resample"]) == 0
+    stdout = capsys.readouterr().out
+    assert f"resampled {files['fine']} from dt = 0.05 s to the model's dt = {MODEL_DT:g} s" in stdout
+    assert out.stat().st_size > 0

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.atomic import atomic_write_table
-from workbench.errors import DataError, WorkbenchError
+from workbench.errors import DataError, ModelError, WorkbenchError
 from workbench.threads import limit_threads
 
 __all__ = ["main", "build_parser", "SAMPLE_LOGS"]
@@ -159,8 +159,6 @@ def _plant(choice: str, horizon: float = 3.0) -> Callable[[Any], Any]:
 
 def _require_proposed(result: Any) -> None:
     """A report and the demo show the proposed model: say why it is missing instead of failing inside them."""
-    from workbench.errors import ModelError
-
     for label in result.test:
         if label not in result.models:
             reason = result.failures.get(label, {}).get("proposed", "unknown cause")
@@ -183,6 +181,24 @@ def _load_model(path: str):
     from workbench.model import load_model
 
     return load_model(_existing(path))
+
+
+def _demos_at_model_dt(ctx: _Context, ds: Any, models: Sequence[Any], resample: bool, source: str) -> Any:
+    """``ds`` on the models' time step: refused when sampled at another (a model steps once per its own dt, so
+    its predictions would be drawn against the wrong times), resampled with ``--resample``."""
+    import math
+
+    dt = float(models[0].system.dt)
+    if any(not math.isclose(float(m.system.dt), dt, rel_tol=1e-6) for m in models[1:]):
+        steps = ", ".join(sorted({f"{float(m.system.dt):g}" for m in models}))
+        raise ModelError(f"the models step at different dt ({steps} s); show them one at a time")
+    try:
+        at_dt = models[0].demos_at_model_dt(ds, resample=resample)
+    except WorkbenchError as exc:
+        raise type(exc)(f"{source}: {exc}") from None
+    if at_dt is not ds:
+        ctx.say(f"resampled {source} from dt = {ds.dt:g} s to the model's dt = {dt:g} s (states linear, inputs held)")
+    return at_dt
 
 
 def _components(value: str) -> int | str:
@@ -716,6 +732,7 @@ def cmd_view(ctx: _Context) -> int:
             named = {Path(a.model[0]).stem: models}
         else:
             models = named = by_label
+        ds = _demos_at_model_dt(ctx, ds, list(by_label.values()), a.resample, ", ".join(a.inputs))
     horizon = _steps(a.horizon, ds.dt)
     default = Path("out") / (Path(a.inputs[0]).stem + ".rrd")  # under out/, never beside the input
     out = _output_kwargs(a, default)
@@ -753,6 +770,7 @@ def cmd_replay(ctx: _Context) -> int:
         raise WorkbenchError("replay needs --model MODEL.npz (predictions) or --to CONNECTION (send the log to a link)")
     ds = _load_demos(ctx, [a.log], a.mapping)
     model = _load_model(a.model)
+    ds = _demos_at_model_dt(ctx, ds, [model], a.resample, a.log)
     ids = ds.ids
     chosen = a.demo or [ids[0]]
     missing = [i for i in chosen if i not in ids]
@@ -1148,6 +1166,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="prediction horizon in seconds (default 3.0)")
     p.add_argument("--samples", type=int, default=0, metavar="N", help="Monte Carlo rollouts for the band")
     p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    p.add_argument("--resample", action="store_true",
+                   help="resample demonstrations sampled at another dt than the model's to the model's dt "
+                        "(default: refuse them)")
     _mapping_option(p)
     _output_options(p)
 
@@ -1163,6 +1184,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-wait", action="store_true", help="stream as fast as possible")
     p.add_argument("--horizon", type=float, default=1.0, metavar="SECONDS",
                    help="rollout horizon of the online prediction (default 1.0 s; 0 turns rollouts off)")
+    p.add_argument("--resample", action="store_true",
+                   help="resample demonstrations sampled at another dt than the model's to the model's dt "
+                        "(default: refuse them)")
     _mapping_option(p)
     _output_options(p)
 
