@@ -33,26 +33,31 @@ OP_A = LQROperator(q=(1.0, 1.0, 1.0, 0.3, 0.3, 0.01), r=(10.0, 10.0))
 OP_B = LQROperator(q=(4.0, 2.0, 46.0, 0.3, 0.3, 0.01), r=(10.0, 10.0))
 
 
-def true_factors(system) -> dict[str, float]:
-    """Factor B/A of every ratio Q_ii / R_kk inside a part, from the operators' costs."""
+# A second pair never used to choose the method: other costs, a less persistent hand (ρ = 0.85)
+OP_C = LQROperator(q=(2.0, 0.5, 5.0, 0.1, 0.6, 0.05), r=(5.0, 20.0), rho=0.85)
+OP_D = LQROperator(q=(0.5, 3.0, 0.5, 0.1, 0.6, 0.05), r=(5.0, 10.0), rho=0.85)
+
+
+def true_factors(system, a: LQROperator = OP_A, b: LQROperator = OP_B) -> dict[str, float]:
+    """Factor b/a of every ratio Q_ii / R_kk inside a part, from the operators' costs."""
     out = {}
     for states, inputs in decoupled_parts(system.A, system.B):
         k = inputs[0]
         for i in states:
             name = f"Q_{system.state_names[i]} / R_{system.input_names[k]}"
-            out[name] = (OP_B.q[i] / OP_B.r[k]) / (OP_A.q[i] / OP_A.r[k])
+            out[name] = (b.q[i] / b.r[k]) / (a.q[i] / a.r[k])
     return out
 
 
-def coverage(seeds, n_boot: int, n_demos: int = 30) -> pd.DataFrame:
+def coverage(seeds, n_boot: int, n_demos: int = 30, a: LQROperator = OP_A, b: LQROperator = OP_B) -> pd.DataFrame:
     system = planar_quadrotor()
-    truth = true_factors(system)
+    truth = true_factors(system, a, b)
     rows = []
     for seed in seeds:
         ratios = {
-            "A": weight_ratios(bootstrap_gain(lqr_operator_demos(OP_A, n_demos, seed=1000 + seed, system=system),
+            "A": weight_ratios(bootstrap_gain(lqr_operator_demos(a, n_demos, seed=1000 + seed, system=system),
                                               system, n_boot=n_boot, method="iv", seed=seed), system),
-            "B": weight_ratios(bootstrap_gain(lqr_operator_demos(OP_B, n_demos, seed=2000 + seed, system=system),
+            "B": weight_ratios(bootstrap_gain(lqr_operator_demos(b, n_demos, seed=2000 + seed, system=system),
                                               system, n_boot=n_boot, method="iv", seed=50000 + seed), system),
         }
         table = compare_strategies(ratios)
@@ -90,6 +95,15 @@ def test_ratio_intervals_cover_the_truth_in_ninety_percent_of_seeds():
         assert row["coverage"] >= 0.9, f"{name}: coverage {row['coverage']:.2f} < 0.9"
         # the structure test rejects a true diagonal cost in at most 5 % of parts (two operators per row here)
         assert row["explained"] >= 0.9, f"{name}: a diagonal cost explains only {row['explained']:.2f}"
+
+
+@pytest.mark.slow
+def test_ratio_intervals_cover_the_truth_on_another_operator_pair():
+    # 40 seeds, ~3 min. At a true coverage of 95 %, 40 seeds fall below 0.85 with probability < 1 %: the bar is set
+    # by that, not by the run (measured: 0.90-1.00)
+    s = summarize(coverage(seeds=range(700, 740), n_boot=100, a=OP_C, b=OP_D))
+    for name, row in s.iterrows():
+        assert row["coverage"] >= 0.85, f"{name}: coverage {row['coverage']:.2f} < 0.85"
 
 
 def scalar_plant(a: float = 1.0, b: float = 0.1):
