@@ -1201,14 +1201,12 @@ def _bootstrap_block(task: tuple) -> list[tuple]:
     """A block of bootstrap resamples, run by a worker: it reads the demonstrations from their file."""
     ref, A, B, method, structure, draws = task
     blocks = _demo_blocks(list(ref.load()), *B.shape)
-    solver = None if structure is None else _cached_problem(A, B, structure, True)
-    return _resamples(blocks, draws, A, B, method, solver)
+    return _resamples(blocks, draws, A, B, method, _solver(A, B, structure))
 
 
-def _checked_n_boot(n_boot: int) -> int:
-    if int(n_boot) < 1:
-        raise DataError(f"n_boot must be ≥ 1, got {n_boot}")
-    return int(n_boot)
+def _solver(A: np.ndarray, B: np.ndarray, structure: Structure | None) -> InverseLQR | None:
+    """The cached inverse-LQR problem of ``structure``; None for gains only."""
+    return None if structure is None else _cached_problem(A, B, structure, True)
 
 
 def _run_resamples(
@@ -1216,7 +1214,7 @@ def _run_resamples(
     n_boot: int, seed: int, progress: Callable[[int, int], None] | None, executor: Any,
 ) -> list[tuple]:
     """Draw ``n_boot`` resamples of whole trials from one generator and fit each (see :func:`bootstrap`)."""
-    solver = None if structure is None else _cached_problem(A, B, structure, True)
+    solver = _solver(A, B, structure)
     rng = np.random.default_rng(seed)
     draws = [(b, rng.integers(0, len(blocks), size=len(blocks))) for b in range(n_boot)]
     if executor is None:
@@ -1233,6 +1231,32 @@ def _run_resamples(
     tasks = [(ref, A, B, method, structure, draws[i : i + size]) for i in range(0, n_boot, size)]
     report = None if progress is None else lambda done, total: progress(min(n_boot, done * size), n_boot)
     return [r for block in executor.map(_bootstrap_block, tasks, progress=report) for r in block]
+
+
+def _resampled(
+    demos: Any, system: Any, n_boot: int, method: GainMethod, structure: Structure | None, seed: int,
+    progress: Callable[[int, int], None] | None, executor: Any,
+) -> tuple[int, np.ndarray, TaskObjective | None, list[tuple], list[str]]:
+    """The point fit on all trials and ``n_boot`` resampled fits: ``(n_trials, K, objective, fits, failures)``,
+    ``fits`` the ``(K, diag Q, diag R)`` of each resample that succeeded (Q, R None for gains only)."""
+    if int(n_boot) < 1:
+        raise DataError(f"n_boot must be ≥ 1, got {n_boot}")
+    n_boot = int(n_boot)
+    A, B = _system_matrices(system.A, system.B)
+    blocks = _demo_blocks(list(demos), *B.shape)
+    if not blocks:
+        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
+    K0, obj0 = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, _solver(A, B, structure))
+    fits, failures = [], []
+    for b, K, q_diag, r_diag, error in _run_resamples(demos, blocks, A, B, method, structure, n_boot, seed,
+                                                      progress, executor):
+        if error is None:
+            fits.append((K, q_diag, r_diag))
+        else:
+            failures.append(f"resample {b}: {error}")
+    if not fits:
+        raise ModelError(f"all {n_boot} bootstrap resamples failed; first failure: {failures[0]}")
+    return len(blocks), K0, obj0, fits, failures
 
 
 @dataclass(frozen=True, eq=False)
@@ -1286,19 +1310,10 @@ def bootstrap_gain(
     ModelError
         If the point estimate on all demonstrations fails, or every resample fails.
     """
-    n_boot = _checked_n_boot(n_boot)
-    A, B = _system_matrices(system.A, system.B)
-    blocks = _demo_blocks(list(demos), *B.shape)
-    if not blocks:
-        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
-    K0, _ = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, None)
-    results = _run_resamples(demos, blocks, A, B, method, None, n_boot, seed, progress, executor)
-    Ks = [K for _, K, _, _, error in results if error is None]
-    failures = tuple(f"resample {b}: {error}" for b, _, _, _, error in results if error is not None)
-    if not Ks:
-        raise ModelError(f"all {n_boot} bootstrap resamples failed; first failure: {failures[0]}")
-    return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array(Ks)), n_trials=len(blocks), n_boot=n_boot,
-                         n_failed=len(failures), failures=failures, method=method, seed=int(seed))
+    n_trials, K0, _, fits, failures = _resampled(demos, system, n_boot, method, None, seed, progress, executor)
+    return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array([f[0] for f in fits])), n_trials=n_trials,
+                         n_boot=int(n_boot), n_failed=len(failures), failures=tuple(failures), method=method,
+                         seed=int(seed))
 
 
 def bootstrap(
@@ -1346,28 +1361,10 @@ def bootstrap(
     """
     if not 0 < ci < 100:
         raise DataError(f"ci must be a percentage in (0, 100), got {ci}")
-    n_boot = _checked_n_boot(n_boot)
-    A, B = _system_matrices(system.A, system.B)
-    n, m = B.shape
-    demo_list = list(demos)
-    blocks = _demo_blocks(demo_list, n, m)
-    if not blocks:
-        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
     if structure not in _STRUCTURES:
         raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
-    K0, obj0 = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, _cached_problem(A, B, structure, True))
-    results = _run_resamples(demos, blocks, A, B, method, structure, n_boot, seed, progress, executor)
-    Ks, Qd, Rd, failures = [], [], [], []
-    for b, K, q_diag, r_diag, error in results:
-        if error is not None:
-            failures.append(f"resample {b}: {error}")
-        else:
-            Ks.append(K)
-            Qd.append(q_diag)
-            Rd.append(r_diag)
-    if not Ks:
-        raise ModelError(f"all {n_boot} bootstrap resamples failed; first failure: {failures[0]}")
-    K_s, Q_s, R_s = np.array(Ks), np.array(Qd), np.array(Rd)
+    _, K0, obj0, fits, failures = _resampled(demos, system, n_boot, method, structure, seed, progress, executor)
+    K_s, Q_s, R_s = (np.array([f[i] for f in fits]) for i in range(3))
     q = [(100 - ci) / 2, 100 - (100 - ci) / 2]
     K_lo, K_hi = np.percentile(K_s, q, axis=0)
     Q_lo, Q_hi = np.percentile(Q_s, q, axis=0)
@@ -1384,7 +1381,7 @@ def bootstrap(
         Q_diag_hi=readonly(Q_hi),
         R_diag_lo=readonly(R_lo),
         R_diag_hi=readonly(R_hi),
-        n_boot=n_boot,
+        n_boot=int(n_boot),
         n_failed=len(failures),
         failures=tuple(failures),
         ci=float(ci),
