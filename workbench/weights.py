@@ -92,19 +92,13 @@ def format_interval(estimate: float, lo: float, hi: float) -> str:
     return f"{bound(estimate)} [{bound(lo)}, {bound(hi)}]"
 
 
-def _ratio_names(
-    parts: Sequence[tuple[tuple[int, ...], tuple[int, ...]]], state_names: Sequence[str], input_names: Sequence[str]
-) -> list[tuple[str, int, int]]:
-    """``(name, state, input)`` of every ``Q_ii / R_kk`` with state and input in one part; ``R_kk`` is the part's
-    first input (any other input of the part is a ratio of these)."""
-    out = []
-    for states, inputs in parts:
-        if not inputs:
-            continue
-        k = inputs[0]
-        out += [(f"Q_{state_names[i]} / R_{input_names[k]}", i, k) for i in states]
-        out += [(f"R_{input_names[j]} / R_{input_names[k]}", -1 - j, k) for j in inputs[1:]]
-    return out
+def _part_ratio_names(states: Sequence[int], inputs: Sequence[int], state_names: Sequence[str],
+                      input_names: Sequence[str]) -> list[str]:
+    """Names of one part's ratios in the order of :class:`ratio_profile.PartDistance`'s θ: every ``Q_ii / R_kk``,
+    then every other input's ``R_jj / R_kk``, ``R_kk`` the part's first input."""
+    k = input_names[inputs[0]]
+    return ([f"Q_{state_names[i]} / R_{k}" for i in states]
+            + [f"R_{input_names[j]} / R_{k}" for j in inputs[1:]])
 
 
 @dataclass(frozen=True)
@@ -192,7 +186,6 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     n, m = B.shape
     K, K_s = np.asarray(gains.K, dtype=float), np.asarray(gains.K_samples, dtype=float)
     parts = decoupled_parts(A, B)
-    spec = _ratio_names(parts, system.state_names, system.input_names)
     q, r = np.ones(n), np.ones(m)
     fitted, index, intervals, fits = [], [], [], []
     for states, inputs in parts:
@@ -211,9 +204,9 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
         Qp, Rp = part.weights(theta)
         scale = max(float(Qp.max()), float(Rp.max()))
         q[s], r[c] = np.diag(Qp) / scale, np.diag(Rp) / scale
-        for j in range(part.d):
+        names = _part_ratio_names(s, c, system.state_names, system.input_names)
+        for j, name in enumerate(names):
             lo, hi = ratio_profile.interval(part, theta, d_min, j, ci)
-            name = spec[len(index)][0]
             intervals.append(RatioInterval(name, float(np.exp(theta[j])), float(np.exp(lo)), float(np.exp(hi)), ci,
                                            explained))
             index.append((len(fitted), j))
