@@ -58,7 +58,7 @@ def test_cli_resamples_when_asked_and_labels_with_the_models_dt(files, tmp_path,
     steps = int(round(horizon_s / MODEL_DT))
     k = int(round((fine[1].t[start] - fine[1].t[0]) / MODEL_DT))
     assert "resampled" in stdout and f"to the model's dt = {MODEL_DT:g} s" in stdout
-    assert f"step {start} (t = {fine[1].t[start]:.3f} s) is step {k} there" in stdout
+    assert f"step {start} (t = {fine[1].t[start]:.3f} s) of {fine[1].id} is step {k} on the model's grid" in stdout
     assert f"predicted {steps} steps ({steps * MODEL_DT:.2f} s)" in stdout
     df = pd.read_csv(out)
     assert len(df) == steps + 1

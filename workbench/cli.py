@@ -510,16 +510,12 @@ def cmd_predict(ctx: _Context) -> int:
         if not 0 <= a.start < len(demo):
             raise DataError(f"{a.demos}: --start {a.start} outside trial {demo.id!r} (0…{len(demo) - 1})")
         t0 = float(demo.t[a.start])
-        try:
-            at_dt = model.demos_at_model_dt(ds, resample=a.resample)
-        except WorkbenchError as exc:
-            raise type(exc)(f"{a.demos}: {exc}") from None
+        at_dt = _demos_at_model_dt(ctx, ds, [model], a.resample, a.demos)
         if at_dt is not ds:
             # --start counts samples of the file; on the model's grid the start is the sample nearest its time
             demo = at_dt[ids.index(demo.id)]
             start = int(np.argmin(np.abs(demo.t - t0)))
-            ctx.say(f"resampled {a.demos} from dt = {ds.dt:g} s to the model's dt = {model.system.dt:g} s "
-                    f"(states linear, inputs held); step {a.start} (t = {t0:.3f} s) is step {start} there")
+            ctx.say(f"step {a.start} (t = {t0:.3f} s) of {demo.id} is step {start} on the model's grid")
             t0 = float(demo.t[start])
         else:
             start = a.start
