@@ -34,7 +34,7 @@ bench: $(STAMP)
 
 ## sample-logs: regenerate sample_logs/ bit-identically from the fixed seed
 sample-logs: $(STAMP)
-	$(BIN)/python -m workbench.sample_logs sample_logs
+	$(BIN)/python -m workbench.cli.sample_logs sample_logs
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache build *.egg-info

@@ -1,4 +1,4 @@
-"""Adapters: flight and teleoperation logs in, :class:`~workbench.demos.DemonstrationSet` out (and back).
+"""Adapters: flight and teleoperation logs in, :class:`~workbench.data.demonstrations.DemonstrationSet` out (and back).
 
 Each format's reader turns a file into *streams* (:mod:`adapters.streams`): per message type or topic, a time
 column and field columns. Everything after that is shared: a *mapping* (:mod:`adapters.mapping`, TOML files in
@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from adapters.streams import Streams
     from adapters.summary import LogSummary
     from adapters.writer import demo_streams, write
-    from workbench.demos import DemonstrationSet
+    from workbench.data.demonstrations import DemonstrationSet
 
 # The names below load their module (and numpy, pandas, pyarrow behind it) on first use, so that importing
 # the package, or a command that never reads a log, starts fast.

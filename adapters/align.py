@@ -101,7 +101,7 @@ def align(series: list[Series], start: float, end: float, dt: float, gap: float)
 def sample(s: Series, grid: np.ndarray, tol: float) -> np.ndarray:
     """One channel's values at the grid times: held (inputs) or interpolated (states), exact within ``tol``.
 
-    The single rule both the offline :func:`align` and the online aligner (:mod:`adapters.online`) apply.
+    The single rule both the offline :func:`align` and the online aligner (:mod:`adapters.link.online`) apply.
     """
     if s.hold:
         idx = np.searchsorted(s.t, grid + tol, side="right") - 1

@@ -2,11 +2,11 @@
 
 :func:`import_logs` expands directories and glob patterns into log files, imports each one as an independent
 task (:func:`import_log`: read it through the mapping, write its trials as one Parquet partition per subject)
-and commits a partitioned dataset (:mod:`workbench.dataset`) that reads as one table. A log that cannot be
+and commits a partitioned dataset (:mod:`workbench.data.dataset`) that reads as one table. A log that cannot be
 read is reported with its cause and the others complete; a dataset is written as long as one log was imported.
 
 The executor is anything with ``map_outcomes(fn, items, keys=, progress=)`` returning outcomes with ``key``,
-``value`` and ``error`` (``workbench.executor``); without one the logs are imported here, one after another.
+``value`` and ``error`` (``workbench.study.executor``); without one the logs are imported here, one after another.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from workbench.dataset import DatasetWriter, Partition, write_partitions
-from workbench.demos import DemonstrationSet
+from workbench.data.dataset import DatasetWriter, Partition, write_partitions
+from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError
 
 __all__ = ["LOG_SUFFIXES", "LogImport", "ImportReport", "expand_logs", "import_log", "import_logs"]
@@ -113,7 +113,7 @@ def import_log(task: tuple[str, str | None, str, str, str | None]) -> LogImport:
     if not len(ds):
         raise DataError(f"{path}: no demonstrations under the mapping")
     if label:
-        ds = ds._like(d.with_meta(label=label) for d in ds)
+        ds = ds.with_demos(d.with_meta(label=label) for d in ds)
     skipped = {k: int(v) for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v}
     parts = write_partitions(ds, folder, name, source=str(path))
     return LogImport(str(path), tuple(parts), ds.state_names, ds.input_names, ds.dt, tuple(skipped.items()))

@@ -63,8 +63,8 @@ import pandas as pd
 from adapters.modes import MODE_TABLES, mode_number
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
 from adapters.transforms import TRANSFORMS
+from workbench.data.roles import Roles
 from workbench.errors import DataError, MappingError
-from workbench.roles import Roles
 
 __all__ = [
     "ChannelMapping",

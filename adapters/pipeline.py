@@ -1,4 +1,4 @@
-"""The shared pipeline: streams + mapping → segmented, aligned :class:`~workbench.demos.DemonstrationSet`.
+"""The shared pipeline: streams + mapping → segmented, aligned :class:`~workbench.data.demonstrations.DemonstrationSet`.
 
 Every format goes through the same steps once its reader has produced :class:`~adapters.streams.Streams`:
 
@@ -32,7 +32,7 @@ from adapters.meta import table_meta, text_meta
 from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect, mode_spans, split_at_landing
 from adapters.streams import Streams, clean_series, numeric
 from adapters.transforms import TRANSFORMS
-from workbench.demos import Demonstration, DemonstrationSet
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError
 
 __all__ = ["build"]

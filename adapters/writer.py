@@ -1,4 +1,5 @@
-"""Writers: a :class:`~workbench.demos.DemonstrationSet` back into a log, through the same mapping that reads it.
+"""Writers: a :class:`~workbench.data.demonstrations.DemonstrationSet` back into a log, through the same mapping that
+reads it.
 
 The mapping is inverted: every channel's value goes back into its source field (undoing scale, offset,
 sign and transform), the demonstration's index (its id for CSV) into the demo field, its metadata into the
@@ -26,7 +27,7 @@ import pandas as pd
 from adapters.formats import FORMATS, get_format
 from adapters.mapping import ChannelMapping, Selector, channel_inverse, load_mapping
 from adapters.meta import format_markers
-from workbench.demos import DemonstrationSet
+from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, MappingError
 
 __all__ = ["demo_streams", "layout", "write", "format_for_path"]

@@ -1,7 +1,7 @@
 """Fit time against the number of demonstrations, BLAS threads, and the EM's peak memory against scikit-learn.
 
 1. ``HumanBehaviorModel.fit`` (gain, inverse LQR, TP-GMM, noise calibration: everything ``workbench fit`` does)
-   on 10 / 60 / 300 / 1000 simulated CS1 landings (``workbench.simulate.simulate_landings``), one fit each, with
+   on 10 / 60 / 300 / 1000 simulated CS1 landings (``workbench.sim.landing.simulate_landings``), one fit each, with
    the BLAS pools single-threaded as the CLI runs them (:mod:`workbench.threads`). Targets: 60 demonstrations
    ≤ 5 s, 1000 ≤ 40 s on the 2-core machine.
 2. The 60-demonstration fit with the BLAS libraries' own default thread count against one thread: the CLI's
@@ -38,8 +38,8 @@ w0 = np.full(G, 1 / G); mu0 = centers + 0.1; S0 = np.repeat(np.eye(D)[None], G, 
 def _fit_seconds(ds, limit: int | None) -> tuple[float, object]:
     from threadpoolctl import threadpool_limits
 
-    from workbench.model import HumanBehaviorModel
-    from workbench.system import planar_quadrotor
+    from workbench.models import HumanBehaviorModel
+    from workbench.plant.system import planar_quadrotor
 
     with threadpool_limits(limits=limit):
         model = HumanBehaviorModel(planar_quadrotor())
@@ -51,7 +51,7 @@ def _fit_seconds(ds, limit: int | None) -> tuple[float, object]:
 def run() -> list[dict]:
     import warnings
 
-    from workbench.simulate import simulate_landings
+    from workbench.sim.landing import simulate_landings
 
     warnings.simplefilter("ignore")
     rows = []
@@ -69,7 +69,8 @@ def run() -> list[dict]:
                          "seconds": default, "ratio default/1 thread": default / seconds,
                          "target": "CLI default (1 thread) never slower than single-threaded",
                          "met": "met (the CLI runs single-threaded unless WORKBENCH_THREADS says otherwise)"})
-    ours = peak_memory(_EM_DATA + "from workbench.tpgmm import TPGMM\nfrom workbench.frames import Frame\n"
+    ours = peak_memory(_EM_DATA + "from workbench.method.tpgmm import TPGMM\n"
+                       "from workbench.method.frames import Frame\n"
                        "import numpy as np\nframes = [[Frame(np.eye(D), np.zeros(D))]]",
                        "TPGMM(n_components=G, max_iter=3, tol=0, weights_init=w0, means_init=mu0[None], "
                        "covariances_init=S0[None], reg_covar=1e-6).fit([X], frames)")

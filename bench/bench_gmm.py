@@ -30,8 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from harness import best_time  # noqa: E402
 
 from workbench.errors import ConvergenceWarning  # noqa: E402
-from workbench.gmr import ConditionalGMM  # noqa: E402
-from workbench.tpgmm import TPGMM, identity_frame, start_frame  # noqa: E402
+from workbench.method.gmr import ConditionalGMM  # noqa: E402
+from workbench.method.tpgmm import TPGMM, identity_frame, start_frame  # noqa: E402
 
 
 def _em_data(rng: np.random.Generator, N: int = 14_000, D: int = 8, G: int = 5) -> np.ndarray:

@@ -19,8 +19,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from harness import markdown_table  # noqa: E402
 
-from workbench.ioc import InverseLQR, forward_gain  # noqa: E402
-from workbench.system import planar_quadrotor  # noqa: E402
+from workbench.method.inverse_lqr_sdp import InverseLQR  # noqa: E402
+from workbench.method.objective import forward_gain
+from workbench.plant.system import planar_quadrotor  # noqa: E402
 
 N_FIRST = 5
 N_RESOLVE = 20

@@ -1,10 +1,11 @@
 """Live prediction benchmarks: per-step compute and message-to-prediction latency, in process and over loopback UDP.
 
-1. **in process** — every frame of ``sample_logs/landing_s00.tlog`` fed to :class:`workbench.live.OnlinePredictor`
+1. **in process** — every frame of ``sample_logs/landing_s00.tlog`` fed to
+:class:`workbench.live.predictor.OnlinePredictor`
    as fast as possible (a CS1 model, 1 s rollouts): per-step compute (aligning the step + the one-step GMR, ŵ and
    the rollout), p50 / p99, and the rerun logging cost per step (:class:`workbench.viewer.live.LiveLogger`, batched).
 2. **loopback UDP at 20 Hz** — a separate process sends the tlog's raw frames at real time
-   (:func:`adapters.mavlink_link.send_tlog`, ``udpout:127.0.0.1``) and this process receives them
+   (:func:`adapters.link.mavlink.send_tlog`, ``udpout:127.0.0.1``) and this process receives them
    (``udpin:127.0.0.1``) into the predictor: per-step compute and *message-to-prediction* latency, from the moment
    the sender wrote the frame that completed a step to the moment its prediction was ready (both read from the
    system-wide monotonic clock), p50 / p99. Target: p99 < 5 ms per step.
@@ -31,10 +32,10 @@ sys.path.insert(0, str(ROOT))
 from harness import markdown_table  # noqa: E402
 
 import adapters  # noqa: E402
-from adapters.mavlink_link import open_link, tlog_frames  # noqa: E402
-from workbench.live import OnlinePredictor  # noqa: E402
-from workbench.model import HumanBehaviorModel  # noqa: E402
-from workbench.system import planar_quadrotor  # noqa: E402
+from adapters.link.mavlink import open_link, tlog_frames  # noqa: E402
+from workbench.live.predictor import OnlinePredictor  # noqa: E402
+from workbench.models import HumanBehaviorModel  # noqa: E402
+from workbench.plant.system import planar_quadrotor  # noqa: E402
 from workbench.viewer.scene import plane_of  # noqa: E402
 
 TLOG = ROOT / "sample_logs" / "landing_s00.tlog"
@@ -42,7 +43,7 @@ HORIZON = 1.0
 
 _SENDER = """
 import sys, time, numpy as np
-from adapters.mavlink_link import send_tlog
+from adapters.link.mavlink import send_tlog
 stamps = []
 n_max = int(sys.argv[3])
 send_tlog(sys.argv[1], sys.argv[2], speed=1.0, on_frame=lambda n, t: stamps.append(time.perf_counter()),
@@ -66,7 +67,7 @@ def in_process(model: HumanBehaviorModel) -> list[dict]:
     from workbench.viewer.live import LiveLogger
 
     frames = list(tlog_frames(TLOG))
-    pr = OnlinePredictor(model, "planar_quadrotor", horizon=HORIZON, now=time.perf_counter)
+    pr = OnlinePredictor(model, "planar_quadrotor", horizon_s=HORIZON, now=time.perf_counter)
     preds = []
     t0 = time.perf_counter()
     for _, frame in frames:
@@ -109,7 +110,7 @@ def loopback(model: HumanBehaviorModel, seconds: float) -> dict:
         port = s.getsockname()[1]
     frames_per_s = 4.4 * 20  # the sample log's ~4.4 frames per 20 Hz step
     n_frames = int(seconds * frames_per_s)
-    pr = OnlinePredictor(model, "planar_quadrotor", horizon=HORIZON, now=time.perf_counter)
+    pr = OnlinePredictor(model, "planar_quadrotor", horizon_s=HORIZON, now=time.perf_counter)
     compute, latency, received = [], [], 0
     completing: list[int] = []
     with tempfile.TemporaryDirectory() as tmp, open_link(f"udpin:127.0.0.1:{port}") as link:

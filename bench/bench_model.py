@@ -28,11 +28,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from harness import best_time, markdown_table  # noqa: E402
 
-from workbench import evaluate as ev  # noqa: E402
-from workbench.ioc import InverseLQR, estimate_gain  # noqa: E402
-from workbench.model import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel  # noqa: E402
-from workbench.simulate import simulate_landings  # noqa: E402
-from workbench.system import planar_quadrotor  # noqa: E402
+from workbench.method.gain import estimate_gain
+from workbench.method.inverse_lqr_sdp import InverseLQR  # noqa: E402
+from workbench.models import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel  # noqa: E402
+from workbench.plant.system import planar_quadrotor  # noqa: E402
+from workbench.sim.landing import simulate_landings  # noqa: E402
+from workbench.study import evaluate as ev  # noqa: E402
 
 
 def _row(case: str, value: float, unit: str, note: str = "") -> dict:
@@ -99,7 +100,7 @@ def _paper_figures(train_seed: int, test_seed: int) -> list[dict]:
                 lambda: {"proposed": HumanBehaviorModel(system, fit_objective=False), "gmr_only": GMROnlyModel(system)},
                 train, test, sizes=(5,), repeats=5, seed=0,
             )
-        table = ev.compare(models, test, horizon=60, samples=200, seed=0)
+        table = ev.compare(models, test, n_steps=60, samples=200, seed=0)
         s = ev.summarize(table)
         cov = ev.coverage_summary(ev.one_step_coverage(models["proposed"], test))
         cov3 = cov[cov.n_sigma == 3].set_index("input")["coverage"]

@@ -67,7 +67,7 @@ def _target(row: dict, bar: float, text: str) -> dict:
 
 # ------------------------------------------------------------------------------------------------------- CSV
 def _csv_files(tmp: Path) -> dict[str, Path]:
-    from workbench.simulate import simulate_landings
+    from workbench.sim.landing import simulate_landings
 
     big = tmp / "landings_300.csv"
     ds = simulate_landings("CS1", 150, seed=3)
@@ -77,7 +77,7 @@ def _csv_files(tmp: Path) -> dict[str, Path]:
 
 
 def bench_csv(tmp: Path) -> list[dict]:
-    from adapters import csv
+    from adapters.formats import csv
 
     rows = []
     for case, path in _csv_files(tmp).items():
@@ -104,7 +104,7 @@ def bench_ulog() -> list[dict]:
     from pyulog import ULog
 
     import adapters
-    from adapters import ulog
+    from adapters.formats import ulog
 
     path = EXTERNAL / "px4_sample_log_small.ulg"
     if not path.exists():
@@ -138,7 +138,7 @@ def bench_ulog() -> list[dict]:
 # ------------------------------------------------------------------------------------------------------ tlog
 def generate_log(path: Path, n_messages: int, seed: int = 0) -> int:
     """A MAVLink 2 tlog of about ``n_messages`` records: a vehicle streaming the usual telemetry (10 types)."""
-    from adapters.tlog import write_tlog
+    from adapters.formats.tlog_write import write_tlog
 
     rng = np.random.default_rng(seed)
     rates = {
@@ -184,8 +184,8 @@ def generate_log(path: Path, n_messages: int, seed: int = 0) -> int:
 
 def generate_many_types(path: Path, n_types: int = 41, size_bytes: int = 1_000_000, seed: int = 0) -> int:
     """A ~1 MB MAVLink 2 tlog with ``n_types`` message types (ids below 256, numeric fields), random values."""
-    from adapters.mavlink_dialect import load_dialect
-    from adapters.tlog import write_tlog
+    from adapters.formats.mavlink_dialect import load_dialect
+    from adapters.formats.tlog_write import write_tlog
 
     rng = np.random.default_rng(seed)
     dialect = load_dialect()
@@ -204,7 +204,7 @@ def generate_many_types(path: Path, n_types: int = 41, size_bytes: int = 1_000_0
 
 
 def _check_tlog(path: Path) -> None:
-    from adapters.tlog import read_tlog
+    from adapters.formats.tlog import read_tlog
 
     ours = read_tlog(path)
     msgs = _pymavlink(path, keep=True)
@@ -217,7 +217,7 @@ def _check_tlog(path: Path) -> None:
 
 
 def bench_tlog(tmp: Path) -> list[dict]:
-    from adapters.tlog import read_streams, read_tlog
+    from adapters.formats.tlog import read_streams, read_tlog
 
     small = tmp / "many_types_1MB.tlog"
     generate_many_types(small)
@@ -255,7 +255,7 @@ def bench_tlog(tmp: Path) -> list[dict]:
             rows.append(_target(row, 10.0, "≥ 10×"))
     # Peak memory of one read of the large log, above the baseline after the imports.
     mb = large.stat().st_size / 2**20
-    ours = peak_memory("from adapters import tlog\nfrom adapters.mavlink_dialect import load_dialect",
+    ours = peak_memory("from adapters import tlog\nfrom adapters.formats.mavlink_dialect import load_dialect",
                        "tlog.read_tlog(sys.argv[1])", str(large), warm="load_dialect()")
     peer = peak_memory(_PM_IMPORTS, "pymavlink_read(sys.argv[1], keep=True)", str(large))
     for name, m in (("ours", ours), ("pymavlink, keeping the messages", peer)):
@@ -270,7 +270,7 @@ def bench_tlog(tmp: Path) -> list[dict]:
 
 # ------------------------------------------------------------------------------------------------------ MCAP
 def _mcap_json(path: Path, n: int) -> Path:
-    from adapters import mcap
+    from adapters.formats import mcap
 
     rng = np.random.default_rng(0)
     k = n // 2
@@ -302,7 +302,7 @@ def _mcap_library(path: Path) -> int:
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    from adapters import mcap
+    from adapters.formats import mcap
 
     count = 0
     with open(path, "rb") as f:
@@ -313,7 +313,7 @@ def _mcap_library(path: Path) -> int:
 
 
 def bench_mcap(tmp: Path) -> list[dict]:
-    from adapters import mcap
+    from adapters.formats import mcap
 
     rows = []
     for case, path in (("JSON channels, zstd, 200k messages", _mcap_json(tmp / "json.mcap", 200_000)),

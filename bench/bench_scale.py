@@ -36,10 +36,11 @@ sys.path.insert(0, str(HERE.parent))
 
 from harness import markdown_table  # noqa: E402
 
-from workbench import evaluate as ev  # noqa: E402
 from workbench.atomic import atomic_write_text  # noqa: E402
-from workbench.simulate import simulate_study  # noqa: E402
-from workbench.system import planar_quadrotor  # noqa: E402
+from workbench.models import make_models  # noqa: E402
+from workbench.plant.system import planar_quadrotor  # noqa: E402
+from workbench.sim.landing import simulate_study  # noqa: E402
+from workbench.study import evaluate as ev  # noqa: E402
 
 HORIZON = 100  # 5 s at dt = 0.05 s, the paper's multi-subject horizon
 TRIALS = 11  # 10 training + 1 test per subject, the paper's design
@@ -54,7 +55,7 @@ def _study(n_subjects: int):
 
 
 def _make_models():
-    return functools.partial(ev.default_models, planar_quadrotor(), 5, 0)
+    return functools.partial(make_models, planar_quadrotor(), n_components=5, random_state=0)
 
 
 def _trivial(i: int) -> int:
@@ -66,8 +67,8 @@ def _warm(i: int) -> int:
     import cvxpy  # noqa: F401
     import sklearn.cluster  # noqa: F401
 
-    import workbench.evaluate  # noqa: F401
-    import workbench.model  # noqa: F401
+    import workbench.models.proposed  # noqa: F401
+    import workbench.study.evaluate  # noqa: F401
 
     return i
 
@@ -78,8 +79,8 @@ def _maxrss_mb() -> float:
 
 def speedup(n_subjects: int = 20, workers: int = 2) -> dict:
     """Serial vs ``workers`` on a running LocalCluster; per-subject task times from the serial run."""
-    from workbench.dataset import write_dataset
-    from workbench.executor import DaskExecutor
+    from workbench.data.dataset import write_dataset
+    from workbench.study.executor import DaskExecutor
 
     # Both sides read one dataset directory, as a study imported with `workbench import -o DATASET/` does:
     # each worker task then reads its own subject's partition, and nothing is staged inside the timing.
@@ -89,7 +90,7 @@ def speedup(n_subjects: int = 20, workers: int = 2) -> dict:
     stamps: list[float] = []
     load0 = _load()
     t0 = time.perf_counter()
-    serial = ev.per_subject(make, study, horizon=HORIZON, seed=0,
+    serial = ev.per_subject(make, study, n_steps=HORIZON, seed=0,
                             progress=lambda d, n: stamps.append(time.perf_counter()))
     t_serial = time.perf_counter() - t0
     load1 = _load()
@@ -100,7 +101,7 @@ def speedup(n_subjects: int = 20, workers: int = 2) -> dict:
         t_start = time.perf_counter() - t0
         load2 = _load()
         t0 = time.perf_counter()
-        parallel = ev.per_subject(make, study, horizon=HORIZON, seed=0, executor=ex)
+        parallel = ev.per_subject(make, study, n_steps=HORIZON, seed=0, executor=ex)
         t_parallel = time.perf_counter() - t0
         load3 = _load()
         # the scheduler's cost per task: many empty tasks
@@ -129,7 +130,7 @@ def task_sizes(n_subjects: int = 20) -> dict:
     """Bytes of one task message, one result and one subject's partition (what moves, and where)."""
     import cloudpickle
 
-    from workbench.dataset import DataRef, read_manifest, write_dataset
+    from workbench.data.dataset import DataRef, read_manifest, write_dataset
 
     study = _study(n_subjects)
     with tempfile.TemporaryDirectory() as tmp:
@@ -151,7 +152,7 @@ def task_sizes(n_subjects: int = 20) -> dict:
 
 def large(n_subjects: int = 200, workers: int = 2) -> dict:
     """The whole study on a fresh ``workers`` cluster: wall time (start-up included) and peak memory."""
-    from workbench.executor import DaskExecutor
+    from workbench.study.executor import DaskExecutor
 
     t0 = time.perf_counter()
     study = _study(n_subjects)
@@ -162,7 +163,7 @@ def large(n_subjects: int = 200, workers: int = 2) -> dict:
         warnings.simplefilter("ignore")
         with DaskExecutor(workers=workers) as ex:
             t_start = time.perf_counter() - t0
-            res = ev.per_subject(_make_models(), study, horizon=HORIZON, seed=0, executor=ex)
+            res = ev.per_subject(_make_models(), study, n_steps=HORIZON, seed=0, executor=ex)
             worker_mb = [v / 1024.0 for v in ex.client.run(
                 lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss).values()]
     wall = time.perf_counter() - t0

@@ -51,7 +51,7 @@ def run() -> list[dict]:
         if label == "workbench --help":
             row.update(target="≤ 0.25 s", met=verdict(wall, 0.25, False))
         rows.append(row)
-    for module, bar in (("adapters", 0.3), ("workbench.cli", None), ("workbench.model", None)):
+    for module, bar in (("adapters", 0.3), ("workbench.cli", None), ("workbench.models.proposed", None)):
         probes = [json.loads(run_script(_IMPORT.format(module=module, heavy=HEAVY))[1].strip().splitlines()[-1])
                   for _ in range(REPEATS)]
         wall = statistics.median(run_script(f"import {module}")[0] for _ in range(REPEATS))

@@ -24,8 +24,8 @@ import rerun as rr  # noqa: E402
 from harness import markdown_table, verdict  # noqa: E402
 
 from workbench import viewer  # noqa: E402
-from workbench.demos import DemonstrationSet  # noqa: E402
-from workbench.simulate import simulate_landings  # noqa: E402
+from workbench.data.demonstrations import DemonstrationSet  # noqa: E402
+from workbench.sim.landing import simulate_landings  # noqa: E402
 from workbench.viewer import replay  # noqa: E402
 
 
@@ -98,8 +98,8 @@ def run() -> list[dict]:
             "met": verdict(t_row / t_col, 20.0, True),
         })
 
-        from workbench.model import HumanBehaviorModel
-        from workbench.system import planar_quadrotor
+        from workbench.models import HumanBehaviorModel
+        from workbench.plant.system import planar_quadrotor
 
         train = ds.by_label("CS1")
         model = HumanBehaviorModel(planar_quadrotor(), n_components=5).fit(train)
@@ -110,7 +110,7 @@ def run() -> list[dict]:
             steps = 0
             for d in list(train)[:5]:
                 stats = replay(d, model, rec, state_names=ds.state_names, input_names=ds.input_names, wait=False,
-                               horizon=horizon)
+                               n_steps=horizon)
                 sim += stats.sim_time
                 wall += stats.wall_time
                 steps += stats.n_steps

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from workbench.simulate import simulate_landings
-from workbench.system import planar_quadrotor
+from workbench.plant.system import planar_quadrotor
+from workbench.sim.landing import simulate_landings
 
 REPO = Path(__file__).resolve().parents[1]
 EXTERNAL = (REPO / ".." / "shared" / "external").resolve()

@@ -1,92 +1,217 @@
-"""The layout of ../shared/DESIGN.md, checked: imports point down, and the core runs headless."""
+"""The layout of docs/architecture.md, checked: floors by subpackage prefix, imports point down, no cycles.
+
+The rules name prefixes, not modules, so a module is checked the day it is added; a module under no floor's
+prefix fails :func:`test_every_module_is_on_a_floor` until the architecture says where it belongs.
+"""
 
 from __future__ import annotations
 
 import ast
 import subprocess
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-# floor 4: what a user touches; nothing below may import it
-TOP = ("workbench.cli", "workbench.__main__", "workbench.viewer", "workbench.report", "workbench.sample_logs",
-       "workbench.live")  # live joins the adapters' online path and a model, like the CLI joins them offline
-# the common format: the only part of workbench the adapters may use
-COMMON = ("workbench.demos", "workbench.dataset", "workbench.errors", "workbench.atomic", "workbench.roles")
-# floor 1: the common format and the plant; it imports nothing above it
-FLOOR1 = (*COMMON, "workbench.system", "workbench.identification", "workbench.frozen")
-# floor 3: the pipelines over models; the method and the models (floor 2) never import them
-FLOOR3 = ("workbench.study", "workbench.evaluate", "workbench.stats", "workbench.executor")
+
+# floor -> the prefixes on it; a module may import its own floor and the floors below, never above
+FLOORS: dict[int, tuple[str, ...]] = {
+    0: ("workbench.errors", "workbench.atomic", "workbench.frozen", "workbench.threads", "workbench.exports"),
+    1: ("workbench.data",),
+    2: ("workbench.plant", "workbench.method", "workbench.sim", "adapters"),
+    3: ("workbench.models",),
+    4: ("workbench.study",),
+    5: ("workbench.viewer", "workbench.report", "workbench.live"),
+    6: ("workbench.cli", "workbench.__main__"),
+}
+ROOT = "workbench"  # the package's public face (floor 0: it imports only the errors; the rest lazily)
+# on one floor, peers meet only where these allow: (importer, imported)
+PEERS_ALLOWED: tuple[tuple[str, str], ...] = (
+    ("workbench.method", "workbench.plant"),
+    ("workbench.sim", "workbench.plant"),
+    ("workbench.sim", "workbench.method"),
+    ("workbench.viewer", "workbench.live"),  # the live view draws the online predictor's output
+    ("workbench.__main__", "workbench.cli"),
+)
+# the method and the models know arrays and DemonstrationSets, never files or links
+NEVER: tuple[tuple[str, str], ...] = (
+    ("workbench.plant", "adapters"),
+    ("workbench.method", "adapters"),
+    ("workbench.sim", "adapters"),
+    ("workbench.models", "adapters"),
+    ("workbench.study", "adapters"),
+    ("workbench.report", "adapters"),
+    ("adapters", "workbench.plant"),
+    ("adapters", "workbench.method"),
+    ("adapters", "workbench.sim"),
+)
 
 
-def _module_name(path: Path) -> str:
+def module_name(path: Path) -> str:
     parts = list(path.relative_to(REPO).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
     return ".".join(parts)
 
 
-def _imports(path: Path) -> set[str]:
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+def _type_checking(node: ast.AST) -> bool:
+    return isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+
+
+def imports_of(source: str, name: str) -> set[str]:
+    """Every workbench/adapters module ``source`` imports, at module level or inside functions (a lazy import
+    is still an arrow), except under ``if TYPE_CHECKING:``; ``from pkg import mod`` counts as ``pkg.mod``."""
+    found: set[str] = set()
+    package = name if name in PACKAGES else name.rpartition(".")[0]
+
+    def visit(node: ast.AST) -> None:
+        if _type_checking(node):
+            return
         if isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            found.add(node.module)
-            found.update(f"{node.module}.{alias.name}" for alias in node.names)
-    return {name for name in found if name.split(".")[0] in ("workbench", "adapters")}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[: len(parts) - node.level + 1] + ([base] if base else []))
+            # ``from pkg import mod`` is an arrow to pkg.mod; to pkg itself only for a name its __init__ defines
+            for alias in node.names:
+                found.add(f"{base}.{alias.name}" if f"{base}.{alias.name}" in ALL_MODULES else base)
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(ast.parse(source))
+    found.discard(name)
+    return {i for i in found if i.split(".")[0] in ("workbench", "adapters")}
 
 
-def _under(name: str, prefixes) -> bool:
-    return any(name == p or name.startswith(p + ".") for p in prefixes)
+def _under(name: str, prefix: str) -> bool:
+    return name == prefix or name.startswith(prefix + ".")
 
 
-MODULES = {
-    _module_name(p): _imports(p) for pkg in ("workbench", "adapters") for p in sorted((REPO / pkg).rglob("*.py"))
-}
+def floor_of(name: str) -> tuple[int, str] | None:
+    if name == ROOT:
+        return 0, ROOT
+    hits = [(f, p) for f, ps in FLOORS.items() for p in ps if _under(name, p)]
+    return max(hits, key=lambda h: len(h[1])) if hits else None
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES if not _under(m, TOP)))
-def test_nothing_below_the_top_floor_imports_it(module):
-    assert not {i for i in MODULES[module] if _under(i, TOP)}, f"{module} imports the CLI, viewer or report"
+def violations(graph: Mapping[str, set[str]]) -> list[str]:
+    """Every import in ``graph`` (module -> modules it imports) that breaks a rule, as one line each."""
+    out = []
+    for module, imported in sorted(graph.items()):
+        mine = floor_of(module)
+        for target in sorted(imported):
+            theirs = floor_of(target)
+            if mine is None or theirs is None:
+                continue  # reported by test_every_module_is_on_a_floor
+            if theirs[0] > mine[0]:
+                out.append(f"{module} (floor {mine[0]}) imports {target} (floor {theirs[0]}): an arrow back up")
+            elif theirs[0] == mine[0] > 0 and theirs[1] != mine[1] and (mine[1], theirs[1]) not in PEERS_ALLOWED:
+                out.append(f"{module} imports its peer {target} on floor {mine[0]} (not in PEERS_ALLOWED)")
+            if any(_under(module, a) and _under(target, b) for a, b in NEVER):
+                out.append(f"{module} imports {target}: never allowed")
+    return out
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES if _under(m, TOP) and m != "workbench.__main__"))
-def test_nothing_imports_the_cli(module):
-    assert not {i for i in MODULES[module] if _under(i, ("workbench.cli",))}
+def cycles(graph: Mapping[str, set[str]]) -> list[list[str]]:
+    """The import cycles of ``graph`` (strongly connected components of more than one module, or a self-loop)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    found: list[list[str]] = []
+    sys.setrecursionlimit(10_000)
+
+    def strong(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in graph:
+                continue
+            if w not in index:
+                strong(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                found.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            strong(v)
+    return found
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES if _under(m, FLOOR1)))
-def test_floor_one_imports_nothing_above_it(module):
-    above = {i for i in MODULES[module] if i.startswith("workbench.") and not _under(i, FLOOR1)}
-    assert not above, f"{module} imports {sorted(above)}"
+PATHS = {module_name(p): p for pkg in ("workbench", "adapters") for p in sorted((REPO / pkg).rglob("*.py"))}
+ALL_MODULES = set(PATHS)
+PACKAGES = {module_name(p) for p in PATHS.values() if p.name == "__init__.py"}
+GRAPH = {name: imports_of(p.read_text(encoding="utf-8"), name) for name, p in PATHS.items()}
 
 
-@pytest.mark.parametrize(
-    "module", sorted(m for m in MODULES if m.startswith("workbench.") and not _under(m, (*TOP, *FLOOR1, *FLOOR3)))
-)
-def test_the_method_and_models_never_import_the_pipelines(module):
-    assert not {i for i in MODULES[module] if _under(i, FLOOR3)}, f"{module} imports a study pipeline"
+def test_every_module_is_on_a_floor():
+    lost = sorted(m for m in GRAPH if floor_of(m) is None)
+    assert not lost, f"modules on no floor (add their subpackage to FLOORS and docs/architecture.md): {lost}"
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES if m.startswith("adapters")))
-def test_adapters_meet_the_core_only_in_the_common_format(module):
-    other = {i for i in MODULES[module] if i.startswith("workbench") and not _under(i, COMMON)}
-    assert not other, f"{module} imports {sorted(other)}"
+def test_imports_point_down():
+    found = violations(GRAPH)
+    assert not found, "\n".join(found)
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES if m.startswith("workbench") and not _under(m, TOP)))
-def test_the_core_never_imports_adapters(module):
-    assert not {i for i in MODULES[module] if i.startswith("adapters")}
+def test_no_import_cycles():
+    assert not cycles(GRAPH)
+
+
+def test_the_rules_catch_a_back_import_and_a_cycle():
+    """The checker itself can fail: a deliberately added arrow back up, a forbidden peer and a cycle."""
+    graph = {k: set(v) for k, v in GRAPH.items()}
+    graph["workbench.data.new_module"] = {"workbench.models.proposed"}
+    graph["workbench.method.gmr"] = graph["workbench.method.gmr"] | {"adapters.mapping"}
+    found = violations(graph)
+    assert any("workbench.data.new_module (floor 1) imports workbench.models.proposed" in f for f in found)
+    assert any("workbench.method.gmr imports adapters.mapping" in f for f in found)
+    graph["workbench.data.roles"] = graph["workbench.data.roles"] | {"workbench.data.new_module"}
+    graph["workbench.data.new_module"] = {"workbench.data.roles"}
+    assert ["workbench.data.new_module", "workbench.data.roles"] in cycles(graph)
+
+
+def test_the_tree_and_the_architecture_page_agree():
+    """docs/architecture.md names every floor's prefixes; every subpackage of workbench/ is on it."""
+    page = (REPO / "docs" / "architecture.md").read_text(encoding="utf-8")
+    for prefixes in FLOORS.values():
+        for prefix in prefixes:
+            shown = prefix.replace(".", "/") + ("/" if (REPO / prefix.replace(".", "/")).is_dir() else ".py")
+            assert f"`{shown}`" in page, f"docs/architecture.md does not show {shown}"
+    for sub in (REPO / "workbench").iterdir():
+        if (sub / "__init__.py").exists():
+            assert floor_of(f"workbench.{sub.name}") is not None, f"workbench/{sub.name}/ is on no floor"
+
+
+def test_workbench_has_few_modules_at_its_top_and_none_too_long():
+    top = sorted(p.name for p in (REPO / "workbench").glob("*.py"))
+    assert len(top) <= 8, top
+    long = {str(p.relative_to(REPO)): n for p in PATHS.values() if (n := len(p.read_text().splitlines())) > 800}
+    assert not long, long
 
 
 def test_core_runs_headless_without_rerun_matplotlib_or_dask():
-    # live.py is on the top floor but has no rerun inside; the executor imports Dask only when asked for workers
+    # live is on the top floor but has no rerun inside; the executor imports Dask only when asked for workers
     code = (
-        "import sys, adapters, workbench.model, workbench.evaluate, workbench.study, workbench.simulate\n"
-        "import workbench.executor, workbench.dataset, workbench.weights, workbench.autoconfig, workbench.live\n"
+        "import sys, adapters, workbench.models.proposed, workbench.study.evaluate, workbench.study.pipeline\n"
+        "import workbench.sim.landing, workbench.study.executor, workbench.data.dataset, workbench.study.weights\n"
+        "import workbench.models.autoconfig, workbench.live.predictor\n"
         "print(sorted(m for m in ('rerun', 'matplotlib', 'dask', 'distributed') if m in sys.modules))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
@@ -100,13 +225,26 @@ HEAVY = ("pandas", "pyarrow", "cvxpy", "sklearn", "scipy", "numpy")
     "code",
     [
         "import adapters, workbench",
+        "import workbench.data, workbench.plant, workbench.method, workbench.models, workbench.study",
         "import sys; from workbench.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass",
         "import sys; from workbench.cli import main\ntry:\n    main(['fit', '--help'])\nexcept SystemExit:\n    pass",
     ],
-    ids=["import adapters", "workbench --help", "workbench fit --help"],
+    ids=["import adapters", "import the subpackages", "workbench --help", "workbench fit --help"],
 )
 def test_startup_imports_no_heavy_library(code):
     """Startup stays fast only while the heavy libraries load where they are used (issue 11: --help <= 0.25 s)."""
     probe = f"{code}\nimport sys\nprint(sorted({{m.split('.')[0] for m in sys.modules}} & set({HEAVY!r})))"
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=REPO)
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_no_public_name_shadows_a_submodule():
+    """``from workbench.method import inverse_lqr`` must give the function, not a module of the same name."""
+    import importlib
+
+    for package in sorted(PACKAGES):
+        if not package.startswith("workbench.") or package.count(".") != 1:
+            continue
+        exports = getattr(importlib.import_module(package), "_EXPORTS", {})
+        submodules = {p.stem for p in (REPO / package.replace(".", "/")).glob("*.py")}
+        assert not set(exports) & submodules, f"{package}: {sorted(set(exports) & submodules)}"

@@ -92,10 +92,10 @@ def _write_originals(folder: Path) -> dict[str, Path]:
     import warnings
 
     import adapters
-    from workbench.demos import DemonstrationSet
-    from workbench.model import HumanBehaviorModel
-    from workbench.simulate import simulate_landings
-    from workbench.system import planar_quadrotor
+    from workbench.data.demonstrations import DemonstrationSet
+    from workbench.models import HumanBehaviorModel
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.landing import simulate_landings
 
     ds = simulate_landings("CS1", 2, seed=5, time_limit=1.5) + simulate_landings("CS2", 1, seed=5, time_limit=1.5)
     # cut short, the trials' outcome reads "time limit": a value with a space, which a tlog text marker cannot carry
@@ -123,8 +123,8 @@ def _write_originals(folder: Path) -> dict[str, Path]:
 def _loader(kind: str, originals: dict[str, Path]):
     """The call that loads a file of a kind, as the CLI does (logs: ``import`` and ``inspect``; mappings: on a log)."""
     import adapters
-    from workbench.demos import DemonstrationSet
-    from workbench.model import load_model
+    from workbench.data.demonstrations import DemonstrationSet
+    from workbench.models import load_model
 
     if kind in ("tlog", "mcap", "ulog", "csv"):
         # in turn: load with the shipped mapping or inspect (every stream), the format detected or named
@@ -289,7 +289,7 @@ def test_mutations_are_seeded_and_change_the_bytes():
 def test_ulog_whose_first_message_runs_past_the_end_does_not_hang(tmp_path):
     """Found by the fuzzer: on a message longer than the rest of the file pyulog seeks back and loops forever."""
     import adapters
-    from adapters.ulog import MAGIC
+    from adapters.formats.ulog import MAGIC
     from workbench.errors import DataError
 
     path = tmp_path / "loop.ulg"

@@ -70,10 +70,10 @@ def _outcome(call, path: Path, where: tuple, value: Any, found: list, also: Path
 @pytest.fixture(scope="module")
 def originals(tmp_path_factory) -> dict[str, Path]:
     import adapters
-    from workbench.demos import DemonstrationSet
-    from workbench.model import HumanBehaviorModel
-    from workbench.simulate import simulate_landings
-    from workbench.system import planar_quadrotor
+    from workbench.data.demonstrations import DemonstrationSet
+    from workbench.models import HumanBehaviorModel
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.landing import simulate_landings
 
     folder = tmp_path_factory.mktemp("fuzz_values")
     ds = simulate_landings("CS1", 2, seed=5, time_limit=3.0) + simulate_landings("CS2", 1, seed=5, time_limit=3.0)
@@ -104,7 +104,7 @@ def fuzz_mapping(originals: dict[str, Path], n: int, seed: int) -> list[str]:
 def fuzz_parquet_metadata(originals: dict[str, Path], n: int, seed: int) -> list[str]:
     import pyarrow.parquet as pq
 
-    from workbench.demos import DemonstrationSet
+    from workbench.data.demonstrations import DemonstrationSet
 
     table = pq.read_table(originals["parquet"])
     doc = json.loads(table.schema.metadata[b"workbench"])
@@ -118,7 +118,7 @@ def fuzz_parquet_metadata(originals: dict[str, Path], n: int, seed: int) -> list
 
 
 def fuzz_model_header(originals: dict[str, Path], n: int, seed: int) -> list[str]:
-    from workbench.model import load_model
+    from workbench.models import load_model
 
     with np.load(originals["npz"]) as npz:
         arrays = {k: npz[k] for k in npz.files}

@@ -15,13 +15,13 @@ import pandas as pd
 import pytest
 from scipy.linalg import solve_discrete_are
 
-from workbench import evaluate as ev
 from workbench.cli import main
-from workbench.demos import Demonstration, DemonstrationSet
-from workbench.model import HumanBehaviorModel, PersistenceModel, load_model
-from workbench.roles import Roles
-from workbench.study import run_study, verdicts
-from workbench.system import LinearSystem, planar_quadrotor
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.roles import Roles
+from workbench.models import HumanBehaviorModel, PersistenceModel, load_model
+from workbench.plant.system import LinearSystem, planar_quadrotor
+from workbench.study import evaluate as ev
+from workbench.study.pipeline import run_study, verdicts
 
 REPO = Path(__file__).resolve().parents[1]
 DT = 0.1
@@ -97,7 +97,7 @@ def test_every_pipeline_step_runs_on_the_plant(plant, tmp_path):
     name, system, ds = plant
     demos = tmp_path / "demos.parquet"
     ds.save(demos)
-    common = ("--components", "2", "--system", "identify")
+    common = ("--n-components", "2", "--system", "identify")
 
     # fit: the model file keeps the roles
     model_file = tmp_path / "model.npz"
@@ -164,7 +164,7 @@ def test_persistence_model_file_round_trip(tmp_path):
 
 def test_a_goal_rotation_needs_the_plane_it_turns():
     from workbench.errors import ModelError
-    from workbench.frames import FrameSpec, goal_frame
+    from workbench.method.frames import FrameSpec, goal_frame
 
     with pytest.raises(ModelError, match="position_idx"):
         goal_frame(np.zeros(4), 1, phi=0.3)
@@ -178,7 +178,7 @@ def test_full_state_rmse_without_roles():
     ds = _demos(system, n_trials=4, n_steps=30, seed=2)
     model = PersistenceModel(system).fit(ds)
     H = 10
-    table = ev.compare({"persistence": model}, ds, horizon=H)
+    table = ev.compare({"persistence": model}, ds, n_steps=H)
     d = ds[1]
     err = np.tile(d.x[0], (H, 1)) - d.x[1 : H + 1]  # the held state against the record, steps 1..H
     got = table[(table["trial"] == d.id)].set_index("metric")["value"]
@@ -195,7 +195,7 @@ def test_model_without_roles_has_no_goal_rotation_and_roles_survive_the_file(tmp
     m = HumanBehaviorModel(system, n_components=2, fit_objective=False, noise_folds=0).fit(ds)
     assert m.frame_spec_.angle_index is None
     quad = planar_quadrotor()
-    from workbench.variability import resolve_frame_spec
+    from workbench.method.variability import resolve_frame_spec
 
     spec = resolve_frame_spec(("start", "goal"), quad.state_names, roles=quad.r)
     assert spec.angle_index == quad.r.heading and spec.position_idx == quad.r.plane
@@ -230,13 +230,13 @@ def _perturbed(ds: DemonstrationSet, trial_id: str) -> DemonstrationSet:
             rng = np.random.default_rng(9)
             d = Demonstration(d.t, d.x + rng.normal(size=d.x.shape), d.u + rng.normal(size=d.u.shape), d.meta)
         out.append(d)
-    return ds._like(out)
+    return ds.with_demos(out)
 
 
 def test_study_identifies_the_plant_from_training_trials_only():
     system = double_integrators()
     ds = _demos(system, n_trials=10, n_steps=30, seed=7)
-    kwargs = dict(test_size=0.2, horizon=5, components=2, samples=0, efficiency=(4,), repeats=1, seed=0)
+    kwargs = dict(test_size=0.2, n_steps=5, n_components=2, samples=0, efficiency=(4,), repeats=1, seed=0)
     seen: list[set[str]] = []
 
     def identify(train: DemonstrationSet) -> LinearSystem:
@@ -259,23 +259,23 @@ def test_study_identifies_the_plant_from_training_trials_only():
 
 
 def test_cli_identifies_the_plant_from_training_trials_only(tmp_path, monkeypatch):
-    """``evaluate`` (split and per subject) hands ``_system_for`` training trials only: no scored trial among them."""
-    import workbench.cli as cli
+    """``evaluate`` (split and per subject) hands the plant choice training trials only: no scored trial among them."""
+    import workbench.plant.choice as choice
 
     system = roleless_plant()
     ds = _demos(system, n_trials=8, n_steps=30, seed=8)
-    ds = ds._like(d.with_meta(subject=f"s{j % 2}") for j, d in enumerate(ds))
+    ds = ds.with_demos(d.with_meta(subject=f"s{j % 2}") for j, d in enumerate(ds))
     path = tmp_path / "demos.parquet"
     ds.save(path)
     seen: list[set[str]] = []
-    real = cli._system_for
+    real = choice.choose_plant
 
     def spy(data, *args, **kwargs):
         seen.append(set(data.ids))
         return real(data, *args, **kwargs)
 
-    monkeypatch.setattr(cli, "_system_for", spy)
-    quick = ("--components", "2", "--system", "identify", "--samples", "0", "--no-efficiency", "--horizon", "1")
+    monkeypatch.setattr(choice, "choose_plant", spy)
+    quick = ("--n-components", "2", "--system", "identify", "--samples", "0", "--no-efficiency", "--horizon", "1")
     for extra in (("--holdout", "split"), ("--per-subject",)):
         seen.clear()
         out = tmp_path / f"results{len(extra)}.csv"
@@ -289,15 +289,15 @@ def test_per_subject_identifies_each_plant_without_the_held_out_trials():
     parts = []
     for s in ("s1", "s2", "s3"):
         sub = _demos(system, n_trials=4, n_steps=25, seed=int(s[1]))
-        parts.append(sub._like(d.with_meta(id=f"{s}-{d.id}", subject=s) for d in sub))
+        parts.append(sub.with_demos(d.with_meta(id=f"{s}-{d.id}", subject=s) for d in sub))
     ds = parts[0] + parts[1] + parts[2]
     seen: list[set[str]] = []
 
     def make_models(train):
         seen.append(set(train.ids))
-        return ev.default_models(LinearSystem.identify(train, structure="free"), n_components=2)
+        return make_models(LinearSystem.identify(train, structure="free"), n_components=2)
 
-    res = ev.per_subject(make_models, ds, n_test=1, horizon=5)
+    res = ev.per_subject(make_models, ds, n_test=1, n_steps=5)
     tested = set(res.table["trial"])
     assert len(seen) == 3 and all(not ids & tested for ids in seen)
     assert "persistence" in res.groups and res.metric == "rmse_position"

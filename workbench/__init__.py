@@ -2,42 +2,44 @@
 
 A human's input is modeled as ``u = K x + w``: ``K`` from a task objective (Q, R, S) found by inverse optimal
 control, and ``w`` a state-dependent Gaussian learned by a task-parameterized GMM and read out by GMR.
+
+The names a script needs are here (each loads its module on first use, so ``import workbench`` stays light);
+the subpackages (``workbench.data``, ``.plant``, ``.method``, ``.models``, ``.study``, ``.sim``) name the rest in
+their ``__all__``. The floors they stand on are in ``docs/architecture.md``.
+
+>>> import workbench as wb
+>>> demos = wb.simulate_landings("CS1", n_trials=10, seed=0)           # doctest: +SKIP
+>>> model = wb.HumanBehaviorModel(wb.planar_quadrotor()).fit(demos)  # doctest: +SKIP
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from workbench.errors import DataError, ModelError, WorkbenchError
-
-if TYPE_CHECKING:
-    from workbench.demos import Demonstration, DemonstrationSet
-    from workbench.system import LinearSystem
+from workbench.exports import lazy_exports
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "Demonstration",
-    "DemonstrationSet",
-    "LinearSystem",
-    "WorkbenchError",
-    "DataError",
-    "ModelError",
-    "__version__",
-]
-
-# numpy and pandas load on first use of these names, so that ``workbench --help`` starts without them.
-_LAZY = {"Demonstration": "workbench.demos", "DemonstrationSet": "workbench.demos", "LinearSystem": "workbench.system"}
-
-
-def __getattr__(name: str):
-    import importlib
-    import importlib.util
-
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    if not name.startswith("_") and importlib.util.find_spec(f"workbench.{name}") is not None:
-        return importlib.import_module(f"workbench.{name}")  # a submodule, as when the package imported it
-    raise AttributeError(f"module 'workbench' has no attribute {name!r}")
+_EXPORTS = {
+    "Demonstration": "data.demonstrations",
+    "DemonstrationSet": "data.demonstrations",
+    "load_demonstrations": "data.dataset",
+    "write_dataset": "data.dataset",
+    "LinearSystem": "plant.system",
+    "planar_quadrotor": "plant.system",
+    "choose_plant": "plant.choice",
+    "HumanBehaviorModel": "models.proposed",
+    "IOCOnlyModel": "models.baselines",
+    "GMROnlyModel": "models.baselines",
+    "PersistenceModel": "models.baselines",
+    "make_model": "models.factory",
+    "make_models": "models.factory",
+    "load_model": "models.factory",
+    "compare": "study.evaluate",
+    "run_study": "study.pipeline",
+    "make_executor": "study.executor",
+    "simulate_landings": "sim.landing",
+    "simulate_study": "sim.landing",
+    "OnlinePredictor": "live.predictor",
+}
+__all__ = [*_EXPORTS, "WorkbenchError", "DataError", "ModelError", "__version__"]
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

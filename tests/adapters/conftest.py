@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import adapters
-from workbench.simulate import simulate_landings
+from workbench.sim.landing import simulate_landings
 
 
 def _quantization(fmt: str, x, u):

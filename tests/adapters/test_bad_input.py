@@ -18,9 +18,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import adapters
-from adapters import csv as csv_format
-from adapters import mcap, ulog
-from workbench.demos import DemonstrationSet
+from adapters.formats import csv as csv_format
+from adapters.formats import mcap, ulog
+from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError
 
 PROPERTY = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 import adapters
-from adapters import csv
+from adapters.formats import csv
 from workbench.errors import DataError
 
 

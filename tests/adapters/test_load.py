@@ -8,7 +8,7 @@ import pytest
 import adapters
 from adapters.formats import detect_format
 from adapters.writer import layout
-from workbench.demos import DemonstrationSet
+from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, FormatError
 
 FORMATS = ["tlog", "mcap", "csv", "ulog"]
@@ -117,7 +117,7 @@ def test_inspect_summarises_streams_rates_and_modes(written, small_set):
 
 
 def test_write_refuses_a_set_with_other_names(small_set, tmp_path):
-    from workbench.demos import Demonstration
+    from workbench.data.demonstrations import Demonstration
 
     other = DemonstrationSet(
         [Demonstration(d.t, d.x, d.u, d.meta) for d in small_set], list("abcdef"), ["p", "q"], small_set.dt

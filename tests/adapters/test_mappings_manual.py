@@ -14,7 +14,7 @@ from adapters.streams import Streams
 from adapters.summary import summarize
 from adapters.transforms import TRANSFORMS
 from adapters.writer import demo_streams, layout
-from workbench.simulate import simulate_landings
+from workbench.sim.landing import simulate_landings
 
 EPOCH, PAUSE = 1_704_067_200.0, 2.0
 

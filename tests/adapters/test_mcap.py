@@ -10,7 +10,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from adapters import mcap
+from adapters.formats import mcap
 from workbench.errors import DataError, FormatError
 
 

@@ -60,7 +60,7 @@ def test_vehicle_clock_is_anchored_on_the_log_clock_per_boot():
 
 
 def _tlog_with_heartbeats(ds, path):
-    from workbench.sample_logs import EPOCH, PAUSE, _heartbeats
+    from workbench.cli.sample_logs import EPOCH, PAUSE, _heartbeats
 
     m = load_mapping("planar_quadrotor").for_format("tlog")
     streams = demo_streams(ds, m, epoch=EPOCH, pause=PAUSE)

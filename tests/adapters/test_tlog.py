@@ -21,15 +21,10 @@ from hypothesis import strategies as st
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from adapters.mavlink_dialect import crc_rows, crc_spans, load_dialect
-from adapters.tlog import (
-    MAX_TIMESTAMP_US,
-    looks_like_tlog,
-    read_streams,
-    read_tlog,
-    write_messages,
-    write_tlog,
-)
+from adapters.formats.mavlink_dialect import crc_rows, crc_spans, load_dialect
+from adapters.formats.tlog import looks_like_tlog, read_streams, read_tlog
+from adapters.formats.tlog_frames import MAX_TIMESTAMP_US
+from adapters.formats.tlog_write import write_messages, write_tlog
 from workbench.errors import DataError, FormatError
 
 EXTERNAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "external"
@@ -266,7 +261,7 @@ def test_dronekit_selected_types_and_columns():
 
 def test_typed_reads_equal_the_full_read_and_checksum_fewer_frames(monkeypatch):
     """``read_streams(types=...)`` checksums only the frames its streams depend on, with the full read's values."""
-    import adapters.tlog as tlog_module
+    import adapters.formats.tlog_frames as tlog_module
 
     path = _external(DRONEKIT)
     full = read_tlog(path)
@@ -320,7 +315,7 @@ def test_typed_read_resynchronises_inside_an_invalid_frame_like_the_full_read(tm
 @pytest.mark.parametrize("block", [997, 4096])
 def test_reading_in_small_blocks_gives_the_same_read(monkeypatch, block):
     """The full read scans and decodes block by block; records across block edges are read exactly once."""
-    import adapters.tlog as tlog_module
+    import adapters.formats.tlog_frames as tlog_module
 
     path = _external(DRONEKIT)
     whole = read_tlog(path)
@@ -717,7 +712,7 @@ def test_timestamps_low_bits_and_zero_times_are_kept(tmp_path):
 def test_dialect_specs_are_cached_between_processes_and_equal_pymavlinks(tmp_path, monkeypatch):
     import importlib
 
-    from adapters import mavlink_dialect as md
+    from adapters.formats import mavlink_dialect as md
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     module = importlib.import_module("pymavlink.dialects.v20.common")

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from adapters import ulog
+from adapters.formats import ulog
 from workbench.errors import DataError, FormatError
 
 

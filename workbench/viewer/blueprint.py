@@ -23,7 +23,7 @@ from typing import Any
 import rerun.blueprint as rrb
 
 from workbench.viewer import style
-from workbench.viewer.session import LoggedSession, _safe
+from workbench.viewer.entities import LoggedSession, entity_part
 
 __all__ = ["session_blueprint", "time_panel"]
 
@@ -67,11 +67,11 @@ def _plot(name: str, contents: list[str], *, legend: rrb.PlotLegend | None = Non
 
 
 def _prediction_paths(s: LoggedSession, demo_id: str, name: str) -> list[str]:
-    out = [f"+ /demos/{_safe(demo_id)}/states/{_safe(name)}"]
+    out = [f"+ /demos/{entity_part(demo_id)}/states/{entity_part(name)}"]
     for start, methods in s.predictions.get(demo_id, []):
-        base = f"/demos/{_safe(demo_id)}/predictions/from_{start}"
-        out += [f"+ {base}/{_safe(m)}_band/{_safe(name)}" for m in methods if m in s.bands]
-        out += [f"+ {base}/{_safe(m)}/{_safe(name)}" for m in methods]
+        base = f"/demos/{entity_part(demo_id)}/predictions/from_{start}"
+        out += [f"+ {base}/{entity_part(m)}_band/{entity_part(name)}" for m in methods if m in s.bands]
+        out += [f"+ {base}/{entity_part(m)}/{entity_part(name)}" for m in methods]
     return out
 
 
@@ -97,13 +97,14 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     for k, name in enumerate(plane):
         if focus and focus[0] in s.predictions:
             fid = focus[0]
-            key = f"demos/{_safe(fid)}/predictions/{_safe(name)}"
+            key = f"demos/{entity_part(fid)}/predictions/{entity_part(name)}"
             side.append(_plot(f"{s.title(name)} · {fid}", _prediction_paths(s, fid, name),
                               legend=rrb.PlotLegend(s.corners.get(key, "RightTop"), visible=k == 0),
-                              y_range=s.ranges.get(f"demos/{_safe(fid)}/predictions/{_safe(name)}"),
+                              y_range=s.ranges.get(f"demos/{entity_part(fid)}/predictions/{entity_part(name)}"),
                               window=s.windows.get(fid)))
         else:
-            side.append(_overlay(s, s.title(name), [f"+ /demos/{_safe(i)}/states/{_safe(name)}" for i in s.demo_ids]))
+            side.append(_overlay(s, s.title(name),
+                                 [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in s.demo_ids]))
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
 
 
@@ -117,9 +118,9 @@ def _objective_tab(s: LoggedSession) -> Any:
             n_rows, n_cols = s.heatmap_shapes.get((m, block), (1, 1))
             # the names stand left of and above the cells: the bounds leave room for them
             bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 0.1], y_range=[-0.8, n_rows + 0.1])
-            views.append(rrb.Spatial2DView(origin=f"/models/{_safe(m)}/heatmap/{block}", visual_bounds=bounds,
+            views.append(rrb.Spatial2DView(origin=f"/models/{entity_part(m)}/heatmap/{block}", visual_bounds=bounds,
                                            name=f"{m}: {title}, scale ±{s.scales.get(block, 1.0):.2g}"))
-        views.append(rrb.TextDocumentView(origin=f"/models/{_safe(m)}/summary", name=f"{m}: summary"))
+        views.append(rrb.TextDocumentView(origin=f"/models/{entity_part(m)}/summary", name=f"{m}: summary"))
         rows.append(rrb.Horizontal(*views))
     return rrb.Vertical(*rows, name="objective")
 
@@ -134,19 +135,21 @@ def session_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.B
     if s.scene:
         tabs.append(_scene_tab(s, plane, focus))
     state_views: list[Any] = [
-        _overlay(s, s.title(name), [f"+ /demos/{_safe(i)}/states/{_safe(name)}" for i in ids]) for name in s.state_names
+        _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in ids])
+        for name in s.state_names
     ]
     if s.modes:
-        lanes = ["+ /flight/mode"] if s.clock == "log" else [f"+ /demos/{_safe(i)}/mode" for i in s.modes]
+        lanes = ["+ /flight/mode"] if s.clock == "log" else [f"+ /demos/{entity_part(i)}/mode" for i in s.modes]
         state_views.append(rrb.StateTimelineView(origin="/", contents=lanes, name="flight mode",
                                                  time_view=_time_axis(s.span) if s.clock == "log" else None))
     tabs.append(rrb.Grid(*state_views, name="states"))
     input_views: list[Any] = [
-        _overlay(s, s.title(name), [f"+ /demos/{_safe(i)}/inputs/{_safe(name)}" for i in ids]) for name in s.input_names
+        _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/inputs/{entity_part(name)}" for i in ids])
+        for name in s.input_names
     ]
     for k, i in enumerate(f for f in focus if f in s.variability):
         for j, name in enumerate(s.input_names):
-            p = f"demos/{_safe(i)}/variability/{_safe(name)}"
+            p = f"demos/{entity_part(i)}/variability/{entity_part(name)}"
             input_views.append(_plot(f"ŵ {s.title(name)} · {i}", [f"+ /{p}/**"],
                                      legend=rrb.PlotLegend(s.corners.get(p, "LeftTop"), visible=k == 0 and j == 0),
                                      y_range=s.ranges.get(p)))
@@ -155,10 +158,10 @@ def session_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.B
         pred_views = []
         for i in [f for f in focus if f in s.predictions]:
             for j, name in enumerate(s.state_names):
-                key = f"demos/{_safe(i)}/predictions/{_safe(name)}"
+                key = f"demos/{entity_part(i)}/predictions/{entity_part(name)}"
                 pred_views.append(_plot(f"{s.title(name)} · {i}", _prediction_paths(s, i, name),
                                         legend=rrb.PlotLegend(s.corners.get(key, "LeftTop"), visible=j == 0),
-                                        y_range=s.ranges.get(f"demos/{_safe(i)}/predictions/{_safe(name)}"),
+                                        y_range=s.ranges.get(f"demos/{entity_part(i)}/predictions/{entity_part(name)}"),
                                         window=s.windows.get(i)))
         tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1, name="predictions"))
     if s.models:

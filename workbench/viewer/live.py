@@ -1,7 +1,8 @@
 """The rerun side of live prediction: each grid step of a live link drawn as it is completed.
 
-:class:`LiveLogger` takes the :class:`~workbench.live.LivePrediction` of every step (from
-:func:`workbench.live.listen`) and sends them in small batches (:meth:`LiveLogger.flush`, a few times a second:
+:class:`LiveLogger` takes the :class:`~workbench.live.predictor.LivePrediction` of every step (from
+:func:`workbench.live.predictor.listen`) and sends them in small batches (:meth:`LiveLogger.flush`, a few times a
+second:
 a ``rr.log`` per value and step would cost more than the prediction), under the same entity layout as the
 offline replay (:mod:`workbench.viewer.replay`), so a live recording and a replayed one read alike:
 
@@ -27,10 +28,10 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from workbench.live import LinkStats, LiveEvent, LivePrediction
+from workbench.live.predictor import LinkStats, LiveEvent, LivePrediction
 from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS, style
 from workbench.viewer.columns import send_columns
-from workbench.viewer.session import _safe as _part  # the replay's entity names: both layouts read alike
+from workbench.viewer.entities import entity_part  # the replay's entity names: both layouts read alike
 
 __all__ = ["LIVE_APPLICATION_ID", "LiveLogger", "live_blueprint"]
 
@@ -80,21 +81,21 @@ class LiveLogger:
             return
         self._styled.add(demo_id)
         self.demo_ids.append(demo_id)
-        base, rec = f"demos/{_part(demo_id)}", self.rec
+        base, rec = f"demos/{entity_part(demo_id)}", self.rec
         for name in self.state_names:
-            rec.log(f"{base}/states/{_part(name)}", rr.SeriesLines(names=[name], colors=[_RECORDED]), static=True)
-            rec.log(f"{base}/online/rollout_end/{_part(name)}",
+            rec.log(f"{base}/states/{entity_part(name)}", rr.SeriesLines(names=[name], colors=[_RECORDED]), static=True)
+            rec.log(f"{base}/online/rollout_end/{entity_part(name)}",
                     rr.SeriesLines(names=[f"{name} forecast (rollout end)"], colors=[_PRED]), static=True)
         for name in self.input_names:
-            rec.log(f"{base}/inputs/{_part(name)}",
+            rec.log(f"{base}/inputs/{entity_part(name)}",
                     rr.SeriesLines(names=[f"{name} recorded"], colors=[_RECORDED], interpolation_mode="StepAfter"),
                     static=True)
-            p = f"{base}/online/{_part(name)}"
+            p = f"{base}/online/{entity_part(name)}"
             label = f"{name}: K̂x + μ(x)"
             self._bands(f"{p}/gmr", [f"{label} ± 1σ", f"{label} ± 3σ"], [_PRED, _BAND])
             rec.log(f"{p}/outside_3sigma", rr.SeriesPoints(names=[f"{name} outside 3σ"], colors=[_OUT],
                                                            markers=["cross"], marker_sizes=[4.0]), static=True)
-            v = f"{base}/variability/{_part(name)}"
+            v = f"{base}/variability/{entity_part(name)}"
             rec.log(f"{v}/w", rr.SeriesLines(names=[f"ŵ {name}"], colors=[_W], interpolation_mode="StepAfter"),
                     static=True)
             self._bands(f"{v}/gmr", ["GMR μ ± 1σ", "GMR μ ± 3σ"], [(255, 170, 90), (255, 225, 190)])
@@ -116,29 +117,29 @@ class LiveLogger:
             self.flush()  # the previous segment's rows first, so events and plots stay in order
             label = p.meta.get("label")
             self.event(LiveEvent("segment", p.t, f"segment {p.demo_id} started" + (f" ({label})" if label else "")))
-        base = f"demos/{_part(p.demo_id)}"
+        base = f"demos/{entity_part(p.demo_id)}"
         now = (p.t, p.t_rel, p.k)
         for j, name in enumerate(self.state_names):
-            self._row(f"{base}/states/{_part(name)}", now, p.x[j])
+            self._row(f"{base}/states/{entity_part(name)}", now, p.x[j])
         sigma = p.u_std
         for j, name in enumerate(self.input_names):
-            self._row(f"{base}/inputs/{_part(name)}", now, p.u[j])
-            o = f"{base}/online/{_part(name)}"
+            self._row(f"{base}/inputs/{entity_part(name)}", now, p.u[j])
+            o = f"{base}/online/{entity_part(name)}"
             self._row(f"{o}/gmr", now, (p.u_mean[j], sigma[j]), band=True)
             if abs(p.u[j] - p.u_mean[j]) > 3.0 * sigma[j]:
                 self._row(f"{o}/outside_3sigma", now, p.u[j])
             if p.w is not None:
-                v = f"{base}/variability/{_part(name)}"
+                v = f"{base}/variability/{entity_part(name)}"
                 self._row(f"{v}/w", now, p.w[j])
                 self._row(f"{v}/gmr", now, (p.w_mean[j], np.sqrt(max(p.w_cov[j, j], 0.0))), band=True)
         self._row("live/compute_ms", now, 1e3 * p.compute_seconds)
         if np.isfinite(p.latency):
             self._row("live/latency_ms", now, 1e3 * p.latency)
         if p.rollout_x is not None:
-            h = p.horizon
+            h = p.n_steps
             ahead = (p.t + h * p.dt, p.t_rel + h * p.dt, p.k + h)  # stamped with the time it forecasts
             for j, name in enumerate(self.state_names):
-                self._row(f"{base}/online/rollout_end/{_part(name)}", ahead, p.rollout_x[-1, j])
+                self._row(f"{base}/online/rollout_end/{entity_part(name)}", ahead, p.rollout_x[-1, j])
         if self.plane is not None:
             across, up, _ = self.plane
             center = np.array([p.x[across], -p.x[up]])
@@ -255,12 +256,12 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
     ``bounds`` (x range, y range) fixes the scene's view (:meth:`LiveLogger.scene_bounds`); the viewer would
     otherwise zoom onto the vehicle alone.
     """
-    ids = [_part(i) for i in list(demo_ids)[-_RECENT:]]
+    ids = [entity_part(i) for i in list(demo_ids)[-_RECENT:]]
     inputs = [
         rrb.TimeSeriesView(
             origin="/",
-            contents=[f"+ /demos/{i}/inputs/{_part(n)}" for i in ids]
-            + [f"+ /demos/{i}/online/{_part(n)}/**" for i in ids],
+            contents=[f"+ /demos/{i}/inputs/{entity_part(n)}" for i in ids]
+            + [f"+ /demos/{i}/online/{entity_part(n)}/**" for i in ids],
             name=f"{n}: operator vs online prediction",
         )
         for n in input_names
@@ -268,14 +269,14 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
     states = [
         rrb.TimeSeriesView(
             origin="/",
-            contents=[f"+ /demos/{i}/states/{_part(n)}" for i in ids]
-            + [f"+ /demos/{i}/online/rollout_end/{_part(n)}" for i in ids],
+            contents=[f"+ /demos/{i}/states/{entity_part(n)}" for i in ids]
+            + [f"+ /demos/{i}/online/rollout_end/{entity_part(n)}" for i in ids],
             name=n,
         )
         for n in state_names
     ]
     variability = [
-        rrb.TimeSeriesView(origin="/", contents=[f"+ /demos/{i}/variability/{_part(n)}/**" for i in ids],
+        rrb.TimeSeriesView(origin="/", contents=[f"+ /demos/{i}/variability/{entity_part(n)}/**" for i in ids],
                            name=f"ŵ {n} with GMR bands")
         for n in input_names
     ]

@@ -28,12 +28,13 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from workbench.demos import Demonstration
+from workbench.data.demonstrations import Demonstration
 from workbench.errors import DataError
 from workbench.viewer import style
 from workbench.viewer.blueprint import time_panel
+from workbench.viewer.entities import entity_part
 from workbench.viewer.scene import Plane, plane_of
-from workbench.viewer.session import HAS_MEASUREMENTS, UI, _safe
+from workbench.viewer.session import HAS_MEASUREMENTS, UI
 
 __all__ = ["ReplayStats", "replay", "replay_blueprint"]
 
@@ -69,7 +70,7 @@ def replay(
     input_names: tuple[str, ...] | None = None,
     speed: float = 1.0,
     wait: bool = True,
-    horizon: int = 20,
+    n_steps: int = 20,
     rollout_every: int = 1,
     clock: Callable[[], float] = time.perf_counter,
     sleep: Callable[[float], None] = time.sleep,
@@ -82,16 +83,16 @@ def replay(
     ----------
     demo : Demonstration
     model : fitted HumanBehaviorModel
-        Needs ``K_``, ``variability(X, x0, target)`` and ``predict(x0, horizon, target)``.
+        Needs ``K_``, ``variability(X, x0, target)`` and ``predict(x0, n_steps, target)``.
     speed : float
         Multiple of real time (``2.0`` plays twice as fast).
     wait : bool
         ``False`` streams as fast as possible (tests, benchmarks).
-    horizon : int
+    n_steps : int
         Steps of the rollout from each state; ``0`` turns rollouts off.
     rollout_every : int
         Roll out at every k-th sample only (the one-step prediction runs at every sample).
-    roles : workbench.roles.Roles, optional
+    roles : workbench.data.roles.Roles, optional
         The vehicle roles that place the scene (default the model's plant's); none, no scene.
     """
     if not speed > 0:
@@ -101,8 +102,8 @@ def replay(
     n, m = demo.x.shape[1], demo.u.shape[1]
     state_names = tuple(state_names or (f"x{i}" for i in range(n)))
     input_names = tuple(input_names or (f"u{i}" for i in range(m)))
-    base = f"demos/{_safe(demo.id)}"
-    sbase = f"scene/replay/{_safe(demo.id)}"
+    base = f"demos/{entity_part(demo.id)}"
+    sbase = f"scene/replay/{entity_part(demo.id)}"
     x_start, target = demo.x[0], demo.target
     if roles is None:
         roles = getattr(getattr(model, "system", None), "roles", None)
@@ -123,9 +124,9 @@ def replay(
         rec.set_time("time", duration=float(t_rel[k]))
         rec.set_time("step", sequence=k)
         for j, name in enumerate(state_names):
-            rec.log(f"{base}/states/{_safe(name)}", rr.Scalars(x[j]))
+            rec.log(f"{base}/states/{entity_part(name)}", rr.Scalars(x[j]))
         for j, name in enumerate(input_names):
-            rec.log(f"{base}/inputs/{_safe(name)}", rr.Scalars(u[j]))
+            rec.log(f"{base}/inputs/{entity_part(name)}", rr.Scalars(u[j]))
         # the model's one-step input Gaussian: K̂(x − r) + μ̂(x) and Σ̂(x), r the goal where the model is goal-relative
         u_mean, Sigma = model.input_distribution(x[None, :], x0=x_start, target=target)
         u_hat = u_mean[0]
@@ -133,7 +134,7 @@ def replay(
         err[k] = u - u_hat
         inside[k] = np.abs(u - u_hat) <= 3.0 * sigma
         for j, name in enumerate(input_names):
-            p = f"{base}/online/{_safe(name)}"
+            p = f"{base}/online/{entity_part(name)}"
             # one entity, two series (±1σ and ±3σ bands): half the log calls of two entities per step
             if HAS_MEASUREMENTS:
                 rec.log(f"{p}/gmr", rr.Measurements(values=[u_hat[j], u_hat[j]],
@@ -147,14 +148,14 @@ def replay(
             (px, py), phi = plane.view(x)[0], float(plane.angle(x)[0])
             rec.log(f"{sbase}/vehicle",
                     rr.Transform3D(translation=[px, py, 0.0], quaternion=[0.0, 0.0, np.sin(phi / 2), np.cos(phi / 2)]))
-        if horizon > 0 and k % rollout_every == 0:
-            pred = model.predict(x, horizon, target=target, task_x0=x_start)
+        if n_steps > 0 and k % rollout_every == 0:
+            pred = model.predict(x, n_steps, target=target, task_x0=x_start)
             xp = np.asarray(pred.x)
             # stamped with the time it forecasts, so the plot compares x(t) with its forecast from t − H·dt
-            rec.set_time("time", duration=float(t_rel[k] + horizon * dt))
-            rec.set_time("step", sequence=k + horizon)
+            rec.set_time("time", duration=float(t_rel[k] + n_steps * dt))
+            rec.set_time("step", sequence=k + n_steps)
             for j, name in enumerate(state_names):
-                rec.log(f"{base}/online/rollout_end/{_safe(name)}", rr.Scalars(xp[-1, j]))
+                rec.log(f"{base}/online/rollout_end/{entity_part(name)}", rr.Scalars(xp[-1, j]))
             rec.set_time("time", duration=float(t_rel[k]))
             rec.set_time("step", sequence=k)
             if plane is not None:
@@ -177,13 +178,14 @@ def replay(
 
 def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane | None) -> None:
     for name in state_names:
-        rec.log(f"{base}/states/{_safe(name)}", rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC]), static=True)
-        rec.log(f"{base}/online/rollout_end/{_safe(name)}",
+        rec.log(f"{base}/states/{entity_part(name)}", rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC]),
+                static=True)
+        rec.log(f"{base}/online/rollout_end/{entity_part(name)}",
                 rr.SeriesLines(names=["forecast (rollout end)"], colors=[_COLOR_PRED], widths=[1.5]), static=True)
     for name in input_names:
-        rec.log(f"{base}/inputs/{_safe(name)}",
+        rec.log(f"{base}/inputs/{entity_part(name)}",
                 rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC], interpolation_mode="StepAfter"), static=True)
-        p = f"{base}/online/{_safe(name)}"
+        p = f"{base}/online/{entity_part(name)}"
         label = "K̂x + μ(x)"
         if HAS_MEASUREMENTS:
             rec.log(f"{p}/gmr", rr.Measurements.from_fields(names=[f"{label} ± 1σ", f"{label} ± 3σ"],
@@ -205,7 +207,7 @@ def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane |
         rec.log(f"{sbase}/path", rr.LineStrips2D([path], colors=[(150, 150, 150)], radii=UI(1.0), draw_order=3.0),
                 static=True)
         if demo.target is not None:  # a pad only where the data declare a landing target
-            from workbench.simulate import PAD_HALF_WIDTH
+            from workbench.sim.landing import PAD_HALF_WIDTH
 
             tx, ty = plane.view(np.asarray(demo.target))[0]
             rec.log("scene/pad", rr.LineStrips2D([[[tx - PAD_HALF_WIDTH, ty], [tx + PAD_HALF_WIDTH, ty]]],
@@ -231,8 +233,8 @@ def replay_blueprint(
     inputs = [
         rrb.TimeSeriesView(
             origin="/",
-            contents=[f"+ /demos/{_safe(i)}/inputs/{_safe(name)}" for i in demo_ids]
-            + [f"+ /demos/{_safe(i)}/online/{_safe(name)}/**" for i in demo_ids],
+            contents=[f"+ /demos/{entity_part(i)}/inputs/{entity_part(name)}" for i in demo_ids]
+            + [f"+ /demos/{entity_part(i)}/online/{entity_part(name)}/**" for i in demo_ids],
             name=f"{unit(name)}: recorded vs online K̂x + μ(x) ± σ",
             plot_legend=rrb.PlotLegend("LeftTop", visible=k == 0 and len(demo_ids) == 1),
         )
@@ -241,8 +243,8 @@ def replay_blueprint(
     states = [
         rrb.TimeSeriesView(
             origin="/",
-            contents=[f"+ /demos/{_safe(i)}/states/{_safe(name)}" for i in demo_ids]
-            + [f"+ /demos/{_safe(i)}/online/rollout_end/{_safe(name)}" for i in demo_ids],
+            contents=[f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in demo_ids]
+            + [f"+ /demos/{entity_part(i)}/online/rollout_end/{entity_part(name)}" for i in demo_ids],
             name=unit(name),
             plot_legend=rrb.PlotLegend("LeftTop", visible=k == 0 and len(demo_ids) == 1),
         )

@@ -51,7 +51,7 @@ class Plane:
 
 
 def plane_of(roles: Any, state_names: Any) -> Plane | None:
-    """The plane of flight from vehicle roles (:class:`workbench.roles.Roles`), ``None`` without two positions."""
+    """The plane of flight from vehicle roles (:class:`workbench.data.roles.Roles`), ``None`` without two positions."""
     if not roles:
         return None
     try:

@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import nullcontext
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -16,11 +15,12 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from workbench.atomic import atomic_path
-from workbench.demos import Demonstration, DemonstrationSet
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError
-from workbench.study import StudyResult
+from workbench.study.pipeline import StudyResult
 from workbench.viewer import style
 from workbench.viewer.columns import send_columns
+from workbench.viewer.entities import LoggedSession, entity_part
 from workbench.viewer.objective import Heatmap, colors, heatmaps, model_summary, shared_scales, value_text
 from workbench.viewer.output import has_display, open_output
 from workbench.viewer.scene import Plane, plane_of
@@ -54,12 +54,6 @@ MAX_VEHICLES = 12  # more animated vehicles than this only clutter the scene; th
 MAX_LABELS = 8
 
 
-def _safe(name: str) -> str:
-    """An entity-path part: rerun splits on '/', and spaces or odd characters make paths hard to type."""
-    out = "".join(c if c.isalnum() or c in "-_." else "_" for c in str(name))
-    return out or "_"
-
-
 def new_recording(application_id: str = APPLICATION_ID, *, recording_id: str | None = None) -> rr.RecordingStream:
     """A fresh recording stream (not the global one), so several recordings can live in one process."""
     return rr.RecordingStream(application_id, recording_id=recording_id)
@@ -68,46 +62,6 @@ def new_recording(application_id: str = APPLICATION_ID, *, recording_id: str | N
 def _time_index(t: np.ndarray, step: np.ndarray | None = None) -> list[rr.TimeColumn]:
     step = np.arange(len(t)) if step is None else step
     return [rr.TimeColumn("time", duration=np.asarray(t, dtype=np.float64)), rr.TimeColumn("step", sequence=step)]
-
-
-@dataclass
-class LoggedSession:
-    """What was logged, so a blueprint (and a user) can find it.
-
-    ``focus`` are the trials with variability and predictions, the ones the detail tabs show. ``ranges`` are
-    y-ranges of plots set by the data (key: the plot's entity base path), ``windows`` the time span of each focus
-    trial's predictions, ``bounds`` the scene's visual bounds, ``scales`` the shared color scale of each
-    objective block.
-    """
-
-    state_names: tuple[str, ...]
-    input_names: tuple[str, ...]
-    demo_ids: list[str] = field(default_factory=list)
-    labels: list[str] = field(default_factory=list)
-    focus: list[str] = field(default_factory=list)
-    variability: list[str] = field(default_factory=list)
-    predictions: dict[str, list[tuple[int, list[str]]]] = field(default_factory=dict)
-    models: list[str] = field(default_factory=list)
-    modes: list[str] = field(default_factory=list)
-    scene: bool = False
-    entities: list[str] = field(default_factory=list)
-    units: dict[str, str] = field(default_factory=dict)
-    methods: list[str] = field(default_factory=list)
-    bands: list[str] = field(default_factory=list)
-    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
-    windows: dict[str, tuple[float, float]] = field(default_factory=dict)
-    bounds: tuple[list[float], list[float]] | None = None
-    heatmaps: dict[str, list[tuple[str, str]]] = field(default_factory=dict)
-    scales: dict[str, float] = field(default_factory=dict)
-    clock: str = "trial"
-    plane_names: tuple[str, str] | None = None
-    span: tuple[float, float] | None = None
-    heatmap_shapes: dict[tuple[str, str], tuple[int, int]] = field(default_factory=dict)
-    corners: dict[str, str] = field(default_factory=dict)
-
-    def title(self, name: str) -> str:
-        """``name [unit]`` for a state or input."""
-        return style.with_unit(name, self.units.get(name, ""))
 
 
 def _model_for(models: Any, demo: Demonstration) -> Any:
@@ -275,7 +229,7 @@ class SessionLogger:
         targets = [p.view(np.asarray(d.target))[0] for d in demos if d.target is not None]
         self.session.bounds = p.bounds([*points, *(np.atleast_2d(t) for t in targets)])
         if targets:
-            from workbench.simulate import PAD_HALF_WIDTH
+            from workbench.sim.landing import PAD_HALF_WIDTH
 
             tx, ty = targets[0]
             (x_lo, x_hi), _ = self.session.bounds
@@ -292,7 +246,7 @@ class SessionLogger:
     def _log_track(self, demo: Demonstration) -> None:
         p = self.plane
         assert p is not None
-        sbase = f"scene/demos/{_safe(demo.id)}"
+        sbase = f"scene/demos/{entity_part(demo.id)}"
         color = self.colors[demo.id]
         pts = p.view(demo.x)
         focus = demo.id in self.labelled
@@ -334,7 +288,7 @@ class SessionLogger:
     def log_demonstration(self, demo: Demonstration, model: Any = None, *, variability: bool = True) -> None:
         """States, inputs, the flown track and vehicle, mode lanes; with a model, ŵ and its GMR bands."""
         s = self.session
-        base = f"demos/{_safe(demo.id)}"
+        base = f"demos/{entity_part(demo.id)}"
         packed = style.packed(self.colors[demo.id])
         t = self._t(demo)
         index = _time_index(t)  # one pair of time columns serves every entity of the trial
@@ -342,11 +296,11 @@ class SessionLogger:
         state_style = rr.SeriesLines(colors=packed, widths=[1.5], names=[demo.id])
         input_style = rr.SeriesLines(colors=packed, widths=[1.5], names=[demo.id], interpolation_mode="StepAfter")
         for j, name in enumerate(s.state_names):
-            path = f"{base}/states/{_safe(name)}"
+            path = f"{base}/states/{entity_part(name)}"
             self._style(path, state_style)
             self._send(path, index, rr.Scalars.columns(scalars=demo.x[:, j]))
         for j, name in enumerate(s.input_names):
-            path = f"{base}/inputs/{_safe(name)}"
+            path = f"{base}/inputs/{entity_part(name)}"
             self._style(path, input_style)
             self._send(path, index, rr.Scalars.columns(scalars=demo.u[:, j]))
         modes = _readable_modes(demo.meta)
@@ -374,7 +328,7 @@ class SessionLogger:
         Returns the logged arrays (``w``, ``mu``, ``sigma``, ``outside``) for the caller's summary.
         """
         s = self.session
-        base = f"demos/{_safe(demo.id)}/variability"
+        base = f"demos/{entity_part(demo.id)}/variability"
         residuals = getattr(model, "residuals", None)
         w = residuals(demo) if callable(residuals) else demo.u - demo.x @ np.asarray(model.K_).T
         out: dict[str, np.ndarray] = {"w": w}
@@ -387,7 +341,7 @@ class SessionLogger:
         t = self._t(demo)
         index = _time_index(t)  # one pair of time columns serves every series of the trial
         for j, name in enumerate(s.input_names):
-            p = f"{base}/{_safe(name)}"
+            p = f"{base}/{entity_part(name)}"
             self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[style.W_COLOR], widths=[1.75],
                                                  interpolation_mode="StepAfter"))
             self._send(f"{p}/w", index, rr.Scalars.columns(scalars=w[:, j]))
@@ -426,7 +380,7 @@ class SessionLogger:
         models: Mapping[str, Any],
         *,
         start: int = 0,
-        horizon: int = 60,
+        n_steps: int = 60,
         samples: int = 0,
         seed: int | None = 0,
     ) -> dict[str, Any]:
@@ -443,8 +397,8 @@ class SessionLogger:
         x0 = demo.x[start]
         t_rel = self._t(demo)
         t0 = t_rel[start]
-        base = f"demos/{_safe(demo.id)}/predictions/from_{start}"
-        sbase = f"scene/predictions/{_safe(demo.id)}/from_{start}"
+        base = f"demos/{entity_part(demo.id)}/predictions/from_{start}"
+        sbase = f"scene/predictions/{entity_part(demo.id)}/from_{start}"
         results: dict[str, Any] = {}
         spans: dict[str, list[np.ndarray]] = {}
         points: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
@@ -457,7 +411,7 @@ class SessionLogger:
             kwargs: dict[str, Any] = {"target": demo.target, "task_x0": demo.x[0]}
             if mc:
                 kwargs.update(samples=mc, seed=seed)
-            pred = model.predict(x0, horizon, **kwargs)
+            pred = model.predict(x0, n_steps, **kwargs)
             results[method] = pred
             x = np.asarray(pred.x)
             steps = start + np.arange(len(x))
@@ -466,13 +420,13 @@ class SessionLogger:
             color = style.method_color(method)
             title = style.method_title(method)
             for j, name in enumerate(s.state_names):
-                path = f"{base}/{_safe(method)}/{_safe(name)}"
+                path = f"{base}/{entity_part(method)}/{entity_part(name)}"
                 self._style(path, rr.SeriesLines(names=[title], colors=[color], widths=[2.0]))
                 self._send(path, _time_index(tp, steps), rr.Scalars.columns(scalars=x[:, j]))
                 spans.setdefault(name, []).append(x[:, j])
                 points.setdefault(name, []).append((tp, x[:, j]))
             if self.plane is not None:
-                self._static(f"{sbase}/{_safe(method)}", rr.LineStrips2D(
+                self._static(f"{sbase}/{entity_part(method)}", rr.LineStrips2D(
                     [self.plane.view(x)], colors=[color], radii=UI(2.0), labels=[title], show_labels=False,
                     draw_order=6.0))
             band = _prediction_band(pred)
@@ -483,7 +437,7 @@ class SessionLogger:
             if method not in s.bands:
                 s.bands.append(method)
             for j, name in enumerate(s.state_names):
-                path = f"{base}/{_safe(method)}_band/{_safe(name)}"
+                path = f"{base}/{entity_part(method)}_band/{entity_part(name)}"
                 mid, half = (lo[:, j] + hi[:, j]) / 2, np.abs(hi[:, j] - lo[:, j]) / 2
                 if HAS_MEASUREMENTS:
                     # the band is an area: value ± one "σ" spans exactly [lower, upper]; its centre line is hidden
@@ -502,7 +456,7 @@ class SessionLogger:
                 vlo, vhi = self.plane.view(lo), self.plane.view(hi)
                 every = max(1, len(vlo) // 20)
                 centers, halves = ((vlo + vhi) / 2)[::every], (np.abs(vhi - vlo) / 2)[::every]
-                self._static(f"{sbase}/{_safe(method)}_band", rr.Boxes2D(
+                self._static(f"{sbase}/{entity_part(method)}_band", rr.Boxes2D(
                     centers=centers, half_sizes=halves, colors=[tint], radii=UI(0.6),
                     labels=[f"{title} MC {level}"], show_labels=False, draw_order=5.0))
         # the prediction plots are zoomed to the predictions; their y-range is set by what is visible there
@@ -511,7 +465,7 @@ class SessionLogger:
         w_lo, w_hi = s.windows[demo.id]
         seen = (t_rel >= w_lo - 1e-9) & (t_rel <= w_hi + 1e-9)
         for j, name in enumerate(s.state_names):
-            key = f"demos/{_safe(demo.id)}/predictions/{_safe(name)}"
+            key = f"demos/{entity_part(demo.id)}/predictions/{entity_part(name)}"
             earlier = [np.asarray(s.ranges[key])] if key in s.ranges else []  # another start of the same trial
             s.ranges[key] = _data_range(demo.x[seen, j], *spans.get(name, []), *earlier, margin=0.05)
             s.corners[key] = quiet_corner([(t_rel[seen], demo.x[seen, j]), *points.get(name, [])],
@@ -537,7 +491,7 @@ class SessionLogger:
         ``scales`` (block → largest |entry|) puts several models on one color scale; by default the model's own.
         """
         s = self.session
-        base = f"models/{_safe(name)}"
+        base = f"models/{entity_part(name)}"
         blocks = heatmaps(model, s.state_names, s.input_names)
         scales = dict(scales) if scales is not None else shared_scales({name: blocks})
         for h in blocks:
@@ -591,7 +545,7 @@ def log_session(
     named_models: Mapping[str, Any] | None = None,
     baselines: Mapping[str, Mapping[str, Any]] | None = None,
     focus: Sequence[str] | None = None,
-    horizon: int = 60,
+    n_steps: int = 60,
     samples: int = 0,
     starts: Sequence[int] = (0,),
     seed: int | None = 0,
@@ -642,7 +596,7 @@ def log_session(
             methods.update(extra)
             for k in starts:
                 if k < len(d):
-                    logger.log_predictions(d, methods, start=int(k), horizon=horizon, samples=samples, seed=seed)
+                    logger.log_predictions(d, methods, start=int(k), n_steps=n_steps, samples=samples, seed=seed)
     return logger.session
 
 
@@ -673,7 +627,7 @@ def record_study(
             p.add_task(f"writing {path}", total=None)
         out, _ = record_session(
             path, result.demos, application_id=APPLICATION_IDS["study"], models=result.models,
-            baselines=result.baselines, focus=focus, horizon=result.horizon, samples=result.samples,
+            baselines=result.baselines, focus=focus, n_steps=result.n_steps, samples=result.samples,
             seed=result.seed, clock="trial",
         )
     return out

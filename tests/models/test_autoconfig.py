@@ -1,0 +1,121 @@
+"""``n_components="cv"`` / ``reg_covar="cv"``: settings chosen by cross-validation over demonstrations.
+
+The slow acceptance test flies an operator unlike the simulator's (delays, bang-bang corrections, hesitations,
+a left/right detour: :func:`workbench.sim.operators.erratic_operator_demos`) and the paper-style CS1/CS2 operators
+(:func:`workbench.sim.landing.simulate_landings`), and compares the auto-configured proposed model with IOC-only and
+GMR-only on held-out trials (3 s position RMSE from every second of each trial).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import workbench.models.autoconfig as ac
+from workbench.errors import ModelError
+from workbench.models import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel, load_model
+from workbench.plant.system import planar_quadrotor
+from workbench.sim.landing import simulate_landings
+from workbench.sim.operators import ErraticOperator, erratic_operator_demos
+from workbench.study import evaluate as ev
+
+
+@pytest.fixture(scope="module")
+def quad():
+    return planar_quadrotor()
+
+
+@pytest.fixture(scope="module")
+def small():
+    return erratic_operator_demos(None, 6, seed=71)
+
+
+def test_choice_is_the_best_cross_validated_candidate(quad, small):
+    model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0)
+    by_rmse = ac.choose_settings(model, small, components=(1, 2), reg_covars=(0.3, 1.0), folds=2)
+    rows = by_rmse.scores
+    assert len(rows) == 4 and sum(r["chosen"] for r in rows) == 1
+    assert by_rmse.criterion == "prediction" and by_rmse.folds == 2
+    best = min((r for r in rows if math.isfinite(r["heldout_rmse"])), key=lambda r: r["heldout_rmse"])
+    assert (by_rmse.n_components, by_rmse.reg_covar) == (best["n_components"], best["reg_covar"])
+    by_ll = ac.choose_settings(model, small, components=(1, 2), reg_covars=(0.3, 1.0), folds=2,
+                               criterion="likelihood")
+    best = max(by_ll.scores, key=lambda r: r["heldout_loglik"])
+    assert (by_ll.n_components, by_ll.reg_covar) == (best["n_components"], best["reg_covar"])
+    # the same folds and fits: both criteria saw the same scores
+    assert [r["heldout_rmse"] for r in by_ll.scores] == pytest.approx([r["heldout_rmse"] for r in rows])
+    with pytest.raises(ModelError, match="criterion"):
+        ac.choose_settings(model, small, criterion="aic")
+
+
+def test_auto_model_records_its_choice_and_survives_a_round_trip(quad, small, tmp_path, monkeypatch):
+    monkeypatch.setattr(ac, "COMPONENT_GRID", (1, 2))
+    monkeypatch.setattr(ac, "REG_COVAR_GRID", (1.0,))
+    model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0,
+                               fit_objective=False).fit(small)
+    assert model.n_components == "cv" and model.reg_covar == "cv"  # settings stay as given
+    assert model.n_components_ == model.auto_.n_components and model.reg_covar_ == model.auto_.reg_covar
+    fixed = HumanBehaviorModel(quad, n_components=model.n_components_, reg_covar=model.reg_covar_, noise_folds=0,
+                               fit_objective=False).fit(small)
+    x0 = small[0].x[0]
+    np.testing.assert_allclose(model.predict(x0, 20).x, fixed.predict(x0, 20).x)
+    model.save(tmp_path / "auto.npz")
+    back = load_model(tmp_path / "auto.npz")
+    assert back.auto_ == model.auto_ and back.reg_covar_ == model.reg_covar_
+    np.testing.assert_allclose(back.predict(x0, 20).x, model.predict(x0, 20).x)
+
+
+def mean_position_rmse(models, test) -> dict[str, float]:
+    table = ev.compare(models, test, n_steps=60, starts=20)
+    rmse = table[table["metric"] == "rmse_position"]
+    return rmse.groupby("method")["value"].mean().to_dict()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["erratic", "CS1", "CS2"])
+def test_auto_configured_model_earns_its_place(quad, case):
+    if case == "erratic":
+        train, test = erratic_operator_demos(None, 30, seed=81), erratic_operator_demos(None, 20, seed=82)
+    else:
+        train, test = simulate_landings(case, 30, seed=83), simulate_landings(case, 20, seed=84)
+    models = {
+        "proposed": HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0,
+                                       fit_objective=False).fit(train),
+        "ioc_only": IOCOnlyModel(quad, noise_folds=0).fit(train),
+        "gmr_only": GMROnlyModel(quad, noise_folds=0).fit(train),
+    }
+    r = mean_position_rmse(models, test)
+    print(f"{case}: chose G={models['proposed'].n_components_}, reg_covar={models['proposed'].reg_covar_}; "
+          f"position RMSE {r}")
+    if case == "erratic":
+        assert r["proposed"] <= 1.03 * r["ioc_only"]
+    else:
+        assert r["proposed"] < r["ioc_only"] and r["proposed"] < r["gmr_only"]
+
+
+ERRATIC_VARIANTS = {
+    "late": ErraticOperator(delay=0.3),
+    "pulsy": ErraticOperator(pulse=0.1, dead_band=0.05),
+    "hesitant": ErraticOperator(hesitation_rate=0.03, hesitation=0.6),
+    "wide": ErraticOperator(detour=1.6, sigma=(0.02, 0.05)),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [501, 502])
+@pytest.mark.parametrize("variant", sorted(ERRATIC_VARIANTS))
+def test_auto_configured_model_holds_on_other_erratic_operators(quad, variant, seed):
+    # operators the settings grid was never looked at on: later reactions, harder pulses, longer hesitations,
+    # a wider detour with more drift
+    op = ERRATIC_VARIANTS[variant]
+    train, test = erratic_operator_demos(op, 30, seed=seed), erratic_operator_demos(op, 20, seed=seed + 1000)
+    models = {
+        "proposed": HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0,
+                                       fit_objective=False).fit(train),
+        "ioc_only": IOCOnlyModel(quad, noise_folds=0).fit(train),
+    }
+    r = mean_position_rmse(models, test)
+    print(f"{variant} {seed}: G={models['proposed'].n_components_}, reg_covar={models['proposed'].reg_covar_}; {r}")
+    assert r["proposed"] <= 1.03 * r["ioc_only"]

@@ -1,0 +1,97 @@
+"""The report: Markdown with PNG figures that exist and are non-trivial images; tables computed from the data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.image import imread
+
+from workbench.models import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel
+from workbench.plant.system import planar_quadrotor
+from workbench.report.markdown import ReportInputs, write_report
+from workbench.sim.landing import simulate_landings
+from workbench.study import evaluate as ev
+from workbench.study.pipeline import improvement_table
+
+FIGURES = ("demonstrations", "objective", "variability", "predictions", "rmse", "data_efficiency")
+HORIZON = 30
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    system = planar_quadrotor()
+    train, test, models, baselines, tables = {}, {}, {}, {}, []
+    for label in ("CS1", "CS2"):
+        ds = simulate_landings(label, 9, seed=5)
+        tr, te = ds.split(3, seed=0)
+        train[label], test[label] = tr, te
+        fitted = {
+            "proposed": HumanBehaviorModel(system, n_components=3).fit(tr),
+            "ioc_only": IOCOnlyModel(system).fit(tr),
+            "gmr_only": GMROnlyModel(system, n_components=3).fit(tr),
+        }
+        models[label] = fitted["proposed"]
+        baselines[label] = {k: v for k, v in fitted.items() if k != "proposed"}
+        tables.append(ev.compare(fitted, te, n_steps=HORIZON, samples=20, seed=0).assign(label=label))
+    table = pd.concat(tables, ignore_index=True)
+    rmse = table[table["metric"].str.startswith("rmse_")]
+    # a small data-efficiency table in the shape the study passes: label, method, n_train, value
+    eff = pd.DataFrame(
+        [
+            {"label": lab, "method": m, "n_train": n, "value": float(v)}
+            for lab in ("CS1", "CS2")
+            for m in ("proposed", "ioc_only", "gmr_only")
+            for n in (2, 4)
+            for v in rmse[(rmse["label"] == lab) & (rmse["method"] == m) & (rmse["metric"] == "rmse_position")]["value"]
+        ]
+    )
+    out = tmp_path_factory.mktemp("report")
+    path = write_report(
+        out,
+        ReportInputs(train=train, test=test, models=models, baselines=baselines, rmse=rmse, efficiency=eff,
+                     band=table[table["metric"] == "band_position"], n_steps=HORIZON, samples=20,
+                     stats="| pair | t |\n|---|---|\n| a vs b | 1 |", notes=["a note"]),
+    )
+    return {"path": path, "dir": out, "rmse": rmse, "models": models}
+
+
+def test_report_links_every_figure(report):
+    text = report["path"].read_text(encoding="utf-8")
+    assert text.startswith("# Workbench report")
+    for name in FIGURES:
+        assert f"](figures/{name}.png)" in text
+    assert "## Multi-subject statistics" in text
+    assert "a note" in text
+
+
+@pytest.mark.parametrize("name", FIGURES)
+def test_figures_are_non_trivial_images(report, name):
+    png = report["dir"] / "figures" / f"{name}.png"
+    assert png.stat().st_size > 20_000, png.stat().st_size
+    img = imread(png)
+    assert img.ndim == 3 and img.shape[0] > 250 and img.shape[1] > 400
+    gray = img[..., :3].mean(axis=2)
+    # not blank: ink on a white page, and plenty of distinct shades (lines, text, heatmaps)
+    assert gray.std() > 0.05
+    assert (gray < 0.5).mean() > 0.002
+    assert len(np.unique(np.round(gray, 2))) > 20
+
+
+def test_improvement_table_is_computed_from_the_rmse(report):
+    rmse = report["rmse"]
+    tab = improvement_table(rmse)
+    row = tab[(tab["label"] == "CS1") & (tab["metric"] == "rmse_position")].iloc[0]
+    sel = rmse[(rmse["label"] == "CS1") & (rmse["metric"] == "rmse_position")]
+    means = sel.groupby("method")["value"].mean()
+    assert row["proposed"] == pytest.approx(means["proposed"])
+    assert row["IOC-only"] == pytest.approx(means["ioc_only"])
+    change = 100 * (1 - means["proposed"] / means["ioc_only"])
+    assert row["vs IOC-only"] == f"{abs(change):.1f} % {'lower' if change >= 0 else 'higher'}"
+
+
+def test_objective_table_matches_the_model(report):
+    text = report["path"].read_text(encoding="utf-8")
+    o = report["models"]["CS2"].objective_
+    assert f"{o.alpha:.3g}" in text
+    assert f"{o.M_normalized[2, 2]:.3g}" in text  # the attitude weight Q_φφ

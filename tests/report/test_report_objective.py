@@ -1,0 +1,52 @@
+"""The report's objective section: bootstrap intervals on every weight, and weight ratios compared by strategy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench.plant.system import planar_quadrotor
+from workbench.report.markdown import write_study_report
+from workbench.sim.operators import LQROperator, lqr_operator_demos
+from workbench.study.pipeline import run_study
+from workbench.study.weights import NOT_IDENTIFIABLE, compare_strategies, format_interval
+
+
+@pytest.fixture(scope="module")
+def result():
+    system = planar_quadrotor()
+    a = lqr_operator_demos(LQROperator(q=(1, 1, 1, 0.3, 0.3, 0.01)), 10, seed=41, system=system, label="A")
+    b = lqr_operator_demos(LQROperator(q=(4, 2, 46, 0.3, 0.3, 0.01)), 10, seed=42, system=system, label="B")
+    return run_study(a + b, system, n_components=2, samples=0, efficiency=None, n_steps=20, bootstrap=12)
+
+
+def test_study_bootstraps_each_strategy_objective(result):
+    assert set(result.objectives) == {"A", "B"}
+    for label, oi in result.objectives.items():
+        model = result.models[label]
+        # resampled as the model saw its trials: the bootstrap's point estimate is the model's objective
+        np.testing.assert_allclose(oi.boot.objective.M_normalized, model.objective_.M_normalized, atol=1e-6)
+        assert oi.boot.n_boot == 12 and oi.ratios.gains.n_boot == 12 and oi.ratios.gains.method == "iv"
+        assert oi.ratio_gain == "iv"
+
+
+def test_report_shows_intervals_and_the_ratio_comparison(result, tmp_path):
+    text = write_study_report(result, tmp_path / "r").read_text()
+    section = text.split("## Task objective")[1].split("\n## ")[0]
+    boot = result.objectives["A"].boot
+    assert f"[{boot.Q_diag_lo[2]:.3g}, {boot.Q_diag_hi[2]:.3g}]" in section
+    assert "### Weight ratios inside coupled parts" in section
+    table = compare_strategies({lb: oi.ratios for lb, oi in result.objectives.items()})
+    row = table[(table.strategy == "B") & (table.ratio == "Q_phi / R_u1")].iloc[0]
+    assert format_interval(row.factor, row.factor_lo, row.factor_hi) in section
+    flagged = (table["factor_identifiable"] == False).any()  # noqa: E712 - NaN rows of the first strategy
+    assert (NOT_IDENTIFIABLE in section) == (flagged or (~table["identifiable"]).any())
+
+
+def test_report_without_bootstrap_says_so(tmp_path):
+    system = planar_quadrotor()
+    a = lqr_operator_demos(LQROperator(), 6, seed=43, system=system, label="A")
+    res = run_study(a, system, n_components=2, samples=0, efficiency=None, n_steps=20)
+    assert res.objectives == {}
+    text = write_study_report(res, tmp_path / "r").read_text()
+    assert "No intervals" in text

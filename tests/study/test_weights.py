@@ -1,0 +1,278 @@
+"""Weight ratios inside coupled parts, and whether their intervals cover known costs.
+
+Two LQR operators (:mod:`workbench.sim.operators`) with known diagonal costs and zero-mean, AR(1), state-dependent
+variability: B weights the attitude 46× and the horizontal and vertical positions 4× and 2× more than A.
+The gain is estimated by instrumental variables (least squares is biased in closed loop), its covariance by
+resampling each operator's trials with its own seed, and each ratio's factor B/A gets a 95 % profile interval
+(:mod:`workbench.method.ratio_profile`).
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from workbench.errors import DataError, ModelError
+from workbench.method import ratio_profile
+from workbench.method.objective import forward_gain
+from workbench.method.resampling import bootstrap_gain
+from workbench.method.structured import decoupled_parts
+from workbench.plant.system import planar_quadrotor
+from workbench.sim.operators import LQROperator, lqr_operator_demos
+from workbench.study.weights import (
+    NOT_EXPLAINED,
+    NOT_IDENTIFIABLE,
+    RatioInterval,
+    compare_strategies,
+    format_interval,
+    weight_ratios,
+)
+
+OP_A = LQROperator(q=(1.0, 1.0, 1.0, 0.3, 0.3, 0.01), r=(10.0, 10.0))
+OP_B = LQROperator(q=(4.0, 2.0, 46.0, 0.3, 0.3, 0.01), r=(10.0, 10.0))
+
+
+# A second pair never used to choose the method: other costs, a less persistent hand (ρ = 0.85)
+OP_C = LQROperator(q=(2.0, 0.5, 5.0, 0.1, 0.6, 0.05), r=(5.0, 20.0), rho=0.85)
+OP_D = LQROperator(q=(0.5, 3.0, 0.5, 0.1, 0.6, 0.05), r=(5.0, 10.0), rho=0.85)
+
+
+def true_factors(system, a: LQROperator = OP_A, b: LQROperator = OP_B) -> dict[str, float]:
+    """Factor b/a of every ratio Q_ii / R_kk inside a part, from the operators' costs."""
+    out = {}
+    for states, inputs in decoupled_parts(system.A, system.B):
+        k = inputs[0]
+        for i in states:
+            name = f"Q_{system.state_names[i]} / R_{system.input_names[k]}"
+            out[name] = (b.q[i] / b.r[k]) / (a.q[i] / a.r[k])
+    return out
+
+
+def coverage(seeds, n_boot: int, n_demos: int = 30, a: LQROperator = OP_A, b: LQROperator = OP_B) -> pd.DataFrame:
+    system = planar_quadrotor()
+    truth = true_factors(system, a, b)
+    rows = []
+    for seed in seeds:
+        ratios = {
+            "A": weight_ratios(bootstrap_gain(lqr_operator_demos(a, n_demos, seed=1000 + seed, system=system),
+                                              system, n_boot=n_boot, method="iv", seed=seed), system),
+            "B": weight_ratios(bootstrap_gain(lqr_operator_demos(b, n_demos, seed=2000 + seed, system=system),
+                                              system, n_boot=n_boot, method="iv", seed=50000 + seed), system),
+        }
+        table = compare_strategies(ratios)
+        for r in table[table["strategy"] == "B"].itertuples():
+            t = truth[r.ratio]
+            rows.append({"seed": seed, "ratio": r.ratio, "truth": t, "factor": r.factor, "lo": r.factor_lo,
+                         "hi": r.factor_hi, "covered": r.factor_lo <= t <= r.factor_hi,
+                         "identifiable": r.factor_identifiable, "explained": r.factor_note != NOT_EXPLAINED})
+    return pd.DataFrame(rows)
+
+
+def summarize(df: pd.DataFrame) -> pd.DataFrame:
+    s = df.groupby("ratio").agg(coverage=("covered", "mean"), identifiable=("identifiable", "mean"),
+                                explained=("explained", "mean"), median_factor=("factor", "median"),
+                                truth=("truth", "first"))
+    print(s.to_string())
+    return s
+
+
+def test_ratio_intervals_on_a_few_seeds():
+    s = summarize(coverage(seeds=(20, 21), n_boot=40))
+    # LQR operators: a diagonal cost explains every part's gain
+    assert (s["explained"] == 1.0).all()
+    # the position ratios are identifiable (interval within 10×) and cover their factor
+    for name in ("Q_x / R_u1", "Q_y / R_u2"):
+        assert s.loc[name, "identifiable"] == 1.0 and s.loc[name, "coverage"] == 1.0
+
+
+@pytest.mark.slow
+def test_ratio_intervals_cover_the_truth_in_ninety_percent_of_seeds():
+    # 50 seeds × 2 operators × 100 resampled gains and the profile intervals: ~4 min on an idle 2-core machine.
+    # The method was chosen on seeds 0-39 and 100-139; these seeds were not looked at before the measurement.
+    s = summarize(coverage(seeds=range(300, 350), n_boot=100))
+    for name, row in s.iterrows():
+        assert row["coverage"] >= 0.9, f"{name}: coverage {row['coverage']:.2f} < 0.9"
+        # the structure test rejects a true diagonal cost in at most 5 % of parts (two operators per row here)
+        assert row["explained"] >= 0.9, f"{name}: a diagonal cost explains only {row['explained']:.2f}"
+
+
+@pytest.mark.slow
+def test_ratio_intervals_cover_the_truth_on_another_operator_pair():
+    # 40 seeds, ~3 min. At a true coverage of 95 %, 40 seeds fall below 0.85 with probability < 1 %: the bar is set
+    # by that, not by the run (measured: 0.90-1.00)
+    s = summarize(coverage(seeds=range(700, 740), n_boot=100, a=OP_C, b=OP_D))
+    for name, row in s.iterrows():
+        assert row["coverage"] >= 0.85, f"{name}: coverage {row['coverage']:.2f} < 0.85"
+
+
+def scalar_plant(a: float = 1.0, b: float = 0.1):
+    return SimpleNamespace(A=np.array([[a]]), B=np.array([[b]]), state_names=("p",), input_names=("u",))
+
+
+def scalar_gain(plant, ratio: float) -> float:
+    """The LQR gain (u = K x) of Q / R = ratio on a scalar plant."""
+    return float(forward_gain(plant.A, plant.B, np.array([[ratio]]), np.array([[1.0]]))[0][0, 0])
+
+
+def gains(plant, k_hat: float, sigma: float, n_trials: int = 30, seed: int = 0, n: int = 400):
+    """A gain bootstrap whose resampled gains have standard deviation ``sigma`` exactly."""
+    z = np.random.default_rng(seed).standard_normal(n)
+    z = (z - z.mean()) / z.std(ddof=1)
+    return SimpleNamespace(K=np.array([[k_hat]]), K_samples=(k_hat + sigma * z)[:, None, None], n_trials=n_trials,
+                           seed=seed)
+
+
+def test_scalar_interval_is_where_the_gain_is_within_t_sigma():
+    plant = scalar_plant()
+    k_true, sigma, n = scalar_gain(plant, 2.0), 0.02, 30
+    wr = weight_ratios(gains(plant, k_true, sigma, n), plant)
+    (iv,) = wr.intervals
+    assert iv.estimate == pytest.approx(2.0, rel=1e-4)
+    # independently: the ratios whose gain lies t·σ·sqrt(n / (n − 1)) from k̂ (the gain falls with the ratio)
+    half = np.sqrt(ratio_profile.critical_value(95, n) * n / (n - 1)) * sigma
+    import scipy.optimize
+
+    ends = [scipy.optimize.brentq(lambda lr, k=k: scalar_gain(plant, np.exp(lr)) - k, -10, 10)
+            for k in (k_true + half, k_true - half)]
+    assert iv.lo == pytest.approx(np.exp(ends[0]), rel=2e-3) and iv.hi == pytest.approx(np.exp(ends[1]), rel=2e-3)
+    assert iv.identifiable
+    # a gain whose interval reaches 0 (the gain of a zero weight) does not bound the weight away from zero
+    loose = weight_ratios(gains(plant, k_true, abs(k_true) / 2, n), plant).intervals[0]
+    assert loose.lo < 1e-12 and not loose.identifiable and NOT_IDENTIFIABLE in loose.describe()
+
+
+def test_factor_interval_is_the_profile_of_the_difference():
+    import scipy.optimize
+
+    plant = scalar_plant()
+    ka, kb, sa, sb, n = scalar_gain(plant, 1.0), scalar_gain(plant, 3.0), 0.03, 0.05, 30
+    wa = weight_ratios(gains(plant, ka, sa, n, seed=1), plant)
+    wb = weight_ratios(gains(plant, kb, sb, n, seed=2), plant)
+    row = compare_strategies({"a": wa, "b": wb}).query("strategy == 'b'").iloc[0]
+    assert row.factor == pytest.approx(3.0, rel=1e-3)
+    # independently: min over log ratio t of a of the two operators' whitened distances with b's at t + log f
+    c = n / (n - 1)
+
+    def profile(log_f):
+        dist = lambda t: ((scalar_gain(plant, np.exp(t)) - ka) ** 2 / (c * sa**2)  # noqa: E731
+                          + (scalar_gain(plant, np.exp(t + log_f)) - kb) ** 2 / (c * sb**2))
+        return scipy.optimize.minimize_scalar(dist, bounds=(-8, 8), method="bounded", options={"xatol": 1e-9}).fun
+
+    crit = ratio_profile.critical_value(95, n)
+    ends = [scipy.optimize.brentq(lambda lf: profile(lf) - crit, a, b) for a, b in ((-3, np.log(3)), (np.log(3), 5))]
+    assert row.factor_lo == pytest.approx(np.exp(ends[0]), rel=3e-3)
+    assert row.factor_hi == pytest.approx(np.exp(ends[1]), rel=3e-3)
+
+
+def test_factor_interval_covers_at_its_level_when_the_gain_is_gaussian():
+    # k̂ ~ N(k, σ²) per operator and resampled gains with that σ: the factor's 95 % interval covers the truth
+    plant = scalar_plant()
+    truth, ka, kb, sigma = 2.0, scalar_gain(plant, 1.0), scalar_gain(plant, 2.0), 0.02
+    rng = np.random.default_rng(5)
+    covered = []
+    for i in range(60):
+        wa = weight_ratios(gains(plant, ka + sigma * rng.standard_normal(), sigma, seed=2 * i), plant)
+        wb = weight_ratios(gains(plant, kb + sigma * rng.standard_normal(), sigma, seed=2 * i + 1), plant)
+        row = compare_strategies({"a": wa, "b": wb}).query("strategy == 'b'").iloc[0]
+        covered.append(row.factor_lo <= truth <= row.factor_hi)
+    # nominal 95 %; 60 draws: below 0.88 has probability < 1 %
+    assert np.mean(covered) >= 0.88
+
+
+def test_a_gain_no_diagonal_cost_reaches_is_flagged():
+    # scalar plant x+ = x + 0.1 u: LQR gains run from 0 (zero state weight) to -10 (deadbeat, infinite ratio); -15
+    # still stabilizes but is the gain of no cost
+    plant = scalar_plant()
+    sigma, n = 0.5, 30
+    wr = weight_ratios(gains(plant, -15.0, sigma, n), plant)
+    (fit,), (iv,) = wr.fits, wr.intervals
+    nearest = scalar_gain(plant, np.exp(ratio_profile.LOG_BOUND))
+    assert fit.distance == pytest.approx((nearest + 15.0) ** 2 / (sigma**2 * n / (n - 1)), rel=1e-6)
+    assert fit.restrictions == 0 and fit.critical == pytest.approx(ratio_profile.critical_value(95, n))
+    assert not fit.explained and not iv.explained and iv.note == NOT_EXPLAINED and NOT_EXPLAINED in iv.describe()
+    # inside the reachable range the same spread is explained
+    inside = weight_ratios(gains(plant, scalar_gain(plant, 2.0), sigma, n), plant)
+    assert inside.fits[0].explained and inside.fits[0].distance < 1e-12 and inside.intervals[0].note != NOT_EXPLAINED
+
+
+def test_identifiability_of_an_interval():
+    assert NOT_IDENTIFIABLE in RatioInterval("r", 1.0, 0.5, 6.0, 95).describe()
+    assert NOT_IDENTIFIABLE not in RatioInterval("r", 1.0, 0.5, 4.9, 95).describe()
+    # a weight at the bottom of the search (zero) is no finite ratio, however narrow its interval
+    assert not RatioInterval("r", 1e-13, 1e-13, 2e-13, 95).identifiable
+    assert not RatioInterval("r", 1e13, 1e13, 1e13, 95).identifiable  # ... or at its top (infinite)
+    # the ends of the searched range are no numbers the data gave
+    assert format_interval(0.5, np.exp(-ratio_profile.LOG_BOUND), np.exp(ratio_profile.LOG_BOUND)) == "0.5 [0, ∞]"
+    assert format_interval(0.5, 0.25, 1.0) == "0.5 [0.25, 1]"
+
+
+def test_factor_needs_independent_resamples():
+    plant = scalar_plant()
+    a = weight_ratios(gains(plant, scalar_gain(plant, 1.0), 0.02, seed=7), plant)
+    b = weight_ratios(gains(plant, scalar_gain(plant, 2.0), 0.02, seed=7), plant)
+    with pytest.raises(ModelError, match="same seed"):
+        compare_strategies({"a": a, "b": b})
+    c = weight_ratios(gains(plant, scalar_gain(plant, 2.0), 0.02, seed=8), plant)
+    assert compare_strategies({"a": a, "c": c}).query("strategy == 'c'").factor.iloc[0] == pytest.approx(2.0, rel=1e-3)
+
+
+def test_gains_that_do_not_vary_give_no_interval():
+    plant = scalar_plant()
+    k = scalar_gain(plant, 2.0)
+    same = SimpleNamespace(K=np.array([[k]]), K_samples=np.full((50, 1, 1), k), n_trials=30, seed=0)
+    with pytest.raises(ModelError, match="do not vary"):
+        weight_ratios(same, plant)
+    with pytest.raises(ModelError, match="two or more"):
+        weight_ratios(gains(plant, k, 0.02, n_trials=1), plant)
+    with pytest.raises(DataError, match="percentage"):
+        weight_ratios(gains(plant, k, 0.02), plant, ci=120)
+
+
+def continuation_end(joint, theta, value, excess, direction, step=0.25):
+    """An interval end by small steps, each fit started from the previous one, then bisection: slow and plain."""
+    inside, theta_in = value, theta
+    while True:
+        nxt = float(np.clip(inside + direction * step, -ratio_profile.LOG_BOUND, ratio_profile.LOG_BOUND))
+        dist, th = joint.fit(nxt, theta_in)
+        if excess(dist) > 0:
+            break
+        inside, theta_in = nxt, th
+        if abs(nxt) >= ratio_profile.LOG_BOUND:
+            return nxt
+    outside = nxt
+    while abs(outside - inside) > 1e-3:
+        mid = 0.5 * (inside + outside)
+        dist, th = joint.fit(mid, theta_in)
+        inside, theta_in, outside = (inside, theta_in, mid) if excess(dist) > 0 else (mid, th, outside)
+    return inside
+
+
+def test_an_interval_end_is_not_taken_from_one_fit_that_fell_into_another_minimum():
+    # a fully coupled 3-state, 2-input plant with wide gain noise: a long, flat profile where a far-started fit
+    # can land in another local minimum (found by review: R_v / R_u ended at log 14.0, where the profile was
+    # still inside; followed in small steps it stays inside to log 26.6)
+    rng = np.random.default_rng(3)
+    M = rng.standard_normal((3, 3))
+    plant = SimpleNamespace(A=0.9 * M / np.max(np.abs(np.linalg.eigvals(M))), B=rng.standard_normal((3, 2)),
+                            state_names=("a", "b", "c"), input_names=("u", "v"))
+    K = forward_gain(plant.A, plant.B, np.diag([1.0, 0.2, 5.0]), np.diag([2.0, 0.5]))[0]
+    noise = np.random.default_rng(4).standard_normal((400, *K.shape)) * 0.1 * np.maximum(np.abs(K), 1e-3)
+    samples = K + noise
+    wr = weight_ratios(SimpleNamespace(K=samples[7], K_samples=samples, n_trials=30, seed=4), plant)
+    iv = wr.intervals[-1]
+    assert iv.name == "R_v / R_u"
+    (part, theta, d_min), (_, j) = wr._parts[0], wr._index[-1]
+    crit = ratio_profile.critical_value(95, 30)
+    reference = continuation_end(ratio_profile._Joint([part], {j: 1.0}), theta, theta[j],
+                                 lambda dist: dist - d_min - crit, +1)
+    assert np.log(iv.hi) == pytest.approx(reference, abs=0.05)
+
+
+def test_too_few_resamples_for_the_covariance_is_an_error():
+    plant = SimpleNamespace(A=np.eye(2), B=np.array([[0.1], [0.2]]), state_names=("p", "q"), input_names=("u",))
+    few = SimpleNamespace(K=np.array([[-1.0, -1.0]]), K_samples=np.zeros((2, 1, 2)), n_trials=30, seed=0)
+    with pytest.raises(ModelError, match="more bootstrap resamples"):
+        weight_ratios(few, plant)

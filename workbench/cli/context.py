@@ -1,0 +1,263 @@
+"""What the commands share: the run's context (output, progress), loading demonstrations and models, choosing the
+plant, printing it, and the option types.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from workbench.errors import DataError, ModelError, WorkbenchError
+
+__all__ = ['SAMPLE_LOGS']
+
+SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
+DEFAULT_MAPPING = "planar_quadrotor"
+EXIT_ERROR = 1
+EXIT_INTERNAL = 3
+
+
+class Context:
+    """What every command gets: parsed options, consoles and a progress factory."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        from rich.console import Console
+
+        self.args = args
+        self.quiet = bool(getattr(args, "quiet", False))
+        self.out = Console(highlight=False, quiet=self.quiet)
+        if not self.out.is_terminal:  # piped or captured: wide tables instead of 80 columns
+            self.out = Console(highlight=False, quiet=self.quiet, width=140)
+        self.err = Console(stderr=True, highlight=False)
+
+    def say(self, *parts: Any, markup: bool = False) -> None:
+        self.out.print(*parts, soft_wrap=True, markup=markup)
+
+    def progress(self):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        return Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=self.err,
+            transient=True,
+            disable=self.quiet or not self.err.is_terminal,  # no bars (or blank lines) in logs and pipes
+        )
+
+    def executor(self):
+        """Serial by default; a Dask ``LocalCluster`` with ``--workers N``; the cluster at ``--scheduler``."""
+        from workbench.study.executor import make_executor
+
+        a = self.args
+        ex = make_executor(getattr(a, "workers", None), getattr(a, "scheduler", None),
+                           staging=getattr(a, "staging", None))
+        if ex.parallel and not self.quiet:
+            print(f"running tasks on {ex}", file=sys.stderr)
+        return ex
+
+
+# -- input helpers -----------------------------------------------------------------------------------------
+def existing_path(path: str | os.PathLike, what: str = "file") -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise DataError(f"{p}: no such {what}")
+    return p
+
+
+def is_demo_file(path: Path) -> bool:
+    from workbench.data.dataset import is_dataset
+
+    return path.suffix.lower() in (".parquet", ".pq") or is_dataset(path)
+
+
+def load_one(path: Path, mapping: str | None) -> Any:
+    from workbench.data.dataset import load_demonstrations
+
+    if is_demo_file(path):
+        return load_demonstrations(path)
+    import adapters
+
+    return adapters.load(path, mapping=mapping or DEFAULT_MAPPING)
+
+
+def join_sets_named(sets: Sequence[Any], names: Sequence[str]) -> Any:
+    """One set from several files; a trial id seen twice is prefixed with its file's name."""
+    from workbench.data.dataset import join_sets
+
+    return join_sets(sets, names)
+
+
+def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None):
+    files = [existing_path(p) for p in paths]
+    sets = []
+    with ctx.progress() as progress:
+        task = progress.add_task("reading logs", total=len(files))
+        for f in files:
+            ds = load_one(f, mapping)
+            skipped = {k: v for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v} if len(ds) else {}
+            if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
+                what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())
+                print(f"warning: {f}: skipped {what}", file=sys.stderr)
+            sets.append(ds)
+            progress.advance(task)
+    ds = join_sets_named(sets, [str(f) for f in files])
+    if labels:
+        parts = [ds.by_label(label) for label in labels]
+        ds = parts[0]
+        for p in parts[1:]:
+            ds = ds + p
+    if not len(ds):
+        raise DataError(f"{', '.join(paths)}: no demonstrations")
+    return ds
+
+
+def system_for(ds: Any, choice: str = "auto", horizon_s: float = 3.0):
+    from workbench.plant.choice import choose_plant
+
+    return choose_plant(ds, choice, horizon_s)
+
+
+def study_plant(choice: str, horizon_s: float = 3.0) -> Callable[[Any], Any]:
+    from workbench.plant.choice import plant_rule
+
+    return plant_rule(choice, horizon_s)
+
+
+def require_proposed(result: Any) -> None:
+    """A report and the demo show the proposed model: say why it is missing instead of failing inside them."""
+    for label in result.test:
+        if label not in result.models:
+            reason = result.failures.get(label, {}).get("proposed", "unknown cause")
+            raise ModelError(f"the proposed model could not be fitted on {label!r} (so no report): {reason}; "
+                             "`workbench evaluate` compares the methods that can be")
+
+
+def print_plant(ctx: Context, system: Any, note: str = "") -> None:
+    """An identified plant's report (held-out errors vs persistence, ρ, conditioning, checks); its warning on
+    stderr too, where a user looks for problems."""
+    report = getattr(system, "identification", None)
+    if report is None:
+        return
+    ctx.say(str(report) + (f"\n  {note}" if note else ""))
+    if report.warning:
+        print(f"warning: {report.warning}", file=sys.stderr)
+
+
+def load_model_file(path: str):
+    from workbench.models.factory import load_model
+
+    return load_model(existing_path(path))
+
+
+def demos_at_model_dt(ctx: Context, ds: Any, models: Sequence[Any], resample: bool, source: str) -> Any:
+    """``ds`` on the models' time step: refused when sampled at another (a model steps once per its own dt, so
+    its predictions would be drawn against the wrong times), resampled with ``--resample``."""
+    import math
+
+    dt = float(models[0].system.dt)
+    if any(not math.isclose(float(m.system.dt), dt, rel_tol=1e-6) for m in models[1:]):
+        steps = ", ".join(sorted({f"{float(m.system.dt):g}" for m in models}))
+        raise ModelError(f"the models step at different dt ({steps} s); show them one at a time")
+    try:
+        at_dt = models[0].demos_at_model_dt(ds, resample=resample)
+    except WorkbenchError as exc:
+        raise type(exc)(f"{source}: {exc}") from None
+    if at_dt is not ds:
+        ctx.say(f"resampled {source} from dt = {ds.dt:g} s to the model's dt = {dt:g} s (states linear, inputs held)")
+    return at_dt
+
+
+def n_components_arg(value: str, rules: tuple[str, ...] = ("bic",)) -> int | str:
+    """``--n-components``: a positive integer, or the name of the rule that chooses it (``bic``, ``cv``)."""
+    if value in rules:
+        return value
+    try:
+        g = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--n-components must be a positive integer or {' or '.join(map(repr, rules))}, got {value!r}") from None
+    if g < 1:
+        raise argparse.ArgumentTypeError(f"--n-components must be at least 1, got {g}")
+    return g
+
+
+def fit_n_components_arg(value: str) -> int | str:
+    return n_components_arg(value, ("bic", "cv"))
+
+
+def positive_float(value: str) -> float:
+    try:
+        v = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {value!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {value!r}")
+    return v
+
+
+def int_list(value: str) -> list[int]:
+    try:
+        out = [int(v) for v in value.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {value!r}") from None
+    if not out or min(out) < 1:
+        raise argparse.ArgumentTypeError(f"expected positive integers, got {value!r}")
+    return out
+
+
+def steps_of(seconds: float, dt: float) -> int:
+    return max(1, int(round(seconds / dt)))
+
+
+def write_demos(ds: Any, out: Path, mapping: str | None = None) -> None:
+    if out.suffix.lower() in (".parquet", ".pq"):
+        ds.save(out)
+        return
+    import adapters
+
+    adapters.write(ds, out, mapping or DEFAULT_MAPPING)
+
+
+def viewer_command(path: str | os.PathLike) -> str:
+    """How to open a recording, with the viewer this workbench would start (the venv's, found without PATH)."""
+    import shlex
+
+    from workbench.viewer.output import rerun_executable
+
+    def short(p: str) -> str:  # .venv/bin/rerun when run from the project, the full path from anywhere else
+        rel = os.path.relpath(p) if os.path.isabs(p) else p
+        return p if rel.startswith("..") else rel
+
+    return shlex.join([*(short(p) for p in rerun_executable()), str(path)])
+
+
+def output_kwargs(a: argparse.Namespace, default: Path) -> dict[str, Any]:
+    from workbench.viewer import has_display
+
+    if a.spawn or a.serve or a.save:
+        return {"save": a.save, "spawn": a.spawn, "serve": a.serve}
+    # headless by default when nothing could show a window
+    return {"save": str(default), "spawn": False, "serve": False} if not has_display() else {
+        "save": None, "spawn": True, "serve": False}
+
+
+def announce(ctx: Context, out: dict[str, Any], sink: Any, what: str) -> None:
+    if out["save"]:
+        ctx.say(f"wrote {out['save']} ({what}); open it with:  {viewer_command(out['save'])}")
+    elif out["spawn"]:
+        ctx.say(f"sent {what} to the rerun viewer")
+    else:
+        ctx.say(f"serving {what} on 127.0.0.1 only: open {sink.url}  (Ctrl-C to stop)")
+        sink.wait()
+
+
+# -- entry point -------------------------------------------------------------------------------------------
+def one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__

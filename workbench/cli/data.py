@@ -1,0 +1,131 @@
+"""``workbench simulate``, ``inspect`` and ``import``: logs in, demonstrations out.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from workbench.cli.context import EXIT_ERROR, Context, existing_path, is_demo_file, load_demos, write_demos
+from workbench.errors import WorkbenchError
+
+__all__ = []
+
+# -- commands ----------------------------------------------------------------------------------------------
+def cmd_simulate(ctx: Context) -> int:
+    a = ctx.args
+    if a.sample_logs:
+        from workbench.cli.sample_logs import write_sample_logs
+
+        written = write_sample_logs(a.sample_logs, seed=a.seed)
+        files = list(written) if written is not None else sorted(Path(a.sample_logs).iterdir())
+        ctx.say(f"wrote {len(files)} sample logs to {a.sample_logs}")
+        return 0
+    if not a.output:
+        raise WorkbenchError("simulate needs -o FILE (.parquet, .csv, .tlog or .mcap) or --sample-logs DIR")
+    from workbench.sim.landing import simulate_landings
+
+    subjects = [None] if a.subjects == 0 else [f"s{i + 1:02d}" for i in range(a.subjects)]
+    sets = []
+    with ctx.progress() as progress:
+        task = progress.add_task("simulating", total=len(a.strategy) * len(subjects))
+        for strategy in a.strategy:
+            for subject in subjects:
+                sets.append(simulate_landings(strategy, a.trials, seed=a.seed, subject=subject))
+                progress.advance(task)
+    ds = sets[0]
+    for s in sets[1:]:
+        ds = ds + s
+    out = Path(a.output)
+    write_demos(ds, out)
+    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples) to {out}")
+    return 0
+
+
+def cmd_inspect(ctx: Context) -> int:
+    from rich.markup import escape
+    from rich.table import Table
+
+    path = existing_path(ctx.args.log)
+    if is_demo_file(path):
+        from workbench.data.dataset import load_demonstrations
+
+        ds = load_demonstrations(path)
+        ctx.say(f"[bold]{escape(str(path))}[/bold]: workbench demonstrations, {len(ds)} trials, "
+                f"{ds.n_samples} samples, dt {ds.dt} s", markup=True)
+        ctx.say(f"states {list(ds.state_names)}, inputs {list(ds.input_names)}")
+        table = Table("id", "label", "subject", "samples", "duration [s]", "success", "source")
+        for d in ds:
+            table.add_row(d.id, str(d.label), str(d.meta.get("subject")), str(len(d)), f"{d.duration:.2f}",
+                          str(d.meta.get("success")), Path(str(d.meta.get("source", ""))).name)
+        ctx.say(table)
+        return 0
+    import adapters
+
+    summary = adapters.inspect(path)
+    t0 = summary.t_start
+    ctx.say(
+        f"[bold]{escape(str(summary.path))}[/bold]: {summary.format}, {summary.size_bytes} bytes, "
+        f"{len(summary.streams)} streams, {summary.duration:.1f} s",
+        markup=True,
+    )
+    table = Table("stream", "messages", "mean rate [Hz]", "from [s]", "to [s]", "fields")
+    for st in summary.streams:
+        fields = ", ".join(st.fields[:8]) + (f", … (+{len(st.fields) - 8})" if len(st.fields) > 8 else "")
+        table.add_row(st.name, str(st.count), f"{st.rate_hz:.3g}", f"{st.t_start - t0:.2f}", f"{st.t_end - t0:.2f}",
+                      fields)
+    ctx.say(table)
+    if summary.modes:
+        ctx.say(f"flight modes{f' ({summary.vehicle})' if summary.vehicle else ''}: " + "; ".join(
+            f"{m.mode} {m.start - t0:.1f}–{min(m.end, summary.t_end) - t0:.1f} s "
+            f"({min(m.end, summary.t_end) - m.start:.1f} s)" for m in summary.modes))
+    if summary.armed:
+        ctx.say("armed: " + "; ".join(f"{a - t0:.1f}–{min(b, summary.t_end) - t0:.1f} s" for a, b in summary.armed))
+    if summary.skipped:
+        ctx.say("skipped: " + ", ".join(f"{k} {v}" for k, v in summary.skipped))
+    return 0
+
+
+def _is_dataset_output(output: str) -> bool:
+    """``-o DIR/`` (or an existing directory, or a name without a suffix) asks for a partitioned dataset."""
+    return output.endswith(("/", os.sep)) or Path(output).is_dir() or not Path(output).suffix
+
+
+def _import_dataset(ctx: Context) -> int:
+    from adapters.batch import expand_logs, import_logs
+
+    a = ctx.args
+    files = expand_logs(a.logs)
+    with ctx.executor() as ex, ctx.progress() as progress:
+        task = progress.add_task(f"importing {len(files)} logs", total=len(files))
+        report = import_logs(files, a.output, a.mapping, label=a.label, executor=ex,
+                             progress=lambda done, total: progress.update(task, completed=done))
+    for log in report.imported:
+        if log.skipped:  # a damaged or partly unmapped file still gave data: say what was left out
+            what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in log.skipped)
+            print(f"warning: {log.source}: skipped {what}", file=sys.stderr)
+    for source, cause in report.failures:
+        print(f"error: {source}: not imported: {cause}", file=sys.stderr)
+    subjects = {p.subject for log in report.imported for p in log.partitions if p.subject is not None}
+    ctx.say(f"wrote {report.n_demos} demonstrations ({report.n_samples} samples, {len(subjects)} subjects) from "
+            f"{len(report.imported)} of {len(files)} logs to the dataset {report.path}/")
+    return EXIT_ERROR if report.failures else 0
+
+
+def cmd_import(ctx: Context) -> int:
+    a = ctx.args
+    if _is_dataset_output(a.output):
+        return _import_dataset(ctx)
+    if a.workers or a.scheduler:
+        print(f"warning: --workers and --scheduler import in parallel into a dataset (-o DIR/); {a.output} is one "
+              "file, so the logs are read here, one after another", file=sys.stderr)
+    from adapters.batch import expand_logs
+
+    ds = load_demos(ctx, [str(f) for f in expand_logs(a.logs)], a.mapping)
+    if a.label:
+        ds = type(ds)([d.with_meta(label=a.label) for d in ds], ds.state_names, ds.input_names, ds.dt)
+    out = Path(a.output)
+    write_demos(ds, out, a.mapping)
+    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples, labels {ds.labels}) to {out}")
+    return 0

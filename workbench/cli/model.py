@@ -1,0 +1,190 @@
+"""``workbench fit`` and ``predict``: one model from demonstrations, and its predictions.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from workbench.atomic import atomic_write_table
+from workbench.cli.context import (
+    Context,
+    demos_at_model_dt,
+    load_demos,
+    load_model_file,
+    print_plant,
+    steps_of,
+    system_for,
+)
+from workbench.errors import DataError, WorkbenchError
+
+__all__ = []
+
+def cmd_fit(ctx: Context) -> int:
+    a = ctx.args
+    ds = load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None)
+    system = system_for(ds, a.system)
+    print_plant(ctx, system)
+    t0 = time.perf_counter()
+    with ctx.progress() as progress:
+        components = a.n_components
+        if components == "cv" and a.method != "proposed":
+            raise DataError("--n-components cv chooses the proposed model's settings; use a number or 'bic' with "
+                            f"--method {a.method}")
+        if components == "bic" and a.method != "ioc-only":
+            from workbench.study.pipeline import select_components
+
+            progress.add_task("choosing the number of components by BIC", total=None)
+            components = select_components(ds, system, seed=a.seed)
+            ctx.say(f"chose {components} components by BIC")
+        progress.add_task(f"fitting {a.method} model on {len(ds)} demonstrations", total=None)
+        from workbench.models.factory import make_model
+
+        model = make_model(a.method, system, n_components=components, random_state=a.seed, gain_method=a.gain).fit(ds)
+    model.save(a.output)
+    ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
+    _print_model(ctx, model, ds)
+    if a.bootstrap > 0 and getattr(model, "K_", None) is not None:
+        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, a.gain)
+        _print_ratios(ctx, model, ds, a.bootstrap, a.seed)
+    elif getattr(model, "objective_", None) is not None:
+        ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
+    ctx.say(f"wrote {a.output}")
+    return 0
+
+
+def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct") -> None:
+    from workbench.method.resampling import bootstrap
+
+    with ctx.executor() as ex, ctx.progress() as progress:
+        task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
+        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain,
+                           progress=lambda done, total: progress.update(task, completed=done), executor=ex)
+    ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
+            f"{result.ci:g} % percentile intervals):")
+    for names, lo, hi, what in ((ds.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
+                                (ds.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
+        ctx.say(f"  diag {what}: " + ", ".join(
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(names, lo, hi, strict=True)))
+    for i, u in enumerate(ds.input_names):
+        ctx.say(f"  K̂ row {u}: " + ", ".join(
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(ds.state_names, result.K_lo[i], result.K_hi[i], strict=True)))
+
+
+def _as_fitted(ds: Any, model: Any) -> Any:
+    """The trials as a goal-relative model fitted them (states minus their targets), so the bootstrap's point
+    estimate is the model's own gain and objective; unchanged for a model of ``u = K̂x``."""
+    from workbench.data.demonstrations import Demonstration
+
+    if not getattr(model, "goal_relative_", False):
+        return ds
+    return ds.with_demos([Demonstration(d.t, d.x - d.target, d.u, d.meta) for d in ds])
+
+
+def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int) -> None:
+    """Weight ratios inside each coupled part of the plant (minimum-distance diagonal cost), with intervals."""
+    from workbench.study.weights import ratio_bootstrap
+
+    with ctx.progress() as progress:
+        task = progress.add_task(f"weight ratios: {n_boot} resampled gains", total=n_boot)
+        ratios, gain, note = ratio_bootstrap(model, ds, n_boot=n_boot, seed=seed,
+                                             progress=lambda done, total: progress.update(task, completed=done))
+    if ratios is None:
+        ctx.say(f"weight ratios: none ({note})")
+        return
+    g = ratios.gains
+    ctx.say(f"weight ratios inside coupled parts (S = 0, diagonal cost closest to the {gain} gain in the metric of "
+            f"its covariance over {g.n_ok} of {g.n_boot} resamples; {ratios.ci:g} % profile intervals; "
+            f"forward-gain error {ratios.forward_gain_error:.2g}):")
+    for r in ratios.intervals:
+        ctx.say(f"  {r.describe()}")
+    for f in ratios.fits:
+        if not f.explained:
+            ctx.say(f"  {f.describe()}: its ratios describe no objective the operator could have had")
+
+
+def _print_model(ctx: Context, model: Any, ds: Any) -> None:
+    import numpy as np
+
+    K = getattr(model, "K_", None)
+    if K is not None:
+        ctx.say("K̂ (u = K̂ x): " + np.array2string(np.asarray(K), precision=3, suppress_small=True))
+    o = getattr(model, "objective_", None)
+    if o is not None:
+        n = ds.n_states
+        q = np.diag(np.asarray(o.M_normalized)[:n, :n])
+        r = np.diag(np.asarray(o.M_normalized)[n:, n:])
+        ctx.say(f"α* = {o.alpha:.4g}, forward-gain error {o.forward_gain_error:.1e}")
+        ctx.say("diag Q/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.state_names, q, strict=True)))
+        ctx.say("diag R/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.input_names, r, strict=True)))
+    g = getattr(model, "n_components_", None) or getattr(model, "n_components", None)
+    if g is not None:
+        ctx.say(f"GMM components: {g}")
+    auto = getattr(model, "auto_", None)
+    if auto is not None:
+        ctx.say(f"chose G = {auto.n_components}, reg_covar = {auto.reg_covar:g} by {auto.folds}-fold cross-validation "
+                f"over the trials ({auto.criterion}); held-out 3 s RMSE per candidate: " + ", ".join(
+                    f"G{r['n_components']}/{r['reg_covar']:g} {r['heldout_rmse']:.3g}" for r in auto.scores))
+
+
+def cmd_predict(ctx: Context) -> int:
+    import numpy as np
+    import pandas as pd
+
+    a = ctx.args
+    model = load_model_file(a.model)
+    if a.x0 is not None:
+        try:
+            x0 = np.array([float(v) for v in a.x0.split(",")])
+        except ValueError:
+            raise DataError(f"--x0 must be comma-separated numbers, got {a.x0!r}") from None
+        target, t0, demo_id, task_x0, start = None, 0.0, "x0", None, 0
+        names, in_names = model.system.state_names, model.system.input_names
+    else:
+        if not a.demos:
+            raise WorkbenchError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
+        ds = load_demos(ctx, [a.demos], a.mapping)
+        ids = ds.ids
+        if a.demo and a.demo not in ids:
+            raise DataError(f"{a.demos}: no demonstration {a.demo!r}; ids present: {ids[:10]}")
+        demo = ds[ids.index(a.demo)] if a.demo else ds[0]
+        if not 0 <= a.start < len(demo):
+            raise DataError(f"{a.demos}: --start {a.start} outside trial {demo.id!r} (0…{len(demo) - 1})")
+        t0 = float(demo.t[a.start])
+        at_dt = demos_at_model_dt(ctx, ds, [model], a.resample, a.demos)
+        if at_dt is not ds:
+            # --start counts samples of the file; on the model's grid the start is the sample nearest its time
+            demo = at_dt[ids.index(demo.id)]
+            start = int(np.argmin(np.abs(demo.t - t0)))
+            ctx.say(f"step {a.start} (t = {t0:.3f} s) of {demo.id} is step {start} on the model's grid")
+            t0 = float(demo.t[start])
+        else:
+            start = a.start
+        x0, target, demo_id, task_x0 = demo.x[start], demo.target, demo.id, demo.x[0]
+        names, in_names = ds.state_names, ds.input_names
+    dt = model.system.dt  # the model steps at its own dt, whatever the demonstrations' sampling
+    n_steps = steps_of(a.horizon_s, dt)
+    # from inside a trial, the task's start frame stays at the trial's first state
+    kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0}
+    if a.samples:
+        kwargs.update(samples=a.samples, seed=a.seed)
+    pred = model.predict(x0, n_steps, **kwargs)
+    x, u = np.asarray(pred.x), np.asarray(pred.u)
+    names = list(names or [f"x{i}" for i in range(x.shape[1])])
+    in_names = list(in_names or [f"u{i}" for i in range(u.shape[1])])
+    cols: dict[str, Any] = {"demo": demo_id, "step": np.arange(len(x)), "t": t0 + dt * np.arange(len(x))}
+    cols.update({s: x[:, j] for j, s in enumerate(names)})
+    u_full = np.vstack([u, np.full((1, u.shape[1]), np.nan)])  # the last state has no input yet
+    cols.update({s: u_full[:, j] for j, s in enumerate(in_names)})
+    if pred.x_lower is not None:
+        cols.update({f"{s}_lower": pred.x_lower[:, j] for j, s in enumerate(names)})
+        cols.update({f"{s}_upper": pred.x_upper[:, j] for j, s in enumerate(names)})
+    out = atomic_write_table(pd.DataFrame(cols), a.output)
+    # the end position where the plant declares positions, else the whole end state
+    shown = model.system.r.position or range(len(names))
+    ctx.say(
+        f"predicted {n_steps} steps ({n_steps * dt:.2f} s) from {demo_id} step {start}: "
+        "end " + ", ".join(f"{names[j]} = {x[-1, j]:.3f}" for j in shown)
+    )
+    ctx.say(f"wrote {out}")
+    return 0

@@ -1,0 +1,279 @@
+"""The ``workbench`` command line: every command, its options and an example in its ``--help``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+from workbench.cli.context import (
+    DEFAULT_MAPPING,
+    SAMPLE_LOGS,
+    Context,
+    fit_n_components_arg,
+    int_list,
+    n_components_arg,
+    positive_float,
+)
+from workbench.cli.data import cmd_import, cmd_inspect, cmd_simulate
+from workbench.cli.model import cmd_fit, cmd_predict
+from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
+from workbench.cli.view import cmd_live, cmd_replay, cmd_view
+
+__all__ = ['build_parser']
+
+# -- parser ------------------------------------------------------------------------------------------------
+_EPILOG = """\
+examples:
+  workbench demo                                   # sample logs → models, report and out/demo.rrd
+  workbench inspect sample_logs/landing_s00.tlog   # streams, rates, fields, time span
+  workbench import sample_logs/*.tlog --mapping planar_quadrotor -o demos.parquet
+  workbench fit demos.parquet --label CS1 -o cs1.npz
+  workbench view demos.parquet --model CS1=cs1.npz --save session.rrd && rerun session.rrd
+  workbench replay demos.parquet --model cs1.npz --speed 2
+"""
+
+
+def _common(p: argparse.ArgumentParser, *, top: bool = False) -> None:
+    default = False if top else argparse.SUPPRESS
+    p.add_argument("--debug", action="store_true", default=default, help="show the traceback of an error")
+    p.add_argument("-q", "--quiet", action="store_true", default=default, help="print nothing but errors")
+
+
+def _study_options(
+    p: argparse.ArgumentParser, *, samples: int = 100, efficiency: str | None = "2,5,10,20", repeats: int = 2
+) -> None:
+    p.add_argument("--test-size", type=float, default=0.2, metavar="F",
+                   help="fraction of each strategy's trials held out for testing (default 0.2)")
+    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=3.0, metavar="SECONDS",
+                   help="prediction horizon in seconds (default 3.0, the paper's 60 steps)")
+    p.add_argument("--n-components", type=n_components_arg, default=5, metavar="G|bic",
+                   help="GMM components G, or 'bic' to pick G by BIC on each strategy's training trials "
+                        "(default 5, the paper's)")
+    p.add_argument("--samples", type=int, default=samples, metavar="N",
+                   help=f"Monte Carlo rollouts for the prediction band; 0 turns it off (default {samples})")
+    p.add_argument("--efficiency", type=int_list, default=int_list(efficiency) if efficiency else None,
+                   metavar="N,N,…", help=f"training-set sizes of the data-efficiency curve (default {efficiency})")
+    p.add_argument("--no-efficiency", dest="efficiency", action="store_const", const=None,
+                   help="skip the data-efficiency curve")
+    p.add_argument("--repeats", type=int, default=repeats, metavar="R",
+                   help=f"random training subsets per size on the data-efficiency curve (default {repeats})")
+    p.add_argument("--seed", type=int, default=0, help="seed of the split, EM and Monte Carlo (default 0)")
+    _system_option(p)
+
+
+def _system_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--system", choices=["auto", "paper", "identify"], default="auto",
+                   help="plant (A, B): the paper's planar quadrotor, identified from the data by least squares, "
+                   "or auto (the paper's for its state layout at dt 0.05 s, else identified)")
+
+
+def _output_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--save", metavar="FILE.rrd",
+                   help="write a rerun recording (without a display the default is out/<input>.rrd)")
+    g.add_argument("--spawn", action="store_true", help="stream to a native rerun viewer")
+    g.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1 (localhost only)")
+
+
+def _executor_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("scaling out (Dask)")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("--workers", type=int, metavar="N",
+                   help="run independent tasks on a local Dask cluster of N worker processes (default: serial, "
+                        "in this process)")
+    x.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run them on a running Dask cluster, e.g. tcp://10.0.0.5:8786 (its workers need the "
+                        "workbench and must reach the input files and --staging)")
+    g.add_argument("--staging", metavar="DIR",
+                   help="folder where data for the workers is written (default a temporary folder; on a cluster, "
+                        "a path every worker reaches)")
+
+
+def _mapping_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mapping", metavar="M",
+                   help=f"channel mapping for raw logs: a shipped name or a TOML file (default {DEFAULT_MAPPING})")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from workbench import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="workbench",
+        description="Models of how a human operator flies, from teleoperation and flight logs: u = K x + w, "
+        "K from inverse optimal control, w from a task-parameterized GMM read out by GMR.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"workbench {__version__}")
+    _common(parser, top=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    def add(name: str, func: Callable[[Context], int], help: str, example: str) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help, description=help, epilog=f"example:\n  {example}",
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        _common(p)
+        p.set_defaults(func=func)
+        return p
+
+    p = add("simulate", cmd_simulate, "simulate landing demonstrations with synthetic operators",
+            "workbench simulate --strategy CS1 CS2 --trials 30 -o demos.parquet")
+    p.add_argument("-o", "--output", metavar="FILE", help="demonstrations file: .parquet, .csv, .tlog or .mcap")
+    p.add_argument("--strategy", nargs="+", default=["CS1", "CS2"], choices=["CS1", "CS2"],
+                   help="control strategies: CS1 centre first, CS2 straight line (default both)")
+    p.add_argument("--trials", type=int, default=30, help="trials per strategy and subject (default 30)")
+    p.add_argument("--subjects", type=int, default=0, help="number of synthetic subjects; 0 = the reference expert")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sample-logs", metavar="DIR", help="instead: regenerate the sample logs into DIR")
+
+    p = add("inspect", cmd_inspect, "show what a log contains: streams, rates, fields, time span",
+            "workbench inspect flight.tlog")
+    p.add_argument("log", help="a .tlog, .mcap, .ulg, .csv log or a demonstrations .parquet")
+
+    p = add("import", cmd_import, "turn logs into one demonstrations file, or many logs into a partitioned dataset",
+            "workbench import 'logs/*.tlog' --mapping planar_quadrotor -o dataset/ --workers 2")
+    p.add_argument("logs", nargs="+", metavar="LOG|DIR|GLOB",
+                   help="log files, directories of logs, or quoted glob patterns")
+    _mapping_option(p)
+    p.add_argument("-o", "--output", required=True, metavar="FILE|DIR/",
+                   help="a demonstrations file (.parquet, .csv, …), or DIR/ for a dataset with one Parquet file per "
+                        "log and subject, imported in parallel; a log that fails is reported and the rest imported")
+    p.add_argument("--label", help="set every trial's strategy label")
+    _executor_options(p)
+
+    p = add("fit", cmd_fit, "fit a human behavior model (task objective + variability) to demonstrations",
+            "workbench fit demos.parquet --label CS1 --n-components 5 -o cs1.npz")
+    p.add_argument("demos", metavar="DEMOS", help="demonstrations (.parquet) or a raw log (with --mapping)")
+    p.add_argument("-o", "--output", required=True, metavar="MODEL.npz")
+    p.add_argument("--label", help="fit only the trials of this strategy label")
+    p.add_argument("--n-components", type=fit_n_components_arg, default=5, metavar="G|bic|cv",
+                   help="GMM components G (default 5, the paper's); bic: G by BIC; cv: the proposed model chooses G "
+                        "and reg_covar by cross-validation over the trials (held-out 3 s predictions)")
+    p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
+                   help="the proposed model (default) or one of its baselines")
+    p.add_argument("--gain", choices=["direct", "dmd", "iv"], default="direct",
+                   help="how K̂ is estimated: least squares (direct, default), the paper's DMD, or instrumental "
+                        "variables (iv: consistent when the operator's variability is autocorrelated)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialization (default 0)")
+    p.add_argument("--bootstrap", type=int, default=100, metavar="N",
+                   help="resample the trials N times (default 100; 0: no intervals) and print 95 %% intervals of "
+                        "K̂, the normalized Q, R diagonals and the weight ratios inside coupled parts (the paper "
+                        "gives none)")
+    _system_option(p)
+    _mapping_option(p)
+    _executor_options(p)
+
+    p = add("predict", cmd_predict, "predict a trajectory with a fitted model from a recorded or given state",
+            "workbench predict --model cs1.npz demos.parquet --demo s00-cs1-003 --horizon 3 --samples 200 -o p.csv")
+    p.add_argument("demos", nargs="?", metavar="DEMOS", help="demonstrations to take the start state from")
+    p.add_argument("--model", required=True, metavar="MODEL.npz")
+    p.add_argument("--demo", metavar="ID", help="trial to start from (default the first)")
+    p.add_argument("--start", type=int, default=0, metavar="K", help="sample of the trial to start from (default 0)")
+    p.add_argument("--x0", metavar="X,Y,…", help="instead of a trial: the start state, comma-separated")
+    p.add_argument("--resample", action="store_true",
+                   help="resample demonstrations sampled at another dt than the model's to the model's dt "
+                        "(default: refuse them)")
+    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=3.0, metavar="SECONDS",
+                   help="prediction horizon in seconds (default 3.0)")
+    p.add_argument("--samples", type=int, default=0, metavar="N",
+                   help="Monte Carlo rollouts: adds <state>_lower/_upper band columns (5–95 %%)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet")
+    _mapping_option(p)
+
+    p = add("evaluate", cmd_evaluate,
+            "compare the proposed model with IOC-only, GMR-only and persistence on held-out trials; data efficiency",
+            "workbench evaluate demos.parquet --horizon 3 -o results.csv")
+    p.add_argument("demos", nargs="+", metavar="DEMOS")
+    p.add_argument("--label", nargs="+", help="strategy labels to evaluate (default all)")
+    p.add_argument("-o", "--output", metavar="FILE", help="tidy results table (.csv or .parquet)")
+    p.add_argument("--per-subject", action="store_true",
+                   help="the paper's multi-subject design: a model per subject, --n-test held-out trials each, "
+                        "ANOVA and paired t-tests across the methods (use --horizon 5 for the paper's)")
+    p.add_argument("--n-test", type=int, default=1, metavar="N",
+                   help="held-out trials per subject with --per-subject (default 1)")
+    p.add_argument("--holdout", choices=["auto", "split", "loso"], default="auto",
+                   help="test trials: one random split (--test-size), leave-one-segment-out (every trial tested "
+                        "once by models fitted on the others; no data-efficiency curve), or auto: leave-one-out "
+                        "when a label has fewer than 10 trials (default)")
+    _study_options(p)
+    _mapping_option(p)
+    _executor_options(p)
+
+    p = add("view", cmd_view, "log demonstrations (and a model's variability and predictions) to rerun",
+            "workbench view demos.parquet --model CS1=cs1.npz --model CS2=cs2.npz --save session.rrd")
+    p.add_argument("inputs", nargs="+", metavar="DEMOS_OR_LOG")
+    p.add_argument("--model", action="append", metavar="[LABEL=]MODEL.npz",
+                   help="a fitted model; with LABEL= it explains the trials of that strategy (repeatable)")
+    p.add_argument("--label", nargs="+", help="show only these strategy labels")
+    p.add_argument("--focus", nargs="+", metavar="ID", help="trials to predict from (default the first per label)")
+    p.add_argument("--starts", nargs="+", type=int, metavar="K", help="samples to predict from (default 0)")
+    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=3.0, metavar="SECONDS",
+                   help="prediction horizon in seconds (default 3.0)")
+    p.add_argument("--samples", type=int, default=0, metavar="N", help="Monte Carlo rollouts for the band")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    p.add_argument("--resample", action="store_true",
+                   help="resample demonstrations sampled at another dt than the model's to the model's dt "
+                        "(default: refuse them)")
+    _mapping_option(p)
+    _output_options(p)
+
+    p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",
+            "workbench replay demos.parquet --model cs1.npz --speed 1.0 --spawn")
+    p.add_argument("log", metavar="LOG", help="demonstrations (.parquet) or a raw log (with --mapping)")
+    p.add_argument("--model", metavar="MODEL.npz", help="the model whose online predictions are shown")
+    p.add_argument("--to", metavar="CONNECTION",
+                   help="instead: send a .tlog's raw MAVLink frames to a link with their recorded timing (a stand-in "
+                        "vehicle for `workbench live`), e.g. udpout:127.0.0.1:14550; no model needed")
+    p.add_argument("--demo", nargs="+", metavar="ID", help="trials to replay (default the first)")
+    p.add_argument("--speed", type=positive_float, default=1.0, help="multiple of real time (default 1.0)")
+    p.add_argument("--no-wait", action="store_true", help="stream as fast as possible")
+    p.add_argument("--horizon", dest="horizon_s", type=float, default=1.0, metavar="SECONDS",
+                   help="rollout horizon of the online prediction (default 1.0 s; 0 turns rollouts off)")
+    p.add_argument("--resample", action="store_true",
+                   help="resample demonstrations sampled at another dt than the model's to the model's dt "
+                        "(default: refuse them)")
+    _mapping_option(p)
+    _output_options(p)
+
+    p = add("live", cmd_live, "predict the pilot online from a vehicle's live MAVLink telemetry, into rerun",
+            "workbench live udpin:0.0.0.0:14550 --mapping planar_quadrotor --model cs1.npz --spawn")
+    p.add_argument("connection", metavar="CONNECTION",
+                   help="a pymavlink connection: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device")
+    p.add_argument("--model", required=True, metavar="MODEL.npz")
+    p.add_argument("--duration", type=positive_float, metavar="SECONDS", help="stop after this long (default: Ctrl-C)")
+    p.add_argument("--horizon", dest="horizon_s", type=float, default=1.0, metavar="SECONDS",
+                   help="rollout horizon at every step (default 1.0 s; 0 turns rollouts off)")
+    p.add_argument("--sysid", type=int, metavar="N", help="follow this MAVLink system (default: the first vehicle)")
+    p.add_argument("--clock", choices=["vehicle", "arrival"], default="vehicle",
+                   help="time samples by the vehicle's time_boot_ms (default) or by their arrival")
+    p.add_argument("--silence", type=positive_float, default=2.0, metavar="SECONDS",
+                   help="report the link silent after this long without data (default 2 s)")
+    _mapping_option(p)
+    _output_options(p)
+
+    p = add("report", cmd_report, "fit, compare and write a Markdown report with PNG figures",
+            "workbench report demos.parquet -o report/")
+    p.add_argument("demos", nargs="+", metavar="DEMOS")
+    p.add_argument("-o", "--output", required=True, metavar="DIR")
+    p.add_argument("--label", nargs="+", help="strategy labels to include (default all)")
+    p.add_argument("--title", default="Workbench report")
+    _bootstrap_option(p)
+    _study_options(p)
+    _mapping_option(p)
+    _executor_options(p)
+
+    p = add("demo", cmd_demo, "the whole pipeline on the sample logs: import, fit CS1 and CS2, compare, report, .rrd",
+            "workbench demo --out out/ && rerun out/demo.rrd")
+    p.add_argument("--out", default="out", metavar="DIR", help="output directory (default out/)")
+    p.add_argument("--logs", metavar="DIR", help=f"logs to import (default {SAMPLE_LOGS})")
+    _study_options(p, repeats=1)  # one subset per size keeps the demo well under a minute on two cores
+    _bootstrap_option(p)
+    _mapping_option(p)
+    return parser
+
+
+def _bootstrap_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bootstrap", type=int, default=100, metavar="N",
+                   help="resamples of each strategy's training trials for the intervals of its task objective and "
+                        "weight ratios (default 100; 0: point estimates only)")

@@ -1,0 +1,255 @@
+"""``workbench evaluate``, ``report`` and ``demo``: the comparison of the proposed model with its baselines.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from workbench.atomic import atomic_write_table
+from workbench.cli.context import (
+    SAMPLE_LOGS,
+    Context,
+    is_demo_file,
+    load_demos,
+    print_plant,
+    require_proposed,
+    steps_of,
+    study_plant,
+    system_for,
+    viewer_command,
+)
+from workbench.errors import DataError
+
+__all__ = []
+
+def cmd_evaluate(ctx: Context) -> int:
+    from workbench.study import pipeline as study
+
+    a = ctx.args
+    ds = load_demos(ctx, a.demos, a.mapping, a.label)
+    if a.per_subject:
+        return _evaluate_per_subject(ctx, ds)
+    smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
+    loso = a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW)
+    with ctx.executor() as ex:
+        if loso:
+            ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
+                    "the others)")
+            result = study.run_loso(
+                ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
+                n_components=a.n_components,
+                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex,
+            )
+        else:
+            result = study.run_study(
+                ds,
+                study_plant(a.system, a.horizon_s),
+                test_size=a.test_size,
+                n_steps=steps_of(a.horizon_s, ds.dt),
+                n_components=a.n_components,
+                samples=a.samples,
+                efficiency=a.efficiency,
+                repeats=a.repeats,
+                seed=a.seed,
+                progress=ctx.progress,
+                executor=ex,
+            )
+    if loso and getattr(result.system, "identification", None) is not None:
+        # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
+        # spread of the folds' plants, which the scores below used
+        checks = [c for p in result.plants.values() for c in p.identification.checks]
+        spread = (f"each fold's plant from its training segments: {checks[0].name} "
+                  f"{min(c.value for c in checks):.4g}–{max(c.value for c in checks):.4g} over {len(checks)} folds"
+                  if checks else "each fold's plant is identified from its training segments only")
+        print_plant(ctx, system_for(ds, a.system, a.horizon_s), f"(plant from all {len(ds)} segments; {spread})")
+    else:
+        print_plant(ctx, result.system, "(plant from the training trials)")
+    _print_study(ctx, result)
+    if a.output:
+        result.save_tables(a.output)
+        ctx.say(f"wrote {a.output}")
+    return 0
+
+
+def _evaluate_per_subject(ctx: Context, ds: Any) -> int:
+    from rich.markup import escape
+    from rich.table import Table
+
+    from workbench.models.factory import METHOD_TITLES, make_models
+    from workbench.study import evaluate
+    from workbench.study.pipeline import verdicts
+
+    a = ctx.args
+    components = 5 if a.n_components == "bic" else a.n_components
+    plant = study_plant(a.system)
+    subjects = sorted({str(d.meta.get("subject")) for d in ds if d.meta.get("subject") is not None})
+    seed = a.seed
+    # a dataset is read where it lies, each subject's partition by its own task: nothing to stage for workers
+    source = a.demos[0] if len(a.demos) == 1 and not a.label and is_demo_file(Path(a.demos[0])) and Path(
+        a.demos[0]).is_dir() else ds
+    with ctx.executor() as ex, ctx.progress() as progress:
+        task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
+        res = evaluate.per_subject(
+            # each subject's plant from its training trials only, never from the held-out ones
+            lambda train: make_models(plant(train), n_components=components, random_state=seed), source,
+            n_test=a.n_test,
+            n_steps=steps_of(a.horizon_s, ds.dt), seed=a.seed,
+            progress=lambda done, total: progress.update(task, completed=done), executor=ex,
+        )
+    for failure in res.failures:
+        print(f"warning: {failure}", file=sys.stderr)
+    table = Table("subject", *[METHOD_TITLES.get(m, m) for m in res.groups],
+                  title=f"per-subject {res.metric} ({a.n_test} held-out trial(s) each, {a.horizon_s:g} s horizon)")
+    for i, subject in enumerate(res.subjects):
+        table.add_row(subject, *[f"{g[i]:.4g}" for g in res.groups.values()])
+    ctx.say(table)
+    ctx.say(f"one-way ANOVA across methods: {res.anova}")
+    for r in res.ttests.values():
+        ctx.say(f"  {r}")
+    for line in verdicts(res.table.assign(label=""), res.metric):
+        ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
+    if a.output:
+        atomic_write_table(res.table, a.output)
+        ctx.say(f"wrote {a.output}")
+    return 0
+
+
+def _print_study(ctx: Context, result: Any) -> None:
+    from rich.markup import escape
+    from rich.table import Table
+
+    summary = result.summary()
+    table = Table(*[str(c) for c in summary.columns], title="mean horizon RMSE on the test trials")
+    for row in summary.itertuples(index=False):
+        table.add_row(*[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row])
+    ctx.say(table)
+    if result.coverage is not None and len(result.coverage):
+        cov = Table(*[str(c) for c in result.coverage.columns], title="one-step coverage of ŵ by GMR bands [%]")
+        for row in result.coverage.itertuples(index=False):
+            cov.add_row(*[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row])
+        ctx.say(cov)
+    if result.stats_text:
+        ctx.say(result.stats_text)
+    _print_objective_comparison(ctx, result)
+    for line in result.verdicts():
+        ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
+
+
+def _print_objective_comparison(ctx: Context, result: Any) -> None:
+    """Weight ratios inside coupled parts per strategy, and each one's factor against the first strategy."""
+    from rich.table import Table
+
+    from workbench.study.weights import NOT_EXPLAINED, NOT_IDENTIFIABLE, compare_strategies, format_interval
+
+    ratios = {lb: oi.ratios for lb, oi in getattr(result, "objectives", {}).items() if oi.ratios is not None}
+    if not ratios:
+        return
+    table = compare_strategies(ratios)
+    first = next(iter(ratios))
+    out = Table("ratio", "strategy", "estimate [95 % interval]", f"× vs {first}", "",
+                title="task-objective weight ratios inside coupled parts (diagonal cost, profile intervals)")
+    for r in table.itertuples():
+        factor = getattr(r, "factor", float("nan"))
+        note = r.note if r.strategy == first or factor != factor else (r.factor_note or r.note)
+        out.add_row(r.ratio, str(r.strategy), format_interval(r.estimate, r.lo, r.hi),
+                    "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi),
+                    note if note else "")
+    ctx.say(out)
+    notes = set(table["note"]) | (set(table["factor_note"].dropna()) if "factor_note" in table else set())
+    if NOT_IDENTIFIABLE in notes:
+        ctx.say(f"(\"{NOT_IDENTIFIABLE}\": the 95 % interval spans more than ×10)")
+    if NOT_EXPLAINED in notes:
+        ctx.say(f"(\"{NOT_EXPLAINED}\": the estimated gain is farther from every diagonal-cost LQR gain than its "
+                "spread allows, so the operator's objective is not of that form and these ratios describe none)")
+
+
+def cmd_report(ctx: Context) -> int:
+    from workbench.report.markdown import write_study_report
+    from workbench.study import pipeline as study
+
+    a = ctx.args
+    ds = load_demos(ctx, a.demos, a.mapping, a.label)
+    with ctx.executor() as ex:
+        result = study.run_study(
+            ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
+            n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
+            progress=ctx.progress, executor=ex, bootstrap=a.bootstrap,
+        )
+    print_plant(ctx, result.system, "(plant from the training trials)")
+    require_proposed(result)
+    path = write_study_report(result, a.output, title=a.title)
+    _print_study(ctx, result)
+    ctx.say(f"wrote {path} with figures in {Path(a.output) / 'figures'}")
+    return 0
+
+
+def cmd_demo(ctx: Context) -> int:
+    from rich.markup import escape
+
+    from workbench.report.markdown import write_study_report
+    from workbench.study import pipeline as study
+    from workbench.viewer import record_study
+
+    a = ctx.args
+    t_start = time.perf_counter()
+    out = Path(a.out)
+    logs = Path(a.logs) if a.logs else SAMPLE_LOGS
+    files = sorted(p for p in logs.iterdir() if p.is_file() and not p.name.startswith(".")) if logs.is_dir() else []
+    files = [p for p in files if p.suffix.lower() in (".tlog", ".mcap", ".csv", ".ulg", ".parquet")]
+    if not files:
+        if a.logs:
+            raise DataError(f"{logs}: no logs (.tlog, .mcap, .csv, .ulg) to import")
+        from workbench.cli.sample_logs import write_sample_logs
+
+        logs = out / "sample_logs"
+        ctx.say(f"{SAMPLE_LOGS} is empty; generating the sample logs into {logs}")
+        write_sample_logs(logs, seed=0)
+        files = sorted(p for p in logs.iterdir() if p.suffix.lower() in (".tlog", ".mcap", ".csv", ".ulg"))
+    timings = {}
+    t0 = time.perf_counter()
+    ds = load_demos(ctx, [str(f) for f in files], a.mapping)
+    timings["import"] = time.perf_counter() - t0
+    by_format: dict[str, int] = {}
+    for f in files:
+        by_format[f.suffix.lstrip(".")] = by_format.get(f.suffix.lstrip("."), 0) + 1
+    ctx.say(
+        f"imported {len(ds)} demonstrations ({ds.n_samples} samples; labels {ds.labels}) from {len(files)} logs "
+        f"({', '.join(f'{v} {k}' for k, v in by_format.items())}) in {logs}"
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    ds.save(out / "demos.parquet")
+    result = study.run_study(
+        ds, study_plant(a.system), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
+        n_components=a.n_components,
+        samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
+        bootstrap=a.bootstrap,
+    )
+    timings["fit + compare"] = time.perf_counter() - t0 - timings["import"]
+    require_proposed(result)
+    model_dir = out / "models"
+    for label, model in result.models.items():
+        model.save(model_dir / f"{label}.npz")
+    result.save_tables(out / "results.csv")
+    t1 = time.perf_counter()
+    report = write_study_report(result, out, title="Workbench demo: sample logs")
+    timings["report"] = time.perf_counter() - t1
+    rrd = out / "demo.rrd"
+    t1 = time.perf_counter()
+    record_study(result, rrd, progress=ctx.progress)
+    timings["recording"] = time.perf_counter() - t1
+    _print_study(ctx, result)
+    ctx.say("")
+    rows = [
+        ("report", f"{report}  (figures in {out / 'figures'})"),
+        ("recording", f"{rrd}   open it with:  {viewer_command(rrd)}"),
+        ("models", ", ".join(str(model_dir / f"{k}.npz") for k in result.models)),
+        ("data", f"{out / 'demos.parquet'}, {out / 'results.csv'}"),
+    ]
+    for key, value in rows:
+        ctx.say(f"[bold]{key:<10}[/bold] {escape(value)}", markup=True)
+    parts = ", ".join(f"{k} {v:.1f} s" for k, v in timings.items())
+    ctx.say(f"done in {time.perf_counter() - t_start:.1f} s ({parts})")
+    return 0

@@ -1,0 +1,188 @@
+"""``workbench view``, ``replay`` and ``live``: rerun recordings of logs, models and live telemetry.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+from workbench.cli.context import (
+    DEFAULT_MAPPING,
+    Context,
+    announce,
+    demos_at_model_dt,
+    existing_path,
+    load_demos,
+    load_model_file,
+    output_kwargs,
+    steps_of,
+)
+from workbench.errors import DataError, WorkbenchError
+
+__all__ = []
+
+def cmd_view(ctx: Context) -> int:
+    from workbench import viewer
+
+    a = ctx.args
+    ds = load_demos(ctx, a.inputs, a.mapping, a.label)
+    models, named = None, None
+    if a.model:
+        by_label: dict[str, Any] = {}
+        for spec in a.model:
+            label, _, path = spec.rpartition("=")
+            by_label[label] = load_model_file(path)
+        if "" in by_label:
+            if len(by_label) > 1:
+                raise WorkbenchError("give every --model a LABEL= (e.g. --model CS1=cs1.npz) or pass only one")
+            models = by_label[""]
+            named = {Path(a.model[0]).stem: models}
+        else:
+            models = named = by_label
+        ds = demos_at_model_dt(ctx, ds, list(by_label.values()), a.resample, ", ".join(a.inputs))
+    n_steps = steps_of(a.horizon_s, ds.dt)
+    default = Path("out") / (Path(a.inputs[0]).stem + ".rrd")  # under out/, never beside the input
+    out = output_kwargs(a, default)
+    rec = viewer.new_recording(viewer.APPLICATION_IDS["session" if models is not None else "log"])
+    with ctx.progress() as progress:
+        progress.add_task(f"logging {len(ds)} demonstrations", total=None)
+        with viewer.open_output(rec, **out) as sink:
+            session = viewer.log_session(
+                rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
+                samples=a.samples, starts=a.starts or (0,), seed=a.seed,
+            )
+            sink.blueprint = viewer.default_blueprint(session)
+    announce(ctx, out, sink, f"{len(ds)} demonstrations")
+    return 0
+
+
+def cmd_replay(ctx: Context) -> int:
+    if getattr(ctx.args, "to", None):  # a stand-in vehicle: the log's raw MAVLink frames, no model
+        return _replay_to(ctx)
+    from workbench import viewer
+    from workbench.viewer import replay, replay_blueprint
+
+    a = ctx.args
+    if not a.model:
+        raise WorkbenchError("replay needs --model MODEL.npz (predictions) or --to CONNECTION (send the log to a link)")
+    ds = load_demos(ctx, [a.log], a.mapping)
+    model = load_model_file(a.model)
+    ds = demos_at_model_dt(ctx, ds, [model], a.resample, a.log)
+    ids = ds.ids
+    chosen = a.demo or [ids[0]]
+    missing = [i for i in chosen if i not in ids]
+    if missing:
+        raise DataError(f"{a.log}: no demonstration {missing[0]!r}; ids present: {ids[:10]}")
+    out = output_kwargs(a, Path("out") / (Path(a.log).stem + ".replay.rrd"))
+    rec = viewer.new_recording(viewer.APPLICATION_IDS["replay"])
+    stats = []
+    with viewer.open_output(rec, **out) as sink:
+        sink.blueprint = replay_blueprint(chosen, ds.state_names, ds.input_names, roles=ds.roles,
+                                          demos=[ds[ids.index(i)] for i in chosen])
+        if not out["save"]:
+            rec.send_blueprint(sink.blueprint)
+        with ctx.progress() as progress:
+            for demo_id in chosen:
+                demo = ds[ids.index(demo_id)]
+                task = progress.add_task(f"replaying {demo_id} at {a.speed:g}×", total=len(demo))
+                stats.append(
+                    replay(demo, model, rec, state_names=ds.state_names, input_names=ds.input_names, roles=ds.roles,
+                           speed=a.speed, wait=not a.no_wait,
+                           n_steps=steps_of(a.horizon_s, ds.dt) if a.horizon_s else 0,
+                           on_step=lambda k, task=task: progress.update(task, completed=k + 1))
+                )
+    for s in stats:
+        cover = ", ".join(f"{n} {100 * c:.1f} %" for n, c in zip(ds.input_names, s.coverage_3sigma, strict=True))
+        ctx.say(f"{s.demo_id}: {s.n_steps} steps, {s.sim_time:.1f} s of flight in {s.wall_time:.2f} s "
+                f"({s.realtime_factor:.1f}× real time); actual input inside the online 3σ band: {cover}")
+    announce(ctx, out, sink, f"replay of {', '.join(chosen)}")
+    return 0
+
+
+def _replay_to(ctx: Context) -> int:
+    from adapters.link.mavlink import send_tlog
+
+    a = ctx.args
+    log = existing_path(a.log)
+    ctx.say(f"sending {log} to {a.to} at {a.speed:g}× real time (Ctrl-C to stop)")
+    with ctx.progress() as progress:
+        task = progress.add_task(f"replaying {log.name} to {a.to}", total=None)
+        try:
+            report = send_tlog(log, a.to, speed=a.speed,
+                               on_frame=lambda n, t: progress.update(task, completed=n) if n % 200 == 0 else None)
+        except KeyboardInterrupt:
+            ctx.say("stopped")
+            return 130
+    ctx.say(f"sent {report.n_frames} MAVLink frames ({report.log_seconds:.1f} s of log) in {report.wall_seconds:.1f} s "
+            f"({report.speed:.1f}× real time)")
+    return 0
+
+
+def cmd_live(ctx: Context) -> int:
+    import signal
+
+    from adapters.link.mavlink import open_link
+    from workbench import viewer
+    from workbench.live.predictor import OnlinePredictor, listen
+    from workbench.viewer.live import LIVE_APPLICATION_ID, LiveLogger, live_blueprint
+    from workbench.viewer.scene import plane_of
+
+    a = ctx.args
+    model = load_model_file(a.model)
+    predictor = OnlinePredictor(model, a.mapping or DEFAULT_MAPPING, horizon_s=a.horizon_s, system=a.sysid,
+                                clock=a.clock, silence=a.silence)
+    m = predictor.mapping
+    scene = plane_of(m.roles, m.state_names)  # the plane of flight the replay and the session draw
+    plane = None if scene is None else (scene.across, scene.up, scene.heading)
+    out = output_kwargs(a, Path("out") / "live.rrd")
+    rec = viewer.new_recording(LIVE_APPLICATION_ID)
+    link = open_link(a.connection)
+    logger: Any = None
+    shown: list[str] = []
+
+    def on_prediction(p: Any) -> None:
+        logger.log(p)
+        if not out["save"] and logger.demo_ids[-1:] != shown[-1:]:  # a new segment: show it in the viewer
+            shown.append(p.demo_id)
+            rec.send_blueprint(live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
+                                              bounds=logger.scene_bounds()))
+
+    def on_event(ev: Any) -> None:
+        logger.event(ev)
+        print(f"{ev.kind}: {ev.text}", file=sys.stderr)
+
+    with link, viewer.open_output(rec, **out) as sink:
+        logger = LiveLogger(rec, m.state_names, m.input_names, plane=plane)
+        if not out["save"]:
+            rec.send_blueprint(live_blueprint([], m.state_names, m.input_names, scene=plane is not None))
+        ctx.say(f"listening on {a.connection} (mapping {m.name}, dt {m.dt:g} s, rollout {a.horizon_s:g} s)"
+                + (f" for {a.duration:g} s" if a.duration else "; Ctrl-C to stop"))
+        def on_tick(stats: Any) -> None:  # the viewer gets the steps in batches, a few times a second
+            logger.flush()
+            logger.status(stats)
+
+        def on_term(signum: int, frame: Any) -> None:  # a SIGTERM ends the session as cleanly as Ctrl-C
+            raise KeyboardInterrupt
+
+        previous = signal.signal(signal.SIGTERM, on_term)
+        try:
+            summary = listen(link, predictor, duration=a.duration, on_prediction=on_prediction, on_event=on_event,
+                             on_tick=on_tick, tick=0.25)
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+        sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
+                                        bounds=logger.scene_bounds())
+    c50, c99 = summary.percentiles("compute")
+    l50, l99 = summary.percentiles("latency")
+    ctx.say(f"{summary.n_steps} steps in {summary.n_segments} segment(s) over {summary.wall_seconds:.1f} s "
+            f"({'interrupted' if summary.ended_by == 'interrupt' else 'duration reached'}); per step "
+            f"p50 {c50:.2f} ms, p99 {c99:.2f} ms; message to prediction p50 {l50:.2f} ms, p99 {l99:.2f} ms")
+    counts = summary.stats.counts
+    ctx.say("link: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if v) or "nothing received"))
+    if summary.stats.waiting_for and not summary.n_steps:
+        ctx.say(f"never received: {', '.join(summary.stats.waiting_for)}")
+    if summary.ended_by == "interrupt" and out["serve"]:
+        return 0
+    announce(ctx, out, sink, f"live session ({summary.n_steps} steps)")
+    return 0

@@ -1,0 +1,248 @@
+"""Step 1 of Algorithm 1: the task-objective-based gain ``K̂`` of ``u = K x`` from demonstrations.
+
+As in the paper by dynamic mode decomposition, eqs. (12)-(14) (``Ã = X' X⁺``, ``K̂ = B⁺(Ã − A)``; labels
+``eq:DMD_argue``, ``eq:DMD_variables``, ``eq:K_hat_computation``), by the direct regression ``K̂ = U X⁺``
+(algebraically identical for exact (A, B), more accurate under process noise or model mismatch), or by
+instrumental variables (``"iv"``), the one of the three that is consistent in closed loop with autocorrelated
+variability.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from typing import Any, Literal
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+import scipy.sparse.csgraph
+
+from workbench.errors import DataError, ModelError
+
+try:  # a dependency of scikit-learn, so normally present
+    from threadpoolctl import ThreadpoolController
+except ImportError:  # pragma: no cover
+    ThreadpoolController = None
+from workbench.method.closed_loop import as_matrix, check_stabilizing, system_matrices
+
+__all__ = ['GainMethod', 'stack_demonstrations', 'iv_instruments', 'gain_from_arrays', 'estimate_gain']
+
+GainMethod = Literal["direct", "dmd", "iv"]
+_METHODS = ("direct", "dmd", "iv")
+
+
+# Instruments of method "iv": each demonstration's first state times this many decaying exponentials of time.
+IV_BASIS = 8
+
+
+# Smallest squared canonical correlation between states and instruments accepted by "iv" (see `_iv_gain`).
+IV_MIN_RELEVANCE = 0.05
+
+
+def _demo_name(d: Any, j: int) -> str:
+    ident = getattr(d, "id", None)
+    if ident is None:
+        meta = getattr(d, "meta", None)
+        ident = meta.get("id") if isinstance(meta, dict) else None
+    return f"demonstration {j}" + (f" ({ident!r})" if ident is not None else "")
+
+
+def demo_blocks(demos: Iterable[Any], n: int, m: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per demonstration, the column blocks (X_j, U_j, X'_j) of eq. (13) of the method paper."""
+    blocks = []
+    for j, d in enumerate(demos):
+        name = _demo_name(d, j)
+        x = as_matrix(getattr(d, "x", None), f"{name}: x", (None, n))
+        u = as_matrix(getattr(d, "u", None), f"{name}: u", (None, m))
+        if x.shape[0] != u.shape[0]:
+            raise DataError(f"{name}: x has {x.shape[0]} samples but u has {u.shape[0]}")
+        if x.shape[0] < 2:
+            continue  # a single sample has no transition to contribute
+        blocks.append((x[:-1].T, u[:-1].T, x[1:].T))
+    return blocks
+
+
+def stack_demonstrations(demos: Iterable[Any], n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stack demonstrations into the data matrices of eq. (13) of the method paper.
+
+    Parameters
+    ----------
+    demos : iterable of Demonstration
+        Each with ``.x`` (N_j, n) and ``.u`` (N_j, m), ``u[k]`` applied between ``x[k]`` and ``x[k+1]``.
+    n, m : int
+        Numbers of states and inputs.
+
+    Returns
+    -------
+    X, U, X_next : ndarray, shapes (n, T), (m, T), (n, T)
+        Columns ``x_1 … x_{N_j - 1}``, the inputs at the same steps, and ``x_2 … x_{N_j}`` of every
+        demonstration in turn, ``T = Σ_j (N_j − 1)``.
+    """
+    blocks = demo_blocks(demos, n, m)
+    if not blocks:
+        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
+    return tuple(np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))  # type: ignore[return-value]
+
+
+def iv_instruments(X: np.ndarray, lengths: Sequence[int], n_basis: int = IV_BASIS) -> np.ndarray:
+    """Instruments of the ``"iv"`` gain: each demonstration's first state times decaying exponentials of time.
+
+    The state a demonstration starts in was not made by its operator's variability, and (for zero-mean
+    variability) neither is ``x₀ e^{−k/τ}``; yet the closed loop carries ``x₀`` into every later state through
+    its decaying modes, which a few exponentials with time constants from 2 steps to half the longest
+    demonstration span. States several steps back are no substitute: an AR(1) variability with ρ = 0.9 still
+    correlates 0.35 over 10 steps, and on the known-gain operators of :mod:`workbench.sim.operators` lagged-state
+    instruments (lags 5-40) gave larger errors than least squares (0.7-6 against 0.3 relative), the
+    initial-state ones 0.02-0.04 at 30 demonstrations.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, T)
+        Stacked states, demonstration after demonstration.
+    lengths : sequence of int
+        Columns per demonstration, summing to T.
+    n_basis : int
+        Number of time constants.
+
+    Returns
+    -------
+    ndarray, shape (n · n_basis, T)
+    """
+    n, T = X.shape
+    lengths = [int(L) for L in lengths]
+    if sum(lengths) != T or min(lengths, default=0) < 1:
+        raise DataError(f"demonstration lengths {lengths[:5]}… do not add up to the {T} stacked transitions")
+    taus = np.geomspace(2.0, max(4.0, max(lengths) / 2.0), n_basis)
+    blocks = []
+    for start, L in zip(np.cumsum([0, *lengths[:-1]]), lengths, strict=True):
+        basis = np.exp(-np.arange(L)[:, None] / taus[None, :])  # (L, n_basis)
+        x0 = X[:, start]
+        blocks.append((basis[:, :, None] * x0[None, None, :]).reshape(L, -1).T)
+    return np.concatenate(blocks, axis=1)
+
+
+def _iv_gain(X: np.ndarray, U: np.ndarray, lengths: Sequence[int]) -> np.ndarray:
+    """Two-stage least squares: regress U on the projection of X onto the instruments."""
+    Z = iv_instruments(X, lengths)
+    X_hat = np.linalg.lstsq(Z.T, X.T, rcond=None)[0].T @ Z  # first stage: E[x | instruments]
+    # Relevance: the smallest squared canonical correlation between the states and the instruments. A state
+    # direction the starts do not move is "explained" only by chance (≈ 0.02 on 6 demonstrations, less on
+    # more); on the known-gain operators every direction reached ≥ 0.3.
+    L = np.linalg.cholesky(X @ X.T)
+    W = scipy.linalg.solve_triangular(L, X_hat, lower=True)
+    relevance = float(np.linalg.eigvalsh(W @ W.T)[0])
+    if relevance < IV_MIN_RELEVANCE:
+        raise ModelError(
+            f"the instruments of the 'iv' gain (initial states × time) leave a state direction unexcited: its "
+            f"squared canonical correlation with them is {relevance:.3g} < {IV_MIN_RELEVANCE:g}, so the starts "
+            "of the demonstrations do not move every state (e.g. all start at the same height). Use "
+            "demonstrations from more varied start states, or method='direct'"
+        )
+    return np.linalg.lstsq(X_hat.T, U.T, rcond=None)[0].T
+
+
+def gain_from_arrays(
+    X: Any,
+    U: Any,
+    X_next: Any,
+    A: Any,
+    B: Any,
+    method: GainMethod = "direct",
+    lengths: Sequence[int] | None = None,
+) -> np.ndarray:
+    """Estimate the gain ``K̂`` of ``u = K x`` from stacked data (step 1 of Algorithm 1).
+
+    Parameters
+    ----------
+    X, U, X_next : array_like, shapes (n, T), (m, T), (n, T)
+        States, inputs at the same steps and next states as columns (eq. (13) of the method paper).
+        ``U`` is used by ``"direct"`` only, ``X_next`` by ``"dmd"`` only.
+    A, B : array_like, shapes (n, n) and (n, m)
+        The known plant (Assumption 1).
+    method : {"direct", "dmd", "iv"}
+        ``"dmd"``: ``Ã = X' X⁺`` (eq. (12)) and ``K̂ = B⁺(Ã − A)`` (eq. (14)), valid under rank B = m
+        (Assumption 2). ``"direct"``: the least-squares regression ``K̂ = U X⁺``; identical to DMD for exact
+        dynamics, more accurate under process noise or model mismatch. ``"iv"``: instrumental variables
+        (two-stage least squares, instruments :func:`iv_instruments`), consistent when the variability is
+        autocorrelated and the state was made by the operator's own earlier inputs (closed loop), where both
+        least-squares estimates stay biased however many demonstrations there are.
+    lengths : sequence of int, optional
+        Columns of each demonstration in X (required by ``"iv"``).
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+
+    Raises
+    ------
+    ModelError
+        If rank(X) < n (the message reports rank and cond(X)), if rank B < m for ``"dmd"``, or if the
+        estimate is not stabilizing (Assumption 3; the message names ρ).
+    """
+    if method not in _METHODS:
+        raise DataError(f"method must be one of {_METHODS}, got {method!r}")
+    A, B = system_matrices(A, B)
+    n, m = B.shape
+    X = as_matrix(X, "X", (n, None))
+    T = X.shape[1]
+    sv = np.linalg.svd(X, compute_uv=False)
+    tol = sv[0] * max(X.shape) * np.finfo(float).eps if sv.size else 0.0
+    rank = int(np.sum(sv > tol))
+    if rank < n:
+        cond = float(sv[0] / sv[-1]) if sv.size == n and sv[-1] > 0 else math.inf
+        raise ModelError(
+            f"state data are rank-deficient: rank(X) = {rank} < n = {n} over {T} transitions "
+            f"(cond(X) = {cond:.3g}); the demonstrations do not excite every state direction, so K̂ "
+            "(eqs. (12)-(14) of the method paper) is not determined. Add demonstrations, or drop states "
+            "that never change"
+        )
+    cond_X = float(sv[0] / sv[-1])
+    if method == "direct":
+        U = as_matrix(U, "U", (m, T))
+        # lstsq on Xᵀ Kᵀ = Uᵀ: the minimum-norm least-squares solution, i.e. K̂ = U X⁺, without forming X⁺.
+        K = np.linalg.lstsq(X.T, U.T, rcond=None)[0].T
+    elif method == "iv":
+        U = as_matrix(U, "U", (m, T))
+        if lengths is None:
+            raise DataError("method 'iv' needs the demonstrations' lengths (its instruments are per demonstration)")
+        K = _iv_gain(X, U, lengths)
+    else:
+        X_next = as_matrix(X_next, "X_next", (n, T))
+        if np.linalg.matrix_rank(B) < m:
+            raise ModelError(
+                f"rank B = {np.linalg.matrix_rank(B)} < m = {m} (Assumption 2 of the method paper): B⁺B ≠ I, "
+                "so the DMD gain of eq. (14) is not defined; use method='direct'"
+            )
+        A_tilde = np.linalg.lstsq(X.T, X_next.T, rcond=None)[0].T  # eq. (12)
+        K = np.linalg.lstsq(B, A_tilde - A, rcond=None)[0]  # eq. (14)
+    try:
+        check_stabilizing(A, B, K)
+    except ModelError as exc:
+        raise ModelError(f"estimated gain ({method}, cond(X) = {cond_X:.3g}): {exc}") from None
+    return K
+
+
+def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direct") -> np.ndarray:
+    """Estimate ``K̂`` of ``u = K x`` from demonstrations (Algorithm 1, step 1; eqs. (12)-(14)).
+
+    Parameters
+    ----------
+    demos : DemonstrationSet or iterable of Demonstration
+        Each demonstration has ``.x`` (N, n) and ``.u`` (N, m).
+    system : LinearSystem
+        Anything with ``.A`` (n, n) and ``.B`` (n, m).
+    method : {"direct", "dmd", "iv"}
+        See :func:`gain_from_arrays`; ``"iv"`` for closed-loop data with autocorrelated variability.
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+        The gain, checked to be stabilizing (Assumption 3 of the method paper).
+    """
+    A, B = system_matrices(system.A, system.B)
+    blocks = demo_blocks(demos, *B.shape)
+    if not blocks:
+        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
+    X, U, X_next = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))
+    return gain_from_arrays(X, U, X_next, A, B, method, lengths=[b[0].shape[1] for b in blocks])

@@ -1,0 +1,293 @@
+"""Resampling whole demonstrations: intervals of ``K̂`` and of the task objective (the bootstrap over trials).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from workbench.errors import DataError, ModelError
+from workbench.frozen import readonly
+
+try:  # a dependency of scikit-learn, so normally present
+    from threadpoolctl import ThreadpoolController
+except ImportError:  # pragma: no cover
+    ThreadpoolController = None
+from workbench.method.closed_loop import single_threaded_blas, system_matrices
+from workbench.method.gain import GainMethod, demo_blocks, gain_from_arrays
+from workbench.method.inverse_lqr_sdp import InverseLQR, cached_problem
+from workbench.method.objective import _STRUCTURES, Structure, TaskObjective
+
+__all__ = ['BootstrapResult', 'GainBootstrap', 'bootstrap_gain', 'bootstrap']
+
+@dataclass(frozen=True, eq=False)
+class BootstrapResult:
+    """Percentile intervals of K̂ and of the normalized objective over demonstration resamples.
+
+    Attributes
+    ----------
+    K : ndarray, shape (m, n)
+        Point estimate from all demonstrations.
+    objective : TaskObjective
+        Point estimate of the task objective.
+    K_samples : ndarray, shape (n_ok, m, n)
+    Q_diag_samples, R_diag_samples : ndarray, shapes (n_ok, n) and (n_ok, m)
+        Diagonals of ``Q_normalized`` and ``R_normalized`` per successful resample.
+    K_lo, K_hi : ndarray, shape (m, n)
+    Q_diag_lo, Q_diag_hi : ndarray, shape (n,)
+    R_diag_lo, R_diag_hi : ndarray, shape (m,)
+        Lower and upper percentile bounds of the ``ci`` % interval.
+    n_boot, n_failed : int
+        Resamples drawn, and resamples whose gain or objective could not be fitted.
+    failures : tuple of str
+        One message per failed resample (index: reason).
+    ci : float
+    method, structure : str
+    seed : int
+    """
+
+    K: np.ndarray
+    objective: TaskObjective
+    K_samples: np.ndarray
+    Q_diag_samples: np.ndarray
+    R_diag_samples: np.ndarray
+    K_lo: np.ndarray
+    K_hi: np.ndarray
+    Q_diag_lo: np.ndarray
+    Q_diag_hi: np.ndarray
+    R_diag_lo: np.ndarray
+    R_diag_hi: np.ndarray
+    n_boot: int
+    n_failed: int
+    failures: tuple[str, ...]
+    ci: float
+    method: str
+    structure: str
+    seed: int
+
+    @property
+    def n_ok(self) -> int:
+        return self.n_boot - self.n_failed
+
+
+def _resample_fit(
+    blocks: list, idx: np.ndarray, A: np.ndarray, B: np.ndarray, method: GainMethod, solver: InverseLQR | None
+) -> tuple[np.ndarray, TaskObjective | None]:
+    """Gain and (with a solver) task objective of the demonstrations ``idx`` (with repeats) of ``blocks``."""
+    X, U, X_next = (np.concatenate([blocks[i][k] for i in idx], axis=1) for k in range(3))
+    K = gain_from_arrays(X, U, X_next, A, B, method, lengths=[blocks[i][0].shape[1] for i in idx])
+    return K, (None if solver is None else solver.solve(K))
+
+
+def _resamples(blocks: list, draws: list, A: np.ndarray, B: np.ndarray, method: GainMethod,
+               solver: InverseLQR | None) -> list[tuple]:
+    """Per resample ``(b, idx)``: ``(b, K, diag Q, diag R, None)`` (Q, R None without a solver), or
+    ``(b, None, None, None, reason)``."""
+    out = []
+    for b, idx in draws:
+        try:
+            K, obj = _resample_fit(blocks, idx, A, B, method, solver)
+        except ModelError as exc:
+            out.append((b, None, None, None, str(exc)))
+        else:
+            q, r = (None, None) if obj is None else (np.diag(obj.Q_normalized), np.diag(obj.R_normalized))
+            out.append((b, K, q, r, None))
+    return out
+
+
+def _bootstrap_block(task: tuple) -> list[tuple]:
+    """A block of bootstrap resamples, run by a worker: it reads the demonstrations from their file."""
+    ref, A, B, method, structure, draws = task
+    blocks = demo_blocks(list(ref.load()), *B.shape)
+    return _resamples(blocks, draws, A, B, method, _solver(A, B, structure))
+
+
+def _solver(A: np.ndarray, B: np.ndarray, structure: Structure | None) -> InverseLQR | None:
+    """The cached inverse-LQR problem of ``structure``; None for gains only."""
+    return None if structure is None else cached_problem(A, B, structure, True)
+
+
+def _run_resamples(
+    demos: Any, blocks: list, A: np.ndarray, B: np.ndarray, method: GainMethod, structure: Structure | None,
+    n_boot: int, seed: int, progress: Callable[[int, int], None] | None, executor: Any,
+) -> list[tuple]:
+    """Draw ``n_boot`` resamples of whole trials from one generator and fit each (see :func:`bootstrap`)."""
+    solver = _solver(A, B, structure)
+    rng = np.random.default_rng(seed)
+    draws = [(b, rng.integers(0, len(blocks), size=len(blocks))) for b in range(n_boot)]
+    if executor is None:
+        results = []
+        with single_threaded_blas():  # as on a worker: the same reductions, so the same intervals
+            for b, idx in draws:
+                results.extend(_resamples(blocks, [(b, idx)], A, B, method, solver))
+                if progress is not None:
+                    progress(b + 1, n_boot)
+        return results
+    # one resample per task in process (progress per resample); on workers ~4 blocks each amortize the setup
+    size = max(1, math.ceil(n_boot / (4 * executor.workers))) if executor.parallel else 1
+    ref = executor.share(demos)
+    tasks = [(ref, A, B, method, structure, draws[i : i + size]) for i in range(0, n_boot, size)]
+    report = None if progress is None else lambda done, total: progress(min(n_boot, done * size), n_boot)
+    return [r for block in executor.map(_bootstrap_block, tasks, progress=report) for r in block]
+
+
+def _resampled(
+    demos: Any, system: Any, n_boot: int, method: GainMethod, structure: Structure | None, seed: int,
+    progress: Callable[[int, int], None] | None, executor: Any,
+) -> tuple[int, np.ndarray, TaskObjective | None, list[tuple], list[str]]:
+    """The point fit on all trials and ``n_boot`` resampled fits: ``(n_trials, K, objective, fits, failures)``,
+    ``fits`` the ``(K, diag Q, diag R)`` of each resample that succeeded (Q, R None for gains only)."""
+    if int(n_boot) < 1:
+        raise DataError(f"n_boot must be ≥ 1, got {n_boot}")
+    n_boot = int(n_boot)
+    A, B = system_matrices(system.A, system.B)
+    blocks = demo_blocks(list(demos), *B.shape)
+    if not blocks:
+        raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
+    K0, obj0 = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, _solver(A, B, structure))
+    fits, failures = [], []
+    for b, K, q_diag, r_diag, error in _run_resamples(demos, blocks, A, B, method, structure, n_boot, seed,
+                                                      progress, executor):
+        if error is None:
+            fits.append((K, q_diag, r_diag))
+        else:
+            failures.append(f"resample {b}: {error}")
+    if not fits:
+        raise ModelError(f"all {n_boot} bootstrap resamples failed; first failure: {failures[0]}")
+    return len(blocks), K0, obj0, fits, failures
+
+
+@dataclass(frozen=True, eq=False)
+class GainBootstrap:
+    """Gains ``K̂`` of demonstration resamples, without a task objective per resample.
+
+    Attributes
+    ----------
+    K : ndarray, shape (m, n)
+        Point estimate from all demonstrations.
+    K_samples : ndarray, shape (n_ok, m, n)
+    n_trials : int
+        Demonstrations resampled (each resample draws this many, with repeats).
+    n_boot, n_failed : int
+    failures : tuple of str
+    method : str
+    seed : int
+    """
+
+    K: np.ndarray
+    K_samples: np.ndarray
+    n_trials: int
+    n_boot: int
+    n_failed: int
+    failures: tuple[str, ...]
+    method: str
+    seed: int
+
+    @property
+    def n_ok(self) -> int:
+        return self.n_boot - self.n_failed
+
+
+def bootstrap_gain(
+    demos: Any,
+    system: Any,
+    n_boot: int = 200,
+    method: GainMethod = "direct",
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    executor: Any = None,
+) -> GainBootstrap:
+    """The sampling distribution of ``K̂`` (eqs. (12)-(14)) over resamples of whole demonstrations.
+
+    What :func:`bootstrap` draws, without solving an inverse LQR per resample: the source of the gain's
+    covariance for :mod:`workbench.method.ratio_profile`. Same draws as :func:`bootstrap` for the same ``seed``.
+
+    Raises
+    ------
+    ModelError
+        If the point estimate on all demonstrations fails, or every resample fails.
+    """
+    n_trials, K0, _, fits, failures = _resampled(demos, system, n_boot, method, None, seed, progress, executor)
+    return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array([f[0] for f in fits])), n_trials=n_trials,
+                         n_boot=int(n_boot), n_failed=len(failures), failures=tuple(failures), method=method,
+                         seed=int(seed))
+
+
+def bootstrap(
+    demos: Any,
+    system: Any,
+    n_boot: int = 200,
+    method: GainMethod = "direct",
+    structure: Structure = "full",
+    seed: int = 0,
+    ci: float = 95,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    executor: Any = None,
+) -> BootstrapResult:
+    """Bootstrap intervals of the gain (eqs. (12)-(14)) and the task objective (eqs. (15)-(19)).
+
+    Demonstrations (whole trials, not samples: samples within a trial are correlated) are drawn with
+    replacement; each resample is refitted with :func:`gain_from_arrays` and the cached :class:`InverseLQR`
+    problem. Resamples that fail (rank-deficient, non-stabilizing, solver failure, infeasible structure)
+    are counted and reported, not raised.
+
+    Parameters
+    ----------
+    demos : DemonstrationSet or sequence of Demonstration
+    system : LinearSystem (anything with ``.A`` and ``.B``)
+    n_boot : int
+        Number of resamples.
+    method, structure
+        As in :func:`estimate_gain` and :func:`inverse_lqr`.
+    seed : int
+        Seed of the resampling generator.
+    ci : float
+        Interval coverage in percent (percentile method).
+    progress : callable(i, n), optional
+        Called after each resample with the count done and ``n_boot`` (after each block with workers).
+    executor : Executor, optional
+        Where blocks of resamples run (``workbench.study.executor``; default here, in order); with workers, ``demos``
+        must be a DemonstrationSet (they read it from a shared Parquet file). Every resample's trials are drawn
+        here from one generator, so the intervals are the same whatever runs them.
+
+    Raises
+    ------
+    ModelError
+        If the point estimate on all demonstrations fails, or every resample fails.
+    """
+    if not 0 < ci < 100:
+        raise DataError(f"ci must be a percentage in (0, 100), got {ci}")
+    if structure not in _STRUCTURES:
+        raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
+    _, K0, obj0, fits, failures = _resampled(demos, system, n_boot, method, structure, seed, progress, executor)
+    K_s, Q_s, R_s = (np.array([f[i] for f in fits]) for i in range(3))
+    q = [(100 - ci) / 2, 100 - (100 - ci) / 2]
+    K_lo, K_hi = np.percentile(K_s, q, axis=0)
+    Q_lo, Q_hi = np.percentile(Q_s, q, axis=0)
+    R_lo, R_hi = np.percentile(R_s, q, axis=0)
+    return BootstrapResult(
+        K=readonly(K0),
+        objective=obj0,
+        K_samples=readonly(K_s),
+        Q_diag_samples=readonly(Q_s),
+        R_diag_samples=readonly(R_s),
+        K_lo=readonly(K_lo),
+        K_hi=readonly(K_hi),
+        Q_diag_lo=readonly(Q_lo),
+        Q_diag_hi=readonly(Q_hi),
+        R_diag_lo=readonly(R_lo),
+        R_diag_hi=readonly(R_hi),
+        n_boot=int(n_boot),
+        n_failed=len(failures),
+        failures=tuple(failures),
+        ci=float(ci),
+        method=method,
+        structure=structure,
+        seed=int(seed),
+    )

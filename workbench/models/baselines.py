@@ -1,0 +1,258 @@
+"""The paper's two baselines, with the proposed model's interface (:class:`~workbench.models.behavior.BehaviorModel`).
+
+* :class:`IOCOnlyModel`: ``û = K̂x̂`` only (the paper's IOC-only method); its input uncertainty is one
+  constant Gaussian of the residuals.
+* :class:`GMROnlyModel`: a TP-GMM on ``[x; u]`` with the same frames as the proposed model (the paper's
+  appendix, eqs. (36)-(37)); ``û`` is the GMR mean of ``u`` given ``x`` (eqs. (24)-(27)).
+* :class:`PersistenceModel`: no operator at all — the vehicle keeps its velocity (or its state). Not in the
+  paper; it is the floor a model of the operator must beat before its predictions mean anything.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.method.frames import FrameSpec
+from workbench.method.inverse_lqr_sdp import inverse_lqr
+from workbench.models.behavior import (
+    BehaviorModel,
+    TaskGMRModel,
+    as_vector,
+    demo_list,
+    fit_gain,
+    objective_restore,
+    objective_state,
+    references,
+)
+from workbench.models.files import ModelFile
+from workbench.models.prediction import Policy, Prediction
+from workbench.plant.system import LinearSystem
+
+__all__ = ["IOCOnlyModel", "GMROnlyModel", "PersistenceModel"]
+
+
+class GMROnlyModel(TaskGMRModel):
+    """Baseline: a TP-GMM on ``ξ' = [x; u]`` read out by GMR, the paper's appendix (eqs. (36)-(37)).
+
+    ``û = E[u | x]``, the GMR mean, with the same frames as the proposed model; no gain, no objective.
+    Parameters as for :class:`HumanBehaviorModel` (those of the TP-GMM).
+    """
+
+    _fitted_attr = "variability_"
+
+    def __init__(
+        self,
+        system: LinearSystem,
+        n_components: int = 5,
+        frames: Sequence[str] | FrameSpec = ("start", "goal"),
+        reg_covar: float = 0.5,
+        standardize: bool = True,
+        random_state: int | None = 0,
+        max_iter: int = 1000,
+        tol: float = 1e-6,
+        n_init: int = 1,
+        angle_index: int | str | None = "auto",
+        position_idx: tuple[int, int] | None = None,
+        noise: str = "calibrated",
+        noise_window: float = 2.0,
+        noise_folds: int = 3,
+        noise_horizon_s: float = 3.0,
+    ) -> None:
+        super().__init__(system)
+        self.n_components = n_components
+        self.frames = frames
+        self.reg_covar = reg_covar
+        self.standardize = standardize
+        self.random_state = random_state
+        self.max_iter = max_iter
+        self.tol = tol
+        self.n_init = n_init
+        self.angle_index = angle_index
+        self.position_idx = position_idx
+        self.noise = noise
+        self.noise_window = noise_window
+        self.noise_folds = noise_folds
+        self.noise_horizon_s = noise_horizon_s
+
+    def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> GMROnlyModel:
+        """EM on ``[x; u]`` of every demonstration in its own frames (eqs. (28)-(29), (36)-(37))."""
+        self._check_settings()
+        ds = demo_list(demos, self.system, "GMROnlyModel.fit")
+        U = [d.u for d in ds]
+        self._fit_common(ds, getattr(demos, "labels", []))
+        self._fit_gmr(ds, U)
+        self._fit_noise(ds)
+        return self
+
+    def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
+        cond = self._conditional(x0, target)
+
+        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return cond.predict(X)
+
+        policy.mean = cond.predict_mean
+        return policy
+
+    def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return self._gmr_state()
+
+    def _restore(self, mf: ModelFile) -> None:
+        self._gmr_restore(mf, self.system.m)
+
+
+class IOCOnlyModel(BehaviorModel):
+    """Baseline: ``û = K̂x̂`` only (the paper's IOC-only method).
+
+    Its input uncertainty is one constant Gaussian around ``K̂x`` with covariance ``E[ŵŵᵀ]`` over the
+    training residuals (the second moment, not the covariance: the mean prediction carries no offset, so a
+    residual mean is part of its error).
+
+    Parameters
+    ----------
+    system : LinearSystem
+    gain_method, structure
+        As for :class:`HumanBehaviorModel`.
+    fit_objective : bool
+        Also solve the inverse LQR (``objective_``); off by default, the prediction does not use it.
+    noise, noise_window, noise_folds, noise_horizon
+        Monte Carlo noise, as for :class:`HumanBehaviorModel` (whitened by the constant residual Gaussian).
+    """
+
+    _fitted_attr = "K_"
+
+    def __init__(
+        self,
+        system: LinearSystem,
+        gain_method: str = "direct",
+        structure: str = "full",
+        fit_objective: bool = False,
+        noise: str = "calibrated",
+        noise_window: float = 2.0,
+        noise_folds: int = 3,
+        noise_horizon_s: float = 3.0,
+    ) -> None:
+        super().__init__(system)
+        self.gain_method = gain_method
+        self.structure = structure
+        self.fit_objective = fit_objective
+        self.noise = noise
+        self.noise_window = noise_window
+        self.noise_folds = noise_folds
+        self.noise_horizon_s = noise_horizon_s
+
+    def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> IOCOnlyModel:
+        """K̂ by eqs. (12)-(14) and, optionally, the objective by eqs. (15)-(19); the residual second moment."""
+        self._check_noise()
+        ds = demo_list(demos, self.system, "IOCOnlyModel.fit")
+        refs, self.goal_relative_ = references(ds, self.system.n)
+        K = fit_gain(ds, refs, self.system, self.gain_method)
+        self.objective_ = (
+            inverse_lqr(self.system.A, self.system.B, K, structure=self.structure) if self.fit_objective else None
+        )
+        W = [d.u - (d.x - r) @ K.T for d, r in zip(ds, refs, strict=True)]
+        Wall = np.concatenate(W)
+        m = self.system.m
+        # a tiny floor keeps the factor defined for an input that never deviates from K̂x
+        self.residual_cov_ = Wall.T @ Wall / len(Wall) + 1e-12 * np.eye(m)
+        self._fit_common(ds, getattr(demos, "labels", []))
+        self.K_ = K
+        self._fit_noise(ds)
+        return self
+
+    def variability(self, X: Any, x0: Any = None, target: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """The constant residual Gaussian at every state: zero mean, covariance ``E[ŵŵᵀ]``."""
+        self._check_fitted("variability")
+        X = self._states(X, "IOCOnlyModel.variability")
+        N, m = X.shape[0], self.system.m
+        return np.zeros((N, m)), np.broadcast_to(self.residual_cov_, (N, m, m)).copy()
+
+    def _task(self, x0: Any, target: Any) -> tuple[np.ndarray, np.ndarray]:
+        n = self.system.n
+        x0 = np.zeros(n) if x0 is None else as_vector(x0, n, "start state x0")
+        return x0, self.default_target(x0) if target is None else as_vector(target, n, "target")
+
+    def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
+        KT, cov, m = self.K_.T, self.residual_cov_, self.system.m
+        offset = self._reference(target) @ KT
+
+        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return X @ KT - offset, np.broadcast_to(cov, (X.shape[0], m, m))
+
+        return policy
+
+    def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        obj_header, obj_arrays = objective_state(self.objective_)
+        return {"objective": obj_header}, {"K": self.K_, "residual_cov": self.residual_cov_, **obj_arrays}
+
+    def _restore(self, mf: ModelFile) -> None:
+        n, m = self.system.n, self.system.m
+        self.K_ = np.array(mf.array("K", (m, n)))
+        self.residual_cov_ = np.array(mf.array("residual_cov", (m, m)))
+        self.objective_ = objective_restore(mf)
+
+
+class PersistenceModel(BehaviorModel):
+    """Baseline without an operator: the vehicle keeps its velocity, or its whole state.
+
+    With velocity roles (:mod:`workbench.data.roles`) it is a constant-velocity guess: every position advances by
+    ``dt`` times its velocity and every other state is held, ``x̂[k+1] = F x̂[k]`` with ``F = I + dt E``
+    (``E`` picks each position's velocity). Without velocity roles ``F = I``: the state is held. It ignores
+    the plant (A, B) and the inputs, so it predicts no input (zero mean and covariance) and has no Monte Carlo
+    band; ``predict(…, samples=S)`` returns the mean alone.
+
+    Attributes
+    ----------
+    transition_ : ndarray, shape (n, n)
+        ``F``.
+    target_ : ndarray, shape (n,)
+        As for the other models (unused by the prediction).
+    """
+
+    _fitted_attr = "transition_"
+    #: No input distribution: one-step input coverage does not apply.
+    models_inputs: ClassVar[bool] = False
+
+    def __init__(self, system: LinearSystem) -> None:
+        super().__init__(system)
+
+    def _transition(self) -> np.ndarray:
+        return self.system.r.constant_velocity(self.system.n, self.system.dt)
+
+    def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> PersistenceModel:
+        """Nothing to learn but the shapes and the default target; checks the demonstrations like the others."""
+        ds = demo_list(demos, self.system, "PersistenceModel.fit")
+        m = self.system.m
+        self._fit_common(ds, getattr(demos, "labels", []))
+        self.noise_scale_, self.noise_rho_ = np.ones(m), np.zeros(m)
+        self.noise_band_factor_, self.noise_band_coverage_ = 1.0, float("nan")
+        self.transition_ = self._transition()
+        return self
+
+    def _dynamics(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.transition_, np.zeros_like(self.system.B)
+
+    def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
+        m = self.system.m
+
+        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return np.zeros((X.shape[0], m)), np.zeros((X.shape[0], m, m))
+
+        policy.mean = lambda X: np.zeros((X.shape[0], m))
+        return policy
+
+    def predict_many(self, x0s: Any, n_steps: int, targets: Any = None, **kwargs: Any) -> list[Prediction]:
+        """As :meth:`BehaviorModel.predict_many`, without samples: a band of zero width would claim certainty."""
+        kwargs["samples"] = 0
+        kwargs.pop("return_samples", None)
+        return super().predict_many(x0s, n_steps, targets, **kwargs)
+
+    def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return {}, {"transition": self.transition_}
+
+    def _restore(self, mf: ModelFile) -> None:
+        n = self.system.n
+        self.transition_ = np.array(mf.array("transition", (n, n)))

@@ -1,0 +1,417 @@
+"""Plant identification with physics in it: (A, B) by least squares, checked on held-out segments.
+
+:meth:`workbench.plant.system.LinearSystem.identify` calls :func:`identify_plant`. Two structures:
+
+``"kinematic"``
+    For every position / velocity pair of the roles (:mod:`workbench.data.roles`) the position row is fixed by
+    kinematics, ``p[k+1] = p[k] + dt·v[k]`` (no input and no other state enters a position directly), and the
+    remaining rows are fitted by least squares. With ``translation_invariant=True`` no other state may depend
+    on an absolute position either (as in the paper's plant, eq. (31)), so the positions are exact integrators.
+    That is the physics of free flight, but then a pilot who does not hold an absolute position leaves the
+    closed loop marginal and the inverse LQR refuses the gain (Assumption 3); by default the fit may keep the
+    small pull toward where the flights were, and the report shows how large it is.
+``"free"``
+    Every entry of ``[A B]`` by least squares, ``min ‖X' − [A B] [X; U]‖_F`` (eq. (1) read as a regression).
+
+Regression pairs ``(x[k], u[k]) → x[k+1]`` never cross two segments. The :class:`IdentificationReport` says
+how good the plant is where it was not fitted: one-step and multi-step (the model's horizon) error with every
+segment left out in turn (leave-one-segment-out; a log with fewer than three segments is cut into contiguous
+pieces first), against persistence (every state held, positions moved on at their recorded velocity); the
+spectral radius ρ(A), also without the integrators; the conditioning of the regressor; the physical checks
+that apply (the across-velocity's response to the heading angle vs g·dt); and one warning line when the plant
+is unstable beyond its integrators, worse than persistence, or ill-conditioned. The checks are reported,
+never enforced.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from workbench.data.roles import ResolvedRoles, Roles
+from workbench.errors import ModelError
+from workbench.frozen import readonly
+
+if TYPE_CHECKING:
+    from workbench.data.demonstrations import DemonstrationSet
+
+__all__ = [
+    "IdentificationReport",
+    "PhysicalCheck",
+    "identify_plant",
+    "resolve_structure",
+    "STRUCTURES",
+    "GRAVITY",
+    "ILL_CONDITIONED",
+]
+
+STRUCTURES = ("auto", "kinematic", "free")
+GRAVITY = 9.80665  # m/s², standard gravity
+#: Condition number of the column-normalized regressor above which the fit is called ill-conditioned.
+ILL_CONDITIONED = 1e4
+#: |λ| above 1 + this counts as unstable (the paper's plant has eigenvalues exactly on the unit circle).
+UNSTABLE_TOL = 1e-6
+MIN_SEGMENTS = 3
+
+
+@dataclass(frozen=True)
+class PhysicalCheck:
+    """One physical expectation on an identified entry, reported (not enforced)."""
+
+    name: str
+    value: float
+    expected: float
+    note: str = ""
+
+    @property
+    def ratio(self) -> float:
+        """``value / expected``."""
+        return self.value / self.expected if self.expected else float("nan")
+
+    def within(self, factor: float = 2.0) -> bool:
+        """Whether ``value`` is within ``factor`` of ``expected`` (same sign)."""
+        r = self.ratio
+        return bool(np.isfinite(r) and 1.0 / factor <= r <= factor)
+
+    def __str__(self) -> str:
+        verdict = "within a factor 2" if self.within() else "NOT within a factor 2"
+        return (f"{self.name} = {self.value:.4g}, expected {self.expected:.4g} ({self.note}); "
+                f"ratio {self.ratio:.3g}, {verdict}")
+
+
+@dataclass(frozen=True, eq=False)
+class IdentificationReport:
+    """How an identified plant does where it was not fitted (see the module docstring).
+
+    RMSE arrays are per state, in the state's units, pooled over the held-out segments; the ``*_score``
+    scalars are the RMSE over all states after dividing each by its standard deviation in the data, so that
+    states of different units weigh alike.
+    """
+
+    structure: str
+    validation: str
+    n_segments: int
+    n_pairs: int
+    dt: float
+    n_steps: int
+    state_names: tuple[str, ...]
+    one_step_rmse: np.ndarray
+    one_step_rmse_persistence: np.ndarray
+    horizon_rmse: np.ndarray
+    horizon_rmse_persistence: np.ndarray
+    one_step_score: float
+    one_step_score_persistence: float
+    horizon_score: float
+    horizon_score_persistence: float
+    spectral_radius: float
+    spectral_radius_beyond_integrators: float
+    n_integrators: int
+    condition_number: float
+    fixed: tuple[str, ...] = ()
+    checks: tuple[PhysicalCheck, ...] = ()
+    warnings: tuple[str, ...] = ()
+    position_pull: float = 0.0  # max |A[i, p]| over positions p and the other rows i (0 when translation invariant)
+
+    def __post_init__(self) -> None:
+        for name in ("one_step_rmse", "one_step_rmse_persistence", "horizon_rmse", "horizon_rmse_persistence"):
+            object.__setattr__(self, name, readonly(np.asarray(getattr(self, name), dtype=np.float64)))
+
+    @property
+    def warning(self) -> str | None:
+        """One line naming every problem found, or ``None``."""
+        return "identified plant: " + "; ".join(self.warnings) if self.warnings else None
+
+    @property
+    def horizon_s(self) -> float:
+        return self.n_steps * self.dt
+
+    def __str__(self) -> str:
+        lines = [
+            f"plant identification ({self.structure}, dt {self.dt:g} s, {self.n_pairs} sample pairs, "
+            f"{self.n_segments} segments; held out: {self.validation})",
+        ]
+        lines += [f"  fixed: {f}" for f in self.fixed]
+        lines.append(
+            f"  normalized held-out RMSE, one step: plant {self.one_step_score:.3g}, persistence "
+            f"{self.one_step_score_persistence:.3g}; {self.horizon_s:g} s ({self.n_steps} steps): plant "
+            f"{self.horizon_score:.3g}, persistence {self.horizon_score_persistence:.3g}"
+        )
+        width = max(len(s) for s in self.state_names)
+        lines.append(f"  {'state':<{width}}  {'1-step':>9}  {'persist.':>9}  {f'{self.horizon_s:g} s':>9}  "
+                     f"{'persist.':>9}")
+        for i, s in enumerate(self.state_names):
+            lines.append(
+                f"  {s:<{width}}  {self.one_step_rmse[i]:>9.4g}  {self.one_step_rmse_persistence[i]:>9.4g}  "
+                f"{self.horizon_rmse[i]:>9.4g}  {self.horizon_rmse_persistence[i]:>9.4g}"
+            )
+        if self.n_integrators:
+            lines.append(f"  absolute position in the other rows: max |A[i, position]| = {self.position_pull:.3g} "
+                         "(0 in free-flight physics; a pull the data ascribe to the plant)")
+        lines.append(
+            f"  ρ(A) = {self.spectral_radius:.6g}; without the {self.n_integrators} integrator(s) "
+            f"{self.spectral_radius_beyond_integrators:.6g}; cond of the normalized regressor "
+            f"{self.condition_number:.3g}"
+        )
+        lines += [f"  check: {c}" for c in self.checks]
+        if self.warning:
+            lines.append(f"  warning: {self.warning}")
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------------------------- structure
+
+
+def _pairs_of(r: ResolvedRoles) -> list[tuple[int, int]]:
+    return list(zip(r.position, r.velocity, strict=True)) if r.has_velocity else []
+
+
+def resolve_structure(structure: str, roles: Roles, state_names: Sequence[str]) -> str:
+    """``"kinematic"`` or ``"free"``; ``"auto"`` is kinematic when the roles pair positions with velocities.
+
+    Raises
+    ------
+    ModelError
+        An unknown structure, or ``"kinematic"`` for states without position / velocity roles.
+    """
+    if structure not in STRUCTURES:
+        raise ModelError(f"identify: unknown structure {structure!r}; known: {', '.join(STRUCTURES)}")
+    has_pairs = bool(_pairs_of(roles.resolve(state_names))) if roles else False
+    if structure == "auto":
+        return "kinematic" if has_pairs else "free"
+    if structure == "kinematic" and not has_pairs:
+        raise ModelError(
+            "identify: structure 'kinematic' needs roles that pair position states with velocity states "
+            f"(the data's roles: position {list(roles.position)}, velocity {list(roles.velocity)}); "
+            "declare them in the mapping's [roles] table or use structure='free'"
+        )
+    return structure
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Which rows are fixed and which regressor columns the fitted rows use."""
+
+    n: int
+    m: int
+    dt: float
+    pairs: tuple[tuple[int, int], ...]  # (position, velocity) state indices with kinematic rows
+    invariant: bool = False  # no row but a position's own depends on an absolute position
+
+    @property
+    def fixed_rows(self) -> list[int]:
+        return [p for p, _ in self.pairs]
+
+    @property
+    def free_rows(self) -> list[int]:
+        fixed = set(self.fixed_rows)
+        return [i for i in range(self.n) if i not in fixed]
+
+    @property
+    def columns(self) -> list[int]:
+        """Columns of ``[X U]`` the fitted rows regress on: all, or all but the positions (translation invariance)."""
+        fixed = set(self.fixed_rows) if self.invariant else set()
+        return [j for j in range(self.n + self.m) if j not in fixed]
+
+    def base(self) -> np.ndarray:
+        """``[A B]`` with the kinematic rows filled in and zeros elsewhere."""
+        AB = np.zeros((self.n, self.n + self.m))
+        for p, v in self.pairs:
+            AB[p, p] = 1.0
+            AB[p, v] = self.dt
+        return AB
+
+
+
+def _fit(layout: _Layout, Z: np.ndarray, Xn: np.ndarray) -> np.ndarray:
+    AB = layout.base()
+    rows, cols = layout.free_rows, layout.columns
+    if rows:
+        theta, *_ = np.linalg.lstsq(Z[:, cols], Xn[:, rows], rcond=None)
+        AB[np.ix_(rows, cols)] = theta.T
+    return AB
+
+
+def _rank(M: np.ndarray) -> int:
+    s = np.linalg.svd(M, compute_uv=False)
+    return int((s > 1e-10 * max(M.shape) * s[0]).sum()) if s.size and s[0] > 0 else 0
+
+
+def _normalized_cond(M: np.ndarray) -> float:
+    scale = np.sqrt(np.mean(M**2, axis=0))
+    scale[scale == 0] = 1.0
+    return float(np.linalg.cond(M / scale))
+
+
+# -------------------------------------------------------------------------------------------- validation
+
+
+def _segments(demos: DemonstrationSet) -> tuple[list[tuple[np.ndarray, np.ndarray]], bool]:
+    """The demonstrations as (x, u) segments; fewer than three are cut into contiguous pieces (``True``)."""
+    segs = [(d.x, d.u) for d in demos]
+    if len(segs) >= MIN_SEGMENTS:
+        return segs, False
+    total = sum(len(x) for x, _ in segs)
+    pieces = []
+    for x, u in segs:
+        k = max(1, int(round(MIN_SEGMENTS * len(x) / total)))
+        for idx in np.array_split(np.arange(len(x)), k):
+            if len(idx) >= 2:
+                pieces.append((x[idx], u[idx]))
+    return pieces, True
+
+
+def _pairs(segs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    Z = [np.hstack([x[:-1], u[:-1]]) for x, u in segs if len(x) >= 2]
+    Xn = [x[1:] for x, _ in segs if len(x) >= 2]
+    return np.concatenate(Z), np.concatenate(Xn)
+
+
+def _errors(A: np.ndarray, B: np.ndarray, x: np.ndarray, u: np.ndarray, h: int) -> tuple[np.ndarray, np.ndarray]:
+    """One-step and ``h``-step errors (rows: start samples) of open-loop rollouts with the recorded inputs."""
+    one = x[1:] - (x[:-1] @ A.T + u[:-1] @ B.T)
+    starts = len(x) - h
+    if starts <= 0:
+        return one, np.empty((0, x.shape[1]))
+    xh = x[:starts].copy()
+    for j in range(h):
+        xh = xh @ A.T + u[j : j + starts] @ B.T
+    return one, x[h : h + starts] - xh
+
+
+def _rms(errors: list[np.ndarray], n: int) -> np.ndarray:
+    e = np.concatenate(errors) if errors else np.empty((0, n))
+    return np.sqrt(np.mean(e**2, axis=0)) if len(e) else np.full(n, np.nan)
+
+
+def _score(rmse: np.ndarray, sigma: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((rmse / sigma) ** 2)))
+
+
+def _beyond_integrators(A: np.ndarray, n_int: int) -> float:
+    """The spectral radius once the ``n_int`` eigenvalues closest to 1 (the integrators) are set aside."""
+    lam = np.linalg.eigvals(A)
+    if n_int:
+        lam = lam[np.argsort(np.abs(lam - 1.0))[n_int:]]
+    return float(np.abs(lam).max()) if lam.size else 0.0
+
+
+def _checks(A: np.ndarray, r: ResolvedRoles, roles: Roles, state_names: Sequence[str], dt: float):
+    """The across-velocity's response to the heading angle vs g·dt, where the roles say which those are."""
+    plane = r.plane
+    if r.heading is None or plane is None or not r.has_velocity:
+        return ()
+    across = plane[0]
+    v = r.velocity[r.position.index(across)]
+    unit = roles.unit(state_names[r.heading])
+    per_unit = {"": 1.0, "rad": 1.0, "deg": np.pi / 180.0}.get(unit)
+    if per_unit is None:
+        return ()
+    name = f"A[{state_names[v]}, {state_names[r.heading]}]"
+    return (PhysicalCheck(name, float(A[v, r.heading]), GRAVITY * dt * per_unit,
+                          f"g·dt: tilting by the heading angle accelerates {state_names[v]}"),)
+
+
+def identify_plant(
+    demos: DemonstrationSet, structure: str = "auto", horizon_s: float = 3.0, translation_invariant: bool = False
+) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
+    """(A, B), the RMS one-step residual of the fit on all data, and the report (see the module docstring).
+
+    Parameters
+    ----------
+    demos : DemonstrationSet
+    structure : {"auto", "kinematic", "free"}
+        ``"auto"`` is ``"kinematic"`` when ``demos.roles`` pair positions with velocities, else ``"free"``.
+    horizon_s : float
+        Seconds of the multi-step check (the model's prediction horizon; the paper's is 3 s).
+    translation_invariant : bool
+        With ``"kinematic"``: also keep absolute positions out of every other row.
+
+    Raises
+    ------
+    ModelError
+        No demonstrations, an unknown or inapplicable structure, or data that do not excite every direction
+        the fitted rows regress on.
+    """
+    if not len(demos):
+        raise ModelError("identify needs at least one demonstration")
+    n, m, dt = demos.n_states, demos.n_inputs, float(demos.dt)
+    names = tuple(demos.state_names)
+    roles = demos.roles
+    structure = resolve_structure(structure, roles, names)
+    r = roles.resolve(names) if roles else ResolvedRoles()
+    pairs = tuple(_pairs_of(r)) if structure == "kinematic" else ()
+    layout = _Layout(n, m, dt, pairs, invariant=translation_invariant)
+
+    Z, Xn = _pairs([(d.x, d.u) for d in demos])
+    cols = layout.columns
+    rank = _rank(Z[:, cols])
+    if rank < len(cols):
+        raise ModelError(
+            f"identify: the data excite only {rank} of {len(cols)} state and input directions "
+            f"(cond [X; U] = {np.linalg.cond(Z[:, cols]):.3g}); record more varied demonstrations"
+        )
+    AB = _fit(layout, Z, Xn)
+    A, B = AB[:, :n], AB[:, n:]
+    residual = float(np.sqrt(np.mean((Xn - Z @ AB.T) ** 2)))
+
+    # held out: each segment predicted by the plant fitted on the others
+    segs, cut = _segments(demos)
+    h = max(1, int(round(horizon_s / dt)))
+    P = r.constant_velocity(n, dt)  # a free plant too is compared with constant velocity where roles know it
+    zero_B = np.zeros((n, m))
+    errs: dict[str, list[np.ndarray]] = {"one": [], "h": [], "one_p": [], "h_p": []}
+    n_folds = 0
+    for i, (x, u) in enumerate(segs):
+        if len(x) < 2:
+            continue
+        train = [s for j, s in enumerate(segs) if j != i]
+        Zt, Xt = _pairs(train)
+        if _rank(Zt[:, cols]) < len(cols):
+            continue  # this fold's training data alone do not excite every direction
+        ABi = _fit(layout, Zt, Xt)
+        one, hs = _errors(ABi[:, :n], ABi[:, n:], x, u, h)
+        one_p, hs_p = _errors(P, zero_B, x, u, h)
+        for key, e in (("one", one), ("h", hs), ("one_p", one_p), ("h_p", hs_p)):
+            errs[key].append(e)
+        n_folds += 1
+    sigma = np.concatenate([d.x for d in demos]).std(axis=0)
+    sigma[~(sigma > 0)] = 1.0
+    rm = {k: _rms(v, n) for k, v in errs.items()}
+    what = "contiguous pieces of the segments" if cut else "segments"
+    validation = f"leave-one-out over {len(segs)} {what}, {n_folds} folds fitted"
+
+    n_int = len(tuple(_pairs_of(r)))
+    rho = float(np.abs(np.linalg.eigvals(A)).max())
+    rho_free = _beyond_integrators(A, n_int)
+    cond = _normalized_cond(Z[:, cols])
+    checks = _checks(A, r, roles, names, dt)
+    elsewhere = ", no position elsewhere" if translation_invariant else ""
+    fixed = tuple(f"{names[p]}[k+1] = {names[p]}[k] + dt·{names[v]}[k] (no input{elsewhere})" for p, v in pairs)
+    positions = list(r.position) if n_int else []
+    others = [i for i in range(n) if i not in positions]
+    pull = float(np.abs(A[np.ix_(others, positions)]).max()) if positions and others else 0.0
+
+    scores = {k: _score(v, sigma) for k, v in rm.items()}
+    warns = []
+    if rho_free > 1.0 + UNSTABLE_TOL:
+        warns.append(f"unstable beyond its integrators (ρ = {rho_free:.4g})")
+    worse = [f"{label} ({scores[a]:.3g} vs {scores[b]:.3g})" for label, a, b in
+             (("one step", "one", "one_p"), (f"{h * dt:g} s", "h", "h_p")) if scores[a] > scores[b]]
+    if worse:
+        warns.append("worse than persistence on held-out segments at " + " and ".join(worse))
+    if n_folds == 0:
+        warns.append("no held-out check: no fold's training data excite every direction")
+    if cond > ILL_CONDITIONED:
+        warns.append(f"ill-conditioned regressor (cond {cond:.3g} > {ILL_CONDITIONED:g})")
+    report = IdentificationReport(
+        structure=structure, validation=validation, n_segments=len(demos), n_pairs=len(Z), dt=dt, n_steps=h,
+        state_names=names, one_step_rmse=rm["one"], one_step_rmse_persistence=rm["one_p"], horizon_rmse=rm["h"],
+        horizon_rmse_persistence=rm["h_p"], one_step_score=scores["one"], one_step_score_persistence=scores["one_p"],
+        horizon_score=scores["h"], horizon_score_persistence=scores["h_p"], spectral_radius=rho,
+        spectral_radius_beyond_integrators=rho_free, n_integrators=n_int, condition_number=cond, fixed=fixed,
+        checks=checks, warnings=tuple(warns), position_pull=pull,
+    )
+    return A, B, residual, report

@@ -1,0 +1,620 @@
+"""The workbench's report: one Markdown file with PNG figures in the spirit of the method paper's figures.
+
+Figures (``figures/`` beside the report), each drawn on a matplotlib :class:`~matplotlib.figure.Figure` with the
+Agg canvas — no pyplot, no global backend, so the report runs headless and never touches a user's session:
+
+* ``demonstrations.png`` — the flown paths per strategy;
+* ``objective.png`` — normalized Q and R side by side per strategy, the attitude term called out;
+* ``variability.png`` — ŵ on a test trial with the GMR mean and 3σ band (eqs. (24)–(27));
+* ``calibration.png`` — one-step band coverage against the Gaussian nominal at 0.25σ … 3σ (the calibration curve);
+* ``predictions.png`` — predicted vs recorded trajectories of the three methods, with the Monte Carlo band;
+* ``rmse.png`` — horizon RMSE (eq. (35)) per method as box plots;
+* ``data_efficiency.png`` — RMSE against the number of training demonstrations;
+
+and for multi-subject data the ANOVA / pairwise t-test table.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+
+from workbench.atomic import atomic_path, atomic_write_text
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.roles import Roles
+from workbench.models.factory import METHOD_TITLES
+from workbench.study.pipeline import StudyResult, improvement_table, metric_unit
+
+__all__ = [
+    "ReportInputs",
+    "fig_data_efficiency",
+    "fig_demonstrations",
+    "fig_objective",
+    "fig_calibration",
+    "fig_predictions",
+    "fig_rmse",
+    "fig_variability",
+    "save_figure",
+    "write_report",
+]
+
+_PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
+METHOD_COLORS = {"proposed": "#2ca02c", "ioc_only": "#d62728", "gmr_only": "#9467bd", "persistence": "#8c564b",
+                 "recorded": "#282828"}
+DPI = 110
+
+
+def _label_color(label: str, labels: Sequence[str]) -> str:
+    return _PALETTE[list(labels).index(label) % len(_PALETTE)] if label in labels else "#7f7f7f"
+
+
+def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
+    """Render ``fig`` to a PNG at ``path`` atomically."""
+    path = Path(path)
+    FigureCanvasAgg(fig)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
+    return path
+
+
+def _plane(roles: Roles | None, state_names: Sequence[str]) -> tuple[int, int] | None:
+    """The (across, up) position states of the plant's roles, or None: then there is no path to draw."""
+    return (roles or Roles()).resolve(state_names).plane
+
+
+def _titled(name: str, roles: Roles | None) -> str:
+    """``name [unit]`` with the roles' unit, the bare name where none is declared."""
+    unit = roles.unit(name) if roles else ""
+    return f"{name} [{unit}]" if unit else name
+
+
+# -- figures ----------------------------------------------------------------------------------------------
+def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
+    """Flown paths of every trial in the plane of the position roles, one panel per strategy; a plant without
+    a plane gets every state against time instead."""
+    labels = list(sets)
+    first = sets[labels[0]]
+    plane = _plane(first.roles, first.state_names)
+    rows = 1 if plane is not None else first.n_states
+    fig = Figure(figsize=(4.6 * len(labels), 3.8 if plane is not None else 1.9 * rows), layout="constrained")
+    axs = fig.subplots(rows, len(labels), squeeze=False, sharey="row")
+    for c, label in enumerate(labels):
+        ds = sets[label]
+        color = _label_color(label, labels)
+        if plane is None:
+            for j, name in enumerate(ds.state_names):
+                ax = axs[j, c]
+                for d in ds:
+                    ax.plot(d.t - d.t[0], d.x[:, j], color=color, lw=0.9, alpha=0.55)
+                ax.set_ylabel(_titled(name, ds.roles))
+                ax.grid(alpha=0.3)
+            axs[0, c].set_title(f"{label}: {len(ds)} demonstrations")
+            axs[-1, c].set_xlabel("time since start [s]")
+            continue
+        ix, iy = plane
+        ax = axs[0, c]
+        for d in ds:
+            ax.plot(d.x[:, ix], d.x[:, iy], color=color, lw=0.9, alpha=0.55)
+            ax.plot(d.x[0, ix], d.x[0, iy], "o", color=color, ms=3)
+        targets = [d.target for d in ds if d.target is not None]
+        if targets:
+            tx, ty = targets[0][ix], targets[0][iy]
+            ax.plot([tx - 0.5, tx + 0.5], [ty, ty], color="k", lw=4, solid_capstyle="butt", label="pad")
+            ax.legend(loc="upper right", fontsize=8)
+        ax.set_title(f"{label}: {len(ds)} demonstrations")
+        ax.set_xlabel(_titled(ds.state_names[ix], ds.roles))
+        ax.grid(alpha=0.3)
+        ax.set_aspect("equal", adjustable="datalim")
+    if plane is not None:
+        axs[0, 0].set_ylabel(_titled(first.state_names[plane[1]], first.roles))
+    return fig
+
+
+def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_names: Sequence[str]) -> Figure:
+    """Normalized Q and R heatmaps side by side per strategy, the attitude weight Q_φφ outlined.
+
+    A diverging color map symmetric about zero, every cell labelled with its value. Each block has one color scale
+    shared by every strategy, so two strategies compare cell by cell; Q and R keep separate scales: R usually
+    dominates M, and on one scale the structure of Q — which states the operator cares about, the paper's point —
+    would vanish.
+    """
+    labels = [k for k, m in models.items() if getattr(m, "objective_", None) is not None]
+    n, m = len(state_names), len(input_names)
+    fig = Figure(figsize=(10.0, 3.9 * max(1, len(labels))), layout="constrained")
+    axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
+    # the attitude weight is the plant's heading role, where it declares one
+    att = models[labels[0]].system.r.heading if labels else None
+    blocks = {k: [np.asarray(models[lab].objective_.M_normalized)[sl, sl] for lab in labels]
+              for k, sl in (("Q", slice(0, n)), ("R", slice(n, n + m)))}
+    vmaxes = {k: max([float(np.abs(b).max()) for b in v] + [1e-12]) for k, v in blocks.items()}
+    for row, label in zip(axs, labels, strict=True):
+        Mn = np.asarray(models[label].objective_.M_normalized)
+        for ax, block, names, title, vmax in (
+            (row[0], Mn[:n, :n], state_names, "Q / λmax(M)", vmaxes["Q"]),
+            (row[1], Mn[n:, n:], input_names, "R / λmax(M)", vmaxes["R"]),
+        ):
+            image = ax.imshow(block, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
+            ax.set_xticks(range(len(names)), names)
+            ax.set_yticks(range(len(names)), names)
+            for (i, j), v in np.ndenumerate(block):
+                text = "0" if abs(v) < 5e-4 * vmax else f"{v:.2g}"
+                ax.text(j, i, text, ha="center", va="center", fontsize=7,
+                        color="white" if abs(v) > 0.6 * vmax else "black")
+            fig.colorbar(image, ax=ax, shrink=0.8)
+            ax.set_title(f"{label}: {title}", fontsize=10)
+        if att is not None:
+            row[0].add_patch(Rectangle((att - 0.5, att - 0.5), 1, 1, fill=False, ec="gold", lw=2.5))
+            q = np.diag(Mn[:n, :n])
+            rank = int((q > q[att]).sum()) + 1
+            row[0].set_title(
+                f"{label}: Q / λmax(M) — attitude weight Q_φφ = {q[att]:.3g} (rank {rank} of {n})", fontsize=10
+            )
+    return fig
+
+
+def fig_calibration(calibration: pd.DataFrame) -> Figure:
+    """One-step band calibration: share of recorded inputs inside ``μ̂ ± cσ̂`` against the Gaussian nominal.
+
+    One panel per strategy, one line per input, points at every level ``c`` of the study (1σ, 2σ, 3σ marked);
+    on the diagonal the band is calibrated, below it too narrow, above it too wide.
+    """
+    labels = list(dict.fromkeys(calibration["label"]))
+    fig = Figure(figsize=(3.6 * max(1, len(labels)), 3.6), layout="constrained")
+    axs = fig.subplots(1, max(1, len(labels)), squeeze=False)[0]
+    for ax, label in zip(axs, labels, strict=True):
+        t = calibration[calibration["label"] == label]
+        ax.plot([0, 100], [0, 100], color="0.6", lw=1, ls="--", label="nominal")
+        for inp, g in t.groupby("input", sort=False):
+            g = g.sort_values("n_sigma")
+            line = ax.plot(100 * g["nominal"], 100 * g["coverage"], marker=".", label=str(inp))[0]
+            marks = g[g["n_sigma"].isin([1.0, 2.0, 3.0])]
+            ax.scatter(100 * marks["nominal"], 100 * marks["coverage"], s=36, color=line.get_color(), zorder=3)
+            for r in marks.itertuples():
+                ax.annotate(f"{r.n_sigma:g}σ", (100 * r.nominal, 100 * r.coverage), fontsize=7,
+                            xytext=(3, -9), textcoords="offset points")
+        ax.set_xlim(0, 100)
+        ax.set_ylim(0, 100)
+        ax.set_aspect("equal")
+        ax.set_xlabel("nominal coverage [%]")
+        ax.set_title(f"{label}: one-step band calibration", fontsize=9)
+        ax.grid(alpha=0.3)
+    axs[0].set_ylabel("observed coverage [%]")
+    axs[0].legend(fontsize=8)
+    return fig
+
+
+def fig_variability(cases: Mapping[str, tuple[Demonstration, Any]], input_names: Sequence[str]) -> Figure:
+    """ŵ = u − K̂x on a test trial per strategy with the GMR mean and ±3σ band; samples outside marked."""
+    labels = list(cases)
+    m = len(input_names)
+    fig = Figure(figsize=(5.2 * len(labels), 2.6 * m), layout="constrained")
+    axs = fig.subplots(m, len(labels), squeeze=False, sharex="col")
+    for c, label in enumerate(labels):
+        demo, model = cases[label]
+        t = demo.t - demo.t[0]
+        w = demo.u - demo.x @ np.asarray(model.K_).T
+        mu, Sigma = model.variability(demo.x, x0=demo.x[0], target=demo.target)
+        sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
+        for j in range(m):
+            ax = axs[j, c]
+            ax.fill_between(t, mu[:, j] - 3 * sigma[:, j], mu[:, j] + 3 * sigma[:, j], step="post",
+                            color="#ffbb78", alpha=0.6, lw=0, label="GMR μ ± 3σ")
+            ax.step(t, mu[:, j], where="post", color="#ff7f0e", lw=1.2, label="GMR μ")
+            ax.step(t, w[:, j], where="post", color="#1f77b4", lw=1.0, label="ŵ")
+            out = np.abs(w[:, j] - mu[:, j]) > 3 * sigma[:, j]
+            cover = 100.0 * (1.0 - out.mean())
+            if out.any():
+                ax.plot(t[out], w[out, j], "x", color="#d62728", ms=5, label="outside 3σ")
+            ax.set_title(f"{label} {demo.id}: ŵ {input_names[j]} — {cover:.1f} % inside 3σ", fontsize=9)
+            ax.grid(alpha=0.3)
+            ax.set_ylabel(f"ŵ {input_names[j]}")
+        axs[-1, c].set_xlabel("time since start [s]")
+    axs[0, 0].legend(fontsize=7, loc="best")
+    return fig
+
+
+def _band(pred: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    for lo, hi in (("x_lower", "x_upper"), ("x_lo", "x_hi"), ("x_low", "x_high")):
+        if getattr(pred, lo, None) is not None and getattr(pred, hi, None) is not None:
+            return np.asarray(getattr(pred, lo)), np.asarray(getattr(pred, hi))
+    return None
+
+
+def fig_predictions(
+    cases: Mapping[str, tuple[Demonstration, Mapping[str, Any]]],
+    state_names: Sequence[str],
+    dt: float,
+    roles: Roles | None = None,
+) -> Figure:
+    """Predicted vs recorded trajectory on a test trial per strategy: the path in the plane of the position
+    roles and each position against time; without a plane, every state against time.
+
+    ``cases[label] = (demo, {method: Prediction})`` with every prediction starting at the trial's first state.
+    """
+    labels = list(cases)
+    plane = _plane(roles, state_names)
+    shown = list(plane) if plane is not None else list(range(len(state_names)))
+    n_cols = len(shown) + (plane is not None)
+    fig = Figure(figsize=(max(13.0, 3.4 * n_cols), 3.5 * len(labels)), layout="constrained")
+    axs = fig.subplots(len(labels), n_cols, squeeze=False)
+    for r, label in enumerate(labels):
+        demo, preds = cases[label]
+        t = demo.t - demo.t[0]
+        n_steps = max(len(np.asarray(p.x)) for p in preds.values()) - 1
+        tp = np.arange(n_steps + 1) * dt
+        n_rec = min(len(demo), n_steps + 1)
+        ax_path = axs[r, 0] if plane is not None else None
+        ax_time = list(axs[r, 1:] if plane is not None else axs[r])
+        if ax_path is not None:
+            ix, iy = plane
+            ax_path.plot(demo.x[:, ix], demo.x[:, iy], color="#9a9a9a", lw=1.0, label="recorded (whole trial)")
+            ax_path.plot(demo.x[:n_rec, ix], demo.x[:n_rec, iy], color=METHOD_COLORS["recorded"], lw=2.0,
+                         label="recorded (horizon)")
+        for ax, j in zip(ax_time, shown, strict=True):
+            ax.plot(t[:n_rec], demo.x[:n_rec, j], color=METHOD_COLORS["recorded"], lw=2.0, label="recorded")
+        for method, pred in preds.items():
+            x = np.asarray(pred.x)
+            color = METHOD_COLORS.get(method, "k")
+            title = METHOD_TITLES.get(method, method)
+            band = _band(pred)
+            if band is not None:
+                lo, hi = band
+                level = getattr(pred, "band_level", None)
+                name = f"{title} {100 * level:.0f} % MC band" if level else f"{title} MC band"
+                for k, (ax, j) in enumerate(zip(ax_time, shown, strict=True)):
+                    ax.fill_between(tp[: len(lo)], lo[:, j], hi[:, j], color=color, alpha=0.18, lw=0,
+                                    label=name if k == 0 else None)
+            if ax_path is not None:
+                ax_path.plot(x[:, plane[0]], x[:, plane[1]], color=color, lw=1.4, ls="--", label=title)
+            for k, (ax, j) in enumerate(zip(ax_time, shown, strict=True)):
+                ax.plot(tp[: len(x)], x[:, j], color=color, lw=1.4, ls="--", label=title if k == 0 else None)
+        if ax_path is not None:
+            ax_path.plot(demo.x[0, plane[0]], demo.x[0, plane[1]], "o", color="k", ms=5)
+            ax_path.set_title(f"{label} {demo.id}: path ({n_steps * dt:.1f} s horizon)", fontsize=9)
+            ax_path.set_xlabel(_titled(state_names[plane[0]], roles))
+            ax_path.set_ylabel(_titled(state_names[plane[1]], roles))
+        for ax, j in zip(ax_time, shown, strict=True):
+            ax.set_title(f"{label} {demo.id}: {state_names[j]}(t)" if ax_path is None and j == shown[0]
+                         else f"{state_names[j]}(t)", fontsize=9)
+            ax.set_ylabel(_titled(state_names[j], roles))
+            ax.set_xlabel("time since start [s]")
+        for ax in axs[r]:
+            ax.grid(alpha=0.3)
+    for ax in axs[0, : min(2, n_cols)]:
+        ax.legend(fontsize=7, loc="best")
+    return fig
+
+
+def fig_rmse(table: pd.DataFrame, metrics: Sequence[tuple[str, str]]) -> Figure:
+    """Box plots of per-trial horizon RMSE (eq. (35)) per method, one panel per (metric, label).
+
+    ``table`` has columns ``label``, ``method``, ``metric``, ``value`` (one row per trial and start).
+    """
+    labels = list(dict.fromkeys(table["label"]))
+    methods = [m for m in METHOD_TITLES if m in set(table["method"])] + sorted(
+        set(table["method"]) - set(METHOD_TITLES)
+    )
+    fig = Figure(figsize=(4.0 * len(labels) * len(metrics) / 1.3, 3.6), layout="constrained")
+    axs = fig.subplots(1, len(labels) * len(metrics), squeeze=False)[0]
+    k = 0
+    for metric, unit in metrics:
+        for label in labels:
+            ax = axs[k]
+            k += 1
+            sub = table[(table["label"] == label) & (table["metric"] == metric)]
+            data = [sub.loc[sub["method"] == m, "value"].to_numpy(dtype=float) for m in methods]
+            # no fliers: every trial is drawn as a dot on top
+            bp = ax.boxplot(data, tick_labels=[METHOD_TITLES.get(m, m) for m in methods], patch_artist=True,
+                            widths=0.6, showfliers=False, medianprops={"color": "k"})
+            for patch, m in zip(bp["boxes"], methods, strict=True):
+                patch.set_facecolor(METHOD_COLORS.get(m, "#cccccc"))
+                patch.set_alpha(0.55)
+            for j, d in enumerate(data):
+                if len(d):
+                    ax.plot(np.full(len(d), j + 1) + np.linspace(-0.12, 0.12, len(d)), d, ".", color="k", ms=3)
+            ax.set_title(f"{label}: {metric.replace('_', ' ')}", fontsize=9)
+            ax.set_ylabel(f"RMSE [{unit}]" if unit else "RMSE")
+            ax.tick_params(axis="x", labelrotation=30)  # four or more method names overlap when horizontal
+            ax.grid(alpha=0.3, axis="y")
+    return fig
+
+
+def _metric_words(metric: str) -> str:
+    """``rmse_position`` → ``position RMSE``."""
+    return f"{metric.removeprefix('rmse_').replace('_', ' ')} RMSE"
+
+
+def fig_data_efficiency(table: pd.DataFrame, unit: str = "m", what: str = "position RMSE") -> Figure:
+    """Mean RMSE (± standard error) against the number of training demonstrations, per method and label.
+
+    ``table`` has columns ``label``, ``method``, ``n_train`` and ``value`` (one row per trial and repeat).
+    """
+    labels = list(dict.fromkeys(table["label"]))
+    fig = Figure(figsize=(4.8 * len(labels), 3.6), layout="constrained")
+    axs = fig.subplots(1, len(labels), squeeze=False, sharey=True)[0]
+    for ax, label in zip(axs, labels, strict=True):
+        sub = table[table["label"] == label]
+        for method, g in sub.groupby("method", sort=False):
+            stats = g.groupby("n_train")["value"].agg(["mean", "std", "count"]).sort_index()
+            se = stats["std"].fillna(0.0) / np.sqrt(stats["count"])
+            color = METHOD_COLORS.get(method, "k")
+            ax.errorbar(stats.index, stats["mean"], yerr=se, marker="o", ms=4, capsize=3, color=color,
+                        label=METHOD_TITLES.get(method, method))
+        ax.set_xscale("log")
+        ax.minorticks_off()  # the log axis's minor labels (3×10⁰, …) only clutter a handful of sizes
+        ax.set_xticks(sorted(set(sub["n_train"])), [str(v) for v in sorted(set(sub["n_train"]))])
+        ax.set_xlabel("training demonstrations")
+        ax.set_title(f"{label}: data efficiency", fontsize=9)
+        ax.grid(alpha=0.3)
+    axs[0].set_ylabel(f"{what} [{unit}]" if unit else what)
+    axs[0].legend(fontsize=8)
+    return fig
+
+
+# -- the report -------------------------------------------------------------------------------------------
+@dataclass
+class ReportInputs:
+    """Everything the report shows, computed by the caller (the CLI) so figures and numbers agree.
+
+    ``models[label]`` is the proposed model per strategy; ``baselines[label]`` maps method → model;
+    ``train``/``test`` the demonstrations per label; ``rmse`` a tidy table (label, method, metric, value, …);
+    ``efficiency`` a tidy table (label, method, n_train, value); ``coverage`` a table per label and input;
+    ``stats`` Markdown of a multi-subject test; ``notes`` free lines for the header; ``verdicts`` plain
+    sentences saying where the proposed model is not better than IOC-only or persistence (shown first).
+    """
+
+    train: Mapping[str, DemonstrationSet]
+    test: Mapping[str, DemonstrationSet]
+    models: Mapping[str, Any]
+    baselines: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    rmse: pd.DataFrame | None = None
+    efficiency: pd.DataFrame | None = None
+    coverage: pd.DataFrame | None = None
+    band: pd.DataFrame | None = None
+    stats: str | None = None
+    n_steps: int = 60
+    samples: int = 0
+    seed: int = 0
+    notes: list[str] = field(default_factory=list)
+    title: str = "Workbench report"
+    verdicts: list[str] = field(default_factory=list)
+    objectives: Mapping[str, Any] = field(default_factory=dict)
+    envelope: pd.DataFrame | None = None
+    calibration: pd.DataFrame | None = None
+
+
+def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
+    cols = [str(c) for c in df.columns]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for row in df.itertuples(index=False):
+        cells = [format(v, floatfmt) if isinstance(v, float | np.floating) else str(v) for v in row]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
+    """Write ``out_dir/report.md`` and ``out_dir/figures/*.png``; returns the report's path."""
+    out_dir = Path(out_dir)
+    fig_dir = out_dir / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    labels = list(inputs.models)
+    any_set = next(iter(inputs.train.values()))
+    state_names, input_names, dt = any_set.state_names, any_set.input_names, any_set.dt
+    md: list[str] = [f"# {inputs.title}", ""]
+    md += [f"- {line}" for line in inputs.notes]
+    md += [""]
+    md += [f"**{line}**\n" for line in inputs.verdicts]
+    system = inputs.models[labels[0]].system
+
+    # data
+    rows = []
+    for label in labels:
+        tr, te = inputs.train[label], inputs.test.get(label)
+        rows.append({
+            "strategy": label,
+            "train": len(tr),
+            "test": 0 if te is None else len(te),
+            "samples": tr.n_samples + (0 if te is None else te.n_samples),
+            "subjects": len({d.meta.get("subject") for d in tr}),
+            "sources": ", ".join(sorted({Path(str(d.meta.get("source", "?"))).name for d in tr}))[:80],
+        })
+    md += ["## Demonstrations", "", _md_table(pd.DataFrame(rows)), ""]
+    all_sets = {label: inputs.train[label] + inputs.test[label] if label in inputs.test else inputs.train[label]
+                for label in labels}
+    save_figure(fig_demonstrations(all_sets), fig_dir / "demonstrations.png")
+    md += ["![Demonstrations per strategy](figures/demonstrations.png)", "",
+           "*Flown paths per strategy in the plane of the position roles; dots are start points, the bar is the pad "
+           "(where known).*" if _plane(any_set.roles, state_names) is not None else
+           "*Every state against time per strategy (the plant declares no plane of positions).*", ""]
+
+    # objective
+    md += ["## Task objective (inverse LQR)", ""]
+    obj_rows = []
+    for label in labels:
+        o = getattr(inputs.models[label], "objective_", None)
+        if o is None:
+            continue
+        n = len(state_names)
+        Mn = np.asarray(o.M_normalized)
+        oi = inputs.objectives.get(label)
+        row = {"strategy": label, "α*": float(o.alpha), "forward-gain error": float(o.forward_gain_error)}
+        q, r = np.diag(Mn[:n, :n]), np.diag(Mn[n:, n:])
+        if oi is None:
+            row.update({f"Q {s}": float(v) for s, v in zip(state_names, q, strict=True)})
+            row.update({f"R {s}": float(v) for s, v in zip(input_names, r, strict=True)})
+        else:
+            b = oi.boot
+            row.update({f"Q {s}": f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
+                        for s, v, lo, hi in zip(state_names, q, b.Q_diag_lo, b.Q_diag_hi, strict=True)})
+            row.update({f"R {s}": f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
+                        for s, v, lo, hi in zip(input_names, r, b.R_diag_lo, b.R_diag_hi, strict=True)})
+        obj_rows.append(row)
+    if obj_rows:
+        md += [_md_table(pd.DataFrame(obj_rows), ".3g"), ""]
+        md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names)
+        save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
+        md += ["![Normalized Q and R](figures/objective.png)", "",
+               "*Normalized cost blocks (M / λmax(M)) per strategy; the attitude weight is outlined. The SDP returns "
+               "the minimum-condition-number cost with the fitted gain, not a unique cost (see METHOD.md).*", ""]
+
+    # variability and predictions on one test trial per label
+    cases_w, cases_p = {}, {}
+    for label in labels:
+        te = inputs.test.get(label)
+        if te is None or not len(te):
+            continue
+        demo = te[0]
+        model = inputs.models[label]
+        if callable(getattr(model, "variability", None)):
+            cases_w[label] = (demo, model)
+        preds = {"proposed": _predict(model, demo, inputs.n_steps, inputs.samples, inputs.seed)}
+        for method, bm in inputs.baselines.get(label, {}).items():
+            preds[method] = _predict(bm, demo, inputs.n_steps, 0, inputs.seed)
+        cases_p[label] = (demo, preds)
+    md += ["## Variability (TP-GMM + GMR)", ""]
+    if inputs.coverage is not None and len(inputs.coverage):
+        md += ["One-step coverage of ŵ by the GMR bands on the test trials:", "",
+               _md_table(inputs.coverage, ".1f"), ""]
+    if inputs.calibration is not None and len(inputs.calibration):
+        save_figure(fig_calibration(inputs.calibration), fig_dir / "calibration.png")
+        md += ["![One-step band calibration](figures/calibration.png)", "",
+               "*Share of the test trials' inputs inside the model's one-step band μ̂ ± cσ̂ against the share a "
+               "Gaussian puts there, for c from 0.25σ to 3σ: on the diagonal the band is calibrated at every level, "
+               "below it too narrow.*", ""]
+    if cases_w:
+        save_figure(fig_variability(cases_w, input_names), fig_dir / "variability.png")
+        md += ["![Residual variability with GMR bands](figures/variability.png)", "",
+               "*ŵ = u − K̂x on a test trial with the GMR mean μ(x) and its ±3σ band (eqs. (24)–(27)).*", ""]
+    md += ["## Predictions", ""]
+    if cases_p:
+        save_figure(fig_predictions(cases_p, state_names, dt, any_set.roles), fig_dir / "predictions.png")
+        band = f", shaded: the proposed model's Monte Carlo band ({inputs.samples} rollouts)" if inputs.samples else ""
+        md += ["![Predicted vs recorded trajectories](figures/predictions.png)", "",
+               f"*{inputs.n_steps * dt:.1f} s predictions from the test trial's start{band}.*", ""]
+    if inputs.rmse is not None and len(inputs.rmse):
+        metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
+        save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
+        md += [_md_table(improvement_table(inputs.rmse)), ""]
+        md += _envelope_line(inputs.envelope)
+        md += [f"**{line}**\n" for line in inputs.verdicts]
+        md += [
+               "![RMSE per method](figures/rmse.png)", "",
+               "*Horizon RMSE (eq. (35)) per test trial and start point.*", ""]
+    if inputs.band is not None and len(inputs.band):
+        b = inputs.band.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
+        b = (100.0 * b).rename(columns=METHOD_TITLES).reset_index()
+        md += [f"Monte Carlo trajectory bands (5–95 %, {inputs.samples} rollouts): share of the horizon's steps "
+               "at which every state of the block lies inside the band [%] (persistence has no band):", "",
+               _md_table(b, ".1f"), ""]
+    if inputs.efficiency is not None and len(inputs.efficiency):
+        what = str(inputs.efficiency["metric"].iloc[0]) if "metric" in inputs.efficiency else "rmse_position"
+        save_figure(fig_data_efficiency(inputs.efficiency, metric_unit(system, what), _metric_words(what)),
+                    fig_dir / "data_efficiency.png")
+        eff = inputs.efficiency.groupby(["label", "n_train", "method"], sort=False)["value"].mean().unstack("method")
+        eff = eff.rename(columns=METHOD_TITLES).reset_index()
+        md += ["## Data efficiency", "", _md_table(eff), "",
+               "![Data efficiency](figures/data_efficiency.png)", "",
+               f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations.*",
+               ""]
+    if inputs.stats:
+        md += ["## Multi-subject statistics", "", inputs.stats, ""]
+    path = out_dir / "report.md"
+    atomic_write_text(path, "\n".join(md).rstrip() + "\n")
+    return path
+
+
+def _envelope_line(envelope: pd.DataFrame | None) -> list[str]:
+    """How many predictions left the envelope of their model's training states (``left_envelope`` rows)."""
+    if envelope is None or not len(envelope):
+        return []
+    counts = envelope.groupby("method", sort=False)["value"].agg(["sum", "count"])
+    parts = [f"{METHOD_TITLES.get(m, m)} {int(r['sum'])} of {int(r['count'])}" for m, r in counts.iterrows()]
+    return ["Predictions whose mean rollout left the envelope of the training states (the model extrapolates "
+            "there): " + ", ".join(parts) + ".", ""]
+
+
+def _objective_interval_notes(
+    objectives: Mapping[str, Any], labels: Sequence[str], state_names: Sequence[str], input_names: Sequence[str]
+) -> list[str]:
+    """What the intervals are, and the weight ratios inside coupled parts compared between strategies."""
+    from workbench.study.weights import compare_strategies, format_interval
+
+    if not objectives:
+        return ["*No intervals: the study ran without bootstrap resamples (`--bootstrap 0`); the values above "
+                "are point estimates.*", ""]
+    first = next(iter(objectives.values())).boot
+    md = [f"*In brackets: {first.ci:g} % percentile intervals over {first.n_boot} bootstrap resamples of the "
+          "training trials.*", ""]
+    ratios = {lb: objectives[lb].ratios for lb in labels if lb in objectives and objectives[lb].ratios}
+    if not ratios:
+        return md
+    table = compare_strategies(ratios)
+    gains = sorted({objectives[lb].ratio_gain for lb in ratios})
+    rows = []
+    for r in table.itertuples():
+        row = {"ratio": r.ratio, "strategy": r.strategy, "estimate [interval]": format_interval(r.estimate, r.lo, r.hi),
+               "note": r.note}
+        if len(ratios) > 1:
+            factor = getattr(r, "factor", float("nan"))
+            row[f"× vs {labels[0] if labels[0] in ratios else next(iter(ratios))}"] = (
+                "" if not np.isfinite(factor) else format_interval(factor, r.factor_lo, r.factor_hi)
+                + (f" — {r.factor_note}" if r.factor_note else ""))
+        rows.append(row)
+    fwd = ", ".join(f"{lb} {ratios[lb].forward_gain_error:.2g}" for lb in ratios)
+    md += ["### Weight ratios inside coupled parts", "",
+           "The cost above is the SDP's minimum-condition-number member and keeps no ratio between strategies. "
+           "A cost with S = 0 and diagonal Q, R is unique up to one scale per decoupled part of the plant, so its "
+           "ratios inside a part compare between strategies. Each strategy's ratios are those whose LQR gain is "
+           f"closest to its estimated gain ({', '.join(gains)}) in the metric of that gain's bootstrap "
+           "covariance; the intervals are profile intervals of that distance (a ratio is kept while the gain it "
+           "implies stays statistically compatible with the estimate), and a factor's interval profiles both "
+           f"strategies' distances together (forward-gain error of each diagonal cost: {fwd}). An interval wider "
+           "than ×10 is marked not identifiable from these data. Where even the closest diagonal cost's gain is "
+           "farther from the estimate than its spread allows (the distance test of the diagonal structure), the "
+           "operator's objective is not of that form: those ratios are marked and describe no objective.", "",
+           _md_table(pd.DataFrame(rows)), ""]
+    failing = [f"- {lb}: {f.describe()}" for lb in ratios for f in ratios[lb].fits if not f.explained]
+    if failing:
+        md += [*failing, ""]
+    return md
+
+
+def _predict(model: Any, demo: Demonstration, n_steps: int, samples: int, seed: int) -> Any:
+    kwargs: dict[str, Any] = {"target": demo.target}
+    if samples:
+        kwargs.update(samples=samples, seed=seed)
+    return model.predict(demo.x[0], n_steps, **kwargs)
+
+
+def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str = "Workbench report") -> Path:
+    """``out_dir/report.md`` with figures under ``out_dir/figures``."""
+    notes = [
+        f"{len(result.demos)} demonstrations, {result.demos.n_samples} samples, dt = {result.demos.dt:g} s; "
+        f"states {list(result.demos.state_names)}, inputs {list(result.demos.input_names)}",
+        f"prediction horizon {result.n_steps} steps ({result.n_steps * result.demos.dt:.2f} s); "
+        f"{result.samples} Monte Carlo rollouts per band; seed {result.seed}",
+    ]
+    cov = None
+    if result.coverage is not None:
+        cov = result.coverage.copy()
+        front = [c for c in ("label",) if c in cov.columns]
+        cov = cov[front + [c for c in cov.columns if c not in front]]
+    return write_report(
+        out_dir,
+        ReportInputs(
+            train=result.train, test=result.test, models=result.models, baselines=result.baselines,
+            rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
+            stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,
+            envelope=result.table[result.table["metric"] == "left_envelope"], calibration=result.calibration,
+            n_steps=result.n_steps, samples=result.samples, seed=result.seed, notes=notes, title=title,
+        ),
+    )

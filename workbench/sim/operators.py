@@ -1,0 +1,200 @@
+"""Synthetic operators whose task objective is known: the ground truth for checking the task-objective estimate.
+
+These operators exist to *measure* the workbench (is the gain estimate consistent? does a bootstrap interval of
+a weight ratio cover the truth?), never to choose its defaults: a default tuned on the operator it is judged by
+would make the measurement meaningless.
+
+:func:`lqr_operator_demos` flies an LQR operator with a known diagonal cost ``(Q, R)`` on the planar quadrotor
+(or any plant): ``u = K x + w`` with ``K`` the LQR gain (convention ``u = K x``) and a variability ``w`` that
+is zero-mean, autocorrelated (AR(1), ρ ≈ 0.9 per step: a hand that drifts for seconds) and state-dependent (its
+scale grows with the distance from the pad). That is the closed-loop identification problem of the method's
+"What the paper leaves open": each state was made by the operator's own earlier, correlated variability, so a
+least-squares gain is biased however many demonstrations there are.
+
+:func:`erratic_operator_demos` flies a strongly non-LQR operator (reaction delay, bang-bang corrections,
+hesitations, a left/right detour choice around an obstacle) for checking that automatically chosen settings do
+not make the proposed model worse than its task-objective-only baseline.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.errors import DataError
+from workbench.method.objective import forward_gain
+from workbench.plant.system import LinearSystem, planar_quadrotor
+
+__all__ = ["LQROperator", "lqr_operator_demos", "ErraticOperator", "erratic_operator_demos"]
+
+
+@dataclass(frozen=True)
+class LQROperator:
+    """An LQR operator with a known diagonal cost and zero-mean, autocorrelated, state-dependent variability.
+
+    Parameters
+    ----------
+    q, r : sequence of float
+        Diagonals of Q (n) and R (m). Default: the planar quadrotor, attitude weight 1.
+    rho : float
+        AR(1) correlation of the variability per step.
+    sigma_near, sigma_far : sequence of float (m)
+        Standard deviation of each input's variability at the pad and far from it.
+    length : float
+        Distance (m) over which the variability grows from ``sigma_near`` to ``sigma_far``.
+    x0_low, x0_high : sequence of float (n)
+        Initial states are uniform in this box (the paper's start region by default).
+    duration : float
+        Seconds per trial.
+    """
+
+    q: Sequence[float] = (1.0, 1.0, 1.0, 0.3, 0.3, 0.01)
+    r: Sequence[float] = (10.0, 10.0)
+    rho: float = 0.9
+    sigma_near: Sequence[float] = (0.01, 0.02)
+    sigma_far: Sequence[float] = (0.04, 0.08)
+    length: float = 0.8
+    x0_low: Sequence[float] = (-2.0, 2.5, 0.0, 0.0, 0.0, 0.0)
+    x0_high: Sequence[float] = (2.0, 3.0, 0.0, 0.0, 0.0, 0.0)
+    duration: float = 8.0
+
+    def gain(self, system: LinearSystem) -> np.ndarray:
+        """The operator's true gain ``K`` of ``u = K x`` (the LQR gain of ``diag(q), diag(r)``)."""
+        return forward_gain(system.A, system.B, np.diag(self.q), np.diag(self.r))[0]
+
+
+def _box(low: Sequence[float], high: Sequence[float], n: int, rng: np.random.Generator) -> np.ndarray:
+    lo, hi = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+    if lo.shape != (n,) or hi.shape != (n,):
+        raise DataError(f"the initial-state box must have {n} entries, got {lo.shape} and {hi.shape}")
+    return rng.uniform(lo, hi)
+
+
+def lqr_operator_demos(
+    operator: LQROperator | None = None,
+    n_trials: int = 30,
+    seed: int = 0,
+    system: LinearSystem | None = None,
+    label: str = "LQR",
+) -> DemonstrationSet:
+    """Fly ``n_trials`` trials of an :class:`LQROperator` to the origin; deterministic for ``seed``.
+
+    The inputs are not clipped: the gain is then exactly ``operator.gain(system)``.
+    """
+    op = operator or LQROperator()
+    sys_ = system or planar_quadrotor()
+    n, m = sys_.n, sys_.m
+    K = op.gain(sys_)
+    rng = np.random.default_rng(seed)
+    s_near, s_far = np.asarray(op.sigma_near, dtype=float), np.asarray(op.sigma_far, dtype=float)
+    plane = sys_.r.plane  # None without two position roles (a plant always has roles, maybe empty)
+    steps = int(round(op.duration / sys_.dt))
+    demos = []
+    for j in range(n_trials):
+        x = _box(op.x0_low, op.x0_high, n, rng)
+        e = np.zeros(m)
+        xs, us = np.empty((steps, n)), np.empty((steps, m))
+        for k in range(steps):
+            dist = float(np.hypot(*x[list(plane)])) if plane is not None else float(np.linalg.norm(x))
+            sigma = s_near + (s_far - s_near) * (1.0 - np.exp(-dist / op.length))
+            e = op.rho * e + np.sqrt(1.0 - op.rho**2) * rng.standard_normal(m)
+            u = K @ x + sigma * e
+            xs[k], us[k] = x, u
+            x = sys_.A @ x + sys_.B @ u
+        demos.append(
+            Demonstration(
+                sys_.dt * np.arange(steps), xs, us,
+                {"id": f"{label.lower()}-{j:03d}", "label": label, "source": "lqr operator", "target": [0.0] * n},
+            )
+        )
+    return DemonstrationSet(demos, sys_.state_names, sys_.input_names, sys_.dt, roles=sys_.roles)
+
+
+@dataclass(frozen=True)
+class ErraticOperator:
+    """A strongly non-LQR operator: it reacts late, corrects in bang-bang pulses, hesitates and picks a side.
+
+    It flies to the pad around an obstacle above it: each trial first heads for a waypoint left or right of
+    the obstacle (a coin flip: a multi-modal choice), then to the pad. It sees the state ``delay`` seconds late,
+    holds its stick for a while (``hesitation_rate`` per step, ``hesitation`` seconds), and applies attitude
+    corrections as full pulses of ``pulse`` once the error exceeds a dead band.
+    """
+
+    delay: float = 0.15
+    hesitation_rate: float = 0.01
+    hesitation: float = 0.3
+    pulse: float = 0.06
+    dead_band: float = 0.03
+    detour: float = 1.0
+    waypoint_height: float = 1.5
+    k_pos: float = 0.5
+    k_vel: float = 1.5
+    k_alt: float = 0.5
+    k_vy: float = 0.9
+    phi_max: float = 0.25
+    sigma: Sequence[float] = field(default=(0.01, 0.03))
+    duration: float = 15.0
+
+
+def erratic_operator_demos(
+    operator: ErraticOperator | None = None, n_trials: int = 30, seed: int = 0, label: str = "erratic"
+) -> DemonstrationSet:
+    """Fly ``n_trials`` trials of an :class:`ErraticOperator` on the planar quadrotor; deterministic for ``seed``."""
+    op = operator or ErraticOperator()
+    sys_ = planar_quadrotor()
+    n = sys_.n
+    ix, iy, iphi, ivx, ivy, _ = range(n)
+    rng = np.random.default_rng(seed)
+    lag = max(0, int(round(op.delay / sys_.dt)))
+    steps = int(round(op.duration / sys_.dt))
+    hold_steps = max(1, int(round(op.hesitation / sys_.dt)))
+    sigma = np.asarray(op.sigma, dtype=float)
+    demos = []
+    for j in range(n_trials):
+        x = np.zeros(n)
+        x[ix], x[iy] = rng.uniform(-2.0, 2.0), rng.uniform(2.5, 3.0)
+        side = 1.0 if rng.random() < 0.5 else -1.0
+        history = [x.copy()] * (lag + 1)
+        held, hold_left = np.zeros(2), 0
+        xs, us = np.empty((steps, n)), np.empty((steps, 2))
+        drift = np.zeros(2)
+        via = True
+        for k in range(steps):
+            seen = history[0]
+            # first the waypoint beside the obstacle, then (once near it, or below it) the pad
+            via = via and seen[iy] > op.waypoint_height and math.hypot(
+                seen[ix] - side * op.detour, seen[iy] - op.waypoint_height) > 0.3
+            goal_x = side * op.detour if via else 0.0
+            goal_y = op.waypoint_height if via else 0.0
+            vx_des = float(np.clip(-op.k_pos * (seen[ix] - goal_x), -0.8, 0.8))
+            vy_des = float(np.clip(-op.k_alt * (seen[iy] - goal_y), -0.6, 0.6))
+            phi_des = float(np.clip(op.k_vel * (vx_des - seen[ivx]) / 9.8, -op.phi_max, op.phi_max))
+            err = phi_des - seen[iphi]
+            u1 = op.pulse * np.sign(err) if abs(err) > op.dead_band else 0.0
+            u2 = op.k_vy * (vy_des - seen[ivy])
+            if hold_left > 0:
+                u, hold_left = held, hold_left - 1
+            else:
+                if rng.random() < op.hesitation_rate:
+                    hold_left = hold_steps
+                drift = 0.9 * drift + np.sqrt(1 - 0.81) * sigma * rng.standard_normal(2)
+                u = np.array([u1, u2]) + drift
+                held = u
+            u = sys_.clip(u)
+            xs[k], us[k] = x, u
+            if x[iy] <= 0.0 or abs(x[ix]) > 3.0 or x[iy] > 3.5:  # touched down, or left the domain
+                break
+            x = sys_.A @ x + sys_.B @ u
+            history = [*history[1:], x.copy()]
+        xs, us = xs[: k + 1], us[: k + 1]
+        demos.append(
+            Demonstration(
+                sys_.dt * np.arange(k + 1), xs, us,
+                {"id": f"{label.lower()}-{j:03d}", "label": label, "source": "erratic operator", "target": [0.0] * n},
+            )
+        )
+    return DemonstrationSet(demos, sys_.state_names, sys_.input_names, sys_.dt, roles=sys_.roles)

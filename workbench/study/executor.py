@@ -1,0 +1,412 @@
+"""The one place that maps independent work over workers: in this process, or on a Dask cluster.
+
+Studies are made of independent tasks: one log's import, one subject's fit and evaluation, a block of
+bootstrap resamples, one data-efficiency point. Whoever has such a loop builds a list of small task
+descriptions and a module-level function that does one, and hands both to an executor:
+
+>>> with make_executor(workers=2) as ex:                       # doctest: +SKIP
+...     ref = ex.share(demos, by_subject=True)                 # where workers read the data (Parquet)
+...     tables = ex.map(fit_one_subject, [(ref, s) for s in subjects], progress=bar)
+
+* :class:`SerialExecutor` (the default) runs the tasks here, in order, and imports no Dask.
+* :class:`DaskExecutor` runs them on ``dask.distributed``: a ``LocalCluster`` of N worker processes
+  (``--workers N``) or an existing cluster (``--scheduler ADDRESS``). Dask is imported only when one is made.
+
+What both guarantee:
+
+* **Same results.** :meth:`~SerialExecutor.map` returns the results in task order whatever order they finish in;
+  a task that needs randomness derives its seed from the master seed and its own identity (:func:`task_seed`),
+  never from a generator shared across tasks; every task runs with one BLAS/OpenMP thread, here as on a worker,
+  so that floating-point reductions are the same.
+* **Small messages.** Data travel as paths: :meth:`~SerialExecutor.share` turns a set into a
+  :class:`~workbench.data.dataset.DataRef` (the set itself here; a Parquet file or a per-subject dataset in the
+  staging folder for workers), and a worker reads what its task needs.
+* **Failures contained.** :meth:`~SerialExecutor.map_outcomes` reports each failed task (its key and cause) and
+  completes the others. On Dask a task whose worker dies is run again on another worker (the scheduler's
+  ``allowed-failures``), and a task that raises something other than a
+  :class:`~workbench.errors.WorkbenchError` is retried ``retries`` times; a ``WorkbenchError`` (bad data) is
+  final at once.
+* **Warnings** a task raises on a worker are raised again here, in task order, so callers that count them
+  (e.g. EM stopping at ``max_iter``) see the same as in a serial run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+import uuid
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from workbench.data.dataset import DataRef, write_dataset
+from workbench.data.demonstrations import DemonstrationSet
+from workbench.errors import DataError, WorkbenchError
+
+__all__ = ["Executor", "SerialExecutor", "DaskExecutor", "Outcome", "make_executor", "task_seed", "serial"]
+
+Progress = Callable[[int, int], Any]
+#: Re-runs of a task that raised something unexpected (an OSError on a network file system, a MemoryError).
+DEFAULT_RETRIES = 2
+
+
+def task_seed(seed: int, *key: Any) -> np.random.SeedSequence:
+    """The seed of one task: the master ``seed`` and a stable hash of the task's identity ``key``.
+
+    The same (seed, key) gives the same stream in any process, on any machine, whatever else runs; Python's
+    ``hash()`` would not (it is salted per process). Use it as ``np.random.default_rng(task_seed(seed, "subject",
+    name))``.
+    """
+    text = json.dumps([str(k) for k in key], ensure_ascii=False)
+    words = np.frombuffer(hashlib.blake2b(text.encode("utf-8"), digest_size=16).digest(), dtype="<u4")
+    return np.random.SeedSequence([int(seed) % 2**64, *(int(w) for w in words)])
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One task's result or, when it failed, its cause (``error``: the exception's type and message)."""
+
+    key: str
+    value: Any = None
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+class Executor(Protocol):
+    """What the studies use; :class:`SerialExecutor` and :class:`DaskExecutor` implement it."""
+
+    parallel: bool
+    workers: int
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
+        ...
+
+    def map_outcomes(
+        self, fn: Callable[[Any], Any], items: Sequence[Any], *, keys: Sequence[str] | None = None,
+        progress: Progress | None = None,
+    ) -> list[Outcome]:
+        ...
+
+    def share(self, demos: Any, *, by_subject: bool = False) -> DataRef:
+        ...
+
+
+# ------------------------------------------------------------------------------------ thread limits
+
+_CONTROLLER: Any = None
+
+
+def _controller() -> Any:
+    global _CONTROLLER
+    if _CONTROLLER is None:
+        from threadpoolctl import ThreadpoolController
+
+        _CONTROLLER = ThreadpoolController()
+    return _CONTROLLER
+
+
+_WORKER_LIMIT: Any = None
+
+
+def _limit_worker_threads() -> None:
+    """One BLAS and OpenMP thread for the rest of this worker process (N workers on N cores, not N × cores).
+
+    Called by every task rather than once per worker, so a worker restarted after a crash is limited too.
+    """
+    global _WORKER_LIMIT
+    if _WORKER_LIMIT is None:
+        _WORKER_LIMIT = _controller().limit(limits=1)  # held for the life of the process
+
+
+def _warning_records(caught: list[warnings.WarningMessage]) -> list[tuple[type[Warning], str]]:
+    return [(w.category, str(w.message)) for w in caught]
+
+
+def _run_task(fn: Callable[[Any], Any], item: Any) -> tuple[Any, list[tuple[type[Warning], str]], BaseException | None]:
+    """Run one task on a worker: (value, warnings, WorkbenchError or None).
+
+    A ``WorkbenchError`` is returned, not raised: it is a property of the data (a corrupt log), and Dask would
+    otherwise retry it. Anything else is raised, so Dask retries it.
+    """
+    _limit_worker_threads()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            value = fn(item)
+        except WorkbenchError as exc:
+            return None, _warning_records(caught), exc
+    return value, _warning_records(caught), None
+
+
+def _describe(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def _keys(items: Sequence[Any], keys: Sequence[str] | None) -> list[str]:
+    if keys is None:
+        return [f"task {i}" for i in range(len(items))]
+    if len(keys) != len(items):
+        raise DataError(f"{len(keys)} keys for {len(items)} tasks")
+    return [str(k) for k in keys]
+
+
+# -------------------------------------------------------------------------------------------- serial
+
+
+class SerialExecutor:
+    """Every task in this process, one after the other: the default, with nothing to start or stop."""
+
+    parallel = False
+    workers = 1
+
+    def __enter__(self) -> SerialExecutor:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    def __repr__(self) -> str:
+        return "SerialExecutor()"
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
+        """``[fn(item) for item in items]``, one BLAS thread each, reporting ``progress(done, total)``."""
+        items, out = list(items), []
+        with _controller().limit(limits=1):
+            for i, item in enumerate(items):
+                out.append(fn(item))
+                if progress is not None:
+                    progress(i + 1, len(items))
+        return out
+
+    def map_outcomes(
+        self, fn: Callable[[Any], Any], items: Sequence[Any], *, keys: Sequence[str] | None = None,
+        progress: Progress | None = None,
+    ) -> list[Outcome]:
+        """As :meth:`map`, but a task that raises is an :class:`Outcome` with its error; the others still run."""
+        items = list(items)
+        names = _keys(items, keys)
+        out = []
+        with _controller().limit(limits=1):
+            for i, item in enumerate(items):
+                try:
+                    out.append(Outcome(names[i], fn(item)))
+                except Exception as exc:  # contained: the caller reports it with the task's key
+                    out.append(Outcome(names[i], error=_describe(exc)))
+                if progress is not None:
+                    progress(i + 1, len(items))
+        return out
+
+    def share(self, demos: Any, *, by_subject: bool = False) -> DataRef:
+        """A reference to ``demos`` (a set, a path, or a reference) for tasks run here: nothing is copied."""
+        if isinstance(demos, DataRef):
+            return demos
+        if isinstance(demos, str | os.PathLike):
+            return DataRef(path=str(demos))
+        return DataRef(demos=demos)
+
+
+#: The default executor of every ``executor=`` keyword.
+serial = SerialExecutor()
+
+
+# ---------------------------------------------------------------------------------------------- Dask
+
+
+class DaskExecutor:
+    """Tasks on ``dask.distributed``: a ``LocalCluster`` of ``workers`` processes, or the cluster at ``scheduler``.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Start a local cluster of this many single-threaded worker processes (stopped by :meth:`close`).
+    scheduler : str, optional
+        Instead, connect to a running scheduler, e.g. ``tcp://10.0.0.5:8786``. Its workers must have the
+        workbench installed and must reach ``staging`` (and any input paths) under the same names.
+    staging : path, optional
+        Folder where :meth:`share` writes the sets workers read. Default: a fresh temporary folder (removed by
+        :meth:`close`), which only a local cluster can see; on a real cluster give a shared file system path.
+    retries : int
+        Re-runs of a task that raised an unexpected exception (a ``WorkbenchError`` is not retried).
+    timeout : float
+        Seconds to wait for the scheduler at ``scheduler``.
+
+    Raises
+    ------
+    WorkbenchError
+        Neither or both of ``workers`` and ``scheduler``, a worker count below 1, or a scheduler that cannot
+        be reached.
+    """
+
+    parallel = True
+
+    def __init__(
+        self, workers: int | None = None, scheduler: str | None = None, *, staging: str | os.PathLike | None = None,
+        retries: int = DEFAULT_RETRIES, timeout: float = 15.0,
+    ) -> None:
+        if (workers is None) == (scheduler is None):
+            raise WorkbenchError("give either a number of local workers or a scheduler address")
+        if workers is not None and int(workers) < 1:
+            raise WorkbenchError(f"the number of workers must be at least 1, got {workers}")
+        import logging
+
+        from dask.distributed import Client, LocalCluster
+
+        self.retries = int(retries)
+        self._cluster = None
+        self._own_staging = staging is None
+        self._staging = Path(staging) if staging is not None else None
+        self._n_shared = 0
+        if scheduler is not None:
+            try:
+                self._client = Client(scheduler, timeout=f"{float(timeout)}s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: {_describe(exc)}") from None
+            self.address = str(scheduler)
+        else:
+            self._cluster = LocalCluster(
+                # any free port for the scheduler's HTTP endpoint: two studies at once must not collide on 8787
+                n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0",
+                silence_logs=logging.ERROR,
+            )
+            self._client = Client(self._cluster)
+            self.address = self._cluster.scheduler_address
+
+    @property
+    def client(self) -> Any:
+        """The ``dask.distributed.Client``."""
+        return self._client
+
+    @property
+    def workers(self) -> int:
+        """Worker threads the scheduler knows now (one per process on a local cluster)."""
+        info = self._client.scheduler_info()
+        return max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
+
+    def __repr__(self) -> str:
+        return f"DaskExecutor({self.address}, {self.workers} workers)"
+
+    def __enter__(self) -> DaskExecutor:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Disconnect, stop the local cluster (if this executor started one) and remove its own staging folder."""
+        self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+        if self._own_staging and self._staging is not None:
+            shutil.rmtree(self._staging, ignore_errors=True)
+
+    # -- data --------------------------------------------------------------------------------------------
+    def _staging_dir(self) -> Path:
+        if self._staging is None:
+            self._staging = Path(tempfile.mkdtemp(prefix="workbench-staging-"))
+        self._staging.mkdir(parents=True, exist_ok=True)
+        return self._staging
+
+    def share(self, demos: Any, *, by_subject: bool = False) -> DataRef:
+        """A path reference workers read: the set written to the staging folder, one Parquet file or (with
+        ``by_subject``) a dataset with one partition per subject. A path or a path reference is used as it is."""
+        if isinstance(demos, DataRef) and demos.path is not None:
+            return demos
+        if isinstance(demos, str | os.PathLike):
+            return DataRef(path=str(demos))
+        if isinstance(demos, DataRef):
+            demos = demos.demos
+        if not isinstance(demos, DemonstrationSet):
+            raise DataError(f"can only share a DemonstrationSet or a path with workers, not a {type(demos).__name__}")
+        self._n_shared += 1
+        target = self._staging_dir() / f"share-{self._n_shared:04d}-{uuid.uuid4().hex[:8]}"
+        if by_subject:
+            return DataRef(path=str(write_dataset(demos, target)))
+        return DataRef(path=str(demos.save(target.with_suffix(".parquet"))))
+
+    # -- tasks -------------------------------------------------------------------------------------------
+    def _run(self, fn: Callable[[Any], Any], items: Sequence[Any], names: list[str], progress: Progress | None,
+             contain: bool) -> list[Outcome]:
+        from dask.distributed import as_completed
+
+        token = uuid.uuid4().hex[:8]
+        label = getattr(fn, "__name__", "task").strip("_") or "task"
+        # one batched submission: the scheduler hears of every task in one message, not one message per task
+        futures = self._client.map(_run_task, [fn] * len(items), items, key=[f"{label}-{token}-{i}" for i in
+                                                                              range(len(items))],
+                                   pure=False, retries=self.retries)
+        position = {f.key: i for i, f in enumerate(futures)}
+        results: list[Outcome | None] = [None] * len(items)
+        emitted: list[list[tuple[type[Warning], str]]] = [[] for _ in items]
+        done = 0
+        try:
+            # results come in batches as they finish (one round trip per batch, not per task)
+            for fut, result in as_completed(futures, with_results=True, raise_errors=False):
+                i = position[fut.key]
+                if fut.status != "finished":  # retries used up, every worker that tried it died, or cancelled
+                    if isinstance(result, tuple) and len(result) == 3:  # dask gives (type, exception, traceback)
+                        result = result[1]
+                    exc = result if isinstance(result, BaseException) else RuntimeError(f"task {fut.status}")
+                    if not contain:
+                        raise exc
+                    results[i] = Outcome(names[i], error=_describe(exc))
+                else:
+                    value, caught, error = result
+                    emitted[i] = caught
+                    if error is not None:
+                        if not contain:
+                            raise error
+                        results[i] = Outcome(names[i], error=_describe(error))
+                    else:
+                        results[i] = Outcome(names[i], value)
+                fut.release()
+                done += 1
+                if progress is not None:
+                    progress(done, len(items))
+        finally:
+            self._client.cancel([f for f in futures if not f.done()])
+        for caught in emitted:  # in task order, whatever order the tasks finished in
+            for category, message in caught:
+                warnings.warn(message, category, stacklevel=3)
+        return [r for r in results if r is not None]
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
+        """``[fn(item) for item in items]`` on the workers, in task order; the first failure is raised."""
+        items = list(items)
+        return [o.value for o in self._run(fn, items, _keys(items, None), progress, contain=False)]
+
+    def map_outcomes(
+        self, fn: Callable[[Any], Any], items: Sequence[Any], *, keys: Sequence[str] | None = None,
+        progress: Progress | None = None,
+    ) -> list[Outcome]:
+        """One :class:`Outcome` per task, in task order; a failed task is reported, the others complete."""
+        items = list(items)
+        return self._run(fn, items, _keys(items, keys), progress, contain=True)
+
+
+def make_executor(
+    workers: int | None = None, scheduler: str | None = None, *, staging: str | os.PathLike | None = None,
+    retries: int = DEFAULT_RETRIES,
+) -> SerialExecutor | DaskExecutor:
+    """The executor the options ask for: serial without either, else a :class:`DaskExecutor`.
+
+    ``workers=0`` also means serial (in this process).
+    """
+    if scheduler is None and not workers:
+        return SerialExecutor()
+    if scheduler is not None and workers:
+        raise WorkbenchError("give --workers N (a local cluster) or --scheduler ADDRESS (a running one), not both")
+    return DaskExecutor(workers if scheduler is None else None, scheduler, staging=staging, retries=retries)

@@ -1,0 +1,59 @@
+"""Names shared by every recording's logging and its blueprint: entity-path parts, and what a session logged.
+
+The blueprint reads :class:`LoggedSession` to find what the logger wrote; keeping both here lets the session
+logger import the blueprint without the blueprint importing the logger (no import cycle).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from workbench.viewer import style
+
+__all__ = ["LoggedSession", "entity_part"]
+
+
+def entity_part(name: str) -> str:
+    """An entity-path part: rerun splits on '/', and spaces or odd characters make paths hard to type."""
+    out = "".join(c if c.isalnum() or c in "-_." else "_" for c in str(name))
+    return out or "_"
+
+
+@dataclass
+class LoggedSession:
+    """What was logged, so a blueprint (and a user) can find it.
+
+    ``focus`` are the trials with variability and predictions, the ones the detail tabs show. ``ranges`` are
+    y-ranges of plots set by the data (key: the plot's entity base path), ``windows`` the time span of each focus
+    trial's predictions, ``bounds`` the scene's visual bounds, ``scales`` the shared color scale of each
+    objective block.
+    """
+
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    demo_ids: list[str] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)
+    focus: list[str] = field(default_factory=list)
+    variability: list[str] = field(default_factory=list)
+    predictions: dict[str, list[tuple[int, list[str]]]] = field(default_factory=dict)
+    models: list[str] = field(default_factory=list)
+    modes: list[str] = field(default_factory=list)
+    scene: bool = False
+    entities: list[str] = field(default_factory=list)
+    units: dict[str, str] = field(default_factory=dict)
+    methods: list[str] = field(default_factory=list)
+    bands: list[str] = field(default_factory=list)
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    windows: dict[str, tuple[float, float]] = field(default_factory=dict)
+    bounds: tuple[list[float], list[float]] | None = None
+    heatmaps: dict[str, list[tuple[str, str]]] = field(default_factory=dict)
+    scales: dict[str, float] = field(default_factory=dict)
+    clock: str = "trial"
+    plane_names: tuple[str, str] | None = None
+    span: tuple[float, float] | None = None
+    heatmap_shapes: dict[tuple[str, str], tuple[int, int]] = field(default_factory=dict)
+    corners: dict[str, str] = field(default_factory=dict)
+
+    def title(self, name: str) -> str:
+        """``name [unit]`` for a state or input."""
+        return style.with_unit(name, self.units.get(name, ""))
