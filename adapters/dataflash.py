@@ -53,7 +53,8 @@ or old ``Week``/``TimeMS`` with ``T``), ``info["utc_time_at_boot"]`` (Unix secon
 
 Instances: where FMTU marks a field as the instance (unit ``#``, e.g. ``IMU.I``, ``XKF1.C``), every instance
 value becomes its own stream named as DFReader indexes its messages: ``IMU[0]``, ``IMU[1]``, ``XKF1[0]``.
-``types=["IMU"]`` reads every instance, ``types=["IMU[1]"]`` one. ``info["instances"]`` lists them per type.
+``types=["IMU"]`` reads every instance, ``types=["IMU[1]"]`` one. ``info["instances"]`` lists them per type. A
+type with more than 256 instance values (damage), or whose instance names would collide, stays one stream.
 
 Vehicle and modes: the firmware string is the first ``MSG`` naming a vehicle (``"ArduCopter V3.3-dev (…)"``,
 ``"ArduPlane V4.5.7 (…)"``; DFReader's substring test) or a ``VER`` message's build type; it gives
@@ -154,6 +155,7 @@ _GPS_EPOCH = 315964800.0  # 1980-01-06 in Unix seconds
 _MAX_FIXPOINT = 6
 _MAX_FMT_HEADS = 4096  # FMT heads decoded up front; more (hostile bytes): only those on the chain
 _MAX_JUMPS = 20_000  # more irregular heads than this (hostile bytes): the chain by pointer doubling instead
+_MAX_INSTANCES = 256  # more instance values than this in one type: damage, not sensors (one stream)
 
 
 def looks_like_dataflash(head: bytes) -> bool:
@@ -553,7 +555,8 @@ def read(path: str | os.PathLike, types: Iterable[str] | None = None) -> Streams
 
 
 def _stream_names(log: _Log) -> tuple[dict[int, str], dict[int, dict[str, np.ndarray]]]:
-    """Stream name per type, and per instanced type its instance streams' row masks (DFReader's NAME[i])."""
+    """Stream name per type, and per instanced type its instance streams' rows (chain indices; DFReader's
+    ``NAME[i]``)."""
     names: dict[int, str] = {}
     used: set[str] = set()
     for t in sorted(log.index):
@@ -568,13 +571,15 @@ def _stream_names(log: _Log) -> tuple[dict[int, str], dict[int, dict[str, np.nda
         if d.instance is None:
             continue
         raw = log.field(t, d.instance)
-        keys, inverse = np.unique(raw, return_inverse=True)
+        keys, inverse, sizes = np.unique(raw, return_inverse=True, return_counts=True)
+        if keys.size > _MAX_INSTANCES:
+            continue  # damage (a real log has a few instances): keep the type as one stream
         values = log.value(t, d.instance, keys)
         labels = [f"{name}[{v}]" for v in values.tolist()]  # DFReader: "%s[%s]" % (type, str(value))
         if len(set(labels)) != len(labels) or used & set(labels):
             continue  # instance names that would collide: keep the type as one stream
-        inverse = inverse.ravel()
-        instances[t] = {label: inverse == k for k, label in enumerate(labels)}
+        rows = log.index[t][np.argsort(inverse.ravel(), kind="stable")]
+        instances[t] = dict(zip(labels, np.split(rows, np.cumsum(sizes)[:-1]), strict=True))
     return names, instances
 
 
@@ -583,7 +588,7 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
     counts: dict[str, int] = {}
     for t, name in names.items():
         if t in instances:
-            counts.update({label: int(mask.sum()) for label, mask in instances[t].items()})
+            counts.update({label: int(rows.size) for label, rows in instances[t].items()})
         else:
             counts[name] = int(log.index[t].size)
     want = None if wanted is None else set(wanted)
@@ -594,7 +599,7 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
         if not chosen:
             continue
         for s in chosen:
-            rows = log.index[t] if parts[s] is None else log.index[t][parts[s]]
+            rows = log.index[t] if parts[s] is None else parts[s]
             frames[s] = pd.DataFrame({"t": log.t[rows], **log.decode(t, rows)}, copy=False)  # fresh arrays
     info = _info(log, names, instances)
     return Streams(where, "dataflash", frames, counts=counts, skipped=dict(log.chain.skipped), info=info)

@@ -395,3 +395,19 @@ def test_hostile_floods_stay_fast_and_bounded(tmp_path):
     assert a.counts == {"FMT": 1, "E": 300_000} and list(a["E"].columns) == ["t"]
     # FMT heads every 3 bytes: one 89-byte FMT every 90 bytes (the next head after each), none describing a type
     assert b.counts == {"FMT": 10_000} and b.skipped == {"bytes": 900_000 - 89 * 10_000, "invalid FMT": 10_000}
+
+
+def test_instance_field_from_fmtu_and_too_many_instances(tmp_path):
+    """Any field FMTU marks with unit '#' splits the type (DFReader's NAME[value]); hundreds of values do not."""
+    t = 1.0 + np.arange(3000) * 0.01
+    streams = {"FEW": pd.DataFrame({"t": t, "Id": np.arange(3000, dtype=np.uint32) % 3, "v": np.sin(t)}),
+               "MANY": pd.DataFrame({"t": t, "Id": np.arange(3000, dtype=np.uint32), "v": np.cos(t)})}
+    units = {name: {"Id": "#", "v": "m"} for name in streams}
+    path = dataflash.write(tmp_path / "inst.bin", streams, units=units)
+    ours = adapters.read(path)
+    assert ours.info["instances"] == {"FEW": ["FEW[0]", "FEW[1]", "FEW[2]"]}
+    assert ours.counts["MANY"] == 3000 and "MANY[7]" not in ours.counts
+    assert ours["FEW[2]"]["v"].tolist() == streams["FEW"]["v"][2::3].tolist()
+    msgs, _ = dfreader(path)
+    assert {k: len(v) for k, v in msgs.items() if not k.startswith("MANY")} == \
+        {k: v for k, v in ours.counts.items() if k != "MANY"}
