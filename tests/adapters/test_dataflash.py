@@ -253,6 +253,24 @@ def test_modes_and_armed_spans_in_summary(logs):
         assert "ArduPlane" in summary.vehicle and "MANUAL" in str(summary)
 
 
+def test_cli_inspect_of_a_bin_and_of_a_damaged_one(logs, tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    repo = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "COLUMNS": "200", "PYTHONPATH": str(repo) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    bad = tmp_path / "bad.BIN"
+    bad.write_bytes(b"\xa3\x95\x80" + bytes(20))
+    out = [subprocess.run([sys.executable, "-m", "workbench", "inspect", str(p)], capture_output=True, text=True,
+                          timeout=120, env=env, cwd=repo) for p in (logs("new", "plane"), bad)]
+    assert out[0].returncode == 0, out[0].stderr
+    assert "dataflash" in out[0].stdout and "IMU[1]" in out[0].stdout
+    assert "flight modes (ArduPlane V4" in out[0].stdout and "FBWA" in out[0].stdout and "armed: 0.2" in out[0].stdout
+    assert out[1].returncode != 0 and "Traceback" not in out[1].stderr
+    assert "bad.BIN" in out[1].stderr and "byte 0" in out[1].stderr
+
+
 def test_load_with_a_mapping_of_dataflash_streams(logs, tmp_path):
     mapping = tmp_path / "bin.toml"
     mapping.write_text(
