@@ -34,15 +34,23 @@ Everything is vectorised with numpy, never one Python step per message:
    the FMT messages) are kept;
 2. the message chain is walked from the first candidate: a message's successor is the first candidate at or
    after its end — which is exactly where ``DFReader``'s parser resynchronises after damage (it skips byte by
-   byte to the next head of a known type). The walk is done by pointer doubling over the successor array
-   (``log2(n)`` vector steps), so false heads inside payloads are never followed;
+   byte to the next head of a known type), so false heads inside payloads are never followed. Runs of
+   messages that follow each other are taken whole; Python steps only from one irregular head (a false head,
+   damage) to the next on the chain, or, past 20,000 of them (hostile bytes), the chain comes from pointer
+   doubling over the successor array (``log2(n)`` vector steps);
 3. the FMT messages on the chain define the types (iterated until the chain and its FMTs agree, normally
    once); FMTU/UNIT/MULT are read likewise;
-4. each type's messages are gathered into one byte matrix and viewed through a packed structured dtype.
+4. each type's (or instance's) messages are gathered into one byte matrix and viewed through a packed
+   structured dtype.
 
 Streams: one per message type, named as in the log (``ATT``, ``EKF1``, ``XKF1``). Columns: ``t`` (float64
-seconds), then every field in FMT order, raw time fields included; text fields (``n N Z``) are ``str``
-(UTF-8, else Latin-1, cut at the first NUL, as DFReader decodes them); a field named ``t`` becomes ``t_``.
+seconds), then every field in FMT order, raw time fields included, integers and floats in their logged types
+(``c C e E L`` as float64); text fields (``n N Z``) are ``str`` (UTF-8, else Latin-1, cut at the first NUL, as
+DFReader decodes them). Odd FMT columns are made usable: a field named ``t`` becomes ``t_``, a missing, empty
+or repeated name ``<name>_<i>`` / ``field_<i>``; a second type of an existing name is ``NAME#<type id>``.
+``counts`` has every stream of the file, read or not. ``info`` also holds ``formats`` (per stream: type id,
+length, format, columns), ``params`` (PARM name → value), ``n_messages`` and, for damaged logs,
+``invalid_formats``.
 
 Time: ``t`` is the boot clock in seconds: the first field when it is ``TimeUS`` (× 1e-6) or ``TimeMS``
 (× 1e-3), or old GPS messages' ``T`` (ms); a message without a time field (FMT, PARM, MSG or EV in old logs)
