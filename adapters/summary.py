@@ -137,7 +137,18 @@ def _heartbeat_rows(hb) -> tuple[np.ndarray, str | None, str]:
     return rows, str(tables[first]), vehicle_kind(int(autopilot[first]), main)
 
 
+def _dataflash_modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
+    """ArduPilot DataFlash logs: :mod:`adapters.dataflash` names the MODE messages by the vehicle its firmware
+    string says and takes armed spans from ARM / EV messages; both come in ``Streams.info``."""
+    info = streams.info
+    modes = [ModeSpan(float(a), float(b), str(name)) for name, a, b in info.get("flight_modes", ())]
+    armed = [Span(float(a), float(b)) for a, b in info.get("armed_spans", ())]
+    return modes, armed, str(info.get("firmware") or info.get("vehicle") or "")
+
+
 def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
+    if streams.format == "dataflash":
+        return _dataflash_modes(streams)
     hb = streams.frames.get("HEARTBEAT")
     if hb is not None and len(hb) and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb.columns):
         rows, table, vehicle = _heartbeat_rows(hb)

@@ -1,4 +1,5 @@
-"""Readers against their peer libraries, same files, same values, one run: CSV, ULog, tlog, MCAP (JSON and CDR).
+"""Readers against their peer libraries, same files, same values, one run: CSV, ULog, tlog, MCAP (JSON and CDR),
+DataFlash (.bin).
 
 Every ratio is ``peer seconds / our seconds`` (above 1: ours is faster), both sides run the same number of
 times, interleaved, summarised by the median (``harness``). Three ways of timing each case:
@@ -9,8 +10,9 @@ times, interleaved, summarised by the median (``harness``). Three ways of timing
 
 Peers: ``pandas.read_csv`` (its default C engine; the pyarrow engine is shown too), ``pyulog.ULog`` with its topic
 filter, pymavlink's ``mavlink_connection`` + ``recv_match`` loop (``type=`` for typed reads; pymavlink decodes
-every message either way), and the ``mcap`` library's ``iter_decoded_messages`` (JSON through our decoder
-factory, CDR through ``mcap_ros2``'s). Before timing, each case checks that both sides return the same values.
+every message either way), the ``mcap`` library's ``iter_decoded_messages`` (JSON through our decoder
+factory, CDR through ``mcap_ros2``'s), and pymavlink's ``DFReader_binary`` + ``recv_msg`` loop over every message
+(its C indexer included). Before timing, each case checks that both sides return the same values.
 """
 
 from __future__ import annotations
@@ -326,13 +328,98 @@ def bench_mcap(tmp: Path) -> list[dict]:
     return rows
 
 
+# ------------------------------------------------------------------------------------------------- DataFlash
+_DFREADER_LOOP = """
+def dfreader_read(path, kind=None):
+    reader = DFReader.DFReader_binary(str(path))
+    n = 0
+    while (reader.recv_msg() if kind is None else reader.recv_match(type=kind)) is not None:
+        n += 1
+    reader.close()
+    return n
+"""
+_DF_IMPORTS = "from pymavlink import DFReader\n" + _DFREADER_LOOP
+
+
+def _dfreader(path: Path, kind: str | None = None) -> int:
+    from pymavlink import DFReader
+
+    namespace = {"DFReader": DFReader}
+    exec(_DFREADER_LOOP, namespace)  # the same source the subprocess cases run
+    return namespace["dfreader_read"](path, kind)
+
+
+def _check_dataflash(path: Path) -> int:
+    from pymavlink import DFReader
+
+    from adapters import dataflash
+
+    ours = dataflash.read(path)
+    reader = DFReader.DFReader_binary(str(path))
+    roll = []
+    n = 0
+    while (m := reader.recv_msg()) is not None:
+        n += 1
+        if m.get_type() == "ATT":
+            roll.append(m.Roll)
+    reader.close()
+    assert n == sum(ours.counts.values()), (n, ours.counts)
+    assert np.array_equal(ours["ATT"]["Roll"].to_numpy(), np.array(roll))
+    return n
+
+
+def bench_dataflash(tmp: Path) -> list[dict]:
+    """Every message of a .bin, cold and warm: the real 2015 ArduCopter log and a generated 4.x-style log."""
+    from adapters import dataflash
+
+    big = tmp / "generated_copter.bin"
+    dataflash.write_example(big, "new", "copter", seconds=300.0, rate=7.0, seed=2)
+    cases = []
+    real = EXTERNAL / "erle_copter_83.BIN"
+    if real.exists():
+        cases.append(("small", real, f"erle_copter_83.BIN (real ArduCopter 3.3, {real.stat().st_size / 1e6:.1f} MB"))
+    mb = big.stat().st_size / 1e6
+    cases.append(("large", big, f"generated ArduCopter 4.x-style log (FMTU, instances, {mb:.1f} MB"))
+    rows = []
+    for size, path, label in cases:
+        n = _check_dataflash(path)
+        case = f"{label}, {n} messages)"
+        reps = 7 if size == "small" else 3
+        warm = interleaved({"ours": lambda p=path: dataflash.read(p), "peer": lambda p=path: _dfreader(p)}, reps)
+        row = _row("DataFlash", case, "warm", warm["ours"], warm["peer"], "pymavlink DFReader_binary recv_msg")
+        rows.append(_target(row, 10.0, "≥ 10×"))
+        cold = first_calls({"ours": ("from adapters import dataflash", "dataflash.read(sys.argv[1])"),
+                            "peer": (_DF_IMPORTS, "dfreader_read(sys.argv[1])")}, reps, str(path))
+        row = _row("DataFlash", case, "cold (first call in a process)", cold["ours"], cold["peer"],
+                   "pymavlink DFReader_binary recv_msg")
+        rows.append(_target(row, 10.0, "≥ 10×"))
+        proc = processes({"ours": "import sys, adapters; adapters.read_streams(sys.argv[1])",
+                          "peer": "import sys\n" + _DF_IMPORTS + "dfreader_read(sys.argv[1])"}, 3, str(path))
+        rows.append(_row("DataFlash", case, "process", proc["ours"], proc["peer"],
+                         "pymavlink DFReader_binary recv_msg"))
+        typed = interleaved({"ours": lambda p=path: dataflash.read(p, ["ATT"]),
+                             "peer": lambda p=path: _dfreader(p, "ATT")}, reps)
+        rows.append(_row("DataFlash", case, "typed read, warm: ATT only", typed["ours"], typed["peer"],
+                         "pymavlink DFReader_binary recv_match(type=)"))
+    mb = big.stat().st_size / 2**20
+    m = peak_memory("from adapters import dataflash", "dataflash.read(sys.argv[1])", str(big))
+    rows.append({"reader": "DataFlash", "case": f"peak memory, ours, {mb:.1f} MiB generated file", "mode": "memory",
+                 "rss_peak_MB": m["rss_MB"], "traced_peak_MB": m["traced_MB"], "rss_x_file": m["rss_MB"] / mb,
+                 "traced_x_file": m["traced_MB"] / mb})
+    return rows
+
+
 def run() -> list[dict]:
     with tempfile.TemporaryDirectory(prefix="bench_readers_") as tmp:
         tmp = Path(tmp)
-        return bench_csv(tmp) + bench_ulog() + bench_tlog(tmp) + bench_mcap(tmp)
+        return bench_csv(tmp) + bench_ulog() + bench_tlog(tmp) + bench_mcap(tmp) + bench_dataflash(tmp)
 
 
 if __name__ == "__main__":
     from harness import markdown_table
 
-    print(markdown_table(run()))
+    if sys.argv[1:] == ["dataflash"]:  # this section alone: python bench/bench_readers.py dataflash
+        with tempfile.TemporaryDirectory(prefix="bench_readers_") as tmp:
+            print(markdown_table(bench_dataflash(Path(tmp))))
+    else:
+        print(markdown_table(run()))

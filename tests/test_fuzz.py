@@ -1,6 +1,7 @@
 """Seeded fuzzing of every input kind: a corrupt file loads or raises a WorkbenchError, never anything else.
 
-Kinds: MAVLink tlog, MCAP, ULog, CSV, the Parquet demonstration file, the ``.npz`` model file and a mapping TOML.
+Kinds: MAVLink tlog, MCAP, ULog, CSV, ArduPilot DataFlash (``.bin``, new-style and old-style logs in turn), the
+Parquet demonstration file, the ``.npz`` model file and a mapping TOML.
 Each is written once from a small simulated set (and a model fitted on it; every other model file uncompressed,
 as ``np.savez`` writes them, so that damage reaches the ``.npy`` headers directly), then damaged by one of seven
 mutations — truncation, bit flips, an inserted chunk, a deleted chunk, a zeroed region, a huge length field
@@ -32,10 +33,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-KINDS = ("tlog", "mcap", "ulog", "csv", "parquet", "npz", "mapping")
+KINDS = ("tlog", "mcap", "ulog", "csv", "parquet", "npz", "mapping", "dataflash")
 MUTATIONS = ("truncate", "bitflip", "insert", "delete", "zero", "huge_length", "random_behind_magic")
 _EXT = {"tlog": ".tlog", "mcap": ".mcap", "ulog": ".ulg", "csv": ".csv", "parquet": ".parquet", "npz": ".npz",
-        "mapping": ".toml"}
+        "mapping": ".toml", "dataflash": ".bin"}
 _MAGIC = 16  # bytes kept by "random_behind_magic": every format's signature fits in them
 CALL_TIMEOUT = 30.0  # s per load; a tiny file loads in well under one even on a loaded machine
 MEMORY_BUDGET_MB = 1024  # address space a worker may add after start-up (RLIMIT_AS): a hard stop
@@ -114,6 +115,11 @@ def _write_originals(folder: Path) -> dict[str, Path]:
     with zipfile.ZipFile(out["npz"]) as zin, zipfile.ZipFile(out["npz_stored"], "w", zipfile.ZIP_STORED) as zout:
         for info in zin.infolist():
             zout.writestr(info.filename, zin.read(info))
+    # DataFlash: no demonstration layout of its own; a generated flight of each log generation (12-16 kB)
+    from adapters import dataflash
+
+    out["dataflash"] = dataflash.write_example(folder / "original.bin", "new", "copter", seconds=1.0)
+    out["dataflash_old"] = dataflash.write_example(folder / "original-old.bin", "old", "plane", seconds=1.5)
     shipped = Path(adapters.mapping.MAPPINGS_DIR) / "planar_quadrotor.toml"
     out["mapping"] = folder / "original.toml"
     out["mapping"].write_bytes(shipped.read_bytes())
@@ -135,6 +141,15 @@ def _loader(kind: str, originals: dict[str, Path]):
             return str(adapters.inspect(path, format=fmt))
 
         return log
+    if kind == "dataflash":
+        # in turn: a typed read of a few streams or inspect (every stream), the format detected or named
+        def bin_log(path: Path, i: int) -> object:
+            fmt = kind if i % 2 else None
+            if i % 4 < 2:
+                return adapters.read(path, ["ATT", "IMU", "MODE", "MSG", "GPS[0]"], format=fmt)
+            return str(adapters.inspect(path, format=fmt))
+
+        return bin_log
     if kind == "parquet":
         return lambda path, i: DemonstrationSet.load(path)
     if kind == "npz":
@@ -185,9 +200,11 @@ def worker(kinds: list[str], n: int, seed: int, folder: Path, budget_mb: int, ti
     for kind in kinds:
         data = originals[kind].read_bytes()
         stored = originals["npz_stored"].read_bytes()
+        old_bin = originals["dataflash_old"].read_bytes()
         for i, mutation, rng in cases(kind, n, seed):
             path = folder / f"{kind}-{i:03d}{_EXT[kind]}"
-            path.write_bytes(mutate(stored if kind == "npz" and i % 2 else data, mutation, rng))
+            old = kind == "dataflash" and (i // 2) % 2  # the old-style .bin every other pair of cases
+            path.write_bytes(mutate(old_bin if old else stored if kind == "npz" and i % 2 else data, mutation, rng))
             record = {"kind": kind, "i": i, "mutation": mutation, "path": str(path)}
             t0 = time.perf_counter()
             signal.setitimer(signal.ITIMER_REAL, timeout)

@@ -2,15 +2,17 @@
 
 Byte damage (tests/test_fuzz.py) is caught by CRCs and checksums before a parser sees odd values; a file written
 by hand or by another program is not. Here a mapping's TOML tables, a demonstration file's ``workbench`` metadata
-(without its checksum, as an older file) and a model file's JSON header get one entry replaced by a number, a
-string, a list, a table, … or deleted, and are then loaded the way the CLI loads them. The outcome must be a
-load or a :class:`~workbench.errors.WorkbenchError` naming the file.
+(without its checksum, as an older file), a model file's JSON header and an ArduPilot DataFlash log's
+self-description (its FMT, UNIT, MULT and FMTU messages, re-encoded into their binary fields) get one entry
+replaced by a number, a string, a list, a table, … or deleted, and are then loaded the way the CLI loads them.
+The outcome must be a load or a :class:`~workbench.errors.WorkbenchError` naming the file.
 """
 
 from __future__ import annotations
 
 import copy
 import json
+import re
 import tomllib
 import warnings
 from collections.abc import Iterator
@@ -82,8 +84,11 @@ def originals(tmp_path_factory) -> dict[str, Path]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = HumanBehaviorModel(planar_quadrotor(dt=ds.dt), n_components=2, noise_folds=0).fit(ds)
+    from adapters import dataflash
+
     return {"mcap": adapters.write(ds, folder / "a.mcap"), "csv": adapters.write(ds, folder / "a.csv"),
-            "parquet": ds.save(folder / "a.parquet"), "npz": model.save(folder / "m.npz"), "folder": folder}
+            "parquet": ds.save(folder / "a.parquet"), "npz": model.save(folder / "m.npz"), "folder": folder,
+            "dataflash": dataflash.write_example(folder / "a.bin", "new", "copter", seconds=3.0)}
 
 
 def fuzz_mapping(originals: dict[str, Path], n: int, seed: int) -> list[str]:
@@ -139,7 +144,76 @@ def fuzz_model_header(originals: dict[str, Path], n: int, seed: int) -> list[str
     return found
 
 
-FUZZERS = {"mapping": fuzz_mapping, "parquet metadata": fuzz_parquet_metadata, "model header": fuzz_model_header}
+# DataFlash: the self-describing messages as a document; each field's value of whatever kind is packed into its
+# binary field (numbers wrapped to the field's width, text as UTF-8 cut to its size, other kinds as JSON text).
+_DATAFLASH_META = {  # name: (struct of the payload, fields)
+    "FMT": ("<BB4s16s64s", ("Type", "Length", "Name", "Format", "Columns")),
+    "UNIT": ("<Qb64s", ("TimeUS", "Id", "Label")),
+    "MULT": ("<Qbd", ("TimeUS", "Id", "Mult")),
+    "FMTU": ("<QB16s16s", ("TimeUS", "FmtType", "UnitIds", "MultIds")),
+}
+
+
+def _packed(code: str, value: Any) -> Any:
+    if code.endswith("s"):
+        text = value if isinstance(value, str) else json.dumps(value) if isinstance(value, list | dict) else str(value)
+        return text.encode("utf-8", "replace")[: int(code[:-1])]
+    if code == "d":
+        return float(value) if isinstance(value, int | float) else float("nan")
+    if isinstance(value, float):
+        number = int(value) if np.isfinite(value) else 0
+    elif isinstance(value, int):
+        number = int(value)
+    elif isinstance(value, str):
+        number = int.from_bytes(value.encode()[:8] or b"\0", "little")
+    else:
+        number = len(value) if isinstance(value, list | dict) else 0
+    bits = {"B": 8, "b": 8, "Q": 64}[code]
+    number &= (1 << bits) - 1
+    return number - (1 << bits) if code == "b" and number >= 128 else number
+
+
+def _dataflash_document(path: Path) -> tuple[dict, dict[str, int], bytes]:
+    """The FMT/UNIT/MULT/FMTU records of a log adapters.dataflash wrote (they lead the file), their type ids,
+    and the bytes after them."""
+    import adapters
+
+    streams = adapters.read(path)
+    formats = streams.info["formats"]
+    doc = {name: [{k: (v.item() if hasattr(v, "item") else v) for k, v in row.items() if k != "t"}
+                  for row in streams[name].to_dict("records")] for name in _DATAFLASH_META}
+    head = sum(len(doc[name]) * formats[name]["length"] for name in _DATAFLASH_META)
+    return doc, {name: formats[name]["type"] for name in _DATAFLASH_META}, path.read_bytes()[head:]
+
+
+def _dataflash_bytes(doc: dict, ids: dict[str, int], rest: bytes) -> bytes:
+    import struct
+
+    out = []
+    for name, (code, fields) in _DATAFLASH_META.items():
+        codes = [c for c in re.findall(r"\d*[A-Za-z]", code.lstrip("<"))]
+        for record in doc.get(name, []) if isinstance(doc.get(name), list) else []:
+            record = record if isinstance(record, dict) else {}
+            values = [_packed(c, record.get(f, 0)) for c, f in zip(codes, fields, strict=True)]
+            out.append(bytes([0xA3, 0x95, ids[name]]) + struct.pack(code, *values))
+    return b"".join(out) + rest
+
+
+def fuzz_dataflash_formats(originals: dict[str, Path], n: int, seed: int) -> list[str]:
+    import adapters
+
+    doc, ids, rest = _dataflash_document(originals["dataflash"])
+    path = originals["folder"] / "fuzzed.bin"
+    found: list[str] = []
+    for i, (where, value, fuzzed) in enumerate(mutations(doc, n, seed)):
+        path.write_bytes(_dataflash_bytes(fuzzed, ids, rest))
+        call = (lambda: str(adapters.inspect(path))) if i % 2 else (lambda: adapters.read(path, format="dataflash"))
+        _outcome(call, path, where, value, found)
+    return found
+
+
+FUZZERS = {"mapping": fuzz_mapping, "parquet metadata": fuzz_parquet_metadata, "model header": fuzz_model_header,
+           "dataflash formats": fuzz_dataflash_formats}
 
 
 @pytest.mark.parametrize("kind", list(FUZZERS))

@@ -1,13 +1,14 @@
 """The known log formats and how a file's format is recognised: by its first bytes, not its name.
 
-======  ==========================  ============================================================
-format  extensions                  recognised by
-======  ==========================  ============================================================
-mcap    ``.mcap``                   the magic ``89 4D 43 41 50 30 0D 0A`` (``\\x89MCAP0\\r\\n``)
-ulog    ``.ulg``                    the magic ``55 4C 6F 67 01 12 35`` (``ULog\\x01\\x12\\x35``)
-tlog    ``.tlog``                   an 8-byte big-endian µs timestamp, then a MAVLink v1/v2 frame
-csv     ``.csv``                    UTF-8 text whose first line is a comma-separated header
-======  ==========================  ============================================================
+=========  ==========================  ============================================================
+format     extensions                  recognised by
+=========  ==========================  ============================================================
+mcap       ``.mcap``                   the magic ``89 4D 43 41 50 30 0D 0A`` (``\\x89MCAP0\\r\\n``)
+ulog       ``.ulg``                    the magic ``55 4C 6F 67 01 12 35`` (``ULog\\x01\\x12\\x35``)
+dataflash  ``.bin``                    an ArduPilot DataFlash FMT message head ``A3 95 80``
+tlog       ``.tlog``                   an 8-byte big-endian µs timestamp, then a MAVLink v1/v2 frame
+csv        ``.csv``                    UTF-8 text whose first line is a comma-separated header
+=========  ==========================  ============================================================
 
 Binary magic wins over the extension (a renamed file is still read right); an unrecognised file is a
 :class:`~workbench.errors.FormatError` that lists these formats.
@@ -42,6 +43,10 @@ def _is_ulog(head: bytes) -> bool:
     return head.startswith(MAGIC)
 
 
+def _is_dataflash(head: bytes) -> bool:
+    return head.startswith(b"\xa3\x95\x80")  # adapters.dataflash.MAGIC, without importing numpy to sniff
+
+
 def _is_tlog(head: bytes) -> bool:
     from adapters.formats.tlog import looks_like_tlog
 
@@ -64,6 +69,12 @@ def _read_ulog(path, topics):
     from adapters.formats import ulog
 
     return ulog.read(path, topics)
+
+
+def _read_dataflash(path, topics):
+    from adapters import dataflash
+
+    return dataflash.read(path, topics)
 
 
 def _read_csv(path, topics):
@@ -101,6 +112,12 @@ def _write_mcap(path, streams, **kwargs):
     from adapters.formats import mcap
 
     return mcap.write(path, streams, **kwargs)
+
+
+def _write_dataflash(path, streams, **kwargs):
+    from adapters import dataflash
+
+    return dataflash.write(path, streams, **kwargs)
 
 
 def _write_csv(path, streams, **kwargs):
@@ -159,6 +176,8 @@ FORMATS: dict[str, Format] = {
         Format("mcap", (".mcap",), "MCAP (ROS 2 / Foxglove): JSON, ROS 2 CDR, protobuf channels", _is_mcap,
                _read_mcap, _write_mcap),
         Format("ulog", (".ulg", ".ulog"), "PX4 ULog", _is_ulog, _read_ulog, _write_ulog),
+        Format("dataflash", (".bin",), "ArduPilot DataFlash onboard log", _is_dataflash, _read_dataflash,
+               _write_dataflash),
         Format("tlog", (".tlog",), "MAVLink telemetry log (ArduPilot, PX4 ground stations)", _is_tlog,
                _read_tlog, _write_tlog),
         Format("csv", (".csv",), "CSV long format: demo, t, states, inputs", _is_csv, _read_csv, _write_csv),
