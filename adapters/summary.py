@@ -138,7 +138,7 @@ def _heartbeat_rows(hb) -> tuple[np.ndarray, str | None, str]:
 
 
 def _dataflash_modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
-    """ArduPilot DataFlash logs: :mod:`adapters.dataflash` names the MODE messages by the vehicle its firmware
+    """ArduPilot DataFlash logs: :mod:`adapters.formats.dataflash` names the MODE messages by the vehicle its firmware
     string says and takes armed spans from ARM / EV messages; both come in ``Streams.info``."""
     info = streams.info
     modes = [ModeSpan(float(a), float(b), str(name)) for name, a, b in info.get("flight_modes", ())]

@@ -352,7 +352,7 @@ def _dfreader(path: Path, kind: str | None = None) -> int:
 def _check_dataflash(path: Path) -> int:
     from pymavlink import DFReader
 
-    from adapters import dataflash
+    from adapters.formats import dataflash
 
     ours = dataflash.read(path)
     reader = DFReader.DFReader_binary(str(path))
@@ -370,10 +370,10 @@ def _check_dataflash(path: Path) -> int:
 
 def bench_dataflash(tmp: Path) -> list[dict]:
     """Every message of a .bin, cold and warm: the real 2015 ArduCopter log and a generated 4.x-style log."""
-    from adapters import dataflash
+    from adapters.formats import dataflash, dataflash_write
 
     big = tmp / "generated_copter.bin"
-    dataflash.write_example(big, "new", "copter", seconds=300.0, rate=7.0, seed=2)
+    dataflash_write.write_example(big, "new", "copter", seconds=300.0, rate=7.0, seed=2)
     cases = []
     real = EXTERNAL / "erle_copter_83.BIN"
     if real.exists():
@@ -388,7 +388,7 @@ def bench_dataflash(tmp: Path) -> list[dict]:
         warm = interleaved({"ours": lambda p=path: dataflash.read(p), "peer": lambda p=path: _dfreader(p)}, reps)
         row = _row("DataFlash", case, "warm", warm["ours"], warm["peer"], "pymavlink DFReader_binary recv_msg")
         rows.append(_target(row, 10.0, "≥ 10×"))
-        cold = first_calls({"ours": ("from adapters import dataflash", "dataflash.read(sys.argv[1])"),
+        cold = first_calls({"ours": ("from adapters.formats import dataflash", "dataflash.read(sys.argv[1])"),
                             "peer": (_DF_IMPORTS, "dfreader_read(sys.argv[1])")}, reps, str(path))
         row = _row("DataFlash", case, "cold (first call in a process)", cold["ours"], cold["peer"],
                    "pymavlink DFReader_binary recv_msg")
@@ -402,7 +402,7 @@ def bench_dataflash(tmp: Path) -> list[dict]:
         rows.append(_row("DataFlash", case, "typed read, warm: ATT only", typed["ours"], typed["peer"],
                          "pymavlink DFReader_binary recv_match(type=)"))
     mb = big.stat().st_size / 2**20
-    m = peak_memory("from adapters import dataflash", "dataflash.read(sys.argv[1])", str(big))
+    m = peak_memory("from adapters.formats import dataflash", "dataflash.read(sys.argv[1])", str(big))
     rows.append({"reader": "DataFlash", "case": f"peak memory, ours, {mb:.1f} MiB generated file", "mode": "memory",
                  "rss_peak_MB": m["rss_MB"], "traced_peak_MB": m["traced_MB"], "rss_x_file": m["rss_MB"] / mb,
                  "traced_x_file": m["traced_MB"] / mb})

@@ -116,10 +116,10 @@ def _write_originals(folder: Path) -> dict[str, Path]:
         for info in zin.infolist():
             zout.writestr(info.filename, zin.read(info))
     # DataFlash: no demonstration layout of its own; a generated flight of each log generation (12-16 kB)
-    from adapters import dataflash
+    from adapters.formats import dataflash_write
 
-    out["dataflash"] = dataflash.write_example(folder / "original.bin", "new", "copter", seconds=1.0)
-    out["dataflash_old"] = dataflash.write_example(folder / "original-old.bin", "old", "plane", seconds=1.5)
+    out["dataflash"] = dataflash_write.write_example(folder / "original.bin", "new", "copter", seconds=1.0)
+    out["dataflash_old"] = dataflash_write.write_example(folder / "original-old.bin", "old", "plane", seconds=1.5)
     shipped = Path(adapters.mapping.MAPPINGS_DIR) / "planar_quadrotor.toml"
     out["mapping"] = folder / "original.toml"
     out["mapping"].write_bytes(shipped.read_bytes())

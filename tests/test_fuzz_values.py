@@ -84,11 +84,11 @@ def originals(tmp_path_factory) -> dict[str, Path]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = HumanBehaviorModel(planar_quadrotor(dt=ds.dt), n_components=2, noise_folds=0).fit(ds)
-    from adapters import dataflash
+    from adapters.formats import dataflash_write
 
     return {"mcap": adapters.write(ds, folder / "a.mcap"), "csv": adapters.write(ds, folder / "a.csv"),
             "parquet": ds.save(folder / "a.parquet"), "npz": model.save(folder / "m.npz"), "folder": folder,
-            "dataflash": dataflash.write_example(folder / "a.bin", "new", "copter", seconds=3.0)}
+            "dataflash": dataflash_write.write_example(folder / "a.bin", "new", "copter", seconds=3.0)}
 
 
 def fuzz_mapping(originals: dict[str, Path], n: int, seed: int) -> list[str]:
@@ -174,7 +174,7 @@ def _packed(code: str, value: Any) -> Any:
 
 
 def _dataflash_document(path: Path) -> tuple[dict, dict[str, int], bytes]:
-    """The FMT/UNIT/MULT/FMTU records of a log adapters.dataflash wrote (they lead the file), their type ids,
+    """The FMT/UNIT/MULT/FMTU records of a log adapters.formats.dataflash wrote (they lead the file), their type ids,
     and the bytes after them."""
     import adapters
 

@@ -44,7 +44,7 @@ def _is_ulog(head: bytes) -> bool:
 
 
 def _is_dataflash(head: bytes) -> bool:
-    return head.startswith(b"\xa3\x95\x80")  # adapters.dataflash.MAGIC, without importing numpy to sniff
+    return head.startswith(b"\xa3\x95\x80")  # adapters.formats.dataflash.MAGIC, without importing numpy to sniff
 
 
 def _is_tlog(head: bytes) -> bool:
@@ -72,7 +72,7 @@ def _read_ulog(path, topics):
 
 
 def _read_dataflash(path, topics):
-    from adapters import dataflash
+    from adapters.formats import dataflash
 
     return dataflash.read(path, topics)
 
@@ -115,9 +115,9 @@ def _write_mcap(path, streams, **kwargs):
 
 
 def _write_dataflash(path, streams, **kwargs):
-    from adapters import dataflash
+    from adapters.formats import dataflash_write
 
-    return dataflash.write(path, streams, **kwargs)
+    return dataflash_write.write(path, streams, **kwargs)
 
 
 def _write_csv(path, streams, **kwargs):

@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 import adapters
-from adapters import dataflash
+from adapters.formats import dataflash, dataflash_write
 from workbench.errors import DataError, FormatError
 
 REAL = "erle_copter_83.BIN"
@@ -99,7 +99,7 @@ def logs(tmp_path_factory):
 
     def make(style: str, vehicle: str) -> Path:
         if (style, vehicle) not in cache:
-            cache[style, vehicle] = dataflash.write_example(folder / f"{style}_{vehicle}.bin", style, vehicle,
+            cache[style, vehicle] = dataflash_write.write_example(folder / f"{style}_{vehicle}.bin", style, vehicle,
                                                             seconds=20.0, seed=7)
         return cache[style, vehicle]
 
@@ -167,8 +167,8 @@ def test_written_logs_equal_dfreader(logs, style, vehicle):
 
 
 def test_round_trip_values_and_every_format_character(tmp_path):
-    streams, options = dataflash.example_streams("new", "copter", seconds=5.0, seed=3)
-    path = dataflash.write(tmp_path / "rt.bin", streams, **options)
+    streams, options = dataflash_write.example_streams("new", "copter", seconds=5.0, seed=3)
+    path = dataflash_write.write(tmp_path / "rt.bin", streams, **options)
     back = adapters.read(path)
     assert set("bBhHiIfdcCeELMqQgnNZa") <= set(options["formats"]["TYP1"] + options["formats"]["TYP2"])
     assert back["MSG"]["Message"].tolist() == [options["firmware"], *streams["MSG"]["Message"]]
@@ -212,7 +212,7 @@ def test_writer_streams_as_given_and_default_format_chars(tmp_path):
 )
 def test_writer_refuses_what_a_log_cannot_hold(tmp_path, streams, kwargs, match):
     with pytest.raises(DataError, match=match):
-        dataflash.write(tmp_path / "bad.bin", streams, **kwargs)
+        dataflash_write.write(tmp_path / "bad.bin", streams, **kwargs)
     assert not (tmp_path / "bad.bin").exists()
 
 
@@ -383,12 +383,12 @@ def test_unreadable_files_are_clean_errors(tmp_path, data, error, cause):
 
 
 def test_invalid_and_conflicting_fmt_are_counted(tmp_path):
-    good = dataflash._fmt_record(0x81, 3 + 4, "ABC", "f", "x")
+    good = dataflash_write._fmt_record(0x81, 3 + 4, "ABC", "f", "x")
     body = b"\xa3\x95\x81" + np.float32(1.5).tobytes()
-    bad_char = dataflash._fmt_record(0x82, 3 + 4, "BAD", "?", "x")
-    bad_len = dataflash._fmt_record(0x83, 3 + 9, "LEN", "f", "x")
-    conflict = dataflash._fmt_record(0x81, 3 + 8, "ABC", "d", "x")
-    fmt = dataflash._fmt_record(0x80, 89, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
+    bad_char = dataflash_write._fmt_record(0x82, 3 + 4, "BAD", "?", "x")
+    bad_len = dataflash_write._fmt_record(0x83, 3 + 9, "LEN", "f", "x")
+    conflict = dataflash_write._fmt_record(0x81, 3 + 8, "ABC", "d", "x")
+    fmt = dataflash_write._fmt_record(0x80, 89, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
     path = tmp_path / "fmt.bin"
     path.write_bytes(fmt + good + bad_char + bad_len + body + conflict + body + b"\xa3\x95\x82" + bytes(4) + body)
     ours = adapters.read(path)
@@ -401,7 +401,7 @@ def test_hostile_floods_stay_fast_and_bounded(tmp_path):
     """Length-3 messages back to back, and FMT heads every 3 bytes: linear work, no Python step per message."""
     import time
 
-    fmt = dataflash._fmt_record(5, 3, "E", "", "")
+    fmt = dataflash_write._fmt_record(5, 3, "E", "", "")
     flood = tmp_path / "flood.bin"
     flood.write_bytes(fmt + b"\xa3\x95\x05" * 300_000)
     heads = tmp_path / "heads.bin"
@@ -421,7 +421,7 @@ def test_instance_field_from_fmtu_and_too_many_instances(tmp_path):
     streams = {"FEW": pd.DataFrame({"t": t, "Id": np.arange(3000, dtype=np.uint32) % 3, "v": np.sin(t)}),
                "MANY": pd.DataFrame({"t": t, "Id": np.arange(3000, dtype=np.uint32), "v": np.cos(t)})}
     units = {name: {"Id": "#", "v": "m"} for name in streams}
-    path = dataflash.write(tmp_path / "inst.bin", streams, units=units)
+    path = dataflash_write.write(tmp_path / "inst.bin", streams, units=units)
     ours = adapters.read(path)
     assert ours.info["instances"] == {"FEW": ["FEW[0]", "FEW[1]", "FEW[2]"]}
     assert ours.counts["MANY"] == 3000 and "MANY[7]" not in ours.counts
