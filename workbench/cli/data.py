@@ -80,8 +80,8 @@ def cmd_inspect(ctx: Context) -> int:
         ctx.say(f"flight modes{f' ({summary.vehicle})' if summary.vehicle else ''}: " + "; ".join(
             f"{m.mode} {m.start - t0:.1f}–{min(m.end, summary.t_end) - t0:.1f} s "
             f"({min(m.end, summary.t_end) - m.start:.1f} s)" for m in summary.modes))
-    if summary.armed:
-        ctx.say("armed: " + "; ".join(f"{a - t0:.1f}–{min(b, summary.t_end) - t0:.1f} s" for a, b in summary.armed))
+    if summary.armed_text:  # the armed spans, or "never armed" when the log says so
+        ctx.say(summary.armed_text)
     if summary.skipped:
         ctx.say("skipped: " + ", ".join(f"{k} {v}" for k, v in summary.skipped))
     return 0
