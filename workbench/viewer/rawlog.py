@@ -40,7 +40,7 @@ RAW_APPLICATION_ID = "workbench_log_raw"
 #: the segment lane's states: what a mapping kept, and why a piece was dropped
 SEGMENT_STATES = {
     "kept": (44, 160, 44), "disarmed": (150, 150, 150), "too short": (255, 127, 14), "gap": (214, 39, 40),
-    "missing channel": (148, 103, 189), "no stick input": (140, 86, 75),
+    "missing channel": (148, 103, 189), "not mapped": (60, 60, 60),
 }  # fmt: skip
 _CLOCKISH = re.compile(r"^(time(_boot)?(_ms|_us|_usec)?|timestamp(_sample)?|TimeUS|TimeMS|stamp\.(n?a?n?o?sec))$",
                        re.IGNORECASE)
@@ -71,16 +71,21 @@ def _index(raw: RawLog, t: np.ndarray, origin: float) -> list[rr.TimeColumn]:
 
 
 def _lane(rec: rr.RecordingStream, path: str, raw: RawLog, origin: float, starts: Sequence[float],
-          ends: Sequence[float], names: Sequence[str], colors: dict[str, tuple[int, int, int]]) -> bool:
-    """A state lane from spans: each span's state from its start, an empty state (null) where none holds."""
+          ends: Sequence[float], names: Sequence[str], colors: dict[str, tuple[int, int, int]],
+          fill: str | None = None) -> bool:
+    """A state lane from spans: each span's state from its start; between spans (and after the last) the ``fill``
+    state, or the previous state held on when there is none. Never a null state: ``rerun rrd verify`` rejects it."""
     t: list[float] = []
-    states: list[str | None] = []
+    states: list[str] = []
     for a, b, name in sorted(zip(starts, ends, names, strict=True)):
-        if t and states[-1] is None and t[-1] == a:
+        if t and fill is not None and states[-1] == fill and t[-1] >= a:
             t.pop()
             states.pop()
-        t += [a, b]
-        states += [name, None]
+        t.append(a)
+        states.append(name)
+        if fill is not None:
+            t.append(b)
+            states.append(fill)
     if not t:
         return False
     rec.log(path, rr.StateConfiguration(values=list(colors), colors=style.packed(*colors.values())), static=True)
@@ -134,14 +139,16 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
         out.modes = _lane(rec, f"{prefix}/mode", raw, origin, [m.start for m in raw.modes],
                           [m.end for m in raw.modes], [m.mode for m in raw.modes], colors)
     if raw.armed_known:
-        starts = [a for a, _ in raw.armed] or [raw.t_start]
-        ends = [b for _, b in raw.armed] or [raw.t_end]
-        states = ["armed"] * len(raw.armed) or ["never armed"]
+        # disarmed from the log's start: the lane says so rather than staying blank until the first arming
+        starts = [raw.t_start, *(a for a, _ in raw.armed)] if raw.armed else [raw.t_start]
+        ends = [raw.t_start, *(b for _, b in raw.armed)] if raw.armed else [raw.t_end]
+        states = ["disarmed", *["armed"] * len(raw.armed)] if raw.armed else ["never armed"]
         colors = {**_ARMED, "never armed": _ARMED["disarmed"]}
-        out.armed = _lane(rec, f"{prefix}/armed", raw, origin, starts, ends, states, colors)
+        out.armed = _lane(rec, f"{prefix}/armed", raw, origin, starts, ends, states, colors,
+                          fill="disarmed" if raw.armed else None)
     if segments:
         out.segments = _lane(rec, f"{prefix}/segments", raw, origin, [s[0] for s in segments],
-                             [s[1] for s in segments], [s[2] for s in segments], SEGMENT_STATES)
+                             [s[1] for s in segments], [s[2] for s in segments], SEGMENT_STATES, fill="not mapped")
         dropped = [s for s in segments if s[2] != "kept"]
         if dropped:
             send_columns(rec, f"{prefix}/segments/why", _index(raw, np.array([s[0] for s in dropped]), origin),
@@ -195,7 +202,7 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
     elif side:
         tabs.append(rrb.Vertical(*side, name="raw streams"))
     if s.gps:
-        tabs.append(rrb.MapView(origin=f"{p}/gps", name="map", zoom=16.0))
+        tabs.append(rrb.MapView(origin=f"{p}/gps", name="map", zoom=17.0))
     if s.parameters:
         tabs.append(rrb.TextDocumentView(origin=f"{p}/parameters", name="parameters"))
     return tabs
