@@ -87,6 +87,28 @@ def cmd_inspect(ctx: Context) -> int:
     return 0
 
 
+def cmd_map(ctx: Context) -> int:
+    """Draft a mapping from a log (adapters.draft) and write it, or print it without -o."""
+    import adapters
+    from adapters.draft import draft_mapping
+    from workbench.atomic import atomic_path
+
+    a = ctx.args
+    path = existing_path(a.log)
+    name = Path(a.output).stem if a.output else path.stem
+    draft = draft_mapping(adapters.read(path), name=name)
+    if a.output:
+        with atomic_path(a.output) as tmp:
+            Path(tmp).write_text(draft.toml, encoding="utf-8")
+        ctx.say(f"wrote {a.output}: a mapping for {draft.vehicle} (template {draft.template}); "
+                f"try: workbench import {path} --mapping {a.output} -o demos.parquet")
+    else:
+        print(draft.toml, end="")
+    for item in draft.undecided:  # what the draft could not decide, on stderr so a piped TOML stays clean
+        print(f"undecided: {item}", file=sys.stderr)
+    return 0
+
+
 def _is_dataset_output(output: str) -> bool:
     """``-o DIR/`` (or an existing directory, or a name without a suffix) asks for a partitioned dataset."""
     return output.endswith(("/", os.sep)) or Path(output).is_dir() or not Path(output).suffix
