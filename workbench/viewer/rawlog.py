@@ -42,8 +42,9 @@ SEGMENT_STATES = {
     "kept": (44, 160, 44), "disarmed": (150, 150, 150), "too short": (255, 127, 14), "gap": (214, 39, 40),
     "missing channel": (148, 103, 189), "not mapped": (60, 60, 60),
 }  # fmt: skip
-_CLOCKISH = re.compile(r"^(time(_boot)?(_ms|_us|_usec)?|timestamp(_sample)?|TimeUS|TimeMS|stamp\.(n?a?n?o?sec))$",
-                       re.IGNORECASE)
+# clock and time-stamp fields (time_boot_ms, timestamp_sample, armed_time_ms, TimeUS, stamp.sec, …): hidden by
+# default, since their ramp flattens every other line of a stream's plot
+_CLOCKISH = re.compile(r"time|stamp", re.IGNORECASE)
 _ARMED = {"armed": (214, 39, 40), "disarmed": (200, 200, 200)}
 
 
@@ -54,6 +55,8 @@ class LoggedRaw:
     prefix: str
     path: str
     streams: list[str] = field(default_factory=list)
+    rows: dict[str, int] = field(default_factory=dict)
+    spans: dict[str, tuple[float, float]] = field(default_factory=dict)
     modes: bool = False
     armed: bool = False
     segments: bool = False
@@ -129,11 +132,12 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
     for s in raw.streams:
         path = f"{prefix}/streams/{entity_part(s.name)}"
         names = [style.with_unit(f, u) for f, u in zip(s.fields, s.units, strict=True)]
-        visible = [not _CLOCKISH.match(f) and u not in ("ms", "us", "µs") for f, u in zip(s.fields, s.units,
-                                                                                         strict=True)]
+        visible = [not _CLOCKISH.search(f) for f in s.fields]
         rec.log(path, rr.SeriesLines(names=names, visible_series=visible, widths=[1.0] * len(names)), static=True)
         if send_columns(rec, path, _index(raw, s.t, origin), rr.Scalars.columns(scalars=s.values)):
             out.streams.append(s.name)
+            out.rows[s.name] = len(s.t)
+            out.spans[s.name] = (float(s.t[0]) - origin, float(s.t[-1]) - origin)
     if raw.modes:
         colors = style.mode_colors(list(dict.fromkeys(m.mode for m in raw.modes)))
         out.modes = _lane(rec, f"{prefix}/mode", raw, origin, [m.start for m in raw.modes],
@@ -192,11 +196,14 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
         side.append(rrb.TextLogView(origin=p, contents=[f"+ {p}/messages", f"+ {p}/segments/why"],
                                     name="messages"))
     plots = [rrb.TimeSeriesView(origin=f"{p}/streams/{entity_part(n)}", name=n,
-                                plot_legend=rrb.PlotLegend("LeftTop", visible=True), axis_x=_whole_log(s.span))
+                                plot_legend=rrb.PlotLegend("LeftTop", visible=True),
+                                axis_x=_whole_log(s.spans.get(n, s.span)))  # the stream's own span
              for n in s.streams]
     tabs: list[rrb.Container | rrb.View] = []
     if plots:
-        left = rrb.Tabs(*plots, name="streams")
+        # the busiest stream first on screen (attitude or IMU in a flight log), the tabs in name order
+        busiest = max(range(len(s.streams)), key=lambda k: (s.rows.get(s.streams[k], 0), -k))
+        left = rrb.Tabs(*plots, name="streams", active_tab=busiest)
         tabs.append(rrb.Horizontal(left, rrb.Vertical(*side, row_shares=[1, 2][: len(side)]), column_shares=[3, 2],
                                    name="raw streams") if side else left)
     elif side:
