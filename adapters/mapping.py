@@ -22,6 +22,9 @@ Schema
     u1 = { source = "RC_CHANNELS.chan1_raw", transform = "pwm", pwm_min = 1000, pwm_max = 2000 }
     u2 = { source = "MANUAL_CONTROL.z", scale = 0.001, offset = 0.0, sign = 1 }
     # value = sign * scale * transform(field) + offset; `where = { sysid = 1 }` keeps matching rows only
+    u1 = ["manual_control_setpoint.y", "manual_control_setpoint.roll"]   # alternatives: the first present wins
+    u2 = [{ source = "manual_control_setpoint.z", scale = 2.0, offset = -1.0 },   # alternative channels, each
+          { source = "manual_control_setpoint.throttle" }]                        # with its own conversion
 
     [segment]                           # every rule given must hold (their spans are intersected)
     gap = 0.5                           # s; a mapped channel silent for longer splits (never interpolated)
@@ -60,7 +63,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from adapters.modes import MODE_TABLES, mode_number
+from adapters.modes import MODE_TABLES, mode_name, mode_number
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
 from adapters.transforms import TRANSFORMS
 from workbench.data.roles import Roles
@@ -77,6 +80,8 @@ __all__ = [
     "shipped_mappings",
     "MAPPINGS_DIR",
     "FORMAT_NAMES",
+    "resolve_channel",
+    "suggest_mapping",
 ]
 
 MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
@@ -122,10 +127,18 @@ class Channel:
     offset: float = 0.0
     sign: float = 1.0
     params: tuple[tuple[str, Any], ...] = ()
+    #: further channels tried in order when this one's source is not in a file (another firmware's field names,
+    #: each with its own conversion); writers and the online path use the first
+    alternatives: tuple[Channel, ...] = ()
 
     @property
     def gain(self) -> float:
         return self.sign * self.scale
+
+    @property
+    def variants(self) -> tuple[Channel, ...]:
+        """This channel (without its alternatives) and each alternative, in the order they are tried."""
+        return (replace(self, alternatives=()), *self.alternatives)
 
 
 @dataclass(frozen=True)
@@ -242,7 +255,7 @@ class ChannelMapping:
 
     def selectors(self) -> list[Selector]:
         """Every stream field this mapping reads: channels, segmentation rules, metadata."""
-        out = [c.selector for c in self.channels]
+        out = [v.selector for c in self.channels for v in c.variants]
         seg = self.segment
         out += [s for s in (seg.demo, seg.mode and seg.mode.selector, seg.armed and seg.armed.selector) if s]
         if seg.landing is not None and seg.landing.flag is not None:
@@ -338,6 +351,10 @@ def _selector(value: Any, path: str, where: str, extra: Iterable[str] = ()) -> S
 
 def _channel(name: str, value: Any, path: str) -> Channel:
     where = f"channels.{name}"
+    if isinstance(value, list) and value and any(isinstance(v, dict) for v in value):
+        # alternative channels: [table or source, …], the first whose stream and fields a file has wins
+        first, *rest = (_channel(name, v, path) for v in value)
+        return replace(first, alternatives=tuple(rest))
     if _sources(value) is not None:
         return Channel(name, _selector(value, path, where))
     if not isinstance(value, dict):
@@ -510,6 +527,24 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
     )
 
 
+def suggest_mapping(fmt: str, table: str | None, modes: Iterable[str], exclude: str = "") -> str | None:
+    """A shipped mapping whose mode rule, for files of ``fmt``, names modes by ``table`` and keeps one of
+    ``modes`` (the modes a log reports); ``None`` when none does."""
+    present = {str(m).upper() for m in modes}
+    for name in shipped_mappings():
+        if name == exclude:
+            continue
+        try:
+            rule = load_mapping(name).for_format(fmt).segment.mode
+        except MappingError:
+            continue
+        if rule is None or table is None or rule.names != table:
+            continue
+        if any(mode_name(rule.names, k).upper() in present for k in rule.keep):
+            return name
+    return None
+
+
 # ---------------------------------------------------------------------------------------------- resolving
 
 
@@ -518,6 +553,14 @@ def _missing_stream(sel: Selector, streams: Streams, what: str, mapping: str) ->
     names = streams.names
     near = nearest(head, names)
     listing = ", ".join(names[:40]) + (f", … ({len(names)} in all)" if len(names) > 40 else "")
+    empty = [s for s in (candidate_streams(src)[0] if candidate_streams(src) else src for src in sel.sources)
+             if s in streams.counts and not streams.counts[s]]
+    if empty:  # declared by the file but never written: the stream exists, its data do not
+        return MappingError(
+            f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but {streams.path} "
+            f"({streams.format}) holds no message of {', '.join(map(repr, empty))} (the file declares the stream "
+            f"but the vehicle never wrote it)"
+        )
     return MappingError(
         f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but {streams.path} "
         f"({streams.format}) has no such stream{'; nearest: ' + ', '.join(near) if near else ''}; "
@@ -551,13 +594,34 @@ def select(sel: Selector, streams: Streams, what: str, mapping: str, *, n_column
     Where a MAVLink stream carries several (sysid, compid) sources and ``where`` picks none, the most frequent
     source is kept, so two vehicles (or a ground station) are never mixed into one channel.
     """
-    split = None
+    first_error: MappingError | None = None
     for source in sel.sources:
-        split = split_source(source, streams.frames)
-        if split is None and source in streams.frames and n_columns is None:
-            split = (source, "")
-        if split is not None:
-            break
+        try:
+            return _select_one(sel, source, streams, what, mapping, n_columns)
+        except MappingError as exc:  # another firmware's names: try the next alternative
+            first_error = first_error or exc
+    raise first_error if first_error is not None else _missing_stream(sel, streams, what, mapping)
+
+
+def resolve_channel(ch: Channel, streams: Streams) -> Channel:
+    """The first of a channel's variants whose stream and fields ``streams`` has (the channel itself when none
+    has: selecting it then raises the MappingError that names what is missing)."""
+    if not ch.alternatives:
+        return ch
+    for variant in ch.variants:
+        try:
+            select(variant.selector, streams, "", "", n_columns=TRANSFORMS[variant.transform].n_columns)
+            return variant
+        except MappingError:
+            continue
+    return replace(ch, alternatives=())
+
+
+def _select_one(sel: Selector, source: str, streams: Streams, what: str, mapping: str,
+                n_columns: int | None) -> Selected:
+    split = split_source(source, streams.frames)
+    if split is None and source in streams.frames and n_columns is None:
+        split = (source, "")
     if split is None:
         raise _missing_stream(sel, streams, what, mapping)
     stream, fld = split

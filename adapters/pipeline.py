@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -27,15 +28,16 @@ import numpy as np
 
 from adapters.align import Series, align
 from adapters.clock import stream_times
-from adapters.mapping import ChannelMapping, Selected, channel_values, select
+from adapters.mapping import ChannelMapping, Selected, channel_values, resolve_channel, select
 from adapters.meta import table_meta, text_meta
+from adapters.modes import mode_name
 from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect, mode_spans, split_at_landing
 from adapters.streams import Streams, clean_series, numeric
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError
 
-__all__ = ["build"]
+__all__ = ["build", "check_rules", "explain"]
 
 
 def _ordered(t: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -92,7 +94,7 @@ def _metadata(streams: Streams, m: ChannelMapping) -> tuple[dict[str, dict], lis
 def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Series]:
     series = []
     inputs = set(m.input_names)
-    for ch in m.channels:
+    for ch in (resolve_channel(c, streams) for c in m.channels):
         what = f"channel {ch.name!r}"
         sel = select(ch.selector, streams, what, m.name, n_columns=TRANSFORMS[ch.transform].n_columns)
         if sel.dropped_other_systems:
@@ -137,6 +139,7 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
     m = mapping
     m.check_complete()
     skipped: Counter = Counter()
+    check_rules(streams, m)  # a log never armed, or without a kept mode, says so before any channel is read
     series = _channels(streams, m, skipped)
     spans = _spans(streams, m, skipped)
     by_key, loose = _metadata(streams, m)
@@ -167,6 +170,13 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
         if kept_t:
             found.append((span, kept_t, kept_v))
     if not found:
+        no_input = _silent_channels(series, spans, set(m.input_names))
+        if no_input:
+            raise DataError(
+                f"{streams.path}: mapping {m.name!r}: no stick input in these spans: {', '.join(no_input)} "
+                f"{'has' if len(no_input) == 1 else 'have'} no sample in the {len(spans)} span(s) the segmentation "
+                f"rules kept ({_span_text(spans)})"
+            )
         raise DataError(
             f"{streams.path}: mapping {m.name!r} found no demonstration: the segmentation rules gave "
             f"{len(spans)} span(s), alignment {n_pieces} piece(s) "
@@ -231,9 +241,135 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
         raise DataError(f"{streams.path}: {exc}") from None
 
 
+def _span_text(spans: list[Span], n: int = 4) -> str:
+    text = ", ".join(f"{s.meta.get('mode', '')} {s.start:.1f}–{s.end:.1f} s".strip() for s in spans[:n])
+    return text + (f", … ({len(spans)} in all)" if len(spans) > n else "")
+
+
+def _silent_channels(series: list[Series], spans: list[Span], names: set[str]) -> list[str]:
+    """The channels among ``names`` without a single sample inside any of ``spans``."""
+    out = []
+    for s in series:
+        if s.name in names and not any(((s.t >= sp.start) & (s.t <= sp.end)).any() for sp in spans):
+            out.append(s.name)
+    return out
+
+
+def check_rules(streams: Streams, m: ChannelMapping) -> None:
+    """Raise a DataError naming the cause when the log was never armed, or never in a mode the mapping keeps.
+
+    The armed rule is checked first: a vehicle that never armed has no manual flight whatever its modes. The
+    mode message lists the log's modes, named by its own vehicle type, and suggests a shipped mapping that
+    keeps one of them.
+    """
+    seg = m.segment
+    if seg.armed is not None:
+        sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
+        _, flags = _rule_series(sel, m)
+        if flags.size and not seg.armed.truth(flags).any():
+            raise DataError(
+                f"{streams.path}: never armed: {sel.stream} ({seg.armed.selector.describe()}) says the vehicle was "
+                f"disarmed in all {flags.size} message(s), so mapping {m.name!r} has no flight to import"
+            )
+    if seg.mode is not None:
+        sel = select(seg.mode.selector, streams, "segment.mode", m.name, n_columns=1)
+        t, modes = _rule_series(sel, m)
+        if t.size and not mode_spans(t, modes, seg.mode.keep, seg.mode.names):
+            from adapters.mapping import suggest_mapping
+            from adapters.summary import log_modes
+
+            present, table = log_modes(streams)
+            if not present:
+                present = [mode_name(seg.mode.names, v) for v in dict.fromkeys(modes[np.isfinite(modes)].tolist())]
+            hint = suggest_mapping(streams.format, table, present, exclude=m.name)
+            raise DataError(
+                f"{streams.path}: no manual mode in this log (modes: {', '.join(present)}"
+                f"{f'; try --mapping {hint}' if hint else ''}); mapping {m.name!r} keeps only "
+                f"{', '.join(mode_name(seg.mode.names, k) for k in seg.mode.keep)}"
+            )
+
+
 def _valid_target(target: Any, n: int) -> bool:
     try:
         arr = np.asarray(target, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
         return False
     return arr.shape == (n,) and bool(np.isfinite(arr).all())
+
+
+def _minus(lo: float, hi: float, parts: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """``[lo, hi]`` without the sorted intervals ``parts``."""
+    out, at = [], lo
+    for a, b in sorted(parts):
+        if a > at:
+            out.append((at, min(a, hi)))
+        at = max(at, b)
+    if at < hi:
+        out.append((at, hi))
+    return [(a, b) for a, b in out if b > a]
+
+
+def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, float, str, str]]:
+    """What a mapping keeps of a log and why it drops the rest, for the raw view's segment lane.
+
+    Returns ``(start, end, state, reason)`` on the log clock, in time order, ``state`` one of ``"kept"``,
+    ``"disarmed"``, ``"too short"``, ``"gap"``, ``"missing channel"``, within the spans of the modes (and demo
+    fields) the mapping keeps. A mapping that cannot be applied at all gives one ``"missing channel"`` span over
+    the whole log with the error as its reason. The landing rule is not drawn.
+    """
+    from workbench.errors import WorkbenchError
+
+    m = mapping
+    skipped: Counter = Counter()
+    try:
+        m.check_complete()
+        series = _channels(streams, m, skipped)
+        seg = m.segment
+        rules = replace(m, segment=replace(seg, armed=None, landing=None))
+        spans = _spans(streams, rules, skipped)
+        armed = EVERYTHING
+        if seg.armed is not None:
+            sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
+            t, flags = _rule_series(sel, m)
+            armed = flag_spans(t, seg.armed.truth(flags))
+    except WorkbenchError as exc:
+        ends = [float(f["t"].min()) for f in streams.frames.values() if len(f)]
+        ends += [float(f["t"].max()) for f in streams.frames.values() if len(f)]
+        return [(min(ends), max(ends), "missing channel", str(exc))] if ends else []
+    lo, hi = min(float(x.t[0]) for x in series), max(float(x.t[-1]) for x in series)
+    out: list[tuple[float, float, str, str]] = []
+    for span in spans:
+        a, b = max(span.start, lo), min(span.end, hi)
+        if b <= a:
+            continue
+        mode = span.meta.get("mode", "")
+        parts = intersect([Span(a, b)], armed)
+        out += [(x, y, "disarmed", f"{mode} while disarmed".strip()) for x, y in _minus(a, b,
+                                                                                    [(p.start, p.end) for p in parts])]
+        for part in parts:
+            covered = []
+            for piece in align(series, part.start, part.end, m.dt, m.segment.gap):
+                x, y = float(piece.t[0]), float(piece.t[-1])
+                covered.append((x, y))
+                if y - x < m.dt:  # a lone grid point at a span's edge: an instant, not a piece worth a bar
+                    continue
+                if len(piece.t) < 2 or y - x < m.segment.min_duration - 1e-9:
+                    out.append((x, y, "too short", f"{y - x:.1f} s, under min_duration = {m.segment.min_duration:g} s"))
+                else:
+                    out.append((x, y, "kept", mode or "kept"))
+            for x, y in _minus(part.start, part.end, covered):
+                if y - x <= m.dt:
+                    continue
+                absent = [s.name for s in series if s.t[0] >= y or s.t[-1] <= x]
+                if absent:
+                    out.append((x, y, "missing channel", f"no {', '.join(absent)} in this {mode or 'span'}"))
+                else:
+                    silent = []
+                    for s in series:  # the channels whose silence longer than `gap` overlaps this hole
+                        d = np.diff(s.t)
+                        k = np.flatnonzero((d > m.segment.gap) & (s.t[:-1] < y) & (s.t[1:] > x))
+                        if k.size:
+                            silent.append(f"{s.name} ({float(d[k].max()):.1f} s)")
+                    out.append((x, y, "gap", f"no sample of {', '.join(silent) or 'a channel'}: longer than "
+                                             f"gap = {m.segment.gap:g} s"))
+    return sorted(out)

@@ -21,7 +21,7 @@ from adapters.modes import heartbeat_table, mode_name, vehicle_kind
 from adapters.segment import Span, flag_spans
 from adapters.streams import Streams
 
-__all__ = ["LogSummary", "StreamSummary", "ModeSpan", "summarize"]
+__all__ = ["LogSummary", "StreamSummary", "ModeSpan", "summarize", "log_modes"]
 
 
 
@@ -65,6 +65,7 @@ class LogSummary:
     skipped: tuple[tuple[str, int], ...]
     info: tuple[tuple[str, Any], ...]
     vehicle: str = ""  # what the modes were named by, e.g. "MAV_AUTOPILOT_ARDUPILOTMEGA MAV_TYPE_FIXED_WING"
+    armed_known: bool = False  # the log says whether the vehicle was armed (so no armed span means never armed)
 
     @property
     def duration(self) -> float:
@@ -89,10 +90,17 @@ class LogSummary:
             lines.append(f"modes{f' ({self.vehicle})' if self.vehicle else ''}: " + "; ".join(
                 f"{m.mode} {m.start - self.t_start:.1f}–{min(m.end, self.t_end) - self.t_start:.1f} s "
                 f"({m.duration:.1f} s)" for m in self.modes))
-        if self.armed:
-            lines.append("armed: " + "; ".join(
-                f"{a - self.t_start:.1f}–{min(b, self.t_end) - self.t_start:.1f} s" for a, b in self.armed))
+        if self.armed_text:
+            lines.append(self.armed_text)
         return "\n".join(lines)
+
+    @property
+    def armed_text(self) -> str:
+        """``"armed: 12.0–80.5 s; …"``, ``"armed: never armed"`` or ``""`` when the log does not say."""
+        if self.armed:
+            return "armed: " + "; ".join(
+                f"{a - self.t_start:.1f}–{min(b, self.t_end) - self.t_start:.1f} s" for a, b in self.armed)
+        return "armed: never armed" if self.armed_known else ""
 
 
 def _stream_summary(name: str, frame, count: int) -> StreamSummary:
@@ -165,6 +173,19 @@ def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
     return [], [], ""
 
 
+def log_modes(streams: Streams) -> tuple[list[str], str | None]:
+    """The flight modes a log reports, in order of first appearance, named by its own vehicle type, and the
+    mode table that named them (``None`` when the log says its modes in no known way)."""
+    modes, _, vehicle = _modes(streams)
+    table = None
+    hb = streams.frames.get("HEARTBEAT")
+    if hb is not None and len(hb) and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb.columns):
+        table = _heartbeat_rows(hb)[1]
+    elif vehicle:
+        table = "px4_nav_state"
+    return list(dict.fromkeys(m.mode for m in modes)), table
+
+
 def summarize(streams: Streams) -> LogSummary:
     """The summary of a file's streams (read them all for a complete picture)."""
     summaries = tuple(
@@ -191,4 +212,5 @@ def summarize(streams: Streams) -> LogSummary:
         skipped=tuple(sorted((str(k), int(v)) for k, v in streams.skipped.items() if v)),
         info=info,
         vehicle=vehicle,
+        armed_known=bool(vehicle),
     )

@@ -110,6 +110,9 @@ def _read_pyulog(where: str, data: bytes, names: list[str] | None) -> Streams:
         "start_timestamp": int(ulog.start_timestamp),
         "last_timestamp": int(ulog.last_timestamp),
         "msg_info": {k: (v if isinstance(v, int | float | str) else str(v)) for k, v in ulog.msg_info_dict.items()},
+        "parameters": dict(ulog.initial_parameters),
+        "logged_messages": [(m.timestamp * 1e-6, m.log_level - 0x30 if m.log_level >= 0x30 else m.log_level,
+                             m.message) for m in ulog.logged_messages],
     }
     return Streams(where, "ulog", frames, counts=counts, skipped=skipped, info=info)
 
@@ -209,6 +212,8 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
         n = len(data)
         formats: dict[str, list] = {}
         msg_info: dict[str, Any] = {}
+        params: dict[str, Any] = {}
+        messages: list[tuple[float, int, str]] = []
         pos = 16
         # Definitions: few messages, parsed one by one like pyulog does.
         while pos + 3 <= n:
@@ -229,7 +234,9 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
             elif kind in b"ALC":
                 break
             elif kind in b"MPQ":
-                _info_message(payload if kind == 0x50 else payload[1:])  # parsed as pyulog does: same failures
+                key, value = _info_message(payload if kind == 0x50 else payload[1:])  # as pyulog: same failures
+                if kind == 0x50:
+                    params[key] = value
             else:
                 raise _Unusual
             pos = end
@@ -256,10 +263,17 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
 
         dropouts = int(np.count_nonzero(kinds == 0x4F))
         subs: dict[int, tuple[str, int, np.dtype, int | None, int]] = {}
-        parsed = np.isin(kinds, np.frombuffer(b"AIMPQ", dtype=np.uint8))
+        parsed = np.isin(kinds, np.frombuffer(b"AIMPQLC", dtype=np.uint8))
         for k in np.flatnonzero(parsed).tolist():
             p, size = int(at[k]), int(sizes[k])
             payload = data[p + 3 : p + 3 + size]
+            if kinds[k] in (0x4C, 0x43):  # L / C: a logged (tagged) text message
+                messages.append(_logged_message(payload, tagged=kinds[k] == 0x43))
+                continue
+            if kinds[k] == 0x50:  # P after the definitions: a parameter changed in flight; the first value stays
+                key, value = _info_message(payload)
+                params.setdefault(key, value)
+                continue
             if kinds[k] == 0x49:
                 key, value = _info_message(payload)
                 msg_info[key] = value
@@ -313,8 +327,18 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
         "start_timestamp": int(start_timestamp),
         "last_timestamp": int(last_timestamp),
         "msg_info": {k: (v if isinstance(v, int | float | str) else str(v)) for k, v in msg_info.items()},
+        "parameters": params,
+        "logged_messages": messages,
     }
     return Streams(where, "ulog", frames, counts=counts, skipped=skipped, info=info)
+
+
+def _logged_message(payload: bytes, tagged: bool) -> tuple[float, int, str]:
+    """(time s, syslog level 0-7, text) of an L (or tagged C) message; the level is stored as ASCII '0'…'7'."""
+    level = payload[0]
+    head = 11 if tagged else 9
+    (stamp,) = struct.unpack_from("<Q", payload, head - 8)
+    return stamp * 1e-6, level - 0x30 if level >= 0x30 else level, payload[head:].decode("utf-8", "replace")
 
 
 def _fields(frame: pd.DataFrame) -> list[tuple[str, str, list[str]]]:
@@ -348,12 +372,19 @@ def _message(kind: bytes, payload: bytes) -> bytes:
     return struct.pack("<HB", len(payload), kind[0]) + payload
 
 
-def write(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, timestamp_us: int = 0) -> Path:
-    """Write numeric streams (topic -> frame with ``t`` seconds since boot) as a ULog file. Atomic."""
+def write(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, timestamp_us: int = 0,
+          info: Mapping[str, str] | None = None) -> Path:
+    """Write numeric streams (topic -> frame with ``t`` seconds since boot) as a ULog file. Atomic.
+
+    ``info`` are text information messages (``{"sys_name": "PX4", "ver_sw_release": …}``; default
+    ``sys_name = "workbench"``), as a firmware writes them.
+    """
     where = os.fspath(path)
     header = [MAGIC + b"\x01" + struct.pack("<Q", timestamp_us)]
     header.append(_message(b"B", bytes(16) + bytes(24)))  # flag bits: no compat / incompat flags, no appended data
-    header.append(_message(b"I", _info("char[9] sys_name", b"workbench")))
+    for key, value in (info or {"sys_name": "workbench"}).items():
+        text = str(value).encode()
+        header.append(_message(b"I", _info(f"char[{len(text)}] {key}", text)))
     subscriptions, events = [], []
     for msg_id, (topic, frame) in enumerate(streams.items()):
         if "/" in topic or ":" in topic:

@@ -80,10 +80,32 @@ def cmd_inspect(ctx: Context) -> int:
         ctx.say(f"flight modes{f' ({summary.vehicle})' if summary.vehicle else ''}: " + "; ".join(
             f"{m.mode} {m.start - t0:.1f}–{min(m.end, summary.t_end) - t0:.1f} s "
             f"({min(m.end, summary.t_end) - m.start:.1f} s)" for m in summary.modes))
-    if summary.armed:
-        ctx.say("armed: " + "; ".join(f"{a - t0:.1f}–{min(b, summary.t_end) - t0:.1f} s" for a, b in summary.armed))
+    if summary.armed_text:  # the armed spans, or "never armed" when the log says so
+        ctx.say(summary.armed_text)
     if summary.skipped:
         ctx.say("skipped: " + ", ".join(f"{k} {v}" for k, v in summary.skipped))
+    return 0
+
+
+def cmd_map(ctx: Context) -> int:
+    """Draft a mapping from a log (adapters.draft) and write it, or print it without -o."""
+    import adapters
+    from adapters.draft import draft_mapping
+    from workbench.atomic import atomic_path
+
+    a = ctx.args
+    path = existing_path(a.log)
+    name = Path(a.output).stem if a.output else path.stem
+    draft = draft_mapping(adapters.read(path), name=name)
+    if a.output:
+        with atomic_path(a.output) as tmp:
+            Path(tmp).write_text(draft.toml, encoding="utf-8")
+        ctx.say(f"wrote {a.output}: a mapping for {draft.vehicle} (template {draft.template}); "
+                f"try: workbench import {path} --mapping {a.output} -o demos.parquet")
+    else:
+        print(draft.toml, end="")
+    for item in draft.undecided:  # what the draft could not decide, on stderr so a piped TOML stays clean
+        print(f"undecided: {item}", file=sys.stderr)
     return 0
 
 

@@ -15,7 +15,7 @@ from workbench.cli.context import (
     n_components_arg,
     positive_float,
 )
-from workbench.cli.data import cmd_import, cmd_inspect, cmd_simulate
+from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
 from workbench.cli.model import cmd_fit, cmd_predict
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
 from workbench.cli.view import cmd_live, cmd_replay, cmd_view
@@ -199,6 +199,11 @@ def build_parser() -> argparse.ArgumentParser:
     _study_options(p)
     _mapping_option(p)
     _executor_options(p)
+
+    p = add("map", cmd_map, "draft a mapping from a log: the vehicle, its firmware's field names, the streams "
+            "for positions, velocities, attitude and sticks", "workbench map flight.tlog -o flight.toml")
+    p.add_argument("log", metavar="LOG")
+    p.add_argument("-o", "--output", metavar="MAPPING.toml", help="write the mapping here (default: print it)")
 
     p = add("view", cmd_view, "log demonstrations (and a model's variability and predictions) to rerun",
             "workbench view demos.parquet --model CS1=cs1.npz --model CS2=cs2.npz --save session.rrd")

@@ -22,10 +22,44 @@ from workbench.errors import DataError, WorkbenchError
 
 __all__ = []
 
+def _raw_streams(path: str) -> Any:
+    """A raw log's every stream (for the raw view), or ``None`` for a demonstrations file."""
+    import adapters
+    from workbench.cli.context import is_demo_file
+
+    p = existing_path(path)
+    return None if is_demo_file(p) else adapters.read(p)
+
+
+def _view_raw(ctx: Context, streams: Any) -> int:
+    """``workbench view LOG`` without a mapping: the log as it is (workbench.viewer.rawlog)."""
+    from adapters.rawlog import raw_log
+    from workbench import viewer
+    from workbench.viewer.rawlog import RAW_APPLICATION_ID, log_raw, raw_blueprint
+
+    a = ctx.args
+    raw = raw_log(streams)
+    out = output_kwargs(a, Path("out") / (Path(a.inputs[0]).stem + ".rrd"))
+    rec = viewer.new_recording(RAW_APPLICATION_ID)
+    with ctx.progress() as progress:
+        progress.add_task(f"logging {len(raw.streams)} streams", total=None)
+        with viewer.open_output(rec, **out) as sink:
+            logged = log_raw(rec, raw)
+            sink.blueprint = raw_blueprint(logged)
+    n = sum(s.values.size for s in raw.streams)
+    announce(ctx, out, sink, f"the raw log: {len(raw.streams)} streams, {n} values, {len(raw.text)} messages"
+             + (f", a GPS track ({raw.track.source})" if raw.track is not None else "")
+             + (f", {len(raw.parameters)} parameters" if raw.parameters else ""))
+    return 0
+
+
 def cmd_view(ctx: Context) -> int:
     from workbench import viewer
 
     a = ctx.args
+    raw_streams = _raw_streams(a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
+    if raw_streams is not None and not a.mapping and not a.model:
+        return _view_raw(ctx, raw_streams)
     ds = load_demos(ctx, a.inputs, a.mapping, a.label)
     models, named = None, None
     if a.model:
@@ -52,9 +86,23 @@ def cmd_view(ctx: Context) -> int:
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
                 samples=a.samples, starts=a.starts or (0,), seed=a.seed,
             )
-            sink.blueprint = viewer.default_blueprint(session)
+            extra = _raw_beside(rec, raw_streams, a.mapping, ds) if raw_streams is not None and a.mapping else []
+            sink.blueprint = viewer.default_blueprint(session, extra_tabs=extra)
     announce(ctx, out, sink, f"{len(ds)} demonstrations")
     return 0
+
+
+def _raw_beside(rec: Any, streams: Any, mapping: str, ds: Any) -> list[Any]:
+    """The raw log under a mapped flight, on the flight's clock, with what the mapping kept and dropped."""
+    from adapters.mapping import load_mapping
+    from adapters.pipeline import explain
+    from adapters.rawlog import raw_log
+    from workbench.viewer.rawlog import log_raw, raw_views
+
+    meta = ds[0].meta
+    origin = float(meta["t0"]) - float(meta["t_start"]) if "t0" in meta and "t_start" in meta else None
+    pieces = explain(streams, load_mapping(mapping).for_format(streams.format))
+    return raw_views(log_raw(rec, raw_log(streams), origin=origin, segments=pieces))
 
 
 def cmd_replay(ctx: Context) -> int:

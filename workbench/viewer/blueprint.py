@@ -125,7 +125,8 @@ def _objective_tab(s: LoggedSession) -> Any:
     return rrb.Vertical(*rows, name="objective")
 
 
-def session_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.Blueprint:
+def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
+                      max_overlay: int = 60) -> rrb.Blueprint:
     """Tabs scene, states, inputs & variability, predictions, objective (see the module docstring)."""
     s = session
     ids = s.demo_ids[:max_overlay]
@@ -166,4 +167,5 @@ def session_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.B
         tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1, name="predictions"))
     if s.models:
         tabs.append(_objective_tab(s))
+    tabs += list(extra_tabs)  # e.g. the raw log's tabs (workbench.viewer.rawlog) behind a mapped flight
     return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), time_panel(), collapse_panels=True)

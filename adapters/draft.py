@@ -1,0 +1,281 @@
+"""``workbench map LOG``: a mapping drafted from the log itself, ready for ``workbench import``.
+
+The draft recognises the vehicle (MAVLink ``HEARTBEAT`` autopilot and type, the ULog's ``sys_name`` /
+``ver_sw_branch`` information, the DataFlash firmware string in ``MSG``), takes the shipped mapping made for
+that kind of vehicle as its template (its manual modes, roles, segmentation), and picks for every state and
+input the first source whose stream and fields the log has, among the template's alternatives for this format
+(old and new PX4 topics and fields, ``RC_CHANNELS`` / ``RC_CHANNELS_RAW``) and the DataFlash names
+(:data:`BIN_CHANNELS`). The grid step follows the slowest chosen stream. What it cannot decide — a channel
+with no source in the log, no armed flag, no manual mode — is listed in :attr:`Draft.undecided`, and the TOML
+says it in comments.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from adapters.mapping import (
+    FORMAT_NAMES,
+    Channel,
+    ChannelMapping,
+    FlagRule,
+    Selector,
+    load_mapping,
+    select,
+    shipped_mappings,
+)
+from adapters.modes import mode_name
+from adapters.streams import Streams
+from adapters.summary import log_modes, summarize
+from workbench.errors import DataError, MappingError
+
+__all__ = ["Draft", "draft_mapping", "BIN_CHANNELS"]
+
+_DEG = math.pi / 180.0
+#: DataFlash (.bin) names of the planar channels, newest EKF first (XKF1: EKF3, NKF1: EKF2, EKF1: the old EKF).
+#: ATT is in degrees and gives the body roll (no yaw-corrected tilt: ATT.Yaw is a heading in degrees).
+BIN_CHANNELS: dict[str, list[Channel]] = {
+    "x": [Channel("x", Selector(f"{s}.PE")) for s in ("XKF1", "NKF1", "EKF1")],
+    "y": [Channel("x", Selector(f"{s}.PD"), transform="ned_up") for s in ("XKF1", "NKF1", "EKF1")],
+    "phi": [Channel("phi", Selector("ATT.Roll"), scale=_DEG)],
+    "xdot": [Channel("xdot", Selector(f"{s}.VE")) for s in ("XKF1", "NKF1", "EKF1")],
+    "ydot": [Channel("ydot", Selector(f"{s}.VD"), transform="ned_up") for s in ("XKF1", "NKF1", "EKF1")],
+    "phidot": [Channel("phidot", Selector("IMU.GyrX")), Channel("phidot", Selector("RATE.R"), scale=_DEG)],
+    "u1": [Channel("u1", Selector("RCIN.C1"), transform="pwm", params=(("pwm_min", 1000.0), ("pwm_max", 2000.0)))],
+    "u2": [Channel("u2", Selector("RCIN.C3"), transform="pwm", params=(("pwm_min", 1000.0), ("pwm_max", 2000.0)))],
+}
+_BIN_FIRMWARE = (("copter", "arducopter"), ("plane", "arduplane"), ("rover", "ardurover"), ("sub", "ardusub"))
+_STEPS = (0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
+
+
+@dataclass(frozen=True)
+class Draft:
+    """A drafted mapping: its TOML text, the vehicle it was drafted for, and what it could not decide."""
+
+    toml: str
+    vehicle: str
+    template: str
+    chosen: tuple[tuple[str, str], ...]
+    undecided: tuple[str, ...]
+
+
+def _vehicle(streams: Streams) -> tuple[str, str | None]:
+    """A description of the vehicle and firmware, and the mode table of its kind (``None``: not recognised)."""
+    _, table = log_modes(streams)
+    summary = summarize(streams)
+    if table is not None and table != "px4_nav_state":
+        return summary.vehicle, table
+    info = streams.info.get("msg_info", {}) or {}
+    if streams.format == "ulog" or "sys_name" in info:
+        name = str(info.get("sys_name", "ULog"))
+        version = info.get("ver_sw_branch") or info.get("ver_sw_release") or ""
+        table = "px4_nav_state" if name.upper().startswith("PX4") or "vehicle_status" in streams.frames else None
+        return f"{name} {version}".strip(), table
+    msg = streams.frames.get("MSG")
+    if msg is not None and "Message" in msg.columns:
+        for text in msg["Message"].astype(str):
+            low = text.lower()
+            if low.startswith(("ardu", "apm:")):
+                for word, kind in _BIN_FIRMWARE:
+                    if word in low:
+                        return text.strip(), kind
+    return summary.vehicle, table
+
+
+def _template(table: str | None, fmt: str) -> ChannelMapping | None:
+    """The shipped mapping whose mode rule names modes by ``table`` (for files of ``fmt``, or by default)."""
+    for name in shipped_mappings():
+        m = load_mapping(name)
+        for candidate in (m.for_format(fmt) if fmt in FORMAT_NAMES else m, m):
+            rule = candidate.segment.mode
+            if rule is not None and rule.names == table:
+                return candidate
+        if table == "px4" and m.for_format("tlog").segment.mode is not None:
+            if m.for_format("tlog").segment.mode.names == "px4":
+                return m.for_format("tlog")
+    return None
+
+
+def _has(sel: Selector, streams: Streams, n_columns: int | None = 1) -> bool:
+    try:
+        return bool(select(sel, streams, "", "", n_columns=n_columns).rows.any())
+    except MappingError:
+        return False
+
+
+def _pick(ch: Channel, streams: Streams, fmt: str) -> Channel | None:
+    from adapters.transforms import TRANSFORMS
+
+    extra = BIN_CHANNELS.get(ch.name, []) if fmt not in ("tlog", "ulog", "mcap", "csv") else []
+    variants = [*ch.variants, *(replace(e, name=ch.name) for e in extra)]
+    for v in variants:
+        # each source of a selector on its own: the TOML names the one this log has
+        for source in v.selector.sources:
+            one = replace(v, selector=replace(v.selector, source=source, alternatives=()))
+            if _has(one.selector, streams, TRANSFORMS[one.transform].n_columns):
+                return one
+    return None
+
+
+def _toml_value(v: object) -> str:
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int | float):
+        return repr(float(v)) if isinstance(v, float) else str(v)
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(type(v))
+
+
+def _channel_toml(ch: Channel) -> str:
+    table: dict[str, object] = {"source": ch.selector.source}
+    if ch.selector.where:
+        table["where"] = dict(ch.selector.where)
+    if ch.transform != "identity":
+        table["transform"] = ch.transform
+    table.update(dict(ch.params))
+    if ch.scale != 1.0:
+        table["scale"] = ch.scale
+    if ch.offset != 0.0:
+        table["offset"] = ch.offset
+    if ch.sign != 1.0:
+        table["sign"] = ch.sign
+    return _toml_value(table["source"]) if len(table) == 1 else _toml_value(table)
+
+
+def _period(streams: Streams, stream: str) -> float:
+    t = streams.frames[stream]["t"].to_numpy(dtype=np.float64)
+    d = np.diff(np.unique(t[np.isfinite(t)]))
+    return float(np.median(d)) if d.size else 1.0
+
+
+def _flag_toml(rule: FlagRule) -> dict[str, object]:
+    out: dict[str, object] = {"source": rule.selector.source}
+    if rule.selector.where:
+        out["where"] = dict(rule.selector.where)
+    if rule.bitmask is not None:
+        out["bitmask"] = rule.bitmask
+    if rule.equals is not None:
+        out["equals"] = rule.equals
+    return out
+
+
+def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
+    """Draft a mapping for the log whose (all) streams are ``streams``.
+
+    Raises
+    ------
+    DataError
+        The vehicle is not one the shipped mappings know (the message says what the log revealed).
+    """
+    vehicle, table = _vehicle(streams)
+    fmt = streams.format
+    template = _template(table, fmt)
+    if template is None:
+        seen = vehicle or "no HEARTBEAT, ULog system information or firmware message"
+        raise DataError(f"{streams.path}: cannot draft a mapping: the vehicle is not recognised ({seen}); copy a "
+                        "shipped mapping and change its sources")
+    undecided: list[str] = []
+    chosen: dict[str, Channel] = {}
+    for ch in template.channels:
+        picked = _pick(ch, streams, fmt)
+        if picked is None:
+            undecided.append(f"{ch.name}: none of {', '.join(v.selector.describe() for v in ch.variants)} is in "
+                             f"this log")
+        else:
+            chosen[ch.name] = picked
+    if undecided:
+        raise DataError(f"{streams.path}: cannot draft a mapping for {vehicle}: " + "; ".join(undecided))
+    streams_used = sorted({_stream_of(c, streams) for c in chosen.values()})
+    slowest = max(_period(streams, s) for s in streams_used)
+    dt = next((s for s in _STEPS if s >= slowest * 0.999), _STEPS[-1])
+    seg = template.segment
+    gap = max(seg.gap, 5 * dt)
+    min_duration = max(seg.min_duration, 10 * dt)
+    lines = [
+        f"# Drafted by `workbench map` from {streams.path}",
+        f"# vehicle: {vehicle or 'unknown'}; template: the shipped mapping {template.name!r}",
+        f"# grid step: the slowest chosen stream arrives every {slowest:.3g} s (median)",
+        f"name = {_toml_value(name or 'drafted')}",
+        f"description = {_toml_value(f'drafted for {vehicle} from {template.name}')}",
+        f"dt = {dt!r}",
+        f"states = {_toml_value(list(template.state_names))}",
+        f"inputs = {_toml_value(list(template.input_names))}",
+    ]
+    clock = template.clock
+    if clock.field is not None:
+        if all(clock.field in streams.frames[s].columns for s in streams_used):
+            lines.append(f"clock = {_toml_value({'field': clock.field, 'scale': clock.scale})}")
+        else:
+            lines.append(f"# clock: not every chosen stream has {clock.field!r}; the log's own clock is used")
+    roles = template.raw.get("roles")
+    if roles:
+        lines += ["", "[roles]"] + [f"{k} = {_toml_value(v)}" for k, v in roles.items()]
+    lines += ["", "[channels]"]
+    for ch in template.channels:
+        c = chosen[ch.name]
+        others = [v.selector.source for v in ch.variants if v.selector.source != c.selector.source]
+        note = f"  # chosen over {', '.join(others)}" if others else ""
+        lines.append(f"{ch.name} = {_channel_toml(c)}{note}")
+    lines += ["", "[segment]", f"gap = {gap!r}", f"min_duration = {min_duration!r}"]
+    mode = seg.mode
+    keep = [mode_name(mode.names, k) for k in mode.keep] if mode is not None else []
+    mode_sel = _mode_selector(mode.selector if mode else None, streams)
+    present, _ = log_modes(streams)
+    if mode_sel is not None and mode is not None:
+        lines.append(f"mode = {_toml_value({**_selector_table(mode_sel), 'names': mode.names, 'keep': keep})}")
+        if present and not set(keep) & set(present):
+            undecided.append(f"mode: no manual mode in this log (modes: {', '.join(present)}); kept "
+                             f"{', '.join(keep)} as the template does, so import will find nothing")
+    else:
+        undecided.append("mode: no flight-mode stream found; every span is used")
+        lines.append("# mode: no flight-mode stream found in this log")
+    armed = _armed_rule(seg.armed, streams)
+    if armed is not None:
+        lines.append(f"armed = {_toml_value(armed)}")
+    else:
+        undecided.append("armed: no armed flag found (a DataFlash log's arming is an EV event, not a held flag); "
+                         "disarmed spans are not dropped")
+        lines.append("# armed: no armed flag found in this log")
+    for u in undecided:
+        lines.insert(3, f"# undecided: {u}")
+    text = "\n".join(lines) + "\n"
+    return Draft(text, vehicle, template.name, tuple((k, c.selector.source) for k, c in chosen.items()),
+                 tuple(undecided))
+
+
+def _stream_of(ch: Channel, streams: Streams) -> str:
+    return select(ch.selector, streams, "", "").stream
+
+
+def _selector_table(sel: Selector) -> dict[str, object]:
+    out: dict[str, object] = {"source": sel.source}
+    if sel.where:
+        out["where"] = dict(sel.where)
+    return out
+
+
+def _mode_selector(sel: Selector | None, streams: Streams) -> Selector | None:
+    """The template's mode source when the log has it, else a DataFlash MODE field."""
+    for candidate in (sel, Selector("MODE.ModeNum"), Selector("MODE.Mode")):
+        if candidate is not None and _has(candidate, streams):
+            return candidate
+    return None
+
+
+def _armed_rule(rule: FlagRule | None, streams: Streams) -> dict[str, object] | None:
+    candidates = [rule] if rule is not None else []
+    candidates.append(FlagRule(Selector("ARM.ArmState")))
+    for r in candidates:
+        if r is not None and _has(r.selector, streams):
+            return _flag_toml(r)
+    return None
+

@@ -1,0 +1,80 @@
+"""The raw log in rerun (``workbench view LOG`` without a mapping) and ``rerun-loader-workbench`` through rerun's
+external data-loader protocol: path in, an rrd stream on stdout, exit code 66 for files it does not handle."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+from rerun.chunk import RrdReader
+
+import adapters
+from adapters.rawlog import raw_log
+
+REPO = Path(__file__).resolve().parents[2]
+SAMPLE = REPO / "sample_logs" / "landing_s00.tlog"
+FLIGHT = REPO.parent / "shared" / "external" / "dronekit_flight.tlog"
+
+
+def _loader(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "workbench.cli.loader", *args], capture_output=True, cwd=REPO,
+                          timeout=120)
+
+
+def _entities(data: bytes, tmp_path: Path) -> set[str]:
+    path = tmp_path / "out.rrd"
+    path.write_bytes(data)
+    return {str(c.entity_path) for c in RrdReader(path).stream()}
+
+
+def test_the_loader_is_a_console_script_named_for_rerun():
+    scripts = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["rerun-loader-workbench"] == "workbench.cli.loader:run"
+
+
+def test_loader_streams_a_tlog_under_the_given_prefix(tmp_path):
+    r = _loader(str(SAMPLE), "--application-id", "app", "--recording-id", "rec-1", "--entity-path-prefix", "pre",
+                "--time_sequence", "frame=3")
+    assert r.returncode == 0, r.stderr.decode()
+    paths = _entities(r.stdout, tmp_path)
+    raw = raw_log(adapters.read(SAMPLE))
+    expected = {f"/pre/log/streams/{s.name}" for s in raw.streams}
+    assert expected <= paths
+    assert "/pre/log/messages" in paths and "/pre/log/mode" in paths
+    assert not [p for p in paths if p.startswith("/log")]  # everything under the prefix
+
+
+@pytest.mark.parametrize("name, text", [("notes.txt", "just some words\n"), ("table.csv", "a,b\n1,2\n")])
+def test_loader_declines_files_it_does_not_handle(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    r = _loader(str(path), "--recording-id", "x")
+    assert r.returncode == 66 and r.stdout == b""
+    r = _loader(str(tmp_path / "missing.tlog"))
+    assert r.returncode == 66
+
+
+@pytest.mark.slow
+def test_loader_static_logs_only_the_timeless_part(tmp_path):
+    r = _loader(str(FLIGHT), "--static")
+    assert r.returncode == 0, r.stderr.decode()
+    paths = _entities(r.stdout, tmp_path)
+    assert "/log/parameters" in paths and not [p for p in paths if p.startswith("/log/streams")]
+
+
+@pytest.mark.slow
+def test_view_without_a_mapping_is_the_raw_view(tmp_path):
+    out = tmp_path / "raw.rrd"
+    r = subprocess.run([sys.executable, "-m", "workbench", "view", str(FLIGHT), "--save", str(out)],
+                       capture_output=True, text=True, cwd=REPO, timeout=300)
+    assert r.returncode == 0, r.stderr
+    paths = {str(c.entity_path) for c in RrdReader(out).stream()}
+    raw = raw_log(adapters.read(FLIGHT))
+    assert {f"/log/streams/{s.name}" for s in raw.streams} <= paths
+    assert {"/log/mode", "/log/armed", "/log/messages", "/log/gps/vehicle", "/log/parameters"} <= paths
+    verify = subprocess.run([str(Path(sys.executable).with_name("rerun")), "rrd", "verify", str(out)],
+                            capture_output=True, text=True, timeout=120)
+    assert verify.returncode == 0, verify.stderr

@@ -1,0 +1,223 @@
+"""The raw log in rerun: every stream of a log as it was recorded, before (or beside) any mapping.
+
+Entities, under a prefix (``log`` by default):
+
+* ``<prefix>/streams/<stream>`` — one entity per stream, one scalar series per numeric field (named
+  ``field [unit]`` where the format has units); clock and counter fields (``time_boot_ms``, ``timestamp``, …)
+  are logged but hidden, since their ramp would flatten every other line of the plot;
+* ``<prefix>/mode`` — the flight-mode lane, every mode the log reports; ``<prefix>/armed`` — armed spans;
+* ``<prefix>/segments`` — with a mapping: what it kept and every dropped piece named by its reason (disarmed,
+  too short, a gap, a missing channel), and ``<prefix>/segments/why`` the same as text;
+* ``<prefix>/messages`` — text messages as a rerun TextLog with their severity;
+* ``<prefix>/gps`` — the GPS track on rerun's map (``GeoPoints`` over time, the whole path as a line);
+* ``<prefix>/parameters`` — the parameters as a Markdown document (static).
+
+Everything goes through one guarded ``send_columns`` per entity (:mod:`workbench.viewer.columns`), on timeline
+``time`` (seconds since the log's start, or since a given origin so the raw streams sit under a mapped session
+of the same log) and ``log_clock`` (the log's own clock: a timestamp for Unix-time logs, else seconds since
+boot).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyarrow as pa
+import rerun as rr
+import rerun.blueprint as rrb
+
+from adapters.rawlog import RawLog
+from workbench.viewer import style
+from workbench.viewer.columns import send_columns
+from workbench.viewer.entities import entity_part
+
+__all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_raw", "raw_blueprint", "raw_views"]
+
+RAW_APPLICATION_ID = "workbench_log_raw"
+#: the segment lane's states: what a mapping kept, and why a piece was dropped
+SEGMENT_STATES = {
+    "kept": (44, 160, 44), "disarmed": (150, 150, 150), "too short": (255, 127, 14), "gap": (214, 39, 40),
+    "missing channel": (148, 103, 189), "not mapped": (60, 60, 60),
+}  # fmt: skip
+# clock and time-stamp fields (time_boot_ms, timestamp_sample, armed_time_ms, TimeUS, stamp.sec, …): hidden by
+# default, since their ramp flattens every other line of a stream's plot
+_CLOCKISH = re.compile(r"time|stamp", re.IGNORECASE)
+_ARMED = {"armed": (214, 39, 40), "disarmed": (200, 200, 200)}
+
+
+@dataclass
+class LoggedRaw:
+    """What :func:`log_raw` logged, so :func:`raw_blueprint` shows only views with something in them."""
+
+    prefix: str
+    path: str
+    streams: list[str] = field(default_factory=list)
+    rows: dict[str, int] = field(default_factory=dict)
+    spans: dict[str, tuple[float, float]] = field(default_factory=dict)
+    modes: bool = False
+    armed: bool = False
+    segments: bool = False
+    messages: bool = False
+    gps: bool = False
+    parameters: bool = False
+    span: tuple[float, float] = (0.0, 0.0)
+
+
+def _index(raw: RawLog, t: np.ndarray, origin: float) -> list[rr.TimeColumn]:
+    t = np.asarray(t, dtype=np.float64)
+    clock = (rr.TimeColumn("log_clock", timestamp=t) if raw.epoch_clock
+             else rr.TimeColumn("log_clock", duration=t))
+    return [rr.TimeColumn("time", duration=t - origin), clock]
+
+
+def _lane(rec: rr.RecordingStream, path: str, raw: RawLog, origin: float, starts: Sequence[float],
+          ends: Sequence[float], names: Sequence[str], colors: dict[str, tuple[int, int, int]],
+          fill: str | None = None) -> bool:
+    """A state lane from spans: each span's state from its start; between spans (and after the last) the ``fill``
+    state, or the previous state held on when there is none. Never a null state: ``rerun rrd verify`` rejects it."""
+    t: list[float] = []
+    states: list[str] = []
+    for a, b, name in sorted(zip(starts, ends, names, strict=True)):
+        if t and fill is not None and states[-1] == fill and t[-1] >= a:
+            t.pop()
+            states.pop()
+        t.append(a)
+        states.append(name)
+        if fill is not None:
+            t.append(b)
+            states.append(fill)
+    if not t:
+        return False
+    rec.log(path, rr.StateConfiguration(values=list(colors), colors=style.packed(*colors.values())), static=True)
+    t_arr = np.clip(np.asarray(t, dtype=np.float64), raw.t_start, raw.t_end)
+    return send_columns(rec, path, _index(raw, t_arr, origin),
+                        rr.StateChange.columns(state=pa.array(states, type=pa.string())))
+
+
+def _parameters_markdown(raw: RawLog) -> str:
+    lines = [f"# Parameters of {raw.path}", "", f"{len(raw.parameters)} parameters.", "", "| name | value |",
+             "|---|---|"]
+    lines += [f"| {k} | {v:g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in raw.parameters]
+    return "\n".join(lines)
+
+
+def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin: float | None = None,
+            segments: Sequence[tuple[float, float, str, str]] = (), static: bool = False) -> LoggedRaw:
+    """Log a :class:`~adapters.rawlog.RawLog` (see the module docstring for the entities).
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+    raw : RawLog
+    prefix : str
+        Entity-path prefix (a loader's ``--entity-path-prefix`` goes in front of it).
+    origin : float, optional
+        Log-clock time that is zero on the ``time`` timeline (default: the log's start).
+    segments : sequence of (start, end, state, reason)
+        A mapping's kept and dropped pieces (:func:`adapters.pipeline.explain`), on the log clock.
+    static : bool
+        Log only what has no time (the parameters and a summary), as a loader's ``--static`` asks.
+    """
+    origin = raw.t_start if origin is None else float(origin)
+    out = LoggedRaw(prefix, raw.path, span=(raw.t_start - origin, raw.t_end - origin))
+    if raw.parameters:
+        rec.log(f"{prefix}/parameters", rr.TextDocument(_parameters_markdown(raw), media_type="text/markdown"),
+                static=True)
+        out.parameters = True
+    if static:
+        return out
+    for s in raw.streams:
+        path = f"{prefix}/streams/{entity_part(s.name)}"
+        names = [style.with_unit(f, u) for f, u in zip(s.fields, s.units, strict=True)]
+        visible = [not _CLOCKISH.search(f) for f in s.fields]
+        rec.log(path, rr.SeriesLines(names=names, visible_series=visible, widths=[1.0] * len(names)), static=True)
+        if send_columns(rec, path, _index(raw, s.t, origin), rr.Scalars.columns(scalars=s.values)):
+            out.streams.append(s.name)
+            out.rows[s.name] = len(s.t)
+            out.spans[s.name] = (float(s.t[0]) - origin, float(s.t[-1]) - origin)
+    if raw.modes:
+        colors = style.mode_colors(list(dict.fromkeys(m.mode for m in raw.modes)))
+        out.modes = _lane(rec, f"{prefix}/mode", raw, origin, [m.start for m in raw.modes],
+                          [m.end for m in raw.modes], [m.mode for m in raw.modes], colors)
+    if raw.armed_known:
+        # disarmed from the log's start: the lane says so rather than staying blank until the first arming
+        starts = [raw.t_start, *(a for a, _ in raw.armed)] if raw.armed else [raw.t_start]
+        ends = [raw.t_start, *(b for _, b in raw.armed)] if raw.armed else [raw.t_end]
+        states = ["disarmed", *["armed"] * len(raw.armed)] if raw.armed else ["never armed"]
+        colors = {**_ARMED, "never armed": _ARMED["disarmed"]}
+        out.armed = _lane(rec, f"{prefix}/armed", raw, origin, starts, ends, states, colors,
+                          fill="disarmed" if raw.armed else None)
+    if segments:
+        out.segments = _lane(rec, f"{prefix}/segments", raw, origin, [s[0] for s in segments],
+                             [s[1] for s in segments], [s[2] for s in segments], SEGMENT_STATES, fill="not mapped")
+        dropped = [s for s in segments if s[2] != "kept"]
+        if dropped:
+            send_columns(rec, f"{prefix}/segments/why", _index(raw, np.array([s[0] for s in dropped]), origin),
+                         rr.TextLog.columns(text=[f"dropped {s[1] - s[0]:.1f} s: {s[3]}" for s in dropped],
+                                            level=["WARN"] * len(dropped)))
+    if len(raw.text):
+        out.messages = send_columns(rec, f"{prefix}/messages", _index(raw, raw.text.t, origin),
+                                    rr.TextLog.columns(text=[f"{src}: {x}" for src, x in
+                                                             zip(raw.text.sources, raw.text.texts, strict=True)],
+                                                       level=list(raw.text.levels)))
+    if raw.track is not None:
+        tr = raw.track
+        latlon = np.column_stack([tr.lat, tr.lon])
+        rec.log(f"{prefix}/gps/track", rr.GeoLineStrings(lat_lon=[latlon], radii=rr.Radius.ui_points(2.0),
+                                                         colors=[(31, 119, 180)]), static=True)
+        rec.log(f"{prefix}/gps/vehicle", rr.GeoPoints.from_fields(radii=rr.Radius.ui_points(6.0),
+                                                                  colors=[(214, 39, 40)]), static=True)
+        out.gps = send_columns(rec, f"{prefix}/gps/vehicle", _index(raw, tr.t, origin),
+                               rr.GeoPoints.columns(positions=latlon))
+    return out
+
+
+def _whole_log(span: tuple[float, float]) -> rrb.TimeAxis:
+    """The x-axis over the whole log: a plot opened on a paused cursor would otherwise show ±30 s around it."""
+    lo, hi = span
+    pad = 0.01 * max(hi - lo, 1e-6)
+    return rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(seconds=lo - pad),
+                                                 end=rrb.TimeRangeBoundary.absolute(seconds=hi + pad)))
+
+
+def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
+    """The raw log's tabs: streams (a plot per stream beside the mode lane and the messages), map, parameters."""
+    p = f"/{s.prefix}"
+    lanes = [f"+ {p}/{lane}" for lane, on in (("mode", s.modes), ("armed", s.armed), ("segments", s.segments))
+             if on]
+    side: list[rrb.View] = []
+    if lanes:
+        side.append(rrb.StateTimelineView(origin="/", contents=lanes, name="modes · armed"
+                                          + (" · segments" if s.segments else ""), time_view=_whole_log(s.span)))
+    if s.messages or s.segments:
+        side.append(rrb.TextLogView(origin=p, contents=[f"+ {p}/messages", f"+ {p}/segments/why"],
+                                    name="messages"))
+    plots = [rrb.TimeSeriesView(origin=f"{p}/streams/{entity_part(n)}", name=n,
+                                plot_legend=rrb.PlotLegend("LeftTop", visible=True),
+                                axis_x=_whole_log(s.spans.get(n, s.span)))  # the stream's own span
+             for n in s.streams]
+    tabs: list[rrb.Container | rrb.View] = []
+    if plots:
+        # the busiest stream first on screen (attitude or IMU in a flight log), the tabs in name order
+        busiest = max(range(len(s.streams)), key=lambda k: (s.rows.get(s.streams[k], 0), -k))
+        left = rrb.Tabs(*plots, name="streams", active_tab=busiest)
+        tabs.append(rrb.Horizontal(left, rrb.Vertical(*side, row_shares=[1, 2][: len(side)]), column_shares=[3, 2],
+                                   name="raw streams") if side else left)
+    elif side:
+        tabs.append(rrb.Vertical(*side, name="raw streams"))
+    if s.gps:
+        tabs.append(rrb.MapView(origin=f"{p}/gps", name="map", zoom=17.0))
+    if s.parameters:
+        tabs.append(rrb.TextDocumentView(origin=f"{p}/parameters", name="parameters"))
+    return tabs
+
+
+def raw_blueprint(s: LoggedRaw) -> rrb.Blueprint:
+    """The first view of a raw-log recording: its tabs, side panels collapsed, the time cursor at the start."""
+    return rrb.Blueprint(rrb.Tabs(*raw_views(s)), rrb.BlueprintPanel(state="collapsed"),
+                         rrb.SelectionPanel(state="collapsed"),
+                         rrb.TimePanel(timeline="time", play_state="paused", state="collapsed"),
+                         collapse_panels=False)
