@@ -85,7 +85,7 @@ __all__ = [
 ]
 
 MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
-FORMAT_NAMES = ("tlog", "mcap", "ulog", "csv")
+FORMAT_NAMES = ("tlog", "dataflash", "mcap", "ulog", "csv")
 DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", *FORMAT_NAMES
@@ -420,7 +420,9 @@ def _segment(raw: Any, path: str, states: tuple[str, ...], dt: float) -> Segment
                 raise _fail(path, "segment.mode.keep", f"unknown mode {k!r} in table {names!r}; known: {known}")
             keep.append(number)
         mode = ModeRule(sel, tuple(keep), names)
-    armed = _flag(raw["armed"], path, "segment.armed") if "armed" in raw else None
+    # `armed = false` turns a rule inherited from the top-level [segment] off for one format (a DataFlash log
+    # records arming as EV events, not as a flag held in every message)
+    armed = _flag(raw["armed"], path, "segment.armed") if raw.get("armed", False) is not False else None
     landing = None
     if "landing" in raw:
         lr = raw["landing"]
