@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 import adapters
-from adapters.formats import dataflash, dataflash_write
+from adapters.formats import dataflash_write
 from workbench.errors import DataError, FormatError
 
 REAL = "erle_copter_83.BIN"
