@@ -62,7 +62,7 @@ def _overlay(s: LoggedSession, name: str, contents: list[str], key: str | None =
     """Every trial in one plot: on a flight's clock the x-axis spans the whole log, not the first segment. The key
     of the trials' colors is the tab's (:func:`_key`): no legend over the data."""
     return _plot(name, contents, window=s.span if s.clock == "log" else None, legend=rrb.PlotLegend(visible=False),
-                 y_range=s.ranges.get(key) if key else None, linked=s.clock == "log")
+                 y_range=s.ranges.get(key) if key else None, linked=True)
 
 
 def _key(s: LoggedSession) -> list[rrb.TextDocumentView]:
@@ -123,7 +123,7 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
             side.append(_plot(f"{s.title(name)} · {fid}", _prediction_paths(s, fid, name),
                               legend=rrb.PlotLegend(s.corners.get(key, "RightTop"), visible=k == 0),
                               y_range=s.ranges.get(f"demos/{entity_part(fid)}/predictions/{entity_part(name)}"),
-                              window=s.windows.get(fid), linked=True))
+                              window=s.windows.get(fid)))
         else:
             side.append(_overlay(s, s.title(name),
                                  [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in s.demo_ids],
@@ -153,7 +153,7 @@ def _objective_tab(s: LoggedSession) -> Any:
         # the summary's tables are wide: its column gets as much room as the heatmaps together
         rows.append(rrb.Horizontal(*views, rrb.Vertical(*notes, row_shares=[1, 3][:len(notes)] if len(notes) > 1
                                                         else None),
-                                   column_shares=[*shares, max(sum(shares), 1.0)]))
+                                   column_shares=[*shares, max(0.6 * sum(shares), 1.0)]))
     return rrb.Vertical(*rows, name="objective")
 
 
@@ -161,8 +161,8 @@ def _fit_of(s: LoggedSession, demo_id: str) -> str:
     """The fit figures of the model that explains ``demo_id`` (its trial's ŵ coverage against nominal)."""
     parts = [s.fit_titles[k] for k in sorted(s.fit_titles) if k.startswith(f"demos/{entity_part(demo_id)}/")]
     bad = [m for m, v in s.verdicts.items() if not v.fits]
-    head = f"⚠ model {', '.join(bad)} does not fit these data; " if bad else ""
-    return head + ("ŵ " + parts[0] if parts else "")
+    head = f"⚠ model {', '.join(bad)} does not fit" if bad else ""
+    return "; ".join(x for x in (head, "ŵ " + parts[0] if parts else "") if x)
 
 
 def session_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.Blueprint:
@@ -189,13 +189,14 @@ def session_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.B
                  key=f"inputs/{entity_part(name)}")
         for name in s.input_names
     ]
-    for k, i in enumerate(f for f in focus if f in s.variability):
-        for j, name in enumerate(s.input_names):
+    for i in [f for f in focus if f in s.variability]:
+        for name in s.input_names:
             p = f"demos/{entity_part(i)}/variability/{entity_part(name)}"
             fit = s.fit_titles.get(p)
-            input_views.append(_plot(f"ŵ {s.title(name)} · {i}" + (f" — {fit}" if fit else ""), [f"+ /{p}/**"],
-                                     legend=rrb.PlotLegend(s.corners.get(p, "LeftTop"), visible=k == 0 and j == 0),
-                                     y_range=s.ranges.get(p), linked=True))
+            # the fit first: a long title is cut at its end; the key view explains the colors (no legend)
+            input_views.append(_plot((f"{fit} · " if fit else "") + f"ŵ {name} · {i}", [f"+ /{p}/**"],
+                                     legend=rrb.PlotLegend(visible=False), y_range=s.ranges.get(p),
+                                     window=s.trial_windows.get(i)))
     tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
     for i in [f for f in focus if f in s.predictions]:
         # one tab per focus trial: six plots of one trial are tall enough for a y-tick every few pixels rows
@@ -203,10 +204,10 @@ def session_blueprint(session: LoggedSession, *, max_overlay: int = 60) -> rrb.B
         fit = _fit_of(s, i)
         for j, name in enumerate(s.state_names):
             key = f"demos/{entity_part(i)}/predictions/{entity_part(name)}"
-            pred_views.append(_plot(f"{s.title(name)}" + (f" — {fit}" if fit and j == 0 else ""),
+            pred_views.append(_plot((f"{fit} · " if fit and j == 0 else "") + s.title(name),
                                     _prediction_paths(s, i, name),
                                     legend=rrb.PlotLegend(s.corners.get(key, "LeftTop"), visible=j == 0),
-                                    y_range=s.ranges.get(key), window=s.windows.get(i), linked=True))
+                                    y_range=s.ranges.get(key), window=s.windows.get(i)))
         tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1, name=f"predictions · {i}"))
     if s.models:
         tabs.append(_objective_tab(s))

@@ -54,6 +54,7 @@ class LoggedSession:
     span: tuple[float, float] | None = None
     heatmap_shapes: dict[tuple[str, str], tuple[int, int]] = field(default_factory=dict)
     corners: dict[str, str] = field(default_factory=dict)
+    trial_windows: dict[str, tuple[float, float]] = field(default_factory=dict)  # trial → its time span
     fit_titles: dict[str, str] = field(default_factory=dict)  # ŵ plot → its band coverage against nominal
     verdicts: dict[str, Any] = field(default_factory=dict)  # model name → workbench.viewer.verdict.Verdict
     warnings: list[str] = field(default_factory=list)  # what the recording and the terminal warn of

@@ -384,6 +384,7 @@ class SessionLogger:
         if self.plane is not None:
             self._log_track(demo)
         s.demo_ids.append(demo.id)
+        s.trial_windows[demo.id] = (float(t[0]), float(t[-1]))
         lo, hi = s.span or (float(t[0]), float(t[-1]))
         s.span = (min(lo, float(t[0])), max(hi, float(t[-1])))
         if model is not None and variability:

@@ -46,12 +46,13 @@ class Coverage:
         return self.n > 0 and self.inside_3sigma < POOR_3SIGMA
 
     def text(self) -> str:
-        """``"1σ 70 % · 3σ 99 % (nominal 68/99.7)"``, with a word a reader sees at once when the band is poor."""
+        """``"✓ 3σ 99.1 % (nominal 99.7), 1σ 70 % (68)"``: the 3σ share first (titles are cut at their end), and
+        words a reader sees at once when the band is poor."""
         if not self.n:
             return "no samples"
-        head = "DOES NOT FIT — " if self.poor else ""
-        return (f"{head}inside 1σ {100 * self.inside_1sigma:.0f} % · 3σ {100 * self.inside_3sigma:.1f} % "
-                f"(nominal {100 * NOMINAL_1SIGMA:.0f} / {100 * NOMINAL_3SIGMA:.1f})")
+        head = "✗ DOES NOT FIT " if self.poor else "✓ "
+        return (f"{head}3σ {100 * self.inside_3sigma:.1f} % (nominal {100 * NOMINAL_3SIGMA:.1f}), "
+                f"1σ {100 * self.inside_1sigma:.0f} % ({100 * NOMINAL_1SIGMA:.0f})")
 
 
 def coverage(w: np.ndarray, mu: np.ndarray, sigma: np.ndarray) -> Coverage:
