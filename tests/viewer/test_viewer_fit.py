@@ -32,6 +32,14 @@ read_rrd, blueprint_names = _tv.read_rrd, _tv._blueprint_names
 PX4_LOG = recordings.REPO.parent / "shared" / "external" / "px4_sample_log_small.ulg"
 
 
+def _flat(values: list) -> list:
+    """A column's cells, one level of list per row unwrapped."""
+    out = []
+    for v in values:
+        out.extend(v if isinstance(v, list) else [v])
+    return out
+
+
 def _view(capsys, *argv: str) -> str:
     from workbench.cli import main
 
@@ -64,7 +72,7 @@ def test_a_model_on_data_of_another_dt_is_warned_in_the_terminal_and_the_recordi
     assert expected, "the dt mismatch must be found"
     printed = [line for line in err.splitlines() if line.startswith("warning: model")]
     assert len(printed) == 1 and expected[0] in printed[0] and "does not fit" in printed[0], err
-    logged = read_rrd(out)["/warnings"]["static:TextLog:text"]
+    logged = _flat(read_rrd(out)["/warnings"]["static:TextLog:text"])
     assert logged == [printed[0].removeprefix("warning: ")]
     # the first view's title says it, and the objective tab carries the verdict
     names = blueprint_names(out)
@@ -118,9 +126,9 @@ def test_bands_keep_line_colors_and_sit_under_the_scene_lines(setup_session):
     ents = setup_session
     # every time-series band, in the session, is drawn in the one neutral band tint
     band_colors = set()
-    for path, cols in ents.items():
+    for cols in ents.values():
         for key in ("static:Measurements:colors",):
-            band_colors.update(int(c) for c in cols.get(key, []))
+            band_colors.update(int(c) for c in _flat(cols.get(key, [])))
     packed = int(style.packed(style.BAND_COLOR)[0])
     assert band_colors == {packed}
     # rerun draws a fill over the lines: a neutral tint turns no method's hue, a colored one would
@@ -130,10 +138,10 @@ def test_bands_keep_line_colors_and_sit_under_the_scene_lines(setup_session):
     assert _hue_shift(style.method_color("ioc_only"), style.light(style.method_color("proposed"), 0.45), 0.3) > 5.0
     # in the scene, draw order is honored: the envelope is under every track and prediction line
     band_orders = [o for p, c in ents.items() if p.endswith("_band") and p.startswith("/scene/")
-                   for o in c["static:LineStrips2D:draw_order"]]
+                   for o in _flat(c["static:LineStrips2D:draw_order"])]
     line_orders = [o for p, c in ents.items() if p.startswith("/scene/") and not p.endswith("_band")
                    and "static:LineStrips2D:draw_order" in c and not p.endswith("/ground")
-                   for o in c["static:LineStrips2D:draw_order"]]
+                   for o in _flat(c["static:LineStrips2D:draw_order"])]
     assert band_orders and line_orders and max(band_orders) < min(line_orders)
 
 
