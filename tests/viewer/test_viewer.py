@@ -197,7 +197,7 @@ def test_model_tensors(setup):
 def test_blueprint_has_the_five_tabs(setup):
     assert RrdReader(setup["path"]).blueprints(), "the recording carries no default blueprint"
     names = _blueprint_names(setup["path"])
-    for tab in ("scene", "states", "inputs & variability", "predictions", "objective"):
+    for tab in ("scene", "states", "inputs & variability", f"predictions · {setup['focus']}", "objective"):
         assert tab in names, (tab, names)
 
 
@@ -351,15 +351,16 @@ def _blueprint_names(path: Path) -> list[str]:
 
 
 def test_a_flight_is_drawn_on_its_own_clock_one_color_per_segment():
-    from adapters import load
+    from adapters import inspect, load
 
     path = _recording("flight")
     ds = load(recordings.FLIGHT_LOG, mapping="ardupilot_manual")
+    log_start = inspect(recordings.FLIGHT_LOG).t_start  # the clock `workbench inspect` prints its modes on
     ents = read_rrd(path)
     colors = set()
     for d in ds:
         t, x = series(ents, f"/demos/{d.id}/states/{ds.state_names[0]}")
-        np.testing.assert_allclose(t, d.meta["t_start"] + d.t - d.t[0], atol=1e-6)
+        np.testing.assert_allclose(t, d.meta["t0"] - log_start + d.t - d.t[0], atol=1e-6)
         colors.add(tuple(ents[f"/demos/{d.id}/states/{ds.state_names[0]}"]["static:SeriesLines:colors"][0]))
     assert len(colors) == len(ds)
     # segments follow each other on the log's clock
@@ -369,7 +370,8 @@ def test_a_flight_is_drawn_on_its_own_clock_one_color_per_segment():
     assert "/scene/pad" not in ents and all(f"/scene/demos/{d.id}/path" in ents for d in ds)
     assert len(ents["/flight/mode"]["time"]) == 2 * len(ds)  # each segment's mode, then its end
     names = _blueprint_names(path)
-    assert "scene" in names and "states" in names and "predictions" not in names and "objective" not in names
+    assert "scene" in names and "states" in names and "objective" not in names
+    assert not any(n.startswith("predictions") for n in names)
 
 
 def test_a_plant_without_roles_has_plots_but_no_scene(tmp_path, setup):
@@ -384,7 +386,7 @@ def test_a_plant_without_roles_has_plots_but_no_scene(tmp_path, setup):
     t, v = series(ents, f"/demos/{d.id}/states/x")
     np.testing.assert_array_equal(v[:, 0], d.x[:, 0])
     names = _blueprint_names(path)
-    assert "scene" not in names and "predictions" in names
+    assert "scene" not in names and any(n.startswith("predictions") for n in names)
 
 
 def test_heatmaps_of_two_models_share_one_diverging_scale(tmp_path, setup):

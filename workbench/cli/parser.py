@@ -18,7 +18,7 @@ from workbench.cli.context import (
 from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
 from workbench.cli.model import cmd_fit, cmd_predict
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
-from workbench.cli.view import cmd_live, cmd_replay, cmd_view
+from workbench.cli.view import VIEW_SAMPLES, cmd_live, cmd_replay, cmd_view
 
 __all__ = ['build_parser']
 
@@ -215,7 +215,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--starts", nargs="+", type=int, metavar="K", help="samples to predict from (default 0)")
     p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=3.0, metavar="SECONDS",
                    help="prediction horizon in seconds (default 3.0)")
-    p.add_argument("--samples", type=int, default=0, metavar="N", help="Monte Carlo rollouts for the band")
+    p.add_argument("--samples", type=int, default=VIEW_SAMPLES, metavar="N",
+                   help=f"Monte Carlo rollouts for the prediction band drawn with --model (default {VIEW_SAMPLES}, "
+                        "enough for its 90 %% band and fast; 0 turns the band off)")
     p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
     p.add_argument("--resample", action="store_true",
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "

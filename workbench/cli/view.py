@@ -20,7 +20,31 @@ from workbench.cli.context import (
 )
 from workbench.errors import DataError, WorkbenchError
 
-__all__ = []
+__all__ = ["VIEW_SAMPLES"]
+
+# Monte Carlo rollouts of `view --model`'s prediction band: its 5th/95th percentiles move by a few percent of
+# the band's width between seeds at 50, and the focus trials' rollouts stay under a second
+VIEW_SAMPLES = 50
+
+
+def _log_origins(paths: list[str]) -> dict[str, float]:
+    """Each raw log's start as ``workbench inspect`` reckons it (the first message of any stream), so a
+    flight's segments are drawn where ``inspect`` places its flight modes; demonstration files have none."""
+    import adapters
+    from workbench.cli.context import is_demo_file
+
+    out = {}
+    for p in paths:
+        path = Path(p)
+        if path.is_file() and not is_demo_file(path):
+            out[str(path)] = float(adapters.inspect(path).t_start)
+    return out
+
+
+def _warn(ctx: Context, session: Any) -> None:
+    """The recording's warnings (a model that does not fit its data), on stderr where a user looks for them."""
+    for w in session.warnings:
+        print(f"warning: {w}", file=sys.stderr)
 
 def _raw_streams(path: str) -> Any:
     """A raw log's every stream (for the raw view), or ``None`` for a demonstrations file."""
@@ -61,6 +85,7 @@ def cmd_view(ctx: Context) -> int:
     if raw_streams is not None and not a.mapping and not a.model:
         return _view_raw(ctx, raw_streams)
     ds = load_demos(ctx, a.inputs, a.mapping, a.label)
+    source_dt = float(ds.dt)
     models, named = None, None
     if a.model:
         by_label: dict[str, Any] = {}
@@ -84,10 +109,12 @@ def cmd_view(ctx: Context) -> int:
         with viewer.open_output(rec, **out) as sink:
             session = viewer.log_session(
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
-                samples=a.samples, starts=a.starts or (0,), seed=a.seed,
+                samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=_log_origins(a.inputs),
+                source_dt=source_dt,
             )
             extra = _raw_beside(rec, raw_streams, a.mapping, ds) if raw_streams is not None and a.mapping else []
             sink.blueprint = viewer.default_blueprint(session, extra_tabs=extra)
+    _warn(ctx, session)
     announce(ctx, out, sink, f"{len(ds)} demonstrations")
     return 0
 
@@ -170,6 +197,8 @@ def _replay_to(ctx: Context) -> int:
 def cmd_live(ctx: Context) -> int:
     import signal
 
+    import numpy as np
+
     from adapters.link.mavlink import open_link
     from workbench import viewer
     from workbench.live.predictor import OnlinePredictor, listen
@@ -194,7 +223,7 @@ def cmd_live(ctx: Context) -> int:
         if not out["save"] and logger.demo_ids[-1:] != shown[-1:]:  # a new segment: show it in the viewer
             shown.append(p.demo_id)
             rec.send_blueprint(live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
-                                              bounds=logger.scene_bounds()))
+                                              bounds=logger.scene_bounds(), following=True))
 
     def on_event(ev: Any) -> None:
         logger.event(ev)
@@ -203,7 +232,8 @@ def cmd_live(ctx: Context) -> int:
     with link, viewer.open_output(rec, **out) as sink:
         logger = LiveLogger(rec, m.state_names, m.input_names, plane=plane)
         if not out["save"]:
-            rec.send_blueprint(live_blueprint([], m.state_names, m.input_names, scene=plane is not None))
+            rec.send_blueprint(live_blueprint([], m.state_names, m.input_names, scene=plane is not None,
+                                              following=True))
         ctx.say(f"listening on {a.connection} (mapping {m.name}, dt {m.dt:g} s, rollout {a.horizon_s:g} s)"
                 + (f" for {a.duration:g} s" if a.duration else "; Ctrl-C to stop"))
         def on_tick(stats: Any) -> None:  # the viewer gets the steps in batches, a few times a second
@@ -223,9 +253,11 @@ def cmd_live(ctx: Context) -> int:
                                         bounds=logger.scene_bounds())
     c50, c99 = summary.percentiles("compute")
     l50, l99 = summary.percentiles("latency")
+    timing = (f"per step p50 {c50:.2f} ms, p99 {c99:.2f} ms" if summary.n_steps else "no step predicted, no timing")
+    if summary.n_steps and np.isfinite(l50):
+        timing += f"; message to prediction p50 {l50:.2f} ms, p99 {l99:.2f} ms"
     ctx.say(f"{summary.n_steps} steps in {summary.n_segments} segment(s) over {summary.wall_seconds:.1f} s "
-            f"({'interrupted' if summary.ended_by == 'interrupt' else 'duration reached'}); per step "
-            f"p50 {c50:.2f} ms, p99 {c99:.2f} ms; message to prediction p50 {l50:.2f} ms, p99 {l99:.2f} ms")
+            f"({'interrupted' if summary.ended_by == 'interrupt' else 'duration reached'}); {timing}")
     counts = summary.stats.counts
     ctx.say("link: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if v) or "nothing received"))
     if summary.stats.waiting_for and not summary.n_steps:

@@ -8,11 +8,17 @@ Tabs (each only when it has something to show):
   flight's segments), and the flight-mode lanes;
 * **inputs & variability** — the recorded inputs, and per focus trial ŵ = u − K̂x on its GMR ±1σ/±3σ bands with
   the samples outside 3σ marked;
-* **predictions** — per focus trial and state, the recorded state and every method's prediction with the Monte
-  Carlo band, zoomed to the prediction window;
-* **objective** — per model ``K̂``, ``Q``, ``R`` as labelled heatmaps on one color scale per block, and the fit.
+* **predictions · <trial>** — one tab per focus trial (up to three): per state, the recorded state and every
+  method's prediction with the Monte Carlo band, zoomed to the prediction window;
+* **objective** — per model ``K̂``, ``Q``, ``R`` as labelled heatmaps on one color scale per block with a color
+  bar, the verdict and the fit.
 
-Side panels start collapsed and the time cursor at the start (the time panel is paused).
+How it reads: the key of a tab's colors is in its view titles or a small "key" text view, a legend only in the
+quiet corner of one plot; the plots of a tab share one time axis (``LinkAxis.LinkToGlobal``); a plot's y-range
+is the data's but never narrower than its unit's minimum span (:data:`workbench.viewer.style.MIN_SPAN`); ŵ and
+prediction titles carry the model's fit against nominal (:mod:`workbench.viewer.verdict`), and a model that does
+not fit the data says so in the first view's title. Side panels start collapsed and the time cursor at the
+start (the time panel is paused).
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import rerun.blueprint as rrb
+from rerun.blueprint.components import LinkAxis
 
 from workbench.viewer import style
 from workbench.viewer.entities import LoggedSession, entity_part
@@ -40,26 +47,36 @@ def _legend(n_series: int, corner: str = "LeftTop") -> rrb.PlotLegend:
     return rrb.PlotLegend(corner, visible=n_series <= MAX_LEGEND)
 
 
-def _time_axis(window: tuple[float, float] | None) -> rrb.TimeAxis | None:
+def _time_axis(window: tuple[float, float] | None, *, linked: bool = True) -> rrb.TimeAxis | None:
+    """A plot's time axis over ``window``, linked to every other linked plot (a tab's plots zoom together)."""
+    link = LinkAxis.LinkToGlobal if linked else LinkAxis.Independent
     if window is None:
-        return None
+        return rrb.TimeAxis(link=link) if linked else None
     lo, hi = window
     pad = 0.03 * max(hi - lo, 1e-6)
-    return rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(seconds=lo - pad),
-                                                 end=rrb.TimeRangeBoundary.absolute(seconds=hi + pad)))
+    return rrb.TimeAxis(link=link, view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(seconds=lo - pad),
+                                                            end=rrb.TimeRangeBoundary.absolute(seconds=hi + pad)))
 
 
-def _overlay(s: LoggedSession, name: str, contents: list[str]) -> rrb.TimeSeriesView:
-    """Every trial in one plot: on a flight's clock the x-axis spans the whole log, not the first segment."""
-    return _plot(name, contents, window=s.span if s.clock == "log" else None)
+def _overlay(s: LoggedSession, name: str, contents: list[str], key: str | None = None) -> rrb.TimeSeriesView:
+    """Every trial in one plot: on a flight's clock the x-axis spans the whole log, not the first segment. The key
+    of the trials' colors is the tab's (:func:`_key`): no legend over the data."""
+    return _plot(name, contents, window=s.span if s.clock == "log" else None, legend=rrb.PlotLegend(visible=False),
+                 y_range=s.ranges.get(key) if key else None, linked=True)
+
+
+def _key(s: LoggedSession) -> list[rrb.TextDocumentView]:
+    """The small text view naming what each color means (strategies or segments, methods, bands), if logged."""
+    return [rrb.TextDocumentView(origin="/key", name="key")] if "key" in s.entities else []
 
 
 def _plot(name: str, contents: list[str], *, legend: rrb.PlotLegend | None = None,
-          y_range: tuple[float, float] | None = None, window: tuple[float, float] | None = None) -> rrb.TimeSeriesView:
+          y_range: tuple[float, float] | None = None, window: tuple[float, float] | None = None,
+          linked: bool = False) -> rrb.TimeSeriesView:
     kwargs: dict[str, Any] = {}
     if y_range is not None:
         kwargs["axis_y"] = rrb.ScalarAxis(range=list(y_range))
-    axis_x = _time_axis(window)
+    axis_x = _time_axis(window, linked=linked)
     if axis_x is not None:
         kwargs["axis_x"] = axis_x
     return rrb.TimeSeriesView(origin="/", contents=contents, name=name,
@@ -77,10 +94,15 @@ def _prediction_paths(s: LoggedSession, demo_id: str, name: str) -> list[str]:
 
 def _scene_name(s: LoggedSession, across: str, up: str) -> str:
     name = f"plane of flight: {s.title(across)} → / {s.title(up)} ↑"
+    bad = [m for m, v in s.verdicts.items() if not v.fits]
+    if bad:  # a wrong model is seen in the first second: in the first view's title
+        name = f"⚠ MODEL {', '.join(bad)} DOES NOT FIT THESE DATA (see objective) — " + name
     if s.methods:
         words = {"proposed": "green", "ioc_only": "red", "gmr_only": "purple", "persistence": "brown"}
         name += " — " + ", ".join(f"{style.method_title(m)} {words[m]}" if m in words else style.method_title(m)
                                   for m in s.methods)
+        if s.bands:
+            name += ", MC band dark"
     return name
 
 
@@ -104,7 +126,8 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
                               window=s.windows.get(fid)))
         else:
             side.append(_overlay(s, s.title(name),
-                                 [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in s.demo_ids]))
+                                 [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in s.demo_ids],
+                                 key=f"states/{entity_part(name)}"))
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
 
 
@@ -112,17 +135,34 @@ def _objective_tab(s: LoggedSession) -> Any:
     rows = []
     for m in s.models:
         views: list[Any] = []
+        shares = []
         for block, title in s.heatmaps.get(m, []):
             if block == "S":
                 continue  # the cross term is ~0 for the paper's structure; its numbers are in the summary
             n_rows, n_cols = s.heatmap_shapes.get((m, block), (1, 1))
-            # the names stand left of and above the cells: the bounds leave room for them
-            bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 0.1], y_range=[-0.8, n_rows + 0.1])
+            # the names stand left of and above the cells, the color bar right of them: the bounds leave room
+            bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 1.6], y_range=[-0.8, n_rows + 0.1])
             views.append(rrb.Spatial2DView(origin=f"/models/{entity_part(m)}/heatmap/{block}", visual_bounds=bounds,
                                            name=f"{m}: {title}, scale ±{s.scales.get(block, 1.0):.2g}"))
-        views.append(rrb.TextDocumentView(origin=f"/models/{entity_part(m)}/summary", name=f"{m}: summary"))
-        rows.append(rrb.Horizontal(*views))
+            shares.append(n_cols + 3.0)
+        notes = [rrb.TextDocumentView(origin=f"/models/{entity_part(m)}/summary", name=f"{m}: summary")]
+        if m in s.verdicts:
+            v = s.verdicts[m]
+            notes.insert(0, rrb.TextDocumentView(origin=f"/models/{entity_part(m)}/verdict",
+                                                 name=f"{m}: {'fits' if v.fits else 'DOES NOT FIT'}"))
+        # the summary's tables are wide: its column gets as much room as the heatmaps together
+        rows.append(rrb.Horizontal(*views, rrb.Vertical(*notes, row_shares=[1, 3][:len(notes)] if len(notes) > 1
+                                                        else None),
+                                   column_shares=[*shares, max(0.6 * sum(shares), 1.0)]))
     return rrb.Vertical(*rows, name="objective")
+
+
+def _fit_of(s: LoggedSession, demo_id: str) -> str:
+    """The fit figures of the model that explains ``demo_id`` (its trial's ŵ coverage against nominal)."""
+    parts = [s.fit_titles[k] for k in sorted(s.fit_titles) if k.startswith(f"demos/{entity_part(demo_id)}/")]
+    bad = [m for m, v in s.verdicts.items() if not v.fits]
+    head = f"⚠ model {', '.join(bad)} does not fit" if bad else ""
+    return "; ".join(x for x in (head, "ŵ " + parts[0] if parts else "") if x)
 
 
 def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
@@ -136,35 +176,40 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
     if s.scene:
         tabs.append(_scene_tab(s, plane, focus))
     state_views: list[Any] = [
-        _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in ids])
+        _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in ids],
+                 key=f"states/{entity_part(name)}")
         for name in s.state_names
     ]
     if s.modes:
         lanes = ["+ /flight/mode"] if s.clock == "log" else [f"+ /demos/{entity_part(i)}/mode" for i in s.modes]
         state_views.append(rrb.StateTimelineView(origin="/", contents=lanes, name="flight mode",
                                                  time_view=_time_axis(s.span) if s.clock == "log" else None))
-    tabs.append(rrb.Grid(*state_views, name="states"))
+    tabs.append(rrb.Grid(*state_views, *_key(s), name="states"))
     input_views: list[Any] = [
-        _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/inputs/{entity_part(name)}" for i in ids])
+        _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/inputs/{entity_part(name)}" for i in ids],
+                 key=f"inputs/{entity_part(name)}")
         for name in s.input_names
     ]
-    for k, i in enumerate(f for f in focus if f in s.variability):
-        for j, name in enumerate(s.input_names):
+    for i in [f for f in focus if f in s.variability]:
+        for name in s.input_names:
             p = f"demos/{entity_part(i)}/variability/{entity_part(name)}"
-            input_views.append(_plot(f"ŵ {s.title(name)} · {i}", [f"+ /{p}/**"],
-                                     legend=rrb.PlotLegend(s.corners.get(p, "LeftTop"), visible=k == 0 and j == 0),
-                                     y_range=s.ranges.get(p)))
-    tabs.append(rrb.Grid(*input_views, name="inputs & variability"))
-    if s.predictions:
+            fit = s.fit_titles.get(p)
+            # the fit first: a long title is cut at its end; the key view explains the colors (no legend)
+            input_views.append(_plot((f"{fit} · " if fit else "") + f"ŵ {name} · {i}", [f"+ /{p}/**"],
+                                     legend=rrb.PlotLegend(visible=False), y_range=s.ranges.get(p),
+                                     window=s.trial_windows.get(i)))
+    tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
+    for i in [f for f in focus if f in s.predictions]:
+        # one tab per focus trial: six plots of one trial are tall enough for a y-tick every few pixels rows
         pred_views = []
-        for i in [f for f in focus if f in s.predictions]:
-            for j, name in enumerate(s.state_names):
-                key = f"demos/{entity_part(i)}/predictions/{entity_part(name)}"
-                pred_views.append(_plot(f"{s.title(name)} · {i}", _prediction_paths(s, i, name),
-                                        legend=rrb.PlotLegend(s.corners.get(key, "LeftTop"), visible=j == 0),
-                                        y_range=s.ranges.get(f"demos/{entity_part(i)}/predictions/{entity_part(name)}"),
-                                        window=s.windows.get(i)))
-        tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1, name="predictions"))
+        fit = _fit_of(s, i)
+        for j, name in enumerate(s.state_names):
+            key = f"demos/{entity_part(i)}/predictions/{entity_part(name)}"
+            pred_views.append(_plot((f"{fit} · " if fit and j == 0 else "") + s.title(name),
+                                    _prediction_paths(s, i, name),
+                                    legend=rrb.PlotLegend(s.corners.get(key, "LeftTop"), visible=j == 0),
+                                    y_range=s.ranges.get(key), window=s.windows.get(i)))
+        tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1, name=f"predictions · {i}"))
     if s.models:
         tabs.append(_objective_tab(s))
     tabs += list(extra_tabs)  # e.g. the raw log's tabs (workbench.viewer.rawlog) behind a mapped flight

@@ -7,6 +7,7 @@ logger import the blueprint without the blueprint importing the logger (no impor
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from workbench.viewer import style
 
@@ -53,6 +54,11 @@ class LoggedSession:
     span: tuple[float, float] | None = None
     heatmap_shapes: dict[tuple[str, str], tuple[int, int]] = field(default_factory=dict)
     corners: dict[str, str] = field(default_factory=dict)
+    trial_windows: dict[str, tuple[float, float]] = field(default_factory=dict)  # trial → its time span
+    fit_titles: dict[str, str] = field(default_factory=dict)  # ŵ plot → its band coverage against nominal
+    verdicts: dict[str, Any] = field(default_factory=dict)  # model name → workbench.viewer.verdict.Verdict
+    warnings: list[str] = field(default_factory=list)  # what the recording and the terminal warn of
+    colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # trial → its color, for the key
 
     def title(self, name: str) -> str:
         """``name [unit]`` for a state or input."""

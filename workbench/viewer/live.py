@@ -16,7 +16,10 @@ offline replay (:mod:`workbench.viewer.replay`), so a live recording and a repla
   ``live/events`` (silence, resumption, clock resets, segments), ``live/compute_ms`` and ``live/latency_ms``.
 
 Timelines: ``link_time`` (the vehicle's clock, continuous: what the time panel follows), ``time`` (seconds since
-the segment's first step, as the replay) and ``step``.
+the segment's first step, as the replay) and ``step``. Every event and status is on ``link_time`` — stamped with
+the vehicle's latest time (0 before the first step), so a silent link still has a timeline and its tabs say why
+they are empty. Bands share the session's and the replay's neutral tint (:data:`workbench.viewer.style.BAND_COLOR`),
+the predicted mean its own green line (``…/online/<input>/mean``).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+from rerun.blueprint.components import LinkAxis
 
 from workbench.live.predictor import LinkStats, LiveEvent, LivePrediction
 from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS, style
@@ -38,7 +42,7 @@ __all__ = ["LIVE_APPLICATION_ID", "LiveLogger", "live_blueprint"]
 LIVE_APPLICATION_ID = "workbench_live"
 _RECORDED = (200, 200, 200)
 _PRED = METHOD_COLORS["proposed"]
-_BAND = (255, 187, 120)
+_BAND = style.BAND_COLOR
 _W = style.W_COLOR
 _OUT = style.OUTLIER_COLOR
 _RECENT = 3
@@ -69,7 +73,11 @@ class LiveLogger:
         self._path: list[np.ndarray] = []
         self._rows: dict[str, tuple[list, list, list, list, bool]] = {}
         self._latest: LivePrediction | None = None
+        self._link_t = 0.0  # the vehicle's latest time: where events without a step of their own are stamped
+        self._at(0.0, 0.0, 0)
         rec.log("live/events", rr.TextLog("waiting for the link", level="INFO"))
+        rec.log("live/status", rr.TextDocument("# Link\n\nwaiting for the first message …",
+                                               media_type=rr.MediaType.MARKDOWN))
         rec.log("live/compute_ms", rr.SeriesLines(names=["align + predict [ms]"], colors=[_PRED]), static=True)
         rec.log("live/latency_ms", rr.SeriesLines(names=["message → prediction [ms]"], colors=[_W]), static=True)
         if plane is not None:
@@ -92,18 +100,20 @@ class LiveLogger:
                     static=True)
             p = f"{base}/online/{entity_part(name)}"
             label = f"{name}: K̂x + μ(x)"
-            self._bands(f"{p}/gmr", [f"{label} ± 1σ", f"{label} ± 3σ"], [_PRED, _BAND])
+            self._bands(f"{p}/gmr", [f"{label} ± 1σ", f"{label} ± 3σ"], [_BAND, _BAND])
+            rec.log(f"{p}/mean", rr.SeriesLines(names=[label], colors=[_PRED], widths=[1.5],
+                                                interpolation_mode="StepAfter"), static=True)
             rec.log(f"{p}/outside_3sigma", rr.SeriesPoints(names=[f"{name} outside 3σ"], colors=[_OUT],
                                                            markers=["cross"], marker_sizes=[4.0]), static=True)
             v = f"{base}/variability/{entity_part(name)}"
             rec.log(f"{v}/w", rr.SeriesLines(names=[f"ŵ {name}"], colors=[_W], interpolation_mode="StepAfter"),
                     static=True)
-            self._bands(f"{v}/gmr", ["GMR μ ± 1σ", "GMR μ ± 3σ"], [(255, 170, 90), (255, 225, 190)])
+            self._bands(f"{v}/gmr", ["GMR μ ± 1σ", "GMR μ ± 3σ"], [_BAND, _BAND])
 
     def _bands(self, path: str, names: list[str], colors: list[tuple[int, int, int]]) -> None:
-        if HAS_MEASUREMENTS:
-            self.rec.log(path, rr.Measurements.from_fields(names=names, colors=colors, interpolation_mode="StepAfter"),
-                         static=True)
+        if HAS_MEASUREMENTS:  # fills only: the mean is its own line, in the prediction's color
+            self.rec.log(path, rr.Measurements.from_fields(names=names, colors=colors, widths=[0.0] * len(names),
+                                                           interpolation_mode="StepAfter"), static=True)
         else:  # older SDKs: each band as its two edges
             edges = [f"{n} {side}" for n in names for side in ("low", "high")]
             self.rec.log(path, rr.SeriesLines(names=edges, colors=[c for c in colors for _ in (0, 1)]), static=True)
@@ -113,8 +123,10 @@ class LiveLogger:
         """Take one step's state, input, predictions, ŵ bands and rollout; sent at the next :meth:`flush`."""
         new = p.demo_id not in self._styled
         self._style(p.demo_id)
+        self._link_t = float(p.t)
         if new:
             self.flush()  # the previous segment's rows first, so events and plots stay in order
+            self._at(p.t, p.t_rel, p.k)  # the event at the segment's first step on the link timeline
             label = p.meta.get("label")
             self.event(LiveEvent("segment", p.t, f"segment {p.demo_id} started" + (f" ({label})" if label else "")))
         base = f"demos/{entity_part(p.demo_id)}"
@@ -126,6 +138,7 @@ class LiveLogger:
             self._row(f"{base}/inputs/{entity_part(name)}", now, p.u[j])
             o = f"{base}/online/{entity_part(name)}"
             self._row(f"{o}/gmr", now, (p.u_mean[j], sigma[j]), band=True)
+            self._row(f"{o}/mean", now, p.u_mean[j])
             if abs(p.u[j] - p.u_mean[j]) > 3.0 * sigma[j]:
                 self._row(f"{o}/outside_3sigma", now, p.u[j])
             if p.w is not None:
@@ -234,13 +247,21 @@ class LiveLogger:
     def event(self, ev: LiveEvent) -> None:
         """A link event as a log line (on the link clock where it has a time there)."""
         level = "WARN" if ev.kind in ("silent", "reset") else "INFO"
+        # the event's own time is the wall clock; on the link timeline it sits at the vehicle's latest time
+        self.rec.set_time("link_time", duration=self._link_t)
         self.rec.log("live/events", rr.TextLog(ev.text, level=level))
 
     def status(self, stats: LinkStats) -> None:
         """The link's counts as a small Markdown table (what was received, what was dropped and why)."""
         rows = [f"| {k} | {v} |" for k, v in sorted(stats.counts.items())]
+        why = []
+        if not stats.n_steps:
+            # a silent or incomplete link explains itself where the plots would be
+            why = ["**No step predicted yet**: " + (f"the link has not sent {', '.join(stats.waiting_for)}"
+                                                   if stats.waiting_for else "no message has arrived") + ".", ""]
+        self.rec.set_time("link_time", duration=self._link_t)
         text = "\n".join([
-            "# Link", "",
+            "# Link", "", *why,
             f"- steps predicted: **{stats.n_steps}** in {stats.n_segments} segment(s)",
             f"- link: {'**silent**' if stats.silent else 'receiving'} (silences so far: {stats.silences})",
             *([f"- waiting for: {', '.join(stats.waiting_for)}"] if stats.waiting_for else []),
@@ -250,19 +271,26 @@ class LiveLogger:
 
 
 def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_names: Sequence[str], *,
-                   scene: bool = True, bounds: tuple[list[float], list[float]] | None = None) -> rrb.Blueprint:
+                   scene: bool = True, bounds: tuple[list[float], list[float]] | None = None,
+                   following: bool = False) -> rrb.Blueprint:
     """The live layout: the scene with the online input predictions beside it; states; ŵ; the link.
+
+    A saved recording opens with the panels collapsed and the cursor paused at the start, as every other
+    recording; ``following`` (a viewer watching the link as it happens) keeps the cursor on the newest step.
 
     ``bounds`` (x range, y range) fixes the scene's view (:meth:`LiveLogger.scene_bounds`); the viewer would
     otherwise zoom onto the vehicle alone.
     """
     ids = [entity_part(i) for i in list(demo_ids)[-_RECENT:]]
+    linked = rrb.TimeAxis(link=LinkAxis.LinkToGlobal)
+    quiet = rrb.PlotLegend(visible=False)  # the key is in each title: no legend over the data
     inputs = [
         rrb.TimeSeriesView(
             origin="/",
             contents=[f"+ /demos/{i}/inputs/{entity_part(n)}" for i in ids]
             + [f"+ /demos/{i}/online/{entity_part(n)}/**" for i in ids],
-            name=f"{n}: operator vs online prediction",
+            name=f"{n}: operator gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×",
+            axis_x=linked, plot_legend=quiet,
         )
         for n in input_names
     ]
@@ -271,13 +299,13 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
             origin="/",
             contents=[f"+ /demos/{i}/states/{entity_part(n)}" for i in ids]
             + [f"+ /demos/{i}/online/rollout_end/{entity_part(n)}" for i in ids],
-            name=n,
+            name=f"{n}: recorded gray, rollout end green", axis_x=linked, plot_legend=quiet,
         )
         for n in state_names
     ]
     variability = [
         rrb.TimeSeriesView(origin="/", contents=[f"+ /demos/{i}/variability/{entity_part(n)}/**" for i in ids],
-                           name=f"ŵ {n} with GMR bands")
+                           name=f"ŵ {n} blue, GMR μ ± 1σ/3σ band", axis_x=linked, plot_legend=quiet)
         for n in input_names
     ]
     link = rrb.Horizontal(
@@ -288,6 +316,10 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
         name="link",
     )
     first: Any = rrb.Vertical(*inputs, name="live")
+    if not ids:  # nothing predicted (a silent link): the first tab says why instead of showing empty plots
+        first = rrb.Vertical(rrb.TextDocumentView(origin="/live/status", name="link status: no data"),
+                             rrb.TextLogView(origin="/live/events", name="events"), name="live")
+        return rrb.Blueprint(rrb.Tabs(first, link), _time_panel(following), collapse_panels=True)
     if scene:
         fit = rrb.VisualBounds2D(x_range=bounds[0], y_range=bounds[1]) if bounds else None
         view = rrb.Spatial2DView(origin="/scene/live", name="scene", visual_bounds=fit)
@@ -295,6 +327,12 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
                                column_shares=[3, 2], name="live")
     return rrb.Blueprint(
         rrb.Tabs(first, rrb.Grid(*states, name="states"), rrb.Grid(*variability, name="variability"), link),
-        rrb.TimePanel(timeline="link_time"),
-        collapse_panels=False,
+        _time_panel(following),
+        collapse_panels=True,
     )
+
+
+def _time_panel(following: bool = False) -> rrb.TimePanel:
+    """As the session's and the replay's: the vehicle's clock, collapsed, paused with the cursor at the start
+    (``following``: on the newest step, for a link watched live)."""
+    return rrb.TimePanel(timeline="link_time", play_state="following" if following else "paused", state="collapsed")

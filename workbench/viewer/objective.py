@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Heatmap", "heatmaps", "model_summary", "shared_scales"]
+__all__ = ["Heatmap", "decimals", "heatmaps", "model_summary", "shared_scales", "text_colors", "value_text"]
 
 CMAP = "RdBu_r"
 
@@ -69,9 +69,26 @@ def colors(values: np.ndarray, vmax: float) -> np.ndarray:
     return (255 * colormaps[CMAP](frac)[..., :3]).round().astype(np.uint8)
 
 
+def decimals(vmax: float) -> int:
+    """Decimals that show a block's values to about 1 % of its scale (2 for a scale of 0.1–1): a cell's text
+    stays at most five characters, so neighbours never run into each other; the summary has every digit."""
+    if not vmax > 0 or not np.isfinite(vmax):
+        return 2
+    return max(0, 1 - int(np.floor(np.log10(vmax))))
+
+
 def value_text(v: float, vmax: float) -> str:
-    """A cell's value, short: ``0`` where it is negligible on the block's scale."""
-    return "0" if abs(v) < 5e-4 * vmax else f"{v:.2g}"
+    """A cell's value at the block's precision (:func:`decimals`): ``0`` where it rounds to nothing."""
+    d = decimals(vmax)
+    text = f"{v:.{d}f}"
+    return "0" if float(text) == 0.0 else text
+
+
+def text_colors(values: np.ndarray, vmax: float) -> np.ndarray:
+    """Per cell, dark or light text, whichever contrasts with the cell's color (relative luminance > 0.45: dark)."""
+    rgb = colors(values, vmax).reshape(-1, 3) / 255.0
+    luminance = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    return np.where(luminance[:, None] > 0.45, np.array([[15, 15, 15]]), np.array([[245, 245, 245]])).astype(np.uint8)
 
 
 def _fmt_matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+from rerun.blueprint.components import LinkAxis
 
 from workbench.data.demonstrations import Demonstration
 from workbench.errors import DataError
@@ -40,7 +41,7 @@ __all__ = ["ReplayStats", "replay", "replay_blueprint"]
 
 _COLOR_REC = style.RECORDED_COLOR
 _COLOR_PRED = style.method_color("proposed")
-_COLOR_BAND = style.light(_COLOR_PRED, 0.55)
+_COLOR_BAND = style.BAND_COLOR  # one band tint in view, replay and live (see workbench.viewer.style)
 _COLOR_OUT = style.OUTLIER_COLOR
 
 
@@ -136,6 +137,7 @@ def replay(
         for j, name in enumerate(input_names):
             p = f"{base}/online/{entity_part(name)}"
             # one entity, two series (±1σ and ±3σ bands): half the log calls of two entities per step
+            rec.log(f"{p}/mean", rr.Scalars(u_hat[j]))
             if HAS_MEASUREMENTS:
                 rec.log(f"{p}/gmr", rr.Measurements(values=[u_hat[j], u_hat[j]],
                                                     variances=[sigma[j] ** 2, (3 * sigma[j]) ** 2]))
@@ -187,9 +189,11 @@ def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane |
                 rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC], interpolation_mode="StepAfter"), static=True)
         p = f"{base}/online/{entity_part(name)}"
         label = "K̂x + μ(x)"
-        if HAS_MEASUREMENTS:
+        rec.log(f"{p}/mean", rr.SeriesLines(names=[label], colors=[_COLOR_PRED], widths=[1.5],
+                                            interpolation_mode="StepAfter"), static=True)
+        if HAS_MEASUREMENTS:  # fills only, in the neutral band tint: the mean is the green line above
             rec.log(f"{p}/gmr", rr.Measurements.from_fields(names=[f"{label} ± 1σ", f"{label} ± 3σ"],
-                                                            colors=[_COLOR_PRED, _COLOR_BAND],
+                                                            colors=[_COLOR_BAND, _COLOR_BAND], widths=[0.0, 0.0],
                                                             interpolation_mode="StepAfter"), static=True)
         else:
             rec.log(f"{p}/gmr", rr.SeriesLines(names=[f"{label} − 3σ", f"{label} − 1σ", f"{label} + 1σ",
@@ -201,7 +205,7 @@ def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane |
     if plane is not None:
         path = plane.view(demo.x)
         (x_lo, x_hi), (y_lo, y_hi) = plane.bounds([path])
-        size = 0.03 * max(x_hi - x_lo, y_hi - y_lo)
+        size = 0.045 * max(x_hi - x_lo, y_hi - y_lo)  # as the session's vehicle: it reads at a glance
         rec.log(f"{sbase}/rollout", rr.LineStrips2D.from_fields(colors=[_COLOR_PRED], radii=[UI(2.0)],
                                                                 draw_order=[6.0]), static=True)
         rec.log(f"{sbase}/path", rr.LineStrips2D([path], colors=[(150, 150, 150)], radii=UI(1.0), draw_order=3.0),
@@ -235,20 +239,20 @@ def replay_blueprint(
             origin="/",
             contents=[f"+ /demos/{entity_part(i)}/inputs/{entity_part(name)}" for i in demo_ids]
             + [f"+ /demos/{entity_part(i)}/online/{entity_part(name)}/**" for i in demo_ids],
-            name=f"{unit(name)}: recorded vs online K̂x + μ(x) ± σ",
-            plot_legend=rrb.PlotLegend("LeftTop", visible=k == 0 and len(demo_ids) == 1),
+            name=f"{unit(name)}: recorded gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×",
+            plot_legend=rrb.PlotLegend(visible=False), axis_x=rrb.TimeAxis(link=LinkAxis.LinkToGlobal),
         )
-        for k, name in enumerate(input_names)
+        for name in input_names
     ]
     states = [
         rrb.TimeSeriesView(
             origin="/",
             contents=[f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in demo_ids]
             + [f"+ /demos/{entity_part(i)}/online/rollout_end/{entity_part(name)}" for i in demo_ids],
-            name=unit(name),
-            plot_legend=rrb.PlotLegend("LeftTop", visible=k == 0 and len(demo_ids) == 1),
+            name=f"{unit(name)}: recorded gray, rollout end green",
+            plot_legend=rrb.PlotLegend(visible=False), axis_x=rrb.TimeAxis(link=LinkAxis.LinkToGlobal),
         )
-        for k, name in enumerate(state_names)
+        for name in state_names
     ]
     plane = plane_of(roles, state_names)
     if plane is not None:

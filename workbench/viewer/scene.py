@@ -2,6 +2,10 @@
 
 Rerun's 2-D views point their y axis down, so the second position (the vertical one, or north) is drawn negated:
 up is up on the screen. A plant without position roles has no plane and no scene.
+
+What makes the plane read as a map: a scale bar of a round length (:func:`scale_bar`), a ground line where the
+plane is vertical, the Monte Carlo band as a filled envelope (:func:`envelope`) instead of a ladder of outlined
+boxes, and labels only where they do not run into each other (:func:`label_spots`).
 """
 
 from __future__ import annotations
@@ -11,10 +15,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import rerun as rr
 
 from workbench.errors import DataError
+from workbench.viewer import style
 
-__all__ = ["Plane", "plane_of"]
+__all__ = ["Plane", "envelope", "label_spots", "plane_of", "scale_bar"]
 
 
 @dataclass(frozen=True)
@@ -24,6 +30,7 @@ class Plane:
     across: int
     up: int
     heading: int | None = None
+    vertical: bool = False  # whether ``up`` is the vertical axis (a side view with a ground), not north
 
     def view(self, x: np.ndarray) -> np.ndarray:
         """Screen coordinates (N, 2) of states ``x`` (N, n): across right, up drawn up (negated for rerun)."""
@@ -61,4 +68,63 @@ def plane_of(roles: Any, state_names: Any) -> Plane | None:
     plane = resolved.plane
     if plane is None:
         return None
-    return Plane(across=plane[0], up=plane[1], heading=resolved.heading)
+    return Plane(across=plane[0], up=plane[1], heading=resolved.heading,
+                 vertical=resolved.vertical is not None and resolved.position[resolved.vertical] == plane[1])
+
+
+def envelope(lo: np.ndarray, hi: np.ndarray, color: tuple[int, int, int], label: str) -> rr.LineStrips2D:
+    """A prediction band in the plane as one filled envelope under the lines.
+
+    ``lo``, ``hi`` (N, 2) are the screen corners of each step's percentile box. Each box becomes a capsule along
+    its long side (radius its short half-size, in scene units) and consecutive centres are joined by a strip as
+    wide as the narrower box, so the boxes merge into one area; the color is opaque (a dark tint of the method's
+    color) so overlaps do not darken, and the draw order puts it under every track and prediction.
+    """
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    centre, half = (lo + hi) / 2, np.abs(hi - lo) / 2
+    ok = np.isfinite(centre).all(axis=1) & np.isfinite(half).all(axis=1)
+    centre, half = centre[ok], half[ok]
+    strips, radii = [], []
+    short = half.min(axis=1) if len(half) else np.zeros(0)
+    for c, h, r in zip(centre, half, short, strict=True):
+        axis = np.array([h[0] - r, 0.0]) if h[0] >= h[1] else np.array([0.0, h[1] - r])
+        strips.append([c - axis, c + axis])
+        radii.append(r)
+    for k in range(len(centre) - 1):
+        strips.append([centre[k], centre[k + 1]])
+        radii.append(min(short[k], short[k + 1]))
+    keep = [i for i, r in enumerate(radii) if r > 0]
+    return rr.LineStrips2D([strips[i] for i in keep], radii=[float(radii[i]) for i in keep], colors=[color],
+                           labels=[label], show_labels=False, draw_order=style.SCENE_ORDER["band"])
+
+
+def nice_length(extent: float) -> float:
+    """A round length (1, 2 or 5 × 10^k) near a fifth of ``extent``: the scale bar's."""
+    if not extent > 0 or not np.isfinite(extent):
+        return 1.0
+    raw = extent / 5
+    k = np.floor(np.log10(raw))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10**k <= raw:
+            return float(m * 10**k)
+    return float(10**k)
+
+
+def scale_bar(bounds: tuple[list[float], list[float]], unit: str) -> tuple[np.ndarray, str]:
+    """The scale bar's two screen points (bottom left of ``bounds``) and its text, e.g. ``"5 m"``."""
+    (x_lo, x_hi), (y_lo, y_hi) = bounds
+    length = nice_length(x_hi - x_lo)
+    x0, y0 = x_lo + 0.04 * (x_hi - x_lo), y_hi - 0.05 * (y_hi - y_lo)  # rerun's y points down: y_hi is the bottom
+    return np.array([[x0, y0], [x0 + length, y0]]), f"{length:g} {unit}".strip()
+
+
+def label_spots(points: np.ndarray, min_distance: float) -> list[int]:
+    """Indices of ``points`` to label so no two labels are closer than ``min_distance`` (first come, first kept)."""
+    kept: list[int] = []
+    pts = np.asarray(points, dtype=float)
+    for i, p in enumerate(pts):
+        if not np.isfinite(p).all():
+            continue
+        if all(np.hypot(*(p - pts[j])) >= min_distance for j in kept):
+            kept.append(i)
+    return kept

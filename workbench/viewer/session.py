@@ -18,12 +18,20 @@ from workbench.atomic import atomic_path
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError
 from workbench.study.pipeline import StudyResult
-from workbench.viewer import style
+from workbench.viewer import style, verdict
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import LoggedSession, entity_part
-from workbench.viewer.objective import Heatmap, colors, heatmaps, model_summary, shared_scales, value_text
+from workbench.viewer.objective import (
+    Heatmap,
+    colors,
+    heatmaps,
+    model_summary,
+    shared_scales,
+    text_colors,
+    value_text,
+)
 from workbench.viewer.output import has_display, open_output
-from workbench.viewer.scene import Plane, plane_of
+from workbench.viewer.scene import Plane, envelope, label_spots, plane_of, scale_bar
 from workbench.viewer.style import METHOD_COLORS, label_color
 
 __all__ = [
@@ -121,8 +129,21 @@ def _t_start(demo: Demonstration) -> float | None:
     return v if np.isfinite(v) else None
 
 
-def _data_range(*arrays: Any, margin: float = 0.08) -> tuple[float, float]:
-    """A y-range holding every finite value of ``arrays``, with ``margin`` of its extent on each side."""
+def _log_time(demo: Demonstration, origins: Mapping[str, float] | None) -> float:
+    """A segment's start on its log's clock: ``meta["t0"]`` less the log's start as ``workbench inspect`` reckons
+    it (``origins``: source file → that start), else ``meta["t_start"]`` (since the first mapped sample)."""
+    source, t0 = demo.meta.get("source"), demo.meta.get("t0")
+    if origins and source in origins and t0 is not None:
+        try:
+            return float(t0) - float(origins[source])
+        except (TypeError, ValueError):
+            pass
+    return _t_start(demo) or 0.0
+
+
+def _data_range(*arrays: Any, margin: float = 0.08, min_span: float = 0.0) -> tuple[float, float]:
+    """A y-range holding every finite value of ``arrays``, with ``margin`` of its extent on each side, and at least
+    ``min_span`` wide about its middle (:data:`workbench.viewer.style.MIN_SPAN`)."""
     lo, hi = np.inf, -np.inf
     for a in arrays:
         a = np.asarray(a, dtype=float).ravel()
@@ -132,7 +153,11 @@ def _data_range(*arrays: Any, margin: float = 0.08) -> tuple[float, float]:
     if not np.isfinite(lo) or not np.isfinite(hi):
         return -1.0, 1.0
     pad = margin * max(hi - lo, 1e-9, 1e-3 * max(abs(lo), abs(hi)))
-    return float(lo - pad), float(hi + pad)
+    lo, hi = lo - pad, hi + pad
+    if hi - lo < min_span:
+        mid = (lo + hi) / 2
+        lo, hi = mid - min_span / 2, mid + min_span / 2
+    return float(lo), float(hi)
 
 
 def quiet_corner(series: Sequence[tuple[np.ndarray, np.ndarray]], t_range: tuple[float, float],
@@ -164,7 +189,8 @@ class SessionLogger:
         one after another); see :func:`resolve_clock`.
     """
 
-    def __init__(self, rec: rr.RecordingStream, demos: DemonstrationSet, *, clock: str = "trial") -> None:
+    def __init__(self, rec: rr.RecordingStream, demos: DemonstrationSet, *, clock: str = "trial",
+                 origins: Mapping[str, float] | None = None) -> None:
         self.rec = rec
         self.demos = demos
         s = self.session = LoggedSession(tuple(demos.state_names), tuple(demos.input_names))
@@ -177,7 +203,11 @@ class SessionLogger:
         s.units = {n: roles.unit(n) for n in (*s.state_names, *s.input_names)} if roles else {}
         ids = [d.id for d in demos]
         self.colors = style.trial_colors(ids, [d.label for d in demos], s.labels)
-        self.offsets = {d.id: (_t_start(d) or 0.0) if s.clock == "log" else 0.0 for d in demos}
+        s.colors = dict(self.colors)
+        self.offsets = {d.id: _log_time(d, origins) if s.clock == "log" else 0.0 for d in demos}
+        self.w_parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}  # by id(model), for verdicts
+        self._extent: dict[str, list[float]] = {}
+        self.label_ids: set[str] | None = None  # the start labels that do not collide (set by log_scene)
         # every mode of the set, so one mode has one color in every lane
         seen: dict[str, None] = {}
         for d in demos:
@@ -228,19 +258,36 @@ class SessionLogger:
         points = [p.view(d.x) for d in demos]
         targets = [p.view(np.asarray(d.target))[0] for d in demos if d.target is not None]
         self.session.bounds = p.bounds([*points, *(np.atleast_2d(t) for t in targets)])
+        (x_lo, x_hi), (y_lo, y_hi) = self.session.bounds
+        order = style.SCENE_ORDER
+        ground = targets[0][1] if targets else None
+        if ground is None and p.vertical:
+            # a flight's side view: the ground is the home altitude where the flight comes near it, else its lowest
+            lowest = max(float(np.nanmax(pts[:, 1])) for pts in points)  # screen y points down
+            ground = 0.0 if y_lo <= 0.0 <= y_hi else lowest
+        if ground is not None:
+            self._static("scene/ground", rr.LineStrips2D([[[x_lo, ground], [x_hi, ground]]], colors=[(110, 110, 110)],
+                                                         radii=UI(1.0), labels=["ground"], show_labels=False,
+                                                         draw_order=order["ground"]))
+        ends, text = scale_bar(self.session.bounds, self.session.units.get(self.session.state_names[p.across], ""))
+        self._static("scene/scale", rr.LineStrips2D([ends], colors=[(230, 230, 230)], radii=UI(2.0), labels=[text],
+                                                    show_labels=True, draw_order=order["scale"]))
         if targets:
             from workbench.sim.landing import PAD_HALF_WIDTH
 
             tx, ty = targets[0]
-            (x_lo, x_hi), _ = self.session.bounds
-            self._static("scene/ground", rr.LineStrips2D([[[x_lo, ty], [x_hi, ty]]], colors=[(90, 90, 90)],
-                                                         radii=UI(0.75), draw_order=1.0))
             self._static("scene/pad", rr.LineStrips2D([[[tx - PAD_HALF_WIDTH, ty], [tx + PAD_HALF_WIDTH, ty]]],
                                                       colors=[(200, 200, 200)], radii=UI(4.0), labels=["pad"],
-                                                      show_labels=False, draw_order=2.0))
+                                                      show_labels=False, draw_order=order["pad"]))
             starts = np.array([pts[0] for pts in points])
             self._static("scene/starts", rr.Points2D(starts, colors=[self.colors[d.id] for d in demos], radii=UI(3.0),
-                                                     labels=[d.id for d in demos], show_labels=False, draw_order=4.0))
+                                                     labels=[d.id for d in demos], show_labels=False,
+                                                     draw_order=order["starts"]))
+        # start labels only where they do not run into each other (a flight's segments often start together)
+        focus = [d for d in demos if d.id in self.labelled]
+        spots = label_spots(np.array([p.view(d.x[:1])[0] for d in focus]).reshape(-1, 2),
+                            0.08 * max(x_hi - x_lo, y_hi - y_lo))
+        self.label_ids = {focus[i].id for i in spots}
         self.session.scene = True
 
     def _log_track(self, demo: Demonstration) -> None:
@@ -250,24 +297,42 @@ class SessionLogger:
         color = self.colors[demo.id]
         pts = p.view(demo.x)
         focus = demo.id in self.labelled
-        self._static(f"{sbase}/path", rr.LineStrips2D([pts], colors=style.packed(color),
-                                                      radii=UI(1.6 if focus else 1.0), labels=[demo.id],
-                                                      show_labels=False, draw_order=3.0))
-        if focus:  # a strip's label sits at its middle, where the tracks pile up; the start is where it is clear
+        order = style.SCENE_ORDER
+        on_log_clock = self.session.clock == "log"
+        # the trials in focus in their color, the rest dimmed; on a flight's clock every segment is dimmed and the
+        # one flying at the time cursor is drawn over it in full color
+        bright = focus and not on_log_clock and len(self.labelled) < len(self.demos)
+        dim = not bright and (on_log_clock or len(self.labelled) < len(self.demos))
+        self._static(f"{sbase}/path", rr.LineStrips2D(
+            [pts], colors=style.packed(style.dimmed(color, 0.55) if dim else color),
+            radii=UI(2.0 if bright else 1.0), labels=[demo.id], show_labels=False,
+            draw_order=order["dimmed"] if dim else order["track"]))
+        if on_log_clock:
+            t = self._t(demo)
+            self.rec.set_time("time", duration=float(t[0]))
+            self.rec.log(f"{sbase}/current", rr.LineStrips2D([pts], colors=style.packed(color), radii=UI(2.5),
+                                                              labels=[demo.id], show_labels=False,
+                                                              draw_order=order["track"]))
+            self.rec.set_time("time", duration=float(t[-1]) + 1e-6)
+            self.rec.log(f"{sbase}/current", rr.Clear(recursive=False))
+            self.rec.reset_time()
+            self.session.entities.append(f"{sbase}/current")
+        if focus and (self.label_ids is None or demo.id in self.label_ids):
+            # a strip's label sits at its middle, where the tracks pile up; the start is where it is clear;
             # a label is written in its point's color: a light tint reads over tracks of the same color
             self._static(f"{sbase}/start", rr.Points2D(pts[:1], colors=style.packed(style.light(color, 0.45)),
-                                                       radii=UI(4.0),
-                                                       labels=[demo.id], show_labels=True, draw_order=20.0))
+                                                       radii=UI(4.0), labels=[demo.id], show_labels=True,
+                                                       draw_order=order["labels"]))
         if demo.id not in self.animated:
             return
         if self.session.bounds is None:
             self.session.bounds = p.bounds([p.view(d.x) for d in self.demos])
         # the vehicle: a bar across and a mast up, a few percent of the scene wide
         (x_lo, x_hi), (y_lo, y_hi) = self.session.bounds
-        size = 0.03 * max(x_hi - x_lo, y_hi - y_lo)
-        body = rr.LineStrips2D([[[-size, 0], [size, 0]], [[0, 0], [0, -0.6 * size]]],
-                               colors=style.packed(color, style.RECORDED_COLOR), radii=[UI(3.0), UI(1.5)],
-                               draw_order=10.0)
+        size = 0.045 * max(x_hi - x_lo, y_hi - y_lo)  # ~70 px in a 1600 px window: it reads as a vehicle
+        body = rr.LineStrips2D([[[-size, 0], [size, 0]], [[0, 0], [0, -0.7 * size]]],
+                               colors=style.packed(color, style.RECORDED_COLOR), radii=[UI(4.5), UI(2.5)],
+                               draw_order=style.SCENE_ORDER["vehicle"])
         t = self._t(demo)
         if self.session.clock == "log":
             # on a flight's clock a segment's vehicle exists only while it flies: before its first pose it would
@@ -299,10 +364,12 @@ class SessionLogger:
             path = f"{base}/states/{entity_part(name)}"
             self._style(path, state_style)
             self._send(path, index, rr.Scalars.columns(scalars=demo.x[:, j]))
+            self._overlay_range(f"states/{entity_part(name)}", name, demo.x[:, j])
         for j, name in enumerate(s.input_names):
             path = f"{base}/inputs/{entity_part(name)}"
             self._style(path, input_style)
             self._send(path, index, rr.Scalars.columns(scalars=demo.u[:, j]))
+            self._overlay_range(f"inputs/{entity_part(name)}", name, demo.u[:, j])
         modes = _readable_modes(demo.meta)
         if modes is not None:
             mt, names = modes
@@ -317,10 +384,24 @@ class SessionLogger:
         if self.plane is not None:
             self._log_track(demo)
         s.demo_ids.append(demo.id)
+        s.trial_windows[demo.id] = (float(t[0]), float(t[-1]))
         lo, hi = s.span or (float(t[0]), float(t[-1]))
         s.span = (min(lo, float(t[0])), max(hi, float(t[-1])))
         if model is not None and variability:
             self.log_variability(demo, model)
+
+    def _overlay_range(self, key: str, name: str, values: np.ndarray) -> None:
+        """The y-range of an overlay plot of every trial: their extent, at least its unit's minimum span."""
+        v = np.asarray(values, dtype=float)
+        v = v[np.isfinite(v)]
+        if not v.size:
+            return
+        lo, hi = self._extent.get(key, [np.inf, -np.inf])
+        self._extent[key] = [min(lo, float(v.min())), max(hi, float(v.max()))]
+        self.session.ranges[key] = _data_range(self._extent[key], margin=0.05, min_span=self._min_span(name))
+
+    def _min_span(self, name: str) -> float:
+        return style.min_span(self.session.units.get(name, ""))
 
     def log_variability(self, demo: Demonstration, model: Any) -> dict[str, np.ndarray]:
         """ŵ = u − K̂x with the model's GMR mean μ(x) and σ bands (eqs. (24)–(27)), and the 3σ outliers.
@@ -338,6 +419,7 @@ class SessionLogger:
             sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
             outside = np.abs(w - mu) > 3.0 * sigma
             out.update(mu=mu, sigma=sigma, outside=outside)
+            self.w_parts.setdefault(id(model), []).append((w, mu, sigma))
         t = self._t(demo)
         index = _time_index(t)  # one pair of time columns serves every series of the trial
         for j, name in enumerate(s.input_names):
@@ -346,18 +428,22 @@ class SessionLogger:
                                                  interpolation_mode="StepAfter"))
             self._send(f"{p}/w", index, rr.Scalars.columns(scalars=w[:, j]))
             if not has_gmr:
-                s.ranges[p] = _data_range(w[:, j])
+                s.ranges[p] = _data_range(w[:, j], min_span=self._min_span(name))
                 continue
             m_j, s_j = out["mu"][:, j], out["sigma"][:, j]
             # ŵ, μ and the typical 3σ band set the scale; the band's start-up transient may run off the plot
-            s.ranges[p] = _data_range(w[:, j], m_j, np.median(m_j - 3 * s_j), np.median(m_j + 3 * s_j))
+            s.ranges[p] = _data_range(w[:, j], m_j, np.median(m_j - 3 * s_j), np.median(m_j + 3 * s_j),
+                                      min_span=self._min_span(name))
+            s.fit_titles[p] = verdict.coverage(w[:, j], m_j, s_j).text()
             s.corners[p] = quiet_corner([(t, w[:, j]), (t, m_j - 3 * s_j), (t, m_j + 3 * s_j)],
                                         (float(t[0]), float(t[-1])), s.ranges[p])
             for suffix, k, color in (("gmr", 1.0, style.SIGMA1_COLOR), ("gmr_3sigma", 3.0, style.SIGMA3_COLOR)):
                 label = f"μ ± {k:g}σ"
                 if HAS_MEASUREMENTS:
+                    # the 1σ band carries the μ line, the 3σ band only its fill (one μ line, not two)
                     self._style(f"{p}/{suffix}", rr.Measurements.from_fields(
-                        names=[label], colors=[color], widths=[1.0], interpolation_mode="StepAfter"))
+                        names=[label], colors=[color], widths=[1.0 if k == 1.0 else 0.0],
+                        interpolation_mode="StepAfter"))
                     self._send(f"{p}/{suffix}", index,
                                rr.Measurements.columns(values=m_j, variances=(k * s_j) ** 2))
                 else:  # older SDKs: the band as two lines
@@ -428,12 +514,12 @@ class SessionLogger:
             if self.plane is not None:
                 self._static(f"{sbase}/{entity_part(method)}", rr.LineStrips2D(
                     [self.plane.view(x)], colors=[color], radii=UI(2.0), labels=[title], show_labels=False,
-                    draw_order=6.0))
+                    draw_order=style.SCENE_ORDER["prediction"]))
             band = _prediction_band(pred)
             if band is None:
                 continue
             lo, hi, level = band
-            tint = style.light(color, 0.45)
+            tint = style.BAND_COLOR
             if method not in s.bands:
                 s.bands.append(method)
             for j, name in enumerate(s.state_names):
@@ -452,13 +538,8 @@ class SessionLogger:
                 spans.setdefault(name, []).extend([lo[:, j], hi[:, j]])
                 points.setdefault(name, []).extend([(tp, lo[:, j]), (tp, hi[:, j])])
             if self.plane is not None:
-                # the band in the plane: the percentile box at every few steps, a light tube around the path
-                vlo, vhi = self.plane.view(lo), self.plane.view(hi)
-                every = max(1, len(vlo) // 20)
-                centers, halves = ((vlo + vhi) / 2)[::every], (np.abs(vhi - vlo) / 2)[::every]
-                self._static(f"{sbase}/{entity_part(method)}_band", rr.Boxes2D(
-                    centers=centers, half_sizes=halves, colors=[tint], radii=UI(0.6),
-                    labels=[f"{title} MC {level}"], show_labels=False, draw_order=5.0))
+                self._static(f"{sbase}/{entity_part(method)}_band", envelope(
+                    self.plane.view(lo), self.plane.view(hi), style.dimmed(color, 0.55), f"{title} MC {level}"))
         # the prediction plots are zoomed to the predictions; their y-range is set by what is visible there
         lo_t, hi_t = s.windows.get(demo.id, (t0, t_end))
         s.windows[demo.id] = (min(lo_t, t0), max(hi_t, t_end))
@@ -467,7 +548,8 @@ class SessionLogger:
         for j, name in enumerate(s.state_names):
             key = f"demos/{entity_part(demo.id)}/predictions/{entity_part(name)}"
             earlier = [np.asarray(s.ranges[key])] if key in s.ranges else []  # another start of the same trial
-            s.ranges[key] = _data_range(demo.x[seen, j], *spans.get(name, []), *earlier, margin=0.05)
+            s.ranges[key] = _data_range(demo.x[seen, j], *spans.get(name, []), *earlier, margin=0.05,
+                                        min_span=self._min_span(name))
             s.corners[key] = quiet_corner([(t_rel[seen], demo.x[seen, j]), *points.get(name, [])],
                                           s.windows[demo.id], s.ranges[key])
         s.predictions.setdefault(demo.id, []).append((start, list(models)))
@@ -505,21 +587,76 @@ class SessionLogger:
                                                         media_type=rr.MediaType.MARKDOWN))
         s.models.append(name)
 
+    def log_key(self) -> None:
+        """The tab's key as a small text (``key``): what each trial color, method color and band means."""
+        s = self.session
+        by_color: dict[tuple[int, int, int], list[str]] = {}
+        for d in self.demos:
+            by_color.setdefault(self.colors[d.id], []).append(d.label if s.labels and d.label else d.id)
+        what = "strategy" if s.labels else "segment" if s.clock == "log" else "trial"
+        lines = [f"**{what} colors**", ""]
+        shown = list(by_color.items())[:12]
+        for color, names in shown:
+            uniq = list(dict.fromkeys(names))
+            lines.append(f"- {style.color_name(color)}: {', '.join(uniq[:3])}{' …' if len(uniq) > 3 else ''}")
+        if len(by_color) > len(shown):
+            lines.append(f"- … {len(by_color) - len(shown)} more")
+        lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ; Monte Carlo band of a prediction",
+                  "", "red ×: ŵ outside 3σ; blue: ŵ"]
+        self._static("key", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
+
+    def log_verdicts(self, named: Mapping[str, Any], models: Any, *, source_dt: float | None = None) -> None:
+        """Per model, whether it fits the trials it explains (:mod:`workbench.viewer.verdict`): a Markdown verdict
+        under ``models/<name>/verdict`` and, when it does not, a warning in ``warnings`` that the blueprint and
+        the terminal repeat."""
+        s = self.session
+        for name, model in named.items():
+            mine = [d for d in self.demos if _model_for(models, d) is model]
+            if not mine:
+                continue
+            subset = DemonstrationSet(mine, self.demos.state_names, self.demos.input_names, self.demos.dt,
+                                      roles=getattr(self.demos, "roles", None))
+            v = verdict.verdict(name, model, subset, source_dt=source_dt, w_parts=self.w_parts.get(id(model), ()))
+            s.verdicts[name] = v
+            cov = v.coverage.text() if v.coverage is not None else "no GMR bands"
+            lines = [f"# {name}: {'fits these data' if v.fits else 'DOES NOT FIT these data'}", "",
+                     f"- ŵ over {len(mine)} trial(s): {cov}", *(f"- {m}" for m in v.mismatches)]
+            self._static(f"models/{entity_part(name)}/verdict",
+                         rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
+            warning = v.warning()
+            if warning:
+                self.rec.log("warnings", rr.TextLog(warning, level=rr.TextLogLevel.WARN), static=True)
+                s.warnings.append(warning)
+                if "warnings" not in s.entities:
+                    s.entities.append("warnings")
+
     def _log_heatmap(self, path: str, h: Heatmap, vmax: float) -> None:
-        """Cell (i, j) covers [j, j+1] × [i, i+1] of the 2-D view; values centred in the cells, names outside."""
+        """Cell (i, j) covers [j, j+1] × [i, i+1] of the 2-D view; values centred in the cells at the block's
+        precision in a color that contrasts with the cell, names outside, a color bar to the right."""
         rows, cols = h.values.shape
         self._static(f"{path}/cells", rr.Image(colors(h.values, vmax), magnification_filter="Nearest", draw_order=0.0))
         ii, jj = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
         centres = np.column_stack([jj.ravel() + 0.5, ii.ravel() + 0.5])
         texts = [value_text(v, vmax) for v in h.values.ravel()]
-        self._static(f"{path}/values", rr.Points2D(centres, radii=UI(0.1), colors=[(20, 20, 20)], labels=texts,
-                                                   show_labels=True, draw_order=5.0))
+        self._static(f"{path}/values", rr.Points2D(centres, radii=UI(0.1), colors=text_colors(h.values, vmax),
+                                                   labels=texts, show_labels=True, draw_order=5.0))
         row_pts = np.column_stack([np.full(rows, -0.7), np.arange(rows) + 0.5])
         col_pts = np.column_stack([np.arange(cols) + 0.5, np.full(cols, -0.3)])
         self._static(f"{path}/rows", rr.Points2D(row_pts, radii=UI(0.1), colors=[(230, 230, 230)],
                                                  labels=list(h.rows), show_labels=True, draw_order=5.0))
         self._static(f"{path}/cols", rr.Points2D(col_pts, radii=UI(0.1), colors=[(230, 230, 230)],
                                                  labels=list(h.cols), show_labels=True, draw_order=5.0))
+        # the color bar: +vmax at the top, −vmax at the bottom, as tall as the block, a third of a cell wide
+        steps = np.linspace(vmax, -vmax, 21)[:, None]
+        x0, height = cols + 0.35, float(max(rows, 1))
+        self._static(f"{path}/colorbar", rr.Transform3D(translation=[x0, 0.0, 0.0],
+                                                        scale=[0.35, height / len(steps), 1.0]))
+        self._static(f"{path}/colorbar/image", rr.Image(colors(steps, vmax), magnification_filter="Nearest",
+                                                        draw_order=0.0))
+        ticks = np.array([[x0 + 0.9, 0.15], [x0 + 0.9, height / 2], [x0 + 0.9, height - 0.15]])
+        self._static(f"{path}/colorbar_ticks", rr.Points2D(
+            ticks, radii=UI(0.1), colors=[(230, 230, 230)], show_labels=True, draw_order=5.0,
+            labels=[f"+{vmax:.2g}", "0", f"−{vmax:.2g}"]))
 
 
 def _prediction_band(pred: Any) -> tuple[np.ndarray, np.ndarray, str] | None:
@@ -550,6 +687,8 @@ def log_session(
     starts: Sequence[int] = (0,),
     seed: int | None = 0,
     clock: str = "auto",
+    origins: Mapping[str, float] | None = None,
+    source_dt: float | None = None,
 ) -> LoggedSession:
     """Log a whole session and return what was logged (for :func:`default_blueprint`).
 
@@ -566,8 +705,13 @@ def log_session(
         Trials to predict from (at ``starts``); default the first trial of each label.
     clock : {"auto", "log", "trial"}
         See :func:`resolve_clock`.
+    origins : mapping source file → float, optional
+        Each log's start on its own clock as ``workbench inspect`` reckons it, so a flight's segments sit where
+        ``inspect`` places its flight modes (default: since the log's first mapped sample).
+    source_dt : float, optional
+        The demonstrations' step before they were resampled to the models' (a mismatch the verdict names).
     """
-    logger = SessionLogger(rec, demos, clock=clock)
+    logger = SessionLogger(rec, demos, clock=clock, origins=origins)
     by_id = {d.id: d for d in demos}
     if models is not None:
         if focus is None:
@@ -585,6 +729,9 @@ def log_session(
     if named_models is None and models is not None:
         named_models = models if isinstance(models, Mapping) else {"model": models}
     logger.log_models({str(k): v for k, v in (named_models or {}).items()})
+    if named_models:
+        logger.log_verdicts({str(k): v for k, v in named_models.items()}, models, source_dt=source_dt)
+    logger.log_key()
     if models is not None:
         for fid in focus or ():
             d = by_id[fid]

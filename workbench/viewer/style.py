@@ -1,7 +1,14 @@
 """Colors and display names of the viewer: one color per method, per strategy label or flight segment, per mode.
 
-The viewer's background is dark, so "recorded" is a light gray (the report, on white paper, draws it dark) and a
-band is drawn in the light tint of its method's color. Method colors agree with the report's (tab10).
+The viewer's background is dark, so "recorded" is a light gray (the report, on white paper, draws it dark).
+Method colors agree with the report's (tab10).
+
+Bands (Monte Carlo, GMR ±1σ/±3σ, online ±σ) share one neutral tint, :data:`BAND_COLOR`, in every recording:
+rerun 0.41 draws a time-series band's translucent fill after every line of its plot whatever the entity order
+(measured with ``rrd-look``: a green fill turned the IOC-only red (214, 39, 40) into (194, 83, 41)), so a
+colored fill would change the hue of every line under it; a neutral one only lightens them. Nested bands (±1σ
+inside ±3σ) read by the fill doubling. In the 2-D scene, where draw order is honored, the Monte Carlo envelope
+is an opaque dark tint of its method's color under every line (:data:`SCENE_ORDER`).
 """
 
 from __future__ import annotations
@@ -17,6 +24,11 @@ __all__ = [
     "RECORDED_COLOR",
     "W_COLOR",
     "OUTLIER_COLOR",
+    "BAND_COLOR",
+    "SCENE_ORDER",
+    "color_name",
+    "dimmed",
+    "min_span",
     "label_color",
     "light",
     "method_color",
@@ -45,8 +57,19 @@ METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GM
 # methods nobody named above get one of the colors no named method uses, the same one on every run
 _SPARE = ((227, 119, 194), (188, 189, 34), (23, 190, 207), (255, 127, 14), (31, 119, 180))
 W_COLOR = (110, 190, 255)  # ŵ: bright enough to read on top of its σ bands
-SIGMA1_COLOR = (255, 170, 90)
-SIGMA3_COLOR = (255, 225, 190)
+BAND_COLOR = (190, 190, 190)  # every band's fill, see the module docstring
+SIGMA1_COLOR = BAND_COLOR
+SIGMA3_COLOR = BAND_COLOR
+BACKGROUND = (18, 18, 18)  # the viewer's plot background, for dimmed and envelope tints
+# draw order in the 2-D scene, bottom to top: the band envelope under the ground, tracks and predictions
+SCENE_ORDER = {"band": 1.0, "ground": 1.5, "pad": 2.0, "dimmed": 2.5, "track": 3.0, "starts": 4.0,
+               "prediction": 6.0, "scale": 8.0, "vehicle": 10.0, "labels": 20.0}
+# the smallest y-span a plot of a quantity in this unit shows: quantization noise (a stick moving by 3 PWM
+# counts, a roll of a milliradian) must not fill a plot and read as bang-bang input or oscillation
+MIN_SPAN = {"m": 1.0, "m/s": 0.5, "rad": 0.1, "rad/s": 0.2, "deg": 5.0, "deg/s": 10.0, "stick": 0.2, "": 0.0}
+COLOR_NAMES = {(31, 119, 180): "blue", (255, 127, 14): "orange", (44, 160, 44): "green", (214, 39, 40): "red",
+               (148, 103, 189): "purple", (140, 86, 75): "brown", (227, 119, 194): "pink", (127, 127, 127): "gray",
+               (188, 189, 34): "olive", (23, 190, 207): "cyan"}
 OUTLIER_COLOR = (255, 60, 60)
 _MODE_PALETTE = ((76, 175, 80), (66, 165, 245), (255, 167, 38), (171, 71, 188), (239, 83, 80), (38, 198, 218),
                  (212, 225, 87), (141, 110, 99))
@@ -93,6 +116,23 @@ def trial_colors(ids: Sequence[str], labels: Sequence[str | None], known: Sequen
 def mode_colors(modes: Sequence[str]) -> dict[str, tuple[int, int, int]]:
     """One color per flight mode, in the order the modes are given."""
     return {m: _MODE_PALETTE[k % len(_MODE_PALETTE)] for k, m in enumerate(modes)}
+
+
+def dimmed(color: Sequence[int], amount: float = 0.6) -> tuple[int, int, int]:
+    """``color`` mixed with the background by ``amount``: the trials that are not in focus, the scene's envelope."""
+    c, b = np.asarray(tuple(color)[:3], dtype=float), np.asarray(BACKGROUND, dtype=float)
+    return tuple(int(round(v)) for v in c + amount * (b - c))
+
+
+def color_name(color: Sequence[int]) -> str:
+    """A color's name for a key ("blue"), or its RGB triple."""
+    c = tuple(int(v) for v in tuple(color)[:3])
+    return COLOR_NAMES.get(c, f"rgb{c}")
+
+
+def min_span(unit: str) -> float:
+    """The smallest y-span of a plot in ``unit`` (:data:`MIN_SPAN`), 0 for an unknown unit."""
+    return MIN_SPAN.get(unit, 0.0)
 
 
 def with_unit(name: str, unit: str) -> str:

@@ -1,0 +1,193 @@
+"""What the viewer tells a user at a glance: a model that does not fit is warned of (terminal and recording),
+``view --model`` draws its Monte Carlo band by default, bands never change a line's hue and sit under the scene's
+lines, a ULog is drawn on ``inspect``'s clock, and a saved live recording opens like the others.
+
+Expected values are computed here (from the models, ``adapters.inspect``, the style's colors), never copied.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rerun as rr
+from rerun.chunk import RrdReader
+
+from workbench.viewer import style, verdict
+from workbench.viewer.live import LiveLogger, live_blueprint
+
+_spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
+_loader = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_loader)
+recordings = _loader.load()
+
+_spec = importlib.util.spec_from_file_location("_test_viewer", Path(__file__).with_name("test_viewer.py"))
+_tv = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_tv)
+read_rrd, blueprint_names = _tv.read_rrd, _tv._blueprint_names
+
+PX4_LOG = recordings.REPO.parent / "shared" / "external" / "px4_sample_log_small.ulg"
+
+
+def _flat(values: list) -> list:
+    """A column's cells, one level of list per row unwrapped."""
+    out = []
+    for v in values:
+        out.extend(v if isinstance(v, list) else [v])
+    return out
+
+
+def _view(capsys, *argv: str) -> str:
+    from workbench.cli import main
+
+    code = main(["view", *argv])
+    assert code == 0
+    return capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def demo_files():
+    recordings.cli_recordings()
+    d = recordings.workdir() / "demo"
+    return d / "demos.parquet", d / "models" / "CS1.npz"
+
+
+def test_a_model_on_data_of_another_dt_is_warned_in_the_terminal_and_the_recording(tmp_path, capsys, demo_files):
+    from workbench.data.dataset import load_demonstrations
+    from workbench.models.factory import load_model
+
+    demos, model_path = demo_files
+    model = load_model(model_path)
+    coarse = load_demonstrations(demos).by_label("CS1").resample(2 * model.system.dt)
+    coarse_path = tmp_path / "coarse.parquet"
+    coarse.save(coarse_path)
+    out = tmp_path / "wrong.rrd"
+    err = _view(capsys, str(coarse_path), "--model", str(model_path), "--resample", "--samples", "0",
+                "--save", str(out), "-q")
+    expected = verdict.mismatches(model, coarse.state_names, coarse.input_names, coarse.roles, None,
+                                  source_dt=coarse.dt)
+    assert expected, "the dt mismatch must be found"
+    printed = [line for line in err.splitlines() if line.startswith("warning: model")]
+    assert len(printed) == 1 and expected[0] in printed[0] and "does not fit" in printed[0], err
+    logged = _flat(read_rrd(out)["/warnings"]["static:TextLog:text"])
+    assert logged == [printed[0].removeprefix("warning: ")]
+    # the first view's title says it, and the objective tab carries the verdict
+    names = blueprint_names(out)
+    assert any(n.startswith("⚠ MODEL") and "DOES NOT FIT" in n for n in names), names
+    assert "/models/" + model_path.stem + "/verdict" in read_rrd(out)
+
+
+def test_view_with_a_model_draws_the_band_by_default_and_a_fitting_model_is_not_warned(tmp_path, capsys, demo_files):
+    from workbench.cli.view import VIEW_SAMPLES
+
+    demos, model_path = demo_files
+    out = tmp_path / "model.rrd"
+    err = _view(capsys, str(demos), "--model", f"CS1={model_path}", "--horizon", "1", "--save", str(out), "-q")
+    assert "warning: model" not in err, err
+    ents = read_rrd(out)
+    bands = [p for p in ents if "/proposed_band/" in p]
+    scene = [p for p in ents if p.startswith("/scene/predictions/") and p.endswith("proposed_band")]
+    assert bands and scene
+    assert VIEW_SAMPLES > 0 and f"default {VIEW_SAMPLES}" in _help("view")
+
+
+def _help(command: str) -> str:
+    from workbench.cli.parser import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    return sub.choices[command].format_help()
+
+
+def test_the_verdict_counts_coverage_against_a_gaussian():
+    rng = np.random.default_rng(0)
+    n = 20000
+    w, mu, sigma = rng.normal(size=n), np.zeros(n), np.ones(n)
+    cov = verdict.coverage(w, mu, sigma)
+    se = np.sqrt(verdict.NOMINAL_1SIGMA * (1 - verdict.NOMINAL_1SIGMA) / n)
+    assert abs(cov.inside_1sigma - verdict.NOMINAL_1SIGMA) < 4 * se and not cov.poor
+    wrong = verdict.coverage(w * 5, mu, sigma)  # a band five times too narrow
+    assert wrong.poor and wrong.inside_3sigma == pytest.approx(np.mean(np.abs(w * 5) <= 3))
+
+
+def _hue_shift(line: tuple[int, int, int], band: tuple[int, int, int], alpha: float) -> float:
+    """Degrees the hue of ``line`` turns under a fill of ``band`` at ``alpha`` (rerun draws fills over lines)."""
+    a = np.asarray(line, float) / 255
+    b = a + alpha * (np.asarray(band, float) / 255 - a)
+    h0, h1 = colorsys.rgb_to_hsv(*a)[0], colorsys.rgb_to_hsv(*b)[0]
+    d = abs(h0 - h1) * 360
+    return min(d, 360 - d)
+
+
+def test_bands_keep_line_colors_and_sit_under_the_scene_lines(setup_session):
+    ents = setup_session
+    # every time-series band, in the session, is drawn in the one neutral band tint
+    band_colors = set()
+    for cols in ents.values():
+        for key in ("static:Measurements:colors",):
+            band_colors.update(int(c) for c in _flat(cols.get(key, [])))
+    packed = int(style.packed(style.BAND_COLOR)[0])
+    assert band_colors == {packed}
+    # rerun draws a fill over the lines: a neutral tint turns no method's hue, a colored one would
+    for method in ("proposed", "ioc_only", "gmr_only", "persistence"):
+        for alpha in (0.1, 0.2, 0.3):
+            assert _hue_shift(style.method_color(method), style.BAND_COLOR, alpha) < 5.0
+    assert _hue_shift(style.method_color("ioc_only"), style.light(style.method_color("proposed"), 0.45), 0.3) > 5.0
+    # in the scene, draw order is honored: the envelope is under every track and prediction line
+    band_orders = [o for p, c in ents.items() if p.endswith("_band") and p.startswith("/scene/")
+                   for o in _flat(c["static:LineStrips2D:draw_order"])]
+    line_orders = [o for p, c in ents.items() if p.startswith("/scene/") and not p.endswith("_band")
+                   and "static:LineStrips2D:draw_order" in c and not p.endswith("/ground")
+                   for o in _flat(c["static:LineStrips2D:draw_order"])]
+    assert band_orders and line_orders and max(band_orders) < min(line_orders)
+
+
+@pytest.fixture(scope="module")
+def setup_session():
+    return read_rrd(recordings.cli_recordings()["view_model"])
+
+
+def test_a_ulog_is_drawn_on_the_clock_of_inspect(tmp_path, capsys):
+    if not PX4_LOG.is_file():
+        pytest.skip(f"{PX4_LOG} is absent")
+    import adapters
+
+    out = tmp_path / "px4.rrd"
+    _view(capsys, str(PX4_LOG), "--mapping", "px4_manual", "--save", str(out), "-q")
+    summary = adapters.inspect(PX4_LOG)
+    ds = adapters.load(PX4_LOG, mapping="px4_manual")
+    ents = read_rrd(out)
+    for d in ds:
+        t = np.sort(np.asarray(ents[f"/demos/{d.id}/states/{ds.state_names[0]}"]["time"], float))
+        np.testing.assert_allclose(t, d.meta["t0"] - summary.t_start + d.t - d.t[0], atol=1e-6)
+        # inside the flight-mode span inspect prints for this segment's mode, to a grid step
+        spans = [(m.start - summary.t_start, m.end - summary.t_start) for m in summary.modes
+                 if m.mode == d.meta.get("mode")]
+        assert any(a - ds.dt <= t[0] and t[-1] <= b + ds.dt for a, b in spans), (t[0], t[-1], spans)
+
+
+def test_a_saved_live_recording_opens_collapsed_paused_and_every_event_has_a_link_time(tmp_path):
+    saved = live_blueprint(["seg-1"], ["x", "y"], ["u1"])
+    assert saved.collapse_panels is True
+    assert saved.time_panel.play_state == "paused" and saved.time_panel.timeline == "link_time"
+    watched = live_blueprint(["seg-1"], ["x", "y"], ["u1"], following=True)
+    assert watched.time_panel.play_state == "following"
+    silent = live_blueprint([], ["x", "y"], ["u1"])  # nothing received: the first tab explains why
+    assert silent.collapse_panels is True
+    from workbench.live.predictor import LiveEvent
+
+    path = tmp_path / "live.rrd"
+    rec = rr.RecordingStream("workbench_live_test")
+    rec.save(path)
+    logger = LiveLogger(rec, ["x", "y"], ["u1"])
+    logger.event(LiveEvent("silent", 123.0, "no data for 2 s; waiting for the link"))
+    rec.flush()
+    rec.disconnect()
+    ents = read_rrd(path)
+    events = ents["/live/events"]
+    assert len(events["link_time"]) == len(events["TextLog:text"]) == 2
+    assert "link_time" in ents["/live/status"]
+    assert RrdReader(path).recordings()
