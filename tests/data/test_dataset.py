@@ -20,7 +20,6 @@ from workbench.data.dataset import (
     write_dataset,
     write_partitions,
 )
-from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, FormatError
 from workbench.sim.landing import simulate_study
 

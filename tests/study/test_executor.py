@@ -17,7 +17,6 @@ import pandas as pd
 import pytest
 
 from workbench.data.dataset import load_demonstrations, write_dataset
-from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
 from workbench.method.resampling import bootstrap
 from workbench.models import HumanBehaviorModel, IOCOnlyModel
