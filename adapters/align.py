@@ -25,7 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Series", "Piece", "align", "sample"]
+from workbench.errors import DataError
+
+__all__ = ["MAX_ROWS", "MAX_UPSAMPLING", "check_grid", "Series", "Piece", "align", "sample"]
 
 #: Fraction of ``dt`` within which a sample time counts as equal to a grid time.
 GRID_TOLERANCE = 1e-3
@@ -71,6 +73,41 @@ def _gaps(series: list[Series], lo: float, hi: float, gap: float, tol: float) ->
 def _grid(lo: float, hi: float, dt: float) -> np.ndarray:
     n = int(math.floor((hi - lo) / dt + GRID_TOLERANCE)) + 1
     return lo + dt * np.arange(n)
+
+
+#: The most grid rows one import may produce (every demonstration together), checked before anything is allocated:
+#: a 5-hour flight at 100 Hz is 1.8 million; past this a mapping's ``dt`` is a typo (0.00005 for 0.05).
+MAX_ROWS = 5_000_000
+#: How much finer than a channel's typical sample interval the grid may be: interpolating 50 grid points between
+#: two samples already invents almost all of them.
+MAX_UPSAMPLING = 50.0
+
+
+def check_grid(series: list[Series], spans: list[tuple[float, float]], dt: float, where: str) -> None:
+    """Refuse a grid step far below the log's sample intervals, or a grid of more than :data:`MAX_ROWS` rows.
+
+    ``spans`` are the segmentation's (start, end) times; ``where`` names the file and mapping in the message.
+
+    Raises
+    ------
+    DataError
+        One line saying which limit, by how much, and what ``dt`` the log suggests.
+    """
+    intervals = {s.name: float(np.median(np.diff(s.t))) for s in series if s.t.size > 1}
+    if intervals:
+        name, finest = min(intervals.items(), key=lambda kv: kv[1])
+        if finest > 0 and finest / dt > MAX_UPSAMPLING:
+            raise DataError(f"{where}: dt = {dt:g} s is {finest / dt:.3g}× finer than the log's finest channel "
+                            f"({name}: one sample every {finest:.3g} s); the grid would be almost all "
+                            f"interpolation (limit {MAX_UPSAMPLING:g}×): a typo? a dt near {finest:.2g} s fits")
+    if any(s.t.size == 0 for s in series):
+        return
+    lo = max(float(s.t[0]) for s in series)
+    hi = min(float(s.t[-1]) for s in series)
+    rows = sum(max(0.0, min(b, hi) - max(a, lo)) / dt + 1 for a, b in spans if min(b, hi) >= max(a, lo))
+    if rows > MAX_ROWS:
+        raise DataError(f"{where}: dt = {dt:g} s would give {rows:.3g} grid rows (limit {MAX_ROWS:,}); "
+                        "use a coarser dt or import the log in parts")
 
 
 def align(series: list[Series], start: float, end: float, dt: float, gap: float) -> list[Piece]:

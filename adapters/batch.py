@@ -59,28 +59,36 @@ class ImportReport:
         return sum(p.n_samples for log in self.imported for p in log.partitions)
 
 
+def _is_log(f: Path) -> bool:
+    return f.is_file() and f.suffix.lower() in LOG_SUFFIXES and not f.name.startswith(".")
+
+
 def expand_logs(specs: Iterable[str | os.PathLike]) -> list[Path]:
     """Log files from files, directories (their logs, not recursively) and glob patterns, sorted per spec.
+
+    A directory or a pattern contributes only logs (:data:`LOG_SUFFIXES`): ``sample_logs/*`` skips the README
+    beside them. A file named on its own is taken whatever its name (the readers detect the format).
 
     Raises
     ------
     DataError
-        A spec that names nothing: a missing file, a directory without logs, a pattern that matches none.
+        A spec that names nothing: a missing file, a directory without logs, a pattern that matches no log.
     """
     files: list[Path] = []
     for spec in specs:
         p = Path(spec)
         if p.is_dir():
-            found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in LOG_SUFFIXES
-                           and not f.name.startswith("."))
+            found = sorted(f for f in p.iterdir() if _is_log(f))
             if not found:
                 raise DataError(f"{p}: no logs ({', '.join(LOG_SUFFIXES)}) in this directory")
         elif p.is_file():
             found = [p]
         elif glob.has_magic(str(spec)):
-            found = sorted(Path(f) for f in glob.glob(str(spec), recursive=True) if Path(f).is_file())
+            matched = [Path(f) for f in glob.glob(str(spec), recursive=True) if Path(f).is_file()]
+            found = sorted(f for f in matched if _is_log(f))
             if not found:
-                raise DataError(f"{spec}: the pattern matches no file")
+                raise DataError(f"{spec}: the pattern matches no log ({', '.join(LOG_SUFFIXES)})"
+                                + (f"; it matches {len(matched)} other file(s)" if matched else ""))
         else:
             raise DataError(f"{p}: no such file or directory")
         files.extend(f for f in found if f not in files)
@@ -96,15 +104,15 @@ def _partition_names(files: Sequence[Path]) -> list[str]:
             for s, f in zip(stems, files, strict=True)]
 
 
-def import_log(task: tuple[str, str | None, str, str, str | None]) -> LogImport:
-    """One log into partitions: ``(log, mapping, dataset folder, partition name, label or None)``.
+def import_log(task: tuple[str, str | None, str, str, str | None, int]) -> LogImport:
+    """One log into partitions: ``(log, mapping, dataset folder, partition name, label or None, order)``.
 
     A task of :func:`import_logs`, run by a worker that reads the log and writes the partitions itself; only
     the small :class:`LogImport` travels back.
     """
     import adapters
 
-    log, mapping, folder, name, label = task
+    log, mapping, folder, name, label, order = task
     path = Path(log)
     if path.suffix.lower() in (".parquet", ".pq"):
         ds = DemonstrationSet.load(path)
@@ -115,7 +123,7 @@ def import_log(task: tuple[str, str | None, str, str, str | None]) -> LogImport:
     if label:
         ds = ds.with_demos(d.with_meta(label=label) for d in ds)
     skipped = {k: int(v) for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v}
-    parts = write_partitions(ds, folder, name, source=str(path))
+    parts = write_partitions(ds, folder, name, source=str(path), order=order)
     return LogImport(str(path), tuple(parts), ds.state_names, ds.input_names, ds.dt, tuple(skipped.items()))
 
 
@@ -156,7 +164,8 @@ def import_logs(
     names = _partition_names(files)
     keys = [str(f) for f in files]
     with DatasetWriter(output) as writer:
-        tasks = [(str(f), mapping, str(writer.tmp), n, label) for f, n in zip(files, names, strict=True)]
+        tasks = [(str(f), mapping, str(writer.tmp), n, label, i)
+                 for i, (f, n) in enumerate(zip(files, names, strict=True))]
         if executor is None:
             outcomes = _serial_outcomes(import_log, tasks, keys, progress)
         else:

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from adapters.align import Series, align
+from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
 from adapters.mapping import ChannelMapping, Selected, channel_values, resolve_channel, select
 from adapters.meta import table_meta, text_meta
@@ -142,6 +142,7 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
     check_rules(streams, m)  # a log never armed, or without a kept mode, says so before any channel is read
     series = _channels(streams, m, skipped)
     spans = _spans(streams, m, skipped)
+    check_grid(series, [(s.start, s.end) for s in spans], m.dt, f"{streams.path}: mapping {m.name!r}")
     by_key, loose = _metadata(streams, m)
     n_states = len(m.state_names)
     landing = m.segment.landing

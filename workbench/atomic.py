@@ -1,21 +1,125 @@
 """Atomic file output: write to a temp file beside the target, rename into place only on success.
 
 Every file the workbench writes goes through here, so a crash or a bad input never leaves a half-written output.
+Temporary names carry the writing process's id (``.NAME.<pid>-XXXXXXXX.ext.tmp``, ``.NAME.tmp-<pid>-…/``), so
+the next write of the same target removes what a killed process left (:func:`remove_leftovers`) without
+touching the files of a process still writing.
 """
 
 from __future__ import annotations
 
 import os
+import re
+import shutil
+import signal
 import tempfile
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "atomic_write_table"]
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "atomic_write_table", "remove_leftovers",
+           "temp_sibling", "swap_in", "deferred_interrupt"]
+
+#: Leftovers named before temp names carried a process id are removed once they are this old (s): no write takes
+#: an hour between creating its temp file and renaming it.
+LEGACY_AGE = 3600.0
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process: alive
+        return True
+    return True
+
+
+def remove_leftovers(folder: str | os.PathLike, name: str) -> list[Path]:
+    """Remove what interrupted writes of ``folder/name`` left behind; return what was removed.
+
+    Temp files and folders of a process that no longer runs go; those of a running process stay (it may be
+    writing now). Leftovers of earlier versions (no process id in the name) go once older than :data:`LEGACY_AGE`.
+    """
+    folder = Path(folder)
+    ours = re.compile(rf"^\.{re.escape(name)}\.(?:(?:tmp|old)-)?(\d+)-")
+    legacy = re.compile(rf"^\.{re.escape(name)}\.(?:(?:tmp|old)-[0-9a-f]{{8}}$|[a-z0-9_]{{8}}[^-]*\.tmp$)")
+    removed = []
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        m = ours.match(entry.name)
+        if m is not None:
+            stale = not _alive(int(m.group(1)))
+        elif legacy.match(entry.name):
+            try:
+                stale = time.time() - entry.lstat().st_mtime > LEGACY_AGE
+            except OSError:
+                continue
+        else:
+            continue
+        if not stale:
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
+        removed.append(entry)
+    return removed
+
+
+def temp_sibling(path: str | os.PathLike, kind: str = "tmp") -> Path:
+    """A hidden name beside ``path`` for a folder being built (``kind="tmp"``) or retired (``"old"``)."""
+    path = Path(path)
+    return path.parent / f".{path.name}.{kind}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+
+
+@contextmanager
+def deferred_interrupt() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) back while the block runs and raise it after: renames that belong together are
+    never split by an interrupt. Outside the main thread (where signals cannot be handled) it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
+
+
+def swap_in(built: str | os.PathLike, target: str | os.PathLike) -> Path:
+    """Move the folder ``built`` to ``target``, replacing what was there, with Ctrl-C held back meanwhile.
+
+    The old ``target`` is renamed aside first and removed last: a reader sees the old folder or the new one.
+    """
+    built, target = Path(built), Path(target)
+    with deferred_interrupt():
+        old = None
+        if target.exists():
+            old = temp_sibling(target, "old")
+            os.replace(target, old)
+        os.replace(built, target)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return target
 
 
 class atomic_path:
     """Context manager yielding a temp path beside ``path``; renamed onto ``path`` only on success.
 
-    A crash or an exception leaves no half-written output behind.
+    A crash or an exception leaves no half-written output behind; a kill leaves a temp file that the next
+    write of ``path`` removes.
     """
 
     def __init__(self, path: str | os.PathLike, suffix: str | None = None) -> None:
@@ -24,7 +128,9 @@ class atomic_path:
 
     def __enter__(self) -> Path:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=self.suffix + ".tmp", dir=self.path.parent)
+        remove_leftovers(self.path.parent, self.path.name)
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.{os.getpid()}-", suffix=self.suffix + ".tmp",
+                                   dir=self.path.parent)
         os.close(fd)
         # mkstemp makes the file private (0600); give the output the permissions a plain open() would
         umask = os.umask(0)

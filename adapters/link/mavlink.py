@@ -26,6 +26,7 @@ scaled by a speed factor — a stand-in vehicle, like MAVProxy's log replay.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import socket
@@ -100,7 +101,11 @@ class MavlinkReader:
     counts : Counter
         Everything the link brought, by cause: ``messages``, ``samples``, ``garbage bytes``, ``CRC failures``,
         ``truncated frames``, ``duplicates``, ``out of order``, ``other systems``, ``other components``,
-        ``unknown messages``, ``clock resets``.
+        ``unknown messages``, ``clock resets``, ``shed (backlog)``; messages held while no vehicle is locked
+        are :attr:`held`.
+    received : Counter
+        Every valid message by type, from any system, before and after the lock: what did arrive, even when
+        no vehicle ever sent everything ``required`` names.
     system : int or None
         The vehicle locked onto.
     reset : bool
@@ -125,7 +130,11 @@ class MavlinkReader:
         self.clock_field, self.clock_scale = clock_field, float(clock_scale)
         self.reset_after = float(reset_after)
         self.counts: Counter = Counter()
+        self.received: Counter = Counter()
         self.reset = False
+        ids = load_dialect(dialect).by_name
+        # the message ids worth parsing when behind: what the mapping reads, and what a lock needs
+        self._wanted_ids = {ids[s].msgid for s in self._streams | {"HEARTBEAT"} if s in ids}
         self._seq: dict[tuple[int, int], int] = {}
         self._recent: dict[tuple[int, int], deque] = {}
 
@@ -166,6 +175,7 @@ class MavlinkReader:
         if kind.startswith("UNKNOWN_"):
             self.counts["unknown messages"] += 1
             return []
+        self.received[kind] += 1
         src = (int(msg.get_srcSystem()), int(msg.get_srcComponent()))
         if self.system is not None and src[0] != self.system:
             self.counts["other systems"] += 1
@@ -223,6 +233,31 @@ class MavlinkReader:
         return [Sample(kind, source.vehicle_time, fields, arrival, False)]
 
     @property
+    def held(self) -> int:
+        """Messages received from candidate vehicles while none is locked (each sent only part of what the
+        mapping needs): counted here until a lock makes them the vehicle's ``messages`` or ``other systems``."""
+        return 0 if self.system is not None else sum(s.n_messages for s in self._sources.values())
+
+    def never_received(self) -> list[str]:
+        """What ``required`` names that no system ever sent (alternatives joined by ``or``): why nothing locks."""
+        return [" or ".join(sorted(need)) for need in self._required if not need & set(self.received)]
+
+    def shed(self, data: bytes) -> bool:
+        """Whether a datagram may be dropped unparsed when the link is behind: it is not a frame of a message
+        the mapping reads (or a HEARTBEAT), judged from its header alone. Counted as ``shed (backlog)``."""
+        b = bytes(data[:10])
+        if len(b) >= 6 and b[0] == 0xFE:
+            msgid = b[5]
+        elif len(b) >= 10 and b[0] == 0xFD:
+            msgid = b[7] | b[8] << 8 | b[9] << 16
+        else:
+            msgid = None
+        if msgid in self._wanted_ids:
+            return False
+        self.counts["shed (backlog)"] += 1
+        return True
+
+    @property
     def vehicle_time(self) -> float:
         """The latest time on the followed vehicle's clock (−inf before any)."""
         source = self._sources.get(self.system) if self.system is not None else None
@@ -269,8 +304,35 @@ class _Source:
 # ------------------------------------------------------------------------------------------------- links
 
 
+def _udp_drops(sock: socket.socket) -> int | None:
+    """The kernel's count of datagrams dropped for ``sock`` (receive buffer full): the ``drops`` column of
+    ``/proc/net/udp`` (``udp6``), found by the socket's inode; None where there is no such file (not Linux)."""
+    try:
+        inode = str(os.fstat(sock.fileno()).st_ino)
+    except (OSError, ValueError):
+        return None
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(table, encoding="ascii") as fh:
+                lines = fh.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            cols = line.split()
+            if len(cols) >= 13 and cols[9] == inode:
+                return int(cols[-1])
+    return None
+
+
 class Link:
-    """An open pymavlink connection read as raw bytes (see :func:`open_link`)."""
+    """An open pymavlink connection read as raw bytes (see :func:`open_link`).
+
+    Attributes
+    ----------
+    drops_source : str or None
+        Where :meth:`kernel_drops` reads the datagrams the kernel dropped (``/proc/net/udp drops column``), None
+        when this link or system has no such counter.
+    """
 
     def __init__(self, conn: Any, description: str) -> None:
         from pymavlink import mavutil
@@ -278,6 +340,11 @@ class Link:
         self.conn = conn
         self.description = description
         self.datagram = isinstance(conn, mavutil.mavudp | mavutil.mavmcast)
+        port = getattr(conn, "port", None)
+        self._socket = port if isinstance(port, socket.socket) and port.type == socket.SOCK_DGRAM else None
+        self._drops0 = _udp_drops(self._socket) if self._socket is not None else None
+        self.drops_source = "/proc/net/udp drops column" if self._drops0 is not None else None
+        self.backlog = False
         self._heartbeat = None
         if isinstance(conn, mavutil.mavtcp) or (isinstance(conn, mavutil.mavudp) and not conn.udp_server):
             self._heartbeat = 0.0  # an outbound link: the other end learns where to send only from us
@@ -287,10 +354,22 @@ class Link:
         self._beat()
         return bool(self.conn.select(timeout))
 
+    def kernel_drops(self) -> int | None:
+        """Datagrams the kernel dropped on this link since it was opened (its receive buffer was full); None
+        where unknown (see :attr:`drops_source`)."""
+        if self._drops0 is None:
+            return None
+        now = _udp_drops(self._socket)
+        return None if now is None else now - self._drops0
+
     def read(self) -> list[bytes]:
-        """What has arrived (up to a bounded batch): datagrams on UDP, chunks otherwise; empty when nothing."""
+        """What has arrived (up to a bounded batch): datagrams on UDP, chunks otherwise; empty when nothing.
+
+        :attr:`backlog` says whether the batch was full (more is waiting: the reader is behind the link).
+        """
         self._beat()
         out = []
+        self.backlog = False
         for _ in range(_BATCH):
             try:
                 # a byte stream reads what is there (pymavlink would read only the next frame's bytes)
@@ -300,6 +379,8 @@ class Link:
             if not data:
                 break
             out.append(bytes(data) if not isinstance(data, str) else data.encode("latin-1"))
+        else:
+            self.backlog = True
         return out
 
     def _beat(self) -> None:
@@ -346,6 +427,8 @@ def open_link(connection: str, *, receive_buffer: int = _RECEIVE_BUFFER, write: 
         raise LinkError("empty connection string; e.g. udpin:127.0.0.1:14550, udpout:HOST:PORT, tcp:HOST:PORT")
     if os.path.isfile(text) or text.lower().endswith((".tlog", ".bin", ".log")):
         raise LinkError(f"{text}: a file, not a link; to send a log to a link use: workbench replay {text} --to URL")
+    if not write:
+        _refuse_shared_port(text)
     device, _, baud = text.rpartition(":") if text.startswith("/dev/") and text.count(":") == 1 else (text, "", "")
     kwargs: dict[str, Any] = {"source_system": 255, "source_component": 0, "robust_parsing": True,
                               "input": not write, "autoreconnect": False}
@@ -368,9 +451,32 @@ def open_link(connection: str, *, receive_buffer: int = _RECEIVE_BUFFER, write: 
     if isinstance(port, socket.socket) and port.type == socket.SOCK_DGRAM:
         try:
             port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer)
+            # pymavlink binds a listening port with SO_REUSEADDR: clear it, so no later socket can share the port
+            # and silently take its traffic
+            port.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 0)
         except OSError:
             pass
     return Link(conn, text)
+
+
+def _refuse_shared_port(text: str) -> None:
+    """A listening UDP port already bound by another socket is refused: binding it with SO_REUSEADDR (as
+    pymavlink does) would succeed and one of the two listeners would silently get all the traffic."""
+    kind, _, rest = text.partition(":")
+    if kind not in ("udpin", "udp") or rest.count(":") != 1:
+        return
+    host, _, port = rest.rpartition(":")
+    if not port.isdigit():
+        return
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind((host, int(port)))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                raise LinkError(f"{text}: UDP port {port} is already in use by another program (another "
+                                "`workbench live`, MAVProxy, a ground station); stop it or choose another port"
+                                ) from None
+            # other causes (an address not on this machine …) are pymavlink's to report
 
 
 # ------------------------------------------------------------------------------------------ tlog → link

@@ -117,10 +117,12 @@ def test_online_steps_equal_the_offline_import_and_predictions(fitted, records):
         assert_equal_to_offline(model, d, got[d.id], rollout_at=(0, len(d) // 2, len(d) - 1))
     assert pr.stats.n_segments == 4
     assert pr.stats.rejected == {}
-    # step(t): the newest completed step at or before a time, None when it is older than the mapping's gap
+    # step(): the newest step, once; step(t): the newest completed step at or before a time, None when it is older
+    # than the mapping's gap
     last = preds[-1]
-    assert pr.step() is not None and pr.step().k == last.k and pr.step().demo_id == last.demo_id
-    assert pr.step(last.t + 10.0) is None
+    first = pr.step()
+    assert first is not None and (first.k, first.demo_id) == (last.k, last.demo_id) and pr.step() is None
+    assert pr.step(last.t).k == last.k and pr.step(last.t + 10.0) is None
 
 
 def test_a_bad_link_is_counted_and_changes_nothing(fitted, records):
@@ -460,9 +462,13 @@ def test_live_cli_predictions_equal_the_replay_commands_recording(fitted, live_r
 
 def test_live_cli_survives_and_counts_a_bad_link(live_run):
     assert live_run["code"] == 0, live_run["stderr"]
-    counts = dict(re.findall(r"([a-zA-Z][a-zA-Z ]+?) (\d+)(?:,|$)", live_run["stdout"].split("link: ")[-1].strip()))
+    line = next(x for x in live_run["stdout"].splitlines() if x.startswith("link: "))
+    counts = dict(re.findall(r"([a-zA-Z][a-zA-Z ()]+?) (\d+)(?:,|$)", line.removeprefix("link: ").strip()))
     for cause, n in live_run["injected"].items():
-        assert int(counts.get(cause, 0)) == n, (cause, counts)
+        if cause == "garbage bytes" and "shed (backlog)" in counts:  # a slow machine fell behind: junk shed unparsed
+            assert int(counts.get(cause, 0)) <= n, (cause, counts)
+        else:
+            assert int(counts.get(cause, 0)) == n, (cause, counts)
 
 
 def test_live_recording_verifies(live_run):

@@ -16,8 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from workbench.data.dataset import write_dataset
-from workbench.data.demonstrations import DemonstrationSet
+from workbench.data.dataset import load_demonstrations, write_dataset
 from workbench.errors import DataError, WorkbenchError
 from workbench.method.resampling import bootstrap
 from workbench.models import HumanBehaviorModel, IOCOnlyModel
@@ -194,7 +193,7 @@ def test_a_corrupt_log_among_many_is_reported_and_the_rest_imported(cluster, tmp
     assert all(cause.split(":")[0].endswith("Error") for cause in failed.values())
     assert str(tmp_path / "logs" / "corrupt.tlog") in failed[str(tmp_path / "logs" / "corrupt.tlog")]
     assert calls[-1] == (7, 7)
-    ds = DemonstrationSet.load(tmp_path / "dataset")
+    ds = load_demonstrations(tmp_path / "dataset")
     expected = functools.reduce(lambda a, b: a + b, [adapters.load(p) for p in good])
     assert ds.ids == expected.ids and ds.n_samples == expected.n_samples == report.n_samples
     for a, b in zip(ds, expected, strict=True):
@@ -204,7 +203,7 @@ def test_a_corrupt_log_among_many_is_reported_and_the_rest_imported(cluster, tmp
     assert sorted(set(table.column("subject").to_pylist())) == [f"s{i:02d}" for i in range(5)]
     serial = import_logs([tmp_path / "logs"], tmp_path / "serial")
     assert serial.failures == report.failures
-    assert DemonstrationSet.load(tmp_path / "serial").ids == ds.ids
+    assert load_demonstrations(tmp_path / "serial").ids == ds.ids
 
 
 def _wb(*args: str, cwd: Path) -> subprocess.CompletedProcess:

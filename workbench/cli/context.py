@@ -220,7 +220,12 @@ def write_demos(ds: Any, out: Path, mapping: str | None = None) -> None:
         ds.save(out)
         return
     import adapters
+    from adapters.writer import FORMATS
 
+    extensions = [".parquet", *(e for f in FORMATS.values() for e in f.extensions)]
+    if out.suffix.lower() not in extensions:  # the command line has no format flag: the extension decides
+        raise DataError(f"{out}: cannot tell the format from the extension {out.suffix or '(none)'!r}; name the "
+                        f"output with one of {', '.join(dict.fromkeys(extensions))}, or DIR/ for a dataset")
     adapters.write(ds, out, mapping or DEFAULT_MAPPING)
 
 

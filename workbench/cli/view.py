@@ -258,10 +258,21 @@ def cmd_live(ctx: Context) -> int:
         timing += f"; message to prediction p50 {l50:.2f} ms, p99 {l99:.2f} ms"
     ctx.say(f"{summary.n_steps} steps in {summary.n_segments} segment(s) over {summary.wall_seconds:.1f} s "
             f"({'interrupted' if summary.ended_by == 'interrupt' else 'duration reached'}); {timing}")
-    counts = summary.stats.counts
-    ctx.say("link: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if v) or "nothing received"))
-    if summary.stats.waiting_for and not summary.n_steps:
-        ctx.say(f"never received: {', '.join(summary.stats.waiting_for)}")
+    st = summary.stats
+    ctx.say("link: " + (", ".join(f"{k} {v}" for k, v in sorted(st.counts.items()) if v) or "nothing received"))
+    if st.received:
+        ctx.say("received: " + ", ".join(f"{k} {v}" for k, v in sorted(st.received.items(), key=lambda kv: -kv[1])[:12])
+                + (f" and {len(st.received) - 12} other types" if len(st.received) > 12 else ""))
+    ctx.say(f"kernel drops: {st.counts.get('kernel drops', 0)} (from the {st.drops_source})" if st.drops_source
+            else "kernel drops: not known on this link")
+    if st.counts.get("shed (backlog)"):
+        ctx.say(f"behind the link: {st.counts['shed (backlog)']} datagrams that carry nothing the mapping reads "
+                "were dropped unparsed to keep predictions current")
+    if st.never_received:
+        ctx.say(f"never received (from any system): {', '.join(st.never_received)}; no vehicle can be followed "
+                f"without them (mapping {m.name})")
+    elif st.waiting_for and not summary.n_steps:
+        ctx.say(f"no sample yet for: {', '.join(st.waiting_for)}")
     if summary.ended_by == "interrupt" and out["serve"]:
         return 0
     announce(ctx, out, sink, f"live session ({summary.n_steps} steps)")

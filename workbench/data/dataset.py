@@ -1,24 +1,34 @@
-"""Partitioned demonstration datasets: one directory of Parquet files, read as one table.
+"""Partitioned demonstration datasets: one directory of Parquet files, read as one table by every tool.
 
 Many logs become one *dataset*: a directory with one demonstration file (the format of
-:mod:`workbench.data.demonstrations`)
-per source log and subject, in Hive-style ``subject=<name>`` folders, and a manifest written last::
+:mod:`workbench.data.demonstrations`) per source log and subject, in Hive-style ``subject=<name>`` folders, and
+nothing else::
 
     DATASET/
-      _workbench_dataset.json              format, version, partitions (file, source, subject, ids), failures
       subject=s01/landing_s01.parquet      the trials of subject s01 from landing_s01.tlog
       subject=__HIVE_DEFAULT_PARTITION__/flight.parquet    trials without a subject
 
-Every partition has the same columns (``demo``, ``t``, states, inputs), so other tools read the directory as one
-table, with ``subject`` as a column from the folder names::
+Each file says in its own metadata what it is (source log, subject, place in the dataset's order), so no
+manifest sits among the Parquet files for another reader to trip on (polars reads every file of a directory it
+is given, whatever its name). Trial ids are unique across the files themselves, not only once the workbench
+renames them. Every partition has the same columns (``demo``, ``t``, states, inputs), so other tools read the
+directory as the same table, with ``subject`` as a column from the folder names::
 
     pd.read_parquet("DATASET")                                          # pandas (pyarrow)
     pyarrow.dataset.dataset("DATASET", partitioning="hive")             # pyarrow
     SELECT * FROM read_parquet('DATASET/*/*.parquet', hive_partitioning = true)   -- DuckDB
-    pl.read_parquet("DATASET/*/*.parquet", hive_partitioning=True)      # polars
+    pl.scan_parquet("DATASET")                                          # polars
+
+The workbench reads what those tools read: every file pyarrow's discovery finds (names starting with ``_`` or
+``.`` are hidden from all of them). A file there that is not one of the dataset's partitions (a stray Parquet
+file, a note) is refused by name rather than skipped, since pandas would read it into the table; no file is
+read outside the folder (a symlink pointing out, an old manifest entry with ``..`` or an absolute path).
+A Hive-partitioned folder written by pandas from :meth:`DemonstrationSet.to_pandas`
+(``df.to_parquet(DIR, partition_cols=["subject"])``) is read too, its partition columns becoming metadata.
 
 The workbench reads it with :func:`load_dataset` (:func:`load_demonstrations` takes a directory or a file), whole
-or one subject at a time: a worker fitting subject s07 reads ``subject=s07/`` and nothing else.
+or one subject at a time: a worker fitting subject s07 reads ``subject=s07/`` and nothing else. Datasets of the
+first version (a ``_workbench_dataset.json`` manifest beside the files) still load.
 
 :class:`DataRef` says where a task finds its demonstrations: a path (what a worker process or another machine
 reads) or, in the calling process only, the set itself.
@@ -29,15 +39,13 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import uuid
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
-from urllib.parse import quote
+from urllib.parse import quote, unquote
 
-from workbench.atomic import atomic_write_text
+from workbench.atomic import remove_leftovers, swap_in, temp_sibling
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, FormatError
 
@@ -59,11 +67,14 @@ __all__ = [
 ]
 
 DATASET_FORMAT = "workbench.dataset"
-DATASET_VERSION = 1
-#: A leading underscore: pyarrow, pandas, polars and DuckDB globs skip it when they read the directory as a table.
+DATASET_VERSION = 2
+#: The first version's manifest file (read, never written): a leading underscore hides it from pyarrow and pandas.
 MANIFEST = "_workbench_dataset.json"
 #: The folder of trials without a subject; pyarrow and DuckDB read it back as a null ``subject``.
 NO_SUBJECT = "__HIVE_DEFAULT_PARTITION__"
+#: Names pyarrow's dataset discovery (and so pandas) skip at any depth: what other readers never see.
+HIDDEN_PREFIXES = ("_", ".")
+PARQUET_SUFFIXES = (".parquet", ".pq")
 
 
 @dataclass(frozen=True)
@@ -88,10 +99,15 @@ class Partition:
 
 @dataclass(frozen=True)
 class Manifest:
-    """What a dataset holds: its partitions in reading order, and the sources that could not be imported."""
+    """What a dataset holds: its partitions in reading order.
+
+    ``foreign`` marks a Hive dataset written by another tool (pandas): its partitions carry no trial ids and
+    it is read as one table. ``failures`` are the sources a first-version manifest says failed to import.
+    """
 
     partitions: tuple[Partition, ...]
     failures: tuple[tuple[str, str], ...] = ()
+    foreign: bool = False
 
     @property
     def subjects(self) -> list[str]:
@@ -103,10 +119,48 @@ class Manifest:
         return sum(len(p.ids) for p in self.partitions)
 
 
+def _visible_files(root: Path) -> list[str]:
+    """Every entry other readers would open as part of the table, as a path relative to ``root``.
+
+    pyarrow's discovery (pandas' too) walks every folder and skips names starting with ``_`` or ``.``; a
+    symlinked folder is listed as an entry (it is checked, never walked), so nothing outside ``root`` is listed
+    without being refused.
+    """
+    out = []
+    for folder, dirs, files in os.walk(root, followlinks=False):
+        rel = Path(folder).relative_to(root)
+        links = [d for d in dirs if (Path(folder) / d).is_symlink()]
+        dirs[:] = sorted(d for d in dirs if not d.startswith(HIDDEN_PREFIXES) and d not in links)
+        out += [(rel / f).as_posix() for f in sorted(files + links) if not f.startswith(HIDDEN_PREFIXES)]
+    return sorted(out)
+
+
+def _inside(root: Path, rel: str, where: str) -> Path:
+    """``root/rel``, refused when it names or leads to anything outside ``root`` (``..``, absolute, symlinks)."""
+    p = Path(rel)
+    if p.is_absolute() or ".." in p.parts or not rel:
+        raise FormatError(f"{where}: partition path {rel!r} is outside the dataset folder; refused")
+    full = root / p
+    resolved, top = full.resolve(), root.resolve()
+    if resolved != top and top not in resolved.parents:
+        raise FormatError(f"{where}: {rel} leads to {resolved}, outside the dataset folder; refused")
+    return full
+
+
 def is_dataset(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is a dataset directory (it has a manifest)."""
+    """Whether ``path`` is a dataset directory (or a first-version one with its manifest): Parquet files in
+    Hive-style ``key=value`` folders (or at its top), as pandas and pyarrow read a partitioned table.
+
+    A folder that merely holds a dataset somewhere below it is not one.
+    """
     p = Path(path)
-    return p.is_dir() and (p / MANIFEST).is_file()
+    if not p.is_dir():
+        return False
+    if (p / MANIFEST).is_file():
+        return True
+    files = _visible_files(p)
+    return any(f.lower().endswith(PARQUET_SUFFIXES) for f in files) and all(
+        all("=" in part for part in Path(f).parts[:-1]) for f in files)
 
 
 def _subject_folder(subject: str | None) -> str:
@@ -115,11 +169,13 @@ def _subject_folder(subject: str | None) -> str:
 
 
 def write_partitions(
-    demos: DemonstrationSet, directory: str | os.PathLike, name: str, source: str | None = None
+    demos: DemonstrationSet, directory: str | os.PathLike, name: str, source: str | None = None, order: int = 0
 ) -> list[Partition]:
     """Write ``demos`` as one partition per subject, ``directory/subject=<s>/<name>.parquet``.
 
-    Trials keep their order within a subject; subjects come in order of first appearance.
+    Trials keep their order within a subject; subjects come in order of first appearance. ``order`` places
+    these partitions in the dataset's reading order (the position of their source among the imported logs);
+    it travels in each file's metadata with the source and the subject.
     """
     directory = Path(directory)
     by_subject: dict[str | None, list] = {}
@@ -127,45 +183,85 @@ def write_partitions(
         s = d.meta.get("subject")
         by_subject.setdefault(None if s is None else str(s), []).append(d)
     out = []
-    for subject, members in by_subject.items():
+    for j, (subject, members) in enumerate(by_subject.items()):
         rel = f"{_subject_folder(subject)}/{name}.parquet"
         part = demos.with_demos(members)
-        part.save(directory / rel)
+        part.save(directory / rel, dataset=_partition_info(source, subject, [int(order), j]))
         out.append(Partition(rel, source, subject, tuple(part.ids), part.n_samples))
     return out
 
 
-def _write_manifest(directory: Path, partitions: Sequence[Partition], failures: Iterable[tuple[str, str]]) -> Path:
-    doc = {
-        "format": DATASET_FORMAT,
-        "version": DATASET_VERSION,
-        "partitions": [p.to_json() for p in partitions],
-        "failures": [{"source": s, "error": e} for s, e in failures],
-    }
-    return atomic_write_text(directory / MANIFEST, json.dumps(doc, indent=1))
+def _partition_info(source: str | None, subject: str | None, order: list[int]) -> dict[str, Any]:
+    return {"format": DATASET_FORMAT, "version": DATASET_VERSION, "source": source, "subject": subject,
+            "order": order}
+
+
+def _unique_ids(folder: Path, partitions: Sequence[Partition]) -> list[Partition]:
+    """The partitions with every trial id unique across the dataset, renamed in the files themselves.
+
+    A trial whose id an earlier partition holds (the same flight logged twice, a truncated copy) is renamed
+    ``<source stem>-<id>`` (then ``-2``, ``-3`` … if that is taken too) and its file rewritten, so pandas, DuckDB
+    and polars see as many trials as the workbench does.
+    """
+    import pyarrow.parquet as pq
+
+    seen: set[str] = set()
+    out = []
+    for i, p in enumerate(partitions):
+        if not seen.intersection(p.ids):
+            seen.update(p.ids)
+            out.append(p)
+            continue
+        stem = Path(p.source).stem if p.source else Path(p.file).stem
+        ds = DemonstrationSet.load(folder / p.file)
+        renamed = []
+        for d in ds:
+            new, n = d.id, 1
+            while new in seen:
+                new = f"{stem}-{d.id}" if n == 1 else f"{stem}-{d.id}-{n}"
+                n += 1
+            seen.add(new)
+            renamed.append(d if new == d.id else d.with_meta(id=new))
+        ds = ds.with_demos(renamed)
+        header = json.loads((pq.read_metadata(folder / p.file).metadata or {}).get(b"workbench", b"{}"))
+        order = (header.get("dataset") or {}).get("order", [i, 0])  # its place stays where the writer put it
+        ds.save(folder / p.file, dataset=_partition_info(p.source, p.subject, order))
+        out.append(Partition(p.file, p.source, p.subject, tuple(ds.ids), p.n_samples))
+    return out
+
+
+def _is_own_dataset(path: Path) -> bool:
+    """A folder the workbench may replace: a dataset of its own (every visible file one of its partitions)."""
+    if (path / MANIFEST).is_file():
+        return True
+    try:
+        return not _read_partitions(path)[1]
+    except (DataError, FormatError):
+        return False
 
 
 class DatasetWriter:
     """Build a dataset in a hidden folder beside ``directory`` and move it into place only when complete.
 
     Partitions are written into :attr:`tmp` (by this process or by workers that can reach it); :meth:`commit`
-    writes the manifest and swaps the folder in, replacing an earlier dataset at ``directory``. Leaving the
-    ``with`` block without a commit, or with an exception, removes the hidden folder: a failed import never
-    leaves half a dataset behind.
+    makes trial ids unique in the files and swaps the folder in, replacing an earlier dataset at ``directory``.
+    Leaving the ``with`` block without a commit, or with an exception, removes the hidden folder: a failed import
+    never leaves half a dataset behind; what a killed import left is removed by the next import to the same place.
 
     Raises
     ------
     DataError
-        If ``directory`` exists and is neither empty nor a dataset (it is never overwritten).
+        If ``directory`` exists and is neither empty nor a workbench dataset (it is never overwritten).
     """
 
     def __init__(self, directory: str | os.PathLike) -> None:
         self.directory = Path(directory)
         if self.directory.exists() and not (
-            is_dataset(self.directory) or (self.directory.is_dir() and not any(self.directory.iterdir()))
+            (self.directory.is_dir() and not any(self.directory.iterdir())) or _is_own_dataset(self.directory)
         ):
             raise DataError(f"{self.directory}: exists and is not a workbench dataset; choose another output")
-        self.tmp = self.directory.parent / f".{self.directory.name}.tmp-{uuid.uuid4().hex[:8]}"
+        remove_leftovers(self.directory.parent, self.directory.name)
+        self.tmp = temp_sibling(self.directory)
         self._committed = False
 
     def __enter__(self) -> DatasetWriter:
@@ -173,15 +269,12 @@ class DatasetWriter:
         return self
 
     def commit(self, partitions: Sequence[Partition], failures: Iterable[tuple[str, str]] = ()) -> Path:
-        """Write the manifest (partitions in this order) and move the dataset into place."""
-        _write_manifest(self.tmp, partitions, failures)
-        old = None
-        if self.directory.exists():
-            old = self.directory.parent / f".{self.directory.name}.old-{uuid.uuid4().hex[:8]}"
-            os.replace(self.directory, old)
-        os.replace(self.tmp, self.directory)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        """Make the partitions' trial ids unique (in this order) and move the dataset into place.
+
+        ``failures`` are not stored (the dataset holds only Parquet files); the import reports them.
+        """
+        _unique_ids(self.tmp, partitions)
+        swap_in(self.tmp, self.directory)
         self._committed = True
         return self.directory
 
@@ -197,9 +290,8 @@ def write_dataset(demos: DemonstrationSet, directory: str | os.PathLike, name: s
         return w.commit(partitions)
 
 
-@lru_cache(maxsize=16)
-def _manifest_cached(path: str, mtime_ns: int) -> Manifest:
-    manifest = Path(path) / MANIFEST
+def _legacy_manifest(root: Path) -> Manifest:
+    manifest = root / MANIFEST
     try:
         doc = json.loads(manifest.read_text(encoding="utf-8"))
         if doc.get("format") != DATASET_FORMAT:
@@ -209,31 +301,113 @@ def _manifest_cached(path: str, mtime_ns: int) -> Manifest:
         failures = tuple((str(f["source"]), str(f["error"])) for f in doc.get("failures", []))
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise FormatError(f"{manifest}: damaged dataset manifest ({exc})") from None
-    if version > DATASET_VERSION:
+    if version > 1:
         raise FormatError(f"{manifest}: dataset version {version} is newer than this workbench reads "
-                          f"({DATASET_VERSION}); upgrade")
+                          f"(manifests of version 1); upgrade")
+    for p in partitions:
+        _inside(root, p.file, str(manifest))
+    listed = {Path(p.file).as_posix() for p in partitions}
+    stray = [f for f in _visible_files(root) if f not in listed]
+    if stray:
+        raise DataError(f"{root}: {_stray_text(stray)} not in {MANIFEST}; pandas, DuckDB and polars would read "
+                        "them as part of the table: remove them or import again")
     return Manifest(partitions, failures)
 
 
-def read_manifest(path: str | os.PathLike) -> Manifest:
-    """The manifest of the dataset at ``path``.
+def _stray_text(files: Sequence[str]) -> str:
+    return f"{len(files)} file(s) ({', '.join(files[:3])}{', …' if len(files) > 3 else ''})"
+
+
+def _hive_subject(rel: str) -> str | None:
+    for part in Path(rel).parts[:-1]:
+        key, eq, value = part.partition("=")
+        if eq and key == "subject":
+            return None if value == NO_SUBJECT else unquote(value)
+    return None
+
+
+def _read_partitions(root: Path, wanted: Sequence[str] | None = None) -> tuple[list[Partition], list[str]]:
+    """The dataset's own partitions in reading order, and the visible files that are not (foreign ones).
+
+    With ``wanted`` subjects, only files in those subjects' folders are opened (the others are only listed).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    files = _visible_files(root)
+    if not files:
+        raise DataError(f"{root}: a directory without Parquet files: not a dataset (import logs into it with "
+                        "`workbench import LOGS -o DIR/`)")
+    not_parquet = [f for f in files if not f.lower().endswith(PARQUET_SUFFIXES)]
+    if not_parquet:
+        raise DataError(f"{root}: {_stray_text(not_parquet)} beside the Parquet files; pandas and pyarrow read "
+                        "every file of the folder as Parquet and would fail on them: remove them, or hide them "
+                        "with a name starting with '_' or '.'")
+    own, foreign = [], []
+    for rel in files:
+        if wanted is not None and _hive_subject(rel) not in wanted:
+            continue
+        path = _inside(root, rel, str(root))
+        try:
+            meta = pq.read_metadata(path)
+        except (pa.ArrowException, OSError) as exc:
+            raise FormatError(f"{path}: not a readable Parquet file ({' '.join(str(exc).split())})") from None
+        raw = (meta.metadata or {}).get(b"workbench")
+        info = None
+        if raw is not None:
+            try:
+                header = json.loads(raw)
+                info = header.get("dataset")
+                ids = tuple(str(m["id"]) for m in header["demos"])
+            except (ValueError, KeyError, TypeError, AttributeError) as exc:
+                raise FormatError(f"{path}: damaged workbench metadata ({exc})") from None
+        if not isinstance(info, dict):
+            foreign.append(rel)
+            continue
+        try:
+            version, order = int(info["version"]), [int(v) for v in info["order"]]
+        except (ValueError, KeyError, TypeError) as exc:
+            raise FormatError(f"{path}: damaged dataset metadata ({exc})") from None
+        if version > DATASET_VERSION:
+            raise FormatError(f"{path}: dataset version {version} is newer than this workbench reads "
+                              f"({DATASET_VERSION}); upgrade")
+        subject = info.get("subject")
+        own.append((order, rel, Partition(rel, info.get("source"), None if subject is None else str(subject), ids,
+                                          int(meta.num_rows))))
+    own.sort(key=lambda o: (o[0], o[1]))
+    return [p for _, _, p in own], foreign
+
+
+def read_manifest(path: str | os.PathLike, subjects: Iterable[str] | None = None) -> Manifest:
+    """What the dataset at ``path`` holds, from its files' own metadata (or a first-version manifest).
+
+    With ``subjects``, only the files of those subjects' folders are opened (what a worker fitting one subject
+    reads), and the manifest lists only them.
 
     Raises
     ------
     DataError
-        ``path`` is not a directory, or has no manifest (not a dataset, or an import that never finished).
+        ``path`` is not a directory or holds no Parquet file; a file other readers would read that is not one
+        of the dataset's partitions (a stray Parquet file among them, anything not Parquet).
     FormatError
-        The manifest is damaged or of a newer version.
+        Damaged metadata, a newer version, a partition path leading outside the folder.
     """
     p = Path(path)
     if not p.is_dir():
         raise DataError(f"{p}: no such dataset directory")
-    manifest = p / MANIFEST
-    if not manifest.is_file():
-        raise DataError(f"{p}: a directory without {MANIFEST}: not a workbench dataset (import logs into it with "
-                        "`workbench import LOGS -o DIR/`)")
-    # the manifest is rewritten (never edited) on every import, so its mtime identifies its content
-    return _manifest_cached(str(p.resolve()), manifest.stat().st_mtime_ns)
+    if (p / MANIFEST).is_file():
+        return _legacy_manifest(p)
+    own, foreign = _read_partitions(p, None if subjects is None else [str(s) for s in subjects])
+    if own and foreign:
+        raise DataError(f"{p}: {_stray_text(foreign)} not written by the workbench among the dataset's files; "
+                        "pandas, DuckDB and polars would read them as part of the table: remove them or import "
+                        "them (`workbench import`)")
+    if foreign:
+        import pyarrow.parquet as pq
+
+        return Manifest(tuple(Partition(f, None, _hive_subject(f), (), pq.read_metadata(p / f).num_rows)
+                              for f in foreign), foreign=True)
+    return Manifest(tuple(own))
 
 
 def join_sets(sets: Sequence[DemonstrationSet], names: Sequence[str]) -> DemonstrationSet:
@@ -265,32 +439,71 @@ def join_sets(sets: Sequence[DemonstrationSet], names: Sequence[str]) -> Demonst
     return DemonstrationSet(demos, first.state_names, first.input_names, first.dt, roles=first.roles)
 
 
+def _load_foreign(root: Path, manifest: Manifest, wanted: list[str] | None) -> DemonstrationSet:
+    """A Hive dataset another tool wrote from :meth:`DemonstrationSet.to_pandas` (names and dt in its attrs)."""
+    import pyarrow as pa
+    import pyarrow.dataset as pads
+
+    files = [p.file for p in manifest.partitions if wanted is None or p.subject in wanted]
+    try:
+        dataset = pads.dataset([str(root / f) for f in files], format="parquet",
+                               partitioning=pads.partitioning(flavor="hive"), partition_base_dir=str(root))
+        df = dataset.to_table().to_pandas()
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise FormatError(f"{root}: not a readable Parquet dataset ({' '.join(str(exc).split())})") from None
+    if not {"state_names", "input_names", "dt"} <= set(df.attrs):
+        raise DataError(f"{root}: Parquet files without the workbench's state and input names and dt (no "
+                        "'workbench' metadata, no pandas attrs): write them from DemonstrationSet.to_pandas(), "
+                        "or import the logs with `workbench import`")
+    keys = [c for c in df.columns if c not in ("demo", "t", *df.attrs["state_names"], *df.attrs["input_names"])]
+    meta = dict(df.attrs.get("demos") or {})
+    if keys:  # a trial is one demo id within one partition: the same id in two folders is two trials
+        group = df[keys].astype(str).agg("/".join, axis=1) if len(keys) > 1 else df[keys[0]].astype(str)
+        pairs = dict.fromkeys(zip(group, df["demo"].astype(str), strict=True))
+        counts: dict[str, int] = {}
+        for _, demo in pairs:
+            counts[demo] = counts.get(demo, 0) + 1
+        rename = {(g, d): (d if counts[d] == 1 else f"{g}-{d}") for g, d in pairs}
+        rows = [df.loc[i, keys].to_dict() for i in df.drop_duplicates(keys).index]
+        by_group = {("/".join(str(r[k]) for k in keys)): r for r in rows}
+        new_ids = [rename[(g, d)] for g, d in zip(group, df["demo"].astype(str), strict=True)]
+        for (g, d), new in rename.items():
+            extra = {k: (None if str(v) in ("nan", "None", "<NA>", NO_SUBJECT) else str(v))
+                     for k, v in by_group[g].items()}
+            meta[new] = {**dict(meta.get(d, {})), **extra, "id": new}
+        df = df.assign(demo=new_ids)
+    return DemonstrationSet.from_pandas(df, meta=meta, source=str(root))
+
+
 def load_dataset(path: str | os.PathLike, subjects: Iterable[str] | None = None) -> DemonstrationSet:
     """Read a dataset as one :class:`DemonstrationSet`, or only the partitions of ``subjects``.
 
-    Partitions are read in the manifest's order; a trial id that repeats across partitions is prefixed with
-    the source file's stem, as when joining single files.
+    Partitions are read in the dataset's order; a trial id that repeats across partitions (only in datasets
+    written before ids were made unique in the files) is prefixed with the source file's stem.
 
     Raises
     ------
     DataError
-        Not a dataset, no partition of a requested subject, a partition file missing, partitions that disagree
-        on states, inputs or ``dt``.
+        Not a dataset, no partition of a requested subject, a partition file missing, files that are not the
+        dataset's, partitions that disagree on states, inputs or ``dt``.
     """
     root = Path(path)
-    manifest = read_manifest(root)
+    wanted = None if subjects is None else [str(s) for s in subjects]
+    manifest = read_manifest(root, wanted)
     parts = list(manifest.partitions)
-    if subjects is not None:
-        wanted = [str(s) for s in subjects]
+    if wanted is not None:
         parts = [p for p in parts if p.subject in wanted]
         if missing := sorted(set(wanted) - {p.subject for p in parts}):
-            raise DataError(f"{root}: no trials of subject(s) {missing}; subjects present: {manifest.subjects}")
+            raise DataError(f"{root}: no trials of subject(s) {missing}; subjects present: "
+                            f"{read_manifest(root).subjects}")
     if not parts:
         raise DataError(f"{root}: the dataset holds no demonstrations"
                         + (f" ({len(manifest.failures)} source(s) failed to import)" if manifest.failures else ""))
+    if manifest.foreign:
+        return _load_foreign(root, manifest, wanted)
     sets, names = [], []
     for p in parts:
-        file = root / p.file
+        file = _inside(root, p.file, str(root))
         if not file.is_file():
             raise DataError(f"{file}: partition listed in {root / MANIFEST} is missing")
         sets.append(DemonstrationSet.load(file))

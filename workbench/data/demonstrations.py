@@ -435,8 +435,13 @@ class DemonstrationSet(Sequence[Demonstration]):
         return cls(demos, state_names, input_names, dt, roles=roles)
 
     # -- Parquet -----------------------------------------------------------------------------------------
-    def save(self, path: str | os.PathLike) -> Path:
-        """Write the set to one Parquet file, atomically (a temp file renamed into place)."""
+    def save(self, path: str | os.PathLike, *, dataset: Mapping[str, Any] | None = None) -> Path:
+        """Write the set to one Parquet file, atomically (a temp file renamed into place).
+
+        ``dataset`` is what a dataset's partition says about itself (its source, subject and place in the
+        dataset's order, :mod:`workbench.data.dataset`); it travels in the file's metadata, so a dataset folder
+        needs no file beside its Parquet files that another reader could trip on.
+        """
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -450,6 +455,8 @@ class DemonstrationSet(Sequence[Demonstration]):
             "roles": self.roles.to_json() if self.roles else None,
             "demos": [dict(d.meta) for d in self._demos],
         }
+        if dataset is not None:
+            header["dataset"] = dict(dataset)
         table = pa.Table.from_pandas(df, preserve_index=False)
         header["sha256"] = _checksum(header, table)
         table = table.replace_schema_metadata({_SCHEMA_KEY: json.dumps(header).encode()})

@@ -12,7 +12,7 @@ the human (shared control). :class:`OnlinePredictor` is what such a loop calls:
 ...     msg = link.recv_match(blocking=True, timeout=0.05)
 ...     if msg is not None:
 ...         predictor.push(msg)
-...     p = predictor.step()          # the newest grid step: û, Σ̂ and a 1 s rollout
+...     p = predictor.step()          # a new grid step (each once): û, Σ̂ and a 1 s rollout
 ...     if p is not None:
 ...         assist(p.u_mean, p.u_cov, p.rollout.x)
 
@@ -31,6 +31,7 @@ Nothing here imports rerun: :mod:`workbench.viewer.live` draws the predictions.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections import deque
@@ -138,7 +139,13 @@ class LiveEvent:
 
 @dataclass(frozen=True)
 class LinkStats:
-    """What the link brought so far: counts by cause, steps and segments completed, and whether it is silent."""
+    """What the link brought so far: counts by cause, steps and segments completed, and whether it is silent.
+
+    ``received`` counts every valid message by type (any system, before and after the vehicle locked);
+    ``never_received`` names what the mapping needs that no system sent (why no vehicle locks); ``waiting_for``
+    the channels and rules without a sample yet. ``counts["kernel drops"]`` is set when the link knows them
+    (``drops_source`` says from where).
+    """
 
     counts: Mapping[str, int]
     n_steps: int
@@ -146,6 +153,9 @@ class LinkStats:
     silent: bool
     silences: int
     waiting_for: tuple[str, ...]
+    received: Mapping[str, int] = field(default_factory=dict)
+    never_received: tuple[str, ...] = ()
+    drops_source: str | None = None
 
     @property
     def rejected(self) -> dict[str, int]:
@@ -230,6 +240,7 @@ class OnlinePredictor:
         self._pending: deque[tuple[AlignedStep, float]] = deque()
         self._recent: deque[LivePrediction] = deque(maxlen=_RECENT)
         self._latest: tuple[AlignedStep, float] | None = None
+        self._stepped: tuple[int, int] | None = None  # the step step() returned last: each is returned once
         self._events: list[LiveEvent] = []
         self._last_message = math.nan
         self._silent = False
@@ -297,15 +308,21 @@ class OnlinePredictor:
         return out
 
     def step(self, t: float | None = None) -> LivePrediction | None:
-        """The prediction at the newest step completed at or before link time ``t`` (default: the newest).
+        """The prediction at the newest completed step, once: the control loop's call.
 
-        None before the first step, or when that step is older than the mapping's ``gap`` (the segment ended
-        or the link went quiet). Steps still pending for :meth:`pop` stay pending.
+        Without ``t``, each grid step is returned at most once: a call before the next step is completed returns
+        None, so a loop that polls faster than the grid acts on every step once (and on only the newest one
+        when it polls slower). With ``t`` it is a look-up that may repeat: the newest step completed at or
+        before link time ``t``. Either way None before the first step, or when that step is older than the
+        mapping's ``gap`` (the segment ended or the link went quiet). Steps pending for :meth:`pop` stay pending.
         """
         if self._latest is None:
             return None
         st, share = self._latest
-        if t is not None and st.t > t:
+        if t is None:
+            if (st.segment, st.k) == self._stepped:
+                return None
+        elif st.t > t:
             older = [p for p in self._recent if p.t <= t]
             pending = [q for q in self._pending if q[0].t <= t]
             if pending:
@@ -317,6 +334,8 @@ class OnlinePredictor:
         ref = self.aligner.now if t is None else t
         if ref - st.t > self.mapping.segment.gap:
             return None
+        if t is None:
+            self._stepped = (st.segment, st.k)
         for p in reversed(self._recent):
             if p.segment == st.segment and p.k == st.k:
                 return p
@@ -330,8 +349,11 @@ class OnlinePredictor:
             counts[k] = counts.get(k, 0) + int(v)
         if self.dropped_steps:
             counts["steps not consumed"] = self.dropped_steps
+        if self.reader.held:
+            counts["held (no vehicle locked)"] = self.reader.held
         return LinkStats(counts, self.n_steps, self.aligner.n_segments, self._silent, self._silences,
-                         tuple(self.aligner.waiting_for()))
+                         tuple(self.aligner.waiting_for()), dict(self.reader.received),
+                         tuple(self.reader.never_received()))
 
     def _predict(self, st: AlignedStep, align_seconds: float) -> LivePrediction:
         start = time.perf_counter()
@@ -367,11 +389,17 @@ def listen(
     on_event: Callable[[LiveEvent], None] | None = None,
     on_tick: Callable[[LinkStats], None] | None = None,
     tick: float = 1.0,
+    shed_after: float = 0.25,
 ) -> LiveSummary:
     """Read ``link`` into ``predictor`` until ``duration`` seconds passed or Ctrl-C; every step's prediction goes
     to ``on_prediction``, link events to ``on_event``, the link's counts every ``tick`` seconds to ``on_tick``.
 
-    Ctrl-C (KeyboardInterrupt) ends the session cleanly: what was completed is returned, nothing is lost.
+    A step's prediction is made as soon as the datagram completing it is parsed, not after the rest of the batch.
+    When the link is behind (still full batches waiting after ``shed_after`` seconds of reading without a
+    pause: a flood), datagrams that are not frames of a message the mapping reads are shed unparsed (counted
+    ``shed (backlog)``), so the time from a message to its prediction stays bounded. Datagrams the kernel
+    dropped (receive buffer full) are counted ``kernel drops`` where the link knows them. Ctrl-C
+    (KeyboardInterrupt) ends the session cleanly: what was completed is returned, nothing is lost.
     """
     clock = time.monotonic
     start = clock()
@@ -379,29 +407,48 @@ def listen(
     compute, latency = [], []
     next_tick = start + tick
     ended_by = "duration"
+
+    def emit() -> None:
+        for p in predictor.pop():
+            compute.append(p.compute_seconds * 1e3)
+            latency.append(p.latency * 1e3)
+            if on_prediction is not None:
+                on_prediction(p)
+
+    def stats() -> LinkStats:
+        st = predictor.stats
+        drops = link.kernel_drops()
+        if drops is None:
+            return st
+        return dataclasses.replace(st, counts={**st.counts, "kernel drops": drops}, drops_source=link.drops_source)
+
     try:
         while True:
             now = clock()
             if now >= deadline:
                 break
             if link.wait(min(0.1, deadline - now)):
-                for data in link.read():
-                    predictor.feed(data, datagram=link.datagram)
-            for p in predictor.pop():
-                compute.append(p.compute_seconds * 1e3)
-                latency.append(p.latency * 1e3)
-                if on_prediction is not None:
-                    on_prediction(p)
+                behind, drain_start = False, clock()
+                while True:  # drain what is there, shedding once behind
+                    for data in link.read():
+                        if behind and link.datagram and predictor.reader.shed(data):
+                            continue
+                        if predictor.feed(data, datagram=link.datagram):
+                            emit()
+                    if not link.backlog or clock() >= deadline:
+                        break
+                    behind = clock() - drain_start > shed_after
+            emit()
             for ev in predictor.poll():
                 if on_event is not None:
                     on_event(ev)
             if on_tick is not None and clock() >= next_tick:
                 next_tick = clock() + tick
-                on_tick(predictor.stats)
+                on_tick(stats())
     except KeyboardInterrupt:
         ended_by = "interrupt"
-    stats = predictor.stats
+    final = stats()
     if on_tick is not None:
-        on_tick(stats)
-    return LiveSummary(stats.n_steps, stats.n_segments, clock() - start, np.asarray(compute), np.asarray(latency),
-                       stats, ended_by)
+        on_tick(final)
+    return LiveSummary(final.n_steps, final.n_segments, clock() - start, np.asarray(compute), np.asarray(latency),
+                       final, ended_by)

@@ -17,6 +17,7 @@ and for multi-subject data the ANOVA / pairwise t-test table.
 from __future__ import annotations
 
 import os
+import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +29,13 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from workbench.atomic import atomic_path, atomic_write_text
+from workbench.atomic import (
+    atomic_path,
+    atomic_write_text,
+    deferred_interrupt,
+    remove_leftovers,
+    temp_sibling,
+)
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
 from workbench.models.factory import METHOD_TITLES
@@ -402,8 +409,35 @@ def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
 
 
 def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
-    """Write ``out_dir/report.md`` and ``out_dir/figures/*.png``; returns the report's path."""
+    """Write ``out_dir/report.md`` and ``out_dir/figures/*.png``; returns the report's path.
+
+    The report is built in a hidden folder inside ``out_dir`` and swapped in with Ctrl-C held back: the old
+    ``report.md`` goes first and the new one comes last, so an interrupted run never leaves an old report
+    beside new figures (a kill inside the few renames can leave figures without a ``report.md``, never a
+    mix); the hidden folders of a killed run are removed by the next one. Other files in ``out_dir`` stay.
+    """
     out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    remove_leftovers(out_dir, "report")
+    build = temp_sibling(out_dir / "report")
+    build.mkdir()
+    try:
+        _write_report(build, inputs)
+        with deferred_interrupt():
+            old = temp_sibling(out_dir / "report", "old")
+            old.mkdir()
+            for name in ("report.md", "figures"):  # the old report first: never an old report.md beside new figures
+                if (out_dir / name).exists():
+                    os.replace(out_dir / name, old / name)
+            for name in ("figures", "report.md"):  # the new report last: its presence says the figures are its own
+                os.replace(build / name, out_dir / name)
+        shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(build, ignore_errors=True)
+    return out_dir / "report.md"
+
+
+def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     fig_dir = out_dir / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
     labels = list(inputs.models)

@@ -271,6 +271,9 @@ class DaskExecutor:
         self._staging = Path(staging) if staging is not None else None
         self._n_shared = 0
         if scheduler is not None:
+            from workbench.study.handshake import check_scheduler
+
+            check_scheduler(scheduler, min(float(timeout), 10.0))  # a server that is not Dask: one line, not a hang
             try:
                 self._client = Client(scheduler, timeout=f"{float(timeout)}s")
             except (OSError, TimeoutError, ValueError) as exc:

@@ -1,0 +1,319 @@
+"""Attack round on the surfaces this round touched: datasets, mappings' dt, the live link, the scheduler handshake,
+interrupted writes. Not part of the test suite: run it for a bounded time and read the counts.
+
+    PYTHONPATH=. .venv/bin/python bench/attack/fuzz_surfaces.py --seconds 60
+
+Each surface gets the same share of the time. Per surface it counts calls, clean errors (a ``WorkbenchError``:
+one line naming the cause), foreign errors (anything else: a traceback from inside a library), hangs (a call
+over its time limit) and silent wrong results (a call that returned but broke an invariant the surface
+promises: a dataset read differently by pandas, a file read from outside the folder, a count that does not add
+up, an old report beside new figures).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import re
+import shutil
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from collections import Counter
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO))
+
+from workbench.errors import WorkbenchError  # noqa: E402
+
+HANG_S = 20.0
+
+
+class Tally:
+    def __init__(self) -> None:
+        self.by_surface: dict[str, Counter] = {}
+        self.examples: dict[str, list[str]] = {}
+
+    def run(self, surface: str, fn, *args) -> None:
+        c = self.by_surface.setdefault(surface, Counter())
+        c["calls"] += 1
+        start = time.monotonic()
+        try:
+            wrong = fn(*args)
+        except WorkbenchError:
+            c["clean errors"] += 1
+            wrong = None
+        except Exception as exc:  # the point of the fuzzer: count what escapes as a foreign error
+            c["foreign errors"] += 1
+            self.examples.setdefault(surface, []).append(
+                f"{type(exc).__name__}: {str(exc)[:160]} @ {traceback.extract_tb(exc.__traceback__)[-1].filename}")
+            wrong = None
+        if time.monotonic() - start > HANG_S:
+            c["hangs"] += 1
+        if wrong:
+            c["silent wrong results"] += 1
+            self.examples.setdefault(surface, []).append(f"wrong: {wrong}")
+
+
+# -- datasets ----------------------------------------------------------------------------------------------------
+def attack_dataset(rng: random.Random, base: Path, study) -> str | None:
+    import pandas as pd
+
+    from workbench.data.dataset import DatasetWriter, load_dataset, write_dataset, write_partitions
+
+    root = base / f"ds{rng.randrange(10**9)}"
+    outside = base / "outside"
+    if not outside.exists():
+        write_dataset(study.select(subject="s03"), outside)
+    if rng.random() < 0.5:
+        write_dataset(study, root)
+    else:  # two logs with the same ids
+        one = study.select(subject=rng.choice(["s01", "s02"]))
+        with DatasetWriter(root) as w:
+            w.commit(write_partitions(one, w.tmp, "a", "a.tlog", 0) + write_partitions(one, w.tmp, "b", "b.tlog", 1))
+    victim = next(root.rglob("*.parquet"))
+    action = rng.choice(["stray_parquet", "stray_text", "symlink_out", "symlink_dir_out", "legacy_dotdot",
+                         "legacy_abs", "truncate", "garbage", "hidden_file", "nothing", "empty_subject_dir"])
+    if action == "stray_parquet":
+        study.select(subject="s03").to_pandas().to_parquet(victim.parent / "stray.parquet")
+    elif action == "stray_text":
+        note = root / rng.choice(["notes.txt", f"{victim.parent.name}/x.json"])
+        note.write_text("x")
+    elif action == "symlink_out":
+        (victim.parent / "link.parquet").symlink_to(next(outside.rglob("*.parquet")))
+    elif action == "symlink_dir_out":
+        (root / "subject=zz").symlink_to(next(outside.rglob("*.parquet")).parent)
+    elif action in ("legacy_dotdot", "legacy_abs"):
+        out_file = next(outside.rglob("*.parquet"))
+        bad = str(out_file) if action == "legacy_abs" else "../" + out_file.relative_to(base).as_posix()
+        parts = [{"file": p.relative_to(root).as_posix(), "source": None, "subject": None, "ids": [],
+                  "n_samples": 0} for p in root.rglob("*.parquet")]
+        parts.append({"file": bad, "source": None, "subject": None, "ids": [], "n_samples": 0})
+        (root / "_workbench_dataset.json").write_text(json.dumps({"format": "workbench.dataset", "version": 1,
+                                                                  "partitions": parts}))
+    elif action == "truncate":
+        data = victim.read_bytes()
+        victim.write_bytes(data[: rng.randrange(len(data))])
+    elif action == "garbage":
+        data = bytearray(victim.read_bytes())
+        for _ in range(rng.randrange(1, 20)):
+            data[rng.randrange(len(data))] = rng.randrange(256)
+        victim.write_bytes(bytes(data))
+    elif action == "hidden_file":
+        (root / "_notes.txt").write_text("hidden from every reader")
+    elif action == "empty_subject_dir":
+        (root / "subject=s09").mkdir()
+    ds = load_dataset(root)  # clean error or a set: then every reader must agree with it
+    if action in ("symlink_out", "symlink_dir_out", "legacy_dotdot", "legacy_abs"):
+        return f"{action}: read a dataset with a path leading outside"
+    table = pd.read_parquet(root)
+    if len(table) != ds.n_samples or table["demo"].nunique() != len(ds):
+        return f"{action}: pandas sees {len(table)} rows / {table['demo'].nunique()} trials, the workbench " \
+               f"{ds.n_samples} / {len(ds)}"
+    return None
+
+
+# -- mappings: dt ------------------------------------------------------------------------------------------------
+def attack_mapping(rng: random.Random, base: Path) -> str | None:
+    import adapters
+
+    dt = rng.choice([10 ** rng.uniform(-320, 1), rng.uniform(0, 0.2), 0.05, -0.05, float("nan"), float("inf"),
+                     1e-5, 5e-4, 0.001, "0.05", True])
+    text = (REPO / "adapters" / "mappings" / "planar_quadrotor.toml").read_text()
+    value = repr(dt) if not isinstance(dt, str) else f'"{dt}"'
+    value = {"nan": "nan", "inf": "inf"}.get(value, value).replace("True", "true")
+    m = base / f"m{rng.randrange(10**9)}.toml"
+    m.write_text(re.sub(r"^dt = .*$", f"dt = {value}", text, count=1, flags=re.M))
+    start = time.monotonic()
+    ds = adapters.load(REPO / "sample_logs" / "landing_s00.tlog", mapping=str(m))
+    if time.monotonic() - start > 10:
+        return f"dt = {dt}: took {time.monotonic() - start:.0f} s"
+    if ds.n_samples > 5_000_000:
+        return f"dt = {dt}: {ds.n_samples} rows"
+    return None
+
+
+# -- live link ---------------------------------------------------------------------------------------------------
+def attack_live(rng: random.Random, frames, model) -> str | None:
+    from workbench.live.predictor import OnlinePredictor
+
+    pr = OnlinePredictor(model, "planar_quadrotor", horizon_s=0)
+    start = rng.randrange(len(frames) - 600)
+    n_junk = 0
+    for t, f in frames[start:start + 600]:
+        kind = rng.random()
+        if kind < 0.1:
+            data = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 300)))
+            n_junk += 1
+        elif kind < 0.2:
+            b = bytearray(f)
+            b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
+            data = bytes(b)
+        elif kind < 0.25:
+            data = f[: rng.randrange(1, len(f))]
+        elif kind < 0.3:
+            data = f + f
+        else:
+            data = f
+        pr.feed(data, arrival=t)
+        pr.pop()
+    seen = []
+    for _ in range(5):
+        p = pr.step()
+        if p is not None:
+            seen.append((p.segment, p.k))
+    if len(seen) > 1:
+        return f"step() returned {len(seen)} predictions without a new step"
+    st = pr.stats
+    if sum(st.received.values()) < st.counts.get("messages", 0):
+        return f"received {sum(st.received.values())} < messages {st.counts.get('messages')}"
+    return None
+
+
+# -- scheduler ---------------------------------------------------------------------------------------------------
+def attack_scheduler(rng: random.Random) -> str | None:
+    from workbench.study.handshake import check_scheduler
+
+    kind = rng.choice(["random", "http", "silent", "close", "huge_length", "plausible", "slow_drip"])
+
+    def respond(conn):
+        try:
+            if kind == "random":
+                conn.sendall(os.urandom(rng.randrange(1, 5000)))
+            elif kind == "http":
+                conn.recv(100)
+            elif kind == "silent":
+                time.sleep(4)
+            elif kind == "huge_length":
+                conn.sendall(struct.pack("<Q", 2 ** 63) + os.urandom(50))
+            elif kind == "plausible":
+                n = rng.randrange(16, 500)
+                conn.sendall(struct.pack("<Q", n) + struct.pack("<Q", 1) + struct.pack("<Q", n - 16)
+                             + os.urandom(n - 16))
+            elif kind == "slow_drip":
+                for b in os.urandom(30):
+                    conn.sendall(bytes([b]))
+                    time.sleep(0.2)
+        except OSError:
+            pass
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen()
+    threading.Thread(target=lambda: _accept_once(srv, respond), daemon=True).start()
+    start = time.monotonic()
+    try:
+        check_scheduler(f"tcp://127.0.0.1:{srv.getsockname()[1]}", timeout=2)
+    finally:
+        srv.close()
+        if time.monotonic() - start > 5:
+            raise RuntimeError(f"{kind}: {time.monotonic() - start:.1f} s")
+    return f"{kind}: accepted as a Dask scheduler"
+
+
+def _accept_once(srv, respond):
+    try:
+        conn, _ = srv.accept()
+    except OSError:
+        return
+    with conn:
+        respond(conn)
+
+
+# -- interrupted writes ------------------------------------------------------------------------------------------
+KILL_CODE = """
+import sys
+from pathlib import Path
+from workbench.sim.landing import simulate_study
+from workbench.data.dataset import write_dataset
+s = simulate_study(n_subjects=3, n_trials=2, strategy="CS1", seed=int(sys.argv[2]))
+for _ in range(50):
+    write_dataset(s, Path(sys.argv[1]) / "ds")
+    s.save(Path(sys.argv[1]) / "one.parquet")
+"""
+
+
+def attack_kill(rng: random.Random, base: Path) -> str | None:
+    from workbench.data.dataset import load_dataset
+    from workbench.data.demonstrations import DemonstrationSet
+
+    folder = base / "kill"
+    folder.mkdir(exist_ok=True)
+    proc = subprocess.Popen([sys.executable, "-c", KILL_CODE, str(folder), "1"], cwd=REPO,
+                            env={**os.environ, "PYTHONPATH": str(REPO)}, stderr=subprocess.DEVNULL)
+    time.sleep(rng.uniform(1.0, 6.0))
+    proc.send_signal(rng.choice([signal.SIGKILL, signal.SIGINT, signal.SIGTERM]))
+    proc.wait(timeout=60)
+    if proc.returncode in (-signal.SIGABRT, 134):
+        return "the interpreter aborted"
+    # what is there must be whole; leftovers must go with the next write
+    if (folder / "ds").exists():
+        load_dataset(folder / "ds")
+    if (folder / "one.parquet").exists():
+        DemonstrationSet.load(folder / "one.parquet")
+    from workbench.data.dataset import write_dataset
+    from workbench.sim.landing import simulate_study
+
+    s = simulate_study(n_subjects=1, n_trials=1, strategy="CS1", seed=2)
+    write_dataset(s, folder / "ds")
+    s.save(folder / "one.parquet")
+    left = sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+    return f"leftovers after the next write: {left}" if left else None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    rng = random.Random(args.seed)
+
+    import adapters
+    from adapters.link.mavlink import tlog_frames
+    from workbench.models import HumanBehaviorModel
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.landing import simulate_study
+
+    study = simulate_study(n_subjects=3, n_trials=2, strategy="CS1", seed=1)
+    tlog = REPO / "sample_logs" / "landing_s00.tlog"
+    frames = list(tlog_frames(tlog))
+    model = HumanBehaviorModel(planar_quadrotor(), n_components=2, noise_folds=0).fit(
+        adapters.load(tlog, mapping="planar_quadrotor").by_label("CS1")[:4])
+    tally = Tally()
+    base = Path(tempfile.mkdtemp(prefix="wb-attack-"))
+    surfaces = {
+        "datasets": lambda: tally.run("datasets", attack_dataset, rng, base, study),
+        "mappings (dt)": lambda: tally.run("mappings (dt)", attack_mapping, rng, base),
+        "live link": lambda: tally.run("live link", attack_live, rng, frames, model),
+        "scheduler": lambda: tally.run("scheduler", attack_scheduler, rng),
+        "interrupted writes": lambda: tally.run("interrupted writes", attack_kill, rng, base),
+    }
+    share = args.seconds / len(surfaces)
+    try:
+        for call in surfaces.values():
+            end = time.monotonic() + share
+            while time.monotonic() < end:
+                call()
+    finally:
+        shutil.rmtree(base, ignore_errors=True)
+    keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
+    print("| surface | " + " | ".join(keys) + " |")
+    print("|---|" + "---|" * len(keys))
+    for name, c in tally.by_surface.items():
+        print(f"| {name} | " + " | ".join(str(c.get(k, 0)) for k in keys) + " |")
+    for name, ex in tally.examples.items():
+        for e in dict.fromkeys(ex):
+            print(f"{name}: {e}")
+
+
+if __name__ == "__main__":
+    main()

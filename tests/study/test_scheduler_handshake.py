@@ -1,0 +1,92 @@
+"""``--scheduler`` pointed at something that is not a Dask scheduler: one clear line within ~10 s, never a hang
+or a MemoryError. Local servers on 127.0.0.1 only."""
+
+from __future__ import annotations
+
+import http.server
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from workbench.errors import WorkbenchError
+from workbench.study.handshake import check_scheduler
+
+
+def _serve(respond):
+    """A TCP server on 127.0.0.1 calling ``respond(conn)`` for each connection; returns its address."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen()
+
+    def loop():
+        while True:
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                return
+            with conn:
+                respond(conn)
+
+    threading.Thread(target=loop, daemon=True).start()
+    return srv, f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+
+
+def test_a_real_scheduler_passes():
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster:
+        check_scheduler(cluster.scheduler_address, timeout=5)
+
+
+def test_random_bytes_are_not_a_scheduler():
+    srv, address = _serve(lambda conn: conn.sendall(os.urandom(4096)))
+    with srv, pytest.raises(WorkbenchError, match="not a Dask scheduler"):
+        check_scheduler(address, timeout=5)
+
+
+def test_a_plausible_length_then_garbage_is_not_a_scheduler():
+    srv, address = _serve(lambda conn: conn.sendall((100).to_bytes(8, "little") + os.urandom(100)))
+    with srv, pytest.raises(WorkbenchError, match="not a Dask handshake"):
+        check_scheduler(address, timeout=5)
+
+
+def test_an_http_server_is_refused_within_the_time_limit():
+    httpd = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    start = time.monotonic()
+    try:
+        with pytest.raises(WorkbenchError, match="no handshake within 1 s"):
+            check_scheduler(f"tcp://127.0.0.1:{httpd.server_address[1]}", timeout=1)
+    finally:
+        httpd.shutdown()
+    assert time.monotonic() - start < 3
+
+
+def test_nothing_listening_is_one_line():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(WorkbenchError, match="cannot reach"):
+        check_scheduler(f"127.0.0.1:{port}", timeout=2)
+
+
+@pytest.mark.slow
+def test_the_cli_answers_an_http_server_in_one_line_within_the_limit(tmp_path):
+    httpd = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    try:
+        start = time.monotonic()
+        out = subprocess.run([sys.executable, "-m", "workbench", "import", "sample_logs/landing_s00.tlog", "-o",
+                              str(tmp_path / "ds/"), "--scheduler", f"tcp://127.0.0.1:{httpd.server_address[1]}"],
+                             capture_output=True, text=True, timeout=60,
+                             cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+        took = time.monotonic() - start
+    finally:
+        httpd.shutdown()
+    assert out.returncode == 1 and len(out.stderr.strip().splitlines()) == 1 and "not a Dask scheduler" in out.stderr
+    assert took < 20
