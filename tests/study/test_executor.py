@@ -94,7 +94,7 @@ def test_serial_is_the_default_and_imports_no_dask():
     code = (
         "import sys\n"
         "from workbench.study.executor import make_executor\n"
-        "from workbench import evaluate, study\n"
+        "from workbench.study import evaluate, pipeline\n"
         "ex = make_executor()\n"
         "loaded = sorted(m for m in ('dask', 'distributed') if m in sys.modules)\n"
         "print(type(ex).__name__, ex.map(abs, [-1, -2]), loaded)"
