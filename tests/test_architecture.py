@@ -245,6 +245,6 @@ def test_no_public_name_shadows_a_submodule():
     for package in sorted(PACKAGES):
         if not package.startswith("workbench.") or package.count(".") != 1:
             continue
-        exports = getattr(importlib.import_module(package), "_EXPORTS", {})
+        exports = set(getattr(importlib.import_module(package), "__all__", ()))
         submodules = {p.stem for p in (REPO / package.replace(".", "/")).glob("*.py")}
         assert not set(exports) & submodules, f"{package}: {sorted(set(exports) & submodules)}"

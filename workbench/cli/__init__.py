@@ -13,7 +13,7 @@ commands share (loading, printing the plant) in :mod:`.context`. Commands parse,
 domain decision lives here.
 """
 
-from workbench.cli.main import main
+from workbench.cli.app import main
 from workbench.cli.parser import build_parser
 
 __all__ = ["main", "build_parser"]

@@ -70,9 +70,14 @@ class _Attempt:
     note: str = ""
 
     def describe(self) -> str:
+        """What went wrong in this attempt: a solver status that is not a solution, or the post-check a solution
+        failed (a solver's "optimal" alone is no success here: the forward check decides)."""
+        if self.status not in _ACCEPTED_STATUS:
+            return f"{self.solver} stage {self.stage}: {self.status}" + (f" ({self.note})" if self.note else "")
         return (
-            f"{self.solver} stage {self.stage}: status={self.status}, λmin(M)={self.lambda_min:.3g}, "
-            f"forward-gain error={self.error:.3g}" + (f" ({self.note})" if self.note else "")
+            f"{self.solver} stage {self.stage}: solved ({self.status}) but failed the post-checks: "
+            f"λmin(M)={self.lambda_min:.3g}, forward-gain error={self.error:.3g}"
+            + (f", {self.note}" if self.note else "")
         )
 
 
@@ -255,8 +260,8 @@ class InverseLQR:
                     return stage2
             warnings.warn(
                 "inverse LQR: the second stage (closest-to-I member of the α-optimal face) failed with every "
-                "solver; returning the stage-1 α-optimum, which may depend on the solver. Attempts: "
-                + "; ".join(a.describe() for a in attempts),
+                "solver; returning the stage-1 α-optimum, which may depend on the solver. "
+                + "; ".join(a.describe() for a in attempts if a.stage == 2),
                 ConvergenceWarning,
                 stacklevel=3,
             )

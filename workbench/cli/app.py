@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import re
 import sys
 import traceback
 import warnings
@@ -13,10 +14,30 @@ from workbench.cli.parser import build_parser
 from workbench.errors import WorkbenchError
 from workbench.threads import limit_threads
 
-__all__ = ['main']
+__all__ = ["main"]
 
-def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    print(f"warning: {' '.join(str(message).split())}", file=sys.stderr)
+_NUMBER = re.compile(r"[-+]?\d[\d.e+-]*")
+
+
+class _Warnings:
+    """Each kind of warning once: a bootstrap repeats the same solver warning for many resamples, and a user
+    needs it once with a count, not a screenful (warnings that differ only in their numbers are one kind)."""
+
+    def __init__(self) -> None:
+        self.seen: dict[str, int] = {}
+
+    def show(self, message, category, filename, lineno, file=None, line=None) -> None:
+        text = " ".join(str(message).split())
+        key = f"{category.__name__}:{_NUMBER.sub('#', text)}"
+        self.seen[key] = self.seen.get(key, 0) + 1
+        if self.seen[key] == 1:
+            print(f"warning: {text}", file=sys.stderr)
+
+    def close(self) -> None:
+        repeats = sum(n - 1 for n in self.seen.values())
+        if repeats:
+            print(f"warning: … and {repeats} more of the warnings above (the same cause, other numbers)",
+                  file=sys.stderr)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -24,8 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     debug = bool(getattr(args, "debug", False))
     previous = warnings.showwarning
+    shown = _Warnings()
     if not debug:
-        warnings.showwarning = _show_warning
+        warnings.showwarning = shown.show
     try:
         with limit_threads():  # small matrices: one BLAS thread is faster than many (workbench.threads)
             return int(args.func(Context(args)) or 0)
@@ -49,3 +71,4 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERNAL
     finally:
         warnings.showwarning = previous
+        shown.close()
