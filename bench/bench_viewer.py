@@ -3,7 +3,7 @@
 1. The same session (states, inputs and the vehicle pose of 60 simulated landings, both strategies) logged to an
    ``.rrd`` once through ``send_columns`` (what :class:`workbench.viewer.SessionLogger` does) and once row by row
    with ``set_time`` + ``rr.log`` — the ratio is what the columnar path buys (target ≥ 20×).
-2. :func:`workbench.viewer.replay` without waiting, with the model's online predictions on (one-step GMR and a
+2. :func:`workbench.viewer.replaying` without waiting, with the model's online predictions on (one-step GMR and a
    1 s rollout at every sample): simulated seconds per wall-clock second (target ≥ 20× real time).
 
 ``python bench/bench_viewer.py`` prints the rows; ``bench/run_all.py`` collects them into ``bench/results.md``.

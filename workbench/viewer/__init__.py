@@ -25,7 +25,7 @@ segments of a flight — and sequence ``step``; styling is logged once, static. 
 Each kind of recording has its own application id (:data:`APPLICATION_IDS`), so each keeps its own layout.
 """
 
-from workbench.viewer.replay import ReplayStats, replay, replay_blueprint
+from workbench.viewer.replaying import ReplayStats, replay, replay_blueprint
 from workbench.viewer.session import (
     APPLICATION_ID,
     APPLICATION_IDS,

@@ -4,7 +4,7 @@
 :func:`workbench.live.predictor.listen`) and sends them in small batches (:meth:`LiveLogger.flush`, a few times a
 second:
 a ``rr.log`` per value and step would cost more than the prediction), under the same entity layout as the
-offline replay (:mod:`workbench.viewer.replay`), so a live recording and a replayed one read alike:
+offline replay (:mod:`workbench.viewer.replaying`), so a live recording and a replayed one read alike:
 
 * ``demos/<id>/states/<state>`` and ``demos/<id>/inputs/<input>`` — the aligned state and the operator's input;
 * ``demos/<id>/online/<input>/gmr`` — the one-step input prediction ``K̂(x − r) + μ̂(x)`` with its ±1σ and ±3σ
