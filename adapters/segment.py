@@ -18,11 +18,11 @@ further at gaps (``segment.gap``) and, with a state landing rule, at touchdown.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from adapters.modes import mode_name
 
@@ -53,7 +53,8 @@ def _runs(values: list[Any]) -> list[tuple[int, int]]:
 
 def demo_key(value: Any) -> str | None:
     """A demo field value as a comparable key: integral numbers as ``"3"``, text stripped; missing → None."""
-    if value is None or value is pd.NA or value is pd.NaT:
+    pd = sys.modules.get("pandas")  # its missing markers exist only where pandas is loaded (not on the read path)
+    if value is None or (pd is not None and (value is pd.NA or value is pd.NaT)):
         return None
     if isinstance(value, float | np.floating):
         if not math.isfinite(value):

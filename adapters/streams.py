@@ -1,11 +1,17 @@
 """Streams: what every reader turns a file into, and the only thing the shared pipeline reads.
 
-A stream is one message type (``"ATTITUDE"``) or topic (``"/quadrotor/state"``) of a log: a
-:class:`pandas.DataFrame` whose first column ``t`` is float64 seconds on the log's own clock (tlog: the ground
-station's arrival time; MCAP: ``log_time``; ULog: the autopilot's ``timestamp``; CSV: the ``t`` column), followed
-by one column per field. Nested fields are flattened to dotted names (``pose.position.x``), fixed-size arrays to
-indexed names (``q[0]``); text fields stay ``str`` columns. Readers keep a file's rows as they are: cleaning
-(non-finite values, time going backwards) is the pipeline's job, and it counts what it drops.
+A stream is one message type (``"ATTITUDE"``) or topic (``"/quadrotor/state"``) of a log: columns whose first,
+``t``, is float64 seconds on the log's own clock (tlog: the ground station's arrival time; MCAP: ``log_time``;
+ULog: the autopilot's ``timestamp``; CSV: the ``t`` column), followed by one column per field. Nested fields are
+flattened to dotted names (``pose.position.x``), fixed-size arrays to indexed names (``q[0]``); text fields stay
+``str`` columns. Readers keep a file's rows as they are: cleaning (non-finite values, time going backwards) is the
+pipeline's job, and it counts what it drops.
+
+A reader gives each stream as a dict of numpy columns (text as object arrays of ``str``) or as a
+:class:`pandas.DataFrame`. :meth:`Streams.columns` hands out numpy columns without pandas (what ``inspect`` reads);
+``streams[name]`` and ``streams.frames[name]`` hand out a DataFrame, built from the columns the first time it is
+asked for. Reading a tlog, ULog or MCAP file therefore never imports pandas (about 0.4 s, ten times the read of a
+1 MB tlog); the mapping pipeline, which works on DataFrames, pays for it when it runs.
 
 :class:`Streams` bundles the streams of one file with what the reader skipped (bad bytes, failed checksums,
 undecodable messages) and how many messages every stream in the file has, read or not, so that a mapping error
@@ -18,19 +24,61 @@ import difflib
 import re
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["Streams", "split_source", "candidate_streams", "nearest", "clean_series"]
 
 _INDEX = re.compile(r"\[(\d+)\]$")
 
 
+#: A stream as a reader gives it: a DataFrame, or a dict of equal-length numpy columns (``t`` first).
+Stream = Any
+
+
+def _is_columns(stream: Stream) -> bool:
+    return isinstance(stream, Mapping)  # a DataFrame is not a Mapping
+
+
+def as_frame(stream: Stream) -> pd.DataFrame:
+    """A stream as a DataFrame: itself, or its numpy columns in a new frame (object columns of text become
+    pandas' string dtype by its own inference)."""
+    if not _is_columns(stream):
+        return stream
+    import pandas as pd
+
+    return pd.DataFrame(dict(stream), copy=False)
+
+
+class _Frames(Mapping):
+    """The streams as DataFrames, each built on first access from the reader's columns and kept."""
+
+    def __init__(self, raw: Mapping[str, Stream]) -> None:
+        self.raw = raw
+        self._built: dict[str, pd.DataFrame] = {}
+
+    def __getitem__(self, name: str) -> pd.DataFrame:
+        if name not in self._built:
+            self._built[name] = as_frame(self.raw[name])
+        return self._built[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.raw)
+
+    def __len__(self) -> int:
+        return len(self.raw)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.raw
+
+
 @dataclass(frozen=True, eq=False)
-class Streams(Mapping[str, pd.DataFrame]):
-    """The streams of one log file (a read-only mapping: stream name -> DataFrame).
+class Streams(Mapping[str, "pd.DataFrame"]):
+    """The streams of one log file (a read-only mapping: stream name -> DataFrame, built on first access).
 
     Attributes
     ----------
@@ -38,8 +86,9 @@ class Streams(Mapping[str, pd.DataFrame]):
         The file read.
     format : str
         Its format's name (``"tlog"``, ``"mcap"``, ``"ulog"``, ``"csv"``).
-    frames : dict of str to pandas.DataFrame
-        The streams read (all, or those asked for), each with a float64 ``t`` column first.
+    frames : mapping of str to pandas.DataFrame
+        The streams read (all, or those asked for), each with a float64 ``t`` column first. Given as DataFrames
+        or as dicts of numpy columns; either way ``frames[name]`` is a DataFrame, made when first asked for.
     counts : dict of str to int
         Messages per stream in the whole file, including streams that were not read.
     skipped : dict of str to int
@@ -55,14 +104,33 @@ class Streams(Mapping[str, pd.DataFrame]):
     skipped: Mapping[str, int] = field(default_factory=dict)
     info: Mapping[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.frames, _Frames):
+            object.__setattr__(self, "frames", _Frames(dict(self.frames)))
+
     def __getitem__(self, name: str) -> pd.DataFrame:
         return self.frames[name]
+
+    def __contains__(self, name: object) -> bool:  # Mapping's own would build the DataFrame to answer
+        return name in self.frames
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.frames)
 
     def __len__(self) -> int:
         return len(self.frames)
+
+    def columns(self, name: str) -> dict[str, np.ndarray]:
+        """One stream's columns as numpy arrays (``t`` first), without building a DataFrame."""
+        raw = self.frames.raw[name]
+        if _is_columns(raw):
+            return dict(raw)
+        return {str(c): raw[c].to_numpy() for c in raw.columns}
+
+    def n_rows(self, name: str) -> int:
+        """Rows (messages) read of one stream."""
+        raw = self.frames.raw[name]
+        return len(next(iter(raw.values()))) if _is_columns(raw) and len(raw) else len(raw)
 
     @property
     def names(self) -> list[str]:
@@ -147,6 +215,8 @@ def clean_series(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def numeric(frame: pd.DataFrame, column: str) -> np.ndarray:
     """A column as float64; text that is not a number becomes NaN (and is then dropped and counted)."""
+    import pandas as pd
+
     col = frame[column]
     if col.dtype.kind in "biuf":
         return col.to_numpy(dtype=np.float64, na_value=np.nan)

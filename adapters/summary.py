@@ -103,12 +103,20 @@ class LogSummary:
         return "armed: never armed" if self.armed_known else ""
 
 
-def _stream_summary(name: str, frame, count: int) -> StreamSummary:
-    t = frame["t"].to_numpy(dtype=np.float64, na_value=np.nan)
+def _float(column: Any) -> np.ndarray:
+    """A numeric column as float64 (a missing value in an object column as NaN)."""
+    try:
+        return np.asarray(column, dtype=np.float64)
+    except (TypeError, ValueError):
+        return np.array([np.nan if v is None else v for v in column], dtype=np.float64)
+
+
+def _stream_summary(name: str, columns: dict[str, np.ndarray], count: int) -> StreamSummary:
+    t = _float(columns["t"])
     t = t[np.isfinite(t)]
     span = float(t.max() - t.min()) if t.size else 0.0
     rate = (t.size - 1) / span if t.size > 1 and span > 0 else 0.0
-    fields = tuple(str(c) for c in frame.columns if c != "t")
+    fields = tuple(str(c) for c in columns if c != "t")
     return StreamSummary(name, int(count), rate, float(t.min()) if t.size else math.nan,
                          float(t.max()) if t.size else math.nan, fields)
 
@@ -125,16 +133,16 @@ def _mode_spans(t: np.ndarray, modes: np.ndarray, table: str) -> list[ModeSpan]:
     return [ModeSpan(a, b, n) for a, b, n in out]
 
 
-def _heartbeat_rows(hb) -> tuple[np.ndarray, str | None, str]:
+def _heartbeat_rows(hb: dict[str, np.ndarray]) -> tuple[np.ndarray, str | None, str]:
     """The vehicle's HEARTBEAT rows (the most frequent vehicle source), its mode table and its description."""
-    autopilot = hb["autopilot"].to_numpy().astype(np.int64)
-    kind = hb["type"].to_numpy().astype(np.int64)
+    autopilot = np.asarray(hb["autopilot"]).astype(np.int64)
+    kind = np.asarray(hb["type"]).astype(np.int64)
     tables = np.array([heartbeat_table(a, k) or "" for a, k in zip(autopilot, kind, strict=True)])
     rows = tables != ""
     if not rows.any():
         return rows, None, ""
-    if {"sysid", "compid"} <= set(hb.columns):  # two vehicles (or a companion) are never mixed
-        key = hb["sysid"].to_numpy().astype(np.int64) * 256 + hb["compid"].to_numpy().astype(np.int64)
+    if {"sysid", "compid"} <= set(hb):  # two vehicles (or a companion) are never mixed
+        key = np.asarray(hb["sysid"]).astype(np.int64) * 256 + np.asarray(hb["compid"]).astype(np.int64)
         values, counts = np.unique(key[rows], return_counts=True)
         rows &= key == values[np.argmax(counts)]
     # a vehicle reports one type; the most frequent wins over a stray message
@@ -157,19 +165,20 @@ def _dataflash_modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]
 def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
     if streams.format == "dataflash":
         return _dataflash_modes(streams)
-    hb = streams.frames.get("HEARTBEAT")
-    if hb is not None and len(hb) and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb.columns):
+    hb = streams.columns("HEARTBEAT") if "HEARTBEAT" in streams else None
+    if hb is not None and streams.n_rows("HEARTBEAT") and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb):
         rows, table, vehicle = _heartbeat_rows(hb)
         if rows.any():
-            t = hb["t"].to_numpy(dtype=np.float64)[rows]
-            modes = hb["custom_mode"].to_numpy()[rows]
-            armed = (hb["base_mode"].to_numpy()[rows].astype(np.int64) & 128) != 0  # MAV_MODE_FLAG_SAFETY_ARMED
+            t = _float(hb["t"])[rows]
+            modes = np.asarray(hb["custom_mode"])[rows]
+            armed = (np.asarray(hb["base_mode"])[rows].astype(np.int64) & 128) != 0  # MAV_MODE_FLAG_SAFETY_ARMED
             return _mode_spans(t, modes, table), flag_spans(t, armed), vehicle
-    vs = streams.frames.get("vehicle_status")
-    if vs is not None and "nav_state" in vs.columns:
-        t = vs["t"].to_numpy(dtype=np.float64)
-        armed = vs["arming_state"].to_numpy() == 2 if "arming_state" in vs.columns else np.zeros(len(t), bool)
-        return _mode_spans(t, vs["nav_state"].to_numpy(), "px4_nav_state"), flag_spans(t, armed), "PX4 (nav_state)"
+    vs = streams.columns("vehicle_status") if "vehicle_status" in streams else None
+    if vs is not None and "nav_state" in vs:
+        t = _float(vs["t"])
+        armed = np.asarray(vs["arming_state"]) == 2 if "arming_state" in vs else np.zeros(len(t), bool)
+        return (_mode_spans(t, np.asarray(vs["nav_state"]), "px4_nav_state"), flag_spans(t, armed),
+                "PX4 (nav_state)")
     return [], [], ""
 
 
@@ -188,8 +197,10 @@ def log_modes(streams: Streams) -> tuple[list[str], str | None]:
 
 def summarize(streams: Streams) -> LogSummary:
     """The summary of a file's streams (read them all for a complete picture)."""
+    # numpy columns, never DataFrames: a summary of a tlog, ULog or MCAP file does not import pandas
     summaries = tuple(
-        _stream_summary(name, frame, streams.counts.get(name, len(frame))) for name, frame in streams.frames.items()
+        _stream_summary(name, streams.columns(name), streams.counts.get(name, streams.n_rows(name)))
+        for name in streams
     )
     starts = [s.t_start for s in summaries if math.isfinite(s.t_start)]
     ends = [s.t_end for s in summaries if math.isfinite(s.t_end)]

@@ -26,7 +26,15 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness import ROOT, first_calls, interleaved, peak_memory, processes, verdict  # noqa: E402
+from harness import (  # noqa: E402
+    ROOT,
+    first_calls,
+    import_and_first_call,
+    interleaved,
+    peak_memory,
+    processes,
+    verdict,
+)
 
 EXTERNAL = ROOT.parent / "shared" / "external"
 SAMPLE_LOGS = ROOT / "sample_logs"
@@ -249,6 +257,16 @@ def bench_tlog(tmp: Path) -> list[dict]:
                           "peer": "import sys\n" + _PM_IMPORTS + "pymavlink_read(sys.argv[1])"},
                          3 if size == "small" else 1, str(path))
         rows.append(_row("tlog", case, "process", proc["ours"], proc["peer"], "pymavlink recv_match"))
+        if size == "small":
+            # issue 18: what `workbench inspect` waits for beyond the interpreter: the reader's imports (numpy,
+            # no pandas) and the read into numpy columns, against pymavlink's import and read of the same file
+            for cold_cache in (True, False):
+                first = import_and_first_call(
+                    {"ours": ("import adapters", "adapters.read(sys.argv[1])"),
+                     "peer": (_PM_IMPORTS, "pymavlink_read(sys.argv[1])")}, 3, str(path), cold=cold_cache)
+                mode = f"first call (fresh process, import + read), file cache {'cold' if cold_cache else 'warm'}"
+                rows.append(_target(_row("tlog", case, mode, first["ours"], first["peer"], "pymavlink recv_match"),
+                                    10.0, "≥ 10×"))
         if path != small:
             typed = interleaved({"ours": lambda p=path: read_streams(p, types=["ATTITUDE"]),
                                  "peer": lambda p=path: _pymavlink(p, "ATTITUDE")}, reps, warmup=size == "small")

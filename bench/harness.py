@@ -84,6 +84,37 @@ def first_calls(cases: dict[str, tuple[str, str]], repeats: int, *args: str) -> 
     return {k: statistics.median(v) for k, v in times.items()}
 
 
+_IMPORT_AND_CALL = """
+import json, os, sys, time
+if {evict}:  # the file's pages out of the page cache: the read starts from the disk, as after a reboot
+    fd = os.open(sys.argv[1], os.O_RDONLY)
+    os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)
+    os.close(fd)
+t0 = time.perf_counter()
+{imports}
+{call}
+print(json.dumps({{"first_call_s": time.perf_counter() - t0}}))
+"""
+
+
+def import_and_first_call(
+    cases: dict[str, tuple[str, str]], repeats: int, path: str, *, cold: bool
+) -> dict[str, float]:
+    """Median seconds of importing a reader and its first call on ``path`` in a fresh process, interleaved.
+
+    Unlike :func:`first_calls` the clock starts before the imports: what a user's one-shot command waits for
+    beyond the bare interpreter. ``cold``: the file is dropped from the page cache before every run
+    (``posix_fadvise(DONTNEED)``, this file only); else it is cached (the previous run read it).
+    """
+    times: dict[str, list[float]] = {k: [] for k in cases}
+    for _ in range(repeats):
+        for name, (imports, call) in cases.items():
+            code = _IMPORT_AND_CALL.format(imports=imports, call=call, evict=bool(cold))
+            out = run_script(code, path)[1]
+            times[name].append(json.loads(out.strip().splitlines()[-1])["first_call_s"])
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
 _MEMORY = """
 import json, sys, tracemalloc
 {imports}

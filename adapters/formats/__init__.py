@@ -20,21 +20,26 @@ import os
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from adapters.streams import Streams
 from workbench.errors import DataError, FormatError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["Format", "FORMATS", "detect_format", "get_format"]
 
 _HEAD = 4096
 
 
-def _is_mcap(head: bytes) -> bool:
-    from adapters.formats.mcap import MAGIC
+#: MCAP's magic (``adapters.formats.mcap.MAGIC``), here too so that sniffing a file does not import the MCAP reader
+#: and pyarrow behind it (tests/adapters/test_read_path.py checks that both are the same).
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
-    return head.startswith(MAGIC)
+
+def _is_mcap(head: bytes) -> bool:
+    return head.startswith(MCAP_MAGIC)
 
 
 def _is_ulog(head: bytes) -> bool:
@@ -104,7 +109,7 @@ def _read_tlog(path, topics) -> Streams:
         "skipped_runs": r.skipped_runs,
         "unknown_msgids": dict(r.unknown_msgids),
     }
-    return Streams(os.fspath(path), "tlog", dict(result.streams), counts=dict(r.counts),
+    return Streams(os.fspath(path), "tlog", dict(result.columns), counts=dict(r.counts),
                    skipped={k: v for k, v in skipped.items() if v}, info=info)
 
 

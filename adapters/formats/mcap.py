@@ -39,10 +39,9 @@ import zlib
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.json as pajson
@@ -53,9 +52,12 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
-from adapters.streams import Streams
+from adapters.streams import Streams, as_frame
 from workbench.atomic import atomic_path
 from workbench.errors import DataError, FormatError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["MAGIC", "JsonDecoderFactory", "decoder_factories", "read", "write", "MAX_ARRAY"]
 
@@ -281,7 +283,7 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
 
 def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:
     skipped: dict[str, int] = dict(scan.skipped)
-    by_topic: dict[str, list[pd.DataFrame]] = defaultdict(list)
+    by_topic: dict[str, list[dict[str, np.ndarray]]] = defaultdict(list)
     counts: dict[str, int] = defaultdict(int)
     for cid, k in scan.counts.items():
         ch = scan.channels.get(cid)
@@ -303,8 +305,13 @@ def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:
             by_topic[ch.topic].append(frame)
     frames = {}
     for topic, parts in by_topic.items():
-        frame = parts[0] if len(parts) == 1 else pd.concat(parts, ignore_index=True)
-        frames[topic] = frame.sort_values("t", kind="stable", ignore_index=True)
+        if len(parts) == 1:
+            frames[topic] = _sorted_by_time(parts[0])
+        else:  # a topic on several channels, whose fields may differ: pandas aligns them (rare)
+            import pandas as pd
+
+            frame = pd.concat([as_frame(p) for p in parts], ignore_index=True)
+            frames[topic] = frame.sort_values("t", kind="stable", ignore_index=True)
     info = {
         "indexed": indexed,
         "metadata": scan.metadata,
@@ -319,8 +326,8 @@ def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:
 
 def _decode_channel(
     ch: Channel, schema: Schema | None, times: list[int], datas: list[bytes], factories: list[DecoderFactory]
-) -> tuple[pd.DataFrame | None, int]:
-    """One channel's messages as a frame (``t`` + flattened fields) and the number that did not decode."""
+) -> tuple[dict[str, np.ndarray] | None, int]:
+    """One channel's messages as numpy columns (``t`` + flattened fields) and the number that did not decode."""
     t_ns = np.asarray(times, dtype=np.uint64)
     if ch.message_encoding == "json" and (schema is None or schema.encoding in ("jsonschema", "")):
         table = _json_bulk(datas, schema)
@@ -358,19 +365,35 @@ def _decode_channel(
     return _records_frame(t_ns[keep], objects), len(datas) - len(keep)
 
 
-def _frame(t_ns: np.ndarray, columns: dict[str, Any]) -> pd.DataFrame:
+def _sorted_by_time(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The rows in order of ``t`` (stable: messages logged at one time keep their file order)."""
+    t = columns["t"]
+    if t.size < 2 or bool(np.all(t[1:] >= t[:-1])):
+        return columns
+    order = np.argsort(t, kind="stable")
+    return {k: v[order] for k, v in columns.items()}
+
+
+def _frame(t_ns: np.ndarray, columns: dict[str, Any]) -> dict[str, np.ndarray]:
+    """A channel's stream as numpy columns: ``t`` in seconds, then the flattened fields."""
     data = {"t": t_ns.astype(np.float64) * 1e-9}
-    data.update((k, v) for k, v in columns.items() if k != "t")
-    return pd.DataFrame(data)
+    data.update((k, np.asarray(v)) for k, v in columns.items() if k != "t")
+    return data
 
 
-def _records_frame(t_ns: np.ndarray, objects: list[Any]) -> pd.DataFrame:
+def _records_frame(t_ns: np.ndarray, objects: list[Any]) -> dict[str, np.ndarray]:
     if not objects:
-        return pd.DataFrame({"t": np.empty(0)})
+        return {"t": np.empty(0)}
+    columns = _uniform_columns([_flatten_py(o if isinstance(o, dict) else {"value": o}) for o in objects])
+    if columns is not None:
+        return _frame(t_ns, columns)
     try:
         table = pa.Table.from_pylist([o if isinstance(o, dict) else {"value": o} for o in objects])
         return _frame(t_ns, _arrow_columns(table))
     except (pa.ArrowException, TypeError, ValueError, OverflowError):
+        # fields whose types differ between messages: pandas' record reader makes common columns of them
+        import pandas as pd
+
         flat = [_flatten_py(o if isinstance(o, dict) else {"value": o}) for o in objects]
         frame = pd.DataFrame.from_records(flat)
         return _frame(t_ns, {str(c): frame[c].to_numpy() for c in frame.columns})
@@ -399,6 +422,35 @@ def _plain(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {str(k): _plain(v) for k, v in obj.items()}
     return None
+
+
+def _uniform_columns(flat: list[dict]) -> dict[str, np.ndarray] | None:
+    """Columns of flattened messages that all have the same fields, each field of one kind (bool, int, float, str),
+    as numpy arrays; None otherwise (pyarrow then works out common types and nulls).
+
+    What ``pa.Table.from_pylist`` gives for such messages, without it: Arrow's conversion from Python objects
+    imports pandas (≈ 0.4 s), more than decoding a small file.
+    """
+    keys = list(flat[0])
+    if any(len(f) != len(keys) or f.keys() != flat[0].keys() for f in flat):
+        return None
+    out: dict[str, np.ndarray] = {}
+    for key in keys:
+        values = [f[key] for f in flat]
+        kinds = {type(v) for v in values}
+        if kinds == {bool}:
+            out[key] = np.array(values, dtype=bool)
+        elif kinds == {int} and all(-(2**63) <= v < 2**63 for v in values):
+            out[key] = np.array(values, dtype=np.int64)
+        elif kinds == {float}:
+            out[key] = np.array(values, dtype=np.float64)
+        elif kinds == {str}:
+            text = np.empty(len(values), dtype=object)
+            text[:] = values
+            out[key] = text
+        else:
+            return None
+    return out
 
 
 def _flatten_py(obj: dict, prefix: str = "", out: dict | None = None) -> dict:
@@ -483,6 +535,24 @@ def _arrow_columns(table: pa.Table) -> dict[str, Any]:
     return out
 
 
+def _bits(buffer: Any, offset: int, n: int) -> np.ndarray:
+    """An Arrow bitmap (validity or booleans, least significant bit first) as a boolean array."""
+    return np.unpackbits(np.frombuffer(buffer, dtype=np.uint8), bitorder="little")[offset : offset + n].astype(bool)
+
+
+def _numpy(arr: pa.Array) -> np.ndarray:
+    """A numeric or boolean Arrow array without nulls as a numpy array (a copy), read from its value buffer.
+
+    Arrow's own ``to_numpy`` imports pandas (≈ 0.4 s, more than the read of a small file) to check its version.
+    """
+    typ = arr.type
+    if pa.types.is_boolean(typ):
+        return _bits(arr.buffers()[1], arr.offset, len(arr))
+    kind = "f" if pa.types.is_floating(typ) else "i" if pa.types.is_signed_integer(typ) else "u"
+    dtype = np.dtype(f"<{kind}{typ.bit_width // 8}")
+    return np.frombuffer(arr.buffers()[1], dtype=dtype, count=len(arr), offset=arr.offset * dtype.itemsize).copy()
+
+
 def _flatten_arrow(name: str, arr: pa.Array, out: dict[str, Any]) -> None:
     typ = arr.type
     if pa.types.is_struct(typ):
@@ -495,13 +565,24 @@ def _flatten_arrow(name: str, arr: pa.Array, out: dict[str, Any]) -> None:
         bounds = pc.min_max(lengths).as_py()
         if bounds["min"] != bounds["max"] or bounds["max"] > MAX_ARRAY:
             return
+        child = arr.flatten() if arr.null_count == 0 else None
+        if child is not None and (pa.types.is_integer(child.type) or pa.types.is_floating(child.type)) \
+                and child.null_count == 0 and len(child) == len(arr) * bounds["max"]:
+            # equal-length lists of numbers: one strided view per element, no per-element compute call (whose
+            # Python-int argument makes pyarrow import pandas)
+            values = _numpy(child).reshape(len(arr), bounds["max"])
+            for i in range(bounds["max"]):
+                out[f"{name}[{i}]"] = np.ascontiguousarray(values[:, i])
+            return
         for i in range(bounds["max"]):
             _flatten_arrow(f"{name}[{i}]", pc.list_element(arr, i), out)
     elif pa.types.is_integer(typ) or pa.types.is_floating(typ) or pa.types.is_boolean(typ):
         if arr.null_count:
-            out[name] = pc.cast(arr, pa.float64()).to_numpy(zero_copy_only=False)
+            values = _numpy(pc.cast(arr, pa.float64()))
+            values[~_bits(arr.buffers()[0], arr.offset, len(arr))] = np.nan
+            out[name] = values
         else:
-            out[name] = arr.to_numpy(zero_copy_only=False)
+            out[name] = _numpy(arr)
     elif pa.types.is_string(typ) or pa.types.is_large_string(typ):
         out[name] = np.array(arr.to_pylist(), dtype=object)
     elif pa.types.is_null(typ):
@@ -588,6 +669,8 @@ def write(
     DataError
         A stream without ``t``, with non-finite or negative times, or with columns of unequal length.
     """
+    import pandas as pd
+
     where = os.fspath(path)
     prepared = []
     for topic, data in streams.items():

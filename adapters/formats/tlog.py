@@ -32,15 +32,16 @@ record), into columns allocated at their final length: a read holds the records'
 the whole file (peak memory below twice the file's size). A typed read through :func:`read_streams` checksums
 only the frames its streams depend on, with the same values (see :func:`_scan_wanted`).
 
-Columns of a stream (one ``pandas.DataFrame`` per message type, in file order):
+Columns of a stream (one dict of numpy columns per message type, in file order; ``TlogRead.streams`` and
+:func:`read_streams` give them as ``pandas.DataFrame`` s, importing pandas only then):
 
 * ``t`` float64 — the record's timestamp in seconds, ``time_us * 1e-6`` (the exact expression pymavlink
   uses for ``msg._timestamp``, so values compare equal bit for bit);
 * one column per field, in the message's declaration order. Integer fields keep their wire integer dtype
   (uint8 … uint64, int8 … int64: lossless); float fields are widened to float64 (exact for float32 and
   spares downstream code float32 arithmetic). Array fields are flattened into ``name[0]``, ``name[1]``, …;
-  ``char`` fields become text (pandas' string dtype, Python ``str`` values) decoded the way pymavlink does:
-  up to the first NUL, ASCII, undecodable bytes replaced by U+FFFD. A field named like a reserved column
+  ``char`` fields become text (object arrays of ``str``; pandas' string dtype in a DataFrame) decoded the way
+  pymavlink does: up to the first NUL, ASCII, undecodable bytes replaced by U+FFFD. A field named like a reserved column
   gets a trailing underscore: ``MANUAL_CONTROL.t`` (the pitch-only axis) is column ``t_``;
 * ``sysid``, ``compid`` uint8 — the frame's source system and component.
 
@@ -55,10 +56,12 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 from adapters.formats.mavlink_dialect import (
     Dialect,
@@ -136,17 +139,25 @@ class TlogRead:
 
     Attributes
     ----------
-    streams : dict of str to pandas.DataFrame
-        One frame per message type present (and selected), keyed by message name (``"ATTITUDE"``).
+    columns : dict of str to dict of str to numpy.ndarray
+        One dict of numpy columns per message type present (and selected), keyed by message name
+        (``"ATTITUDE"``); text fields are object arrays of ``str``.
     report : ReadReport
         Counts of messages, skipped bytes, checksum failures, unknown ids.
     time_us : dict of str to numpy.ndarray
         Raw uint64 record timestamps per stream (µs, low two bits possibly a MAVProxy link number).
     """
 
-    streams: dict[str, pd.DataFrame]
+    columns: dict[str, dict[str, np.ndarray]]
     report: ReadReport
     time_us: dict[str, np.ndarray] = field(repr=False)
+
+    @property
+    def streams(self) -> dict[str, pd.DataFrame]:
+        """One DataFrame per message type (imports pandas; :attr:`columns` does not), made on each access."""
+        from adapters.streams import as_frame
+
+        return {name: as_frame(cols) for name, cols in self.columns.items()}
 
 
 def looks_like_tlog(head: bytes) -> bool:
@@ -293,11 +304,9 @@ def _read(path: str | os.PathLike[str], message_types: Iterable[str] | None, dia
     del start, v2, plen, rank, blocks, buf  # before the frames are built
     if n >= _TRIM_ABOVE:
         _return_free_memory()
-    streams: dict[str, pd.DataFrame] = {}
-    time_us: dict[str, np.ndarray] = {}
-    for out in outs.values():
-        streams[out.layout.name], time_us[out.layout.name] = out.frame()
-    return TlogRead(streams=streams, report=report_, time_us=time_us)
+    columns = {out.layout.name: out.columns() for out in outs.values()}
+    time_us = {out.layout.name: out.time_us for out in outs.values()}
+    return TlogRead(columns=columns, report=report_, time_us=time_us)
 
 
 def _group(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -380,18 +389,21 @@ class _StreamOut:
                         out[lo:hi] = col
         self.pos = hi
 
-    def frame(self) -> tuple[pd.DataFrame, np.ndarray]:
-        columns: dict[str, Any] = {"t": self.time_us * 1e-6}
+    def columns(self) -> dict[str, np.ndarray]:
+        """The stream's numpy columns (text as an object array of ``str``)."""
+        columns: dict[str, np.ndarray] = {"t": self.time_us * 1e-6}
         for f, out in zip(self.layout.fields, self.fields, strict=True):
             if f.is_text:
-                columns[f.columns[0]] = pd.array(out, dtype="str")
+                text = np.empty(len(out), dtype=object)
+                text[:] = out
+                columns[f.columns[0]] = text
             elif f.is_array:
                 columns.update(zip(f.columns, out, strict=True))
             else:
                 columns[f.columns[0]] = out
         columns["sysid"] = self.sysid
         columns["compid"] = self.compid
-        return pd.DataFrame(columns, copy=False), self.time_us
+        return columns
 
 
 def _decode_block(

@@ -89,18 +89,16 @@ def _read_pyulog(where: str, data: bytes, names: list[str] | None) -> Streams:
                 raise DataError(
                     f"{where}: damaged ULog file, parsing stopped near byte {at} ({type(exc).__name__}: {exc})"
                 ) from None
-    import pandas as pd
-
-    frames: dict[str, pd.DataFrame] = {}
+    frames: dict[str, dict[str, np.ndarray]] = {}
     for d in ulog.data_list:
         data = d.data
         if "timestamp" not in data:
             continue
         columns = {"t": np.asarray(data["timestamp"], dtype=np.float64) * 1e-6}
         columns.update((k, np.asarray(v)) for k, v in data.items() if k != "timestamp")
-        frames[_stream_name(d.name, d.multi_id)] = pd.DataFrame(columns)
+        frames[_stream_name(d.name, d.multi_id)] = columns
     counts = dict.fromkeys(ulog.message_formats, 0)
-    counts.update({k: len(v) for k, v in frames.items()})
+    counts.update({k: len(v["t"]) for k, v in frames.items()})
     skipped = {}
     if ulog.file_corruption:
         skipped["corrupt regions"] = 1
@@ -204,7 +202,6 @@ def _info_message(payload: bytes) -> tuple[str, Any]:
 
 def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
     """The vectorized reader of well-formed files (see the module docstring); raises _Unusual otherwise."""
-    import pandas as pd
     from numpy.lib.stride_tricks import sliding_window_view
 
     try:
@@ -319,9 +316,9 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
         columns: dict[str, Any] = {"t": stamps.astype(np.float64) * 1e-6}
         columns.update((f, rec[f]) for f in dtype.names if f != "timestamp")
         items.append(((name, multi_id), _stream_name(name, multi_id), columns))
-    frames = {stream: pd.DataFrame(columns) for _, stream, columns in sorted(items, key=lambda i: i[0])}
+    frames = {stream: columns for _, stream, columns in sorted(items, key=lambda i: i[0])}
     counts = dict.fromkeys(formats, 0)
-    counts.update({k: len(v) for k, v in frames.items()})
+    counts.update({k: len(v["t"]) for k, v in frames.items()})
     skipped = {"logger dropouts": dropouts} if dropouts else {}
     info = {
         "start_timestamp": int(start_timestamp),

@@ -130,10 +130,14 @@ class PartDistance:
         w = np.exp(theta)
         return np.diag(w[: self.n]), np.diag(np.r_[1.0, w[self.n :]])
 
-    def problem(self) -> tuple[Callable, Callable]:
+    def problem(self, warm: bool = False) -> tuple[Callable, Callable]:
         """``(residual, jacobian)`` of the whitened gain mismatch ``W (k(θ) − k̂)``; a point where the DARE has no
-        solution gets a large residual and a zero Jacobian."""
-        lqr = memo_lqr(self.A, self.B, self.weights)
+        solution gets a large residual and a zero Jacobian.
+
+        ``warm``: each DARE by Newton's method from the last point's gain (a profile walks through nearby θ);
+        the minimum-distance estimate itself uses SciPy's solver at every point.
+        """
+        lqr = memo_lqr(self.A, self.B, self.weights, warm=warm)
         big = np.full(self.k_hat.size, 1e6)
 
         def residual(theta: np.ndarray) -> np.ndarray:
@@ -169,7 +173,7 @@ class _Joint:
 
     def __init__(self, parts: Sequence[PartDistance], coef: dict[int, float]) -> None:
         self.parts = list(parts)
-        self.fns = [p.problem() for p in self.parts]
+        self.fns = [p.problem(warm=True) for p in self.parts]
         self.offsets = np.cumsum([0, *[p.d for p in self.parts]])
         self.size = int(self.offsets[-1])
         self.coef = dict(coef)

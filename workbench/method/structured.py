@@ -114,22 +114,31 @@ def _diag_start(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarray:
 
 
 def memo_lqr(
-    A: np.ndarray, B: np.ndarray, weights: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    A: np.ndarray, B: np.ndarray, weights: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], *,
+    warm: bool = False,
 ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray] | None]:
     """``lqr(p)``: the LQR gain ``K`` (u = K x) and ``H = R + Bᵀ P B`` of the cost ``weights(p) = (Q, R)``, or None
     where the DARE has no solution; the last solved point is kept, as least_squares asks for the residual and
-    the Jacobian at the same point."""
+    the Jacobian at the same point.
+
+    ``warm``: solve each DARE by Newton's method from the last solved gain (:func:`workbench.method.dare.solve_lqr`),
+    for callers that move through nearby weights (a profile); the first point and any failure use SciPy's solver.
+    """
+    from workbench.method.dare import solve_lqr
+
     memo: dict[bytes, tuple[np.ndarray, np.ndarray] | None] = {}
+    last: list[np.ndarray] = []
 
     def lqr(p: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         key = p.tobytes()
         if key not in memo:
             Q, R = weights(p)
             try:
-                P = scipy.linalg.solve_discrete_are(A, B, Q, R)
-                H = R + B.T @ P @ B
+                K, H, _ = solve_lqr(A, B, Q, R, last[0] if last else None)
                 memo.clear()
-                memo[key] = (-np.linalg.solve(H, B.T @ P @ A), H)
+                memo[key] = (K, H)
+                if warm:
+                    last[:] = [K]
             except (np.linalg.LinAlgError, ValueError):
                 memo[key] = None
         return memo[key]

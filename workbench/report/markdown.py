@@ -397,6 +397,9 @@ class ReportInputs:
     objectives: Mapping[str, Any] = field(default_factory=dict)
     envelope: pd.DataFrame | None = None
     calibration: pd.DataFrame | None = None
+    #: :func:`workbench.study.weights.compare_strategies` of the objectives' ratios when the study computed it
+    #: (``StudyResult.ratio_comparison``); None computes it here.
+    ratio_comparison: pd.DataFrame | None = None
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -494,7 +497,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         obj_rows.append(row)
     if obj_rows:
         md += [_md_table(pd.DataFrame(obj_rows), ".3g"), ""]
-        md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names)
+        md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names,
+                                        inputs.ratio_comparison)
         save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
         md += ["![Normalized Q and R](figures/objective.png)", "",
                "*Normalized cost blocks (M / λmax(M)) per strategy; the attitude weight is outlined. The SDP returns "
@@ -577,7 +581,8 @@ def _envelope_line(envelope: pd.DataFrame | None) -> list[str]:
 
 
 def _objective_interval_notes(
-    objectives: Mapping[str, Any], labels: Sequence[str], state_names: Sequence[str], input_names: Sequence[str]
+    objectives: Mapping[str, Any], labels: Sequence[str], state_names: Sequence[str], input_names: Sequence[str],
+    table: pd.DataFrame | None = None,
 ) -> list[str]:
     """What the intervals are, and the weight ratios inside coupled parts compared between strategies."""
     from workbench.study.weights import compare_strategies, format_interval
@@ -591,7 +596,8 @@ def _objective_interval_notes(
     ratios = {lb: objectives[lb].ratios for lb in labels if lb in objectives and objectives[lb].ratios}
     if not ratios:
         return md
-    table = compare_strategies(ratios)
+    if table is None:
+        table = compare_strategies(ratios)
     gains = sorted({objectives[lb].ratio_gain for lb in ratios})
     rows = []
     for r in table.itertuples():
@@ -649,6 +655,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
             stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,
             envelope=result.table[result.table["metric"] == "left_envelope"], calibration=result.calibration,
+            ratio_comparison=getattr(result, "ratio_comparison", None),
             n_steps=result.n_steps, samples=result.samples, seed=result.seed, notes=notes, title=title,
         ),
     )

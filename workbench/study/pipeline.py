@@ -69,6 +69,10 @@ class StudyResult:
     #: With ``bootstrap > 0``: per label, the bootstrap intervals of the proposed model's task objective and of its
     #: weight ratios (:class:`workbench.study.weights.ObjectiveIntervals`).
     objectives: dict[str, Any] = field(default_factory=dict)
+    #: The weight ratios of ``objectives`` compared between labels (:func:`workbench.study.weights.compare_strategies`),
+    #: computed once here because its factor intervals are the costliest profiles of a study and both the report and
+    #: the command line show them; None without ratios.
+    ratio_comparison: pd.DataFrame | None = None
 
     @property
     def rmse(self) -> pd.DataFrame:
@@ -286,7 +290,14 @@ def run_study(
     table = pd.concat(rmse_parts, ignore_index=True)
     metric = ev.primary_metric(system)
     stats_text = _subject_stats(ev, table, demos, metric, metric_unit(system, metric))
+    t0 = time.perf_counter()
     objectives = _objective_intervals(models, train, int(bootstrap), seed)
+    if objectives:
+        timings["objective intervals"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ratio_comparison = _ratio_comparison(objectives)
+    if ratio_comparison is not None:
+        timings["ratio comparison"] = time.perf_counter() - t0
     calibration = pd.concat(cov_parts, ignore_index=True) if cov_parts else None
     return StudyResult(
         demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
@@ -294,8 +305,16 @@ def run_study(
         calibration=calibration,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
         stats_text=stats_text, n_steps=n_steps, samples=samples, seed=seed, timings=timings, failures=failures,
-        objectives=objectives,
+        objectives=objectives, ratio_comparison=ratio_comparison,
     )
+
+
+def _ratio_comparison(objectives: dict[str, Any]) -> pd.DataFrame | None:
+    """The labels' weight ratios and their factors against the first label's, or None where no label has ratios."""
+    from workbench.study.weights import compare_strategies
+
+    ratios = {lb: oi.ratios for lb, oi in objectives.items() if oi.ratios is not None}
+    return compare_strategies(ratios) if ratios else None
 
 
 def _objective_intervals(
