@@ -293,11 +293,11 @@ def test_per_subject_identifies_each_plant_without_the_held_out_trials():
     ds = parts[0] + parts[1] + parts[2]
     seen: list[set[str]] = []
 
-    def make_models(train):
+    def models_for_subject(train):
         seen.append(set(train.ids))
         return make_models(LinearSystem.identify(train, structure="free"), n_components=2)
 
-    res = ev.per_subject(make_models, ds, n_test=1, n_steps=5)
+    res = ev.per_subject(models_for_subject, ds, n_test=1, n_steps=5)
     tested = set(res.table["trial"])
     assert len(seen) == 3 and all(not ids & tested for ids in seen)
     assert "persistence" in res.groups and res.metric == "rmse_position"

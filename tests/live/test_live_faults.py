@@ -119,6 +119,7 @@ def test_kernel_drops_are_counted():
         assert link.kernel_drops() > 0 and link.kernel_drops() + received == 400
 
 
+@pytest.mark.slow  # timing-dependent: shedding starts only when the backlog outlasts 0.25 s of reading
 def test_a_junk_flood_is_shed_and_predictions_stay_current(model, records):
     """Junk floods the port while the sample log's frames arrive; predictions come from every frame, the junk
     behind a full batch is shed unparsed and said so."""
