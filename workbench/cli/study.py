@@ -41,7 +41,7 @@ def cmd_evaluate(ctx: Context) -> int:
             result = study.run_loso(
                 ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
                 n_components=a.n_components,
-                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex,
+                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s,
             )
         else:
             result = study.run_study(
@@ -56,6 +56,7 @@ def cmd_evaluate(ctx: Context) -> int:
                 seed=a.seed,
                 progress=ctx.progress,
                 executor=ex,
+                stride_s=a.stride_s,
             )
     if loso and getattr(result.system, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
@@ -80,6 +81,7 @@ def _evaluate_per_subject(ctx: Context, ds: Any) -> int:
 
     from workbench.models.factory import METHOD_TITLES, make_models
     from workbench.study import evaluate
+    from workbench.study.paired import paired_differences
     from workbench.study.pipeline import verdicts
 
     a = ctx.args
@@ -106,10 +108,17 @@ def _evaluate_per_subject(ctx: Context, ds: Any) -> int:
     for i, subject in enumerate(res.subjects):
         table.add_row(subject, *[f"{g[i]:.4g}" for g in res.groups.values()])
     ctx.say(table)
-    ctx.say(f"one-way ANOVA across methods: {res.anova}")
+    ctx.say(f"{res.rm_anova} (methods are a within-subject factor: every subject is scored under each)")
+    ctx.say("paired t-tests over subjects (Holm-corrected):")
     for r in res.ttests.values():
         ctx.say(f"  {r}")
-    for line in verdicts(res.table.assign(label=""), res.metric):
+    paired = paired_differences(res.table.assign(label=""), res.metric,
+                                subjects={str(t): str(s) for t, s in zip(res.table["trial"], res.table["subject"],
+                                                                          strict=True)}, seed=a.seed)
+    for d in paired:
+        ctx.say(f"proposed vs {METHOD_TITLES.get(d.baseline, d.baseline)}: {d.sentence()} ({d.n_trials} held-out "
+                f"trials; bootstrap over {d.resampled})")
+    for line in verdicts(paired, res.metric):
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
     if a.output:
         atomic_write_table(res.table, a.output)
@@ -176,7 +185,7 @@ def cmd_report(ctx: Context) -> int:
         result = study.run_study(
             ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
             n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
-            progress=ctx.progress, executor=ex, bootstrap=a.bootstrap,
+            progress=ctx.progress, executor=ex, bootstrap=a.bootstrap, stride_s=a.stride_s,
         )
     print_plant(ctx, result.system, "(plant from the training trials)")
     require_proposed(result)
@@ -225,7 +234,7 @@ def cmd_demo(ctx: Context) -> int:
         ds, study_plant(a.system), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
         n_components=a.n_components,
         samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
-        bootstrap=a.bootstrap,
+        bootstrap=a.bootstrap, stride_s=a.stride_s,
     )
     timings["fit + compare"] = time.perf_counter() - t0 - timings["import"]
     require_proposed(result)

@@ -11,7 +11,8 @@ Agg canvas — no pyplot, no global backend, so the report runs headless and nev
 * ``rmse.png`` — horizon RMSE (eq. (35)) per method as box plots;
 * ``data_efficiency.png`` — RMSE against the number of training demonstrations;
 
-and for multi-subject data the ANOVA / pairwise t-test table.
+and the comparison's statistics: paired differences with bootstrap intervals over whole trials, Wilcoxon / paired
+t-tests (Holm) and the mixed-effects model (:mod:`workbench.study.findings`).
 """
 
 from __future__ import annotations
@@ -390,6 +391,7 @@ class ReportInputs:
     objectives: Mapping[str, Any] = field(default_factory=dict)
     envelope: pd.DataFrame | None = None
     calibration: pd.DataFrame | None = None
+    paired: Sequence[Any] = ()
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -442,11 +444,16 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     for label in labels:
         o = getattr(inputs.models[label], "objective_", None)
         if o is None:
+            reason = getattr(inputs.models[label], "objective_error_", None)
+            if reason:
+                obj_rows.append({"strategy": label, "α*": f"not found: {reason}"})
             continue
         n = len(state_names)
         Mn = np.asarray(o.M_normalized)
         oi = inputs.objectives.get(label)
-        row = {"strategy": label, "α*": float(o.alpha), "forward-gain error": float(o.forward_gain_error)}
+        choice = getattr(inputs.models[label], "gain_choice_", None)
+        row = {"strategy": label, "gain K̂": "" if choice is None else choice.method, "α*": float(o.alpha),
+               "forward-gain error": float(o.forward_gain_error)}
         q, r = np.diag(Mn[:n, :n]), np.diag(Mn[n:, n:])
         if oi is None:
             row.update({f"Q {s}": float(v) for s, v in zip(state_names, q, strict=True)})
@@ -461,6 +468,8 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     if obj_rows:
         md += [_md_table(pd.DataFrame(obj_rows), ".3g"), ""]
         md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names)
+        md += [f"- {lb}: {c}" for lb in labels if (c := getattr(inputs.models[lb], "gain_choice_", None))] + [""]
+    if any(getattr(m, "objective_", None) is not None for m in inputs.models.values()):
         save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
         md += ["![Normalized Q and R](figures/objective.png)", "",
                "*Normalized cost blocks (M / λmax(M)) per strategy; the attitude weight is outlined. The SDP returns "
@@ -503,7 +512,7 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     if inputs.rmse is not None and len(inputs.rmse):
         metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
-        md += [_md_table(improvement_table(inputs.rmse)), ""]
+        md += [_md_table(improvement_table(inputs.rmse, inputs.paired)), ""]
         md += _envelope_line(inputs.envelope)
         md += [f"**{line}**\n" for line in inputs.verdicts]
         md += [
@@ -526,7 +535,7 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
                f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations.*",
                ""]
     if inputs.stats:
-        md += ["## Multi-subject statistics", "", inputs.stats, ""]
+        md += ["## Statistics of the comparison", "", inputs.stats, ""]
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(md).rstrip() + "\n")
     return path
@@ -616,5 +625,6 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
             stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,
             envelope=result.table[result.table["metric"] == "left_envelope"], calibration=result.calibration,
             n_steps=result.n_steps, samples=result.samples, seed=result.seed, notes=notes, title=title,
+            paired=() if result.statistics is None else result.statistics.paired,
         ),
     )
