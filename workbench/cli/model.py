@@ -12,6 +12,7 @@ from workbench.cli.context import (
     demos_at_model_dt,
     load_demos,
     load_model_file,
+    pilot_only,
     print_plant,
     steps_of,
     system_for,
@@ -22,7 +23,7 @@ __all__ = []
 
 def cmd_fit(ctx: Context) -> int:
     a = ctx.args
-    ds = load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None)
+    ds = pilot_only(ctx, load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None), a.keep_still)
     system = system_for(ds, a.system)
     print_plant(ctx, system)
     t0 = time.perf_counter()

@@ -159,6 +159,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "and reg_covar by cross-validation over the trials (held-out 3 s predictions)")
     p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
                    help="the proposed model (default) or one of its baselines")
+    p.add_argument("--keep-still", action="store_true",
+                   help="keep segments in which no input moves beyond its resolution (default: reported and left "
+                        "out: no pilot was flying them)")
     p.add_argument("--gain", choices=["iv-or-direct", "direct", "dmd", "iv"], default="iv-or-direct",
                    help="how K̂ is estimated: instrumental variables where their instruments are relevant, else least "
                         "squares (iv-or-direct, default; the choice and its reason are printed), least squares "

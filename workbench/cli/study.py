@@ -14,6 +14,7 @@ from workbench.cli.context import (
     Context,
     is_demo_file,
     load_demos,
+    pilot_only,
     print_plant,
     require_proposed,
     steps_of,
@@ -29,7 +30,7 @@ def cmd_evaluate(ctx: Context) -> int:
     from workbench.study import pipeline as study
 
     a = ctx.args
-    ds = load_demos(ctx, a.demos, a.mapping, a.label)
+    ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     if a.per_subject:
         return _evaluate_per_subject(ctx, ds)
     smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
@@ -140,6 +141,16 @@ def _print_study(ctx: Context, result: Any) -> None:
         for row in result.coverage.itertuples(index=False):
             cov.add_row(*[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row])
         ctx.say(cov)
+    check = getattr(result, "calibration_check", None)
+    if check is not None and len(check):
+        from workbench.study.calibration import check_table
+
+        shown = check_table(check)
+        t = Table(*shown.columns, title="one-step calibration: inputs at a limit excluded, against the sampling "
+                                        "spread (binomial over effective samples)")
+        for row in shown.itertuples(index=False):
+            t.add_row(*[str(v) for v in row])
+        ctx.say(t)
     if result.stats_text:
         ctx.say(result.stats_text)
     _print_objective_comparison(ctx, result)
@@ -180,7 +191,7 @@ def cmd_report(ctx: Context) -> int:
     from workbench.study import pipeline as study
 
     a = ctx.args
-    ds = load_demos(ctx, a.demos, a.mapping, a.label)
+    ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     with ctx.executor() as ex:
         result = study.run_study(
             ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
@@ -219,7 +230,7 @@ def cmd_demo(ctx: Context) -> int:
         files = sorted(p for p in logs.iterdir() if p.suffix.lower() in (".tlog", ".mcap", ".csv", ".ulg"))
     timings = {}
     t0 = time.perf_counter()
-    ds = load_demos(ctx, [str(f) for f in files], a.mapping)
+    ds = pilot_only(ctx, load_demos(ctx, [str(f) for f in files], a.mapping), a.keep_still)
     timings["import"] = time.perf_counter() - t0
     by_format: dict[str, int] = {}
     for f in files:

@@ -392,6 +392,7 @@ class ReportInputs:
     envelope: pd.DataFrame | None = None
     calibration: pd.DataFrame | None = None
     paired: Sequence[Any] = ()
+    calibration_check: pd.DataFrame | None = None
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -493,6 +494,15 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     if inputs.coverage is not None and len(inputs.coverage):
         md += ["One-step coverage of ŵ by the GMR bands on the test trials:", "",
                _md_table(inputs.coverage, ".1f"), ""]
+    if inputs.calibration_check is not None and len(inputs.calibration_check):
+        from workbench.study.calibration import check_table
+
+        md += ["Calibration at 1σ, 2σ, 3σ: inputs at their limits (the plant's bounds, or a stick pinned at the "
+               "extreme of its travel) are censored, not Gaussian, so they are counted apart and the band is "
+               "judged without them; it is called too narrow or too wide only where the share inside lies outside "
+               "the binomial 95 % range of the nominal share over the effective number of samples (samples within "
+               "a trial are correlated: N_eff = N(1 − ρ)/(1 + ρ), ρ the lag-1 autocorrelation of inside/outside).",
+               "", _md_table(check_table(inputs.calibration_check)), ""]
     if inputs.calibration is not None and len(inputs.calibration):
         save_figure(fig_calibration(inputs.calibration), fig_dir / "calibration.png")
         md += ["![One-step band calibration](figures/calibration.png)", "",
@@ -626,5 +636,6 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
             envelope=result.table[result.table["metric"] == "left_envelope"], calibration=result.calibration,
             n_steps=result.n_steps, samples=result.samples, seed=result.seed, notes=notes, title=title,
             paired=() if result.statistics is None else result.statistics.paired,
+            calibration_check=result.calibration_check,
         ),
     )

@@ -69,6 +69,12 @@ class StudyResult:
     #: With ``bootstrap > 0``: per label, the bootstrap intervals of the proposed model's task objective and of its
     #: weight ratios (:class:`workbench.study.weights.ObjectiveIntervals`).
     objectives: dict[str, Any] = field(default_factory=dict)
+    #: One-step calibration per label, input and level (1σ, 2σ, 3σ): coverage with and without inputs at their
+    #: limits, and whether it is off by more than sampling allows (:func:`workbench.study.calibration.
+    #: calibration_check`).
+    calibration_check: pd.DataFrame | None = None
+    #: The counts behind ``calibration_check`` (they add up over folds).
+    calibration_counts: pd.DataFrame | None = None
     #: Steps between the starts of the scored windows in a test trial (None: each trial's first state only).
     stride_steps: int | None = None
     #: The paired differences, tests and mixed model of the headline metric
@@ -229,12 +235,13 @@ def run_study(
     test trial shapes (A, B). ``StudyResult.system`` is the plant used.
     """
     from workbench.study import evaluate as ev
+    from workbench.study.calibration import calibration_counts
 
     stride = _stride_steps(stride_s, demos.dt)
     labels = demos.labels or [None]
     timings: dict[str, float] = {}
     train, test, models, baselines = {}, {}, {}, {}
-    rmse_parts, cov_parts, eff_parts = [], [], []
+    rmse_parts, cov_parts, eff_parts, check_parts = [], [], [], []
     splits = {}
     for label in labels:
         ds = demos if label is None else demos.by_label(label)
@@ -271,6 +278,7 @@ def run_study(
                 cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, CALIBRATION_LEVELS,
                                                                method="proposed"))
                 cov_parts.append(cov.assign(label=label))
+                check_parts.append(calibration_counts(fitted["proposed"], list(te)).assign(label=label))
             timings[f"compare {label}"] = time.perf_counter() - t0
             if efficiency:
                 t0 = time.perf_counter()
@@ -313,6 +321,8 @@ def run_study(
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
         stats_text=statistics.text(), n_steps=n_steps, samples=samples, seed=seed, timings=timings,
         failures=failures, objectives=objectives, stride_steps=stride, statistics=statistics,
+        calibration_check=_check(check_parts),
+        calibration_counts=pd.concat(check_parts, ignore_index=True) if check_parts else None,
     )
 
 
@@ -403,7 +413,8 @@ def run_loso(
         stats_text=statistics.text(), n_steps=n_steps,
         samples=samples, seed=seed, timings={k: v for _, r in folds for k, v in r.timings.items()},
         failures=failures, plants={trial: r.system for trial, r in folds}, stride_steps=stride,
-        statistics=statistics,
+        statistics=statistics, calibration_check=_check([r.calibration_counts for _, r in folds
+                                                         if r.calibration_counts is not None]),
     )
 
 
@@ -414,6 +425,14 @@ def _coverage_table(cov: pd.DataFrame) -> pd.DataFrame:
     nominal = dict(zip(cov["n_sigma"], cov["nominal"], strict=True))
     wide.columns = [f"inside {c:g}σ [%] (nominal {100 * nominal[c]:.1f})" for c in wide.columns]
     return (100.0 * wide).reset_index()
+
+
+def _check(parts: list[pd.DataFrame]) -> pd.DataFrame | None:
+    """The calibration check of the summed counts of every test set (label, fold)."""
+    from workbench.study.calibration import calibration_check
+
+    parts = [p for p in parts if p is not None and len(p)]
+    return calibration_check(pd.concat(parts, ignore_index=True)) if parts else None
 
 
 def _stride_steps(stride_s: float | None, dt: float) -> int | None:
