@@ -41,7 +41,7 @@ def test_a_failed_inverse_lqr_leaves_a_model_that_predicts(failing_sdp, tmp_path
 
 
 def test_the_study_keeps_the_proposed_model_when_its_objective_is_not_found(failing_sdp):
-    ds = simulate_landings("CS1", 6, seed=22, time_limit=4.0)
+    ds = simulate_landings("CS1", 8, seed=21)
     res = run_study(ds, planar_quadrotor(), n_components=2, samples=0, efficiency=None, n_steps=20)
     assert "proposed" in set(res.table["method"]) and res.models
     assert not res.failures

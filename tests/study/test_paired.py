@@ -2,30 +2,12 @@
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import pandas as pd
 import pytest
 
 from workbench.study.findings import study_statistics, windows_sentence
 from workbench.study.paired import MIN_SUBJECTS, paired_difference, paired_differences, per_trial
-
-CLAIM = re.compile(r"(lower|higher) by (\d+) % \[(-?\d+) %, (-?\d+) %\]")
-
-
-def assert_claims_shown(text: str) -> int:
-    """Every stated difference in ``text`` has an interval that shows it, and no other percentage claims one.
-
-    Returns the number of stated differences (so a caller can check that the text states any at all).
-    """
-    claims = CLAIM.findall(text)
-    for _, est, lo, hi in claims:
-        assert 0 < int(lo) <= int(est) <= int(hi), f"a difference stated beyond its interval: {est} [{lo}, {hi}]"
-    # the old style, "39.1 % lower", states a difference with no interval
-    loose = re.findall(r"\d+(?:\.\d+)? % (?:lower|higher)", text)
-    assert not loose, f"differences without intervals: {loose}"
-    return len(claims)
 
 
 def _table(rng, n_trials, windows, ratio, noise, subjects=None):
@@ -53,7 +35,7 @@ def test_point_estimate_is_the_ratio_of_per_trial_means():
     assert d.lo < d.change < d.hi
 
 
-def test_sentence_comes_from_the_interval():
+def test_sentence_comes_from_the_interval(assert_claims_shown):
     rng = np.random.default_rng(4)
     lower, _ = _table(rng, 12, 3, 0.7, 0.05)
     same, _ = _table(rng, 12, 3, 1.0, 0.3)
@@ -96,7 +78,7 @@ def test_subjects_are_resampled_only_where_there_are_enough():
     assert d_many.resampled == "subjects, then trials within each" and d_many.n_subjects == MIN_SUBJECTS
 
 
-def test_study_statistics_text_states_only_what_its_intervals_show():
+def test_study_statistics_text_states_only_what_its_intervals_show(assert_claims_shown):
     rng = np.random.default_rng(6)
     a, subj = _table(rng, 10, 4, 0.7, 0.05, subjects=2)
     b, _ = _table(rng, 10, 4, 1.0, 0.4)

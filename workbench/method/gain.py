@@ -309,12 +309,18 @@ def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT) -
         return estimate_gain(demos, system, method), GainChoice(method, method, "as requested")
     A, B = system_matrices(system.A, system.B)
     blocks = demo_blocks(demos, *B.shape)
+    relevance = float("nan")
     try:
         if not blocks:
             raise DataError("no demonstration has two or more samples")
-        X = np.concatenate([b[0] for b in blocks], axis=1)
-        relevance = iv_relevance(X, [b[0].shape[1] for b in blocks])
-        K = estimate_gain(demos, system, "iv")
+        X, U = (np.concatenate([b[i] for b in blocks], axis=1) for i in (0, 1))
+        # one first stage for the relevance and the estimate (it is most of the cost of "iv")
+        X_hat, relevance = _first_stage(X, [b[0].shape[1] for b in blocks])
+        if relevance < IV_MIN_RELEVANCE:
+            raise ModelError(f"the instruments (initial states × time) leave a state direction unexcited: its "
+                             f"squared canonical correlation with them is {relevance:.3g} < {IV_MIN_RELEVANCE:g}")
+        K = np.linalg.lstsq(X_hat.T, U.T, rcond=None)[0].T
+        check_stabilizing(A, B, K)
     except (ModelError, np.linalg.LinAlgError) as exc:
         why = " ".join(str(exc).split()) or type(exc).__name__
         return estimate_gain(demos, system, "direct"), GainChoice(method, "direct", f"fallback from iv: {why}")

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+import scipy.stats
 
 from workbench.errors import DataError
 
@@ -46,7 +47,7 @@ class PairedDifference:
     ----------
     change, lo, hi : float
         ``1 − mean(method) / mean(baseline)`` over trials (each trial the mean over its windows) and its
-        bootstrap percentile interval, as fractions (0.12 = 12 % lower).
+        bootstrap interval (expanded percentile), as fractions (0.12 = 12 % lower).
     mean_method, mean_baseline : float
         The two means over trials.
     n_trials, n_windows, n_subjects : int
@@ -144,19 +145,35 @@ def _count_weights(groups: Sequence[np.ndarray], n: int, n_boot: int, two_stage:
     return W
 
 
+def _expanded_tail(ci: float, n_units: int) -> float:
+    """The percentile (per tail, in %) of the expanded percentile interval for ``n_units`` resampled units.
+
+    The plain percentile interval is too narrow for few units (it acts as if the spread were known and divides
+    by n, not n − 1); widening the tail to ``Φ(−√(n/(n−1)) t_{n−1, 1−α/2})`` gives it the coverage of a t
+    interval (Hesterberg 2015, "What teachers should know about the bootstrap", sec. 5). With 6 trials a 95 %
+    interval uses the 0.24 % and 99.76 % points, with 30 trials 2.0 % and 98.0 %.
+    """
+    alpha = 1.0 - ci / 100.0
+    if n_units < 2:
+        return 100.0 * alpha / 2.0
+    z = np.sqrt(n_units / (n_units - 1.0)) * scipy.stats.t.ppf(1.0 - alpha / 2.0, n_units - 1)
+    return 100.0 * float(scipy.stats.norm.cdf(-z))
+
+
 def paired_difference(
     wide: pd.DataFrame,
     method: str,
     baseline: str,
     metric: str = "",
     label: str = "",
-    n_boot: int = 2000,
+    n_boot: int = 4000,
     ci: float = 95.0,
     seed: int = 0,
 ) -> PairedDifference:
     """``method`` against ``baseline`` on the rows of a :func:`per_trial` table (trials where both were scored).
 
-    The bootstrap draws whole trials (see the module's text for subjects); percentile interval at ``ci``.
+    The bootstrap draws whole trials (see the module's text for subjects); expanded percentile interval at
+    ``ci`` (:func:`_expanded_tail`: the plain percentile interval under-covers with few units).
     """
     if method not in wide.columns or baseline not in wide.columns:
         raise DataError(f"no scores of {method!r} and {baseline!r} on the same trials")
@@ -179,7 +196,7 @@ def paired_difference(
     with np.errstate(divide="ignore", invalid="ignore"):
         boot = 1.0 - (W @ a) / (W @ b)
     boot = boot[np.isfinite(boot)]
-    tail = (100.0 - ci) / 2.0
+    tail = _expanded_tail(ci, len(groups) if two_stage else n)
     lo, hi = (np.percentile(boot, [tail, 100.0 - tail]) if boot.size else (np.nan, np.nan))
     return PairedDifference(
         method=method, baseline=baseline, metric=metric, label=label, change=float(1.0 - a.mean() / b.mean()),
@@ -195,7 +212,7 @@ def paired_differences(
     method: str = "proposed",
     baselines: Sequence[str] | None = None,
     subjects: Mapping[str, str] | None = None,
-    n_boot: int = 2000,
+    n_boot: int = 4000,
     ci: float = 95.0,
     seed: int = 0,
 ) -> list[PairedDifference]:
