@@ -169,7 +169,7 @@ def large(n_subjects: int = 200, workers: int = 2) -> dict:
     wall = time.perf_counter() - t0
     return {"subjects": n_subjects, "workers": workers, "wall_s": wall, "cluster_start_s": t_start,
             "simulate_s": t_sim, "client_peak_mb": _maxrss_mb(), "worker_peak_mb": worker_mb,
-            "rows": len(res.table), "anova": str(res.anova), "load": f"{load0} → {_load()}"}
+            "rows": len(res.table), "anova": str(res.rm_anova), "load": f"{load0} → {_load()}"}
 
 
 def estimate(sp: dict, sizes: dict, n_subjects: int = 2000, nodes: int = 32, cores_per_node: int = 16) -> dict:
@@ -278,7 +278,7 @@ def _report(sp: dict, sizes: dict, lg: dict, est: dict) -> str:
         f"If the client stages the set (``--staging``), writing it costs {t['stage_s']:.0f} s up front; a "
         "dataset imported to shared storage (``workbench import LOGS -o /shared/ds/``) needs none.",
         f"* **Memory**: a worker holds one subject at a time (peak {max(lg['worker_peak_mb']):.0f} MB here); the "
-        f"client holds the result tables ({t['result_mb']:.0f} MB) and the ANOVA.",
+        f"client holds the result tables ({t['result_mb']:.0f} MB) and the repeated-measures ANOVA.",
         f"* **Total** ≈ compute + scheduler ≈ **{t['total_s']:.0f} s** (≈ {t['total_s'] / 60:.1f} min) from a "
         f"dataset on shared storage, ≈ {t['total_staged_s']:.0f} s when the client stages an in-memory set first; "
         "plus the cluster's start-up (workers importing the workbench: "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -44,3 +45,27 @@ def cs2_demos():
 def external():
     """``external("dronekit_flight.tlog")`` → the path, skipping (or failing in CI) where it is absent."""
     return external_file
+
+
+CLAIM = re.compile(r"(lower|higher) by (\d+) % \[(-?\d+) %, (-?\d+) %\]")
+
+
+def _claims_shown(text: str) -> int:
+    """Every stated difference in ``text`` has an interval that shows it, and no other percentage claims one.
+
+    Returns the number of stated differences (so a caller can check that the text states any at all).
+    """
+    claims = CLAIM.findall(text)
+    for _, est, lo, hi in claims:
+        assert 0 < int(lo) <= int(est) <= int(hi), f"a difference stated beyond its interval: {est} [{lo}, {hi}]"
+    # the old style, "39.1 % lower", states a difference with no interval
+    loose = re.findall(r"\d+(?:\.\d+)? % (?:lower|higher)", text)
+    assert not loose, f"differences without intervals: {loose}"
+    return len(claims)
+
+
+@pytest.fixture
+def assert_claims_shown():
+    """Check that every difference a text states ("lower by 12 % [4 %, 19 %]") has an interval that shows it, and
+    that no percentage states one without an interval; returns the number of stated differences."""
+    return _claims_shown

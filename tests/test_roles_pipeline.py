@@ -18,7 +18,7 @@ from scipy.linalg import solve_discrete_are
 from workbench.cli import main
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
-from workbench.models import HumanBehaviorModel, PersistenceModel, load_model
+from workbench.models import HumanBehaviorModel, PersistenceModel, load_model, make_models
 from workbench.plant.system import LinearSystem, planar_quadrotor
 from workbench.study import evaluate as ev
 from workbench.study.pipeline import run_study, verdicts
@@ -305,18 +305,22 @@ def test_per_subject_identifies_each_plant_without_the_held_out_trials():
 
 # -- honest verdicts -----------------------------------------------------------------------------------------
 def test_verdict_says_plainly_when_the_proposed_model_is_not_better():
+    from workbench.study.paired import paired_differences
+
     rng = np.random.default_rng(0)
     rows = []
     for method, scale in (("proposed", 1.0), ("ioc_only", 0.9), ("gmr_only", 1.5), ("persistence", 2.0)):
         for t in range(5):
             rows.append((f"tr{t}", "L", 0, method, "rmse_position", scale * (1 + 0.01 * rng.random())))
     table = pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
-    lines = verdicts(table, "rmse_position", "m")
-    mean = table.groupby("method")["value"].mean()
-    assert len(lines) == 1 and "not better than IOC-only" in lines[0] and "persistence" not in lines[0]
-    assert f"{mean['proposed']:.3g} vs {mean['ioc_only']:.3g} m" in lines[0]
+    paired = paired_differences(table, "rmse_position", n_boot=500)
+    lines = verdicts(paired, "rmse_position")
+    ioc = next(d for d in paired if d.baseline == "ioc_only")
+    assert ioc.hi < 0  # the proposed model is clearly worse here
+    assert len(lines) == 1 and "not shown to be better than IOC-only" in lines[0] and "persistence" not in lines[0]
+    assert ioc.sentence() in lines[0] and ioc.sentence().startswith("higher by")
     better = table.assign(value=np.where(table["method"] == "proposed", 0.5 * table["value"], table["value"]))
-    assert verdicts(better, "rmse_position") == []
+    assert verdicts(paired_differences(better, "rmse_position", n_boot=500), "rmse_position") == []
 
 
 # -- no state is named or indexed in generic code --------------------------------------------------------------

@@ -61,7 +61,7 @@ def test_report_links_every_figure(report):
     assert text.startswith("# Workbench report")
     for name in FIGURES:
         assert f"](figures/{name}.png)" in text
-    assert "## Multi-subject statistics" in text
+    assert "## Statistics of the comparison" in text
     assert "a note" in text
 
 
@@ -79,15 +79,20 @@ def test_figures_are_non_trivial_images(report, name):
 
 
 def test_improvement_table_is_computed_from_the_rmse(report):
+    from workbench.study.paired import paired_differences
+
     rmse = report["rmse"]
-    tab = improvement_table(rmse)
+    paired = paired_differences(rmse, "rmse_position", n_boot=500)
+    tab = improvement_table(rmse, paired)
     row = tab[(tab["label"] == "CS1") & (tab["metric"] == "rmse_position")].iloc[0]
     sel = rmse[(rmse["label"] == "CS1") & (rmse["metric"] == "rmse_position")]
-    means = sel.groupby("method")["value"].mean()
+    means = sel.groupby(["method", "trial"])["value"].mean().groupby("method").mean()  # every trial weighs the same
     assert row["proposed"] == pytest.approx(means["proposed"])
     assert row["IOC-only"] == pytest.approx(means["ioc_only"])
-    change = 100 * (1 - means["proposed"] / means["ioc_only"])
-    assert row["vs IOC-only"] == f"{abs(change):.1f} % {'lower' if change >= 0 else 'higher'}"
+    d = next(d for d in paired if d.label == "CS1" and d.baseline == "ioc_only")
+    assert d.change == pytest.approx(1 - means["proposed"] / means["ioc_only"])
+    assert row["vs IOC-only"] == d.sentence()  # the words come from the interval, not from the two means
+    assert "vs IOC-only" not in improvement_table(rmse).columns  # no interval, no comparison in words
 
 
 def test_objective_table_matches_the_model(report):

@@ -13,7 +13,7 @@ from workbench.errors import DataError
 from workbench.models import HumanBehaviorModel, IOCOnlyModel
 from workbench.sim.landing import simulate_landings, simulate_study
 from workbench.study import evaluate as ev
-from workbench.study.stats import anova_oneway, pairwise_ttests
+from workbench.study.stats import pairwise_ttests, repeated_measures_anova
 
 
 @pytest.fixture(scope="module")
@@ -142,19 +142,23 @@ def test_data_efficiency_refits_on_subsets(quadrotor, small):
 # -------------------------------------------------------------------------------------------- statistics
 
 
-def test_anova_matches_scipy_and_eta_squared_by_hand():
+def test_repeated_measures_anova_matches_the_within_subject_sums_of_squares():
+    """Methods are a within-subject factor: F = MS_method / MS_(method × subject), computed by hand."""
     rng = np.random.default_rng(1)
-    groups = {"a": rng.normal(0, 1, 10), "b": rng.normal(0.5, 1, 10), "c": rng.normal(1.0, 1, 10)}
-    res = anova_oneway(groups)
-    ref = sps.f_oneway(*groups.values())
-    assert res.F == pytest.approx(ref.statistic) and res.p == pytest.approx(ref.pvalue)
-    assert (res.df_between, res.df_within) == (2, 27)
-    allv = np.concatenate(list(groups.values()))
-    ss_b = sum(len(v) * (v.mean() - allv.mean()) ** 2 for v in groups.values())
-    assert res.eta_squared == pytest.approx(ss_b / np.sum((allv - allv.mean()) ** 2)) == res.eta2
-    assert "F(2, 27)" in str(res)
+    subject = rng.normal(0, 2, 10)  # large subject effects: a between-groups ANOVA would drown in them
+    groups = {"a": subject + rng.normal(0, 0.3, 10), "b": subject + 0.4 + rng.normal(0, 0.3, 10),
+              "c": subject + 0.8 + rng.normal(0, 0.3, 10)}
+    res = repeated_measures_anova(groups)
+    Y = np.column_stack(list(groups.values()))  # subjects × methods
+    n, k = Y.shape
+    ss_method = n * ((Y.mean(axis=0) - Y.mean()) ** 2).sum()
+    ss_error = ((Y - Y.mean(axis=1, keepdims=True) - Y.mean(axis=0, keepdims=True) + Y.mean()) ** 2).sum()
+    F = (ss_method / (k - 1)) / (ss_error / ((k - 1) * (n - 1)))
+    assert res.F == pytest.approx(F) and (res.df_num, res.df_den) == (k - 1, (k - 1) * (n - 1))
+    assert res.p == pytest.approx(sps.f.sf(F, k - 1, (k - 1) * (n - 1)))
+    assert "F(2, 18)" in str(res)
     with pytest.raises(DataError):
-        anova_oneway({"a": [1.0]})
+        repeated_measures_anova({"a": [1.0], "b": [2.0]})
 
 
 def test_pairwise_ttests_paired_and_welch():
@@ -178,7 +182,7 @@ def test_pairwise_ttests_paired_and_welch():
 
 
 def test_multi_subject_study_statistics(quadrotor):
-    """The paper's design: per subject, 10 training trials and 1 test trial; ANOVA across the methods."""
+    """The paper's design: per subject, 10 training trials and 1 test trial; methods compared within subjects."""
     study = simulate_study(n_subjects=4, n_trials=11, strategy="CS1", seed=0)
     tables = []
     for subject in sorted({d.meta["subject"] for d in study}):
@@ -190,15 +194,16 @@ def test_multi_subject_study_statistics(quadrotor):
     df = pd.concat(tables, ignore_index=True)
     groups = ev.method_groups(df, "rmse_position")
     assert {k: len(v) for k, v in groups.items()} == {"proposed": 4, "ioc_only": 4}
-    res = anova_oneway(groups)
+    res = repeated_measures_anova(groups)
     tt = pairwise_ttests(groups)[("proposed", "ioc_only")]
     print(f"\n4 simulated subjects, position RMSE: proposed {groups['proposed'].mean():.3f}, IOC-only "
-          f"{groups['ioc_only'].mean():.3f}; ANOVA {res}; paired t = {tt.t:.3g}, p = {tt.p:.3g}")
-    assert np.isfinite(res.F) and 0 <= res.p <= 1 and res.df_within == 6
+          f"{groups['ioc_only'].mean():.3f}; {res}; paired t = {tt.t:.3g}, p = {tt.p:.3g}")
+    # two methods within subjects: the repeated-measures F is the square of the paired t
+    assert res.F == pytest.approx(tt.t**2) and res.p == pytest.approx(tt.p) and res.df_den == 3
 
 
-def test_per_subject_study_matches_an_independent_anova(quadrotor):
-    """The paper's multi-subject design: a model per subject, one held-out trial each, ANOVA across methods."""
+def test_per_subject_study_compares_methods_within_subjects(quadrotor):
+    """The paper's multi-subject design: a model per subject, one held-out trial each, methods within subjects."""
     study = simulate_study(n_subjects=4, n_trials=8, strategy="CS2", seed=2)
 
     def models():
@@ -214,13 +219,10 @@ def test_per_subject_study_matches_an_independent_anova(quadrotor):
     for method, values in res.groups.items():
         expected = [rows[(rows.subject == s) & (rows.method == method)]["value"].mean() for s in res.subjects]
         np.testing.assert_allclose(values, expected)
-    F, p = sps.f_oneway(*res.groups.values())
-    assert res.anova.F == pytest.approx(F) and res.anova.p == pytest.approx(p)
-    allv = np.concatenate(list(res.groups.values()))
-    ss_between = sum(len(g) * (g.mean() - allv.mean()) ** 2 for g in res.groups.values())
-    assert res.anova.eta_squared == pytest.approx(ss_between / ((allv - allv.mean()) ** 2).sum())
     paired = sps.ttest_rel(res.groups["proposed"], res.groups["ioc_only"])
     assert res.ttests[("proposed", "ioc_only")].p == pytest.approx(paired.pvalue)
-    print(f"\n4 simulated subjects (CS2): {res.anova}; {res.ttests[('proposed', 'ioc_only')]}")
+    # two methods within subjects: the repeated-measures F is the square of the paired t
+    assert res.rm_anova.F == pytest.approx(paired.statistic**2) and res.rm_anova.p == pytest.approx(paired.pvalue)
+    print(f"\n4 simulated subjects (CS2): {res.rm_anova}; {res.ttests[('proposed', 'ioc_only')]}")
     with pytest.raises(DataError, match="at least two subjects"):
         ev.per_subject(models, study.select(subject="s01"))

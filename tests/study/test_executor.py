@@ -119,7 +119,7 @@ def test_per_subject_study_is_the_same_on_two_workers(cluster, study, quadrotor,
     from_disk = ev.per_subject(make, write_dataset(study, tmp_path / "ds"), n_steps=20, seed=1, executor=cluster)
     _same_table(serial.table, from_disk.table)
     assert serial.subjects == parallel.subjects == ("s01", "s02", "s03")
-    assert parallel.anova.F == pytest.approx(serial.anova.F, rel=RTOL)
+    assert parallel.rm_anova.F == pytest.approx(serial.rm_anova.F, rel=RTOL)
     assert calls[-1] == (3, 3) and len(calls) == 3  # the progress bar counts tasks: one per subject
     # a subject's held-out trial comes from its own seed, not from the other subjects' draws
     one = ev.per_subject(make, study.filter(lambda d: d.meta["subject"] != "s02"), n_steps=20, seed=1)

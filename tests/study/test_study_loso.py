@@ -24,8 +24,14 @@ def test_every_trial_is_scored_once_by_a_plant_identified_without_it(few):
     res = run_loso(few, LinearSystem.identify, **FAST)
     rmse = res.rmse
     assert set(rmse["trial"]) == set(few.ids)
-    per = rmse.groupby(["trial", "method", "metric"]).size()
-    assert (per == 1).all()  # one row per trial, method and metric: each trial is tested once
+    per = rmse.groupby(["trial", "method", "metric", "start"]).size()
+    assert (per == 1).all()  # one row per trial, window, method and metric: each trial is tested once
+    # windows every 1 s (20 steps) where the record covers the horizon, the same for every method
+    windows = rmse.groupby(["trial", "method"])["start"].apply(lambda s: sorted(set(s)))
+    for trial in few.ids:
+        n = len(few[few.ids.index(trial)])
+        expected = [0, *range(20, n - FAST["n_steps"], 20)]
+        assert all(w == expected for w in windows.loc[trial])
     assert {"proposed", "ioc_only", "gmr_only", "persistence"} <= set(rmse["method"])
     assert set(res.plants) == set(few.ids)
     for left_out, plant in res.plants.items():

@@ -129,6 +129,20 @@ def study_plant(choice: str, horizon_s: float = 3.0) -> Callable[[Any], Any]:
     return plant_rule(choice, horizon_s)
 
 
+def pilot_only(ctx: Context, ds: Any, keep_still: bool) -> Any:
+    """The segments with pilot input (:mod:`workbench.data.excitation`); the others are named and left out
+    unless ``--keep-still``, and an input no segment moves is named too."""
+    from workbench.data.excitation import pilot_segments
+
+    kept, report = pilot_segments(ds, keep_still=keep_still)
+    for line in report.describe():
+        print(f"warning: {line}", file=sys.stderr)
+    if report.still_segments:
+        ctx.say(f"{'kept (--keep-still)' if keep_still else 'left out of fitting'}: {len(report.still_segments)} "
+                f"segment(s) without pilot input")
+    return kept
+
+
 def require_proposed(result: Any) -> None:
     """A report and the demo show the proposed model: say why it is missing instead of failing inside them."""
     for label in result.test:

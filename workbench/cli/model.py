@@ -12,6 +12,7 @@ from workbench.cli.context import (
     demos_at_model_dt,
     load_demos,
     load_model_file,
+    pilot_only,
     print_plant,
     steps_of,
     system_for,
@@ -22,7 +23,7 @@ __all__ = []
 
 def cmd_fit(ctx: Context) -> int:
     a = ctx.args
-    ds = load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None)
+    ds = pilot_only(ctx, load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None), a.keep_still)
     system = system_for(ds, a.system)
     print_plant(ctx, system)
     t0 = time.perf_counter()
@@ -45,7 +46,7 @@ def cmd_fit(ctx: Context) -> int:
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and getattr(model, "K_", None) is not None:
-        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, a.gain)
+        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
         _print_ratios(ctx, model, ds, a.bootstrap, a.seed)
     elif getattr(model, "objective_", None) is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
@@ -109,7 +110,12 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
     K = getattr(model, "K_", None)
     if K is not None:
         ctx.say("K̂ (u = K̂ x): " + np.array2string(np.asarray(K), precision=3, suppress_small=True))
+    choice = getattr(model, "gain_choice_", None)
+    if choice is not None:
+        ctx.say(str(choice))
     o = getattr(model, "objective_", None)
+    if o is None and getattr(model, "objective_error_", None):
+        ctx.say(f"task objective: not found ({model.objective_error_}); the model predicts without it")
     if o is not None:
         n = ds.n_states
         q = np.diag(np.asarray(o.M_normalized)[:n, :n])

@@ -58,6 +58,14 @@ def _study_options(
                    help="skip the data-efficiency curve")
     p.add_argument("--repeats", type=int, default=repeats, metavar="R",
                    help=f"random training subsets per size on the data-efficiency curve (default {repeats})")
+    p.add_argument("--stride", dest="stride_s", type=positive_float, default=1.0, metavar="SECONDS",
+                   help="score predictions from every SECONDS of each test trial whose record covers the horizon, "
+                        "and from its first state (default 1.0)")
+    p.add_argument("--first-state-only", dest="stride_s", action="store_const", const=None,
+                   help="score one prediction per test trial, from its first state (the paper's)")
+    p.add_argument("--keep-still", action="store_true",
+                   help="keep segments in which no input moves beyond its resolution (default: reported and left "
+                        "out: no pilot was flying them)")
     p.add_argument("--seed", type=int, default=0, help="seed of the split, EM and Monte Carlo (default 0)")
     _system_option(p)
 
@@ -151,9 +159,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "and reg_covar by cross-validation over the trials (held-out 3 s predictions)")
     p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
                    help="the proposed model (default) or one of its baselines")
-    p.add_argument("--gain", choices=["direct", "dmd", "iv"], default="direct",
-                   help="how K̂ is estimated: least squares (direct, default), the paper's DMD, or instrumental "
-                        "variables (iv: consistent when the operator's variability is autocorrelated)")
+    p.add_argument("--keep-still", action="store_true",
+                   help="keep segments in which no input moves beyond its resolution (default: reported and left "
+                        "out: no pilot was flying them)")
+    p.add_argument("--gain", choices=["iv-or-direct", "direct", "dmd", "iv"], default="iv-or-direct",
+                   help="how K̂ is estimated: instrumental variables where their instruments are relevant, else least "
+                        "squares (iv-or-direct, default; the choice and its reason are printed), least squares "
+                        "(direct), the paper's DMD, or instrumental variables only (iv: consistent when the "
+                        "operator's variability is autocorrelated)")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialization (default 0)")
     p.add_argument("--bootstrap", type=int, default=100, metavar="N",
                    help="resample the trials N times (default 100; 0: no intervals) and print 95 %% intervals of "

@@ -15,6 +15,7 @@ from workbench.cli.context import (
     Context,
     is_demo_file,
     load_demos,
+    pilot_only,
     print_plant,
     require_proposed,
     steps_of,
@@ -30,7 +31,7 @@ def cmd_evaluate(ctx: Context) -> int:
     from workbench.study import pipeline as study
 
     a = ctx.args
-    ds = load_demos(ctx, a.demos, a.mapping, a.label)
+    ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     if a.per_subject:
         return _evaluate_per_subject(ctx, ds)
     smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
@@ -42,7 +43,7 @@ def cmd_evaluate(ctx: Context) -> int:
             result = study.run_loso(
                 ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
                 n_components=a.n_components,
-                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex,
+                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s,
             )
         else:
             result = study.run_study(
@@ -57,6 +58,7 @@ def cmd_evaluate(ctx: Context) -> int:
                 seed=a.seed,
                 progress=ctx.progress,
                 executor=ex,
+                stride_s=a.stride_s,
             )
     if loso and getattr(result.system, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
@@ -81,6 +83,7 @@ def _evaluate_per_subject(ctx: Context, ds: Any) -> int:
 
     from workbench.models.factory import METHOD_TITLES, make_models
     from workbench.study import evaluate
+    from workbench.study.paired import paired_differences
     from workbench.study.pipeline import verdicts
 
     a = ctx.args
@@ -107,10 +110,17 @@ def _evaluate_per_subject(ctx: Context, ds: Any) -> int:
     for i, subject in enumerate(res.subjects):
         table.add_row(subject, *[f"{g[i]:.4g}" for g in res.groups.values()])
     ctx.say(table)
-    ctx.say(f"one-way ANOVA across methods: {res.anova}")
+    ctx.say(f"{res.rm_anova} (methods are a within-subject factor: every subject is scored under each)")
+    ctx.say("paired t-tests over subjects (Holm-corrected):")
     for r in res.ttests.values():
         ctx.say(f"  {r}")
-    for line in verdicts(res.table.assign(label=""), res.metric):
+    paired = paired_differences(res.table.assign(label=""), res.metric,
+                                subjects={str(t): str(s) for t, s in zip(res.table["trial"], res.table["subject"],
+                                                                          strict=True)}, seed=a.seed)
+    for d in paired:
+        ctx.say(f"proposed vs {METHOD_TITLES.get(d.baseline, d.baseline)}: {d.sentence()} ({d.n_trials} held-out "
+                f"trials; bootstrap over {d.resampled})")
+    for line in verdicts(paired, res.metric):
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
     if a.output:
         atomic_write_table(res.table, a.output)
@@ -132,6 +142,16 @@ def _print_study(ctx: Context, result: Any) -> None:
         for row in result.coverage.itertuples(index=False):
             cov.add_row(*[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row])
         ctx.say(cov)
+    check = getattr(result, "calibration_check", None)
+    if check is not None and len(check):
+        from workbench.study.calibration import check_table
+
+        shown = check_table(check)
+        t = Table(*shown.columns, title="one-step calibration: inputs at a limit excluded, against the sampling "
+                                        "spread (binomial over effective samples)")
+        for row in shown.itertuples(index=False):
+            t.add_row(*[str(v) for v in row])
+        ctx.say(t)
     if result.stats_text:
         ctx.say(result.stats_text)
     _print_objective_comparison(ctx, result)
@@ -171,12 +191,12 @@ def cmd_report(ctx: Context) -> int:
     from workbench.study import pipeline as study
 
     a = ctx.args
-    ds = load_demos(ctx, a.demos, a.mapping, a.label)
+    ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     with ctx.executor() as ex:
         result = study.run_study(
             ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
             n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
-            progress=ctx.progress, executor=ex, bootstrap=a.bootstrap,
+            progress=ctx.progress, executor=ex, bootstrap=a.bootstrap, stride_s=a.stride_s,
         )
     print_plant(ctx, result.system, "(plant from the training trials)")
     require_proposed(result)
@@ -211,7 +231,7 @@ def cmd_demo(ctx: Context) -> int:
     # the interpreter and the command's modules before this function: part of what a user waits for
     timings = {"startup": _seconds_since_process_start(t_start)}
     t0 = time.perf_counter()
-    ds = load_demos(ctx, [str(f) for f in files], a.mapping)
+    ds = pilot_only(ctx, load_demos(ctx, [str(f) for f in files], a.mapping), a.keep_still)
     timings["import"] = time.perf_counter() - t0
     by_format: dict[str, int] = {}
     for f in files:
@@ -229,7 +249,7 @@ def cmd_demo(ctx: Context) -> int:
         ds, study_plant(a.system), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
         n_components=a.n_components,
         samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed, progress=ctx.progress,
-        bootstrap=a.bootstrap,
+        bootstrap=a.bootstrap, stride_s=a.stride_s,
     )
     study_s = time.perf_counter() - t0
     timings.update(_study_phases(result.timings, study_s))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -26,10 +27,15 @@ except ImportError:  # pragma: no cover
     ThreadpoolController = None
 from workbench.method.closed_loop import as_matrix, check_stabilizing, system_matrices
 
-__all__ = ['GainMethod', 'stack_demonstrations', 'iv_instruments', 'gain_from_arrays', 'estimate_gain']
+__all__ = ['GainMethod', 'stack_demonstrations', 'iv_instruments', 'iv_relevance', 'gain_from_arrays', 'estimate_gain',
+           'GainChoice', 'choose_gain', 'IV_OR_DIRECT', 'GAIN_METHODS']
 
 GainMethod = Literal["direct", "dmd", "iv"]
 _METHODS = ("direct", "dmd", "iv")
+#: The default rule: instrumental variables where the instruments are relevant, else least squares ("direct").
+IV_OR_DIRECT = "iv-or-direct"
+#: Every gain method a model accepts: the three estimators and the rule that chooses between two of them.
+GAIN_METHODS = (IV_OR_DIRECT, *_METHODS)
 
 
 # Instruments of method "iv": each demonstration's first state times this many decaying exponentials of time.
@@ -122,16 +128,29 @@ def iv_instruments(X: np.ndarray, lengths: Sequence[int], n_basis: int = IV_BASI
     return np.concatenate(blocks, axis=1)
 
 
-def _iv_gain(X: np.ndarray, U: np.ndarray, lengths: Sequence[int]) -> np.ndarray:
-    """Two-stage least squares: regress U on the projection of X onto the instruments."""
+def _first_stage(X: np.ndarray, lengths: Sequence[int]) -> tuple[np.ndarray, float]:
+    """The first stage of the "iv" gain, ``E[x | instruments]``, and the instruments' relevance.
+
+    Relevance: the smallest squared canonical correlation between the states and the instruments. A state
+    direction the starts do not move is "explained" only by chance (≈ 0.02 on 6 demonstrations, less on more);
+    on the known-gain operators every direction reached ≥ 0.3.
+    """
     Z = iv_instruments(X, lengths)
-    X_hat = np.linalg.lstsq(Z.T, X.T, rcond=None)[0].T @ Z  # first stage: E[x | instruments]
-    # Relevance: the smallest squared canonical correlation between the states and the instruments. A state
-    # direction the starts do not move is "explained" only by chance (≈ 0.02 on 6 demonstrations, less on
-    # more); on the known-gain operators every direction reached ≥ 0.3.
+    X_hat = np.linalg.lstsq(Z.T, X.T, rcond=None)[0].T @ Z
     L = np.linalg.cholesky(X @ X.T)
     W = scipy.linalg.solve_triangular(L, X_hat, lower=True)
-    relevance = float(np.linalg.eigvalsh(W @ W.T)[0])
+    return X_hat, float(np.linalg.eigvalsh(W @ W.T)[0])
+
+
+def iv_relevance(X: np.ndarray, lengths: Sequence[int]) -> float:
+    """The smallest squared canonical correlation between stacked states ``X`` (n, T) and the "iv" instruments
+    (:func:`iv_instruments`); "iv" refuses to estimate below :data:`IV_MIN_RELEVANCE`."""
+    return _first_stage(X, lengths)[1]
+
+
+def _iv_gain(X: np.ndarray, U: np.ndarray, lengths: Sequence[int]) -> np.ndarray:
+    """Two-stage least squares: regress U on the projection of X onto the instruments."""
+    X_hat, relevance = _first_stage(X, lengths)
     if relevance < IV_MIN_RELEVANCE:
         raise ModelError(
             f"the instruments of the 'iv' gain (initial states × time) leave a state direction unexcited: its "
@@ -246,3 +265,64 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
         raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
     X, U, X_next = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))
     return gain_from_arrays(X, U, X_next, A, B, method, lengths=[b[0].shape[1] for b in blocks])
+
+
+@dataclass(frozen=True)
+class GainChoice:
+    """Which estimator made a model's K̂, and why.
+
+    Attributes
+    ----------
+    requested : str
+        The model's ``gain_method`` (one of :data:`GAIN_METHODS`).
+    method : str
+        The estimator used: ``"direct"``, ``"dmd"`` or ``"iv"``.
+    reason : str
+        Why: the instruments' relevance for ``"iv"``, the cause of a fallback to ``"direct"``, or "as requested".
+    """
+
+    requested: str
+    method: str
+    reason: str
+
+    def __str__(self) -> str:
+        return f"gain {self.method} ({self.reason})"
+
+
+def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT) -> tuple[np.ndarray, GainChoice]:
+    """K̂ by ``method``, or for :data:`IV_OR_DIRECT` by the rule: instrumental variables where the instruments
+    are relevant and the gain they give is stabilizing, least squares otherwise.
+
+    Least squares is biased in closed loop with autocorrelated variability (the state was made by the operator's
+    own earlier inputs) however many demonstrations there are; "iv" is consistent but needs demonstrations that
+    start in varied states. The fallback keeps a model for data where "iv" cannot work, and says so.
+
+    Returns
+    -------
+    K : ndarray, shape (m, n)
+    choice : GainChoice
+    """
+    if method not in GAIN_METHODS:
+        raise DataError(f"gain method must be one of {GAIN_METHODS}, got {method!r}")
+    demos = list(demos)
+    if method != IV_OR_DIRECT:
+        return estimate_gain(demos, system, method), GainChoice(method, method, "as requested")
+    A, B = system_matrices(system.A, system.B)
+    blocks = demo_blocks(demos, *B.shape)
+    relevance = float("nan")
+    try:
+        if not blocks:
+            raise DataError("no demonstration has two or more samples")
+        X, U = (np.concatenate([b[i] for b in blocks], axis=1) for i in (0, 1))
+        # one first stage for the relevance and the estimate (it is most of the cost of "iv")
+        X_hat, relevance = _first_stage(X, [b[0].shape[1] for b in blocks])
+        if relevance < IV_MIN_RELEVANCE:
+            raise ModelError(f"the instruments (initial states × time) leave a state direction unexcited: its "
+                             f"squared canonical correlation with them is {relevance:.3g} < {IV_MIN_RELEVANCE:g}")
+        K = np.linalg.lstsq(X_hat.T, U.T, rcond=None)[0].T
+        check_stabilizing(A, B, K)
+    except (ModelError, np.linalg.LinAlgError) as exc:
+        why = " ".join(str(exc).split()) or type(exc).__name__
+        return estimate_gain(demos, system, "direct"), GainChoice(method, "direct", f"fallback from iv: {why}")
+    return K, GainChoice(method, "iv", f"instruments relevant: smallest squared canonical correlation "
+                                       f"{relevance:.2g} ≥ {IV_MIN_RELEVANCE:g}")

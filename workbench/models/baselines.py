@@ -17,13 +17,16 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.method.frames import FrameSpec
-from workbench.method.inverse_lqr_sdp import inverse_lqr
+from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import (
     BehaviorModel,
     TaskGMRModel,
     as_vector,
     demo_list,
     fit_gain,
+    fit_objective_or_reason,
+    gain_choice_restore,
+    gain_choice_state,
     objective_restore,
     objective_state,
     references,
@@ -127,7 +130,7 @@ class IOCOnlyModel(BehaviorModel):
     def __init__(
         self,
         system: LinearSystem,
-        gain_method: str = "direct",
+        gain_method: str = IV_OR_DIRECT,
         structure: str = "full",
         fit_objective: bool = False,
         noise: str = "calibrated",
@@ -149,10 +152,9 @@ class IOCOnlyModel(BehaviorModel):
         self._check_noise()
         ds = demo_list(demos, self.system, "IOCOnlyModel.fit")
         refs, self.goal_relative_ = references(ds, self.system.n)
-        K = fit_gain(ds, refs, self.system, self.gain_method)
-        self.objective_ = (
-            inverse_lqr(self.system.A, self.system.B, K, structure=self.structure) if self.fit_objective else None
-        )
+        K, self.gain_choice_ = fit_gain(ds, refs, self.system, self.gain_method)
+        self.gain_method_ = self.gain_choice_.method
+        self.objective_, self.objective_error_ = fit_objective_or_reason(self, K)
         W = [d.u - (d.x - r) @ K.T for d, r in zip(ds, refs, strict=True)]
         Wall = np.concatenate(W)
         m = self.system.m
@@ -186,13 +188,18 @@ class IOCOnlyModel(BehaviorModel):
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         obj_header, obj_arrays = objective_state(self.objective_)
-        return {"objective": obj_header}, {"K": self.K_, "residual_cov": self.residual_cov_, **obj_arrays}
+        header = {"objective": obj_header, "gain_choice": gain_choice_state(self),
+                  "objective_error": getattr(self, "objective_error_", None)}
+        return header, {"K": self.K_, "residual_cov": self.residual_cov_, **obj_arrays}
 
     def _restore(self, mf: ModelFile) -> None:
         n, m = self.system.n, self.system.m
         self.K_ = np.array(mf.array("K", (m, n)))
         self.residual_cov_ = np.array(mf.array("residual_cov", (m, m)))
         self.objective_ = objective_restore(mf)
+        err = mf.header.get("objective_error")
+        self.objective_error_ = None if err is None else str(err)
+        gain_choice_restore(self, mf.header)
 
 
 class PersistenceModel(BehaviorModel):

@@ -27,7 +27,8 @@ import numpy as np
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError, WorkbenchError
 from workbench.method.frames import FrameSpec
-from workbench.method.gain import estimate_gain
+from workbench.method.gain import GainChoice, choose_gain
+from workbench.method.inverse_lqr_sdp import inverse_lqr
 from workbench.method.objective import TaskObjective
 from workbench.method.variability import TaskConditional, TaskGMR, resolve_frame_spec
 from workbench.models.files import ModelFile, ModelFileError, write_model_file
@@ -135,10 +136,44 @@ def references(demos: Sequence[Demonstration], n: int) -> tuple[list[np.ndarray]
 
 def fit_gain(
     demos: Sequence[Demonstration], refs: Sequence[np.ndarray], system: LinearSystem, method: str
-) -> np.ndarray:
-    """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.method.gain.estimate_gain` on the shifted states."""
+) -> tuple[np.ndarray, GainChoice]:
+    """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.method.gain.choose_gain` on the shifted states, and which
+    estimator made it (``method`` may be the rule ``"iv-or-direct"``)."""
     shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(demos, refs, strict=True)]
-    return np.ascontiguousarray(estimate_gain(shifted, system, method))
+    K, choice = choose_gain(shifted, system, method)
+    return np.ascontiguousarray(K), choice
+
+
+def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | None, str | None]:
+    """The task objective of ``K`` by inverse LQR (eqs. (15)-(19)) when ``model.fit_objective``, or why none.
+
+    The objective explains the gain; predictions never use it. So a solve that fails (no cost passes the
+    post-checks, the solver stops) is recorded, ``(None, reason)``, instead of taking the model with it: the
+    model still predicts, and a study keeps it in every comparison.
+    """
+    if not getattr(model, "fit_objective", False):
+        return None, None
+    try:
+        return inverse_lqr(model.system.A, model.system.B, K, structure=model.structure), None
+    except ModelError as exc:
+        return None, " ".join(str(exc).split())
+
+
+def gain_choice_state(model: Any) -> dict[str, str] | None:
+    """The model file's record of :class:`GainChoice` (None for a model without one)."""
+    c = getattr(model, "gain_choice_", None)
+    return None if c is None else {"requested": c.requested, "method": c.method, "reason": c.reason}
+
+
+def gain_choice_restore(model: Any, header: dict[str, Any]) -> None:
+    """``gain_choice_`` and ``gain_method_`` from a model file; files written before the record say only what
+    was requested, which was then the estimator used."""
+    rec = header.get("gain_choice")
+    if isinstance(rec, dict) and {"requested", "method", "reason"} <= set(rec):
+        model.gain_choice_ = GainChoice(str(rec["requested"]), str(rec["method"]), str(rec["reason"]))
+    else:
+        model.gain_choice_ = GainChoice(model.gain_method, model.gain_method, "as requested")
+    model.gain_method_ = model.gain_choice_.method
 
 
 def state_envelope(demos: Sequence[Demonstration]) -> np.ndarray:

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from workbench.errors import DataError
+from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.baselines import GMROnlyModel, IOCOnlyModel, PersistenceModel
 from workbench.models.behavior import BehaviorModel
 from workbench.models.files import read_model_file
@@ -33,7 +34,7 @@ def make_model(
     *,
     n_components: int | str = PAPER_N_COMPONENTS,
     random_state: int | None = 0,
-    gain_method: str = "direct",
+    gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
 ) -> BehaviorModel:
     """An unfitted model of ``method`` (one of :data:`METHODS`; ``ioc-only`` spellings are accepted).
@@ -43,8 +44,9 @@ def make_model(
     n_components : int or "cv"
         G of the proposed and GMR-only models; ``"cv"`` lets the proposed model choose G and ``reg_covar`` by
         cross-validation over the demonstrations (:func:`workbench.models.autoconfig.choose_settings`).
-    gain_method : {"direct", "dmd", "iv"}
-        How K̂ is estimated (proposed and IOC-only).
+    gain_method : {"iv-or-direct", "direct", "dmd", "iv"}
+        How K̂ is estimated (proposed and IOC-only); the default uses instrumental variables where their
+        instruments are relevant, least squares otherwise (:func:`workbench.method.gain.choose_gain`).
     fit_objective : bool
         Whether the proposed model also solves for its task objective (predictions never need it).
     """
@@ -69,7 +71,7 @@ def make_models(
     *,
     n_components: int = PAPER_N_COMPONENTS,
     random_state: int | None = 0,
-    gain_method: str = "direct",
+    gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = False,
 ) -> dict[str, BehaviorModel]:
     """Unfitted ``{method: model}`` for a comparison, with the paper's settings (G, start/goal frames).

@@ -32,13 +32,16 @@ from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
 from workbench.errors import DataError, ModelError
 from workbench.method.frames import FrameSpec
-from workbench.method.inverse_lqr_sdp import inverse_lqr
+from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.baselines import GMROnlyModel
 from workbench.models.behavior import (
     BehaviorModel,
     TaskGMRModel,
     demo_list,
     fit_gain,
+    fit_objective_or_reason,
+    gain_choice_restore,
+    gain_choice_state,
     goal_of,
     objective_restore,
     objective_state,
@@ -63,9 +66,11 @@ class HumanBehaviorModel(TaskGMRModel):
         demonstrations (:func:`workbench.models.autoconfig.choose_settings`), recorded in ``auto_``.
     frames : sequence of str or FrameSpec
         Task frames; default the paper's start and goal frames, eqs. (33)-(34).
-    gain_method : {"direct", "dmd", "iv"}
-        How K̂ is estimated (:func:`workbench.method.gain.estimate_gain`); "iv" is consistent in closed loop with
-        autocorrelated variability, where the least-squares "direct" and "dmd" stay biased.
+    gain_method : {"iv-or-direct", "direct", "dmd", "iv"}
+        How K̂ is estimated (:func:`workbench.method.gain.choose_gain`); "iv" is consistent in closed loop with
+        autocorrelated variability, where the least-squares "direct" and "dmd" stay biased. The default
+        "iv-or-direct" uses "iv" where its instruments are relevant and falls back to "direct" otherwise
+        (``gain_choice_`` says which, and why).
     structure : {"full", "S=0", "diagonal"}
         Cost structure of the inverse LQR (:func:`workbench.method.inverse_lqr_sdp.inverse_lqr`).
     reg_covar : float or "cv"
@@ -81,7 +86,8 @@ class HumanBehaviorModel(TaskGMRModel):
     random_state : int or None
         Seed of the k-means initialization.
     fit_objective : bool
-        Solve the inverse LQR (``objective_``); predictions do not need it.
+        Solve the inverse LQR (``objective_``); predictions do not need it, so a failed solve leaves the model
+        fitted with ``objective_ = None`` and the solver's reason in ``objective_error_``.
     max_iter, tol, n_init
         EM settings of :class:`~workbench.method.tpgmm.TPGMM`.
     angle_index : int, "auto" or None
@@ -111,7 +117,13 @@ class HumanBehaviorModel(TaskGMRModel):
     K_ : ndarray, shape (m, n)
         The gain of ``u = K̂x`` (eqs. (12)-(14)).
     objective_ : TaskObjective or None
-        Q, R, S, α, … (eqs. (15)-(19)).
+        Q, R, S, α, … (eqs. (15)-(19)); None when not asked for or not found.
+    objective_error_ : str or None
+        Why the inverse LQR found no objective (the solver's message); None when it found one or was not asked.
+    gain_method_ : str
+        The estimator that made ``K_`` (``"iv"``, ``"direct"`` or ``"dmd"``).
+    gain_choice_ : GainChoice
+        ``gain_method_`` with the reason (the instruments' relevance, or the cause of the fallback).
     variability_ : TaskGMR
         The TP-GMM on ``ξ = [x; ŵ]`` (``variability_.tpgmm_``) with its standardization.
     frame_spec_ : FrameSpec
@@ -139,7 +151,7 @@ class HumanBehaviorModel(TaskGMRModel):
         system: LinearSystem,
         n_components: int | str = 5,
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
-        gain_method: str = "direct",
+        gain_method: str = IV_OR_DIRECT,
         structure: str = "full",
         reg_covar: float | str = 0.5,
         standardize: bool = True,
@@ -185,12 +197,10 @@ class HumanBehaviorModel(TaskGMRModel):
         self.reg_covar_ = float(self.reg_covar)
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
         refs, self.goal_relative_ = references(ds, self.system.n)
-        K = fit_gain(ds, refs, self.system, self.gain_method)
-        objective = None
-        if self.fit_objective:
-            objective = inverse_lqr(self.system.A, self.system.B, K, structure=self.structure)
+        K, self.gain_choice_ = fit_gain(ds, refs, self.system, self.gain_method)
+        self.gain_method_ = self.gain_choice_.method
         self.K_ = K
-        self.objective_ = objective
+        self.objective_, self.objective_error_ = fit_objective_or_reason(self, K)
         self._fit_common(ds, getattr(demos, "labels", []))
         self._fit_gmr(ds, [self._residual(d) for d in ds])
         self._fit_noise(ds)
@@ -267,13 +277,17 @@ class HumanBehaviorModel(TaskGMRModel):
         obj_header, obj_arrays = objective_state(self.objective_)
         auto = getattr(self, "auto_", None)
         header = {**header, "objective": obj_header, "reg_covar_chosen": getattr(self, "reg_covar_", None),
-                  "auto": None if auto is None else auto.as_json()}
+                  "auto": None if auto is None else auto.as_json(), "gain_choice": gain_choice_state(self),
+                  "objective_error": getattr(self, "objective_error_", None)}
         return header, {"K": self.K_, **arrays, **obj_arrays}
 
     def _restore(self, mf: ModelFile) -> None:
         n, m = self.system.n, self.system.m
         self.K_ = np.array(mf.array("K", (m, n)))
         self.objective_ = objective_restore(mf)
+        err = mf.header.get("objective_error")
+        self.objective_error_ = None if err is None else str(err)
+        gain_choice_restore(self, mf.header)
         from workbench.models.autoconfig import AutoSettings
 
         auto = mf.header.get("auto")

@@ -11,7 +11,8 @@ Agg canvas — no pyplot, no global backend, so the report runs headless and nev
 * ``rmse.png`` — horizon RMSE (eq. (35)) per method as box plots;
 * ``data_efficiency.png`` — RMSE against the number of training demonstrations;
 
-and for multi-subject data the ANOVA / pairwise t-test table.
+and the comparison's statistics: paired differences with bootstrap intervals over whole trials, Wilcoxon / paired
+t-tests (Holm) and the mixed-effects model (:mod:`workbench.study.findings`).
 """
 
 from __future__ import annotations
@@ -400,6 +401,8 @@ class ReportInputs:
     #: :func:`workbench.study.weights.compare_strategies` of the objectives' ratios when the study computed it
     #: (``StudyResult.ratio_comparison``); None computes it here.
     ratio_comparison: pd.DataFrame | None = None
+    paired: Sequence[Any] = ()
+    calibration_check: pd.DataFrame | None = None
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -479,11 +482,16 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     for label in labels:
         o = getattr(inputs.models[label], "objective_", None)
         if o is None:
+            reason = getattr(inputs.models[label], "objective_error_", None)
+            if reason:
+                obj_rows.append({"strategy": label, "α*": f"not found: {reason}"})
             continue
         n = len(state_names)
         Mn = np.asarray(o.M_normalized)
         oi = inputs.objectives.get(label)
-        row = {"strategy": label, "α*": float(o.alpha), "forward-gain error": float(o.forward_gain_error)}
+        choice = getattr(inputs.models[label], "gain_choice_", None)
+        row = {"strategy": label, "gain K̂": "" if choice is None else choice.method, "α*": float(o.alpha),
+               "forward-gain error": float(o.forward_gain_error)}
         q, r = np.diag(Mn[:n, :n]), np.diag(Mn[n:, n:])
         if oi is None:
             row.update({f"Q {s}": float(v) for s, v in zip(state_names, q, strict=True)})
@@ -499,6 +507,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         md += [_md_table(pd.DataFrame(obj_rows), ".3g"), ""]
         md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names,
                                         inputs.ratio_comparison)
+        md += [f"- {lb}: {c}" for lb in labels if (c := getattr(inputs.models[lb], "gain_choice_", None))] + [""]
+    if any(getattr(m, "objective_", None) is not None for m in inputs.models.values()):
         save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
         md += ["![Normalized Q and R](figures/objective.png)", "",
                "*Normalized cost blocks (M / λmax(M)) per strategy; the attitude weight is outlined. The SDP returns "
@@ -522,6 +532,15 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     if inputs.coverage is not None and len(inputs.coverage):
         md += ["One-step coverage of ŵ by the GMR bands on the test trials:", "",
                _md_table(inputs.coverage, ".1f"), ""]
+    if inputs.calibration_check is not None and len(inputs.calibration_check):
+        from workbench.study.calibration import check_table
+
+        md += ["Calibration at 1σ, 2σ, 3σ: inputs at their limits (the plant's bounds, or a stick pinned at the "
+               "extreme of its travel) are censored, not Gaussian, so they are counted apart and the band is "
+               "judged without them; it is called too narrow or too wide only where the share inside lies outside "
+               "the binomial 95 % range of the nominal share over the effective number of samples (samples within "
+               "a trial are correlated: N_eff = N(1 − ρ)/(1 + ρ), ρ the lag-1 autocorrelation of inside/outside).",
+               "", _md_table(check_table(inputs.calibration_check)), ""]
     if inputs.calibration is not None and len(inputs.calibration):
         save_figure(fig_calibration(inputs.calibration), fig_dir / "calibration.png")
         md += ["![One-step band calibration](figures/calibration.png)", "",
@@ -541,7 +560,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     if inputs.rmse is not None and len(inputs.rmse):
         metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
-        md += [_md_table(improvement_table(inputs.rmse)), ""]
+        md += [_md_table(improvement_table(inputs.rmse, inputs.paired)), ""]
         md += _envelope_line(inputs.envelope)
         md += [f"**{line}**\n" for line in inputs.verdicts]
         md += [
@@ -564,7 +583,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations.*",
                ""]
     if inputs.stats:
-        md += ["## Multi-subject statistics", "", inputs.stats, ""]
+        md += ["## Statistics of the comparison", "", inputs.stats, ""]
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(md).rstrip() + "\n")
     return path
@@ -657,5 +676,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
             envelope=result.table[result.table["metric"] == "left_envelope"], calibration=result.calibration,
             ratio_comparison=getattr(result, "ratio_comparison", None),
             n_steps=result.n_steps, samples=result.samples, seed=result.seed, notes=notes, title=title,
+            paired=() if result.statistics is None else result.statistics.paired,
+            calibration_check=result.calibration_check,
         ),
     )

@@ -19,8 +19,8 @@ the RMSE eq. (36)):
 
 :func:`compare` returns a tidy table (``trial, label, start, method, metric, value``); :func:`data_efficiency`
 refits every method on growing subsets of the training trials; :func:`per_subject` runs the paper's
-multi-subject design (a model per subject, held-out trials, ANOVA and paired t-tests across the methods, from
-:mod:`workbench.study.stats`, re-exported here).
+multi-subject design (a model per subject, held-out trials, a repeated-measures ANOVA and paired t-tests across
+the methods: methods are a within-subject factor, :mod:`workbench.study.stats`).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
 from workbench.models.factory import make_models as make_models_for_plant
 from workbench.study.executor import serial, task_seed
-from workbench.study.stats import AnovaResult, TTestResult, anova_oneway, pairwise_ttests
+from workbench.study.stats import RMAnovaResult, TTestResult, pairwise_ttests, repeated_measures_anova
 
 __all__ = [
     "STATE_BLOCK",
@@ -61,9 +61,7 @@ __all__ = [
     "cross_validate",
     "SubjectStudy",
     "models_for",
-    "anova_oneway",
     "pairwise_ttests",
-    "AnovaResult",
     "TTestResult",
 ]
 
@@ -327,7 +325,7 @@ def improvement(table: pd.DataFrame, metric: str, method: str, baseline: str) ->
 
 
 def method_groups(table: pd.DataFrame, metric: str) -> dict[str, np.ndarray]:
-    """Per method, the per-trial mean of ``metric`` (trials in one order): groups for ANOVA and t-tests."""
+    """Per method, the per-trial mean of ``metric`` (trials in one order): paired values for within-trial tests."""
     t = table[table["metric"] == metric]
     if t.empty:
         raise DataError(f"table has no metric {metric!r}")
@@ -460,9 +458,10 @@ class SubjectStudy:
     table : DataFrame
         :func:`compare` rows with a ``subject`` column.
     groups : dict
-        Per method, the per-subject mean of ``metric`` (subjects in one order): the ANOVA's groups.
-    anova : AnovaResult
-        One-way ANOVA across the methods, with η².
+        Per method, the per-subject mean of ``metric`` (subjects in one order): repeated measures per subject.
+    rm_anova : RMAnovaResult
+        Repeated-measures ANOVA over the methods within subjects (the omnibus within-subject test; the paper's
+        between-groups one-way ANOVA treated the methods as independent groups).
     ttests : dict
         Paired t-tests per pair of methods (Holm-corrected).
     metric : str
@@ -473,7 +472,7 @@ class SubjectStudy:
 
     table: pd.DataFrame
     groups: dict[str, np.ndarray]
-    anova: AnovaResult
+    rm_anova: RMAnovaResult
     ttests: dict[tuple[str, str], TTestResult]
     metric: str
     subjects: tuple[str, ...]
@@ -513,11 +512,12 @@ def per_subject(
     executor: Any = None,
 ) -> SubjectStudy:
     """The multi-subject study of the paper: for every subject, fit each method on all but ``n_test`` of its
-    trials (chosen at random, seeded), predict the held-out ones, then compare the methods across subjects.
+    trials (chosen at random, seeded), predict the held-out ones, then compare the methods within subjects.
 
     The paper's design is 10 training trials and 1 test trial per subject with a 5 s (100-step) horizon,
     reporting a one-way ANOVA of the position RMSE across the methods (F(2, 27) for 10 subjects) and pairwise
-    t-tests; the t-tests here are paired by subject.
+    t-tests. Every subject is scored under every method, so here the omnibus test is the repeated-measures
+    ANOVA (F(2, 18) for 10 subjects) and the t-tests are paired by subject.
 
     Parameters
     ----------
@@ -563,7 +563,7 @@ def per_subject(
     return SubjectStudy(
         table=table,
         groups=groups,
-        anova=anova_oneway(groups),
+        rm_anova=repeated_measures_anova(groups),
         ttests=pairwise_ttests(groups, paired=True),
         metric=metric,
         subjects=tuple(str(s) for s in wide.index),

@@ -73,6 +73,17 @@ class StudyResult:
     #: computed once here because its factor intervals are the costliest profiles of a study and both the report and
     #: the command line show them; None without ratios.
     ratio_comparison: pd.DataFrame | None = None
+    #: One-step calibration per label, input and level (1σ, 2σ, 3σ): coverage with and without inputs at their
+    #: limits, and whether it is off by more than sampling allows (:func:`workbench.study.calibration.
+    #: calibration_check`).
+    calibration_check: pd.DataFrame | None = None
+    #: The counts behind ``calibration_check`` (they add up over folds).
+    calibration_counts: pd.DataFrame | None = None
+    #: Steps between the starts of the scored windows in a test trial (None: each trial's first state only).
+    stride_steps: int | None = None
+    #: The paired differences, tests and mixed model of the headline metric
+    #: (:class:`workbench.study.findings.StudyStatistics`); ``stats_text`` is its text.
+    statistics: Any = None
 
     @property
     def rmse(self) -> pd.DataFrame:
@@ -97,18 +108,24 @@ class StudyResult:
         return t[t["metric"].isin(joint)]
 
     def summary(self) -> pd.DataFrame:
-        """Mean RMSE per label, metric and method, with the proposed model's improvement over each baseline."""
-        return improvement_table(self.rmse)
+        """Mean RMSE per label, metric and method, with the proposed model's paired difference (and interval)
+        against each baseline on the headline metric."""
+        return improvement_table(self.rmse, None if self.statistics is None else self.statistics.paired)
 
     def verdicts(self) -> list[str]:
-        """One plain sentence per label where the proposed model does not beat IOC-only or persistence, or a
-        method could not be fitted at all."""
+        """One plain sentence per label where the proposed model is not shown to beat IOC-only or persistence
+        (by the interval of its paired difference), or a method could not be fitted at all."""
         lines = [
             f"{'On ' + label + ', ' if label not in ('', 'None') else ''}{METHOD_TITLES.get(m, m)} could not be "
             f"fitted and is left out of the comparison: {reason}"
             for label, by_method in self.failures.items() for m, reason in by_method.items()
         ]
-        return lines + verdicts(self.rmse, self.metric, metric_unit(self.system, self.metric))
+        lines += [f"{'On ' + label + ', the' if label not in ('', 'None', UNLABELED) else 'The'} proposed model's task "
+                  f"objective was not found ({reason}); it still predicts, and is compared as usual."
+                  for label, model in self.models.items()
+                  if (reason := getattr(model, "objective_error_", None))]
+        paired = () if self.statistics is None else self.statistics.paired
+        return lines + verdicts(paired, self.metric)
 
     def save_tables(self, path: str | os.PathLike) -> Path:
         """The tidy RMSE table (plus the data-efficiency rows, ``table`` column) as CSV or Parquet, atomically."""
@@ -157,7 +174,8 @@ def _fit_each(
 
     On a real log the operator's estimated gain may not stabilize an honest plant (a pilot who does not hold an
     absolute position leaves its integrators marginal, Assumption 3): then the proposed model and IOC-only do
-    not exist, and the study says so and compares the rest instead of stopping.
+    not exist, and the study says so and compares the rest instead of stopping. A task objective that inverse
+    LQR cannot find does not take the proposed model with it (``objective_error_``): it still predicts.
     """
     from workbench.models.factory import make_models
 
@@ -199,8 +217,13 @@ def run_study(
     executor: Any = None,
     test_ids: Sequence[str] | None = None,
     bootstrap: int = 0,
+    stride_s: float | None = 1.0,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
+
+    Every test trial is predicted from its first state and from every ``stride_s`` seconds of it whose record
+    covers the horizon (None: its first state only); the methods are compared as paired differences of the
+    per-trial means with bootstrap intervals over whole trials (``StudyResult.statistics``).
 
     ``bootstrap``: resamples of each label's training trials for intervals of the proposed model's task objective
     and its weight ratios (``StudyResult.objectives``); 0 computes none.
@@ -216,11 +239,13 @@ def run_study(
     test trial shapes (A, B). ``StudyResult.system`` is the plant used.
     """
     from workbench.study import evaluate as ev
+    from workbench.study.calibration import calibration_counts
 
+    stride = _stride_steps(stride_s, demos.dt)
     labels = demos.labels or [None]
     timings: dict[str, float] = {}
     train, test, models, baselines = {}, {}, {}, {}
-    rmse_parts, cov_parts, eff_parts = [], [], []
+    rmse_parts, cov_parts, eff_parts, check_parts = [], [], [], []
     splits = {}
     for label in labels:
         ds = demos if label is None else demos.by_label(label)
@@ -250,12 +275,14 @@ def run_study(
                 models[label] = fitted["proposed"]
             baselines[label] = {k: v for k, v in fitted.items() if k != "proposed"}
             t0 = time.perf_counter()
-            table = ev.compare(fitted, te, n_steps=n_steps, samples=samples, seed=seed)
+            table = ev.compare(fitted, te, n_steps=n_steps, samples=samples, seed=seed,
+                               starts="initial" if stride is None else stride)
             rmse_parts.append(table.assign(label=label))
             if "proposed" in fitted:
                 cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, CALIBRATION_LEVELS,
                                                                method="proposed"))
                 cov_parts.append(cov.assign(label=label))
+                check_parts.append(calibration_counts(fitted["proposed"], list(te)).assign(label=label))
             timings[f"compare {label}"] = time.perf_counter() - t0
             if efficiency:
                 t0 = time.perf_counter()
@@ -288,8 +315,7 @@ def run_study(
             if p is not None:
                 p.advance(task)
     table = pd.concat(rmse_parts, ignore_index=True)
-    metric = ev.primary_metric(system)
-    stats_text = _subject_stats(ev, table, demos, metric, metric_unit(system, metric))
+    statistics = _statistics(table, demos, system, n_steps, stride, seed)
     t0 = time.perf_counter()
     objectives = _objective_intervals(models, train, int(bootstrap), seed)
     if objectives:
@@ -304,8 +330,10 @@ def run_study(
         coverage=_coverage_table(calibration) if calibration is not None else None,
         calibration=calibration,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
-        stats_text=stats_text, n_steps=n_steps, samples=samples, seed=seed, timings=timings, failures=failures,
-        objectives=objectives, ratio_comparison=ratio_comparison,
+        stats_text=statistics.text(), n_steps=n_steps, samples=samples, seed=seed, timings=timings,
+        failures=failures, objectives=objectives, ratio_comparison=ratio_comparison, stride_steps=stride,
+        statistics=statistics, calibration_check=_check(check_parts),
+        calibration_counts=pd.concat(check_parts, ignore_index=True) if check_parts else None,
     )
 
 
@@ -353,6 +381,7 @@ def run_loso(
     seed: int = 0,
     progress: Callable[[], Any] | None = None,
     executor: Any = None,
+    stride_s: float | None = 1.0,
 ) -> StudyResult:
     """Leave-one-segment-out: every trial is the test set once, the others train (:func:`run_study` per fold).
 
@@ -364,7 +393,6 @@ def run_loso(
     coverage is the mean over the folds; there is no data-efficiency curve. ``models`` and ``baselines`` are
     the last fold's; ``train`` is every trial of a label (each trains in all folds but its own).
     """
-    from workbench.study import evaluate as ev
 
     folds: list[tuple[str, StudyResult]] = []
     bar = progress() if progress is not None else nullcontext()
@@ -373,7 +401,7 @@ def run_loso(
         task = p.add_task(what, total=len(demos)) if p is not None else None
         for d in demos:
             res = run_study(demos, system, n_steps=n_steps, n_components=n_components, samples=samples,
-                            efficiency=None, seed=seed, executor=executor, test_ids=[d.id])
+                            efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s)
             folds.append((d.id, res))
             if p is not None:
                 p.advance(task)
@@ -396,13 +424,16 @@ def run_loso(
     test = {lbl: demos.with_demos([d for _, r in folds for d in r.test.get(lbl, [])]) for lbl in labels}
     train = {lbl: test[lbl] for lbl in labels}
     plant = last.system
-    metric = ev.primary_metric(plant)
+    stride = _stride_steps(stride_s, demos.dt)
+    statistics = _statistics(table, demos, plant, n_steps, stride, seed)
     return StudyResult(
         demos=demos, system=plant, train=train, test=test, models=last.models, baselines=last.baselines,
         table=table, coverage=coverage, efficiency=None, calibration=calibration,
-        stats_text=_subject_stats(ev, table, demos, metric, metric_unit(plant, metric)), n_steps=n_steps,
+        stats_text=statistics.text(), n_steps=n_steps,
         samples=samples, seed=seed, timings={k: v for _, r in folds for k, v in r.timings.items()},
-        failures=failures, plants={trial: r.system for trial, r in folds},
+        failures=failures, plants={trial: r.system for trial, r in folds}, stride_steps=stride,
+        statistics=statistics, calibration_check=_check([r.calibration_counts for _, r in folds
+                                                         if r.calibration_counts is not None]),
     )
 
 
@@ -415,72 +446,79 @@ def _coverage_table(cov: pd.DataFrame) -> pd.DataFrame:
     return (100.0 * wide).reset_index()
 
 
-def _subject_stats(
-    ev: Any, table: pd.DataFrame, demos: DemonstrationSet, metric: str = "rmse_position", unit: str = ""
-) -> str | None:
-    """For multi-subject data: one-way ANOVA of the per-trial headline RMSE across methods, paired t-tests."""
-    subjects = sorted({str(d.meta.get("subject")) for d in demos if d.meta.get("subject") is not None})
-    if len(subjects) < 2:
-        return None
-    groups = ev.method_groups(table, metric)
-    if len(groups) < 2 or min(len(v) for v in groups.values()) < 2:
-        return None
-    anova = ev.anova_oneway(groups)
-    lines = [
-        f"{len(subjects)} subjects ({', '.join(subjects)}); {len(next(iter(groups.values())))} test trials. "
-        f"One-way ANOVA of the per-trial {metric.removeprefix('rmse_').replace('_', ' ')} RMSE across methods: "
-        f"{anova}.",
-        "",
-        f"| pair | t | df | p | p (Holm) | mean difference{f' [{unit}]' if unit else ''} |",
-        "|---|---|---|---|---|---|",
-    ]
-    for (a, b), r in ev.pairwise_ttests(groups).items():
-        lines.append(f"| {a} vs {b} | {r.t:.3g} | {r.df:.3g} | {r.p:.3g} | {r.p_adjusted:.3g} | "
-                     f"{r.mean_difference:+.3g} |")
-    return "\n".join(lines)
+def _check(parts: list[pd.DataFrame]) -> pd.DataFrame | None:
+    """The calibration check of the summed counts of every test set (label, fold)."""
+    from workbench.study.calibration import calibration_check
+
+    parts = [p for p in parts if p is not None and len(p)]
+    return calibration_check(pd.concat(parts, ignore_index=True)) if parts else None
 
 
-def improvement_table(rmse: pd.DataFrame) -> pd.DataFrame:
-    """Mean RMSE per label, metric and method, and how much lower the proposed model's is (the paper's %)."""
-    mean = rmse.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
+def _stride_steps(stride_s: float | None, dt: float) -> int | None:
+    """The stride between scored windows in steps (at least one), or None for the first state only."""
+    if stride_s is None:
+        return None
+    if not stride_s > 0:
+        raise DataError(f"the stride between scored windows must be positive seconds, got {stride_s!r}")
+    return max(1, int(round(float(stride_s) / dt)))
+
+
+def _statistics(table: pd.DataFrame, demos: DemonstrationSet, system: Any, n_steps: int, stride: int | None,
+                seed: int) -> Any:
+    """The paired differences, tests and mixed model of the headline metric (:mod:`workbench.study.findings`)."""
+    from workbench.study.evaluate import primary_metric
+    from workbench.study.findings import study_statistics, windows_sentence
+
+    metric = primary_metric(system)
+    subjects = {d.id: str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None}
+    return study_statistics(table, metric, metric_unit(system, metric), subjects,
+                            windows_sentence(table, n_steps, stride, demos.dt), seed=seed)
+
+
+def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -> pd.DataFrame:
+    """Mean RMSE per label, metric and method (each trial the mean of its windows); with ``paired`` differences
+    (:mod:`workbench.study.paired`), the proposed model against each baseline in words derived from the interval
+    (only on their metric)."""
+    # every trial weighs the same, as in the paired differences: its windows are averaged first
+    per = rmse.groupby(["label", "metric", "method", "trial"], sort=False)["value"].mean()
+    mean = per.groupby(["label", "metric", "method"], sort=False).mean().unstack("method")
+    by = {(d.label, d.metric, d.baseline): d for d in (paired or ())}
     rows = []
     for (label, metric), r in mean.iterrows():
         row: dict[str, Any] = {"label": label, "metric": metric}
         for m in r.index:
             row[METHOD_TITLES.get(m, m)] = float(r[m])
-        if "proposed" in r.index:
-            for base in ("ioc_only", "gmr_only", "persistence"):
-                if base in r.index and r[base] > 0:
-                    change = 100 * (1 - r["proposed"] / r[base])
-                    row[f"vs {METHOD_TITLES[base]}"] = f"{abs(change):.1f} % {'lower' if change >= 0 else 'higher'}"
+        for base in ("ioc_only", "gmr_only", "persistence"):
+            d = by.get((str(label), metric, base))
+            if d is not None:
+                row[f"vs {METHOD_TITLES[base]}"] = d.sentence()
         rows.append(row)
     return pd.DataFrame(rows)
 
 
-def verdicts(rmse: pd.DataFrame, metric: str, unit: str = "") -> list[str]:
-    """One plain sentence per label where the proposed model's mean ``metric`` is not lower than IOC-only's or
-    persistence's (:data:`FLOOR_METHODS`): then its predictions gain nothing on these data, and the user must
-    read that before any other number.
+def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
+    """One plain sentence per label where the proposed model is not shown to be better than IOC-only or
+    persistence (:data:`FLOOR_METHODS`): the interval of its paired difference does not lie above zero. Then its
+    predictions are not shown to gain anything on these data, and the user must read that before any other number.
 
-    ``rmse`` is a tidy table (``label, method, metric, value``); labels where it beats both give no sentence.
+    ``paired`` are :class:`~workbench.study.paired.PairedDifference`; labels where it beats both give no sentence.
     """
-    t = rmse[rmse["metric"] == metric]
-    if t.empty:
-        return []
-    label_col = t["label"] if "label" in t.columns else pd.Series("", index=t.index)
-    mean = t.assign(label=label_col.fillna("")).groupby(["label", "method"], sort=False)["value"].mean()
-    u = f" {unit}" if unit else ""
     what = metric.removeprefix("rmse_").replace("_", " ")
     out = []
-    for label in dict.fromkeys(mean.index.get_level_values("label")):
-        m = mean.loc[label]
-        if "proposed" not in m.index or not np.isfinite(m["proposed"]):
+    from workbench.study.paired import ALL_LABELS
+
+    # per strategy; the pooled rows ("all") only where there is no strategy to name
+    labels = list(dict.fromkeys(d.label for d in paired if d.metric == metric))
+    labels = [lb for lb in labels if lb != ALL_LABELS] or labels
+    for label in labels:
+        worse = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
+                 and not d.lo > 0]
+        if not worse:
             continue
-        worse = [f"{METHOD_TITLES.get(b, b)} ({m['proposed']:.3g} vs {m[b]:.3g}{u})"
-                 for b in FLOOR_METHODS if b in m.index and np.isfinite(m[b]) and m["proposed"] >= m[b]]
-        if worse:
-            where = f"On {label}, the" if label not in ("", UNLABELED) else "The"
-            which = "that baseline" if len(worse) == 1 else "those baselines"
-            out.append(f"{where} proposed model is not better than {' nor than '.join(worse)} in mean {what} RMSE "
-                       f"on the test trials: its predictions gain nothing over {which} on these data.")
+        where = f"On {label}, the" if label not in ("", UNLABELED) else "The"
+        parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} ({d.sentence()})" for d in worse]
+        which = "that baseline" if len(worse) == 1 else "those baselines"
+        out.append(f"{where} proposed model is not shown to be better than {' nor than '.join(parts)} in mean "
+                   f"{what} RMSE on the test trials: its predictions are not shown to gain anything over {which} on "
+                   "these data.")
     return out

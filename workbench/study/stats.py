@@ -1,43 +1,37 @@
-"""Statistics of a multi-subject comparison: one-way ANOVA with η², pairwise t-tests (scipy.stats).
+"""Repeated-measures statistics of a comparison: methods are a within-trial (and within-subject) factor.
 
-The paper's multi-subject study compares the position RMSE of the three methods over 10 subjects with a
-one-way ANOVA (``F(2, 27) = 4.55, p = 0.02, η² = 0.25``) and pairwise t-tests. Every subject's test trial is
-predicted by all three methods, so the pairwise tests are paired by default; the ANOVA is the paper's
-between-groups one-way test.
+Every test trial (every subject, in the multi-subject design) is predicted by every method, so methods are
+compared within units, never as independent groups (the paper's one-way ANOVA, F(2, 27), treats them as
+independent and is not used here):
+
+* :func:`paired_tests` — per pair of methods, the Wilcoxon signed-rank test (``scipy.stats.wilcoxon``) and the
+  paired t-test (``scipy.stats.ttest_rel``) of the per-unit differences, Holm-corrected over the pairs
+  (``statsmodels.stats.multitest.multipletests``): *does method a's error differ from method b's on the same
+  units?*
+* :func:`mixed_effects` — a linear mixed model (``statsmodels`` MixedLM) of the log per-trial error with method
+  and strategy as fixed effects, subject as a random intercept and the trial within its subject as a variance
+  component: *by what factor does each method's error differ from the reference's, allowing every subject and
+  trial its own level?*, and — strategies being flown in different trials — *do the strategies differ?*
+* :func:`repeated_measures_anova` — the omnibus test over methods with subjects as the repeated unit
+  (``statsmodels`` AnovaRM), for the per-subject design.
+* :func:`pairwise_ttests` — t-tests for every pair (paired by default).
 """
 
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 from scipy import stats as sps
 
 from workbench.errors import DataError
 
-__all__ = ["AnovaResult", "TTestResult", "anova_oneway", "pairwise_ttests"]
-
-
-@dataclass(frozen=True)
-class AnovaResult:
-    """One-way ANOVA: ``F(df_between, df_within) = F``, ``p``, effect size ``η² = SS_between / SS_total``."""
-
-    F: float
-    p: float
-    df_between: int
-    df_within: int
-    eta_squared: float
-    groups: tuple[str, ...] = ()
-
-    @property
-    def eta2(self) -> float:
-        """Alias of :attr:`eta_squared`."""
-        return self.eta_squared
-
-    def __str__(self) -> str:
-        return f"F({self.df_between}, {self.df_within}) = {self.F:.3g}, p = {self.p:.3g}, η² = {self.eta_squared:.3g}"
+__all__ = ["holm", "TTestResult", "pairwise_ttests", "PairedTest", "paired_tests", "MixedEffect", "MixedModelResult",
+           "mixed_effects", "RMAnovaResult", "repeated_measures_anova"]
 
 
 @dataclass(frozen=True)
@@ -82,43 +76,11 @@ def _groups(groups: Mapping[str, Sequence[float]] | Sequence[Sequence[float]]) -
     return out
 
 
-def anova_oneway(groups: Mapping[str, Sequence[float]] | Sequence[Sequence[float]]) -> AnovaResult:
-    """One-way ANOVA across groups (``scipy.stats.f_oneway``) with ``η²``.
+def holm(p: Sequence[float] | np.ndarray) -> np.ndarray:
+    """Holm-adjusted p-values (``statsmodels.stats.multitest.multipletests``)."""
+    from statsmodels.stats.multitest import multipletests
 
-    Parameters
-    ----------
-    groups : mapping name → values, or a sequence of value arrays
-        Each group needs at least two values.
-    """
-    g = _groups(groups)
-    if min(len(v) for v in g.values()) < 2:
-        raise DataError("every group needs at least two values for an ANOVA")
-    values = list(g.values())
-    res = sps.f_oneway(*values)
-    allv = np.concatenate(values)
-    grand = allv.mean()
-    ss_between = sum(len(v) * (v.mean() - grand) ** 2 for v in values)
-    ss_total = float(((allv - grand) ** 2).sum())
-    eta = float(ss_between / ss_total) if ss_total > 0 else float("nan")
-    return AnovaResult(
-        F=float(res.statistic),
-        p=float(res.pvalue),
-        df_between=len(values) - 1,
-        df_within=len(allv) - len(values),
-        eta_squared=eta,
-        groups=tuple(g),
-    )
-
-
-def _holm(p: np.ndarray) -> np.ndarray:
-    order = np.argsort(p)
-    k = len(p)
-    adj = np.empty(k)
-    running = 0.0
-    for rank, i in enumerate(order):
-        running = max(running, min(1.0, (k - rank) * p[i]))
-        adj[i] = running
-    return adj
+    return multipletests(np.asarray(p, dtype=float), method="holm")[1] if len(p) else np.asarray(p, dtype=float)
 
 
 def pairwise_ttests(
@@ -169,7 +131,7 @@ def pairwise_ttests(
         raw.append((float(res.statistic), float(res.pvalue), df, diff, min(len(va), len(vb))))
     p = np.array([r[1] for r in raw])
     if correction == "holm":
-        p_adj = _holm(p)
+        p_adj = holm(p)
     elif correction == "bonferroni":
         p_adj = np.minimum(1.0, p * len(p))
     else:
@@ -178,3 +140,192 @@ def pairwise_ttests(
         (a, b): TTestResult(a, b, r[0], r[1], float(pa), r[2], paired, r[3], r[4])
         for (a, b), r, pa in zip(pairs, raw, p_adj, strict=True)
     }
+
+
+@dataclass(frozen=True)
+class PairedTest:
+    """Method ``a`` against ``b`` on the same units: Wilcoxon signed-rank and paired t-test of ``a − b``.
+
+    ``p_wilcoxon_holm`` and ``p_t_holm`` are Holm-corrected over the pairs tested together.
+    """
+
+    a: str
+    b: str
+    label: str
+    n: int
+    median_difference: float
+    wilcoxon: float
+    p_wilcoxon: float
+    p_wilcoxon_holm: float
+    t: float
+    p_t: float
+    p_t_holm: float
+
+
+def paired_tests(
+    wide: pd.DataFrame, pairs: Sequence[tuple[str, str]], label: str = "", correction: str = "holm"
+) -> list[PairedTest]:
+    """Wilcoxon signed-rank and paired t-tests of per-unit values, one per pair, corrected over the pairs.
+
+    Parameters
+    ----------
+    wide : DataFrame
+        One row per unit (trial or subject), one column per method.
+    pairs : sequence of (a, b)
+        The comparisons; a pair with fewer than 2 units scored by both is left out.
+    correction : {"holm", "bonferroni", "none"}
+    """
+    rows = []
+    for a, b in pairs:
+        if a not in wide.columns or b not in wide.columns:
+            continue
+        both = wide[[a, b]].dropna()
+        if len(both) < 2:
+            continue
+        d = both[a].to_numpy(float) - both[b].to_numpy(float)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-equal differences: a NaN statistic, said as such
+            w = sps.wilcoxon(d) if np.any(d != 0) else None
+            t = sps.ttest_rel(both[a].to_numpy(float), both[b].to_numpy(float))
+        rows.append((a, b, len(d), float(np.median(d)), np.nan if w is None else float(w.statistic),
+                     1.0 if w is None else float(w.pvalue), float(t.statistic), float(t.pvalue)))
+    if not rows:
+        return []
+    if correction not in ("holm", "bonferroni", "none"):
+        raise DataError(f"correction must be 'holm', 'bonferroni' or 'none', got {correction!r}")
+    pw, pt = (np.array([r[i] for r in rows]) for i in (5, 7))
+    if correction == "holm":
+        pw_adj, pt_adj = holm(pw), holm(pt)
+    elif correction == "bonferroni":
+        pw_adj, pt_adj = np.minimum(1.0, pw * len(pw)), np.minimum(1.0, pt * len(pt))
+    else:
+        pw_adj, pt_adj = pw, pt
+    return [PairedTest(a, b, label, n, med, w, p1, float(q1), t, p2, float(q2))
+            for (a, b, n, med, w, p1, t, p2), q1, q2 in zip(rows, pw_adj, pt_adj, strict=True)]
+
+
+@dataclass(frozen=True)
+class MixedEffect:
+    """One fixed effect of :func:`mixed_effects` as a factor on the error: ``exp(coef)`` with its interval."""
+
+    term: str
+    factor: float
+    lo: float
+    hi: float
+    p: float
+
+
+@dataclass(frozen=True)
+class MixedModelResult:
+    """A mixed model of the log per-trial error (statsmodels MixedLM), fixed effects as factors on the error.
+
+    Attributes
+    ----------
+    effects : tuple of MixedEffect
+        Each method against ``reference`` (``method <name>``), each strategy against the first (``strategy <name>``).
+    groups : str
+        What the random intercept is per: "subject" (trial within subject a variance component) or "trial".
+    n_obs, n_groups : int
+    converged : bool
+    note : str
+        Warnings of the fit (e.g. a variance on the boundary), or "".
+    """
+
+    reference: str
+    effects: tuple[MixedEffect, ...]
+    groups: str
+    n_obs: int
+    n_groups: int
+    converged: bool
+    note: str = ""
+
+
+def mixed_effects(long: pd.DataFrame, reference: str = "proposed") -> MixedModelResult | None:
+    """``log value ~ method + strategy``, random intercept per subject (trial within subject a variance
+    component), or per trial where fewer than two subjects are named; None where it cannot be fitted.
+
+    Parameters
+    ----------
+    long : DataFrame
+        One row per trial and method: ``trial, label, subject, method, value`` (value > 0, e.g. an RMSE).
+    reference : str
+        The method the others are compared with.
+    """
+    import statsmodels.formula.api as smf
+
+    d = long.dropna(subset=["value"])
+    d = d[d["value"] > 0]
+    if reference not in set(d["method"]) or d["method"].nunique() < 2:
+        return None
+    d = d.assign(y=np.log(d["value"].to_numpy(float)), method=d["method"].astype(str),
+                 label=d["label"].fillna("").astype(str), trial=d["trial"].astype(str))
+    subjects = d["subject"].dropna().astype(str).unique() if "subject" in d.columns else []
+    by_subject = len(subjects) >= 2 and d["subject"].notna().all()
+    terms = f"C(method, Treatment({reference!r}))" + (" + C(label)" if d["label"].nunique() > 1 else "")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            if by_subject:
+                model = smf.mixedlm(f"y ~ {terms}", d, groups=d["subject"].astype(str), re_formula="1",
+                                    vc_formula={"trial": "0 + C(trial)"})
+            else:
+                model = smf.mixedlm(f"y ~ {terms}", d, groups=d["trial"])
+            fit = model.fit(reml=True)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            warnings.warn(f"mixed-effects model not fitted: {exc}", stacklevel=2)
+            return None
+    ci = fit.conf_int()
+    effects = []
+    for name in fit.fe_params.index:
+        if name == "Intercept":
+            continue
+        level = name.split("[T.", 1)[-1].rstrip("]")
+        term = f"method {level}" if name.startswith("C(method") else f"strategy {level}"
+        effects.append(MixedEffect(term, float(np.exp(fit.fe_params[name])), float(np.exp(ci.loc[name, 0])),
+                                   float(np.exp(ci.loc[name, 1])), float(fit.pvalues[name])))
+    # the optimizer's retries are noise once it converged; a variance at zero is worth saying
+    messages = [str(w.message) for w in caught]
+    note = "; ".join(dict.fromkeys(
+        ["a variance component is estimated at zero (on the boundary)" for m in messages if "boundary" in m]
+        + ([] if fit.converged else [messages[0].split(".")[0]] if messages else [])))
+    return MixedModelResult(
+        reference=reference, effects=tuple(effects), groups="subject" if by_subject else "trial",
+        n_obs=int(fit.nobs), n_groups=int(len(fit.model.group_labels)), converged=bool(fit.converged), note=note,
+    )
+
+
+@dataclass(frozen=True)
+class RMAnovaResult:
+    """Repeated-measures ANOVA over methods with subjects as the repeated unit: ``F(df_num, df_den)``, ``p``."""
+
+    F: float
+    p: float
+    df_num: float
+    df_den: float
+    n_subjects: int
+
+    def __str__(self) -> str:
+        return (f"repeated-measures ANOVA over methods within {self.n_subjects} subjects: "
+                f"F({self.df_num:g}, {self.df_den:g}) = {self.F:.3g}, p = {self.p:.3g}")
+
+
+def repeated_measures_anova(groups: Mapping[str, Sequence[float]]) -> RMAnovaResult:
+    """The omnibus within-subject test over methods (``statsmodels.stats.anova.AnovaRM``).
+
+    Parameters
+    ----------
+    groups : mapping method → values
+        One value per subject, subjects in the same order in every method.
+    """
+    from statsmodels.stats.anova import AnovaRM
+
+    g = _groups(groups)
+    if len({len(v) for v in g.values()}) != 1 or len(next(iter(g.values()))) < 2:
+        raise DataError("a repeated-measures ANOVA needs one value per subject for every method, ≥ 2 subjects")
+    n = len(next(iter(g.values())))
+    long = pd.DataFrame([(i, m, v) for m, vals in g.items() for i, v in enumerate(vals)],
+                        columns=["subject", "method", "value"])
+    table = AnovaRM(long, "value", "subject", within=["method"]).fit().anova_table
+    r = table.iloc[0]
+    return RMAnovaResult(F=float(r["F Value"]), p=float(r["Pr > F"]), df_num=float(r["Num DF"]),
+                         df_den=float(r["Den DF"]), n_subjects=n)

@@ -308,6 +308,11 @@ def _as_fitted(model, demos) -> list:
     return [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(ds, refs, strict=True)]
 
 
+def _used_gain(model) -> str:
+    """The estimator that made the model's K̂ (its ``gain_method`` may be the rule "iv-or-direct")."""
+    return getattr(model, "gain_method_", None) or getattr(model, "gain_method", "direct")
+
+
 def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv", ci: float = 95.0,
                     progress: Callable[[int, int], None] | None = None) -> tuple[WeightRatios | None, str, str]:
     """Weight ratios of a fitted model's demonstrations: ``(ratios or None, gain method, note)``.
@@ -320,7 +325,7 @@ def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: 
 
     shifted = _as_fitted(model, demos)
     note = ""
-    for gain in dict.fromkeys((ratio_gain, getattr(model, "gain_method", "direct"))):
+    for gain in dict.fromkeys((ratio_gain, _used_gain(model))):
         try:
             gains = bootstrap_gain(shifted, model.system, n_boot=n_boot, method=gain, seed=seed, progress=progress)
             return weight_ratios(gains, model.system, ci), gain, note.strip()
@@ -338,7 +343,7 @@ def objective_intervals(model, demos, n_boot: int = 100, seed: int = 0, ratio_ga
     """
     from workbench.method.resampling import bootstrap
 
-    method = getattr(model, "gain_method", "direct")
+    method = _used_gain(model)
     structure = getattr(model, "structure", "full")
     boot = bootstrap(_as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
                      seed=seed)

@@ -1,0 +1,94 @@
+"""Paired differences with bootstrap intervals over whole trials, and sentences derived from the intervals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from workbench.study.findings import study_statistics, windows_sentence
+from workbench.study.paired import MIN_SUBJECTS, paired_difference, paired_differences, per_trial
+
+
+def _table(rng, n_trials, windows, ratio, noise, subjects=None):
+    rows = []
+    for i in range(n_trials):
+        level = rng.lognormal(0, 0.5)  # trials differ a lot; the methods' ratio within a trial is what counts
+        for s in range(windows):
+            base = level * rng.lognormal(0, 0.1)
+            rows.append((f"t{i}", "A", 20 * s, "baseline", "rmse_position", base))
+            rows.append((f"t{i}", "A", 20 * s, "proposed", "rmse_position",
+                         base * ratio * rng.lognormal(0, noise)))
+    table = pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
+    subj = None if subjects is None else {f"t{i}": f"s{i % subjects}" for i in range(n_trials)}
+    return table, subj
+
+
+def test_point_estimate_is_the_ratio_of_per_trial_means():
+    rng = np.random.default_rng(3)
+    table, _ = _table(rng, 8, 5, 0.8, 0.05)
+    wide = per_trial(table, "rmse_position")
+    d = paired_difference(wide, "proposed", "baseline", n_boot=500)
+    by_trial = table.groupby(["trial", "method"])["value"].mean().unstack()
+    assert d.change == pytest.approx(1 - by_trial["proposed"].mean() / by_trial["baseline"].mean())
+    assert d.n_trials == 8 and d.n_windows == 40 and d.resampled == "trials"
+    assert d.lo < d.change < d.hi
+
+
+def test_sentence_comes_from_the_interval(assert_claims_shown):
+    rng = np.random.default_rng(4)
+    lower, _ = _table(rng, 12, 3, 0.7, 0.05)
+    same, _ = _table(rng, 12, 3, 1.0, 0.3)
+    higher, _ = _table(rng, 12, 3, 1.4, 0.05)
+    d_lower, d_same, d_higher = (paired_difference(per_trial(t, "rmse_position"), "proposed", "baseline",
+                                                   n_boot=1000) for t in (lower, same, higher))
+    assert d_lower.shown and d_lower.lo > 0 and d_lower.sentence().startswith("lower by")
+    assert d_higher.shown and d_higher.hi < 0 and d_higher.sentence().startswith("higher by")
+    assert d_same.lo < 0 < d_same.hi and not d_same.shown
+    assert d_same.sentence().startswith("no difference shown")
+    for d in (d_lower, d_same, d_higher):
+        assert_claims_shown(d.sentence())
+
+
+def test_interval_narrows_with_more_trials_and_covers_the_truth():
+    """The 95 % interval holds the true change (a ratio 0.8 times a log-normal factor of mean e^{σ²/2}) in most
+    of 40 seeds, and narrows with more trials."""
+    truth = 1 - 0.8 * np.exp(0.2**2 / 2)
+    hits, widths = 0, {6: [], 30: []}
+    for seed in range(40):
+        rng = np.random.default_rng(100 + seed)
+        for n in (6, 30):
+            # the same ratio in every trial on average: per-trial noise only
+            table, _ = _table(rng, n, 3, 0.8, 0.2)
+            d = paired_difference(per_trial(table, "rmse_position"), "proposed", "baseline", n_boot=400, seed=seed)
+            widths[n].append(d.hi - d.lo)
+            if n == 30:
+                hits += d.lo <= truth <= d.hi
+    assert np.median(widths[30]) < 0.6 * np.median(widths[6])
+    assert hits >= 33  # ≥ 82 % of 40 (the binomial 95 % lower bound of a 95 % interval's coverage is ~85 %)
+
+
+def test_subjects_are_resampled_only_where_there_are_enough():
+    rng = np.random.default_rng(5)
+    few, subj_few = _table(rng, 12, 2, 0.8, 0.1, subjects=3)
+    many, subj_many = _table(rng, 20, 2, 0.8, 0.1, subjects=MIN_SUBJECTS)
+    d_few = paired_differences(few, "rmse_position", "proposed", subjects=subj_few, n_boot=300)[0]
+    d_many = paired_differences(many, "rmse_position", "proposed", subjects=subj_many, n_boot=300)[0]
+    assert d_few.resampled.startswith("trials (only 3 subjects") and d_few.n_subjects == 3
+    assert d_many.resampled == "subjects, then trials within each" and d_many.n_subjects == MIN_SUBJECTS
+
+
+def test_study_statistics_text_states_only_what_its_intervals_show(assert_claims_shown):
+    rng = np.random.default_rng(6)
+    a, subj = _table(rng, 10, 4, 0.7, 0.05, subjects=2)
+    b, _ = _table(rng, 10, 4, 1.0, 0.4)
+    b = b.assign(label="B", trial="b" + b["trial"])
+    table = pd.concat([a, b], ignore_index=True)
+    subj = {**subj, **{f"bt{i}": f"s{i % 2}" for i in range(10)}}
+    stats = study_statistics(table, "rmse_position", "m", subj, windows_sentence(table, 60, 20, 0.05), n_boot=500)
+    text = stats.text()
+    assert assert_claims_shown(text) >= 1
+    assert stats.difference("A", "baseline").shown and not stats.difference("B", "baseline").shown
+    assert "no difference shown" in text and "Wilcoxon" in text and "mixed model" in text.lower()
+    assert stats.mixed is not None and stats.mixed.groups == "subject"
+    assert "every 20 steps (1 s)" in text and "80 windows on 20 test trials" in text

@@ -1,0 +1,141 @@
+"""Is the one-step band calibrated? Coverage without saturated inputs, against the spread sampling allows.
+
+The one-step coverage (:func:`workbench.study.evaluate.one_step_coverage`) counts the recorded inputs inside
+the model's band ``m(x_k) ± c σ(x_k)``. Two things hide or fake a miscalibration there:
+
+* **Saturation.** An input held at its limit — the plant's ``u_min`` / ``u_max``, or a stick pinned at the
+  extreme of its travel in the data — is censored: the operator wanted at least that much, the Gaussian band
+  does not model it. :func:`saturated` flags those samples; coverage is scored with and without them.
+* **Sampling spread.** Samples within a trial are correlated, so the count inside the band varies more than a
+  binomial of N samples. The effective count ``N_eff = N (1 − ρ) / (1 + ρ)`` uses the lag-1 autocorrelation ρ
+  of the inside/outside indicator within trials (an AR(1) approximation); a band is called off only where the
+  observed share lies outside the binomial 95 % interval of the nominal share over ``N_eff`` samples
+  (``scipy.stats.binom.interval``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import scipy.stats
+
+from workbench.data.demonstrations import Demonstration
+from workbench.study.evaluate import nominal_coverage
+
+__all__ = ["saturated", "calibration_counts", "calibration_check", "PINNED_SHARE"]
+
+#: A value at the data's extreme counts as a pinned stick when at least this share of the samples sit on it.
+PINNED_SHARE = 0.01
+
+
+def saturated(demos: Sequence[Demonstration], system: Any, pinned_share: float = PINNED_SHARE) -> list[np.ndarray]:
+    """Per demonstration, a (N, m) mask of the inputs at their limits.
+
+    An input is at its limit where it equals the plant's ``u_min`` / ``u_max`` (within 1e-9 of its range), or —
+    with or without declared limits — where it equals the smallest or largest value it takes over ``demos`` and
+    at least ``pinned_share`` of the samples (and 3) sit exactly there: a stick held against its stop.
+    """
+    U = np.concatenate([d.u for d in demos]) if demos else np.zeros((0, system.m))
+    lo_d, hi_d = (U.min(axis=0), U.max(axis=0)) if len(U) else (np.zeros(system.m), np.zeros(system.m))
+    pinned_lo = ((U == lo_d).sum(axis=0) >= max(3, pinned_share * len(U))) & (hi_d > lo_d)
+    pinned_hi = ((U == hi_d).sum(axis=0) >= max(3, pinned_share * len(U))) & (hi_d > lo_d)
+    u_min = None if system.u_min is None else np.asarray(system.u_min, dtype=float)
+    u_max = None if system.u_max is None else np.asarray(system.u_max, dtype=float)
+    tol = 1e-9 * np.maximum(1.0, np.abs(hi_d - lo_d))
+    out = []
+    for d in demos:
+        mask = (pinned_lo & (d.u == lo_d)) | (pinned_hi & (d.u == hi_d))
+        if u_min is not None:
+            mask |= d.u <= u_min + tol
+        if u_max is not None:
+            mask |= d.u >= u_max - tol
+        out.append(mask)
+    return out
+
+
+def _lag1(indicators: Iterable[np.ndarray]) -> float:
+    """Pooled lag-1 autocorrelation of 0/1 series (one per trial), clipped to [0, 0.99]."""
+    num = den = 0.0
+    for z in indicators:
+        if len(z) < 3:
+            continue
+        c = z - z.mean()
+        num += float(np.sum(c[1:] * c[:-1]))
+        den += float(np.sum(c * c))
+    return float(np.clip(num / den, 0.0, 0.99)) if den > 0 else 0.0
+
+
+def calibration_counts(
+    model: Any, test: Sequence[Demonstration], n_sigmas: Sequence[float] = (1, 2, 3)
+) -> pd.DataFrame:
+    """Counts behind the calibration check, per input and level: ``input, n_sigma, n, n_saturated, hits,
+    n_free, hits_free, n_eff`` (``free``: samples not at a limit; ``n_eff`` of the free samples). Counts of
+    several test sets (folds) add up."""
+    demos = list(test)
+    masks = saturated(demos, model.system)
+    rows = []
+    dev, sig = [], []
+    for d in demos:
+        mean, Sigma = model.input_distribution(d.x, d.x[0], d.target)
+        dev.append(np.abs(d.u - mean))
+        sig.append(np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None)))
+    for j, name in enumerate(model.system.input_names):
+        for c in n_sigmas:
+            inside = [(e[:, j] <= float(c) * s[:, j]).astype(float) for e, s in zip(dev, sig, strict=True)]
+            free = [z[~m[:, j]] for z, m in zip(inside, masks, strict=True)]
+            n_free = int(sum(len(z) for z in free))
+            rho = _lag1(free)
+            rows.append((name, float(c), int(sum(len(z) for z in inside)), int(sum(int(m[:, j].sum()) for m in masks)),
+                         float(sum(z.sum() for z in inside)), n_free, float(sum(z.sum() for z in free)),
+                         n_free * (1.0 - rho) / (1.0 + rho)))
+    return pd.DataFrame(rows, columns=["input", "n_sigma", "n", "n_saturated", "hits", "n_free", "hits_free",
+                                       "n_eff"])
+
+
+def calibration_check(counts: pd.DataFrame, ci: float = 95.0) -> pd.DataFrame:
+    """Coverage with and without saturated inputs, and whether it is off by more than sampling allows.
+
+    Parameters
+    ----------
+    counts : DataFrame
+        :func:`calibration_counts` rows, possibly of several test sets (summed per ``label`` where present,
+        input and level).
+
+    Returns
+    -------
+    DataFrame with ``[label,] input, n_sigma, nominal, coverage, coverage_free, saturated, n_eff, lo, hi,
+    verdict``: ``lo``–``hi`` is the binomial interval of the nominal share over ``n_eff`` samples; the verdict is
+    "ok", "too narrow" (fewer inside than that) or "too wide".
+    """
+    keys = [k for k in ("label", "input", "n_sigma") if k in counts.columns]
+    g = counts.groupby(keys, sort=False)[["n", "n_saturated", "hits", "n_free", "hits_free", "n_eff"]].sum()
+    g = g.reset_index()
+    nominal = np.asarray(nominal_coverage(g["n_sigma"].to_numpy(float)), dtype=float)
+    n_eff = np.maximum(1, np.round(g["n_eff"].to_numpy(float))).astype(int)
+    lo, hi = scipy.stats.binom.interval(ci / 100.0, n_eff, nominal)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov_free = g["hits_free"] / g["n_free"]
+        out = g[keys].assign(
+            nominal=nominal, coverage=g["hits"] / g["n"], coverage_free=cov_free,
+            saturated=g["n_saturated"] / g["n"], n_eff=g["n_eff"], lo=lo / n_eff, hi=hi / n_eff)
+    out["verdict"] = np.where(out["coverage_free"] < out["lo"], "too narrow",
+                              np.where(out["coverage_free"] > out["hi"], "too wide", "ok"))
+    return out
+
+
+def check_table(check: pd.DataFrame) -> pd.DataFrame:
+    """:func:`calibration_check` for reading: percentages, the sampling range, the verdict per row."""
+    rows = []
+    for r in check.itertuples(index=False):
+        rows.append({
+            **({"label": r.label} if "label" in check.columns else {}),
+            "input": r.input, "band": f"{r.n_sigma:g}σ", "nominal [%]": f"{100 * r.nominal:.1f}",
+            "inside [%]": f"{100 * r.coverage:.1f}", "at a limit [%]": f"{100 * r.saturated:.1f}",
+            "inside, limits excluded [%]": f"{100 * r.coverage_free:.1f}",
+            "sampling 95 % range [%] (N_eff)": f"{100 * r.lo:.1f}–{100 * r.hi:.1f} ({r.n_eff:.0f})",
+            "calibration": r.verdict,
+        })
+    return pd.DataFrame(rows)
