@@ -99,7 +99,9 @@ def anova_oneway(groups: Mapping[str, Sequence[float]] | Sequence[Sequence[float
     grand = allv.mean()
     ss_between = sum(len(v) * (v.mean() - grand) ** 2 for v in values)
     ss_total = float(((allv - grand) ** 2).sum())
-    eta = float(ss_between / ss_total) if ss_total > 0 else float("nan")
+    # values all equal: η² is undefined, and ss_total is rounding (0.1 five and seven times: 2e-33, with η² = 2.7)
+    tiny = len(allv) * (1e-12 * max(1.0, float(np.abs(allv).max()))) ** 2
+    eta = float(ss_between / ss_total) if ss_total > tiny else float("nan")
     return AnovaResult(
         F=float(res.statistic),
         p=float(res.pvalue),
