@@ -6,9 +6,10 @@ STAMP  := $(VENV)/.installed-stamp
 OUT    ?= out
 # The exact version of every distribution .venv gets, used as pip constraints (see `make lock`).
 LOCK   := requirements.lock
+LATEST := .venv-latest
 PIP     = -m pip --disable-pip-version-check
 
-.PHONY: demo test test-all lint bench sample-logs lock clean
+.PHONY: demo test test-all test-latest lint bench sample-logs lock clean
 
 # A changed lock reinstalls: pip moves every package to its pinned version (pip itself first).
 $(STAMP): pyproject.toml $(LOCK)
@@ -28,6 +29,16 @@ test: $(STAMP)
 ## test-all: the suite including the slow tests (full fuzz runs, large studies)
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -m ''
+
+## test-latest: the fast suite in $(LATEST), installed without the lock: the newest releases pyproject.toml allows
+test-latest:
+	@test -x $(LATEST)/bin/python || $(PYTHON) -m venv $(LATEST)
+	$(LATEST)/bin/python $(PIP) install --quiet --upgrade pip
+	$(LATEST)/bin/python $(PIP) install --quiet --upgrade --upgrade-strategy eager -e '.[test]'
+	@$(LATEST)/bin/python $(PIP) freeze --all --exclude-editable > $(LATEST)/freeze.txt
+	@echo "versions that differ from $(LOCK) (< lock, > latest):"
+	@grep -v '^#' $(LOCK) | diff - $(LATEST)/freeze.txt | grep '^[<>]' || echo "  none"
+	$(LATEST)/bin/python -m pytest
 
 lint: $(STAMP)
 	$(BIN)/ruff check workbench adapters tests bench
@@ -59,4 +70,4 @@ lock:
 	echo "lock: wrote $(LOCK) ($$(grep -vc '^#' $(LOCK)) pins)"
 
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache build *.egg-info
+	rm -rf $(VENV) $(LATEST) $(OUT) .pytest_cache .ruff_cache build *.egg-info
