@@ -56,11 +56,12 @@ lock:
 	@set -e; tmp=$$(mktemp -d); trap 'rm -rf "$$tmp"' EXIT; \
 	$(PYTHON) -m venv "$$tmp/venv"; py="$$tmp/venv/bin/python"; \
 	"$$py" $(PIP) install --quiet --upgrade pip; \
-	"$$py" $(PIP) install --quiet -e '.[test]'; \
+	"$$py" $(PIP) install --quiet --upgrade --upgrade-strategy eager -e '.[test]'; \
 	{ echo "# Every distribution .venv gets, pinned; the Makefile installs with --constraint $(LOCK)."; \
-	  echo "# Made by \`make lock\`: a fresh venv, pip install --upgrade pip, pip install -e '.[test]' without"; \
-	  echo "# constraints (the newest releases pyproject.toml allows), pip freeze --all --exclude-editable"; \
-	  echo "# (--all keeps pip and setuptools: osqp needs setuptools at run time)."; \
+	  echo "# Made by \`make lock\`: a fresh venv, pip install --upgrade pip, then pip install --upgrade"; \
+	  echo "# --upgrade-strategy eager -e '.[test]' without constraints (the newest releases pyproject.toml allows,"; \
+	  echo "# the venv's own setuptools too), pip freeze --all --exclude-editable (--all keeps pip and setuptools:"; \
+	  echo "# osqp needs setuptools at run time)."; \
 	  echo "# $$("$$py" -c 'import platform as p; print(p.python_implementation(), p.python_version(), "on", p.system(), p.machine())'), $$(date -u +%Y-%m-%d). Do not edit: run make lock."; \
 	  "$$py" $(PIP) freeze --all --exclude-editable; } > "$$tmp/lock"; \
 	if grep -v '^#' "$$tmp/lock" | grep -Evq '^[A-Za-z0-9._-]+==[A-Za-z0-9.!]+$$'; then \
