@@ -4,13 +4,18 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 OUT    ?= out
+# The exact version of every distribution .venv gets, used as pip constraints (see `make lock`).
+LOCK   := requirements.lock
+LATEST := .venv-latest
+PIP     = -m pip --disable-pip-version-check
 
-.PHONY: demo test test-all lint bench sample-logs clean
+.PHONY: demo test test-all test-latest lint bench sample-logs lock clean
 
-$(STAMP): pyproject.toml
+# A changed lock reinstalls: pip moves every package to its pinned version (pip itself first).
+$(STAMP): pyproject.toml $(LOCK)
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check --upgrade pip
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
+	$(BIN)/python $(PIP) install --quiet --constraint $(LOCK) pip
+	$(BIN)/python $(PIP) install --quiet --constraint $(LOCK) -e '.[test]'
 	@touch $(STAMP)
 
 ## demo: set up .venv, then run the main job on sample_logs/ (report + rerun recording in $(OUT)/)
@@ -25,6 +30,16 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -m ''
 
+## test-latest: the fast suite in $(LATEST), installed without the lock: the newest releases pyproject.toml allows
+test-latest:
+	@test -x $(LATEST)/bin/python || $(PYTHON) -m venv $(LATEST)
+	$(LATEST)/bin/python $(PIP) install --quiet --upgrade pip
+	$(LATEST)/bin/python $(PIP) install --quiet --upgrade --upgrade-strategy eager -e '.[test]'
+	@$(LATEST)/bin/python $(PIP) freeze --all --exclude-editable > $(LATEST)/freeze.txt
+	@echo "versions that differ from $(LOCK) (< lock, > latest):"
+	@grep -v '^#' $(LOCK) | diff - $(LATEST)/freeze.txt | grep '^[<>]' || echo "  none"
+	$(LATEST)/bin/python -m pytest
+
 lint: $(STAMP)
 	$(BIN)/ruff check workbench adapters tests bench
 
@@ -36,5 +51,24 @@ bench: $(STAMP)
 sample-logs: $(STAMP)
 	$(BIN)/python -m workbench.cli.sample_logs sample_logs
 
+## lock: rewrite $(LOCK) from a fresh venv with .[test] installed unconstrained (then commit it)
+lock:
+	@set -e; tmp=$$(mktemp -d); trap 'rm -rf "$$tmp"' EXIT; \
+	$(PYTHON) -m venv "$$tmp/venv"; py="$$tmp/venv/bin/python"; \
+	"$$py" $(PIP) install --quiet --upgrade pip; \
+	"$$py" $(PIP) install --quiet --upgrade --upgrade-strategy eager -e '.[test]'; \
+	{ echo "# Every distribution .venv gets, pinned; the Makefile installs with --constraint $(LOCK)."; \
+	  echo "# Made by \`make lock\`: a fresh venv, pip install --upgrade pip, then pip install --upgrade"; \
+	  echo "# --upgrade-strategy eager -e '.[test]' without constraints (the newest releases pyproject.toml allows,"; \
+	  echo "# the venv's own setuptools too), pip freeze --all --exclude-editable (--all keeps pip and setuptools:"; \
+	  echo "# osqp needs setuptools at run time)."; \
+	  echo "# $$("$$py" -c 'import platform as p; print(p.python_implementation(), p.python_version(), "on", p.system(), p.machine())'), $$(date -u +%Y-%m-%d). Do not edit: run make lock."; \
+	  "$$py" $(PIP) freeze --all --exclude-editable; } > "$$tmp/lock"; \
+	if grep -v '^#' "$$tmp/lock" | grep -Evq '^[A-Za-z0-9._-]+==[A-Za-z0-9.!]+$$'; then \
+	  echo "lock: not a plain name==version pin (a URL, a local +version or an editable):" >&2; \
+	  grep -v '^#' "$$tmp/lock" | grep -Ev '^[A-Za-z0-9._-]+==[A-Za-z0-9.!]+$$' >&2; exit 1; fi; \
+	cp "$$tmp/lock" $(LOCK).tmp; mv -f $(LOCK).tmp $(LOCK); \
+	echo "lock: wrote $(LOCK) ($$(grep -vc '^#' $(LOCK)) pins)"
+
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache build *.egg-info
+	rm -rf $(VENV) $(LATEST) $(OUT) .pytest_cache .ruff_cache build *.egg-info

@@ -82,7 +82,12 @@ class PartDistance:
     @classmethod
     def from_samples(cls, A: np.ndarray, B: np.ndarray, K_hat: np.ndarray, K_samples: np.ndarray,
                      n_trials: int) -> PartDistance:
-        """Σ from resampled gains ``K_samples`` (S, m, n) of ``n_trials`` trials, times ``n / (n − 1)``."""
+        """Σ from resampled gains ``K_samples`` (S, m, n) of ``n_trials`` trials, times ``n / (n − 1)``.
+
+        An entry whose spread is at rounding level, ``sd ≤ 1e-12 · max(1, max |K_samples|)``, does not vary: rounding
+        in the fits and in ``np.cov`` scales with the gain (50 equal gains give a variance of 5e-32, not 0), so
+        ``sd > 0`` would depend on the library version.
+        """
         S = np.asarray(K_samples, dtype=float).reshape(len(K_samples), -1)
         if int(n_trials) < 2:
             raise ModelError(f"{n_trials} demonstration(s): resampling needs two or more to estimate how the gain "
@@ -99,7 +104,8 @@ class PartDistance:
         sd = np.sqrt(np.diag(cov))
         # gains that do not vary in some direction (repeated or too few distinct trials) would make every interval
         # collapse onto the estimate: the distance test needs a covariance of full rank
-        rank_ok = bool(np.all(sd > 0)) and float(np.linalg.eigvalsh(cov / np.outer(sd, sd))[0]) > 1e-10
+        varies = sd > 1e-12 * max(1.0, float(np.abs(S).max()))  # not `sd > 0`: see the docstring
+        rank_ok = bool(np.all(varies)) and float(np.linalg.eigvalsh(cov / np.outer(sd, sd))[0]) > 1e-10
         if not rank_ok:
             raise ModelError(
                 f"the {len(S)} resampled gains do not vary in every direction of the part's {S.shape[1]} gain "

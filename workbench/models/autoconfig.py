@@ -150,8 +150,9 @@ def choose_settings(
         if system.r.position:
             spread = np.ones(len(idx))
         else:
-            spread = np.concatenate([d.x for d in train])[:, idx].std(axis=0)
-        spread = np.where(spread > 0, spread, 1.0)
+            xs = np.concatenate([d.x for d in train])[:, idx]
+            spread = xs.std(axis=0)  # of a constant state: rounding (1e-16), not 0, hence the relative tolerance
+            spread = np.where(spread > 1e-12 * np.maximum(1.0, np.abs(xs).max(axis=0)), spread, 1.0)
         for G in Gs:
             if G * _SAMPLES_PER_COMPONENT > n_train:
                 continue
