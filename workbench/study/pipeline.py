@@ -195,11 +195,13 @@ def run_study(
     executor: Any = None,
     test_ids: Sequence[str] | None = None,
     bootstrap: int = 0,
+    power: int = 0,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
 
     ``bootstrap``: resamples of each label's training trials for intervals of the proposed model's task objective
-    and its weight ratios (``StudyResult.objectives``); 0 computes none.
+    and its weight ratios (``StudyResult.objectives``); 0 computes none. ``power``: simulated sets per size of the
+    power curve of every ratio the data do not pin down (:mod:`workbench.study.power`); 0 computes none.
 
     ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
@@ -286,7 +288,7 @@ def run_study(
     table = pd.concat(rmse_parts, ignore_index=True)
     metric = ev.primary_metric(system)
     stats_text = _subject_stats(ev, table, demos, metric, metric_unit(system, metric))
-    objectives = _objective_intervals(models, train, int(bootstrap), seed)
+    objectives = _objective_intervals(models, train, int(bootstrap), seed, int(power))
     calibration = pd.concat(cov_parts, ignore_index=True) if cov_parts else None
     return StudyResult(
         demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
@@ -299,9 +301,10 @@ def run_study(
 
 
 def _objective_intervals(
-    models: dict[str, Any], train: dict[str, DemonstrationSet], n_boot: int, seed: int
+    models: dict[str, Any], train: dict[str, DemonstrationSet], n_boot: int, seed: int, power: int = 0
 ) -> dict[str, Any]:
-    """Bootstrap intervals of each label's task objective (:func:`workbench.study.weights.objective_intervals`)."""
+    """Bootstrap intervals of each label's task objective (:func:`workbench.study.weights.objective_intervals`),
+    with ``power`` simulated sets per size of a power curve for the ratios that need one (0: none)."""
     from workbench.errors import ModelError
     from workbench.study.weights import objective_intervals
 
@@ -314,7 +317,7 @@ def _objective_intervals(
         try:
             # a seed per label: with one seed, resample j of every label draws the same trial positions, and the
             # factor between two labels' ratios (weights.compare_strategies) needs independent resamples
-            out[label] = objective_intervals(model, train[label], n_boot=n_boot, seed=seed + i)
+            out[label] = objective_intervals(model, train[label], n_boot=n_boot, seed=seed + i, power=power)
         except ModelError as exc:  # the report then shows the point estimate and says it has no interval
             warnings.warn(f"{label}: no bootstrap intervals of the task objective: {exc}", stacklevel=3)
     return out
