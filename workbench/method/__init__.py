@@ -46,6 +46,8 @@ _EXPORTS = {
     "explains": "ratio_profile",
     "interval": "ratio_profile",
     "factor_interval": "ratio_profile",
+    "PseudoTrue": "pseudo_true",
+    "pseudo_true": "pseudo_true",
     "decoupled_parts": "structured",
     "memo_lqr": "structured",
     "gain_jacobian": "structured",

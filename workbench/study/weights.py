@@ -6,8 +6,11 @@ decoupled part of the plant (:func:`workbench.method.structured.decoupled_parts`
 ratios
 inside one part, e.g. ``Q_φφ / R_u1`` of the quadrotor's lateral part. This module estimates them from a gain
 and its bootstrap distribution (:func:`workbench.method.resampling.bootstrap_gain`) by minimum distance, with profile
-intervals (:mod:`workbench.method.ratio_profile`), and compares two strategies ratio by ratio, saying "not
-identifiable from these data" where an interval spans more than a factor of :data:`IDENTIFIABLE_SPAN`.
+intervals (:mod:`workbench.method.ratio_profile`), and compares two strategies ratio by ratio. Every ratio ends in one
+of three readings: a finite estimate with its interval; "not identifiable" where the interval spans more than
+×:data:`IDENTIFIABLE_SPAN`, with the demonstrations a power curve says it would need (:mod:`workbench.study.power`);
+or "not of this form" where the part's gain is no diagonal cost's, with the closest one and the mismatch per gain
+entry (:mod:`workbench.method.pseudo_true`).
 """
 
 from __future__ import annotations
@@ -324,7 +327,8 @@ def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
     """Weight ratios per strategy and, for two or more, the factor between each strategy's and the first one's.
 
     A factor's interval is the profile interval of the difference of one log ratio between two strategies
-    (:func:`workbench.method.ratio_profile.factor_interval`), each strategy with its own gain and covariance.
+    (:func:`workbench.method.ratio_profile.factor_interval`), each strategy with its own gain and covariance; where
+    either strategy's part is not of the diagonal form there is no factor (NaN) and its note says why.
 
     Returns
     -------
