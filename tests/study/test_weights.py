@@ -259,25 +259,27 @@ def test_structure_test_runs_only_with_restrictions():
     wr = weight_ratios(bootstrap_gain(demos, system, n_boot=30, method="iv", seed=1), system)
     assert [f.restrictions for f in wr.fits] == [0, 0]
     assert all(f.explained is None and not f.tested for f in wr.fits)
-    # a part driven by two inputs has restrictions (4 gain entries, 2 + 2 − 1 ratios): tested
+    # a part driven by two inputs has restrictions (6 gain entries, 3 + 2 − 1 ratios): tested
     plant = two_input_plant()
     wr2 = weight_ratios(bootstrap_gain(lqr_operator_demos(TWO_INPUT_OP, 30, seed=902, system=plant), plant,
                                        n_boot=60, method="iv", seed=2), plant)
     (fit,) = wr2.fits
-    assert fit.restrictions == 1 and fit.tested and fit.explained is not None
-    assert fit.critical == pytest.approx(ratio_profile.critical_value(95, 30, 1))
+    assert fit.restrictions == 2 and fit.tested and fit.explained is not None
+    assert fit.critical == pytest.approx(ratio_profile.critical_value(95, 30, 2))
 
 
 def two_input_plant():
     from workbench.plant.system import LinearSystem
 
     dt = 0.05
-    return LinearSystem(A=np.array([[1.0, dt], [0.0, 1.0]]), B=np.array([[0.0, 0.0], [dt, 0.5 * dt]]), dt=dt,
-                        state_names=("p", "v"), input_names=("a", "b"))
+    # position, velocity and a lagged actuator state; input b drives both the velocity and the lag
+    return LinearSystem(A=np.array([[1.0, dt, 0.0], [0.0, 1.0, 0.3 * dt], [0.0, 0.0, 0.9]]),
+                        B=np.array([[0.0, 0.0], [dt, 0.5 * dt], [0.0, dt]]), dt=dt,
+                        state_names=("p", "v", "w"), input_names=("a", "b"))
 
 
-TWO_INPUT_OP = LQROperator(q=(1.0, 0.3), r=(10.0, 4.0), sigma_near=(0.01, 0.02), sigma_far=(0.04, 0.06),
-                           x0_low=(-2.0, -0.5), x0_high=(2.0, 0.5), duration=6.0)
+TWO_INPUT_OP = LQROperator(q=(1.0, 0.3, 0.1), r=(10.0, 4.0), sigma_near=(0.01, 0.02), sigma_far=(0.04, 0.06),
+                           x0_low=(-2.0, -0.5, -0.5), x0_high=(2.0, 0.5, 0.5), duration=6.0)
 
 
 def structure_rejections(seeds, n_demos: int = 30, n_boot: int = 100) -> float:

@@ -52,6 +52,11 @@ class PowerCurve:
     target: float
     n_trials: int
 
+    @property
+    def largest(self) -> int:
+        """The largest simulated number of demonstrations."""
+        return int(self.spans["n"].max()) if len(self.spans) else 0
+
     def describe(self) -> list[str]:
         """One line per ratio: its median simulated span at each size and the demonstrations needed."""
         lines = []
@@ -61,7 +66,8 @@ class PowerCurve:
                             for n, v in med[ratio].items())
             need = self.needed.get(ratio, float("inf"))
             lines.append(f"{ratio}: {pts}; span < ×{self.target:g} at " +
-                         (f"~{int(np.ceil(need))} demonstrations" if np.isfinite(need) else "more than simulated"))
+                         (f"~{int(np.ceil(need))} demonstrations" if np.isfinite(need)
+                          else f"more than {self.largest} demonstrations"))
         return lines
 
 

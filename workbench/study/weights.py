@@ -62,7 +62,8 @@ class RatioInterval:
     spread): the estimate and interval are then those of the closest diagonal cost (the pseudo-true value,
     :mod:`workbench.method.pseudo_true`) and ``mismatch`` says in words how the gain departs from it.
     ``needed`` is the number of demonstrations a power curve (:mod:`workbench.study.power`) says would make
-    the interval narrower than ×:data:`TARGET_SPAN` (inf: more than it simulated; None: not computed).
+    the interval narrower than ×:data:`TARGET_SPAN` (inf: more than the ``simulated`` largest size; None: not
+    computed).
     """
 
     name: str
@@ -73,6 +74,7 @@ class RatioInterval:
     explained: bool = True
     mismatch: str = ""
     needed: float | None = None
+    simulated: int | None = None
 
     @property
     def span(self) -> float:
@@ -94,19 +96,20 @@ class RatioInterval:
             return f"{NOT_EXPLAINED}: mismatch {self.mismatch}" if self.mismatch else NOT_EXPLAINED
         if self.identifiable:
             return ""
-        return f"{NOT_IDENTIFIABLE}: {needed_words(self.needed)}"
+        return f"{NOT_IDENTIFIABLE}: {needed_words(self.needed, self.simulated)}"
 
     def describe(self) -> str:
         text = f"{self.name} = {format_interval(self.estimate, self.lo, self.hi)}"
         return f"{text}: {self.note}" if self.note else text
 
 
-def needed_words(needed: float | None) -> str:
+def needed_words(needed: float | None, simulated: int | None = None) -> str:
     """``~N demonstrations needed`` from a power curve; what is known where none was computed."""
     if needed is None:
         return "demonstrations needed not computed (`workbench report` or `fit --power`)"
     if not np.isfinite(needed):
-        return "more demonstrations needed than the power curve simulated (a zero or infinite weight fits)"
+        most = f" than {simulated}" if simulated else " than simulated"
+        return f"more demonstrations needed{most} (a zero or infinite weight fits at every simulated size)"
     return f"~{_round_up(needed)} demonstrations needed"
 
 
@@ -127,6 +130,12 @@ def format_interval(estimate: float, lo: float, hi: float) -> str:
         return "∞" if v >= 1 / ZERO_RATIO else f"{v:.3g}"
 
     return f"{bound(estimate)} [{bound(lo)}, {bound(hi)}]"
+
+
+def _pct(v: float) -> str:
+    """A fraction as a percentage: two significant figures below 10 %, whole percent above."""
+    v = 100.0 * abs(float(v))
+    return f"{v:.0f} %" if v >= 10 else f"{v:.2g} %"
 
 
 def _part_ratio_names(states: Sequence[int], inputs: Sequence[int], state_names: Sequence[str],
@@ -191,7 +200,7 @@ class PartFit:
             if np.isfinite(rel[e]):
                 way = "stiffer" if rel[e] > 0 else "softer"
                 a, b = sorted((abs(lo[e]), abs(hi[e]))) if lo[e] * hi[e] > 0 else (0.0, max(abs(lo[e]), abs(hi[e])))
-                words.append(f"{where} {100 * abs(rel[e]):.0f} % {way} [{100 * a:.0f} %, {100 * b:.0f} %]")
+                words.append(f"{where} {_pct(rel[e])} {way} [{_pct(a)}, {_pct(b)}]")
             else:
                 words.append(f"{where} {c.k_hat[e]:.3g} where the closest diagonal LQR has {c.k_closest[e]:.3g}")
         return "; ".join(words) + " than the closest diagonal LQR gain" if words else ""
@@ -243,11 +252,11 @@ class WeightRatios:
     def names(self) -> list[str]:
         return [iv.name for iv in self.intervals]
 
-    def with_needed(self, needed: dict[str, float]) -> WeightRatios:
-        """A copy whose intervals carry the demonstrations a power curve says each ratio needs."""
+    def with_needed(self, needed: dict[str, float], simulated: int | None = None) -> WeightRatios:
+        """A copy whose intervals carry the demonstrations a power curve (up to ``simulated``) says each needs."""
         from dataclasses import replace
 
-        return replace(self, intervals=tuple(replace(iv, needed=needed.get(iv.name, iv.needed))
+        return replace(self, intervals=tuple(replace(iv, needed=needed.get(iv.name, iv.needed), simulated=simulated)
                                              for iv in self.intervals))
 
 
@@ -387,7 +396,7 @@ def _factor(first: WeightRatios, other: WeightRatios, k: int) -> dict:
     lo, hi = ratio_profile.factor_interval(part_a, theta_a, d_a, part_b, theta_b, d_b, j, other.ci)
     needed = None if a.needed is None or b.needed is None else a.needed + b.needed
     f = RatioInterval(b.name, float(np.exp(theta_b[j] - theta_a[j])), float(np.exp(lo)), float(np.exp(hi)), other.ci,
-                      needed=needed)
+                      needed=needed, simulated=max(a.simulated or 0, b.simulated or 0) or None)
     return {"factor": f.estimate, "factor_lo": f.lo, "factor_hi": f.hi, "factor_identifiable": f.identifiable,
             "factor_note": f.note}
 
@@ -501,4 +510,4 @@ def with_power(model, demos, ratios: WeightRatios, repeats: int = 1, seed: int =
     if wide:
         curve = power_curve(model, demos, sizes=sizes, repeats=repeats, seed=seed, gain=gain, ratios=wide)
         needed.update({k: v for k, v in curve.needed.items() if k in wide})
-    return ratios.with_needed(needed), curve
+    return ratios.with_needed(needed, None if curve is None else curve.largest), curve
