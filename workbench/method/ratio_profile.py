@@ -99,7 +99,9 @@ class PartDistance:
         sd = np.sqrt(np.diag(cov))
         # gains that do not vary in some direction (repeated or too few distinct trials) would make every interval
         # collapse onto the estimate: the distance test needs a covariance of full rank
-        rank_ok = bool(np.all(sd > 0)) and float(np.linalg.eigvalsh(cov / np.outer(sd, sd))[0]) > 1e-10
+        # (a spread at rounding level of the entries, e.g. 5e-32 for identical resamples, is no spread)
+        floor = 1e-12 * np.maximum(np.abs(S).max(axis=0), np.finfo(float).tiny)
+        rank_ok = bool(np.all(sd > floor)) and float(np.linalg.eigvalsh(cov / np.outer(sd, sd))[0]) > 1e-10
         if not rank_ok:
             raise ModelError(
                 f"the {len(S)} resampled gains do not vary in every direction of the part's {S.shape[1]} gain "
