@@ -37,7 +37,8 @@ import scipy.stats
 from workbench.errors import ModelError
 from workbench.method.structured import gain_jacobian, memo_lqr
 
-__all__ = ["LOG_BOUND", "PartDistance", "critical_value", "fit", "explains", "interval", "factor_interval"]
+__all__ = ["LOG_BOUND", "PartDistance", "ratio_names", "critical_value", "fit", "explains", "interval",
+           "factor_interval"]
 
 # Log ratios are searched within ±LOG_BOUND: a ratio at -LOG_BOUND (≈ 1e-13) is a zero weight, and the DAREs
 # stay well posed inside.
@@ -161,6 +162,15 @@ class PartDistance:
             return self.W @ gain_jacobian(self.A, self.B, *out, directions())
 
         return residual, jacobian
+
+
+def ratio_names(states: Sequence[int], inputs: Sequence[int], state_names: Sequence[str],
+                input_names: Sequence[str]) -> list[str]:
+    """Names of one part's ratios in the order of :class:`PartDistance`'s θ: every ``Q_ii / R_kk``,
+    then every other input's ``R_jj / R_kk``, ``R_kk`` the part's first input."""
+    k = input_names[inputs[0]]
+    return ([f"Q_{state_names[i]} / R_{k}" for i in states]
+            + [f"R_{input_names[j]} / R_{k}" for j in inputs[1:]])
 
 
 class _Joint:

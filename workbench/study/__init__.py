@@ -53,6 +53,7 @@ _EXPORTS = {
     "PowerCurve": "power",
     "power_curve": "power",
     "simulate_like": "power",
+    "as_fitted": "power",
 }
 __all__ = list(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -28,7 +28,7 @@ import pandas as pd
 from workbench.errors import DataError, ModelError
 from workbench.method import ratio_profile
 
-__all__ = ["PowerCurve", "simulate_like", "power_curve"]
+__all__ = ["PowerCurve", "simulate_like", "power_curve", "as_fitted"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,11 +109,21 @@ def simulate_like(model, demos, n_trials: int, seed: int = 0):
                             roles=model.system.roles)
 
 
+def as_fitted(model, demos) -> list:
+    """The demonstrations as the model saw them: states relative to their targets when it is goal-relative."""
+    from types import SimpleNamespace
+
+    from workbench.models.behavior import references
+
+    ds = list(demos)
+    refs, _ = references(ds, model.system.n)
+    return [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(ds, refs, strict=True)]
+
+
 def _log_spans(gains, system, ci: float, ratios: Sequence[str] | None = None) -> dict[str, float]:
     """Per ratio, ``2 t se`` of its minimum-distance log estimate (inf at a zero or infinite weight); only the
     parts holding one of ``ratios`` (default all)."""
     from workbench.method.structured import closest_structured_objective, decoupled_parts
-    from workbench.study.weights import _part_ratio_names
 
     A, B = np.asarray(system.A, dtype=float), np.asarray(system.B, dtype=float)
     K, K_s = np.asarray(gains.K, dtype=float), np.asarray(gains.K_samples, dtype=float)
@@ -123,7 +133,7 @@ def _log_spans(gains, system, ci: float, ratios: Sequence[str] | None = None) ->
         if not inputs:
             continue
         s, c = list(states), list(inputs)
-        names = _part_ratio_names(s, c, system.state_names, system.input_names)
+        names = ratio_profile.ratio_names(s, c, system.state_names, system.input_names)
         if ratios is not None and not set(names) & set(ratios):
             continue
         try:
@@ -168,7 +178,6 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
         Only the parts holding these ratios are refitted (default all): the others cost time and say nothing new.
     """
     from workbench.method.resampling import bootstrap_gain
-    from workbench.study.weights import _as_fitted
 
     n0 = len(demos)
     sizes = sorted({int(v) for v in (sizes if sizes is not None else (n0, 2 * n0, 4 * n0))})
@@ -183,7 +192,7 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
         for rep in range(int(repeats)):
             sim = simulate_like(model, demos, n, seed=int(rng.integers(2**31)))
             try:
-                gains = bootstrap_gain(_as_fitted(model, sim), model.system, n_boot=n_boot, method=gain_method,
+                gains = bootstrap_gain(as_fitted(model, sim), model.system, n_boot=n_boot, method=gain_method,
                                        seed=int(rng.integers(2**31)))
                 spans = _log_spans(gains, model.system, ci, ratios)
             except ModelError:

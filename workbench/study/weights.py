@@ -15,7 +15,7 @@ entry (:mod:`workbench.method.pseudo_true`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -136,15 +136,6 @@ def _pct(v: float) -> str:
     """A fraction as a percentage: two significant figures below 10 %, whole percent above."""
     v = 100.0 * abs(float(v))
     return f"{v:.0f} %" if v >= 10 else f"{v:.2g} %"
-
-
-def _part_ratio_names(states: Sequence[int], inputs: Sequence[int], state_names: Sequence[str],
-                      input_names: Sequence[str]) -> list[str]:
-    """Names of one part's ratios in the order of :class:`ratio_profile.PartDistance`'s θ: every ``Q_ii / R_kk``,
-    then every other input's ``R_jj / R_kk``, ``R_kk`` the part's first input."""
-    k = input_names[inputs[0]]
-    return ([f"Q_{state_names[i]} / R_{k}" for i in states]
-            + [f"R_{input_names[j]} / R_{k}" for j in inputs[1:]])
 
 
 @dataclass(frozen=True)
@@ -314,7 +305,7 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
         Qp, Rp = part.weights(shown)
         scale = max(float(Qp.max()), float(Rp.max()))
         q[s], r[c] = np.diag(Qp) / scale, np.diag(Rp) / scale
-        names = _part_ratio_names(s, c, system.state_names, system.input_names)
+        names = ratio_profile.ratio_names(s, c, system.state_names, system.input_names)
         words = "" if fit.of_form else fit.mismatch_words()
         for j, name in enumerate(names):
             if fit.of_form:
@@ -440,17 +431,6 @@ class ObjectiveIntervals:
     power: object = None
 
 
-def _as_fitted(model, demos) -> list:
-    """The demonstrations as the model saw them: states relative to their targets when it is goal-relative."""
-    from types import SimpleNamespace
-
-    from workbench.models.behavior import references
-
-    ds = list(demos)
-    refs, _ = references(ds, model.system.n)
-    return [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(ds, refs, strict=True)]
-
-
 def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv", ci: float = 95.0,
                     progress: Callable[[int, int], None] | None = None) -> tuple[WeightRatios | None, str, str]:
     """Weight ratios of a fitted model's demonstrations: ``(ratios or None, gain method, note)``.
@@ -460,8 +440,9 @@ def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: 
     covariance comes from ``n_boot`` resamples of whole trials.
     """
     from workbench.method.resampling import bootstrap_gain
+    from workbench.study.power import as_fitted
 
-    shifted = _as_fitted(model, demos)
+    shifted = as_fitted(model, demos)
     note = ""
     for gain in dict.fromkeys((ratio_gain, getattr(model, "gain_method", "direct"))):
         try:
@@ -483,10 +464,11 @@ def objective_intervals(model, demos, n_boot: int = 100, seed: int = 0, ratio_ga
     than ×:data:`TARGET_SPAN`, so that a ratio the data do not identify says how many demonstrations would.
     """
     from workbench.method.resampling import bootstrap
+    from workbench.study.power import as_fitted
 
     method = getattr(model, "gain_method", "direct")
     structure = getattr(model, "structure", "full")
-    boot = bootstrap(_as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
+    boot = bootstrap(as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
                      seed=seed)
     ratios, gain, note = ratio_bootstrap(model, demos, n_boot, seed, ratio_gain, boot.ci)
     curve = None
