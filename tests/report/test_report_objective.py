@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -17,7 +19,8 @@ def result():
     system = planar_quadrotor()
     a = lqr_operator_demos(LQROperator(q=(1, 1, 1, 0.3, 0.3, 0.01)), 10, seed=41, system=system, label="A")
     b = lqr_operator_demos(LQROperator(q=(4, 2, 46, 0.3, 0.3, 0.01)), 10, seed=42, system=system, label="B")
-    return run_study(a + b, system, n_components=2, samples=0, efficiency=None, n_steps=20, bootstrap=12)
+    return run_study(a + b, system, n_components=2, samples=0, efficiency=None, n_steps=20, bootstrap=12,
+                     power=1)
 
 
 def test_study_bootstraps_each_strategy_objective(result):
@@ -41,6 +44,29 @@ def test_report_shows_intervals_and_the_ratio_comparison(result, tmp_path):
     assert format_interval(row.factor, row.factor_lo, row.factor_hi) in section
     flagged = (table["factor_identifiable"] == False).any()  # noqa: E712 - NaN rows of the first strategy
     assert (NOT_IDENTIFIABLE in section) == (flagged or (~table["identifiable"]).any())
+
+
+def ratio_rows(section: str) -> list[list[str]]:
+    """The cells of the weight-ratio table's rows."""
+    table = section.split("### Weight ratios inside coupled parts")[1].split("\n\n")[2]
+    return [[c.strip() for c in line.strip("|").split("|")] for line in table.splitlines()[2:]]
+
+
+def test_every_ratio_says_what_the_data_carry(result, tmp_path):
+    # a finite estimate with its interval, or not identifiable with the demonstrations needed, or not of this
+    # form with the mismatch: never a bare "∞ [0, ∞]" or an unexplained unbounded interval
+    text = write_study_report(result, tmp_path / "r").read_text()
+    section = text.split("## Task objective")[1].split("\n## ")[0]
+    rows = ratio_rows(section)
+    assert len(rows) == 12
+    said = re.compile(r"(not identifiable: (~\d+|more) demonstrations|not of this form: mismatch )")
+    for ratio, strategy, estimate, note, factor in rows:
+        for cell in (estimate, factor):
+            bounded = "∞" not in cell and "[0," not in cell
+            assert bounded or said.search(note), (ratio, strategy, cell, note)
+        assert "not computed" not in note
+    assert section.index("### What the data identify") < section.index("### Weight ratios inside coupled parts")
+    assert "Power curve of" in section or not any("not identifiable" in r[3] for r in rows)
 
 
 def test_report_without_bootstrap_says_so(tmp_path):

@@ -40,18 +40,26 @@ OP_C = LQROperator(q=(2.0, 0.5, 5.0, 0.1, 0.6, 0.05), r=(5.0, 20.0), rho=0.85)
 OP_D = LQROperator(q=(0.5, 3.0, 0.5, 0.1, 0.6, 0.05), r=(5.0, 10.0), rho=0.85)
 
 
-def true_factors(system, a: LQROperator = OP_A, b: LQROperator = OP_B) -> dict[str, float]:
-    """Factor b/a of every ratio Q_ii / R_kk inside a part, from the operators' costs."""
+def true_ratios(system, op: LQROperator) -> dict[str, float]:
+    """Every ratio Q_ii / R_kk inside a part, from an operator's cost."""
     out = {}
     for states, inputs in decoupled_parts(system.A, system.B):
         k = inputs[0]
         for i in states:
-            name = f"Q_{system.state_names[i]} / R_{system.input_names[k]}"
-            out[name] = (b.q[i] / b.r[k]) / (a.q[i] / a.r[k])
+            out[f"Q_{system.state_names[i]} / R_{system.input_names[k]}"] = op.q[i] / op.r[k]
     return out
 
 
-def coverage(seeds, n_boot: int, n_demos: int = 30, a: LQROperator = OP_A, b: LQROperator = OP_B) -> pd.DataFrame:
+def true_factors(system, a: LQROperator = OP_A, b: LQROperator = OP_B) -> dict[str, float]:
+    """Factor b/a of every ratio Q_ii / R_kk inside a part, from the operators' costs."""
+    ra, rb = true_ratios(system, a), true_ratios(system, b)
+    return {name: rb[name] / ra[name] for name in ra}
+
+
+def coverage(seeds, n_boot: int, n_demos: int = 30, a: LQROperator = OP_A, b: LQROperator = OP_B,
+             own: list | None = None) -> pd.DataFrame:
+    """Per seed and ratio, whether the factor's interval covers the truth; with ``own`` a list, each operator's
+    own ratio intervals are recorded there too (``finite``: an interval that reaches neither 0 nor ∞)."""
     system = planar_quadrotor()
     truth = true_factors(system, a, b)
     rows = []
@@ -62,13 +70,31 @@ def coverage(seeds, n_boot: int, n_demos: int = 30, a: LQROperator = OP_A, b: LQ
             "B": weight_ratios(bootstrap_gain(lqr_operator_demos(b, n_demos, seed=2000 + seed, system=system),
                                               system, n_boot=n_boot, method="iv", seed=50000 + seed), system),
         }
+        if own is not None:
+            for lb, op in (("A", a), ("B", b)):
+                t = true_ratios(system, op)
+                for iv in ratios[lb].intervals:
+                    own.append({"seed": seed, "operator": lb, "ratio": iv.name, "covered": iv.lo <= t[iv.name] <= iv.hi,
+                                "finite": bool(np.isfinite(iv.span)), "of_form": iv.explained})
         table = compare_strategies(ratios)
         for r in table[table["strategy"] == "B"].itertuples():
             t = truth[r.ratio]
             rows.append({"seed": seed, "ratio": r.ratio, "truth": t, "factor": r.factor, "lo": r.factor_lo,
                          "hi": r.factor_hi, "covered": r.factor_lo <= t <= r.factor_hi,
-                         "identifiable": r.factor_identifiable, "explained": r.factor_note != NOT_EXPLAINED})
+                         "identifiable": r.factor_identifiable, "explained": not str(r.factor_note).startswith(
+                             NOT_EXPLAINED)})
     return pd.DataFrame(rows)
+
+
+def own_summary(own: list) -> pd.DataFrame:
+    """Coverage of each operator's ratio intervals where they are finite, and how often they are."""
+    df = pd.DataFrame(own)
+    finite = df[df["finite"]]
+    s = finite.groupby(["operator", "ratio"]).agg(coverage=("covered", "mean"), finite=("covered", "size"))
+    s["seeds"] = df.groupby(["operator", "ratio"]).size()
+    s["of_form"] = df.groupby(["operator", "ratio"])["of_form"].mean()
+    print(s.to_string())
+    return s
 
 
 def summarize(df: pd.DataFrame) -> pd.DataFrame:
@@ -80,12 +106,30 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def test_ratio_intervals_on_a_few_seeds():
-    s = summarize(coverage(seeds=(20, 21), n_boot=40))
-    # LQR operators: a diagonal cost explains every part's gain
+    own: list = []
+    s = summarize(coverage(seeds=(20, 21), n_boot=40, own=own))
+    # LQR operators: their parts are of the diagonal form (untested: no restrictions; no mismatch shown)
     assert (s["explained"] == 1.0).all()
     # the position ratios are identifiable (interval within 10×) and cover their factor
     for name in ("Q_x / R_u1", "Q_y / R_u2"):
         assert s.loc[name, "identifiable"] == 1.0 and s.loc[name, "coverage"] == 1.0
+    o = own_summary(own)
+    assert o.loc[("A", "Q_y / R_u2"), "coverage"] == 1.0 and o.loc[("B", "Q_y / R_u2"), "coverage"] == 1.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("n_demos", [30, 60])
+def test_every_finite_ratio_interval_covers_in_ninety_percent_of_seeds(n_demos):
+    # seeds 500-529, never used to choose the method: each operator's own ratios and the factors between them
+    own: list = []
+    s = summarize(coverage(seeds=range(500, 530), n_boot=100, n_demos=n_demos, own=own))
+    o = own_summary(own)
+    for name, row in s.iterrows():
+        assert row["coverage"] >= 0.9, f"factor {name} at {n_demos}: coverage {row['coverage']:.2f} < 0.9"
+    for (op, name), row in o.iterrows():
+        assert row["coverage"] >= 0.9, f"{op} {name} at {n_demos}: coverage {row['coverage']:.2f} < 0.9"
+        # the diagonal form is not rejected on operators whose cost is diagonal
+        assert row["of_form"] >= 0.9, f"{op} {name}: not of the form in {1 - row['of_form']:.2f} of seeds"
 
 
 @pytest.mark.slow
@@ -95,7 +139,7 @@ def test_ratio_intervals_cover_the_truth_in_ninety_percent_of_seeds():
     s = summarize(coverage(seeds=range(300, 350), n_boot=100))
     for name, row in s.iterrows():
         assert row["coverage"] >= 0.9, f"{name}: coverage {row['coverage']:.2f} < 0.9"
-        # the structure test rejects a true diagonal cost in at most 5 % of parts (two operators per row here)
+        # the diagonal form is kept for true diagonal costs in at least 90 % of seeds
         assert row["explained"] >= 0.9, f"{name}: a diagonal cost explains only {row['explained']:.2f}"
 
 
@@ -182,7 +226,7 @@ def test_factor_interval_covers_at_its_level_when_the_gain_is_gaussian():
     assert np.mean(covered) >= 0.88
 
 
-def test_a_gain_no_diagonal_cost_reaches_is_flagged():
+def test_a_gain_no_diagonal_cost_reaches_is_flagged_without_a_test():
     # scalar plant x+ = x + 0.1 u: LQR gains run from 0 (zero state weight) to -10 (deadbeat, infinite ratio); -15
     # still stabilizes but is the gain of no cost
     plant = scalar_plant()
@@ -191,11 +235,70 @@ def test_a_gain_no_diagonal_cost_reaches_is_flagged():
     (fit,), (iv,) = wr.fits, wr.intervals
     nearest = scalar_gain(plant, np.exp(ratio_profile.LOG_BOUND))
     assert fit.distance == pytest.approx((nearest + 15.0) ** 2 / (sigma**2 * n / (n - 1)), rel=1e-6)
-    assert fit.restrictions == 0 and fit.critical == pytest.approx(ratio_profile.critical_value(95, n))
-    assert not fit.explained and not iv.explained and iv.note == NOT_EXPLAINED and NOT_EXPLAINED in iv.describe()
-    # inside the reachable range the same spread is explained
+    # one gain entry, one free ratio: no restriction, so the structure test is not run
+    assert fit.restrictions == 0 and not fit.tested and fit.explained is None and np.isnan(fit.critical)
+    assert "no restriction to test" in fit.describe()
+    # ... but the gain departs from the closest diagonal cost's (the deadbeat gain) by more than its spread
+    closest = fit.closest
+    assert closest.k_closest[0] == pytest.approx(nearest, rel=1e-6)
+    assert closest.mismatch[0] == pytest.approx(-15.0 - nearest, rel=1e-6)
+    half = np.sqrt(ratio_profile.critical_value(95, n) * n / (n - 1)) * sigma  # one entry: no Bonferroni
+    assert closest.mismatch_hi[0] == pytest.approx(-15.0 - nearest + half, rel=1e-3)
+    assert not fit.of_form and not iv.explained and iv.note.startswith(NOT_EXPLAINED + ": mismatch u on p ")
+    assert "stiffer" in iv.note  # |−15| > |−10|
+    # inside the reachable range the same spread is an exact fit: of the form, with a profile interval
     inside = weight_ratios(gains(plant, scalar_gain(plant, 2.0), sigma, n), plant)
-    assert inside.fits[0].explained and inside.fits[0].distance < 1e-12 and inside.intervals[0].note != NOT_EXPLAINED
+    assert inside.fits[0].of_form and inside.fits[0].closest is None and inside.fits[0].distance < 1e-12
+    assert inside.intervals[0].explained
+
+
+def test_structure_test_runs_only_with_restrictions():
+    # the planar quadrotor's parts have as many free ratios as gain entries: never tested
+    system = planar_quadrotor()
+    demos = lqr_operator_demos(OP_A, 12, seed=901, system=system)
+    wr = weight_ratios(bootstrap_gain(demos, system, n_boot=30, method="iv", seed=1), system)
+    assert [f.restrictions for f in wr.fits] == [0, 0]
+    assert all(f.explained is None and not f.tested for f in wr.fits)
+    # a part driven by two inputs has restrictions (6 gain entries, 3 + 2 − 1 ratios): tested
+    plant = two_input_plant()
+    wr2 = weight_ratios(bootstrap_gain(lqr_operator_demos(TWO_INPUT_OP, 30, seed=902, system=plant), plant,
+                                       n_boot=60, method="iv", seed=2), plant)
+    (fit,) = wr2.fits
+    assert fit.restrictions == 2 and fit.tested and fit.explained is not None
+    assert fit.critical == pytest.approx(ratio_profile.critical_value(95, 30, 2))
+
+
+def two_input_plant():
+    from workbench.plant.system import LinearSystem
+
+    dt = 0.05
+    # position, velocity and a lagged actuator state; input b drives both the velocity and the lag
+    return LinearSystem(A=np.array([[1.0, dt, 0.0], [0.0, 1.0, 0.3 * dt], [0.0, 0.0, 0.9]]),
+                        B=np.array([[0.0, 0.0], [dt, 0.5 * dt], [0.0, dt]]), dt=dt,
+                        state_names=("p", "v", "w"), input_names=("a", "b"))
+
+
+TWO_INPUT_OP = LQROperator(q=(1.0, 0.3, 0.1), r=(10.0, 4.0), sigma_near=(0.01, 0.02), sigma_far=(0.04, 0.06),
+                           x0_low=(-2.0, -0.5, -0.5), x0_high=(2.0, 0.5, 0.5), duration=6.0)
+
+
+def structure_rejections(seeds, n_demos: int = 30, n_boot: int = 100) -> float:
+    plant = two_input_plant()
+    rejected = []
+    for seed in seeds:
+        demos = lqr_operator_demos(TWO_INPUT_OP, n_demos, seed=3000 + seed, system=plant)
+        (fit,) = weight_ratios(bootstrap_gain(demos, plant, n_boot=n_boot, method="iv", seed=seed), plant).fits
+        rejected.append(fit.explained is False)
+    return float(np.mean(rejected))
+
+
+@pytest.mark.slow
+def test_structure_test_false_rejections_on_a_diagonal_cost():
+    # seeds 400-439, never used to choose anything; at a true level of 5 %, 40 seeds exceed 0.10 with prob. ≈ 8 %,
+    # 0.15 with < 1 %: the bar is the issue's 10 %
+    rate = structure_rejections(range(400, 440))
+    print(f"false rejections of a true diagonal cost: {rate:.3f}")
+    assert rate <= 0.10
 
 
 def test_identifiability_of_an_interval():

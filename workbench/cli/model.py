@@ -47,7 +47,7 @@ def cmd_fit(ctx: Context) -> int:
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and getattr(model, "K_", None) is not None:
         _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
-        _print_ratios(ctx, model, ds, a.bootstrap, a.seed)
+        _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
     elif getattr(model, "objective_", None) is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
     ctx.say(f"wrote {a.output}")
@@ -82,9 +82,10 @@ def _as_fitted(ds: Any, model: Any) -> Any:
     return ds.with_demos([Demonstration(d.t, d.x - d.target, d.u, d.meta) for d in ds])
 
 
-def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int) -> None:
-    """Weight ratios inside each coupled part of the plant (minimum-distance diagonal cost), with intervals."""
-    from workbench.study.weights import ratio_bootstrap
+def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, power: int = 0) -> None:
+    """Weight ratios inside each coupled part of the plant (minimum-distance diagonal cost), with intervals; with
+    ``power`` > 0 the demonstrations a simulated power curve says each wide one would need."""
+    from workbench.study.weights import ratio_bootstrap, with_power
 
     with ctx.progress() as progress:
         task = progress.add_task(f"weight ratios: {n_boot} resampled gains", total=n_boot)
@@ -93,6 +94,11 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int) -> 
     if ratios is None:
         ctx.say(f"weight ratios: none ({note})")
         return
+    curve = None
+    if power > 0:
+        with ctx.progress() as progress:
+            progress.add_task("power curve: simulating demonstrations from the model", total=None)
+            ratios, curve = with_power(model, ds, ratios, power, seed)
     g = ratios.gains
     ctx.say(f"weight ratios inside coupled parts (S = 0, diagonal cost closest to the {gain} gain in the metric of "
             f"its covariance over {g.n_ok} of {g.n_boot} resamples; {ratios.ci:g} % profile intervals; "
@@ -100,8 +106,13 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int) -> 
     for r in ratios.intervals:
         ctx.say(f"  {r.describe()}")
     for f in ratios.fits:
-        if not f.explained:
-            ctx.say(f"  {f.describe()}: its ratios describe no objective the operator could have had")
+        ctx.say(f"  {f.describe()}")
+    if curve is not None:
+        ctx.say(f"power curve (simulated from the model; interval span by n, median over {power} set(s) per size):")
+        for line in curve.describe():
+            ctx.say(f"  {line}")
+    elif power <= 0 and any(not r.identifiable and r.explained for r in ratios.intervals):
+        ctx.say("  (--power 1 simulates how many demonstrations the ratios that are not identifiable would need)")
 
 
 def _print_model(ctx: Context, model: Any, ds: Any) -> None:

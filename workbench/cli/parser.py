@@ -172,6 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="resample the trials N times (default 100; 0: no intervals) and print 95 %% intervals of "
                         "K̂, the normalized Q, R diagonals and the weight ratios inside coupled parts (the paper "
                         "gives none)")
+    _power_option(p, 0)
     _system_option(p)
     _mapping_option(p)
     _executor_options(p)
@@ -279,6 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--label", nargs="+", help="strategy labels to include (default all)")
     p.add_argument("--title", default="Workbench report")
     _bootstrap_option(p)
+    _power_option(p, 1)
     _study_options(p)
     _mapping_option(p)
     _executor_options(p)
@@ -289,8 +291,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--logs", metavar="DIR", help=f"logs to import (default {SAMPLE_LOGS})")
     _study_options(p, repeats=1)  # one subset per size keeps the demo well under a minute on two cores
     _bootstrap_option(p)
+    _power_option(p, 1)
     _mapping_option(p)
     return parser
+
+
+def _power_option(p: argparse.ArgumentParser, default: int) -> None:
+    p.add_argument("--power", type=int, default=default, metavar="N",
+                   help="simulated demonstration sets per size (n, 2n, 4n) of the power curve that says how many "
+                        "demonstrations a weight ratio the data do not identify would need "
+                        f"(default {default}; 0: none)")
 
 
 def _bootstrap_option(p: argparse.ArgumentParser) -> None:

@@ -604,7 +604,7 @@ def _objective_interval_notes(
     table: pd.DataFrame | None = None,
 ) -> list[str]:
     """What the intervals are, and the weight ratios inside coupled parts compared between strategies."""
-    from workbench.study.weights import compare_strategies, format_interval
+    from workbench.study.weights import compare_strategies, format_interval, identified_first
 
     if not objectives:
         return ["*No intervals: the study ran without bootstrap resamples (`--bootstrap 0`); the values above "
@@ -618,15 +618,21 @@ def _objective_interval_notes(
     if table is None:
         table = compare_strategies(ratios)
     gains = sorted({objectives[lb].ratio_gain for lb in ratios})
+    found = identified_first(table)
+    md += ["### What the data identify", "",
+           *([f"- {line}" for line in found] or ["- no weight ratio and no factor between strategies: every interval "
+                                                "below spans more than ×10 or its part is not of the diagonal form"]),
+           ""]
     rows = []
     for r in table.itertuples():
         row = {"ratio": r.ratio, "strategy": r.strategy, "estimate [interval]": format_interval(r.estimate, r.lo, r.hi),
                "note": r.note}
         if len(ratios) > 1:
             factor = getattr(r, "factor", float("nan"))
-            row[f"× vs {labels[0] if labels[0] in ratios else next(iter(ratios))}"] = (
-                "" if not np.isfinite(factor) else format_interval(factor, r.factor_lo, r.factor_hi)
-                + (f" — {r.factor_note}" if r.factor_note else ""))
+            first = labels[0] if labels[0] in ratios else next(iter(ratios))
+            row[f"× vs {first}"] = "" if not np.isfinite(factor) else format_interval(factor, r.factor_lo, r.factor_hi)
+            if r.strategy != first and r.factor_note and r.factor_note != r.note:
+                row["note"] = f"{r.note}; factor: {r.factor_note}" if r.note else f"factor: {r.factor_note}"
         rows.append(row)
     fwd = ", ".join(f"{lb} {ratios[lb].forward_gain_error:.2g}" for lb in ratios)
     md += ["### Weight ratios inside coupled parts", "",
@@ -634,16 +640,21 @@ def _objective_interval_notes(
            "A cost with S = 0 and diagonal Q, R is unique up to one scale per decoupled part of the plant, so its "
            "ratios inside a part compare between strategies. Each strategy's ratios are those whose LQR gain is "
            f"closest to its estimated gain ({', '.join(gains)}) in the metric of that gain's bootstrap "
-           "covariance; the intervals are profile intervals of that distance (a ratio is kept while the gain it "
-           "implies stays statistically compatible with the estimate), and a factor's interval profiles both "
-           f"strategies' distances together (forward-gain error of each diagonal cost: {fwd}). An interval wider "
-           "than ×10 is marked not identifiable from these data. Where even the closest diagonal cost's gain is "
-           "farther from the estimate than its spread allows (the distance test of the diagonal structure), the "
-           "operator's objective is not of that form: those ratios are marked and describe no objective.", "",
+           "covariance; the intervals are profile intervals of that distance, and a factor's interval profiles both "
+           f"strategies' distances together (forward-gain error of each diagonal cost: {fwd}). "
+           "Whether a part is of the diagonal form is tested only where it has overidentifying restrictions (gain "
+           "entries beyond its free ratios); a part with none is not tested, and counts as not of this form only "
+           "where its estimated gain departs from the closest diagonal cost's by more than its spread in some entry. "
+           "For such a part, the row gives that closest cost (the pseudo-true value) with misspecification-robust "
+           "(sandwich) intervals and the mismatch per gain entry. An interval wider than ×10 is not identifiable; "
+           "the number of demonstrations that would make it narrower than ×2 comes from a power curve simulated "
+           "from the fitted model.", "",
            _md_table(pd.DataFrame(rows)), ""]
-    failing = [f"- {lb}: {f.describe()}" for lb in ratios for f in ratios[lb].fits if not f.explained]
-    if failing:
-        md += [*failing, ""]
+    md += [f"- {lb}: {f.describe()}" for lb in ratios for f in ratios[lb].fits] + [""]
+    curves = {lb: objectives[lb].power for lb in ratios if getattr(objectives[lb], "power", None) is not None}
+    for lb, curve in curves.items():
+        md += [f"Power curve of {lb} (demonstrations simulated from its fitted model, refitted; interval span by "
+               "number of demonstrations):", "", *[f"- {line}" for line in curve.describe()], ""]
     return md
 
 

@@ -55,6 +55,12 @@ _EXPORTS = {
     "ratio_bootstrap": "weights",
     "weight_ratios": "weights",
     "compare_strategies": "weights",
+    "identified_first": "weights",
+    "with_power": "weights",
+    "PowerCurve": "power",
+    "power_curve": "power",
+    "simulate_like": "power",
+    "as_fitted": "power",
 }
 __all__ = list(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -218,6 +218,7 @@ def run_study(
     test_ids: Sequence[str] | None = None,
     bootstrap: int = 0,
     stride_s: float | None = 1.0,
+    power: int = 0,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
 
@@ -226,7 +227,8 @@ def run_study(
     per-trial means with bootstrap intervals over whole trials (``StudyResult.statistics``).
 
     ``bootstrap``: resamples of each label's training trials for intervals of the proposed model's task objective
-    and its weight ratios (``StudyResult.objectives``); 0 computes none.
+    and its weight ratios (``StudyResult.objectives``); 0 computes none. ``power``: simulated sets per size of the
+    power curve of every ratio the data do not pin down (:mod:`workbench.study.power`); 0 computes none.
 
     ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
@@ -317,7 +319,7 @@ def run_study(
     table = pd.concat(rmse_parts, ignore_index=True)
     statistics = _statistics(table, demos, system, n_steps, stride, seed)
     t0 = time.perf_counter()
-    objectives = _objective_intervals(models, train, int(bootstrap), seed)
+    objectives = _objective_intervals(models, train, int(bootstrap), seed, int(power))
     if objectives:
         timings["objective intervals"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -346,9 +348,10 @@ def _ratio_comparison(objectives: dict[str, Any]) -> pd.DataFrame | None:
 
 
 def _objective_intervals(
-    models: dict[str, Any], train: dict[str, DemonstrationSet], n_boot: int, seed: int
+    models: dict[str, Any], train: dict[str, DemonstrationSet], n_boot: int, seed: int, power: int = 0
 ) -> dict[str, Any]:
-    """Bootstrap intervals of each label's task objective (:func:`workbench.study.weights.objective_intervals`)."""
+    """Bootstrap intervals of each label's task objective (:func:`workbench.study.weights.objective_intervals`),
+    with ``power`` simulated sets per size of a power curve for the ratios that need one (0: none)."""
     from workbench.errors import ModelError
     from workbench.study.weights import objective_intervals
 
@@ -361,7 +364,7 @@ def _objective_intervals(
         try:
             # a seed per label: with one seed, resample j of every label draws the same trial positions, and the
             # factor between two labels' ratios (weights.compare_strategies) needs independent resamples
-            out[label] = objective_intervals(model, train[label], n_boot=n_boot, seed=seed + i)
+            out[label] = objective_intervals(model, train[label], n_boot=n_boot, seed=seed + i, power=power)
         except ModelError as exc:  # the report then shows the point estimate and says it has no interval
             warnings.warn(f"{label}: no bootstrap intervals of the task objective: {exc}", stacklevel=3)
     return out

@@ -6,13 +6,16 @@ decoupled part of the plant (:func:`workbench.method.structured.decoupled_parts`
 ratios
 inside one part, e.g. ``Q_φφ / R_u1`` of the quadrotor's lateral part. This module estimates them from a gain
 and its bootstrap distribution (:func:`workbench.method.resampling.bootstrap_gain`) by minimum distance, with profile
-intervals (:mod:`workbench.method.ratio_profile`), and compares two strategies ratio by ratio, saying "not
-identifiable from these data" where an interval spans more than a factor of :data:`IDENTIFIABLE_SPAN`.
+intervals (:mod:`workbench.method.ratio_profile`), and compares two strategies ratio by ratio. Every ratio ends in one
+of three readings: a finite estimate with its interval; "not identifiable" where the interval spans more than
+×:data:`IDENTIFIABLE_SPAN`, with the demonstrations a power curve says it would need (:mod:`workbench.study.power`);
+or "not of this form" where the part's gain is no diagonal cost's, with the closest one and the mismatch per gain
+entry (:mod:`workbench.method.pseudo_true`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,23 +35,35 @@ __all__ = [
     "ratio_bootstrap",
     "weight_ratios",
     "compare_strategies",
+    "identified_first",
+    "with_power",
+    "needed_words",
+    "TARGET_SPAN",
 ]
 
 IDENTIFIABLE_SPAN = 10.0
+#: The span a power curve aims at: an interval narrower than ×2 pins a ratio down to within a factor √2.
+TARGET_SPAN = 2.0
 # Log ratios are searched down to -ratio_profile.LOG_BOUND (e^-30 ≈ 1e-13): a ratio below this is a weight at the
 # bottom of the search, i.e. zero, and an interval reaching it is not a finite ratio.
 ZERO_RATIO = 1e-9
-NOT_IDENTIFIABLE = "not identifiable from these data"
-NOT_EXPLAINED = "no diagonal cost explains this part's gain"
+NOT_IDENTIFIABLE = "not identifiable"
+NOT_EXPLAINED = "not of this form"
+# A whitened squared distance below this is an exact fit: the estimated gain is a diagonal cost's gain.
+EXACT_DISTANCE = 1e-6
 
 
 @dataclass(frozen=True)
 class RatioInterval:
     """One weight ratio (or a factor between two strategies' ratios) with its interval.
 
-    ``explained`` is False where no diagonal cost explains the gain of the ratio's part
-    (:func:`workbench.method.ratio_profile.explains`): the ratio then describes no objective the operator could have
-    had.
+    ``explained`` is False where the ratio's part is not of the diagonal form (the structure test rejects it, or,
+    without restrictions to test, the estimated gain departs from the closest diagonal cost's by more than its
+    spread): the estimate and interval are then those of the closest diagonal cost (the pseudo-true value,
+    :mod:`workbench.method.pseudo_true`) and ``mismatch`` says in words how the gain departs from it.
+    ``needed`` is the number of demonstrations a power curve (:mod:`workbench.study.power`) says would make
+    the interval narrower than ×:data:`TARGET_SPAN` (inf: more than the ``simulated`` largest size; None: not
+    computed).
     """
 
     name: str
@@ -57,6 +72,9 @@ class RatioInterval:
     hi: float
     ci: float
     explained: bool = True
+    mismatch: str = ""
+    needed: float | None = None
+    simulated: int | None = None
 
     @property
     def span(self) -> float:
@@ -68,18 +86,38 @@ class RatioInterval:
 
     @property
     def identifiable(self) -> bool:
-        return bool(np.isfinite(self.span) and self.span <= IDENTIFIABLE_SPAN)
+        return bool(self.explained and np.isfinite(self.span) and self.span <= IDENTIFIABLE_SPAN)
 
     @property
     def note(self) -> str:
-        """Why the interval says little: the part's gain is not that of a diagonal cost, or it spans > ×10."""
+        """Why the interval says little: the part is not of the diagonal form (with its mismatch), or it spans
+        more than ×10 (with the demonstrations a power curve says would be needed)."""
         if not self.explained:
-            return NOT_EXPLAINED
-        return "" if self.identifiable else NOT_IDENTIFIABLE
+            return f"{NOT_EXPLAINED}: mismatch {self.mismatch}" if self.mismatch else NOT_EXPLAINED
+        if self.identifiable:
+            return ""
+        return f"{NOT_IDENTIFIABLE}: {needed_words(self.needed, self.simulated)}"
 
     def describe(self) -> str:
         text = f"{self.name} = {format_interval(self.estimate, self.lo, self.hi)}"
         return f"{text}: {self.note}" if self.note else text
+
+
+def needed_words(needed: float | None, simulated: int | None = None) -> str:
+    """``~N demonstrations needed`` from a power curve; what is known where none was computed."""
+    if needed is None:
+        return "demonstrations needed not computed (`workbench report` or `fit --power`)"
+    if not np.isfinite(needed):
+        most = f" than {simulated}" if simulated else " than simulated"
+        return f"more demonstrations needed{most} (a zero or infinite weight fits at every simulated size)"
+    return f"~{_round_up(needed)} demonstrations needed"
+
+
+def _round_up(n: float) -> int:
+    """``n`` rounded up to two significant figures: a simulated estimate claims no more."""
+    n = max(1, int(np.ceil(n)))
+    step = 10 ** max(0, len(str(n)) - 2)
+    return int(np.ceil(n / step) * step)
 
 
 def format_interval(estimate: float, lo: float, hi: float) -> str:
@@ -94,18 +132,15 @@ def format_interval(estimate: float, lo: float, hi: float) -> str:
     return f"{bound(estimate)} [{bound(lo)}, {bound(hi)}]"
 
 
-def _part_ratio_names(states: Sequence[int], inputs: Sequence[int], state_names: Sequence[str],
-                      input_names: Sequence[str]) -> list[str]:
-    """Names of one part's ratios in the order of :class:`ratio_profile.PartDistance`'s θ: every ``Q_ii / R_kk``,
-    then every other input's ``R_jj / R_kk``, ``R_kk`` the part's first input."""
-    k = input_names[inputs[0]]
-    return ([f"Q_{state_names[i]} / R_{k}" for i in states]
-            + [f"R_{input_names[j]} / R_{k}" for j in inputs[1:]])
+def _pct(v: float) -> str:
+    """A fraction as a percentage: two significant figures below 10 %, whole percent above."""
+    v = 100.0 * abs(float(v))
+    return f"{v:.0f} %" if v >= 10 else f"{v:.2g} %"
 
 
 @dataclass(frozen=True)
 class PartFit:
-    """The distance test of the diagonal structure on one decoupled part (:func:`ratio_profile.explains`).
+    """Whether a diagonal cost explains one decoupled part's gain, and how far the closest one is where not.
 
     Attributes
     ----------
@@ -113,11 +148,14 @@ class PartFit:
     distance : float
         ``D(θ̂)``: the whitened squared distance from the estimated gain to the closest diagonal cost's gain.
     restrictions : int
-        Gain entries beyond the part's ratios.
+        Gain entries minus free log ratios: the overidentifying restrictions of the structure test.
     critical : float
-        The test's critical value at the ratios' level.
-    explained : bool
-        ``distance ≤ critical``.
+        The test's critical value at the ratios' level (nan where there is nothing to test).
+    explained : bool or None
+        The structure test (:func:`ratio_profile.explains`); None where the part has no restrictions.
+    closest : PseudoTrue or None
+        The closest diagonal cost and its mismatch (:func:`workbench.method.pseudo_true.pseudo_true`), where the
+        test rejects or, untested, the estimate is no diagonal cost's gain.
     """
 
     states: tuple[str, ...]
@@ -125,12 +163,51 @@ class PartFit:
     distance: float
     restrictions: int
     critical: float
-    explained: bool
+    explained: bool | None
+    closest: object = None
+
+    @property
+    def tested(self) -> bool:
+        return self.restrictions > 0
+
+    @property
+    def of_form(self) -> bool:
+        """False where the test rejects the diagonal form, or, untested, the gain departs from the closest
+        diagonal cost's by more than its spread in some entry."""
+        if self.explained is not None:
+            return self.explained
+        return self.closest is None or not bool(np.any(self.closest.shown))
+
+    def mismatch_words(self) -> str:
+        """How the gain departs from the closest diagonal cost's, per entry the data show: e.g.
+        ``u1 on phi 17 % softer [11 %, 23 %]`` (softer: a smaller gain magnitude)."""
+        c = self.closest
+        if c is None:
+            return ""
+        rel, lo, hi = c.relative()
+        words = []
+        for e in np.flatnonzero(c.shown):
+            where = f"{self.inputs[e // len(self.states)]} on {self.states[e % len(self.states)]}"
+            if np.isfinite(rel[e]):
+                way = "stiffer" if rel[e] > 0 else "softer"
+                a, b = sorted((abs(lo[e]), abs(hi[e]))) if lo[e] * hi[e] > 0 else (0.0, max(abs(lo[e]), abs(hi[e])))
+                words.append(f"{where} {_pct(rel[e])} {way} [{_pct(a)}, {_pct(b)}]")
+            else:
+                words.append(f"{where} {c.k_hat[e]:.3g} where the closest diagonal LQR has {c.k_closest[e]:.3g}")
+        return "; ".join(words) + " than the closest diagonal LQR gain" if words else ""
 
     def describe(self) -> str:
+        where = f"part ({', '.join(self.states)}; {', '.join(self.inputs)})"
+        if not self.tested:
+            entries = self.restrictions + len(self.states) + len(self.inputs) - 1
+            text = f"{where}: no restriction to test a diagonal cost ({entries} gain entries, as many free ratios)"
+            if not self.of_form:
+                text += f"; the estimated gain lies outside every diagonal cost's: {self.mismatch_words()}"
+            return text
         verdict = "explains" if self.explained else "does not explain"
-        return (f"part ({', '.join(self.states)}; {', '.join(self.inputs)}): a diagonal cost {verdict} the gain "
-                f"(distance {self.distance:.3g}, critical value {self.critical:.3g})")
+        text = (f"{where}: a diagonal cost {verdict} the gain (distance {self.distance:.3g}, critical value "
+                f"{self.critical:.3g}, {self.restrictions} restriction(s))")
+        return text + (f"; {self.mismatch_words()}" if not self.explained and self.closest is not None else "")
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,7 +226,7 @@ class WeightRatios:
         The gain estimate and its resamples.
     ci : float
     fits : tuple of PartFit
-        Per part with an input: whether a diagonal cost explains its gain.
+        Per part with an input: whether a diagonal cost explains its gain, and the closest one where not.
     """
 
     intervals: tuple[RatioInterval, ...]
@@ -166,10 +243,22 @@ class WeightRatios:
     def names(self) -> list[str]:
         return [iv.name for iv in self.intervals]
 
+    def with_needed(self, needed: dict[str, float], simulated: int | None = None) -> WeightRatios:
+        """A copy whose intervals carry the demonstrations a power curve (up to ``simulated``) says each needs."""
+        from dataclasses import replace
+
+        return replace(self, intervals=tuple(replace(iv, needed=needed.get(iv.name, iv.needed), simulated=simulated)
+                                             for iv in self.intervals))
+
 
 def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     """Minimum-distance weight ratios and their profile intervals from a gain bootstrap (see
-    :mod:`workbench.method.ratio_profile`).
+    :mod:`workbench.method.ratio_profile`); where a part is not of the diagonal form, the closest diagonal cost
+    with sandwich intervals and its mismatch (:mod:`workbench.method.pseudo_true`).
+
+    Per part: with restrictions (gain entries beyond its free ratios) the structure test decides; without, nothing
+    is tested, and the part counts as not of the form only where the estimated gain is no diagonal cost's gain
+    and departs from the closest one's by more than its spread in some entry.
 
     Parameters
     ----------
@@ -181,6 +270,7 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
         Interval level in percent.
     """
     from workbench.method.objective import forward_gain
+    from workbench.method.pseudo_true import pseudo_true
     from workbench.method.structured import closest_structured_objective, decoupled_parts
 
     if not 0 < ci < 100:
@@ -195,25 +285,38 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
         if not inputs:
             continue  # a part no input reaches: its weights do not affect the gain
         s, c = list(states), list(inputs)
+        samples = K_s[:, c][:, :, s]
         part = ratio_profile.PartDistance.from_samples(
-            A[np.ix_(s, s)], B[np.ix_(s, c)], K[np.ix_(c, s)], K_s[:, c][:, :, s], gains.n_trials)
+            A[np.ix_(s, s)], B[np.ix_(s, c)], K[np.ix_(c, s)], samples, gains.n_trials)
         start = closest_structured_objective(part.A, part.B, K[np.ix_(c, s)], "diagonal")
         w0 = np.r_[np.diag(start.Q), np.diag(start.R)[1:]] / start.R[0, 0]
-        theta, d_min = ratio_profile.fit(part, np.log(np.maximum(w0, 1e-300)))
+        theta0 = np.log(np.maximum(w0, 1e-300))
+        theta, d_min = ratio_profile.fit(part, theta0)
         explained = ratio_profile.explains(part, d_min, ci)
-        fits.append(PartFit(tuple(system.state_names[i] for i in s), tuple(system.input_names[k] for k in c),
-                            float(d_min), part.restrictions,
-                            ratio_profile.critical_value(ci, part.n_trials, part.restrictions), explained))
-        Qp, Rp = part.weights(theta)
+        closest = None
+        if explained is False or (explained is None and d_min > EXACT_DISTANCE):
+            closest = pseudo_true(part, samples, theta0, ci)
+        fit = PartFit(tuple(system.state_names[i] for i in s), tuple(system.input_names[k] for k in c),
+                      float(d_min), part.restrictions,
+                      ratio_profile.critical_value(ci, part.n_trials, part.restrictions) if part.restrictions
+                      else float("nan"), explained, closest)
+        fits.append(fit)
+        shown = theta if fit.of_form else closest.theta
+        Qp, Rp = part.weights(shown)
         scale = max(float(Qp.max()), float(Rp.max()))
         q[s], r[c] = np.diag(Qp) / scale, np.diag(Rp) / scale
-        names = _part_ratio_names(s, c, system.state_names, system.input_names)
+        names = ratio_profile.ratio_names(s, c, system.state_names, system.input_names)
+        words = "" if fit.of_form else fit.mismatch_words()
         for j, name in enumerate(names):
-            lo, hi = ratio_profile.interval(part, theta, d_min, j, ci)
-            intervals.append(RatioInterval(name, float(np.exp(theta[j])), float(np.exp(lo)), float(np.exp(hi)), ci,
-                                           explained))
+            if fit.of_form:
+                lo, hi = ratio_profile.interval(part, theta, d_min, j, ci)
+                est = theta[j]
+            else:  # the pseudo-true value: profiling a distance no diagonal cost comes near only walks to the bounds
+                est, lo, hi = closest.theta[j], closest.theta_lo[j], closest.theta_hi[j]
+            intervals.append(RatioInterval(name, float(np.exp(est)), float(np.exp(lo)), float(np.exp(hi)), ci,
+                                           fit.of_form, words))
             index.append((len(fitted), j))
-        fitted.append((part, theta, d_min))
+        fitted.append((part, shown, d_min))
     K_fwd, _ = forward_gain(A, B, np.diag(q), np.diag(r))
     err = float(np.linalg.norm(K_fwd - K) / max(float(np.linalg.norm(K)), 1e-300))
     return WeightRatios(intervals=tuple(intervals), Q_diag=q, R_diag=r, forward_gain_error=err, gains=gains,
@@ -224,7 +327,8 @@ def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
     """Weight ratios per strategy and, for two or more, the factor between each strategy's and the first one's.
 
     A factor's interval is the profile interval of the difference of one log ratio between two strategies
-    (:func:`workbench.method.ratio_profile.factor_interval`), each strategy with its own gain and covariance.
+    (:func:`workbench.method.ratio_profile.factor_interval`), each strategy with its own gain and covariance; where
+    either strategy's part is not of the diagonal form there is no factor (NaN) and its note says why.
 
     Returns
     -------
@@ -262,16 +366,43 @@ def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
             row = {"ratio": iv.name, "strategy": lb, "estimate": iv.estimate, "lo": iv.lo, "hi": iv.hi,
                    "identifiable": iv.identifiable, "explained": iv.explained, "note": iv.note}
             if lb != labels[0]:
-                p, j = wr._index[k]
-                part_a, theta_a, d_a = first._parts[p]
-                part_b, theta_b, d_b = wr._parts[p]
-                lo, hi = ratio_profile.factor_interval(part_a, theta_a, d_a, part_b, theta_b, d_b, j, wr.ci)
-                f = RatioInterval(iv.name, float(np.exp(theta_b[j] - theta_a[j])), float(np.exp(lo)),
-                                  float(np.exp(hi)), wr.ci, iv.explained and first.intervals[k].explained)
-                row.update(factor=f.estimate, factor_lo=f.lo, factor_hi=f.hi, factor_identifiable=f.identifiable,
-                           factor_note=f.note)
+                row.update(_factor(first, wr, k))
             rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _factor(first: WeightRatios, other: WeightRatios, k: int) -> dict:
+    """The factor of interval ``k`` between two strategies: its profile interval where both parts are of the
+    diagonal form; else no factor (the closest costs of a misspecified part estimate no operator's ratio) and the
+    mismatch as its note. The demonstrations a factor needs, each strategy's needs added (the √n law: squared
+    log spans add)."""
+    a, b = first.intervals[k], other.intervals[k]
+    if not (a.explained and b.explained):
+        bad = b if not b.explained else a
+        return {"factor": float("nan"), "factor_lo": float("nan"), "factor_hi": float("nan"),
+                "factor_identifiable": False, "factor_note": bad.note}
+    p, j = other._index[k]
+    part_a, theta_a, d_a = first._parts[p]
+    part_b, theta_b, d_b = other._parts[p]
+    lo, hi = ratio_profile.factor_interval(part_a, theta_a, d_a, part_b, theta_b, d_b, j, other.ci)
+    needed = None if a.needed is None or b.needed is None else a.needed + b.needed
+    f = RatioInterval(b.name, float(np.exp(theta_b[j] - theta_a[j])), float(np.exp(lo)), float(np.exp(hi)), other.ci,
+                      needed=needed, simulated=max(a.simulated or 0, b.simulated or 0) or None)
+    return {"factor": f.estimate, "factor_lo": f.lo, "factor_hi": f.hi, "factor_identifiable": f.identifiable,
+            "factor_note": f.note}
+
+
+def identified_first(table: pd.DataFrame) -> list[str]:
+    """Sentences for what the data identify, contrasts first: each factor between strategies whose interval is
+    finite and within ×10, then each ratio that is."""
+    out = []
+    if "factor" in table:
+        for r in table[table["factor_identifiable"] == True].itertuples():  # noqa: E712 - NaN in the first's rows
+            out.append(f"{r.ratio}: {r.strategy} / {table['strategy'].iloc[0]} = "
+                       f"{format_interval(r.factor, r.factor_lo, r.factor_hi)}")
+    for r in table[table["identifiable"]].itertuples():
+        out.append(f"{r.ratio} of {r.strategy} = {format_interval(r.estimate, r.lo, r.hi)}")
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -289,23 +420,15 @@ class ObjectiveIntervals:
         Gain method of ``ratios``: ``"iv"`` where the demonstrations' starts excite every state (least squares is
         biased in closed loop), else the model's.
     note : str
+    power : PowerCurve or None
+        The simulated power curve behind the ratios' ``needed`` (None where not computed).
     """
 
     boot: object
     ratios: WeightRatios | None
     ratio_gain: str
     note: str = ""
-
-
-def _as_fitted(model, demos) -> list:
-    """The demonstrations as the model saw them: states relative to their targets when it is goal-relative."""
-    from types import SimpleNamespace
-
-    from workbench.models.behavior import references
-
-    ds = list(demos)
-    refs, _ = references(ds, model.system.n)
-    return [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(ds, refs, strict=True)]
+    power: object = None
 
 
 def _used_gain(model) -> str:
@@ -322,8 +445,9 @@ def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: 
     covariance comes from ``n_boot`` resamples of whole trials.
     """
     from workbench.method.resampling import bootstrap_gain
+    from workbench.study.power import as_fitted
 
-    shifted = _as_fitted(model, demos)
+    shifted = as_fitted(model, demos)
     note = ""
     for gain in dict.fromkeys((ratio_gain, _used_gain(model))):
         try:
@@ -334,18 +458,43 @@ def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: 
     return None, ratio_gain, note.strip()
 
 
-def objective_intervals(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv") -> ObjectiveIntervals:
+def objective_intervals(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv",
+                        power: int = 0) -> ObjectiveIntervals:
     """Bootstrap a fitted model's objective over its training demonstrations (whole trials resampled).
 
     The demonstrations are seen as the model saw them (states relative to their targets when the model is
     goal-relative), so the point estimate of ``boot`` is the model's own ``objective_``; the weight ratios come
-    from :func:`ratio_bootstrap`.
+    from :func:`ratio_bootstrap`. ``power`` > 0: simulated sets per size of a power curve
+    (:func:`workbench.study.power.power_curve`) for the ratios of the diagonal form whose interval spans more
+    than ×:data:`TARGET_SPAN`, so that a ratio the data do not identify says how many demonstrations would.
     """
     from workbench.method.resampling import bootstrap
+    from workbench.study.power import as_fitted
 
     method = _used_gain(model)
     structure = getattr(model, "structure", "full")
-    boot = bootstrap(_as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
+    boot = bootstrap(as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
                      seed=seed)
     ratios, gain, note = ratio_bootstrap(model, demos, n_boot, seed, ratio_gain, boot.ci)
-    return ObjectiveIntervals(boot=boot, ratios=ratios, ratio_gain=gain, note=note)
+    curve = None
+    if ratios is not None and power > 0:
+        ratios, curve = with_power(model, demos, ratios, power, seed, ratio_gain)
+    return ObjectiveIntervals(boot=boot, ratios=ratios, ratio_gain=gain, note=note, power=curve)
+
+
+def with_power(model, demos, ratios: WeightRatios, repeats: int = 1, seed: int = 0, gain: str = "iv",
+               sizes=None) -> tuple[WeightRatios, object]:
+    """``ratios`` with the demonstrations each would need for a span below ×:data:`TARGET_SPAN`, and the power
+    curve: simulated for the ratios of the diagonal form wider than that; a ratio already narrower needs
+    ``n (log span / log 2)²`` by the √n law from its own interval."""
+    from workbench.study.power import power_curve
+
+    n0 = ratios.gains.n_trials
+    needed = {iv.name: n0 * (np.log(iv.span) / np.log(TARGET_SPAN)) ** 2
+              for iv in ratios.intervals if iv.explained and iv.span <= TARGET_SPAN}
+    wide = [iv.name for iv in ratios.intervals if iv.explained and iv.span > TARGET_SPAN]
+    curve = None
+    if wide:
+        curve = power_curve(model, demos, sizes=sizes, repeats=repeats, seed=seed, gain=gain, ratios=wide)
+        needed.update({k: v for k, v in curve.needed.items() if k in wide})
+    return ratios.with_needed(needed, None if curve is None else curve.largest), curve
