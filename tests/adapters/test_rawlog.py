@@ -187,10 +187,25 @@ def test_explain_keeps_exactly_what_the_import_keeps():
     assert all(b - a < m.segment.min_duration for a, b, _, _ in short)
 
 
-@pytest.mark.parametrize("log", ["dronekit_flight.tlog", "px4_sample_log_small.ulg"])
+@pytest.mark.parametrize("log", ["dronekit_flight.tlog", "px4_sample_log_small.ulg", "erle_copter_83.BIN"])
 def test_map_on_the_real_logs_imports_without_edits(tmp_path, log):
     draft = draft_mapping(adapters.read(EXTERNAL + log), name="drafted")
     path = tmp_path / "drafted.toml"
     path.write_text(draft.toml)
     ds = adapters.load(EXTERNAL + log, path)
     assert len(ds) == len(adapters.load(EXTERNAL + log, draft.template))
+
+
+@pytest.mark.parametrize("style", ["old", "new"])
+@pytest.mark.parametrize("vehicle", ["copter", "plane"])
+def test_map_drafts_a_mapping_for_each_dataflash_generation(tmp_path, style, vehicle):
+    """ArduPilot's onboard logs of two firmware generations (EKF1 / TimeMS; XKF1[0] or NKF1[0] / TimeUS, FMTU)."""
+    from adapters.formats.dataflash_write import write_example
+
+    log = write_example(tmp_path / f"{style}_{vehicle}.bin", style, vehicle, seconds=60.0, seed=5)
+    draft = draft_mapping(adapters.read(log), name="drafted")
+    assert draft.template == ("ardupilot_manual" if vehicle == "copter" else "arduplane_manual")
+    path = tmp_path / "drafted.toml"
+    path.write_text(draft.toml)
+    ds = adapters.load(log, path)
+    assert len(ds) >= 1 and set(ds.state_names) == set(adapters.load(log, draft.template).state_names)
