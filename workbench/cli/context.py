@@ -50,13 +50,16 @@ class Context:
             disable=self.quiet or not self.err.is_terminal,  # no bars (or blank lines) in logs and pipes
         )
 
-    def executor(self):
-        """Serial by default; a Dask ``LocalCluster`` with ``--workers N``; the cluster at ``--scheduler``."""
-        from workbench.study.executor import make_executor
+    def executor(self, local_tasks: int = 0):
+        """A Dask ``LocalCluster`` with ``--workers N``; the cluster at ``--scheduler``; without either, serial, or
+        for ``local_tasks`` big independent tasks a pool of local processes (one per task, up to the CPUs)."""
+        from workbench.study.executor import local_executor, make_executor
 
         a = self.args
-        ex = make_executor(getattr(a, "workers", None), getattr(a, "scheduler", None),
-                           staging=getattr(a, "staging", None))
+        workers, scheduler = getattr(a, "workers", None), getattr(a, "scheduler", None)
+        if local_tasks and workers is None and scheduler is None:
+            return local_executor(local_tasks)
+        ex = make_executor(workers, scheduler, staging=getattr(a, "staging", None))
         if ex.parallel and not self.quiet:
             print(f"running tasks on {ex}", file=sys.stderr)
         return ex

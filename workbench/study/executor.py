@@ -50,7 +50,10 @@ from workbench.data.dataset import DataRef, write_dataset
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
 
-__all__ = ["Executor", "SerialExecutor", "DaskExecutor", "Outcome", "make_executor", "task_seed", "serial"]
+__all__ = [
+    "Executor", "SerialExecutor", "ProcessExecutor", "DaskExecutor", "Outcome", "make_executor", "local_executor",
+    "available_cpus", "task_seed", "serial",
+]
 
 Progress = Callable[[int, int], Any]
 #: Re-runs of a task that raised something unexpected (an OSError on a network file system, a MemoryError).
@@ -148,6 +151,13 @@ def _run_task(fn: Callable[[Any], Any], item: Any) -> tuple[Any, list[tuple[type
     return value, _warning_records(caught), None
 
 
+def _replay(emitted: list[list[tuple[type[Warning], str]]]) -> None:
+    """Raise the warnings the tasks raised on workers again here, in task order, whatever order they finished in."""
+    for caught in emitted:
+        for category, message in caught:
+            warnings.warn(message, category, stacklevel=4)
+
+
 def _describe(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
@@ -159,6 +169,46 @@ def _keys(items: Sequence[Any], keys: Sequence[str] | None) -> list[str]:
     if len(keys) != len(items):
         raise DataError(f"{len(keys)} keys for {len(items)} tasks")
     return [str(k) for k in keys]
+
+
+class Staging:
+    """The folder where sets are written for worker processes to read (data travel as paths, not in messages).
+
+    ``path`` None: a fresh temporary folder, made on first use and removed by :meth:`close`.
+    """
+
+    def __init__(self, path: str | os.PathLike | None = None) -> None:
+        self._own = path is None
+        self._path = Path(path) if path is not None else None
+        self._n = 0
+
+    def _dir(self) -> Path:
+        if self._path is None:
+            self._path = Path(tempfile.mkdtemp(prefix="workbench-staging-"))
+        self._path.mkdir(parents=True, exist_ok=True)
+        return self._path
+
+    def share(self, demos: Any, *, by_subject: bool = False) -> DataRef:
+        """The set written here, one Parquet file or (with ``by_subject``) a dataset with one partition per subject;
+        a path or a path reference is used as it is."""
+        if isinstance(demos, DataRef) and demos.path is not None:
+            return demos
+        if isinstance(demos, str | os.PathLike):
+            return DataRef(path=str(demos))
+        if isinstance(demos, DataRef):
+            demos = demos.demos
+        if not isinstance(demos, DemonstrationSet):
+            raise DataError(f"can only share a DemonstrationSet or a path with workers, not a {type(demos).__name__}")
+        self._n += 1
+        target = self._dir() / f"share-{self._n:04d}-{uuid.uuid4().hex[:8]}"
+        if by_subject:
+            return DataRef(path=str(write_dataset(demos, target)))
+        return DataRef(path=str(demos.save(target.with_suffix(".parquet"))))
+
+    def close(self) -> None:
+        """Remove the folder if this object made it."""
+        if self._own and self._path is not None:
+            shutil.rmtree(self._path, ignore_errors=True)
 
 
 # -------------------------------------------------------------------------------------------- serial
@@ -267,9 +317,7 @@ class DaskExecutor:
 
         self.retries = int(retries)
         self._cluster = None
-        self._own_staging = staging is None
-        self._staging = Path(staging) if staging is not None else None
-        self._n_shared = 0
+        self._staging = Staging(staging)
         if scheduler is not None:
             from workbench.study.handshake import check_scheduler
 
@@ -313,32 +361,11 @@ class DaskExecutor:
         self._client.close()
         if self._cluster is not None:
             self._cluster.close()
-        if self._own_staging and self._staging is not None:
-            shutil.rmtree(self._staging, ignore_errors=True)
-
-    # -- data --------------------------------------------------------------------------------------------
-    def _staging_dir(self) -> Path:
-        if self._staging is None:
-            self._staging = Path(tempfile.mkdtemp(prefix="workbench-staging-"))
-        self._staging.mkdir(parents=True, exist_ok=True)
-        return self._staging
+        self._staging.close()
 
     def share(self, demos: Any, *, by_subject: bool = False) -> DataRef:
-        """A path reference workers read: the set written to the staging folder, one Parquet file or (with
-        ``by_subject``) a dataset with one partition per subject. A path or a path reference is used as it is."""
-        if isinstance(demos, DataRef) and demos.path is not None:
-            return demos
-        if isinstance(demos, str | os.PathLike):
-            return DataRef(path=str(demos))
-        if isinstance(demos, DataRef):
-            demos = demos.demos
-        if not isinstance(demos, DemonstrationSet):
-            raise DataError(f"can only share a DemonstrationSet or a path with workers, not a {type(demos).__name__}")
-        self._n_shared += 1
-        target = self._staging_dir() / f"share-{self._n_shared:04d}-{uuid.uuid4().hex[:8]}"
-        if by_subject:
-            return DataRef(path=str(write_dataset(demos, target)))
-        return DataRef(path=str(demos.save(target.with_suffix(".parquet"))))
+        """A path reference workers read (:meth:`Staging.share`)."""
+        return self._staging.share(demos, by_subject=by_subject)
 
     # -- tasks -------------------------------------------------------------------------------------------
     def _run(self, fn: Callable[[Any], Any], items: Sequence[Any], names: list[str], progress: Progress | None,
@@ -381,9 +408,7 @@ class DaskExecutor:
                     progress(done, len(items))
         finally:
             self._client.cancel([f for f in futures if not f.done()])
-        for caught in emitted:  # in task order, whatever order the tasks finished in
-            for category, message in caught:
-                warnings.warn(message, category, stacklevel=3)
+        _replay(emitted)
         return [r for r in results if r is not None]
 
     def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
@@ -398,6 +423,110 @@ class DaskExecutor:
         """One :class:`Outcome` per task, in task order; a failed task is reported, the others complete."""
         items = list(items)
         return self._run(fn, items, _keys(items, keys), progress, contain=True)
+
+
+class ProcessExecutor:
+    """Tasks in a pool of local worker processes (``concurrent.futures``, started with ``spawn``): no Dask and no
+    cluster to start, for a handful of big tasks on one machine (e.g. a study's strategies).
+
+    Each worker imports what its first task needs (about 2 s, while this process works on), runs with one BLAS
+    thread, and reads the sets :meth:`share` wrote to a temporary folder: for many machines use
+    :class:`DaskExecutor`. ``spawn``, not ``fork``: a fork would copy this process's threads'
+    locks (the progress bar's, BLAS's) in whatever state they are.
+    """
+
+    parallel = True
+
+    def __init__(self, workers: int | None = None) -> None:
+        n = available_cpus() if workers is None else int(workers)
+        if n < 1:
+            raise WorkbenchError(f"the number of worker processes must be at least 1, got {workers}")
+        self.workers = n
+        self._pool: Any = None
+        self._staging = Staging()
+
+    def __repr__(self) -> str:
+        return f"ProcessExecutor({self.workers} processes)"
+
+    def __enter__(self) -> ProcessExecutor:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the workers; tasks not started are cancelled."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+        self._staging.close()
+
+    def share(self, demos: Any, *, by_subject: bool = False) -> DataRef:
+        """A path reference workers read (:meth:`Staging.share`, in a temporary folder)."""
+        return self._staging.share(demos, by_subject=by_subject)
+
+    def _run(self, fn: Callable[[Any], Any], items: Sequence[Any], names: list[str], progress: Progress | None,
+             contain: bool) -> list[Outcome]:
+        import multiprocessing
+        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+        futures = [self._pool.submit(_run_task, fn, item) for item in items]
+        position = {f: i for i, f in enumerate(futures)}
+        results: list[Outcome | None] = [None] * len(items)
+        emitted: list[list[tuple[type[Warning], str]]] = [[] for _ in items]
+        pending, done = set(futures), 0
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in sorted(finished, key=position.__getitem__):
+                    i = position[fut]
+                    exc = fut.exception()
+                    if exc is None:
+                        value, emitted[i], exc = fut.result()
+                    if exc is not None:
+                        if not contain:
+                            raise exc
+                        results[i] = Outcome(names[i], error=_describe(exc))
+                    else:
+                        results[i] = Outcome(names[i], value)
+                    done += 1
+                    if progress is not None:
+                        progress(done, len(items))
+        finally:
+            for fut in pending:
+                fut.cancel()
+        _replay(emitted)
+        return [r for r in results if r is not None]
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
+        """``[fn(item) for item in items]`` in the worker processes, in task order; the first failure is raised."""
+        items = list(items)
+        return [o.value for o in self._run(fn, items, _keys(items, None), progress, contain=False)]
+
+    def map_outcomes(
+        self, fn: Callable[[Any], Any], items: Sequence[Any], *, keys: Sequence[str] | None = None,
+        progress: Progress | None = None,
+    ) -> list[Outcome]:
+        """One :class:`Outcome` per task, in task order; a failed task is reported, the others complete."""
+        items = list(items)
+        return self._run(fn, items, _keys(items, keys), progress, contain=True)
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on (its affinity mask where the system has one, else the CPU count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def local_executor(tasks: int) -> SerialExecutor | ProcessExecutor:
+    """For ``tasks`` big independent tasks on this machine: a :class:`ProcessExecutor` with a worker per task (up
+    to the CPUs available), or serial where there is one task or one CPU (a worker would only add its start-up)."""
+    n = min(int(tasks), available_cpus())
+    return ProcessExecutor(n) if n >= 2 else SerialExecutor()
 
 
 def make_executor(

@@ -234,20 +234,18 @@ def run_study(
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
     cannot be fitted is left out of the comparison and named in ``failures`` and :meth:`StudyResult.verdicts`.
 
-    ``executor`` (:mod:`workbench.study.executor`) runs the points of the data-efficiency curves; default here.
+    ``executor`` (:mod:`workbench.study.executor`): a parallel one runs each strategy as one task (its fits,
+    scores, data-efficiency curve and objective intervals); otherwise the strategies run here in turn and the
+    executor runs the points of their data-efficiency curves. The results are the same either way.
 
     ``system`` is the plant, or a callable that makes it from a :class:`DemonstrationSet` (e.g.
     ``LinearSystem.identify``): it is then called once, on the training trials of every label together, so no
     test trial shapes (A, B). ``StudyResult.system`` is the plant used.
     """
-    from workbench.study import evaluate as ev
-    from workbench.study.calibration import calibration_counts
 
     stride = _stride_steps(stride_s, demos.dt)
     labels = demos.labels or [None]
     timings: dict[str, float] = {}
-    train, test, models, baselines = {}, {}, {}, {}
-    rmse_parts, cov_parts, eff_parts, check_parts = [], [], [], []
     splits = {}
     for label in labels:
         ds = demos if label is None else demos.by_label(label)
@@ -262,66 +260,49 @@ def run_study(
     failures: dict[str, dict[str, str]] = {}
     all_train = [d for tr, _ in splits.values() for d in tr]
     system = plant_for(system, demos.with_demos(all_train))
+    settings = _LabelSettings(n_components=n_components, seed=seed, n_steps=n_steps, samples=samples, stride=stride,
+                              efficiency=tuple(efficiency or ()), repeats=repeats, bootstrap=int(bootstrap),
+                              power=int(power))
+    # the strategies are independent: with a parallel executor each is one task (fit, compare, data efficiency,
+    # objective intervals), else they run here in turn and the data-efficiency points go to the executor
+    by_label = bool(getattr(executor, "parallel", False)) and len(splits) > 1
+    parts: list[_LabelPart] = []
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
-        task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
-        for label, (tr, te) in splits.items():
-            t0 = time.perf_counter()
-            G = select_components(tr, system, seed=seed) if n_components == "bic" else int(n_components)
-            fitted, failed = _fit_each(system, tr, G, seed)
-            if failed:
-                failures[label] = failed
-            timings[f"fit {label}"] = time.perf_counter() - t0
-            train[label], test[label] = tr, te
-            if "proposed" in fitted:
-                models[label] = fitted["proposed"]
-            baselines[label] = {k: v for k, v in fitted.items() if k != "proposed"}
-            t0 = time.perf_counter()
-            table = ev.compare(fitted, te, n_steps=n_steps, samples=samples, seed=seed,
-                               starts="initial" if stride is None else stride)
-            rmse_parts.append(table.assign(label=label))
-            if "proposed" in fitted:
-                cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, CALIBRATION_LEVELS,
-                                                               method="proposed"))
-                cov_parts.append(cov.assign(label=label))
-                check_parts.append(calibration_counts(fitted["proposed"], list(te)).assign(label=label))
-            timings[f"compare {label}"] = time.perf_counter() - t0
-            if efficiency:
-                t0 = time.perf_counter()
-                sizes = [n for n in efficiency if n <= len(tr)]
-                if sizes:
-                    # small training subsets often stop EM at max_iter: one summary line, not one per fit
-                    with warnings.catch_warnings(record=True) as caught:
-                        warnings.simplefilter("always", ConvergenceWarning)
-                        sub = p.add_task(f"{label}: data efficiency", total=None) if p is not None else None
-                        eff = ev.data_efficiency(
-                            system, tr, te, sizes=sizes, n_steps=n_steps, repeats=repeats, seed=seed, n_components=G,
-                            progress=None if p is None else lambda d, t, sub=sub: p.update(sub, completed=d, total=t),
-                            executor=executor,
-                        )
-                        if p is not None:
-                            p.remove_task(sub)
-                    n_warn = sum(issubclass(w.category, ConvergenceWarning) for w in caught)
-                    if n_warn:
-                        warnings.warn(
-                            f"{label} data efficiency: EM stopped at max_iter in {n_warn} of the subset fits",
-                            ConvergenceWarning, stacklevel=2,
-                        )
-                    eff_failures = eff.attrs.get("failures") or []
-                    if eff_failures:
-                        warnings.warn(f"{label} data efficiency: {len(eff_failures)} fits failed, e.g. "
-                                      f"{eff_failures[0]}", stacklevel=2)
-                    eff = eff[eff["metric"] == ev.primary_metric(system)].assign(label=label)
-                    eff_parts.append(eff)
-                timings[f"efficiency {label}"] = time.perf_counter() - t0
-            if p is not None:
-                p.advance(task)
+        what = f"fitting and comparing ({len(splits)} strategies in parallel)" if by_label else "fitting and comparing"
+        task = p.add_task(what, total=len(splits)) if p is not None else None
+        if by_label:
+            tasks = [(label, i, executor.share(tr), executor.share(te), system, settings)
+                     for i, (label, (tr, te)) in enumerate(splits.items())]
+            parts = executor.map(_study_label, tasks,
+                                 progress=None if p is None else lambda d, t: p.update(task, completed=d))
+        else:
+            for i, (label, (tr, te)) in enumerate(splits.items()):
+                parts.append(_study_label((label, i, tr, te, system, settings), executor=executor, progress=p))
+                if p is not None:
+                    p.advance(task)
+    train, test, models, baselines = {}, {}, {}, {}
+    objectives: dict[str, Any] = {}
+    for (label, (tr, te)), part in zip(splits.items(), parts, strict=True):
+        train[label], test[label] = tr, te
+        if part.failures:
+            failures[label] = part.failures
+        if "proposed" in part.fitted:
+            models[label] = part.fitted["proposed"]
+        baselines[label] = {k: v for k, v in part.fitted.items() if k != "proposed"}
+        if part.objective is not None:
+            objectives[label] = part.objective
+        for phase, seconds in part.timings.items():  # "fit CS1", …; the objective intervals summed over labels
+            key = phase if phase == "objective intervals" else f"{phase} {label}"
+            timings[key] = timings.get(key, 0.0) + seconds
+    rmse_parts = [part.table.assign(label=label) for label, part in zip(splits, parts, strict=True)]
+    cov_parts = [part.coverage.assign(label=label) for label, part in zip(splits, parts, strict=True)
+                 if part.coverage is not None]
+    check_parts = [part.check.assign(label=label) for label, part in zip(splits, parts, strict=True)
+                   if part.check is not None]
+    eff_parts = [part.efficiency for part in parts if part.efficiency is not None]
     table = pd.concat(rmse_parts, ignore_index=True)
     statistics = _statistics(table, demos, system, n_steps, stride, seed)
-    t0 = time.perf_counter()
-    objectives = _objective_intervals(models, train, int(bootstrap), seed, int(power))
-    if objectives:
-        timings["objective intervals"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
     if ratio_comparison is not None:
@@ -339,6 +320,100 @@ def run_study(
     )
 
 
+@dataclass(frozen=True)
+class _LabelSettings:
+    """What every strategy's part of a study is run with (see :func:`run_study`)."""
+
+    n_components: int | str
+    seed: int
+    n_steps: int
+    samples: int
+    stride: int | None
+    efficiency: tuple[int, ...]
+    repeats: int
+    bootstrap: int
+    power: int
+
+
+@dataclass(frozen=True)
+class _LabelPart:
+    """One strategy's part of a study: its fitted methods, their scores, its data-efficiency rows, its objective's
+    intervals, and the seconds each phase took."""
+
+    fitted: dict[str, Any]
+    failures: dict[str, str]
+    table: pd.DataFrame
+    coverage: pd.DataFrame | None
+    check: pd.DataFrame | None
+    efficiency: pd.DataFrame | None
+    objective: Any
+    timings: dict[str, float]
+
+
+def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _LabelPart:
+    """One strategy of :func:`run_study` (a task of its executor): fit every method on the training trials, score
+    them on the test trials, the data-efficiency curve, and the bootstrap intervals of the proposed model's
+    objective (seeded by the label's position ``i``, so two labels never draw the same resamples)."""
+    from workbench.study import evaluate as ev
+    from workbench.study.calibration import calibration_counts
+
+    label, i, tr, te, system, s = task
+    tr = tr.load() if hasattr(tr, "load") else tr
+    te = te.load() if hasattr(te, "load") else te
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    G = select_components(tr, system, seed=s.seed) if s.n_components == "bic" else int(s.n_components)
+    fitted, failed = _fit_each(system, tr, G, s.seed)
+    timings["fit"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    table = ev.compare(fitted, te, n_steps=s.n_steps, samples=s.samples, seed=s.seed,
+                       starts="initial" if s.stride is None else s.stride)
+    cov = check = None
+    if "proposed" in fitted:
+        cov = ev.coverage_summary(ev.one_step_coverage(fitted["proposed"], te, CALIBRATION_LEVELS, method="proposed"))
+        check = calibration_counts(fitted["proposed"], list(te))
+    timings["compare"] = time.perf_counter() - t0
+    eff = None
+    sizes = [n for n in s.efficiency if n <= len(tr)]
+    if sizes:
+        t0 = time.perf_counter()
+        eff = _efficiency(label, system, tr, te, sizes, G, s, executor, progress)
+        timings["efficiency"] = time.perf_counter() - t0
+    objective = None
+    if s.bootstrap > 0 and getattr(fitted.get("proposed"), "objective_", None) is not None:
+        t0 = time.perf_counter()
+        objective = _objective_interval(label, fitted["proposed"], tr, s.bootstrap, s.seed + i, s.power)
+        timings["objective intervals"] = time.perf_counter() - t0
+    return _LabelPart(fitted=fitted, failures=failed, table=table, coverage=cov, check=check, efficiency=eff,
+                      objective=objective, timings=timings)
+
+
+def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: DemonstrationSet, sizes: list[int], G: int,
+                s: _LabelSettings, executor: Any, p: Any) -> pd.DataFrame:
+    """One label's data-efficiency rows of the primary metric, its EM and fit warnings summarized in a line each."""
+    from workbench.study import evaluate as ev
+
+    # small training subsets often stop EM at max_iter: one summary line, not one per fit
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ConvergenceWarning)
+        sub = p.add_task(f"{label}: data efficiency", total=None) if p is not None else None
+        eff = ev.data_efficiency(
+            system, tr, te, sizes=sizes, n_steps=s.n_steps, repeats=s.repeats, seed=s.seed, n_components=G,
+            progress=None if p is None else lambda d, t: p.update(sub, completed=d, total=t), executor=executor,
+        )
+        if p is not None:
+            p.remove_task(sub)
+    n_warn = sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+    if n_warn:
+        warnings.warn(f"{label} data efficiency: EM stopped at max_iter in {n_warn} of the subset fits",
+                      ConvergenceWarning, stacklevel=2)
+    eff_failures = eff.attrs.get("failures") or []
+    if eff_failures:
+        warnings.warn(f"{label} data efficiency: {len(eff_failures)} fits failed, e.g. {eff_failures[0]}",
+                      stacklevel=2)
+    return eff[eff["metric"] == ev.primary_metric(system)].assign(label=label)
+
+
 def _ratio_comparison(objectives: dict[str, Any]) -> pd.DataFrame | None:
     """The labels' weight ratios and their factors against the first label's, or None where no label has ratios."""
     from workbench.study.weights import compare_strategies
@@ -347,27 +422,18 @@ def _ratio_comparison(objectives: dict[str, Any]) -> pd.DataFrame | None:
     return compare_strategies(ratios) if ratios else None
 
 
-def _objective_intervals(
-    models: dict[str, Any], train: dict[str, DemonstrationSet], n_boot: int, seed: int, power: int = 0
-) -> dict[str, Any]:
-    """Bootstrap intervals of each label's task objective (:func:`workbench.study.weights.objective_intervals`),
-    with ``power`` simulated sets per size of a power curve for the ratios that need one (0: none)."""
-    from workbench.errors import ModelError
+def _objective_interval(label: str, model: Any, train: DemonstrationSet, n_boot: int, seed: int,
+                        power: int = 0) -> Any:
+    """Bootstrap intervals of a label's task objective (:func:`workbench.study.weights.objective_intervals`), with
+    ``power`` simulated sets per size of a power curve for the ratios that need one (0: none); None, with a
+    warning, where it cannot be had (the report then shows the point estimate and says it has no interval)."""
     from workbench.study.weights import objective_intervals
 
-    out: dict[str, Any] = {}
-    if n_boot <= 0:
-        return out
-    for i, (label, model) in enumerate(models.items()):
-        if getattr(model, "objective_", None) is None:
-            continue
-        try:
-            # a seed per label: with one seed, resample j of every label draws the same trial positions, and the
-            # factor between two labels' ratios (weights.compare_strategies) needs independent resamples
-            out[label] = objective_intervals(model, train[label], n_boot=n_boot, seed=seed + i, power=power)
-        except ModelError as exc:  # the report then shows the point estimate and says it has no interval
-            warnings.warn(f"{label}: no bootstrap intervals of the task objective: {exc}", stacklevel=3)
-    return out
+    try:
+        return objective_intervals(model, train, n_boot=n_boot, seed=seed, power=power)
+    except ModelError as exc:
+        warnings.warn(f"{label}: no bootstrap intervals of the task objective: {exc}", stacklevel=3)
+        return None
 
 
 #: Below this many trials in a label, ``evaluate`` leaves one trial out at a time instead of one random split.
