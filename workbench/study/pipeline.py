@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from workbench.atomic import atomic_write_table
+from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.factory import METHOD_TITLES
@@ -358,8 +359,8 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
     from workbench.study.calibration import calibration_counts
 
     label, i, tr, te, system, s = task
-    tr = tr.load() if hasattr(tr, "load") else tr
-    te = te.load() if hasattr(te, "load") else te
+    tr = tr.load() if isinstance(tr, DataRef) else tr  # a worker reads what the executor shared
+    te = te.load() if isinstance(te, DataRef) else te
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     G = select_components(tr, system, seed=s.seed) if s.n_components == "bic" else int(s.n_components)
