@@ -17,7 +17,7 @@ import sys
 import tempfile
 import time
 
-from harness import PYTHON, ROOT, load, verdict
+from harness import PYTHON, ROOT, child_env, load, verdict
 
 RUNS = 3
 TARGET_S = 30.0
@@ -28,7 +28,7 @@ def _one(out: str) -> tuple[float, float, str]:
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run([PYTHON, "-m", "workbench", "demo", "--out", out], capture_output=True, text=True,
-                          cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+                          cwd=ROOT, env=child_env(PYTHONPATH=str(ROOT)))
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode:
