@@ -3,9 +3,12 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 import sys
+import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -215,12 +218,28 @@ def cmd_report(ctx: Context) -> int:
     return 0
 
 
-def cmd_demo(ctx: Context) -> int:
-    from rich.markup import escape
+#: What the demo needs after its study (the report, the recording, the models its workers send back): imported by a
+#: thread while this process waits for the workers, instead of before it starts them.
+_AFTER_STUDY = ("workbench.models.factory", "workbench.report.markdown", "workbench.viewer", "workbench.study.findings")
 
-    from workbench.report.markdown import write_study_report
+
+def _import_in_background(modules: Sequence[str]) -> threading.Thread:
+    """Import ``modules`` in a daemon thread (a module's first import is then shared, not repeated)."""
+
+    def run() -> None:
+        for name in modules:
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001 - the real import later raises it where it can be reported
+                return
+
+    thread = threading.Thread(target=run, name="workbench-preload", daemon=True)
+    thread.start()
+    return thread
+
+
+def cmd_demo(ctx: Context) -> int:
     from workbench.study import pipeline as study
-    from workbench.viewer import record_study
 
     a = ctx.args
     t_start = time.perf_counter()
@@ -255,12 +274,15 @@ def cmd_demo(ctx: Context) -> int:
     timings["files"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     with ctx.executor(local_tasks=len(ds.labels)) as ex:
+        preload = _import_in_background(_AFTER_STUDY) if ex.parallel else None
         result = study.run_study(
             ds, study_plant(a.system), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
             n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
             progress=ctx.progress, bootstrap=a.bootstrap, stride_s=a.stride_s, power=a.power, executor=ex,
         )
         workers = ex.workers if ex.parallel else 1
+    if preload is not None:
+        preload.join()
     study_s = time.perf_counter() - t0
     if workers > 1:
         # the strategies ran side by side: their phases add up to process time, not to the wall time of the study
@@ -275,6 +297,11 @@ def cmd_demo(ctx: Context) -> int:
         model.save(model_dir / f"{label}.npz")
     result.save_tables(out / "results.csv")
     timings["files"] += time.perf_counter() - t0
+    from rich.markup import escape
+
+    from workbench.report.markdown import write_study_report
+    from workbench.viewer import record_study
+
     t1 = time.perf_counter()
     report = write_study_report(result, out, title="Workbench demo: sample logs")
     timings["report"] = time.perf_counter() - t1

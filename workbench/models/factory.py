@@ -15,13 +15,11 @@ from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.baselines import GMROnlyModel, IOCOnlyModel, PersistenceModel
 from workbench.models.behavior import BehaviorModel
 from workbench.models.files import read_model_file
+from workbench.models.names import METHOD_TITLES, METHODS
 from workbench.models.proposed import HumanBehaviorModel, restore_model
 
 __all__ = ["METHODS", "METHOD_TITLES", "MODEL_CLASSES", "make_model", "make_models", "load_model"]
 
-# the comparison's methods, in table order; persistence is the floor every model must beat
-METHODS = ("proposed", "ioc_only", "gmr_only", "persistence")
-METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence"}
 MODEL_CLASSES: dict[str, type[BehaviorModel]] = {
     cls.__name__: cls for cls in (HumanBehaviorModel, IOCOnlyModel, GMROnlyModel, PersistenceModel)
 }

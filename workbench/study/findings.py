@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from workbench.models.factory import METHOD_TITLES
+from workbench.models.names import METHOD_TITLES
 from workbench.study.paired import ALL_LABELS, PairedDifference, paired_differences, per_trial
 from workbench.study.stats import MixedModelResult, PairedTest, holm, mixed_effects, paired_tests
 

@@ -24,7 +24,7 @@ from workbench.atomic import atomic_write_table
 from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError, ModelError
-from workbench.models.factory import METHOD_TITLES
+from workbench.models.names import METHOD_TITLES
 
 __all__ = [
     "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "improvement_table", "verdicts", "metric_unit", "plant_for",
