@@ -276,7 +276,41 @@ serial = SerialExecutor()
 # ---------------------------------------------------------------------------------------------- Dask
 
 
-class DaskExecutor:
+def _settle(name: str, returned: Any, exc: BaseException | None, contain: bool) -> tuple[Outcome, list]:
+    """One task's :class:`Outcome` and warnings, from what its worker returned (:func:`_run_task`'s triple) or the
+    exception that ended it; the error is raised instead where ``contain`` is false."""
+    caught: list[tuple[type[Warning], str]] = []
+    if exc is None:
+        value, caught, exc = returned
+    if exc is not None:
+        if not contain:
+            raise exc
+        return Outcome(name, error=_describe(exc)), caught
+    return Outcome(name, value), caught
+
+
+class _Workers:
+    """What the executors with workers share: :meth:`map` and :meth:`map_outcomes` over their ``_run``."""
+
+    def _run(self, fn: Callable[[Any], Any], items: Sequence[Any], names: list[str], progress: Progress | None,
+             contain: bool) -> list[Outcome]:
+        raise NotImplementedError
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
+        """``[fn(item) for item in items]`` on the workers, in task order; the first failure is raised."""
+        items = list(items)
+        return [o.value for o in self._run(fn, items, _keys(items, None), progress, contain=False)]
+
+    def map_outcomes(
+        self, fn: Callable[[Any], Any], items: Sequence[Any], *, keys: Sequence[str] | None = None,
+        progress: Progress | None = None,
+    ) -> list[Outcome]:
+        """One :class:`Outcome` per task, in task order; a failed task is reported, the others complete."""
+        items = list(items)
+        return self._run(fn, items, _keys(items, keys), progress, contain=True)
+
+
+class DaskExecutor(_Workers):
     """Tasks on ``dask.distributed``: a ``LocalCluster`` of ``workers`` processes, or the cluster at ``scheduler``.
 
     Parameters
@@ -390,18 +424,9 @@ class DaskExecutor:
                     if isinstance(result, tuple) and len(result) == 3:  # dask gives (type, exception, traceback)
                         result = result[1]
                     exc = result if isinstance(result, BaseException) else RuntimeError(f"task {fut.status}")
-                    if not contain:
-                        raise exc
-                    results[i] = Outcome(names[i], error=_describe(exc))
+                    results[i], emitted[i] = _settle(names[i], None, exc, contain)
                 else:
-                    value, caught, error = result
-                    emitted[i] = caught
-                    if error is not None:
-                        if not contain:
-                            raise error
-                        results[i] = Outcome(names[i], error=_describe(error))
-                    else:
-                        results[i] = Outcome(names[i], value)
+                    results[i], emitted[i] = _settle(names[i], result, None, contain)
                 fut.release()
                 done += 1
                 if progress is not None:
@@ -411,21 +436,9 @@ class DaskExecutor:
         _replay(emitted)
         return [r for r in results if r is not None]
 
-    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
-        """``[fn(item) for item in items]`` on the workers, in task order; the first failure is raised."""
-        items = list(items)
-        return [o.value for o in self._run(fn, items, _keys(items, None), progress, contain=False)]
-
-    def map_outcomes(
-        self, fn: Callable[[Any], Any], items: Sequence[Any], *, keys: Sequence[str] | None = None,
-        progress: Progress | None = None,
-    ) -> list[Outcome]:
-        """One :class:`Outcome` per task, in task order; a failed task is reported, the others complete."""
-        items = list(items)
-        return self._run(fn, items, _keys(items, keys), progress, contain=True)
 
 
-class ProcessExecutor:
+class ProcessExecutor(_Workers):
     """Tasks in a pool of local worker processes (``concurrent.futures``, started with ``spawn``): no Dask and no
     cluster to start, for a handful of big tasks on one machine (e.g. a study's strategies).
 
@@ -482,15 +495,8 @@ class ProcessExecutor:
                 finished, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in sorted(finished, key=position.__getitem__):
                     i = position[fut]
-                    exc = fut.exception()
-                    if exc is None:
-                        value, emitted[i], exc = fut.result()
-                    if exc is not None:
-                        if not contain:
-                            raise exc
-                        results[i] = Outcome(names[i], error=_describe(exc))
-                    else:
-                        results[i] = Outcome(names[i], value)
+                    exc = fut.exception()  # the worker died (BrokenProcessPool) or the task raised
+                    results[i], emitted[i] = _settle(names[i], None if exc else fut.result(), exc, contain)
                     done += 1
                     if progress is not None:
                         progress(done, len(items))
@@ -500,18 +506,6 @@ class ProcessExecutor:
         _replay(emitted)
         return [r for r in results if r is not None]
 
-    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], *, progress: Progress | None = None) -> list:
-        """``[fn(item) for item in items]`` in the worker processes, in task order; the first failure is raised."""
-        items = list(items)
-        return [o.value for o in self._run(fn, items, _keys(items, None), progress, contain=False)]
-
-    def map_outcomes(
-        self, fn: Callable[[Any], Any], items: Sequence[Any], *, keys: Sequence[str] | None = None,
-        progress: Progress | None = None,
-    ) -> list[Outcome]:
-        """One :class:`Outcome` per task, in task order; a failed task is reported, the others complete."""
-        items = list(items)
-        return self._run(fn, items, _keys(items, keys), progress, contain=True)
 
 
 def available_cpus() -> int:
