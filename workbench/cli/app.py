@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 import re
+import signal
 import sys
+import threading
 import traceback
 import warnings
 from collections.abc import Sequence
@@ -40,7 +42,53 @@ class _Warnings:
                   file=sys.stderr)
 
 
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, what a shell reports for a program ended by Ctrl-C
+
+
+def _hold_interrupts_until_exit() -> None:
+    """From here to the process's end, Ctrl-C is ignored: what is left is the interpreter's shutdown, where a
+    KeyboardInterrupt inside the rerun SDK's exit hooks (its writer threads flushing) once aborted the
+    interpreter (``Fatal Python error: PyThreadState_Get``), and where Python has put back the default handler
+    that ends the process without a word."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _forget_escaped_interrupt()
+
+
+def _forget_escaped_interrupt() -> None:
+    """Clear CPython's memory of a KeyboardInterrupt that escaped code it ran through ``PyRun_*`` (extension
+    modules run snippets that way): at exit it would kill the process with SIGINT whatever status ``main``
+    returned (``Py_RunMain``'s ``exit_sigint``; seen as ``interrupted`` followed by death by signal, 6 of 50
+    trials of bench/attack/sigint_view.py). Every ``PyRun_*`` call resets that flag before it runs, so an empty
+    one, with SIGINT already ignored, leaves it cleared."""
+    if sys.implementation.name != "cpython":
+        return
+    import ctypes
+
+    ctypes.pythonapi.PyRun_SimpleString(b"")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; the exit status (0 done, 1 a clear error, 3 an internal one, 130 interrupted).
+
+    Called with no ``argv`` (the console script, ``python -m workbench``) this call is the whole process: Ctrl-C
+    then ends it with the one line ``interrupted`` and status 130, never a traceback or an abort (see
+    :func:`_hold_interrupts_until_exit`). Tests pass ``argv`` and keep their own SIGINT handling.
+    """
+    entry = argv is None
+    try:
+        return _run(argv)
+    except KeyboardInterrupt:
+        if entry:
+            _hold_interrupts_until_exit()
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        if entry:
+            _hold_interrupts_until_exit()
+
+
+def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = bool(getattr(args, "debug", False))
@@ -51,9 +99,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with limit_threads():  # small matrices: one BLAS thread is faster than many (workbench.threads)
             return int(args.func(Context(args)) or 0)
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:
         return EXIT_ERROR
     except Exception as exc:
