@@ -96,24 +96,31 @@ def _run(argv: Sequence[str] | None) -> int:
     shown = _Warnings()
     if not debug:
         warnings.showwarning = shown.show
+    ctx: Context | None = None
     try:
+        ctx = Context(args)
         with limit_threads():  # small matrices: one BLAS thread is faster than many (workbench.threads)
-            return int(args.func(Context(args)) or 0)
+            status = int(args.func(ctx) or 0)
+        ctx.stdio.emit()  # `-o -`: the finished file to standard output, nothing of a failed run
+        return status
     except BrokenPipeError:
         return EXIT_ERROR
     except Exception as exc:
         if debug:
             traceback.print_exc()
+        tidy = ctx.stdio.tidy if ctx is not None else str  # <stdin>, not the temporary file's name
         if isinstance(exc, WorkbenchError):
-            print(f"error: {one_line(exc)}", file=sys.stderr)
+            print(f"error: {tidy(one_line(exc))}", file=sys.stderr)
             return EXIT_ERROR
         if isinstance(exc, OSError):
-            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-            print(f"error: {where}{exc.strerror or one_line(exc)}", file=sys.stderr)
+            where = f"{tidy(str(exc.filename))}: " if getattr(exc, "filename", None) else ""
+            print(f"error: {where}{tidy(exc.strerror or one_line(exc))}", file=sys.stderr)
             return EXIT_ERROR
         hint = "" if debug else " (run with --debug for the traceback)"
-        print(f"error: {type(exc).__name__}: {one_line(exc)}{hint}", file=sys.stderr)
+        print(f"error: {type(exc).__name__}: {tidy(one_line(exc))}{hint}", file=sys.stderr)
         return EXIT_INTERNAL
     finally:
+        if ctx is not None:
+            ctx.stdio.cleanup()
         warnings.showwarning = previous
         shown.close()
