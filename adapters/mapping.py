@@ -555,8 +555,16 @@ def _missing_stream(sel: Selector, streams: Streams, what: str, mapping: str) ->
     names = streams.names
     near = nearest(head, names)
     listing = ", ".join(names[:40]) + (f", … ({len(names)} in all)" if len(names) > 40 else "")
-    empty = [s for s in (candidate_streams(src)[0] if candidate_streams(src) else src for src in sel.sources)
-             if s in streams.counts and not streams.counts[s]]
+    heads = [candidate_streams(src)[0] if candidate_streams(src) else src for src in sel.sources]
+    empty = [s for s in heads if s in streams.counts and not streams.counts[s]]
+    lost = [s for s in heads if streams.counts.get(s) and s not in streams]
+    if lost and streams.skipped:  # counted by the file's index, but every message of it was in damaged data
+        damage = ", ".join(f"{k} {v}" for k, v in streams.skipped.items())
+        return MappingError(
+            f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but every message of "
+            f"{', '.join(map(repr, lost))} in {streams.path} ({streams.format}) is in damaged data the reader "
+            f"skipped ({damage}): the file is corrupt there"
+        )
     if empty:  # declared by the file but never written: the stream exists, its data do not
         return MappingError(
             f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but {streams.path} "

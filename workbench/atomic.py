@@ -131,12 +131,16 @@ class atomic_path:
         remove_leftovers(self.path.parent, self.path.name)
         fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.{os.getpid()}-", suffix=self.suffix + ".tmp",
                                    dir=self.path.parent)
-        os.close(fd)
-        # mkstemp makes the file private (0600); give the output the permissions a plain open() would
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
         self.tmp = Path(tmp)
+        try:
+            os.close(fd)
+            # mkstemp makes the file private (0600); give the output the permissions a plain open() would
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
+        except BaseException:  # Ctrl-C between mkstemp and the with-block: no __exit__ will remove it
+            self.tmp.unlink(missing_ok=True)
+            raise
         return self.tmp
 
     def __exit__(self, exc_type, exc, tb) -> None:

@@ -15,9 +15,14 @@ whose length varies from message to message (or exceeds :data:`MAX_ARRAY`) are l
 
 The summary section's chunk indexes are used to read only the chunks that hold the requested topics. A file
 without a usable summary (a recording cut short, a damaged index) is scanned from the start instead, up to
-the first record that cannot be read. Chunks are checked before use: a compressed chunk must declare a sane
-size and match its CRC, else it is skipped whole (its bytes counted in ``skipped["bytes"]``, never its
-values used). Messages that do not decode are skipped and counted.
+the first record that cannot be read; so is a file whose summary section fails its CRC (the footer's
+``summary_crc``, which the ``mcap`` library does not check), its bytes counted in ``skipped["summary bytes"]``.
+Chunks are checked before use: a compressed chunk must declare a sane size, and every chunk must match its CRC
+(checked by the ``mcap`` library's own validation, :func:`mcap.stream_reader.get_chunk_data_stream`), else it is
+skipped whole (its bytes counted in ``skipped["bytes"]``, never its values used). A file in which every chunk
+read fails these checks, or that holds no readable record at all, is corrupt: a :class:`DataError` names the
+file, the byte offset of the first bad chunk or record, and the cause (e.g. ``chunk CRC mismatch``). Messages
+that do not decode are skipped and counted.
 
 Writing
 -------
@@ -30,6 +35,7 @@ time).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 import os
@@ -49,7 +55,7 @@ from mcap.data_stream import ReadDataStream
 from mcap.decoder import DecoderFactory
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.stream_reader import CRCValidationError, StreamReader, get_chunk_data_stream
 from mcap.writer import CompressionType, Writer
 
 from adapters.streams import Streams, as_frame
@@ -67,6 +73,9 @@ MAX_ARRAY = 256
 _REC = struct.Struct("<BQ")
 _MSG = struct.Struct("<HIQQ")
 _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x03, 0x04, 0x05, 0x06
+_OP_FOOTER = 0x02
+# Footer record: opcode, length, summary_start, summary_offset_start, summary_crc; then the closing magic
+_FOOTER = struct.Struct("<BQQQI")
 # A chunk may not claim to decompress to more than this many times its stored size (zstd's best case on
 # constant data is ~30000×): a corrupt size field must not make us allocate gigabytes.
 _MAX_RATIO = 40_000
@@ -104,6 +113,28 @@ class _Scan:
         self.metadata: dict[str, dict[str, str]] = {}
         self.skipped: dict[str, int] = defaultdict(int)
         self.notes: list[str] = []
+        self.chunks_read = 0
+        self.bad_chunks: list[tuple[int, str]] = []  # (byte offset of the chunk record, why it was skipped)
+
+    def chunk_failed(self, offset: int, exc: BaseException, n_bytes: int) -> None:
+        self.skipped["bytes"] += n_bytes
+        self.skipped["chunks"] += 1
+        self.bad_chunks.append((offset, _why(exc)))
+
+
+def _why(exc: BaseException) -> str:
+    """A damaged chunk's cause in a few words."""
+    if isinstance(exc, CRCValidationError):
+        return f"chunk CRC mismatch (stored {exc.expected:#010x}, computed {exc.actual:#010x})"
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if not isinstance(exc, ValueError) or not text else text
+
+
+def _check_crc(chunk: Chunk, data: bytes) -> None:
+    """The chunk's CRC over its decompressed records, checked by the mcap library (raises
+    :class:`~mcap.stream_reader.CRCValidationError`); the library is handed the bytes already decompressed under
+    :func:`_decompress`'s size limits, which its own decompression does not have."""
+    get_chunk_data_stream(dataclasses.replace(chunk, compression="", data=data), validate_crc=True)
 
 
 def _decompress(chunk: Chunk, size_limit: int) -> bytes:
@@ -127,8 +158,7 @@ def _decompress(chunk: Chunk, size_limit: int) -> bytes:
         raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
     if len(data) != declared:
         raise ValueError(f"chunk decompressed to {len(data)} bytes, not {declared}")
-    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise ValueError("chunk CRC mismatch")
+    _check_crc(chunk, data)
     return data
 
 
@@ -199,12 +229,12 @@ def _read_indexed(f, size: int, topics: set[str] | None, scan: _Scan) -> bool:
             chunk = Chunk.read(ReadDataStream(io.BytesIO(f.read(length))))
             saved = dict(scan.counts)
             _chunk_records(_decompress(chunk, size * _MAX_RATIO), scan, wanted)
+            scan.chunks_read += 1
             if summary.statistics is not None:
                 scan.counts.clear()
                 scan.counts.update(saved)
-        except Exception:  # noqa: BLE001 - a damaged chunk is skipped whole, never half-used
-            scan.skipped["bytes"] += int(min(ci.chunk_length, size))
-            scan.skipped["chunks"] += 1
+        except Exception as exc:  # noqa: BLE001 - a damaged chunk is skipped whole, never half-used
+            scan.chunk_failed(int(ci.chunk_start_offset), exc, int(min(ci.chunk_length, size)))
     for mi in summary.metadata_indexes:
         try:
             f.seek(mi.offset + 9)
@@ -229,9 +259,9 @@ def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan) -> None:
             elif isinstance(record, Chunk):
                 try:
                     _chunk_records(_decompress(record, size * _MAX_RATIO), scan, None)
-                except Exception:  # noqa: BLE001 - damaged chunk skipped whole
-                    scan.skipped["bytes"] += len(record.data)
-                    scan.skipped["chunks"] += 1
+                    scan.chunks_read += 1
+                except Exception as exc:  # noqa: BLE001 - damaged chunk skipped whole
+                    scan.chunk_failed(good, exc, len(record.data))
             elif isinstance(record, Metadata):
                 scan.metadata[record.name] = dict(record.metadata)
             elif isinstance(record, Message):
@@ -242,7 +272,8 @@ def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan) -> None:
             good = f.tell()
     except Exception as exc:  # noqa: BLE001 - truncated or damaged data section: keep what came before
         scan.skipped["bytes"] += max(0, size - good)
-        scan.notes.append(f"stopped at byte {good}: {type(exc).__name__}: {exc}")
+        scan.notes.append(f"unreadable record at byte {good} ({_why(exc)}); the {size - good} bytes from there on "
+                          "are cut off or damaged")
     if topics is not None:
         keep = {cid for cid, c in scan.channels.items() if c.topic in topics}
         for cid in list(scan.messages):
@@ -270,15 +301,51 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
             if f.read(8) != MAGIC:
                 raise FormatError(f"{where}: not an MCAP file (the first 8 bytes are not the MCAP magic)")
             scan = _Scan()
-            indexed = _read_indexed(f, size, topic_set, scan)
+            bad_summary = _bad_summary(f, size)
+            indexed = bad_summary is None and _read_indexed(f, size, topic_set, scan)
             if not indexed:
                 scan = _Scan()
+                if bad_summary is not None:
+                    scan.skipped["summary bytes"], why = bad_summary
+                    scan.notes.append(why)
                 _read_linear(f, size, topic_set, scan)
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
-    if not scan.channels and scan.skipped:
-        raise DataError(f"{where}: no readable MCAP records ({'; '.join(scan.notes) or 'damaged file'})")
+    _refuse_corrupt(where, scan)
     return _to_streams(where, scan, indexed)
+
+
+def _bad_summary(f, size: int) -> tuple[int, str] | None:
+    """``(summary bytes, why)`` when the footer's ``summary_crc`` disagrees with the summary section, else
+    None (no footer, no summary, no CRC, or a match). The CRC covers the summary start to the footer's CRC field."""
+    footer_at = size - len(MAGIC) - _FOOTER.size
+    if footer_at < len(MAGIC):
+        return None
+    f.seek(footer_at)
+    tail = f.read(_FOOTER.size + len(MAGIC))
+    if tail[_FOOTER.size:] != MAGIC:
+        return None  # no closing magic: a cut file, which the linear scan reports
+    op, length, start, _offsets, stored = _FOOTER.unpack(tail[:_FOOTER.size])
+    if op != _OP_FOOTER or length != _FOOTER.size - 9 or not stored or not len(MAGIC) <= start < footer_at:
+        return None
+    f.seek(start)
+    computed = zlib.crc32(f.read(footer_at + _FOOTER.size - 4 - start))
+    if computed == stored:
+        return None
+    return footer_at - start, (f"summary section at byte {start} fails its CRC (stored {stored:#010x}, computed "
+                               f"{computed:#010x}); read without its index, by a scan from the start")
+
+
+def _refuse_corrupt(where: str, scan: _Scan) -> None:
+    """A file from which nothing could be read is corrupt, not a file without the streams a mapping asks for."""
+    if scan.bad_chunks and not scan.chunks_read:
+        offset, why = scan.bad_chunks[0]
+        n = len(scan.bad_chunks)
+        which = f"all {n} chunks read fail their checks, the first" if n > 1 else "its only chunk read fails its checks"
+        raise DataError(f"{where}: corrupt MCAP file: {which} (at byte {offset}): {why}"
+                        + (f"; {'; '.join(scan.notes)}" if scan.notes else ""))
+    if not scan.channels and scan.skipped:
+        raise DataError(f"{where}: corrupt MCAP file: no readable record ({'; '.join(scan.notes) or 'damaged'})")
 
 
 def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import warnings
 
+import pytest
+
 from workbench.cli import app as cli_main
 from workbench.method.inverse_lqr_sdp import _Attempt
 
@@ -25,3 +27,51 @@ def test_repeated_warnings_print_once_with_a_count(capsys):
     assert err[1] == "warning: something else entirely"
     assert "10 more" in err[2] and len(err) == 3
     warnings.resetwarnings()
+
+
+def test_an_attempt_names_only_the_checks_it_failed(monkeypatch):
+    """A solution that meets M ⪰ I but misses the forward check is described by the forward check alone, with the
+    bound it broke (the README flight's warning once listed a passing λmin(M)=1 among the failures)."""
+    import re
+
+    import numpy as np
+
+    from workbench.errors import SolverError
+    from workbench.method import inverse_lqr_sdp as sdp
+    from workbench.method.objective import forward_gain
+    from workbench.plant.system import planar_quadrotor
+
+    system = planar_quadrotor()
+    A, B = np.asarray(system.A), np.asarray(system.B)
+    K, _ = forward_gain(A, B, np.eye(A.shape[0]), np.eye(B.shape[1]))
+    monkeypatch.setattr(sdp, "forward_gain_tolerance", lambda alpha: 0.0)  # no error can meet it
+    with pytest.raises(SolverError) as caught:
+        sdp.InverseLQR(A, B, solvers=["CLARABEL"]).solve(K)
+    text = str(caught.value).split("Attempts:", 1)[1]  # before it: the checks every solution must pass
+    clauses = re.findall(r"failed (the forward check: gain error (\S+) > (\S+))", text)
+    assert clauses, text
+    for _, error, bound in clauses:
+        assert float(error) > float(bound)
+    assert "λmin(M)" not in text and "P ⪰ 0" not in text
+
+
+@pytest.mark.slow
+def test_the_readme_flights_identify_fit_warns_once_and_only_of_what_failed(external, tmp_path, capsys):
+    """`workbench fit --system identify` on the README's flight: each warning once, and every failure it lists a
+    bound that was broken by the numbers it gives."""
+    import re
+
+    flight = external("dronekit_flight.tlog")
+    demos = tmp_path / "flight.parquet"
+    assert cli_main.main(["import", str(flight), "--mapping", "ardupilot_manual", "-o", str(demos)]) == 0
+    capsys.readouterr()
+    assert cli_main.main(["fit", str(demos), "--system", "identify", "-o", str(tmp_path / "flight.npz")]) == 0
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("warning:")]
+    assert len(err) == len(set(err))
+    assert not any("more of the warnings above" in ln for ln in err)
+    for line in err:
+        assert "=1," not in line.replace(" ", "")  # a passing λmin(M)=1 is no failure
+        for error, bound in re.findall(r"gain error (\S+) > (\S+)", line):
+            assert float(error) > float(bound)
+        for value in re.findall(r"λmin\(M\) = (\S+) < 1", line):
+            assert float(value) < 1

@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 import re
+import signal
 import sys
+import threading
 import traceback
 import warnings
 from collections.abc import Sequence
@@ -40,7 +42,53 @@ class _Warnings:
                   file=sys.stderr)
 
 
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, what a shell reports for a program ended by Ctrl-C
+
+
+def _hold_interrupts_until_exit() -> None:
+    """From here to the process's end, Ctrl-C is ignored: what is left is the interpreter's shutdown, where a
+    KeyboardInterrupt inside the rerun SDK's exit hooks (its writer threads flushing) once aborted the
+    interpreter (``Fatal Python error: PyThreadState_Get``), and where Python has put back the default handler
+    that ends the process without a word."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _forget_escaped_interrupt()
+
+
+def _forget_escaped_interrupt() -> None:
+    """Clear CPython's memory of a KeyboardInterrupt that escaped code it ran through ``PyRun_*`` (extension
+    modules run snippets that way): at exit it would kill the process with SIGINT whatever status ``main``
+    returned (``Py_RunMain``'s ``exit_sigint``; seen as ``interrupted`` followed by death by signal, 6 of 50
+    trials of bench/attack/sigint_view.py). Every ``PyRun_*`` call resets that flag before it runs, so an empty
+    one, with SIGINT already ignored, leaves it cleared."""
+    if sys.implementation.name != "cpython":
+        return
+    import ctypes
+
+    ctypes.pythonapi.PyRun_SimpleString(b"")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; the exit status (0 done, 1 a clear error, 3 an internal one, 130 interrupted).
+
+    Called with no ``argv`` (the console script, ``python -m workbench``) this call is the whole process: Ctrl-C
+    then ends it with the one line ``interrupted`` and status 130, never a traceback or an abort (see
+    :func:`_hold_interrupts_until_exit`). Tests pass ``argv`` and keep their own SIGINT handling.
+    """
+    entry = argv is None
+    try:
+        return _run(argv)
+    except KeyboardInterrupt:
+        if entry:
+            _hold_interrupts_until_exit()
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        if entry:
+            _hold_interrupts_until_exit()
+
+
+def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = bool(getattr(args, "debug", False))
@@ -48,27 +96,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     shown = _Warnings()
     if not debug:
         warnings.showwarning = shown.show
+    ctx: Context | None = None
     try:
+        ctx = Context(args)
         with limit_threads():  # small matrices: one BLAS thread is faster than many (workbench.threads)
-            return int(args.func(Context(args)) or 0)
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+            status = int(args.func(ctx) or 0)
+        ctx.stdio.emit()  # `-o -`: the finished file to standard output, nothing of a failed run
+        return status
     except BrokenPipeError:
         return EXIT_ERROR
     except Exception as exc:
         if debug:
             traceback.print_exc()
+        tidy = ctx.stdio.tidy if ctx is not None else str  # <stdin>, not the temporary file's name
         if isinstance(exc, WorkbenchError):
-            print(f"error: {one_line(exc)}", file=sys.stderr)
+            print(f"error: {tidy(one_line(exc))}", file=sys.stderr)
             return EXIT_ERROR
         if isinstance(exc, OSError):
-            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-            print(f"error: {where}{exc.strerror or one_line(exc)}", file=sys.stderr)
+            where = f"{tidy(str(exc.filename))}: " if getattr(exc, "filename", None) else ""
+            print(f"error: {where}{tidy(exc.strerror or one_line(exc))}", file=sys.stderr)
             return EXIT_ERROR
         hint = "" if debug else " (run with --debug for the traceback)"
-        print(f"error: {type(exc).__name__}: {one_line(exc)}{hint}", file=sys.stderr)
+        print(f"error: {type(exc).__name__}: {tidy(one_line(exc))}{hint}", file=sys.stderr)
         return EXIT_INTERNAL
     finally:
+        if ctx is not None:
+            ctx.stdio.cleanup()
         warnings.showwarning = previous
         shown.close()

@@ -11,6 +11,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from workbench.cli.stdio import STDIN_NAME, Stdio, is_stdio
 from workbench.errors import DataError, ModelError, WorkbenchError
 
 __all__ = ['SAMPLE_LOGS']
@@ -29,10 +30,34 @@ class Context:
 
         self.args = args
         self.quiet = bool(getattr(args, "quiet", False))
-        self.out = Console(highlight=False, quiet=self.quiet)
+        self.stdio = Stdio(getattr(args, "format", None))
+        # with `-o -` standard output carries the file: every message goes to standard error instead
+        data_out = any(is_stdio(getattr(args, k, None)) for k in ("output", "save"))
+        self.out = Console(highlight=False, quiet=self.quiet, stderr=data_out)
         if not self.out.is_terminal:  # piped or captured: wide tables instead of 80 columns
-            self.out = Console(highlight=False, quiet=self.quiet, width=140)
+            self.out = Console(highlight=False, quiet=self.quiet, width=140, stderr=data_out)
         self.err = Console(stderr=True, highlight=False)
+
+    def input_path(self, name: str | os.PathLike, what: str = "the input", suffix: str | None = None) -> Path:
+        """A file to read: ``name``, or standard input's bytes for ``-`` (:mod:`workbench.cli.stdio`)."""
+        return existing_path(self.stdio.input(name, what, suffix))
+
+    def output_path(self, name: str | os.PathLike, default_suffix: str, what: str = "the output") -> Path:
+        """Where to write ``name``; for ``-`` a file copied to standard output once the command succeeds, in
+        ``--output-format`` (else ``default_suffix``)."""
+        fmt = getattr(self.args, "output_format", None)
+        if fmt is not None and not is_stdio(name):
+            raise WorkbenchError(f"--output-format is for -o - (standard output); {name} is named by its extension")
+        if not is_stdio(name):
+            return Path(name)
+        suffix = f".{fmt}" if fmt is not None else default_suffix
+        hint = "" if fmt is not None or suffix == ".csv" or not hasattr(self.args, "output_format") else (
+            ", or --output-format csv for text")
+        return self.stdio.output(name, suffix, what=what, hint=hint)
+
+    def shown(self, path: str | os.PathLike) -> str:
+        """A path as the user knows it: ``<stdin>``/``<stdout>`` for standard input's and output's files."""
+        return self.stdio.tidy(os.fspath(path))
 
     def say(self, *parts: Any, markup: bool = False) -> None:
         self.out.print(*parts, soft_wrap=True, markup=markup)
@@ -66,6 +91,11 @@ class Context:
 
 
 # -- input helpers -----------------------------------------------------------------------------------------
+def input_stem(name: str) -> str:
+    """A default output name's stem from an input's name (``stdin`` for ``-``)."""
+    return "stdin" if is_stdio(name) else Path(name).stem
+
+
 def existing_path(path: str | os.PathLike, what: str = "file") -> Path:
     p = Path(path)
     if not p.exists():
@@ -79,14 +109,15 @@ def is_demo_file(path: Path) -> bool:
     return path.suffix.lower() in (".parquet", ".pq") or is_dataset(path)
 
 
-def load_one(path: Path, mapping: str | None) -> Any:
+def load_one(path: Path, mapping: str | None, format: str | None = None) -> Any:
     from workbench.data.dataset import load_demonstrations
 
     if is_demo_file(path):
         return load_demonstrations(path)
     import adapters
 
-    return adapters.load(path, mapping=mapping or DEFAULT_MAPPING)
+    return adapters.load(path, mapping=mapping or DEFAULT_MAPPING,
+                         format=None if format in (None, "parquet") else format)
 
 
 def join_sets_named(sets: Sequence[Any], names: Sequence[str]) -> Any:
@@ -97,19 +128,24 @@ def join_sets_named(sets: Sequence[Any], names: Sequence[str]) -> Any:
 
 
 def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None):
-    files = [existing_path(p) for p in paths]
+    if sum(is_stdio(p) for p in paths) > 1:
+        raise WorkbenchError("- (standard input) given twice: it can be read once")
+    files = [ctx.input_path(p, "the demonstrations") for p in paths]
     sets = []
     with ctx.progress() as progress:
         task = progress.add_task("reading logs", total=len(files))
         for f in files:
-            ds = load_one(f, mapping)
+            stdin = f == ctx.stdio.stdin_path
+            ds = load_one(f, mapping, ctx.stdio.format if stdin else None)
+            if stdin:  # the temporary file is gone once the command ends: the trials come from <stdin>
+                ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
             skipped = {k: v for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v} if len(ds) else {}
             if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
                 what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())
-                print(f"warning: {f}: skipped {what}", file=sys.stderr)
+                print(f"warning: {ctx.shown(f)}: skipped {what}", file=sys.stderr)
             sets.append(ds)
             progress.advance(task)
-    ds = join_sets_named(sets, [str(f) for f in files])
+    ds = join_sets_named(sets, [ctx.shown(f) for f in files])
     if labels:
         parts = [ds.by_label(label) for label in labels]
         ds = parts[0]
@@ -166,10 +202,10 @@ def print_plant(ctx: Context, system: Any, note: str = "") -> None:
         print(f"warning: {report.warning}", file=sys.stderr)
 
 
-def load_model_file(path: str):
+def load_model_file(path: str, ctx: Context | None = None):
     from workbench.models.factory import load_model
 
-    return load_model(existing_path(path))
+    return load_model(ctx.input_path(path, "the model", ".npz") if ctx is not None else existing_path(path))
 
 
 def demos_at_model_dt(ctx: Context, ds: Any, models: Sequence[Any], resample: bool, source: str) -> Any:
@@ -259,18 +295,22 @@ def viewer_command(path: str | os.PathLike) -> str:
     return shlex.join([*(short(p) for p in rerun_executable()), str(path)])
 
 
-def output_kwargs(a: argparse.Namespace, default: Path) -> dict[str, Any]:
+def output_kwargs(ctx: Context, default: Path) -> dict[str, Any]:
     from workbench.viewer import has_display
 
+    a = ctx.args
     if a.spawn or a.serve or a.save:
-        return {"save": a.save, "spawn": a.spawn, "serve": a.serve}
+        save = None if not a.save else str(ctx.output_path(a.save, ".rrd", "the recording"))
+        return {"save": save, "spawn": a.spawn, "serve": a.serve}
     # headless by default when nothing could show a window
     return {"save": str(default), "spawn": False, "serve": False} if not has_display() else {
         "save": None, "spawn": True, "serve": False}
 
 
 def announce(ctx: Context, out: dict[str, Any], sink: Any, what: str) -> None:
-    if out["save"]:
+    if out["save"] and ctx.stdio.writes_stdout:
+        ctx.say(f"wrote {what} to standard output (an .rrd stream)")
+    elif out["save"]:
         ctx.say(f"wrote {out['save']} ({what}); open it with:  {viewer_command(out['save'])}")
     elif out["spawn"]:
         ctx.say(f"sent {what} to the rerun viewer")

@@ -7,7 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from workbench.cli.context import EXIT_ERROR, Context, existing_path, is_demo_file, load_demos, write_demos
+from workbench.cli.context import EXIT_ERROR, Context, is_demo_file, load_demos, write_demos
+from workbench.cli.stdio import is_stdio, refuse_stdio
 from workbench.errors import WorkbenchError
 
 __all__ = []
@@ -16,6 +17,7 @@ __all__ = []
 def cmd_simulate(ctx: Context) -> int:
     a = ctx.args
     if a.sample_logs:
+        refuse_stdio(a.sample_logs, "--sample-logs", "the sample logs are several files")
         from workbench.cli.sample_logs import write_sample_logs
 
         written = write_sample_logs(a.sample_logs, seed=a.seed)
@@ -37,22 +39,26 @@ def cmd_simulate(ctx: Context) -> int:
     ds = sets[0]
     for s in sets[1:]:
         ds = ds + s
-    out = Path(a.output)
+    out = ctx.output_path(a.output, ".parquet", "the demonstrations")
     write_demos(ds, out)
-    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples) to {out}")
+    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples) to {_named(ctx, out)}")
     return 0
+
+
+def _named(ctx: Context, out: Path) -> str:
+    return "standard output" if ctx.stdio.writes_stdout else str(out)
 
 
 def cmd_inspect(ctx: Context) -> int:
     from rich.markup import escape
     from rich.table import Table
 
-    path = existing_path(ctx.args.log)
+    path = ctx.input_path(ctx.args.log, "the log")
     if is_demo_file(path):
         from workbench.data.dataset import load_demonstrations
 
         ds = load_demonstrations(path)
-        ctx.say(f"[bold]{escape(str(path))}[/bold]: workbench demonstrations, {len(ds)} trials, "
+        ctx.say(f"[bold]{escape(ctx.shown(path))}[/bold]: workbench demonstrations, {len(ds)} trials, "
                 f"{ds.n_samples} samples, dt {ds.dt} s", markup=True)
         ctx.say(f"states {list(ds.state_names)}, inputs {list(ds.input_names)}")
         table = Table("id", "label", "subject", "samples", "duration [s]", "success", "source")
@@ -63,10 +69,10 @@ def cmd_inspect(ctx: Context) -> int:
         return 0
     import adapters
 
-    summary = adapters.inspect(path)
+    summary = adapters.inspect(path, format=ctx.stdio.format if path == ctx.stdio.stdin_path else None)
     t0 = summary.t_start
     ctx.say(
-        f"[bold]{escape(str(summary.path))}[/bold]: {summary.format}, {summary.size_bytes} bytes, "
+        f"[bold]{escape(ctx.shown(summary.path))}[/bold]: {summary.format}, {summary.size_bytes} bytes, "
         f"{len(summary.streams)} streams, {summary.duration:.1f} s",
         markup=True,
     )
@@ -94,23 +100,27 @@ def cmd_map(ctx: Context) -> int:
     from workbench.atomic import atomic_path
 
     a = ctx.args
-    path = existing_path(a.log)
-    name = Path(a.output).stem if a.output else path.stem
-    draft = draft_mapping(adapters.read(path), name=name)
-    if a.output:
-        with atomic_path(a.output) as tmp:
-            Path(tmp).write_text(draft.toml, encoding="utf-8")
-        ctx.say(f"wrote {a.output}: a mapping for {draft.vehicle} (template {draft.template}); "
-                f"try: workbench import {path} --mapping {a.output} -o demos.parquet")
+    path = ctx.input_path(a.log, "the log")
+    output = None if is_stdio(a.output) else a.output  # `-o -`: printed, as without -o
+    name = Path(output).stem if output else ("stdin" if is_stdio(a.log) else path.stem)
+    draft = draft_mapping(adapters.read(path, format=ctx.stdio.format if is_stdio(a.log) else None), name=name)
+    if output:
+        with atomic_path(output) as tmp:
+            Path(tmp).write_text(ctx.shown(draft.toml), encoding="utf-8")
+        ctx.say(f"wrote {output}: a mapping for {draft.vehicle} (template {draft.template}); "
+                f"try: workbench import {a.log} --mapping {output} -o demos.parquet")
     else:
-        print(draft.toml, end="")
+        print(ctx.shown(draft.toml), end="")  # <stdin>, not the temporary file's name
     for item in draft.undecided:  # what the draft could not decide, on stderr so a piped TOML stays clean
         print(f"undecided: {item}", file=sys.stderr)
     return 0
 
 
 def _is_dataset_output(output: str) -> bool:
-    """``-o DIR/`` (or an existing directory, or a name without a suffix) asks for a partitioned dataset."""
+    """``-o DIR/`` (or an existing directory, or a name without a suffix) asks for a partitioned dataset;
+    ``-o -`` is one file, on standard output."""
+    if is_stdio(output):
+        return False
     return output.endswith(("/", os.sep)) or Path(output).is_dir() or not Path(output).suffix
 
 
@@ -118,6 +128,9 @@ def _import_dataset(ctx: Context) -> int:
     from adapters.batch import expand_logs, import_logs
 
     a = ctx.args
+    if any(is_stdio(log) for log in a.logs):
+        raise WorkbenchError("- (standard input) is one log: import it into one file (-o FILE or -o -), not a "
+                             "dataset folder")
     files = expand_logs(a.logs)
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"importing {len(files)} logs", total=len(files))
@@ -144,10 +157,12 @@ def cmd_import(ctx: Context) -> int:
               "file, so the logs are read here, one after another", file=sys.stderr)
     from adapters.batch import expand_logs
 
-    ds = load_demos(ctx, [str(f) for f in expand_logs(a.logs)], a.mapping)
+    out = ctx.output_path(a.output, ".parquet", "the demonstrations")  # before reading: refused on a terminal
+    # `-` is standard input, not a file name a glob or folder could expand to
+    names = [name for log in a.logs for name in (["-"] if is_stdio(log) else [str(f) for f in expand_logs([log])])]
+    ds = load_demos(ctx, names, a.mapping)
     if a.label:
         ds = type(ds)([d.with_meta(label=a.label) for d in ds], ds.state_names, ds.input_names, ds.dt)
-    out = Path(a.output)
     write_demos(ds, out, a.mapping)
-    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples, labels {ds.labels}) to {out}")
+    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples, labels {ds.labels}) to {_named(ctx, out)}")
     return 0

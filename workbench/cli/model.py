@@ -23,6 +23,7 @@ __all__ = []
 
 def cmd_fit(ctx: Context) -> int:
     a = ctx.args
+    output = ctx.output_path(a.output, ".npz", "the model")  # before the work: `-o -` to a terminal is refused
     ds = pilot_only(ctx, load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None), a.keep_still)
     system = system_for(ds, a.system)
     print_plant(ctx, system)
@@ -42,7 +43,7 @@ def cmd_fit(ctx: Context) -> int:
         from workbench.models.factory import make_model
 
         model = make_model(a.method, system, n_components=components, random_state=a.seed, gain_method=a.gain).fit(ds)
-    model.save(a.output)
+    model.save(output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and getattr(model, "K_", None) is not None:
@@ -50,7 +51,7 @@ def cmd_fit(ctx: Context) -> int:
         _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
     elif getattr(model, "objective_", None) is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
-    ctx.say(f"wrote {a.output}")
+    ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
     return 0
 
 
@@ -149,7 +150,8 @@ def cmd_predict(ctx: Context) -> int:
     import pandas as pd
 
     a = ctx.args
-    model = load_model_file(a.model)
+    output = ctx.output_path(a.output, ".parquet", "the prediction")
+    model = load_model_file(a.model, ctx)
     if a.x0 is not None:
         try:
             x0 = np.array([float(v) for v in a.x0.split(",")])
@@ -196,12 +198,12 @@ def cmd_predict(ctx: Context) -> int:
     if pred.x_lower is not None:
         cols.update({f"{s}_lower": pred.x_lower[:, j] for j, s in enumerate(names)})
         cols.update({f"{s}_upper": pred.x_upper[:, j] for j, s in enumerate(names)})
-    out = atomic_write_table(pd.DataFrame(cols), a.output)
+    out = atomic_write_table(pd.DataFrame(cols), output)
     # the end position where the plant declares positions, else the whole end state
     shown = model.system.r.position or range(len(names))
     ctx.say(
         f"predicted {n_steps} steps ({n_steps * dt:.2f} s) from {demo_id} step {start}: "
         "end " + ", ".join(f"{names[j]} = {x[-1, j]:.3f}" for j in shown)
     )
-    ctx.say(f"wrote {out}")
+    ctx.say(f"wrote {'the prediction to standard output' if ctx.stdio.writes_stdout else out}")
     return 0

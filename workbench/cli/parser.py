@@ -79,7 +79,8 @@ def _system_option(p: argparse.ArgumentParser) -> None:
 def _output_options(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--save", metavar="FILE.rrd",
-                   help="write a rerun recording (without a display the default is out/<input>.rrd)")
+                   help="write a rerun recording (without a display the default is out/<input>.rrd); - for standard "
+                        "output")
     g.add_argument("--spawn", action="store_true", help="stream to a native rerun viewer")
     g.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1 (localhost only)")
 
@@ -96,6 +97,23 @@ def _executor_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--staging", metavar="DIR",
                    help="folder where data for the workers is written (default a temporary folder; on a cluster, "
                         "a path every worker reaches)")
+
+
+_STDIN_FORMATS = ["parquet", "mcap", "ulog", "dataflash", "tlog", "csv"]  # workbench.cli.stdio.input_formats()
+_DEMO_OUTPUTS = ["parquet", "csv", "tlog", "mcap", "ulg", "bin"]
+_TABLE_OUTPUTS = ["parquet", "csv"]
+
+
+def _format_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--format", choices=_STDIN_FORMATS, metavar="FORMAT",
+                   help="what - (standard input) holds: " + ", ".join(_STDIN_FORMATS) + " (default: recognised from "
+                        "its first bytes; files are always recognised by theirs)")
+
+
+def _output_format_option(p: argparse.ArgumentParser, choices: list[str]) -> None:
+    p.add_argument("--output-format", choices=choices, metavar="FORMAT",
+                   help=f"with -o - (standard output): {', '.join(choices)} (default parquet; binary output to a "
+                        "terminal is refused)")
 
 
 def _mapping_option(p: argparse.ArgumentParser) -> None:
@@ -126,7 +144,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("simulate", cmd_simulate, "simulate landing demonstrations with synthetic operators",
             "workbench simulate --strategy CS1 CS2 --trials 30 -o demos.parquet")
-    p.add_argument("-o", "--output", metavar="FILE", help="demonstrations file: .parquet, .csv, .tlog or .mcap")
+    p.add_argument("-o", "--output", metavar="FILE", help="demonstrations file: .parquet, .csv, .tlog or .mcap; "
+                   "- for standard output")
+    _output_format_option(p, _DEMO_OUTPUTS)
     p.add_argument("--strategy", nargs="+", default=["CS1", "CS2"], choices=["CS1", "CS2"],
                    help="control strategies: CS1 centre first, CS2 straight line (default both)")
     p.add_argument("--trials", type=int, default=30, help="trials per strategy and subject (default 30)")
@@ -136,23 +156,31 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("inspect", cmd_inspect, "show what a log contains: streams, rates, fields, time span",
             "workbench inspect flight.tlog")
-    p.add_argument("log", help="a .tlog, .mcap, .ulg, .csv log or a demonstrations .parquet")
+    p.add_argument("log", help="a .tlog, .mcap, .ulg, .bin, .csv log or a demonstrations .parquet; - reads standard "
+                   "input")
+    _format_option(p)
 
     p = add("import", cmd_import, "turn logs into one demonstrations file, or many logs into a partitioned dataset",
             "workbench import 'logs/*.tlog' --mapping planar_quadrotor -o dataset/ --workers 2")
     p.add_argument("logs", nargs="+", metavar="LOG|DIR|GLOB",
-                   help="log files, directories of logs, or quoted glob patterns")
+                   help="log files, directories of logs, or quoted glob patterns; - reads one log from standard "
+                        "input")
     _mapping_option(p)
     p.add_argument("-o", "--output", required=True, metavar="FILE|DIR/",
-                   help="a demonstrations file (.parquet, .csv, …), or DIR/ for a dataset with one Parquet file per "
-                        "log and subject, imported in parallel; a log that fails is reported and the rest imported")
+                   help="a demonstrations file (.parquet, .csv, …), - for standard output, or DIR/ for a dataset with "
+                        "one Parquet file per log and subject, imported in parallel; a log that fails is reported and "
+                        "the rest imported")
+    _output_format_option(p, _DEMO_OUTPUTS)
+    _format_option(p)
     p.add_argument("--label", help="set every trial's strategy label")
     _executor_options(p)
 
     p = add("fit", cmd_fit, "fit a human behavior model (task objective + variability) to demonstrations",
             "workbench fit demos.parquet --label CS1 --n-components 5 -o cs1.npz")
-    p.add_argument("demos", metavar="DEMOS", help="demonstrations (.parquet) or a raw log (with --mapping)")
-    p.add_argument("-o", "--output", required=True, metavar="MODEL.npz")
+    p.add_argument("demos", metavar="DEMOS", help="demonstrations (.parquet) or a raw log (with --mapping); - reads "
+                   "standard input")
+    p.add_argument("-o", "--output", required=True, metavar="MODEL.npz", help="the model file; - for standard output")
+    _format_option(p)
     p.add_argument("--label", help="fit only the trials of this strategy label")
     p.add_argument("--n-components", type=fit_n_components_arg, default=5, metavar="G|bic|cv",
                    help="GMM components G (default 5, the paper's); bic: G by BIC; cv: the proposed model chooses G "
@@ -179,8 +207,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("predict", cmd_predict, "predict a trajectory with a fitted model from a recorded or given state",
             "workbench predict --model cs1.npz demos.parquet --demo s00-cs1-003 --horizon 3 --samples 200 -o p.csv")
-    p.add_argument("demos", nargs="?", metavar="DEMOS", help="demonstrations to take the start state from")
-    p.add_argument("--model", required=True, metavar="MODEL.npz")
+    p.add_argument("demos", nargs="?", metavar="DEMOS", help="demonstrations to take the start state from; - reads "
+                   "standard input")
+    p.add_argument("--model", required=True, metavar="MODEL.npz", help="a fitted model; - reads standard input")
+    _format_option(p)
     p.add_argument("--demo", metavar="ID", help="trial to start from (default the first)")
     p.add_argument("--start", type=int, default=0, metavar="K", help="sample of the trial to start from (default 0)")
     p.add_argument("--x0", metavar="X,Y,…", help="instead of a trial: the start state, comma-separated")
@@ -192,15 +222,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=int, default=0, metavar="N",
                    help="Monte Carlo rollouts: adds <state>_lower/_upper band columns (5–95 %%)")
     p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
-    p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet")
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet; - for standard output")
+    _output_format_option(p, _TABLE_OUTPUTS)
     _mapping_option(p)
 
     p = add("evaluate", cmd_evaluate,
             "compare the proposed model with IOC-only, GMR-only and persistence on held-out trials; data efficiency",
             "workbench evaluate demos.parquet --horizon 3 -o results.csv")
-    p.add_argument("demos", nargs="+", metavar="DEMOS")
+    p.add_argument("demos", nargs="+", metavar="DEMOS", help="demonstrations or logs; - reads one from standard input")
     p.add_argument("--label", nargs="+", help="strategy labels to evaluate (default all)")
-    p.add_argument("-o", "--output", metavar="FILE", help="tidy results table (.csv or .parquet)")
+    p.add_argument("-o", "--output", metavar="FILE",
+                   help="tidy results table (.csv or .parquet); - for standard output")
+    _output_format_option(p, _TABLE_OUTPUTS)
+    _format_option(p)
     p.add_argument("--per-subject", action="store_true",
                    help="the paper's multi-subject design: a model per subject, --n-test held-out trials each, "
                         "ANOVA and paired t-tests across the methods (use --horizon 5 for the paper's)")
@@ -216,14 +250,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("map", cmd_map, "draft a mapping from a log: the vehicle, its firmware's field names, the streams "
             "for positions, velocities, attitude and sticks", "workbench map flight.tlog -o flight.toml")
-    p.add_argument("log", metavar="LOG")
-    p.add_argument("-o", "--output", metavar="MAPPING.toml", help="write the mapping here (default: print it)")
+    p.add_argument("log", metavar="LOG", help="the log; - reads standard input")
+    p.add_argument("-o", "--output", metavar="MAPPING.toml", help="write the mapping here (default, or -: print it)")
+    _format_option(p)
 
     p = add("view", cmd_view, "log demonstrations (and a model's variability and predictions) to rerun",
             "workbench view demos.parquet --model CS1=cs1.npz --model CS2=cs2.npz --save session.rrd")
-    p.add_argument("inputs", nargs="+", metavar="DEMOS_OR_LOG")
+    p.add_argument("inputs", nargs="+", metavar="DEMOS_OR_LOG", help="demonstrations or logs; - reads one from "
+                   "standard input")
     p.add_argument("--model", action="append", metavar="[LABEL=]MODEL.npz",
                    help="a fitted model; with LABEL= it explains the trials of that strategy (repeatable)")
+    _format_option(p)
     p.add_argument("--label", nargs="+", help="show only these strategy labels")
     p.add_argument("--focus", nargs="+", metavar="ID", help="trials to predict from (default the first per label)")
     p.add_argument("--starts", nargs="+", type=int, metavar="K", help="samples to predict from (default 0)")
@@ -241,8 +278,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",
             "workbench replay demos.parquet --model cs1.npz --speed 1.0 --spawn")
-    p.add_argument("log", metavar="LOG", help="demonstrations (.parquet) or a raw log (with --mapping)")
+    p.add_argument("log", metavar="LOG", help="demonstrations (.parquet) or a raw log (with --mapping); - reads "
+                   "standard input")
     p.add_argument("--model", metavar="MODEL.npz", help="the model whose online predictions are shown")
+    _format_option(p)
     p.add_argument("--to", metavar="CONNECTION",
                    help="instead: send a .tlog's raw MAVLink frames to a link with their recorded timing (a stand-in "
                         "vehicle for `workbench live`), e.g. udpout:127.0.0.1:14550; no model needed")
@@ -275,8 +314,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("report", cmd_report, "fit, compare and write a Markdown report with PNG figures",
             "workbench report demos.parquet -o report/")
-    p.add_argument("demos", nargs="+", metavar="DEMOS")
-    p.add_argument("-o", "--output", required=True, metavar="DIR")
+    p.add_argument("demos", nargs="+", metavar="DEMOS", help="demonstrations or logs; - reads one from standard input")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="the report's folder (not -: it is a folder)")
+    _format_option(p)
     p.add_argument("--label", nargs="+", help="strategy labels to include (default all)")
     p.add_argument("--title", default="Workbench report")
     _bootstrap_option(p)

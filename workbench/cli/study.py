@@ -26,6 +26,7 @@ from workbench.cli.context import (
     system_for,
     viewer_command,
 )
+from workbench.cli.stdio import is_stdio, refuse_stdio
 from workbench.errors import DataError
 
 __all__ = []
@@ -34,9 +35,10 @@ def cmd_evaluate(ctx: Context) -> int:
     from workbench.study import pipeline as study
 
     a = ctx.args
+    output = ctx.output_path(a.output, ".parquet", "the results table") if a.output else None
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     if a.per_subject:
-        return _evaluate_per_subject(ctx, ds)
+        return _evaluate_per_subject(ctx, ds, output)
     smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
     loso = a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW)
     with ctx.executor() as ex:
@@ -74,13 +76,13 @@ def cmd_evaluate(ctx: Context) -> int:
     else:
         print_plant(ctx, result.system, "(plant from the training trials)")
     _print_study(ctx, result)
-    if a.output:
-        result.save_tables(a.output)
-        ctx.say(f"wrote {a.output}")
+    if output is not None:
+        result.save_tables(output)
+        ctx.say(f"wrote {'standard output' if ctx.stdio.writes_stdout else output}")
     return 0
 
 
-def _evaluate_per_subject(ctx: Context, ds: Any) -> int:
+def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
     from rich.markup import escape
     from rich.table import Table
 
@@ -95,8 +97,8 @@ def _evaluate_per_subject(ctx: Context, ds: Any) -> int:
     subjects = sorted({str(d.meta.get("subject")) for d in ds if d.meta.get("subject") is not None})
     seed = a.seed
     # a dataset is read where it lies, each subject's partition by its own task: nothing to stage for workers
-    source = a.demos[0] if len(a.demos) == 1 and not a.label and is_demo_file(Path(a.demos[0])) and Path(
-        a.demos[0]).is_dir() else ds
+    source = a.demos[0] if len(a.demos) == 1 and not a.label and not is_stdio(a.demos[0]) and is_demo_file(
+        Path(a.demos[0])) and Path(a.demos[0]).is_dir() else ds
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
         res = evaluate.per_subject(
@@ -125,9 +127,9 @@ def _evaluate_per_subject(ctx: Context, ds: Any) -> int:
                 f"trials; bootstrap over {d.resampled})")
     for line in verdicts(paired, res.metric):
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
-    if a.output:
-        atomic_write_table(res.table, a.output)
-        ctx.say(f"wrote {a.output}")
+    if output is not None:
+        atomic_write_table(res.table, output)
+        ctx.say(f"wrote {'standard output' if ctx.stdio.writes_stdout else output}")
     return 0
 
 
@@ -203,6 +205,7 @@ def cmd_report(ctx: Context) -> int:
     from workbench.study import pipeline as study
 
     a = ctx.args
+    refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     with ctx.executor(local_tasks=len(ds.labels)) as ex:
         result = study.run_study(
@@ -242,6 +245,8 @@ def cmd_demo(ctx: Context) -> int:
     from workbench.study import pipeline as study
 
     a = ctx.args
+    refuse_stdio(a.out, "--out", "the demo writes a folder (report, models, data, recording)")
+    refuse_stdio(a.logs, "--logs", "the demo reads a folder of logs")
     t_start = time.perf_counter()
     out = Path(a.out)
     logs = Path(a.logs) if a.logs else SAMPLE_LOGS

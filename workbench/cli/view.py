@@ -12,7 +12,7 @@ from workbench.cli.context import (
     Context,
     announce,
     demos_at_model_dt,
-    existing_path,
+    input_stem,
     load_demos,
     load_model_file,
     output_kwargs,
@@ -36,7 +36,7 @@ def _log_origins(paths: list[str]) -> dict[str, float]:
     out = {}
     for p in paths:
         path = Path(p)
-        if path.is_file() and not is_demo_file(path):
+        if p != "-" and path.is_file() and not is_demo_file(path):
             out[str(path)] = float(adapters.inspect(path).t_start)
     return out
 
@@ -46,13 +46,14 @@ def _warn(ctx: Context, session: Any) -> None:
     for w in session.warnings:
         print(f"warning: {w}", file=sys.stderr)
 
-def _raw_streams(path: str) -> Any:
+def _raw_streams(ctx: Context, path: str) -> Any:
     """A raw log's every stream (for the raw view), or ``None`` for a demonstrations file."""
     import adapters
     from workbench.cli.context import is_demo_file
 
-    p = existing_path(path)
-    return None if is_demo_file(p) else adapters.read(p)
+    p = ctx.input_path(path, "the demonstrations")
+    stdin = p == ctx.stdio.stdin_path
+    return None if is_demo_file(p) else adapters.read(p, format=ctx.stdio.format if stdin else None)
 
 
 def _view_raw(ctx: Context, streams: Any) -> int:
@@ -63,7 +64,7 @@ def _view_raw(ctx: Context, streams: Any) -> int:
 
     a = ctx.args
     raw = raw_log(streams)
-    out = output_kwargs(a, Path("out") / (Path(a.inputs[0]).stem + ".rrd"))
+    out = output_kwargs(ctx, Path("out") / (input_stem(a.inputs[0]) + ".rrd"))
     rec = viewer.new_recording(RAW_APPLICATION_ID)
     with ctx.progress() as progress:
         progress.add_task(f"logging {len(raw.streams)} streams", total=None)
@@ -81,7 +82,7 @@ def cmd_view(ctx: Context) -> int:
     from workbench import viewer
 
     a = ctx.args
-    raw_streams = _raw_streams(a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
+    raw_streams = _raw_streams(ctx, a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
     if raw_streams is not None and not a.mapping and not a.model:
         return _view_raw(ctx, raw_streams)
     ds = load_demos(ctx, a.inputs, a.mapping, a.label)
@@ -91,7 +92,7 @@ def cmd_view(ctx: Context) -> int:
         by_label: dict[str, Any] = {}
         for spec in a.model:
             label, _, path = spec.rpartition("=")
-            by_label[label] = load_model_file(path)
+            by_label[label] = load_model_file(path, ctx)
         if "" in by_label:
             if len(by_label) > 1:
                 raise WorkbenchError("give every --model a LABEL= (e.g. --model CS1=cs1.npz) or pass only one")
@@ -101,8 +102,8 @@ def cmd_view(ctx: Context) -> int:
             models = named = by_label
         ds = demos_at_model_dt(ctx, ds, list(by_label.values()), a.resample, ", ".join(a.inputs))
     n_steps = steps_of(a.horizon_s, ds.dt)
-    default = Path("out") / (Path(a.inputs[0]).stem + ".rrd")  # under out/, never beside the input
-    out = output_kwargs(a, default)
+    default = Path("out") / (input_stem(a.inputs[0]) + ".rrd")  # under out/, never beside the input
+    out = output_kwargs(ctx, default)
     rec = viewer.new_recording(viewer.APPLICATION_IDS["session" if models is not None else "log"])
     with ctx.progress() as progress:
         progress.add_task(f"logging {len(ds)} demonstrations", total=None)
@@ -142,14 +143,14 @@ def cmd_replay(ctx: Context) -> int:
     if not a.model:
         raise WorkbenchError("replay needs --model MODEL.npz (predictions) or --to CONNECTION (send the log to a link)")
     ds = load_demos(ctx, [a.log], a.mapping)
-    model = load_model_file(a.model)
+    model = load_model_file(a.model, ctx)
     ds = demos_at_model_dt(ctx, ds, [model], a.resample, a.log)
     ids = ds.ids
     chosen = a.demo or [ids[0]]
     missing = [i for i in chosen if i not in ids]
     if missing:
         raise DataError(f"{a.log}: no demonstration {missing[0]!r}; ids present: {ids[:10]}")
-    out = output_kwargs(a, Path("out") / (Path(a.log).stem + ".replay.rrd"))
+    out = output_kwargs(ctx, Path("out") / (input_stem(a.log) + ".replay.rrd"))
     rec = viewer.new_recording(viewer.APPLICATION_IDS["replay"])
     stats = []
     with viewer.open_output(rec, **out) as sink:
@@ -179,7 +180,7 @@ def _replay_to(ctx: Context) -> int:
     from adapters.link.mavlink import send_tlog
 
     a = ctx.args
-    log = existing_path(a.log)
+    log = ctx.input_path(a.log, "the log")
     ctx.say(f"sending {log} to {a.to} at {a.speed:g}× real time (Ctrl-C to stop)")
     with ctx.progress() as progress:
         task = progress.add_task(f"replaying {log.name} to {a.to}", total=None)
@@ -206,13 +207,13 @@ def cmd_live(ctx: Context) -> int:
     from workbench.viewer.scene import plane_of
 
     a = ctx.args
-    model = load_model_file(a.model)
+    model = load_model_file(a.model, ctx)
     predictor = OnlinePredictor(model, a.mapping or DEFAULT_MAPPING, horizon_s=a.horizon_s, system=a.sysid,
                                 clock=a.clock, silence=a.silence)
     m = predictor.mapping
     scene = plane_of(m.roles, m.state_names)  # the plane of flight the replay and the session draw
     plane = None if scene is None else (scene.across, scene.up, scene.heading)
-    out = output_kwargs(a, Path("out") / "live.rrd")
+    out = output_kwargs(ctx, Path("out") / "live.rrd")
     rec = viewer.new_recording(LIVE_APPLICATION_ID)
     link = open_link(a.connection)
     logger: Any = None

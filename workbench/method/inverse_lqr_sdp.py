@@ -68,12 +68,15 @@ class _Attempt:
     lambda_min: float = math.nan
     error: float = math.nan
     note: str = ""
+    failed: tuple[str, ...] = ()  # the post-checks this solution failed, each as the bound it broke
 
     def describe(self) -> str:
-        """What went wrong in this attempt: a solver status that is not a solution, or the post-check a solution
-        failed (a solver's "optimal" alone is no success here: the forward check decides)."""
+        """What went wrong in this attempt: a solver status that is not a solution, or the post-checks a solution
+        failed, only those (a solver's "optimal" alone is no success here: the forward check decides)."""
         if self.status not in _ACCEPTED_STATUS:
             return f"{self.solver} stage {self.stage}: {self.status}" + (f" ({self.note})" if self.note else "")
+        if self.failed:
+            return f"{self.solver} stage {self.stage}: solved ({self.status}) but failed " + "; ".join(self.failed)
         return (
             f"{self.solver} stage {self.stage}: solved ({self.status}) but failed the post-checks: "
             f"λmin(M)={self.lambda_min:.3g}, forward-gain error={self.error:.3g}"
@@ -310,17 +313,19 @@ class InverseLQR:
             M, P = M / lam_raw, P / lam_raw
         lam_min = float(np.linalg.eigvalsh(M)[0])
         p_rel, err, K_fwd, note = self._check(K, M, P)
-        if not note and p_rel < -P_PSD_TOL:
-            note = f"λmin(P)/max(1, λmax(P)) = {p_rel:.3g}"
-        attempts.append(_Attempt(solver, stage, status, lam_raw, err, note))
         alpha = float(alpha_star if alpha_star is not None else self._alpha.value)
-        ok = (
-            K_fwd is not None
-            and lam_min >= 1.0 - LAMBDA_MIN_TOL
-            and p_rel >= -P_PSD_TOL
-            and err <= forward_gain_tolerance(alpha)
-        )
-        if not ok:
+        tolerance = forward_gain_tolerance(alpha)
+        # only the checks that failed are named: a user reads the warning to learn what went wrong
+        failed = [note] if K_fwd is None and note else []
+        if lam_min < 1.0 - LAMBDA_MIN_TOL:
+            failed.append(f"M ⪰ I: λmin(M) = {lam_min:.3g} < 1")
+        if p_rel < -P_PSD_TOL:
+            failed.append(f"P ⪰ 0: λmin(P)/max(1, λmax(P)) = {p_rel:.3g} < 0")
+        if K_fwd is not None and not err <= tolerance:
+            failed.append(f"the forward check: gain error {err:.3g} > {tolerance:.3g} (the tolerance at α = "
+                          f"{alpha:.3g})")
+        attempts.append(_Attempt(solver, stage, status, lam_raw, err, note, tuple(failed)))
+        if failed or K_fwd is None:
             return None
         n = self.A.shape[0]
         lam_max = float(np.linalg.eigvalsh(M)[-1])

@@ -8,6 +8,7 @@ viewer that exits at start is one clear :class:`~workbench.errors.WorkbenchError
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -20,7 +21,7 @@ from pathlib import Path
 import rerun as rr
 import rerun.blueprint as rrb
 
-from workbench.atomic import atomic_path
+from workbench.atomic import atomic_path, deferred_interrupt
 from workbench.errors import WorkbenchError
 
 __all__ = ["has_display", "open_output", "rerun_executable"]
@@ -121,7 +122,12 @@ class open_output:
     def __enter__(self) -> open_output:
         if self.save is not None:
             self._atomic = atomic_path(self.save)
-            self.rec.save(self._atomic.__enter__())
+            tmp = self._atomic.__enter__()
+            try:
+                self.rec.save(tmp)
+            except BaseException as exc:  # Ctrl-C here skips __exit__: the temp file would stay behind
+                self._atomic.__exit__(type(exc), exc, exc.__traceback__)
+                raise
         elif self.spawn:
             _spawn_viewer(self.spawn_port)
             self.rec.connect_grpc(f"rerun+http://127.0.0.1:{self.spawn_port}/proxy")
@@ -131,20 +137,29 @@ class open_output:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
+        failed = exc_type is not None
         try:
-            if exc_type is None and self.blueprint is not None:
-                self.rec.send_blueprint(self.blueprint, make_active=True, make_default=True)
-            try:
-                self.rec.flush(timeout_sec=FLUSH_TIMEOUT)
-            except RuntimeError as err:  # the SDK's own words for a viewer that went away: "connection severed"
+            # A file's flush is short: Ctrl-C is held back until it ends (a KeyboardInterrupt raised between the
+            # SDK's calls while its writer threads still run is how the interpreter once aborted), then raised
+            # before the file is renamed into place, so an interrupted run leaves no recording behind.
+            with deferred_interrupt() if self.save is not None else contextlib.nullcontext():
+                if not failed and self.blueprint is not None:
+                    self.rec.send_blueprint(self.blueprint, make_active=True, make_default=True)
+                try:
+                    self.rec.flush(timeout_sec=FLUSH_TIMEOUT)
+                except RuntimeError as err:  # the SDK's own words for a viewer that went away: "connection severed"
+                    if self.save is not None:
+                        raise
+                    raise WorkbenchError(f"the rerun viewer went away while receiving the recording ({err})") from None
                 if self.save is not None:
-                    raise
-                raise WorkbenchError(f"the rerun viewer went away while receiving the recording ({err})") from None
-            if self.save is not None:
-                self.rec.disconnect()
+                    self.rec.disconnect()
+        except BaseException:
+            failed = True
+            raise
         finally:
             if self._atomic is not None:
-                self._atomic.__exit__(exc_type, exc, tb)
+                # the recording goes into place only when everything before succeeded, never after an interrupt
+                self._atomic.__exit__(KeyboardInterrupt if failed and exc_type is None else exc_type, exc, tb)
 
     @property
     def url(self) -> str:

@@ -1,0 +1,94 @@
+"""Ctrl-C (SIGINT) ends ``workbench view`` with one line ``interrupted``, exit 130, no recording half-written
+and never an abort (bench/attack/sigint_view.py is the long version: ~50 random moments)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from workbench.viewer.output import open_output
+
+REPO = Path(__file__).resolve().parents[2]
+LOG = REPO / "sample_logs" / "landing_s00.tlog"
+ENV = {**os.environ, "PYTHONPATH": str(REPO), "DISPLAY": "", "WAYLAND_DISPLAY": ""}
+
+
+def _leftovers(folder: Path, name: str) -> list[Path]:
+    return [p for p in folder.iterdir() if p.name.startswith(f".{name}")]
+
+
+def test_sigint_while_logging_leaves_no_recording(tmp_path):
+    out = tmp_path / "x.rrd"
+    proc = subprocess.Popen([sys.executable, "-m", "workbench", "view", str(LOG), "--mapping", "planar_quadrotor",
+                             "--save", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV,
+                            cwd=tmp_path)
+    end = time.monotonic() + 60
+    while not _leftovers(tmp_path, out.name) and proc.poll() is None and time.monotonic() < end:
+        time.sleep(0.01)  # the recording's temporary file appears when logging starts
+    assert proc.poll() is None, "the view ended before it could be interrupted"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    lines = [ln for ln in err.decode().splitlines() if ln.strip() and not ln.startswith("warning:")]
+    assert proc.returncode == 130 and lines == ["interrupted"], err.decode()
+    assert not out.exists() and not _leftovers(tmp_path, out.name)
+
+
+def test_sigint_during_shutdown_neither_kills_nor_prints_a_traceback(tmp_path):
+    """A SIGINT arriving after the command is done (here from an exit hook, where the rerun SDK flushes its
+    recordings) finds nothing left to interrupt."""
+    code = (
+        "import atexit, os, signal, sys, time\n"
+        "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(0.2)))\n"
+        f"sys.argv = ['workbench', 'inspect', {str(LOG)!r}]\n"
+        "from workbench.cli import main\n"
+        "raise SystemExit(main())\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, cwd=tmp_path,
+                            timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr and "KeyboardInterrupt" not in result.stderr
+
+
+class _Recording:
+    """A stand-in for a rerun recording whose flush is interrupted half-way through writing its file."""
+
+    def save(self, path):
+        self.path = Path(path)
+        self.path.write_bytes(b"first half")
+
+    def send_blueprint(self, *args, **kwargs):
+        pass
+
+    def flush(self, timeout_sec=None):
+        os.kill(os.getpid(), signal.SIGINT)
+        with open(self.path, "ab") as f:
+            f.write(b", second half")
+
+    def disconnect(self):
+        pass
+
+
+def test_an_interrupted_flush_puts_no_file_in_place(tmp_path):
+    target = tmp_path / "x.rrd"
+    with pytest.raises(KeyboardInterrupt):
+        with open_output(_Recording(), save=target):
+            pass
+    assert not target.exists() and not _leftovers(tmp_path, target.name)
+
+
+def test_a_flush_that_ends_puts_the_whole_file_in_place(tmp_path):
+    class Done(_Recording):
+        def flush(self, timeout_sec=None):
+            with open(self.path, "ab") as f:
+                f.write(b", second half")
+
+    target = tmp_path / "x.rrd"
+    with open_output(Done(), save=target):
+        pass
+    assert target.read_bytes() == b"first half, second half"

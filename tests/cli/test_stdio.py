@@ -1,0 +1,148 @@
+"""``-`` is standard input where a command reads a file and standard output where it writes one
+(workbench/cli/stdio.py); a folder output refuses it, binary output to a terminal is refused."""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from workbench.cli import main
+from workbench.data.dataset import load_demonstrations
+
+REPO = Path(__file__).resolve().parents[2]
+TLOG = REPO / "sample_logs" / "landing_s00.tlog"
+MCAP = REPO / "sample_logs" / "landing_s01.mcap"
+ENV = {**os.environ, "PYTHONPATH": str(REPO)}
+
+
+def _run(args: list[str], stdin: bytes = b"") -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "workbench", *args], input=stdin, capture_output=True, env=ENV,
+                          timeout=300)
+
+
+class _Stdin(io.TextIOWrapper):
+    """A piped standard input for in-process runs."""
+
+    def __init__(self, data: bytes) -> None:
+        super().__init__(io.BytesIO(data))
+
+    def isatty(self) -> bool:
+        return False
+
+
+def test_inspect_reads_a_log_from_standard_input_and_names_it_stdin(monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdin", _Stdin(MCAP.read_bytes()))
+    assert main(["inspect", "-"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"<stdin>: mcap, {MCAP.stat().st_size} bytes")
+    assert main(["inspect", str(MCAP)]) == 0
+    by_name = capsys.readouterr().out
+    assert out.splitlines()[1:] == by_name.splitlines()[1:]  # the same table as for the file
+
+
+def test_import_from_stdin_to_stdout_is_the_same_table_as_from_files(tmp_path):
+    result = _run(["import", "-", "-o", "-"], stdin=TLOG.read_bytes())
+    assert result.returncode == 0, result.stderr.decode()
+    assert result.stdout.startswith(b"PAR1")
+    assert b"wrote" in result.stderr and b"wrote" not in result.stdout  # messages on stderr
+    piped = tmp_path / "piped.parquet"
+    piped.write_bytes(result.stdout)
+    assert main(["import", str(TLOG), "-o", str(tmp_path / "named.parquet")]) == 0
+    a, b = load_demonstrations(piped), load_demonstrations(tmp_path / "named.parquet")
+    assert len(a) == len(b) and a.n_samples == b.n_samples
+    assert {str(d.meta.get("source")) for d in a} == {"<stdin>"}
+    for x, y in zip(a, b, strict=True):
+        assert (x.x == y.x).all() and (x.u == y.u).all()
+
+
+def test_csv_to_stdout_with_output_format(tmp_path, capsys):
+    assert main(["import", str(TLOG), "-o", "-", "--output-format", "csv"]) == 0
+    captured = capsys.readouterr()
+    table = pd.read_csv(io.StringIO(captured.out))
+    assert main(["import", str(TLOG), "-o", str(tmp_path / "named.csv")]) == 0
+    pd.testing.assert_frame_equal(table, pd.read_csv(tmp_path / "named.csv"))
+    assert "wrote" in captured.err
+
+
+def test_bytes_no_reader_knows_ask_for_format(monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdin", _Stdin(b"\x00\x01 not a log at all " * 50))
+    assert main(["inspect", "-"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "<stdin>" in err[0] and "--format" in err[0]
+
+
+def test_the_format_can_be_given(monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdin", _Stdin(TLOG.read_bytes()))
+    assert main(["inspect", "-", "--format", "tlog"]) == 0
+    assert capsys.readouterr().out.startswith("<stdin>: tlog")
+
+
+def test_errors_name_stdin_not_a_temporary_file():
+    bad = bytearray(MCAP.read_bytes())
+    result = _run(["import", "-", "-o", "-"], stdin=bytes(bad[: len(bad) // 40]))
+    err = result.stderr.decode()
+    assert result.returncode == 1 and result.stdout == b""
+    assert "<stdin>" in err and "workbench-stdio" not in err
+
+
+def test_fit_to_stdout_then_predict_reads_the_model_from_stdin(tmp_path):
+    fitted = _run(["fit", "-", "--bootstrap", "0", "-o", "-"], stdin=TLOG.read_bytes())
+    assert fitted.returncode == 0, fitted.stderr.decode()
+    predicted = _run(["predict", str(TLOG), "--model", "-", "-o", "-", "--output-format", "csv"],
+                     stdin=fitted.stdout)
+    assert predicted.returncode == 0, predicted.stderr.decode()
+    model = tmp_path / "m.npz"
+    model.write_bytes(fitted.stdout)
+    assert main(["predict", str(TLOG), "--model", str(model), "-o", str(tmp_path / "p.csv")]) == 0
+    pd.testing.assert_frame_equal(pd.read_csv(io.BytesIO(predicted.stdout)), pd.read_csv(tmp_path / "p.csv"))
+
+
+def test_stdin_is_read_once(monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdin", _Stdin(TLOG.read_bytes()))
+    assert main(["view", "-", "--model", "-", "--save", "x.rrd"]) == 1
+    assert "already" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [["report", str(TLOG), "-o", "-"], ["demo", "--out", "-"],
+                                  ["simulate", "--sample-logs", "-"]])
+def test_a_folder_output_refuses_stdout(args, capsys):
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "-:" in err and "folder" in err
+
+
+def test_binary_to_a_terminal_is_refused(monkeypatch, capsys):
+    class Tty(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(sys, "stdout", Tty())
+    assert main(["import", str(TLOG), "-o", "-"]) == 1
+    assert "terminal" in capsys.readouterr().err
+
+
+def test_view_saves_its_recording_to_stdout(tmp_path):
+    result = _run(["view", str(TLOG), "--save", "-"])
+    assert result.returncode == 0, result.stderr.decode()
+    rrd = tmp_path / "x.rrd"
+    rrd.write_bytes(result.stdout)
+    rerun = Path(sys.executable).with_name("rerun")
+    check = subprocess.run([str(rerun) if rerun.exists() else "rerun", "rrd", "verify", str(rrd)],
+                           capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0, check.stdout + check.stderr
+
+
+def test_every_reading_and_writing_command_documents_the_dash():
+    from workbench.cli.parser import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for name in ("inspect", "import", "fit", "predict", "evaluate", "map", "view", "replay", "report", "simulate"):
+        text = sub.choices[name].format_help()
+        assert "standard input" in text or "standard output" in text, name

@@ -1,0 +1,172 @@
+"""``-`` on the command line: standard input where a file is read, standard output where one file is written.
+
+Readers need a file they can seek in (MCAP's summary at the end, Parquet's footer), and a file's format is told
+from its first bytes (:func:`adapters.formats.detect_format`), so standard input is read whole into a private
+temporary file first and recognised from its bytes, or read as ``--format`` says; a name ending in the format's
+extension keeps the rest of the pipeline as for any file. Errors and the demonstrations' ``source`` say
+``<stdin>``, never the temporary name. A single output file is written as usual (atomically, beside a temporary
+name) and copied to standard output only once it is complete, so a failed or interrupted command writes nothing
+there; binary output to a terminal is refused, as ``curl`` does. A folder (a report, a dataset) has no
+standard-output form and is refused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from workbench.errors import DataError, FormatError, WorkbenchError
+
+__all__ = ["STDIO", "STDIN_NAME", "STDOUT_NAME", "Stdio", "is_stdio", "refuse_stdio", "input_formats",
+           "PARQUET_MAGIC"]
+
+STDIO = "-"
+STDIN_NAME = "<stdin>"
+STDOUT_NAME = "<stdout>"
+#: First (and last) bytes of a Parquet file: what tells a demonstrations file on standard input from a log.
+PARQUET_MAGIC = b"PAR1"
+#: Output formats that are text, safe to print to a terminal.
+TEXT_SUFFIXES = (".csv", ".toml", ".json", ".txt")
+
+
+def is_stdio(name: object) -> bool:
+    return isinstance(name, str) and name == STDIO
+
+
+def refuse_stdio(name: object, option: str, why: str) -> None:
+    """A clear error for ``-`` where the output is a folder (or the input one), naming the option."""
+    if is_stdio(name):
+        raise WorkbenchError(f"{option} -: {why}; name a folder instead")
+
+
+def _extensions() -> dict[str, str]:
+    """Format name → the extension its files carry (the first one a format lists), Parquet included."""
+    from adapters.formats import FORMATS
+
+    return {"parquet": ".parquet", **{name: f.extensions[0] for name, f in FORMATS.items()}}
+
+
+def input_formats() -> list[str]:
+    """What ``--format`` accepts: the log formats and ``parquet`` (workbench demonstrations)."""
+    return list(_extensions())
+
+
+def _sniff(head: bytes) -> str | None:
+    """The format of bytes that carry no name: Parquet's magic, else what the log readers recognise."""
+    if head.startswith(PARQUET_MAGIC):
+        return "parquet"
+    from adapters.formats import FORMATS
+
+    for fmt in FORMATS.values():
+        if fmt.sniff(head):
+            return fmt.name
+    return None
+
+
+class Stdio:
+    """A command's standard input and output as files: made on first use, removed by :meth:`close`.
+
+    Parameters
+    ----------
+    format : str, optional
+        ``--format``: what standard input holds (a log format or ``parquet``); by default recognised from its
+        first bytes.
+    """
+
+    def __init__(self, format: str | None = None) -> None:
+        self.format = format
+        self._folder: Path | None = None
+        self._stdin: Path | None = None
+        self._stdin_for: str | None = None
+        self._stdout: Path | None = None
+
+    def _temp(self) -> Path:
+        if self._folder is None:
+            self._folder = Path(tempfile.mkdtemp(prefix="workbench-stdio-"))
+        return self._folder
+
+    # -- input ---------------------------------------------------------------------------------------------
+    def input(self, name: str | os.PathLike, what: str = "the input", suffix: str | None = None) -> Path:
+        """``name`` as a path: itself, or for ``-`` standard input saved to a file named for its format.
+
+        ``what`` names the input; standard input serves one (asked for again for the same one, the same file).
+        ``suffix`` is the extension of an input that is not a log (a model's ``.npz``): no sniffing then.
+        """
+        if not is_stdio(name):
+            return Path(name)
+        if self._stdin is not None:
+            if what != self._stdin_for:
+                raise WorkbenchError(f"- (standard input) is already {self._stdin_for}; it cannot be {what} too")
+            return self._stdin
+        stream = sys.stdin
+        if stream is None:
+            raise DataError(f"{STDIN_NAME}: there is no standard input to read")
+        if stream.isatty():
+            raise DataError(f"{STDIN_NAME}: standard input is a terminal; pipe or redirect a file into it, e.g. "
+                            "`workbench inspect - < flight.tlog`")
+        data = stream.buffer.read()
+        if not data:
+            raise DataError(f"{STDIN_NAME}: empty input")
+        fmt = None if suffix is not None else self.format or _sniff(data[:4096])
+        if fmt is None and suffix is None:
+            raise FormatError(f"{STDIN_NAME}: cannot tell the format from the first bytes (standard input has no "
+                              f"file name to go by); give it with --format ({', '.join(input_formats())})")
+        path = self._temp() / f"stdin{suffix if fmt is None else _extensions()[fmt]}"
+        path.write_bytes(data)
+        self._stdin, self._stdin_for = path, what
+        return path
+
+    @property
+    def stdin_path(self) -> Path | None:
+        return self._stdin
+
+    def shown(self, path: str | os.PathLike) -> str:
+        """How a path is named to the user: ``<stdin>`` for standard input's file."""
+        return STDIN_NAME if self._stdin is not None and Path(path) == self._stdin else os.fspath(path)
+
+    def tidy(self, text: str) -> str:
+        """A message with the temporary files' names replaced by ``<stdin>`` / ``<stdout>``."""
+        for path, shown in ((self._stdin, STDIN_NAME), (self._stdout, STDOUT_NAME)):
+            if path is not None:
+                text = text.replace(os.fspath(path), shown)
+        return text
+
+    # -- output --------------------------------------------------------------------------------------------
+    def output(self, name: str | os.PathLike, suffix: str, *, what: str = "the output", hint: str = "") -> Path:
+        """Where to write ``name``: itself, or for ``-`` a temporary file (ending in ``suffix``) that
+        :meth:`close` copies to standard output. Binary output to a terminal is refused here, before any work."""
+        if not is_stdio(name):
+            return Path(name)
+        if self._stdout is None:
+            stream = sys.stdout
+            if stream is None:
+                raise WorkbenchError(f"-o -: there is no standard output to write {what} to")
+            binary = suffix.lower() not in TEXT_SUFFIXES
+            if binary and stream.isatty():
+                raise WorkbenchError(f"not writing {what} ({suffix.lstrip('.')}, binary) to a terminal: redirect "
+                                     f"standard output to a file (> out{suffix}) or a pipe, or name a file{hint}")
+            self._stdout = self._temp() / f"stdout{suffix}"
+        return self._stdout
+
+    @property
+    def writes_stdout(self) -> bool:
+        return self._stdout is not None
+
+    def emit(self) -> None:
+        """Copy the finished output file to standard output (call once the command has succeeded)."""
+        if self._stdout is not None and self._stdout.exists():
+            sys.stdout.flush()
+            with open(self._stdout, "rb") as f:
+                shutil.copyfileobj(f, sys.stdout.buffer)
+            sys.stdout.buffer.flush()
+
+    def cleanup(self) -> None:
+        """Remove the temporary files (always, success or not)."""
+        if self._folder is not None:
+            with contextlib.suppress(OSError):
+                shutil.rmtree(self._folder)
+            self._folder = None
