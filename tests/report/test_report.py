@@ -93,6 +93,9 @@ def test_improvement_table_is_computed_from_the_rmse(report):
     assert d.change == pytest.approx(1 - means["proposed"] / means["ioc_only"])
     assert row["vs IOC-only"] == d.sentence()  # the words come from the interval, not from the two means
     assert "vs IOC-only" not in improvement_table(rmse).columns  # no interval, no comparison in words
+    # a metric the differences were not computed on says so in its cells, never "nan"
+    other = tab[tab["metric"] != "rmse_position"]
+    assert len(other) and (other[[c for c in tab.columns if c.startswith("vs ")]] == "—").all().all()
 
 
 def test_objective_table_matches_the_model(report):

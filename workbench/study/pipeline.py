@@ -563,7 +563,11 @@ def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -
             if d is not None:
                 row[f"vs {METHOD_TITLES[base]}"] = d.sentence()
         rows.append(row)
-    return pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    # the differences are computed on the study's metric only: the other metrics' cells say so, not "nan"
+    vs = [c for c in table.columns if c.startswith("vs ")]
+    table[vs] = table[vs].astype(object).where(table[vs].notna(), "—")
+    return table
 
 
 def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
