@@ -349,7 +349,8 @@ def test_the_guard_drops_a_send_without_rows(tmp_path, setup):
 
 def test_each_kind_of_recording_has_its_own_application_id():
     expected = {"demo": "workbench_study", "view": "workbench_log", "view_model": "workbench_session",
-                "replay": "workbench_replay", "flight": "workbench_log"}
+                "replay": "workbench_replay", "flight": "workbench_log", "plane": "workbench_log",
+                "plane_raw": "workbench_log_raw", "live_silent": "workbench_live"}
     found = {}
     for kind, path in recordings.cli_recordings().items():
         reader = RrdReader(path)
