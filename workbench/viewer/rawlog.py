@@ -233,8 +233,9 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
         busiest = max(range(len(s.streams)), key=lambda k: (s.rows.get(s.streams[k], 0), -k))
         main: Any = rrb.Tabs(*plots, name="streams", active_tab=busiest)
         if lane_view is not None:
-            main = rrb.Vertical(main, lane_view, row_shares=[5, 1])
-        tabs.append(rrb.Horizontal(main, messages, column_shares=[3, 1], name="raw streams") if messages
+            # about 40 px a lane under its header: a third lane (segments) was cut at 1/6 of the height
+            main = rrb.Vertical(main, lane_view, row_shares=[5, 1] if len(lanes) <= 2 else [3.5, 1])
+        tabs.append(rrb.Horizontal(main, messages, column_shares=[5, 2], name="raw streams") if messages
                     else rrb.Vertical(main, name="raw streams"))
     elif lane_view is not None or messages is not None:
         tabs.append(rrb.Vertical(*(v for v in (lane_view, messages) if v is not None), name="raw streams"))
