@@ -164,7 +164,8 @@ def _fit_of(s: LoggedSession, demo_id: str) -> str:
     parts = [s.fit_titles[k] for k in sorted(s.fit_titles) if k.startswith(f"demos/{entity_part(demo_id)}/")]
     bad = [m for m, v in s.verdicts.items() if not v.fits]
     head = f"⚠ model {', '.join(bad)} does not fit" if bad else ""
-    return "; ".join(x for x in (head, "ŵ " + parts[0] if parts else "") if x)
+    fit = parts[0].removeprefix("✓ ") if parts and bad else parts[0] if parts else ""  # no ✓ beside "does not fit"
+    return "; ".join(x for x in (head, "ŵ " + fit if fit else "") if x)
 
 
 def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
