@@ -110,3 +110,32 @@ def test_a_stream_silent_between_two_flights_is_drawn_with_a_break(tmp_path):
             rows += [np.asarray(v, dtype=float) for v in pa.array(col).to_pylist()]
     broken = sum(bool(np.isnan(r).all()) for r in rows)
     assert broken == gaps and len(rows) == len(att.t) + gaps
+
+
+def test_fields_zero_throughout_are_hidden_by_default(tmp_path):
+    import importlib.util
+
+    import numpy as np
+    import rerun as rr
+
+    from workbench.viewer.rawlog import log_raw
+
+    spec = importlib.util.spec_from_file_location("_rec", Path(__file__).with_name("viewer_recordings.py"))
+    recordings = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(recordings)
+    raw = raw_log(adapters.read(recordings.quadplane_tlog(tmp_path / "qp.tlog")))
+    rc = next(s for s in raw.streams if s.name == "RC_CHANNELS")
+    zero = [f for k, f in enumerate(rc.fields) if not np.any(rc.values[:, k] != 0)]
+    moving = [f for k, f in enumerate(rc.fields) if np.ptp(rc.values[:, k]) > 0 and "time" not in f]
+    assert zero and moving  # unused channels, and the throttle the writer moved
+    out = tmp_path / "raw.rrd"
+    rec = rr.RecordingStream("raw_test")
+    rec.save(out)
+    log_raw(rec, raw)
+    rec.flush()
+    rec.disconnect()
+    for chunk in RrdReader(out).stream():
+        if str(chunk.entity_path) == "/log/streams/RC_CHANNELS" and chunk.is_static:
+            shown = chunk.to_record_batch().column("SeriesLines:visible_series").to_pylist()[0]
+    by_field = dict(zip(rc.fields, shown, strict=True))
+    assert not any(by_field[f] for f in zero) and all(by_field[f] for f in moving)

@@ -154,7 +154,10 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
     for s in raw.streams:
         path = f"{prefix}/streams/{entity_part(s.name)}"
         names = [style.with_unit(f, u) for f, u in zip(s.fields, s.units, strict=True)]
-        visible = [not _CLOCKISH.search(f) for f in s.fields]
+        # hidden by default (a click in the legend shows them): time stamps, which flatten every other field, and
+        # fields that are zero throughout (unused RC channels), which stretch the axis down to 0 for nothing
+        zero = ~np.any(np.nan_to_num(s.values, nan=1.0) != 0.0, axis=0) if len(s.t) else np.zeros(len(s.fields), bool)
+        visible = [not _CLOCKISH.search(f) and not z for f, z in zip(s.fields, zero, strict=True)]
         rec.log(path, rr.SeriesLines(names=names, visible_series=visible, widths=[1.0] * len(names)), static=True)
         t_sent, v_sent = with_breaks(s.t, s.values)
         if send_columns(rec, path, _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent)):
