@@ -572,7 +572,8 @@ class SessionLogger:
                                                                       if s.bands else ""),
                       "", "red ×: ŵ outside 3σ; blue: ŵ",
                       "", f"ŵ titles: share inside 3σ and 1σ (nominal {100 * verdict.NOMINAL_3SIGMA:.1f} % and "
-                      f"{100 * verdict.NOMINAL_1SIGMA:.0f} %); ✓ fits, ✗ does not"]
+                      f"{100 * verdict.NOMINAL_1SIGMA:.0f} %); ✓ fits, ✗ does not, ⚠ the model meets data it was "
+                      "not fitted for (see objective)"]
         self._static("key", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
 
     def log_verdicts(self, named: Mapping[str, Any], models: Any, *, source_dt: float | None = None) -> None:
