@@ -327,6 +327,24 @@ def test_a_silent_link_is_reported_once_and_resumes(fitted, records):
     assert not pr.stats.silent
 
 
+def test_a_link_that_never_sends_is_silent_from_the_start_and_says_since_when(fitted):
+    from workbench.viewer.live import link_state
+
+    _, model, _ = fitted
+    start = 1_700_000_000.0
+    now = [start]
+    pr = OnlinePredictor(model, "planar_quadrotor", silence=2.0, now=lambda: now[0])
+    now[0] = start + 1.0
+    assert pr.poll() == [] and "waiting" in link_state(pr.stats)  # quiet, not yet past the silence threshold
+    now[0] = start + 3.0
+    events = pr.poll()
+    assert [e.kind for e in events] == ["silent"] and "since listening began" in events[0].text
+    st = pr.stats
+    assert not st.heard and st.quiet_since == start and st.quiet_for == pytest.approx(3.0)
+    text = link_state(st)
+    assert "receiving" not in text and time.strftime("%H:%M:%S", time.localtime(start)) in text, text
+
+
 def test_model_and_mapping_must_agree(fitted, tmp_path):
     _, model, _ = fitted
     other = tmp_path / "other.toml"

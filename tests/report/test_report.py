@@ -103,3 +103,28 @@ def test_objective_table_matches_the_model(report):
     o = report["models"]["CS2"].objective_
     assert f"{o.alpha:.3g}" in text
     assert f"{o.M_normalized[2, 2]:.3g}" in text  # the attitude weight Q_φφ
+
+
+def test_the_calibration_figure_names_each_sigma_level_once_without_overlap():
+    from scipy.stats import norm
+
+    from workbench.report.markdown import fig_calibration
+
+    levels = np.arange(0.25, 3.01, 0.25)
+    nominal = norm.cdf(levels) - norm.cdf(-levels)
+    rows = [{"label": lab, "input": inp, "n_sigma": c, "nominal": p, "coverage": min(1.0, p * f)}
+            for lab in ("CS1", "CS2") for inp, f in (("u1", 0.97), ("u2", 1.02))
+            for c, p in zip(levels, nominal, strict=True)]
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = fig_calibration(pd.DataFrame(rows))
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    for ax in fig.axes:
+        named = [t for t in ax.texts if t.get_text() in ("1σ", "2σ", "3σ")]
+        assert sorted(t.get_text() for t in named) == ["1σ", "2σ", "3σ"]  # once per panel, not per input
+        boxes = [t.get_window_extent(renderer) for t in named]
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                assert not boxes[i].overlaps(boxes[j]), (named[i].get_text(), named[j].get_text())

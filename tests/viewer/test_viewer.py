@@ -26,7 +26,7 @@ from workbench.errors import DataError, WorkbenchError
 from workbench.models import HumanBehaviorModel, IOCOnlyModel
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_landings
-from workbench.viewer import columns, objective, output, replay, replay_blueprint, session
+from workbench.viewer import columns, objective, output, replay, replay_blueprint, session, style
 
 _spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
 _loader = importlib.util.module_from_spec(_spec)
@@ -290,6 +290,27 @@ def _recording(kind: str) -> Path:
     return recordings.cli_recording(kind)
 
 
+@pytest.mark.parametrize("kind", [*KINDS, "plane_raw", "plane", "live_silent"])
+def test_rerun_verifies_every_cli_recording(kind):
+    """``rerun rrd verify`` deserializes every column: a null where rerun expects a value (a mode lane's null
+    state) fails it, though the viewer opens the file."""
+    result = rrd_verify(_recording(kind))
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_a_flights_mode_lane_holds_no_null_state():
+    import adapters
+
+    lane = read_rrd(_recording("plane"))["/flight/mode"]
+    ds = adapters.load(recordings.workdir() / "quadplane.tlog", "arduplane_manual")
+    order = np.argsort(np.asarray(lane["time"], dtype=float), kind="stable")
+    states = [lane["StateChange:state"][k] for k in order]
+    states = [s[0] if s else None for s in states]
+    # each segment's mode from its start, then the state that says no segment is flown
+    assert len(ds) >= 2 and states == [s for d in ds for s in (d.meta["mode"], style.NO_TRIAL_STATE)]
+    assert style.NO_TRIAL_STATE in lane["static:StateConfiguration:values"][0]
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_no_chunk_of_a_cli_recording_is_empty(kind):
     """Two chunks without rows on one timeline crash the rerun 0.41 viewer; every chunk of every store must have
@@ -328,7 +349,8 @@ def test_the_guard_drops_a_send_without_rows(tmp_path, setup):
 
 def test_each_kind_of_recording_has_its_own_application_id():
     expected = {"demo": "workbench_study", "view": "workbench_log", "view_model": "workbench_session",
-                "replay": "workbench_replay", "flight": "workbench_log"}
+                "replay": "workbench_replay", "flight": "workbench_log", "plane": "workbench_log",
+                "plane_raw": "workbench_log_raw", "live_silent": "workbench_live"}
     found = {}
     for kind, path in recordings.cli_recordings().items():
         reader = RrdReader(path)
@@ -494,11 +516,12 @@ def test_flight_modes_get_one_color_each_and_lanes_end_with_their_trial(tmp_path
     config = lanes[0]
     values = config["static:StateConfiguration:values"][0]
     colors = config["static:StateConfiguration:colors"][0]
-    assert sorted(values) == ["ALT_HOLD", "LOITER", "STABILIZE"] and len(set(colors)) == 3
+    assert sorted(values) == sorted(["ALT_HOLD", "LOITER", "STABILIZE", style.NO_TRIAL_STATE])
+    assert len(set(colors)) == len(values)
     assert all(lane["static:StateConfiguration:colors"][0] == colors for lane in lanes)  # same mode, same color
     for d, lane, names in zip(demos, lanes, modes, strict=True):
         states = [s[0] if s else None for s in lane["StateChange:state"]]
-        assert states == [*names, None]  # a null state closes the lane at the trial's end
+        assert states == [*names, style.NO_TRIAL_STATE]  # a state of its own (not null) closes the lane
         assert max(lane["time"]) == pytest.approx(d.t[-1] - d.t[0])
 
 

@@ -80,6 +80,34 @@ def test_a_model_on_data_of_another_dt_is_warned_in_the_terminal_and_the_recordi
     assert "/models/" + model_path.stem + "/verdict" in read_rrd(out)
 
 
+def test_a_model_on_data_of_other_roles_is_warned_in_the_terminal_and_the_recording(tmp_path, capsys, demo_files):
+    from dataclasses import replace
+
+    from workbench.data.dataset import load_demonstrations
+    from workbench.data.demonstrations import DemonstrationSet
+    from workbench.models.factory import load_model
+
+    demos, model_path = demo_files
+    model = load_model(model_path)
+    cs1 = load_demonstrations(demos).by_label("CS1")
+    # the same names and dt, but another vehicle's roles: the heading is not declared (another mapping)
+    other = DemonstrationSet(list(cs1), cs1.state_names, cs1.input_names, cs1.dt,
+                             roles=replace(cs1.roles, heading=None))
+    assert other.roles != model.system.roles
+    path = tmp_path / "other_roles.parquet"
+    other.save(path)
+    out = tmp_path / "roles.rrd"
+    err = _view(capsys, str(path), "--model", str(model_path), "--samples", "0", "--save", str(out), "-q")
+    expected = verdict.mismatches(model, other.state_names, other.input_names, load_demonstrations(path).roles, None)
+    assert [m for m in expected if "roles" in m], "the roles mismatch must be found"
+    printed = [line for line in err.splitlines() if line.startswith("warning: model")]
+    assert len(printed) == 1 and all(m in printed[0] for m in expected), err
+    assert "roles" in printed[0]
+    logged = _flat(read_rrd(out)["/warnings"]["static:TextLog:text"])
+    assert logged == [printed[0].removeprefix("warning: ")]
+    assert any(n.startswith("⚠ MODEL") and "DOES NOT FIT" in n for n in blueprint_names(out))
+
+
 def test_view_with_a_model_draws_the_band_by_default_and_a_fitting_model_is_not_warned(tmp_path, capsys, demo_files):
     from workbench.cli.view import VIEW_SAMPLES
 
@@ -191,3 +219,16 @@ def test_a_saved_live_recording_opens_collapsed_paused_and_every_event_has_a_lin
     assert len(events["link_time"]) == len(events["TextLog:text"]) == 2
     assert "link_time" in ents["/live/status"]
     assert RrdReader(path).recordings()
+
+
+def test_a_silent_live_recording_shows_the_port_it_waits_on_and_a_scene_to_wait_in():
+    ents = read_rrd(recordings.cli_recording("live_silent"))
+    status = _flat(ents["/live/status"]["TextDocument:text"])[-1]
+    port = next(w for w in status.split() if w.startswith("udpin:")).rstrip(":")
+    assert "**waiting**" in status and "receiving" not in status
+    waiting = ents["/scene/live/waiting"]
+    label = _flat(waiting["Points2D:labels"])[0]
+    assert "waiting for the vehicle's first state" in label and port in label
+    assert min(waiting["link_time"]) == 0.0  # where a saved live file opens
+    for static in ("/scene/live/ground", "/scene/live/scale"):  # planar_quadrotor's plane is a side view
+        assert ents[static]["static:LineStrips2D:strips"], static

@@ -49,8 +49,10 @@ def workdir() -> Path:
 
 @functools.cache
 def cli_recordings() -> dict[str, Path]:
-    """Name → ``.rrd`` written by the CLI: ``demo``, ``view``, ``view_model``, ``replay`` and, where the shared
-    real log is present, ``flight`` (``view dronekit_flight.tlog --mapping ardupilot_manual``)."""
+    """Name → ``.rrd`` written by the CLI: ``demo``, ``view``, ``view_model``, ``replay``, a writer-made QuadPlane
+    log viewed raw (``plane_raw``) and with ``--mapping arduplane_manual`` (``plane``), a live session on a
+    silent link (``live_silent``) and, where the shared real log is present, ``flight`` (``view
+    dronekit_flight.tlog --mapping ardupilot_manual``)."""
     out = workdir()
     logs = out / "logs"
     logs.mkdir()
@@ -66,10 +68,61 @@ def cli_recordings() -> dict[str, Path]:
          "--save", str(paths["view_model"]))
     paths["replay"] = out / "replay.rrd"
     _run("replay", str(demos), "--model", str(model), "--no-wait", "--horizon", "0.5", "--save", str(paths["replay"]))
+    plane_log = quadplane_tlog(out / "quadplane.tlog")
+    paths["plane_raw"] = out / "plane_raw.rrd"
+    _run("view", str(plane_log), "--save", str(paths["plane_raw"]))
+    paths["plane"] = out / "plane.rrd"  # a flight's clock: its segments share one mode lane
+    _run("view", str(plane_log), "--mapping", "arduplane_manual", "--save", str(paths["plane"]))
+    paths["live_silent"] = out / "live_silent.rrd"  # a link nobody sends to: the status and events only
+    _run("live", f"udpin:127.0.0.1:{_free_udp_port()}", "--model", str(model), "--duration", "0.5",
+         "--save", str(paths["live_silent"]))
     if FLIGHT_LOG.is_file():
         paths["flight"] = out / "flight.rrd"
         _run("view", str(FLIGHT_LOG), "--mapping", "ardupilot_manual", "--save", str(paths["flight"]))
     return paths
+
+
+def _free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def quadplane_tlog(path: Path) -> Path:
+    """A QuadPlane's tlog written by the project's writer (as ``tests/adapters/test_rawlog.py`` makes one): two
+    simulated landings flown in QLOITER with CIRCLE between them, the roll stick held still at centre."""
+    from dataclasses import replace
+
+    import numpy as np
+    import pandas as pd
+    from pymavlink import mavutil
+
+    import adapters
+    from adapters.mapping import load_mapping
+    from adapters.modes import mode_number
+    from adapters.writer import demo_streams, layout
+    from workbench.data.demonstrations import DemonstrationSet
+    from workbench.sim.landing import simulate_landings
+
+    flights = simulate_landings("CS1", 2, seed=3)
+    still = [replace(d, u=np.column_stack([np.zeros(len(d)), d.u[:, 1]])) for d in flights]
+    flights = DemonstrationSet(still, flights.state_names, flights.input_names, flights.dt, roles=flights.roles)
+    streams = demo_streams(flights, load_mapping("arduplane_manual").for_format("tlog"), epoch=1e9, pause=2.0)
+    spans = layout(flights, 1e9, 2.0)
+    t = np.arange(spans[0][0] - 1.0, spans[-1][1] + 1.0, 0.5)
+    flying = np.zeros(t.size, dtype=bool)
+    for a, b in spans:
+        flying |= (t >= a) & (t <= b)
+    for frame in streams.values():
+        frame["time_boot_ms"] = np.rint((frame["t"].to_numpy() - 1e9) * 1000.0).astype(np.int64)
+    ml = mavutil.mavlink
+    modes = np.where(flying, mode_number("arduplane", "QLOITER"), mode_number("arduplane", "CIRCLE"))
+    streams["HEARTBEAT"] = pd.DataFrame({"t": t, "type": ml.MAV_TYPE_VTOL_QUADROTOR,
+                                         "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA, "base_mode": 129,
+                                         "custom_mode": modes, "system_status": 4, "mavlink_version": 3})
+    return adapters.FORMATS["tlog"].write(path, streams)
 
 
 def cli_recording(kind: str) -> Path:

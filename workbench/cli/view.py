@@ -231,7 +231,9 @@ def cmd_live(ctx: Context) -> int:
         print(f"{ev.kind}: {ev.text}", file=sys.stderr)
 
     with link, viewer.open_output(rec, **out) as sink:
-        logger = LiveLogger(rec, m.state_names, m.input_names, plane=plane)
+        logger = LiveLogger(rec, m.state_names, m.input_names, plane=plane, connection=a.connection,
+                            vertical=scene is not None and scene.vertical,
+                            units={n: m.roles.unit(n) for n in m.state_names} if m.roles else None)
         if not out["save"]:
             rec.send_blueprint(live_blueprint([], m.state_names, m.input_names, scene=plane is not None,
                                               following=True))

@@ -156,6 +156,16 @@ class LinkStats:
     received: Mapping[str, int] = field(default_factory=dict)
     never_received: tuple[str, ...] = ()
     drops_source: str | None = None
+    # the (``now``-clock) time of the last valid message, or of the start of listening while none arrived, and
+    # the time these stats were taken: how long the link has been quiet, for a status that says since when
+    quiet_since: float = math.nan
+    taken_at: float = math.nan
+    heard: bool = False  # whether any valid message arrived
+
+    @property
+    def quiet_for(self) -> float:
+        """Seconds since the last valid message (since listening began while none arrived); NaN unknown."""
+        return self.taken_at - self.quiet_since
 
     @property
     def rejected(self) -> dict[str, int]:
@@ -243,6 +253,7 @@ class OnlinePredictor:
         self._stepped: tuple[int, int] | None = None  # the step step() returned last: each is returned once
         self._events: list[LiveEvent] = []
         self._last_message = math.nan
+        self._started = float(now())  # a link that never sends is quiet from here on
         self._silent = False
         self._silences = 0
         self.n_steps = 0
@@ -274,8 +285,9 @@ class OnlinePredictor:
         if self.reader.counts["messages"] > before:
             if self._silent:
                 self._silent = False
+                quiet = self._last_message if math.isfinite(self._last_message) else self._started
                 self._events.append(LiveEvent("resumed", arrival,
-                                              f"link resumed after {arrival - self._last_message:.1f} s of silence"))
+                                              f"link resumed after {arrival - quiet:.1f} s of silence"))
             self._last_message = arrival
         if steps:
             share = (time.perf_counter() - start) / len(steps)
@@ -291,10 +303,12 @@ class OnlinePredictor:
     def poll(self, now: float | None = None) -> list[LiveEvent]:
         """Events since the last poll: the link went silent (reported once), resumed, or the clock restarted."""
         now = self.now() if now is None else now
-        if not self._silent and now - (self._last_message if math.isfinite(self._last_message) else now) > self.silence:
+        heard = math.isfinite(self._last_message)
+        if not self._silent and now - (self._last_message if heard else self._started) > self.silence:
             self._silent = True
             self._silences += 1
-            self._events.append(LiveEvent("silent", now, f"no data for {self.silence:g} s; waiting for the link"))
+            self._events.append(LiveEvent("silent", now, f"no data for {self.silence:g} s"
+                                          + ("" if heard else " since listening began") + "; waiting for the link"))
         out, self._events = self._events, []
         return out
 
@@ -351,9 +365,12 @@ class OnlinePredictor:
             counts["steps not consumed"] = self.dropped_steps
         if self.reader.held:
             counts["held (no vehicle locked)"] = self.reader.held
+        heard = math.isfinite(self._last_message)
         return LinkStats(counts, self.n_steps, self.aligner.n_segments, self._silent, self._silences,
                          tuple(self.aligner.waiting_for()), dict(self.reader.received),
-                         tuple(self.reader.never_received()))
+                         tuple(self.reader.never_received()),
+                         quiet_since=self._last_message if heard else self._started, taken_at=float(self.now()),
+                         heard=heard)
 
     def _predict(self, st: AlignedStep, align_seconds: float) -> LivePrediction:
         start = time.perf_counter()

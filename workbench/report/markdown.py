@@ -172,8 +172,9 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
 def fig_calibration(calibration: pd.DataFrame) -> Figure:
     """One-step band calibration: share of recorded inputs inside ``μ̂ ± cσ̂`` against the Gaussian nominal.
 
-    One panel per strategy, one line per input, points at every level ``c`` of the study (1σ, 2σ, 3σ marked);
-    on the diagonal the band is calibrated, below it too narrow, above it too wide.
+    One panel per strategy, one line per input, points at every level ``c`` of the study (1σ, 2σ, 3σ marked by
+    larger points and named once, on dotted lines at their nominal coverage); on the diagonal the band is
+    calibrated, below it too narrow, above it too wide.
     """
     labels = list(dict.fromkeys(calibration["label"]))
     fig = Figure(figsize=(3.6 * max(1, len(labels)), 3.6), layout="constrained")
@@ -186,9 +187,16 @@ def fig_calibration(calibration: pd.DataFrame) -> Figure:
             line = ax.plot(100 * g["nominal"], 100 * g["coverage"], marker=".", label=str(inp))[0]
             marks = g[g["n_sigma"].isin([1.0, 2.0, 3.0])]
             ax.scatter(100 * marks["nominal"], 100 * marks["coverage"], s=36, color=line.get_color(), zorder=3)
-            for r in marks.itertuples():
-                ax.annotate(f"{r.n_sigma:g}σ", (100 * r.nominal, 100 * r.coverage), fontsize=7,
-                            xytext=(3, -9), textcoords="offset points")
+        # the levels are named once per panel, on the nominal axis (every input shares them): per point, the 2σ
+        # and 3σ labels of two inputs piled up in the top right corner, 4 points of nominal apart
+        levels = t[t["n_sigma"].isin([1.0, 2.0, 3.0])].drop_duplicates("n_sigma").sort_values("n_sigma")
+        for r in levels.itertuples():
+            x = 100 * r.nominal
+            ax.axvline(x, color="0.75", lw=0.8, ls=":", zorder=0)
+            # 2σ left of its line, 3σ right of its: the two lines are close
+            ha, dx = {2.0: ("right", -2), 3.0: ("left", 2)}.get(float(r.n_sigma), ("center", 0))
+            ax.annotate(f"{r.n_sigma:g}σ", (x, 0), xytext=(dx, 3), textcoords="offset points", fontsize=7,
+                        ha=ha, va="bottom", color="0.3")
         ax.set_xlim(0, 100)
         ax.set_ylim(0, 100)
         ax.set_aspect("equal")

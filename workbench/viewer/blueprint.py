@@ -143,15 +143,17 @@ def _objective_tab(s: LoggedSession) -> Any:
             # the names stand left of and above the cells, the color bar right of them: the bounds leave room
             bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 1.6], y_range=[-0.8, n_rows + 0.1])
             views.append(rrb.Spatial2DView(origin=f"/models/{entity_part(m)}/heatmap/{block}", visual_bounds=bounds,
-                                           name=f"{m}: {title}, scale ±{s.scales.get(block, 1.0):.2g}"))
-            shares.append(n_cols + 3.0)
+                                           name=f"{m}: {title}"))  # the color bar says the scale
+            shares.append(max(n_cols, 4) + 3.0)  # a 2-column block (R) still gets room for its title
         notes = [rrb.TextDocumentView(origin=f"/models/{entity_part(m)}/summary", name=f"{m}: summary")]
         if m in s.verdicts:
             v = s.verdicts[m]
             notes.insert(0, rrb.TextDocumentView(origin=f"/models/{entity_part(m)}/verdict",
                                                  name=f"{m}: {'fits' if v.fits else 'DOES NOT FIT'}"))
         # the summary's tables are wide: its column gets as much room as the heatmaps together
-        rows.append(rrb.Horizontal(*views, rrb.Vertical(*notes, row_shares=[1, 3][:len(notes)] if len(notes) > 1
+        # the verdict's view is a paragraph tall; with mismatches listed it needs more
+        fits = m not in s.verdicts or s.verdicts[m].fits
+        rows.append(rrb.Horizontal(*views, rrb.Vertical(*notes, row_shares=[1 if fits else 2, 3] if len(notes) > 1
                                                         else None),
                                    column_shares=[*shares, max(0.6 * sum(shares), 1.0)]))
     return rrb.Vertical(*rows, name="objective")
@@ -162,7 +164,8 @@ def _fit_of(s: LoggedSession, demo_id: str) -> str:
     parts = [s.fit_titles[k] for k in sorted(s.fit_titles) if k.startswith(f"demos/{entity_part(demo_id)}/")]
     bad = [m for m, v in s.verdicts.items() if not v.fits]
     head = f"⚠ model {', '.join(bad)} does not fit" if bad else ""
-    return "; ".join(x for x in (head, "ŵ " + parts[0] if parts else "") if x)
+    fit = parts[0].removeprefix("✓ ") if parts and bad else parts[0] if parts else ""  # no ✓ beside "does not fit"
+    return "; ".join(x for x in (head, "ŵ " + fit if fit else "") if x)
 
 
 def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
@@ -194,8 +197,11 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
         for name in s.input_names:
             p = f"demos/{entity_part(i)}/variability/{entity_part(name)}"
             fit = s.fit_titles.get(p)
-            # the fit first: a long title is cut at its end; the key view explains the colors (no legend)
-            input_views.append(_plot((f"{fit} · " if fit else "") + f"ŵ {name} · {i}", [f"+ /{p}/**"],
+            if fit and fit.startswith("✓") and any(not v.fits for v in s.verdicts.values()):
+                fit = "⚠" + fit[1:]  # ŵ inside its bands, but the model meets data it was not fitted for
+            # what and the fit first, the trial last: a long title is cut at its end; the key view explains the
+            # colors and the nominal shares (no legend)
+            input_views.append(_plot(f"ŵ {name} " + (f"{fit} · " if fit else "· ") + i, [f"+ /{p}/**"],
                                      legend=rrb.PlotLegend(visible=False), y_range=s.ranges.get(p),
                                      window=s.trial_windows.get(i)))
     tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))

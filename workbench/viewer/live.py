@@ -24,7 +24,8 @@ the predicted mean its own green line (``…/online/<input>/mean``).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import time
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -36,8 +37,10 @@ from workbench.live.predictor import LinkStats, LiveEvent, LivePrediction
 from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS, style
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import entity_part  # the replay's entity names: both layouts read alike
+from workbench.viewer.scene import scale_bar
+from workbench.viewer.session import UI
 
-__all__ = ["LIVE_APPLICATION_ID", "LiveLogger", "live_blueprint"]
+__all__ = ["LIVE_APPLICATION_ID", "LiveLogger", "link_state", "live_blueprint"]
 
 LIVE_APPLICATION_ID = "workbench_live"
 _RECORDED = (200, 200, 200)
@@ -58,11 +61,22 @@ class LiveLogger:
     plane : (int, int, int or None), optional
         State indices of the plane of flight (across, up) and the heading angle, from the mapping's roles;
         without it there is no scene.
+    connection : str, optional
+        The link listened on (``udpin:0.0.0.0:14550``), named where the status says the link is quiet.
+    vertical : bool
+        Whether the plane's second axis is up (a side view): the scene then has a ground line at zero height.
+    units : mapping of str to str, optional
+        Each state's unit (the mapping's roles): the scale bar's.
     """
 
     def __init__(self, rec: rr.RecordingStream, state_names: Sequence[str], input_names: Sequence[str], *,
-                 plane: tuple[int, int, int | None] | None = None) -> None:
+                 plane: tuple[int, int, int | None] | None = None, connection: str | None = None,
+                 vertical: bool = False, units: Mapping[str, str] | None = None) -> None:
         self.rec = rec
+        self.units = dict(units or {})
+        self.connection = connection
+        self.vertical = vertical
+        self._framed: tuple[float, ...] = ()  # the bounds the ground and the scale bar were last drawn for
         self.state_names = tuple(state_names)
         self.input_names = tuple(input_names)
         self.plane = plane
@@ -82,6 +96,12 @@ class LiveLogger:
         rec.log("live/latency_ms", rr.SeriesLines(names=["message → prediction [ms]"], colors=[_W]), static=True)
         if plane is not None:
             rec.log("scene/live/rollout", rr.LineStrips2D.from_fields(colors=[_PRED], radii=[0.015]), static=True)
+            # before the first state the scene is not empty: a ground and scale around where the vehicle will
+            # appear, and a line saying what it waits for (cleared at the first step)
+            self._frame(([-2.0, 2.0], [-2.5, 0.5]))
+            where = f" on {connection}" if connection else ""
+            rec.log("scene/live/waiting", rr.Points2D([[0.0, -1.0]], radii=[0.0], colors=[(200, 200, 200)],
+                                                     labels=[f"waiting for the vehicle's first state{where}"]))
 
     # -- styling, once per segment ---------------------------------------------------------------------------
     def _style(self, demo_id: str) -> None:
@@ -156,6 +176,9 @@ class LiveLogger:
         if self.plane is not None:
             across, up, _ = self.plane
             center = np.array([p.x[across], -p.x[up]])
+            if not self.n_logged:  # the first state: the waiting line goes (at this step's time)
+                self._at(p.t, p.t_rel, p.k)
+                self.rec.log("scene/live/waiting", rr.Clear(recursive=False))
             if new:
                 self._path = []
                 if p.target is not None:
@@ -222,9 +245,29 @@ class LiveLogger:
         if p.rollout_x is not None:
             xp = p.rollout_x
             self.rec.log("scene/live/rollout", rr.LineStrips2D([np.column_stack([xp[:, across], -xp[:, up]])]))
+        bounds = self.scene_bounds()
+        if bounds is not None:
+            self._frame(bounds)
         if len(self._path) > 1:
             self.rec.log("scene/live/path", rr.LineStrips2D([np.array(self._path)], colors=[(120, 120, 120)],
                                                             radii=[0.008], labels=[p.demo_id]))
+
+    def _frame(self, bounds: tuple[list[float], list[float]]) -> None:
+        """The ground line (a side view) and the scale bar for the view's ``bounds``, redrawn when they grow."""
+        key = tuple(np.round(np.concatenate(bounds), 1))
+        if key == self._framed:
+            return
+        self._framed = key
+        (x_lo, x_hi), _ = bounds
+        if self.vertical:  # the home altitude: the mapping's up is zero at home
+            self.rec.log("scene/live/ground", rr.LineStrips2D([[[x_lo, 0.0], [x_hi, 0.0]]], colors=[(110, 110, 110)],
+                                                              radii=[UI(1.0)], draw_order=style.SCENE_ORDER["ground"]),
+                         static=True)
+        across = self.state_names[self.plane[0]] if self.plane is not None else ""
+        ends, text = scale_bar(bounds, self.units.get(across, ""))
+        self.rec.log("scene/live/scale", rr.LineStrips2D([ends], colors=[(230, 230, 230)], radii=[UI(2.0)],
+                                                         labels=[text], draw_order=style.SCENE_ORDER["scale"]),
+                     static=True)
 
     def _grow(self, point: np.ndarray) -> None:
         self.bounds[:2] = np.minimum(self.bounds[:2], point)
@@ -263,11 +306,29 @@ class LiveLogger:
         text = "\n".join([
             "# Link", "", *why,
             f"- steps predicted: **{stats.n_steps}** in {stats.n_segments} segment(s)",
-            f"- link: {'**silent**' if stats.silent else 'receiving'} (silences so far: {stats.silences})",
+            f"- link{f' {self.connection}' if self.connection else ''}: {link_state(stats)}",
             *([f"- waiting for: {', '.join(stats.waiting_for)}"] if stats.waiting_for else []),
             "", "| count | n |", "|---|---|", *rows,
         ])
         self.rec.log("live/status", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
+
+
+def link_state(stats: LinkStats) -> str:
+    """The link's state in words: receiving, or quiet — waiting for a first message or silent — and since when.
+
+    A link is quiet from its last valid message, or from the start of listening while none arrived; "silent"
+    once the predictor reported it so (its ``silence`` threshold), "waiting" before any message came.
+    """
+    quiet = stats.quiet_for
+    since = ""
+    if np.isfinite(stats.quiet_since) and np.isfinite(quiet):
+        clock = time.strftime("%H:%M:%S", time.localtime(stats.quiet_since))
+        since = f" since {clock} ({quiet:.0f} s)"
+    if not stats.heard:
+        return f"**waiting** — no message{since or ' yet'}"
+    if stats.silent:
+        return f"**silent**{since or ''} (silences so far: {stats.silences})"
+    return f"receiving (silences so far: {stats.silences})"
 
 
 def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_names: Sequence[str], *,

@@ -23,6 +23,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -34,7 +35,7 @@ from workbench.viewer import style
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import entity_part
 
-__all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_raw", "raw_blueprint", "raw_views"]
+__all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_raw", "raw_blueprint", "raw_views", "with_breaks"]
 
 RAW_APPLICATION_ID = "workbench_log_raw"
 #: the segment lane's states: what a mapping kept, and why a piece was dropped
@@ -45,6 +46,7 @@ SEGMENT_STATES = {
 # clock and time-stamp fields (time_boot_ms, timestamp_sample, armed_time_ms, TimeUS, stamp.sec, …): hidden by
 # default, since their ramp flattens every other line of a stream's plot
 _CLOCKISH = re.compile(r"time|stamp", re.IGNORECASE)
+GAP_S = 1.0  # s: a stream silent for longer is drawn with a break (see with_breaks)
 _ARMED = {"armed": (214, 39, 40), "disarmed": (200, 200, 200)}
 
 
@@ -56,6 +58,7 @@ class LoggedRaw:
     path: str
     streams: list[str] = field(default_factory=list)
     rows: dict[str, int] = field(default_factory=dict)
+    corners: dict[str, str] = field(default_factory=dict)  # per stream, where its legend covers the fewest points
     spans: dict[str, tuple[float, float]] = field(default_factory=dict)
     modes: bool = False
     armed: bool = False
@@ -97,6 +100,25 @@ def _lane(rec: rr.RecordingStream, path: str, raw: RawLog, origin: float, starts
                         rr.StateChange.columns(state=pa.array(states, type=pa.string())))
 
 
+def with_breaks(t: np.ndarray, values: np.ndarray, *, gap: float = GAP_S) -> tuple[np.ndarray, np.ndarray]:
+    """``t``, ``values`` with a row of NaN in the middle of every silence longer than ``gap`` seconds (or 20 of
+    the stream's median steps, if longer): rerun draws a line straight across a gap and ends it at a NaN, so a
+    pause between two flights or a radio dropout is not drawn as data."""
+    t = np.asarray(t, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    if len(t) < 3:
+        return t, values
+    steps = np.diff(t)
+    limit = max(gap, 20.0 * float(np.median(steps)))
+    where = np.flatnonzero(steps > limit)
+    if not where.size:
+        return t, values
+    mids = (t[where] + t[where + 1]) / 2
+    t_out = np.insert(t, where + 1, mids)
+    v_out = np.insert(values, where + 1, np.nan, axis=0)
+    return t_out, v_out
+
+
 def _parameters_markdown(raw: RawLog) -> str:
     lines = [f"# Parameters of {raw.path}", "", f"{len(raw.parameters)} parameters.", "", "| name | value |",
              "|---|---|"]
@@ -132,12 +154,21 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
     for s in raw.streams:
         path = f"{prefix}/streams/{entity_part(s.name)}"
         names = [style.with_unit(f, u) for f, u in zip(s.fields, s.units, strict=True)]
-        visible = [not _CLOCKISH.search(f) for f in s.fields]
+        # hidden by default (a click in the legend shows them): time stamps, which flatten every other field, and
+        # fields that are zero throughout (unused RC channels), which stretch the axis down to 0 for nothing
+        zero = ~np.any(np.nan_to_num(s.values, nan=1.0) != 0.0, axis=0) if len(s.t) else np.zeros(len(s.fields), bool)
+        visible = [not _CLOCKISH.search(f) and not z for f, z in zip(s.fields, zero, strict=True)]
         rec.log(path, rr.SeriesLines(names=names, visible_series=visible, widths=[1.0] * len(names)), static=True)
-        if send_columns(rec, path, _index(raw, s.t, origin), rr.Scalars.columns(scalars=s.values)):
+        t_sent, v_sent = with_breaks(s.t, s.values)
+        if send_columns(rec, path, _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent)):
             out.streams.append(s.name)
             out.rows[s.name] = len(s.t)
             out.spans[s.name] = (float(s.t[0]) - origin, float(s.t[-1]) - origin)
+            shown = s.values[:, np.asarray(visible, dtype=bool)]
+            if shown.size:
+                out.corners[s.name] = style.quiet_corner([(s.t, shown[:, k]) for k in range(shown.shape[1])],
+                                                         (float(s.t[0]), float(s.t[-1])),
+                                                         style.data_range(shown, margin=0.0))
     if raw.modes:
         colors = style.mode_colors(list(dict.fromkeys(m.mode for m in raw.modes)))
         out.modes = _lane(rec, f"{prefix}/mode", raw, origin, [m.start for m in raw.modes],
@@ -188,26 +219,29 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
     p = f"/{s.prefix}"
     lanes = [f"+ {p}/{lane}" for lane, on in (("mode", s.modes), ("armed", s.armed), ("segments", s.segments))
              if on]
-    side: list[rrb.View] = []
-    if lanes:
-        side.append(rrb.StateTimelineView(origin="/", contents=lanes, name="modes · armed"
-                                          + (" · segments" if s.segments else ""), time_view=_whole_log(s.span)))
+    lane_view = None
+    if lanes:  # a few lanes tall: under the plots (a column of its own was mostly empty)
+        lane_view = rrb.StateTimelineView(origin="/", contents=lanes, name="modes · armed"
+                                          + (" · segments" if s.segments else ""), time_view=_whole_log(s.span))
+    messages = None
     if s.messages or s.segments:
-        side.append(rrb.TextLogView(origin=p, contents=[f"+ {p}/messages", f"+ {p}/segments/why"],
-                                    name="messages"))
+        messages = rrb.TextLogView(origin=p, contents=[f"+ {p}/messages", f"+ {p}/segments/why"], name="messages")
     plots = [rrb.TimeSeriesView(origin=f"{p}/streams/{entity_part(n)}", name=n,
-                                plot_legend=rrb.PlotLegend("LeftTop", visible=True),
+                                plot_legend=rrb.PlotLegend(s.corners.get(n, "LeftTop"), visible=True),
                                 axis_x=_whole_log(s.spans.get(n, s.span)))  # the stream's own span
              for n in s.streams]
     tabs: list[rrb.Container | rrb.View] = []
     if plots:
         # the busiest stream first on screen (attitude or IMU in a flight log), the tabs in name order
         busiest = max(range(len(s.streams)), key=lambda k: (s.rows.get(s.streams[k], 0), -k))
-        left = rrb.Tabs(*plots, name="streams", active_tab=busiest)
-        tabs.append(rrb.Horizontal(left, rrb.Vertical(*side, row_shares=[1, 2][: len(side)]), column_shares=[3, 2],
-                                   name="raw streams") if side else left)
-    elif side:
-        tabs.append(rrb.Vertical(*side, name="raw streams"))
+        main: Any = rrb.Tabs(*plots, name="streams", active_tab=busiest)
+        if lane_view is not None:
+            # about 40 px a lane under its header: a third lane (segments) was cut at 1/6 of the height
+            main = rrb.Vertical(main, lane_view, row_shares=[5, 1] if len(lanes) <= 2 else [3.5, 1])
+        tabs.append(rrb.Horizontal(main, messages, column_shares=[5, 2], name="raw streams") if messages
+                    else rrb.Vertical(main, name="raw streams"))
+    elif lane_view is not None or messages is not None:
+        tabs.append(rrb.Vertical(*(v for v in (lane_view, messages) if v is not None), name="raw streams"))
     if s.gps:
         tabs.append(rrb.MapView(origin=f"{p}/gps", name="map", zoom=17.0))
     if s.parameters:

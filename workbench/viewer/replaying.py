@@ -34,7 +34,7 @@ from workbench.errors import DataError
 from workbench.viewer import style
 from workbench.viewer.blueprint import time_panel
 from workbench.viewer.entities import entity_part
-from workbench.viewer.scene import Plane, plane_of
+from workbench.viewer.scene import Plane, plane_of, scale_bar
 from workbench.viewer.session import HAS_MEASUREMENTS, UI
 
 __all__ = ["ReplayStats", "replay", "replay_blueprint"]
@@ -109,7 +109,7 @@ def replay(
     if roles is None:
         roles = getattr(getattr(model, "system", None), "roles", None)
     plane = plane_of(roles, state_names)
-    _log_styles(rec, demo, base, sbase, state_names, input_names, plane)
+    _log_styles(rec, demo, base, sbase, state_names, input_names, plane, roles)
 
     t_rel = demo.t - demo.t[0]
     dt = float(np.median(np.diff(demo.t))) if len(demo) > 1 else 0.0
@@ -178,7 +178,7 @@ def replay(
 
 
 
-def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane | None) -> None:
+def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane | None, roles: Any = None) -> None:
     for name in state_names:
         rec.log(f"{base}/states/{entity_part(name)}", rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC]),
                 static=True)
@@ -216,6 +216,10 @@ def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane |
             tx, ty = plane.view(np.asarray(demo.target))[0]
             rec.log("scene/pad", rr.LineStrips2D([[[tx - PAD_HALF_WIDTH, ty], [tx + PAD_HALF_WIDTH, ty]]],
                                                  colors=[(200, 200, 200)], radii=UI(4.0), draw_order=2.0), static=True)
+        # a scale bar, as in the session's scene: a track of a few centimetres must not read as one of metres
+        ends, text = scale_bar(((x_lo, x_hi), (y_lo, y_hi)), roles.unit(state_names[plane.across]) if roles else "")
+        rec.log("scene/scale", rr.LineStrips2D([ends], colors=[(230, 230, 230)], radii=UI(2.0), labels=[text],
+                                               draw_order=style.SCENE_ORDER["scale"]), static=True)
         rec.log(f"{sbase}/vehicle", rr.LineStrips2D([[[-size, 0], [size, 0]], [[0, 0], [0, -0.6 * size]]],
                                                     colors=[_COLOR_REC, _COLOR_REC], radii=[UI(3.0), UI(1.5)],
                                                     draw_order=10.0), static=True)
@@ -234,6 +238,16 @@ def replay_blueprint(
     def unit(name: str) -> str:
         return style.with_unit(name, roles.unit(name) if roles else "")
 
+    def y_axis(values: list[np.ndarray], name: str) -> dict[str, Any]:
+        """The plot's y-range: the recorded values, at least their unit's minimum span (quantization noise must
+        not fill a plot); the viewer's own autoscale without ``demos``."""
+        if not values:
+            return {}
+        lo, hi = style.data_range(*values, margin=0.05, min_span=style.min_span(roles.unit(name) if roles else ""))
+        return {"axis_y": rrb.ScalarAxis(range=[lo, hi])}
+
+    shown = list(demos or [])
+
     inputs = [
         rrb.TimeSeriesView(
             origin="/",
@@ -241,8 +255,9 @@ def replay_blueprint(
             + [f"+ /demos/{entity_part(i)}/online/{entity_part(name)}/**" for i in demo_ids],
             name=f"{unit(name)}: recorded gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×",
             plot_legend=rrb.PlotLegend(visible=False), axis_x=rrb.TimeAxis(link=LinkAxis.LinkToGlobal),
+            **y_axis([d.u[:, j] for d in shown], name),
         )
-        for name in input_names
+        for j, name in enumerate(input_names)
     ]
     states = [
         rrb.TimeSeriesView(
@@ -251,8 +266,9 @@ def replay_blueprint(
             + [f"+ /demos/{entity_part(i)}/online/rollout_end/{entity_part(name)}" for i in demo_ids],
             name=f"{unit(name)}: recorded gray, rollout end green",
             plot_legend=rrb.PlotLegend(visible=False), axis_x=rrb.TimeAxis(link=LinkAxis.LinkToGlobal),
+            **y_axis([d.x[:, j] for d in shown], name),
         )
-        for name in state_names
+        for j, name in enumerate(state_names)
     ]
     plane = plane_of(roles, state_names)
     if plane is not None:
@@ -264,7 +280,7 @@ def replay_blueprint(
         title = (f"plane of flight: {unit(state_names[plane.across])} → / {unit(state_names[plane.up])} ↑ — "
                  "online rollout green")
         live = rrb.Horizontal(rrb.Spatial2DView(origin="/scene", name=title, visual_bounds=bounds),
-                              rrb.Vertical(*inputs), column_shares=[3, 2], name="live")
+                              rrb.Vertical(*inputs), column_shares=[3, 2], name="replay")
     else:
-        live = rrb.Vertical(*inputs, name="live")
+        live = rrb.Vertical(*inputs, name="replay")
     return rrb.Blueprint(rrb.Tabs(live, rrb.Grid(*states, name="states")), time_panel(), collapse_panels=True)

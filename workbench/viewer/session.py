@@ -32,7 +32,7 @@ from workbench.viewer.objective import (
 )
 from workbench.viewer.output import has_display, open_output
 from workbench.viewer.scene import Plane, envelope, label_spots, plane_of, scale_bar
-from workbench.viewer.style import METHOD_COLORS, label_color
+from workbench.viewer.style import METHOD_COLORS, data_range, label_color, quiet_corner
 
 __all__ = [
     "APPLICATION_ID",
@@ -139,41 +139,6 @@ def _log_time(demo: Demonstration, origins: Mapping[str, float] | None) -> float
         except (TypeError, ValueError):
             pass
     return _t_start(demo) or 0.0
-
-
-def _data_range(*arrays: Any, margin: float = 0.08, min_span: float = 0.0) -> tuple[float, float]:
-    """A y-range holding every finite value of ``arrays``, with ``margin`` of its extent on each side, and at least
-    ``min_span`` wide about its middle (:data:`workbench.viewer.style.MIN_SPAN`)."""
-    lo, hi = np.inf, -np.inf
-    for a in arrays:
-        a = np.asarray(a, dtype=float).ravel()
-        a = a[np.isfinite(a)]
-        if a.size:
-            lo, hi = min(lo, a.min()), max(hi, a.max())
-    if not np.isfinite(lo) or not np.isfinite(hi):
-        return -1.0, 1.0
-    pad = margin * max(hi - lo, 1e-9, 1e-3 * max(abs(lo), abs(hi)))
-    lo, hi = lo - pad, hi + pad
-    if hi - lo < min_span:
-        mid = (lo + hi) / 2
-        lo, hi = mid - min_span / 2, mid + min_span / 2
-    return float(lo), float(hi)
-
-
-def quiet_corner(series: Sequence[tuple[np.ndarray, np.ndarray]], t_range: tuple[float, float],
-                 y_range: tuple[float, float]) -> str:
-    """The corner of a plot (``"LeftTop"``, …) holding the fewest of its points: where a legend hides nothing."""
-    (t0, t1), (y0, y1) = t_range, y_range
-    counts = dict.fromkeys(("LeftTop", "RightTop", "LeftBottom", "RightBottom"), 0)
-    for t, y in series:
-        t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
-        # a legend covers about a third of the width and height
-        left, right = t <= t0 + (t1 - t0) / 3, t >= t1 - (t1 - t0) / 3
-        top, bottom = y >= y1 - (y1 - y0) / 3, y <= y0 + (y1 - y0) / 3
-        for name, mask in (("LeftTop", left & top), ("RightTop", right & top), ("LeftBottom", left & bottom),
-                           ("RightBottom", right & bottom)):
-            counts[name] += int(mask.sum())
-    return min(counts, key=lambda k: counts[k])  # ties keep the order above: top left first
 
 
 class SessionLogger:
@@ -375,11 +340,12 @@ class SessionLogger:
             mt, names = modes
             # overlaid trials get a lane each; on a flight's clock its segments share the one lane of the flight
             lane = "flight/mode" if s.clock == "log" else f"{base}/mode"
-            self._style(lane, rr.StateConfiguration(values=list(self.mode_colors),
-                                                    colors=style.packed(*self.mode_colors.values())))
-            # the lane ends with the trial (a null state): the gaps between a flight's segments stay empty
+            lanes = {**self.mode_colors, style.NO_TRIAL_STATE: style.NO_TRIAL_COLOR}
+            self._style(lane, rr.StateConfiguration(values=list(lanes), colors=style.packed(*lanes.values())))
+            # the lane ends with the trial, in a dark state of its own (a null state would leave the gaps
+            # between a flight's segments empty too, but `rerun rrd verify` rejects null strings)
             self._send(lane, [rr.TimeColumn("time", duration=np.append(mt + t[0], t[-1]))],
-                       rr.StateChange.columns(state=pa.array([*names, None], type=pa.string())))
+                       rr.StateChange.columns(state=pa.array([*names, style.NO_TRIAL_STATE], type=pa.string())))
             s.modes.append(demo.id)
         if self.plane is not None:
             self._log_track(demo)
@@ -398,7 +364,7 @@ class SessionLogger:
             return
         lo, hi = self._extent.get(key, [np.inf, -np.inf])
         self._extent[key] = [min(lo, float(v.min())), max(hi, float(v.max()))]
-        self.session.ranges[key] = _data_range(self._extent[key], margin=0.05, min_span=self._min_span(name))
+        self.session.ranges[key] = data_range(self._extent[key], margin=0.05, min_span=self._min_span(name))
 
     def _min_span(self, name: str) -> float:
         return style.min_span(self.session.units.get(name, ""))
@@ -428,13 +394,13 @@ class SessionLogger:
                                                  interpolation_mode="StepAfter"))
             self._send(f"{p}/w", index, rr.Scalars.columns(scalars=w[:, j]))
             if not has_gmr:
-                s.ranges[p] = _data_range(w[:, j], min_span=self._min_span(name))
+                s.ranges[p] = data_range(w[:, j], min_span=self._min_span(name))
                 continue
             m_j, s_j = out["mu"][:, j], out["sigma"][:, j]
             # ŵ, μ and the typical 3σ band set the scale; the band's start-up transient may run off the plot
-            s.ranges[p] = _data_range(w[:, j], m_j, np.median(m_j - 3 * s_j), np.median(m_j + 3 * s_j),
+            s.ranges[p] = data_range(w[:, j], m_j, np.median(m_j - 3 * s_j), np.median(m_j + 3 * s_j),
                                       min_span=self._min_span(name))
-            s.fit_titles[p] = verdict.coverage(w[:, j], m_j, s_j).text()
+            s.fit_titles[p] = verdict.coverage(w[:, j], m_j, s_j).short()
             s.corners[p] = quiet_corner([(t, w[:, j]), (t, m_j - 3 * s_j), (t, m_j + 3 * s_j)],
                                         (float(t[0]), float(t[-1])), s.ranges[p])
             for suffix, k, color in (("gmr", 1.0, style.SIGMA1_COLOR), ("gmr_3sigma", 3.0, style.SIGMA3_COLOR)):
@@ -548,7 +514,7 @@ class SessionLogger:
         for j, name in enumerate(s.state_names):
             key = f"demos/{entity_part(demo.id)}/predictions/{entity_part(name)}"
             earlier = [np.asarray(s.ranges[key])] if key in s.ranges else []  # another start of the same trial
-            s.ranges[key] = _data_range(demo.x[seen, j], *spans.get(name, []), *earlier, margin=0.05,
+            s.ranges[key] = data_range(demo.x[seen, j], *spans.get(name, []), *earlier, margin=0.05,
                                         min_span=self._min_span(name))
             s.corners[key] = quiet_corner([(t_rel[seen], demo.x[seen, j]), *points.get(name, [])],
                                           s.windows[demo.id], s.ranges[key])
@@ -601,8 +567,13 @@ class SessionLogger:
             lines.append(f"- {style.color_name(color)}: {', '.join(uniq[:3])}{' …' if len(uniq) > 3 else ''}")
         if len(by_color) > len(shown):
             lines.append(f"- … {len(by_color) - len(shown)} more")
-        lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ; Monte Carlo band of a prediction",
-                  "", "red ×: ŵ outside 3σ; blue: ŵ"]
+        if s.variability:  # the bands and ŵ only where a model drew them: a key names what is on screen
+            lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ" + ("; Monte Carlo band of a prediction"
+                                                                      if s.bands else ""),
+                      "", "red ×: ŵ outside 3σ; blue: ŵ",
+                      "", f"ŵ titles: share inside 3σ and 1σ (nominal {100 * verdict.NOMINAL_3SIGMA:.1f} % and "
+                      f"{100 * verdict.NOMINAL_1SIGMA:.0f} %); ✓ fits, ✗ does not, ⚠ the model meets data it was "
+                      "not fitted for (see objective)"]
         self._static("key", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
 
     def log_verdicts(self, named: Mapping[str, Any], models: Any, *, source_dt: float | None = None) -> None:
@@ -619,8 +590,10 @@ class SessionLogger:
             v = verdict.verdict(name, model, subset, source_dt=source_dt, w_parts=self.w_parts.get(id(model), ()))
             s.verdicts[name] = v
             cov = v.coverage.text() if v.coverage is not None else "no GMR bands"
-            lines = [f"# {name}: {'fits these data' if v.fits else 'DOES NOT FIT these data'}", "",
-                     f"- ŵ over {len(mine)} trial(s): {cov}", *(f"- {m}" for m in v.mismatches)]
+            # no heading: the view above the summary is a few lines tall, its title already says fits / does not
+            lines = [f"**{name} {'fits these data' if v.fits else 'DOES NOT FIT these data'}** — ŵ over "
+                     f"{len(mine)} trial(s): {cov}", *([""] if v.mismatches else []),
+                     *(f"- {m}" for m in v.mismatches)]
             self._static(f"models/{entity_part(name)}/verdict",
                          rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
             warning = v.warning()
@@ -731,7 +704,6 @@ def log_session(
     logger.log_models({str(k): v for k, v in (named_models or {}).items()})
     if named_models:
         logger.log_verdicts({str(k): v for k, v in named_models.items()}, models, source_dt=source_dt)
-    logger.log_key()
     if models is not None:
         for fid in focus or ():
             d = by_id[fid]
@@ -744,6 +716,7 @@ def log_session(
             for k in starts:
                 if k < len(d):
                     logger.log_predictions(d, methods, start=int(k), n_steps=n_steps, samples=samples, seed=seed)
+    logger.log_key()  # last: it names only what was drawn (bands, ŵ)
     return logger.session
 
 

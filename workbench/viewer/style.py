@@ -24,11 +24,15 @@ __all__ = [
     "RECORDED_COLOR",
     "W_COLOR",
     "OUTLIER_COLOR",
+    "NO_TRIAL_STATE",
+    "NO_TRIAL_COLOR",
     "BAND_COLOR",
     "SCENE_ORDER",
     "color_name",
     "dimmed",
     "min_span",
+    "data_range",
+    "quiet_corner",
     "label_color",
     "light",
     "method_color",
@@ -71,6 +75,9 @@ COLOR_NAMES = {(31, 119, 180): "blue", (255, 127, 14): "orange", (44, 160, 44): 
                (148, 103, 189): "purple", (140, 86, 75): "brown", (227, 119, 194): "pink", (127, 127, 127): "gray",
                (188, 189, 34): "olive", (23, 190, 207): "cyan"}
 OUTLIER_COLOR = (255, 60, 60)
+# a mode lane's state where no trial is flown (between a flight's segments, after an overlaid trial's end)
+NO_TRIAL_STATE = "no trial"
+NO_TRIAL_COLOR = (55, 55, 55)
 _MODE_PALETTE = ((76, 175, 80), (66, 165, 245), (255, 167, 38), (171, 71, 188), (239, 83, 80), (38, 198, 218),
                  (212, 225, 87), (141, 110, 99))
 
@@ -138,3 +145,38 @@ def min_span(unit: str) -> float:
 def with_unit(name: str, unit: str) -> str:
     """``"x [m]"``, or just the name without a unit."""
     return f"{name} [{unit}]" if unit else name
+
+
+def data_range(*arrays: object, margin: float = 0.08, min_span: float = 0.0) -> tuple[float, float]:
+    """A y-range holding every finite value of ``arrays``, with ``margin`` of its extent on each side, and at least
+    ``min_span`` wide about its middle (:data:`MIN_SPAN`)."""
+    lo, hi = np.inf, -np.inf
+    for a in arrays:
+        a = np.asarray(a, dtype=float).ravel()
+        a = a[np.isfinite(a)]
+        if a.size:
+            lo, hi = min(lo, a.min()), max(hi, a.max())
+    if not np.isfinite(lo) or not np.isfinite(hi):
+        return -1.0, 1.0
+    pad = margin * max(hi - lo, 1e-9, 1e-3 * max(abs(lo), abs(hi)))
+    lo, hi = lo - pad, hi + pad
+    if hi - lo < min_span:
+        mid = (lo + hi) / 2
+        lo, hi = mid - min_span / 2, mid + min_span / 2
+    return float(lo), float(hi)
+
+
+def quiet_corner(series: Sequence[tuple[np.ndarray, np.ndarray]], t_range: tuple[float, float],
+                 y_range: tuple[float, float]) -> str:
+    """The corner of a plot (``"LeftTop"``, …) holding the fewest of its points: where a legend hides nothing."""
+    (t0, t1), (y0, y1) = t_range, y_range
+    counts = dict.fromkeys(("LeftTop", "RightTop", "LeftBottom", "RightBottom"), 0)
+    for t, y in series:
+        t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+        # a legend covers about a third of the width and height
+        left, right = t <= t0 + (t1 - t0) / 3, t >= t1 - (t1 - t0) / 3
+        top, bottom = y >= y1 - (y1 - y0) / 3, y <= y0 + (y1 - y0) / 3
+        for name, mask in (("LeftTop", left & top), ("RightTop", right & top), ("LeftBottom", left & bottom),
+                           ("RightBottom", right & bottom)):
+            counts[name] += int(mask.sum())
+    return min(counts, key=lambda k: counts[k])  # ties keep the order above: top left first

@@ -45,6 +45,17 @@ class Coverage:
         """Whether the 3σ band misses far more samples than a calibrated band would."""
         return self.n > 0 and self.inside_3sigma < POOR_3SIGMA
 
+    def short(self) -> str:
+        """``"✓ 3σ 98.2 %, 1σ 74 %"``: a plot title's verdict (the nominal 99.7 % and 68 % are in the tab's key).
+
+        A plot title is cut at the width of its view (about 40 characters in a grid of four): the mark and the
+        3σ share come first, and a poor band says so in words.
+        """
+        if not self.n:
+            return "no samples"
+        head = "✗ DOES NOT FIT: " if self.poor else "✓ "
+        return f"{head}3σ {100 * self.inside_3sigma:.1f} %, 1σ {100 * self.inside_1sigma:.0f} %"
+
     def text(self) -> str:
         """``"✓ 3σ 99.1 % (nominal 99.7), 1σ 70 % (68)"``: the 3σ share first (titles are cut at their end), and
         words a reader sees at once when the band is poor."""
