@@ -1,5 +1,6 @@
-"""Attack round on the surfaces this round touched: datasets, mappings' dt, the live link, the scheduler handshake,
-interrupted writes. Not part of the test suite: run it for a bounded time and read the counts.
+"""Attack round on the surfaces the last rounds touched: datasets, mappings' dt, the live link, the scheduler
+handshake, interrupted writes, standard input, damaged MCAP files, a study on worker processes interrupted.
+Not part of the test suite: run it for a bounded time and read the counts.
 
     PYTHONPATH=. .venv/bin/python bench/attack/fuzz_surfaces.py --seconds 60
 
@@ -270,10 +271,116 @@ def attack_kill(rng: random.Random, base: Path) -> str | None:
     return f"leftovers after the next write: {left}" if left else None
 
 
+# -- standard input -----------------------------------------------------------------------------------------------
+def _mutate(rng: random.Random, data: bytes) -> bytes:
+    """A real log's bytes, damaged the ways transfers damage them: cut, flipped bytes, a block zeroed or repeated."""
+    b = bytearray(data)
+    how = rng.choice(["cut", "flip", "zero", "repeat", "prefix"])
+    if how == "cut":
+        return bytes(b[: rng.randrange(len(b))])
+    if how == "flip":
+        for _ in range(rng.randrange(1, 50)):
+            b[rng.randrange(len(b))] = rng.randrange(256)
+    elif how == "zero":
+        a = rng.randrange(len(b))
+        b[a : a + rng.randrange(1, 4096)] = bytes(min(len(b) - a, 4096))[: len(b[a : a + 4096])]
+    elif how == "repeat":
+        a = rng.randrange(len(b))
+        b[a:a] = b[a : a + rng.randrange(1, 2048)]
+    else:
+        b[:0] = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 64)))
+    return bytes(b)
+
+
+def attack_stdin(rng: random.Random, logs: dict[str, bytes]) -> str | None:
+    """``workbench inspect -`` / ``import - --format F -o -`` on damaged log bytes: exit 0 or one line, never a
+    traceback, a signal or a half-written file on stdout."""
+    fmt, data = rng.choice(sorted(logs.items()))
+    data = _mutate(rng, data)
+    args = rng.choice([["inspect", "-"], ["inspect", "-", "--format", fmt],
+                       ["import", "-", "--format", fmt, "--mapping", "planar_quadrotor", "-o", "-"]])
+    proc = subprocess.run([sys.executable, "-m", "workbench", *args], input=data, capture_output=True,
+                          cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=HANG_S * 3)
+    err = proc.stderr.decode(errors="replace")
+    if proc.returncode < 0 or "Traceback" in err or proc.returncode == 3:
+        raise RuntimeError(f"{' '.join(args)}: exit {proc.returncode}: {err.strip()[-200:]}")
+    if proc.returncode == 0 and args[0] == "import":
+        import io
+
+        import pandas as pd
+
+        pd.read_parquet(io.BytesIO(proc.stdout))  # what reached stdout is a whole file
+    elif proc.returncode not in (0, 1):
+        return f"{' '.join(args)}: exit {proc.returncode}"
+    return None
+
+
+# -- MCAP files ------------------------------------------------------------------------------------------------------
+def attack_mcap(rng: random.Random, base: Path, data: bytes) -> str | None:
+    """A damaged MCAP read in this process: streams or a clean error naming the file."""
+    import adapters
+
+    path = base / f"m{rng.randrange(10**9)}.mcap"
+    path.write_bytes(_mutate(rng, data))
+    try:
+        adapters.read(path)
+    except WorkbenchError as exc:
+        if str(path) not in str(exc):
+            return f"an error that does not name the file: {str(exc)[:120]}"
+        raise
+    finally:
+        path.unlink()
+    return None
+
+
+# -- a study on worker processes, interrupted ------------------------------------------------------------------------
+STUDY_CODE = """
+import sys
+from workbench.cli import main
+sys.exit(main(["report", sys.argv[1], "-o", sys.argv[2], "--bootstrap", "8", "--samples", "4",
+               "--efficiency", "2", "--n-components", "2"]))
+"""
+
+
+def attack_study_interrupt(rng: random.Random, base: Path, demos: Path) -> str | None:
+    """Ctrl-C (to the whole process group, as a terminal sends it) while a report's strategies run on worker
+    processes: exit 130 and one line, no worker left running, no staging folder or half report left."""
+    out = base / "report"
+    tmp_before = {p.name for p in Path(tempfile.gettempdir()).glob("workbench-staging-*")}
+    proc = subprocess.Popen([sys.executable, "-c", STUDY_CODE, str(demos), str(out)], cwd=REPO,
+                            env={**os.environ, "PYTHONPATH": str(REPO)}, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, start_new_session=True)
+    time.sleep(rng.uniform(0.5, 12.0))
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+    except ProcessLookupError:
+        pass
+    err = proc.communicate(timeout=HANG_S * 3)[1].decode(errors="replace")
+    time.sleep(0.5)
+    try:
+        os.killpg(proc.pid, 0)
+        alive = True
+    except (ProcessLookupError, PermissionError):
+        alive = False
+    if alive:
+        os.killpg(proc.pid, signal.SIGKILL)
+        return "a worker outlived the interrupted command"
+    if "Traceback" in err or proc.returncode not in (0, 130):
+        raise RuntimeError(f"exit {proc.returncode}: {err.strip()[-200:]}")
+    left = {p.name for p in Path(tempfile.gettempdir()).glob("workbench-staging-*")} - tmp_before
+    if left:
+        return f"staging folders left: {sorted(left)}"
+    if proc.returncode == 130 and (out / "report.md").exists() and not (out / "figures").exists():
+        return "a report without its figures"
+    shutil.rmtree(out, ignore_errors=True)
+    return None
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--only", action="append", help="run only the surfaces whose name contains this")
     args = ap.parse_args()
     rng = random.Random(args.seed)
 
@@ -290,13 +397,23 @@ def main() -> None:
         adapters.load(tlog, mapping="planar_quadrotor").by_label("CS1")[:4])
     tally = Tally()
     base = Path(tempfile.mkdtemp(prefix="wb-attack-"))
+    logs = {"tlog": tlog.read_bytes(), "mcap": (REPO / "sample_logs" / "landing_s01.mcap").read_bytes(),
+            "csv": (REPO / "sample_logs" / "landing_s02.csv").read_bytes()}
+    demos = base / "two_strategies.parquet"
+    adapters.load(tlog, mapping="planar_quadrotor").save(demos)
     surfaces = {
+        "stdin (damaged logs)": lambda: tally.run("stdin (damaged logs)", attack_stdin, rng, logs),
+        "MCAP (damaged)": lambda: tally.run("MCAP (damaged)", attack_mcap, rng, base, logs["mcap"]),
+        "study on worker processes, Ctrl-C": lambda: tally.run("study on worker processes, Ctrl-C",
+                                                               attack_study_interrupt, rng, base, demos),
         "datasets": lambda: tally.run("datasets", attack_dataset, rng, base, study),
         "mappings (dt)": lambda: tally.run("mappings (dt)", attack_mapping, rng, base),
         "live link": lambda: tally.run("live link", attack_live, rng, frames, model),
         "scheduler": lambda: tally.run("scheduler", attack_scheduler, rng),
         "interrupted writes": lambda: tally.run("interrupted writes", attack_kill, rng, base),
     }
+    if args.only:
+        surfaces = {k: v for k, v in surfaces.items() if any(o.lower() in k.lower() for o in args.only)}
     share = args.seconds / len(surfaces)
     try:
         for call in surfaces.values():
