@@ -337,7 +337,13 @@ def test_damaged_ros2_schema_is_skipped_without_printing(tmp_path, capfd):
     data = EXTERNAL_MCAP.read_bytes()
     assert data.count(b"uint8 level") == 1
     path = tmp_path / "schema.mcap"
-    path.write_bytes(data.replace(b"uint8 level", b"uint8 l%vel"))  # not a valid ROS 2 field name
+    damaged = bytearray(data.replace(b"uint8 level", b"uint8 l%vel"))  # not a valid ROS 2 field name
+    # the schema's readable copy is the summary's, which its CRC now rejects (and the reader then scans the intact
+    # chunks): a summary CRC of 0 ("not computed", the footer's last field before the magic) lets the damaged
+    # schema reach the parser, as a writer that computes no CRCs would
+    assert damaged[-8:] == b"\x89MCAP0\r\n"
+    damaged[-12:-8] = bytes(4)
+    path.write_bytes(bytes(damaged))
     summary = str(adapters.inspect(path))
     assert "/rosout: undecodable messages" in summary
     assert capfd.readouterr().err == ""

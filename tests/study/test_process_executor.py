@@ -61,8 +61,8 @@ def test_local_executor_starts_processes_only_for_several_tasks_and_cpus():
 
 
 def test_a_study_of_two_strategies_on_two_processes_is_the_serial_study(pool, quadrotor):
-    demos = simulate_landings("CS1", 6, seed=3) + simulate_landings("CS2", 6, seed=4)
-    kwargs = dict(n_components=2, samples=8, efficiency=(2, 4), repeats=1, n_steps=20, seed=1, bootstrap=6)
+    demos = simulate_landings("CS1", 5, seed=3) + simulate_landings("CS2", 5, seed=4)
+    kwargs = dict(n_components=2, samples=4, efficiency=(3,), repeats=1, n_steps=15, seed=1, bootstrap=4)
     here = run_study(demos, quadrotor, executor=SerialExecutor(), **kwargs)
     there = run_study(demos, quadrotor, executor=pool, **kwargs)
     assert set(there.models) == set(here.models) == {"CS1", "CS2"}
