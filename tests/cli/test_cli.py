@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -189,6 +190,13 @@ def test_demo_end_to_end(tmp_path):
         assert (out / f).is_file(), f
     rrd_verify(out / "demo.rrd")
     load_model(out / "models" / "CS2.npz")
+    # the phases it prints account for its whole time (issue 18): the top-level parts add up to the total, the
+    # strategies' own phases (in brackets, process time of the workers) aside
+    done = next(line for line in r.stdout.splitlines() if line.startswith("done in"))
+    total = float(re.match(r"done in ([\d.]+) s", done).group(1))
+    top = re.sub(r"\[[^\]]*\]", "", done.split("(", 1)[1])
+    parts = [float(v) for v in re.findall(r"([\d.]+) s\b", top)]
+    assert len(parts) >= 8 and abs(sum(parts) - total) <= 0.05 * len(parts) + 1e-9, done
 
 
 # -- bad input -------------------------------------------------------------------------------------------
