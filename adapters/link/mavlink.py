@@ -240,7 +240,8 @@ class MavlinkReader:
 
     def never_received(self) -> list[str]:
         """What ``required`` names that no system ever sent (alternatives joined by ``or``): why nothing locks."""
-        return [" or ".join(sorted(need)) for need in self._required if not need & set(self.received)]
+        missing = (" or ".join(sorted(need)) for need in self._required if not need & set(self.received))
+        return list(dict.fromkeys(missing))  # a message several fields come from is named once
 
     def shed(self, data: bytes) -> bool:
         """Whether a datagram may be dropped unparsed when the link is behind: it is not a frame of a message

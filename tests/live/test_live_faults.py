@@ -57,8 +57,10 @@ def test_step_returns_each_grid_step_once(model, records):
 
 def test_messages_before_a_lock_are_counted_and_the_missing_type_named(model, records, tmp_path):
     # the sample log through a mapping that also needs RC_CHANNELS, which the log never carries: no vehicle locks
-    text = MAPPING.read_text().replace('u2 = { source = "MANUAL_CONTROL.z", scale = 0.001 }',
-                                       'u2 = { source = "RC_CHANNELS.chan3_raw", scale = 0.001 }')
+    # (both sticks from it: the missing message is named once, not once per field)
+    text = MAPPING.read_text()
+    for old, new in (("MANUAL_CONTROL.z", "RC_CHANNELS.chan3_raw"), ("MANUAL_CONTROL.y", "RC_CHANNELS.chan1_raw")):
+        text = text.replace(f'source = "{old}"', f'source = "{new}"')
     mapping = tmp_path / "needs_rc.toml"
     mapping.write_text(text)
     part = records[:2000]
