@@ -356,12 +356,13 @@ def attack_study_interrupt(rng: random.Random, base: Path, demos: Path) -> str |
     except ProcessLookupError:
         pass
     err = proc.communicate(timeout=HANG_S * 3)[1].decode(errors="replace")
-    time.sleep(0.5)
-    try:
-        os.killpg(proc.pid, 0)
-        alive = True
-    except (ProcessLookupError, PermissionError):
-        alive = False
+    alive = True
+    for _ in range(50):  # a worker's last moments as a zombie, until init reaps it, are not a worker left running
+        ps = subprocess.run(["ps", "-o", "stat=", "-g", str(proc.pid)], capture_output=True, text=True).stdout
+        alive = any(not st.startswith("Z") for st in ps.split())
+        if not alive:
+            break
+        time.sleep(0.1)
     if alive:
         os.killpg(proc.pid, signal.SIGKILL)
         return "a worker outlived the interrupted command"

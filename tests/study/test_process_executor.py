@@ -4,7 +4,12 @@ tasks' warnings and errors brought back here; a study's strategies run side by s
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
+import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,6 +19,8 @@ from workbench.errors import DataError, WorkbenchError
 from workbench.sim.landing import simulate_landings
 from workbench.study.executor import ProcessExecutor, SerialExecutor, available_cpus, local_executor
 from workbench.study.pipeline import run_study
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -77,3 +84,40 @@ def test_a_study_of_two_strategies_on_two_processes_is_the_serial_study(pool, qu
     # every phase of both strategies is timed, whichever process ran it
     assert {k for k in there.timings if k.split(" ")[0] in ("fit", "compare", "efficiency")} == {
         f"{p} {lb}" for p in ("fit", "compare", "efficiency") for lb in ("CS1", "CS2")}
+
+
+_REPORT = """
+import sys
+from workbench.cli import main
+sys.exit(main(["report", sys.argv[1], "-o", sys.argv[2], "--bootstrap", "8", "--samples", "4", "--efficiency", "2",
+               "--n-components", "2"]))
+"""
+
+
+def _group(pgid: int) -> list[str]:
+    """States of the live (not zombie) processes of a process group."""
+    ps = subprocess.run(["ps", "-o", "stat=", "-g", str(pgid)], capture_output=True, text=True).stdout.split()
+    return [s for s in ps if not s.startswith("Z")]
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="process groups and ps as on Linux")
+@pytest.mark.parametrize("delay", [0.0, 1.0])
+def test_ctrl_c_while_workers_study_ends_in_one_line_and_leaves_nothing(tmp_path, delay):
+    demos = (simulate_landings("CS1", 5, seed=3) + simulate_landings("CS2", 5, seed=4)).save(tmp_path / "d.parquet")
+    env = {**os.environ, "PYTHONPATH": str(REPO), "TMPDIR": str(tmp_path)}  # its staging folders land here
+    proc = subprocess.Popen([sys.executable, "-c", _REPORT, str(demos), str(tmp_path / "report")], cwd=REPO,
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while len(_group(proc.pid)) < 3 and time.monotonic() < deadline:  # the command and its two workers
+        time.sleep(0.05)
+    time.sleep(delay)  # 0: the workers still start their interpreters; 1: they study
+    os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole foreground group
+    err = proc.communicate(timeout=120)[1].decode()
+    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err
+    assert "Traceback" not in err, err
+    for _ in range(50):
+        if not _group(proc.pid):
+            break
+        time.sleep(0.1)
+    assert not _group(proc.pid), "a worker outlived the command"
+    assert not list(tmp_path.glob("workbench-staging-*"))

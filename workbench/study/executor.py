@@ -36,10 +36,13 @@ import hashlib
 import json
 import os
 import shutil
+import signal
 import tempfile
+import threading
 import uuid
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -464,15 +467,25 @@ class ProcessExecutor(_Workers):
     def __enter__(self) -> ProcessExecutor:
         return self
 
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
+    def __exit__(self, exc_type: Any, *exc: Any) -> None:
+        self.close(abort=exc_type is not None)
 
-    def close(self) -> None:
-        """Stop the workers; tasks not started are cancelled."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
-        self._staging.close()
+    def close(self, abort: bool = False) -> None:
+        """Stop the workers; tasks not started are cancelled. ``abort`` (an error or Ctrl-C here): running tasks
+        are not waited for either, their workers are ended."""
+        try:
+            if self._pool is not None:
+                if abort:
+                    terminate = getattr(self._pool, "terminate_workers", None)  # Python 3.14+
+                    if terminate is not None:
+                        terminate()
+                    else:  # before 3.14 the pool's processes are only reachable through its attribute
+                        for proc in list(getattr(self._pool, "_processes", {}).values()):
+                            proc.terminate()
+                self._pool.shutdown(wait=True, cancel_futures=True)
+                self._pool = None
+        finally:  # Ctrl-C while the workers stop must not leave the shared sets behind
+            self._staging.close()
 
     def share(self, demos: Any, *, by_subject: bool = False) -> DataRef:
         """A path reference workers read (:meth:`Staging.share`, in a temporary folder)."""
@@ -484,8 +497,10 @@ class ProcessExecutor(_Workers):
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
-        futures = [self._pool.submit(_run_task, fn, item) for item in items]
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_quiet_interrupts)
+        with _spawning_without_interrupts():
+            futures = [self._pool.submit(_run_task, fn, item) for item in items]
         position = {f: i for i, f in enumerate(futures)}
         results: list[Outcome | None] = [None] * len(items)
         emitted: list[list[tuple[type[Warning], str]]] = [[] for _ in items]
@@ -506,6 +521,34 @@ class ProcessExecutor(_Workers):
         _replay(emitted)
         return [r for r in results if r is not None]
 
+
+
+@contextmanager
+def _spawning_without_interrupts() -> Iterator[None]:
+    """Start worker processes with Ctrl-C ignored until their initializer (:func:`_quiet_interrupts`) runs.
+
+    An ignored signal stays ignored across ``exec`` and Python keeps it so, so a Ctrl-C during a worker's
+    interpreter start-up cannot print a traceback from ``site``; the command itself still gets it. Only the main
+    thread may change a signal's handler: elsewhere the workers start as they are.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _quiet_interrupts() -> None:
+    """In a worker process: Ctrl-C (the terminal sends it to the whole process group) ends the worker at once and
+    silently; the command that started it reports the interrupt, in one line, and stops the pool."""
+    signal.signal(signal.SIGINT, _exit_interrupted)
+
+
+def _exit_interrupted(signum: int, frame: Any) -> None:
+    os._exit(128 + signum)  # no traceback of a worker waiting for its next task, no clean-up to run
 
 
 def available_cpus() -> int:
