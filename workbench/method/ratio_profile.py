@@ -13,8 +13,9 @@ An interval for a scalar ``c(θ)`` (a log ratio, or the difference of one log ra
 with its own ``k̂`` and ``Σ``) inverts the distance test: every value ``c`` with
 ``min{D(θ) : c(θ) = c} − D(θ̂) ≤ T²`` (the profile).
 
-Three small-sample corrections, each measured on known-cost operators (:mod:`workbench.sim.operators`, 30 and 60
-trials, seeds 0-199; ``tests/study/test_weights.py`` measures them on other seeds):
+Three small-sample corrections, chosen on known-cost operators (:mod:`workbench.sim.operators`, the operators of
+``tests/study/test_weights.py``, 30 trials and 60 for the bias, seeds 0-199 only; that file measures them on seeds
+never used to choose):
 
 - **Bias.** An instrumental-variable gain from 30 trials is biased towards least squares by up to one standard
   error (the lateral gain of the test's operator A). With the leave-one-trial-out gains ``k̂₍₋ⱼ₎`` the estimate is
@@ -25,23 +26,27 @@ trials, seeds 0-199; ``tests/study/test_weights.py`` measures them on other seed
   J. Econometrics 2023, recommend with few clusters). Trials contribute unequally to it (a trial that starts far
   from the pad weighs more), so it varies like a Wishart matrix with fewer than ``n − 1`` degrees of freedom; the
   reference distribution uses the effective number ``ν`` of :func:`effective_dof` (a Satterthwaite 1946 moment
-  match: 13-29 instead of 29 at 30 trials). With ``n − 1`` the Wald statistic at the true gain exceeded its 95 %
-  Hotelling quantile in 7-10.5 % of seeds, the structure test rejected true diagonal costs in 13 %; with ``ν``,
-  4-7 % and 8.5 %. Without leave-one-out gains (anything with only resamples) ``Σ`` is the resampled gains'
-  covariance times ``n / (n − 1)`` and ``ν = n − 1``.
+  match: 12-29, 21 on average, for a four-entry part at 30 trials). With the bootstrap covariance and ``n − 1``
+  the Wald statistic at the true gain exceeded its 95 % Hotelling quantile in 5-10.5 % of seeds (by part and
+  operator) and the structure test rejected true diagonal costs in 13 %; with the bias correction, the jackknife
+  covariance and ``ν``, 4-7 % and 8.5 % (the same test with the true covariance of the estimate: 6 %). Without
+  leave-one-out gains (anything with only resamples) ``Σ`` is the resampled gains' covariance times
+  ``n / (n − 1)`` and ``ν = n − 1``.
 - **Simultaneous over a part's ratios.** ``T²`` is Hotelling's quantile with ``d`` (the part's number of ratios)
   and ``ν`` degrees of freedom, so that the intervals are the projections of the part's joint 95 % region
   (Scheffé 1953): they hold for all ratios of the part together, and so for the ratios the data single out. A
   one-at-a-time interval does not: where a weight is near zero in the gain's units (the attitude weights) its
   interval is finite only when the estimate lands far from zero, and those are the seeds where it misses the
-  truth; at 30 trials one-at-a-time intervals covered 93-99 % of all seeds but only 50-73 % of those whose
-  interval was finite. The price is width: ``T`` grows from 2.05 to 3.4-3.7 for a four-ratio part.
+  truth; at 30 trials one-at-a-time intervals covered 93-98.5 % of all seeds but only 50-73 % of those whose
+  interval was finite, these 97-100 % (seeds 100-139). The price is width: ``T`` grows from 2.05 to 3.5-4.3 for a
+  four-ratio part (2.6-2.9 for two ratios), and fewer ratios are bounded (operator B's ``Q_xdot / R_u1`` in 5 of
+  40 seeds, one-at-a-time in 128 of 200).
 
 Why not percentiles of resampled ratios: the map from gain to weights is ill-conditioned where a weight barely
 moves the gain (the quadrotor's attitude weights) and ends at a zero weight; resampled ratios pile up at that
 boundary or sit on one side of it, and a resampled instrumental-variable gain is biased towards least squares
-(fewer distinct trials). The distribution of ``k̂`` itself is near Gaussian (linearized intervals at the true
-ratios covered 91-98 %), so the test is made there.
+(fewer distinct trials). The distribution of ``k̂`` itself is near Gaussian (linearized one-at-a-time intervals
+at the true ratios covered 91-98.5 %), so the test is made there.
 """
 
 from __future__ import annotations
