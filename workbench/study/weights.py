@@ -260,6 +260,11 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     :mod:`workbench.method.ratio_profile`); where a part is not of the diagonal form, the closest diagonal cost
     with sandwich intervals and its mismatch (:mod:`workbench.method.pseudo_true`).
 
+    Where ``gains`` carries leave-one-trial-out gains (``K_loo``, the default of ``bootstrap_gain``), the part's
+    gain is the jackknife bias-corrected one, its covariance the jackknife's and the critical values use that
+    covariance's effective degrees of freedom; the intervals hold simultaneously for a part's ratios
+    (:mod:`workbench.method.ratio_profile`).
+
     Per part: with restrictions (gain entries beyond its free ratios) the structure test decides; without, nothing
     is tested, and the part counts as not of the form only where the estimated gain is no diagonal cost's gain
     and departs from the closest one's by more than its spread in some entry.
