@@ -193,11 +193,11 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
     for lb, wr in ratios.items():
         for f in wr.fits:
             ctx.say(f"  {lb}: {f.describe()}")
-    ctx.say("(estimates: the diagonal cost whose gain is closest to the estimated gain in its covariance metric, "
-            "with profile intervals; \"not of this form\": the gain departs from every diagonal cost's by more than "
-            "its spread, and the row gives the closest diagonal cost with sandwich intervals; \"not identifiable\": "
-            "the interval spans more than ×10, with the demonstrations a simulated power curve says would make it "
-            "narrower than ×2)")
+    ctx.say("(estimates: the diagonal cost whose gain is closest to the jackknife bias-corrected gain in its "
+            "covariance metric, with profile intervals simultaneous over each part's ratios; \"not of this form\": "
+            "the gain departs from every diagonal cost's by more than its spread, and the row gives the closest "
+            "diagonal cost with sandwich intervals; \"not identifiable\": the interval spans more than ×10, with the "
+            "demonstrations a simulated power curve says would make it narrower than ×2)")
 
 
 def cmd_report(ctx: Context) -> int:

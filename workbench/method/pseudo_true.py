@@ -16,7 +16,9 @@ Intervals come from the misspecification-robust (sandwich) covariance of this M-
 
     dθ = H⁻¹ Jᵀ D⁻² dk̂,      H = Jᵀ D⁻² J + Σ_i (D⁻² (k(θ) − k̂))_i ∇²k_i,
 
-and ``Var θ̂ = M Σ Mᵀ`` with ``M = H⁻¹ Jᵀ D⁻²`` and ``Σ`` the gain's resampling covariance (times ``n / (n − 1)``).
+and ``Var θ̂ = M Σ Mᵀ`` with ``M = H⁻¹ Jᵀ D⁻²`` and ``Σ`` the gain's resampling covariance (times ``n / (n − 1)``);
+the half-width is ``T`` standard errors, ``T²`` the part's simultaneous Hotelling quantile as for the profile
+intervals of :mod:`workbench.method.ratio_profile`.
 The second term of ``H`` — the curvature of the gain map weighted by the residual — is what a correctly
 specified fit drops and a misspecified one must keep (White, 1982); it is taken by central differences of the
 DARE's analytic Jacobian. A ratio at the end of the search (a zero or infinite weight) is held there; a direction
@@ -154,7 +156,8 @@ def pseudo_true(part: ratio_profile.PartDistance, K_samples: np.ndarray, theta0:
     unbounded = np.zeros(theta.size, dtype=bool)
     if flat.any():
         unbounded[free] = np.abs(V[:, flat]).max(axis=1) > 1e-6
-    t = float(np.sqrt(ratio_profile.critical_value(ci, n)))
+    # simultaneous over the part's ratios, as the profile intervals (ratio_profile's docstring)
+    t = float(np.sqrt(ratio_profile.critical_value(ci, n, part.d, part.nu)))
     half = np.where(unbounded, np.inf, t * np.sqrt(np.maximum(var, 0.0)))
     P = np.eye(S.shape[1]) - J @ M
     d_sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", P, Sigma, P), 0.0))

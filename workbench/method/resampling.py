@@ -176,6 +176,10 @@ class GainBootstrap:
     failures : tuple of str
     method : str
     seed : int
+    K_loo : ndarray, shape (n_trials, m, n), or None
+        The gain of every leave-one-demonstration-out set (the delete-one jackknife over trials), from which
+        :mod:`workbench.method.ratio_profile` takes the bias correction, covariance and degrees of freedom of
+        ``K̂``; None where not computed or where a leave-one-out fit failed.
     """
 
     K: np.ndarray
@@ -186,6 +190,7 @@ class GainBootstrap:
     failures: tuple[str, ...]
     method: str
     seed: int
+    K_loo: np.ndarray | None = None
 
     @property
     def n_ok(self) -> int:
@@ -201,11 +206,14 @@ def bootstrap_gain(
     progress: Callable[[int, int], None] | None = None,
     *,
     executor: Any = None,
+    jackknife: bool = True,
 ) -> GainBootstrap:
     """The sampling distribution of ``K̂`` (eqs. (12)-(14)) over resamples of whole demonstrations.
 
     What :func:`bootstrap` draws, without solving an inverse LQR per resample: the source of the gain's
     covariance for :mod:`workbench.method.ratio_profile`. Same draws as :func:`bootstrap` for the same ``seed``.
+    With ``jackknife`` (default) also the ``n`` leave-one-demonstration-out gains (``K_loo``, Quenouille-Tukey
+    jackknife over trials): what the ratio intervals take their bias correction and degrees of freedom from.
 
     Raises
     ------
@@ -213,9 +221,23 @@ def bootstrap_gain(
         If the point estimate on all demonstrations fails, or every resample fails.
     """
     n_trials, K0, _, fits, failures = _resampled(demos, system, n_boot, method, None, seed, progress, executor)
+    loo = _leave_one_out(demos, system, method) if jackknife and n_trials >= 3 else None
     return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array([f[0] for f in fits])), n_trials=n_trials,
                          n_boot=int(n_boot), n_failed=len(failures), failures=tuple(failures), method=method,
-                         seed=int(seed))
+                         seed=int(seed), K_loo=None if loo is None else readonly(loo))
+
+
+def _leave_one_out(demos: Any, system: Any, method: GainMethod) -> np.ndarray | None:
+    """The gain of every set with one demonstration left out, shape (n, m, n_x); None if one fit fails (e.g. a
+    non-stabilizing estimate): a jackknife with a hole in it estimates nothing."""
+    A, B = system_matrices(system.A, system.B)
+    blocks = demo_blocks(list(demos), *B.shape)
+    every = np.arange(len(blocks))
+    try:
+        with single_threaded_blas():  # as the resamples: the same reductions wherever it runs
+            return np.array([_resample_fit(blocks, np.delete(every, j), A, B, method, None)[0] for j in every])
+    except ModelError:
+        return None
 
 
 def bootstrap(

@@ -156,6 +156,9 @@ class PartFit:
     closest : PseudoTrue or None
         The closest diagonal cost and its mismatch (:func:`workbench.method.pseudo_true.pseudo_true`), where the
         test rejects or, untested, the estimate is no diagonal cost's gain.
+    dof : float
+        Degrees of freedom of the gain's covariance behind the test and the intervals
+        (:func:`workbench.method.ratio_profile.effective_dof`).
     """
 
     states: tuple[str, ...]
@@ -165,6 +168,7 @@ class PartFit:
     critical: float
     explained: bool | None
     closest: object = None
+    dof: float = float("nan")
 
     @property
     def tested(self) -> bool:
@@ -256,6 +260,11 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     :mod:`workbench.method.ratio_profile`); where a part is not of the diagonal form, the closest diagonal cost
     with sandwich intervals and its mismatch (:mod:`workbench.method.pseudo_true`).
 
+    Where ``gains`` carries leave-one-trial-out gains (``K_loo``, the default of ``bootstrap_gain``), the part's
+    gain is the jackknife bias-corrected one, its covariance the jackknife's and the critical values use that
+    covariance's effective degrees of freedom; the intervals hold simultaneously for a part's ratios
+    (:mod:`workbench.method.ratio_profile`).
+
     Per part: with restrictions (gain entries beyond its free ratios) the structure test decides; without, nothing
     is tested, and the part counts as not of the form only where the estimated gain is no diagonal cost's gain
     and departs from the closest one's by more than its spread in some entry.
@@ -286,9 +295,11 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
             continue  # a part no input reaches: its weights do not affect the gain
         s, c = list(states), list(inputs)
         samples = K_s[:, c][:, :, s]
+        loo = getattr(gains, "K_loo", None)
         part = ratio_profile.PartDistance.from_samples(
-            A[np.ix_(s, s)], B[np.ix_(s, c)], K[np.ix_(c, s)], samples, gains.n_trials)
-        start = closest_structured_objective(part.A, part.B, K[np.ix_(c, s)], "diagonal")
+            A[np.ix_(s, s)], B[np.ix_(s, c)], K[np.ix_(c, s)], samples, gains.n_trials,
+            None if loo is None else np.asarray(loo, dtype=float)[:, c][:, :, s])
+        start = closest_structured_objective(part.A, part.B, _stabilizing(part, K[np.ix_(c, s)]), "diagonal")
         w0 = np.r_[np.diag(start.Q), np.diag(start.R)[1:]] / start.R[0, 0]
         theta0 = np.log(np.maximum(w0, 1e-300))
         theta, d_min = ratio_profile.fit(part, theta0)
@@ -298,8 +309,8 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
             closest = pseudo_true(part, samples, theta0, ci)
         fit = PartFit(tuple(system.state_names[i] for i in s), tuple(system.input_names[k] for k in c),
                       float(d_min), part.restrictions,
-                      ratio_profile.critical_value(ci, part.n_trials, part.restrictions) if part.restrictions
-                      else float("nan"), explained, closest)
+                      ratio_profile.critical_value(ci, part.n_trials, part.restrictions, part.nu)
+                      if part.restrictions else float("nan"), explained, closest, part.nu)
         fits.append(fit)
         shown = theta if fit.of_form else closest.theta
         Qp, Rp = part.weights(shown)
@@ -321,6 +332,14 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     err = float(np.linalg.norm(K_fwd - K) / max(float(np.linalg.norm(K)), 1e-300))
     return WeightRatios(intervals=tuple(intervals), Q_diag=q, R_diag=r, forward_gain_error=err, gains=gains,
                         ci=float(ci), fits=tuple(fits), _parts=tuple(fitted), _index=tuple(index))
+
+
+def _stabilizing(part, K_part: np.ndarray) -> np.ndarray:
+    """The part's (bias-corrected) gain where it stabilizes the part, else the uncorrected one: only the start of
+    the fit, which needs a stabilizing gain."""
+    K_bc = part.k_hat.reshape(K_part.shape)
+    rho = float(np.max(np.abs(np.linalg.eigvals(part.A + part.B @ K_bc))))
+    return K_bc if rho < 1.0 else K_part
 
 
 def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
