@@ -184,7 +184,8 @@ class PartFit:
 
     def mismatch_words(self) -> str:
         """How the gain departs from the closest diagonal cost's, per entry the data show: e.g.
-        ``u1 on phi 17 % softer [11 %, 23 %]`` (softer: a smaller gain magnitude)."""
+        ``u1 on phi 17 % softer [11 %, 23 %]`` (softer: a smaller gain magnitude), or where the two have opposite
+        signs ``u1 on phidot -0.008 where it has 0.037``."""
         c = self.closest
         if c is None:
             return ""
@@ -196,9 +197,9 @@ class PartFit:
                 way = "stiffer" if rel[e] > 0 else "softer"
                 a, b = sorted((abs(lo[e]), abs(hi[e]))) if lo[e] * hi[e] > 0 else (0.0, max(abs(lo[e]), abs(hi[e])))
                 words.append(f"{where} {_pct(rel[e])} {way} [{_pct(a)}, {_pct(b)}]")
-            else:
-                words.append(f"{where} {c.k_hat[e]:.3g} where the closest diagonal LQR has {c.k_closest[e]:.3g}")
-        return "; ".join(words) + " than the closest diagonal LQR gain" if words else ""
+            else:  # opposite signs: no relative change to state
+                words.append(f"{where} {c.k_hat[e]:.3g} where it has {c.k_closest[e]:.3g}")
+        return "; ".join(words) + " (against the closest diagonal LQR gain)" if words else ""
 
     def describe(self) -> str:
         where = f"part ({', '.join(self.states)}; {', '.join(self.inputs)})"
