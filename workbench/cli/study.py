@@ -169,7 +169,7 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
     weight ratio per strategy with its interval or why it has none, and each part's structure check."""
     from rich.table import Table
 
-    from workbench.study.weights import compare_strategies, format_interval, identified_first
+    from workbench.study.weights import NOT_EXPLAINED, compare_strategies, format_interval, identified_first
 
     objectives = getattr(result, "objectives", {})
     ratios = {lb: oi.ratios for lb, oi in objectives.items() if oi.ratios is not None}
@@ -187,6 +187,8 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
     for r in table.itertuples():
         factor = getattr(r, "factor", float("nan"))
         note = r.note if r.strategy == first else (r.factor_note or r.note)
+        if note and note.startswith(NOT_EXPLAINED):  # its mismatch is the part's, printed once under the table
+            note = f"{NOT_EXPLAINED} (mismatch of {r.strategy}'s part below)"
         out.add_row(r.ratio, str(r.strategy), format_interval(r.estimate, r.lo, r.hi),
                     "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi), note or "")
     ctx.say(out)
