@@ -80,31 +80,43 @@ def test_view_without_a_mapping_is_the_raw_view(tmp_path):
     assert verify.returncode == 0, verify.stderr
 
 
-def test_a_stream_silent_between_two_flights_is_drawn_with_a_break(tmp_path):
+def _quadplane_raw(tmp_path: Path):
+    """The raw log of a QuadPlane tlog written with the project's writer (two landings, a still roll stick)."""
     import importlib.util
-
-    import numpy as np
-    import pyarrow as pa
-    import rerun as rr
-
-    from workbench.viewer.rawlog import GAP_S, log_raw
 
     spec = importlib.util.spec_from_file_location("_rec", Path(__file__).with_name("viewer_recordings.py"))
     recordings = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(recordings)
-    raw = raw_log(adapters.read(recordings.quadplane_tlog(tmp_path / "qp.tlog")))
-    att = next(s for s in raw.streams if s.name == "ATTITUDE")
-    steps = np.diff(att.t)
-    gaps = int(np.sum(steps > max(GAP_S, 20 * np.median(steps))))
-    assert gaps >= 1  # the pause between the two landings
-    out = tmp_path / "raw.rrd"
+    return raw_log(adapters.read(recordings.quadplane_tlog(tmp_path / "qp.tlog")))
+
+
+def _recorded(raw, out: Path) -> Path:
+    """``raw`` logged by the viewer into the recording ``out``."""
+    import rerun as rr
+
+    from workbench.viewer.rawlog import log_raw
+
     rec = rr.RecordingStream("raw_test")
     rec.save(out)
     log_raw(rec, raw)
     rec.flush()
     rec.disconnect()
+    return out
+
+
+def test_a_stream_silent_between_two_flights_is_drawn_with_a_break(tmp_path):
+    import numpy as np
+    import pyarrow as pa
+
+    from workbench.viewer.rawlog import GAP_S
+
+    raw = _quadplane_raw(tmp_path)
+    att = next(s for s in raw.streams if s.name == "ATTITUDE")
+    steps = np.diff(att.t)
+    gaps = int(np.sum(steps > max(GAP_S, 20 * np.median(steps))))
+    assert gaps >= 1  # the pause between the two landings
     rows = []
-    for chunk in RrdReader(out).stream():
+    for chunk in RrdReader(_recorded(raw, tmp_path / "raw.rrd")).stream():
         if str(chunk.entity_path) == "/log/streams/ATTITUDE" and not chunk.is_static:
             col = chunk.to_record_batch().column("Scalars:scalars")
             rows += [np.asarray(v, dtype=float) for v in pa.array(col).to_pylist()]
@@ -113,28 +125,14 @@ def test_a_stream_silent_between_two_flights_is_drawn_with_a_break(tmp_path):
 
 
 def test_fields_zero_throughout_are_hidden_by_default(tmp_path):
-    import importlib.util
-
     import numpy as np
-    import rerun as rr
 
-    from workbench.viewer.rawlog import log_raw
-
-    spec = importlib.util.spec_from_file_location("_rec", Path(__file__).with_name("viewer_recordings.py"))
-    recordings = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(recordings)
-    raw = raw_log(adapters.read(recordings.quadplane_tlog(tmp_path / "qp.tlog")))
+    raw = _quadplane_raw(tmp_path)
     rc = next(s for s in raw.streams if s.name == "RC_CHANNELS")
     zero = [f for k, f in enumerate(rc.fields) if not np.any(rc.values[:, k] != 0)]
     moving = [f for k, f in enumerate(rc.fields) if np.ptp(rc.values[:, k]) > 0 and "time" not in f]
     assert zero and moving  # unused channels, and the throttle the writer moved
-    out = tmp_path / "raw.rrd"
-    rec = rr.RecordingStream("raw_test")
-    rec.save(out)
-    log_raw(rec, raw)
-    rec.flush()
-    rec.disconnect()
-    for chunk in RrdReader(out).stream():
+    for chunk in RrdReader(_recorded(raw, tmp_path / "raw.rrd")).stream():
         if str(chunk.entity_path) == "/log/streams/RC_CHANNELS" and chunk.is_static:
             shown = chunk.to_record_batch().column("SeriesLines:visible_series").to_pylist()[0]
     by_field = dict(zip(rc.fields, shown, strict=True))
