@@ -270,8 +270,9 @@ def run_study(
     parts: list[_LabelPart] = []
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
-        what = f"fitting and comparing ({len(splits)} strategies in parallel)" if by_label else "fitting and comparing"
-        task = p.add_task(what, total=len(splits)) if p is not None else None
+        # short: on an 80-column terminal the bar leaves the description ~25 characters (the strategies' count is
+        # the bar's total)
+        task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
         if by_label:
             tasks = [(label, i, executor.share(tr), executor.share(te), system, settings)
                      for i, (label, (tr, te)) in enumerate(splits.items())]
