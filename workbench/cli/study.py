@@ -41,7 +41,8 @@ def cmd_evaluate(ctx: Context) -> int:
         return _evaluate_per_subject(ctx, ds, output)
     smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
     loso = a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW)
-    with ctx.executor() as ex:
+    # a split study's strategies are independent tasks (run side by side on local processes, as in report and demo)
+    with ctx.executor(local_tasks=0 if loso else len(ds.labels)) as ex:
         if loso:
             ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
                     "the others)")
