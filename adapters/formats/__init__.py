@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from adapters.formats.files import read_bytes
 from adapters.streams import Streams
 from workbench.errors import DataError, FormatError
 
@@ -211,13 +212,7 @@ def detect_format(path: str | os.PathLike) -> Format:
         No known format matches; the message lists the known formats and what the extension suggested.
     """
     where = os.fspath(path)
-    try:
-        with open(path, "rb") as f:
-            head = f.read(_HEAD)
-    except FileNotFoundError:
-        raise DataError(f"{where}: no such file") from None
-    except OSError as exc:
-        raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
+    head = read_bytes(path, _HEAD)
     if not head:
         raise DataError(f"{where}: empty file")
     for fmt in FORMATS.values():

@@ -127,6 +127,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from pymavlink import mavutil
 from pymavlink.DFReader import MULT_TO_PREFIX
 
+from adapters.formats.files import read_bytes
 from adapters.modes import heartbeat_table
 from adapters.streams import Streams
 from workbench.errors import DataError, FormatError
@@ -548,13 +549,7 @@ def _units(log: _Log) -> None:
 def read(path: str | os.PathLike, types: Iterable[str] | None = None) -> Streams:
     """Read a DataFlash ``.bin`` log into streams (only ``types`` when given: names or ``NAME[instance]``)."""
     where = os.fspath(path)
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except FileNotFoundError:
-        raise DataError(f"{where}: no such file") from None
-    except OSError as exc:
-        raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
+    data = read_bytes(path)
     if not data:
         raise DataError(f"{where}: empty file, not a DataFlash log")
     buf = np.frombuffer(data, dtype=np.uint8)

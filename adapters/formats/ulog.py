@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from adapters.formats.files import read_bytes
 from adapters.streams import Streams
 from workbench.atomic import atomic_path
 from workbench.errors import DataError, FormatError
@@ -60,11 +61,7 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     """Read a ULog file into streams (only ``topics``, by topic name, when given)."""
     where = os.fspath(path)
     names = None if topics is None else sorted({t.split("/")[0] for t in topics})
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as exc:
-        raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
+    data = read_bytes(path)
     if not data:
         raise DataError(f"{where}: empty file, not a ULog file")
     if not data.startswith(MAGIC):
