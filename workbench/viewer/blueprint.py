@@ -83,6 +83,26 @@ def _plot(name: str, contents: list[str], *, legend: rrb.PlotLegend | None = Non
                               plot_legend=legend if legend is not None else _legend(len(contents)), **kwargs)
 
 
+#: Where a replay or a live link logs each quantity's online overlay, under ``/demos/<trial>/online/``: the input's
+#: one-step prediction with its bands, and the state's rollout end.
+_ONLINE = {"inputs": "{name}/**", "states": "rollout_end/{name}"}
+
+
+def online_plots(ids: Sequence[str], names: Sequence[str], kind: str, titles: Sequence[str],
+                 y_ranges: Sequence[tuple[float, float] | None] | None = None) -> list[rrb.TimeSeriesView]:
+    """A replay's or live link's plots, one per input (``kind="inputs"``) or state (``"states"``): every trial's
+    (``ids``: entity parts) recorded series under its online overlay, titled ``titles[j]`` (the title is the key:
+    no legend over the data), on the tab's linked time axis, with ``y_ranges[j]`` where given."""
+    out = []
+    for j, (name, title) in enumerate(zip(names, titles, strict=True)):
+        n = entity_part(name)
+        contents = [f"+ /demos/{i}/{kind}/{n}" for i in ids] + [
+            f"+ /demos/{i}/online/{_ONLINE[kind].format(name=n)}" for i in ids]
+        out.append(_plot(title, contents, legend=rrb.PlotLegend(visible=False), linked=True,
+                         y_range=None if y_ranges is None else y_ranges[j]))
+    return out
+
+
 def _prediction_paths(s: LoggedSession, demo_id: str, name: str) -> list[str]:
     out = [f"+ /demos/{entity_part(demo_id)}/states/{entity_part(name)}"]
     for start, methods in s.predictions.get(demo_id, []):

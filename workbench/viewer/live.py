@@ -35,6 +35,7 @@ from rerun.blueprint.components import LinkAxis
 
 from workbench.live.predictor import LinkStats, LiveEvent, LivePrediction
 from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS, style
+from workbench.viewer.blueprint import online_plots
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import entity_part  # the replay's entity names: both layouts read alike
 from workbench.viewer.scene import scale_bar
@@ -345,25 +346,10 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
     ids = [entity_part(i) for i in list(demo_ids)[-_RECENT:]]
     linked = rrb.TimeAxis(link=LinkAxis.LinkToGlobal)
     quiet = rrb.PlotLegend(visible=False)  # the key is in each title: no legend over the data
-    inputs = [
-        rrb.TimeSeriesView(
-            origin="/",
-            contents=[f"+ /demos/{i}/inputs/{entity_part(n)}" for i in ids]
-            + [f"+ /demos/{i}/online/{entity_part(n)}/**" for i in ids],
-            name=f"{n}: operator gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×",
-            axis_x=linked, plot_legend=quiet,
-        )
-        for n in input_names
-    ]
-    states = [
-        rrb.TimeSeriesView(
-            origin="/",
-            contents=[f"+ /demos/{i}/states/{entity_part(n)}" for i in ids]
-            + [f"+ /demos/{i}/online/rollout_end/{entity_part(n)}" for i in ids],
-            name=f"{n}: recorded gray, rollout end green", axis_x=linked, plot_legend=quiet,
-        )
-        for n in state_names
-    ]
+    inputs = online_plots(ids, input_names, "inputs",
+                          [f"{n}: operator gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×"
+                           for n in input_names])
+    states = online_plots(ids, state_names, "states", [f"{n}: recorded gray, rollout end green" for n in state_names])
     variability = [
         rrb.TimeSeriesView(origin="/", contents=[f"+ /demos/{i}/variability/{entity_part(n)}/**" for i in ids],
                            name=f"ŵ {n} blue, GMR μ ± 1σ/3σ band", axis_x=linked, plot_legend=quiet)

@@ -27,12 +27,11 @@ from typing import Any
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
-from rerun.blueprint.components import LinkAxis
 
 from workbench.data.demonstrations import Demonstration
 from workbench.errors import DataError
 from workbench.viewer import style
-from workbench.viewer.blueprint import time_panel
+from workbench.viewer.blueprint import online_plots, time_panel
 from workbench.viewer.entities import entity_part
 from workbench.viewer.scene import Plane, plane_of, scale_bar
 from workbench.viewer.session import HAS_MEASUREMENTS, UI
@@ -238,38 +237,24 @@ def replay_blueprint(
     def unit(name: str) -> str:
         return style.with_unit(name, roles.unit(name) if roles else "")
 
-    def y_axis(values: list[np.ndarray], name: str) -> dict[str, Any]:
+    def y_range(values: list[np.ndarray], name: str) -> tuple[float, float] | None:
         """The plot's y-range: the recorded values, at least their unit's minimum span (quantization noise must
         not fill a plot); the viewer's own autoscale without ``demos``."""
         if not values:
-            return {}
-        lo, hi = style.data_range(*values, margin=0.05, min_span=style.min_span(roles.unit(name) if roles else ""))
-        return {"axis_y": rrb.ScalarAxis(range=[lo, hi])}
+            return None
+        return style.data_range(*values, margin=0.05, min_span=style.min_span(roles.unit(name) if roles else ""))
 
     shown = list(demos or [])
-
-    inputs = [
-        rrb.TimeSeriesView(
-            origin="/",
-            contents=[f"+ /demos/{entity_part(i)}/inputs/{entity_part(name)}" for i in demo_ids]
-            + [f"+ /demos/{entity_part(i)}/online/{entity_part(name)}/**" for i in demo_ids],
-            name=f"{unit(name)}: recorded gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×",
-            plot_legend=rrb.PlotLegend(visible=False), axis_x=rrb.TimeAxis(link=LinkAxis.LinkToGlobal),
-            **y_axis([d.u[:, j] for d in shown], name),
-        )
-        for j, name in enumerate(input_names)
-    ]
-    states = [
-        rrb.TimeSeriesView(
-            origin="/",
-            contents=[f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in demo_ids]
-            + [f"+ /demos/{entity_part(i)}/online/rollout_end/{entity_part(name)}" for i in demo_ids],
-            name=f"{unit(name)}: recorded gray, rollout end green",
-            plot_legend=rrb.PlotLegend(visible=False), axis_x=rrb.TimeAxis(link=LinkAxis.LinkToGlobal),
-            **y_axis([d.x[:, j] for d in shown], name),
-        )
-        for j, name in enumerate(state_names)
-    ]
+    ids = [entity_part(i) for i in demo_ids]
+    inputs = online_plots(
+        ids, input_names, "inputs",
+        [f"{unit(n)}: recorded gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×" for n in input_names],
+        [y_range([d.u[:, j] for d in shown], n) for j, n in enumerate(input_names)],
+    )
+    states = online_plots(
+        ids, state_names, "states", [f"{unit(n)}: recorded gray, rollout end green" for n in state_names],
+        [y_range([d.x[:, j] for d in shown], n) for j, n in enumerate(state_names)],
+    )
     plane = plane_of(roles, state_names)
     if plane is not None:
         bounds = None
