@@ -19,6 +19,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 import rerun as rr
+from rerun.blueprint.components import LinkAxis
 from rerun.chunk import RrdReader
 
 from workbench import viewer
@@ -394,6 +395,23 @@ def test_a_flight_is_drawn_on_its_own_clock_one_color_per_segment():
     names = _blueprint_names(path)
     assert "scene" in names and "states" in names and "objective" not in names
     assert not any(n.startswith("predictions") for n in names)
+    # the plots span the log (its segments start minutes in): a time axis with a range is not globally linked,
+    # which rerun 0.41 would draw around the cursor at 0 instead, empty
+    axes = _time_axes(path)
+    ranged = [a for a in axes.values() if a.get("TimeAxis:view_range")]
+    assert ranged and not any(a.get("TimeAxis:link") in ([LinkAxis.LinkToGlobal.value], LinkAxis.LinkToGlobal.value)
+                              for a in ranged)
+
+
+def _time_axes(path: Path) -> dict[str, dict]:
+    """Per view of the recording's blueprint, its time axis' logged components."""
+    reader = RrdReader(path)
+    axes: dict[str, dict] = defaultdict(dict)
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        if str(chunk.entity_path).endswith("/TimeAxis"):
+            row = chunk.to_record_batch().to_pylist()[-1]
+            axes[str(chunk.entity_path)].update({k: v for k, v in row.items() if k.startswith("TimeAxis:")})
+    return axes
 
 
 def test_a_plant_without_roles_has_plots_but_no_scene(tmp_path, setup):

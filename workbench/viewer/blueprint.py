@@ -48,14 +48,19 @@ def _legend(n_series: int, corner: str = "LeftTop") -> rrb.PlotLegend:
 
 
 def _time_axis(window: tuple[float, float] | None, *, linked: bool = True) -> rrb.TimeAxis | None:
-    """A plot's time axis over ``window``, linked to every other linked plot (a tab's plots zoom together)."""
-    link = LinkAxis.LinkToGlobal if linked else LinkAxis.Independent
+    """A plot's time axis: over ``window`` where one is given, else (``linked``) linked to every other linked plot,
+    so a tab's plots zoom together.
+
+    Never both: rerun 0.41 draws a globally linked axis around the time cursor whatever its view range, so a
+    flight's plots on the log's clock (segments from 444 s, the cursor at 0) opened empty (seen with rrd-look).
+    """
     if window is None:
-        return rrb.TimeAxis(link=link) if linked else None
+        return rrb.TimeAxis(link=LinkAxis.LinkToGlobal) if linked else None
     lo, hi = window
     pad = 0.03 * max(hi - lo, 1e-6)
-    return rrb.TimeAxis(link=link, view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(seconds=lo - pad),
-                                                            end=rrb.TimeRangeBoundary.absolute(seconds=hi + pad)))
+    return rrb.TimeAxis(link=LinkAxis.Independent,
+                        view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(seconds=lo - pad),
+                                                 end=rrb.TimeRangeBoundary.absolute(seconds=hi + pad)))
 
 
 def _overlay(s: LoggedSession, name: str, contents: list[str], key: str | None = None) -> rrb.TimeSeriesView:
