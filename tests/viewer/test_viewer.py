@@ -202,6 +202,18 @@ def test_blueprint_has_the_five_tabs(setup):
         assert tab in names, (tab, names)
 
 
+def test_the_first_view_names_the_color_of_each_strategy(setup):
+    # the scene's tracks are colored by strategy and no key view stands beside it: its title is the key
+    demos = setup["demos"]
+    scene = next(n for n in _blueprint_names(setup["path"]) if n.startswith("plane of flight"))
+    for label in ("CS1", "CS2"):
+        d = demos.by_label(label)[0]
+        (rgba,) = np.ravel(setup["entities"][f"/demos/{d.id}/states/{demos.state_names[0]}"]
+                           ["static:SeriesLines:colors"][0])
+        rgb = [(int(rgba) >> shift) & 0xFF for shift in (24, 16, 8)]
+        assert f"{label} {style.color_name(rgb)}" in scene, scene
+
+
 def test_measurements_fallback_logs_two_lines(tmp_path, setup, monkeypatch):
     monkeypatch.setattr(session, "HAS_MEASUREMENTS", False)
     demos, model = setup["demos"], setup["model"]

@@ -59,6 +59,7 @@ class LoggedSession:
     verdicts: dict[str, Any] = field(default_factory=dict)  # model name → workbench.viewer.verdict.Verdict
     warnings: list[str] = field(default_factory=list)  # what the recording and the terminal warn of
     colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # trial → its color, for the key
+    label_colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # strategy → its color
 
     def title(self, name: str) -> str:
         """``name [unit]`` for a state or input."""

@@ -169,6 +169,8 @@ class SessionLogger:
         ids = [d.id for d in demos]
         self.colors = style.trial_colors(ids, [d.label for d in demos], s.labels)
         s.colors = dict(self.colors)
+        if s.labels:
+            s.label_colors = {d.label: self.colors[d.id] for d in demos if d.label}
         self.offsets = {d.id: _log_time(d, origins) if s.clock == "log" else 0.0 for d in demos}
         self.w_parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}  # by id(model), for verdicts
         self._extent: dict[str, list[float]] = {}
