@@ -95,14 +95,17 @@ class StudyStatistics:
             lines += ["", f"Mixed-effects model (statsmodels MixedLM, REML) of log {what} RMSE: {m.n_obs} "
                           f"observations, {m.n_groups} {m.groups}s{'' if m.converged else ', NOT converged'}"
                           f"{'; ' + m.note if m.note else ''}. Factors on the error against the proposed model "
-                          "(methods) and against the first strategy (strategies):", "",
-                      "| term | factor [95 % interval] | p |", "|---|---|---|"]
+                          "(methods) and against the first strategy (strategies); intervals and p from a t "
+                          "distribution with the between-within degrees of freedom of the term's level (df), "
+                          "not the Wald z, which is far too confident with this few trials:", "",
+                      "| term | factor [95 % interval] | p (t, df) |", "|---|---|---|"]
             for e in m.effects:
                 kind, level = e.term.split(" ", 1)
                 name = METHOD_TITLES.get(level, level) + (" vs proposed" if kind == "method" else "")
                 shown = ("" if e.lo <= 1.0 <= e.hi else
                          (" (higher)" if e.lo > 1.0 else " (lower)"))
-                lines.append(f"| {kind} {name} | ×{e.factor:.3g} [{e.lo:.3g}, {e.hi:.3g}]{shown} | {e.p:.3g} |")
+                lines.append(f"| {kind} {name} | ×{e.factor:.3g} [{e.lo:.3g}, {e.hi:.3g}]{shown} | {e.p:.3g} "
+                             f"({e.df:.0f}) |")
         return "\n".join(lines)
 
 

@@ -11,7 +11,8 @@ independent and is not used here):
 * :func:`mixed_effects` — a linear mixed model (``statsmodels`` MixedLM) of the log per-trial error with method
   and strategy as fixed effects, subject as a random intercept and the trial within its subject as a variance
   component: *by what factor does each method's error differ from the reference's, allowing every subject and
-  trial its own level?*, and — strategies being flown in different trials — *do the strategies differ?*
+  trial its own level?*, and — strategies being flown in different trials — *do the strategies differ?* Its
+  intervals and p-values use a t reference with between-within degrees of freedom, not MixedLM's Wald z.
 * :func:`repeated_measures_anova` — the omnibus test over methods with subjects as the repeated unit
   (``statsmodels`` AnovaRM), for the per-subject design.
 * :func:`pairwise_ttests` — t-tests for every pair (paired by default).
@@ -213,6 +214,7 @@ class MixedEffect:
     lo: float
     hi: float
     p: float
+    df: float = float("inf")  # of the t reference (between-within); inf: the normal (Wald z)
 
 
 @dataclass(frozen=True)
@@ -274,15 +276,17 @@ def mixed_effects(long: pd.DataFrame, reference: str = "proposed") -> MixedModel
         except (ValueError, np.linalg.LinAlgError) as exc:
             warnings.warn(f"mixed-effects model not fitted: {exc}", stacklevel=2)
             return None
-    ci = fit.conf_int()
+    dfs = _between_within_dof(d, by_subject)
     effects = []
     for name in fit.fe_params.index:
         if name == "Intercept":
             continue
         level = name.split("[T.", 1)[-1].rstrip("]")
-        term = f"method {level}" if name.startswith("C(method") else f"strategy {level}"
-        effects.append(MixedEffect(term, float(np.exp(fit.fe_params[name])), float(np.exp(ci.loc[name, 0])),
-                                   float(np.exp(ci.loc[name, 1])), float(fit.pvalues[name])))
+        kind = "method" if name.startswith("C(method") else "strategy"
+        est, se, df = float(fit.fe_params[name]), float(fit.bse_fe[name]), dfs[kind]
+        half = float(sps.t.ppf(0.975, df)) * se
+        effects.append(MixedEffect(f"{kind} {level}", float(np.exp(est)), float(np.exp(est - half)),
+                                   float(np.exp(est + half)), float(2.0 * sps.t.sf(abs(est) / se, df)), float(df)))
     # the optimizer's retries are noise once it converged; a variance at zero is worth saying
     messages = [str(w.message) for w in caught]
     note = "; ".join(dict.fromkeys(
@@ -292,6 +296,26 @@ def mixed_effects(long: pd.DataFrame, reference: str = "proposed") -> MixedModel
         reference=reference, effects=tuple(effects), groups="subject" if by_subject else "trial",
         n_obs=int(fit.nobs), n_groups=int(len(fit.model.group_labels)), converged=bool(fit.converged), note=note,
     )
+
+
+def _between_within_dof(d: pd.DataFrame, by_subject: bool) -> dict[str, float]:
+    """Denominator degrees of freedom of each kind of fixed effect by the between-within rule (SAS DDFM=BETWITHIN;
+    Schluchter & Elashoff 1990): a term is tested against the residual of the level it varies at.
+
+    MixedLM's Wald z treats the variance components as known, which with a handful of trials or subjects makes
+    p-values and intervals far too small; a t reference with the degrees of freedom left at the term's level is
+    the standard small-sample correction short of Kenward-Roger. Methods vary within trials:
+    ``N_obs − rank[trial dummies, method dummies]``. Strategies vary between trials, within subjects where
+    there are several: ``N_trials − rank[subject (or intercept) dummies, strategy dummies]``.
+    """
+    def rank(*columns: pd.Series) -> int:
+        return int(np.linalg.matrix_rank(pd.get_dummies(pd.concat(columns, axis=1).astype(str)).to_numpy(float)))
+
+    within = len(d) - rank(d["trial"], d["method"])
+    trials = d.drop_duplicates("trial")
+    unit = trials["subject"].astype(str) if by_subject else pd.Series("all", index=trials.index)
+    between = len(trials) - rank(unit, trials["label"])
+    return {"method": float(max(within, 1)), "strategy": float(max(between, 1))}
 
 
 @dataclass(frozen=True)
