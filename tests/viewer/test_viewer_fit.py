@@ -195,6 +195,11 @@ def test_a_ulog_is_drawn_on_the_clock_of_inspect(tmp_path, capsys):
         spans = [(m.start - summary.t_start, m.end - summary.t_start) for m in summary.modes
                  if m.mode == d.meta.get("mode")]
         assert any(a - ds.dt <= t[0] and t[-1] <= b + ds.dt for a, b in spans), (t[0], t[-1], spans)
+    # the raw streams beside the mapped segments are on the same clock: each starts where inspect starts it
+    first = {s.name: s.t_start for s in summary.streams}
+    for name in ("vehicle_local_position", "manual_control_setpoint"):
+        t_raw = np.asarray(ents[f"/log/streams/{name}"]["time"], float)
+        assert t_raw.min() == pytest.approx(first[name] - summary.t_start, abs=1e-6), name
 
 
 def test_a_saved_live_recording_opens_collapsed_paused_and_every_event_has_a_link_time(tmp_path):

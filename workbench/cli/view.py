@@ -107,28 +107,33 @@ def cmd_view(ctx: Context) -> int:
     rec = viewer.new_recording(viewer.APPLICATION_IDS["session" if models is not None else "log"])
     with ctx.progress() as progress:
         progress.add_task(f"logging {len(ds)} demonstrations", total=None)
+        origins = _log_origins(a.inputs)
         with viewer.open_output(rec, **out) as sink:
             session = viewer.log_session(
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
-                samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=_log_origins(a.inputs),
-                source_dt=source_dt,
+                samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=origins, source_dt=source_dt,
             )
-            extra = _raw_beside(rec, raw_streams, a.mapping, ds) if raw_streams is not None and a.mapping else []
+            extra = (_raw_beside(rec, raw_streams, a.mapping, ds, origins.get(a.inputs[0]))
+                     if raw_streams is not None and a.mapping else [])
             sink.blueprint = viewer.default_blueprint(session, extra_tabs=extra)
     _warn(ctx, session)
     announce(ctx, out, sink, f"{len(ds)} demonstrations")
     return 0
 
 
-def _raw_beside(rec: Any, streams: Any, mapping: str, ds: Any) -> list[Any]:
-    """The raw log under a mapped flight, on the flight's clock, with what the mapping kept and dropped."""
+def _raw_beside(rec: Any, streams: Any, mapping: str, ds: Any, origin: float | None) -> list[Any]:
+    """The raw log under a mapped flight, on the flight's clock, with what the mapping kept and dropped.
+
+    ``origin``: the log's start as the session's segments reckon it (:func:`_log_origins`); else, as the session
+    does without one, the first mapped sample's time."""
     from adapters.mapping import load_mapping
     from adapters.pipeline import explain
     from adapters.rawlog import raw_log
     from workbench.viewer.rawlog import log_raw, raw_views
 
     meta = ds[0].meta
-    origin = float(meta["t0"]) - float(meta["t_start"]) if "t0" in meta and "t_start" in meta else None
+    if origin is None and "t0" in meta and "t_start" in meta:
+        origin = float(meta["t0"]) - float(meta["t_start"])
     pieces = explain(streams, load_mapping(mapping).for_format(streams.format))
     return raw_views(log_raw(rec, raw_log(streams), origin=origin, segments=pieces))
 
