@@ -237,3 +237,15 @@ def test_a_silent_live_recording_shows_the_port_it_waits_on_and_a_scene_to_wait_
     assert min(waiting["link_time"]) == 0.0  # where a saved live file opens
     for static in ("/scene/live/ground", "/scene/live/scale"):  # planar_quadrotor's plane is a side view
         assert ents[static]["static:LineStrips2D:strips"], static
+
+
+def test_the_scale_bar_follows_the_larger_extent_of_the_plane():
+    from workbench.viewer.scene import scale_bar
+
+    # a vertical descent: 2 cm across, 1.1 m down; the view shows it as wide as tall, so the bar is ~a fifth of 1.1 m
+    ends, text = scale_bar(([-0.01, 0.01], [0.1, 1.2]), "m")
+    length = float(ends[1, 0] - ends[0, 0])
+    assert 1.1 / 10 <= length <= 1.1 / 2 and text == f"{length:g} m"
+    # across and down alike: the same rule either way round
+    wide, _ = scale_bar(([0.0, 1.1], [0.0, 0.02]), "m")
+    assert float(wide[1, 0] - wide[0, 0]) == length

@@ -111,9 +111,13 @@ def nice_length(extent: float) -> float:
 
 
 def scale_bar(bounds: tuple[list[float], list[float]], unit: str) -> tuple[np.ndarray, str]:
-    """The scale bar's two screen points (bottom left of ``bounds``) and its text, e.g. ``"5 m"``."""
+    """The scale bar's two screen points (bottom left of ``bounds``) and its text, e.g. ``"5 m"``.
+
+    Its length follows the larger extent: the view keeps the plane's aspect ratio, so a flight that barely moves
+    across (a vertical descent) is shown as wide as it is tall, and a bar from the narrow extent was a speck.
+    """
     (x_lo, x_hi), (y_lo, y_hi) = bounds
-    length = nice_length(x_hi - x_lo)
+    length = nice_length(max(x_hi - x_lo, y_hi - y_lo))
     x0, y0 = x_lo + 0.04 * (x_hi - x_lo), y_hi - 0.05 * (y_hi - y_lo)  # rerun's y points down: y_hi is the bottom
     return np.array([[x0, y0], [x0 + length, y0]]), f"{length:g} {unit}".strip()
 
