@@ -208,6 +208,13 @@ def test_a_saved_live_recording_opens_collapsed_paused_and_every_event_has_a_lin
     assert saved.time_panel.play_state == "paused" and saved.time_panel.timeline == "link_time"
     watched = live_blueprint(["seg-1"], ["x", "y"], ["u1"], following=True)
     assert watched.time_panel.play_state == "following"
+    # the link's timing plots over the whole session, not ±30 s around the paused cursor at its start
+    spanned = live_blueprint(["seg-1"], ["x", "y"], ["u1"], span=(3.0, 90.0))
+    timing = [v for v in _views(spanned.root_container) if str(getattr(v, "name", "")).endswith("[ms]")]
+    assert len(timing) == 2
+    for v in timing:
+        (r,) = v.properties["TimeAxis"].view_range.as_arrow_array().to_pylist()
+        assert r["start"] < 3e9 < 90e9 < r["end"] < 100e9  # nanoseconds on the link's clock
     silent = live_blueprint([], ["x", "y"], ["u1"])  # nothing received: the first tab explains why
     assert silent.collapse_panels is True
     from workbench.live.predictor import LiveEvent
@@ -249,3 +256,10 @@ def test_the_scale_bar_follows_the_larger_extent_of_the_plane():
     # across and down alike: the same rule either way round
     wide, _ = scale_bar(([0.0, 1.1], [0.0, 0.02]), "m")
     assert float(wide[1, 0] - wide[0, 0]) == length
+
+
+def _views(container):
+    """Every view and container under a blueprint container, depth first."""
+    for c in getattr(container, "contents", None) or []:
+        yield c
+        yield from _views(c)

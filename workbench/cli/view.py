@@ -258,7 +258,7 @@ def cmd_live(ctx: Context) -> int:
         finally:
             signal.signal(signal.SIGTERM, previous)
         sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
-                                        bounds=logger.scene_bounds())
+                                        bounds=logger.scene_bounds(), span=logger.link_span)
     c50, c99 = summary.percentiles("compute")
     l50, l99 = summary.percentiles("latency")
     timing = (f"per step p50 {c50:.2f} ms, p99 {c99:.2f} ms" if summary.n_steps else "no step predicted, no timing")

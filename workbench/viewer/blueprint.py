@@ -32,7 +32,7 @@ from rerun.blueprint.components import LinkAxis
 from workbench.viewer import style
 from workbench.viewer.entities import LoggedSession, entity_part
 
-__all__ = ["session_blueprint", "time_panel"]
+__all__ = ["session_blueprint", "time_axis", "time_panel"]
 
 MAX_LEGEND = 6  # series in a plot beyond which its legend would cover the data: off
 
@@ -47,7 +47,7 @@ def _legend(n_series: int, corner: str = "LeftTop") -> rrb.PlotLegend:
     return rrb.PlotLegend(corner, visible=n_series <= MAX_LEGEND)
 
 
-def _time_axis(window: tuple[float, float] | None, *, linked: bool = True) -> rrb.TimeAxis | None:
+def time_axis(window: tuple[float, float] | None, *, linked: bool = True) -> rrb.TimeAxis | None:
     """A plot's time axis: over ``window`` where one is given, else (``linked``) linked to every other linked plot,
     so a tab's plots zoom together.
 
@@ -81,7 +81,7 @@ def _plot(name: str, contents: list[str], *, legend: rrb.PlotLegend | None = Non
     kwargs: dict[str, Any] = {}
     if y_range is not None:
         kwargs["axis_y"] = rrb.ScalarAxis(range=list(y_range))
-    axis_x = _time_axis(window, linked=linked)
+    axis_x = time_axis(window, linked=linked)
     if axis_x is not None:
         kwargs["axis_x"] = axis_x
     return rrb.TimeSeriesView(origin="/", contents=contents, name=name,
@@ -213,7 +213,7 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
     if s.modes:
         lanes = ["+ /flight/mode"] if s.clock == "log" else [f"+ /demos/{entity_part(i)}/mode" for i in s.modes]
         state_views.append(rrb.StateTimelineView(origin="/", contents=lanes, name="flight mode",
-                                                 time_view=_time_axis(s.span) if s.clock == "log" else None))
+                                                 time_view=time_axis(s.span) if s.clock == "log" else None))
     tabs.append(rrb.Grid(*state_views, *_key(s), name="states"))
     input_views: list[Any] = [
         _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/inputs/{entity_part(name)}" for i in ids],

@@ -35,7 +35,7 @@ from rerun.blueprint.components import LinkAxis
 
 from workbench.live.predictor import LinkStats, LiveEvent, LivePrediction
 from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS, style
-from workbench.viewer.blueprint import online_plots
+from workbench.viewer.blueprint import online_plots, time_axis
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import entity_part  # the replay's entity names: both layouts read alike
 from workbench.viewer.scene import scale_bar
@@ -89,6 +89,7 @@ class LiveLogger:
         self._rows: dict[str, tuple[list, list, list, list, bool]] = {}
         self._latest: LivePrediction | None = None
         self._link_t = 0.0  # the vehicle's latest time: where events without a step of their own are stamped
+        self.link_span: tuple[float, float] | None = None  # the first and last step on the link's clock
         self._at(0.0, 0.0, 0)
         rec.log("live/events", rr.TextLog("waiting for the link", level="INFO"))
         rec.log("live/status", rr.TextDocument("# Link\n\nwaiting for the first message …",
@@ -145,6 +146,8 @@ class LiveLogger:
         new = p.demo_id not in self._styled
         self._style(p.demo_id)
         self._link_t = float(p.t)
+        lo, hi = self.link_span or (self._link_t, self._link_t)
+        self.link_span = (min(lo, self._link_t), max(hi, self._link_t))
         if new:
             self.flush()  # the previous segment's rows first, so events and plots stay in order
             self._at(p.t, p.t_rel, p.k)  # the event at the segment's first step on the link timeline
@@ -334,14 +337,16 @@ def link_state(stats: LinkStats) -> str:
 
 def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_names: Sequence[str], *,
                    scene: bool = True, bounds: tuple[list[float], list[float]] | None = None,
-                   following: bool = False) -> rrb.Blueprint:
+                   following: bool = False, span: tuple[float, float] | None = None) -> rrb.Blueprint:
     """The live layout: the scene with the online input predictions beside it; states; ŵ; the link.
 
     A saved recording opens with the panels collapsed and the cursor paused at the start, as every other
     recording; ``following`` (a viewer watching the link as it happens) keeps the cursor on the newest step.
 
     ``bounds`` (x range, y range) fixes the scene's view (:meth:`LiveLogger.scene_bounds`); the viewer would
-    otherwise zoom onto the vehicle alone.
+    otherwise zoom onto the vehicle alone. ``span`` (the first and last step on the link's clock) puts the link's
+    timing plots over the whole session; without it a paused cursor at the start showed them ±30 s around it,
+    half of it before the first step.
     """
     ids = [entity_part(i) for i in list(demo_ids)[-_RECENT:]]
     linked = rrb.TimeAxis(link=LinkAxis.LinkToGlobal)
@@ -355,11 +360,12 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
                            name=f"ŵ {n} blue, GMR μ ± 1σ/3σ band", axis_x=linked, plot_legend=quiet)
         for n in input_names
     ]
+    whole = time_axis(span, linked=False) if span is not None and not following else None
     link = rrb.Horizontal(
         rrb.Vertical(rrb.TextDocumentView(origin="/live/status", name="link status"),
                      rrb.TextLogView(origin="/live/events", name="events")),
-        rrb.Vertical(rrb.TimeSeriesView(origin="/live/compute_ms", name="compute per step [ms]"),
-                     rrb.TimeSeriesView(origin="/live/latency_ms", name="message → prediction [ms]")),
+        rrb.Vertical(rrb.TimeSeriesView(origin="/live/compute_ms", name="compute per step [ms]", axis_x=whole),
+                     rrb.TimeSeriesView(origin="/live/latency_ms", name="message → prediction [ms]", axis_x=whole)),
         name="link",
     )
     first: Any = rrb.Vertical(*inputs, name="live")

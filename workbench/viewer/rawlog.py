@@ -32,6 +32,7 @@ import rerun.blueprint as rrb
 
 from adapters.rawlog import RawLog
 from workbench.viewer import style
+from workbench.viewer.blueprint import time_axis
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import entity_part
 
@@ -208,10 +209,7 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
 
 def _whole_log(span: tuple[float, float]) -> rrb.TimeAxis:
     """The x-axis over the whole log: a plot opened on a paused cursor would otherwise show ±30 s around it."""
-    lo, hi = span
-    pad = 0.01 * max(hi - lo, 1e-6)
-    return rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(seconds=lo - pad),
-                                                 end=rrb.TimeRangeBoundary.absolute(seconds=hi + pad)))
+    return time_axis(span, linked=False)
 
 
 def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
