@@ -9,6 +9,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
+import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
 import adapters
@@ -137,3 +138,28 @@ def test_fields_zero_throughout_are_hidden_by_default(tmp_path):
             shown = chunk.to_record_batch().column("SeriesLines:visible_series").to_pylist()[0]
     by_field = dict(zip(rc.fields, shown, strict=True))
     assert not any(by_field[f] for f in zero) and all(by_field[f] for f in moving)
+
+
+def test_the_lanes_span_where_the_data_is_not_a_stray_message():
+    from workbench.viewer.rawlog import LoggedRaw, bulk_span, raw_views
+
+    # a 7 s flight logged at 250 Hz, one message at 0 s and one at 1174 s (as the PX4 sample log has)
+    s = LoggedRaw("log", "x.ulg", streams=["attitude", "test_motor", "mission"], armed=True,
+                  rows={"attitude": 1750, "test_motor": 1, "mission": 1},
+                  spans={"attitude": (20.3, 27.3), "test_motor": (0.0, 0.0), "mission": (1174.0, 1174.0)},
+                  span=(0.0, 1174.0))
+    assert bulk_span(s) == (20.3, 27.3)
+    # a log whose streams all carry data spans them all
+    even = LoggedRaw("log", "x.tlog", streams=["a", "b"], rows={"a": 100, "b": 50},
+                     spans={"a": (0.0, 10.0), "b": (5.0, 30.0)}, span=(0.0, 30.0))
+    assert bulk_span(even) == (0.0, 30.0)
+    (tab,) = [t for t in raw_views(s) if getattr(t, "name", "") == "raw streams"]
+    lanes = [v for v in _views(tab) if isinstance(v, rrb.StateTimelineView)]
+    (r,) = lanes[0].properties["TimeAxis"].view_range.as_arrow_array().to_pylist()
+    assert 19e9 < r["start"] < 20.3e9 and 27.3e9 < r["end"] < 29e9  # nanoseconds
+
+
+def _views(container):
+    for c in getattr(container, "contents", None) or []:
+        yield c
+        yield from _views(c)

@@ -212,6 +212,17 @@ def _whole_log(span: tuple[float, float]) -> rrb.TimeAxis:
     return time_axis(span, linked=False)
 
 
+def bulk_span(s: LoggedRaw, share: float = 0.01) -> tuple[float, float]:
+    """Where the log's data is: the span of the streams with at least ``share`` of the busiest stream's rows.
+
+    A stray message far from the flight (a ULog's ``test_motor`` at 0 s and ``mission`` at 1174 s around a 7 s
+    flight) stretched the mode and armed lanes over 20 minutes, leaving the flight a sliver under its plots.
+    """
+    top = max(s.rows.values(), default=0)
+    spans = [s.spans[n] for n in s.streams if n in s.spans and s.rows.get(n, 0) >= share * top]
+    return (min(a for a, _ in spans), max(b for _, b in spans)) if spans else s.span
+
+
 def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
     """The raw log's tabs: streams (a plot per stream beside the mode lane and the messages), map, parameters."""
     p = f"/{s.prefix}"
@@ -220,7 +231,7 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
     lane_view = None
     if lanes:  # a few lanes tall: under the plots (a column of its own was mostly empty)
         lane_view = rrb.StateTimelineView(origin="/", contents=lanes, name="modes · armed"
-                                          + (" · segments" if s.segments else ""), time_view=_whole_log(s.span))
+                                          + (" · segments" if s.segments else ""), time_view=_whole_log(bulk_span(s)))
     messages = None
     if s.messages or s.segments:
         messages = rrb.TextLogView(origin=p, contents=[f"+ {p}/messages", f"+ {p}/segments/why"], name="messages")
