@@ -150,7 +150,8 @@ class PartFit:
     restrictions : int
         Gain entries minus free log ratios: the overidentifying restrictions of the structure test.
     critical : float
-        The test's critical value at the ratios' level (nan where there is nothing to test).
+        The test's critical value at the ratios' level, for its restrictions plus ``edges`` (nan where there is
+        nothing to test).
     explained : bool or None
         The structure test (:func:`ratio_profile.explains`); None where the part has no restrictions.
     closest : PseudoTrue or None
@@ -159,6 +160,9 @@ class PartFit:
     dof : float
         Degrees of freedom of the gain's covariance behind the test and the intervals
         (:func:`workbench.method.ratio_profile.effective_dof`).
+    edges : int
+        Ratios of the closest diagonal cost at a zero or infinite weight (:func:`ratio_profile.at_edge`): no free
+        parameters there, so each is one more restriction of the test.
     """
 
     states: tuple[str, ...]
@@ -169,6 +173,7 @@ class PartFit:
     explained: bool | None
     closest: object = None
     dof: float = float("nan")
+    edges: int = 0
 
     @property
     def tested(self) -> bool:
@@ -210,8 +215,9 @@ class PartFit:
                 text += f"; the estimated gain lies outside every diagonal cost's: {self.mismatch_words()}"
             return text
         verdict = "explains" if self.explained else "does not explain"
+        edges = f", one more per weight ratio at 0 or ∞: {self.edges}" if self.edges else ""
         text = (f"{where}: a diagonal cost {verdict} the gain (distance {self.distance:.3g}, critical value "
-                f"{self.critical:.3g}, {self.restrictions} restriction(s))")
+                f"{self.critical:.3g}, {self.restrictions} restriction(s){edges})")
         return text + (f"; {self.mismatch_words()}" if not self.explained and self.closest is not None else "")
 
 
@@ -266,9 +272,10 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     covariance's effective degrees of freedom; the intervals hold simultaneously for a part's ratios
     (:mod:`workbench.method.ratio_profile`).
 
-    Per part: with restrictions (gain entries beyond its free ratios) the structure test decides; without, nothing
-    is tested, and the part counts as not of the form only where the estimated gain is no diagonal cost's gain
-    and departs from the closest one's by more than its spread in some entry.
+    Per part: with restrictions (gain entries beyond its free ratios) the structure test decides, a ratio fitted at
+    a zero or infinite weight counting as one restriction more; without, nothing is tested, and the part counts as
+    not of the form only where the estimated gain is no diagonal cost's gain and departs from the closest one's by
+    more than its spread in some entry.
 
     Parameters
     ----------
@@ -304,14 +311,16 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
         w0 = np.r_[np.diag(start.Q), np.diag(start.R)[1:]] / start.R[0, 0]
         theta0 = np.log(np.maximum(w0, 1e-300))
         theta, d_min = ratio_profile.fit(part, theta0)
-        explained = ratio_profile.explains(part, d_min, ci)
+        explained = ratio_profile.explains(part, theta, d_min, ci)
         closest = None
         if explained is False or (explained is None and d_min > EXACT_DISTANCE):
             closest = pseudo_true(part, samples, theta0, ci)
+        edges, critical = 0, float("nan")
+        if part.restrictions:
+            edges = int(np.sum(ratio_profile.at_edge(part, theta)))
+            critical = ratio_profile.critical_value(ci, part.n_trials, part.restrictions + edges, part.nu)
         fit = PartFit(tuple(system.state_names[i] for i in s), tuple(system.input_names[k] for k in c),
-                      float(d_min), part.restrictions,
-                      ratio_profile.critical_value(ci, part.n_trials, part.restrictions, part.nu)
-                      if part.restrictions else float("nan"), explained, closest, part.nu)
+                      float(d_min), part.restrictions, critical, explained, closest, part.nu, edges)
         fits.append(fit)
         shown = theta if fit.of_form else closest.theta
         Qp, Rp = part.weights(shown)
