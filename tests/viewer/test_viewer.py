@@ -202,16 +202,16 @@ def test_blueprint_has_the_five_tabs(setup):
         assert tab in names, (tab, names)
 
 
-def test_the_first_view_names_the_color_of_each_strategy(setup):
-    # the scene's tracks are colored by strategy and no key view stands beside it: its title is the key
-    demos = setup["demos"]
-    scene = next(n for n in _blueprint_names(setup["path"]) if n.startswith("plane of flight"))
-    for label in ("CS1", "CS2"):
-        d = demos.by_label(label)[0]
-        (rgba,) = np.ravel(setup["entities"][f"/demos/{d.id}/states/{demos.state_names[0]}"]
-                           ["static:SeriesLines:colors"][0])
-        rgb = [(int(rgba) >> shift) & 0xFF for shift in (24, 16, 8)]
-        assert f"{label} {style.color_name(rgb)}" in scene, scene
+def test_the_scene_carries_a_key_of_the_strategies_colors(setup):
+    # the scene's tracks are colored by strategy and no key view stands beside it: the scene draws its own key
+    demos, ents = setup["demos"], setup["entities"]
+    key = ents["/scene/key"]
+    names = list(key["static:Points2D:labels"][0])
+    assert names == ["CS1", "CS2"]
+    for name, packed in zip(names, np.ravel(key["static:Points2D:colors"][0]), strict=True):
+        d = demos.by_label(name)[0]
+        (line,) = np.ravel(ents[f"/demos/{d.id}/states/{demos.state_names[0]}"]["static:SeriesLines:colors"][0])
+        assert packed == line  # the key's color is the one its tracks and plots are drawn in
 
 
 def test_measurements_fallback_logs_two_lines(tmp_path, setup, monkeypatch):

@@ -122,8 +122,6 @@ def _scene_name(s: LoggedSession, across: str, up: str) -> str:
     bad = [m for m, v in s.verdicts.items() if not v.fits]
     if bad:  # a wrong model is seen in the first second: in the first view's title
         name = f"⚠ MODEL {', '.join(bad)} DOES NOT FIT THESE DATA (see objective) — " + name
-    if 1 < len(s.label_colors) <= 4:  # the tracks' colors: the first view has no key view beside it
-        name += " — " + ", ".join(f"{label} {style.color_name(c)}" for label, c in s.label_colors.items())
     if s.methods:
         words = {"proposed": "green", "ioc_only": "red", "gmr_only": "purple", "persistence": "brown"}
         name += " — " + ", ".join(f"{style.method_title(m)} {words[m]}" if m in words else style.method_title(m)

@@ -239,6 +239,15 @@ class SessionLogger:
         ends, text = scale_bar(self.session.bounds, self.session.units.get(self.session.state_names[p.across], ""))
         self._static("scene/scale", rr.LineStrips2D([ends], colors=[(230, 230, 230)], radii=UI(2.0), labels=[text],
                                                     show_labels=True, draw_order=order["scale"]))
+        labels = self.session.label_colors
+        if 1 < len(labels) <= 4:
+            # the tracks' key, in a row at the scale bar's height in the bottom right corner: the first view has no
+            # key view beside it, and its title had no room left for one
+            names = list(labels)
+            x0, y, step = x_hi - 0.04 * (x_hi - x_lo), y_hi - 0.05 * (y_hi - y_lo), 0.08 * (x_hi - x_lo)
+            self._static("scene/key", rr.Points2D([[x0 - k * step, y] for k in reversed(range(len(names)))],
+                                                  colors=[labels[n] for n in names], radii=UI(5.0), labels=names,
+                                                  show_labels=True, draw_order=order["scale"]))
         if targets:
             from workbench.sim.landing import PAD_HALF_WIDTH
 
