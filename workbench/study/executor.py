@@ -525,26 +525,31 @@ class ProcessExecutor(_Workers):
 
 @contextmanager
 def _spawning_without_interrupts() -> Iterator[None]:
-    """Start worker processes with Ctrl-C ignored until their initializer (:func:`_quiet_interrupts`) runs.
+    """Start worker processes with Ctrl-C blocked until their initializer (:func:`_quiet_interrupts`) unblocks it.
 
-    An ignored signal stays ignored across ``exec`` and Python keeps it so, so a Ctrl-C during a worker's
-    interpreter start-up cannot print a traceback from ``site``; the command itself still gets it. Only the main
-    thread may change a signal's handler: elsewhere the workers start as they are.
+    A process inherits its parent thread's signal mask across ``fork`` and ``exec``, so a Ctrl-C during a worker's
+    interpreter start-up stays pending instead of printing a traceback from ``site``, and ends the worker quietly
+    once its initializer runs. Blocked, not ignored: an ignored Ctrl-C was lost to the command too, which then went
+    on (a hang) or failed on its workers' deaths (``BrokenProcessPool``), as the attack round found under load; a
+    blocked one reaches the command when its mask is restored, or at once through another of its threads.
     """
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _quiet_interrupts() -> None:
     """In a worker process: Ctrl-C (the terminal sends it to the whole process group) ends the worker at once and
-    silently; the command that started it reports the interrupt, in one line, and stops the pool."""
+    silently; the command that started it reports the interrupt, in one line, and stops the pool. A Ctrl-C that
+    came during the worker's start-up (blocked, :func:`_spawning_without_interrupts`) is delivered here."""
     signal.signal(signal.SIGINT, _exit_interrupted)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _exit_interrupted(signum: int, frame: Any) -> None:
