@@ -100,7 +100,7 @@ def bench_csv(tmp: Path) -> list[dict]:
                             "pa": lambda p=path: pd.read_csv(p, engine="pyarrow")}, 7)
         rows.append(_target(_row("CSV", case, "warm", warm["ours"], warm["c"], "pandas.read_csv"), 0.8, "≥ 0.8×"))
         rows.append(_row("CSV", case, "warm", warm["ours"], warm["pa"], "pandas.read_csv(engine='pyarrow')"))
-        cold = first_calls({"ours": ("from adapters import csv", "csv.read(sys.argv[1])"),
+        cold = first_calls({"ours": ("from adapters.formats import csv", "csv.read(sys.argv[1])"),
                             "peer": ("import pandas as pd", "pd.read_csv(sys.argv[1])")}, 3, str(path))
         rows.append(_target(_row("CSV", case, "cold", cold["ours"], cold["peer"], "pandas.read_csv"), 0.8, "≥ 0.8×"))
         proc = processes({"ours": "import sys, adapters; adapters.read_streams(sys.argv[1])",
@@ -135,7 +135,7 @@ def bench_ulog() -> list[dict]:
         row = _row("ULog", case, "warm", warm["ours"], warm["peer"], "pyulog.ULog")
         rows.append(_target(row, 1.0, "≥ 1×") if topics else row)
         arg = repr(topics)
-        cold = first_calls({"ours": ("from adapters import ulog", f"ulog.read(sys.argv[1], {arg})"),
+        cold = first_calls({"ours": ("from adapters.formats import ulog", f"ulog.read(sys.argv[1], {arg})"),
                             "peer": ("from pyulog import ULog", f"ULog(sys.argv[1], {arg})")}, 3, str(path))
         row = _row("ULog", case, "cold", cold["ours"], cold["peer"], "pyulog.ULog")
         rows.append(_target(row, 1.0, "≥ 1×") if topics else row)
@@ -248,7 +248,7 @@ def bench_tlog(tmp: Path) -> list[dict]:
         warm = interleaved({"ours": lambda p=path: read_tlog(p), "peer": lambda p=path: _pymavlink(p)}, reps,
                            warmup=size == "small")
         rows.append(_row("tlog", case, "warm", warm["ours"], warm["peer"], "pymavlink recv_match"))
-        cold = first_calls({"ours": ("from adapters import tlog", "tlog.read_tlog(sys.argv[1])"),
+        cold = first_calls({"ours": ("from adapters.formats import tlog", "tlog.read_tlog(sys.argv[1])"),
                             "peer": (_PM_IMPORTS, "pymavlink_read(sys.argv[1])")}, 3 if size == "small" else 1,
                            str(path))
         row = _row("tlog", case, "cold (first call in a process)", cold["ours"], cold["peer"], "pymavlink recv_match")
@@ -275,7 +275,7 @@ def bench_tlog(tmp: Path) -> list[dict]:
             rows.append(_target(row, 10.0, "≥ 10×"))
     # Peak memory of one read of the large log, above the baseline after the imports.
     mb = large.stat().st_size / 2**20
-    ours = peak_memory("from adapters import tlog\nfrom adapters.formats.mavlink_dialect import load_dialect",
+    ours = peak_memory("from adapters.formats import tlog\nfrom adapters.formats.mavlink_dialect import load_dialect",
                        "tlog.read_tlog(sys.argv[1])", str(large), warm="load_dialect()")
     peer = peak_memory(_PM_IMPORTS, "pymavlink_read(sys.argv[1], keep=True)", str(large))
     for name, m in (("ours", ours), ("pymavlink, keeping the messages", peer)):
