@@ -113,7 +113,7 @@ def cmd_view(ctx: Context) -> int:
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
                 samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=origins, source_dt=source_dt,
             )
-            extra = (_raw_beside(rec, raw_streams, a.mapping, ds, origins.get(a.inputs[0]))
+            extra = (_raw_beside(rec, raw_streams, a.mapping, ds, origins.get(str(Path(a.inputs[0]))))
                      if raw_streams is not None and a.mapping else [])
             sink.blueprint = viewer.default_blueprint(session, extra_tabs=extra)
     _warn(ctx, session)
