@@ -457,6 +457,20 @@ def test_live_cli_predictions_equal_the_offline_replay(fitted, live_run):
     assert re.search(r"(\d+) steps in (\d+) segment", live_run["stdout"])
 
 
+def test_live_timing_lines_break_between_segments(live_run):
+    # one NaN row just before each segment's first step after the first: no line drawn across the pause
+    ents = read_rrd(live_run["rrd"])
+    firsts = sorted(float(np.min(np.asarray(c["link_time"], dtype=float)))
+                    for p, c in ents.items() if re.fullmatch(r"/demos/[^/]+/states/x", p))
+    assert len(firsts) >= 2
+    for path in ("/live/compute_ms", "/live/latency_ms"):
+        t = np.asarray(ents[path]["link_time"], dtype=float)
+        v = np.asarray(ents[path]["Scalars:scalars"], dtype=float)[:, 0]
+        gaps = np.sort(t[np.isnan(v)])
+        assert len(gaps) == len(firsts) - 1
+        np.testing.assert_allclose(gaps, np.asarray(firsts[1:]) - 1e-6, atol=1e-7)
+
+
 def test_live_cli_predictions_equal_the_replay_commands_recording(fitted, live_run, tmp_path):
     """The same steps as ``workbench replay LOG --model M`` streams, read back from both recordings."""
     ds, _, model_path = fitted

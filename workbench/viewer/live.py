@@ -150,6 +150,11 @@ class LiveLogger:
         self.link_span = (min(lo, self._link_t), max(hi, self._link_t))
         if new:
             self.flush()  # the previous segment's rows first, so events and plots stay in order
+            if self.n_logged:
+                # a pause between segments: the link's timing lines end there (a NaN row), not bridge it as data
+                gap = (p.t - 1e-6, p.t_rel, p.k)
+                self._row("live/compute_ms", gap, float("nan"))
+                self._row("live/latency_ms", gap, float("nan"))
             self._at(p.t, p.t_rel, p.k)  # the event at the segment's first step on the link timeline
             label = p.meta.get("label")
             self.event(LiveEvent("segment", p.t, f"segment {p.demo_id} started" + (f" ({label})" if label else "")))
