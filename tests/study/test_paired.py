@@ -131,3 +131,22 @@ def test_mixed_model_p_values_hold_their_level_with_few_trials():
     rate = float(np.mean(np.array(p) < 0.05))
     # at a true 5 %, 300 draws exceed 8 % with probability < 1 %
     assert rate <= 0.08, rate
+
+
+def test_strategy_degrees_of_freedom_where_each_subject_flies_one_strategy():
+    # the per-subject design: strategies vary between subjects, so they are tested against the subjects' spread
+    from workbench.study.stats import mixed_effects
+
+    rng = np.random.default_rng(13)
+    for per_subject, subjects in ((2, 6), (3, 4)):
+        rows = []
+        for s in range(subjects):
+            label = "CS1" if s < subjects // 2 else "CS2"
+            for i in range(per_subject):
+                level = rng.normal(0.0, 0.5)
+                for method in ("proposed", "b1"):
+                    rows.append((f"s{s}-t{i}", label, f"s{s}", method, float(np.exp(level + rng.normal(0, 0.2)))))
+        m = mixed_effects(pd.DataFrame(rows, columns=["trial", "label", "subject", "method", "value"]))
+        by_kind = {e.term.split()[0]: e.df for e in m.effects}
+        assert by_kind["strategy"] == subjects - 2, (per_subject, subjects, by_kind)
+        assert by_kind["method"] == subjects * per_subject - 1

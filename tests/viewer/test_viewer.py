@@ -563,3 +563,23 @@ def test_a_legend_goes_to_the_corner_without_data():
     assert session.quiet_corner([(t, rising)], (0.0, 3.0), (0.0, 1.0)) in ("LeftTop", "RightBottom")
     high = np.full_like(t, 0.95)
     assert session.quiet_corner([(t, high)], (0.0, 3.0), (0.0, 1.0)) == "LeftBottom"
+
+
+def test_the_scene_key_stays_clear_of_the_scale_bar_in_a_narrow_scene(tmp_path):
+    # a vertical descent: the view is shown as wide as it is tall, the bar follows the larger extent, and the key's
+    # points must neither sit on the bar nor on each other
+    from dataclasses import replace
+
+    demos = simulate_landings("CS1", 2, seed=5) + simulate_landings("CS2", 2, seed=5)
+    i_x = demos.state_names.index("x")
+    narrow = [replace(d, x=d.x * np.where(np.arange(d.x.shape[1]) == i_x, 0.01, 1.0)) for d in demos]
+    demos = demos.with_demos(narrow)
+    path = tmp_path / "narrow.rrd"
+    viewer.record_session(path, demos)
+    ents = read_rrd(path)
+    key = np.asarray(ents["/scene/key"]["static:Points2D:positions"][0], dtype=float).reshape(-1, 2)
+    bar = np.asarray(ents["/scene/scale"]["static:LineStrips2D:strips"][0][0], dtype=float).reshape(-1, 2)
+    length = bar[1, 0] - bar[0, 0]
+    height = abs(bar[0, 1] - key[0, 1])
+    assert height > 0.05 * length  # above the bar, not on it
+    assert np.min(np.diff(key[:, 0])) > 0.2 * length  # apart from each other, on the bar's scale

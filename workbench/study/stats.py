@@ -306,15 +306,21 @@ def _between_within_dof(d: pd.DataFrame, by_subject: bool) -> dict[str, float]:
     p-values and intervals far too small; a t reference with the degrees of freedom left at the term's level is
     the standard small-sample correction short of Kenward-Roger. Methods vary within trials:
     ``N_obs − rank[trial dummies, method dummies]``. Strategies vary between trials, within subjects where
-    there are several: ``N_trials − rank[subject (or intercept) dummies, strategy dummies]``.
+    there are several and subjects fly more than one: ``N_trials − rank[subject (or intercept) dummies, strategy
+    dummies]``; where each subject flies one strategy they vary between subjects: ``N_subjects − N_strategies``.
     """
     def rank(*columns: pd.Series) -> int:
         return int(np.linalg.matrix_rank(pd.get_dummies(pd.concat(columns, axis=1).astype(str)).to_numpy(float)))
 
     within = len(d) - rank(d["trial"], d["method"])
     trials = d.drop_duplicates("trial")
-    unit = trials["subject"].astype(str) if by_subject else pd.Series("all", index=trials.index)
-    between = len(trials) - rank(unit, trials["label"])
+    if by_subject and rank(trials["subject"], trials["label"]) == trials["subject"].nunique():
+        # each subject flies one strategy: strategies vary between subjects, against the subjects' spread
+        units = trials.drop_duplicates("subject")
+        between = len(units) - rank(pd.Series("all", index=units.index), units["label"])
+    else:
+        unit = trials["subject"].astype(str) if by_subject else pd.Series("all", index=trials.index)
+        between = len(trials) - rank(unit, trials["label"])
     return {"method": float(max(within, 1)), "strategy": float(max(between, 1))}
 
 

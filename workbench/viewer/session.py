@@ -241,11 +241,13 @@ class SessionLogger:
                                                     show_labels=True, draw_order=order["scale"]))
         labels = self.session.label_colors
         if 1 < len(labels) <= 4:
-            # the tracks' key, in a row at the scale bar's height in the bottom right corner: the first view has no
-            # key view beside it, and its title had no room left for one
+            # the tracks' key, in a row just above the scale bar: the first view has no key view beside it, and its
+            # title had no room left for one. Spaced by the larger extent, as the bar is long: the view keeps the
+            # plane's aspect, so a narrow scene is shown as wide as it is tall
             names = list(labels)
-            x0, y, step = x_hi - 0.04 * (x_hi - x_lo), y_hi - 0.05 * (y_hi - y_lo), 0.08 * (x_hi - x_lo)
-            self._static("scene/key", rr.Points2D([[x0 - k * step, y] for k in reversed(range(len(names)))],
+            (bx, by), _ = ends
+            step, y = 0.1 * max(x_hi - x_lo, y_hi - y_lo), by - 0.07 * (y_hi - y_lo)
+            self._static("scene/key", rr.Points2D([[bx + k * step, y] for k in range(len(names))],
                                                   colors=[labels[n] for n in names], radii=UI(5.0), labels=names,
                                                   show_labels=True, draw_order=order["scale"]))
         if targets:
