@@ -80,7 +80,7 @@ from workbench.errors import ModelError
 from workbench.method.structured import gain_jacobian, memo_lqr
 
 __all__ = ["LOG_BOUND", "PartDistance", "ratio_names", "critical_value", "effective_dof", "fit", "at_edge",
-           "tested_restrictions", "explains", "interval", "factor_interval"]
+           "tested_restrictions", "StructureTest", "structure_test", "explains", "interval", "factor_interval"]
 
 # Log ratios are searched within ±LOG_BOUND: a ratio at -LOG_BOUND (≈ 1e-13) is a zero weight, and the DAREs
 # stay well posed inside.
@@ -419,6 +419,26 @@ def tested_restrictions(part: PartDistance, theta: np.ndarray) -> int:
     return part.restrictions + int(np.sum(at_edge(part, theta)))
 
 
+@dataclass(frozen=True)
+class StructureTest:
+    """The structure test of a part at ``θ̂`` (:func:`structure_test`): its verdict (None: nothing to test), the
+    critical value it was judged against (nan: nothing to test) and the ratios at an edge counted in it."""
+
+    explained: bool | None
+    critical: float
+    edges: int
+
+
+def structure_test(part: PartDistance, theta: np.ndarray, d_min: float, ci: float) -> StructureTest:
+    """:func:`explains` with the critical value and the edges it used, computed once for the verdict and the
+    report."""
+    if part.restrictions <= 0:
+        return StructureTest(None, float("nan"), 0)
+    q = tested_restrictions(part, theta)
+    critical = critical_value(ci, part.n_trials, q, part.nu)
+    return StructureTest(bool(d_min <= critical), critical, q - part.restrictions)
+
+
 def explains(part: PartDistance, theta: np.ndarray, d_min: float, ci: float) -> bool | None:
     """Whether a diagonal cost explains the part's gain: ``D(θ̂)`` within the critical value of its
     overidentifying restrictions, plus one per ratio of ``θ̂`` at an edge (:func:`tested_restrictions`); None where
@@ -434,9 +454,7 @@ def explains(part: PartDistance, theta: np.ndarray, d_min: float, ci: float) -> 
     diagonal cost, and the ratios of the closest one describe no objective the operator could have had
     (:mod:`workbench.method.pseudo_true` says how far).
     """
-    if part.restrictions <= 0:
-        return None
-    return bool(d_min <= critical_value(ci, part.n_trials, tested_restrictions(part, theta), part.nu))
+    return structure_test(part, theta, d_min, ci).explained
 
 
 def interval(part: PartDistance, theta_hat: np.ndarray, d_min: float, j: int, ci: float) -> tuple[float, float]:

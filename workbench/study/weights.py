@@ -311,16 +311,12 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
         w0 = np.r_[np.diag(start.Q), np.diag(start.R)[1:]] / start.R[0, 0]
         theta0 = np.log(np.maximum(w0, 1e-300))
         theta, d_min = ratio_profile.fit(part, theta0)
-        explained = ratio_profile.explains(part, theta, d_min, ci)
+        test = ratio_profile.structure_test(part, theta, d_min, ci)
         closest = None
-        if explained is False or (explained is None and d_min > EXACT_DISTANCE):
+        if test.explained is False or (test.explained is None and d_min > EXACT_DISTANCE):
             closest = pseudo_true(part, samples, theta0, ci)
-        edges, critical = 0, float("nan")
-        if part.restrictions:
-            edges = int(np.sum(ratio_profile.at_edge(part, theta)))
-            critical = ratio_profile.critical_value(ci, part.n_trials, part.restrictions + edges, part.nu)
         fit = PartFit(tuple(system.state_names[i] for i in s), tuple(system.input_names[k] for k in c),
-                      float(d_min), part.restrictions, critical, explained, closest, part.nu, edges)
+                      float(d_min), part.restrictions, test.critical, test.explained, closest, part.nu, test.edges)
         fits.append(fit)
         shown = theta if fit.of_form else closest.theta
         Qp, Rp = part.weights(shown)
