@@ -75,9 +75,9 @@ def _vehicle(streams: Streams) -> tuple[str, str | None]:
         version = info.get("ver_sw_branch") or info.get("ver_sw_release") or ""
         table = "px4_nav_state" if name.upper().startswith("PX4") or "vehicle_status" in streams.frames else None
         return f"{name} {version}".strip(), table
-    msg = streams.frames.get("MSG")
-    if msg is not None and "Message" in msg.columns:
-        for text in msg["Message"].astype(str):
+    msg = streams.columns("MSG") if "MSG" in streams else {}
+    if "Message" in msg:
+        for text in map(str, msg["Message"]):
             low = text.lower()
             if low.startswith(("ardu", "apm:")):
                 for word, kind in _BIN_FIRMWARE:
@@ -152,7 +152,7 @@ def _channel_toml(ch: Channel) -> str:
 
 
 def _period(streams: Streams, stream: str) -> float:
-    t = streams.frames[stream]["t"].to_numpy(dtype=np.float64)
+    t = np.asarray(streams.columns(stream)["t"], dtype=np.float64)
     d = np.diff(np.unique(t[np.isfinite(t)]))
     return float(np.median(d)) if d.size else 1.0
 
@@ -212,7 +212,7 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
     ]
     clock = template.clock
     if clock.field is not None:
-        if all(clock.field in streams.frames[s].columns for s in streams_used):
+        if all(clock.field in streams.columns(s) for s in streams_used):
             lines.append(f"clock = {_toml_value({'field': clock.field, 'scale': clock.scale})}")
         else:
             lines.append(f"# clock: not every chosen stream has {clock.field!r}; the log's own clock is used")

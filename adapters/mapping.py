@@ -58,10 +58,12 @@ import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 from adapters.modes import MODE_TABLES, mode_name, mode_number
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source

@@ -187,8 +187,8 @@ def log_modes(streams: Streams) -> tuple[list[str], str | None]:
     mode table that named them (``None`` when the log says its modes in no known way)."""
     modes, _, vehicle = _modes(streams)
     table = None
-    hb = streams.frames.get("HEARTBEAT")
-    if hb is not None and len(hb) and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb.columns):
+    hb = streams.columns("HEARTBEAT") if "HEARTBEAT" in streams else {}
+    if len(hb.get("t", ())) and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb):
         table = _heartbeat_rows(hb)[1]
     elif vehicle:
         table = "px4_nav_state"

@@ -42,6 +42,22 @@ def test_reading_and_inspecting_a_log_imports_no_pandas(path):
     assert out.stdout.strip().splitlines()[-1] == "False", f"reading {path.name} imported pandas"
 
 
+@pytest.mark.parametrize("path", LOGS, ids=[p.name for p in LOGS])
+def test_the_inspect_command_imports_no_pandas(path):
+    """What a user types: ``workbench inspect LOG`` (it also tells a log from a dataset folder, without pandas)."""
+    if not path.exists():
+        pytest.skip(f"{path} is not on this machine")
+    probe = ("import contextlib, io, sys\n"
+             "from workbench.cli import main\n"
+             "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+             "    rc = main(['inspect', sys.argv[1]])\n"
+             "assert rc == 0 and 'messages' in out.getvalue(), (rc, out.getvalue())\n"
+             "print('pandas' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", probe, str(path)], capture_output=True, text=True, cwd=REPO)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "False", f"workbench inspect {path.name} imported pandas"
+
+
 @pytest.mark.parametrize("path", [p for p in LOGS if p.suffix != ".ulg"], ids=lambda p: p.name)
 def test_the_dataframe_view_holds_the_numpy_columns(path):
     if not path.exists():

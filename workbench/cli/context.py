@@ -104,9 +104,13 @@ def existing_path(path: str | os.PathLike, what: str = "file") -> Path:
 
 
 def is_demo_file(path: Path) -> bool:
+    if path.suffix.lower() in (".parquet", ".pq"):
+        return True
+    if not path.is_dir():
+        return False  # a log: telling so must not import the dataset module, and pandas behind it (0.25 s)
     from workbench.data.dataset import is_dataset
 
-    return path.suffix.lower() in (".parquet", ".pq") or is_dataset(path)
+    return is_dataset(path)
 
 
 def load_one(path: Path, mapping: str | None, format: str | None = None) -> Any:
