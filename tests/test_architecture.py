@@ -19,7 +19,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 # floor -> the prefixes on it; a module may import its own floor and the floors below, never above
 FLOORS: dict[int, tuple[str, ...]] = {
-    0: ("workbench.errors", "workbench.atomic", "workbench.frozen", "workbench.threads", "workbench.exports"),
+    0: ("workbench.errors", "workbench.atomic", "workbench.frozen", "workbench.threads", "workbench.exports",
+        "workbench.interrupts"),
     1: ("workbench.data",),
     2: ("workbench.plant", "workbench.method", "workbench.sim", "adapters"),
     3: ("workbench.models",),

@@ -367,6 +367,10 @@ def attack_study_interrupt(rng: random.Random, base: Path, demos: Path) -> str |
         os.killpg(proc.pid, signal.SIGKILL)
         return "a worker outlived the interrupted command"
     if "Traceback" in err or proc.returncode not in (0, 130):
+        keep = os.environ.get("WB_ATTACK_KEEP")  # a folder: the whole stderr of each failure, to read the trace
+        if keep:
+            Path(keep).mkdir(parents=True, exist_ok=True)
+            (Path(keep) / f"study-{time.time_ns()}.txt").write_text(err)
         raise RuntimeError(f"exit {proc.returncode}: {err.strip()[-200:]}")
     left = {p.name for p in Path(tempfile.gettempdir()).glob("workbench-staging-*")} - tmp_before
     if left:

@@ -92,3 +92,52 @@ def test_a_flush_that_ends_puts_the_whole_file_in_place(tmp_path):
     with open_output(Done(), save=target):
         pass
     assert target.read_bytes() == b"first half, second half"
+
+
+# A finaliser that receives Ctrl-C: CPython runs the handler inside it and drops the KeyboardInterrupt ("Exception
+# ignored in …"). The attack round met it in one of four interrupted studies (a WeakSet's callback): the command
+# then went on and ended in its workers' deaths (BrokenProcessPool) with a traceback instead of ``interrupted``.
+_DROPPER = (
+    "import os, signal\n"
+    "class Dropper:\n"
+    "    def __del__(self):\n"
+    "        os.kill(os.getpid(), signal.SIGINT)\n"
+    "        for _ in range(10_000):\n"
+    "            pass  # the handler runs here, inside the finaliser\n"
+)
+
+
+def test_an_interrupt_a_finaliser_swallowed_still_ends_the_command_in_one_line():
+    code = _DROPPER + (
+        "import sys\n"
+        "from workbench.cli import app\n"
+        "def command(args):  # stands in for a command's work, inside the command line's error handling\n"
+        "    Dropper()  # finalised at once\n"
+        "    raise RuntimeError('a worker process died')  # what the Ctrl-C did to the workers\n"
+        "app.Context = command\n"
+        "sys.argv = ['workbench', 'inspect', 'x.tlog']\n"
+        "raise SystemExit(app.main())\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=60)
+    assert result.returncode == 130 and result.stderr.splitlines() == ["interrupted"], result.stderr
+
+
+def test_tasks_stop_after_an_interrupt_a_finaliser_swallowed():
+    code = _DROPPER + (
+        "from workbench import interrupts\n"
+        "from workbench.study.executor import SerialExecutor\n"
+        "interrupts.install()\n"
+        "ran = []\n"
+        "def task(i):\n"
+        "    ran.append(i)\n"
+        "    if i == 1:\n"
+        "        Dropper()\n"
+        "    return i\n"
+        "try:\n"
+        "    SerialExecutor().map(task, range(5))\n"
+        "except KeyboardInterrupt:\n"
+        "    print('stopped after', ran)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=60)
+    assert result.stdout.strip() == "stopped after [0, 1]", (result.stdout, result.stderr)
+    assert "Exception ignored" not in result.stderr and "Traceback" not in result.stderr, result.stderr

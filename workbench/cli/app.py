@@ -11,6 +11,7 @@ import traceback
 import warnings
 from collections.abc import Sequence
 
+from workbench import interrupts
 from workbench.cli.context import EXIT_ERROR, EXIT_INTERNAL, Context, one_line
 from workbench.cli.parser import build_parser
 from workbench.errors import WorkbenchError
@@ -76,6 +77,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     :func:`_hold_interrupts_until_exit`). Tests pass ``argv`` and keep their own SIGINT handling.
     """
     entry = argv is None
+    if entry:
+        interrupts.install()  # a Ctrl-C swallowed by a finaliser is still this command's interrupt
     try:
         return _run(argv)
     except KeyboardInterrupt:
@@ -106,6 +109,8 @@ def _run(argv: Sequence[str] | None) -> int:
     except BrokenPipeError:
         return EXIT_ERROR
     except Exception as exc:
+        if interrupts.interrupted():  # the failure followed a Ctrl-C (workers it ended, say): say interrupted
+            raise KeyboardInterrupt from None
         if debug:
             traceback.print_exc()
         tidy = ctx.stdio.tidy if ctx is not None else str  # <stdin>, not the temporary file's name

@@ -49,6 +49,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from workbench import interrupts
 from workbench.data.dataset import DataRef, write_dataset
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
@@ -241,6 +242,7 @@ class SerialExecutor:
         with _controller().limit(limits=1):
             for i, item in enumerate(items):
                 out.append(fn(item))
+                interrupts.check()  # a Ctrl-C a finaliser swallowed during the task stops the next one
                 if progress is not None:
                     progress(i + 1, len(items))
         return out
@@ -259,6 +261,7 @@ class SerialExecutor:
                     out.append(Outcome(names[i], fn(item)))
                 except Exception as exc:  # contained: the caller reports it with the task's key
                     out.append(Outcome(names[i], error=_describe(exc)))
+                interrupts.check()  # the task's failure may be the interrupt's doing: report the interrupt
                 if progress is not None:
                     progress(i + 1, len(items))
         return out
@@ -422,6 +425,7 @@ class DaskExecutor(_Workers):
         try:
             # results come in batches as they finish (one round trip per batch, not per task)
             for fut, result in as_completed(futures, with_results=True, raise_errors=False):
+                interrupts.check()
                 i = position[fut.key]
                 if fut.status != "finished":  # retries used up, every worker that tried it died, or cancelled
                     if isinstance(result, tuple) and len(result) == 3:  # dask gives (type, exception, traceback)
@@ -508,6 +512,9 @@ class ProcessExecutor(_Workers):
         try:
             while pending:
                 finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                # Ctrl-C reaches the workers too: their deaths (BrokenProcessPool) are the interrupt, not a failure,
+                # also when the KeyboardInterrupt itself was swallowed (workbench.interrupts)
+                interrupts.check()
                 for fut in sorted(finished, key=position.__getitem__):
                     i = position[fut]
                     exc = fut.exception()  # the worker died (BrokenProcessPool) or the task raised
