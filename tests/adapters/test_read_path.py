@@ -28,34 +28,34 @@ LOGS = [
 ]
 
 
-@pytest.mark.parametrize("path", LOGS, ids=[p.name for p in LOGS])
-def test_reading_and_inspecting_a_log_imports_no_pandas(path):
+def _imports_pandas(probe: str, path: Path) -> bool:
+    """Whether ``probe`` (run in a fresh interpreter with the log's path as its argument) imported pandas."""
     if not path.exists():
         pytest.skip(f"{path} is not on this machine")
+    out = subprocess.run([sys.executable, "-c", probe + "\nprint('pandas' in sys.modules)", str(path)],
+                         capture_output=True, text=True, cwd=REPO)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip().splitlines()[-1] == "True"
+
+
+@pytest.mark.parametrize("path", LOGS, ids=[p.name for p in LOGS])
+def test_reading_and_inspecting_a_log_imports_no_pandas(path):
     probe = ("import sys, adapters\n"
              "streams = adapters.read(sys.argv[1])\n"
              "summary = adapters.inspect(sys.argv[1])\n"
-             "assert len(streams) and summary.streams\n"
-             "print('pandas' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", probe, str(path)], capture_output=True, text=True, cwd=REPO)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip().splitlines()[-1] == "False", f"reading {path.name} imported pandas"
+             "assert len(streams) and summary.streams")
+    assert not _imports_pandas(probe, path), f"reading {path.name} imported pandas"
 
 
 @pytest.mark.parametrize("path", LOGS, ids=[p.name for p in LOGS])
 def test_the_inspect_command_imports_no_pandas(path):
     """What a user types: ``workbench inspect LOG`` (it also tells a log from a dataset folder, without pandas)."""
-    if not path.exists():
-        pytest.skip(f"{path} is not on this machine")
     probe = ("import contextlib, io, sys\n"
              "from workbench.cli import main\n"
              "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
              "    rc = main(['inspect', sys.argv[1]])\n"
-             "assert rc == 0 and 'messages' in out.getvalue(), (rc, out.getvalue())\n"
-             "print('pandas' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", probe, str(path)], capture_output=True, text=True, cwd=REPO)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip().splitlines()[-1] == "False", f"workbench inspect {path.name} imported pandas"
+             "assert rc == 0 and 'messages' in out.getvalue(), (rc, out.getvalue())")
+    assert not _imports_pandas(probe, path), f"workbench inspect {path.name} imported pandas"
 
 
 @pytest.mark.parametrize("path", [p for p in LOGS if p.suffix != ".ulg"], ids=lambda p: p.name)
