@@ -334,11 +334,14 @@ def attack_mcap(rng: random.Random, base: Path, data: bytes) -> str | None:
 
 
 # -- a study on worker processes, interrupted ------------------------------------------------------------------------
+# As the console script runs it: main() without arguments is the whole process (its own Ctrl-C handling),
+# main(argv) is a call from a program that keeps its own (tests).
 STUDY_CODE = """
 import sys
 from workbench.cli import main
-sys.exit(main(["report", sys.argv[1], "-o", sys.argv[2], "--bootstrap", "8", "--samples", "4",
-               "--efficiency", "2", "--n-components", "2"]))
+sys.argv = ["workbench", "report", sys.argv[1], "-o", sys.argv[2], "--bootstrap", "8", "--samples", "4",
+            "--efficiency", "2", "--n-components", "2"]
+sys.exit(main())
 """
 
 
