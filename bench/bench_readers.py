@@ -436,8 +436,9 @@ def run() -> list[dict]:
 if __name__ == "__main__":
     from harness import markdown_table
 
-    if sys.argv[1:] == ["dataflash"]:  # this section alone: python bench/bench_readers.py dataflash
+    sections = {"dataflash": bench_dataflash, "tlog": bench_tlog}
+    if sys.argv[1:2] and sys.argv[1] in sections:  # one section alone: python bench/bench_readers.py tlog
         with tempfile.TemporaryDirectory(prefix="bench_readers_") as tmp:
-            print(markdown_table(bench_dataflash(Path(tmp))))
+            print(markdown_table(sections[sys.argv[1]](Path(tmp))))
     else:
         print(markdown_table(run()))
