@@ -188,7 +188,7 @@ def log_modes(streams: Streams) -> tuple[list[str], str | None]:
     modes, _, vehicle = _modes(streams)
     table = None
     hb = streams.columns("HEARTBEAT") if "HEARTBEAT" in streams else {}
-    if len(hb.get("t", ())) and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb):
+    if hb and streams.n_rows("HEARTBEAT") and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb):
         table = _heartbeat_rows(hb)[1]
     elif vehicle:
         table = "px4_nav_state"

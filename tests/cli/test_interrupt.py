@@ -107,19 +107,47 @@ _DROPPER = (
 )
 
 
-def test_an_interrupt_a_finaliser_swallowed_still_ends_the_command_in_one_line():
+@pytest.mark.parametrize("ending", [
+    "raise RuntimeError('a worker process died')",  # what the Ctrl-C did to the workers
+    "raise BrokenPipeError()",  # what it did to the reader of the output pipe
+    "return 0",  # nothing: the command ran to its end
+], ids=["fails", "broken pipe", "completes"])
+def test_an_interrupt_a_finaliser_swallowed_still_ends_the_command_in_one_line(ending):
     code = _DROPPER + (
         "import sys\n"
-        "from workbench.cli import app\n"
-        "def command(args):  # stands in for a command's work, inside the command line's error handling\n"
+        "from workbench.cli import app, parser\n"
+        "def command(ctx):  # stands in for a command's work, inside the command line's handling\n"
         "    Dropper()  # finalised at once\n"
-        "    raise RuntimeError('a worker process died')  # what the Ctrl-C did to the workers\n"
-        "app.Context = command\n"
+        f"    {ending}\n"
+        "parser.cmd_inspect = command\n"
         "sys.argv = ['workbench', 'inspect', 'x.tlog']\n"
         "raise SystemExit(app.main())\n"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=60)
     assert result.returncode == 130 and result.stderr.splitlines() == ["interrupted"], result.stderr
+
+
+def test_a_command_that_handles_ctrl_c_itself_still_reports_its_own_failure():
+    """``live`` and ``send`` take Ctrl-C as "stop": a failure after it (the recording's folder gone) is that
+    failure, not an interrupt."""
+    code = (
+        "import os, signal, sys, time\n"
+        "from workbench import interrupts\n"
+        "from workbench.cli import app, parser\n"
+        "from workbench.errors import DataError\n"
+        "def command(ctx):\n"
+        "    try:\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "        time.sleep(5)\n"
+        "    except KeyboardInterrupt:\n"
+        "        interrupts.clear()  # as workbench.live.predictor.listen does\n"
+        "    raise DataError('out/c.rrd: cannot save the recording: No such file or directory')\n"
+        "parser.cmd_inspect = command\n"
+        "sys.argv = ['workbench', 'inspect', 'x.tlog']\n"
+        "raise SystemExit(app.main())\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=60)
+    assert result.returncode == 1 and result.stderr.startswith("error: out/c.rrd"), result.stderr
 
 
 def test_tasks_stop_after_an_interrupt_a_finaliser_swallowed():

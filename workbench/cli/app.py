@@ -77,9 +77,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     :func:`_hold_interrupts_until_exit`). Tests pass ``argv`` and keep their own SIGINT handling.
     """
     entry = argv is None
-    if entry:
-        interrupts.install()  # a Ctrl-C swallowed by a finaliser is still this command's interrupt
     try:
+        if entry:
+            interrupts.install()  # a Ctrl-C swallowed by a finaliser is still this command's interrupt
         return _run(argv)
     except KeyboardInterrupt:
         if entry:
@@ -104,13 +104,14 @@ def _run(argv: Sequence[str] | None) -> int:
         ctx = Context(args)
         with limit_threads():  # small matrices: one BLAS thread is faster than many (workbench.threads)
             status = int(args.func(ctx) or 0)
+        interrupts.check()  # a Ctrl-C a finaliser swallowed: the command is interrupted, `-o -` emits nothing
         ctx.stdio.emit()  # `-o -`: the finished file to standard output, nothing of a failed run
         return status
-    except BrokenPipeError:
-        return EXIT_ERROR
     except Exception as exc:
-        if interrupts.interrupted():  # the failure followed a Ctrl-C (workers it ended, say): say interrupted
+        if interrupts.interrupted():  # the failure followed a Ctrl-C (workers it ended, a reader of the pipe)
             raise KeyboardInterrupt from None
+        if isinstance(exc, BrokenPipeError):
+            return EXIT_ERROR
         if debug:
             traceback.print_exc()
         tidy = ctx.stdio.tidy if ctx is not None else str  # <stdin>, not the temporary file's name

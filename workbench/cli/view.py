@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from workbench import interrupts
 from workbench.cli.context import (
     DEFAULT_MAPPING,
     Context,
@@ -193,6 +194,7 @@ def _replay_to(ctx: Context) -> int:
             report = send_tlog(log, a.to, speed=a.speed,
                                on_frame=lambda n, t: progress.update(task, completed=n) if n % 200 == 0 else None)
         except KeyboardInterrupt:
+            interrupts.clear()  # handled here, with its own line
             ctx.say("stopped")
             return 130
     ctx.say(f"sent {report.n_frames} MAVLink frames ({report.log_seconds:.1f} s of log) in {report.wall_seconds:.1f} s "

@@ -44,6 +44,7 @@ import numpy as np
 from adapters.link.mavlink import Link, MavlinkReader, dialect_streams
 from adapters.link.online import AlignedStep, OnlineAligner
 from adapters.mapping import ChannelMapping, load_mapping
+from workbench import interrupts
 from workbench.errors import ModelError
 from workbench.frozen import readonly
 
@@ -441,6 +442,7 @@ def listen(
 
     try:
         while True:
+            interrupts.check()  # a Ctrl-C a finaliser swallowed ends the session as a caught one does
             now = clock()
             if now >= deadline:
                 break
@@ -464,6 +466,7 @@ def listen(
                 on_tick(stats())
     except KeyboardInterrupt:
         ended_by = "interrupt"
+        interrupts.clear()  # handled: Ctrl-C ends the session, whose summary and recording are still wanted
     final = stats()
     if on_tick is not None:
         on_tick(final)

@@ -21,6 +21,7 @@ from pathlib import Path
 import rerun as rr
 import rerun.blueprint as rrb
 
+from workbench import interrupts
 from workbench.atomic import atomic_path, deferred_interrupt
 from workbench.errors import WorkbenchError
 
@@ -186,7 +187,7 @@ def _wait_then_stop(proc: subprocess.Popen) -> None:
     try:
         proc.wait()
     except KeyboardInterrupt:
-        pass
+        interrupts.clear()  # Ctrl-C is how the user closes the served viewer: the command ends normally
     finally:
         signal.signal(signal.SIGTERM, previous)
         proc.terminate()
