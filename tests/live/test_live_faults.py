@@ -135,9 +135,11 @@ def test_a_junk_flood_is_shed_and_predictions_stay_current(model, records):
             for j in range(3):
                 s.sendto(junk[(2 * i + j) % 64], ("127.0.0.1", port))
             s.sendto(frame, ("127.0.0.1", port))
-        summary = listen(link, pr, duration=3.0)
+        # behind from the second full batch on (the default waits 0.25 s of reading, which a fast machine
+        # drains this backlog within: the test then passed or failed with the machine's speed)
+        summary = listen(link, pr, duration=3.0, shed_after=0.0)
     st = summary.stats
     assert st.counts.get("kernel drops", 0) == 0
-    assert st.counts["shed (backlog)"] > 0
+    assert st.counts.get("shed (backlog)", 0) > 0
     assert st.received["LOCAL_POSITION_NED"] == _kinds(part)["LOCAL_POSITION_NED"]  # no telemetry frame shed
     assert summary.n_steps > 0 and np.percentile(summary.latency_ms, 99) < 250
