@@ -350,7 +350,7 @@ def _read_partitions(root: Path, wanted: Sequence[str] | None = None) -> tuple[l
         path = _inside(root, rel, str(root))
         try:
             meta = pq.read_metadata(path)
-        except (pa.ArrowException, OSError) as exc:
+        except (pa.ArrowException, OSError, UnicodeDecodeError) as exc:  # a column name that is not UTF-8
             raise FormatError(f"{path}: not a readable Parquet file ({' '.join(str(exc).split())})") from None
         raw = (meta.metadata or {}).get(b"workbench")
         info = None
