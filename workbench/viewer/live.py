@@ -365,7 +365,7 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
                            name=f"ŵ {n} blue, GMR μ ± 1σ/3σ band", axis_x=linked, plot_legend=quiet)
         for n in input_names
     ]
-    whole = time_axis(span, linked=False) if span is not None and not following else None
+    whole = time_axis(None if following else span, linked=False)  # None: rerun's own axis, on the cursor
     link = rrb.Horizontal(
         rrb.Vertical(rrb.TextDocumentView(origin="/live/status", name="link status"),
                      rrb.TextLogView(origin="/live/events", name="events")),
