@@ -2,11 +2,11 @@
 
 The reader returns numpy columns, and ``import numpy`` alone takes about 0.05 s of the ~0.05 s that 10× pymavlink
 leaves on the generated 41-type log. This script times the least a pure-stdlib reader must do, in a fresh process
-with its imports on the clock: load the cached dialect specs (JSON), walk every frame, check its checksum
-(``binascii.crc_hqx`` on bit-reversed bytes: MAVLink's X.25 CRC is the reflected CCITT one), gather each type's
-zero-padded payloads and unpack them with ``struct.iter_unpack`` into ``array.array`` columns. It skips what a
-real reader also needs (resynchronisation after damage, unknown ids, text decoding, column names), so a real one
-would be slower: if this bound misses the bar, no stdlib reader meets it.
+with its imports on the clock: load the reader's cached dialect specs (JSON; the path is handed in), walk every
+frame, check its checksum (``binascii.crc_hqx`` on bit-reversed bytes: MAVLink's X.25 CRC is the reflected CCITT
+one), gather each type's zero-padded payloads and unpack them with ``struct.iter_unpack`` into ``array.array``
+columns. It skips what a real reader also needs (resynchronisation after damage, unknown ids, text decoding,
+column names), so a real one would be slower: if this bound misses the bar, no stdlib reader meets it.
 
     python bench/bench_tlog_stdlib_bound.py [LOG ...]     (default: a generated 41-type 1 MB log)
 """
@@ -25,15 +25,11 @@ ROOT = Path(__file__).resolve().parents[1]
 _BOUND = r'''
 import time, sys
 t0 = time.perf_counter()
-import binascii, json, os, struct
+import binascii, json, struct
 from array import array
 from pathlib import Path
-import importlib.util
 
-origin = importlib.util.find_spec("pymavlink.dialects.v20.ardupilotmega").origin
-st = os.stat(origin)
-root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "workbench"
-specs = {s[0]: s for s in json.loads((root / f"mavlink-ardupilotmega-{st.st_size}-{st.st_mtime_ns}.json").read_text())}
+specs = {s[0]: s for s in json.loads(Path(sys.argv[2]).read_text())}  # the reader's dialect cache, as JSON
 REV = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
 extra = {k: bytes([REV[v[2]]]) for k, v in specs.items()}
 b = Path(sys.argv[1]).read_bytes()
@@ -89,18 +85,23 @@ print(json.dumps({"s": time.perf_counter() - t0}))
 '''
 
 
-def _run(code: str, path: Path) -> dict:
-    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True,
+def _run(code: str, *args: object) -> dict:
+    out = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, check=True,
                          cwd=ROOT)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def measure(path: Path, repeats: int = 5) -> dict:
-    for code in (_BOUND, _PEER, _OURS):
-        _run(code, path)  # once untimed: bytecode caches and the dialect cache as a user's second run has them
+    sys.path.insert(0, str(ROOT))
+    from adapters.formats.mavlink_dialect import _cache_file, load_dialect
+
+    load_dialect()  # writes the dialect cache the reader (and the bound) load from
+    cache = _cache_file("ardupilotmega")
+    for code, *args in ((_BOUND, path, cache), (_PEER, path), (_OURS, path)):
+        _run(code, *args)  # once untimed: bytecode caches as a user's second run has them
     runs = {"bound": [], "peer": [], "ours": [], "frames": 0}
     for _ in range(repeats):
-        b = _run(_BOUND, path)
+        b = _run(_BOUND, path, cache)
         runs["bound"].append(b["s"])
         runs["frames"] = b["frames"]
         runs["walked"] = b["bytes_walked"] / b["size"]
