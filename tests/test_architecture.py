@@ -25,7 +25,7 @@ FLOORS: dict[int, tuple[str, ...]] = {
     2: ("workbench.plant", "workbench.method", "workbench.sim", "adapters"),
     3: ("workbench.models",),
     4: ("workbench.study",),
-    5: ("workbench.viewer", "workbench.report", "workbench.live"),
+    5: ("workbench.viewer", "workbench.report", "workbench.live", "workbench.collect"),
     6: ("workbench.cli", "workbench.__main__"),
 }
 ROOT = "workbench"  # the package's public face (floor 0: it imports only the errors; the rest lazily)

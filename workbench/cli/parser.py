@@ -15,6 +15,7 @@ from workbench.cli.context import (
     n_components_arg,
     positive_float,
 )
+from workbench.cli.collect import add_collect
 from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
 from workbench.cli.model import cmd_fit, cmd_predict
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
@@ -333,6 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bootstrap_option(p)
     _power_option(p, 1)
     _mapping_option(p)
+
+    add_collect(add)
     return parser
 
 

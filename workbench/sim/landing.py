@@ -45,6 +45,8 @@ DOMAIN = ((-3.0, 3.0), (0.0, 3.5))  # position domain of the paper, metres
 PAD_HALF_WIDTH = 0.5
 LANDING_SPEED = 0.1  # m/s
 LANDING_ATTITUDE = np.deg2rad(5.0)
+START_BOX = ((-2.0, 2.0), (2.5, 3.0))  # x0, y0 drawn uniformly in these ranges (metres), every other state zero
+TIME_LIMIT = 30.0  # s, a trial that has neither landed nor crashed by then ends
 
 
 @dataclass(frozen=True)
@@ -154,8 +156,8 @@ def simulate_trial(
     target_vec = np.zeros(sys_.n) if target is None else np.asarray(target, dtype=np.float64)
     if x0 is None:
         x = np.zeros(sys_.n)
-        x[0] = rng.uniform(-2.0, 2.0)
-        x[1] = rng.uniform(2.5, 3.0)
+        x[0] = rng.uniform(*START_BOX[0])
+        x[1] = rng.uniform(*START_BOX[1])
     else:
         x = np.asarray(x0, dtype=np.float64).copy()
     n_max = int(round(time_limit / sys_.dt))

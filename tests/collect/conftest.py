@@ -1,0 +1,149 @@
+"""Fixtures of the testbed's tests: a session server in this process, Debian's Chromium driven by Playwright, and a
+scripted subject on a virtual gamepad (``navigator.getGamepads`` overridden by an init script).
+
+The browser is the distribution's (``/usr/bin/chromium``, installed by ``.ci/run``); Playwright never downloads
+one. Without it the browser tests are skipped on a user's machine and fail in CI.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from workbench.collect.protocol import load_protocol
+from workbench.collect.server import Server, make_app
+from workbench.collect.session import Session
+from workbench.plant.system import planar_quadrotor
+
+CHROMIUM = os.environ.get("WORKBENCH_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
+
+# A scripted pad: the sticks a deterministic pilot asks for in the page's current state (read from the page's
+# window.collect hook), the axes it returned logged by the state they were returned for, so a test can check
+# that what the page recorded is exactly what the pad said.
+PAD_SCRIPT = """
+(() => {
+  const buttons = Array.from({ length: 17 }, () => ({ pressed: false, touched: false, value: 0 }));
+  const pad = { id: "Scripted pad (test)", index: 0, connected: true, mapping: "standard", timestamp: 0,
+                axes: [0, 0, 0, 0], buttons, vibrationActuator: null };
+  window.__padLog = {};
+  window.__pilot = null;
+  navigator.getGamepads = () => {
+    const c = window.collect, trial = c && c.trial;
+    let axes = [0, 0, 0, 0];
+    if (window.__pilot && trial && !trial.ended) {
+      axes = window.__pilot(trial.x, trial.k);
+      window.__padLog[JSON.stringify(trial.x)] = axes.slice();
+    }
+    pad.axes = axes; pad.timestamp = performance.now();
+    return [{ ...pad, axes: axes.slice() }, null, null, null];
+  };
+})();
+"""
+
+
+def pilot_gain(r_thrust: float = 100.0) -> np.ndarray:
+    """An LQR gain for the plant (``u = K x``): a stabilizing scripted pilot, from a computation, not a copy."""
+    s = planar_quadrotor()
+    Q, R = np.diag([1.0, 1.0, 1.0, 1.0, 4.0, 0.01]), np.diag([20.0, r_thrust])
+    P = scipy.linalg.solve_discrete_are(s.A, s.B, Q, R)
+    return -np.linalg.solve(R + s.B.T @ P @ s.B, s.B.T @ P @ s.A)
+
+
+def pilot_js(K: np.ndarray, y_ref: float, wobble: float = 0.1) -> str:
+    """The scripted pilot as a page function ``(x, k) -> axes``: ``u = clip(K (x - ref) + wobble)``, put on a
+    standard pad's axes (angular acceleration on axis 2, thrust on axis 1, up negative)."""
+    return f"""(x, k) => {{
+      const K = {json.dumps(K.tolist())}, ref = [0, {y_ref}, 0, 0, 0, 0];
+      const u = K.map((row, i) => row.reduce((s, a, j) => s + a * (x[j] - ref[j]), 0)
+                                  + {wobble} * Math.sin((i ? 0.5 : 0.3) * k));
+      const c = u.map((v) => Math.max(-1, Math.min(1, v)));
+      return [0, -c[1], c[0], 0];
+    }}"""
+
+
+def calibrated(raw: np.ndarray, cal: dict) -> np.ndarray:
+    """The page's calibration (static/input.js ``calibrate``) applied to raw axis readings."""
+    out = np.zeros_like(raw)
+    for i in range(raw.shape[1]):
+        v = cal["signs"][i] * (raw[:, i] - cal["offsets"][cal["axes"][i]])
+        a, dz = np.abs(v), cal["deadzone"]
+        out[:, i] = np.where(a <= dz, 0.0, np.clip(np.sign(v) * (a - dz) / (1 - dz), -1, 1))
+    return out
+
+
+@pytest.fixture(scope="session")
+def browser():
+    if not Path(CHROMIUM).is_file():
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"CI must have Chromium at {CHROMIUM} (.ci/run installs it)")
+        pytest.skip(f"no Chromium at {CHROMIUM}")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--no-sandbox"])
+        yield b
+        b.close()
+
+
+def write_protocol(path: Path, blocks: list[dict], **top) -> Path:
+    """A small protocol file for a test."""
+    lines = [f'title = "{top.get("title", "Test protocol")}"', 'consent = "A test session."']
+    for key in ("counterbalance", "time_limit_s"):
+        if key in top:
+            lines.append(f"{key} = {json.dumps(top[key])}")
+    if "breaks" in top:
+        lines += ["[breaks]", *(f"{k} = {json.dumps(v)}" for k, v in top["breaks"].items())]
+    for b in blocks:
+        lines.append("[[blocks]]")
+        lines += [f"{k} = {json.dumps(v)}" for k, v in b.items()]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+class Running:
+    """A session served in this process."""
+
+    def __init__(self, out: Path, protocol) -> None:
+        self.session = Session(out, protocol)
+        self.server = Server(make_app(self.session), port=0).start()
+        self.url = self.server.url
+        self.out = out
+
+
+@pytest.fixture
+def serve(tmp_path):
+    running = []
+
+    def start(protocol, out: Path | None = None) -> Running:
+        p = load_protocol(protocol) if isinstance(protocol, str | Path) else protocol
+        r = Running(out or tmp_path / "session", p)
+        running.append(r)
+        return r
+
+    yield start
+    for r in running:
+        r.server.stop()
+
+
+def new_page(browser, gamepad: bool):
+    context = browser.new_context(viewport={"width": 1100, "height": 760})
+    if gamepad:
+        context.add_init_script(PAD_SCRIPT)
+    return context, context.new_page()
+
+
+def register(page, url: str, subject: str) -> None:
+    """Consent, the subject form, and the calibration screen with its defaults."""
+    page.goto(f"{url}?subject={subject}")
+    page.wait_for_selector("#screen-consent:not([hidden])")
+    page.keyboard.press("Space")
+    page.wait_for_selector("#screen-subject:not([hidden])")
+    page.click("#subject-form button[type=submit]")
+    page.wait_for_selector("#screen-calibration:not([hidden])")
+    page.keyboard.press("Space")

@@ -1,0 +1,83 @@
+"""The page's simulation is the plant's: the same steps and the same end rules as the server's, bit for bit."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from workbench.collect.task import OUTCOMES, outcome, replay, step, task_spec
+from workbench.plant.system import planar_quadrotor
+from workbench.sim.landing import simulate_trial
+
+
+def test_task_spec_is_the_plant():
+    s = planar_quadrotor()
+    spec = task_spec(s)
+    assert np.array_equal(np.array(spec["A"]), s.A) and np.array_equal(np.array(spec["B"]), s.B)
+    assert spec["dt"] == s.dt and spec["max_steps"] == round(spec["time_limit_s"] / s.dt)
+    json.dumps(spec)  # what the page receives
+
+
+def test_python_step_agrees_with_the_plant():
+    s, spec = planar_quadrotor(), task_spec()
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        x, u = rng.normal(size=6), rng.uniform(-1, 1, 2)
+        assert np.allclose(step(spec["A"], spec["B"], x.tolist(), u.tolist()), s.step(x, u), rtol=0, atol=1e-12)
+
+
+def test_replay_ends_where_the_simulator_ends():
+    """A simulated landing's inputs replayed through the task give its states and its outcome."""
+    spec = task_spec()
+    for seed in range(3):
+        d = simulate_trial("CS1", np.random.default_rng(seed))
+        xs, end, k = replay(spec, d.x[0], d.u)
+        assert end == d.meta["outcome"] and k == len(d) - 1
+        assert np.allclose(xs, d.x, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def sim_page(browser, tmp_path_factory):
+    from workbench.collect.protocol import load_protocol
+    from workbench.collect.server import Server, make_app
+    from workbench.collect.session import Session
+
+    server = Server(make_app(Session(tmp_path_factory.mktemp("s") / "session", load_protocol(
+        "paper_single_subject"))), port=0).start()
+    page = browser.new_page()
+    page.goto(f"{server.url}static/index.html")
+    page.evaluate("async () => { window.sim = await import('/static/sim.js'); "
+                  "window.spec = (await (await fetch('/api/config')).json()).task; }")
+    yield page
+    page.close()
+    server.stop()
+
+
+def test_page_and_server_step_the_same_bits(sim_page):
+    spec = task_spec()
+    rng = np.random.default_rng(2)
+    x = [float(v) for v in rng.normal(size=6)]
+    us = rng.uniform(-1, 1, (200, 2)).tolist()
+    page = sim_page.evaluate("([x, us]) => { const out = []; for (const u of us) { x = sim.step(spec.A, spec.B, x, u);"
+                             " out.push(x); } return out; }", [x, us])
+    ours = []
+    for u in us:
+        x = step(spec["A"], spec["B"], x, u)
+        ours.append(x)
+    assert np.array_equal(np.array(page), np.array(ours))  # equal, not close: the same sums in the same order
+
+
+def test_page_and_server_end_trials_by_the_same_rules(sim_page):
+    spec = task_spec()
+    rng = np.random.default_rng(3)
+    states = np.column_stack([rng.uniform(-3.5, 3.5, 400), rng.uniform(-0.2, 3.8, 400), rng.normal(0, 0.1, 400),
+                              rng.normal(0, 0.1, 400), rng.normal(0, 0.1, 400), rng.normal(0, 1, 400)])
+    states[:100, 1] = -0.01  # on the ground: landed or crashed, by pad, speed and attitude
+    ks = rng.integers(0, spec["max_steps"] + 2, 400)
+    page = sim_page.evaluate("([xs, ks]) => xs.map((x, j) => sim.outcome(spec, x, ks[j]))",
+                             [states.tolist(), ks.tolist()])
+    ours = [outcome(spec, x, int(k)) for x, k in zip(states.tolist(), ks, strict=True)]
+    assert page == ours
+    assert set(ours) >= {None, *OUTCOMES}  # every rule was exercised

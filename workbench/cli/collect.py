@@ -1,0 +1,74 @@
+"""``workbench collect``: serve the experiment's page on 127.0.0.1 and write each finished trial into DIR.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from workbench.cli.context import Context
+
+__all__ = ["cmd_collect", "add_collect"]
+
+
+def add_collect(add: Any) -> None:
+    """Register ``collect`` with the parser's ``add`` (see :func:`workbench.cli.parser.build_parser`)."""
+    p = add("collect", cmd_collect, "run the paper's landing experiment in the browser; each trial is written to DIR "
+            "as it ends", "workbench collect --protocol paper_single_subject --out session/ && workbench fit session/ "
+            "--label CS1 -o cs1.npz")
+    p.add_argument("--protocol", required=True, metavar="NAME|FILE.toml",
+                   help="the experiment: paper_single_subject, paper_multi_subject or a protocol TOML file")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="the session folder: a dataset `workbench fit DIR` reads; an existing session of the same "
+                        "protocol is resumed")
+    p.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765; 0: a free one)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1, this machine only; another address lets other "
+                        "machines reach the page)")
+    p.add_argument("--no-browser", action="store_true", help="do not open the page in a browser")
+    p.add_argument("--seed", type=int, default=0, help="seed of the trials' start positions (default 0)")
+    g = p.add_argument_group("shortening (demonstrations and tests; a real session runs the protocol as written)")
+    g.add_argument("--max-trials", type=_positive_int, metavar="N", help="at most N trials per block")
+    g.add_argument("--max-pause", type=float, metavar="SECONDS", help="breaks and practice at most this long")
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def cmd_collect(ctx: Context) -> int:
+    from workbench.collect.protocol import load_protocol
+    from workbench.collect.server import Server, make_app
+    from workbench.collect.session import Session
+
+    a = ctx.args
+    protocol = load_protocol(a.protocol)
+    if a.max_trials is not None or a.max_pause is not None:
+        protocol = protocol.shortened(a.max_trials, a.max_pause)
+    session = Session(a.out, protocol, seed=a.seed)
+
+    def on_trial(out: dict[str, Any]) -> None:
+        ctx.say(f"{out['subject']}: {out['id']} {out['outcome']} ({out['samples']} samples); "
+                f"{out['trials_done']} of {out['trials_total']} trials done")
+
+    server = Server(make_app(session, on_trial=on_trial), a.host, a.port)
+    n_trials = sum(b.trials for b in protocol.blocks)
+    print(f"serving {server.url} (protocol {protocol.name}: {len(protocol.blocks)} blocks, {n_trials} trials; "
+          f"session {a.out}); Ctrl-C stops", flush=True)
+    if a.host not in ("127.0.0.1", "localhost", "::1"):
+        print(f"warning: listening on {a.host}: other machines can reach the page", file=sys.stderr)
+    if not a.no_browser:
+        import webbrowser
+
+        webbrowser.open(server.url)
+    server.run()
+    for subject in session.subjects():
+        status = session.status(subject)
+        parts = ", ".join(f"{r['label']} {r['role']} {r['landed']}/{r['trials']} landed"
+                          for r in session.summary(subject)) or "no trials"
+        ctx.say(f"{subject}: {status['trials_done']} of {status['trials_total']} trials ({parts})")
+    return 0

@@ -1,0 +1,402 @@
+"""The session folder: every finished trial written as it ends, in the workbench's dataset format, and the state
+a closed tab or a killed server resumes from.
+
+``DIR`` is a dataset that ``workbench fit/evaluate/report/view DIR`` read as they are (:mod:`workbench.data.dataset`):
+one Parquet partition per trial, ``DIR/subject=<S>/<S>-<slot>-<label>-<role>.parquet``, each with its trial's
+metadata (subject, label, trial, role, outcome, start, target, the device and its calibration, frame timing and
+dropped steps). Everything else lives in the hidden folder ``DIR/_collect/`` that pandas, pyarrow and the workbench
+skip: the protocol the session runs (``session.json``), each subject's metadata, calibrations and finished steps
+(``subjects/<S>.json``), each trial's MCAP with the raw input events (``mcap/<S>/<id>.mcap``, JSON channels that
+Foxglove and rerun open) and recorded practice (``practice/<S>/``).
+
+Every file is written atomically (:mod:`workbench.atomic`): the MCAP first, then the Parquet file, whose existence
+is what makes a trial finished. A server or browser killed mid-trial loses that trial and nothing else; what it
+was writing is a hidden temp file that the next write removes. A trial is finished once its partition exists, so
+resuming reads the disk, never a counter that a kill could leave behind.
+
+The server never trusts the page's states: :meth:`Session.write_trial` replays the inputs through the plant
+(:func:`workbench.collect.task.replay`) and refuses a trial whose states or outcome differ from the page's.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import re
+import threading
+from pathlib import Path
+from typing import Any
+from urllib.parse import quote
+
+import numpy as np
+
+from workbench.atomic import atomic_write_text
+from workbench.collect.protocol import Item, Protocol, plan
+from workbench.collect.task import OUTCOMES, draw_start, replay, task_spec
+from workbench.errors import DataError
+from workbench.plant.system import LinearSystem, planar_quadrotor
+
+__all__ = ["Session", "SUBJECT_PATTERN", "HIDDEN"]
+
+HIDDEN = "_collect"
+SESSION_FORMAT = "workbench.collect.session"
+SUBJECT_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,39}$")
+#: The page's states must equal the server's replay to this (they are computed in the same order: in practice 0).
+STATE_TOLERANCE = 1e-9
+MAX_EVENTS = 200_000
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
+
+
+def _check_subject(subject: Any) -> str:
+    if not isinstance(subject, str) or not SUBJECT_PATTERN.match(subject):
+        raise DataError(f"subject {subject!r}: an ID is 1–40 letters, digits, '_' or '-', starting with a letter or "
+                        "digit")
+    return subject
+
+
+def _array(payload: dict, key: str, width: int, n_max: int, where: str) -> np.ndarray:
+    value = payload.get(key)
+    if not isinstance(value, list) or not value:
+        raise DataError(f"{where}: {key}: expected a non-empty list of samples")
+    if len(value) > n_max:
+        raise DataError(f"{where}: {key}: {len(value)} samples, more than the time limit allows ({n_max})")
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(f"{where}: {key}: not a list of number lists") from None
+    if arr.ndim != 2 or arr.shape[1] != width:
+        raise DataError(f"{where}: {key}: expected samples of {width} numbers, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise DataError(f"{where}: {key}: non-finite value at sample {int(np.argwhere(~np.isfinite(arr))[0][0])}")
+    return arr
+
+
+class Session:
+    """The session folder ``out`` of one protocol: subjects, their plans and their finished trials.
+
+    Raises
+    ------
+    DataError
+        ``out`` exists and is neither empty nor a session of the same protocol.
+    """
+
+    def __init__(self, out: str | os.PathLike, protocol: Protocol, *, system: LinearSystem | None = None,
+                 seed: int = 0) -> None:
+        self.out = Path(out)
+        self.protocol = protocol
+        self.system = system or planar_quadrotor()
+        self.spec = task_spec(self.system, protocol.time_limit_s)
+        self.seed = int(seed)
+        self._lock = threading.Lock()
+        head = self.out / HIDDEN / "session.json"
+        if self.out.exists():
+            if not self.out.is_dir():
+                raise DataError(f"{self.out}: not a folder; choose a new or empty folder for the session")
+            if head.is_file():
+                try:
+                    doc = json.loads(head.read_text(encoding="utf-8"))
+                    name = doc["protocol"]
+                except (ValueError, KeyError, TypeError) as exc:
+                    raise DataError(f"{head}: damaged session file ({exc})") from None
+                if name != protocol.name:
+                    raise DataError(f"{self.out}: a session of protocol {name!r}, not {protocol.name!r}; resume it "
+                                    f"with --protocol {name} or choose another folder")
+            elif any(self.out.iterdir()):
+                raise DataError(f"{self.out}: exists and is not a session folder; choose a new or empty folder")
+        if not head.is_file():
+            atomic_write_text(head, json.dumps({"format": SESSION_FORMAT, "version": 1, "protocol": protocol.name,
+                                                "protocol_source": protocol.source, "seed": self.seed,
+                                                "created": _now()}, indent=1))
+
+    # -- subjects ----------------------------------------------------------------------------------------
+    def _subject_file(self, subject: str) -> Path:
+        return self.out / HIDDEN / "subjects" / f"{subject}.json"
+
+    def subject_doc(self, subject: str) -> dict[str, Any] | None:
+        """What the session knows of a subject (metadata, index, calibrations, finished steps), or ``None``."""
+        path = self._subject_file(_check_subject(subject))
+        if not path.is_file():
+            return None
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except ValueError as exc:
+            raise DataError(f"{path}: damaged subject file ({exc})") from None
+
+    def subjects(self) -> list[str]:
+        folder = self.out / HIDDEN / "subjects"
+        return sorted(p.stem for p in folder.glob("*.json")) if folder.is_dir() else []
+
+    def register(self, subject: str, fields: dict[str, Any]) -> dict[str, Any]:
+        """Register a new subject with its metadata (checked against the protocol's fields), or return the
+        existing one's status unchanged: a subject who comes back resumes."""
+        subject = _check_subject(subject)
+        with self._lock:
+            if self.subject_doc(subject) is not None:
+                return self.status(subject)
+            meta = self._check_fields(fields)
+            doc = {"subject": subject, "index": len(self.subjects()), "fields": meta, "registered": _now(),
+                   "calibrations": [], "done": []}
+            atomic_write_text(self._subject_file(subject), json.dumps(doc, indent=1))
+        return self.status(subject)
+
+    def _check_fields(self, fields: Any) -> dict[str, Any]:
+        if not isinstance(fields, dict):
+            raise DataError("subject fields: expected a table of name: value")
+        known = {f.name: f for f in self.protocol.fields}
+        if extra := sorted(set(fields) - set(known)):
+            raise DataError(f"subject fields: {extra[0]!r} is not a field of this protocol")
+        out: dict[str, Any] = {}
+        for name, f in known.items():
+            value = fields.get(name)
+            if value in (None, ""):
+                if f.required:
+                    raise DataError(f"subject fields: {f.label} is required")
+                continue
+            if f.type == "number":
+                try:
+                    value = float(value)
+                except (TypeError, ValueError):
+                    raise DataError(f"subject fields: {f.label}: {value!r} is not a number") from None
+                if not math.isfinite(value):
+                    raise DataError(f"subject fields: {f.label}: {value!r} is not a finite number")
+            elif f.type == "choice" and value not in f.choices:
+                raise DataError(f"subject fields: {f.label}: {value!r} is not one of {', '.join(f.choices)}")
+            else:
+                value = str(value)[:500]
+            out[name] = value
+        return out
+
+    def _update(self, subject: str, change: Any) -> dict[str, Any]:
+        with self._lock:
+            doc = self.subject_doc(subject)
+            if doc is None:
+                raise DataError(f"subject {subject!r}: not registered in this session")
+            change(doc)
+            atomic_write_text(self._subject_file(subject), json.dumps(doc, indent=1))
+            return doc
+
+    def calibrate(self, subject: str, calibration: Any) -> None:
+        """Record a device calibration (rest offsets, dead zone, axis assignment): every one is kept, in order."""
+        if not isinstance(calibration, dict) or len(json.dumps(calibration)) > 20_000:
+            raise DataError("calibration: expected a small table (device, offsets, dead zone, axes)")
+        self._update(subject, lambda d: d["calibrations"].append({**calibration, "at": _now()}))
+
+    def advance(self, subject: str, key: str) -> dict[str, Any]:
+        """Mark a practice, break or instructions step finished (trials finish by being written)."""
+        items = {i.key: i for i in self.plan(subject)}
+        if key not in items or items[key].kind in ("trial", "end"):
+            raise DataError(f"step {key!r}: not a practice, break or instructions step of this session")
+        self._update(subject, lambda d: d["done"].append(key) if key not in d["done"] else None)
+        return self.status(subject)
+
+    # -- the plan ----------------------------------------------------------------------------------------
+    def plan(self, subject: str) -> list[Item]:
+        doc = self.subject_doc(subject)
+        if doc is None:
+            raise DataError(f"subject {subject!r}: not registered in this session")
+        return plan(self.protocol, subject, int(doc["index"]))
+
+    def trial_id(self, subject: str, item: Item) -> str:
+        return f"{subject}-{item.slot:03d}-{item.label}-{item.role}"
+
+    def _partition(self, subject: str, trial_id: str) -> Path:
+        return self.out / f"subject={quote(subject, safe='')}" / f"{trial_id}.parquet"
+
+    def finished(self, subject: str) -> set[int]:
+        """The slots whose trial is on disk: the only record of a finished trial."""
+        return {i.slot for i in self.plan(subject)
+                if i.kind == "trial" and self._partition(subject, self.trial_id(subject, i)).is_file()}
+
+    def status(self, subject: str) -> dict[str, Any]:
+        """Where a subject is: the next step (with its start state for a trial), trials done and to do."""
+        doc = self.subject_doc(subject)
+        items = self.plan(subject)
+        done_slots = self.finished(subject)
+        done = set(doc["done"])
+        trials = [i for i in items if i.kind == "trial"]
+        nxt = next(i for i in items if i.kind == "end" or (i.slot not in done_slots if i.kind == "trial"
+                                                              else i.key not in done))
+        step = nxt.to_json()
+        if nxt.kind == "trial":
+            step["x0"] = self.start(subject, nxt.slot)
+            step["id"] = self.trial_id(subject, nxt)
+        return {"subject": subject, "fields": doc["fields"], "calibrated": bool(doc["calibrations"]),
+                "trials_done": len(done_slots), "trials_total": len(trials), "next": step,
+                "summary": self.summary(subject) if nxt.kind == "end" else None}
+
+    def summary(self, subject: str) -> list[dict[str, Any]]:
+        """Per block label and role: trials finished and landed, from the trials' own files."""
+        import pyarrow.parquet as pq
+
+        rows: dict[tuple[str, str], dict[str, Any]] = {}
+        for i in self.plan(subject):
+            path = self._partition(subject, self.trial_id(subject, i)) if i.kind == "trial" else None
+            if path is None or not path.is_file():
+                continue
+            header = json.loads((pq.read_metadata(path).metadata or {}).get(b"workbench", b"{}"))
+            outcome = (header.get("demos") or [{}])[0].get("outcome")
+            r = rows.setdefault((i.label, i.role), {"label": i.label, "role": i.role, "trials": 0, "landed": 0})
+            r["trials"] += 1
+            r["landed"] += outcome == "landed"
+        return list(rows.values())
+
+    def start(self, subject: str, slot: int) -> list[float]:
+        """The start state of a trial slot: drawn from the seed, the subject and the slot, so a resumed trial
+        starts where it would have."""
+        import zlib
+
+        return draw_start(self.spec, [self.seed, zlib.crc32(subject.encode()), slot])
+
+    # -- trials ------------------------------------------------------------------------------------------
+    def write_trial(self, payload: Any) -> dict[str, Any]:
+        """Check a finished trial from the page, replay it through the plant and write it (MCAP, then Parquet).
+
+        Raises
+        ------
+        DataError
+            One line: an unknown subject or slot, a slot already finished, malformed arrays, states or an
+            outcome that the plant's replay does not reproduce.
+        """
+        if not isinstance(payload, dict):
+            raise DataError("trial: expected a JSON object")
+        subject = _check_subject(payload.get("subject"))
+        slot = payload.get("slot")
+        items = {i.slot: i for i in self.plan(subject) if i.kind == "trial"}
+        if not isinstance(slot, int) or slot not in items:
+            raise DataError(f"trial: slot {slot!r} is not a trial of subject {subject!r}'s plan")
+        item = items[slot]
+        trial_id = self.trial_id(subject, item)
+        where = f"trial {trial_id}"
+        x0 = self.start(subject, slot)
+        demo, streams = self._checked(payload, x0, where)
+        doc = self.subject_doc(subject)
+        demo_meta = {
+            "id": trial_id, "subject": subject, "label": item.label, "role": item.role, "trial": item.trial,
+            "slot": slot, "block": item.block, "start": x0, "target": self.spec["target"],
+            "outcome": demo["outcome"], "success": demo["outcome"] == "landed", "source": "workbench collect",
+            "protocol": self.protocol.name, "subject_fields": doc["fields"],
+            "device": demo["device"], "calibration": demo["calibration"], "timing": demo["timing"],
+            "finished": _now(),
+        }
+        with self._lock:
+            if self._partition(subject, trial_id).is_file():
+                raise DataError(f"{where}: already recorded; the page is behind (reload it to resume)")
+            mcap = self.out / HIDDEN / "mcap" / subject / f"{trial_id}.mcap"
+            _write_mcap(mcap, streams, demo_meta)
+            _write_partition(self, subject, trial_id, demo["x"], demo["u"], demo_meta,
+                             order=int(doc["index"]) * 100_000 + slot)
+        return {"id": trial_id, "outcome": demo["outcome"], "samples": len(demo["u"]), **self.status(subject)}
+
+    def write_practice(self, payload: Any) -> dict[str, Any]:
+        """A practice trial: checked like a trial; kept in ``_collect/practice/`` only if the protocol records
+        practice, never in the dataset."""
+        if not isinstance(payload, dict):
+            raise DataError("practice: expected a JSON object")
+        subject = _check_subject(payload.get("subject"))
+        if self.subject_doc(subject) is None:
+            raise DataError(f"subject {subject!r}: not registered in this session")
+        x0 = payload.get("x0")
+        if not isinstance(x0, list) or len(x0) != len(self.spec["state_names"]):
+            raise DataError("practice: x0: expected the start state")
+        demo, _ = self._checked(payload, [float(v) for v in x0], "practice trial")
+        if not self.protocol.practice_recorded:
+            return {"recorded": False, "outcome": demo["outcome"]}
+        from workbench.data.demonstrations import Demonstration, DemonstrationSet
+
+        folder = self.out / HIDDEN / "practice" / subject
+        with self._lock:
+            n = len(list(folder.glob("*.parquet"))) if folder.is_dir() else 0
+            pid = f"{subject}-practice-{n:03d}"
+            d = Demonstration(self.spec["dt"] * np.arange(len(demo["u"])), demo["x"], demo["u"],
+                              {"id": pid, "subject": subject, "label": "practice", "role": "practice",
+                               "outcome": demo["outcome"], "device": demo["device"], "timing": demo["timing"]})
+            DemonstrationSet([d], self.spec["state_names"], self.spec["input_names"], self.spec["dt"]).save(
+                folder / f"{pid}.parquet")
+        return {"recorded": True, "outcome": demo["outcome"]}
+
+    def _checked(self, payload: dict, x0: list[float], where: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        n, m = len(self.spec["state_names"]), len(self.spec["input_names"])
+        n_max = self.spec["max_steps"] + 1
+        u = _array(payload, "u", m, n_max, where)
+        x = _array(payload, "x", n, n_max, where)
+        raw = _array(payload, "raw", m, n_max, where)
+        if not (len(u) == len(x) == len(raw)):
+            raise DataError(f"{where}: u, x and raw have {len(u)}, {len(x)} and {len(raw)} samples; one per step")
+        lo, hi = np.array(self.spec["u_min"]), np.array(self.spec["u_max"])
+        if ((u < lo) | (u > hi)).any():
+            raise DataError(f"{where}: u: an input outside the sticks' range [{lo.tolist()}, {hi.tolist()}]")
+        if len(u) < 2:
+            raise DataError(f"{where}: fewer than 2 samples; not a trial")
+        xs, end, k = replay(self.spec, x0, u)
+        if len(xs) != len(x) or np.max(np.abs(xs - x)) > STATE_TOLERANCE:
+            bad = next((j for j in range(min(len(xs), len(x))) if np.max(np.abs(xs[j] - x[j])) > STATE_TOLERANCE),
+                       min(len(xs), len(x)))
+            raise DataError(f"{where}: the page's states differ from the plant's replay of its inputs from sample "
+                            f"{bad} on (page {len(x)} samples, replay {len(xs)}); nothing written")
+        claimed = payload.get("outcome")
+        if claimed not in OUTCOMES or claimed != end:
+            raise DataError(f"{where}: the page says {claimed!r}, the plant's replay says {end!r}; nothing written")
+        t = self.spec["dt"] * np.arange(len(u))
+        info = {}
+        for key, limit in (("device", 4000), ("calibration", 20_000), ("timing", 20_000)):
+            value = payload.get(key, {})
+            if not isinstance(value, dict) or len(json.dumps(value)) > limit:
+                raise DataError(f"{where}: {key}: expected a small table")
+            info[key] = value
+        streams: dict[str, Any] = {
+            "/trial/state": {"t": t, **{s: xs[:, i] for i, s in enumerate(self.spec["state_names"])}},
+            "/trial/input": {"t": t, **{s: u[:, i] for i, s in enumerate(self.spec["input_names"])},
+                             **{f"raw_{s}": raw[:, i] for i, s in enumerate(self.spec["input_names"])}},
+        }
+        streams.update(_events(payload, where))
+        return {"x": xs, "u": u, "outcome": end, **info}, streams
+
+
+def _events(payload: dict, where: str) -> dict[str, Any]:
+    """The raw input events (``[t_s, kind, code, value]``: key downs and ups, stick readings) and the display
+    frames' times as MCAP streams; times are seconds from the trial's start."""
+    out: dict[str, Any] = {}
+    events = payload.get("events", [])
+    if not isinstance(events, list) or len(events) > MAX_EVENTS:
+        raise DataError(f"{where}: events: expected a list of at most {MAX_EVENTS} events")
+    rows = []
+    for j, e in enumerate(events):
+        if not (isinstance(e, list) and len(e) == 4 and isinstance(e[0], int | float) and isinstance(e[1], str)
+                and isinstance(e[2], str | int) and isinstance(e[3], int | float | None)):
+            raise DataError(f"{where}: events[{j}]: expected [t_s, kind, code, value]")
+        rows.append((max(0.0, float(e[0])), e[1][:32], str(e[2])[:64], float("nan") if e[3] is None else float(e[3])))
+    if rows:
+        t, kind, code, value = zip(*rows, strict=True)
+        out["/input/events"] = {"t": np.array(t), "kind": np.array(kind, dtype=object),
+                                "code": np.array(code, dtype=object), "value": np.array(value)}
+    frames = payload.get("frames", [])
+    if not isinstance(frames, list) or len(frames) > MAX_EVENTS or not all(isinstance(f, int | float) for f in frames):
+        raise DataError(f"{where}: frames: expected a list of display frame times (s)")
+    if frames:
+        ft = np.maximum(np.array(frames, dtype=np.float64), 0.0)
+        out["/display/frames"] = {"t": ft, "interval_s": np.diff(ft, prepend=ft[0])}
+    return out
+
+
+def _write_mcap(path: Path, streams: dict[str, Any], meta: dict[str, Any]) -> None:
+    from adapters.formats import mcap
+
+    flat = {k: (v if isinstance(v, str) else json.dumps(v)) for k, v in meta.items()}
+    mcap.write(path, streams, metadata={"trial": flat}, profile="")
+
+
+def _write_partition(session: Session, subject: str, trial_id: str, x: np.ndarray, u: np.ndarray,
+                     meta: dict[str, Any], order: int) -> None:
+    from workbench.data.dataset import write_partitions
+    from workbench.data.demonstrations import Demonstration, DemonstrationSet
+
+    spec = session.spec
+    d = Demonstration(spec["dt"] * np.arange(len(u)), x, u, meta)
+    roles = session.system.roles
+    write_partitions(DemonstrationSet([d], spec["state_names"], spec["input_names"], spec["dt"], roles=roles),
+                     session.out, trial_id, source="workbench collect", order=order)

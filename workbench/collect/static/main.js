@@ -1,0 +1,373 @@
+// The page: consent, the subject, the sticks' calibration, then the steps the server hands out one at a time
+// (instructions, trials, breaks, practice, the end). Space starts and continues. The server keeps the state:
+// a reloaded page (or a new browser) with ?subject=ID resumes at the first unfinished step.
+
+import { Trial } from "./sim.js";
+import { EventLog, Keyboard, Pad, firstPad, KEY_RAMP } from "./input.js";
+import { View, drawSticks } from "./render.js";
+
+const $ = (id) => document.getElementById(id);
+const state = { config: null, spec: null, subject: null, status: null, device: null, keyboard: null,
+                log: new EventLog(), screen: null, onSpace: null, trial: null, busy: false };
+window.collect = state; // read by scripted subjects in the tests (and handy in the console)
+
+function show(name) {
+  for (const s of document.querySelectorAll("main > section")) s.hidden = s.id !== `screen-${name}`;
+  state.screen = name;
+}
+
+function fail(message) {
+  const e = $("error");
+  e.textContent = message; e.hidden = !message;
+}
+
+async function api(path, body) {
+  const res = await fetch(path, body === undefined ? {} : {
+    method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body),
+  });
+  let data;
+  try { data = await res.json(); } catch { data = { error: `${path}: the server answered ${res.status}` }; }
+  if (!res.ok || data.error) throw new Error(data.error || `${path}: ${res.status}`);
+  return data;
+}
+
+window.addEventListener("keydown", (e) => {
+  if (e.code !== "Space" || e.repeat) return;
+  const tag = (document.activeElement && document.activeElement.tagName) || "";
+  if (["INPUT", "SELECT", "TEXTAREA", "BUTTON"].includes(tag)) return;
+  e.preventDefault();
+  if (state.onSpace && !state.busy) { const f = state.onSpace; state.onSpace = null; f(); }
+});
+
+// A gamepad's "A" button (0) works as Space too.
+let padButton = false;
+function pollPadButton() {
+  const p = firstPad();
+  const pressed = !!(p && p.buttons && p.buttons[0] && p.buttons[0].pressed);
+  if (pressed && !padButton && state.onSpace && !state.busy) { const f = state.onSpace; state.onSpace = null; f(); }
+  padButton = pressed;
+  requestAnimationFrame(pollPadButton);
+}
+
+function whenSpace(f) { state.onSpace = f; }
+
+// -- start --------------------------------------------------------------------------------------------------
+async function main() {
+  state.config = await api("/api/config");
+  state.spec = state.config.task;
+  const p = state.config.protocol;
+  $("title").textContent = p.title;
+  document.title = p.title;
+  state.keyboard = new Keyboard(state.log);
+  requestAnimationFrame(pollPadButton);
+  const wanted = new URLSearchParams(location.search).get("subject");
+  if (wanted) {
+    const s = await api(`/api/subject/${encodeURIComponent(wanted)}`).catch((e) => { fail(e.message); return null; });
+    if (s && s.registered) return resumed(s);
+  }
+  consent(wanted || "");
+}
+
+function consent(subject) {
+  const p = state.config.protocol;
+  $("consent-title").textContent = p.title;
+  $("consent-text").textContent = p.consent.trim();
+  show("consent");
+  const agree = () => { state.onSpace = null; subjectForm(subject); };
+  $("consent-agree").onclick = agree;
+  whenSpace(agree);
+}
+
+function subjectForm(subject) {
+  show("subject");
+  $("subject-id").value = subject;
+  const box = $("subject-fields");
+  box.innerHTML = "";
+  for (const f of state.config.protocol.fields) {
+    const label = document.createElement("label");
+    label.textContent = f.label + (f.required ? " *" : "");
+    let input;
+    if (f.type === "choice") {
+      input = document.createElement("select");
+      input.append(new Option("—", ""), ...f.choices.map((c) => new Option(c, c)));
+    } else {
+      input = document.createElement("input");
+      input.type = f.type === "number" ? "number" : "text";
+      if (f.type === "number") input.step = "any";
+    }
+    input.name = f.name; input.required = f.required;
+    label.append(input);
+    box.append(label);
+  }
+  (subject ? box.querySelector("input, select") || $("subject-id") : $("subject-id")).focus();
+  $("subject-form").onsubmit = async (e) => {
+    e.preventDefault();
+    const fields = {};
+    for (const f of state.config.protocol.fields) fields[f.name] = box.querySelector(`[name="${f.name}"]`).value;
+    try {
+      const s = await api("/api/subject", { subject: $("subject-id").value.trim(), fields });
+      fail("");
+      document.activeElement.blur();
+      resumed(s, true);
+    } catch (err) { fail(err.message); }
+  };
+}
+
+function resumed(s, fresh = false) {
+  state.subject = s.subject;
+  state.status = s;
+  $("who").textContent = `subject ${s.subject}`;
+  if (!fresh && s.trials_done > 0) {
+    $("resume-note").hidden = false;
+    $("resume-note").textContent = `Welcome back, ${s.subject}: ${s.trials_done} of ${s.trials_total} trials are done. ` +
+      "Check your sticks, then continue where you stopped.";
+  }
+  history.replaceState(null, "", `?subject=${encodeURIComponent(s.subject)}`);
+  calibration();
+}
+
+// -- calibration --------------------------------------------------------------------------------------------
+function calibration() {
+  show("calibration");
+  $("ramp-line").textContent = `A held key moves its stick by ${KEY_RAMP} per step (${1 / KEY_RAMP} steps, ` +
+    `${(state.spec.dt / KEY_RAMP).toFixed(2)} s, to full deflection); released, it returns to centre at the same rate.`;
+  let live = true;
+  const pick = () => {
+    const p = firstPad();
+    if (p && (!state.device || state.device.kind !== "gamepad" || state.device.index !== p.index)) {
+      state.device = new Pad(state.log, p);
+    } else if (!p && (!state.device || state.device.kind !== "keyboard")) {
+      state.device = state.keyboard;
+    }
+    const pad = state.device.kind === "gamepad";
+    $("pad-steps").hidden = !pad; $("keys-help").hidden = pad;
+    $("device-line").textContent = pad ? `Gamepad: ${state.device.id}` : "Input: the keyboard";
+    if (pad) {
+      $("axis-u1").textContent = `axis ${state.device.axes[0]}${state.device.signs[0] < 0 ? " (inverted)" : ""}`;
+      $("axis-u2").textContent = `axis ${state.device.axes[1]}${state.device.signs[1] < 0 ? " (inverted)" : ""}`;
+    }
+  };
+  const loop = () => {
+    if (!live) return;
+    pick();
+    const s = state.device.sample();
+    drawSticks($("sticks"), shown(s.raw), s.u, ["angular accel. u1", "thrust u2"]);
+    setTimeout(loop, state.spec.dt * 1000);
+  };
+  loop();
+  $("measure-rest").onclick = async () => {
+    const pad = state.device;
+    const readings = [];
+    $("rest-result").textContent = "measuring… keep the sticks still";
+    for (let j = 0; j < 20; j++) {
+      const p = pad.read();
+      if (p) readings.push(Array.from(p.axes));
+      await new Promise((r) => setTimeout(r, 50));
+    }
+    pad.setRest(readings);
+    $("rest-result").textContent = `offsets ${pad.offsets.map((v) => v.toFixed(3)).join(", ")}; dead zone ${pad.deadzone.toFixed(3)}`;
+  };
+  const assign = (i, text) => async () => {
+    const pad = state.device;
+    const rest = Array.from(pad.read().axes);
+    $(`axis-u${i + 1}`).textContent = text;
+    for (let j = 0; j < 100; j++) {
+      await new Promise((r) => setTimeout(r, 50));
+      const now = Array.from(pad.read().axes);
+      const d = now.map((v, k) => v - rest[k]);
+      const k = d.reduce((best, v, kk) => (Math.abs(v) > Math.abs(d[best]) ? kk : best), 0);
+      if (Math.abs(d[k]) > 0.5) { pad.axes[i] = k; pad.signs[i] = Math.sign(d[k]); break; }
+    }
+  };
+  $("assign-u1").onclick = assign(0, "move the stick fully right now…");
+  $("assign-u2").onclick = assign(1, "push the stick fully up now…");
+  whenSpace(async () => {
+    live = false;
+    try {
+      await api("/api/calibration", { subject: state.subject, calibration: state.device.calibration() });
+      next();
+    } catch (err) { fail(err.message); live = true; loop(); whenSpace(() => calibration()); }
+  });
+}
+
+// -- the steps ----------------------------------------------------------------------------------------------
+async function next(status) {
+  try {
+    state.status = status || await api(`/api/subject/${encodeURIComponent(state.subject)}`);
+  } catch (err) { fail(err.message); return; }
+  const s = state.status, item = s.next;
+  $("progress").textContent = `${s.trials_done} of ${s.trials_total} trials done`;
+  if (item.kind === "instructions") return instructions(item);
+  if (item.kind === "break") return pause(item);
+  if (item.kind === "practice") return practice(item);
+  if (item.kind === "trial") return trial(item);
+  return end(s);
+}
+
+function message(title, text, keys = "") {
+  show("message");
+  $("message-title").textContent = title;
+  $("message-text").textContent = text;
+  $("message-count").textContent = "";
+  $("message-keys").innerHTML = keys;
+  $("summary").hidden = true;
+}
+
+async function advance(item) {
+  try { next(await api("/api/advance", { subject: state.subject, key: item.key })); } catch (err) { fail(err.message); }
+}
+
+function instructions(item) {
+  const role = item.role === "test" ? "test" : "training";
+  message(`Block: ${item.label}`, item.instructions,
+          `${item.n_trials} ${role} trial${item.n_trials === 1 ? "" : "s"}. Press <kbd>Space</kbd> to begin.`);
+  whenSpace(() => advance(item));
+}
+
+function clock(s) {
+  const m = Math.floor(s / 60), r = Math.ceil(s % 60);
+  return r === 60 ? `${m + 1}:00` : `${m}:${String(r).padStart(2, "0")}`;
+}
+
+function pause(item) {
+  message("Break", "Rest your hands. The next part starts when the break is over.");
+  const until = performance.now() + item.duration_s * 1000;
+  const tick = () => {
+    const left = (until - performance.now()) / 1000;
+    if (left > 0) { $("message-count").textContent = clock(left); setTimeout(tick, 200); return; }
+    $("message-count").textContent = "0:00";
+    $("message-keys").innerHTML = "The break is over. Press <kbd>Space</kbd> to continue.";
+    whenSpace(() => advance(item));
+  };
+  tick();
+}
+
+function end(s) {
+  message("Thank you!", "The experiment is over and every trial is saved. You can close this page.");
+  const rows = {};
+  for (const r of (s.summary || [])) rows[`${r.label} (${r.role})`] = r;
+  const table = $("summary");
+  table.innerHTML = "<tr><th>block</th><th>trials</th><th>landed</th></tr>" + Object.entries(rows)
+    .map(([k, r]) => `<tr><td>${k}</td><td>${r.trials}</td><td>${r.landed}</td></tr>`).join("");
+  table.hidden = !(s.summary || []).length;
+  $("progress").textContent = `${s.trials_done} of ${s.trials_total} trials done`;
+}
+
+// The raw reading drawn in the direction of the input it feeds (an inverted axis flipped), so the red tick and
+// the blue bar agree when the stick is calibrated well.
+function shown(raw) {
+  const signs = state.device && state.device.signs;
+  return signs ? raw.map((v, j) => v * signs[j]) : raw;
+}
+
+// -- flying -------------------------------------------------------------------------------------------------
+let view = null;
+
+function taskScreen(label, overlay) {
+  show("task");
+  if (!view) view = new View($("scene"), state.spec);
+  $("task-label").textContent = label;
+  $("task-overlay").innerHTML = overlay;
+}
+
+function fly(x0, onEnd) {
+  const device = state.device;
+  device.reset();
+  const trial = new Trial(state.spec, x0, () => device.sample());
+  state.trial = trial;
+  view.trail = [];
+  state.log.start(performance.now());
+  $("task-overlay").innerHTML = "";
+  const i = state.spec.index;
+  const frame = (now) => {
+    trial.advance(now);
+    const x = trial.ended ? trial.xs[trial.xs.length - 1] : trial.x;
+    view.trail.push([x[i.x], x[i.y]]);
+    const last = trial.us.length ? trial.us[trial.us.length - 1] : [0, 0];
+    const raw = trial.raws.length ? trial.raws[trial.raws.length - 1] : [0, 0];
+    view.draw(x, last, { outcome: trial.ended });
+    drawSticks($("task-sticks"), shown(raw), last, ["angular accel. u1", "thrust u2"]);
+    const speed = Math.hypot(x[i.vx], x[i.vy]), phi = x[i.phi], L = state.spec.landing;
+    const mark = (ok, text) => `<span class="${ok ? "ok" : "notok"}">${text}</span>`;
+    $("task-hud").innerHTML = `t ${(trial.k * state.spec.dt).toFixed(1)} s · height ${x[i.y].toFixed(2)} m · ` +
+      mark(speed < L.speed, `speed ${speed.toFixed(2)} m/s`) + " · " +
+      mark(Math.abs(phi) < L.attitude, `attitude ${((phi * 180) / Math.PI).toFixed(1)}°`);
+    if (trial.ended) { state.trial = null; onEnd(trial); return; }
+    requestAnimationFrame(frame);
+  };
+  requestAnimationFrame(frame);
+}
+
+function verdict(outcome) {
+  const cls = outcome === "landed" ? "landed" : outcome === "crashed" ? "crashed" : "left";
+  const text = { landed: "Landed!", crashed: "Crashed", "left the domain": "Left the area", "time limit": "Out of time" };
+  return `<div class="big ${cls}">${text[outcome] || outcome}</div>`;
+}
+
+function payload(trial, extra) {
+  return {
+    subject: state.subject, x: trial.xs, u: trial.us, raw: trial.raws, outcome: trial.ended,
+    device: state.device.describe(), calibration: state.device.calibration(), timing: trial.timing(),
+    events: state.log.events, frames: trial.frames, ...extra,
+  };
+}
+
+function trial(item) {
+  const role = item.role === "test" ? "test" : "training";
+  const label = `${item.label} · ${role} trial ${item.trial} of ${item.n_trials}`;
+  const last = state.lastOutcome ? verdict(state.lastOutcome) : "";
+  state.lastOutcome = null;
+  const L = state.spec.landing;
+  taskScreen(label, `${last}<p>${item.instructions}</p><p class="keys">Land on the green pad slower than ` +
+                    `${L.speed} m/s and flatter than ${Math.round((L.attitude * 180) / Math.PI)}°.</p>` +
+                    `<p>Press <kbd>Space</kbd> to start ${role} trial ${item.trial} of ${item.n_trials}.</p>`);
+  view.trail = [];
+  view.draw(item.x0, [0, 0]);
+  whenSpace(() => fly(item.x0, async (t) => {
+    state.busy = true;
+    $("task-overlay").innerHTML = `${verdict(t.ended)}<p>Saving…</p>`;
+    try {
+      const s = await api("/api/trial", payload(t, { slot: item.slot, x0: item.x0 }));
+      state.lastOutcome = t.ended;
+      state.busy = false;
+      fail("");
+      next(s);
+    } catch (err) {
+      state.busy = false;
+      fail(err.message);
+      $("task-overlay").innerHTML = `${verdict(t.ended)}<p>Not saved. Press <kbd>Space</kbd> to fly this trial again.</p>`;
+      whenSpace(() => trial(item));
+    }
+  }));
+}
+
+function practiceStart() {
+  const s = state.spec, x0 = new Array(s.state_names.length).fill(0);
+  x0[s.index.x] = s.start.x[0] + Math.random() * (s.start.x[1] - s.start.x[0]);
+  x0[s.index.y] = s.start.y[0] + Math.random() * (s.start.y[1] - s.start.y[0]);
+  return x0;
+}
+
+function practice(item) {
+  const until = performance.now() + item.duration_s * 1000;
+  const round = (last) => {
+    const left = (until - performance.now()) / 1000;
+    if (left <= 0) {
+      taskScreen("Practice", `${last}<p>Practice is over.</p><p>Press <kbd>Space</kbd> to continue.</p>`);
+      whenSpace(() => advance(item));
+      return;
+    }
+    const x0 = practiceStart();
+    taskScreen(`Practice · ${clock(left)} left`, `${last}<p>Practice: land on the pad.</p>` +
+               "<p>Press <kbd>Space</kbd> to start.</p>");
+    view.trail = [];
+    view.draw(x0, [0, 0]);
+    whenSpace(() => fly(x0, async (t) => {
+      try { await api("/api/practice", payload(t, { x0 })); } catch (err) { fail(err.message); }
+      round(verdict(t.ended));
+    }));
+  };
+  round("");
+}
+
+main().catch((err) => { show("loading"); fail(err.message); });
