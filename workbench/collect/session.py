@@ -219,8 +219,10 @@ class Session:
         done_slots = self.finished(subject)
         done = set(doc["done"])
         trials = [i for i in items if i.kind == "trial"]
-        nxt = next(i for i in items if i.kind == "end" or (i.slot not in done_slots if i.kind == "trial"
-                                                              else i.key not in done))
+        finished = [j for j, i in enumerate(items) if (i.slot in done_slots if i.kind == "trial" else i.key in done)]
+        # steps are taken in order: the next one follows the last finished one (instructions shown before a
+        # block's trials are not asked for again when the tab closed after its first trial)
+        nxt = items[finished[-1] + 1 if finished else 0]
         step = nxt.to_json()
         if nxt.kind == "trial":
             step["x0"] = self.start(subject, nxt.slot)
@@ -271,6 +273,10 @@ class Session:
             raise DataError(f"trial: slot {slot!r} is not a trial of subject {subject!r}'s plan")
         item = items[slot]
         trial_id = self.trial_id(subject, item)
+        expected = min((j for j in items if j not in self.finished(subject)), default=None)
+        if slot != expected and not self._partition(subject, trial_id).is_file():
+            raise DataError(f"trial {trial_id}: out of order (the next trial of {subject!r} is slot {expected}); "
+                            "reload the page to resume")
         where = f"trial {trial_id}"
         x0 = self.start(subject, slot)
         demo, streams = self._checked(payload, x0, where)

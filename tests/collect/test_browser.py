@@ -1,0 +1,212 @@
+"""The testbed in a real browser (Debian's Chromium through Playwright): scripted subjects on a virtual gamepad and
+on the keyboard fly a protocol; what is recorded is what they did."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench.collect.session import HIDDEN
+from workbench.data.dataset import is_dataset, load_demonstrations
+
+from .conftest import calibrated, new_page, pilot_gain, pilot_js, register, write_protocol
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _fly_next(page, timeout_s: float = 40.0) -> None:
+    """On a trial's screen: Space starts it; returns once the page has saved it (the progress line moved on)."""
+    page.wait_for_selector("#screen-task:not([hidden])")
+    before = page.inner_text("#progress")
+    page.keyboard.press("Space")
+    page.wait_for_function("b => document.querySelector('#progress').textContent !== b", arg=before,
+                           timeout=timeout_s * 1000)
+    assert page.inner_text("#error") == ""
+
+
+def _pad_said(page, xs: np.ndarray) -> np.ndarray:
+    """The axes the scripted pad returned in each recorded state."""
+    return np.array(page.evaluate("xs => xs.map(x => window.__padLog[JSON.stringify(x)] || null)", xs.tolist()))
+
+
+def test_a_gamepad_subject_flies_a_protocol_and_the_inputs_are_the_pads(browser, serve, tmp_path):
+    run = serve(write_protocol(tmp_path / "p.toml", [{"label": "CS1", "instructions": "Land.", "trials": 2}]))
+    context, page = new_page(browser, gamepad=True)
+    try:
+        register(page, run.url, "pad01")
+        page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(20.0), -1.5)}; }}")  # a quick descent
+        page.wait_for_selector("#screen-message:not([hidden])")  # the block's instructions
+        page.keyboard.press("Space")
+        for _ in range(2):
+            _fly_next(page)
+        page.wait_for_selector("#summary:not([hidden])")
+        ds = load_demonstrations(run.out)
+        assert [d.meta["trial"] for d in ds] == [1, 2] and {d.meta["subject"] for d in ds} == {"pad01"}
+        for d in ds:
+            cal = d.meta["calibration"]
+            assert cal["kind"] == "gamepad" and d.meta["device"]["id"] == "Scripted pad (test)"
+            said = _pad_said(page, d.x)
+            raw = said[:, cal["axes"]]
+            mcap_raw = _mcap_inputs(run.out, d.id)
+            assert np.array_equal(mcap_raw[:, 2:], raw)  # the raw sticks recorded are the pad's, exactly
+            assert np.array_equal(d.u, calibrated(raw, cal))  # and the inputs are their calibration
+            assert d.meta["timing"]["physics_steps"] == len(d) and "dropped_steps" in d.meta["timing"]
+    finally:
+        context.close()
+
+
+def _mcap_inputs(out: Path, trial_id: str) -> np.ndarray:
+    from mcap.reader import make_reader
+
+    with open(out / HIDDEN / "mcap" / trial_id.split("-")[0] / f"{trial_id}.mcap", "rb") as f:
+        rows = [json.loads(m.data) for _, c, m in make_reader(f).iter_messages(topics=["/trial/input"])]
+    return np.array([[r["u1"], r["u2"], r["raw_u1"], r["raw_u2"]] for r in rows])
+
+
+def _mcap_events(out: Path, trial_id: str) -> list[tuple[str, str]]:
+    from mcap.reader import make_reader
+
+    with open(out / HIDDEN / "mcap" / trial_id.split("-")[0] / f"{trial_id}.mcap", "rb") as f:
+        return [(e["kind"], e["code"]) for e in (json.loads(m.data) for _, c, m in
+                                                  make_reader(f).iter_messages(topics=["/input/events"]))]
+
+
+def test_a_keyboard_subject_flies_and_the_keys_and_ramp_are_recorded(browser, serve, tmp_path):
+    run = serve(write_protocol(tmp_path / "p.toml", [{"label": "CS2", "instructions": "Land.", "trials": 1}]))
+    context, page = new_page(browser, gamepad=False)
+    try:
+        register(page, run.url, "kb01")
+        page.wait_for_selector("#screen-message:not([hidden])")
+        page.keyboard.press("Space")
+        page.wait_for_selector("#screen-task:not([hidden])")
+        page.keyboard.press("Space")
+        page.keyboard.down("ArrowLeft")
+        page.wait_for_timeout(150)
+        page.keyboard.up("ArrowLeft")
+        page.keyboard.down("ArrowDown")  # full thrust down: it reaches the ground in about a second
+        page.wait_for_selector("#summary:not([hidden])", timeout=30_000)
+        page.keyboard.up("ArrowDown")
+        (d,) = load_demonstrations(run.out)
+        assert d.meta["device"]["kind"] == "keyboard" and d.meta["outcome"] in ("crashed", "left the domain")
+        events = _mcap_events(run.out, d.id)
+        assert events[:3] == [("keydown", "ArrowLeft"), ("keyup", "ArrowLeft"), ("keydown", "ArrowDown")]
+        raw = _mcap_inputs(run.out, d.id)[:, 2:]
+        assert set(np.unique(raw)) <= {-1.0, 0.0, 1.0} and (raw[:, 0] == -1).any() and (raw[:, 1] == -1).any()
+        ramp, value, ramped = d.meta["device"]["ramp_per_step"], [0.0, 0.0], []
+        for r in raw.tolist():  # the stated ramp, in the page's arithmetic
+            value = [min(t, v + ramp) if v < t else max(t, v - ramp) if v > t else v
+                     for v, t in zip(value, r, strict=True)]
+            ramped.append(value)
+        assert np.array_equal(d.u, np.array(ramped))
+    finally:
+        context.close()
+
+
+def _serve_cli(out: Path, protocol: str, *extra: str) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen([sys.executable, "-m", "workbench", "collect", "--protocol", protocol, "--out", str(out),
+                             "--port", "0", "--no-browser", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=REPO, env={**os.environ, "COLUMNS": "200"})
+    line = proc.stdout.readline()
+    assert line.startswith("serving http://127.0.0.1:"), line + proc.stderr.read()
+    return proc, line.split()[1]
+
+
+@pytest.mark.slow
+def test_killing_server_and_browser_mid_trial_loses_only_that_trial(browser, tmp_path):
+    protocol = write_protocol(tmp_path / "p.toml", [{"label": "CS1", "instructions": "Land.", "trials": 3}])
+    out = tmp_path / "session"
+    proc, url = _serve_cli(out, str(protocol))
+    context, page = new_page(browser, gamepad=True)
+    try:
+        register(page, url, "s01")
+        page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(), -0.15)}; }}")  # a slow descent
+        page.wait_for_selector("#screen-message:not([hidden])")
+        page.keyboard.press("Space")
+        _fly_next(page)
+        page.keyboard.press("Space")  # the second trial starts …
+        page.wait_for_function("() => window.collect.trial && window.collect.trial.k > 20")
+        proc.send_signal(signal.SIGKILL)  # … and the server dies under it
+        proc.wait(timeout=10)
+        page.wait_for_timeout(300)
+    finally:
+        context.close()  # and the browser goes too
+    visible = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()
+                     and not any(part.startswith(("_", ".")) for part in p.relative_to(out).parts))
+    assert visible == ["subject=s01/s01-000-CS1-train.parquet"]
+    assert is_dataset(out) and len(load_demonstrations(out)) == 1
+    proc, url = _serve_cli(out, str(protocol))  # a new server resumes the folder
+    context, page = new_page(browser, gamepad=True)
+    try:
+        page.goto(f"{url}?subject=s01")
+        page.wait_for_selector("#resume-note:not([hidden])")
+        assert "1 of 3 trials are done" in page.inner_text("#resume-note")
+        page.keyboard.press("Space")
+        page.wait_for_selector("#screen-task:not([hidden])")
+        assert "trial 2 of 3" in page.inner_text("#task-label")
+        status = json.loads(page.evaluate("async () => JSON.stringify(await (await fetch('/api/subject/s01')).json())"))
+        assert status["next"]["slot"] == 1 and status["trials_done"] == 1
+    finally:
+        context.close()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
+
+
+@pytest.mark.slow
+def test_a_scripted_paper_single_subject_session_fits_evaluates_and_opens_in_rerun(browser, tmp_path):
+    """The shipped protocol, shortened by its flags: 2 labels × (train + test) trials that evaluate compares."""
+    from workbench.cli import main
+
+    out = tmp_path / "session"
+    proc, url = _serve_cli(out, "paper_single_subject", "--max-trials", "2", "--max-pause", "1")
+    context, page = new_page(browser, gamepad=True)
+    try:
+        register(page, url, "s01")
+        page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(), -0.3)}; }}")
+        while True:
+            page.wait_for_selector("#screen-message:not([hidden]), #screen-task:not([hidden])")
+            if page.is_visible("#summary"):
+                break
+            if page.is_visible("#screen-task"):
+                _fly_next(page)
+                continue
+            page.wait_for_function("() => window.collect.onSpace !== null", timeout=5000)
+            page.keyboard.press("Space")
+            page.wait_for_timeout(100)
+    finally:
+        context.close()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
+    ds = load_demonstrations(out)
+    count = {}
+    for d in ds:
+        count[(d.meta["label"], d.meta["role"])] = count.get((d.meta["label"], d.meta["role"]), 0) + 1
+    assert count == {("CS1", "train"): 2, ("CS2", "train"): 2, ("CS1", "test"): 2, ("CS2", "test"): 2}
+    assert main(["fit", str(out), "--label", "CS1", "--n-components", "1", "--bootstrap", "0",
+                 "-o", str(tmp_path / "cs1.npz")]) == 0
+    table = tmp_path / "results.csv"
+    assert main(["evaluate", str(out), "--n-components", "1", "--samples", "0", "--no-efficiency",
+                 "-o", str(table)]) == 0
+    import pandas as pd
+
+    results = pd.read_csv(table)
+    assert set(results["label"]) == {"CS1", "CS2"} and {"proposed", "ioc-only"} <= set(results["method"])
+    # the MCAP opens in rerun: its loader turns the trial's channels into entities
+    import rerun as rr
+
+    mcap = next((out / HIDDEN / "mcap" / "s01").glob("*.mcap"))
+    rrd = tmp_path / "trial.rrd"
+    rec = rr.RecordingStream("collect-test")
+    rec.save(rrd)
+    rec.log_file_from_path(mcap)
+    rec.flush()
+    rec.disconnect()
+    recording = rr.dataframe.load_recording(rrd)
+    paths = {str(c.entity_path) for c in recording.schema().component_columns()}
+    assert any("trial/input" in p for p in paths) and any("trial/state" in p for p in paths), sorted(paths)

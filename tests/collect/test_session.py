@@ -1,0 +1,142 @@
+"""The session folder: each trial checked against the plant, written atomically as a dataset partition and an MCAP,
+resumed from what is on disk."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench.collect.protocol import load_protocol
+from workbench.collect.session import HIDDEN, Session
+from workbench.collect.task import replay
+from workbench.data.dataset import is_dataset, load_demonstrations
+from workbench.errors import DataError
+
+from .conftest import pilot_gain, write_protocol
+
+
+def _protocol(tmp_path: Path):
+    return load_protocol(write_protocol(tmp_path / "p.toml", [
+        {"label": "CS1", "instructions": "c1", "trials": 2}, {"label": "CS2", "instructions": "c2", "trials": 1,
+                                                              "role": "test"}]))
+
+
+def flown(session: Session, subject: str, slot: int, y_ref: float = -0.3) -> dict:
+    """The payload the page sends for a trial a scripted pilot flew (its inputs, the states, the outcome)."""
+    spec, K = session.spec, pilot_gain()
+    x = np.array(session.start(subject, slot))
+    us = []
+    for k in range(spec["max_steps"] + 1):
+        us.append(np.clip(K @ (x - [0, y_ref, 0, 0, 0, 0]) + 0.05 * np.sin(0.3 * k), -1, 1))
+        xs, end, _ = replay(spec, session.start(subject, slot), np.array(us))
+        if end is not None:
+            break
+        x = np.array(spec["A"]) @ x + np.array(spec["B"]) @ us[-1]
+    u = np.array(us)
+    return {"subject": subject, "slot": slot, "u": u.tolist(), "x": xs.tolist(), "raw": u.tolist(), "outcome": end,
+            "device": {"kind": "test"}, "calibration": {"kind": "test"}, "timing": {"dropped_steps": 0},
+            "events": [[0.0, "keydown", "ArrowDown", None]], "frames": [0.0, 0.016]}
+
+
+def test_a_trial_is_written_as_a_partition_the_workbench_reads(tmp_path):
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    s.register("s01", {})
+    payload = flown(s, "s01", 0)
+    out = s.write_trial(payload)
+    assert out["trials_done"] == 1 and out["next"]["slot"] == 1
+    assert is_dataset(tmp_path / "out")
+    ds = load_demonstrations(tmp_path / "out")
+    d = ds[0]
+    assert len(ds) == 1 and d.id == out["id"] and d.meta["subject"] == "s01" and d.meta["label"] == "CS1"
+    assert d.meta["role"] == "train" and d.meta["outcome"] == payload["outcome"]
+    assert d.meta["start"] == s.start("s01", 0)
+    assert np.array_equal(d.u, np.array(payload["u"])) and np.array_equal(d.x, np.array(payload["x"]))
+    assert np.allclose(np.diff(d.t), s.spec["dt"]) and ds.state_names == tuple(s.spec["state_names"])
+
+
+def test_the_mcap_holds_states_inputs_and_raw_events(tmp_path):
+    from mcap.reader import make_reader
+
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    s.register("s01", {})
+    payload = flown(s, "s01", 0)
+    trial_id = s.write_trial(payload)["id"]
+    path = tmp_path / "out" / HIDDEN / "mcap" / "s01" / f"{trial_id}.mcap"
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        topics = {}
+        for _, channel, message in reader.iter_messages():
+            topics.setdefault(channel.topic, []).append(json.loads(message.data))
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert len(topics["/trial/input"]) == len(payload["u"]) == len(topics["/trial/state"])
+    assert [m["u1"] for m in topics["/trial/input"]] == [u[0] for u in payload["u"]]
+    assert topics["/input/events"] == [{"kind": "keydown", "code": "ArrowDown", "value": None}]
+    assert meta["trial"]["id"] == trial_id and meta["trial"]["outcome"] == payload["outcome"]
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda p: p["x"][5].__setitem__(0, p["x"][5][0] + 1e-6), "differ from the plant's replay"),
+    (lambda p: p.__setitem__("outcome", "landed" if p["outcome"] != "landed" else "crashed"), "replay says"),
+    (lambda p: p.__setitem__("u", p["u"][:-1]), "samples"),
+    (lambda p: p["u"][0].__setitem__(0, 1.5), "outside"),
+    (lambda p: p["u"][0].__setitem__(0, float("nan")), "non-finite"),
+    (lambda p: p.__setitem__("slot", 99), "slot 99"),
+    (lambda p: p.__setitem__("subject", "../x"), "an ID is"),
+])
+def test_a_trial_the_plant_does_not_reproduce_is_refused_and_nothing_written(tmp_path, damage, message):
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    s.register("s01", {})
+    payload = flown(s, "s01", 0)
+    damage(payload)
+    with pytest.raises(DataError, match=message):
+        s.write_trial(payload)
+    assert not list((tmp_path / "out").glob("subject=*/*")) and not list((tmp_path / "out").rglob("*.mcap"))
+
+
+def test_resume_reads_the_disk(tmp_path):
+    p = _protocol(tmp_path)
+    s = Session(tmp_path / "out", p)
+    s.register("s01", {})
+    assert s.status("s01")["next"]["kind"] == "instructions"
+    s.advance("s01", s.status("s01")["next"]["key"])
+    s.write_trial(flown(s, "s01", 0))
+    again = Session(tmp_path / "out", p)  # a new server on the same folder
+    status = again.register("s01", {})
+    assert status["trials_done"] == 1 and status["next"]["slot"] == 1
+    assert status["next"]["x0"] == s.start("s01", 1)
+    with pytest.raises(DataError, match="already recorded"):
+        again.write_trial(flown(again, "s01", 0))
+
+
+def test_a_session_folder_is_only_resumed_by_its_own_protocol(tmp_path):
+    Session(tmp_path / "out", _protocol(tmp_path))
+    with pytest.raises(DataError, match="a session of protocol 'p'"):
+        Session(tmp_path / "out", load_protocol("paper_single_subject"))
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "notes.txt").write_text("x")
+    with pytest.raises(DataError, match="not a session folder"):
+        Session(tmp_path / "other", _protocol(tmp_path))
+
+
+def test_subject_fields_are_checked(tmp_path):
+    s = Session(tmp_path / "out", load_protocol("paper_multi_subject"))
+    with pytest.raises(DataError, match="not a number"):
+        s.register("s01", {"age": "old"})
+    with pytest.raises(DataError, match="not one of"):
+        s.register("s01", {"gaming": "hourly"})
+    assert s.register("s01", {"age": "31", "gaming": "weekly"})["fields"] == {"age": 31.0, "gaming": "weekly"}
+
+
+def test_recorded_practice_stays_out_of_the_dataset(tmp_path):
+    path = write_protocol(tmp_path / "p.toml", [{"label": "A", "instructions": "a", "trials": 1}])
+    path.write_text(path.read_text() + "[practice]\nduration_s = 5\nrecorded = true\n")
+    s = Session(tmp_path / "out", load_protocol(path))
+    s.register("s01", {})
+    payload = flown(s, "s01", 0)
+    payload["x0"] = s.start("s01", 0)
+    assert s.write_practice(payload)["recorded"]
+    assert list((tmp_path / "out" / HIDDEN / "practice" / "s01").glob("*.parquet"))
+    assert not is_dataset(tmp_path / "out")  # nothing visible yet: practice is hidden from fit and evaluate
