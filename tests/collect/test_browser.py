@@ -196,7 +196,8 @@ def test_a_scripted_paper_single_subject_session_fits_evaluates_and_opens_in_rer
     import pandas as pd
 
     results = pd.read_csv(table)
-    assert set(results["label"]) == {"CS1", "CS2"} and {"proposed", "ioc-only"} <= set(results["method"])
+    assert set(results["label"]) == {"CS1", "CS2"} and "proposed" in set(results["method"])
+    assert len(set(results["method"])) >= 3  # compared with its baselines
     # the MCAP opens in rerun: its loader turns the trial's channels into entities
     import rerun as rr
 

@@ -11,6 +11,16 @@ const state = { config: null, spec: null, subject: null, status: null, device: n
                 log: new EventLog(), screen: null, onSpace: null, trial: null, busy: false };
 window.collect = state; // read by scripted subjects in the tests (and handy in the console)
 
+// A protocol's text as paragraphs: a blank line separates them, a single line break inside one is a space (TOML's
+// multi-line strings are wrapped for the file, not for the screen).
+function paragraphs(element, text) {
+  element.replaceChildren(...text.trim().split(/\n\s*\n/).map((t) => {
+    const p = document.createElement("p");
+    p.textContent = t.replace(/\s*\n\s*/g, " ");
+    return p;
+  }));
+}
+
 function show(name) {
   for (const s of document.querySelectorAll("main > section")) s.hidden = s.id !== `screen-${name}`;
   state.screen = name;
@@ -71,7 +81,7 @@ async function main() {
 function consent(subject) {
   const p = state.config.protocol;
   $("consent-title").textContent = p.title;
-  $("consent-text").textContent = p.consent.trim();
+  paragraphs($("consent-text"), p.consent);
   show("consent");
   const agree = () => { state.onSpace = null; subjectForm(subject); };
   $("consent-agree").onclick = agree;
@@ -155,7 +165,9 @@ function calibration() {
     setTimeout(loop, state.spec.dt * 1000);
   };
   loop();
-  $("measure-rest").onclick = async () => {
+  // buttons give the focus back at once: Space must go on meaning "continue", not "press this button again"
+  $("measure-rest").onclick = async (e) => {
+    e.currentTarget.blur();
     const pad = state.device;
     const readings = [];
     $("rest-result").textContent = "measuring… keep the sticks still";
@@ -167,7 +179,8 @@ function calibration() {
     pad.setRest(readings);
     $("rest-result").textContent = `offsets ${pad.offsets.map((v) => v.toFixed(3)).join(", ")}; dead zone ${pad.deadzone.toFixed(3)}`;
   };
-  const assign = (i, text) => async () => {
+  const assign = (i, text) => async (e) => {
+    e.currentTarget.blur();
     const pad = state.device;
     const rest = Array.from(pad.read().axes);
     $(`axis-u${i + 1}`).textContent = text;
@@ -207,7 +220,7 @@ async function next(status) {
 function message(title, text, keys = "") {
   show("message");
   $("message-title").textContent = title;
-  $("message-text").textContent = text;
+  paragraphs($("message-text"), text);
   $("message-count").textContent = "";
   $("message-keys").innerHTML = keys;
   $("summary").hidden = true;
@@ -230,7 +243,9 @@ function clock(s) {
 }
 
 function pause(item) {
-  message("Break", "Rest your hands. The next part starts when the break is over.");
+  const last = state.lastOutcome ? `Your last trial: ${verdictText(state.lastOutcome)}. ` : "";
+  state.lastOutcome = null;
+  message("Break", `${last}Rest your hands. The next part starts when the break is over.`);
   const until = performance.now() + item.duration_s * 1000;
   const tick = () => {
     const left = (until - performance.now()) / 1000;
@@ -298,10 +313,14 @@ function fly(x0, onEnd) {
   requestAnimationFrame(frame);
 }
 
+function verdictText(outcome) {
+  const text = { landed: "Landed!", crashed: "Crashed", "left the domain": "Left the area", "time limit": "Out of time" };
+  return text[outcome] || outcome;
+}
+
 function verdict(outcome) {
   const cls = outcome === "landed" ? "landed" : outcome === "crashed" ? "crashed" : "left";
-  const text = { landed: "Landed!", crashed: "Crashed", "left the domain": "Left the area", "time limit": "Out of time" };
-  return `<div class="big ${cls}">${text[outcome] || outcome}</div>`;
+  return `<div class="big ${cls}">${verdictText(outcome)}</div>`;
 }
 
 function payload(trial, extra) {
@@ -323,6 +342,7 @@ function trial(item) {
                     `<p>Press <kbd>Space</kbd> to start ${role} trial ${item.trial} of ${item.n_trials}.</p>`);
   view.trail = [];
   view.draw(item.x0, [0, 0]);
+  drawSticks($("task-sticks"), [0, 0], [0, 0], ["angular accel. u1", "thrust u2"]);
   whenSpace(() => fly(item.x0, async (t) => {
     state.busy = true;
     $("task-overlay").innerHTML = `${verdict(t.ended)}<p>Saving…</p>`;
