@@ -147,3 +147,16 @@ def register(page, url: str, subject: str) -> None:
     page.click("#subject-form button[type=submit]")
     page.wait_for_selector("#screen-calibration:not([hidden])")
     page.keyboard.press("Space")
+
+
+def rerun_entities(mcap: Path, rrd: Path) -> set[str]:
+    """The entity paths rerun's own MCAP loader makes of a file (what ``rerun FILE.mcap`` shows)."""
+    import rerun as rr
+    from rerun.chunk import RrdReader
+
+    rec = rr.RecordingStream("workbench-collect-test")
+    rec.save(rrd)
+    rec.log_file_from_path(mcap)
+    rec.flush()
+    rec.disconnect()
+    return {str(chunk.entity_path) for chunk in RrdReader(rrd).stream()}

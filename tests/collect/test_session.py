@@ -15,7 +15,7 @@ from workbench.collect.task import replay
 from workbench.data.dataset import is_dataset, load_demonstrations
 from workbench.errors import DataError
 
-from .conftest import pilot_gain, write_protocol
+from .conftest import pilot_gain, rerun_entities, write_protocol
 
 
 def _protocol(tmp_path: Path):
@@ -75,6 +75,14 @@ def test_the_mcap_holds_states_inputs_and_raw_events(tmp_path):
     assert [m["u1"] for m in topics["/trial/input"]] == [u[0] for u in payload["u"]]
     assert topics["/input/events"] == [{"kind": "keydown", "code": "ArrowDown", "value": None}]
     assert meta["trial"]["id"] == trial_id and meta["trial"]["outcome"] == payload["outcome"]
+
+
+def test_the_mcap_opens_in_rerun(tmp_path):
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    s.register("s01", {})
+    trial_id = s.write_trial(flown(s, "s01", 0))["id"]
+    entities = rerun_entities(tmp_path / "out" / HIDDEN / "mcap" / "s01" / f"{trial_id}.mcap", tmp_path / "t.rrd")
+    assert {"/trial/state", "/trial/input", "/input/events", "/display/frames"} <= entities
 
 
 @pytest.mark.parametrize("damage, message", [
