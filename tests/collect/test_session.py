@@ -148,3 +148,26 @@ def test_recorded_practice_stays_out_of_the_dataset(tmp_path):
     assert s.write_practice(payload)["recorded"]
     assert list((tmp_path / "out" / HIDDEN / "practice" / "s01").glob("*.parquet"))
     assert not is_dataset(tmp_path / "out")  # nothing visible yet: practice is hidden from fit and evaluate
+
+
+@pytest.mark.slow
+def test_a_multi_subject_folder_is_what_evaluate_per_subject_view_and_report_read(tmp_path):
+    """The paper's multi-subject analysis on a collected folder as it is (subjects flown by scripted pilots)."""
+    from workbench.cli import main
+
+    s = Session(tmp_path / "out", load_protocol("paper_multi_subject").shortened(6, 0))
+    for j in range(4):
+        s.register(f"s{j:02d}", {})
+        for item in s.plan(f"s{j:02d}"):
+            if item.kind == "trial":
+                s.write_trial(flown(s, f"s{j:02d}", item.slot, y_ref=-0.15 - 0.1 * j))
+    ds = load_demonstrations(tmp_path / "out")
+    assert len(ds) == 24 and sum(d.meta["role"] == "test" for d in ds) == 4
+    table = tmp_path / "per_subject.csv"
+    assert main(["evaluate", str(tmp_path / "out"), "--per-subject", "--n-components", "1", "-o", str(table)]) == 0
+    import pandas as pd
+
+    assert set(pd.read_csv(table)["subject"].astype(str)) == {"s00", "s01", "s02", "s03"}
+    assert main(["view", str(tmp_path / "out"), "--save", str(tmp_path / "v.rrd")]) == 0
+    assert main(["report", str(tmp_path / "out"), "-o", str(tmp_path / "report"), "--n-components", "1",
+                 "--bootstrap", "0", "--no-efficiency", "--samples", "0", "--power", "0"]) == 0
