@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
+from workbench.cli.collect import add_collect
 from workbench.cli.context import (
     DEFAULT_MAPPING,
     SAMPLE_LOGS,
@@ -15,7 +16,6 @@ from workbench.cli.context import (
     n_components_arg,
     positive_float,
 )
-from workbench.cli.collect import add_collect
 from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
 from workbench.cli.model import cmd_fit, cmd_predict
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
