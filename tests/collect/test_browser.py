@@ -201,3 +201,36 @@ def test_a_scripted_paper_single_subject_session_fits_evaluates_and_opens_in_rer
     # the MCAP opens in rerun: its loader turns the trial's channels into entities
     mcap = next((out / HIDDEN / "mcap" / "s01").glob("*.mcap"))
     assert {"/trial/input", "/trial/state", "/input/events"} <= rerun_entities(mcap, tmp_path / "trial.rrd")
+
+
+@pytest.mark.slow
+def test_the_experimenters_view_shows_live_tracks_predictions_outcomes_and_a_summary(browser, tmp_path):
+    from rerun.chunk import RrdReader
+
+    from workbench.cli import main
+
+    demos, model = tmp_path / "demos.parquet", tmp_path / "cs1.npz"
+    assert main(["simulate", "--strategy", "CS1", "--trials", "6", "-o", str(demos)]) == 0
+    assert main(["fit", str(demos), "--n-components", "1", "--bootstrap", "0", "-o", str(model)]) == 0
+    protocol = write_protocol(tmp_path / "p.toml", [{"label": "CS1", "instructions": "Land.", "trials": 1}])
+    out, rrd = tmp_path / "session", tmp_path / "view.rrd"
+    proc, url = _serve_cli(out, str(protocol), "--save", str(rrd), "--model", f"CS1={model}")
+    context, page = new_page(browser, gamepad=True)
+    try:
+        register(page, url, "s01")
+        page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(20.0), -1.5)}; }}")
+        page.wait_for_selector("#screen-message:not([hidden])")
+        page.keyboard.press("Space")
+        _fly_next(page)
+    finally:
+        context.close()
+        proc.send_signal(signal.SIGINT)
+        stdout, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0 and "s01: 1 of 1 trials (CS1 train" in stdout
+    (d,) = load_demonstrations(out)
+    entities = {}
+    for chunk in RrdReader(rrd).stream():
+        entities[str(chunk.entity_path)] = entities.get(str(chunk.entity_path), 0) + chunk.num_rows
+    assert {"/live/s01/vehicle", "/live/s01/prediction", f"/trials/s01/{d.id}", "/outcomes", "/summary"} <= set(
+        entities), sorted(entities)
+    assert entities["/live/s01/vehicle"] == len(d)  # every step of the trial was seen live

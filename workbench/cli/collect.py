@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from typing import Any
 
@@ -28,6 +29,16 @@ def add_collect(add: Any) -> None:
                         "machines reach the page)")
     p.add_argument("--no-browser", action="store_true", help="do not open the page in a browser")
     p.add_argument("--seed", type=int, default=0, help="seed of the trials' start positions (default 0)")
+    v = p.add_argument_group("the experimenter's view (rerun): the trials as they fly, outcomes, a summary per subject")
+    x = v.add_mutually_exclusive_group()
+    x.add_argument("--save", metavar="FILE.rrd", help="write the session's recording when the server stops")
+    x.add_argument("--spawn", action="store_true", help="stream it to a native rerun viewer")
+    x.add_argument("--serve", action="store_true", help="serve a web viewer of it on 127.0.0.1")
+    v.add_argument("--model", action="append", metavar="LABEL=MODEL.npz",
+                   help="a fitted model whose prediction from each trial's start is drawn beside the live track of "
+                        "that label's trials (repeatable)")
+    v.add_argument("--horizon", dest="horizon_s", type=float, default=5.0, metavar="SECONDS",
+                   help="length of that prediction (default 5 s)")
     g = p.add_argument_group("shortening (demonstrations and tests; a real session runs the protocol as written)")
     g.add_argument("--max-trials", type=_positive_int, metavar="N", help="at most N trials per block")
     g.add_argument("--max-pause", type=float, metavar="SECONDS", help="breaks and practice at most this long")
@@ -51,24 +62,53 @@ def cmd_collect(ctx: Context) -> int:
         protocol = protocol.shortened(a.max_trials, a.max_pause)
     session = Session(a.out, protocol, seed=a.seed)
 
-    def on_trial(out: dict[str, Any]) -> None:
+    def on_trial(out: dict[str, Any], payload: dict[str, Any]) -> None:
         ctx.say(f"{out['subject']}: {out['id']} {out['outcome']} ({out['samples']} samples); "
                 f"{out['trials_done']} of {out['trials_total']} trials done")
+        if view is not None:
+            view.trial(out, payload, out)
 
-    server = Server(make_app(session, on_trial=on_trial), a.host, a.port)
-    n_trials = sum(b.trials for b in protocol.blocks)
-    print(f"serving {server.url} (protocol {protocol.name}: {len(protocol.blocks)} blocks, {n_trials} trials; "
-          f"session {a.out}); Ctrl-C stops", flush=True)
-    if a.host not in ("127.0.0.1", "localhost", "::1"):
-        print(f"warning: listening on {a.host}: other machines can reach the page", file=sys.stderr)
-    if not a.no_browser:
-        import webbrowser
+    view = None
+    with contextlib.ExitStack() as stack:
+        if a.save or a.spawn or a.serve:
+            from workbench.collect.experimenter import ExperimenterView
+            from workbench.viewer import new_recording, open_output
 
-        webbrowser.open(server.url)
-    server.run()
+            models = _models(a.model or [])
+            rec = new_recording("workbench collect")
+            save = None if not a.save else str(ctx.output_path(a.save, ".rrd", "the recording"))
+            sink = stack.enter_context(open_output(rec, save=save, spawn=a.spawn, serve=a.serve))
+            view = ExperimenterView(rec, session.spec, models, a.horizon_s)
+            if a.serve:
+                ctx.say(f"the experimenter's view: {sink.url}")
+        server = Server(make_app(session, on_trial=on_trial, on_live=None if view is None else view.live),
+                        a.host, a.port)
+        n_trials = sum(b.trials for b in protocol.blocks)
+        print(f"serving {server.url} (protocol {protocol.name}: {len(protocol.blocks)} blocks, {n_trials} trials; "
+              f"session {a.out}); Ctrl-C stops", flush=True)
+        if a.host not in ("127.0.0.1", "localhost", "::1"):
+            print(f"warning: listening on {a.host}: other machines can reach the page", file=sys.stderr)
+        if not a.no_browser:
+            import webbrowser
+
+            webbrowser.open(server.url)
+        server.run()
     for subject in session.subjects():
         status = session.status(subject)
         parts = ", ".join(f"{r['label']} {r['role']} {r['landed']}/{r['trials']} landed"
                           for r in session.summary(subject)) or "no trials"
         ctx.say(f"{subject}: {status['trials_done']} of {status['trials_total']} trials ({parts})")
     return 0
+
+
+def _models(specs: list[str]) -> dict[str, Any]:
+    from workbench.errors import DataError
+    from workbench.models import load_model
+
+    out = {}
+    for spec in specs:
+        label, eq, path = spec.partition("=")
+        if not eq or not label or not path:
+            raise DataError(f"--model {spec}: expected LABEL=MODEL.npz (the block label whose trials it predicts)")
+        out[label] = load_model(path)
+    return out

@@ -11,6 +11,7 @@ Routes (all JSON but the page and its files)::
     POST /api/advance           {subject, key}: a practice, break or instructions step is over
     POST /api/trial             a finished trial: replayed through the plant, then written (MCAP, Parquet)
     POST /api/practice          a practice trial: checked; kept only if the protocol records practice
+    POST /api/live              states of a trial in flight, for the experimenter's view (never stored)
 
 A request body larger than :data:`MAX_BODY` is refused before it is read whole; bad input is a 400 whose
 ``error`` is one line (the page shows it).
@@ -19,6 +20,7 @@ A request body larger than :data:`MAX_BODY` is refused before it is read whole; 
 from __future__ import annotations
 
 import json
+import signal
 import socket
 import threading
 from collections.abc import Callable
@@ -35,8 +37,13 @@ STATIC = Path(__file__).with_name("static")
 MAX_BODY = 8 << 20
 
 
-def make_app(session: Session, *, on_trial: Callable[[dict[str, Any]], None] | None = None) -> Any:
-    """The Starlette application of one session; ``on_trial`` is called with each written trial's summary."""
+def make_app(session: Session, *, on_trial: Callable[[dict[str, Any], dict[str, Any]], None] | None = None,
+             on_live: Callable[[dict[str, Any], dict[str, Any] | None], None] | None = None) -> Any:
+    """The Starlette application of one session.
+
+    ``on_trial(result, payload)`` is called with each written trial's result and what the page sent;
+    ``on_live(piece, item)`` with each piece of a trial in flight (the page sends them only when it is given).
+    """
     from starlette.applications import Starlette
     from starlette.requests import Request
     from starlette.responses import FileResponse, JSONResponse, Response
@@ -80,7 +87,7 @@ def make_app(session: Session, *, on_trial: Callable[[dict[str, Any]], None] | N
         return Response(status_code=204)
 
     def config(_: Any) -> dict[str, Any]:
-        return {"protocol": session.protocol.to_json(), "task": session.spec}
+        return {"protocol": session.protocol.to_json(), "task": session.spec, "live": on_live is not None}
 
     def subject_status(request: Any) -> dict[str, Any]:
         subject = request.path_params["subject"]
@@ -104,8 +111,23 @@ def make_app(session: Session, *, on_trial: Callable[[dict[str, Any]], None] | N
     def trial(p: Any) -> dict[str, Any]:
         out = session.write_trial(p)
         if on_trial is not None:
-            on_trial(out)
+            on_trial(out, p)
         return out
+
+    def live(p: Any) -> dict[str, Any]:
+        if on_live is None:
+            return {}
+        _need(p, "subject", "slot", "k0", "x")
+        x = p["x"]
+        n = len(session.spec["state_names"])
+        if not (isinstance(x, list) and len(x) <= 200 and all(
+                isinstance(r, list) and len(r) == n and all(isinstance(v, int | float) for v in r) for r in x)
+                and isinstance(p["k0"], int) and isinstance(p["slot"], int)):
+            raise WorkbenchError("live: expected {subject, slot, k0, x: [[state], …]} with at most 200 states")
+        items = {i.slot: i for i in session.plan(str(p["subject"])) if i.kind == "trial"}
+        item = items.get(p["slot"])
+        on_live(p, None if item is None else item.to_json())
+        return {}
 
     routes = [
         Route("/", index),
@@ -117,6 +139,7 @@ def make_app(session: Session, *, on_trial: Callable[[dict[str, Any]], None] | N
         Route("/api/advance", handler(advance), methods=["POST"]),
         Route("/api/trial", handler(trial), methods=["POST"]),
         Route("/api/practice", handler(session.write_practice), methods=["POST"]),
+        Route("/api/live", handler(live), methods=["POST"]),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
     return Starlette(routes=routes)
@@ -145,7 +168,16 @@ class Server:
             self.sock.close()
             raise WorkbenchError(f"cannot listen on {host}:{port} ({exc.strerror}); choose another --port") from None
         self.host, self.port = host, self.sock.getsockname()[1]
-        self.server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off"))
+
+        class _Uvicorn(uvicorn.Server):
+            def handle_exit(self, sig: int, frame: Any) -> None:
+                # Ctrl-C (or SIGTERM) ends serving and the command goes on to save the experimenter's recording
+                # and print its summary: the normal end of a session, not raised again as uvicorn would
+                if self.should_exit and sig == signal.SIGINT:
+                    self.force_exit = True
+                self.should_exit = True
+
+        self.server = _Uvicorn(uvicorn.Config(app, log_level="warning", lifespan="off"))
         self._thread: threading.Thread | None = None
 
     @property

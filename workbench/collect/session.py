@@ -296,7 +296,8 @@ class Session:
             _write_mcap(mcap, streams, demo_meta)
             _write_partition(self, subject, trial_id, demo["x"], demo["u"], demo_meta,
                              order=int(doc["index"]) * 100_000 + slot)
-        return {"id": trial_id, "outcome": demo["outcome"], "samples": len(demo["u"]), **self.status(subject)}
+        return {"id": trial_id, "outcome": demo["outcome"], "samples": len(demo["u"]), "label": item.label,
+                "role": item.role, "trial": item.trial, **self.status(subject)}
 
     def write_practice(self, payload: Any) -> dict[str, Any]:
         """A practice trial: checked like a trial; kept in ``_collect/practice/`` only if the protocol records

@@ -285,8 +285,20 @@ function taskScreen(label, overlay) {
   $("task-overlay").innerHTML = overlay;
 }
 
-function fly(x0, onEnd) {
+// With the experimenter's view on, the states flown so far go to the server every LIVE_EVERY steps (not stored).
+const LIVE_EVERY = 4;
+
+function sendLive(trial, slot, from) {
+  const x = trial.xs.slice(from);
+  if (!x.length) return from;
+  fetch("/api/live", { method: "POST", headers: { "Content-Type": "application/json" },
+                       body: JSON.stringify({ subject: state.subject, slot, k0: from, x }) }).catch(() => {});
+  return from + x.length;
+}
+
+function fly(x0, onEnd, slot = -1) {
   const device = state.device;
+  let sent = 0;
   device.reset();
   const trial = new Trial(state.spec, x0, () => device.sample());
   state.trial = trial;
@@ -296,21 +308,28 @@ function fly(x0, onEnd) {
   const i = state.spec.index;
   const frame = (now) => {
     trial.advance(now);
+    if (state.config.live && (trial.ended || trial.xs.length - sent >= LIVE_EVERY)) sent = sendLive(trial, slot, sent);
     const x = trial.ended ? trial.xs[trial.xs.length - 1] : trial.x;
     view.trail.push([x[i.x], x[i.y]]);
     const last = trial.us.length ? trial.us[trial.us.length - 1] : [0, 0];
     const raw = trial.raws.length ? trial.raws[trial.raws.length - 1] : [0, 0];
     view.draw(x, last, { outcome: trial.ended });
     drawSticks($("task-sticks"), shown(raw), last, ["angular accel. u1", "thrust u2"]);
-    const speed = Math.hypot(x[i.vx], x[i.vy]), phi = x[i.phi], L = state.spec.landing;
-    const mark = (ok, text) => `<span class="${ok ? "ok" : "notok"}">${text}</span>`;
-    $("task-hud").innerHTML = `t ${(trial.k * state.spec.dt).toFixed(1)} s · height ${x[i.y].toFixed(2)} m · ` +
-      mark(speed < L.speed, `speed ${speed.toFixed(2)} m/s`) + " · " +
-      mark(Math.abs(phi) < L.attitude, `attitude ${((phi * 180) / Math.PI).toFixed(1)}°`);
+    hud(x, trial.k);
     if (trial.ended) { state.trial = null; onEnd(trial); return; }
     requestAnimationFrame(frame);
   };
   requestAnimationFrame(frame);
+}
+
+// The numbers above the scene: time, height, and speed and attitude green once within the landing limits.
+function hud(x, k) {
+  const i = state.spec.index, L = state.spec.landing;
+  const speed = Math.hypot(x[i.vx], x[i.vy]), phi = x[i.phi];
+  const mark = (ok, text) => `<span class="${ok ? "ok" : "notok"}">${text}</span>`;
+  $("task-hud").innerHTML = `t ${(k * state.spec.dt).toFixed(1)} s · height ${x[i.y].toFixed(2)} m · ` +
+    mark(speed < L.speed, `speed ${speed.toFixed(2)} m/s`) + " · " +
+    mark(Math.abs(phi) < L.attitude, `attitude ${((phi * 180) / Math.PI).toFixed(1)}°`);
 }
 
 function verdictText(outcome) {
@@ -342,6 +361,7 @@ function trial(item) {
                     `<p>Press <kbd>Space</kbd> to start ${role} trial ${item.trial} of ${item.n_trials}.</p>`);
   view.trail = [];
   view.draw(item.x0, [0, 0]);
+  hud(item.x0, 0);
   drawSticks($("task-sticks"), [0, 0], [0, 0], ["angular accel. u1", "thrust u2"]);
   whenSpace(() => fly(item.x0, async (t) => {
     state.busy = true;
@@ -358,7 +378,7 @@ function trial(item) {
       $("task-overlay").innerHTML = `${verdict(t.ended)}<p>Not saved. Press <kbd>Space</kbd> to fly this trial again.</p>`;
       whenSpace(() => trial(item));
     }
-  }));
+  }, item.slot));
 }
 
 function practiceStart() {
@@ -382,6 +402,7 @@ function practice(item) {
                "<p>Press <kbd>Space</kbd> to start.</p>");
     view.trail = [];
     view.draw(x0, [0, 0]);
+    hud(x0, 0);
     whenSpace(() => fly(x0, async (t) => {
       try { await api("/api/practice", payload(t, { x0 })); } catch (err) { fail(err.message); }
       round(verdict(t.ended));
