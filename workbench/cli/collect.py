@@ -35,8 +35,8 @@ def add_collect(add: Any) -> None:
     x.add_argument("--spawn", action="store_true", help="stream it to a native rerun viewer")
     x.add_argument("--serve", action="store_true", help="serve a web viewer of it on 127.0.0.1")
     v.add_argument("--model", action="append", metavar="LABEL=MODEL.npz",
-                   help="a fitted model whose prediction from each trial's start is drawn beside the live track of "
-                        "that label's trials (repeatable)")
+                   help="a fitted model of a block label (repeatable): it assists that label's assisted blocks, and "
+                        "its prediction from each trial's start is drawn beside the live track")
     v.add_argument("--horizon", dest="horizon_s", type=float, default=5.0, metavar="SECONDS",
                    help="length of that prediction (default 5 s)")
     g = p.add_argument_group("shortening (demonstrations and tests; a real session runs the protocol as written)")
@@ -60,7 +60,8 @@ def cmd_collect(ctx: Context) -> int:
     protocol = load_protocol(a.protocol)
     if a.max_trials is not None or a.max_pause is not None:
         protocol = protocol.shortened(a.max_trials, a.max_pause)
-    session = Session(a.out, protocol, seed=a.seed)
+    models = _models(a.model or [])
+    session = Session(a.out, protocol, seed=a.seed, models=models)
 
     def on_trial(out: dict[str, Any], payload: dict[str, Any]) -> None:
         ctx.say(f"{out['subject']}: {out['id']} {out['outcome']} ({out['samples']} samples); "
@@ -74,7 +75,6 @@ def cmd_collect(ctx: Context) -> int:
             from workbench.collect.experimenter import ExperimenterView
             from workbench.viewer import new_recording, open_output
 
-            models = _models(a.model or [])
             rec = new_recording("workbench collect")
             save = None if not a.save else str(ctx.output_path(a.save, ".rrd", "the recording"))
             sink = stack.enter_context(open_output(rec, save=save, spawn=a.spawn, serve=a.serve))

@@ -33,6 +33,13 @@ blocks stay in their order) is counterbalanced across subjects::
     trials = 30
     role = "train"                  # train | test
     held_out = 0                    # of the trials, this many (drawn per subject) are test trials instead
+    assist = "none"                 # none | show (the model's predicted path) | blend (see below)
+    blend = 0.3                     # with assist = "blend": the model's share α of the input
+
+Assisted blocks need a fitted model of their label (``workbench collect --model CS1=cs1.npz``). ``show`` draws the
+model's mean predicted path from the trial's start; ``blend`` gives the plant ``u = (1 − α) u_pilot + α
+clip(K̂ (x − x_target))``, the pilot's calibrated input blended with the model's task-objective input (its IOC
+part, bounded by the sticks' range), and the recording keeps ``u_pilot`` apart (:mod:`.task`, ``blend``).
 
 Shipped: ``paper_single_subject`` and ``paper_multi_subject`` (:data:`SHIPPED`); ``--protocol`` takes one of
 their names or a path. Every mistake is a :class:`~workbench.errors.DataError` of one line naming the file, the key
@@ -58,6 +65,7 @@ PROTOCOL_DIR = Path(__file__).with_name("protocols")
 SHIPPED = ("paper_single_subject", "paper_multi_subject")
 COUNTERBALANCE = ("none", "reverse", "rotate")
 ROLES = ("train", "test")
+ASSISTS = ("none", "show", "blend")
 FIELD_TYPES = ("text", "number", "choice")
 MAX_TRIALS = 1000
 #: A protocol file larger than this is not a protocol (and is not read whole into memory).
@@ -85,6 +93,7 @@ class Block:
     role: str = "train"
     held_out: int = 0
     assist: str = "none"
+    blend: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -219,7 +228,7 @@ def parse_protocol(doc: dict, source: str, name: str) -> Protocol:
         where = f"blocks[{j}]."
         if not isinstance(b, dict):
             raise DataError(f"{source}: blocks[{j}]: expected a table ([[blocks]])")
-        _unknown(b, {"label", "instructions", "trials", "role", "held_out", "assist"}, source, where)
+        _unknown(b, {"label", "instructions", "trials", "role", "held_out", "assist", "blend"}, source, where)
         label = _get(b, "label", str, source, where)
         if not label or not all(c.isalnum() or c in "_-" for c in label):
             raise DataError(f"{source}: {where}label: {label!r} must be letters, digits, '_' or '-'")
@@ -234,9 +243,13 @@ def parse_protocol(doc: dict, source: str, name: str) -> Protocol:
             raise DataError(f"{source}: {where}held_out: must be 0 or fewer than the block's {trials} trials, and "
                             f"only in a train block (got {held} in a {role} block)")
         assist = _get(b, "assist", str, source, where, "none")
-        if assist != "none":
-            raise DataError(f"{source}: {where}assist: {assist!r}: assisted blocks are not supported yet (none)")
-        blocks.append(Block(label, _get(b, "instructions", str, source, where), trials, role, held, assist))
+        if assist not in ASSISTS:
+            raise DataError(f"{source}: {where}assist: {assist!r} is not one of {', '.join(ASSISTS)}")
+        alpha = float(_get(b, "blend", (int, float), source, where, 0.3 if assist == "blend" else 0.0))
+        if assist == "blend" and not 0 < alpha <= 1 or assist != "blend" and "blend" in b:
+            raise DataError(f"{source}: {where}blend: the model's share must be in (0, 1], and only with "
+                            f"assist = \"blend\" (got {alpha!r} with assist = {assist!r})")
+        blocks.append(Block(label, _get(b, "instructions", str, source, where), trials, role, held, assist, alpha))
     return Protocol(
         name=name, title=title, consent=consent, fields=tuple(fields), blocks=tuple(blocks),
         practice_s=_seconds(practice, "duration_s", source, "practice."),
@@ -282,6 +295,8 @@ class Item:
     slot: int = -1
     trial: int = 0
     n_trials: int = 0
+    assist: str = "none"
+    blend: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -335,7 +350,8 @@ def plan(protocol: Protocol, subject: str, subject_index: int) -> list[Item]:
                 items.append(Item(f"break-block{n}-{t}", "break", protocol.break_s))
             role = "test" if t in test else b.role
             items.append(Item(f"trial{slot}", "trial", block=j, label=b.label, role=role,
-                              instructions=b.instructions, slot=slot, trial=t + 1, n_trials=b.trials))
+                              instructions=b.instructions, slot=slot, trial=t + 1, n_trials=b.trials,
+                              assist=b.assist, blend=b.blend))
             slot += 1
     items.append(Item("end", "end"))
     return items

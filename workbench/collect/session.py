@@ -34,7 +34,7 @@ import numpy as np
 
 from workbench.atomic import atomic_write_text
 from workbench.collect.protocol import Item, Protocol, plan
-from workbench.collect.task import OUTCOMES, draw_start, replay, task_spec
+from workbench.collect.task import OUTCOMES, blend, draw_start, replay, task_spec
 from workbench.errors import DataError
 from workbench.plant.system import LinearSystem, planar_quadrotor
 
@@ -86,11 +86,16 @@ class Session:
     """
 
     def __init__(self, out: str | os.PathLike, protocol: Protocol, *, system: LinearSystem | None = None,
-                 seed: int = 0) -> None:
+                 seed: int = 0, models: dict[str, Any] | None = None) -> None:
         self.out = Path(out)
         self.protocol = protocol
         self.system = system or planar_quadrotor()
         self.spec = task_spec(self.system, protocol.time_limit_s)
+        self.models = dict(models or {})
+        for j, b in enumerate(protocol.blocks):
+            if b.assist != "none" and b.label not in self.models:
+                raise DataError(f"{protocol.source}: blocks[{j}].assist = {b.assist!r} needs a fitted model of label "
+                                f"{b.label!r}: pass --model {b.label}=MODEL.npz")
         self.seed = int(seed)
         self._lock = threading.Lock()
         head = self.out / HIDDEN / "session.json"
@@ -227,6 +232,8 @@ class Session:
         if nxt.kind == "trial":
             step["x0"] = self.start(subject, nxt.slot)
             step["id"] = self.trial_id(subject, nxt)
+            if nxt.assist != "none":
+                step["help"] = self.assistance(nxt, step["x0"])
         return {"subject": subject, "fields": doc["fields"], "calibrated": bool(doc["calibrations"]),
                 "trials_done": len(done_slots), "trials_total": len(trials), "next": step,
                 "summary": self.summary(subject) if nxt.kind == "end" else None}
@@ -246,6 +253,18 @@ class Session:
             r["trials"] += 1
             r["landed"] += outcome == "landed"
         return list(rows.values())
+
+    def assistance(self, item: Item, x0: list[float]) -> dict[str, Any]:
+        """What the page needs to assist a trial: the model's gain ``K`` (for ``blend``) and its mean predicted
+        path from the start, as (across, height) points (for ``show``)."""
+        model = self.models[item.label]
+        i = self.spec["index"]
+        pred = model.predict(np.asarray(x0), self.spec["max_steps"], np.asarray(self.spec["target"]), clip=True)
+        path = pred.x[:, [i["x"], i["y"]]]
+        ground = np.flatnonzero(path[:, 1] <= 0.0)
+        path = path[: ground[0] + 1] if len(ground) else path  # drawn down to the ground, not beyond it
+        return {"kind": item.assist, "alpha": item.blend, "K": np.asarray(model.K_, dtype=np.float64).tolist(),
+                "path": path.tolist(), "law": "u = (1 - alpha) u_pilot + alpha clip(K (x - target))"}
 
     def start(self, subject: str, slot: int) -> list[float]:
         """The start state of a trial slot: drawn from the seed, the subject and the slot, so a resumed trial
@@ -279,7 +298,8 @@ class Session:
                             "reload the page to resume")
         where = f"trial {trial_id}"
         x0 = self.start(subject, slot)
-        demo, streams = self._checked(payload, x0, where)
+        help_ = self.assistance(item, x0) if item.assist != "none" else None
+        demo, streams = self._checked(payload, x0, where, help_)
         doc = self.subject_doc(subject)
         demo_meta = {
             "id": trial_id, "subject": subject, "label": item.label, "role": item.role, "trial": item.trial,
@@ -289,6 +309,9 @@ class Session:
             "device": demo["device"], "calibration": demo["calibration"], "timing": demo["timing"],
             "finished": _now(),
         }
+        if help_ is not None:
+            demo_meta["assist"] = {k: help_[k] for k in ("kind", "alpha", "K", "law")}
+            demo_meta["pilot_u"] = demo["pilot"].tolist()  # the pilot's own input; ``u`` is what the plant got
         with self._lock:
             if self._partition(subject, trial_id).is_file():
                 raise DataError(f"{where}: already recorded; the page is behind (reload it to resume)")
@@ -326,14 +349,26 @@ class Session:
                 folder / f"{pid}.parquet")
         return {"recorded": True, "outcome": demo["outcome"]}
 
-    def _checked(self, payload: dict, x0: list[float], where: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    def _checked(self, payload: dict, x0: list[float], where: str,
+                 help_: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
         n, m = len(self.spec["state_names"]), len(self.spec["input_names"])
         n_max = self.spec["max_steps"] + 1
         u = _array(payload, "u", m, n_max, where)
         x = _array(payload, "x", n, n_max, where)
         raw = _array(payload, "raw", m, n_max, where)
-        if not (len(u) == len(x) == len(raw)):
-            raise DataError(f"{where}: u, x and raw have {len(u)}, {len(x)} and {len(raw)} samples; one per step")
+        pilot = _array(payload, "pilot", m, n_max, where) if "pilot" in payload else u
+        if not (len(u) == len(x) == len(raw) == len(pilot)):
+            raise DataError(f"{where}: u, x, raw and pilot have {len(u)}, {len(x)}, {len(raw)} and {len(pilot)} "
+                            "samples; one per step")
+        if help_ is not None and help_["kind"] == "blend":
+            law = np.array([blend(self.spec, help_["K"], help_["alpha"], xk, pk)
+                            for xk, pk in zip(x.tolist(), pilot.tolist(), strict=True)])
+            if np.max(np.abs(law - u)) > STATE_TOLERANCE:
+                k = int(np.argmax(np.max(np.abs(law - u), axis=1) > STATE_TOLERANCE))
+                raise DataError(f"{where}: the input at sample {k} is not the stated blend of the pilot's input and "
+                                "the model's; nothing written")
+        elif not np.array_equal(pilot, u):
+            raise DataError(f"{where}: pilot input differs from the input in a trial without blending")
         lo, hi = np.array(self.spec["u_min"]), np.array(self.spec["u_max"])
         if ((u < lo) | (u > hi)).any():
             raise DataError(f"{where}: u: an input outside the sticks' range [{lo.tolist()}, {hi.tolist()}]")
@@ -358,10 +393,11 @@ class Session:
         streams: dict[str, Any] = {
             "/trial/state": {"t": t, **{s: xs[:, i] for i, s in enumerate(self.spec["state_names"])}},
             "/trial/input": {"t": t, **{s: u[:, i] for i, s in enumerate(self.spec["input_names"])},
-                             **{f"raw_{s}": raw[:, i] for i, s in enumerate(self.spec["input_names"])}},
+                             **{f"raw_{s}": raw[:, i] for i, s in enumerate(self.spec["input_names"])},
+                             **{f"pilot_{s}": pilot[:, i] for i, s in enumerate(self.spec["input_names"])}},
         }
         streams.update(_events(payload, where))
-        return {"x": xs, "u": u, "outcome": end, **info}, streams
+        return {"x": xs, "u": u, "pilot": pilot, "outcome": end, **info}, streams
 
 
 def _events(payload: dict, where: str) -> dict[str, Any]:

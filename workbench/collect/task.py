@@ -22,7 +22,7 @@ import numpy as np
 from workbench.plant.system import LinearSystem, planar_quadrotor
 from workbench.sim.landing import DOMAIN, LANDING_ATTITUDE, LANDING_SPEED, PAD_HALF_WIDTH, START_BOX, TIME_LIMIT
 
-__all__ = ["task_spec", "step", "replay", "outcome", "draw_start", "OUTCOMES"]
+__all__ = ["task_spec", "step", "replay", "outcome", "draw_start", "blend", "OUTCOMES"]
 
 #: What can end a trial; ``None`` from :func:`outcome` means it goes on.
 OUTCOMES = ("landed", "crashed", "left the domain", "time limit")
@@ -117,3 +117,20 @@ def draw_start(spec: dict[str, Any], seed: Sequence[int]) -> list[float]:
     x0[spec["index"]["x"]] = float(rng.uniform(*spec["start"]["x"]))
     x0[spec["index"]["y"]] = float(rng.uniform(*spec["start"]["y"]))
     return x0
+
+
+def blend(spec: dict[str, Any], K: Sequence[Sequence[float]], alpha: float, x: Sequence[float],
+          pilot: Sequence[float]) -> list[float]:
+    """The arbitration law of an assisted trial: ``(1 − α) u_pilot + α clip(K (x − x_target))``.
+
+    The model's share is its task-objective input (the IOC part ``K̂``) bounded by the sticks' range; summed in
+    the page's order (``static/sim.js`` ``blend``), so both give the same bits.
+    """
+    out = []
+    for i, row in enumerate(K):
+        m = 0.0
+        for k, xj, tj in zip(row, x, spec["target"], strict=True):
+            m += k * (xj - tj)
+        m = min(max(m, spec["u_min"][i]), spec["u_max"][i])
+        out.append((1 - alpha) * pilot[i] + alpha * m)
+    return out

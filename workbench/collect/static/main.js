@@ -2,7 +2,7 @@
 // (instructions, trials, breaks, practice, the end). Space starts and continues. The server keeps the state:
 // a reloaded page (or a new browser) with ?subject=ID resumes at the first unfinished step.
 
-import { Trial } from "./sim.js";
+import { Trial, blend } from "./sim.js";
 import { EventLog, Keyboard, Pad, firstPad, KEY_RAMP } from "./input.js";
 import { View, drawSticks } from "./render.js";
 
@@ -296,11 +296,16 @@ function sendLive(trial, slot, from) {
   return from + x.length;
 }
 
-function fly(x0, onEnd, slot = -1) {
+function fly(x0, onEnd, slot = -1, help = null) {
   const device = state.device;
   let sent = 0;
   device.reset();
-  const trial = new Trial(state.spec, x0, () => device.sample());
+  // an assisted trial blends the pilot's input with the model's by the stated law; both are recorded
+  const sample = help && help.kind === "blend" ? (x) => {
+    const s = device.sample();
+    return { raw: s.raw, pilot: s.u, u: blend(state.spec, help.K, help.alpha, x, s.u) };
+  } : () => device.sample();
+  const trial = new Trial(state.spec, x0, sample);
   state.trial = trial;
   view.trail = [];
   state.log.start(performance.now());
@@ -344,7 +349,7 @@ function verdict(outcome) {
 
 function payload(trial, extra) {
   return {
-    subject: state.subject, x: trial.xs, u: trial.us, raw: trial.raws, outcome: trial.ended,
+    subject: state.subject, x: trial.xs, u: trial.us, raw: trial.raws, pilot: trial.pilots, outcome: trial.ended,
     device: state.device.describe(), calibration: state.device.calibration(), timing: trial.timing(),
     events: state.log.events, frames: trial.frames, ...extra,
   };
@@ -355,10 +360,14 @@ function trial(item) {
   const label = `${item.label} · ${role} trial ${item.trial} of ${item.n_trials}`;
   const last = state.lastOutcome ? verdict(state.lastOutcome) : "";
   state.lastOutcome = null;
-  const L = state.spec.landing;
-  taskScreen(label, `${last}<p>${item.instructions}</p><p class="keys">Land on the green pad slower than ` +
+  const L = state.spec.landing, help = item.help || null;
+  const assisted = !help ? "" : help.kind === "show"
+    ? "<p><b>Assisted:</b> the dashed blue line is the path a model of this strategy predicts.</p>"
+    : `<p><b>Assisted:</b> your input is blended with a model's (its share ${help.alpha}).</p>`;
+  taskScreen(label, `${last}<p>${item.instructions}</p>${assisted}<p class="keys">Land on the green pad slower than ` +
                     `${L.speed} m/s and flatter than ${Math.round((L.attitude * 180) / Math.PI)}°.</p>` +
                     `<p>Press <kbd>Space</kbd> to start ${role} trial ${item.trial} of ${item.n_trials}.</p>`);
+  view.guide = help && help.kind === "show" ? help.path : null;
   view.trail = [];
   view.draw(item.x0, [0, 0]);
   hud(item.x0, 0);
@@ -378,7 +387,7 @@ function trial(item) {
       $("task-overlay").innerHTML = `${verdict(t.ended)}<p>Not saved. Press <kbd>Space</kbd> to fly this trial again.</p>`;
       whenSpace(() => trial(item));
     }
-  }, item.slot));
+  }, item.slot, help));
 }
 
 function practiceStart() {
@@ -400,6 +409,7 @@ function practice(item) {
     const x0 = practiceStart();
     taskScreen(`Practice · ${clock(left)} left`, `${last}<p>Practice: land on the pad.</p>` +
                "<p>Press <kbd>Space</kbd> to start.</p>");
+    view.guide = null;
     view.trail = [];
     view.draw(x0, [0, 0]);
     hud(x0, 0);

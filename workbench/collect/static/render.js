@@ -10,6 +10,7 @@ export class View {
     this.spec = spec;
     this.trail = [];
     this.showTrail = true;
+    this.guide = null; // [[x, y], ...] drawn dashed, or null
   }
 
   fit() {
@@ -65,6 +66,12 @@ export class View {
     ctx.fillStyle = "#eef2e6"; ctx.font = "12px system-ui, sans-serif";
     for (let gx = Math.ceil(x0); gx <= x1; gx++) {
       if (Math.abs(gx - s.pad.x) > s.pad.half_width) ctx.fillText(`${gx} m`, this.sx(gx), this.sy(0) + 18);
+    }
+    // an assisted trial's guide: the model's predicted path from the start
+    if (this.guide && this.guide.length > 1) {
+      ctx.strokeStyle = "rgba(59, 111, 216, 0.9)"; ctx.lineWidth = 2; ctx.setLineDash([8, 6]); ctx.beginPath();
+      this.guide.forEach(([gx, gy], j) => (j ? ctx.lineTo(this.sx(gx), this.sy(gy)) : ctx.moveTo(this.sx(gx), this.sy(gy))));
+      ctx.stroke(); ctx.setLineDash([]);
     }
     if (!x) return;
     // trail

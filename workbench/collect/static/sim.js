@@ -14,6 +14,18 @@ export function step(A, B, x, u) {
   return out;
 }
 
+// The arbitration law of an assisted trial (workbench.collect.task.blend): (1 - alpha) pilot + alpha clip(K (x - target)).
+export function blend(spec, K, alpha, x, pilot) {
+  const out = new Array(K.length);
+  for (let i = 0; i < K.length; i++) {
+    let m = 0.0;
+    for (let j = 0; j < x.length; j++) m += K[i][j] * (x[j] - spec.target[j]);
+    m = Math.min(Math.max(m, spec.u_min[i]), spec.u_max[i]);
+    out[i] = (1 - alpha) * pilot[i] + alpha * m;
+  }
+  return out;
+}
+
 // How a trial ends at sample k in state x, or null: the rules of workbench.collect.task.outcome.
 export function outcome(spec, x, k) {
   const i = spec.index;
@@ -37,8 +49,8 @@ export class Trial {
   constructor(spec, x0, sample, { maxCatchUp = 5 } = {}) {
     this.spec = spec;
     this.x = x0.slice();
-    this.sample = sample; // () => {u: [..], raw: [..]}: the sticks at this step
-    this.xs = []; this.us = []; this.raws = []; this.stepWall = [];
+    this.sample = sample; // (x) => {u, raw, pilot?}: the input at this step (pilot: the pilot's own, if assisted)
+    this.xs = []; this.us = []; this.raws = []; this.pilots = []; this.stepWall = [];
     this.k = 0;
     this.ended = null;
     this.acc = 0;
@@ -51,10 +63,11 @@ export class Trial {
   }
 
   physicsStep(now) {
-    const s = this.sample();
+    const s = this.sample(this.x);
     this.xs.push(this.x.slice());
     this.us.push(s.u.slice());
     this.raws.push(s.raw.slice());
+    this.pilots.push((s.pilot || s.u).slice());
     this.stepWall.push((now - this.t0) / 1000);
     const end = outcome(this.spec, this.x, this.k);
     if (end !== null) { this.ended = end; return; }
