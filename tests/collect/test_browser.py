@@ -234,3 +234,44 @@ def test_the_experimenters_view_shows_live_tracks_predictions_outcomes_and_a_sum
     assert {"/live/s01/vehicle", "/live/s01/prediction", f"/trials/s01/{d.id}", "/outcomes", "/summary"} <= set(
         entities), sorted(entities)
     assert entities["/live/s01/vehicle"] == len(d)  # every step of the trial was seen live
+
+
+@pytest.mark.slow
+def test_assisted_blocks_show_the_models_path_and_blend_by_the_stated_law(browser, tmp_path):
+    from workbench.cli import main
+    from workbench.collect.task import blend, task_spec
+
+    demos, model = tmp_path / "demos.parquet", tmp_path / "cs1.npz"
+    assert main(["simulate", "--strategy", "CS1", "--trials", "6", "-o", str(demos)]) == 0
+    assert main(["fit", str(demos), "--n-components", "1", "--bootstrap", "0", "-o", str(model)]) == 0
+    protocol = write_protocol(tmp_path / "p.toml", [
+        {"label": "CS1", "instructions": "Follow the line.", "trials": 1, "assist": "show"},
+        {"label": "CS1", "instructions": "Fly with help.", "trials": 1, "assist": "blend", "blend": 0.5}])
+    out = tmp_path / "session"
+    proc, url = _serve_cli(out, str(protocol), "--model", f"CS1={model}")
+    context, page = new_page(browser, gamepad=True)
+    try:
+        register(page, url, "s01")
+        page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(20.0), -1.5)}; }}")
+        for _ in range(2):
+            page.wait_for_selector("#screen-message:not([hidden])")
+            page.keyboard.press("Space")
+            page.wait_for_selector("#screen-task:not([hidden])")
+            status = page.evaluate("() => window.collect.status.next")
+            guide = page.evaluate("() => document.querySelector('#task-overlay').textContent")
+            assert "Assisted" in guide
+            _fly_next(page)
+    finally:
+        context.close()
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+    shown, blended = load_demonstrations(out)
+    assert shown.meta["assist"]["kind"] == "show" and np.array_equal(shown.u, np.array(shown.meta["pilot_u"]))
+    assert status["help"]["kind"] == "blend"
+    spec, help_ = task_spec(), blended.meta["assist"]
+    pilot = np.array(blended.meta["pilot_u"])
+    law = np.array([blend(spec, help_["K"], help_["alpha"], x, p) for x, p in zip(blended.x.tolist(),
+                                                                                  pilot.tolist(), strict=True)])
+    assert np.array_equal(blended.u, law) and not np.array_equal(blended.u, pilot)
+    raw = _mcap_inputs(out, blended.id)[:, 2:]
+    assert np.array_equal(pilot, calibrated(raw, blended.meta["calibration"]))  # the pilot's own, from the pad

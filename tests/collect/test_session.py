@@ -11,7 +11,7 @@ import pytest
 
 from workbench.collect.protocol import load_protocol
 from workbench.collect.session import HIDDEN, Session
-from workbench.collect.task import replay
+from workbench.collect.task import outcome, replay, step
 from workbench.data.dataset import is_dataset, load_demonstrations
 from workbench.errors import DataError
 
@@ -171,3 +171,73 @@ def test_a_multi_subject_folder_is_what_evaluate_per_subject_view_and_report_rea
     assert main(["view", str(tmp_path / "out"), "--save", str(tmp_path / "v.rrd")]) == 0
     assert main(["report", str(tmp_path / "out"), "-o", str(tmp_path / "report"), "--n-components", "1",
                  "--bootstrap", "0", "--no-efficiency", "--samples", "0", "--power", "0"]) == 0
+
+
+class _StubModel:
+    """What a session needs of a fitted model to assist: ``K_`` and a mean prediction (here the LQR pilot's)."""
+
+    def __init__(self) -> None:
+        self.K_ = pilot_gain()
+
+    def predict(self, x0, n_steps, target=None, *, clip=False):
+        from types import SimpleNamespace
+
+        from workbench.plant.system import planar_quadrotor
+
+        s, x = planar_quadrotor(), [np.asarray(x0, dtype=float)]
+        for _ in range(n_steps):
+            x.append(s.step(x[-1], np.clip(self.K_ @ x[-1], -1, 1)))
+        return SimpleNamespace(x=np.array(x))
+
+
+def _assisted(tmp_path: Path, kind: str, alpha: float = 0.4):
+    block = {"label": "CS1", "instructions": "c1", "trials": 1, "assist": kind}
+    if kind == "blend":
+        block["blend"] = alpha
+    return load_protocol(write_protocol(tmp_path / "a.toml", [block]))
+
+
+def test_an_assisted_block_needs_a_model_of_its_label(tmp_path):
+    with pytest.raises(DataError, match="--model CS1=MODEL.npz"):
+        Session(tmp_path / "out", _assisted(tmp_path, "show"))
+
+
+def test_a_blended_trial_keeps_the_pilots_input_apart_and_is_checked_against_the_law(tmp_path):
+    from workbench.collect.task import blend
+
+    model = _StubModel()
+    s = Session(tmp_path / "out", _assisted(tmp_path, "blend", 0.4), models={"CS1": model})
+    status = s.register("s01", {})
+    s.advance("s01", status["next"]["key"])
+    help_ = s.status("s01")["next"]["help"]
+    assert help_["kind"] == "blend" and help_["alpha"] == 0.4 and np.array_equal(help_["K"], model.K_)
+    spec, x0 = s.spec, s.start("s01", 0)
+    x, xs, us, pilots = list(x0), [], [], []
+    for k in range(spec["max_steps"] + 1):
+        pilot = [0.3 * np.sin(0.2 * k), -0.4]  # a pilot who descends; the model's share steers
+        u = blend(spec, help_["K"], 0.4, x, pilot)
+        xs.append(x), us.append(u), pilots.append(pilot)
+        end = outcome(spec, x, k)
+        if end is not None:
+            break
+        x = step(spec["A"], spec["B"], x, u)
+    payload = {"subject": "s01", "slot": 0, "x": xs, "u": us, "raw": pilots, "pilot": pilots, "outcome": end}
+    xw, end_w, _ = replay(spec, x0, np.array(pilots))  # the pilot's own input passed off as the blend
+    n = len(xw)
+    with pytest.raises(DataError, match="not the stated blend"):
+        s.write_trial({**payload, "x": xw.tolist(), "u": pilots[:n], "raw": pilots[:n], "pilot": pilots[:n],
+                       "outcome": end_w})
+    s.write_trial(payload)
+    (d,) = load_demonstrations(tmp_path / "out")
+    assert np.array_equal(d.u, np.array(us)) and np.array_equal(np.array(d.meta["pilot_u"]), np.array(pilots))
+    assert d.meta["assist"]["kind"] == "blend" and d.meta["assist"]["alpha"] == 0.4
+
+
+def test_a_shown_prediction_is_the_models_path_from_the_start(tmp_path):
+    model = _StubModel()
+    s = Session(tmp_path / "out", _assisted(tmp_path, "show"), models={"CS1": model})
+    s.register("s01", {})
+    s.advance("s01", s.status("s01")["next"]["key"])
+    path = np.array(s.status("s01")["next"]["help"]["path"])
+    full = model.predict(s.start("s01", 0), s.spec["max_steps"]).x[:, :2]
+    assert np.array_equal(path, full[: len(path)]) and path[-1, 1] <= 0 < path[-2, 1]  # drawn to the ground
