@@ -81,3 +81,36 @@ def test_page_and_server_end_trials_by_the_same_rules(sim_page):
     ours = [outcome(spec, x, int(k)) for x, k in zip(states.tolist(), ks, strict=True)]
     assert page == ours
     assert set(ours) >= {None, *OUTCOMES}  # every rule was exercised
+
+
+@pytest.mark.parametrize("frame_ms", [10.0, 25.0, 50.0])
+def test_physics_runs_at_its_own_rate_whatever_the_display_rate(sim_page, frame_ms):
+    """The accumulator: 2 s of frames at 100, 40 or 20 Hz run the same steps and reach the same state."""
+    spec = task_spec()
+    total_ms = 2000.0
+    out = sim_page.evaluate(
+        """([frame, total]) => {
+             const x0 = [0, 2.8, 0, 0, 0, 0];
+             const t = new sim.Trial(spec, x0, (x) => ({ u: [0, -0.2], raw: [0, -0.2] }));
+             for (let now = 1000; now <= 1000 + total + 1e-9; now += frame) t.advance(now);
+             return { n: t.us.length, late: t.late, dropped: t.skipped, x: t.x };
+           }""", [frame_ms, total_ms])
+    steps = int(total_ms / (spec["dt"] * 1000))
+    assert out["n"] == steps + 1 and out["dropped"] == 0
+    x = [0, 2.8, 0, 0, 0, 0]
+    for _ in range(steps + 1):  # every recorded sample is stepped on (the trial has not ended)
+        x = step(spec["A"], spec["B"], x, [0, -0.2])
+    assert out["x"] == x
+
+
+def test_a_stalled_display_is_counted_not_hidden(sim_page):
+    out = sim_page.evaluate(
+        """() => {
+             const t = new sim.Trial(spec, [0, 2.8, 0, 0, 0, 0], () => ({ u: [0, 0], raw: [0, 0] }));
+             t.advance(0); t.advance(16); t.advance(1016);  // a one-second freeze
+             return { n: t.us.length, late: t.late, dropped: t.skipped };
+           }""")
+    # a frame may catch up 5 steps at once (4 of them late); the other steps of the freeze are dropped, counted
+    dt_ms = task_spec()["dt"] * 1000
+    missed = int(1016 / dt_ms)
+    assert out["n"] == 1 + 5 and out["late"] == 4 and out["dropped"] == missed - 5
