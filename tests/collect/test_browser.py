@@ -275,3 +275,26 @@ def test_assisted_blocks_show_the_models_path_and_blend_by_the_stated_law(browse
     assert np.array_equal(blended.u, law) and not np.array_equal(blended.u, pilot)
     raw = _mcap_inputs(out, blended.id)[:, 2:]
     assert np.array_equal(pilot, calibrated(raw, blended.meta["calibration"]))  # the pilot's own, from the pad
+
+
+@pytest.mark.slow
+def test_practice_runs_for_its_duration_and_stays_out_of_the_dataset(browser, serve, tmp_path):
+    path = write_protocol(tmp_path / "p.toml", [{"label": "CS1", "instructions": "Land.", "trials": 1}])
+    path.write_text(path.read_text() + "[practice]\nduration_s = 2\nrecorded = true\n")
+    run = serve(path)
+    context, page = new_page(browser, gamepad=True)
+    try:
+        register(page, run.url, "s01")
+        page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(20.0), -1.5)}; }}")
+        page.wait_for_selector("#screen-task:not([hidden])")
+        assert "Practice" in page.inner_text("#task-label")
+        page.keyboard.press("Space")  # one practice landing (longer than the practice's 2 s)
+        page.wait_for_function("() => document.querySelector('#task-overlay').textContent.includes('Practice is over')",
+                               timeout=30_000)
+        page.keyboard.press("Space")
+        page.wait_for_selector("#screen-message:not([hidden])")  # the block's instructions
+        assert page.inner_text("#message-title") == "Block: CS1"
+    finally:
+        context.close()
+    practice = list((run.out / HIDDEN / "practice" / "s01").glob("*.parquet"))
+    assert len(practice) == 1 and not is_dataset(run.out)  # kept, but not among the trials fit and evaluate read
