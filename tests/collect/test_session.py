@@ -123,6 +123,10 @@ def test_a_session_folder_is_only_resumed_by_its_own_protocol(tmp_path):
     Session(tmp_path / "out", _protocol(tmp_path))
     with pytest.raises(DataError, match="a session of protocol 'p'"):
         Session(tmp_path / "out", load_protocol("paper_single_subject"))
+    with pytest.raises(DataError, match="same --max-trials"):
+        Session(tmp_path / "out", _protocol(tmp_path).shortened(1))
+    with pytest.raises(DataError, match="--seed 0, not 3"):
+        Session(tmp_path / "out", _protocol(tmp_path), seed=3)
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "notes.txt").write_text("x")
     with pytest.raises(DataError, match="not a session folder"):

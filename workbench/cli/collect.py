@@ -93,6 +93,8 @@ def cmd_collect(ctx: Context) -> int:
 
             webbrowser.open(server.url)
         server.run()
+    if not session.subjects():
+        ctx.say(f"no subject has started; {a.out} holds no trials")
     for subject in session.subjects():
         status = session.status(subject)
         parts = ", ".join(f"{r['label']} {r['role']} {r['landed']}/{r['trials']} landed"

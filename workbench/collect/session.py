@@ -105,17 +105,24 @@ class Session:
             if head.is_file():
                 try:
                     doc = json.loads(head.read_text(encoding="utf-8"))
-                    name = doc["protocol"]
-                except (ValueError, KeyError, TypeError) as exc:
+                    name, trials, seed_then = doc["protocol"], doc.get("trials"), doc.get("seed", 0)
+                except (ValueError, KeyError, TypeError, AttributeError) as exc:
                     raise DataError(f"{head}: damaged session file ({exc})") from None
                 if name != protocol.name:
                     raise DataError(f"{self.out}: a session of protocol {name!r}, not {protocol.name!r}; resume it "
                                     f"with --protocol {name} or choose another folder")
+                if trials is not None and trials != [b.trials for b in protocol.blocks]:
+                    raise DataError(f"{self.out}: a session with {trials} trials per block, not "
+                                    f"{[b.trials for b in protocol.blocks]}; resume it with the same --max-trials")
+                if seed_then != self.seed:
+                    raise DataError(f"{self.out}: a session of --seed {seed_then}, not {self.seed}; resume it with "
+                                    "the same seed (the start positions depend on it)")
             elif any(self.out.iterdir()):
                 raise DataError(f"{self.out}: exists and is not a session folder; choose a new or empty folder")
         if not head.is_file():
             atomic_write_text(head, json.dumps({"format": SESSION_FORMAT, "version": 1, "protocol": protocol.name,
                                                 "protocol_source": protocol.source, "seed": self.seed,
+                                                "trials": [b.trials for b in protocol.blocks],
                                                 "created": _now()}, indent=1))
 
     # -- subjects ----------------------------------------------------------------------------------------
