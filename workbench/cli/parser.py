@@ -243,8 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="held-out trials per subject with --per-subject (default 1)")
     p.add_argument("--holdout", choices=["auto", "split", "loso"], default="auto",
                    help="test trials: one random split (--test-size), leave-one-segment-out (every trial tested "
-                        "once by models fitted on the others; no data-efficiency curve), or auto: leave-one-out "
-                        "when a label has fewer than 10 trials (default)")
+                        "once by models fitted on the others; no data-efficiency curve), or auto: the test trials a "
+                        "collected session recorded (role test), else leave-one-out when a label has fewer than 10 "
+                        "trials, else a split (default)")
     _study_options(p)
     _mapping_option(p)
     _executor_options(p)

@@ -40,7 +40,12 @@ def cmd_evaluate(ctx: Context) -> int:
     if a.per_subject:
         return _evaluate_per_subject(ctx, ds, output)
     smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
-    loso = a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW)
+    # a collected session declares its test trials (the protocol's test blocks, held-out trials): auto keeps them
+    recorded = recorded_test_ids(ds) if a.holdout == "auto" else None
+    loso = recorded is None and (a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW))
+    if recorded is not None:
+        ctx.say(f"test trials as recorded: the {len(recorded)} with role test; the other {len(ds) - len(recorded)} "
+                "train")
     # a split study's strategies are independent tasks (run side by side on local processes, as in report and demo)
     with ctx.executor(local_tasks=0 if loso else len(ds.labels)) as ex:
         if loso:
@@ -65,6 +70,7 @@ def cmd_evaluate(ctx: Context) -> int:
                 progress=ctx.progress,
                 executor=ex,
                 stride_s=a.stride_s,
+                test_ids=recorded,
             )
     if loso and getattr(result.system, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
@@ -81,6 +87,18 @@ def cmd_evaluate(ctx: Context) -> int:
         result.save_tables(output)
         ctx.say(f"wrote {'standard output' if ctx.stdio.writes_stdout else output}")
     return 0
+
+
+def recorded_test_ids(ds: Any) -> list[str] | None:
+    """The ids of the trials recorded as test trials (``meta["role"]``, written by ``workbench collect``), when
+    every trial has a role, train or test, and every label has both; else ``None`` (the study then chooses)."""
+    if not len(ds) or any(d.meta.get("role") not in ("train", "test") for d in ds):
+        return None
+    for label in ds.labels or [None]:
+        part = ds if label is None else ds.by_label(label)
+        if {d.meta["role"] for d in part} != {"train", "test"}:
+            return None
+    return [d.id for d in ds if d.meta["role"] == "test"]
 
 
 def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
