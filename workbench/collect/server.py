@@ -66,6 +66,8 @@ def make_app(session: Session, *, on_trial: Callable[[dict[str, Any], dict[str, 
             return json.loads(data)
         except ValueError as exc:
             raise WorkbenchError(f"request body is not JSON ({exc})") from None
+        except RecursionError:  # a few MB of '[' nest deeper than the parser recurses
+            raise WorkbenchError("request body is JSON nested too deeply") from None
 
     def handler(work: Callable[[Any], Any]) -> Callable:
         async def endpoint(request: Request) -> JSONResponse:

@@ -66,9 +66,12 @@ def _array(payload: dict, key: str, width: int, n_max: int, where: str) -> np.nd
     if len(value) > n_max:
         raise DataError(f"{where}: {key}: {len(value)} samples, more than the time limit allows ({n_max})")
     try:
-        arr = np.array(value, dtype=np.float64)
+        arr = np.array(value)
     except (TypeError, ValueError):
         raise DataError(f"{where}: {key}: not a list of number lists") from None
+    if arr.dtype.kind not in "iuf":  # numpy would read "0.5" and true as numbers; the page sends numbers only
+        raise DataError(f"{where}: {key}: not a list of number lists")
+    arr = arr.astype(np.float64)
     if arr.ndim != 2 or arr.shape[1] != width:
         raise DataError(f"{where}: {key}: expected samples of {width} numbers, got shape {arr.shape}")
     if not np.isfinite(arr).all():
@@ -338,8 +341,9 @@ class Session:
         if self.subject_doc(subject) is None:
             raise DataError(f"subject {subject!r}: not registered in this session")
         x0 = payload.get("x0")
-        if not isinstance(x0, list) or len(x0) != len(self.spec["state_names"]):
-            raise DataError("practice: x0: expected the start state")
+        if not (isinstance(x0, list) and len(x0) == len(self.spec["state_names"]) and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in x0)):
+            raise DataError("practice: x0: expected the start state (a list of finite numbers)")
         demo, _ = self._checked(payload, [float(v) for v in x0], "practice trial")
         if not self.protocol.practice_recorded:
             return {"recorded": False, "outcome": demo["outcome"]}

@@ -1,0 +1,65 @@
+"""The server over HTTP: bad input is a 400 whose ``error`` is one line, never a 500 with a traceback; it listens
+on 127.0.0.1 unless told otherwise."""
+
+from __future__ import annotations
+
+import json
+import urllib.error
+import urllib.request
+
+import pytest
+
+from workbench.cli.parser import build_parser
+from workbench.collect.server import Server, make_app
+from workbench.collect.session import Session
+
+from .test_session import _protocol
+
+
+@pytest.fixture
+def url(tmp_path):
+    session = Session(tmp_path / "out", _protocol(tmp_path))
+    session.register("s01", {})
+    server = Server(make_app(session), port=0).start()
+    yield server.url.rstrip("/")
+    server.stop()
+
+
+def _post(url: str, body: bytes) -> tuple[int, dict]:
+    request = urllib.request.Request(url, data=body, method="POST", headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(request, timeout=10) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as e:
+        text = e.read()
+        return e.code, json.loads(text) if e.code == 400 else {"error": text.decode(errors="replace")}
+
+
+def _trial(**change) -> bytes:
+    payload = {"subject": "s01", "slot": 0, "u": [[0.0, 0.0]] * 3, "x": [[0.0] * 6] * 3, "raw": [[0.0, 0.0]] * 3,
+               "outcome": "crashed"}
+    return json.dumps({**payload, **change}).encode()
+
+
+@pytest.mark.parametrize("path, body, message", [
+    ("/api/subject", b"{bad", "not JSON"),
+    ("/api/trial", b"[" * 100_000 + b"]" * 100_000, "nested too deeply"),
+    ("/api/trial", _trial(u=[["0.5", "0"]] * 3), "u: not a list of number lists"),
+    ("/api/trial", _trial(raw=[[True, False]] * 3), "raw: not a list of number lists"),
+    ("/api/practice", _trial(x0=["a"] * 6), "practice: x0"),
+    ("/api/practice", _trial(x0=[1e400] * 6), "practice: x0"),
+])
+def test_bad_input_is_a_400_of_one_line(url, path, body, message):
+    status, answer = _post(url + path, body)
+    assert status == 400, answer
+    assert message in answer["error"] and "\n" not in answer["error"]
+
+
+def test_the_server_listens_on_127_0_0_1_by_default(tmp_path):
+    args = build_parser().parse_args(["collect", "--protocol", "paper_single_subject", "--out", str(tmp_path)])
+    assert args.host == "127.0.0.1"
+    server = Server(make_app(Session(tmp_path / "out", _protocol(tmp_path))), port=0)
+    try:
+        assert server.sock.getsockname()[0] == "127.0.0.1" and server.url.startswith("http://127.0.0.1:")
+    finally:
+        server.sock.close()
