@@ -36,10 +36,10 @@ PAD_SCRIPT = """
   navigator.getGamepads = () => {
     const c = window.collect, trial = c && c.trial;
     let axes = [0, 0, 0, 0];
-    if (window.__pilot && trial && !trial.ended) {
-      axes = window.__pilot(trial.x, trial.k);
-      window.__padLog[JSON.stringify(trial.x)] = axes.slice();
-    }
+    if (window.__pilot && trial && !trial.ended) axes = window.__pilot(trial.x, trial.k);
+    // a worn pad: at rest its axes read window.__rest, not 0 (what the calibration screen measures)
+    if (window.__rest) axes = axes.map((v, j) => Math.max(-1, Math.min(1, v + window.__rest[j])));
+    if (window.__pilot && trial && !trial.ended) window.__padLog[JSON.stringify(trial.x)] = axes.slice();
     pad.axes = axes; pad.timestamp = performance.now();
     return [{ ...pad, axes: axes.slice() }, null, null, null];
   };
@@ -138,14 +138,19 @@ def new_page(browser, gamepad: bool):
     return context, context.new_page()
 
 
-def register(page, url: str, subject: str) -> None:
-    """Consent, the subject form, and the calibration screen with its defaults."""
+def register(page, url: str, subject: str, rest: list[float] | None = None) -> None:
+    """Consent, the subject form, and the calibration screen: with its defaults, or with a pad whose axes rest at
+    ``rest`` and whose rest offsets the screen measures."""
     page.goto(f"{url}?subject={subject}")
     page.wait_for_selector("#screen-consent:not([hidden])")
     page.keyboard.press("Space")
     page.wait_for_selector("#screen-subject:not([hidden])")
     page.click("#subject-form button[type=submit]")
     page.wait_for_selector("#screen-calibration:not([hidden])")
+    if rest is not None:
+        page.evaluate("rest => { window.__rest = rest; }", rest)
+        page.click("#measure-rest")
+        page.wait_for_function("() => document.querySelector('#rest-result').textContent.includes('dead zone')")
     page.keyboard.press("Space")
 
 
