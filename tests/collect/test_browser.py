@@ -101,11 +101,11 @@ def test_a_keyboard_subject_flies_and_the_keys_and_ramp_are_recorded(browser, se
         assert events[:3] == [("keydown", "ArrowLeft"), ("keyup", "ArrowLeft"), ("keydown", "ArrowDown")]
         raw = _mcap_inputs(run.out, d.id)[:, 2:]
         assert set(np.unique(raw)) <= {-1.0, 0.0, 1.0} and (raw[:, 0] == -1).any() and (raw[:, 1] == -1).any()
-        ramp, value, ramped = d.meta["device"]["ramp_per_step"], [0.0, 0.0], []
-        for r in raw.tolist():  # the stated ramp, in the page's arithmetic
-            value = [min(t, v + ramp) if v < t else max(t, v - ramp) if v > t else v
-                     for v, t in zip(value, r, strict=True)]
-            ramped.append(value)
+        n, level, ramped = d.meta["device"]["ramp_steps"], np.zeros(2), []
+        assert d.meta["device"]["ramp_per_step"] == 1 / n
+        for r in raw:  # the stated ramp: one step of 1/n a physics step toward the keys' direction
+            level = level + np.sign(r * n - level)
+            ramped.append(level / n)
         assert np.array_equal(d.u, np.array(ramped))
     finally:
         context.close()

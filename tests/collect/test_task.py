@@ -114,3 +114,28 @@ def test_a_stalled_display_is_counted_not_hidden(sim_page):
     dt_ms = task_spec()["dt"] * 1000
     missed = int(1016 / dt_ms)
     assert out["n"] == 1 + 5 and out["late"] == 4 and out["dropped"] == missed - 5
+
+
+def test_the_keyboard_ramp_reaches_full_deflection_and_centre_exactly_in_the_stated_steps(sim_page):
+    out = sim_page.evaluate(
+        """async () => {
+             const input = await import('/static/input.js');
+             const kb = new input.Keyboard({ add() {} });
+             const us = [];
+             const hold = (codes, n) => {
+               kb.held = new Set(codes);
+               for (let j = 0; j < n; j++) us.push(kb.sample().u);
+             };
+             hold(["ArrowRight", "ArrowUp"], input.KEY_STEPS + 2);  // held past full deflection
+             hold(["ArrowLeft"], 2 * input.KEY_STEPS + 1);          // reversed: through 0 to -1
+             hold([], input.KEY_STEPS + 1);                         // released
+             return { us, n: input.KEY_STEPS, ramp: input.KEY_RAMP };
+           }""")
+    n, us = out["n"], np.array(out["us"])
+    assert out["ramp"] == 1 / n
+    # integer levels over n: what a ramp of 1/n a step gives, with 1, 0 and -1 reached exactly
+    up = [min(k, n) / n for k in range(1, n + 3)]
+    across = [max(n - k, -n) / n for k in range(1, 2 * n + 2)]  # from 1 down through 0 to -1
+    back = [min(-n + k, 0) / n for k in range(1, n + 2)]
+    assert us[:, 0].tolist() == up + across + back
+    assert us[:, 1].tolist() == up + [max(n - k, 0) / n for k in range(1, 3 * n + 3)]

@@ -3,9 +3,11 @@
 // for the keyboard the direction its held keys ask for), u the calibrated input the plant receives; both are
 // recorded, with every raw event (key downs and ups, axis changes) in the trial's event list.
 
-// The keyboard's stated ramp: a held key moves its stick by this much per physics step toward ±1 (full
-// deflection in 5 steps = 0.25 s at 20 Hz); a released one moves it back to 0 at the same rate.
-export const KEY_RAMP = 0.2;
+// The keyboard's stated ramp: a held key moves its stick by 1/KEY_STEPS per physics step toward ±1 (full
+// deflection in 5 steps = 0.25 s at 20 Hz); a released one moves it back to 0 at the same rate. Counted in whole
+// steps (u = level / KEY_STEPS), so the stick reaches 0.2, 0.4, … , 1 and 0 exactly, never 1e-16 off them.
+export const KEY_STEPS = 5;
+export const KEY_RAMP = 1 / KEY_STEPS;
 export const KEYS = {
   u1: { minus: ["ArrowLeft", "KeyA"], plus: ["ArrowRight", "KeyD"] },
   u2: { minus: ["ArrowDown", "KeyS"], plus: ["ArrowUp", "KeyW"] },
@@ -33,7 +35,7 @@ export class Keyboard {
     this.kind = "keyboard";
     this.log = log;
     this.held = new Set();
-    this.value = [0, 0];
+    this.level = [0, 0];
     this.onDown = (e) => {
       if (!this.codes().has(e.code)) return;
       e.preventDefault();
@@ -55,17 +57,16 @@ export class Keyboard {
     const minus = k.minus.some((c) => this.held.has(c)) ? 1 : 0;
     return plus - minus;
   }
-  reset() { this.value = [0, 0]; }
+  reset() { this.level = [0, 0]; }
   sample() {
     const raw = [this.direction("u1"), this.direction("u2")];
-    for (let i = 0; i < 2; i++) {
-      const v = this.value[i], target = raw[i];
-      this.value[i] = v < target ? Math.min(target, v + KEY_RAMP) : v > target ? Math.max(target, v - KEY_RAMP) : v;
-    }
-    return { raw, u: this.value.slice() };
+    for (let i = 0; i < 2; i++) this.level[i] += Math.sign(raw[i] * KEY_STEPS - this.level[i]);
+    return { raw, u: this.level.map((l) => l / KEY_STEPS) };
   }
-  describe() { return { kind: "keyboard", id: "keyboard", ramp_per_step: KEY_RAMP, keys: KEYS }; }
-  calibration() { return { kind: "keyboard", ramp_per_step: KEY_RAMP }; }
+  describe() {
+    return { kind: "keyboard", id: "keyboard", ramp_per_step: KEY_RAMP, ramp_steps: KEY_STEPS, keys: KEYS };
+  }
+  calibration() { return { kind: "keyboard", ramp_per_step: KEY_RAMP, ramp_steps: KEY_STEPS }; }
 }
 
 // The calibrated input of one axis: rest offset removed, sign applied, a dead zone around rest (rescaled so
