@@ -54,6 +54,9 @@ def test_evaluate_passes_the_recorded_test_trials_to_the_study(collected, monkey
     monkeypatch.setattr(pipeline, "run_loso", run_loso)
     main(["evaluate", str(collected), "--n-components", "1", "--samples", "0", "--no-efficiency"])  # stops there
     assert "loso" not in seen and set(seen["test_ids"]) == declared  # before: leave-one-out over all 4
+    seen.clear()
+    main(["report", str(collected), "-o", str(collected.parent / "report")])
+    assert set(seen["test_ids"]) == declared  # before: a random split
 
 
 @pytest.mark.slow

@@ -228,11 +228,16 @@ def cmd_report(ctx: Context) -> int:
     a = ctx.args
     refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
+    recorded = recorded_test_ids(ds)  # a collected session's test trials are its test set, as in evaluate
+    if recorded is not None:
+        ctx.say(f"test trials as recorded: the {len(recorded)} with role test; the other {len(ds) - len(recorded)} "
+                "train")
     with ctx.executor(local_tasks=len(ds.labels)) as ex:
         result = study.run_study(
             ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
             n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
             progress=ctx.progress, executor=ex, bootstrap=a.bootstrap, stride_s=a.stride_s, power=a.power,
+            test_ids=recorded,
         )
     print_plant(ctx, result.system, "(plant from the training trials)")
     require_proposed(result)
