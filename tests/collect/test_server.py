@@ -63,3 +63,10 @@ def test_the_server_listens_on_127_0_0_1_by_default(tmp_path):
         assert server.sock.getsockname()[0] == "127.0.0.1" and server.url.startswith("http://127.0.0.1:")
     finally:
         server.sock.close()
+
+
+def test_a_port_out_of_range_is_refused_before_anything_is_written(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["collect", "--protocol", "paper_single_subject", "--out", str(tmp_path / "s"),
+                                   "--port", "70000"])
+    assert "a port is 0 to 65535" in capsys.readouterr().err and not (tmp_path / "s").exists()

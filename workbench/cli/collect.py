@@ -23,7 +23,7 @@ def add_collect(add: Any) -> None:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="the session folder: a dataset `workbench fit DIR` reads; an existing session of the same "
                         "protocol is resumed")
-    p.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765; 0: a free one)")
+    p.add_argument("--port", type=_port, default=8765, help="port on 127.0.0.1 (default 8765; 0: a free one)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (default 127.0.0.1, this machine only; another address lets other "
                         "machines reach the page)")
@@ -44,8 +44,22 @@ def add_collect(add: Any) -> None:
     g.add_argument("--max-pause", type=float, metavar="SECONDS", help="breaks and practice at most this long")
 
 
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def _port(text: str) -> int:
+    value = _integer(text)
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"a port is 0 to 65535, got {value}")
+    return value
+
+
 def _positive_int(text: str) -> int:
-    value = int(text)
+    value = _integer(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
     return value
