@@ -76,6 +76,7 @@ def test_shortened_cuts_trials_and_pauses():
     ('consent = "x"\ncolour = 1\n[[blocks]]\nlabel = "A"\ninstructions = "a"\ntrials = 1\n', "colour: unknown key"),
     ('consent = "x"\n[[blocks]]\nlabel = "A/B"\ninstructions = "a"\ntrials = 1\n', "blocks[0].label"),
     ("consent = \n", "not valid TOML"),
+    ("consent = " + "[" * 100_000 + "]" * 100_000 + "\n", "nested too deeply"),
 ])
 def test_a_bad_protocol_is_one_line_naming_file_and_key(tmp_path, text, where):
     path = tmp_path / "bad.toml"

@@ -274,6 +274,8 @@ def load_protocol(spec: str | os.PathLike) -> Protocol:
         raise DataError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise DataError(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:  # tomllib recurses into nested arrays and inline tables
+        raise DataError(f"{path}: not a protocol (values nested too deeply)") from None
     return parse_protocol(doc, str(path), path.stem)
 
 
