@@ -65,8 +65,11 @@ def test_the_server_listens_on_127_0_0_1_by_default(tmp_path):
         server.sock.close()
 
 
-def test_a_port_out_of_range_is_refused_before_anything_is_written(tmp_path, capsys):
+@pytest.mark.parametrize("option, value, message", [("--port", "70000", "a port is 0 to 65535"),
+                                                    ("--max-pause", "nan", "must be 0 or more seconds"),
+                                                    ("--max-pause", "-5", "must be 0 or more seconds")])
+def test_a_bad_option_is_refused_before_anything_is_written(tmp_path, capsys, option, value, message):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["collect", "--protocol", "paper_single_subject", "--out", str(tmp_path / "s"),
-                                   "--port", "70000"])
-    assert "a port is 0 to 65535" in capsys.readouterr().err and not (tmp_path / "s").exists()
+                                   f"{option}={value}"])
+    assert message in capsys.readouterr().err and not (tmp_path / "s").exists()

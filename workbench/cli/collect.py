@@ -41,7 +41,7 @@ def add_collect(add: Any) -> None:
                    help="length of that prediction (default 5 s)")
     g = p.add_argument_group("shortening (demonstrations and tests; a real session runs the protocol as written)")
     g.add_argument("--max-trials", type=_positive_int, metavar="N", help="at most N trials per block")
-    g.add_argument("--max-pause", type=float, metavar="SECONDS", help="breaks and practice at most this long")
+    g.add_argument("--max-pause", type=_seconds, metavar="SECONDS", help="breaks and practice at most this long")
 
 
 def _integer(text: str) -> int:
@@ -55,6 +55,16 @@ def _port(text: str) -> int:
     value = _integer(text)
     if not 0 <= value <= 65535:
         raise argparse.ArgumentTypeError(f"a port is 0 to 65535, got {value}")
+    return value
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
+    if not 0 <= value < float("inf"):  # also refuses nan, which min() would pass over
+        raise argparse.ArgumentTypeError(f"must be 0 or more seconds, got {text}")
     return value
 
 
