@@ -37,8 +37,10 @@ PAD_SCRIPT = """
     const c = window.collect, trial = c && c.trial;
     let axes = [0, 0, 0, 0];
     if (window.__pilot && trial && !trial.ended) axes = window.__pilot(trial.x, trial.k);
-    // a worn pad: at rest its axes read window.__rest, not 0 (what the calibration screen measures)
-    if (window.__rest) axes = axes.map((v, j) => Math.max(-1, Math.min(1, v + window.__rest[j])));
+    // a worn pad: at rest its axes read window.__rest, not 0 (what the calibration screen measures), and at full
+    // deflection still ±1 (the ends of the axis's range)
+    const worn = (v, r) => (Math.abs(v) === 1 ? v : r + v * (v >= 0 ? 1 - r : 1 + r));
+    if (window.__rest) axes = axes.map((v, j) => worn(v, window.__rest[j]));
     if (window.__pilot && trial && !trial.ended) window.__padLog[JSON.stringify(trial.x)] = axes.slice();
     pad.axes = axes; pad.timestamp = performance.now();
     return [{ ...pad, axes: axes.slice() }, null, null, null];
@@ -71,7 +73,10 @@ def calibrated(raw: np.ndarray, cal: dict) -> np.ndarray:
     """The page's calibration (static/input.js ``calibrate``) applied to raw axis readings."""
     out = np.zeros_like(raw)
     for i in range(raw.shape[1]):
-        v = cal["signs"][i] * (raw[:, i] - cal["offsets"][cal["axes"][i]])
+        off = cal["offsets"][cal["axes"][i]]
+        d = raw[:, i] - off
+        travel = np.where(d >= 0, 1 - off, 1 + off)
+        v = cal["signs"][i] * np.where(travel > 0, d / np.where(travel > 0, travel, 1.0), 0.0)
         a, dz = np.abs(v), cal["deadzone"]
         out[:, i] = np.where(a <= dz, 0.0, np.clip(np.sign(v) * (a - dz) / (1 - dz), -1, 1))
     return out

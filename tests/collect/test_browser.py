@@ -59,6 +59,8 @@ def test_a_gamepad_subject_flies_a_protocol_and_the_inputs_are_the_pads(browser,
             assert np.array_equal(mcap_raw[:, 2:], raw)  # the raw sticks recorded are the pad's, exactly
             assert np.array_equal(d.u, calibrated(raw, cal))  # and the inputs are their calibration
             assert ((np.abs(d.u) > 0) & (np.abs(d.u) < 1)).any()  # not only saturated or zero inputs
+            full = np.abs(raw) == 1  # the stick at an end of its range: full input, whatever the rest offset
+            assert full.any() and np.array_equal(d.u[full], (raw * cal["signs"])[full])
             assert d.meta["timing"]["physics_steps"] == len(d) and "dropped_steps" in d.meta["timing"]
     finally:
         context.close()

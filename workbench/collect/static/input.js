@@ -69,10 +69,13 @@ export class Keyboard {
   calibration() { return { kind: "keyboard", ramp_per_step: KEY_RAMP, ramp_steps: KEY_STEPS }; }
 }
 
-// The calibrated input of one axis: rest offset removed, sign applied, a dead zone around rest (rescaled so
-// the stick still reaches ±1 at full deflection), clipped to [-1, 1].
+// The calibrated input of one axis: rest offset removed, each side of rest scaled by its own travel (to +1 it is
+// 1 - offset, to -1 it is 1 + offset, so an off-centre stick still gives ±1 at full deflection both ways), sign
+// applied, a dead zone around rest (rescaled so full deflection stays ±1), clipped to [-1, 1].
 export function calibrate(raw, offset, sign, deadzone) {
-  const v = sign * (raw - offset);
+  const d = raw - offset;
+  const travel = d >= 0 ? 1 - offset : 1 + offset;
+  const v = sign * (travel > 0 ? d / travel : 0);
   const a = Math.abs(v);
   if (a <= deadzone) return 0;
   return clip(Math.sign(v) * (a - deadzone) / (1 - deadzone));
