@@ -62,16 +62,19 @@ def test_a_gamepad_subject_flies_a_protocol_and_the_inputs_are_the_pads(browser,
             full = np.abs(raw) == 1  # the stick at an end of its range: full input, whatever the rest offset
             assert full.any() and np.array_equal(d.u[full], (raw * cal["signs"])[full])
             assert d.meta["timing"]["physics_steps"] == len(d) and "dropped_steps" in d.meta["timing"]
+            sampled = _mcap_inputs(run.out, d.id, ("sampled_s",))[:, 0]  # when the page read each step's sticks
+            assert sampled[0] == 0 and (np.diff(sampled) >= 0).all()
+            assert sampled[-1] == d.meta["timing"]["wall_duration_s"] > 0.5 * d.t[-1]
     finally:
         context.close()
 
 
-def _mcap_inputs(out: Path, trial_id: str) -> np.ndarray:
+def _mcap_inputs(out: Path, trial_id: str, fields: tuple[str, ...] = ("u1", "u2", "raw_u1", "raw_u2")) -> np.ndarray:
     from mcap.reader import make_reader
 
     with open(out / HIDDEN / "mcap" / trial_id.split("-")[0] / f"{trial_id}.mcap", "rb") as f:
         rows = [json.loads(m.data) for _, c, m in make_reader(f).iter_messages(topics=["/trial/input"])]
-    return np.array([[r["u1"], r["u2"], r["raw_u1"], r["raw_u2"]] for r in rows])
+    return np.array([[r[k] for k in fields] for r in rows])
 
 
 def _mcap_events(out: Path, trial_id: str) -> list[tuple[str, str]]:

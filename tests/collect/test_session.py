@@ -38,7 +38,8 @@ def flown(session: Session, subject: str, slot: int, y_ref: float = -0.3) -> dic
     u = np.array(us)
     return {"subject": subject, "slot": slot, "u": u.tolist(), "x": xs.tolist(), "raw": u.tolist(), "outcome": end,
             "device": {"kind": "test"}, "calibration": {"kind": "test"}, "timing": {"dropped_steps": 0},
-            "events": [[0.0, "keydown", "ArrowDown", None]], "frames": [0.0, 0.016]}
+            "events": [[0.0, "keydown", "ArrowDown", None]], "frames": [0.0, 0.016],
+            "sampled": (spec["dt"] * np.arange(len(u))).tolist()}
 
 
 def test_a_trial_is_written_as_a_partition_the_workbench_reads(tmp_path):
@@ -72,6 +73,7 @@ def test_the_mcap_holds_states_inputs_and_raw_events(tmp_path):
             topics.setdefault(channel.topic, []).append(json.loads(message.data))
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
     assert len(topics["/trial/input"]) == len(payload["u"]) == len(topics["/trial/state"])
+    assert [m["sampled_s"] for m in topics["/trial/input"]] == payload["sampled"]
     assert [m["u1"] for m in topics["/trial/input"]] == [u[0] for u in payload["u"]]
     assert topics["/input/events"] == [{"kind": "keydown", "code": "ArrowDown", "value": None}]
     assert meta["trial"]["id"] == trial_id and meta["trial"]["outcome"] == payload["outcome"]
@@ -93,6 +95,7 @@ def test_the_mcap_opens_in_rerun(tmp_path):
     (lambda p: p["u"][0].__setitem__(0, float("nan")), "non-finite"),
     (lambda p: p.__setitem__("slot", 99), "slot 99"),
     (lambda p: p.__setitem__("subject", "../x"), "an ID is"),
+    (lambda p: p.__setitem__("sampled", [0.0]), "sampled: expected one reading time"),
 ])
 def test_a_trial_the_plant_does_not_reproduce_is_refused_and_nothing_written(tmp_path, damage, message):
     s = Session(tmp_path / "out", _protocol(tmp_path))

@@ -395,6 +395,12 @@ class Session:
         if claimed not in OUTCOMES or claimed != end:
             raise DataError(f"{where}: the page says {claimed!r}, the plant's replay says {end!r}; nothing written")
         t = self.spec["dt"] * np.arange(len(u))
+        # when each step's sticks were read (s from the trial's start, on the page's clock): late steps show as
+        # several read at one display frame, a stall as a gap
+        sampled = payload.get("sampled")
+        if sampled is not None and not (isinstance(sampled, list) and len(sampled) == len(u) and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in sampled)):
+            raise DataError(f"{where}: sampled: expected one reading time (s) per sample")
         info = {}
         for key, limit in (("device", 4000), ("calibration", 20_000), ("timing", 20_000)):
             value = payload.get(key, {})
@@ -405,7 +411,8 @@ class Session:
             "/trial/state": {"t": t, **{s: xs[:, i] for i, s in enumerate(self.spec["state_names"])}},
             "/trial/input": {"t": t, **{s: u[:, i] for i, s in enumerate(self.spec["input_names"])},
                              **{f"raw_{s}": raw[:, i] for i, s in enumerate(self.spec["input_names"])},
-                             **{f"pilot_{s}": pilot[:, i] for i, s in enumerate(self.spec["input_names"])}},
+                             **{f"pilot_{s}": pilot[:, i] for i, s in enumerate(self.spec["input_names"])},
+                             **({} if sampled is None else {"sampled_s": np.array(sampled, dtype=np.float64)})},
         }
         streams.update(_events(payload, where))
         return {"x": xs, "u": u, "pilot": pilot, "outcome": end, **info}, streams

@@ -351,7 +351,7 @@ function payload(trial, extra) {
   return {
     subject: state.subject, x: trial.xs, u: trial.us, raw: trial.raws, pilot: trial.pilots, outcome: trial.ended,
     device: state.device.describe(), calibration: state.device.calibration(), timing: trial.timing(),
-    events: state.log.events, frames: trial.frames, ...extra,
+    events: state.log.events, frames: trial.frames, sampled: trial.stepWall, ...extra,
   };
 }
 
