@@ -248,3 +248,33 @@ def test_a_shown_prediction_is_the_models_path_from_the_start(tmp_path):
     path = np.array(s.status("s01")["next"]["help"]["path"])
     full = model.predict(s.start("s01", 0), s.spec["max_steps"]).x[:, :2]
     assert np.array_equal(path, full[: len(path)]) and path[-1, 1] <= 0 < path[-2, 1]  # drawn to the ground
+
+
+def _as_device(payload: dict, kind: str) -> dict:
+    """The payload with raw readings and a stated calibration that do not give its inputs: a gamepad whose raw
+    readings came from other rest offsets than the stated ones, or the keyboard (whose ramp never gives an LQR
+    pilot's inputs). That they agree when they should is the browser tests' (page and server, bit for bit)."""
+    u = np.array(payload["u"])
+    if kind == "gamepad":
+        cal = {"kind": "gamepad", "axes": [2, 1], "signs": [1, -1], "offsets": [0.0, 0.3, 0.15, 0.0], "deadzone": 0.05}
+        true_offsets = [0.0, 0.1, -0.05, 0.0]
+        raw = np.zeros_like(u)
+        for i, (a, sign) in enumerate(zip(cal["axes"], cal["signs"], strict=True)):
+            off, v = true_offsets[a], sign * u[:, i]
+            raw[:, i] = off + v * np.where(v >= 0, 1 - off, 1 + off)
+        return {**payload, "raw": raw.tolist(), "calibration": cal}
+    return {**payload, "raw": np.sign(u).tolist(), "calibration": {"kind": "keyboard", "ramp_steps": 5}}
+
+
+@pytest.mark.parametrize("kind", ["gamepad", "keyboard"])
+def test_inputs_that_are_not_the_stated_calibration_of_the_raw_sticks_are_refused(tmp_path, kind):
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    s.register("s01", {})
+    payload = _as_device(flown(s, "s01", 0), kind)
+    with pytest.raises(DataError, match="not the stated calibration of the raw stick reading"):
+        s.write_trial(payload)
+    assert not list((tmp_path / "out").glob("subject=*/*"))
+    if kind == "gamepad":
+        payload["calibration"]["offsets"] = "x"
+        with pytest.raises(DataError, match="a gamepad needs axes, signs, offsets"):
+            s.write_trial(payload)

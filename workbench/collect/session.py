@@ -380,6 +380,12 @@ class Session:
                                 "the model's; nothing written")
         elif not np.array_equal(pilot, u):
             raise DataError(f"{where}: pilot input differs from the input in a trial without blending")
+        stated = _device_input(raw, payload.get("calibration"), where)
+        if stated is not None and not np.array_equal(stated, pilot):
+            k = int(np.argmax(np.any(stated != pilot, axis=1)))
+            raise DataError(f"{where}: the pilot's input at sample {k} is not the stated calibration of the raw stick "
+                            f"reading ({raw[k].tolist()} gives {stated[k].tolist()}, the page says "
+                            f"{pilot[k].tolist()}); nothing written")
         lo, hi = np.array(self.spec["u_min"]), np.array(self.spec["u_max"])
         if ((u < lo) | (u > hi)).any():
             raise DataError(f"{where}: u: an input outside the sticks' range [{lo.tolist()}, {hi.tolist()}]")
@@ -416,6 +422,44 @@ class Session:
         }
         streams.update(_events(payload, where))
         return {"x": xs, "u": u, "pilot": pilot, "outcome": end, **info}, streams
+
+
+def _device_input(raw: np.ndarray, cal: Any, where: str) -> np.ndarray | None:
+    """The pilot's input the page's device code (``static/input.js``) gives for the raw readings under a stated
+    calibration, in the page's arithmetic (bit-equal): a gamepad's offsets, signs and dead zone, or the keyboard's
+    ramp. ``None`` for another kind of device (a scripted one), which states no rule to check."""
+    kind = cal.get("kind") if isinstance(cal, dict) else None
+    if kind == "keyboard":
+        n = cal.get("ramp_steps")
+        if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+            raise DataError(f"{where}: calibration: a keyboard needs ramp_steps, a whole number of steps")
+        level, out = [0, 0], []
+        for r in raw.tolist():
+            level = [lv + int(np.sign(ri * n - lv)) for lv, ri in zip(level, r, strict=True)]
+            out.append([lv / n for lv in level])
+        return np.array(out)
+    if kind != "gamepad":
+        return None
+    try:
+        axes, signs, offsets, dz = cal["axes"], cal["signs"], cal["offsets"], float(cal["deadzone"])
+        if not all(isinstance(a, int) and 0 <= a < len(offsets) for a in axes):
+            raise ValueError
+        offs = [float(offsets[a]) for a in axes]
+        signs = [float(v) for v in signs]
+        if len(offs) != raw.shape[1] or len(signs) != raw.shape[1] or not 0 <= dz < 1:
+            raise ValueError
+    except (KeyError, IndexError, TypeError, ValueError):
+        raise DataError(f"{where}: calibration: a gamepad needs axes, signs, offsets and a dead zone in "
+                        "[0, 1)") from None
+    out = np.zeros_like(raw)
+    for k, row in enumerate(raw.tolist()):
+        for i, r in enumerate(row):
+            d = r - offs[i]
+            travel = 1 - offs[i] if d >= 0 else 1 + offs[i]
+            v = signs[i] * (d / travel if travel > 0 else 0.0)
+            a = abs(v)
+            out[k, i] = 0.0 if a <= dz else min(1.0, max(-1.0, math.copysign(1.0, v) * (a - dz) / (1 - dz)))
+    return out
 
 
 def _events(payload: dict, where: str) -> dict[str, Any]:

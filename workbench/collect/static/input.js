@@ -110,7 +110,11 @@ export class Pad {
   sample() {
     const p = this.read();
     const now = performance.now();
-    if (!p) { this.log.add(now, "disconnected", this.index, null); return { raw: [0, 0], u: [0, 0] }; }
+    // a pad gone mid-trial reads as at rest (its sticks let go): raw = the rest offsets, u = 0; logged as such
+    if (!p) {
+      this.log.add(now, "disconnected", this.index, null);
+      return { raw: this.axes.map((a) => this.offsets[a] ?? 0), u: [0, 0] };
+    }
     const axes = Array.from(p.axes);
     if (this.lastAxes) {
       axes.forEach((v, j) => { if (v !== this.lastAxes[j]) this.log.add(now, "axis", j, v); });
