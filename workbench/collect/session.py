@@ -15,7 +15,8 @@ was writing is a hidden temp file that the next write removes. A trial is finish
 resuming reads the disk, never a counter that a kill could leave behind.
 
 The server never trusts the page's states: :meth:`Session.write_trial` replays the inputs through the plant
-(:func:`workbench.collect.task.replay`) and refuses a trial whose states or outcome differ from the page's.
+(:func:`workbench.collect.task.replay`) and refuses a trial whose states or outcome differ from the page's, or whose
+pilot input is not the stated calibration of its raw stick readings (:func:`_device_input`).
 """
 
 from __future__ import annotations
