@@ -71,10 +71,11 @@ def _vehicle(streams: Streams) -> tuple[str, str | None]:
         return summary.vehicle, table
     info = streams.info.get("msg_info", {}) or {}
     if streams.format == "ulog" or "sys_name" in info:
+        from adapters.formats.ulog import release_name
+
         name = str(info.get("sys_name", "ULog"))
-        version = info.get("ver_sw_branch") or info.get("ver_sw_release") or ""
         table = "px4_nav_state" if name.upper().startswith("PX4") or "vehicle_status" in streams.frames else None
-        return f"{name} {version}".strip(), table
+        return release_name(info), table
     msg = streams.columns("MSG") if "MSG" in streams else {}
     if "Message" in msg:
         for text in map(str, msg["Message"]):

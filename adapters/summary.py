@@ -100,7 +100,9 @@ class LogSummary:
         if self.armed:
             return "armed: " + "; ".join(
                 f"{a - self.t_start:.1f}–{min(b, self.t_end) - self.t_start:.1f} s" for a, b in self.armed)
-        return "armed: never armed" if self.armed_known else ""
+        if self.armed_known:
+            return "armed: never armed"
+        return "armed: no arming record in this log" if self.vehicle else ""
 
 
 def _float(column: Any) -> np.ndarray:
@@ -162,6 +164,31 @@ def _dataflash_modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]
     return modes, armed, str(info.get("firmware") or info.get("vehicle") or "")
 
 
+def _ulog_vehicle(streams: Streams) -> str:
+    from adapters.formats.ulog import release_name
+
+    info = streams.info.get("msg_info") or {}
+    return release_name(info) if info else "PX4"
+
+
+def _arming_recorded(streams: Streams) -> bool:
+    """Whether the log can say when the vehicle was armed (a held flag or arming events), so that no armed span
+    means never armed; planes' old DataFlash logs carry neither."""
+    if streams.format == "dataflash":
+        formats = streams.info.get("formats") or {}
+        if "ARM" in formats:
+            return True
+        if "EV" in streams and "Id" in streams.columns("EV"):
+            ids = np.asarray(streams.columns("EV")["Id"]).astype(np.int64)
+            return bool(np.isin(ids, (10, 11)).any())
+        return False
+    if "HEARTBEAT" in streams:
+        return "base_mode" in streams.columns("HEARTBEAT")
+    if "vehicle_status" in streams:
+        return "arming_state" in streams.columns("vehicle_status")
+    return False
+
+
 def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
     if streams.format == "dataflash":
         return _dataflash_modes(streams)
@@ -178,7 +205,7 @@ def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
         t = _float(vs["t"])
         armed = np.asarray(vs["arming_state"]) == 2 if "arming_state" in vs else np.zeros(len(t), bool)
         return (_mode_spans(t, np.asarray(vs["nav_state"]), "px4_nav_state"), flag_spans(t, armed),
-                "PX4 (nav_state)")
+                _ulog_vehicle(streams))
     return [], [], ""
 
 
@@ -223,5 +250,5 @@ def summarize(streams: Streams) -> LogSummary:
         skipped=tuple(sorted((str(k), int(v)) for k, v in streams.skipped.items() if v)),
         info=info,
         vehicle=vehicle,
-        armed_known=bool(vehicle),
+        armed_known=bool(vehicle) and _arming_recorded(streams),
     )

@@ -140,7 +140,7 @@ def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: 
         task = progress.add_task("reading logs", total=len(files))
         for f in files:
             stdin = f == ctx.stdio.stdin_path
-            ds = load_one(f, mapping, ctx.stdio.format if stdin else None)
+            ds = load_one(f, mapping, ctx.stdio.format)
             if stdin:  # the temporary file is gone once the command ends: the trials come from <stdin>
                 ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
             skipped = {k: v for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v} if len(ds) else {}

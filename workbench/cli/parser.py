@@ -106,8 +106,8 @@ _TABLE_OUTPUTS = ["parquet", "csv"]
 
 def _format_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--format", choices=_STDIN_FORMATS, metavar="FORMAT",
-                   help="what - (standard input) holds: " + ", ".join(_STDIN_FORMATS) + " (default: recognised from "
-                        "its first bytes; files are always recognised by theirs)")
+                   help="what the input holds (a file or - for standard input): " + ", ".join(_STDIN_FORMATS) +
+                        " (default: recognised from its first bytes)")
 
 
 def _output_format_option(p: argparse.ArgumentParser, choices: list[str]) -> None:

@@ -53,8 +53,8 @@ def _raw_streams(ctx: Context, path: str) -> Any:
     from workbench.cli.context import is_demo_file
 
     p = ctx.input_path(path, "the demonstrations")
-    stdin = p == ctx.stdio.stdin_path
-    return None if is_demo_file(p) else adapters.read(p, format=ctx.stdio.format if stdin else None)
+    fmt = None if ctx.stdio.format == "parquet" else ctx.stdio.format
+    return None if is_demo_file(p) else adapters.read(p, format=fmt)
 
 
 def _view_raw(ctx: Context, streams: Any) -> int:
