@@ -360,7 +360,7 @@ def release_name(msg_info: dict[str, Any]) -> str:
     name = str(msg_info.get("sys_name") or "ULog")
     release = msg_info.get("ver_sw_release")
     if isinstance(release, int) and release > 0:
-        major, minor, patch, kind = (release >> 24) & 0xFF, (release >> 16) & 0xFF, (release >> 8) & 0xFF, release & 0xFF
+        major, minor, patch, kind = ((release >> shift) & 0xFF for shift in (24, 16, 8, 0))
         suffix = "" if kind == 255 else " (development)" if kind < 64 else " (alpha)" if kind < 128 else \
             " (beta)" if kind < 192 else " (release candidate)"
         return f"{name} v{major}.{minor}.{patch}{suffix}"
