@@ -209,13 +209,39 @@ def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
     return [], [], ""
 
 
+#: Streams a reader must include for :func:`log_vehicle` to recognise the vehicle (a DataFlash log's vehicle and a
+#: ULog's system come with every read).
+VEHICLE_STREAMS = ("HEARTBEAT", "vehicle_status")
+
+
+def log_vehicle(streams: Streams) -> tuple[str, str | None]:
+    """The vehicle a log names and the mode table of its kind (``"arducopter"``, ``"px4"`` …; ``None``: not
+    recognised): the DataFlash firmware string, the vehicle's own HEARTBEAT, or the ULog's system."""
+    if streams.format == "dataflash":
+        info = streams.info
+        return str(info.get("firmware") or info.get("vehicle") or ""), info.get("mode_table")
+    hb = streams.columns("HEARTBEAT") if "HEARTBEAT" in streams else None
+    if hb is not None and streams.n_rows("HEARTBEAT") and {"autopilot", "type"} <= set(hb):
+        rows, table, vehicle = _heartbeat_rows(hb)
+        if rows.any():
+            return vehicle, table
+    if streams.format == "ulog":
+        info = streams.info.get("msg_info") or {}
+        name = str(info.get("sys_name", ""))
+        if name.upper().startswith("PX4") or "vehicle_status" in streams:
+            return _ulog_vehicle(streams), "px4_nav_state"
+    return "", None
+
+
 def log_modes(streams: Streams) -> tuple[list[str], str | None]:
     """The flight modes a log reports, in order of first appearance, named by its own vehicle type, and the
     mode table that named them (``None`` when the log says its modes in no known way)."""
     modes, _, vehicle = _modes(streams)
     table = None
     hb = streams.columns("HEARTBEAT") if "HEARTBEAT" in streams else {}
-    if hb and streams.n_rows("HEARTBEAT") and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb):
+    if streams.format == "dataflash":
+        table = streams.info.get("mode_table")
+    elif hb and streams.n_rows("HEARTBEAT") and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb):
         table = _heartbeat_rows(hb)[1]
     elif vehicle:
         table = "px4_nav_state"

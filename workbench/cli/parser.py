@@ -118,7 +118,8 @@ def _output_format_option(p: argparse.ArgumentParser, choices: list[str]) -> Non
 
 def _mapping_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mapping", metavar="M",
-                   help=f"channel mapping for raw logs: a shipped name or a TOML file (default {DEFAULT_MAPPING})")
+                   help="channel mapping for raw logs: a shipped name or a TOML file (default: the shipped mapping "
+                        f"made for the vehicle the log names, else {DEFAULT_MAPPING}; the choice is printed)")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -86,7 +86,7 @@ def cmd_view(ctx: Context) -> int:
     raw_streams = _raw_streams(ctx, a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
     if raw_streams is not None and not a.mapping and not a.model:
         return _view_raw(ctx, raw_streams)
-    ds = load_demos(ctx, a.inputs, a.mapping, a.label)
+    ds = load_demos(ctx, a.inputs, a.mapping, a.label, allow_still=True)
     source_dt = float(ds.dt)
     models, named = None, None
     if a.model:
