@@ -122,3 +122,18 @@ def test_single_sample_demonstrations_are_skipped_by_iv(quad):
     # a DemonstrationSet refuses one-sample trials; estimate_gain also takes any objects with x and u
     padded = [*ds, SimpleNamespace(x=ds[0].x[:1], u=ds[0].u[:1], id="one")]
     np.testing.assert_allclose(estimate_gain(padded, quad, "iv"), estimate_gain(ds, quad, "iv"))
+
+
+def test_a_gain_that_does_not_stabilize_names_the_states_its_slow_mode_lies_on():
+    # a pilot who damps the velocity but never brings the position back: the closed loop keeps the integrator
+    import numpy as np
+
+    from workbench.errors import ModelError
+    from workbench.method.gain import gain_from_arrays
+
+    A, B = np.array([[1.0, 0.1], [0.0, 1.0]]), np.array([[0.0], [0.1]])
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(2, 200))
+    U = np.array([[0.0, -1.0]]) @ X + 0.01 * rng.normal(size=(1, 200))
+    with pytest.raises(ModelError, match=r"lies on x: in these demonstrations the pilot does not bring x back"):
+        gain_from_arrays(X, U, A @ X + B @ U, A, B, "direct", state_names=("x", "xdot"))
