@@ -27,8 +27,8 @@ from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.names import METHOD_TITLES
 
 __all__ = [
-    "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "split_in_time", "improvement_table", "verdicts", "metric_unit",
-    "plant_for",
+    "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "split_in_time", "improvement_table", "verdicts",
+    "metric_unit", "plant_for",
     "FLOOR_METHODS",
 ]
 
