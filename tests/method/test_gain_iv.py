@@ -142,8 +142,8 @@ def test_a_gain_that_does_not_stabilize_names_the_states_its_slow_mode_lies_on()
 def test_a_bootstrap_whose_first_resamples_mostly_fail_stops_early_and_says_why(monkeypatch):
     # 128 s of CPU for 17 fitted resamples of 100 on a real .bin: after the first look the rest are not fitted
     import workbench.method.resampling as rs
-    from workbench.sim.landing import simulate_landings
     from workbench.plant.system import planar_quadrotor
+    from workbench.sim.landing import simulate_landings
 
     demos = simulate_landings("CS1", 6, seed=1)
     calls = []
