@@ -319,3 +319,15 @@ def test_a_mapping_for_another_vehicle_is_refused_naming_the_log_vehicle_and_the
     # without a mapping, the one made for the vehicle is chosen and said
     assert adapters.choose_mapping(plane)[0] == "arduplane_manual"
     assert len(adapters.load(plane, adapters.choose_mapping(plane)[0])) == len(flights)
+
+
+def test_both_planar_channels_of_a_real_copter_flight_are_physics(external):
+    # a copter flies both planes: the roll plane (ardupilot_manual) and the pitch plane (ardupilot_manual_pitch)
+    # each identify a tilt -> velocity response within a factor 2 of g·dt on the real ArduCopter telemetry log
+    from workbench.plant.choice import choose_plant
+
+    log = external("dronekit_flight.tlog")
+    for name in ("ardupilot_manual", "ardupilot_manual_pitch"):
+        plant = choose_plant(adapters.load(log, name), "identify")
+        (check,) = plant.identification.checks
+        assert check.within(), (name, str(check))
