@@ -18,7 +18,8 @@ from pathlib import Path
 
 BIN = Path(sys.executable).parent
 LOGS = (".bin", ".BIN", ".tlog", ".ulg")
-CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?ratio (-?[\d.e+-]+), (\w+ ?\w*) within")
+CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?"
+                   r"ratio (-?[\d.e+-]+), (\w+ ?\w*) within")
 
 
 def _run(args: list[str], timeout: float) -> tuple[int, str, str]:
@@ -74,8 +75,8 @@ def main() -> int:
     p.add_argument("--timeout", type=float, default=900.0)
     a = p.parse_args()
     logs = sorted(f for d in a.folders for f in Path(d).iterdir() if f.suffix in LOGS)
-    print("| log | inspect (vehicle; armed) | import, no --mapping | fit | evaluate (position RMSE per method) | view | "
-          "physics check |")
+    print("| log | inspect (vehicle; armed) | import, no --mapping | fit | evaluate (position RMSE per method) | "
+          "view | physics check |")
     print("|---|---|---|---|---|---|---|")
     for log in logs:
         print("| " + " | ".join(row(log, a.timeout)) + " |", flush=True)
