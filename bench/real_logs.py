@@ -19,7 +19,7 @@ from pathlib import Path
 BIN = Path(sys.executable).parent
 LOGS = (".bin", ".BIN", ".tlog", ".ulg")
 CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?"
-                   r"ratio (-?[\d.e+-]+), (\w+ ?\w*) within")
+                   r"ratio (-?[\d.e+-]+), (NOT )?within", re.S)
 
 
 def _run(args: list[str], timeout: float) -> tuple[int, str, str]:
@@ -53,8 +53,8 @@ def row(log: Path, timeout: float) -> list[str]:
         imp = f"{chosen.group(1) if chosen else '?'}: {imp}"
         code, out, err = _run(["fit", str(log), "-o", f"{tmp}/m.npz"], timeout)
         fit = _outcome(code, out, err, "fitted")
-        m = CHECK.search(out + err)
-        physics = f"{m.group(1)} ratio {m.group(4)} ({m.group(5)} within ×2)" if m else "—"
+        m = CHECK.search(" ".join((out + err).split()))  # the terminal's line wrapping undone
+        physics = f"{m.group(1)} / (g·dt) = {m.group(4)} ({'NOT ' if m.group(5) else ''}within ×2)" if m else "—"
         stop = re.search(r"bootstrap stopped after (\d+ of \d+) resamples", err)
         if stop:
             fit += f" (bootstrap stopped after {stop.group(1)})"
