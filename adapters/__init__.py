@@ -111,12 +111,13 @@ def read_streams(
 
 def load(
     path: str | os.PathLike,
-    mapping: str | os.PathLike | ChannelMapping = "planar_quadrotor",
+    mapping: str | os.PathLike | ChannelMapping | None = None,
     *,
     format: str | None = None,
     allow_still: bool = False,
 ) -> DemonstrationSet:
-    """Load a log as demonstrations with a mapping (a shipped name, a TOML path, or a ChannelMapping).
+    """Load a log as demonstrations with a mapping (a shipped name, a TOML path, or a ChannelMapping; by default
+    the one :func:`choose_mapping` chooses).
 
     A position or velocity that never moves in the whole log (no GPS) is an error naming it, unless
     ``allow_still`` (for looking at the log: the cause is then in each demonstration's ``meta["still"]``).
@@ -139,6 +140,8 @@ def load(
     from adapters.summary import VEHICLE_STREAMS
 
     fmt = _format(path, format)
+    if mapping is None:  # the shipped mapping made for the vehicle the log names (choose_mapping)
+        mapping = choose_mapping(path, format=fmt.name)[0]
     m = load_mapping(mapping).for_format(fmt.name)
     m.check_complete()
     # the vehicle's own streams too, so that a mapping made for another vehicle is refused by name

@@ -61,8 +61,8 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
 
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
-        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain,
-                           progress=lambda done, total: progress.update(task, completed=done), executor=ex)
+        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex,
+                           progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.stopped:
         print(f"warning: bootstrap {result.stopped}", file=sys.stderr)
     ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
@@ -93,8 +93,10 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, pow
 
     with ctx.progress() as progress:
         task = progress.add_task(f"weight ratios: {n_boot} resampled gains", total=n_boot)
-        ratios, gain, note = ratio_bootstrap(model, ds, n_boot=n_boot, seed=seed,
-                                             progress=lambda done, total: progress.update(task, completed=done))
+        def advance(done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total)
+
+        ratios, gain, note = ratio_bootstrap(model, ds, n_boot=n_boot, seed=seed, progress=advance)
     if ratios is None:
         ctx.say(f"weight ratios: none ({note})")
         return

@@ -137,31 +137,43 @@ def _run_resamples(
     solver = _solver(A, B, structure)
     rng = np.random.default_rng(seed)
     draws = [(b, rng.integers(0, len(blocks), size=len(blocks))) for b in range(n_boot)]
+    # Resamples that draw the same trials (in any order) give the same fit: each distinct one is fitted once and
+    # counted as often as it was drawn (with few trials most draws repeat: 4 trials have 35 distinct resamples).
+    keys = [tuple(np.sort(idx).tolist()) for _, idx in draws]
+    unique: dict[tuple, tuple] = {}
+    for draw, key in zip(draws, keys, strict=True):
+        unique.setdefault(key, draw)
+    distinct = list(unique.values())
+    n = len(distinct)
     # a first look, then the rest only where it is worth it: when most resamples of the first look fail, the
     # remaining ones would cost minutes to deliver intervals of a few survivors (unbounded ones, often)
-    first = _run_draws(demos, blocks, A, B, method, structure, solver, draws[:EARLY_LOOK], n_boot, progress,
-                       executor)
-    if len(draws) <= EARLY_LOOK or sum(r[4] is not None for r in first) > EARLY_STOP_FAILED * len(first):
-        return first
-    return first + _run_draws(demos, blocks, A, B, method, structure, solver, draws[EARLY_LOOK:], n_boot, progress,
-                              executor)
+    fitted = _run_draws(demos, blocks, A, B, method, structure, solver, distinct[:EARLY_LOOK], 0, n, progress,
+                        executor)
+    if n > EARLY_LOOK and sum(r[4] is None for r in fitted) >= (1 - EARLY_STOP_FAILED) * len(fitted):
+        fitted += _run_draws(demos, blocks, A, B, method, structure, solver, distinct[EARLY_LOOK:], len(fitted), n,
+                             progress, executor)
+    if len(fitted) < n:  # stopped early: the distinct resamples fitted
+        return fitted
+    by_key = dict(zip(unique, fitted, strict=True))
+    return [(b, *by_key[k][1:]) for (b, _), k in zip(draws, keys, strict=True)]
 
 
 def _run_draws(
     demos: Any, blocks: list, A: np.ndarray, B: np.ndarray, method: GainMethod, structure: Structure | None,
-    solver: InverseLQR | None, draws: list, n_boot: int, progress: Callable[[int, int], None] | None, executor: Any,
+    solver: InverseLQR | None, draws: list, offset: int, n_boot: int, progress: Callable[[int, int], None] | None,
+    executor: Any,
 ) -> list[tuple]:
-    """Fit the resamples ``draws`` here or on the executor's workers (progress counted over all ``n_boot``)."""
+    """Fit the resamples ``draws`` here or on the executor's workers (progress: ``offset`` done before, of
+    ``n_boot``)."""
     if not draws:
         return []
-    offset = draws[0][0]
     if executor is None:
         results = []
         with single_threaded_blas():  # as on a worker: the same reductions, so the same intervals
-            for b, idx in draws:
+            for i, (b, idx) in enumerate(draws):
                 results.extend(_resamples(blocks, [(b, idx)], A, B, method, solver))
                 if progress is not None:
-                    progress(b + 1, n_boot)
+                    progress(offset + i + 1, n_boot)
         return results
     # one resample per task in process (progress per resample); on workers ~4 blocks each amortize the setup
     size = max(1, math.ceil(len(draws) / (4 * executor.workers))) if executor.parallel else 1
