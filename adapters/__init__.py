@@ -77,6 +77,7 @@ __all__ = [
     "demo_streams",
     "load_mapping",
     "shipped_mappings",
+    "choose_mapping",
 ]
 
 
@@ -110,11 +111,16 @@ def read_streams(
 
 def load(
     path: str | os.PathLike,
-    mapping: str | os.PathLike | ChannelMapping = "planar_quadrotor",
+    mapping: str | os.PathLike | ChannelMapping | None = None,
     *,
     format: str | None = None,
+    allow_still: bool = False,
 ) -> DemonstrationSet:
-    """Load a log as demonstrations with a mapping (a shipped name, a TOML path, or a ChannelMapping).
+    """Load a log as demonstrations with a mapping (a shipped name, a TOML path, or a ChannelMapping; by default
+    the one :func:`choose_mapping` chooses).
+
+    A position or velocity that never moves in the whole log (no GPS) is an error naming it, unless
+    ``allow_still`` (for looking at the log: the cause is then in each demonstration's ``meta["still"]``).
 
     Only the streams the mapping names are read. Each demonstration's ``meta`` has ``id``, ``source``,
     ``format``, ``mapping``, ``t0`` (its start on the log clock), ``skipped`` (counts by cause for the file)
@@ -131,12 +137,43 @@ def load(
     """
     from adapters.mapping import load_mapping
     from adapters.pipeline import build
+    from adapters.summary import VEHICLE_STREAMS
 
     fmt = _format(path, format)
+    if mapping is None:  # the shipped mapping made for the vehicle the log names (choose_mapping)
+        mapping = choose_mapping(path, format=fmt.name)[0]
     m = load_mapping(mapping).for_format(fmt.name)
     m.check_complete()
-    streams = fmt.read(path, m.stream_candidates())
-    return build(streams, m)
+    # the vehicle's own streams too, so that a mapping made for another vehicle is refused by name
+    streams = fmt.read(path, [*m.stream_candidates(), *VEHICLE_STREAMS])
+    return build(streams, m, allow_still=allow_still)
+
+
+def choose_mapping(path: str | os.PathLike, *, format: str | None = None) -> tuple[str, str]:
+    """The shipped mapping for the vehicle a log names, and why: ``("ardupilot_manual", "made for ArduCopter
+    V3.3-dev")``; ``planar_quadrotor`` (the simulator's and the testbed's logs) where the log names no vehicle a
+    shipped mapping is made for."""
+    from adapters.mapping import MappingError, load_mapping, mapping_for_vehicle, resolve_channel, select
+    from adapters.summary import VEHICLE_STREAMS, log_vehicle
+    from adapters.transforms import TRANSFORMS
+
+    fmt = _format(path, format)
+    own = load_mapping("planar_quadrotor").for_format(fmt.name)
+    streams = fmt.read(path, [*own.stream_candidates(), *VEHICLE_STREAMS])
+    try:  # the workbench's own recordings (simulator, testbed) carry every channel of its own layout
+        for ch in own.channels:
+            v = resolve_channel(ch, streams)
+            select(v.selector, streams, "", "", n_columns=TRANSFORMS[v.transform].n_columns)
+        if own.channels:
+            return "planar_quadrotor", "the workbench's own layout: every channel of it is in the log"
+    except MappingError:
+        pass
+    vehicle, table = log_vehicle(streams)
+    name = mapping_for_vehicle(fmt.name, table)
+    if name is None:
+        why = f"no shipped mapping is made for {vehicle}" if vehicle else "the log names no vehicle"
+        return "planar_quadrotor", why
+    return name, f"made for {vehicle or table}"
 
 
 def inspect(path: str | os.PathLike, *, format: str | None = None) -> LogSummary:

@@ -117,7 +117,7 @@ def import_log(task: tuple[str, str | None, str, str, str | None, int]) -> LogIm
     if path.suffix.lower() in (".parquet", ".pq"):
         ds = DemonstrationSet.load(path)
     else:
-        ds = adapters.load(path, mapping=mapping or "planar_quadrotor")
+        ds = adapters.load(path, mapping=mapping)  # None: the shipped mapping for the vehicle the log names
     if not len(ds):
         raise DataError(f"{path}: no demonstrations under the mapping")
     if label:

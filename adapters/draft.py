@@ -37,12 +37,13 @@ __all__ = ["Draft", "draft_mapping", "BIN_CHANNELS"]
 
 _DEG = math.pi / 180.0
 #: DataFlash (.bin) names of the planar channels, newest EKF first (XKF1: EKF3, NKF1: EKF2, EKF1: the old EKF).
-#: ATT is in degrees and gives the body roll (no yaw-corrected tilt: ATT.Yaw is a heading in degrees).
+#: Positions and velocities in the heading frame (x across the vehicle), which the body roll ATT.Roll (degrees)
+#: accelerates whatever the heading.
 BIN_CHANNELS: dict[str, list[Channel]] = {
-    "x": [Channel("x", Selector(f"{s}.PE")) for s in ("XKF1", "NKF1", "EKF1")],
+    "x": [Channel("x", Selector(f"{s}.Yaw,PN,PE"), transform="heading_right") for s in ("XKF1", "NKF1", "EKF1")],
     "y": [Channel("x", Selector(f"{s}.PD"), transform="ned_up") for s in ("XKF1", "NKF1", "EKF1")],
     "phi": [Channel("phi", Selector("ATT.Roll"), scale=_DEG)],
-    "xdot": [Channel("xdot", Selector(f"{s}.VE")) for s in ("XKF1", "NKF1", "EKF1")],
+    "xdot": [Channel("xdot", Selector(f"{s}.Yaw,VN,VE"), transform="heading_right") for s in ("XKF1", "NKF1", "EKF1")],
     "ydot": [Channel("ydot", Selector(f"{s}.VD"), transform="ned_up") for s in ("XKF1", "NKF1", "EKF1")],
     "phidot": [Channel("phidot", Selector("IMU.GyrX")), Channel("phidot", Selector("RATE.R"), scale=_DEG)],
     "u1": [Channel("u1", Selector("RCIN.C1"), transform="pwm", params=(("pwm_min", 1000.0), ("pwm_max", 2000.0)))],
@@ -71,10 +72,11 @@ def _vehicle(streams: Streams) -> tuple[str, str | None]:
         return summary.vehicle, table
     info = streams.info.get("msg_info", {}) or {}
     if streams.format == "ulog" or "sys_name" in info:
+        from adapters.formats.ulog import release_name
+
         name = str(info.get("sys_name", "ULog"))
-        version = info.get("ver_sw_branch") or info.get("ver_sw_release") or ""
         table = "px4_nav_state" if name.upper().startswith("PX4") or "vehicle_status" in streams.frames else None
-        return f"{name} {version}".strip(), table
+        return release_name(info), table
     msg = streams.columns("MSG") if "MSG" in streams else {}
     if "Message" in msg:
         for text in map(str, msg["Message"]):

@@ -549,6 +549,21 @@ def suggest_mapping(fmt: str, table: str | None, modes: Iterable[str], exclude: 
     return None
 
 
+def mapping_for_vehicle(fmt: str, table: str | None) -> str | None:
+    """The shipped mapping whose mode rule, for files of ``fmt``, names modes by ``table`` (the log's vehicle
+    kind); ``None`` when none does."""
+    if table is None:
+        return None
+    for name in shipped_mappings():
+        try:
+            rule = load_mapping(name).for_format(fmt).segment.mode
+        except MappingError:
+            continue
+        if rule is not None and rule.names == table:
+            return name
+    return None
+
+
 # ---------------------------------------------------------------------------------------------- resolving
 
 

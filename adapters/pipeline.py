@@ -112,6 +112,27 @@ def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Ser
     return series
 
 
+def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
+    """A position or velocity that holds one value through the whole log is a missing source, not a flight.
+
+    An ArduCopter flown without GPS logs its EKF position ``PN``/``PE`` (and velocity) as 0.0 throughout; fitted,
+    such a state is a direction the data never excite, and the error would come at the fit, naming a rank or a
+    gain instead of the cause.
+    """
+    moving = {*m.roles.position, *m.roles.velocity}
+    still = [s for s in series if s.name in moving and s.t.size > 1 and np.ptp(s.v) == 0.0]
+    if not still:
+        return ""
+    channels = {c.name: c for c in m.channels}
+    parts = [f"{s.name} ({resolve_channel(channels[s.name], streams).selector.describe()}) constant "
+             f"{float(s.v[0]):g} in all {s.t.size} samples" for s in still]
+    if {s.name for s in still} & set(m.roles.velocity):
+        cause = "the estimator reports no motion at all in this log (not running, or never aligned)"
+    else:
+        cause = "no position source in this log (no GPS position: the estimator holds its position at its origin)"
+    return f"{streams.path}: mapping {m.name!r}: {'; '.join(parts)} — {cause}, so there is nothing to fit"
+
+
 def _unique(ids: list[str]) -> list[str]:
     seen: Counter = Counter(ids)
     count: Counter = Counter()
@@ -125,7 +146,7 @@ def _unique(ids: list[str]) -> list[str]:
     return out
 
 
-def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
+def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = False) -> DemonstrationSet:
     """Turn a file's streams into demonstrations with a mapping (already specialised to the format).
 
     Raises
@@ -133,14 +154,18 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
     MappingError
         A source names a stream or field the file lacks (listing the nearest it has).
     DataError
-        No demonstration found (saying how many spans and pieces the rules gave), or a channel without any
-        usable sample.
+        No demonstration found (saying how many spans and pieces the rules gave), a channel without any
+        usable sample, or (unless ``allow_still``: a viewer shows such a log, with the cause in every
+        demonstration's ``meta["still"]``) a position or velocity that never moves in the whole log.
     """
     m = mapping
     m.check_complete()
     skipped: Counter = Counter()
     check_rules(streams, m)  # a log never armed, or without a kept mode, says so before any channel is read
     series = _channels(streams, m, skipped)
+    still = _still(streams, m, series)
+    if still and not allow_still:
+        raise DataError(still)
     spans = _spans(streams, m, skipped)
     check_grid(series, [(s.start, s.end) for s in spans], m.dt, f"{streams.path}: mapping {m.name!r}")
     by_key, loose = _metadata(streams, m)
@@ -215,6 +240,8 @@ def build(streams: Streams, mapping: ChannelMapping) -> DemonstrationSet:
                 "t_start": float(t[0]) - log_start,
                 "skipped": report,
             }
+            if still:
+                meta["still"] = still
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
             if key is not None:
@@ -256,6 +283,25 @@ def _silent_channels(series: list[Series], spans: list[Span], names: set[str]) -
     return out
 
 
+def _check_vehicle(streams: Streams, m: ChannelMapping) -> None:
+    """Refuse a mapping whose mode table is another vehicle's: it would name this vehicle's modes wrongly (the
+    copter table reads an ArduRover's MANUAL as STABILIZE) or look for streams this vehicle does not send."""
+    from adapters.mapping import mapping_for_vehicle
+    from adapters.summary import log_vehicle
+
+    rule = m.segment.mode
+    vehicle, table = log_vehicle(streams)
+    if rule is None or rule.names is None or table is None or rule.names == table:
+        return
+    fit = mapping_for_vehicle(streams.format, table)
+    hint = f"; the shipped mapping {fit!r} is made for it (--mapping {fit})" if fit else \
+        "; no shipped mapping is made for it: `workbench map` drafts one from the log"
+    raise DataError(
+        f"{streams.path}: mapping {m.name!r} is made for {rule.names} flight modes, but this log is from "
+        f"{vehicle or table} ({table} modes){hint}"
+    )
+
+
 def check_rules(streams: Streams, m: ChannelMapping) -> None:
     """Raise a DataError naming the cause when the log was never armed, or never in a mode the mapping keeps.
 
@@ -264,6 +310,7 @@ def check_rules(streams: Streams, m: ChannelMapping) -> None:
     keeps one of them.
     """
     seg = m.segment
+    _check_vehicle(streams, m)
     if seg.armed is not None:
         sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
         _, flags = _rule_series(sel, m)

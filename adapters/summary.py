@@ -100,7 +100,9 @@ class LogSummary:
         if self.armed:
             return "armed: " + "; ".join(
                 f"{a - self.t_start:.1f}–{min(b, self.t_end) - self.t_start:.1f} s" for a, b in self.armed)
-        return "armed: never armed" if self.armed_known else ""
+        if self.armed_known:
+            return "armed: never armed"
+        return "armed: no arming record in this log" if self.vehicle else ""
 
 
 def _float(column: Any) -> np.ndarray:
@@ -162,6 +164,31 @@ def _dataflash_modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]
     return modes, armed, str(info.get("firmware") or info.get("vehicle") or "")
 
 
+def _ulog_vehicle(streams: Streams) -> str:
+    from adapters.formats.ulog import release_name
+
+    info = streams.info.get("msg_info") or {}
+    return release_name(info) if info else "PX4"
+
+
+def _arming_recorded(streams: Streams) -> bool:
+    """Whether the log can say when the vehicle was armed (a held flag or arming events), so that no armed span
+    means never armed; planes' old DataFlash logs carry neither."""
+    if streams.format == "dataflash":
+        formats = streams.info.get("formats") or {}
+        if "ARM" in formats:
+            return True
+        if "EV" in streams and "Id" in streams.columns("EV"):
+            ids = np.asarray(streams.columns("EV")["Id"]).astype(np.int64)
+            return bool(np.isin(ids, (10, 11)).any())
+        return False
+    if "HEARTBEAT" in streams:
+        return "base_mode" in streams.columns("HEARTBEAT")
+    if "vehicle_status" in streams:
+        return "arming_state" in streams.columns("vehicle_status")
+    return False
+
+
 def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
     if streams.format == "dataflash":
         return _dataflash_modes(streams)
@@ -178,8 +205,32 @@ def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
         t = _float(vs["t"])
         armed = np.asarray(vs["arming_state"]) == 2 if "arming_state" in vs else np.zeros(len(t), bool)
         return (_mode_spans(t, np.asarray(vs["nav_state"]), "px4_nav_state"), flag_spans(t, armed),
-                "PX4 (nav_state)")
+                _ulog_vehicle(streams))
     return [], [], ""
+
+
+#: Streams a reader must include for :func:`log_vehicle` to recognise the vehicle (a DataFlash log's vehicle and a
+#: ULog's system come with every read).
+VEHICLE_STREAMS = ("HEARTBEAT", "vehicle_status")
+
+
+def log_vehicle(streams: Streams) -> tuple[str, str | None]:
+    """The vehicle a log names and the mode table of its kind (``"arducopter"``, ``"px4"`` …; ``None``: not
+    recognised): the DataFlash firmware string, the vehicle's own HEARTBEAT, or the ULog's system."""
+    if streams.format == "dataflash":
+        info = streams.info
+        return str(info.get("firmware") or info.get("vehicle") or ""), info.get("mode_table")
+    hb = streams.columns("HEARTBEAT") if "HEARTBEAT" in streams else None
+    if hb is not None and streams.n_rows("HEARTBEAT") and {"autopilot", "type"} <= set(hb):
+        rows, table, vehicle = _heartbeat_rows(hb)
+        if rows.any():
+            return vehicle, table
+    if streams.format == "ulog":
+        info = streams.info.get("msg_info") or {}
+        name = str(info.get("sys_name", ""))
+        if name.upper().startswith("PX4") or "vehicle_status" in streams:
+            return _ulog_vehicle(streams), "px4_nav_state"
+    return "", None
 
 
 def log_modes(streams: Streams) -> tuple[list[str], str | None]:
@@ -188,7 +239,9 @@ def log_modes(streams: Streams) -> tuple[list[str], str | None]:
     modes, _, vehicle = _modes(streams)
     table = None
     hb = streams.columns("HEARTBEAT") if "HEARTBEAT" in streams else {}
-    if hb and streams.n_rows("HEARTBEAT") and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb):
+    if streams.format == "dataflash":
+        table = streams.info.get("mode_table")
+    elif hb and streams.n_rows("HEARTBEAT") and {"autopilot", "custom_mode", "base_mode", "type"} <= set(hb):
         table = _heartbeat_rows(hb)[1]
     elif vehicle:
         table = "px4_nav_state"
@@ -223,5 +276,5 @@ def summarize(streams: Streams) -> LogSummary:
         skipped=tuple(sorted((str(k), int(v)) for k, v in streams.skipped.items() if v)),
         info=info,
         vehicle=vehicle,
-        armed_known=bool(vehicle),
+        armed_known=bool(vehicle) and _arming_recorded(streams),
     )

@@ -18,6 +18,14 @@ name                      columns    channel
                                      in the east–up plane (rad, positive toward east): the angle whose
                                      tangent times g is the east acceleration of a hovering multirotor,
                                      whatever its heading
+``euler_tilt_north``      3          ``roll, pitch, yaw`` (rad) → the thrust axis's tilt in the north–up plane
+                                     (rad, positive toward north): what accelerates a multirotor north
+``euler_deg_tilt_east``   3          ``euler_tilt_east`` of angles in degrees (DataFlash ``ATT`` / ``EKF1``
+                                     ``Roll, Pitch, Yaw``)
+``heading_right``         3          ``yaw_deg, north, east`` → the vector's component along the vehicle's
+                                     right (its heading frame's lateral axis): what its roll accelerates
+``heading_forward``       3          ``yaw_deg, north, east`` → the component along its heading: what its
+                                     pitch accelerates (forward is nose-down pitch, negative)
 ``euler_tilt_east_rate``  5          ``roll, pitch, yaw, rollspeed, pitchspeed`` (rad, rad/s body rates) → the
                                      rate of ``euler_tilt_east`` (rad/s); yaw rate does not move the axis
 ========================  =========  ======================================================================
@@ -103,6 +111,45 @@ def _tilt_east_rate(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
     return (up * d_east - east * d_up) / (east**2 + up**2)
 
 
+def _tilt_north(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    R = _rotation(v[:, 0], v[:, 1], v[:, 2])
+    north, up = -R[:, 0, 2], R[:, 2, 2]  # thrust along −z_body: its north and up (−down) components
+    return np.arctan2(north, up)
+
+
+def _tilt_north_inv(angle: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    z = np.zeros_like(angle)
+    return np.column_stack([z, -angle, z])  # heading north, level in roll: nose-down pitch tilts the thrust north
+
+
+def _tilt_east_deg(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    return _tilt_east(np.deg2rad(v), p)
+
+
+def _tilt_deg_inv(angle: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    return np.rad2deg(_tilt_inv(angle, p))
+
+
+def _heading_right(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    yaw = np.deg2rad(v[:, 0])
+    return -np.sin(yaw) * v[:, 1] + np.cos(yaw) * v[:, 2]
+
+
+def _heading_forward(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    yaw = np.deg2rad(v[:, 0])
+    return np.cos(yaw) * v[:, 1] + np.sin(yaw) * v[:, 2]
+
+
+def _heading_right_inv(value: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    z = np.zeros_like(value)
+    return np.column_stack([z, z, value])  # heading north: right is east
+
+
+def _heading_forward_inv(value: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    z = np.zeros_like(value)
+    return np.column_stack([z, value, z])  # heading north: forward is north
+
+
 def _tilt_inv(angle: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
     return np.column_stack([angle, np.zeros_like(angle), np.zeros_like(angle)])  # heading north: tilt = roll
 
@@ -133,6 +180,10 @@ TRANSFORMS: dict[str, Transform] = {
         Transform("quaternion_yaw", 4, _yaw, _axis_quaternion(3)),
         Transform("euler_tilt_east", 3, _tilt_east, _tilt_inv),
         Transform("euler_tilt_east_rate", 5, _tilt_east_rate, _tilt_rate_inv),
+        Transform("euler_deg_tilt_east", 3, _tilt_east_deg, _tilt_deg_inv),
+        Transform("euler_tilt_north", 3, _tilt_north, _tilt_north_inv),
+        Transform("heading_right", 3, _heading_right, _heading_right_inv),
+        Transform("heading_forward", 3, _heading_forward, _heading_forward_inv),
     )
 }
 

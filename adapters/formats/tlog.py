@@ -173,10 +173,10 @@ def looks_like_tlog(head: bytes) -> bool:
         The first bytes of the file (at least 10; 64 or more lets the checksum be verified).
     """
     head = bytes(head)
-    if len(head) < 10 or head[8] not in (MAGIC_V1, MAGIC_V2):
-        return False
-    if int.from_bytes(head[:8], "big") > MAX_TIMESTAMP_US:
-        return False
+    if len(head) < 10 or head[8] not in (MAGIC_V1, MAGIC_V2) or int.from_bytes(head[:8], "big") > MAX_TIMESTAMP_US:
+        # Text before the first frame (an SITL run's console output, a ground station's banner): pymavlink reads
+        # such a file by resynchronising, and so does the reader; it is a tlog when records follow in the head.
+        return _records_follow(head)
     plen = head[9]
     if head[8] == MAGIC_V2:
         if len(head) < 11 or head[10] & 0xFE:
@@ -193,6 +193,31 @@ def looks_like_tlog(head: bytes) -> bool:
     row = np.frombuffer(head[9 : end - 2], dtype=np.uint8)[None, :]
     crc = int(crc_rows(row, dialect.by_id[msgid].crc_extra)[0])
     return crc == int.from_bytes(head[end - 2 : end], "little")
+
+
+#: Back-to-back checksummed records that make a head with leading junk a tlog (one valid frame can occur by chance
+#: in other data; three in a row, each starting where the one before ends, cannot).
+_CHAINED_RECORDS = 3
+
+
+def _records_follow(head: bytes) -> bool:
+    """Whether ``head`` holds, after whatever comes first, :data:`_CHAINED_RECORDS` valid records back to back."""
+    n = len(head)
+    if n < 10:
+        return False
+    buf = np.zeros(n + _PAD, dtype=np.uint8)
+    buf[:n] = np.frombuffer(head, dtype=np.uint8)
+    rec = _scan_records(buf, n, load_dialect())
+    if np.count_nonzero(rec.known) < _CHAINED_RECORDS:
+        return False
+    end = rec.start + rec.plen + np.where(rec.v2, 20 + 13 * rec.signed, 16)
+    joined = rec.known[1:] & rec.known[:-1] & (rec.start[1:] == end[:-1])
+    # the longest run of records each starting where the one before ends
+    run = best = 0
+    for j in joined.tolist():
+        run = run + 1 if j else 0
+        best = max(best, run)
+    return best + 1 >= _CHAINED_RECORDS
 
 
 def read_streams(

@@ -96,7 +96,7 @@ def _read_pyulog(where: str, data: bytes, names: list[str] | None) -> Streams:
         frames[_stream_name(d.name, d.multi_id)] = columns
     counts = dict.fromkeys(ulog.message_formats, 0)
     counts.update({k: len(v["t"]) for k, v in frames.items()})
-    skipped = {}
+    skipped = _drop_zero_stamps(frames, int(ulog.start_timestamp), int(ulog.last_timestamp))
     if ulog.file_corruption:
         skipped["corrupt regions"] = 1
     if ulog.dropouts:
@@ -316,7 +316,9 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
     frames = {stream: columns for _, stream, columns in sorted(items, key=lambda i: i[0])}
     counts = dict.fromkeys(formats, 0)
     counts.update({k: len(v["t"]) for k, v in frames.items()})
-    skipped = {"logger dropouts": dropouts} if dropouts else {}
+    skipped = _drop_zero_stamps(frames, int(start_timestamp), int(last_timestamp))
+    if dropouts:
+        skipped["logger dropouts"] = dropouts
     info = {
         "start_timestamp": int(start_timestamp),
         "last_timestamp": int(last_timestamp),
@@ -325,6 +327,45 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
         "logged_messages": messages,
     }
     return Streams(where, "ulog", frames, counts=counts, skipped=skipped, info=info)
+
+
+def _drop_zero_stamps(frames: dict[str, dict[str, Any]], start_timestamp: int, last_timestamp: int) -> dict[str, int]:
+    """Drop the rows stamped 0 from a log whose clock runs far from 0, and count them.
+
+    A topic published before its publisher set a time (a parameter update at boot, a transponder report) carries
+    timestamp 0 while the bulk of the log runs on a clock that started at ``start_timestamp`` (in SITL, the
+    Unix time: 1.7e15 µs). Kept, such rows stretch the log's span to decades; pyulog's span
+    (``last_timestamp - start_timestamp``) ignores them. They are dropped where they would lie farther from the
+    log's start than the log is long (so more than double its span); nearer, they are kept as pyulog keeps them.
+    """
+    if start_timestamp <= max(last_timestamp - start_timestamp, 0):
+        return {}
+    dropped = 0
+    for name, columns in frames.items():
+        zero = columns["t"] == 0.0
+        n = int(np.count_nonzero(zero))
+        if n:
+            keep = ~zero
+            frames[name] = {k: np.asarray(v)[keep] for k, v in columns.items()}
+            dropped += n
+    return {"rows stamped 0": dropped} if dropped else {}
+
+
+def release_name(msg_info: dict[str, Any]) -> str:
+    """The firmware a ULog names, as a release: ``"PX4 v1.15.0"`` from ``ver_sw_release`` 0x010F00FF.
+
+    PX4 packs the release as major, minor, patch and a type byte (0-63 development, 64-127 alpha, 128-191 beta,
+    192-254 release candidate, 255 release); a log without one names its branch, else only the system.
+    """
+    name = str(msg_info.get("sys_name") or "ULog")
+    release = msg_info.get("ver_sw_release")
+    if isinstance(release, int) and release > 0:
+        major, minor, patch, kind = ((release >> shift) & 0xFF for shift in (24, 16, 8, 0))
+        suffix = "" if kind == 255 else " (development)" if kind < 64 else " (alpha)" if kind < 128 else \
+            " (beta)" if kind < 192 else " (release candidate)"
+        return f"{name} v{major}.{minor}.{patch}{suffix}"
+    branch = msg_info.get("ver_sw_branch")
+    return f"{name} ({branch})" if branch else name
 
 
 def _logged_message(payload: bytes, tagged: bool) -> tuple[float, int, str]:

@@ -429,3 +429,15 @@ def test_instance_field_from_fmtu_and_too_many_instances(tmp_path):
     msgs, _ = dfreader(path)
     assert {k: len(v) for k, v in msgs.items() if not k.startswith("MANY")} == \
         {k: v for k, v in ours.counts.items() if k != "MANY"}
+
+
+def test_a_log_with_no_arming_record_does_not_say_never_armed(tmp_path):
+    # Old ArduPlane DataFlash logs hold neither ARM nor EV arming events (erlerobot/logs pxf/plane/4-12-2014/329.BIN
+    # flew 600 s at 16-18 m/s): inspect must not turn that silence into "never armed".
+    streams, options = dataflash_write.example_streams("old", "plane", seconds=5.0, seed=1)
+    streams = {k: v for k, v in streams.items() if k not in ("EV", "ARM")}
+    path = dataflash_write.write(tmp_path / "no_arming.bin", streams, **options)
+    summary = adapters.inspect(path)
+    assert summary.armed == () and not summary.armed_known
+    assert summary.armed_text == "armed: no arming record in this log"
+    assert "never armed" not in str(summary)

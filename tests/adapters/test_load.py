@@ -97,7 +97,10 @@ def test_load_reads_only_the_mapped_streams(written, monkeypatch):
 
     monkeypatch.setitem(formats.FORMATS, "mcap", dataclasses.replace(original, read=spy))
     adapters.load(written("mcap"))
-    assert set(seen["topics"]) == {"/quadrotor/state", "/quadrotor/input", "/workbench/demo"}
+    # and the streams that name the vehicle, so that a mapping for another one is refused by name
+    from adapters.summary import VEHICLE_STREAMS
+
+    assert set(seen["topics"]) == {"/quadrotor/state", "/quadrotor/input", "/workbench/demo", *VEHICLE_STREAMS}
 
 
 def test_inspect_summarises_streams_rates_and_modes(written, small_set):
@@ -149,7 +152,12 @@ def test_dronekit_mode_spans_come_from_the_vehicle_not_the_ground_station(extern
 
 
 def test_px4_sample_log_yields_demonstrations(external):
-    ds = adapters.load(external("px4_sample_log_small.ulg"), "px4_manual")
+    # the vehicle flew without GPS: its east position is 0.0 throughout, which import names before any fit
+    with pytest.raises(DataError, match=r"x \(vehicle_local_position\.y\) constant 0 in all \d+ samples — no "
+                                        "position source"):
+        adapters.load(external("px4_sample_log_small.ulg"), "px4_manual")
+    ds = adapters.load(external("px4_sample_log_small.ulg"), "px4_manual", allow_still=True)
+    assert "no position source" in ds[0].meta["still"]
     assert len(ds) >= 1
     for d in ds:
         assert np.isfinite(d.x).all() and np.isfinite(d.u).all()

@@ -14,6 +14,7 @@ from adapters.streams import Streams
 from adapters.summary import summarize
 from adapters.transforms import TRANSFORMS
 from adapters.writer import demo_streams, layout
+from workbench.errors import DataError
 from workbench.sim.landing import simulate_landings
 
 EPOCH, PAUSE = 1_704_067_200.0, 2.0
@@ -262,3 +263,71 @@ def test_the_real_dataflash_log_imports_with_the_shipped_copter_mapping(external
     assert len(ds) >= 1 and modes <= {"STABILIZE", "ALT_HOLD", "LOITER"}
     # the mode lane of `inspect` and the demonstrations agree on the pilot-flown modes the log has
     assert modes & {"STABILIZE", "ALT_HOLD"}
+
+
+def _copter_bin(tmp_path, name, edit):
+    from adapters.formats import dataflash_write
+
+    streams, options = dataflash_write.example_streams("old", "copter", seconds=30.0, seed=3)
+    edit(streams, options)
+    return dataflash_write.write(tmp_path / name, streams, **options)
+
+
+def test_a_position_that_never_moves_is_named_at_import(tmp_path):
+    # An ArduCopter flown without GPS logs EKF1.PN/PE as 0.0 throughout (erlerobot/logs pxf/copter/6-3-2014/5.BIN);
+    # the fit used to stop at "the data excite only 7 of 8 directions" instead of saying so.
+    def no_gps(streams, options):
+        streams["EKF1"]["PN"] = 0.0
+        streams["EKF1"]["PE"] = 0.0
+
+    path = _copter_bin(tmp_path, "no_gps.bin", no_gps)
+    with pytest.raises(DataError, match=r"x \(EKF1\.Yaw,PN,PE\) constant 0 in all \d+ samples — no position source"):
+        adapters.load(path, "ardupilot_manual")
+    looked = adapters.load(path, "ardupilot_manual", allow_still=True)  # the viewer still shows it
+    assert len(looked) and "no GPS position" in looked[0].meta["still"]
+
+
+def test_the_shipped_mapping_reads_a_mode_message_without_modenum(tmp_path):
+    # ArduCopter firmware before ModeNum logs MODE with Mode alone; `workbench map` knew it, the mapping did not
+    def mode_only(streams, options):
+        streams["MODE"] = streams["MODE"].drop(columns=["ModeNum"])
+        options["formats"] = {**options["formats"], "MODE": "M"}
+
+    path = _copter_bin(tmp_path, "mode_only.bin", mode_only)
+    reference = _copter_bin(tmp_path, "reference.bin", lambda s, o: None)
+    got, expected = adapters.load(path, "ardupilot_manual"), adapters.load(reference, "ardupilot_manual")
+    assert [d.meta["mode"] for d in got] == [d.meta["mode"] for d in expected]
+    assert sum(len(d.t) for d in got) == sum(len(d.t) for d in expected)
+
+
+def test_a_mapping_for_another_vehicle_is_refused_naming_the_log_vehicle_and_the_mapping_that_fits(flights, tmp_path):
+    # An ArduRover flown in MANUAL (custom mode 0): the copter mapping's table reads 0 as STABILIZE and imported
+    # the drive as a copter's manual flight without a word; a plane's log against the copter mapping likewise.
+    ml = mavutil.mavlink
+    spans = layout(flights, EPOCH, PAUSE)
+    rover = _write_tlog(tmp_path / "rover.tlog", flights, "ardupilot_manual",
+                        _heartbeats(spans, [mode_number("ardurover", "MANUAL")] * len(spans),
+                                    autopilot=ml.MAV_AUTOPILOT_ARDUPILOTMEGA, mav_type=ml.MAV_TYPE_GROUND_ROVER))
+    with pytest.raises(DataError, match=r"mapping 'ardupilot_manual' is made for arducopter flight modes, but this "
+                                        r"log is from .*MAV_TYPE_GROUND_ROVER \(ardurover modes\)"):
+        adapters.load(rover, "ardupilot_manual")
+    plane = _write_tlog(tmp_path / "plane.tlog", flights, "arduplane_manual",
+                        _heartbeats(spans, [mode_number("arduplane", "FBWA")] * len(spans),
+                                    autopilot=ml.MAV_AUTOPILOT_ARDUPILOTMEGA, mav_type=ml.MAV_TYPE_FIXED_WING))
+    with pytest.raises(DataError, match=r"the shipped mapping 'arduplane_manual' is made for it"):
+        adapters.load(plane, "ardupilot_manual")
+    # without a mapping, the one made for the vehicle is chosen and said
+    assert adapters.choose_mapping(plane)[0] == "arduplane_manual"
+    assert len(adapters.load(plane, adapters.choose_mapping(plane)[0])) == len(flights)
+
+
+def test_both_planar_channels_of_a_real_copter_flight_are_physics(external):
+    # a copter flies both planes: the roll plane (ardupilot_manual) and the pitch plane (ardupilot_manual_pitch)
+    # each identify a tilt -> velocity response within a factor 2 of g·dt on the real ArduCopter telemetry log
+    from workbench.plant.choice import choose_plant
+
+    log = external("dronekit_flight.tlog")
+    for name in ("ardupilot_manual", "ardupilot_manual_pitch"):
+        plant = choose_plant(adapters.load(log, name), "identify")
+        (check,) = plant.identification.checks
+        assert check.within(), (name, str(check))

@@ -723,3 +723,36 @@ def test_dialect_specs_are_cached_between_processes_and_equal_pymavlinks(tmp_pat
     assert md._dialect_specs("common") == derived  # read back from the cache
     cache.write_text("not json")
     assert md._dialect_specs("common") == derived  # a damaged cache is derived again
+
+
+def test_a_tlog_that_starts_with_text_and_holds_text_between_frames_is_read(external, tmp_path):
+    # An SITL autotest tlog starts with the simulator's console output before its first frame; pymavlink reads it
+    # by resynchronising. Detection must look past the text, and the skipped bytes are counted.
+    import adapters
+    from adapters.formats import detect_format
+
+    data = external("dronekit_flight.tlog").read_bytes()[:60_000]
+    clean = tmp_path / "clean.tlog"
+    clean.write_bytes(data)
+    junk = b"SIM_VEHICLE: Start\nSIM_VEHICLE: \"/usr/bin/ardupilot\" --model + --speedup 1\n" * 9
+    middle = b"AP: EKF2 IMU0 origin set\n"
+    cut = 30_000
+    dirty = tmp_path / "sitl.tlog"
+    dirty.write_bytes(junk + data[:cut] + middle + data[cut:])
+    assert detect_format(dirty).name == "tlog"
+    base, got = adapters.read(clean), adapters.read(dirty)
+    assert got.skipped["bytes"] >= base.skipped.get("bytes", 0) + len(junk) + len(middle) - 16
+    # every message of the clean file is read but at most the frame the text was written into
+    assert sum(base.counts.values()) - 1 <= sum(got.counts.values()) <= sum(base.counts.values())
+
+
+def test_format_is_accepted_on_a_path(external, tmp_path, capsys):
+    from workbench.cli.app import main
+
+    # more text before the first frame than detection looks at: only --format can say what the file is
+    renamed = tmp_path / "flight.dat"
+    renamed.write_bytes(b"console output\n" * 400 + external("dronekit_flight.tlog").read_bytes()[:20_000])
+    assert main(["inspect", str(renamed)]) != 0
+    capsys.readouterr()
+    assert main(["inspect", str(renamed), "--format", "tlog"]) == 0
+    assert "tlog" in capsys.readouterr().out

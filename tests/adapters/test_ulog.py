@@ -131,3 +131,44 @@ def test_on_damaged_bytes_the_vectorized_reader_agrees_with_pyulog_or_hands_over
         except ulog._Unusual:
             pass
     assert 0 < fast < 60  # both paths were taken
+
+
+def test_topics_stamped_0_do_not_stretch_the_span_of_a_log_on_a_far_clock(tmp_path):
+    # A SITL log runs on the Unix clock; a topic published before its publisher set a time carries timestamp 0
+    # (PX4/pyulog's sample_px4_events.ulg: pyulog's span 31 s, ours was 1,710,773,381 s).
+    import adapters
+    from adapters.summary import summarize
+
+    start = 1_710_773_350.0
+    t = start + 0.1 * np.arange(50)
+    streams = {
+        "vehicle_attitude": pd.DataFrame({"t": t, "q[0]": np.ones(50, np.float32)}),
+        "manual_control_setpoint": pd.DataFrame({"t": np.r_[0.0, t[10:20]], "roll": np.zeros(11, np.float32)}),
+        "parameter_update": pd.DataFrame({"t": [0.0], "instance": np.zeros(1, np.uint32)}),
+    }
+    path = ulog.write(tmp_path / "sitl.ulg", streams, timestamp_us=int(start * 1e6))
+    read = adapters.read(path)
+    summary = summarize(read)
+    assert summary.duration == pytest.approx(t[-1] - t[0], abs=1e-5)
+    assert read.skipped["rows stamped 0"] == 2
+    assert read.n_rows("manual_control_setpoint") == 10
+
+
+def test_a_log_whose_clock_starts_near_0_keeps_its_rows_stamped_0(tmp_path):
+    t = 1.0 + 0.1 * np.arange(50)
+    streams = {"vehicle_attitude": pd.DataFrame({"t": np.r_[0.0, t], "q[0]": np.ones(51, np.float32)})}
+    read = ulog.read(ulog.write(tmp_path / "a.ulg", streams, timestamp_us=1_000_000))
+    assert read.n_rows("vehicle_attitude") == 51
+    assert "rows stamped 0" not in read.skipped
+
+
+def test_vehicle_names_read_as_releases():
+    def packed(major, minor, patch, kind):
+        return (major << 24) | (minor << 16) | (patch << 8) | kind
+
+    assert ulog.release_name({"sys_name": "PX4", "ver_sw_release": packed(1, 15, 0, 255)}) == "PX4 v1.15.0"
+    assert ulog.release_name({"sys_name": "PX4", "ver_sw_release": packed(1, 15, 0, 0)}) == \
+        "PX4 v1.15.0 (development)"
+    assert ulog.release_name({"sys_name": "PX4", "ver_sw_release": packed(1, 14, 2, 200)}) == \
+        "PX4 v1.14.2 (release candidate)"
+    assert ulog.release_name({"sys_name": "PX4", "ver_sw_branch": "main"}) == "PX4 (main)"

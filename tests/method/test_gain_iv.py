@@ -122,3 +122,45 @@ def test_single_sample_demonstrations_are_skipped_by_iv(quad):
     # a DemonstrationSet refuses one-sample trials; estimate_gain also takes any objects with x and u
     padded = [*ds, SimpleNamespace(x=ds[0].x[:1], u=ds[0].u[:1], id="one")]
     np.testing.assert_allclose(estimate_gain(padded, quad, "iv"), estimate_gain(ds, quad, "iv"))
+
+
+def test_a_gain_that_does_not_stabilize_names_the_states_its_slow_mode_lies_on():
+    # a pilot who damps the velocity but never brings the position back: the closed loop keeps the integrator
+    import numpy as np
+
+    from workbench.errors import ModelError
+    from workbench.method.gain import gain_from_arrays
+
+    A, B = np.array([[1.0, 0.1], [0.0, 1.0]]), np.array([[0.0], [0.1]])
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(2, 200))
+    U = np.array([[0.0, -1.0]]) @ X + 0.01 * rng.normal(size=(1, 200))
+    with pytest.raises(ModelError, match=r"lies on x: in these demonstrations the pilot does not bring x back"):
+        gain_from_arrays(X, U, A @ X + B @ U, A, B, "direct", state_names=("x", "xdot"))
+
+
+def test_a_bootstrap_whose_first_resamples_mostly_fail_stops_early_and_says_why(monkeypatch):
+    # 128 s of CPU for 17 fitted resamples of 100 on a real .bin: after the first look the rest are not fitted
+    import workbench.method.resampling as rs
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.landing import simulate_landings
+
+    demos = simulate_landings("CS1", 6, seed=1)
+    calls = []
+    original = rs._resample_fit
+
+    def failing(blocks, idx, A, B, method, solver):
+        calls.append(1)
+        if len(calls) > 1 and len(calls) % 4 != 0:  # the point fit passes; 3 of 4 resamples fail
+            raise rs.ModelError("the gain is not stabilizing: spectral radius ρ(A + B K) = 1.01 ≥ 1")
+        return original(blocks, idx, A, B, method, solver)
+
+    monkeypatch.setattr(rs, "_resample_fit", failing)
+    result = rs.bootstrap_gain(demos, planar_quadrotor(), n_boot=100, seed=0)
+    assert result.n_boot == rs.EARLY_LOOK < 100
+    assert result.n_failed > rs.EARLY_STOP_FAILED * result.n_boot
+    assert f"stopped after {rs.EARLY_LOOK} of 100 resamples: {result.n_failed} of them failed" in result.stopped
+    assert "not stabilizing" in result.stopped
+    calls.clear()
+    monkeypatch.setattr(rs, "_resample_fit", original)
+    assert rs.bootstrap_gain(demos, planar_quadrotor(), n_boot=30, seed=0).stopped == ""

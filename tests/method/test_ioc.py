@@ -362,15 +362,19 @@ def test_bootstrap_intervals_and_failure_count():
     calls = []
     n_boot, seed = 20, 3
     res = bootstrap(ds, sys_, n_boot=n_boot, seed=seed, progress=lambda i, total: calls.append((i, total)))
-    draws = np.random.default_rng(seed)
-    expected_failures = sum(0 not in draws.integers(0, 4, size=4) for _ in range(n_boot))
+    rng_draws = np.random.default_rng(seed)
+    draws = [rng_draws.integers(0, 4, size=4) for _ in range(n_boot)]
+    expected_failures = sum(0 not in d for d in draws)
+    # each distinct resample (the same trials in any order) is fitted once and counted as often as it was drawn
+    n_distinct = len({tuple(sorted(d.tolist())) for d in draws})
     print(
         f"bootstrap: {res.n_failed} failed (expected {expected_failures}) of {res.n_boot}; "
         f"K interval width max {np.max(res.K_hi - res.K_lo):.2e}; Q diag CI {res.Q_diag_lo} .. {res.Q_diag_hi}"
     )
     assert res.n_failed == expected_failures > 0
     assert len(res.failures) == res.n_failed and "rank(X)" in res.failures[0]
-    assert calls == [(i, n_boot) for i in range(1, n_boot + 1)]
+    assert n_distinct < n_boot and calls == [(i, n_distinct) for i in range(1, n_distinct + 1)]
+    assert res.n_boot == n_boot
     assert res.K_samples.shape == (res.n_ok, m, n)
     assert res.Q_diag_samples.shape == (res.n_ok, n) and res.R_diag_samples.shape == (res.n_ok, m)
     assert np.all(res.K_lo <= res.K_hi) and np.all(res.Q_diag_lo <= res.Q_diag_hi)

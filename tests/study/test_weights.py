@@ -494,3 +494,13 @@ def test_leave_one_out_gains_give_the_jackknife_estimate_and_covariance():
     plain = ratio_profile.PartDistance.from_samples(plant.A, plant.B, np.array([[k_hat]]), samples, n)
     assert plain.k_hat[0] == k_hat and plain.nu == n - 1
     assert plain.W[0, 0] == pytest.approx(1.0 / np.sqrt(np.var(samples, ddof=1) * n / (n - 1)))
+
+
+def test_no_verdict_sentence_on_an_infinite_critical_value():
+    # "a diagonal cost explains the gain (critical value inf)" was printed after 17 of 100 resamples fitted
+    from workbench.study.weights import PartFit
+
+    fit = PartFit(("x", "xdot"), ("u1",), distance=3.2, restrictions=1, critical=float("inf"), explained=True,
+                  dof=2.0)
+    text = fit.describe()
+    assert "no verdict" in text and "explains" not in text and "critical value inf" not in text

@@ -33,6 +33,8 @@ def _entities(data: bytes, tmp_path: Path) -> set[str]:
 
 def test_the_loader_is_a_console_script_named_for_rerun():
     scripts = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["scripts"]
+    # rerun 0.41 looks for rerun-importer-*, and warns that rerun-loader-* is deprecated (still run)
+    assert scripts["rerun-importer-workbench"] == "workbench.cli.loader:run"
     assert scripts["rerun-loader-workbench"] == "workbench.cli.loader:run"
 
 

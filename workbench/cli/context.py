@@ -113,7 +113,7 @@ def is_demo_file(path: Path) -> bool:
     return is_dataset(path)
 
 
-def load_one(path: Path, mapping: str | None, format: str | None = None) -> Any:
+def load_one(path: Path, mapping: str | None, format: str | None = None, allow_still: bool = False) -> Any:
     from workbench.data.dataset import load_demonstrations
 
     if is_demo_file(path):
@@ -121,7 +121,7 @@ def load_one(path: Path, mapping: str | None, format: str | None = None) -> Any:
     import adapters
 
     return adapters.load(path, mapping=mapping or DEFAULT_MAPPING,
-                         format=None if format in (None, "parquet") else format)
+                         format=None if format in (None, "parquet") else format, allow_still=allow_still)
 
 
 def join_sets_named(sets: Sequence[Any], names: Sequence[str]) -> Any:
@@ -131,7 +131,10 @@ def join_sets_named(sets: Sequence[Any], names: Sequence[str]) -> Any:
     return join_sets(sets, names)
 
 
-def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None):
+def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None,
+               allow_still: bool = False):
+    """The demonstrations of ``paths``; ``allow_still`` (a viewer) shows a log whose position never moves, with a
+    warning naming it, where the other commands stop with that cause."""
     if sum(is_stdio(p) for p in paths) > 1:
         raise WorkbenchError("- (standard input) given twice: it can be read once")
     files = [ctx.input_path(p, "the demonstrations") for p in paths]
@@ -140,7 +143,16 @@ def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: 
         task = progress.add_task("reading logs", total=len(files))
         for f in files:
             stdin = f == ctx.stdio.stdin_path
-            ds = load_one(f, mapping, ctx.stdio.format if stdin else None)
+            chosen = mapping
+            if mapping is None and not is_demo_file(f):
+                import adapters
+
+                chosen, why = adapters.choose_mapping(f, format=None if ctx.stdio.format == "parquet"
+                                                      else ctx.stdio.format)
+                ctx.say(f"{ctx.shown(f)}: mapping {chosen} ({why}; --mapping chooses another)")
+            ds = load_one(f, chosen, ctx.stdio.format, allow_still)
+            if len(ds) and ds[0].meta.get("still"):
+                print(f"warning: {ds[0].meta['still']}", file=sys.stderr)
             if stdin:  # the temporary file is gone once the command ends: the trials come from <stdin>
                 ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
             skipped = {k: v for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v} if len(ds) else {}

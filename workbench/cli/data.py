@@ -49,6 +49,11 @@ def _named(ctx: Context, out: Path) -> str:
     return "standard output" if ctx.stdio.writes_stdout else str(out)
 
 
+def _log_format(ctx: Context) -> str | None:
+    """``--format`` for a log (a file or standard input); ``parquet`` is not a log format."""
+    return None if ctx.stdio.format == "parquet" else ctx.stdio.format
+
+
 def cmd_inspect(ctx: Context) -> int:
     from rich.markup import escape
     from rich.table import Table
@@ -69,7 +74,7 @@ def cmd_inspect(ctx: Context) -> int:
         return 0
     import adapters
 
-    summary = adapters.inspect(path, format=ctx.stdio.format if path == ctx.stdio.stdin_path else None)
+    summary = adapters.inspect(path, format=_log_format(ctx))
     t0 = summary.t_start
     ctx.say(
         f"[bold]{escape(ctx.shown(summary.path))}[/bold]: {summary.format}, {summary.size_bytes} bytes, "
@@ -103,7 +108,7 @@ def cmd_map(ctx: Context) -> int:
     path = ctx.input_path(a.log, "the log")
     output = None if is_stdio(a.output) else a.output  # `-o -`: printed, as without -o
     name = Path(output).stem if output else ("stdin" if is_stdio(a.log) else path.stem)
-    draft = draft_mapping(adapters.read(path, format=ctx.stdio.format if is_stdio(a.log) else None), name=name)
+    draft = draft_mapping(adapters.read(path, format=_log_format(ctx)), name=name)
     if output:
         with atomic_path(output) as tmp:
             Path(tmp).write_text(ctx.shown(draft.toml), encoding="utf-8")

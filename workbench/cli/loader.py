@@ -1,13 +1,15 @@
-"""``rerun-loader-workbench``: rerun's external data loader for flight logs, so ``rerun FLIGHT.tlog`` just works.
+"""``rerun-importer-workbench``: rerun's external data loader for flight logs, so ``rerun FLIGHT.tlog`` just works.
 
 Rerun's viewer (and ``rr.log_file_from_path``) runs every executable on ``PATH`` whose name starts with
-``rerun-loader-`` on a file it is asked to open, passing the path and its settings; a loader either streams a
+``rerun-importer-`` (rerun 0.41; before it ``rerun-loader-``, still accepted with a deprecation warning: the package
+installs both names) on a file it is asked to open, passing the path and its settings; a loader either streams a
 recording to stdout (``rr.stdout()``) or exits with code 66 (``rr.EXTERNAL_DATA_LOADER_INCOMPATIBLE_EXIT_CODE``)
 to say the file is not for it. This one handles the logs the workbench reads by their first bytes — MAVLink
 ``.tlog``, PX4 ULog, and every other binary log format registered in :mod:`adapters.formats` (the DataFlash
 ``.bin`` once its reader is there) — and leaves MCAP to rerun's own loader (two loaders would log it twice) and
 CSV files to others (a CSV is too common to claim). The recording is the raw view of ``workbench view LOG``
-(:mod:`workbench.viewer.rawlog`) with its blueprint.
+(:mod:`workbench.viewer.rawlog`) with its blueprint, sent active: the viewer opens on the workbench's layout, as
+``workbench view`` does, not on its own automatic grid.
 
 Settings honoured: ``--application-id`` and ``--recording-id`` (the recording's ids; defaults: the raw view's
 application id and a new recording), ``--entity-path-prefix`` (in front of ``log/…``), ``--static`` (only what
@@ -28,7 +30,11 @@ NOT_OURS = frozenset({"mcap", "csv"})  # formats left to other loaders (see the 
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rerun-loader-workbench", description=__doc__.split("\n\n")[0])
+    import os
+
+    called = os.path.basename(sys.argv[0]) if sys.argv else ""
+    prog = called if called.startswith("rerun-") else "rerun-importer-workbench"
+    p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     p.add_argument("filepath")
     p.add_argument("--application-id")
     p.add_argument("--opened-application-id")
@@ -78,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     rec.stdout()
     prefix = "/".join(p for p in (args.entity_path_prefix.strip("/"), "log") if p)
     logged = log_raw(rec, raw, prefix=prefix, static=args.static or args.timeless)
-    rec.send_blueprint(raw_blueprint(logged), make_active=False, make_default=True)
+    rec.send_blueprint(raw_blueprint(logged), make_active=True, make_default=True)
     rec.flush()
     return 0
 

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from typing import Any
 
@@ -60,8 +61,10 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
 
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
-        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain,
-                           progress=lambda done, total: progress.update(task, completed=done), executor=ex)
+        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex,
+                           progress=lambda done, total: progress.update(task, completed=done, total=total))
+    if result.stopped:
+        print(f"warning: bootstrap {result.stopped}", file=sys.stderr)
     ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
             f"{result.ci:g} % percentile intervals):")
     for names, lo, hi, what in ((ds.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
@@ -90,8 +93,10 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, pow
 
     with ctx.progress() as progress:
         task = progress.add_task(f"weight ratios: {n_boot} resampled gains", total=n_boot)
-        ratios, gain, note = ratio_bootstrap(model, ds, n_boot=n_boot, seed=seed,
-                                             progress=lambda done, total: progress.update(task, completed=done))
+        def advance(done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total)
+
+        ratios, gain, note = ratio_bootstrap(model, ds, n_boot=n_boot, seed=seed, progress=advance)
     if ratios is None:
         ctx.say(f"weight ratios: none ({note})")
         return
@@ -101,6 +106,8 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, pow
             progress.add_task("power curve: simulating demonstrations from the model", total=None)
             ratios, curve = with_power(model, ds, ratios, power, seed)
     g = ratios.gains
+    if getattr(g, "stopped", ""):
+        print(f"warning: weight ratios' bootstrap {g.stopped}", file=sys.stderr)
     ctx.say(f"weight ratios inside coupled parts (S = 0, diagonal cost closest to the {gain} gain in the metric of "
             f"its covariance over {g.n_ok} of {g.n_boot} resamples; {ratios.ci:g} % profile intervals; "
             f"forward-gain error {ratios.forward_gain_error:.2g}):")

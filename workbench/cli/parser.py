@@ -107,8 +107,8 @@ _TABLE_OUTPUTS = ["parquet", "csv"]
 
 def _format_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--format", choices=_STDIN_FORMATS, metavar="FORMAT",
-                   help="what - (standard input) holds: " + ", ".join(_STDIN_FORMATS) + " (default: recognised from "
-                        "its first bytes; files are always recognised by theirs)")
+                   help="what the input holds (a file or - for standard input): " + ", ".join(_STDIN_FORMATS) +
+                        " (default: recognised from its first bytes)")
 
 
 def _output_format_option(p: argparse.ArgumentParser, choices: list[str]) -> None:
@@ -119,7 +119,8 @@ def _output_format_option(p: argparse.ArgumentParser, choices: list[str]) -> Non
 
 def _mapping_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mapping", metavar="M",
-                   help=f"channel mapping for raw logs: a shipped name or a TOML file (default {DEFAULT_MAPPING})")
+                   help="channel mapping for raw logs: a shipped name or a TOML file (default: the shipped mapping "
+                        f"made for the vehicle the log names, else {DEFAULT_MAPPING}; the choice is printed)")
 
 
 def build_parser() -> argparse.ArgumentParser:

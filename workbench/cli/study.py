@@ -39,6 +39,12 @@ def cmd_evaluate(ctx: Context) -> int:
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     if a.per_subject:
         return _evaluate_per_subject(ctx, ds, output)
+    if len(ds) == 1:  # one manual segment: leave-one-segment-out would have nothing to train on
+        duration = float(ds[0].t[-1] - ds[0].t[0])
+        ds = study.split_in_time(ds, steps_of(a.horizon_s, ds.dt))
+        ctx.say(f"one manual segment ({duration:.1f} s): evaluated by a time split inside it, {len(ds)} contiguous "
+                "pieces each scored by models and a plant fitted on the others (parts of one flight, not "
+                "independent trials)")
     smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
     # a collected session declares its test trials (the protocol's test blocks, held-out trials): auto keeps them
     recorded = recorded_test_ids(ds) if a.holdout == "auto" else None

@@ -53,8 +53,8 @@ def _raw_streams(ctx: Context, path: str) -> Any:
     from workbench.cli.context import is_demo_file
 
     p = ctx.input_path(path, "the demonstrations")
-    stdin = p == ctx.stdio.stdin_path
-    return None if is_demo_file(p) else adapters.read(p, format=ctx.stdio.format if stdin else None)
+    fmt = None if ctx.stdio.format == "parquet" else ctx.stdio.format
+    return None if is_demo_file(p) else adapters.read(p, format=fmt)
 
 
 def _view_raw(ctx: Context, streams: Any) -> int:
@@ -86,7 +86,7 @@ def cmd_view(ctx: Context) -> int:
     raw_streams = _raw_streams(ctx, a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
     if raw_streams is not None and not a.mapping and not a.model:
         return _view_raw(ctx, raw_streams)
-    ds = load_demos(ctx, a.inputs, a.mapping, a.label)
+    ds = load_demos(ctx, a.inputs, a.mapping, a.label, allow_still=True)
     source_dt = float(ds.dt)
     models, named = None, None
     if a.model:

@@ -169,8 +169,11 @@ def gain_from_arrays(
     B: Any,
     method: GainMethod = "direct",
     lengths: Sequence[int] | None = None,
+    state_names: Sequence[str] | None = None,
 ) -> np.ndarray:
     """Estimate the gain ``K̂`` of ``u = K x`` from stacked data (step 1 of Algorithm 1).
+
+    ``state_names`` name, in the error for a gain that is not stabilizing, the states its slowest mode lies on.
 
     Parameters
     ----------
@@ -238,8 +241,22 @@ def gain_from_arrays(
     try:
         check_stabilizing(A, B, K)
     except ModelError as exc:
-        raise ModelError(f"estimated gain ({method}, cond(X) = {cond_X:.3g}): {exc}") from None
+        raise ModelError(f"estimated gain ({method}, cond(X) = {cond_X:.3g}): {exc}"
+                         f"{_unstable_mode(A, B, K, state_names)}") from None
     return K
+
+
+def _unstable_mode(A: np.ndarray, B: np.ndarray, K: np.ndarray, names: Sequence[str] | None) -> str:
+    """Which states the closed loop's slowest mode lies on: what the demonstrations never bring back."""
+    if not names or len(names) != A.shape[0]:
+        return ""
+    lam, V = np.linalg.eig(A + B @ K)
+    i = int(np.argmax(np.abs(lam)))
+    v = np.abs(V[:, i])
+    on = [names[j] for j in np.flatnonzero(v >= 0.3 * v.max())]
+    return (f". The mode |λ| = {abs(lam[i]):.5g} lies on {', '.join(on)}: in these demonstrations the pilot does "
+            f"not bring {' and '.join(on)} back (a pilot who flies velocities or attitude and lets the position "
+            "wander holds no position for a cost to explain); fit the states the pilot holds")
 
 
 def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direct") -> np.ndarray:
@@ -264,7 +281,9 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
     if not blocks:
         raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
     X, U, X_next = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))
-    return gain_from_arrays(X, U, X_next, A, B, method, lengths=[b[0].shape[1] for b in blocks])
+    names = getattr(system, "state_names", None)
+    return gain_from_arrays(X, U, X_next, A, B, method, lengths=[b[0].shape[1] for b in blocks],
+                            state_names=tuple(names) if names is not None else None)
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,10 +69,27 @@ class BootstrapResult:
     method: str
     structure: str
     seed: int
+    stopped: str = ""  # why the resampling stopped short of the resamples asked for (stop_note)
 
     @property
     def n_ok(self) -> int:
         return self.n_boot - self.n_failed
+
+
+#: Resamples fitted before deciding whether the rest are worth fitting, and the share of them that may fail.
+EARLY_LOOK = 20
+EARLY_STOP_FAILED = 0.5
+
+
+def stop_note(n_boot: int, done: int, failures: Sequence[str]) -> str:
+    """Why a bootstrap stopped short of ``n_boot`` (``""`` when it did not): how many failed and the commonest
+    cause, for the terminal."""
+    if done >= n_boot:
+        return ""
+    causes = Counter(f.split(": ", 1)[-1].split(";")[0][:160] for f in failures)
+    cause, count = causes.most_common(1)[0] if causes else ("", 0)
+    return (f"stopped after {done} of {n_boot} resamples: {len(failures)} of them failed (more than "
+            f"{EARLY_STOP_FAILED:.0%}), so the rest would not bound the intervals; commonest cause ({count}): {cause}")
 
 
 def _resample_fit(
@@ -119,19 +137,49 @@ def _run_resamples(
     solver = _solver(A, B, structure)
     rng = np.random.default_rng(seed)
     draws = [(b, rng.integers(0, len(blocks), size=len(blocks))) for b in range(n_boot)]
+    # Resamples that draw the same trials (in any order) give the same fit: each distinct one is fitted once and
+    # counted as often as it was drawn (with few trials most draws repeat: 4 trials have 35 distinct resamples).
+    keys = [tuple(np.sort(idx).tolist()) for _, idx in draws]
+    unique: dict[tuple, tuple] = {}
+    for draw, key in zip(draws, keys, strict=True):
+        unique.setdefault(key, draw)
+    distinct = list(unique.values())
+    n = len(distinct)
+    # a first look, then the rest only where it is worth it: when most resamples of the first look fail, the
+    # remaining ones would cost minutes to deliver intervals of a few survivors (unbounded ones, often)
+    fitted = _run_draws(demos, blocks, A, B, method, structure, solver, distinct[:EARLY_LOOK], 0, n, progress,
+                        executor)
+    if n > EARLY_LOOK and sum(r[4] is None for r in fitted) >= (1 - EARLY_STOP_FAILED) * len(fitted):
+        fitted += _run_draws(demos, blocks, A, B, method, structure, solver, distinct[EARLY_LOOK:], len(fitted), n,
+                             progress, executor)
+    if len(fitted) < n:  # stopped early: the distinct resamples fitted
+        return fitted
+    by_key = dict(zip(unique, fitted, strict=True))
+    return [(b, *by_key[k][1:]) for (b, _), k in zip(draws, keys, strict=True)]
+
+
+def _run_draws(
+    demos: Any, blocks: list, A: np.ndarray, B: np.ndarray, method: GainMethod, structure: Structure | None,
+    solver: InverseLQR | None, draws: list, offset: int, n_boot: int, progress: Callable[[int, int], None] | None,
+    executor: Any,
+) -> list[tuple]:
+    """Fit the resamples ``draws`` here or on the executor's workers (progress: ``offset`` done before, of
+    ``n_boot``)."""
+    if not draws:
+        return []
     if executor is None:
         results = []
         with single_threaded_blas():  # as on a worker: the same reductions, so the same intervals
-            for b, idx in draws:
+            for i, (b, idx) in enumerate(draws):
                 results.extend(_resamples(blocks, [(b, idx)], A, B, method, solver))
                 if progress is not None:
-                    progress(b + 1, n_boot)
+                    progress(offset + i + 1, n_boot)
         return results
     # one resample per task in process (progress per resample); on workers ~4 blocks each amortize the setup
-    size = max(1, math.ceil(n_boot / (4 * executor.workers))) if executor.parallel else 1
+    size = max(1, math.ceil(len(draws) / (4 * executor.workers))) if executor.parallel else 1
     ref = executor.share(demos)
-    tasks = [(ref, A, B, method, structure, draws[i : i + size]) for i in range(0, n_boot, size)]
-    report = None if progress is None else lambda done, total: progress(min(n_boot, done * size), n_boot)
+    tasks = [(ref, A, B, method, structure, draws[i : i + size]) for i in range(0, len(draws), size)]
+    report = None if progress is None else lambda done, total: progress(min(n_boot, offset + done * size), n_boot)
     return [r for block in executor.map(_bootstrap_block, tasks, progress=report) for r in block]
 
 
@@ -190,6 +238,7 @@ class GainBootstrap:
     failures: tuple[str, ...]
     method: str
     seed: int
+    stopped: str = ""  # why the resampling stopped short of the resamples asked for (stop_note)
     K_loo: np.ndarray | None = None
 
     @property
@@ -223,8 +272,9 @@ def bootstrap_gain(
     n_trials, K0, _, fits, failures = _resampled(demos, system, n_boot, method, None, seed, progress, executor)
     loo = _leave_one_out(demos, system, method) if jackknife and n_trials >= 3 else None
     return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array([f[0] for f in fits])), n_trials=n_trials,
-                         n_boot=int(n_boot), n_failed=len(failures), failures=tuple(failures), method=method,
-                         seed=int(seed), K_loo=None if loo is None else readonly(loo))
+                         n_boot=len(fits) + len(failures), n_failed=len(failures), failures=tuple(failures),
+                         method=method, seed=int(seed), K_loo=None if loo is None else readonly(loo),
+                         stopped=stop_note(int(n_boot), len(fits) + len(failures), failures))
 
 
 def _leave_one_out(demos: Any, system: Any, method: GainMethod) -> np.ndarray | None:
@@ -305,8 +355,9 @@ def bootstrap(
         Q_diag_hi=readonly(Q_hi),
         R_diag_lo=readonly(R_lo),
         R_diag_hi=readonly(R_hi),
-        n_boot=int(n_boot),
+        n_boot=len(fits) + len(failures),
         n_failed=len(failures),
+        stopped=stop_note(int(n_boot), len(fits) + len(failures), failures),
         failures=tuple(failures),
         ci=float(ci),
         method=method,

@@ -314,6 +314,14 @@ def _checks(A: np.ndarray, r: ResolvedRoles, roles: Roles, state_names: Sequence
                           f"g·dt: tilting by the heading angle accelerates {state_names[v]}"),)
 
 
+def _disagreement(c: PhysicalCheck) -> str:
+    """A failed check as a warning that names the state pair and what usually makes it disagree."""
+    return (f"{c.name} is {c.ratio:.2g} × g·dt (physics: 1): the velocity does not respond to the angle as a tilt "
+            "would; likely cause: the angle is not the tilt along that velocity's axis (a body roll paired with a "
+            "world-frame velocity on a vehicle that turns: declare the states in the heading frame), or the "
+            "velocity is an estimate that does not follow the tilt (no GPS, estimator not converged)")
+
+
 def identify_plant(
     demos: DemonstrationSet, structure: str = "auto", horizon_s: float = 3.0, translation_invariant: bool = False
 ) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
@@ -404,6 +412,9 @@ def identify_plant(
         warns.append("worse than persistence on held-out segments at " + " and ".join(worse))
     if n_folds == 0:
         warns.append("no held-out check: no fold's training data excite every direction")
+    for c in checks:
+        if not c.within():
+            warns.append(_disagreement(c))
     if cond > ILL_CONDITIONED:
         warns.append(f"ill-conditioned regressor (cond {cond:.3g} > {ILL_CONDITIONED:g})")
     report = IdentificationReport(

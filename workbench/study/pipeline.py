@@ -27,7 +27,8 @@ from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.names import METHOD_TITLES
 
 __all__ = [
-    "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "improvement_table", "verdicts", "metric_unit", "plant_for",
+    "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "split_in_time", "improvement_table", "verdicts",
+    "metric_unit", "plant_for",
     "FLOOR_METHODS",
 ]
 
@@ -440,6 +441,40 @@ def _objective_interval(label: str, model: Any, train: DemonstrationSet, n_boot:
 
 #: Below this many trials in a label, ``evaluate`` leaves one trial out at a time instead of one random split.
 LOSO_BELOW = 10
+#: Contiguous pieces one long segment is cut into when it is all a log gives (:func:`split_in_time`).
+TIME_SPLIT_PIECES = 3
+
+
+def split_in_time(demos: DemonstrationSet, n_steps: int, pieces: int = TIME_SPLIT_PIECES) -> DemonstrationSet:
+    """One segment cut into up to ``pieces`` contiguous pieces, each longer than the ``n_steps`` horizon, so that
+    leave-one-segment-out has something to train on when a log holds a single manual segment. The pieces are
+    parts of one flight, not independent trials: a score over them says how the models do later in the same
+    flight.
+
+    Raises
+    ------
+    DataError
+        More than one segment, or one too short for two pieces longer than the horizon.
+    """
+    if len(demos) != 1:
+        raise DataError(f"a time split is for a single segment; these demonstrations have {len(demos)}")
+    d = demos[0]
+    n = len(d.t)
+    k = min(int(pieces), n // (n_steps + 2))
+    if k < 2:
+        raise DataError(
+            f"one manual segment of {d.t[-1] - d.t[0]:.1f} s ({n} samples): too short to split into two pieces "
+            f"longer than the {n_steps * demos.dt:g} s horizon, so no held-out evaluation is possible; fly longer or "
+            "shorten --horizon"
+        )
+    bounds = np.linspace(0, n, k + 1).round().astype(int)
+    t0 = float(d.meta.get("t0", 0.0))
+    parts = [
+        type(d)(d.t[a:b] - d.t[a], d.x[a:b], d.u[a:b],
+                {**d.meta, "id": f"{d.id}.t{i + 1}", "t0": t0 + float(d.t[a] - d.t[0]), "time_split": f"{i + 1}/{k}"})
+        for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True))
+    ]
+    return demos.with_demos(parts)
 
 
 def run_loso(

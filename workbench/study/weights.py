@@ -214,6 +214,10 @@ class PartFit:
             if not self.of_form:
                 text += f"; the estimated gain lies outside every diagonal cost's: {self.mismatch_words()}"
             return text
+        if not np.isfinite(self.critical):  # no verdict from a test that cannot reject
+            return (f"{where}: no verdict on a diagonal cost: the test's critical value is not finite (distance "
+                    f"{self.distance:.3g}, {self.restrictions} restriction(s), {self.dof:.3g} degrees of freedom of "
+                    "the gain's covariance: too few resamples fitted for the test)")
         verdict = "explains" if self.explained else "does not explain"
         edges = f", one more per weight ratio at 0 or ∞: {self.edges}" if self.edges else ""
         text = (f"{where}: a diagonal cost {verdict} the gain (distance {self.distance:.3g}, critical value "
