@@ -172,7 +172,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "the rest imported")
     _output_format_option(p, _DEMO_OUTPUTS)
     _format_option(p)
-    p.add_argument("--label", help="set every trial's strategy label")
+    # --set-label: on `import` the label is written, everywhere else --label filters; the old spelling still works
+    p.add_argument("--set-label", "--label", dest="label", metavar="LABEL", help="set every trial's strategy label")
     _executor_options(p)
 
     p = add("fit", cmd_fit, "fit a human behavior model (task objective + variability) to demonstrations",
