@@ -164,7 +164,7 @@ def test_examples_import_only_the_public_faces(block):
 
 def _fleet(where: Path) -> None:
     """A dataset of the sample logs, one partition per subject, where the scaling-out example reads it."""
-    out = subprocess.run([str(BIN / "workbench"), "-q", "import", str(REPO / "sample_logs"), "-o", "fleet/"],
+    out = subprocess.run([str(BIN / "workbench"), "-q", "import", str(REPO / "sample_logs"), "-o", "out/fleet/"],
                          cwd=where, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
 
