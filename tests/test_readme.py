@@ -169,7 +169,11 @@ def _fleet(where: Path) -> None:
     assert out.returncode == 0, out.stderr
 
 
-@pytest.mark.parametrize("block", BLOCKS, ids=[f"block{i}" for i in range(len(BLOCKS))])
+# the scaling-out example starts a Dask cluster and runs a per-subject study (minutes under load): make test-all
+RUNS = [pytest.param(b, marks=pytest.mark.slow) if "make_executor(workers" in b else b for b in BLOCKS]
+
+
+@pytest.mark.parametrize("block", RUNS, ids=[f"block{i}" for i in range(len(BLOCKS))])
 def test_examples_run(block, tmp_path):
     """Each block as a script of its own (``python example.py``), as a user would save and run it."""
     if any(s in block for s in NEEDS_OUTSIDE):
