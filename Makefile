@@ -22,13 +22,23 @@ $(STAMP): pyproject.toml $(LOCK)
 demo: $(STAMP)
 	$(BIN)/workbench demo --out $(OUT)
 
-## test: set up .venv, then the whole test suite (headless)
+# The suite runs on pytest-xdist workers, one per core (`make test TEST_WORKERS=0` runs it in one process);
+# PYTEST_ARGS adds options (`make test PYTEST_ARGS='-k viewer'`). It prints its duration and the machine's load,
+# and a selection with no tests in it (pytest's exit status 5) is not a failure.
+TEST_WORKERS ?= auto
+PYTEST_ARGS  ?=
+RUN_PYTEST = start=$$(date +%s); status=0; $(1) -m pytest -n $(TEST_WORKERS) $(2) $(PYTEST_ARGS) || status=$$?; \
+	if [ $$status -eq 5 ]; then echo "$@: no tests collected"; status=0; fi; \
+	echo "$@: $$(( $$(date +%s) - start )) s on $$(nproc) cores, $$(uptime | sed 's/.*\(load average\)/\1/')"; \
+	exit $$status
+
+## test: set up .venv, then the fast suite (headless; tests marked slow: make test-all); prints its duration
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	@$(call RUN_PYTEST,$(BIN)/python,)
 
 ## test-all: the suite including the slow tests (full fuzz runs, large studies)
 test-all: $(STAMP)
-	$(BIN)/python -m pytest -m ''
+	@$(call RUN_PYTEST,$(BIN)/python,-m '')
 
 ## test-latest: the fast suite in $(LATEST), installed without the lock: the newest releases pyproject.toml allows
 test-latest:
@@ -38,7 +48,7 @@ test-latest:
 	@$(LATEST)/bin/python $(PIP) freeze --all --exclude-editable > $(LATEST)/freeze.txt
 	@echo "versions that differ from $(LOCK) (< lock, > latest):"
 	@grep -v '^#' $(LOCK) | diff - $(LATEST)/freeze.txt | grep '^[<>]' || echo "  none"
-	$(LATEST)/bin/python -m pytest
+	@$(call RUN_PYTEST,$(LATEST)/bin/python,)
 
 lint: $(STAMP)
 	$(BIN)/ruff check workbench adapters tests bench

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import argparse
+import difflib
 import re
 import signal
 import sys
@@ -91,9 +93,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             _hold_interrupts_until_exit()
 
 
+def _refuse_unknown(parser: argparse.ArgumentParser, command: str, extras: list[str]) -> None:
+    """argparse's usage error for words the command does not take, with the command's nearest flag for a
+    mistyped one (``--lable`` → ``did you mean --label?``); exits with status 2 as argparse does."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[command]
+    flags = sorted({s for a in sub._actions for s in a.option_strings if s.startswith("--")})
+    words = []
+    for word in extras:
+        near = difflib.get_close_matches(word.split("=", 1)[0], flags, n=1) if word.startswith("--") else []
+        words.append(f"{word} (did you mean {near[0]}?)" if near else word)
+    sub.error("unrecognized arguments: " + " ".join(words))
+
+
 def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extras = parser.parse_known_args(argv)
+    if extras:
+        _refuse_unknown(parser, args.command, extras)
     debug = bool(getattr(args, "debug", False))
     previous = warnings.showwarning
     shown = _Warnings()

@@ -167,7 +167,7 @@ def cmd_import(ctx: Context) -> int:
     names = [name for log in a.logs for name in (["-"] if is_stdio(log) else [str(f) for f in expand_logs([log])])]
     ds = load_demos(ctx, names, a.mapping)
     if a.label:
-        ds = type(ds)([d.with_meta(label=a.label) for d in ds], ds.state_names, ds.input_names, ds.dt)
+        ds = ds.with_demos(d.with_meta(label=a.label) for d in ds)  # keeps the mapping's roles
     write_demos(ds, out, a.mapping)
     ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples, labels {ds.labels}) to {_named(ctx, out)}")
     return 0

@@ -20,6 +20,7 @@ from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
 from workbench.cli.model import cmd_fit, cmd_predict
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
 from workbench.cli.view import VIEW_SAMPLES, cmd_live, cmd_replay, cmd_view
+from workbench.defaults import HORIZON_S, N_COMPONENTS, N_STEPS, ONLINE_HORIZON_S
 
 __all__ = ['build_parser']
 
@@ -46,11 +47,11 @@ def _study_options(
 ) -> None:
     p.add_argument("--test-size", type=float, default=0.2, metavar="F",
                    help="fraction of each strategy's trials held out for testing (default 0.2)")
-    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=3.0, metavar="SECONDS",
-                   help="prediction horizon in seconds (default 3.0, the paper's 60 steps)")
-    p.add_argument("--n-components", type=n_components_arg, default=5, metavar="G|bic",
+    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=HORIZON_S, metavar="SECONDS",
+                   help=f"prediction horizon in seconds (default {HORIZON_S}, the paper's {N_STEPS} steps)")
+    p.add_argument("--n-components", type=n_components_arg, default=N_COMPONENTS, metavar="G|bic",
                    help="GMM components G, or 'bic' to pick G by BIC on each strategy's training trials "
-                        "(default 5, the paper's)")
+                        f"(default {N_COMPONENTS}, the paper's)")
     p.add_argument("--samples", type=int, default=samples, metavar="N",
                    help=f"Monte Carlo rollouts for the prediction band; 0 turns it off (default {samples})")
     p.add_argument("--efficiency", type=int_list, default=int_list(efficiency) if efficiency else None,
@@ -174,7 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "the rest imported")
     _output_format_option(p, _DEMO_OUTPUTS)
     _format_option(p)
-    p.add_argument("--label", help="set every trial's strategy label")
+    # --set-label: on `import` the label is written, everywhere else --label filters; the old spelling still works
+    p.add_argument("--set-label", "--label", dest="label", metavar="LABEL", help="set every trial's strategy label")
     _executor_options(p)
 
     p = add("fit", cmd_fit, "fit a human behavior model (task objective + variability) to demonstrations",
@@ -184,9 +186,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="MODEL.npz", help="the model file; - for standard output")
     _format_option(p)
     p.add_argument("--label", help="fit only the trials of this strategy label")
-    p.add_argument("--n-components", type=fit_n_components_arg, default=5, metavar="G|bic|cv",
-                   help="GMM components G (default 5, the paper's); bic: G by BIC; cv: the proposed model chooses G "
-                        "and reg_covar by cross-validation over the trials (held-out 3 s predictions)")
+    p.add_argument("--n-components", type=fit_n_components_arg, default=N_COMPONENTS, metavar="G|bic|cv",
+                   help=f"GMM components G (default {N_COMPONENTS}, the paper's); bic: G by BIC; cv: the proposed "
+                        "model chooses G and reg_covar by cross-validation over the trials (held-out 3 s predictions)")
     p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
                    help="the proposed model (default) or one of its baselines")
     p.add_argument("--keep-still", action="store_true",
@@ -219,8 +221,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resample", action="store_true",
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
-    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=3.0, metavar="SECONDS",
-                   help="prediction horizon in seconds (default 3.0)")
+    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=HORIZON_S, metavar="SECONDS",
+                   help=f"prediction horizon in seconds (default {HORIZON_S})")
     p.add_argument("--samples", type=int, default=0, metavar="N",
                    help="Monte Carlo rollouts: adds <state>_lower/_upper band columns (5–95 %%)")
     p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
@@ -267,8 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--label", nargs="+", help="show only these strategy labels")
     p.add_argument("--focus", nargs="+", metavar="ID", help="trials to predict from (default the first per label)")
     p.add_argument("--starts", nargs="+", type=int, metavar="K", help="samples to predict from (default 0)")
-    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=3.0, metavar="SECONDS",
-                   help="prediction horizon in seconds (default 3.0)")
+    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=HORIZON_S, metavar="SECONDS",
+                   help=f"prediction horizon in seconds (default {HORIZON_S})")
     p.add_argument("--samples", type=int, default=VIEW_SAMPLES, metavar="N",
                    help=f"Monte Carlo rollouts for the prediction band drawn with --model (default {VIEW_SAMPLES}, "
                         "enough for its 90 %% band and fast; 0 turns the band off)")
@@ -291,8 +293,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--demo", nargs="+", metavar="ID", help="trials to replay (default the first)")
     p.add_argument("--speed", type=positive_float, default=1.0, help="multiple of real time (default 1.0)")
     p.add_argument("--no-wait", action="store_true", help="stream as fast as possible")
-    p.add_argument("--horizon", dest="horizon_s", type=float, default=1.0, metavar="SECONDS",
-                   help="rollout horizon of the online prediction (default 1.0 s; 0 turns rollouts off)")
+    p.add_argument("--horizon", dest="horizon_s", type=float, default=ONLINE_HORIZON_S, metavar="SECONDS",
+                   help=f"rollout horizon of the online prediction (default {ONLINE_HORIZON_S} s; 0 turns rollouts "
+                        "off)")
     p.add_argument("--resample", action="store_true",
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
@@ -305,8 +308,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a pymavlink connection: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device")
     p.add_argument("--model", required=True, metavar="MODEL.npz")
     p.add_argument("--duration", type=positive_float, metavar="SECONDS", help="stop after this long (default: Ctrl-C)")
-    p.add_argument("--horizon", dest="horizon_s", type=float, default=1.0, metavar="SECONDS",
-                   help="rollout horizon at every step (default 1.0 s; 0 turns rollouts off)")
+    p.add_argument("--horizon", dest="horizon_s", type=float, default=ONLINE_HORIZON_S, metavar="SECONDS",
+                   help=f"rollout horizon at every step (default {ONLINE_HORIZON_S} s; 0 turns rollouts off)")
     p.add_argument("--sysid", type=int, metavar="N", help="follow this MAVLink system (default: the first vehicle)")
     p.add_argument("--clock", choices=["vehicle", "arrival"], default="vehicle",
                    help="time samples by the vehicle's time_boot_ms (default) or by their arrival")

@@ -45,6 +45,7 @@ from adapters.link.mavlink import Link, MavlinkReader, dialect_streams
 from adapters.link.online import AlignedStep, OnlineAligner
 from adapters.mapping import ChannelMapping, load_mapping
 from workbench import interrupts
+from workbench.defaults import ONLINE_HORIZON_S
 from workbench.errors import ModelError
 from workbench.frozen import readonly
 
@@ -215,8 +216,8 @@ class OnlinePredictor:
         The clock arrival and prediction times are read from (wall time by default).
     """
 
-    def __init__(self, model: Any, mapping: ChannelMapping | str, *, horizon_s: float = 1.0, system: int | None = None,
-                 component: int | None = None, clock: str = "vehicle", silence: float = 2.0,
+    def __init__(self, model: Any, mapping: ChannelMapping | str, *, horizon_s: float = ONLINE_HORIZON_S,
+                 system: int | None = None, component: int | None = None, clock: str = "vehicle", silence: float = 2.0,
                  now: Callable[[], float] = time.time) -> None:
         m = load_mapping(mapping)
         m = m.for_format("tlog") if m.format is None else m

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from workbench.defaults import N_COMPONENTS
 from workbench.errors import ConvergenceWarning, ModelError
 from workbench.method.frames import (
     Frame,
@@ -222,7 +223,7 @@ class TPGMM:
 
     def __init__(
         self,
-        n_components: int = 5,
+        n_components: int = N_COMPONENTS,
         reg_covar: float = 1e-6,
         max_iter: int = 200,
         tol: float = 1e-6,

@@ -28,6 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from workbench.data.roles import ResolvedRoles
+from workbench.defaults import N_COMPONENTS
 from workbench.errors import ConvergenceWarning, ModelError
 from workbench.method.frames import Frame, FrameSpec, frames_for_demo, frames_for_task
 from workbench.method.gmr import ConditionalGMM
@@ -126,7 +127,7 @@ class TaskGMR:
     def __init__(
         self,
         spec: FrameSpec,
-        n_components: int = 5,
+        n_components: int = N_COMPONENTS,
         reg_covar: float = 0.5,
         standardize: bool = True,
         max_iter: int = 1000,

@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.defaults import N_COMPONENTS
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import (
@@ -50,7 +51,7 @@ class GMROnlyModel(TaskGMRModel):
     def __init__(
         self,
         system: LinearSystem,
-        n_components: int = 5,
+        n_components: int = N_COMPONENTS,
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
         reg_covar: float = 0.5,
         standardize: bool = True,

@@ -30,6 +30,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
+from workbench.defaults import N_COMPONENTS
 from workbench.errors import DataError, ModelError
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
@@ -149,7 +150,7 @@ class HumanBehaviorModel(TaskGMRModel):
     def __init__(
         self,
         system: LinearSystem,
-        n_components: int | str = 5,
+        n_components: int | str = N_COMPONENTS,
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
         gain_method: str = IV_OR_DIRECT,
         structure: str = "full",

@@ -1,0 +1,15 @@
+"""The defaults that more than one place uses, defined once (python-control's ``config.defaults`` idea, as names).
+
+The command line's options and the library's signatures import these; ``tests/test_defaults.py`` checks that
+every signature named in :data:`USED_BY` has them and lists the ones not yet converted.
+"""
+
+from __future__ import annotations
+
+__all__ = ["DT_PAPER_S", "HORIZON_S", "N_COMPONENTS", "N_STEPS", "ONLINE_HORIZON_S"]
+
+N_COMPONENTS = 5  # G, Gaussian components of the TP-GMM / GMR (the paper's)
+DT_PAPER_S = 0.05  # the planar quadrotor's sampling step in seconds (the paper's)
+HORIZON_S = 3.0  # prediction horizon in seconds (the command line's --horizon; the paper's)
+N_STEPS = round(HORIZON_S / DT_PAPER_S)  # the same horizon in grid steps at the paper's step: 60
+ONLINE_HORIZON_S = 1.0  # the rollout at every step of `live` and `replay`, in seconds: short, for assistance
