@@ -9,6 +9,7 @@ import sys
 from typing import Any
 
 from workbench.cli.context import Context
+from workbench.defaults import HORIZON_S
 
 __all__ = ["cmd_collect", "add_collect"]
 
@@ -37,8 +38,8 @@ def add_collect(add: Any) -> None:
     v.add_argument("--model", action="append", metavar="LABEL=MODEL.npz",
                    help="a fitted model of a block label (repeatable): it assists that label's assisted blocks, and "
                         "its prediction from each trial's start is drawn beside the live track")
-    v.add_argument("--horizon", dest="horizon_s", type=float, default=5.0, metavar="SECONDS",
-                   help="length of that prediction (default 5 s)")
+    v.add_argument("--horizon", dest="horizon_s", type=float, default=HORIZON_S, metavar="SECONDS",
+                   help="length of that prediction (default %(default)s s)")
     g = p.add_argument_group("shortening (demonstrations and tests; a real session runs the protocol as written)")
     g.add_argument("--max-trials", type=_positive_int, metavar="N", help="at most N trials per block")
     g.add_argument("--max-pause", type=_seconds, metavar="SECONDS", help="breaks and practice at most this long")

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from workbench.defaults import HORIZON_S
+
 __all__ = ["ExperimenterView", "OUTCOME_COLORS"]
 
 OUTCOME_COLORS = {"landed": (46, 158, 87), "crashed": (192, 57, 43)}
@@ -35,7 +37,7 @@ class ExperimenterView:
     """
 
     def __init__(self, rec: Any, spec: Mapping[str, Any], models: Mapping[str, Any] | None = None,
-                 horizon_s: float = 5.0) -> None:
+                 horizon_s: float = HORIZON_S) -> None:
         import rerun as rr
 
         self.rr = rr
