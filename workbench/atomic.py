@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "atomic_write_table", "remove_leftovers",
-           "temp_sibling", "swap_in", "deferred_interrupt"]
+           "temp_sibling", "swap_in", "deferred_interrupt", "refuse_special_file"]
 
 #: Leftovers named before temp names carried a process id are removed once they are this old (s): no write takes
 #: an hour between creating its temp file and renaming it.
@@ -38,6 +38,33 @@ def _alive(pid: int) -> bool:
     except PermissionError:  # someone else's process: alive
         return True
     return True
+
+
+def refuse_special_file(path: str | os.PathLike, where: str | None = None) -> None:
+    """Refuse, before anything opens it, a path that is not a regular file or folder.
+
+    Opening a FIFO blocks until someone writes to it (forever, for a file named ``x.parquet`` in a dataset), a
+    device can be endless, a socket cannot be read at all, and a symlink pointing at itself loops: each gets one
+    :class:`~workbench.errors.DataError` naming the path instead. A missing path passes (the reader says so).
+    """
+    import stat
+
+    from workbench.errors import DataError
+
+    where = where or os.fspath(path)
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        if os.path.islink(path):
+            raise DataError(f"{where}: a symbolic link to nothing ({os.readlink(path)!r})") from None
+        return
+    except OSError as exc:  # ELOOP: a link to itself; ENAMETOOLONG; EACCES on a folder on the way
+        raise DataError(f"{where}: cannot be read ({exc.strerror or exc})") from None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return
+    kind = ("a named pipe (FIFO)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
+            else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "not a regular file")
+    raise DataError(f"{where}: {kind}, not a file; refused (reading it could wait forever or never end)")
 
 
 def remove_leftovers(folder: str | os.PathLike, name: str) -> list[Path]:

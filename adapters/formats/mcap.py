@@ -404,7 +404,7 @@ def _decode_channel(
         for i, data in enumerate(datas):
             try:
                 obj = json.loads(data)
-            except (ValueError, UnicodeDecodeError):
+            except (ValueError, UnicodeDecodeError, RecursionError):
                 continue
             if isinstance(obj, dict):
                 objects.append(obj)

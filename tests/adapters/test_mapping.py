@@ -217,3 +217,9 @@ def test_a_clock_field_in_no_channel_stream_is_a_mapping_error(tmp_path, written
 
     with pytest.raises(MappingError, match=r"clock field 'time_bot_ms' is in none of the channels' streams"):
         build(_streams(**frames), load_mapping(mapping).for_format("test"))
+
+
+def test_deeply_nested_toml_is_a_mapping_error(tmp_path):
+    path = _mapping(tmp_path, BASE + "deep = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(MappingError, match="nested deeper"):
+        load_mapping(path)  # the previous main let tomllib's RecursionError out

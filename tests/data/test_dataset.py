@@ -222,3 +222,21 @@ def test_a_copied_partition_is_refused_naming_both_files(study, tmp_path):
     with pytest.raises(DataError, match=r"hold the same trial sample for sample") as err:
         load_demonstrations(path)
     assert part.file in str(err.value) and copy.relative_to(path).as_posix() in str(err.value)
+
+
+def test_a_fifo_and_a_looping_symlink_in_a_dataset_are_refused(study, tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    path = write_dataset(study, tmp_path / "ds")
+    loop = path / "subject=s01" / "self.parquet"
+    loop.symlink_to(loop)
+    with pytest.raises(DataError, match="self.parquet: a symbolic link that loops"):
+        load_demonstrations(path)  # the previous main raised RuntimeError from pathlib
+    loop.unlink()
+    os.mkfifo(path / "subject=s01" / "x.parquet")
+    code = (f"from workbench.data.dataset import load_dataset\ntry:\n    load_dataset({str(path)!r})\n"
+            "except Exception as e:\n    print(type(e).__name__, e)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    assert out.stdout.startswith("DataError") and "x.parquet: a named pipe (FIFO)" in out.stdout
