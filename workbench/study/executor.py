@@ -62,6 +62,8 @@ __all__ = [
 Progress = Callable[[int, int], Any]
 #: Re-runs of a task that raised something unexpected (an OSError on a network file system, a MemoryError).
 DEFAULT_RETRIES = 2
+#: Seconds a study waits for a scheduler given by address to have its first worker, then stops with an error.
+WORKER_WAIT = 30.0
 
 
 def task_seed(seed: int, *key: Any) -> np.random.SeedSequence:
@@ -333,6 +335,9 @@ class DaskExecutor(_Workers):
         Re-runs of a task that raised an unexpected exception (a ``WorkbenchError`` is not retried).
     timeout : float
         Seconds to wait for the scheduler at ``scheduler``.
+    worker_wait : float
+        Seconds to wait for the scheduler at ``scheduler`` to have a worker (:data:`WORKER_WAIT`); a scheduler
+        still without one then is an error, where tasks sent to it would wait forever.
 
     Raises
     ------
@@ -345,7 +350,7 @@ class DaskExecutor(_Workers):
 
     def __init__(
         self, workers: int | None = None, scheduler: str | None = None, *, staging: str | os.PathLike | None = None,
-        retries: int = DEFAULT_RETRIES, timeout: float = 15.0,
+        retries: int = DEFAULT_RETRIES, timeout: float = 15.0, worker_wait: float | None = None,
     ) -> None:
         if (workers is None) == (scheduler is None):
             raise WorkbenchError("give either a number of local workers or a scheduler address")
@@ -367,6 +372,14 @@ class DaskExecutor(_Workers):
             except (OSError, TimeoutError, ValueError) as exc:
                 raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: {_describe(exc)}") from None
             self.address = str(scheduler)
+            wait = WORKER_WAIT if worker_wait is None else float(worker_wait)
+            try:
+                self._client.wait_for_workers(1, timeout=wait)
+            except (TimeoutError, OSError) as exc:
+                self._client.close()
+                why = (f"has no worker (waited {wait:g} s); start one with `dask worker {scheduler}`"
+                       if isinstance(exc, TimeoutError) else f"cannot be reached: {_describe(exc)}")
+                raise WorkbenchError(f"the Dask scheduler at {scheduler} {why}") from None
         else:
             self._cluster = LocalCluster(
                 # any free port for the scheduler's HTTP endpoint: two studies at once must not collide on 8787
