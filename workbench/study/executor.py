@@ -37,8 +37,10 @@ import json
 import os
 import shutil
 import signal
+import sys
 import tempfile
 import threading
+import time
 import uuid
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -177,6 +179,33 @@ def _keys(items: Sequence[Any], keys: Sequence[str] | None) -> list[str]:
     return [str(k) for k in keys]
 
 
+#: Temporary staging folders are named ``workbench-staging-<pid>-…``: a folder whose process no longer runs (killed
+#: before it could remove it) is removed by the next one made (:func:`remove_stale_staging`).
+STAGING_PREFIX = "workbench-staging-"
+
+
+def remove_stale_staging(folder: str | os.PathLike | None = None) -> list[Path]:
+    """Remove the staging folders of processes that no longer run, from ``folder`` (the temporary folder)."""
+    from workbench.atomic import LEGACY_AGE, _alive
+
+    folder = Path(folder or tempfile.gettempdir())
+    removed = []
+    try:
+        entries = [e for e in folder.iterdir() if e.name.startswith(STAGING_PREFIX)]
+    except OSError:
+        return removed
+    for entry in entries:
+        pid = entry.name[len(STAGING_PREFIX):].split("-", 1)[0]
+        try:
+            stale = not _alive(int(pid)) if pid.isdigit() else time.time() - entry.lstat().st_mtime > LEGACY_AGE
+            if stale and entry.is_dir() and not entry.is_symlink() and entry.stat().st_uid == os.getuid():
+                shutil.rmtree(entry, ignore_errors=True)
+                removed.append(entry)
+        except OSError:
+            continue
+    return removed
+
+
 class Staging:
     """The folder where sets are written for worker processes to read (data travel as paths, not in messages).
 
@@ -187,10 +216,12 @@ class Staging:
         self._own = path is None
         self._path = Path(path) if path is not None else None
         self._n = 0
+        if self._own:
+            remove_stale_staging()
 
     def _dir(self) -> Path:
         if self._path is None:
-            self._path = Path(tempfile.mkdtemp(prefix="workbench-staging-"))
+            self._path = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-"))
         self._path.mkdir(parents=True, exist_ok=True)
         return self._path
 
@@ -567,9 +598,35 @@ def _quiet_interrupts() -> None:
     """In a worker process: Ctrl-C (the terminal sends it to the whole process group) ends the worker at once and
     silently; the command that started it reports the interrupt, in one line, and stops the pool. A Ctrl-C that
     came during the worker's start-up (blocked, :func:`_spawning_without_interrupts`) is delivered here."""
+    _die_with_parent()
     signal.signal(signal.SIGINT, _exit_interrupted)
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """In a worker process: be killed when the command that started it dies, however it dies (SIGKILL included).
+
+    Linux's parent-death signal (``prctl(PR_SET_PDEATHSIG)``), through ctypes: without it a killed command left
+    its workers and their resource tracker running under PID 1 (~575 MiB, for minutes). A parent already gone
+    by now (reparented) ends the worker at once. Elsewhere nothing happens: the pool's own pipes end workers
+    whose parent exited cleanly.
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    parent = os.getppid()
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent or parent == 1:
+        os._exit(1)
 
 
 def _exit_interrupted(signum: int, frame: Any) -> None:
