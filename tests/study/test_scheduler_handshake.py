@@ -110,3 +110,8 @@ def test_a_scheduler_without_workers_is_waited_for_then_an_error():
         with pytest.raises(WorkbenchError, match=r"has no worker \(waited 1 s\)"):
             DaskExecutor(scheduler=cluster.scheduler_address, timeout=5, worker_wait=1.0)
         assert time.monotonic() - start < 15
+
+
+def test_an_address_with_an_unclosed_ipv6_bracket_is_a_workbench_error():
+    with pytest.raises(WorkbenchError, match="not a scheduler address"):
+        check_scheduler("tcp://[::1", timeout=1)  # urllib's ValueError before

@@ -53,7 +53,10 @@ def check_scheduler(address: str, timeout: float = 10.0) -> None:
     text = str(address).strip()
     if "://" not in text:
         text = f"tcp://{text}"
-    parts = urlsplit(text)
+    try:
+        parts = urlsplit(text)
+    except ValueError:  # "tcp://[::1": an unclosed IPv6 bracket
+        raise WorkbenchError(f"{address}: not a scheduler address (tcp://HOST:PORT)") from None
     if parts.scheme == "inproc":  # a scheduler in this very process (a test's LocalCluster): nothing to check
         return
     if parts.scheme != "tcp":
