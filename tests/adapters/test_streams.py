@@ -84,3 +84,16 @@ def test_tlog_with_one_damaged_timestamp_loses_nothing(tmp_path, nth):
     bad.write_bytes(bytes(data))
     want, got = adapters.load(clean), adapters.load(bad)
     assert len(got) == len(want) and got.n_samples == want.n_samples
+
+
+def test_inspect_spans_the_bulk_and_counts_a_stamp_pushed_ahead(tmp_path):
+    clean = REPO / "sample_logs" / "landing_s00.tlog"
+    data = bytearray(clean.read_bytes())
+    off = [o for o, msgid in _tlog_records(bytes(data)) if msgid == 30][1000]  # an ATTITUDE record
+    (stamp,) = struct.unpack(">Q", data[off : off + 8])
+    data[off : off + 8] = struct.pack(">Q", stamp + 2**36)
+    bad = tmp_path / "bad.tlog"
+    bad.write_bytes(bytes(data))
+    want, got = adapters.inspect(clean), adapters.inspect(bad)
+    assert got.duration == pytest.approx(want.duration)  # the previous main showed 2**36 us more, without a word
+    assert dict(got.skipped)["stamps off their stream's time line (not in the spans)"] == 1
