@@ -430,7 +430,7 @@ def open_link(connection: str, *, receive_buffer: int = _RECEIVE_BUFFER, write: 
         raise LinkError(f"{text}: a file, not a link; to send a log to a link use: workbench replay {text} --to URL")
     kind, _, rest = text.partition(":")
     port_text = rest.rpartition(":")[2]
-    if kind in ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin") and port_text.isdigit() \
+    if kind in ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin") and port_text.lstrip("+-").isdigit() \
             and not 0 < int(port_text) <= 65535:
         raise LinkError(f"{text}: port {port_text} is not a port number (1–65535)")
     if not write:

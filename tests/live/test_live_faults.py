@@ -176,7 +176,8 @@ def test_a_replay_waits_at_most_the_gap_ceiling_for_one_damaged_stamp(tmp_path):
     assert report.gaps_capped >= 1 and report.seconds_skipped > 2**36 * 1e-6 - 2 * mavlink.MAX_REPLAY_GAP
 
 
-@pytest.mark.parametrize("connection", ["udpout:127.0.0.1:99999", "udpin:127.0.0.1:70000", "tcp:127.0.0.1:0"])
+@pytest.mark.parametrize("connection", ["udpout:127.0.0.1:99999", "udpin:127.0.0.1:70000", "tcp:127.0.0.1:0",
+                                        "udpout:127.0.0.1:-1"])
 def test_a_port_out_of_range_is_a_link_error(connection):
     with pytest.raises(LinkError, match="is not a port number"):
         open_link(connection)  # the previous main: OverflowError from bind()/connect()
