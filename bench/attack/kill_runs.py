@@ -64,10 +64,12 @@ def _state(kind: str, out: Path) -> dict[str, str]:
 
 
 def _stale_staging() -> list[str]:
+    """Staging folders this code made (named with their process id) whose process is gone. Folders without an id
+    are another checkout's (the machine is shared), not counted."""
     found = []
     for p in Path(tempfile.gettempdir()).glob("workbench-staging-*"):
         pid = p.name.removeprefix("workbench-staging-").split("-", 1)[0]
-        if not (pid.isdigit() and psutil.pid_exists(int(pid))):
+        if pid.isdigit() and not psutil.pid_exists(int(pid)):
             found.append(p.name)
     return found
 
