@@ -83,7 +83,9 @@ __all__ = [
 
 def _format(path: str | os.PathLike, format: str | None) -> Format:
     from adapters.formats import detect_format, get_format
+    from workbench.atomic import refuse_special_file
 
+    refuse_special_file(path)  # before any reader opens it: a FIFO would block the open itself
     return get_format(format) if format is not None else detect_format(path)
 
 

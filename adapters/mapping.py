@@ -308,6 +308,8 @@ def load_mapping(mapping: str | os.PathLike | ChannelMapping) -> ChannelMapping:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise MappingError(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:  # tomllib parses nested arrays and tables by recursion
+        raise MappingError(f"{path}: not a mapping: tables or arrays nested deeper than the parser goes") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise MappingError(f"{path}: cannot read mapping ({exc})") from None
     raw.setdefault("name", path.stem)
@@ -318,12 +320,23 @@ def _fail(path: str, where: str, message: str) -> MappingError:
     return MappingError(f"{path}: {where}: {message}")
 
 
+#: The largest magnitude a mapping's number may have (scales, offsets, durations, transform parameters): beyond
+#: it a converted value leaves float64's range or every sample of a channel collapses into one (raise it here).
+MAX_MAGNITUDE = 1e12
+
+
 def _number(value: Any, path: str, where: str, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+    if isinstance(value, bool) or not isinstance(value, int | float):
         raise _fail(path, where, f"must be a finite number, got {value!r}")
-    if positive and value <= 0:
+    try:
+        number = float(value)  # an integer beyond float64 (10**400) overflows here, not in the conversion
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number) or abs(number) > MAX_MAGNITUDE:
+        raise _fail(path, where, f"must be a finite number of magnitude at most {MAX_MAGNITUDE:g}, got {value!r}")
+    if positive and number <= 0:
         raise _fail(path, where, f"must be positive, got {value!r}")
-    return float(value)
+    return number
 
 
 def _sources(value: Any) -> tuple[str, ...] | None:
@@ -370,8 +383,13 @@ def _channel(name: str, value: Any, path: str) -> Channel:
     if sign not in (1.0, -1.0):
         raise _fail(path, f"{where}.sign", f"must be 1 or -1, got {sign!r}")
     scale = _number(value.get("scale", 1.0), path, f"{where}.scale")
-    if scale == 0:
-        raise _fail(path, f"{where}.scale", "must not be zero")
+    if abs(scale) < 1 / MAX_MAGNITUDE:
+        raise _fail(path, f"{where}.scale", f"must not be zero or below {1 / MAX_MAGNITUDE:g} in magnitude, "
+                    f"got {scale!r}")
+    if transform == "pwm":
+        lo, hi = (_number(value.get(k, d), path, f"{where}.{k}") for k, d in (("pwm_min", 1000), ("pwm_max", 2000)))
+        if not lo < hi:
+            raise _fail(path, where, f"pwm_min ({lo:g}) must be below pwm_max ({hi:g}): the stick's range in µs")
     return Channel(
         name,
         sel,
@@ -387,8 +405,8 @@ def _flag(value: Any, path: str, where: str) -> FlagRule:
     sel = _selector(value, path, where, extra=("bitmask", "equals"))
     bitmask = value.get("bitmask") if isinstance(value, dict) else None
     equals = value.get("equals") if isinstance(value, dict) else None
-    if bitmask is not None and (isinstance(bitmask, bool) or not isinstance(bitmask, int) or bitmask <= 0):
-        raise _fail(path, f"{where}.bitmask", f"must be a positive integer, got {bitmask!r}")
+    if bitmask is not None and (isinstance(bitmask, bool) or not isinstance(bitmask, int) or not 0 < bitmask < 2**63):
+        raise _fail(path, f"{where}.bitmask", f"must be a positive integer below 2**63, got {bitmask!r}")
     if equals is not None:
         equals = _number(equals, path, f"{where}.equals")
     return FlagRule(sel, bitmask, equals)
@@ -402,7 +420,7 @@ def _segment(raw: Any, path: str, states: tuple[str, ...], dt: float) -> Segment
     if unknown := sorted(set(raw) - _SEGMENT_KEYS):
         raise _fail(path, "segment", f"unknown key(s) {unknown}; allowed: {sorted(_SEGMENT_KEYS)}")
     gap = _number(raw.get("gap", max(0.5, 10 * dt)), path, "segment.gap", positive=True)
-    min_duration = _number(raw.get("min_duration", 1.0), path, "segment.min_duration")
+    min_duration = _number(raw.get("min_duration", 1.0), path, "segment.min_duration", positive=True)
     demo = _selector(raw["demo"], path, "segment.demo") if "demo" in raw else None
     mode = None
     if "mode" in raw:
@@ -671,6 +689,9 @@ def _select_one(sel: Selector, source: str, streams: Streams, what: str, mapping
             keep = rows & (key == values[np.argmax(counts)])
             dropped = int(rows.sum() - keep.sum())
             rows = keep
+    if fld == "" and n_columns is not None:
+        raise MappingError(f"mapping {mapping!r}: {what}: source {source!r} names stream {stream!r} but no field; "
+                           f"write {stream}.<field> (fields: {', '.join(map(str, list(frame.columns)[:12]))})")
     if fld == "":
         return Selected(stream, frame, rows, (), dropped)
     cols = []

@@ -35,7 +35,7 @@ from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect
 from adapters.streams import Streams, clean_series, numeric
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
-from workbench.errors import DataError
+from workbench.errors import DataError, MappingError
 
 __all__ = ["build", "check_rules", "explain"]
 
@@ -93,6 +93,7 @@ def _metadata(streams: Streams, m: ChannelMapping) -> tuple[dict[str, dict], lis
 
 def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Series]:
     series = []
+    clocked: list[bool] = []
     inputs = set(m.input_names)
     for ch in (resolve_channel(c, streams) for c in m.channels):
         what = f"channel {ch.name!r}"
@@ -109,6 +110,11 @@ def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Ser
                 f"({int(sel.rows.sum())} rows; dropped: {dict(dropped) or 'none'})"
             )
         series.append(Series(ch.name, t, v, hold=ch.name in inputs))
+        clocked.append(m.clock.field in sel.frame.columns)
+    if m.clock.field is not None and not any(clocked):
+        # Streams without the field stay on the log clock by design (HEARTBEAT); none with it is a misspelling.
+        raise MappingError(f"{streams.path}: mapping {m.name!r}: clock field {m.clock.field!r} is in none of the "
+                           f"channels' streams; check its spelling, or use clock = \"log\"")
     return series
 
 

@@ -185,16 +185,91 @@ def field_columns(frame: pd.DataFrame, name: str) -> list[str]:
     return sorted(cols, key=lambda c: int(_INDEX.search(c).group(1)))
 
 
-def clean_series(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
-    """Drop samples with a non-finite time or value and samples whose time does not increase.
+REPAIR_SHARE = 0.1
+"""Stamps off a stream's time line are repaired only while they are at most this share of it (else dropped)."""
 
-    Time must increase strictly for interpolation; a sample at or before the latest time seen so far is
-    dropped (a clock jump backwards, a duplicate). ``values`` may be 2-D (samples × components).
+
+def _longest_increasing(t: np.ndarray) -> np.ndarray:
+    """A mask of a longest strictly increasing subsequence of ``t`` (patience sorting, O(n log n)).
+
+    The bulk of a stream is the largest set of samples whose times agree with their order; a stamp that does not
+    (one pushed forward by a corrupted high byte, one jumped back) falls outside it, whatever its size, so it can
+    never take the samples after it with it, as a running maximum would.
+    """
+    import bisect
+
+    tails: list[float] = []
+    tail_idx: list[int] = []
+    prev = np.full(t.size, -1, dtype=np.int64)
+    for i, x in enumerate(t.tolist()):
+        k = bisect.bisect_left(tails, x)
+        if k == len(tails):
+            tails.append(x)
+            tail_idx.append(i)
+        else:
+            tails[k] = x
+            tail_idx[k] = i
+        prev[i] = tail_idx[k - 1] if k else -1
+    keep = np.zeros(t.size, dtype=bool)
+    i = tail_idx[-1] if tail_idx else -1
+    while i >= 0:
+        keep[i] = True
+        i = prev[i]
+    return keep
+
+
+def _far_from_neighbours(t: np.ndarray, half: int = 15) -> np.ndarray:
+    """Stamps far from the median of their ``2 * half + 1`` neighbours in file order (the bulk's local time).
+
+    In an increasing run a sample *is* its neighbourhood's median, so only disorder is flagged; "far" is a hundred
+    robust median steps. Taking these out before the longest increasing run decides ties the bulk's way: a stamp
+    thrown back before its predecessor must not win over that predecessor.
+    """
+    from scipy.ndimage import median_filter
+
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if steps.size == 0:
+        return np.zeros(t.size, dtype=bool)
+    local = median_filter(t, size=2 * half + 1, mode="nearest")
+    return np.abs(t - local) > 100.0 * float(np.median(steps))
+
+
+def _end_outliers(t: np.ndarray, most: int = 3) -> np.ndarray:
+    """Up to ``most`` samples at either end that sit further from the rest than the rest's whole span.
+
+    An increasing stream can still end on a corrupted stamp (nothing after it to contradict it); a run that lies
+    beyond a gap longer than everything else together is not part of the recording's time line.
+    """
+    out = np.zeros(t.size, dtype=bool)
+    if t.size < 2 * most + 2:
+        return out
+    for k in range(1, most + 1):
+        bulk = t[k:]
+        if t[k] - t[k - 1] > bulk[-1] - bulk[0] and not out[:k].any():
+            out[:k] = True
+        bulk = t[: t.size - k]
+        if t[t.size - k] - t[t.size - k - 1] > bulk[-1] - bulk[0] and not out[t.size - k :].any():
+            out[t.size - k :] = True
+    return out
+
+
+def clean_series(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """Drop samples with a non-finite value; put samples whose stamp disagrees with the bulk of the stream back.
+
+    Time must increase strictly for interpolation. The stream's time line is its longest strictly increasing run
+    of samples (in file order), not the running maximum: one bad stamp costs at most that one sample, however
+    far it points. A sample off that line whose neighbours on it leave room is *repaired* (its time interpolated
+    by position between them: the sample was recorded there, only its stamp is wrong); a repeated stamp or one
+    with no room is dropped, and so is every one when more than :data:`REPAIR_SHARE` of the stream is off the
+    line (no bulk to repair from). ``values`` may be 2-D (samples × components).
 
     Returns
     -------
     t, values, dropped
-        The kept samples and ``{"non-finite values": k, "non-increasing time": j}`` (zero counts omitted).
+        The kept samples and counts by cause: ``"non-finite values"``, ``"non-increasing time"`` (dropped),
+        ``"time outliers repaired"`` (kept, restamped), ``"time outliers at the ends"`` (dropped: beyond a gap
+        longer than the rest of the stream); zero counts omitted.
     """
     t = np.asarray(t, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
@@ -203,13 +278,44 @@ def clean_series(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndar
     if not finite.all():
         dropped["non-finite values"] = int((~finite).sum())
         t, values = t[finite], values[finite]
-    if t.size > 1:
-        running = np.maximum.accumulate(t)
-        keep = np.ones(t.size, dtype=bool)
-        keep[1:] = t[1:] > running[:-1]
+    if t.size > 1 and not bool(np.all(t[1:] > t[:-1])):
+        # A stamp repeating the one before it is a duplicate sample: dropped, never spread over time.
+        repeat = np.zeros(t.size, dtype=bool)
+        repeat[1:] = t[1:] == t[:-1]
+        if repeat.any():
+            dropped["non-increasing time"] = int(repeat.sum())
+            t, values = t[~repeat], values[~repeat]
+        on_line = np.zeros(t.size, dtype=bool)
+        bulk = ~_far_from_neighbours(t)
+        on_line[np.flatnonzero(bulk)[_longest_increasing(t[bulk])]] = True
+        good = np.flatnonzero(on_line)
+        fixed = t.copy()
+        off = np.flatnonzero(~on_line)
+        # Position between the neighbouring samples on the line: strictly inside, so the result stays increasing.
+        right = np.searchsorted(good, off)
+        inside = (right > 0) & (right < good.size)
+        if off.size > REPAIR_SHARE * t.size:
+            # Most stamps disagree: there is no bulk to repair them from, only order to keep.
+            inside[:] = False
+        keep = on_line.copy()
+        if inside.any():
+            lo, hi = good[right[inside] - 1], good[right[inside]]
+            cand = off[inside]
+            new = t[lo] + (t[hi] - t[lo]) * (cand - lo) / (hi - lo)
+            # A repeated stamp (equal to its left neighbour's) is a duplicate sample, not a damaged one.
+            ok = (new > t[lo]) & (new < t[hi]) & (t[cand] != t[lo])
+            fixed[cand[ok]] = new[ok]
+            keep[cand[ok]] = True
+            if ok.any():
+                dropped["time outliers repaired"] = int(ok.sum())
         if not keep.all():
-            dropped["non-increasing time"] = int((~keep).sum())
-            t, values = t[keep], values[keep]
+            dropped["non-increasing time"] = dropped.get("non-increasing time", 0) + int((~keep).sum())
+        t, values = fixed[keep], values[keep]
+    if t.size > 1:
+        ends = _end_outliers(t)
+        if ends.any():
+            dropped["time outliers at the ends"] = int(ends.sum())
+            t, values = t[~ends], values[~ends]
     return t, values, dropped
 
 

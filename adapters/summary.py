@@ -19,7 +19,7 @@ import numpy as np
 
 from adapters.modes import heartbeat_table, mode_name, vehicle_kind
 from adapters.segment import Span, flag_spans
-from adapters.streams import Streams
+from adapters.streams import Streams, clean_series
 
 __all__ = ["LogSummary", "StreamSummary", "ModeSpan", "summarize", "log_modes"]
 
@@ -113,14 +113,20 @@ def _float(column: Any) -> np.ndarray:
         return np.array([np.nan if v is None else v for v in column], dtype=np.float64)
 
 
-def _stream_summary(name: str, columns: dict[str, np.ndarray], count: int) -> StreamSummary:
+def _stream_summary(name: str, columns: dict[str, np.ndarray], count: int) -> tuple[StreamSummary, int]:
     t = _float(columns["t"])
     t = t[np.isfinite(t)]
+    # the span of the stream's bulk (adapters.streams.clean_series): one stamp pushed days ahead must not make a
+    # 10-minute log read as 12 days; such stamps are counted (and shown as skipped) instead
+    order_kept, _, dropped = clean_series(t, np.zeros(t.size))
+    outliers = dropped.get("time outliers at the ends", 0) + dropped.get("time outliers repaired", 0)
+    if outliers:
+        t = order_kept
     span = float(t.max() - t.min()) if t.size else 0.0
     rate = (t.size - 1) / span if t.size > 1 and span > 0 else 0.0
     fields = tuple(str(c) for c in columns if c != "t")
     return StreamSummary(name, int(count), rate, float(t.min()) if t.size else math.nan,
-                         float(t.max()) if t.size else math.nan, fields)
+                         float(t.max()) if t.size else math.nan, fields), outliers
 
 
 def _mode_spans(t: np.ndarray, modes: np.ndarray, table: str) -> list[ModeSpan]:
@@ -251,10 +257,10 @@ def log_modes(streams: Streams) -> tuple[list[str], str | None]:
 def summarize(streams: Streams) -> LogSummary:
     """The summary of a file's streams (read them all for a complete picture)."""
     # numpy columns, never DataFrames: a summary of a tlog, ULog or MCAP file does not import pandas
-    summaries = tuple(
-        _stream_summary(name, streams.columns(name), streams.counts.get(name, streams.n_rows(name)))
-        for name in streams
-    )
+    both = [_stream_summary(name, streams.columns(name), streams.counts.get(name, streams.n_rows(name)))
+            for name in streams]
+    summaries = tuple(s for s, _ in both)
+    outliers = sum(n for _, n in both)
     starts = [s.t_start for s in summaries if math.isfinite(s.t_start)]
     ends = [s.t_end for s in summaries if math.isfinite(s.t_end)]
     modes, armed, vehicle = _modes(streams)
@@ -273,7 +279,9 @@ def summarize(streams: Streams) -> LogSummary:
         streams=tuple(sorted(summaries, key=lambda s: s.name)),
         modes=tuple(modes),
         armed=tuple((s.start, min(s.end, t_end)) for s in armed),
-        skipped=tuple(sorted((str(k), int(v)) for k, v in streams.skipped.items() if v)),
+        skipped=tuple(sorted([(str(k), int(v)) for k, v in streams.skipped.items() if v]
+                             + ([("stamps off their stream's time line (not in the spans)", outliers)]
+                                if outliers else []))),
         info=info,
         vehicle=vehicle,
         armed_known=bool(vehicle) and _arming_recorded(streams),

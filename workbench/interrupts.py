@@ -19,9 +19,9 @@ import sys
 import threading
 from typing import Any
 
-__all__ = ["install", "interrupted", "check", "clear"]
+__all__ = ["install", "interrupted", "check", "clear", "signal_number"]
 
-_state = {"interrupted": False}
+_state: dict[str, Any] = {"interrupted": False, "signal": signal.SIGINT}
 
 
 def install() -> None:
@@ -29,6 +29,9 @@ def install() -> None:
     if threading.current_thread() is not threading.main_thread():
         return
     signal.signal(signal.SIGINT, _on_interrupt)
+    # SIGTERM (kill, a service manager, a timeout) stops the command the same way, so its workers are ended and
+    # its temporary folders removed; the default action would end it on the spot and orphan them
+    signal.signal(signal.SIGTERM, _on_interrupt)
     previous = sys.unraisablehook
     if getattr(previous, "_drops_interrupts", False):
         return
@@ -45,7 +48,13 @@ def install() -> None:
 
 def _on_interrupt(signum: int, frame: Any) -> None:
     _state["interrupted"] = True
+    _state["signal"] = signum
     raise KeyboardInterrupt
+
+
+def signal_number() -> int:
+    """The signal that interrupted the command (SIGINT unless a SIGTERM came): its exit status is 128 + this."""
+    return int(_state["signal"])
 
 
 def interrupted() -> bool:
@@ -62,3 +71,4 @@ def check() -> None:
 def clear() -> None:
     """Forget a recorded interrupt (tests; a command that has reported it)."""
     _state["interrupted"] = False
+    _state["signal"] = signal.SIGINT

@@ -45,7 +45,8 @@ from workbench.errors import DataError
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["read", "write", "looks_like_csv", "STREAM", "SEPARATION", "REQUIRED", "MAX_MAGNITUDE"]
+__all__ = ["read", "write", "looks_like_csv", "STREAM", "SEPARATION", "REQUIRED", "MAX_MAGNITUDE", "MAX_COLUMNS",
+           "MAX_HEADER_BYTES"]
 
 STREAM = "csv"
 REQUIRED = ("demo", "t")
@@ -54,6 +55,11 @@ SEPARATION = 60.0
 #: Largest magnitude a numeric cell may have. Beyond it a value is a damaged or mistyped number (``1e308``), not a
 #: measurement in any unit; below it squares and sums of squares (covariances, costs) stay finite in float64.
 MAX_MAGNITUDE = 1e100
+#: The widest table read (columns in the header) and the longest header line (bytes): ceilings checked before pandas
+#: allocates anything. A long-format log has a column per state, input and metadata field, tens at most; raise
+#: these module attributes for a wider file.
+MAX_COLUMNS = 10_000
+MAX_HEADER_BYTES = 1 << 20
 
 # A number as text (what a numeric cell the parser read as text because of some other cell looks like).
 _NUMBER = re.compile(r"\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|\s*[-+]?(nan|inf|infinity)\s*$", re.I | re.A)
@@ -147,11 +153,21 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
         if os.path.getsize(path) == 0:
             raise DataError(f"{where}: empty file, not a CSV file")
         with open(path, "rb") as f:
-            header = f.readline()
+            header = f.readline(MAX_HEADER_BYTES + 1)
+        if len(header) > MAX_HEADER_BYTES and not header.endswith(b"\n"):
+            raise DataError(f"{where}, line 1 (header): longer than {MAX_HEADER_BYTES} bytes; refused before parsing "
+                            "(raise adapters.formats.csv.MAX_HEADER_BYTES for a wider table)")
         header_text = header.decode("utf-8", "replace").lstrip("\ufeff").rstrip("\r\n")
         columns = [c.strip() for c in header_text.split(",")]
+        if len(columns) > MAX_COLUMNS:
+            # pandas allocates per column and per cell: a million names took 22 GB before it failed
+            raise DataError(f"{where}, line 1 (header): {len(columns)} columns, more than {MAX_COLUMNS}; refused "
+                            "before parsing (raise adapters.formats.csv.MAX_COLUMNS for a wider table)")
         if len(set(columns)) != len(columns):  # checked here: pandas would rename a repeated name
-            raise DataError(f"{where}, line 1 (header): repeated column names {columns}")
+            from collections import Counter
+
+            repeated = sorted(c for c, n in Counter(columns).items() if n > 1)
+            raise DataError(f"{where}, line 1 (header): repeated column names {repeated[:10]}")
         # pandas' C parser (the peer's own); ids stay text even when they look like numbers (read again as text).
         table = pd.read_csv(where, encoding="utf-8")
         parsed = [col for _, col in table.items()]  # one pass: items() is far cheaper than indexing by column
@@ -161,6 +177,8 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
                 ids = pd.read_csv(where, usecols=[at], dtype=object, encoding="utf-8").iloc[:, 0]
                 table.isetitem(at, ids.to_numpy())
                 parsed[at] = table.iloc[:, at]
+    except DataError:
+        raise
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
     except UnicodeDecodeError as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 
+from workbench.atomic import refuse_special_file
 from workbench.errors import DataError
 
 __all__ = ["read_bytes"]
@@ -14,6 +15,7 @@ def read_bytes(path: str | os.PathLike, size: int = -1) -> bytes:
     """A log file's bytes (its first ``size`` with ``size`` ≥ 0), or a :class:`DataError` naming the file and why
     it cannot be read (missing, a folder, no permission)."""
     where = os.fspath(path)
+    refuse_special_file(path)
     try:
         with open(path, "rb") as f:
             return f.read(size)

@@ -17,6 +17,10 @@ The summary section's chunk indexes are used to read only the chunks that hold t
 without a usable summary (a recording cut short, a damaged index) is scanned from the start instead, up to
 the first record that cannot be read; so is a file whose summary section fails its CRC (the footer's
 ``summary_crc``, which the ``mcap`` library does not check), its bytes counted in ``skipped["summary bytes"]``.
+Before anything is decompressed, the chunks' declared sizes are held against stated ceilings
+(:data:`MAX_CHUNK_BYTES`, :data:`MAX_DECOMPRESSED_BYTES`, :data:`MAX_TOTAL_RATIO` times the file's size): a file
+beyond them is refused whole with one line naming the ceiling to raise. Damage is named in the reader's own words
+(``zstd-compressed data damaged``), never a library's message.
 Chunks are checked before use: a compressed chunk must declare a sane size, and every chunk must match its CRC
 (checked by the ``mcap`` library's own validation, :func:`mcap.stream_reader.get_chunk_data_stream`), else it is
 skipped whole (its bytes counted in ``skipped["bytes"]``, never its values used). A file in which every chunk
@@ -39,12 +43,10 @@ import dataclasses
 import io
 import json
 import os
-import re
 import struct
 import zlib
 from collections import defaultdict
-from collections.abc import Callable, Iterable, Mapping
-from pathlib import Path
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -56,14 +58,13 @@ from mcap.decoder import DecoderFactory
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, get_chunk_data_stream
-from mcap.writer import CompressionType, Writer
 
+from adapters.formats.mcap_write import write  # the writer, beside the reader under one name
 from adapters.streams import Streams, as_frame
-from workbench.atomic import atomic_path
 from workbench.errors import DataError, FormatError
 
 if TYPE_CHECKING:
-    import pandas as pd
+    pass
 
 __all__ = ["MAGIC", "JsonDecoderFactory", "decoder_factories", "read", "write", "MAX_ARRAY"]
 
@@ -79,7 +80,17 @@ _FOOTER = struct.Struct("<BQQQI")
 # A chunk may not claim to decompress to more than this many times its stored size (zstd's best case on
 # constant data is ~30000×): a corrupt size field must not make us allocate gigabytes.
 _MAX_RATIO = 40_000
-_INDEX_TOKEN = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
+#: Ceilings on what a file may make the reader hold, checked on the chunks' *declared* sizes before decompressing:
+#: one chunk (writers use 1–8 MiB), and all chunks read together: at most :data:`MAX_DECOMPRESSED_BYTES` and at
+#: most :data:`MAX_TOTAL_RATIO` times the file's size (recorded data compresses 3–30×; one honest zstd chunk of
+#: zeros in a 30 KB file can declare a gigabyte). Raise these module attributes to read larger recordings.
+MAX_CHUNK_BYTES = 64 << 20
+MAX_DECOMPRESSED_BYTES = 512 << 20
+MAX_TOTAL_RATIO = 1000
+
+
+class _Damage(ValueError):
+    """A check of the reader's own failed: its text is the cause, in the workbench's words."""
 
 
 class JsonDecoderFactory(DecoderFactory):
@@ -115,6 +126,7 @@ class _Scan:
         self.notes: list[str] = []
         self.chunks_read = 0
         self.bad_chunks: list[tuple[int, str]] = []  # (byte offset of the chunk record, why it was skipped)
+        self.declared = 0  # uncompressed bytes the chunks read so far declare
 
     def chunk_failed(self, offset: int, exc: BaseException, n_bytes: int) -> None:
         self.skipped["bytes"] += n_bytes
@@ -123,11 +135,21 @@ class _Scan:
 
 
 def _why(exc: BaseException) -> str:
-    """A damaged chunk's cause in a few words."""
+    """A damaged chunk's cause in a few words: the reader's own, never a library's message."""
     if isinstance(exc, CRCValidationError):
         return f"chunk CRC mismatch (stored {exc.expected:#010x}, computed {exc.actual:#010x})"
-    text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text}" if not isinstance(exc, ValueError) or not text else text
+    if isinstance(exc, _Damage):
+        return " ".join(str(exc).split())
+    name = type(exc).__name__
+    if name == "ZstdError":
+        return "zstd-compressed data damaged"
+    if "lz4" in type(exc).__module__ or "LZ4" in str(exc):
+        return "lz4-compressed data damaged"
+    if isinstance(exc, UnicodeDecodeError):
+        return "a name or text field that is not UTF-8"
+    if isinstance(exc, OverflowError | struct.error | EOFError | IndexError | MemoryError):
+        return "a record whose lengths or fields run out of range"
+    return "a record the MCAP library cannot parse"
 
 
 def _check_crc(chunk: Chunk, data: bytes) -> None:
@@ -137,10 +159,28 @@ def _check_crc(chunk: Chunk, data: bytes) -> None:
     get_chunk_data_stream(dataclasses.replace(chunk, compression="", data=data), validate_crc=True)
 
 
+def _budget(where: str, chunk: Chunk, scan: _Scan, size: int) -> None:
+    """Refuse the whole file, before decompressing, once its chunks declare more than the ceilings allow."""
+    declared = chunk.uncompressed_size
+    if declared > _MAX_RATIO * len(chunk.data) + 4096:
+        return  # a size no compression reaches: damage, which skips this chunk alone (_decompress)
+    scan.declared += declared
+    if declared > MAX_CHUNK_BYTES or scan.declared > min(MAX_DECOMPRESSED_BYTES, MAX_TOTAL_RATIO * size):
+        what = (f"a chunk declares {declared} bytes uncompressed, more than the {MAX_CHUNK_BYTES} a chunk may hold"
+                if declared > MAX_CHUNK_BYTES else
+                f"its chunks declare {scan.declared} bytes uncompressed, more than the "
+                f"{min(MAX_DECOMPRESSED_BYTES, MAX_TOTAL_RATIO * size)} a {size}-byte file may expand to")
+        knob = ("MAX_CHUNK_BYTES" if declared > MAX_CHUNK_BYTES else "MAX_DECOMPRESSED_BYTES"
+                if MAX_DECOMPRESSED_BYTES < MAX_TOTAL_RATIO * size else "MAX_TOTAL_RATIO")
+        raise DataError(f"{where}: {what}; refused before decompressing (raise adapters.formats.mcap.{knob} for a "
+                        "larger recording)")
+
+
 def _decompress(chunk: Chunk, size_limit: int) -> bytes:
     declared = chunk.uncompressed_size
-    if declared > max(size_limit, _MAX_RATIO * len(chunk.data) + 4096):
-        raise ValueError(f"chunk claims {declared} uncompressed bytes")
+    if declared > min(size_limit, _MAX_RATIO * len(chunk.data) + 4096):
+        raise _Damage(f"chunk claims {declared} uncompressed bytes, more than its {len(chunk.data)} stored bytes "
+                      "can hold")
     if chunk.compression == "":
         data = chunk.data
     elif chunk.compression == "zstd":
@@ -148,16 +188,16 @@ def _decompress(chunk: Chunk, size_limit: int) -> bytes:
 
         content = zstandard.frame_content_size(chunk.data)
         if content not in (-1, declared):
-            raise ValueError("zstd frame size disagrees with the chunk's")
+            raise _Damage("zstd frame size disagrees with the chunk's")
         data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=declared)
     elif chunk.compression == "lz4":
         import lz4.frame
 
         data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=declared)
     else:
-        raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
+        raise _Damage(f"unsupported chunk compression {chunk.compression!r}")
     if len(data) != declared:
-        raise ValueError(f"chunk decompressed to {len(data)} bytes, not {declared}")
+        raise _Damage(f"chunk decompressed to {len(data)} bytes, not {declared}")
     _check_crc(chunk, data)
     return data
 
@@ -171,14 +211,14 @@ def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
     unpack_rec, unpack_msg = _REC.unpack_from, _MSG.unpack_from
     while pos < n:
         if pos + 9 > n:
-            raise ValueError("record header cut off")
+            raise _Damage("record header cut off")
         op, length = unpack_rec(buf, pos)
         body, end = pos + 9, pos + 9 + length
         if end > n:
-            raise ValueError("record runs past its chunk")
+            raise _Damage("record runs past its chunk")
         if op == _OP_MESSAGE:
             if length < _MSG.size:
-                raise ValueError("message record too short")
+                raise _Damage("message record too short")
             cid, _seq, log_time, _pub = unpack_msg(buf, body)
             counted[cid] += 1
             if wanted is None or cid in wanted:
@@ -200,7 +240,7 @@ def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
         datas.append(data)
 
 
-def _read_indexed(f, size: int, topics: set[str] | None, scan: _Scan) -> bool:
+def _read_indexed(f, size: int, topics: set[str] | None, scan: _Scan, where: str) -> bool:
     """Read through the summary's chunk indexes; False when the file has no usable index."""
     try:
         f.seek(0)
@@ -220,19 +260,22 @@ def _read_indexed(f, size: int, topics: set[str] | None, scan: _Scan) -> bool:
             continue
         try:
             if not 0 <= ci.chunk_start_offset < size or ci.chunk_length > size:
-                raise ValueError("chunk index points outside the file")
+                raise _Damage("chunk index points outside the file")
             f.seek(ci.chunk_start_offset)
             head = f.read(9)
             op, length = _REC.unpack(head)
             if op != _OP_CHUNK or length > size:
-                raise ValueError("no chunk where the index points")
+                raise _Damage("no chunk where the index points")
             chunk = Chunk.read(ReadDataStream(io.BytesIO(f.read(length))))
             saved = dict(scan.counts)
+            _budget(where, chunk, scan, size)
             _chunk_records(_decompress(chunk, size * _MAX_RATIO), scan, wanted)
             scan.chunks_read += 1
             if summary.statistics is not None:
                 scan.counts.clear()
                 scan.counts.update(saved)
+        except DataError:
+            raise
         except Exception as exc:  # noqa: BLE001 - a damaged chunk is skipped whole, never half-used
             scan.chunk_failed(int(ci.chunk_start_offset), exc, int(min(ci.chunk_length, size)))
     for mi in summary.metadata_indexes:
@@ -245,7 +288,7 @@ def _read_indexed(f, size: int, topics: set[str] | None, scan: _Scan) -> bool:
     return True
 
 
-def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan) -> None:
+def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan, where: str) -> None:
     """Scan records from the start; stop at the first that cannot be read and count the rest as skipped."""
     f.seek(0)
     reader = StreamReader(f, skip_magic=False, emit_chunks=True, record_size_limit=size)
@@ -258,8 +301,11 @@ def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan) -> None:
                 scan.channels.setdefault(record.id, record)
             elif isinstance(record, Chunk):
                 try:
+                    _budget(where, record, scan, size)
                     _chunk_records(_decompress(record, size * _MAX_RATIO), scan, None)
                     scan.chunks_read += 1
+                except DataError:
+                    raise
                 except Exception as exc:  # noqa: BLE001 - damaged chunk skipped whole
                     scan.chunk_failed(good, exc, len(record.data))
             elif isinstance(record, Metadata):
@@ -270,6 +316,8 @@ def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan) -> None:
                 times.append(record.log_time)
                 datas.append(record.data)
             good = f.tell()
+    except DataError:
+        raise
     except Exception as exc:  # noqa: BLE001 - truncated or damaged data section: keep what came before
         scan.skipped["bytes"] += max(0, size - good)
         scan.notes.append(f"unreadable record at byte {good} ({_why(exc)}); the {size - good} bytes from there on "
@@ -302,13 +350,13 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
                 raise FormatError(f"{where}: not an MCAP file (the first 8 bytes are not the MCAP magic)")
             scan = _Scan()
             bad_summary = _bad_summary(f, size)
-            indexed = bad_summary is None and _read_indexed(f, size, topic_set, scan)
+            indexed = bad_summary is None and _read_indexed(f, size, topic_set, scan, where)
             if not indexed:
                 scan = _Scan()
                 if bad_summary is not None:
                     scan.skipped["summary bytes"], why = bad_summary
                     scan.notes.append(why)
-                _read_linear(f, size, topic_set, scan)
+                _read_linear(f, size, topic_set, scan, where)
     except OSError as exc:
         raise DataError(f"{where}: cannot read ({exc.strerror or exc})") from None
     _refuse_corrupt(where, scan)
@@ -404,7 +452,7 @@ def _decode_channel(
         for i, data in enumerate(datas):
             try:
                 obj = json.loads(data)
-            except (ValueError, UnicodeDecodeError):
+            except (ValueError, UnicodeDecodeError, RecursionError):
                 continue
             if isinstance(obj, dict):
                 objects.append(obj)
@@ -654,131 +702,3 @@ def _flatten_arrow(name: str, arr: pa.Array, out: dict[str, Any]) -> None:
         out[name] = np.array(arr.to_pylist(), dtype=object)
     elif pa.types.is_null(typ):
         out[name] = np.full(len(arr), np.nan)
-
-
-# ------------------------------------------------------------------------------------------------ writing
-
-
-def _tokens(column: str) -> list[str | int]:
-    return [int(i) if i else k for k, i in _INDEX_TOKEN.findall(column)]
-
-
-def _json_kind(values: np.ndarray) -> str:
-    kind = values.dtype.kind
-    return {"f": "number", "i": "integer", "u": "integer", "b": "boolean"}.get(kind, "string")
-
-
-def _schema_for(columns: list[str], kinds: list[str], title: str) -> dict:
-    root: dict = {"type": "object", "properties": {}}
-    for column, kind in zip(columns, kinds, strict=True):
-        node = root
-        toks = _tokens(column)
-        for tok, nxt in zip(toks, toks[1:] + [None], strict=True):
-            if isinstance(tok, int):
-                node.setdefault("items", {})
-                node["minItems"] = node["maxItems"] = max(node.get("maxItems", 0), tok + 1)
-                child = node["items"]
-            else:
-                child = node["properties"].setdefault(tok, {})
-            if nxt is None:
-                child["type"] = kind
-            elif isinstance(nxt, int):
-                child["type"] = "array"
-            else:
-                child.setdefault("type", "object")
-                child.setdefault("properties", {})
-            node = child
-    return {"title": title, **root}
-
-
-def _nest(columns: list[list[str | int]], row: tuple) -> dict:
-    root: dict = {}
-    for toks, value in zip(columns, row, strict=True):
-        node: Any = root
-        for tok, nxt in zip(toks[:-1], toks[1:], strict=True):
-            if isinstance(node, list):
-                while len(node) <= tok:
-                    node.append(None)
-                if node[tok] is None:
-                    node[tok] = [] if isinstance(nxt, int) else {}
-                node = node[tok]
-            else:
-                node = node.setdefault(tok, [] if isinstance(nxt, int) else {})
-        last = toks[-1]
-        if isinstance(node, list):
-            while len(node) <= last:
-                node.append(None)
-            node[last] = value
-        else:
-            node[last] = value
-    return root
-
-
-def _schema_name(topic: str) -> str:
-    return ".".join(p for p in re.split(r"[/.]", topic) if p) or "message"
-
-
-def write(
-    path: str | os.PathLike,
-    streams: Mapping[str, pd.DataFrame | Mapping[str, Any]],
-    *,
-    metadata: Mapping[str, Mapping[str, str]] | None = None,
-    profile: str = "",
-    chunk_size: int = 64 * 1024,
-) -> Path:
-    """Write streams (topic -> frame with ``t`` seconds and field columns) as an MCAP file of JSON channels.
-
-    Messages of all topics are interleaved by time (ties keep the order of ``streams`` and of rows); NaN
-    values are written as JSON ``null``. ``metadata`` become MCAP metadata records. Written atomically.
-
-    Raises
-    ------
-    DataError
-        A stream without ``t``, with non-finite or negative times, or with columns of unequal length.
-    """
-    import pandas as pd
-
-    where = os.fspath(path)
-    prepared = []
-    for topic, data in streams.items():
-        frame = data if isinstance(data, pd.DataFrame) else pd.DataFrame(dict(data))
-        if "t" not in frame.columns:
-            raise DataError(f"{where}: stream {topic!r} has no 't' column")
-        t = frame["t"].to_numpy(dtype=np.float64)
-        if not np.isfinite(t).all() or (t < 0).any():
-            raise DataError(f"{where}: stream {topic!r}: times must be finite and non-negative")
-        cols = [str(c) for c in frame.columns if c != "t"]
-        arrays = [frame[c].to_numpy() for c in cols]
-        kinds = [_json_kind(a) for a in arrays]
-        values = []
-        for a, kind in zip(arrays, kinds, strict=True):
-            if kind == "number":
-                a = a.astype(np.float64)
-                values.append([None if not np.isfinite(v) else v for v in a.tolist()])
-            elif kind == "string":
-                values.append([None if v is None or (isinstance(v, float) and v != v) else str(v) for v in a.tolist()])
-            else:
-                values.append(a.tolist())
-        schema = _schema_for(cols, kinds, _schema_name(topic))
-        prepared.append((topic, np.rint(t * 1e9).astype(np.uint64), [_tokens(c) for c in cols], values, schema))
-
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
-        writer.start(profile=profile, library="workbench")
-        events = []
-        for k, (topic, t_ns, toks, values, schema) in enumerate(prepared):
-            sid = writer.register_schema(
-                name=schema["title"], encoding="jsonschema", data=json.dumps(schema, sort_keys=True).encode()
-            )
-            cid = writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
-            rows = list(zip(*values, strict=True)) if values else [()] * len(t_ns)
-            for i, (time, row) in enumerate(zip(t_ns.tolist(), rows, strict=True)):
-                events.append((time, k, i, cid, row, toks))
-        events.sort(key=lambda e: (e[0], e[1], e[2]))
-        for time, _k, i, cid, row, toks in events:
-            data = json.dumps(_nest(toks, row), separators=(",", ":"), allow_nan=False).encode()
-            writer.add_message(channel_id=cid, log_time=time, data=data, publish_time=time, sequence=i)
-        for name, record in (metadata or {}).items():
-            writer.add_metadata(name, {str(k): str(v) for k, v in record.items()})
-        writer.finish()
-    return Path(path)

@@ -428,6 +428,11 @@ def open_link(connection: str, *, receive_buffer: int = _RECEIVE_BUFFER, write: 
         raise LinkError("empty connection string; e.g. udpin:127.0.0.1:14550, udpout:HOST:PORT, tcp:HOST:PORT")
     if os.path.isfile(text) or text.lower().endswith((".tlog", ".bin", ".log")):
         raise LinkError(f"{text}: a file, not a link; to send a log to a link use: workbench replay {text} --to URL")
+    kind, _, rest = text.partition(":")
+    port_text = rest.rpartition(":")[2]
+    if kind in ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin") and port_text.lstrip("+-").isdigit() \
+            and not 0 < int(port_text) <= 65535:
+        raise LinkError(f"{text}: port {port_text} is not a port number (1–65535)")
     if not write:
         _refuse_shared_port(text)
     device, _, baud = text.rpartition(":") if text.startswith("/dev/") and text.count(":") == 1 else (text, "", "")
@@ -441,7 +446,7 @@ def open_link(connection: str, *, receive_buffer: int = _RECEIVE_BUFFER, write: 
         device = text
     try:
         conn = mavutil.mavlink_connection(device, **kwargs)
-    except (OSError, ValueError, socket.gaierror) as exc:
+    except (OSError, ValueError, socket.gaierror, OverflowError) as exc:
         raise LinkError(f"{text}: cannot open the link ({exc})") from None
     except Exception as exc:  # pyserial's SerialException and friends
         raise LinkError(f"{text}: cannot open the link ({type(exc).__name__}: {exc})") from None
@@ -512,6 +517,11 @@ def tlog_frames(path: str | os.PathLike) -> Iterator[tuple[float, bytes]]:
         log.close()
 
 
+#: The longest a replayed frame waits after the one before it, in seconds of log clock: longer pauses (a damaged
+#: stamp, a recording paused for hours) are shortened to this and counted.
+MAX_REPLAY_GAP = 10.0
+
+
 @dataclass(frozen=True)
 class SendReport:
     """What :func:`send_tlog` sent: frames, the log's time span and the wall time it took."""
@@ -519,6 +529,8 @@ class SendReport:
     n_frames: int
     log_seconds: float
     wall_seconds: float
+    gaps_capped: int = 0
+    seconds_skipped: float = 0.0
 
     @property
     def speed(self) -> float:
@@ -538,6 +550,11 @@ def send_tlog(
 ) -> SendReport:
     """Send a tlog's raw frames to a link, each at its recorded time after the first, divided by ``speed``.
 
+    A frame waits for the time since the frame before it, never more than :data:`MAX_REPLAY_GAP` seconds of log
+    clock (and never for a stamp that goes back): one damaged timestamp pushed days ahead costs that long, not
+    days. The report counts the gaps so shortened and the log seconds skipped; ``log_seconds`` is the span
+    actually replayed.
+
     Parameters
     ----------
     link : Link or str
@@ -551,13 +568,18 @@ def send_tlog(
         raise DataError(f"replay speed must be a positive number, got {speed!r}")
     own = not isinstance(link, Link)
     out = open_link(link, write=True) if own else link
-    n, t_first, t_last = 0, math.nan, math.nan
+    n, t_prev, replayed, capped, skipped = 0, math.nan, 0.0, 0, 0.0
     wall0 = clock()
     try:
         for t, frame in tlog_frames(path):
-            if n == 0:
-                t_first = t
-            delay = wall0 + max(0.0, t - t_first) / speed - clock()
+            if n:
+                step = max(0.0, t - t_prev)
+                if step > MAX_REPLAY_GAP:
+                    capped, skipped = capped + 1, skipped + step - MAX_REPLAY_GAP
+                    step = MAX_REPLAY_GAP
+                replayed += step
+            t_prev = t
+            delay = wall0 + replayed / speed - clock()
             if delay > 0:
                 sleep(delay)
             if should_stop is not None and should_stop():
@@ -566,12 +588,11 @@ def send_tlog(
                 out.write(frame)
             except OSError as exc:
                 raise LinkError(f"{out.description}: cannot send ({exc})") from None
-            n, t_last = n + 1, t
+            n += 1
             if on_frame is not None:
                 on_frame(n, t)
     finally:
         if own:
             out.close()
-    span = float(t_last - t_first) if n else 0.0
-    return SendReport(n, span, clock() - wall0)
+    return SendReport(n, replayed, clock() - wall0, capped, skipped)
 

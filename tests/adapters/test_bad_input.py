@@ -208,3 +208,31 @@ def test_nan_fields_are_dropped_and_counted(planar_streams, tmp_path):
     ds = adapters.load(mcap.write(tmp_path / "nan.mcap", streams))
     assert ds[0].meta["skipped"] == {"x: non-finite values": 1}
     assert np.isfinite(ds[0].x).all()
+
+
+def _in_child(code: str, timeout: float = 60.0):
+    import subprocess
+    import sys
+
+    repo = Path(__file__).resolve().parents[2]
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout, cwd=repo)
+
+
+@pytest.mark.parametrize("name", ["x.tlog", "x.mcap", "x.csv"])
+def test_a_fifo_is_refused_before_it_is_opened(tmp_path, name):
+    import os
+
+    fifo = tmp_path / name
+    os.mkfifo(fifo)
+    # in a child: on the previous main open() blocked until the timeout
+    out = _in_child(f"import adapters\ntry:\n    adapters.inspect({str(fifo)!r})\nexcept Exception as e:\n"
+                    f"    print(type(e).__name__, e)", timeout=30)
+    assert out.stdout.startswith("DataError") and "named pipe (FIFO)" in out.stdout and str(fifo) in out.stdout
+
+
+def test_a_device_and_a_symlink_loop_are_refused(tmp_path):
+    loop = tmp_path / "loop.tlog"
+    loop.symlink_to(loop)
+    for path, cause in (("/dev/zero", "a device"), (loop, "cannot be read")):
+        with pytest.raises(DataError, match=cause):
+            adapters.inspect(path)

@@ -209,3 +209,32 @@ def test_an_absurd_magnitude_is_found_in_a_column_with_missing_cells(tmp_path):
     frame.to_csv(path, index=False)
     with pytest.raises(DataError, match=rf"line {29 + 2}, column 'x': -2e\+200 is beyond"):
         csv.read(path)
+
+
+def test_a_header_wider_than_the_ceiling_is_refused_before_parsing(tmp_path):
+    import tracemalloc
+
+    from adapters.formats import csv as csv_reader
+
+    width = getattr(csv_reader, "MAX_COLUMNS", 10_000) + 1  # the previous main had no ceiling and parsed it
+    path = tmp_path / "wide.csv"
+    path.write_text("demo,t," + ",".join(f"c{i}" for i in range(width)) + "\n"
+                    + "a,0," + ",".join("0" for _ in range(width)) + "\n")
+    tracemalloc.start()
+    try:
+        with pytest.raises(DataError, match=r"line 1 \(header\): \d+ columns, more than"):
+            adapters.inspect(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20 * path.stat().st_size
+
+
+def test_a_header_line_longer_than_the_ceiling_is_refused(tmp_path, monkeypatch):
+    from adapters.formats import csv as csv_reader
+
+    monkeypatch.setattr(csv_reader, "MAX_HEADER_BYTES", 1000, raising=False)
+    path = tmp_path / "long.csv"
+    path.write_text("demo,t," + "x" * 2000 + "\na,0,1\n")
+    with pytest.raises(DataError, match=r"line 1 \(header\): longer than 1000 bytes"):
+        adapters.load(path)

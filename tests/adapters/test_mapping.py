@@ -82,6 +82,16 @@ def test_an_unknown_mapping_name_lists_the_shipped_ones():
         (BASE.replace('u = "T.stick"', 'u = { source = "T.stick", transform = ["a"] }'), "unknown transform ['a']"),
         (BASE + "[roles]\nposition = 3\n", "position must be a list of state names"),
         (BASE.replace('inputs = ["u"]', 'inputs = ["a"]'), "are also states"),
+        # values checked for meaning (the previous main accepted each of these)
+        (BASE.replace('u = "T.stick"', 'u = { source = "T.s", transform = "pwm", pwm_min = 1500, pwm_max = 1500 }'),
+         "pwm_min (1500) must be below pwm_max (1500)"),
+        (BASE.replace('u = "T.stick"', 'u = { source = "T.s", transform = "pwm", pwm_min = 2000 }'),
+         "pwm_min (2000) must be below pwm_max (2000)"),
+        (BASE.replace("offset = 1.0", "offset = 1e308"), "channels.b.offset: must be a finite number of magnitude"),
+        (BASE.replace("scale = 2.0", "scale = 1e-300"), "channels.b.scale: must not be zero or below"),
+        (BASE + "[segment]\nmin_duration = -5\n", "segment.min_duration: must be positive"),
+        (BASE + '[segment]\narmed = { source = "H.base_mode", bitmask = 18446744073709551616 }\n',
+         "bitmask: must be a positive integer below 2**63"),
     ],
 )
 def test_invalid_mappings_name_the_file_and_the_key(tmp_path, text, needle):
@@ -189,3 +199,27 @@ def test_sources_with_dots_in_stream_names(tmp_path):
     s = _streams(**{"/robot/state": frame})
     assert select(m.channel("a").selector, s, "a", m.name).columns == ("pose.x",)
     assert select(m.channel("b").selector, s, "b", m.name).columns == ("pose.y",)
+
+
+def test_a_source_naming_a_stream_without_a_field_is_a_mapping_error(tmp_path):
+    m = load_mapping(_mapping(tmp_path, BASE.replace('"S.x"', '"ATTITUDE."')))
+    s = _streams(ATTITUDE=pd.DataFrame({"t": [0.0, 1.0], "roll": [0.0, 0.1]}))
+    with pytest.raises(MappingError, match=r"'ATTITUDE\.' names stream 'ATTITUDE' but no field.*roll"):
+        select(m.channel("a").selector, s, "channel 'a'", m.name, n_columns=1)
+
+
+def test_a_clock_field_in_no_channel_stream_is_a_mapping_error(tmp_path, written):
+    mapping = _mapping(tmp_path, BASE.replace("dt = 0.1", 'dt = 0.1\nclock = { field = "time_bot_ms", scale = 0.001 }'))
+    frames = {"S": pd.DataFrame({"t": np.arange(50) * 0.1, "x": np.zeros(50), "y": np.zeros(50),
+                                 "time_boot_ms": np.arange(50) * 100}),
+              "T": pd.DataFrame({"t": np.arange(50) * 0.1, "stick": np.zeros(50)})}
+    from adapters.pipeline import build
+
+    with pytest.raises(MappingError, match=r"clock field 'time_bot_ms' is in none of the channels' streams"):
+        build(_streams(**frames), load_mapping(mapping).for_format("test"))
+
+
+def test_deeply_nested_toml_is_a_mapping_error(tmp_path):
+    path = _mapping(tmp_path, BASE + "deep = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(MappingError, match="nested deeper"):
+        load_mapping(path)  # the previous main let tomllib's RecursionError out

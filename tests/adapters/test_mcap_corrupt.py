@@ -201,3 +201,51 @@ def test_a_stream_lost_to_damaged_chunks_is_not_called_absent(tmp_path):
     text = str(caught.value)
     assert "'/quadrotor/state'" in text and "damaged data" in text and "chunks 3" in text
     assert "has no such stream" not in text
+
+
+def _spaces_mcap(path: Path, n_bytes: int) -> Path:
+    """One honest zstd chunk of JSON messages padded with spaces: a few KB on disk, ``n_bytes`` declared."""
+    payload = b'{"a": 1}' + b" " * 50_000
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=n_bytes + 100_000, compression=CompressionType.ZSTD)
+        w.start()
+        cid = w.register_channel("/x", "json", w.register_schema("s", "jsonschema", b"{}"))
+        for i in range(n_bytes // len(payload)):
+            w.add_message(cid, log_time=i, data=payload, publish_time=i)
+        w.finish()
+    return path
+
+
+def test_a_chunk_declaring_more_than_the_file_may_expand_to_is_refused_before_decompressing(tmp_path):
+    path = _spaces_mcap(tmp_path / "bomb.mcap", 40_000_000)
+    ratio = getattr(mcap, "MAX_TOTAL_RATIO", 1000)  # the previous main decompressed it (40 MB from ~13 KB)
+    assert 40_000_000 > ratio * path.stat().st_size
+    with pytest.raises(DataError, match="refused before decompressing"):
+        adapters.inspect(path)
+
+
+def test_a_chunk_above_the_chunk_ceiling_is_refused_and_the_ceiling_can_be_raised(tmp_path, monkeypatch):
+    path = _spaces_mcap(tmp_path / "big.mcap", 3_000_000)
+    monkeypatch.setattr(mcap, "MAX_TOTAL_RATIO", 10**6, raising=False)
+    monkeypatch.setattr(mcap, "MAX_CHUNK_BYTES", 1_000_000, raising=False)
+    with pytest.raises(DataError, match=r"a chunk declares \d+ bytes uncompressed.*MAX_CHUNK_BYTES"):
+        adapters.inspect(path)
+    monkeypatch.setattr(mcap, "MAX_CHUNK_BYTES", 10_000_000)
+    assert adapters.inspect(path).streams  # raised: read
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_damaged_compressed_chunks_are_named_in_the_workbenchs_words(tmp_path, seed):
+    rng = np.random.default_rng(seed)
+    data = bytearray(SAMPLE.read_bytes())
+    for start, length in _chunk_offsets(SAMPLE):
+        for at in rng.integers(start + 60, start + length - 8, size=3):
+            data[at] = int(rng.integers(256))
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    try:
+        adapters.inspect(bad)
+    except DataError as exc:
+        text = str(exc)
+        for foreign in ("ZstdError", "zstd decompress", "codec", "cannot fit", "Error:"):
+            assert foreign not in text, text  # the previous main passed the libraries' messages on

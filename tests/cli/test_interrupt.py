@@ -169,3 +169,22 @@ def test_tasks_stop_after_an_interrupt_a_finaliser_swallowed():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=60)
     assert result.stdout.strip() == "stopped after [0, 1]", (result.stdout, result.stderr)
     assert "Exception ignored" not in result.stderr and "Traceback" not in result.stderr, result.stderr
+
+
+def test_a_demo_stopped_after_its_import_keeps_the_old_result_set_whole(tmp_path, monkeypatch):
+    from workbench.cli import main
+    from workbench.study import pipeline
+
+    out = tmp_path / "demo"
+    out.mkdir()
+    old = {"demos.parquet": "old data", "report.md": "old report", "results.csv": "old results"}
+    for name, text in old.items():
+        (out / name).write_text(text)
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt  # Ctrl-C during the study, after the import
+
+    monkeypatch.setattr(pipeline, "run_study", stopped)
+    assert main(["demo", "--out", str(out), "--samples", "0", "--no-efficiency"]) == 130
+    # the previous main had already written the new demos.parquet beside the old report
+    assert {p.name: p.read_text() for p in out.iterdir()} == old

@@ -146,3 +146,43 @@ def test_every_reading_and_writing_command_documents_the_dash():
     for name in ("inspect", "import", "fit", "predict", "evaluate", "map", "view", "replay", "report", "simulate"):
         text = sub.choices[name].format_help()
         assert "standard input" in text or "standard output" in text, name
+
+
+class _Endless(io.RawIOBase):
+    """A pipe delivering ``total`` bytes of a tlog's head then zeros, without ever holding them."""
+
+    def __init__(self, head: bytes, total: int) -> None:
+        self.head, self.left = head, total
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        n = min(len(b), self.left)
+        chunk = (self.head[:n] if self.head else b"") or bytes(n)
+        self.head = self.head[len(chunk):]
+        b[: len(chunk)] = chunk
+        self.left -= len(chunk)
+        return len(chunk)
+
+
+def test_standard_input_is_streamed_to_its_file_not_held(monkeypatch, tmp_path):
+    import tracemalloc
+
+    from workbench.cli.stdio import Stdio
+
+    total = 64 << 20
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BufferedReader(_Endless(TLOG.read_bytes()[:4096], total))))
+    monkeypatch.setattr(sys.stdin, "isatty", lambda: False, raising=False)
+    stdio = Stdio()
+    tracemalloc.start()
+    try:
+        path = stdio.input("-")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    try:
+        assert path.stat().st_size == total
+        assert peak < total / 8  # the previous main held all of it (and a copy) in memory
+    finally:
+        stdio.cleanup()

@@ -7,6 +7,8 @@ import re
 import shutil
 from pathlib import Path
 
+import pytest
+
 from workbench.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
@@ -34,3 +36,10 @@ def test_the_readmes_commands_write_under_out():
     commands = re.findall(r"^\.venv/bin/workbench .*$", text, flags=re.M)
     outputs = [o for c in commands for o in re.findall(r"(?:-o|--save) (\S+)", c)]
     assert outputs and all(o.startswith("out/") for o in outputs), outputs
+
+
+@pytest.mark.parametrize("speed", ["1e-300", "1e300", "0"])
+def test_a_replay_speed_out_of_range_is_refused_by_the_parser(speed, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["replay", "sample_logs/landing_s00.tlog", "--to", "udpout:127.0.0.1:14550", "--speed", speed])
+    assert info.value.code == 2 and "--speed" in capsys.readouterr().err  # previous main: OverflowError on 1e-300

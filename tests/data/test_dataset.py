@@ -57,11 +57,17 @@ def test_one_subject_is_read_from_its_own_partition_only(study, tmp_path):
         load_dataset(path)
 
 
+def _same_ids_other_flights(study):
+    """Trials with the ids of ``study``'s s01 but other samples (two logs numbering their trials alike)."""
+    return simulate_study(n_subjects=1, n_trials=2, strategy="CS1", seed=2).select(subject="s01")
+
+
 def test_repeated_ids_across_logs_are_prefixed_by_their_file(study, tmp_path):
-    one = study.select(subject="s01")
+    one, other = study.select(subject="s01"), _same_ids_other_flights(study)
+    assert other.ids == one.ids
     with DatasetWriter(tmp_path / "ds") as w:
         parts = write_partitions(one, w.tmp, "a", source="logs/a.tlog") + write_partitions(
-            one, w.tmp, "b", source="logs/b.tlog")
+            other, w.tmp, "b", source="logs/b.tlog")
         w.commit(parts)
     ds = load_demonstrations(tmp_path / "ds")
     assert ds.ids == one.ids + [f"b-{i}" for i in one.ids]
@@ -122,10 +128,10 @@ def _legacy(path):
 
 
 def test_trial_ids_are_unique_in_the_files_so_every_reader_sees_the_same_trials(study, tmp_path):
-    one = study.select(subject="s01")  # the same flight imported twice: the same ids in two logs
+    one, other = study.select(subject="s01"), _same_ids_other_flights(study)  # the same ids in two logs
     with DatasetWriter(tmp_path / "ds") as w:
         w.commit(write_partitions(one, w.tmp, "a", source="a.tlog", order=0)
-                 + write_partitions(one, w.tmp, "b", source="b.tlog", order=1))
+                 + write_partitions(other, w.tmp, "b", source="b.tlog", order=1))
     ours = load_demonstrations(tmp_path / "ds")
     table = pd.read_parquet(tmp_path / "ds")
     assert sorted(table["demo"].unique()) == sorted(ours.ids) and len(set(ours.ids)) == 2 * len(one)
@@ -204,3 +210,33 @@ def test_leftovers_of_a_killed_import_are_removed_by_the_next(study, tmp_path):
     alive.mkdir()
     write_dataset(study, tmp_path / "ds")
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["ds", alive.name])
+
+
+def test_a_copied_partition_is_refused_naming_both_files(study, tmp_path):
+    import shutil
+
+    path = write_dataset(study, tmp_path / "ds")
+    part = next(p for p in read_manifest(path).partitions if p.subject == "s02")
+    copy = (path / part.file).with_name(f"{(path / part.file).stem} (copy).parquet")
+    shutil.copyfile(path / part.file, copy)  # the previous main loaded its trials again under new ids
+    with pytest.raises(DataError, match=r"hold the same trial sample for sample") as err:
+        load_demonstrations(path)
+    assert part.file in str(err.value) and copy.relative_to(path).as_posix() in str(err.value)
+
+
+def test_a_fifo_and_a_looping_symlink_in_a_dataset_are_refused(study, tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    path = write_dataset(study, tmp_path / "ds")
+    loop = path / "subject=s01" / "self.parquet"
+    loop.symlink_to(loop)
+    with pytest.raises(DataError, match="self.parquet: a symbolic link that loops"):
+        load_demonstrations(path)  # the previous main raised RuntimeError from pathlib
+    loop.unlink()
+    os.mkfifo(path / "subject=s01" / "x.parquet")
+    code = (f"from workbench.data.dataset import load_dataset\ntry:\n    load_dataset({str(path)!r})\n"
+            "except Exception as e:\n    print(type(e).__name__, e)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    assert out.stdout.startswith("DataError") and "x.parquet: a named pipe (FIFO)" in out.stdout

@@ -143,3 +143,41 @@ def test_a_junk_flood_is_shed_and_predictions_stay_current(model, records):
     assert st.counts.get("shed (backlog)", 0) > 0
     assert st.received["LOCAL_POSITION_NED"] == _kinds(part)["LOCAL_POSITION_NED"]  # no telemetry frame shed
     assert summary.n_steps > 0 and np.percentile(summary.latency_ms, 99) < 250
+
+
+def test_a_replay_waits_at_most_the_gap_ceiling_for_one_damaged_stamp(tmp_path):
+    import struct
+
+    from adapters.link import mavlink
+
+    data = bytearray(TLOG.read_bytes())
+    off, n = 0, 0
+    while n < 500:  # the 500th record's stamp pushed 2**36 µs (19 hours) ahead
+        size = 8 + data[off + 9] + (12 + (13 if data[off + 10] & 1 else 0) if data[off + 8] == 0xFD else 8)
+        off, n = off + size, n + 1
+    (stamp,) = struct.unpack(">Q", data[off : off + 8])
+    data[off : off + 8] = struct.pack(">Q", stamp + 2**36)
+    bad = tmp_path / "bad.tlog"
+    bad.write_bytes(bytes(data))
+    times = [t for t, _ in tlog_frames(TLOG)]
+    steps = np.diff(times)
+    honest = float(np.minimum(np.maximum(steps, 0), getattr(mavlink, "MAX_REPLAY_GAP", np.inf)).sum())
+    now = [0.0]
+
+    def sleep(s: float) -> None:
+        now[0] += s
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:
+        sink.bind(("127.0.0.1", 0))
+        report = mavlink.send_tlog(bad, f"udpout:127.0.0.1:{sink.getsockname()[1]}", speed=1000.0,
+                                   clock=lambda: now[0], sleep=sleep)
+    # the previous main slept 2**36 µs / 1000 = 19 h of (fake) time on that one stamp
+    assert now[0] * 1000.0 <= honest + 2 * mavlink.MAX_REPLAY_GAP + 1.0
+    assert report.gaps_capped >= 1 and report.seconds_skipped > 2**36 * 1e-6 - 2 * mavlink.MAX_REPLAY_GAP
+
+
+@pytest.mark.parametrize("connection", ["udpout:127.0.0.1:99999", "udpin:127.0.0.1:70000", "tcp:127.0.0.1:0",
+                                        "udpout:127.0.0.1:-1"])
+def test_a_port_out_of_range_is_a_link_error(connection):
+    with pytest.raises(LinkError, match="is not a port number"):
+        open_link(connection)  # the previous main: OverflowError from bind()/connect()

@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -298,3 +299,15 @@ def test_shared_sets_travel_as_paths_not_as_data(cluster, study):
     assert ref.load(subject="s02").ids == study.select(subject="s02").ids
     with pytest.raises(DataError, match="cannot be sent to workers"):
         pickle.dumps(SerialExecutor().share(study))
+
+
+def test_stale_staging_folders_are_removed_and_live_ones_kept(tmp_path):
+    from workbench.study.executor import STAGING_PREFIX, remove_stale_staging
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = tmp_path / f"{STAGING_PREFIX}{int(dead.stdout)}-abc"
+    live = tmp_path / f"{STAGING_PREFIX}{os.getpid()}-abc"
+    for p in (stale, live):
+        (p / "share").mkdir(parents=True)
+    assert remove_stale_staging(tmp_path) == [stale]
+    assert not stale.exists() and live.exists()

@@ -135,3 +135,33 @@ def test_a_ctrl_c_while_workers_start_reaches_the_command_late_but_is_never_lost
             time.sleep(0.2)
         time.sleep(0.2)  # the pending signal is delivered as the mask is restored, at the latest
     assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())  # the mask is as it was
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform != "linux", reason="process groups, ps and prctl as on Linux")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_a_command_killed_alone_takes_its_workers_and_its_staging_folder_with_it(tmp_path, sig):
+    from workbench.study.executor import remove_stale_staging
+
+    demos = (simulate_landings("CS1", 5, seed=3) + simulate_landings("CS2", 5, seed=4)).save(tmp_path / "d.parquet")
+    env = {**os.environ, "PYTHONPATH": str(REPO), "TMPDIR": str(tmp_path)}
+    proc = subprocess.Popen([sys.executable, "-m", "workbench", "report", str(demos), "-o", str(tmp_path / "r"),
+                             "--bootstrap", "8", "--samples", "4", "--efficiency", "2", "--n-components", "2"],
+                            cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    deadline = time.monotonic() + 120
+    while len(_group(proc.pid)) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)
+    os.kill(proc.pid, sig)  # the command alone (kill, a service manager), not its group as a terminal would
+    proc.communicate(timeout=120)
+    assert proc.returncode == (128 + sig if sig == signal.SIGTERM else -sig)
+    for _ in range(50):  # the previous main left both workers (and their resource tracker) running
+        if not _group(proc.pid):
+            break
+        time.sleep(0.1)
+    assert not _group(proc.pid), "a worker outlived the command"
+    if sig == signal.SIGTERM:
+        assert not list(tmp_path.glob("workbench-staging-*"))  # removed on the way out
+    remove_stale_staging(tmp_path)  # what the next run does first
+    assert not list(tmp_path.glob("workbench-staging-*"))

@@ -90,3 +90,28 @@ def test_the_cli_answers_an_http_server_in_one_line_within_the_limit(tmp_path):
         httpd.shutdown()
     assert out.returncode == 1 and len(out.stderr.strip().splitlines()) == 1 and "not a Dask scheduler" in out.stderr
     assert took < 20
+
+
+@pytest.mark.parametrize("scheme", ["tls", "ucx", "ws", "wss"])
+def test_schemes_other_than_tcp_are_refused_by_name(scheme):
+    from workbench.study.executor import DaskExecutor
+
+    with pytest.raises(WorkbenchError, match=f"tcp://HOST:PORT only, not {scheme}://"):
+        DaskExecutor(scheduler=f"{scheme}://127.0.0.1:8786", timeout=2)  # previous main: TypeError, WebSocketError
+
+
+def test_a_scheduler_without_workers_is_waited_for_then_an_error():
+    from dask.distributed import LocalCluster
+
+    from workbench.study.executor import DaskExecutor
+
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", dashboard_address=":0") as cluster:
+        start = time.monotonic()
+        with pytest.raises(WorkbenchError, match=r"has no worker \(waited 1 s\)"):
+            DaskExecutor(scheduler=cluster.scheduler_address, timeout=5, worker_wait=1.0)
+        assert time.monotonic() - start < 15
+
+
+def test_an_address_with_an_unclosed_ipv6_bracket_is_a_workbench_error():
+    with pytest.raises(WorkbenchError, match="not a scheduler address"):
+        check_scheduler("tcp://[::1", timeout=1)  # urllib's ValueError before

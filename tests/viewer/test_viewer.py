@@ -583,3 +583,17 @@ def test_the_scene_key_stays_clear_of_the_scale_bar_in_a_narrow_scene(tmp_path):
     height = abs(bar[0, 1] - key[0, 1])
     assert height > 0.05 * length  # above the bar, not on it
     assert np.min(np.diff(key[:, 0])) > 0.2 * length  # apart from each other, on the bar's scale
+
+
+def test_a_writer_that_stops_while_saving_is_a_named_error_and_leaves_no_file(tmp_path, monkeypatch):
+    rec = viewer.new_recording()
+    path = tmp_path / "full.rrd"
+
+    def failing_flush(self, *args, **kwargs):  # what rerun raises when its writer thread cannot write (disk full)
+        raise RuntimeError("File-writer thread shut down prematurely")
+
+    monkeypatch.setattr(rr.RecordingStream, "flush", failing_flush)
+    with pytest.raises(WorkbenchError, match=r"full\.rrd: the recording could not be written"):  # previous main:
+        with viewer.open_output(rec, save=path):                                             # the RuntimeError
+            rec.log("x", rr.Scalars(1.0))
+    assert not path.exists() and not [p for p in tmp_path.iterdir()]

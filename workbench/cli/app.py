@@ -55,6 +55,7 @@ def _hold_interrupts_until_exit() -> None:
     that ends the process without a word."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # the clean-up already under way finishes
         _forget_escaped_interrupt()
 
 
@@ -86,8 +87,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         if entry:
             _hold_interrupts_until_exit()
-        print("interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        terminated = interrupts.signal_number() == signal.SIGTERM
+        print("terminated" if terminated else "interrupted", file=sys.stderr)
+        return 128 + signal.SIGTERM if terminated else EXIT_INTERRUPTED
     finally:
         if entry:
             _hold_interrupts_until_exit()

@@ -270,6 +270,19 @@ def positive_float(value: str) -> float:
     return v
 
 
+#: What ``--speed`` accepts: beyond these a replay's waits overflow a float (1e-300) or round to nothing.
+SPEED_RANGE = (1e-3, 1e6)
+
+
+def speed_arg(value: str) -> float:
+    """A replay speed: a positive multiple of real time within :data:`SPEED_RANGE`."""
+    v = positive_float(value)
+    lo, hi = SPEED_RANGE
+    if not lo <= v <= hi:
+        raise argparse.ArgumentTypeError(f"expected a multiple of real time from {lo:g} to {hi:g}, got {value!r}")
+    return v
+
+
 def int_list(value: str) -> list[int]:
     try:
         out = [int(v) for v in value.split(",") if v.strip()]

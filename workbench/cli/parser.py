@@ -15,6 +15,7 @@ from workbench.cli.context import (
     int_list,
     n_components_arg,
     positive_float,
+    speed_arg,
 )
 from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
 from workbench.cli.model import cmd_fit, cmd_predict
@@ -291,7 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="instead: send a .tlog's raw MAVLink frames to a link with their recorded timing (a stand-in "
                         "vehicle for `workbench live`), e.g. udpout:127.0.0.1:14550; no model needed")
     p.add_argument("--demo", nargs="+", metavar="ID", help="trials to replay (default the first)")
-    p.add_argument("--speed", type=positive_float, default=1.0, help="multiple of real time (default 1.0)")
+    p.add_argument("--speed", type=speed_arg, default=1.0, help="multiple of real time (default 1.0; 0.001 to "
+                   "1e6)")
     p.add_argument("--no-wait", action="store_true", help="stream as fast as possible")
     p.add_argument("--horizon", dest="horizon_s", type=float, default=ONLINE_HORIZON_S, metavar="SECONDS",
                    help=f"rollout horizon of the online prediction (default {ONLINE_HORIZON_S} s; 0 turns rollouts "

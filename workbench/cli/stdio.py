@@ -31,6 +31,7 @@ STDOUT_NAME = "<stdout>"
 PARQUET_MAGIC = b"PAR1"
 #: Output formats that are text, safe to print to a terminal.
 TEXT_SUFFIXES = (".csv", ".toml", ".json", ".txt")
+_STDIN_BLOCK = 1 << 20
 
 
 def is_stdio(name: object) -> bool:
@@ -108,15 +109,25 @@ class Stdio:
         if stream.isatty():
             raise DataError(f"{STDIN_NAME}: standard input is a terminal; pipe or redirect a file into it, e.g. "
                             "`workbench inspect - < flight.tlog`")
-        data = stream.buffer.read()
-        if not data:
+        # Streamed to the file a block at a time: memory stays at one block whatever arrives (1 GiB in used to
+        # mean 1 GiB resident); the format is told from the first block only.
+        source = stream.buffer
+        head = source.read(_STDIN_BLOCK)
+        if not head:
             raise DataError(f"{STDIN_NAME}: empty input")
-        fmt = None if suffix is not None else self.format or _sniff(data[:4096])
+        fmt = None if suffix is not None else self.format or _sniff(head[:4096])
         if fmt is None and suffix is None:
             raise FormatError(f"{STDIN_NAME}: cannot tell the format from the first bytes (standard input has no "
                               f"file name to go by); give it with --format ({', '.join(input_formats())})")
         path = self._temp() / f"stdin{suffix if fmt is None else _extensions()[fmt]}"
-        path.write_bytes(data)
+        try:
+            with open(path, "wb") as f:
+                f.write(head)
+                while block := source.read(_STDIN_BLOCK):
+                    f.write(block)
+        except OSError as exc:
+            raise DataError(f"{STDIN_NAME}: cannot keep standard input in {path.parent} "
+                            f"({exc.strerror or exc})") from None
         self._stdin, self._stdin_for = path, what
         return path
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import shutil
 import sys
 import threading
 import time
@@ -12,7 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from workbench.atomic import atomic_write_table
+from workbench.atomic import atomic_write_table, recover_swaps, swap_entries, temp_sibling
 from workbench.cli.context import (
     SAMPLE_LOGS,
     Context,
@@ -274,13 +275,13 @@ def _import_in_background(modules: Sequence[str]) -> threading.Thread:
 
 
 def cmd_demo(ctx: Context) -> int:
-    from workbench.study import pipeline as study
-
     a = ctx.args
     refuse_stdio(a.out, "--out", "the demo writes a folder (report, models, data, recording)")
     refuse_stdio(a.logs, "--logs", "the demo reads a folder of logs")
     t_start = time.perf_counter()
     out = Path(a.out)
+    if out.is_dir():
+        recover_swaps(out, "demo")  # what a killed run left half done is undone before anything else
     logs = Path(a.logs) if a.logs else SAMPLE_LOGS
     files = sorted(p for p in logs.iterdir() if p.is_file() and not p.name.startswith(".")) if logs.is_dir() else []
     files = [p for p in files if p.suffix.lower() in (".tlog", ".mcap", ".csv", ".ulg", ".parquet")]
@@ -306,8 +307,24 @@ def cmd_demo(ctx: Context) -> int:
         f"({', '.join(f'{v} {k}' for k, v in by_format.items())}) in {logs}"
     )
     out.mkdir(parents=True, exist_ok=True)
+    # One transaction: the whole result set is built beside the old one and swapped in at the end, so a stopped
+    # or killed demo leaves the previous run's set whole (never new data beside an old report).
+    build = temp_sibling(out / "demo")
+    build.mkdir()
+    try:
+        status = _demo_into(ctx, ds, out, build, timings, t_start)
+    finally:
+        if build.exists():
+            shutil.rmtree(build, ignore_errors=True)
+    return status
+
+
+def _demo_into(ctx: Context, ds: Any, out: Path, build: Path, timings: dict[str, float], t_start: float) -> int:
+    from workbench.study import pipeline as study
+
+    a = ctx.args
     t0 = time.perf_counter()
-    ds.save(out / "demos.parquet")
+    ds.save(build / "demos.parquet")
     timings["files"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     with ctx.executor(local_tasks=len(ds.labels)) as ex:
@@ -331,8 +348,8 @@ def cmd_demo(ctx: Context) -> int:
     t0 = time.perf_counter()
     model_dir = out / "models"
     for label, model in result.models.items():
-        model.save(model_dir / f"{label}.npz")
-    result.save_tables(out / "results.csv")
+        model.save(build / "models" / f"{label}.npz")
+    result.save_tables(build / "results.csv")
     timings["files"] += time.perf_counter() - t0
     from rich.markup import escape
 
@@ -340,12 +357,16 @@ def cmd_demo(ctx: Context) -> int:
     from workbench.viewer import record_study
 
     t1 = time.perf_counter()
-    report = write_study_report(result, out, title="Workbench demo: sample logs")
+    write_study_report(result, build, title="Workbench demo: sample logs")
     timings["report"] = time.perf_counter() - t1
     rrd = out / "demo.rrd"
     t1 = time.perf_counter()
-    record_study(result, rrd, progress=ctx.progress)
+    record_study(result, build / rrd.name, progress=ctx.progress)
     timings["recording"] = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    swap_entries(build, out, "demo")
+    report = out / "report.md"
+    timings["files"] += time.perf_counter() - t1
     t1 = time.perf_counter()
     _print_study(ctx, result)
     ctx.say("")

@@ -199,6 +199,11 @@ def _replay_to(ctx: Context) -> int:
             return 130
     ctx.say(f"sent {report.n_frames} MAVLink frames ({report.log_seconds:.1f} s of log) in {report.wall_seconds:.1f} s "
             f"({report.speed:.1f}× real time)")
+    if report.gaps_capped:
+        from adapters.link.mavlink import MAX_REPLAY_GAP
+
+        ctx.say(f"shortened {report.gaps_capped} gap(s) in the log's timestamps to {MAX_REPLAY_GAP:g} s each "
+                f"({report.seconds_skipped:.0f} s of log clock not waited for: a damaged stamp or a paused recording)")
     return 0
 
 

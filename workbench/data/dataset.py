@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote, unquote
 
-from workbench.atomic import remove_leftovers, swap_in, temp_sibling
+from workbench.atomic import refuse_special_file, remove_leftovers, swap_in, temp_sibling
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, FormatError
 
@@ -141,7 +141,10 @@ def _inside(root: Path, rel: str, where: str) -> Path:
     if p.is_absolute() or ".." in p.parts or not rel:
         raise FormatError(f"{where}: partition path {rel!r} is outside the dataset folder; refused")
     full = root / p
-    resolved, top = full.resolve(), root.resolve()
+    try:
+        resolved, top = full.resolve(), root.resolve()
+    except (RuntimeError, OSError):  # a link to itself (RuntimeError before Python 3.13, OSError since)
+        raise DataError(f"{full}: a symbolic link that loops; refused") from None
     if resolved != top and top not in resolved.parents:
         raise FormatError(f"{where}: {rel} leads to {resolved}, outside the dataset folder; refused")
     return full
@@ -299,7 +302,7 @@ def _legacy_manifest(root: Path) -> Manifest:
         version = int(doc["version"])
         partitions = tuple(Partition.from_json(p) for p in doc["partitions"])
         failures = tuple((str(f["source"]), str(f["error"])) for f in doc.get("failures", []))
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
         raise FormatError(f"{manifest}: damaged dataset manifest ({exc})") from None
     if version > 1:
         raise FormatError(f"{manifest}: dataset version {version} is newer than this workbench reads "
@@ -348,6 +351,7 @@ def _read_partitions(root: Path, wanted: Sequence[str] | None = None) -> tuple[l
         if wanted is not None and _hive_subject(rel) not in wanted:
             continue
         path = _inside(root, rel, str(root))
+        refuse_special_file(path)
         try:
             meta = pq.read_metadata(path)
         except (pa.ArrowException, OSError, UnicodeDecodeError) as exc:  # a column name that is not UTF-8
@@ -359,7 +363,7 @@ def _read_partitions(root: Path, wanted: Sequence[str] | None = None) -> tuple[l
                 header = json.loads(raw)
                 info = header.get("dataset")
                 ids = tuple(str(m["id"]) for m in header["demos"])
-            except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
                 raise FormatError(f"{path}: damaged workbench metadata ({exc})") from None
         if not isinstance(info, dict):
             foreign.append(rel)
@@ -502,13 +506,40 @@ def load_dataset(path: str | os.PathLike, subjects: Iterable[str] | None = None)
     if manifest.foreign:
         return _load_foreign(root, manifest, wanted)
     sets, names = [], []
+    seen: dict[bytes, tuple[str, str]] = {}
     for p in parts:
         file = _inside(root, p.file, str(root))
         if not file.is_file():
             raise DataError(f"{file}: partition listed in {root / MANIFEST} is missing")
-        sets.append(DemonstrationSet.load(file))
+        ds = DemonstrationSet.load(file)
+        _refuse_copies(ds, p.file, seen, root)
+        sets.append(ds)
         names.append(Path(p.source).name if p.source else p.file)
     return join_sets(sets, names)
+
+
+def _fingerprint(d) -> bytes:
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=16)
+    for a in (d.t, d.x, d.u):
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.digest()
+
+
+def _refuse_copies(ds: DemonstrationSet, rel: str, seen: dict[bytes, tuple[str, str]], root: Path) -> None:
+    """Refuse a partition repeating, sample for sample, a trial of an earlier one (a copied file, a log imported
+    twice): loaded as new ids, the copies would sit on both sides of a train/test split."""
+    for d in ds:
+        key = _fingerprint(d)
+        if key in seen:
+            first, first_id = seen[key]
+            n = sum(_fingerprint(e) in seen for e in ds)
+            where = f"{rel} and {first}" if first != rel else f"{rel} (twice)"
+            raise DataError(f"{root}: {where} hold the same trial sample for sample ({d.id!r} = {first_id!r}; "
+                            f"{n} of {len(ds)} trials of {rel} repeat earlier ones): a copy; remove one of them")
+        seen[key] = (rel, d.id)
 
 
 @dataclass(frozen=True, eq=False)
@@ -551,4 +582,5 @@ def load_demonstrations(path: str | os.PathLike) -> DemonstrationSet:
     """A demonstrations file (:meth:`DemonstrationSet.save`) or a dataset directory (:func:`load_dataset`), as one
     set: what every command that reads demonstrations takes."""
     path = Path(path)
+    refuse_special_file(path)
     return load_dataset(path) if path.is_dir() else DemonstrationSet.load(path)

@@ -502,7 +502,7 @@ class DemonstrationSet(Sequence[Demonstration]):
             metas = list(header["demos"])
             roles = Roles.from_json(header.get("roles"), f"{path}: roles")
             meta = {str(m.get("id")): m for m in metas}
-        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
             raise FormatError(f"{path}: damaged workbench metadata ({exc})") from None
         if version > FORMAT_VERSION:
             raise FormatError(

@@ -187,6 +187,8 @@ def read_model_file(path: str | os.PathLike) -> ModelFile:
         header = json.loads(raw.tobytes().decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"{path}: damaged model file: header is not JSON ({exc})") from None
+    except RecursionError:
+        raise ModelFileError(f"{path}: damaged model file: header nested deeper than the JSON parser goes") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         fmt = header.get("format") if isinstance(header, dict) else None
         raise ModelFileError(f"{path}: header names format {fmt!r}, not {FORMAT_NAME!r}")

@@ -37,8 +37,10 @@ import json
 import os
 import shutil
 import signal
+import sys
 import tempfile
 import threading
+import time
 import uuid
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -62,6 +64,8 @@ __all__ = [
 Progress = Callable[[int, int], Any]
 #: Re-runs of a task that raised something unexpected (an OSError on a network file system, a MemoryError).
 DEFAULT_RETRIES = 2
+#: Seconds a study waits for a scheduler given by address to have its first worker, then stops with an error.
+WORKER_WAIT = 30.0
 
 
 def task_seed(seed: int, *key: Any) -> np.random.SeedSequence:
@@ -175,6 +179,33 @@ def _keys(items: Sequence[Any], keys: Sequence[str] | None) -> list[str]:
     return [str(k) for k in keys]
 
 
+#: Temporary staging folders are named ``workbench-staging-<pid>-…``: a folder whose process no longer runs (killed
+#: before it could remove it) is removed by the next one made (:func:`remove_stale_staging`).
+STAGING_PREFIX = "workbench-staging-"
+
+
+def remove_stale_staging(folder: str | os.PathLike | None = None) -> list[Path]:
+    """Remove the staging folders of processes that no longer run, from ``folder`` (the temporary folder)."""
+    from workbench.atomic import LEGACY_AGE, _alive
+
+    folder = Path(folder or tempfile.gettempdir())
+    removed = []
+    try:
+        entries = [e for e in folder.iterdir() if e.name.startswith(STAGING_PREFIX)]
+    except OSError:
+        return removed
+    for entry in entries:
+        pid = entry.name[len(STAGING_PREFIX):].split("-", 1)[0]
+        try:
+            stale = not _alive(int(pid)) if pid.isdigit() else time.time() - entry.lstat().st_mtime > LEGACY_AGE
+            if stale and entry.is_dir() and not entry.is_symlink() and entry.stat().st_uid == os.getuid():
+                shutil.rmtree(entry, ignore_errors=True)
+                removed.append(entry)
+        except OSError:
+            continue
+    return removed
+
+
 class Staging:
     """The folder where sets are written for worker processes to read (data travel as paths, not in messages).
 
@@ -185,10 +216,12 @@ class Staging:
         self._own = path is None
         self._path = Path(path) if path is not None else None
         self._n = 0
+        if self._own:
+            remove_stale_staging()
 
     def _dir(self) -> Path:
         if self._path is None:
-            self._path = Path(tempfile.mkdtemp(prefix="workbench-staging-"))
+            self._path = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-"))
         self._path.mkdir(parents=True, exist_ok=True)
         return self._path
 
@@ -333,6 +366,9 @@ class DaskExecutor(_Workers):
         Re-runs of a task that raised an unexpected exception (a ``WorkbenchError`` is not retried).
     timeout : float
         Seconds to wait for the scheduler at ``scheduler``.
+    worker_wait : float
+        Seconds to wait for the scheduler at ``scheduler`` to have a worker (:data:`WORKER_WAIT`); a scheduler
+        still without one then is an error, where tasks sent to it would wait forever.
 
     Raises
     ------
@@ -345,7 +381,7 @@ class DaskExecutor(_Workers):
 
     def __init__(
         self, workers: int | None = None, scheduler: str | None = None, *, staging: str | os.PathLike | None = None,
-        retries: int = DEFAULT_RETRIES, timeout: float = 15.0,
+        retries: int = DEFAULT_RETRIES, timeout: float = 15.0, worker_wait: float | None = None,
     ) -> None:
         if (workers is None) == (scheduler is None):
             raise WorkbenchError("give either a number of local workers or a scheduler address")
@@ -367,6 +403,14 @@ class DaskExecutor(_Workers):
             except (OSError, TimeoutError, ValueError) as exc:
                 raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: {_describe(exc)}") from None
             self.address = str(scheduler)
+            wait = WORKER_WAIT if worker_wait is None else float(worker_wait)
+            try:
+                self._client.wait_for_workers(1, timeout=wait)
+            except (TimeoutError, OSError) as exc:
+                self._client.close()
+                why = (f"has no worker (waited {wait:g} s); start one with `dask worker {scheduler}`"
+                       if isinstance(exc, TimeoutError) else f"cannot be reached: {_describe(exc)}")
+                raise WorkbenchError(f"the Dask scheduler at {scheduler} {why}") from None
         else:
             self._cluster = LocalCluster(
                 # any free port for the scheduler's HTTP endpoint: two studies at once must not collide on 8787
@@ -554,9 +598,35 @@ def _quiet_interrupts() -> None:
     """In a worker process: Ctrl-C (the terminal sends it to the whole process group) ends the worker at once and
     silently; the command that started it reports the interrupt, in one line, and stops the pool. A Ctrl-C that
     came during the worker's start-up (blocked, :func:`_spawning_without_interrupts`) is delivered here."""
+    _die_with_parent()
     signal.signal(signal.SIGINT, _exit_interrupted)
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """In a worker process: be killed when the command that started it dies, however it dies (SIGKILL included).
+
+    Linux's parent-death signal (``prctl(PR_SET_PDEATHSIG)``), through ctypes: without it a killed command left
+    its workers and their resource tracker running under PID 1 (~575 MiB, for minutes). A parent already gone
+    by now (reparented) ends the worker at once. Elsewhere nothing happens: the pool's own pipes end workers
+    whose parent exited cleanly.
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    parent = os.getppid()
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent or parent == 1:
+        os._exit(1)
 
 
 def _exit_interrupted(signum: int, frame: Any) -> None:

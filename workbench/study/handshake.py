@@ -41,7 +41,8 @@ def _read(sock: socket.socket, n: int, deadline: float, address: str) -> bytes:
 def check_scheduler(address: str, timeout: float = 10.0) -> None:
     """Connect to ``address`` (``tcp://HOST:PORT`` or ``HOST:PORT``) and check that a Dask scheduler greets.
 
-    Other schemes (``tls://``, ``ws://``, ``inproc://``) are left to the client.
+    ``inproc://`` (this process's own) passes unchecked; other schemes (``tls://``, ``ws://``, ``ucx://``) are
+    refused.
 
     Raises
     ------
@@ -52,9 +53,17 @@ def check_scheduler(address: str, timeout: float = 10.0) -> None:
     text = str(address).strip()
     if "://" not in text:
         text = f"tcp://{text}"
-    parts = urlsplit(text)
-    if parts.scheme != "tcp":
+    try:
+        parts = urlsplit(text)
+    except ValueError:  # "tcp://[::1": an unclosed IPv6 bracket
+        raise WorkbenchError(f"{address}: not a scheduler address (tcp://HOST:PORT)") from None
+    if parts.scheme == "inproc":  # a scheduler in this very process (a test's LocalCluster): nothing to check
         return
+    if parts.scheme != "tcp":
+        # tls:// needs certificates the workbench has no option for, ws:// and ucx:// extra packages and their
+        # own handshakes: refused by name here rather than failing inside the client (TypeError, WebSocketError)
+        raise WorkbenchError(f"{address}: the workbench connects to Dask schedulers at tcp://HOST:PORT only, not "
+                             f"{parts.scheme}://")
     try:
         host, port = parts.hostname, parts.port
     except ValueError:

@@ -150,7 +150,9 @@ class open_output:
                     self.rec.flush(timeout_sec=FLUSH_TIMEOUT)
                 except RuntimeError as err:  # the SDK's own words for a viewer that went away: "connection severed"
                     if self.save is not None:
-                        raise
+                        # "File-writer thread shut down prematurely": its thread failed to write (a full disk)
+                        raise WorkbenchError(f"{self.save}: the recording could not be written ({_free(self.save)}; "
+                                             "rerun's file writer stopped); nothing was saved") from None
                     raise WorkbenchError(f"the rerun viewer went away while receiving the recording ({err})") from None
                 if self.save is not None:
                     self.rec.disconnect()
@@ -175,6 +177,15 @@ class open_output:
         if self._server is None:
             return
         _wait_then_stop(self._server)
+
+
+def _free(path: Path) -> str:
+    """The free space where ``path`` goes, in words: the likely cause of a writer thread that stopped."""
+    try:
+        free = shutil.disk_usage(path.parent if str(path.parent) else ".").free
+    except OSError:
+        return "the folder cannot be read"
+    return "the disk is full" if free < (1 << 20) else f"{free / 2**20:.0f} MiB free there"
 
 
 def _wait_then_stop(proc: subprocess.Popen) -> None:

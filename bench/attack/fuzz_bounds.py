@@ -1,0 +1,471 @@
+"""Attack round on bounds and losses (issue 29): hostile sizes, bad stamps, meaningless mapping values, copied
+and special files in datasets, replay waits, schedulers, nesting, large standard input.
+Not part of the test suite: run it for a bounded time and read the counts.
+
+    PYTHONPATH=. nice .venv/bin/python bench/attack/fuzz_bounds.py --seconds 30   # per surface
+
+Per surface: calls, clean errors (a ``WorkbenchError``, in the workbench's words), foreign errors (anything else,
+or a clean error quoting a library: ``ZstdError``, ``codec can't decode``, ``cannot fit``), hangs (a call over
+60 s), silent wrong results (a call that returned but lost or doubled data, accepted a meaningless value or
+waited past its bound) and the peak resident memory seen during the surface (this process, or the child for
+standard input).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import re
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+import zlib
+from collections import Counter
+from pathlib import Path
+
+import psutil
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO))
+
+from workbench.errors import WorkbenchError  # noqa: E402
+
+HANG_S = 60.0
+FOREIGN_TEXT = re.compile(r"ZstdError|codec can't decode|cannot fit|Traceback|RecursionError|OverflowError|"
+                          r"need at least one array|WebSocketError|TypeError")
+TLOG = REPO / "sample_logs" / "landing_s00.tlog"
+
+
+class Tally:
+    def __init__(self) -> None:
+        self.by_surface: dict[str, Counter] = {}
+        self.examples: dict[str, list[str]] = {}
+        self.peak: dict[str, float] = {}
+        self.slowest: dict[str, float] = {}
+
+    def run(self, surface: str, fn, *args) -> None:
+        c = self.by_surface.setdefault(surface, Counter())
+        c["calls"] += 1
+        start = time.monotonic()
+        try:
+            wrong = fn(*args)
+        except WorkbenchError as exc:
+            if FOREIGN_TEXT.search(str(exc)):
+                c["foreign errors"] += 1
+                self.examples.setdefault(surface, []).append(f"library text: {str(exc)[:200]}")
+            else:
+                c["clean errors"] += 1
+            wrong = None
+        except Exception as exc:  # the point of the fuzzer: count what escapes as a foreign error
+            c["foreign errors"] += 1
+            self.examples.setdefault(surface, []).append(
+                f"{type(exc).__name__}: {str(exc)[:160]} @ {traceback.extract_tb(exc.__traceback__)[-1].filename}")
+            wrong = None
+        took = time.monotonic() - start
+        self.slowest[surface] = max(self.slowest.get(surface, 0.0), took)
+        if took > HANG_S:
+            c["hangs"] += 1
+        if wrong:
+            c["silent wrong results"] += 1
+            self.examples.setdefault(surface, []).append(f"wrong: {wrong}")
+
+
+class RssSampler:
+    """Peak resident memory of this process (and a child, when one is named), sampled every 20 ms."""
+
+    def __init__(self) -> None:
+        self.peak = 0
+        self.child: int | None = None
+        self._stop = threading.Event()
+        self._me = psutil.Process()
+        threading.Thread(target=self._loop, daemon=True).start()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            rss = self._me.memory_info().rss
+            if self.child is not None:
+                try:
+                    rss = max(rss, psutil.Process(self.child).memory_info().rss)
+                except psutil.Error:
+                    pass
+            self.peak = max(self.peak, rss)
+            time.sleep(0.02)
+
+    def reset(self) -> None:
+        self.peak = 0
+
+
+# -- CSV headers -------------------------------------------------------------------------------------------------
+def attack_csv_header(rng: random.Random, base: Path) -> str | None:
+    import adapters
+
+    width = rng.choice([3, 50, 1000, 9_999, 10_001, 100_000, 1_000_000])
+    name = rng.choice(["c", "x" * rng.choice([1, 100, 10_000])])
+    path = base / f"w{rng.randrange(10**9)}.csv"
+    path.write_text("demo,t," + ",".join(f"{name}{i}" for i in range(width)) + "\n" + "a,0," +
+                    ",".join("0" for _ in range(width)) + "\na,0.1," + ",".join("1" for _ in range(width)) + "\n")
+    try:
+        adapters.inspect(path)
+    finally:
+        path.unlink()
+    return None
+
+
+# -- MCAP: honest chunks declaring much, damaged chunks ------------------------------------------------------------
+_BOMBS: dict[int, bytes] = {}
+
+
+def _mcap_bomb(size: int) -> bytes:
+    """An MCAP (no summary) with one honest zstd chunk of ``size`` bytes of message records, built streaming."""
+    import zstandard
+
+    if size in _BOMBS:
+        return _BOMBS[size]
+    payload = b'{"a": 1}' + b" " * 60_000
+    rec = struct.pack("<BQ", 0x05, 22 + len(payload))
+    block, n = b"", 0
+    while len(block) < (1 << 20):
+        block += rec + struct.pack("<HIQQ", 1, n, n, n) + payload
+        n += 1
+    cobj = zstandard.ZstdCompressor(level=1).compressobj()
+    crc, done, out = 0, 0, []
+    while done + len(block) <= size:
+        out.append(cobj.compress(block))
+        crc = zlib.crc32(block, crc)
+        done += len(block)
+    out.append(cobj.flush())
+    comp = b"".join(out)
+
+    def string(s: bytes) -> bytes:
+        return struct.pack("<I", len(s)) + s
+
+    def record(op: int, body: bytes) -> bytes:
+        return struct.pack("<BQ", op, len(body)) + body
+
+    schema = record(0x03, struct.pack("<H", 1) + string(b"s") + string(b"jsonschema") + string(b"{}"))
+    channel = record(0x04, struct.pack("<HH", 1, 1) + string(b"/x") + string(b"json") + struct.pack("<I", 0))
+    chunk = record(0x06, struct.pack("<QQQI", 0, n, done, crc) + string(b"zstd") + struct.pack("<Q", len(comp))
+                   + comp)
+    header = record(0x01, string(b"") + string(b"bomb"))
+    footer = record(0x02, struct.pack("<QQI", 0, 0, 0))
+    magic = b"\x89MCAP0\r\n"
+    data = magic + header + schema + channel + chunk + footer + magic
+    _BOMBS[size] = data
+    return data
+
+
+def attack_mcap_sizes(rng: random.Random, base: Path, sample: bytes) -> str | None:
+    from fuzz_surfaces import _mutate  # noqa: PLC0415 - the same damage the last round used
+
+    import adapters
+
+    if rng.random() < 0.4:
+        data = _mcap_bomb(rng.choice([8 << 20, 64 << 20, 512 << 20, 1 << 30]))
+    else:
+        data = _mutate(rng, sample)
+    path = base / f"m{rng.randrange(10**9)}.mcap"
+    path.write_bytes(data)
+    try:
+        adapters.inspect(path)
+    finally:
+        path.unlink()
+    return None
+
+
+# -- one bad timestamp ---------------------------------------------------------------------------------------------
+def _tlog_offsets(data: bytes) -> list[int]:
+    offs, off = [], 0
+    while off + 10 <= len(data):
+        magic, ln = data[off + 8], data[off + 9]
+        size = 8 + ln + (12 + (13 if data[off + 10] & 1 else 0) if magic == 0xFD else 8)
+        offs.append(off)
+        off += size
+    return offs
+
+
+def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int], want) -> str | None:
+    import adapters
+
+    data = bytearray(clean)
+    off = rng.choice(offsets)
+    (stamp,) = struct.unpack(">Q", data[off : off + 8])
+    shift = rng.choice([1, -1]) * 2 ** rng.randrange(10, 40)
+    data[off : off + 8] = struct.pack(">Q", max(0, stamp + shift))
+    path = base / f"s{rng.randrange(10**9)}.tlog"
+    path.write_bytes(bytes(data))
+    try:
+        got = adapters.load(path)
+    finally:
+        path.unlink()
+    n_demos, n_samples = want
+    # one stamp costs at most its sample: the grid may lose a step where it sat, never a trial or a run of samples
+    if len(got) != n_demos or got.n_samples < n_samples - 3:
+        return f"stamp +{shift} us at byte {off}: {len(got)} trials / {got.n_samples} samples, not " \
+               f"{n_demos} / {n_samples}"
+    return None
+
+
+# -- mapping values ------------------------------------------------------------------------------------------------
+def attack_mapping_values(rng: random.Random, base: Path) -> str | None:
+    import adapters
+
+    text = (REPO / "adapters" / "mappings" / "planar_quadrotor.toml").read_text()
+    kind = rng.choice(["offset", "scale", "min_duration", "pwm", "bitmask", "clock", "source", "nested"])
+    value = rng.choice(["1e308", "-1e308", "1e13", "1e-300", "0", "-5", "5", "1e12", "2**64", "nan"])
+    meaningless = False
+    literal = str(2**64) if value == "2**64" else value
+    original = text
+    if kind == "offset":
+        v = float(literal)
+        text = re.sub(r"(u2 = \{[^}]*?)scale", rf"\1offset = {literal}, scale", text, count=1)
+        meaningless = not abs(v) <= 1e12
+    elif kind == "scale":
+        v = float(literal)
+        text = re.sub(r"scale = 0\.001", f"scale = {literal}", text, count=1)
+        meaningless = not 1e-12 <= abs(v) <= 1e12
+    elif kind == "min_duration":
+        v = float(literal)
+        text = re.sub(r"^min_duration = .*$", f"min_duration = {literal}", text, count=1, flags=re.M)
+        meaningless = not 0 < v <= 1e12
+    elif kind == "pwm":
+        lo, hi = rng.choice([(1500, 1500), (2000, 1000), (1000, 2000)])
+        text = re.sub(r'(\[tlog\.channels\][^\[]*?u1 = )[^\n]*',
+                      rf'\1{{ source = "MANUAL_CONTROL.y", transform = "pwm", pwm_min = {lo}, pwm_max = {hi} }}',
+                      text, count=1, flags=re.S)
+        meaningless = lo >= hi
+    elif kind == "bitmask":
+        bit = rng.choice([2**64, 2**63, -1, 0, 128])
+        text = text.replace("[tlog.segment]\n", f'[tlog.segment]\narmed = {{ source = "HEARTBEAT.base_mode", '
+                            f'bitmask = {bit} }}\n', 1)
+        meaningless = not 0 < bit < 2**63
+    elif kind == "clock":
+        field = rng.choice(["time_boot_ms", "time_bot_ms", "nonexistent"])
+        text = text.replace('dt = 0.05', f'dt = 0.05\nclock = {{ field = "{field}", scale = 0.001 }}', 1)
+        meaningless = field != "time_boot_ms"
+    elif kind == "source":
+        text = re.sub(r'(\[tlog\.channels\][^\[]*?x = )"[^"]*"', r'\1"LOCAL_POSITION_NED."', text, count=1,
+                      flags=re.S)
+        meaningless = True
+    else:
+        depth = rng.choice([10, 1000, 100_000])
+        text += "\nextra = " + "[" * depth + "]" * depth + "\n"
+        meaningless = depth >= 50_000  # beyond the parser's recursion; shallower ones are plain TOML
+    path = base / f"m{rng.randrange(10**9)}.toml"
+    path.write_text(text)
+    try:
+        adapters.load(TLOG, mapping=str(path))
+    finally:
+        path.unlink()
+    if meaningless and text != original:
+        return f"{kind} = {value}: accepted"
+    return None
+
+
+# -- datasets: copies, special files -------------------------------------------------------------------------------
+def attack_dataset_files(rng: random.Random, base: Path, study) -> str | None:
+    from workbench.data.dataset import load_dataset, write_dataset
+
+    root = base / f"ds{rng.randrange(10**9)}"
+    write_dataset(study, root)
+    victim = next(root.rglob("*.parquet"))
+    action = rng.choice(["copy", "copy_other_subject", "fifo", "self_link", "dangling_link", "device", "socket",
+                         "nothing"])
+    if action == "copy":
+        shutil.copyfile(victim, victim.with_name(f"{victim.stem} (copy).parquet"))
+    elif action == "copy_other_subject":
+        other = root / "subject=zz"
+        other.mkdir()
+        shutil.copyfile(victim, other / victim.name)
+    elif action == "fifo":
+        os.mkfifo(victim.with_name("x.parquet"))
+    elif action == "self_link":
+        link = victim.with_name("self.parquet")
+        link.symlink_to(link)
+    elif action == "dangling_link":
+        victim.with_name("gone.parquet").symlink_to(root / "nowhere.parquet")
+    elif action == "device":
+        victim.with_name("zero.parquet").symlink_to("/dev/zero")
+    elif action == "socket":
+        import socket
+
+        s = socket.socket(socket.AF_UNIX)
+        s.bind(str(victim.with_name("s.parquet")))
+        s.close()
+    try:
+        ds = load_dataset(root)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    if len(ds) != len(study):
+        return f"{action}: {len(ds)} trials, the dataset holds {len(study)}"
+    if action != "nothing":
+        return f"{action}: loaded without a word"
+    return None
+
+
+# -- replay waits, link ports, speeds ------------------------------------------------------------------------------
+def attack_replay(rng: random.Random, base: Path, clean: bytes, offsets: list[int], honest: float) -> str | None:
+    from adapters.link import mavlink
+    from workbench.cli import main
+
+    if rng.random() < 0.3:
+        port = rng.choice([-1, 0, 65536, 99999, 2**32, 2**64])
+        speed = rng.choice(["1e-300", "1e300", "0", "-1", "nan", "inf", "1"])
+        code = main(["replay", str(TLOG), "--to", f"udpout:127.0.0.1:{port}", "--speed", speed, "-q"]) \
+            if speed == "1" else None
+        if code is not None and code != 1:
+            return f"port {port}: exit {code}"
+        if speed != "1":
+            try:
+                main(["replay", str(TLOG), "--to", "udpout:127.0.0.1:14599", "--speed", speed, "-q"])
+            except SystemExit as exc:
+                if exc.code != 2:
+                    return f"--speed {speed}: exit {exc.code}"
+                raise WorkbenchError("refused by the parser") from None
+            return f"--speed {speed}: accepted"
+        return None
+    data = bytearray(clean)
+    off = rng.choice(offsets)
+    (stamp,) = struct.unpack(">Q", data[off : off + 8])
+    data[off : off + 8] = struct.pack(">Q", stamp + 2 ** rng.randrange(20, 44))
+    path = base / f"r{rng.randrange(10**9)}.tlog"
+    path.write_bytes(bytes(data))
+    now = [0.0]
+
+    def sleep(s: float) -> None:
+        now[0] += s
+
+    try:
+        mavlink.send_tlog(path, "udpout:127.0.0.1:14599", speed=1.0, clock=lambda: now[0], sleep=sleep)
+    finally:
+        path.unlink()
+    if now[0] > honest + 2 * mavlink.MAX_REPLAY_GAP + 1:
+        return f"waited {now[0]:.0f} s for a log of {honest:.0f} s"
+    return None
+
+
+# -- schedulers ----------------------------------------------------------------------------------------------------
+def attack_scheduler(rng: random.Random, empty: str) -> str | None:
+    from workbench.study.executor import DaskExecutor
+
+    address = rng.choice([f"{s}://127.0.0.1:8786" for s in ("tls", "ucx", "ws", "wss", "udp", "http")]
+                         + [empty, "tcp://127.0.0.1:99999", "tcp://[::1", "127.0.0.1:1"])
+    start = time.monotonic()
+    ex = DaskExecutor(scheduler=address, timeout=3, worker_wait=2.0)
+    ex.close()
+    return f"{address}: connected" if time.monotonic() - start < 100 else None
+
+
+# -- nesting -------------------------------------------------------------------------------------------------------
+def attack_nesting(rng: random.Random, base: Path) -> str | None:
+    import numpy as np
+
+    from workbench.models import load_model
+
+    depth = rng.choice([10, 1000, 50_000, 500_000])
+    text = ("[" * depth + "]" * depth).encode()
+    path = base / f"n{rng.randrange(10**9)}.npz"
+    np.savez(path, __header__=np.frombuffer(text, dtype=np.uint8))
+    try:
+        load_model(path)
+    finally:
+        path.unlink()
+    return "a nested header loaded as a model"
+
+
+# -- large standard input ------------------------------------------------------------------------------------------
+def attack_stdin_size(rng: random.Random, sampler: RssSampler) -> str | None:
+    size = rng.choice([64 << 20, 256 << 20, 1 << 30])
+    head = TLOG.read_bytes()[: 1 << 16]
+    proc = subprocess.Popen([sys.executable, "-m", "workbench", "inspect", "-", "-q"], stdin=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=REPO,
+                            env={**os.environ, "PYTHONPATH": str(REPO)})
+    sampler.child = proc.pid
+    try:
+        proc.stdin.write(head)
+        block = bytes(1 << 20)
+        for _ in range((size - len(head)) >> 20):
+            proc.stdin.write(block)
+        proc.stdin.close()
+    except BrokenPipeError:
+        pass
+    err = proc.stderr.read().decode(errors="replace")
+    code = proc.wait(timeout=HANG_S * 2)
+    sampler.child = None
+    if code not in (0, 1) or "Traceback" in err:
+        raise RuntimeError(f"inspect - ({size >> 20} MiB): exit {code}: {err[-200:]}")
+    if code == 1:
+        raise WorkbenchError(err.strip())
+    return None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=30.0, help="per surface")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--only", action="append")
+    args = ap.parse_args()
+    rng = random.Random(args.seed)
+    sys.path.insert(0, str(Path(__file__).parent))
+
+    import adapters
+    from workbench.sim.landing import simulate_study
+
+    clean = TLOG.read_bytes()
+    offsets = _tlog_offsets(clean)
+    ref = adapters.load(TLOG)
+    want = (len(ref), ref.n_samples)
+    from adapters.link.mavlink import MAX_REPLAY_GAP, tlog_frames
+
+    times = [t for t, _ in tlog_frames(TLOG)]
+    honest = sum(min(max(b - a, 0.0), MAX_REPLAY_GAP) for a, b in zip(times, times[1:], strict=False))
+    study = simulate_study(n_subjects=2, n_trials=2, strategy="CS1", seed=1)
+    sample_mcap = (REPO / "sample_logs" / "landing_s01.mcap").read_bytes()
+    base = Path(tempfile.mkdtemp(prefix="wb-bounds-"))
+    from dask.distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=0, processes=False, protocol="tcp://", dashboard_address=":0")
+    tally, sampler = Tally(), RssSampler()
+    surfaces = {
+        "CSV header width": lambda: attack_csv_header(rng, base),
+        "MCAP declared sizes / damage": lambda: attack_mcap_sizes(rng, base, sample_mcap),
+        "one bad tlog stamp": lambda: attack_stamp(rng, base, clean, offsets, want),
+        "mapping values": lambda: attack_mapping_values(rng, base),
+        "dataset copies / special files": lambda: attack_dataset_files(rng, base, study),
+        "replay waits / ports / speeds": lambda: attack_replay(rng, base, clean, offsets, honest),
+        "schedulers (schemes, no workers)": lambda: attack_scheduler(rng, cluster.scheduler_address),
+        "nested model header": lambda: attack_nesting(rng, base),
+        "stdin size": lambda: attack_stdin_size(rng, sampler),
+    }
+    if args.only:
+        surfaces = {k: v for k, v in surfaces.items() if any(o.lower() in k.lower() for o in args.only)}
+    try:
+        for name, call in surfaces.items():
+            sampler.reset()
+            end = time.monotonic() + args.seconds
+            while time.monotonic() < end:
+                tally.run(name, call)
+            tally.peak[name] = sampler.peak / 2**20
+            print(f"{name}: {dict(tally.by_surface[name])}, peak {tally.peak[name]:.0f} MiB, slowest call "
+                  f"{tally.slowest[name]:.1f} s", flush=True)
+    finally:
+        cluster.close()
+        shutil.rmtree(base, ignore_errors=True)
+    keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
+    print("| surface | " + " | ".join(keys) + " | peak MiB | slowest call s |")
+    print("|---|" + "---|" * (len(keys) + 2))
+    for name, c in tally.by_surface.items():
+        print(f"| {name} | " + " | ".join(str(c.get(k, 0)) for k in keys)
+              + f" | {tally.peak[name]:.0f} | {tally.slowest[name]:.1f} |")
+    for name, ex in tally.examples.items():
+        for e in list(dict.fromkeys(ex))[:8]:
+            print(f"{name}: {e}")
+
+
+if __name__ == "__main__":
+    main()
