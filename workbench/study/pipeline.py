@@ -25,6 +25,7 @@ from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.names import METHOD_TITLES
+from workbench.study.method_level import SPLITS
 
 __all__ = [
     "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "improvement_table", "verdicts", "metric_unit", "plant_for",
@@ -111,7 +112,7 @@ class StudyResult:
     def summary(self) -> pd.DataFrame:
         """Mean RMSE per label, metric and method, with the proposed model's paired difference (and interval)
         against each baseline on the headline metric."""
-        return improvement_table(self.rmse, None if self.statistics is None else self.statistics.paired)
+        return improvement_table(self.rmse, None if self.statistics is None else self.statistics.headline)
 
     def verdicts(self) -> list[str]:
         """One plain sentence per label where the proposed model is not shown to beat IOC-only or persistence
@@ -125,7 +126,7 @@ class StudyResult:
                   f"objective was not found ({reason}); it still predicts, and is compared as usual."
                   for label, model in self.models.items()
                   if (reason := getattr(model, "objective_error_", None))]
-        paired = () if self.statistics is None else self.statistics.paired
+        paired = () if self.statistics is None else self.statistics.headline
         return lines + verdicts(paired, self.metric)
 
     def save_tables(self, path: str | os.PathLike) -> Path:
@@ -220,6 +221,7 @@ def run_study(
     bootstrap: int = 0,
     stride_s: float | None = 1.0,
     power: int = 0,
+    method_splits: int = SPLITS,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
 
@@ -230,6 +232,10 @@ def run_study(
     ``bootstrap``: resamples of each label's training trials for intervals of the proposed model's task objective
     and its weight ratios (``StudyResult.objectives``); 0 computes none. ``power``: simulated sets per size of the
     power curve of every ratio the data do not pin down (:mod:`workbench.study.power`); 0 computes none.
+
+    ``method_splits``: random train/test splits of each strategy's trials on which every method is refitted, for
+    the method-level comparison (:mod:`workbench.study.method_level`) that the headline and the verdicts use; 0
+    compares the fitted models on the one split only.
 
     ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
@@ -304,7 +310,14 @@ def run_study(
                    if part.check is not None]
     eff_parts = [part.efficiency for part in parts if part.efficiency is not None]
     table = pd.concat(rmse_parts, ignore_index=True)
-    statistics = _statistics(table, demos, system, n_steps, stride, seed)
+    method_level = None
+    if method_splits > 0 and test_ids is None:
+        t0 = time.perf_counter()
+        method_level = _method_level({lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()},
+                                     {lb: part.fitted for lb, part in zip(splits, parts, strict=True)}, system,
+                                     n_steps, stride, test_size, int(method_splits), seed, executor, progress)
+        timings["method-level splits"] = time.perf_counter() - t0
+    statistics = _statistics(table, demos, system, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
     if ratio_comparison is not None:
@@ -535,15 +548,46 @@ def _stride_steps(stride_s: float | None, dt: float) -> int | None:
 
 
 def _statistics(table: pd.DataFrame, demos: DemonstrationSet, system: Any, n_steps: int, stride: int | None,
-                seed: int) -> Any:
-    """The paired differences, tests and mixed model of the headline metric (:mod:`workbench.study.findings`)."""
+                seed: int, method_level: Any = None) -> Any:
+    """The paired differences, tests and mixed model of the headline metric (:mod:`workbench.study.findings`),
+    with the method-level differences where they were computed."""
     from workbench.study.evaluate import primary_metric
     from workbench.study.findings import study_statistics, windows_sentence
 
     metric = primary_metric(system)
     subjects = {d.id: str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None}
     return study_statistics(table, metric, metric_unit(system, metric), subjects,
-                            windows_sentence(table, n_steps, stride, demos.dt), seed=seed)
+                            windows_sentence(table, n_steps, stride, demos.dt), seed=seed, method_level=method_level)
+
+
+def _method_level(by_label: dict[str, DemonstrationSet], fitted: dict[str, dict[str, Any]], system: Any,
+                  n_steps: int, stride: int | None, test_size: float, splits: int, seed: int, executor: Any,
+                  progress: Callable[[], Any] | None) -> Any:
+    """Every method refitted on ``splits`` random splits of each label's trials, scored on the headline metric,
+    as :class:`~workbench.study.method_level.MethodDifference` rows (:mod:`workbench.study.method_level`)."""
+    from workbench.study.evaluate import primary_metric
+    from workbench.study.executor import serial
+    from workbench.study.method_level import method_differences, split_scores, split_tasks
+
+    ex = executor if executor is not None else serial
+    metric = primary_metric(system)
+    templates = {lb: models for lb, models in fitted.items() if "proposed" in models and lb in by_label}
+    if not templates:
+        return None
+    by_label = {lb: ds for lb, ds in by_label.items() if lb in templates}
+    tasks, sizes, units = split_tasks(by_label, templates, metric, n_steps, stride, test_size, splits, seed,
+                                      share=ex.share if getattr(ex, "parallel", False) else None)
+    if not tasks:
+        return None
+    bar = progress() if progress is not None else nullcontext()
+    with bar as p:
+        task = p.add_task(f"refitting on {splits} splits", total=len(tasks)) if p is not None else None
+        parts = ex.map(split_scores, tasks, progress=None if p is None else lambda d, t: p.update(task, completed=d))
+    sizes = {lb: sz for lb, sz in sizes.items()}
+    scores = pd.concat([pt for pt in parts if len(pt)], ignore_index=True) if any(len(pt) for pt in parts) else None
+    if scores is None:
+        return None
+    return tuple(method_differences(scores, sizes, metric, "proposed", units=units))
 
 
 def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -> pd.DataFrame:
@@ -573,10 +617,13 @@ def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -
 
 def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
     """One plain sentence per label where the proposed model is not shown to be better than IOC-only or
-    persistence (:data:`FLOOR_METHODS`): the interval of its paired difference does not lie above zero. Then its
-    predictions are not shown to gain anything on these data, and the user must read that before any other number.
+    persistence (:data:`FLOOR_METHODS`): the interval of its difference does not lie above zero. Then its
+    predictions are not shown to gain anything on these data, and the user must read that before any other number;
+    where the interval lies below zero the sentence says "worse by X % [a, b]".
 
-    ``paired`` are :class:`~workbench.study.paired.PairedDifference`; labels where it beats both give no sentence.
+    ``paired`` are :class:`~workbench.study.paired.PairedDifference` (these fitted models on these test trials) or
+    :class:`~workbench.study.method_level.MethodDifference` (the methods, refitted over splits); the sentence says
+    which. Labels where it beats both give no sentence.
     """
     what = metric.removeprefix("rmse_").replace("_", " ")
     out = []
@@ -586,14 +633,34 @@ def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
     labels = list(dict.fromkeys(d.label for d in paired if d.metric == metric))
     labels = [lb for lb in labels if lb != ALL_LABELS] or labels
     for label in labels:
-        worse = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
-                 and not d.lo > 0]
-        if not worse:
+        rows = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
+                and not d.lo > 0]
+        if not rows:
             continue
         where = f"On {label}, the" if label not in ("", UNLABELED) else "The"
-        parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} ({d.sentence()})" for d in worse]
-        which = "that baseline" if len(worse) == 1 else "those baselines"
-        out.append(f"{where} proposed model is not shown to be better than {' nor than '.join(parts)} in mean "
-                   f"{what} RMSE on the test trials: its predictions are not shown to gain anything over {which} on "
-                   "these data.")
+        scope = _scope(rows[0])
+        worse = [d for d in rows if d.hi < 0]
+        unclear = [d for d in rows if not d.hi < 0]
+        if worse:
+            parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} by {_pct(-d.change)} [{_pct(-d.hi)}, "
+                     f"{_pct(-d.lo)}]" for d in worse]
+            out.append(f"{where} proposed model is worse than {' and than '.join(parts)} in mean {what} RMSE "
+                       f"{scope}: use {'that baseline' if len(worse) == 1 else 'those baselines'} for these data.")
+        if unclear:
+            parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} ({d.sentence()})" for d in unclear]
+            which = "that baseline" if len(unclear) == 1 else "those baselines"
+            out.append(f"{where} proposed model is not shown to be better than {' nor than '.join(parts)} in mean "
+                       f"{what} RMSE {scope}: its predictions are not shown to gain anything over {which} on these "
+                       "data.")
     return out
+
+
+def _scope(d: Any) -> str:
+    """Which question a difference answers, as the verdict says it."""
+    if hasattr(d, "n_splits"):
+        return f"as a method (every model refitted on {d.n_splits} random splits of the trials)"
+    return "on the test trials (these fitted models)"
+
+
+def _pct(v: float) -> str:
+    return f"{100 * v:.0f} %" if np.isfinite(v) else "n/a"
