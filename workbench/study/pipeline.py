@@ -126,6 +126,11 @@ class StudyResult:
                   f"objective was not found ({reason}); it still predicts, and is compared as usual."
                   for label, model in self.models.items()
                   if (reason := getattr(model, "objective_error_", None))]
+        lines += [f"{'On ' + label + ', the' if label not in ('', 'None', UNLABELED) else 'The'} proposed model "
+                  "predicts with its task objective alone (K̂x, as IOC-only does): its variability model did not "
+                  f"lower the held-out error in cross-validation ({auto.describe()})."
+                  for label, model in self.models.items()
+                  if (auto := getattr(model, "auto_", None)) is not None and auto.fallback]
         paired = () if self.statistics is None else self.statistics.headline
         return lines + verdicts(paired, self.metric)
 
@@ -170,7 +175,7 @@ def select_components(
 
 
 def _fit_each(
-    system: Any, train: DemonstrationSet, components: int, seed: int
+    system: Any, train: DemonstrationSet, components: int | str, seed: int
 ) -> tuple[dict[str, Any], dict[str, str]]:
     """Every method that can be fitted, and why the others cannot (a ModelError's message).
 
@@ -328,8 +333,9 @@ def run_study(
         coverage=_coverage_table(calibration) if calibration is not None else None,
         calibration=calibration,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
-        stats_text=statistics.text(), n_steps=n_steps, samples=samples, seed=seed, timings=timings,
-        failures=failures, objectives=objectives, ratio_comparison=ratio_comparison, stride_steps=stride,
+        stats_text=statistics.text() + _settings_text(models), n_steps=n_steps, samples=samples, seed=seed,
+        timings=timings, failures=failures, objectives=objectives, ratio_comparison=ratio_comparison,
+        stride_steps=stride,
         statistics=statistics, calibration_check=_check(check_parts),
         calibration_counts=pd.concat(check_parts, ignore_index=True) if check_parts else None,
     )
@@ -377,8 +383,11 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
     te = te.load() if isinstance(te, DataRef) else te
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    G = select_components(tr, system, seed=s.seed) if s.n_components == "bic" else int(s.n_components)
+    G: int | str = (select_components(tr, system, seed=s.seed) if s.n_components == "bic" else
+                    "cv" if s.n_components == "cv" else int(s.n_components))
     fitted, failed = _fit_each(system, tr, G, s.seed)
+    if G == "cv":  # the data-efficiency fits take the G cross-validation chose on all training trials
+        G = int(getattr(fitted.get("proposed"), "n_components_", 5))
     timings["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     table = ev.compare(fitted, te, n_steps=s.n_steps, samples=s.samples, seed=s.seed,
@@ -558,6 +567,14 @@ def _statistics(table: pd.DataFrame, demos: DemonstrationSet, system: Any, n_ste
     subjects = {d.id: str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None}
     return study_statistics(table, metric, metric_unit(system, metric), subjects,
                             windows_sentence(table, n_steps, stride, demos.dt), seed=seed, method_level=method_level)
+
+
+def _settings_text(models: dict[str, Any]) -> str:
+    """The proposed model's settings where cross-validation chose them, per label (with any fallback to K̂x)."""
+    lines = [f"- {label}: {auto.describe()}" for label, model in models.items()
+             if (auto := getattr(model, "auto_", None)) is not None]
+    return ("\n\nThe proposed model's settings, chosen on each strategy's training trials:\n" + "\n".join(lines)
+            if lines else "")
 
 
 def _method_level(by_label: dict[str, DemonstrationSet], fitted: dict[str, dict[str, Any]], system: Any,
