@@ -35,9 +35,10 @@ from workbench.study.method_level import _cheap, corrected_t, method_differences
 pytestmark = pytest.mark.slow
 
 SEED0 = 7000
-N_TRIALS, TEST_SIZE, SPLITS = 30, 0.2, 10
-REPLICATES = 20
-TRUTH_SETS, POOL = 20, 100
+# as few as make the claims meaningful on a shared 2-core machine: 4 × 12 runs pooled for each rate
+N_TRIALS, TEST_SIZE, SPLITS = 30, 0.2, 8
+REPLICATES = 12
+TRUTH_SETS, POOL = 10, 60
 N_STEPS, STRIDE = 60, 20
 METRIC = "rmse_position"
 # the method compared: the proposed model at fixed settings (the study holds the settings it chose fixed too)
@@ -128,11 +129,12 @@ def _family_run(family: str) -> dict:
     return out
 
 
-@pytest.mark.parametrize("family", list(FAMILIES))
-def test_method_level_interval_covers_the_true_method_difference(family):
-    run = _family_run(family)
-    cover = sum(d.lo <= run["truth"] <= d.hi for d in run["intervals"])
-    assert cover >= 0.9 * REPLICATES
+def test_method_level_interval_covers_the_true_method_difference():
+    covers = {f: sum(d.lo <= _family_run(f)["truth"] <= d.hi for d in _family_run(f)["intervals"]) for f in FAMILIES}
+    total = REPLICATES * len(FAMILIES)
+    print(f"\nmethod-level coverage over {len(FAMILIES)} families: {sum(covers.values())}/{total} ({covers})")
+    assert sum(covers.values()) >= 0.9 * total
+    assert min(covers.values()) >= 0.75 * REPLICATES  # no family far off (binomial slack for 12 runs)
 
 
 def test_self_comparison_rarely_shows_a_difference():
@@ -143,17 +145,17 @@ def test_self_comparison_rarely_shows_a_difference():
     assert shown <= 0.07 * total
 
 
-ERRATIC_SEEDS = 8
+ERRATIC_SEEDS = 6
 
 
 def test_default_model_is_not_worse_than_ioc_only_on_a_non_lqr_pilot():
     """The study's default proposed model (cross-validated G and regularizer, falling back to K̂x) against IOC-only
-    on the erratic pilot: median relative position RMSE over seeds on a 60-trial test pool."""
+    on the erratic pilot: median relative position RMSE over seeds on a test pool of ``POOL`` trials."""
     system = planar_quadrotor()
     rel, fell_back = [], 0
     for k in range(ERRATIC_SEEDS):
         train = erratic_operator_demos(n_trials=30, seed=_seed("erratic", 200_000 + k))
-        pool = erratic_operator_demos(n_trials=60, seed=_seed("erratic", 300_000 + k))
+        pool = erratic_operator_demos(n_trials=POOL, seed=_seed("erratic", 300_000 + k))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             models = {k2: m.fit(train) for k2, m in

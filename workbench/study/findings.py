@@ -3,7 +3,7 @@
 One computation for the printed output, the report and the verdicts: :func:`study_statistics` takes the tidy
 comparison table (every method scored on the same windows of the same test trials) and returns a
 :class:`StudyStatistics` — the method-level differences of :mod:`workbench.study.method_level` (the headline:
-every model refitted over random splits, corrected resampled t), the one-fit paired differences of
+the models refitted over random splits, corrected resampled t), the one-fit paired differences of
 :mod:`workbench.study.paired` (bootstrap intervals over whole test trials), the exact sign-flip tests and the
 mixed-effects model's strategy terms of :mod:`workbench.study.stats` — whose :meth:`~StudyStatistics.text` says
 which number answers which question.
@@ -86,7 +86,8 @@ class StudyStatistics:
             k = sum(family)
             lines.append(
                 f"- *Does the proposed method predict this operator better than a baseline method?* (the headline "
-                f"and the verdicts) The methods, for this operator: every model refitted on each of {m0.n_splits} "
+                f"and the verdicts) The methods, for this operator: the proposed model and each baseline of the table "
+                f"refitted on each of {m0.n_splits} "
                 f"random splits of each strategy's {m0.units} and scored on that split's test part; the mean over "
                 f"splits of `1 − proposed / baseline` (mean per-trial {what} RMSE) with its {m0.ci:g} % interval "
                 "from the corrected resampled t (Nadeau & Bengio 2003: the spread of the splits inflated by "
@@ -114,7 +115,8 @@ class StudyStatistics:
                          "residual variance over the methods, so its method terms are not shown: the rows above "
                          "answer the methods' question.")
         if ml:
-            lines += ["", f"Methods (refitted on every split) — {self._ml_header()}", "",
+            lines += ["", f"Methods (refitted on every split; GMR-only, which no verdict uses, only as fitted models "
+                          f"below) — {self._ml_header()}", "",
                       f"| strategy | proposed vs | splits (train / test {ml[0].units}) | difference "
                       f"[{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|"]
             for d in ml:
