@@ -121,3 +121,23 @@ def test_paired_rows_say_which_question_they_answer():
     stats = study_statistics(table, "rmse_position", "m", {}, windows_sentence(table, 60, None, 0.05), n_boot=200)
     assert stats.headline == tuple(paired) or len(stats.headline) == len(paired)
     assert "holds the fitted models fixed" in stats.text()
+
+
+def test_a_split_refits_the_fitted_models_settings_and_fallback():
+    """The refits take the settings cross-validation chose and its fallback to K̂x: a fallen-back proposed model
+    scores exactly as IOC-only on every split, so the method-level difference is 0, never a made-up gain."""
+    from workbench.models.factory import make_models
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.operators import lqr_operator_demos
+    from workbench.study.method_level import split_scores, split_tasks
+
+    system = planar_quadrotor()
+    ds = lqr_operator_demos(n_trials=6, seed=11)
+    models = make_models(system, ["proposed", "ioc_only"], n_components=1)
+    models = {k: m.fit(ds) for k, m in models.items()}
+    models["proposed"].variability_mean_ = False
+    tasks, sizes, units = split_tasks({"LQR": ds}, {"LQR": models}, "rmse_position", 20, 10, 0.34, 3, seed=0)
+    assert sizes == {"LQR": (4, 2)} and units == {"LQR": "trials"} and len(tasks) == 3
+    scores = pd.concat([split_scores(t) for t in tasks], ignore_index=True)
+    (d,) = method_differences(scores, sizes, "rmse_position", "proposed", ["ioc_only"])
+    assert d.changes == pytest.approx((0.0, 0.0, 0.0), abs=1e-12) and not d.shown

@@ -171,6 +171,9 @@ def split_scores(task: tuple) -> pd.DataFrame:
                 fitted[name] = model.fit(train)
             except ModelError:
                 continue
+            if getattr(templates[name], "variability_mean_", True) is False:
+                # the study's model fell back to K̂x by cross-validation: the refits predict as it does
+                fitted[name].variability_mean_ = False
     if not fitted:
         return pd.DataFrame(columns=["label", "split", "trial", "method", "value"])
     table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride)
