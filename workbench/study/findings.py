@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 import pandas as pd
 
 from workbench.models.names import METHOD_TITLES
-from workbench.study.method_level import MethodDifference
+from workbench.study.method_level import FLOOR_METHODS, MethodDifference
 from workbench.study.paired import ALL_LABELS, PairedDifference, paired_differences, per_trial
 from workbench.study.stats import MixedModelResult, SignFlipTest, holm, mixed_effects, sign_flip_tests
 
@@ -188,9 +188,7 @@ def _p_cell(t: SignFlipTest | None) -> str:
 
 def headline_rows(rows: Sequence[PairedDifference | MethodDifference]) -> list[bool]:
     """Which rows the verdicts use: per strategy (the pooled row only where there is no strategy), against the
-    baselines the proposed model must beat (:data:`workbench.study.pipeline.FLOOR_METHODS`)."""
-    from workbench.study.pipeline import FLOOR_METHODS
-
+    baselines the proposed model must beat (:data:`workbench.study.method_level.FLOOR_METHODS`)."""
     labels = {d.label for d in rows}
     per_strategy = labels - {ALL_LABELS}
     return [d.baseline in FLOOR_METHODS and (d.label != ALL_LABELS or not per_strategy) for d in rows]

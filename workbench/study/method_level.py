@@ -38,8 +38,12 @@ from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
 from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
 
-__all__ = ["MethodDifference", "corrected_t", "split_scores", "split_tasks", "method_differences", "SPLITS"]
+__all__ = ["FLOOR_METHODS", "MethodDifference", "corrected_t", "split_scores", "split_tasks", "method_differences",
+           "SPLITS"]
 
+#: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
+#: (the baselines the verdicts judge it against, and the only ones the splits refit).
+FLOOR_METHODS = ("ioc_only", "persistence")
 #: Random train/test splits per strategy (Nadeau & Bengio used 15; 8 keeps the demo within its 30 s).
 SPLITS = 8
 #: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).

@@ -25,7 +25,7 @@ from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.names import METHOD_TITLES
-from workbench.study.method_level import SPLITS
+from workbench.study.method_level import FLOOR_METHODS, SPLITS
 
 __all__ = [
     "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "improvement_table", "verdicts", "metric_unit", "plant_for",
@@ -34,8 +34,6 @@ __all__ = [
 
 # Band widths (in σ) of the one-step calibration curve; 1, 2 and 3 also make the coverage table.
 CALIBRATION_LEVELS = tuple(float(c) for c in np.arange(0.25, 3.01, 0.25))
-#: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator.
-FLOOR_METHODS = ("ioc_only", "persistence")
 UNLABELED = "all"  # the one group of a study whose trials carry no strategy label
 
 #: The plant of a study: fixed, or identified from a training set (``LinearSystem.identify``-like).
