@@ -4,6 +4,11 @@ Wall time is what a user waits for; on a machine shared with others it drifts wi
 CPU time of the process and its children (``resource.getrusage(RUSAGE_CHILDREN)``, what ``/usr/bin/time`` reports)
 is recorded beside it, with the machine's load. The demo's own phase breakdown (its last line) is kept from the
 median run. The README's stated time is this row's median.
+
+``python bench/bench_demo.py --against DIR`` runs the demo of another checkout (``DIR``, e.g. ``git archive`` of the
+previous main unpacked) interleaved with this one's (A B A B …, three each) and reports both medians and their
+ratio: on a machine whose speed drifts with others' load, the ratio taken side by side is what carries over to a
+quiet machine.
 """
 
 from __future__ import annotations
@@ -23,12 +28,13 @@ RUNS = 3
 TARGET_S = 30.0
 
 
-def _one(out: str) -> tuple[float, float, str]:
-    """Wall seconds, user + system CPU seconds and the 'done in' line of one demo run into ``out``."""
+def _one(out: str, tree: str = str(ROOT)) -> tuple[float, float, str]:
+    """Wall seconds, user + system CPU seconds and the 'done in' line of one demo run into ``out`` (of the
+    checkout ``tree``)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run([PYTHON, "-m", "workbench", "demo", "--out", out], capture_output=True, text=True,
-                          cwd=ROOT, env=child_env(PYTHONPATH=str(ROOT)))
+                          cwd=tree, env=child_env(PYTHONPATH=tree))
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode:
@@ -59,7 +65,30 @@ def run() -> list[dict]:
     }]
 
 
+def against(other: str) -> list[dict]:
+    """This checkout's demo and ``other``'s, interleaved, three runs each: medians, CPU and the ratio."""
+    start = load()
+    runs: dict[str, list] = {"this": [], "other": []}
+    with tempfile.TemporaryDirectory(prefix="bench_demo_") as tmp:
+        for i in range(RUNS):
+            for name, tree in (("other", other), ("this", str(ROOT))):
+                runs[name].append(_one(os.path.join(tmp, f"{name}{i}"), tree))
+    med = {k: statistics.median(r[0] for r in v) for k, v in runs.items()}
+    return [{
+        "benchmark": f"workbench demo, this checkout against {other}, interleaved, median of {RUNS} each",
+        "seconds (this)": med["this"], "seconds (other)": med["other"], "ratio": med["this"] / med["other"],
+        "cpu_s (this / other)": " / ".join(f"{statistics.median(r[1] for r in runs[k]):.1f}"
+                                           for k in ("this", "other")),
+        "runs_s (this; other)": "; ".join(", ".join(f"{r[0]:.1f}" for r in runs[k]) for k in ("this", "other")),
+        "machine": f"{start} → {load()}",
+        "phases (this, median run)": runs["this"][[r[0] for r in runs["this"]].index(
+            sorted(r[0] for r in runs["this"])[len(runs["this"]) // 2])][2],
+    }]
+
+
 if __name__ == "__main__":
     from harness import markdown_table
 
+    if len(sys.argv) == 3 and sys.argv[1] == "--against":
+        sys.exit(print(markdown_table(against(sys.argv[2]))))
     sys.exit(print(markdown_table(run())))

@@ -47,7 +47,7 @@ def external():
     return external_file
 
 
-CLAIM = re.compile(r"(lower|higher) by (\d+) % \[(-?\d+) %, (-?\d+) %\]")
+CLAIM = re.compile(r"(lower|higher|worse than \S+|better than \S+) by (\d+) % \[(-?\d+) %, (-?\d+) %\]")
 
 
 def _claims_shown(text: str) -> int:

@@ -317,8 +317,11 @@ def test_verdict_says_plainly_when_the_proposed_model_is_not_better():
     lines = verdicts(paired, "rmse_position")
     ioc = next(d for d in paired if d.baseline == "ioc_only")
     assert ioc.hi < 0  # the proposed model is clearly worse here
-    assert len(lines) == 1 and "not shown to be better than IOC-only" in lines[0] and "persistence" not in lines[0]
-    assert ioc.sentence() in lines[0] and ioc.sentence().startswith("higher by")
+    # the interval shows it worse: the verdict says so, with the interval, not only "not shown to be better"
+    assert len(lines) == 1 and "persistence" not in lines[0] and "not shown" not in lines[0]
+    worse = f"worse than IOC-only by {100 * -ioc.change:.0f} % [{100 * -ioc.hi:.0f} %, {100 * -ioc.lo:.0f} %]"
+    assert worse in lines[0] and ioc.sentence().startswith("higher by")
+    assert "these fitted models" in lines[0]  # which question the interval answers
     better = table.assign(value=np.where(table["method"] == "proposed", 0.5 * table["value"], table["value"]))
     assert verdicts(paired_differences(better, "rmse_position", n_boot=500), "rmse_position") == []
 

@@ -22,7 +22,8 @@ def _wb(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
 def _check(stdout: str, report: str, assert_claims_shown) -> None:
     for text in (stdout, report):
         assert "Which number answers which question" in text
-        assert "Wilcoxon" in text and "Mixed-effects model" in text
+        assert "sign-flip" in text and "Mixed-effects model" in text and "Wilcoxon" not in text
+        assert "corrected resampled t" in text and "Methods (refitted on every split" in text
         assert "one-way ANOVA" not in text.lower().replace("repeated-measures anova", "")
         assert "windows on" in text  # the stride and the window count are stated
         assert "calibration" in text

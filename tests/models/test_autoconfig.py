@@ -119,3 +119,27 @@ def test_auto_configured_model_holds_on_other_erratic_operators(quad, variant, s
     r = mean_position_rmse(models, test)
     print(f"{variant} {seed}: G={models['proposed'].n_components_}, reg_covar={models['proposed'].reg_covar_}; {r}")
     assert r["proposed"] <= 1.03 * r["ioc_only"]
+
+
+def test_fallback_to_the_task_objective_is_chosen_by_held_out_error_and_kept(quad, small, tmp_path, monkeypatch):
+    """Cross-validation scores ``K̂x`` alone on the same held-out rollouts; it falls back to it exactly where that
+    is no worse than the best candidate, and the fallen-back model predicts IOC-only's mean rollout (same gain)."""
+    model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0)
+    auto = ac.choose_settings(model, small, components=(1, 2), reg_covars=(0.3,), folds=2)
+    best = next(r for r in auto.scores if r["chosen"])
+    assert math.isfinite(auto.ioc_only_rmse)
+    assert auto.fallback == (auto.ioc_only_rmse <= best["heldout_rmse"])
+    # force each outcome through the fit: a candidate grid that cannot beat K̂x, and the flag in predictions
+    monkeypatch.setattr(ac, "choose_settings", lambda *a, **k: ac.AutoSettings(
+        1, 0.3, "prediction", 2, ({"n_components": 1, "reg_covar": 0.3, "heldout_rmse": 2.0, "chosen": True},),
+        1.0, True))
+    fell = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0).fit(small)
+    ioc = IOCOnlyModel(quad).fit(small)
+    assert fell.variability_mean_ is False and "K̂x alone" in fell.auto_.describe()
+    d = small[0]
+    np.testing.assert_allclose(fell.predict(d.x[0], 30, d.target).x, ioc.predict(d.x[0], 30, d.target).x,
+                               atol=1e-9)
+    fell.save(tmp_path / "m.npz")
+    back = load_model(tmp_path / "m.npz")
+    assert back.variability_mean_ is False and back.auto_.fallback and back.auto_.ioc_only_rmse == 1.0
+    np.testing.assert_allclose(back.predict(d.x[0], 30, d.target).x, fell.predict(d.x[0], 30, d.target).x)

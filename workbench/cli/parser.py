@@ -13,7 +13,6 @@ from workbench.cli.context import (
     Context,
     fit_n_components_arg,
     int_list,
-    n_components_arg,
     positive_float,
     speed_arg,
 )
@@ -21,7 +20,7 @@ from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
 from workbench.cli.model import cmd_fit, cmd_predict
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
 from workbench.cli.view import VIEW_SAMPLES, cmd_live, cmd_replay, cmd_view
-from workbench.defaults import HORIZON_S, N_COMPONENTS, N_STEPS, ONLINE_HORIZON_S
+from workbench.defaults import HORIZON_S, N_COMPONENTS, N_STEPS, ONLINE_HORIZON_S, STUDY_N_COMPONENTS
 
 __all__ = ['build_parser']
 
@@ -50,9 +49,11 @@ def _study_options(
                    help="fraction of each strategy's trials held out for testing (default 0.2)")
     p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=HORIZON_S, metavar="SECONDS",
                    help=f"prediction horizon in seconds (default {HORIZON_S}, the paper's {N_STEPS} steps)")
-    p.add_argument("--n-components", type=n_components_arg, default=N_COMPONENTS, metavar="G|bic",
-                   help="GMM components G, or 'bic' to pick G by BIC on each strategy's training trials "
-                        f"(default {N_COMPONENTS}, the paper's)")
+    p.add_argument("--n-components", type=fit_n_components_arg, default=STUDY_N_COMPONENTS, metavar="G|bic|cv",
+                   help="GMM components G, 'bic' to pick G by BIC, or 'cv' (default) to choose G (1, 2 or 5) and "
+                        "the regularizer by cross-validation on each strategy's training trials, falling back to the "
+                        "task objective's K̂x where the variability model does not lower the held-out error "
+                        "(said in the output); 5 is the paper's")
     p.add_argument("--samples", type=int, default=samples, metavar="N",
                    help=f"Monte Carlo rollouts for the prediction band; 0 turns it off (default {samples})")
     p.add_argument("--efficiency", type=int_list, default=int_list(efficiency) if efficiency else None,

@@ -30,10 +30,15 @@ import numpy as np
 
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
 
-__all__ = ["AutoSettings", "choose_settings", "COMPONENT_GRID", "REG_COVAR_GRID", "CRITERIA"]
+__all__ = ["AutoSettings", "choose_settings", "COMPONENT_GRID", "REG_COVAR_GRID", "CRITERIA",
+           "DEFAULT_COMPONENT_GRID", "DEFAULT_REG_COVAR_GRID"]
 
 COMPONENT_GRID = (1, 2, 3, 5, 8)
 REG_COVAR_GRID = (0.1, 0.3, 1.0)
+#: The small grid of the default model (``n_components="cv"`` in a study): one component included, so a
+#: variability model that is little more than a linear correction can win, and two regularizers.
+DEFAULT_COMPONENT_GRID = (1, 2, 5)
+DEFAULT_REG_COVAR_GRID = (0.3, 1.0)
 CRITERIA = ("prediction", "likelihood")
 # EM iterations of the candidate fits: their likelihood has long flattened out by then (as for the noise folds).
 _CV_MAX_ITER = 200
@@ -58,6 +63,13 @@ class AutoSettings:
     scores : tuple of dict
         One row per candidate: ``n_components``, ``reg_covar``, ``heldout_rmse``, ``heldout_loglik`` (means over
         folds; NaN where a fold's fit failed), ``chosen``.
+    ioc_only_rmse : float
+        The held-out rollout RMSE of the task-objective behavior alone (``û = K̂x``, the IOC-only prediction)
+        on the same folds; NaN where it was not scored.
+    fallback : bool
+        True where that beat every candidate: the variability model does not lower the held-out error, so the
+        fitted model predicts with ``K̂x`` alone (``variability_mean_ = False``) and keeps the variability model
+        for its input band only. Said wherever the model is described, never silent.
     """
 
     n_components: int
@@ -65,15 +77,34 @@ class AutoSettings:
     criterion: str
     folds: int
     scores: tuple[dict, ...]
+    ioc_only_rmse: float = math.nan
+    fallback: bool = False
 
     def as_json(self) -> dict:
         return {"n_components": self.n_components, "reg_covar": self.reg_covar, "criterion": self.criterion,
-                "folds": self.folds, "scores": [dict(r) for r in self.scores]}
+                "folds": self.folds, "scores": [dict(r) for r in self.scores],
+                "ioc_only_rmse": None if math.isnan(self.ioc_only_rmse) else self.ioc_only_rmse,
+                "fallback": self.fallback}
 
     @classmethod
     def from_json(cls, d: dict) -> AutoSettings:
+        ioc = d.get("ioc_only_rmse")  # files written before the fallback existed have neither
         return cls(int(d["n_components"]), float(d["reg_covar"]), str(d["criterion"]), int(d["folds"]),
-                   tuple(dict(r) for r in d["scores"]))
+                   tuple(dict(r) for r in d["scores"]), math.nan if ioc is None else float(ioc),
+                   bool(d.get("fallback", False)))
+
+    def describe(self) -> str:
+        """One line: what was chosen, from what, and — where it happened — the fallback to ``K̂x``."""
+        best = next((r for r in self.scores if r.get("chosen")), None)
+        chosen = (f"G = {self.n_components}, reg_covar = {self.reg_covar:g} by {self.folds}-fold cross-validation "
+                  f"({self.criterion})")
+        if best is None or not math.isfinite(self.ioc_only_rmse):
+            return chosen
+        if self.fallback:
+            return (f"{chosen}; its variability model did not lower the held-out rollout error (IOC-only "
+                    f"{self.ioc_only_rmse:.4g} against {best['heldout_rmse']:.4g}), so the model predicts with the "
+                    "task objective's K̂x alone (as IOC-only) and keeps the variability model for its input band")
+        return f"{chosen}; held-out rollout RMSE {best['heldout_rmse']:.4g} against IOC-only {self.ioc_only_rmse:.4g}"
 
 
 def _folds(n_demos: int, k: int, seed: int | None) -> list[np.ndarray]:
@@ -104,6 +135,7 @@ def choose_settings(
     reg_covars: Sequence[float] | None = None,
     folds: int = 3,
     criterion: str = "prediction",
+    fallback: bool = True,
 ) -> AutoSettings:
     """Cross-validate the TP-GMM settings of a :class:`~workbench.models.proposed.HumanBehaviorModel` over
     demonstrations.
@@ -120,6 +152,9 @@ def choose_settings(
     folds : int
         Folds of whole demonstrations (at most one per demonstration).
     criterion : {"prediction", "likelihood"}
+    fallback : bool
+        Also score the task-objective behavior alone (``K̂x``, each fold's gain) on the same held-out rollouts and,
+        with the "prediction" criterion, choose it where no candidate beats it (``AutoSettings.fallback``).
 
     Raises
     ------
@@ -142,7 +177,8 @@ def choose_settings(
                 "max_iter": min(int(model.max_iter), _CV_MAX_ITER)}
     rmse = {(G, r): [] for G in Gs for r in regs}
     loglik = {(G, r): [] for G in Gs for r in regs}
-    for test_idx in parts:
+    ioc: list[float] = []
+    for fold, test_idx in enumerate(parts):
         held = set(test_idx.tolist())
         train = [demos[j] for j in range(len(demos)) if j not in held]
         test = [demos[j] for j in test_idx]
@@ -166,6 +202,10 @@ def choose_settings(
                         candidate.fit(train)
                     rmse[(G, r)].append(_rollout_rmse(candidate, test, H, idx, spread))
                     loglik[(G, r)].append(float(candidate.score_samples(test).mean()))
+                    if fallback and len(ioc) == fold:
+                        # the fold's K̂x alone: every candidate of a fold shares its gain, so any one scores it
+                        candidate.variability_mean_ = False
+                        ioc.append(_rollout_rmse(candidate, test, H, idx, spread))
                 except ModelError:
                     rmse[(G, r)].append(math.nan)
                     loglik[(G, r)].append(math.nan)
@@ -185,4 +225,7 @@ def choose_settings(
         best = max(valid, key=lambda row: (row["heldout_loglik"], -row["n_components"]))
     for row in rows:
         row["chosen"] = row is best
-    return AutoSettings(best["n_components"], best["reg_covar"], criterion, k, tuple(rows))
+    ioc_rmse = float(np.mean(ioc)) if fallback and len(ioc) == k and np.all(np.isfinite(ioc)) else math.nan
+    # ties go to the simpler prediction: a variability model must lower the held-out error to be used for the mean
+    fell_back = criterion == "prediction" and math.isfinite(ioc_rmse) and ioc_rmse <= best["heldout_rmse"]
+    return AutoSettings(best["n_components"], best["reg_covar"], criterion, k, tuple(rows), ioc_rmse, fell_back)

@@ -34,6 +34,7 @@ def make_model(
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
+    cv_grid: dict[str, tuple] | None = None,
 ) -> BehaviorModel:
     """An unfitted model of ``method`` (one of :data:`METHODS`; ``ioc-only`` spellings are accepted).
 
@@ -47,6 +48,8 @@ def make_model(
         instruments are relevant, least squares otherwise (:func:`workbench.method.gain.choose_gain`).
     fit_objective : bool
         Whether the proposed model also solves for its task objective (predictions never need it).
+    cv_grid : dict, optional
+        ``cv_components`` / ``cv_reg_covars`` of a "cv" proposed model (default the full grids).
     """
     kind = method.replace("-", "_")
     if kind not in METHODS:
@@ -55,7 +58,8 @@ def make_model(
         raise DataError(f"n_components='cv' chooses the proposed model's settings; {method} needs a number")
     if kind == "proposed":
         return HumanBehaviorModel(system, n_components=n_components, reg_covar="cv" if n_components == "cv" else 0.5,
-                                  random_state=random_state, gain_method=gain_method, fit_objective=fit_objective)
+                                  random_state=random_state, gain_method=gain_method, fit_objective=fit_objective,
+                                  **(cv_grid or {}))
     if kind == "ioc_only":
         return IOCOnlyModel(system, gain_method=gain_method)
     if kind == "gmr_only":
@@ -67,7 +71,7 @@ def make_models(
     system: Any,
     methods: Sequence[str] = METHODS,
     *,
-    n_components: int = PAPER_N_COMPONENTS,
+    n_components: int | str = PAPER_N_COMPONENTS,
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = False,
@@ -75,9 +79,16 @@ def make_models(
     """Unfitted ``{method: model}`` for a comparison, with the paper's settings (G, start/goal frames).
 
     The proposed model skips its objective by default here: a comparison scores predictions, which never need it.
+    ``n_components="cv"``: the proposed model chooses G and its regularizer by cross-validation on the small grid
+    of :data:`~workbench.models.autoconfig.DEFAULT_COMPONENT_GRID` (one component included) and falls back to
+    ``K̂x`` where that predicts the held-out trials better (``auto_.fallback``); GMR-only keeps the paper's G.
     """
-    return {m: make_model(m, system, n_components=n_components, random_state=random_state,
-                          gain_method=gain_method, fit_objective=fit_objective) for m in methods}
+    from workbench.models.autoconfig import DEFAULT_COMPONENT_GRID, DEFAULT_REG_COVAR_GRID
+
+    grid = {"cv_components": DEFAULT_COMPONENT_GRID, "cv_reg_covars": DEFAULT_REG_COVAR_GRID}
+    return {m: make_model(m, system, n_components=n_components if m == "proposed" or n_components != "cv"
+                          else PAPER_N_COMPONENTS, random_state=random_state, gain_method=gain_method,
+                          fit_objective=fit_objective, cv_grid=grid if m == "proposed" else None) for m in methods}
 
 
 def load_model(path: str | os.PathLike) -> BehaviorModel:

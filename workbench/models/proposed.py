@@ -112,6 +112,11 @@ class HumanBehaviorModel(TaskGMRModel):
         the held-out rollouts that score the "cv" candidates).
     auto_criterion : {"prediction", "likelihood"}
         How "cv" settings are scored on held-out demonstrations: rollout RMSE or TP-GMM log-likelihood.
+    cv_components, cv_reg_covars : tuple or None
+        The "cv" grids (None: :data:`~workbench.models.autoconfig.COMPONENT_GRID` / ``REG_COVAR_GRID``; a
+        study's default model uses the small ``DEFAULT_COMPONENT_GRID`` / ``DEFAULT_REG_COVAR_GRID``). The chosen
+        candidate is fitted with EM capped as the candidates were, and where the task objective's ``K̂x`` alone
+        beats every candidate on the held-out rollouts the model predicts with it (``variability_mean_``).
 
     Attributes
     ----------
@@ -142,6 +147,9 @@ class HumanBehaviorModel(TaskGMRModel):
         The regularizer used (``reg_covar``, or the one "cv" chose).
     auto_ : AutoSettings or None
         With a "cv" setting: what was chosen, by which criterion, and every candidate's held-out scores.
+    variability_mean_ : bool
+        Whether predictions add the variability model's mean ``μ̂(x)`` to ``K̂x`` (False: "cv" found that it does
+        not lower the held-out error, ``auto_.fallback``; the input band still comes from the variability model).
     labels_ : tuple of str
     """
 
@@ -168,6 +176,8 @@ class HumanBehaviorModel(TaskGMRModel):
         noise_folds: int = 3,
         noise_horizon_s: float = 3.0,
         auto_criterion: str = "prediction",
+        cv_components: tuple[int, ...] | None = None,
+        cv_reg_covars: tuple[float, ...] | None = None,
     ) -> None:
         super().__init__(system)
         self.n_components = n_components
@@ -188,6 +198,8 @@ class HumanBehaviorModel(TaskGMRModel):
         self.noise_folds = noise_folds
         self.noise_horizon_s = noise_horizon_s
         self.auto_criterion = auto_criterion
+        self.cv_components = cv_components
+        self.cv_reg_covars = cv_reg_covars
 
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Algorithm 1: K̂ (eqs. (12)-(14)), the task objective (eqs. (15)-(19)), ŵ (eq. (20)), the TP-GMM."""
@@ -195,6 +207,7 @@ class HumanBehaviorModel(TaskGMRModel):
             return self._fit_auto(demos)
         self._check_settings()
         self.auto_ = None
+        self.variability_mean_ = True
         self.reg_covar_ = float(self.reg_covar)
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
         refs, self.goal_relative_ = references(ds, self.system.n)
@@ -209,14 +222,19 @@ class HumanBehaviorModel(TaskGMRModel):
 
     def _fit_auto(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Choose the "cv" settings by cross-validation, then fit with them (the settings stay "cv")."""
-        from workbench.models.autoconfig import choose_settings
+        from workbench.models.autoconfig import _CV_MAX_ITER, choose_settings
 
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
-        auto = choose_settings(self, ds, criterion=self.auto_criterion)
+        auto = choose_settings(self, ds, components=self.cv_components, reg_covars=self.cv_reg_covars,
+                               criterion=self.auto_criterion)
+        # the chosen candidate is fitted as it was scored: EM capped as the candidates were
         chosen = type(self)(self.system, **{**self.get_params(), "n_components": auto.n_components,
-                                            "reg_covar": auto.reg_covar}).fit(demos)
+                                            "reg_covar": auto.reg_covar,
+                                            "max_iter": min(int(self.max_iter), _CV_MAX_ITER)}).fit(demos)
         self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
         self.auto_ = auto
+        # the variability model did not lower the held-out error: predict with K̂x alone (said by auto_.describe())
+        self.variability_mean_ = not auto.fallback
         return self
 
     def residuals(self, demo: Demonstration) -> np.ndarray:
@@ -265,12 +283,15 @@ class HumanBehaviorModel(TaskGMRModel):
         cond = self._conditional(x0, target)
         KT = self.K_.T
         offset = self._reference(target) @ KT
+        # False where cross-validation found that the variability's mean does not lower the held-out error
+        with_mean = getattr(self, "variability_mean_", True)
 
         def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             mu, Sigma = cond.predict(X)
-            return X @ KT - offset + mu, Sigma
+            return X @ KT - offset + (mu if with_mean else 0.0), Sigma
 
-        policy.mean = lambda X: X @ KT - offset + cond.predict_mean(X)
+        policy.mean = ((lambda X: X @ KT - offset + cond.predict_mean(X)) if with_mean else
+                       (lambda X: X @ KT - offset))
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -279,6 +300,7 @@ class HumanBehaviorModel(TaskGMRModel):
         auto = getattr(self, "auto_", None)
         header = {**header, "objective": obj_header, "reg_covar_chosen": getattr(self, "reg_covar_", None),
                   "auto": None if auto is None else auto.as_json(), "gain_choice": gain_choice_state(self),
+                  "variability_mean": bool(getattr(self, "variability_mean_", True)),
                   "objective_error": getattr(self, "objective_error_", None)}
         return header, {"K": self.K_, **arrays, **obj_arrays}
 
@@ -294,6 +316,7 @@ class HumanBehaviorModel(TaskGMRModel):
         auto = mf.header.get("auto")
         try:
             self.auto_ = None if auto is None else AutoSettings.from_json(auto)
+            self.variability_mean_ = bool(mf.header.get("variability_mean", True))
             chosen = mf.header.get("reg_covar_chosen")
             self.reg_covar_ = float(self.reg_covar if chosen is None else chosen)
         except (KeyError, TypeError, ValueError) as exc:
@@ -333,7 +356,7 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]]) -> 
     unknown = sorted(set(settings) - set(cls._param_names()))
     if unknown:
         raise ModelFileError(f"{mf.path}: damaged model file: unknown {cls.__name__} settings {unknown}")
-    for key in ("frames", "position_idx"):
+    for key in ("frames", "position_idx", "cv_components", "cv_reg_covars"):
         if isinstance(settings.get(key), list):
             settings[key] = tuple(settings[key])
     for key in ("n_components", "reg_covar"):  # files written before the rename said "auto" for "cv"

@@ -11,8 +11,9 @@ Agg canvas — no pyplot, no global backend, so the report runs headless and nev
 * ``rmse.png`` — horizon RMSE (eq. (35)) per method as box plots;
 * ``data_efficiency.png`` — RMSE against the number of training demonstrations;
 
-and the comparison's statistics: paired differences with bootstrap intervals over whole trials, Wilcoxon / paired
-t-tests (Holm) and the mixed-effects model (:mod:`workbench.study.findings`).
+and the comparison's statistics: method-level differences over refitted splits (the headline), paired differences of
+the fitted models with bootstrap intervals over whole trials, exact sign-flip tests (Holm over the headline's rows)
+and the mixed model's strategy terms (:mod:`workbench.study.findings`).
 """
 
 from __future__ import annotations
@@ -695,7 +696,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
             envelope=result.table[result.table["metric"] == "left_envelope"], calibration=result.calibration,
             ratio_comparison=getattr(result, "ratio_comparison", None),
             n_steps=result.n_steps, samples=result.samples, seed=result.seed, notes=notes, title=title,
-            paired=() if result.statistics is None else result.statistics.paired,
+            paired=() if result.statistics is None else result.statistics.headline,
             calibration_check=result.calibration_check,
         ),
     )

@@ -11,6 +11,9 @@ scale grows with the distance from the pad). That is the closed-loop identificat
 "What the paper leaves open": each state was made by the operator's own earlier, correlated variability, so a
 least-squares gain is biased however many demonstrations there are.
 
+With ``mean_amplitude`` the LQR operator is *near*-LQR: its variability has a small state-dependent mean (the
+case of the method's Remark 1, which the GMM should carry).
+
 :func:`erratic_operator_demos` flies a strongly non-LQR operator (reaction delay, bang-bang corrections,
 hesitations, a left/right detour choice around an obstacle) for checking that automatically chosen settings do
 not make the proposed model worse than its task-objective-only baseline.
@@ -61,6 +64,10 @@ class LQROperator:
     x0_low: Sequence[float] = (-2.0, 2.5, 0.0, 0.0, 0.0, 0.0)
     x0_high: Sequence[float] = (2.0, 3.0, 0.0, 0.0, 0.0, 0.0)
     duration: float = 8.0
+    #: A small state-dependent mean of the variability (a near-LQR operator): ``mean_amplitude[i] · tanh(p / length)``
+    #: per input, with ``p`` the first plane position — a saturating lean toward one side, which no linear gain
+    #: reproduces. Zero (the default) is the plain LQR operator.
+    mean_amplitude: Sequence[float] = (0.0, 0.0)
 
     def gain(self, system: LinearSystem) -> np.ndarray:
         """The operator's true gain ``K`` of ``u = K x`` (the LQR gain of ``diag(q), diag(r)``)."""
@@ -91,6 +98,9 @@ def lqr_operator_demos(
     K = op.gain(sys_)
     rng = np.random.default_rng(seed)
     s_near, s_far = np.asarray(op.sigma_near, dtype=float), np.asarray(op.sigma_far, dtype=float)
+    lean = np.asarray(op.mean_amplitude, dtype=float)
+    if lean.shape != (m,):
+        raise DataError(f"mean_amplitude must have {m} entries (one per input), got {lean.shape}")
     plane = sys_.r.plane  # None without two position roles (a plant always has roles, maybe empty)
     steps = int(round(op.duration / sys_.dt))
     demos = []
@@ -103,6 +113,9 @@ def lqr_operator_demos(
             sigma = s_near + (s_far - s_near) * (1.0 - np.exp(-dist / op.length))
             e = op.rho * e + np.sqrt(1.0 - op.rho**2) * rng.standard_normal(m)
             u = K @ x + sigma * e
+            if lean.any():
+                p = x[plane[0]] if plane is not None else x[0]
+                u = u + lean * np.tanh(p / op.length)
             xs[k], us[k] = x, u
             x = sys_.A @ x + sys_.B @ u
         demos.append(

@@ -2,9 +2,11 @@
 
 One computation for the printed output, the report and the verdicts: :func:`study_statistics` takes the tidy
 comparison table (every method scored on the same windows of the same test trials) and returns a
-:class:`StudyStatistics` — the paired differences of :mod:`workbench.study.paired` (the headline, with bootstrap
-intervals over whole trials), the Wilcoxon / paired t-tests and the mixed-effects model of
-:mod:`workbench.study.stats` — whose :meth:`~StudyStatistics.text` says which number answers which question.
+:class:`StudyStatistics` — the method-level differences of :mod:`workbench.study.method_level` (the headline:
+the models refitted over random splits, corrected resampled t), the one-fit paired differences of
+:mod:`workbench.study.paired` (bootstrap intervals over whole test trials), the exact sign-flip tests and the
+mixed-effects model's strategy terms of :mod:`workbench.study.stats` — whose :meth:`~StudyStatistics.text` says
+which number answers which question.
 No sentence here states a difference that its interval does not show.
 """
 
@@ -12,15 +14,16 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import pandas as pd
 
 from workbench.models.names import METHOD_TITLES
+from workbench.study.method_level import FLOOR_METHODS, MethodDifference
 from workbench.study.paired import ALL_LABELS, PairedDifference, paired_differences, per_trial
-from workbench.study.stats import MixedModelResult, PairedTest, holm, mixed_effects, paired_tests
+from workbench.study.stats import MixedModelResult, SignFlipTest, holm, mixed_effects, sign_flip_tests
 
-__all__ = ["StudyStatistics", "study_statistics", "windows_sentence"]
+__all__ = ["StudyStatistics", "study_statistics", "windows_sentence", "headline_rows"]
 
 REFERENCE = "proposed"
 
@@ -35,78 +38,160 @@ class StudyStatistics:
     windows : str
         How the test trials were scored (stride, horizon, counts): :func:`windows_sentence`.
     paired : tuple of PairedDifference
-        The proposed model against each baseline, per strategy and over all of them.
-    tests : tuple of PairedTest
-        Wilcoxon signed-rank and paired t-tests of the same per-trial values, Holm-corrected over all rows.
+        The fitted proposed model against each fitted baseline on the test trials, per strategy and over all.
+    tests : tuple of SignFlipTest
+        The exact sign-flip test of the same per-trial differences, Holm-corrected over the rows the headline
+        uses, each saying whether it can reach 5 % at all with its trials.
     mixed : MixedModelResult or None
-        Log error ~ method + strategy with subject (or trial) random effects; None where it cannot be fitted.
+        Log error ~ method + strategy with subject (or trial) random effects, read for the strategies only; None
+        where there is one strategy or it cannot be fitted.
+    method_level : tuple of MethodDifference
+        The methods compared over random splits that refit every model (:mod:`workbench.study.method_level`);
+        the headline where present.
     """
 
     metric: str
     unit: str
     windows: str
     paired: tuple[PairedDifference, ...]
-    tests: tuple[PairedTest, ...]
+    tests: tuple[SignFlipTest, ...]
     mixed: MixedModelResult | None
+    method_level: tuple[MethodDifference, ...] = ()
 
     def difference(self, label: str, baseline: str) -> PairedDifference | None:
         """The paired difference of the proposed model against ``baseline`` on ``label`` (None if not scored)."""
         return next((d for d in self.paired if d.label == label and d.baseline == baseline), None)
 
+    def method_difference(self, label: str, baseline: str) -> MethodDifference | None:
+        """The method-level difference against ``baseline`` on ``label`` (None where not computed)."""
+        return next((d for d in self.method_level if d.label == label and d.baseline == baseline), None)
+
+    @property
+    def headline(self) -> tuple[PairedDifference | MethodDifference, ...]:
+        """What the summary and the verdicts use: the method-level rows where computed, else the one-fit rows."""
+        return self.method_level or self.paired
+
     def text(self) -> str:
-        """Markdown: the windows, what answers which question, the paired table, the mixed model."""
-        if not self.paired:
+        """Markdown: the windows, what answers which question, the method-level and one-fit tables, the mixed
+        model's strategy terms."""
+        if not self.paired and not self.method_level:
             return self.windows
         what = self.metric.removeprefix("rmse_").replace("_", " ")
         u = f" [{self.unit}]" if self.unit else ""
-        first = self.paired[0]
-        how = ("resampling whole subjects, then whole trials within each" if first.resampled.startswith("subjects")
-               else f"resampling whole test trials{first.resampled.removeprefix('trials')}")
-        lines = [
-            self.windows, "",
-            "Which number answers which question:",
-            f"- *Is the proposed model's error lower than a baseline's on the same trials?* The paired difference "
-            f"of the mean per-trial {what} RMSE, `1 − proposed / baseline`, with its {first.ci:g} % interval from "
-            f"{first.n_boot} bootstrap resamples ({how}; expanded percentile interval, which keeps its coverage "
-            "with few trials); a difference is "
-            "stated only where the interval excludes 0.",
-            "- *Is that difference more than chance on these trials?* The Wilcoxon signed-rank test of the "
-            "per-trial differences (and the paired t-test), Holm-corrected over every row of the table.",
-        ]
-        if self.mixed is not None:
+        lines = [self.windows, "", "Which number answers which question:"]
+        ml = self.method_level
+        family = headline_rows(self.headline)
+        if ml:
+            m0 = ml[0]
+            k = sum(family)
+            lines.append(
+                f"- *Does the proposed method predict this operator better than a baseline method?* (the headline "
+                f"and the verdicts) The methods, for this operator: the proposed model and each baseline of the table "
+                f"refitted on each of {m0.n_splits} "
+                f"random splits of each strategy's {m0.units} and scored on that split's test part; the mean over "
+                f"splits of `1 − proposed / baseline` (mean per-trial {what} RMSE) with its {m0.ci:g} % interval "
+                "from the corrected resampled t (Nadeau & Bengio 2003: the spread of the splits inflated by "
+                "n_test / n_train for their overlapping training sets, t on splits − 1 df); p from the same t, "
+                f"Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts use. Settings chosen by "
+                "cross-validation on the study's training trials are held fixed in the refits, which skip the "
+                "task objective and the band calibration (neither changes a mean prediction).")
+        if self.paired:
+            first = self.paired[0]
+            how = ("resampling whole subjects, then whole trials within each" if first.resampled.startswith(
+                "subjects") else f"resampling whole test trials{first.resampled.removeprefix('trials')}")
+            lines.append(
+                f"- *Do these two fitted models differ on these test trials?* The paired difference of the mean "
+                f"per-trial {what} RMSE of the models fitted on the study's training trials, `1 − proposed / "
+                f"baseline`, with its {first.ci:g} % interval from {first.n_boot} bootstrap resamples ({how}; "
+                "expanded percentile interval). It holds the fitted models fixed, so it says nothing about "
+                "training on another sample of the same operator" + (" (the question above)." if ml else "."))
+            lines.append(self._tests_sentence())
+        lines.append("A difference is stated only where its interval excludes 0.")
+        if self.mixed is not None and any(e.term.startswith("strategy") for e in self.mixed.effects):
             per = ("subject (a random intercept) and trial within subject (a variance component)"
                    if self.mixed.groups == "subject" else "trial (a random intercept: every method scored on it)")
-            lines.append(f"- *By what factor does each method's error differ from the proposed model's, and do the "
-                         f"strategies differ?* A linear mixed model of the log per-trial error: method and strategy "
-                         f"fixed, {per}. Strategies are flown in different trials, so they are compared between "
-                         "trials, methods within them.")
-        tests = {(t.label, t.b): t for t in self.tests}
-        lines += ["", f"| strategy | proposed vs | trials (windows) | proposed{u} | baseline{u} | difference "
-                      f"[{first.ci:g} % interval] | Wilcoxon p (Holm) | paired t p (Holm) |",
-                  "|---|---|---|---|---|---|---|---|"]
-        for d in self.paired:
-            t = tests.get((d.label, d.baseline))
-            tw = "" if t is None else f"{t.p_wilcoxon:.3g} ({t.p_wilcoxon_holm:.3g})"
-            tt = "" if t is None else f"{t.p_t:.3g} ({t.p_t_holm:.3g})"
-            lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.n_trials} ({d.n_windows}) "
-                         f"| {d.mean_method:.4g} | {d.mean_baseline:.4g} | {d.sentence()} | {tw} | {tt} |")
-        if self.mixed is not None:
+            lines.append(f"- *Do the strategies differ in error?* A linear mixed model of the log per-trial error: "
+                         f"method and strategy fixed, {per}; strategies are flown in different trials. It pools one "
+                         "residual variance over the methods, so its method terms are not shown: the rows above "
+                         "answer the methods' question.")
+        if ml:
+            lines += ["", f"Methods (refitted on every split; GMR-only, which no verdict uses, only as fitted models "
+                          f"below) — {self._ml_header()}", "",
+                      f"| strategy | proposed vs | splits (train / test {ml[0].units}) | difference "
+                      f"[{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|"]
+            for d in ml:
+                p = f"{d.p_holm:.3g}" if d.p_holm == d.p_holm else "— (not a verdict's row)"
+                lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.n_splits} "
+                             f"({d.n_train} / {d.n_test}) | {d.sentence()} | {p} |")
+        if self.paired:
+            tests = {(t.label, t.b): t for t in self.tests}
+            show_p = any(t.reachable for t in self.tests if t.p_holm == t.p_holm)
+            lines += ["", "These fitted models on these test trials:", "",
+                      f"| strategy | proposed vs | trials (windows) | proposed{u} | baseline{u} | difference "
+                      f"[{self.paired[0].ci:g} % interval] |" + (" sign-flip p (Holm) |" if show_p else ""),
+                      "|---|---|---|---|---|---|" + ("---|" if show_p else "")]
+            for d in self.paired:
+                row = (f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.n_trials} ({d.n_windows}) "
+                       f"| {d.mean_method:.4g} | {d.mean_baseline:.4g} | {d.sentence()} |")
+                if show_p:
+                    t = tests.get((d.label, d.baseline))
+                    row += f" {_p_cell(t)} |"
+                lines.append(row)
+        if self.mixed is not None and any(e.term.startswith("strategy") for e in self.mixed.effects):
             m = self.mixed
             lines += ["", f"Mixed-effects model (statsmodels MixedLM, REML) of log {what} RMSE: {m.n_obs} "
                           f"observations, {m.n_groups} {m.groups}s{'' if m.converged else ', NOT converged'}"
-                          f"{'; ' + m.note if m.note else ''}. Factors on the error against the proposed model "
-                          "(methods) and against the first strategy (strategies); intervals and p from a t "
-                          "distribution with the between-within degrees of freedom of the term's level (df), "
-                          "not the Wald z, which is far too confident with this few trials:", "",
+                          f"{'; ' + m.note if m.note else ''}. The strategies' factor on the error against the "
+                          "first strategy; interval and p from a t distribution with the between-within degrees "
+                          "of freedom (df), not the Wald z:", "",
                       "| term | factor [95 % interval] | p (t, df) |", "|---|---|---|"]
             for e in m.effects:
                 kind, level = e.term.split(" ", 1)
-                name = METHOD_TITLES.get(level, level) + (" vs proposed" if kind == "method" else "")
-                shown = ("" if e.lo <= 1.0 <= e.hi else
-                         (" (higher)" if e.lo > 1.0 else " (lower)"))
-                lines.append(f"| {kind} {name} | ×{e.factor:.3g} [{e.lo:.3g}, {e.hi:.3g}]{shown} | {e.p:.3g} "
+                if kind != "strategy":
+                    continue
+                shown = "" if e.lo <= 1.0 <= e.hi else (" (higher)" if e.lo > 1.0 else " (lower)")
+                lines.append(f"| strategy {level} | ×{e.factor:.3g} [{e.lo:.3g}, {e.hi:.3g}]{shown} | {e.p:.3g} "
                              f"({e.df:.0f}) |")
         return "\n".join(lines)
+
+    def _ml_header(self) -> str:
+        m0 = self.method_level[0]
+        return (f"{m0.n_splits} random splits, {m0.n_train} training and {m0.n_test} test {m0.units} each "
+                "(summed over strategies in the pooled row):")
+
+    def _tests_sentence(self) -> str:
+        """What the sign-flip column answers, or why there is none: with few trials no test can reach 5 %."""
+        head = [t for t in self.tests if t.p_holm == t.p_holm]
+        k = len(head)
+        if head and not any(t.reachable for t in head):
+            n = max(t.n for t in head)
+            pmin = 2.0 / 2.0**n
+            return (f"- *Is that difference more than chance on these trials?* No test can say so at 5 % here: with "
+                    f"{n} test trials the exact sign-flip test of the per-trial differences cannot go below p = "
+                    f"{pmin:.3g}" + (f" ({min(1.0, pmin * k):.3g} after Holm over the {k} rows the verdicts use)"
+                                     if k > 1 else "") + ", so no p-value is printed; read the interval.")
+        return ("- *Is that difference more than chance on these trials?* The exact sign-flip (permutation) test of "
+                f"the per-trial differences, Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts "
+                "use (the only rows given a p); \"cannot reach 5 %\" where its trials are too few for any p of that "
+                "family to be below 0.05.")
+
+
+def _p_cell(t: SignFlipTest | None) -> str:
+    if t is None:
+        return ""
+    if t.p_holm != t.p_holm:
+        return "— (not a verdict's row)"
+    if not t.reachable:
+        return f"cannot reach 5 % ({t.n} trials)"
+    return f"{t.p:.3g} ({t.p_holm:.3g})"
+
+
+def headline_rows(rows: Sequence[PairedDifference | MethodDifference]) -> list[bool]:
+    """Which rows the verdicts use: per strategy (the pooled row only where there is no strategy), against the
+    baselines the proposed model must beat (:data:`workbench.study.method_level.FLOOR_METHODS`)."""
+    labels = {d.label for d in rows}
+    per_strategy = labels - {ALL_LABELS}
+    return [d.baseline in FLOOR_METHODS and (d.label != ALL_LABELS or not per_strategy) for d in rows]
 
 
 def windows_sentence(table: pd.DataFrame, n_steps: int, stride_steps: int | None, dt: float) -> str:
@@ -135,27 +220,31 @@ def study_statistics(
     baselines: Sequence[str] | None = None,
     n_boot: int = 4000,
     seed: int = 0,
+    method_level: Sequence[MethodDifference] | None = None,
 ) -> StudyStatistics:
-    """Paired differences (per strategy, and over all), their tests and the mixed model of one metric.
+    """Paired differences (per strategy, and over all), their sign-flip tests, the mixed model's strategy terms
+    and — where given — the method-level differences, with p Holm-corrected over the rows the verdicts use.
 
     ``subjects`` maps trial ids to subjects (empty when none are named).
     """
     subj = dict(subjects) or None
     paired = tuple(paired_differences(table, metric, REFERENCE, baselines, subjects=subj, n_boot=n_boot, seed=seed))
     wide = per_trial(table, metric, subj)
-    tests: list[PairedTest] = []
-    flat = []
-    for d in paired:
-        part = wide if d.label == ALL_LABELS else wide.xs(d.label, level="label", drop_level=False)
-        flat += paired_tests(part, [(REFERENCE, d.baseline)], label=d.label, correction="none")
-    # one family for the Holm correction: every row of the table
-    if flat:
-        qw, qt = holm([t.p_wilcoxon for t in flat]), holm([t.p_t for t in flat])
-        tests = [PairedTest(t.a, t.b, t.label, t.n, t.median_difference, t.wilcoxon, t.p_wilcoxon, float(a),
-                            t.t, t.p_t, float(b)) for t, a, b in zip(flat, qw, qt, strict=True)]
-    long = wide.drop(columns=["n_windows"]).reset_index().melt(
-        id_vars=["label", "trial", "subject"], var_name="method", value_name="value")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the fit's own warnings are kept in its note
-        mixed = mixed_effects(long, REFERENCE) if len(paired) else None
-    return StudyStatistics(metric=metric, unit=unit, windows=windows, paired=paired, tests=tuple(tests), mixed=mixed)
+    ml = tuple(method_level or ())
+    if ml:
+        fam = headline_rows(ml)
+        idx = [i for i, f in enumerate(fam) if f]
+        adj = dict(zip(idx, holm([ml[i].p for i in idx]), strict=True)) if idx else {}
+        ml = tuple(replace(d, p_holm=float(adj[i])) if i in adj else d for i, d in enumerate(ml))
+    # the one-fit tests' family: the rows the verdicts would use if these were the headline
+    tests = tuple(sign_flip_tests(wide, [(d.label, REFERENCE, d.baseline) for d in paired],
+                                  family=headline_rows(paired), seed=seed)) if paired else ()
+    mixed = None
+    if paired and wide.index.get_level_values("label").nunique() > 1:  # its strategy terms are all it is read for
+        long = wide.drop(columns=["n_windows"]).reset_index().melt(
+            id_vars=["label", "trial", "subject"], var_name="method", value_name="value")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the fit's own warnings are kept in its note
+            mixed = mixed_effects(long, REFERENCE)
+    return StudyStatistics(metric=metric, unit=unit, windows=windows, paired=paired, tests=tests, mixed=mixed,
+                           method_level=ml)

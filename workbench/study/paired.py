@@ -29,8 +29,8 @@ import scipy.stats
 
 from workbench.errors import DataError
 
-__all__ = ["PairedDifference", "MIN_SUBJECTS", "per_trial", "paired_difference", "paired_differences",
-           "ALL_LABELS"]
+__all__ = ["PairedDifference", "difference_sentence", "MIN_SUBJECTS", "per_trial", "paired_difference",
+           "paired_differences", "ALL_LABELS"]
 
 #: Fewest subjects whose resampling (a two-stage cluster bootstrap) gives usable intervals; with fewer, the
 #: trials are resampled within each subject.
@@ -84,12 +84,18 @@ class PairedDifference:
     def sentence(self) -> str:
         """The comparison in words, derived from the interval: "lower by 12 % [4 %, 19 %]", "higher by …", or
         "no difference shown (…)"."""
-        if self.lo > 0:
-            return f"lower by {_pct(self.change)} [{_pct(self.lo)}, {_pct(self.hi)}]"
-        if self.hi < 0:
-            return f"higher by {_pct(-self.change)} [{_pct(-self.hi)}, {_pct(-self.lo)}]"
-        return (f"no difference shown (reduction {_pct(self.change, signed=True)}, {self.ci:g} % interval "
-                f"[{_pct(self.lo, signed=True)}, {_pct(self.hi, signed=True)}] contains 0)")
+        return difference_sentence(self.change, self.lo, self.hi, self.ci)
+
+
+def difference_sentence(change: float, lo: float, hi: float, ci: float = 95.0) -> str:
+    """A relative change (> 0: lower error) in words derived from its interval: "lower by 12 % [4 %, 19 %]",
+    "higher by …", or "no difference shown (…)" where the interval contains 0 (or is unknown)."""
+    if lo > 0:
+        return f"lower by {_pct(change)} [{_pct(lo)}, {_pct(hi)}]"
+    if hi < 0:
+        return f"higher by {_pct(-change)} [{_pct(-hi)}, {_pct(-lo)}]"
+    return (f"no difference shown (reduction {_pct(change, signed=True)}, {ci:g} % interval "
+            f"[{_pct(lo, signed=True)}, {_pct(hi, signed=True)}] contains 0)")
 
 
 def _pct(v: float, signed: bool = False) -> str:

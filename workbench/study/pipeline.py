@@ -25,6 +25,7 @@ from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.names import METHOD_TITLES
+from workbench.study.method_level import FLOOR_METHODS, SPLITS
 
 __all__ = [
     "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "split_in_time", "improvement_table", "verdicts",
@@ -34,8 +35,6 @@ __all__ = [
 
 # Band widths (in σ) of the one-step calibration curve; 1, 2 and 3 also make the coverage table.
 CALIBRATION_LEVELS = tuple(float(c) for c in np.arange(0.25, 3.01, 0.25))
-#: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator.
-FLOOR_METHODS = ("ioc_only", "persistence")
 UNLABELED = "all"  # the one group of a study whose trials carry no strategy label
 
 #: The plant of a study: fixed, or identified from a training set (``LinearSystem.identify``-like).
@@ -112,7 +111,7 @@ class StudyResult:
     def summary(self) -> pd.DataFrame:
         """Mean RMSE per label, metric and method, with the proposed model's paired difference (and interval)
         against each baseline on the headline metric."""
-        return improvement_table(self.rmse, None if self.statistics is None else self.statistics.paired)
+        return improvement_table(self.rmse, None if self.statistics is None else self.statistics.headline)
 
     def verdicts(self) -> list[str]:
         """One plain sentence per label where the proposed model is not shown to beat IOC-only or persistence
@@ -126,7 +125,12 @@ class StudyResult:
                   f"objective was not found ({reason}); it still predicts, and is compared as usual."
                   for label, model in self.models.items()
                   if (reason := getattr(model, "objective_error_", None))]
-        paired = () if self.statistics is None else self.statistics.paired
+        lines += [f"{'On ' + label + ', the' if label not in ('', 'None', UNLABELED) else 'The'} proposed model "
+                  "predicts with its task objective alone (K̂x, as IOC-only does): its variability model did not "
+                  f"lower the held-out error in cross-validation ({auto.describe()})."
+                  for label, model in self.models.items()
+                  if (auto := getattr(model, "auto_", None)) is not None and auto.fallback]
+        paired = () if self.statistics is None else self.statistics.headline
         return lines + verdicts(paired, self.metric)
 
     def save_tables(self, path: str | os.PathLike) -> Path:
@@ -170,7 +174,7 @@ def select_components(
 
 
 def _fit_each(
-    system: Any, train: DemonstrationSet, components: int, seed: int
+    system: Any, train: DemonstrationSet, components: int | str, seed: int
 ) -> tuple[dict[str, Any], dict[str, str]]:
     """Every method that can be fitted, and why the others cannot (a ModelError's message).
 
@@ -221,6 +225,7 @@ def run_study(
     bootstrap: int = 0,
     stride_s: float | None = 1.0,
     power: int = 0,
+    method_splits: int = SPLITS,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
 
@@ -231,6 +236,10 @@ def run_study(
     ``bootstrap``: resamples of each label's training trials for intervals of the proposed model's task objective
     and its weight ratios (``StudyResult.objectives``); 0 computes none. ``power``: simulated sets per size of the
     power curve of every ratio the data do not pin down (:mod:`workbench.study.power`); 0 computes none.
+
+    ``method_splits``: random train/test splits of each strategy's trials on which every method is refitted, for
+    the method-level comparison (:mod:`workbench.study.method_level`) that the headline and the verdicts use; 0
+    compares the fitted models on the one split only.
 
     ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
@@ -305,7 +314,14 @@ def run_study(
                    if part.check is not None]
     eff_parts = [part.efficiency for part in parts if part.efficiency is not None]
     table = pd.concat(rmse_parts, ignore_index=True)
-    statistics = _statistics(table, demos, system, n_steps, stride, seed)
+    method_level = None
+    if method_splits > 0 and test_ids is None:
+        t0 = time.perf_counter()
+        method_level = _method_level({lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()},
+                                     {lb: part.fitted for lb, part in zip(splits, parts, strict=True)}, system,
+                                     n_steps, stride, test_size, int(method_splits), seed, executor, progress)
+        timings["method-level splits"] = time.perf_counter() - t0
+    statistics = _statistics(table, demos, system, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
     if ratio_comparison is not None:
@@ -316,8 +332,9 @@ def run_study(
         coverage=_coverage_table(calibration) if calibration is not None else None,
         calibration=calibration,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
-        stats_text=statistics.text(), n_steps=n_steps, samples=samples, seed=seed, timings=timings,
-        failures=failures, objectives=objectives, ratio_comparison=ratio_comparison, stride_steps=stride,
+        stats_text=statistics.text() + _settings_text(models), n_steps=n_steps, samples=samples, seed=seed,
+        timings=timings, failures=failures, objectives=objectives, ratio_comparison=ratio_comparison,
+        stride_steps=stride,
         statistics=statistics, calibration_check=_check(check_parts),
         calibration_counts=pd.concat(check_parts, ignore_index=True) if check_parts else None,
     )
@@ -365,8 +382,11 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
     te = te.load() if isinstance(te, DataRef) else te
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    G = select_components(tr, system, seed=s.seed) if s.n_components == "bic" else int(s.n_components)
+    G: int | str = (select_components(tr, system, seed=s.seed) if s.n_components == "bic" else
+                    "cv" if s.n_components == "cv" else int(s.n_components))
     fitted, failed = _fit_each(system, tr, G, s.seed)
+    if G == "cv":  # the data-efficiency fits take the G cross-validation chose on all training trials
+        G = int(getattr(fitted.get("proposed"), "n_components_", 5))
     timings["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     table = ev.compare(fitted, te, n_steps=s.n_steps, samples=s.samples, seed=s.seed,
@@ -570,15 +590,56 @@ def _stride_steps(stride_s: float | None, dt: float) -> int | None:
 
 
 def _statistics(table: pd.DataFrame, demos: DemonstrationSet, system: Any, n_steps: int, stride: int | None,
-                seed: int) -> Any:
-    """The paired differences, tests and mixed model of the headline metric (:mod:`workbench.study.findings`)."""
+                seed: int, method_level: Any = None) -> Any:
+    """The paired differences, tests and mixed model of the headline metric (:mod:`workbench.study.findings`),
+    with the method-level differences where they were computed."""
     from workbench.study.evaluate import primary_metric
     from workbench.study.findings import study_statistics, windows_sentence
 
     metric = primary_metric(system)
     subjects = {d.id: str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None}
     return study_statistics(table, metric, metric_unit(system, metric), subjects,
-                            windows_sentence(table, n_steps, stride, demos.dt), seed=seed)
+                            windows_sentence(table, n_steps, stride, demos.dt), seed=seed, method_level=method_level)
+
+
+def _settings_text(models: dict[str, Any]) -> str:
+    """The proposed model's settings where cross-validation chose them, per label (with any fallback to K̂x)."""
+    lines = [f"- {label}: {auto.describe()}" for label, model in models.items()
+             if (auto := getattr(model, "auto_", None)) is not None]
+    return ("\n\nThe proposed model's settings, chosen on each strategy's training trials:\n" + "\n".join(lines)
+            if lines else "")
+
+
+def _method_level(by_label: dict[str, DemonstrationSet], fitted: dict[str, dict[str, Any]], system: Any,
+                  n_steps: int, stride: int | None, test_size: float, splits: int, seed: int, executor: Any,
+                  progress: Callable[[], Any] | None) -> Any:
+    """Every method refitted on ``splits`` random splits of each label's trials, scored on the headline metric,
+    as :class:`~workbench.study.method_level.MethodDifference` rows (:mod:`workbench.study.method_level`)."""
+    from workbench.study.evaluate import primary_metric
+    from workbench.study.executor import serial
+    from workbench.study.method_level import method_differences, split_scores, split_tasks
+
+    ex = executor if executor is not None else serial
+    metric = primary_metric(system)
+    # the methods the verdicts judge against (refitting GMR-only too would cost the demo its time budget)
+    templates = {lb: {k: m for k, m in models.items() if k == "proposed" or k in FLOOR_METHODS}
+                 for lb, models in fitted.items() if "proposed" in models and lb in by_label}
+    if not templates:
+        return None
+    by_label = {lb: ds for lb, ds in by_label.items() if lb in templates}
+    tasks, sizes, units = split_tasks(by_label, templates, metric, n_steps, stride, test_size, splits, seed,
+                                      share=ex.share if getattr(ex, "parallel", False) else None)
+    if not tasks:
+        return None
+    bar = progress() if progress is not None else nullcontext()
+    with bar as p:
+        task = p.add_task(f"refitting on {splits} splits", total=len(tasks)) if p is not None else None
+        parts = ex.map(split_scores, tasks, progress=None if p is None else lambda d, t: p.update(task, completed=d))
+    sizes = {lb: sz for lb, sz in sizes.items()}
+    scores = pd.concat([pt for pt in parts if len(pt)], ignore_index=True) if any(len(pt) for pt in parts) else None
+    if scores is None:
+        return None
+    return tuple(method_differences(scores, sizes, metric, "proposed", units=units))
 
 
 def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -> pd.DataFrame:
@@ -608,10 +669,13 @@ def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -
 
 def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
     """One plain sentence per label where the proposed model is not shown to be better than IOC-only or
-    persistence (:data:`FLOOR_METHODS`): the interval of its paired difference does not lie above zero. Then its
-    predictions are not shown to gain anything on these data, and the user must read that before any other number.
+    persistence (:data:`FLOOR_METHODS`): the interval of its difference does not lie above zero. Then its
+    predictions are not shown to gain anything on these data, and the user must read that before any other number;
+    where the interval lies below zero the sentence says "worse by X % [a, b]".
 
-    ``paired`` are :class:`~workbench.study.paired.PairedDifference`; labels where it beats both give no sentence.
+    ``paired`` are :class:`~workbench.study.paired.PairedDifference` (these fitted models on these test trials) or
+    :class:`~workbench.study.method_level.MethodDifference` (the methods, refitted over splits); the sentence says
+    which. Labels where it beats both give no sentence.
     """
     what = metric.removeprefix("rmse_").replace("_", " ")
     out = []
@@ -621,14 +685,34 @@ def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
     labels = list(dict.fromkeys(d.label for d in paired if d.metric == metric))
     labels = [lb for lb in labels if lb != ALL_LABELS] or labels
     for label in labels:
-        worse = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
-                 and not d.lo > 0]
-        if not worse:
+        rows = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
+                and not d.lo > 0]
+        if not rows:
             continue
         where = f"On {label}, the" if label not in ("", UNLABELED) else "The"
-        parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} ({d.sentence()})" for d in worse]
-        which = "that baseline" if len(worse) == 1 else "those baselines"
-        out.append(f"{where} proposed model is not shown to be better than {' nor than '.join(parts)} in mean "
-                   f"{what} RMSE on the test trials: its predictions are not shown to gain anything over {which} on "
-                   "these data.")
+        scope = _scope(rows[0])
+        worse = [d for d in rows if d.hi < 0]
+        unclear = [d for d in rows if not d.hi < 0]
+        if worse:
+            parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} by {_pct(-d.change)} [{_pct(-d.hi)}, "
+                     f"{_pct(-d.lo)}]" for d in worse]
+            out.append(f"{where} proposed model is worse than {' and than '.join(parts)} in mean {what} RMSE "
+                       f"{scope}: use {'that baseline' if len(worse) == 1 else 'those baselines'} for these data.")
+        if unclear:
+            parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} ({d.sentence()})" for d in unclear]
+            which = "that baseline" if len(unclear) == 1 else "those baselines"
+            out.append(f"{where} proposed model is not shown to be better than {' nor than '.join(parts)} in mean "
+                       f"{what} RMSE {scope}: its predictions are not shown to gain anything over {which} on these "
+                       "data.")
     return out
+
+
+def _scope(d: Any) -> str:
+    """Which question a difference answers, as the verdict says it."""
+    if hasattr(d, "n_splits"):
+        return f"as a method (both refitted on each of {d.n_splits} random splits of the trials)"
+    return "on the test trials (these fitted models)"
+
+
+def _pct(v: float) -> str:
+    return f"{100 * v:.0f} %" if np.isfinite(v) else "n/a"

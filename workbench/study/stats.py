@@ -4,6 +4,9 @@ Every test trial (every subject, in the multi-subject design) is predicted by ev
 compared within units, never as independent groups (the paper's one-way ANOVA, F(2, 27), treats them as
 independent and is not used here):
 
+* :func:`sign_flip_tests` — the exact sign-flip (permutation) test of paired per-unit differences
+  (``scipy.stats.permutation_test``), Holm-corrected over the rows a headline uses, each saying whether any p of
+  its family can reach the level with its units (6 trials: no sign-flip p is below 0.031). What the study prints.
 * :func:`paired_tests` — per pair of methods, the Wilcoxon signed-rank test (``scipy.stats.wilcoxon``) and the
   paired t-test (``scipy.stats.ttest_rel``) of the per-unit differences, Holm-corrected over the pairs
   (``statsmodels.stats.multitest.multipletests``): *does method a's error differ from method b's on the same
@@ -11,7 +14,8 @@ independent and is not used here):
 * :func:`mixed_effects` — a linear mixed model (``statsmodels`` MixedLM) of the log per-trial error with method
   and strategy as fixed effects, subject as a random intercept and the trial within its subject as a variance
   component: *by what factor does each method's error differ from the reference's, allowing every subject and
-  trial its own level?*, and — strategies being flown in different trials — *do the strategies differ?* Its
+  trial its own level?*, and — strategies being flown in different trials — *do the strategies differ?* It pools
+  one residual variance over the methods, so the study reads only its strategy terms. Its
   intervals and p-values use a t reference with between-within degrees of freedom, not MixedLM's Wald z.
 * :func:`repeated_measures_anova` — the omnibus test over methods with subjects as the repeated unit
   (``statsmodels`` AnovaRM), for the per-subject design.
@@ -31,8 +35,8 @@ from scipy import stats as sps
 
 from workbench.errors import DataError
 
-__all__ = ["holm", "TTestResult", "pairwise_ttests", "PairedTest", "paired_tests", "MixedEffect", "MixedModelResult",
-           "mixed_effects", "RMAnovaResult", "repeated_measures_anova"]
+__all__ = ["holm", "SignFlipTest", "sign_flip_tests", "TTestResult", "pairwise_ttests", "PairedTest", "paired_tests",
+           "MixedEffect", "MixedModelResult", "mixed_effects", "RMAnovaResult", "repeated_measures_anova"]
 
 
 @dataclass(frozen=True)
@@ -203,6 +207,73 @@ def paired_tests(
         pw_adj, pt_adj = pw, pt
     return [PairedTest(a, b, label, n, med, w, p1, float(q1), t, p2, float(q2))
             for (a, b, n, med, w, p1, t, p2), q1, q2 in zip(rows, pw_adj, pt_adj, strict=True)]
+
+
+@dataclass(frozen=True)
+class SignFlipTest:
+    """Method ``a`` against ``b`` on the same units: the exact sign-flip (permutation) test of the mean of ``a − b``.
+
+    ``p_min`` is the smallest p the test can give with ``n`` units (``2 / 2^n``), ``p_holm`` is Holm-corrected over
+    the family it was tested in (NaN: not in it), ``reachable`` says whether that family's correction lets it reach
+    ``alpha`` at all.
+    """
+
+    a: str
+    b: str
+    label: str
+    n: int
+    mean_difference: float
+    p: float
+    p_min: float
+    p_holm: float
+    reachable: bool
+
+
+#: Units up to which the sign-flip test enumerates every sign pattern (2^16 = 65,536); above, random flips.
+_EXACT_UP_TO = 16
+
+
+def sign_flip_tests(
+    wide: pd.DataFrame, rows: Sequence[tuple[str, str, str]], family: Sequence[bool] | None = None,
+    alpha: float = 0.05, seed: int = 0,
+) -> list[SignFlipTest]:
+    """The exact sign-flip test of paired per-unit differences (``scipy.stats.permutation_test``), Holm-corrected
+    over the rows marked in ``family`` (default all).
+
+    With ``n`` units no sign-flip test can give less than ``2 / 2^n`` (6 trials: 0.031), and Holm multiplies the
+    smallest p by the family's size, so a row is ``reachable`` only where ``p_min · k ≤ alpha``; the caller then
+    prints no p that could never be significant.
+
+    Parameters
+    ----------
+    wide : DataFrame
+        Indexed by ``(label, trial)``, one column per method (:func:`workbench.study.paired.per_trial`).
+    rows : sequence of (label, a, b)
+        ``label`` "all" (:data:`~workbench.study.paired.ALL_LABELS`) takes every row of ``wide``.
+    """
+    from workbench.study.paired import ALL_LABELS
+
+    family = [True] * len(rows) if family is None else list(family)
+    raw = []
+    for label, a, b in rows:
+        part = wide if label == ALL_LABELS else wide.xs(label, level="label", drop_level=False)
+        both = part[[a, b]].dropna()
+        d = both[a].to_numpy(float) - both[b].to_numpy(float)
+        n = len(d)
+        if n < 2 or not np.any(d != 0):
+            raw.append((label, a, b, n, float(np.mean(d)) if n else np.nan, 1.0, 2.0 / 2.0**max(n, 1)))
+            continue
+        exact = n <= _EXACT_UP_TO
+        res = sps.permutation_test((d,), lambda x, axis: np.mean(x, axis=axis), permutation_type="samples",
+                                   n_resamples=np.inf if exact else 20000, alternative="two-sided",
+                                   random_state=seed)
+        raw.append((label, a, b, n, float(d.mean()), float(res.pvalue), 2.0 / 2.0**n if exact else 0.0))
+    k = sum(family)
+    in_family = [i for i, f in enumerate(family) if f]
+    adjusted = dict(zip(in_family, holm([raw[i][5] for i in in_family]), strict=True)) if in_family else {}
+    return [SignFlipTest(a, b, label, n, md, p, pmin, float(adjusted.get(i, np.nan)),
+                         bool(pmin * (k if family[i] else 1) <= alpha))
+            for i, (label, a, b, n, md, p, pmin) in enumerate(raw)]
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,143 @@
+"""Method-level comparisons (refitted splits, corrected resampled t) and p-values that can reach their level."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats as sps
+
+from workbench.study.findings import headline_rows, study_statistics, windows_sentence
+from workbench.study.method_level import corrected_t, method_differences
+from workbench.study.paired import paired_differences
+from workbench.study.stats import sign_flip_tests
+
+
+def test_corrected_t_inflates_the_variance_by_the_training_overlap():
+    rng = np.random.default_rng(0)
+    c = 0.1 + 0.05 * rng.standard_normal(10)
+    mean, lo, hi, p, se, df = corrected_t(c, n_train=24, n_test=6)
+    s2 = c.var(ddof=1)
+    assert se == pytest.approx(np.sqrt((1 / 10 + 6 / 24) * s2)) and df == 9
+    assert hi - mean == pytest.approx(sps.t.ppf(0.975, 9) * se) and mean - lo == pytest.approx(hi - mean)
+    assert p == pytest.approx(2 * sps.t.sf(abs(mean) / se, 9))
+    naive = sps.t.ppf(0.975, 9) * np.sqrt(s2 / 10)
+    assert hi - mean > 1.8 * naive  # (1/J + 1/4) / (1/J) = 3.5: √3.5 ≈ 1.87 times the naive half-width
+
+
+def _scores(rng, labels=("A", "B"), J=6, n_test=4, ratio=0.8):
+    rows = []
+    for lb in labels:
+        for j in range(J):
+            for t in range(n_test):
+                base = rng.lognormal(0, 0.3)
+                rows.append((lb, j, f"{lb}{j}{t}", "baseline", base))
+                rows.append((lb, j, f"{lb}{j}{t}", "proposed", base * ratio * rng.lognormal(0, 0.05)))
+    return pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value"])
+
+
+def test_method_differences_per_label_and_pooled_from_the_splits_means():
+    rng = np.random.default_rng(1)
+    scores = _scores(rng)
+    rows = method_differences(scores, {"A": (12, 4), "B": (12, 4)}, "rmse_position")
+    assert [d.label for d in rows] == ["A", "B", "all"]
+    a = rows[0]
+    m = scores[scores["label"] == "A"].groupby(["split", "method"])["value"].mean().unstack()
+    expected = 1 - m["proposed"] / m["baseline"]
+    assert a.changes == pytest.approx(tuple(expected)) and a.change == pytest.approx(expected.mean())
+    pooled = scores.groupby(["split", "method"])["value"].mean().unstack()
+    assert rows[2].change == pytest.approx((1 - pooled["proposed"] / pooled["baseline"]).mean())
+    assert rows[2].n_train == 24 and rows[2].n_test == 8
+    assert all(d.shown and d.sentence().startswith("lower by") for d in rows)
+
+
+def _trials(rng, n_trials, labels=("CS1", "CS2")):
+    rows = []
+    for lb in labels:
+        for i in range(n_trials):
+            level = rng.lognormal(0, 0.4)
+            for method, ratio in (("proposed", 0.7), ("ioc_only", 1.0), ("persistence", 2.0)):
+                rows.append((f"{lb}{i}", lb, 0, method, "rmse_position", level * ratio * rng.lognormal(0, 0.05)))
+    return pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
+
+
+def test_no_p_value_column_where_no_test_can_reach_the_level():
+    """Six test trials per strategy, four headline rows: the exact sign-flip p cannot go below 2/2^6 = 0.031, Holm
+    makes it 0.125, so the text prints no p column and says why (the previous main printed a Wilcoxon column
+    whose Holm-corrected p could never be below 0.05)."""
+    rng = np.random.default_rng(2)
+    small = _trials(rng, 6)
+    stats = study_statistics(small, "rmse_position", "m", {}, windows_sentence(small, 60, None, 0.05), n_boot=300)
+    text = stats.text()
+    family = headline_rows(stats.paired)
+    k = sum(family)
+    assert k == 4 and not any(t.reachable for t in stats.tests if t.label != "all")
+    assert "sign-flip p" not in text and "Wilcoxon" not in text
+    assert f"cannot go below p = {2 / 2**6:.3g} ({min(1, k * 2 / 2**6):.3g} after Holm" in text
+    # with 14 trials per strategy the test can reach 5 % after Holm over 4 rows: the column is there
+    large = _trials(rng, 14)
+    stats = study_statistics(large, "rmse_position", "m", {}, windows_sentence(large, 60, None, 0.05), n_boot=300)
+    assert all(t.reachable for t in stats.tests) and "sign-flip p (Holm)" in stats.text()
+    head = [t for t, f in zip(stats.tests, headline_rows(stats.paired), strict=True) if f]
+    assert all(t.p == pytest.approx(2 / 2**14) for t in head)  # every trial lower: the most extreme sign pattern
+    assert [t.p_holm for t in head] == pytest.approx([min(1, 4 * 2 / 2**14)] * 4)
+
+
+def test_sign_flip_p_is_the_exact_permutation_p():
+    rng = np.random.default_rng(3)
+    d = rng.normal(0.1, 0.2, 8)
+    wide = pd.DataFrame({"a": d, "b": np.zeros(8)},
+                        index=pd.MultiIndex.from_tuples([("L", f"t{i}") for i in range(8)], names=["label", "trial"]))
+    (t,) = sign_flip_tests(wide, [("L", "a", "b")])
+    signs = np.array(np.meshgrid(*[[-1, 1]] * 8)).reshape(8, -1).T
+    null = np.abs((signs * d).mean(axis=1))
+    assert t.p == pytest.approx(np.mean(null >= abs(d.mean()) - 1e-12)) and t.p_min == 2 / 2**8
+
+
+def test_method_level_rows_are_the_headline_and_holm_is_over_the_verdicts_rows():
+    rng = np.random.default_rng(4)
+    table = _trials(rng, 6)
+    scores = _scores(rng, labels=("CS1", "CS2")).replace({"baseline": "ioc_only"})
+    ml = method_differences(scores, {"CS1": (24, 6), "CS2": (24, 6)}, "rmse_position")
+    stats = study_statistics(table, "rmse_position", "m", {}, windows_sentence(table, 60, None, 0.05), n_boot=300,
+                             method_level=ml)
+    assert stats.headline == stats.method_level
+    head = [d for d in stats.method_level if d.label != "all"]
+    assert [d.p_holm for d in head] == pytest.approx(list(np.minimum(1, sorted_holm([d.p for d in head]))))
+    assert np.isnan(stats.method_difference("all", "ioc_only").p_holm)
+    assert "the methods, for this operator" in stats.text().lower().replace("*", "")
+
+
+def sorted_holm(p):
+    from statsmodels.stats.multitest import multipletests
+
+    return multipletests(p, method="holm")[1]
+
+
+def test_paired_rows_say_which_question_they_answer():
+    rng = np.random.default_rng(5)
+    table = _trials(rng, 6)
+    paired = paired_differences(table, "rmse_position", n_boot=200)
+    stats = study_statistics(table, "rmse_position", "m", {}, windows_sentence(table, 60, None, 0.05), n_boot=200)
+    assert stats.headline == tuple(paired) or len(stats.headline) == len(paired)
+    assert "holds the fitted models fixed" in stats.text()
+
+
+def test_a_split_refits_the_fitted_models_settings_and_fallback():
+    """The refits take the settings cross-validation chose and its fallback to K̂x: a fallen-back proposed model
+    scores exactly as IOC-only on every split, so the method-level difference is 0, never a made-up gain."""
+    from workbench.models.factory import make_models
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.operators import lqr_operator_demos
+    from workbench.study.method_level import split_scores, split_tasks
+
+    system = planar_quadrotor()
+    ds = lqr_operator_demos(n_trials=6, seed=11)
+    models = make_models(system, ["proposed", "ioc_only"], n_components=1)
+    models = {k: m.fit(ds) for k, m in models.items()}
+    models["proposed"].variability_mean_ = False
+    tasks, sizes, units = split_tasks({"LQR": ds}, {"LQR": models}, "rmse_position", 20, 10, 0.34, 3, seed=0)
+    assert sizes == {"LQR": (4, 2)} and units == {"LQR": "trials"} and len(tasks) == 3
+    scores = pd.concat([split_scores(t) for t in tasks], ignore_index=True)
+    (d,) = method_differences(scores, sizes, "rmse_position", "proposed", ["ioc_only"])
+    assert d.changes == pytest.approx((0.0, 0.0, 0.0), abs=1e-12) and not d.shown

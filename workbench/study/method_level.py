@@ -1,0 +1,265 @@
+"""Methods compared as methods: repeated train/test splits that refit every model, with the corrected resampled t.
+
+The paired differences of :mod:`workbench.study.paired` answer *"do these two fitted models differ on these test
+trials?"*: their bootstrap resamples test trials with the fitted models held fixed, so the variability of training
+is not in them. A claim about the methods — *"does the proposed method predict this operator better than
+IOC-only?"* — must include it: a second sample of the same operator gives other fits. Here each strategy's trials
+are split ``J`` times at random into training and test trials (whole subjects where there are at least
+:data:`~workbench.study.paired.MIN_SUBJECTS`), every method is refitted on each training part and scored on its
+test part, and the per-split relative differences ``c_j = 1 − mean(method) / mean(baseline)`` are averaged.
+
+The splits' training sets overlap, so the ``c_j`` are correlated and the plain ``s² / J`` under-states the
+variance of their mean; Nadeau & Bengio (2003, "Inference for the generalization error", Machine Learning 52)
+correct it to ``(1/J + n_test/n_train) s²`` with a t reference on ``J − 1`` degrees of freedom — the corrected
+resampled t. Its estimand is the expected difference of methods trained on ``n_train`` trials of this operator.
+
+Cost: the refits are the cheap form of each model — no task objective (predictions do not need it), no
+Monte Carlo band calibration (the RMSE scores the mean rollout) and EM stopped at 200 iterations (as the
+cross-validation of :mod:`workbench.models.autoconfig` does) — with the settings of the study's own fits (a
+setting chosen by cross-validation on the study's training trials is held fixed, not chosen again per split: the
+selection's own variability is not in the interval). Splits are independent tasks of the executor. Only the
+methods the verdicts judge the proposed model against are refitted (IOC-only and persistence); GMR-only is compared
+as fitted models on the study's test trials only.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import stats as sps
+
+from workbench.data.dataset import DataRef
+from workbench.data.demonstrations import DemonstrationSet
+from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
+from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
+
+__all__ = ["FLOOR_METHODS", "MethodDifference", "corrected_t", "split_scores", "split_tasks", "method_differences",
+           "SPLITS"]
+
+#: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
+#: (the baselines the verdicts judge it against, and the only ones the splits refit).
+FLOOR_METHODS = ("ioc_only", "persistence")
+#: Random train/test splits per strategy (Nadeau & Bengio used 15; 8 keeps the demo within its 30 s).
+SPLITS = 8
+#: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).
+_SPLIT_MAX_ITER = 200
+
+
+@dataclass(frozen=True)
+class MethodDifference:
+    """``method`` against ``baseline`` as methods: the mean over splits of ``1 − mean(method) / mean(baseline)``.
+
+    Attributes
+    ----------
+    change, lo, hi : float
+        The mean relative change over splits (> 0: the method's error is lower) and its corrected resampled t
+        interval at ``ci`` (fractions).
+    p : float
+        Two-sided p of the corrected resampled t (against no difference).
+    p_holm : float
+        ``p`` Holm-corrected over the rows the headline uses (NaN: not one of them).
+    se, df : float
+        The corrected standard error and the degrees of freedom (``J − 1``).
+    n_splits, n_train, n_test : int
+        Splits scored (a split where either method could not be fitted is left out), training and test trials
+        per split.
+    changes : tuple of float
+        The per-split changes.
+    units : str
+        What was split: "trials" or "subjects".
+    """
+
+    method: str
+    baseline: str
+    metric: str
+    label: str
+    change: float
+    lo: float
+    hi: float
+    p: float
+    se: float
+    df: float
+    n_splits: int
+    n_train: int
+    n_test: int
+    changes: tuple[float, ...]
+    units: str = "trials"
+    p_holm: float = float("nan")
+    ci: float = 95.0
+
+    @property
+    def shown(self) -> bool:
+        """Whether the interval excludes zero."""
+        return self.lo > 0 or self.hi < 0
+
+    def sentence(self) -> str:
+        """"lower by 12 % [4 %, 19 %]", "higher by …" or "no difference shown (…)", from the interval."""
+        return difference_sentence(self.change, self.lo, self.hi, self.ci)
+
+
+def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0
+                ) -> tuple[float, float, float, float, float, float]:
+    """Mean, interval, two-sided p, standard error and df of the corrected resampled t (Nadeau & Bengio 2003).
+
+    ``var = (1/J + n_test/n_train) · s²`` of the ``J`` per-split values; t reference on ``J − 1`` df.
+    """
+    c = np.asarray(changes, dtype=float)
+    c = c[np.isfinite(c)]
+    J = c.size
+    if J < 2:
+        return (float(c.mean()) if J else np.nan), np.nan, np.nan, np.nan, np.nan, float(max(J - 1, 0))
+    mean = float(c.mean())
+    se = float(np.sqrt((1.0 / J + n_test / max(n_train, 1)) * c.var(ddof=1)))
+    df = float(J - 1)
+    if se == 0.0:  # every split gave the same change: nothing varies, the interval is that value
+        return mean, mean, mean, (1.0 if mean == 0.0 else 0.0), 0.0, df
+    half = float(sps.t.ppf(0.5 + ci / 200.0, df)) * se
+    p = float(2.0 * sps.t.sf(abs(mean) / se, df))
+    return mean, mean - half, mean + half, p, se, df
+
+
+def _units(ds: DemonstrationSet) -> tuple[list[list[int]], str]:
+    """Index groups that a split keeps together: each subject's trials (enough subjects) or each trial."""
+    subj = [d.meta.get("subject") for d in ds]
+    named = sorted({str(s) for s in subj if s is not None})
+    if len(named) >= MIN_SUBJECTS and all(s is not None for s in subj):
+        return [[i for i, s in enumerate(subj) if str(s) == name] for name in named], "subjects"
+    return [[i] for i in range(len(ds))], "trials"
+
+
+def _split_indices(n_units: int, test_size: float, J: int, seed: int, key: int) -> list[np.ndarray]:
+    n_test = max(1, min(n_units - 2, int(round(test_size * n_units))))
+    rng = np.random.default_rng([seed, 27, key])
+    return [rng.permutation(n_units)[:n_test] for _ in range(J)]
+
+
+def _cheap(models: Mapping[str, Any]) -> dict[str, Any]:
+    """The models as a split refits them: no objective, no band calibration, EM capped (see the module)."""
+    out = {}
+    for name, m in models.items():
+        params = m.get_params()
+        updates = {k: v for k, v in (("fit_objective", False), ("noise_folds", 0)) if k in params}
+        if "max_iter" in params:
+            updates["max_iter"] = min(int(params["max_iter"]), _SPLIT_MAX_ITER)
+        # settings chosen by cross-validation on the study's training trials are held fixed (see the module)
+        for setting in ("n_components", "reg_covar"):
+            if params.get(setting) == "cv" and getattr(m, f"{setting}_", None) is not None:
+                updates[setting] = getattr(m, f"{setting}_")
+        out[name] = type(m)(m.system, **{**params, **updates})  # always a fresh one: a template is never refitted
+    return out
+
+
+def split_scores(task: tuple) -> pd.DataFrame:
+    """One split (a task of the executor): refit ``models`` (unfitted templates) on the training trials, score
+    the test trials; rows ``label, split, trial, method, value`` (value: the trial's mean ``metric`` over its
+    windows) with ``n_train`` / ``n_test`` in ``attrs``. A method that cannot be fitted has no rows."""
+    from workbench.study import evaluate as ev
+
+    label, j, ds, test_idx, templates, metric, n_steps, stride = task
+    ds = ds.load() if isinstance(ds, DataRef) else ds
+    held = {int(i) for i in test_idx}
+    train = ds.with_demos([d for i, d in enumerate(ds) if i not in held])
+    test = ds.with_demos([d for i, d in enumerate(ds) if i in held])
+    fitted = {}
+    with warnings.catch_warnings():
+        # a split's EM may stop at its cap or fit a degenerate component: the held-out score judges the result
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.simplefilter("ignore", DegenerateFitWarning)
+        for name, model in _cheap(templates).items():
+            try:
+                fitted[name] = model.fit(train)
+            except ModelError:
+                continue
+            if getattr(templates[name], "variability_mean_", True) is False:
+                # the study's model fell back to K̂x by cross-validation: the refits predict as it does
+                fitted[name].variability_mean_ = False
+    if not fitted:
+        return pd.DataFrame(columns=["label", "split", "trial", "method", "value"])
+    table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride)
+    table = table[table["metric"] == metric]
+    per = table.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
+    out = per.assign(label=label, split=j)[["label", "split", "trial", "method", "value"]]
+    out.attrs.update(n_train=len(train), n_test=len(test))
+    return out
+
+
+def method_differences(
+    scores: pd.DataFrame,
+    sizes: Mapping[str, tuple[int, int]],
+    metric: str,
+    method: str = "proposed",
+    baselines: Sequence[str] | None = None,
+    units: Mapping[str, str] | None = None,
+    ci: float = 95.0,
+) -> list[MethodDifference]:
+    """The corrected resampled t of ``method`` against each baseline, per label and (several labels) pooled.
+
+    Parameters
+    ----------
+    scores : DataFrame
+        Rows of :func:`split_scores` of every split and label.
+    sizes : mapping label → (n_train, n_test)
+        Trials per split of each label.
+    units : mapping label → "trials" | "subjects"
+    """
+    if scores.empty or method not in set(scores["method"]):
+        return []
+    means = scores.groupby(["label", "split", "method"], sort=False)["value"].agg(["sum", "count"])
+    methods = list(dict.fromkeys(scores["method"]))
+    baselines = [b for b in (baselines or methods) if b != method and b in methods]
+    labels = list(dict.fromkeys(scores["label"]))
+    scopes = [(lb, [lb]) for lb in labels] + ([(ALL_LABELS, labels)] if len(labels) > 1 else [])
+    out = []
+    for scope, members in scopes:
+        n_train = sum(sizes[lb][0] for lb in members)
+        n_test = sum(sizes[lb][1] for lb in members)
+        for base in baselines:
+            changes = []
+            for j in sorted(set(scores["split"])):
+                try:
+                    a = [means.loc[(lb, j, method)] for lb in members]
+                    b = [means.loc[(lb, j, base)] for lb in members]
+                except KeyError:  # a method not fitted on this split of some label: the split is left out
+                    continue
+                ma = sum(r["sum"] for r in a) / sum(r["count"] for r in a)
+                mb = sum(r["sum"] for r in b) / sum(r["count"] for r in b)
+                changes.append(1.0 - ma / mb if mb > 0 else np.nan)
+            if len(changes) < 2:
+                continue
+            mean, lo, hi, p, se, df = corrected_t(changes, n_train, n_test, ci)
+            what = {(units or {}).get(lb, "trials") for lb in members}
+            out.append(MethodDifference(
+                method=method, baseline=base, metric=metric, label=scope, change=mean, lo=lo, hi=hi, p=p, se=se,
+                df=df, n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
+                units="subjects" if what == {"subjects"} else "trials", ci=ci))
+    return out
+
+
+def split_tasks(
+    by_label: Mapping[str, DemonstrationSet], templates: Mapping[str, Mapping[str, Any]], metric: str, n_steps: int,
+    stride: int | None, test_size: float, splits: int, seed: int, share: Any = None,
+) -> tuple[list[tuple], dict[str, tuple[int, int]], dict[str, str]]:
+    """The split tasks of every label (for :func:`split_scores`), each label's (n_train, n_test) and units.
+
+    ``templates``: per label the unfitted models to refit (their settings those of the study's fits).
+    ``share``: the executor's ``share`` (a worker then reads the label's trials from where they were staged).
+    """
+    tasks, sizes, units = [], {}, {}
+    for key, (label, ds) in enumerate(by_label.items()):
+        groups, what = _units(ds)
+        if len(groups) < 3:
+            continue
+        ref = share(ds) if share is not None else ds
+        n_trials = []
+        for j, test_units in enumerate(_split_indices(len(groups), test_size, splits, seed, key)):
+            test_idx = np.array(sorted(i for u in test_units for i in groups[int(u)]))
+            n_trials.append(len(test_idx))
+            tasks.append((label, j, ref, test_idx, dict(templates[label]), metric, n_steps, stride))
+        n_test = int(round(float(np.mean(n_trials))))
+        sizes[label], units[label] = (len(ds) - n_test, n_test), what
+    return tasks, sizes, units
