@@ -60,6 +60,10 @@ class LoggedSession:
     warnings: list[str] = field(default_factory=list)  # what the recording and the terminal warn of
     colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # trial → its color, for the key
     label_colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # strategy → its color
+    in_sample: list[str] = field(default_factory=list)  # trials a model shown was fitted on
+    scores: Any = None  # held-out scores (workbench.study.scores.heldout_scores rows), logged under /scores
+    score_note: str = ""  # where the scores come from (the split, the horizon), or why there are none
+    trial_labels: dict[str, str] = field(default_factory=dict)  # trial → its strategy label ("" without)
 
     def title(self, name: str) -> str:
         """``name [unit]`` for a state or input."""

@@ -4,6 +4,7 @@ the blueprint are described in :mod:`workbench.viewer`."""
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import nullcontext
 from pathlib import Path
@@ -172,7 +173,6 @@ class SessionLogger:
         if s.labels:
             s.label_colors = {d.label: self.colors[d.id] for d in demos if d.label}
         self.offsets = {d.id: _log_time(d, origins) if s.clock == "log" else 0.0 for d in demos}
-        self.w_parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}  # by id(model), for verdicts
         self._extent: dict[str, list[float]] = {}
         self.label_ids: set[str] | None = None  # the start labels that do not collide (set by log_scene)
         # every mode of the set, so one mode has one color in every lane
@@ -363,6 +363,7 @@ class SessionLogger:
         if self.plane is not None:
             self._log_track(demo)
         s.demo_ids.append(demo.id)
+        s.trial_labels[demo.id] = str(demo.label or "")
         s.trial_windows[demo.id] = (float(t[0]), float(t[-1]))
         lo, hi = s.span or (float(t[0]), float(t[-1]))
         s.span = (min(lo, float(t[0])), max(hi, float(t[-1])))
@@ -398,7 +399,6 @@ class SessionLogger:
             sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
             outside = np.abs(w - mu) > 3.0 * sigma
             out.update(mu=mu, sigma=sigma, outside=outside)
-            self.w_parts.setdefault(id(model), []).append((w, mu, sigma))
         t = self._t(demo)
         index = _time_index(t)  # one pair of time columns serves every series of the trial
         for j, name in enumerate(s.input_names):
@@ -413,7 +413,6 @@ class SessionLogger:
             # ŵ, μ and the typical 3σ band set the scale; the band's start-up transient may run off the plot
             s.ranges[p] = data_range(w[:, j], m_j, np.median(m_j - 3 * s_j), np.median(m_j + 3 * s_j),
                                       min_span=self._min_span(name))
-            s.fit_titles[p] = verdict.coverage(w[:, j], m_j, s_j).short()
             s.corners[p] = quiet_corner([(t, w[:, j]), (t, m_j - 3 * s_j), (t, m_j + 3 * s_j)],
                                         (float(t[0]), float(t[-1])), s.ranges[p])
             for suffix, k, color in (("gmr", 1.0, style.SIGMA1_COLOR), ("gmr_3sigma", 3.0, style.SIGMA3_COLOR)):
@@ -584,15 +583,20 @@ class SessionLogger:
             lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ" + ("; Monte Carlo band of a prediction"
                                                                       if s.bands else ""),
                       "", "red ×: ŵ outside 3σ; blue: ŵ",
-                      "", f"ŵ titles: share inside 3σ and 1σ (nominal {100 * verdict.NOMINAL_3SIGMA:.1f} % and "
-                      f"{100 * verdict.NOMINAL_1SIGMA:.0f} %); ✓ fits, ✗ does not, ⚠ the model meets data it was "
-                      "not fitted for (see objective)"]
+                      "", f"ŵ titles: share of the inputs inside 3σ and 1σ (nominal {100 * verdict.NOMINAL_3SIGMA:.1f}"
+                      f" % and {100 * verdict.NOMINAL_1SIGMA:.0f} %), inputs at a limit left out, and the verdict "
+                      "against the spread sampling allows: fits, too narrow, too wide, does not fit (as in the "
+                      "report)"]
+        if s.in_sample:
+            lines += ["", f"in-sample (a model was fitted on them): {', '.join(s.in_sample[:4])}"
+                      f"{' …' if len(s.in_sample) > 4 else ''}"]
         self._static("key", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
 
     def log_verdicts(self, named: Mapping[str, Any], models: Any, *, source_dt: float | None = None) -> None:
         """Per model, whether it fits the trials it explains (:mod:`workbench.viewer.verdict`): a Markdown verdict
-        under ``models/<name>/verdict`` and, when it does not, a warning in ``warnings`` that the blueprint and
-        the terminal repeat."""
+        under ``models/<name>/verdict``, each trial's band verdict for the ŵ titles, the trials it was fitted on
+        (in-sample, named so wherever they are shown) and, when it does not fit, a warning in ``warnings`` that
+        the blueprint and the terminal repeat."""
         s = self.session
         for name, model in named.items():
             mine = [d for d in self.demos if _model_for(models, d) is model]
@@ -600,13 +604,20 @@ class SessionLogger:
                 continue
             subset = DemonstrationSet(mine, self.demos.state_names, self.demos.input_names, self.demos.dt,
                                       roles=getattr(self.demos, "roles", None))
-            v = verdict.verdict(name, model, subset, source_dt=source_dt, w_parts=self.w_parts.get(id(model), ()))
+            v = verdict.verdict(name, model, subset, source_dt=source_dt)
             s.verdicts[name] = v
-            cov = v.coverage.text() if v.coverage is not None else "no GMR bands"
+            s.in_sample.extend(i for i in v.in_sample if i not in s.in_sample)
+            if not any("states are" in m or "inputs are" in m for m in v.mismatches):
+                for (trial, inp), words in verdict.trial_band_titles(model, mine).items():
+                    s.fit_titles[f"demos/{entity_part(trial)}/variability/{entity_part(inp)}"] = words
+            head = f"{name} {'fits these data' if v.fits else 'DOES NOT FIT these data'}"
+            if v.all_in_sample:
+                head = f"{name} is shown on its own training trials (in-sample)"
             # no heading: the view above the summary is a few lines tall, its title already says fits / does not
-            lines = [f"**{name} {'fits these data' if v.fits else 'DOES NOT FIT these data'}** — ŵ over "
-                     f"{len(mine)} trial(s): {cov}", *([""] if v.mismatches else []),
-                     *(f"- {m}" for m in v.mismatches)]
+            lines = [f"**{head}** — input band over {v.sample_text()}: {v.band_text()}",
+                     *([""] if v.mismatches else []), *(f"- {m}" for m in v.mismatches)]
+            if v.in_sample and not v.all_in_sample:
+                lines += ["", f"in-sample: {', '.join(v.in_sample[:6])}{' …' if len(v.in_sample) > 6 else ''}"]
             self._static(f"models/{entity_part(name)}/verdict",
                          rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
             warning = v.warning()
@@ -615,6 +626,25 @@ class SessionLogger:
                 s.warnings.append(warning)
                 if "warnings" not in s.entities:
                     s.entities.append("warnings")
+
+    def log_scores(self, scores: Any, note: str, units: Mapping[str, str] | None = None) -> None:
+        """The held-out scores (:func:`workbench.study.scores.heldout_scores` rows) as a text under ``scores``
+        (every label) and ``label_scores/<label>`` (one label, for its prediction tabs); ``note`` says where they come
+        from, or why there are none."""
+        from workbench.study.scores import score_lines
+
+        s = self.session
+        s.scores, s.score_note = scores, note
+        labels = [] if scores is None else list(dict.fromkeys(scores["label"]))
+        lines = ["**held-out prediction error** (RMSE, mean of trials [95 % interval]) — " + note]
+        for label in labels:
+            part = score_lines(scores, label, dict(units or {}))
+            head = [f"**{label}**"] if len(labels) > 1 or label not in ("", "all") else []
+            lines += ["", *head, *part]
+            self._static(f"label_scores/{entity_part(label)}", rr.TextDocument(
+                "\n".join([f"**held-out prediction error, {label}** — {note}", "", *part]),
+                media_type=rr.MediaType.MARKDOWN))
+        self._static("scores", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
 
     def _log_heatmap(self, path: str, h: Heatmap, vmax: float) -> None:
         """Cell (i, j) covers [j, j+1] × [i, i+1] of the 2-D view; values centred in the cells at the block's
@@ -675,6 +705,7 @@ def log_session(
     clock: str = "auto",
     origins: Mapping[str, float] | None = None,
     source_dt: float | None = None,
+    scores: tuple[Any, str] | None = None,
 ) -> LoggedSession:
     """Log a whole session and return what was logged (for :func:`default_blueprint`).
 
@@ -696,15 +727,23 @@ def log_session(
         ``inspect`` places its flight modes (default: since the log's first mapped sample).
     source_dt : float, optional
         The demonstrations' step before they were resampled to the models' (a mismatch the verdict names).
+    scores : (table, note), optional
+        A study's comparison table (:func:`workbench.study.evaluate.compare` rows of its test trials) and where it
+        comes from; by default the models are scored here on the trials they were not fitted on
+        (:func:`heldout_table`), and the note says how many those are, or that there are none.
     """
     logger = SessionLogger(rec, demos, clock=clock, origins=origins)
     by_id = {d.id: d for d in demos}
     if models is not None:
         if focus is None:
+            # the first held-out trial of each label: a model's own training trials say nothing about new data
+            from workbench.models.training import in_sample
+
+            inside = {i for d in demos if (m := _model_for(models, d)) is not None for i in in_sample(m, [d])}
             seen: dict[str | None, str] = {}
-            for d in demos:
+            for d in sorted(demos, key=lambda d: d.id in inside):
                 seen.setdefault(d.label, d.id)
-            focus = list(seen.values())
+            focus = [i for i in demos.ids if i in set(seen.values())]
         for fid in focus:
             if fid not in by_id:
                 raise DataError(f"no demonstration {fid!r} to predict from; ids present: {demos.ids[:10]}…")
@@ -729,8 +768,81 @@ def log_session(
             for k in starts:
                 if k < len(d):
                     logger.log_predictions(d, methods, start=int(k), n_steps=n_steps, samples=samples, seed=seed)
+    if models is not None:
+        table, note = scores if scores is not None else heldout_table(demos, models, baselines, n_steps=n_steps,
+                                                                       samples=samples, seed=seed)
+        logger.log_scores(_scores_of(table), note, _score_units(models))
     logger.log_key()  # last: it names only what was drawn (bands, ŵ)
     return logger.session
+
+
+def _scores_of(table: Any) -> Any:
+    from workbench.study.scores import heldout_scores
+
+    return None if table is None or not len(table) else heldout_scores(table)
+
+
+def _score_units(models: Any) -> dict[str, str]:
+    """The unit of each RMSE metric from a model's plant roles (``rmse_position`` → "m")."""
+    from workbench.study.evaluate import metric_blocks
+    from workbench.study.pipeline import metric_unit
+
+    first = next(iter(models.values()), None) if isinstance(models, Mapping) else models
+    system = getattr(first, "system", None)
+    if system is None:
+        return {}
+    return {f"rmse_{b}": metric_unit(system, f"rmse_{b}") for b in metric_blocks(system)}
+
+
+#: Windows of a view's held-out scores start every this many seconds of a trial (as ``evaluate``'s default).
+SCORE_STRIDE_S = 1.0
+
+
+def heldout_table(demos: DemonstrationSet, models: Any, baselines: Mapping[str, Mapping[str, Any]] | None = None,
+                  *, n_steps: int = 60, samples: int = 0, seed: int | None = 0) -> tuple[Any, str]:
+    """Score each model, its baselines and persistence on the trials it was not fitted on.
+
+    Returns the :func:`workbench.study.evaluate.compare` table (None where no trial is held out) and a sentence
+    stating the split: which trials are held out by the model's record of its training trials, the horizon and
+    the windows; or why nothing is scored.
+    """
+    import pandas as pd
+
+    from workbench.models.factory import make_model
+    from workbench.models.training import held_out, training_known
+    from workbench.study.evaluate import compare
+
+    groups: dict[int, tuple[Any, list[Demonstration]]] = {}
+    for d in demos:
+        m = _model_for(models, d)
+        if m is not None:
+            groups.setdefault(id(m), (m, []))[1].append(d)
+    parts, n_held, n_all, unknown = [], 0, 0, False
+    stride = max(1, int(round(SCORE_STRIDE_S / demos.dt)))
+    for model, trials in groups.values():
+        n_all += len(trials)
+        unknown |= not training_known(model)
+        keep = set(held_out(model, trials))
+        held = [d for d in trials if d.id in keep]
+        if not held:
+            continue
+        n_held += len(held)
+        label = held[0].label
+        methods = {"proposed": model, **((baselines or {}).get(label) or (baselines or {}).get(None) or {})}
+        if "persistence" not in methods:
+            with warnings.catch_warnings():  # it learns nothing from them: no "too few trials" warning
+                warnings.simplefilter("ignore")
+                methods["persistence"] = make_model("persistence", model.system).fit(held)
+        parts.append(compare(methods, held, n_steps=n_steps, starts=stride, samples=samples, seed=seed))
+    horizon = f"{n_steps * demos.dt:g} s horizon, windows every {SCORE_STRIDE_S:g} s"
+    if not n_held:
+        return None, (f"none: every one of the {n_all} trial(s) shown was used to fit the model (in-sample); "
+                      "score it with `workbench evaluate` or on a log it has not seen")
+    if unknown:
+        what = f"{n_held} trial(s), the model file does not record its training trials (they may be in-sample)"
+    else:
+        what = f"{n_held} of {n_all} trial(s) held out (not among the trials the model file records)"
+    return pd.concat(parts, ignore_index=True), f"{what}; {horizon}"
 
 
 # -- outputs ---------------------------------------------------------------------------------------------
@@ -749,6 +861,15 @@ def record_session(
     return path, session
 
 
+def study_note(result: StudyResult) -> str:
+    """Where a study's held-out scores come from: its test trials, the horizon, the windows."""
+    n = sum(len(te) for te in result.test.values())
+    stride = ("each trial's first state" if result.stride_steps is None
+              else f"windows every {result.stride_steps * result.demos.dt:g} s")
+    split = "leave-one-segment-out" if result.plants else "trials the models were not fitted on"
+    return f"{n} test trial(s), {split}; {result.n_steps * result.demos.dt:g} s horizon, {stride}"
+
+
 def record_study(
     result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
 ) -> Path:
@@ -761,6 +882,6 @@ def record_study(
         out, _ = record_session(
             path, result.demos, application_id=APPLICATION_IDS["study"], models=result.models,
             baselines=result.baselines, focus=focus, n_steps=result.n_steps, samples=result.samples,
-            seed=result.seed, clock="trial",
+            seed=result.seed, clock="trial", scores=(result.table, study_note(result)),
         )
     return out
