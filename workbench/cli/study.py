@@ -32,40 +32,13 @@ from workbench.errors import DataError
 __all__ = []
 
 def cmd_evaluate(ctx: Context) -> int:
-    from workbench.study import pipeline as study
 
     a = ctx.args
     output = ctx.output_path(a.output, ".parquet", "the results table") if a.output else None
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     if a.per_subject:
         return _evaluate_per_subject(ctx, ds, output)
-    smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
-    loso = a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW)
-    # a split study's strategies are independent tasks (run side by side on local processes, as in report and demo)
-    with ctx.executor(local_tasks=0 if loso else len(ds.labels)) as ex:
-        if loso:
-            ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
-                    "the others)")
-            result = study.run_loso(
-                ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
-                n_components=a.n_components,
-                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s,
-            )
-        else:
-            result = study.run_study(
-                ds,
-                study_plant(a.system, a.horizon_s),
-                test_size=a.test_size,
-                n_steps=steps_of(a.horizon_s, ds.dt),
-                n_components=a.n_components,
-                samples=a.samples,
-                efficiency=a.efficiency,
-                repeats=a.repeats,
-                seed=a.seed,
-                progress=ctx.progress,
-                executor=ex,
-                stride_s=a.stride_s,
-            )
+    result, loso = _holdout_study(ctx, ds)
     if loso and getattr(result.system, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
         # spread of the folds' plants, which the scores below used
@@ -81,6 +54,35 @@ def cmd_evaluate(ctx: Context) -> int:
         result.save_tables(output)
         ctx.say(f"wrote {'standard output' if ctx.stdio.writes_stdout else output}")
     return 0
+
+
+def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0) -> tuple[Any, bool]:
+    """The study of ``evaluate`` and ``report`` (one rule, so both print the same numbers for the same data):
+    ``--holdout`` picks one random split or leave-one-segment-out (auto: leave-one-out where a label has fewer
+    than :data:`~workbench.study.pipeline.LOSO_BELOW` trials). Returns the result and whether it left one out."""
+    from workbench.study import pipeline as study
+
+    a = ctx.args
+    smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
+    loso = a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW)
+    # a split study's strategies are independent tasks (run side by side on local processes, as in report and demo)
+    with ctx.executor(local_tasks=0 if loso else len(ds.labels)) as ex:
+        if loso:
+            ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
+                    "the others)")
+            result = study.run_loso(
+                ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
+                n_components=a.n_components,
+                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s,
+            )
+        else:
+            result = study.run_study(
+                ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
+                n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats,
+                seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s, bootstrap=bootstrap,
+                power=power,
+            )
+    return result, loso
 
 
 def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
@@ -205,18 +207,15 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
 
 def cmd_report(ctx: Context) -> int:
     from workbench.report.markdown import write_study_report
-    from workbench.study import pipeline as study
 
     a = ctx.args
     refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
-    with ctx.executor(local_tasks=len(ds.labels)) as ex:
-        result = study.run_study(
-            ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
-            n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
-            progress=ctx.progress, executor=ex, bootstrap=a.bootstrap, stride_s=a.stride_s, power=a.power,
-        )
-    print_plant(ctx, result.system, "(plant from the training trials)")
+    # evaluate's holdout rules, so both commands score a flight the same way (leave-one-segment-out on a few
+    # segments) and print the same numbers
+    result, loso = _holdout_study(ctx, ds, bootstrap=a.bootstrap, power=a.power)
+    print_plant(ctx, result.system, "(plants fitted without each left-out segment)" if loso
+                else "(plant from the training trials)")
     require_proposed(result)
     path = write_study_report(result, a.output, title=a.title)
     _print_study(ctx, result)

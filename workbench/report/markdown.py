@@ -17,6 +17,7 @@ t-tests (Holm) and the mixed-effects model (:mod:`workbench.study.findings`).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 from collections.abc import Mapping, Sequence
@@ -65,12 +66,32 @@ def _label_color(label: str, labels: Sequence[str]) -> str:
     return _PALETTE[list(labels).index(label) % len(_PALETTE)] if label in labels else "#7f7f7f"
 
 
+#: The vector formats written beside every PNG (a paper takes these; the PNG is for the Markdown).
+VECTOR_FORMATS = ("svg", "pdf")
+
+
 def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
-    """Render ``fig`` to a PNG at ``path`` atomically."""
+    """Render ``fig`` to a PNG at ``path`` and to SVG and PDF beside it (:data:`VECTOR_FORMATS`), each atomically."""
     path = Path(path)
     FigureCanvasAgg(fig)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
+    for fmt in VECTOR_FORMATS:
+        with atomic_path(path.with_suffix(f".{fmt}")) as tmp:
+            fig.savefig(tmp, format=fmt, bbox_inches="tight")
+    return path
+
+
+def save_table(df: pd.DataFrame, path: str | os.PathLike, caption: str = "") -> Path:
+    """A statistics table as CSV at ``path`` and as a LaTeX ``tabular`` (booktabs) beside it, each atomically;
+    the Markdown shows the same rows."""
+    path = Path(path).with_suffix(".csv")
+    with atomic_path(path) as tmp:
+        df.to_csv(tmp, index=False)
+    shown = df.copy()
+    shown.columns = [str(c) for c in shown.columns]
+    tex = shown.to_latex(index=False, float_format="%.4g", caption=caption or None, escape=True)
+    atomic_write_text(path.with_suffix(".tex"), tex)
     return path
 
 
@@ -411,6 +432,12 @@ class ReportInputs:
     ratio_comparison: pd.DataFrame | None = None
     paired: Sequence[Any] = ()
     calibration_check: pd.DataFrame | None = None
+    #: How the test trials were chosen (a random split, leave-one-segment-out): one sentence, shown first.
+    holdout: str = ""
+    #: Held-out scores (:func:`workbench.study.scores.heldout_scores`) of the comparison table.
+    scores: pd.DataFrame | None = None
+    #: Why a section has nothing to show, by section ("efficiency", "statistics", …).
+    empty: Mapping[str, str] = field(default_factory=dict)
 
 
 def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -459,9 +486,14 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     state_names, input_names, dt = any_set.state_names, any_set.input_names, any_set.dt
     md: list[str] = [f"# {inputs.title}", ""]
     md += [f"- {line}" for line in inputs.notes]
+    if inputs.holdout:
+        md += [f"- held out: {inputs.holdout}"]
     md += [""]
     md += [f"**{line}**\n" for line in inputs.verdicts]
     system = inputs.models[labels[0]].system
+    tab_dir = out_dir / "tables"
+    tab_dir.mkdir(parents=True, exist_ok=True)
+    md += _scores_section(inputs, system, tab_dir)
 
     # data
     rows = []
@@ -538,7 +570,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         cases_p[label] = (demo, preds)
     md += ["## Variability (TP-GMM + GMR)", ""]
     if inputs.coverage is not None and len(inputs.coverage):
-        md += ["One-step coverage of ŵ by the GMR bands on the test trials:", "",
+        save_table(inputs.coverage, tab_dir / "coverage.csv")
+        md += ["One-step coverage of ŵ by the GMR bands on the test trials (`tables/coverage.csv`):", "",
                _md_table(inputs.coverage, ".1f"), ""]
     if inputs.calibration_check is not None and len(inputs.calibration_check):
         from workbench.study.calibration import check_table
@@ -548,7 +581,9 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                "judged without them; it is called too narrow or too wide only where the share inside lies outside "
                "the binomial 95 % range of the nominal share over the effective number of samples (samples within "
                "a trial are correlated: N_eff = N(1 − ρ)/(1 + ρ), ρ the lag-1 autocorrelation of inside/outside).",
-               "", _md_table(check_table(inputs.calibration_check)), ""]
+               "", _md_table(check_table(inputs.calibration_check)), "",
+               "(`tables/calibration_check.csv`: every count and interval)", ""]
+        save_table(inputs.calibration_check, tab_dir / "calibration_check.csv")
     if inputs.calibration is not None and len(inputs.calibration):
         save_figure(fig_calibration(inputs.calibration), fig_dir / "calibration.png")
         md += ["![One-step band calibration](figures/calibration.png)", "",
@@ -568,7 +603,9 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     if inputs.rmse is not None and len(inputs.rmse):
         metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
-        md += [_md_table(improvement_table(inputs.rmse, inputs.paired)), ""]
+        improvement = improvement_table(inputs.rmse, inputs.paired)
+        save_table(improvement, tab_dir / "comparison.csv")
+        md += [_md_table(improvement), "", "(`tables/comparison.csv`)", ""]
         md += _envelope_line(inputs.envelope)
         md += [f"**{line}**\n" for line in inputs.verdicts]
         md += [
@@ -577,6 +614,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     if inputs.band is not None and len(inputs.band):
         b = inputs.band.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
         b = (100.0 * b).rename(columns=METHOD_TITLES).reset_index()
+        save_table(b, tab_dir / "mc_band.csv")
         md += [f"Monte Carlo trajectory bands (5–95 %, {inputs.samples} rollouts): share of the horizon's steps "
                "at which every state of the block lies inside the band [%] (persistence has no band):", "",
                _md_table(b, ".1f"), ""]
@@ -586,15 +624,67 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                     fig_dir / "data_efficiency.png")
         eff = inputs.efficiency.groupby(["label", "n_train", "method"], sort=False)["value"].mean().unstack("method")
         eff = eff.rename(columns=METHOD_TITLES).reset_index()
+        save_table(eff, tab_dir / "data_efficiency.csv")
         md += ["## Data efficiency", "", _md_table(eff), "",
                "![Data efficiency](figures/data_efficiency.png)", "",
                f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations.*",
                ""]
+    elif inputs.empty.get("efficiency"):
+        md += ["## Data efficiency", "", f"*None: {inputs.empty['efficiency']}.*", ""]
+    md += ["## Statistics of the comparison", ""]
     if inputs.stats:
-        md += ["## Statistics of the comparison", "", inputs.stats, ""]
+        md += [inputs.stats, ""]
+    if not inputs.paired:
+        md += [f"*No paired differences: {inputs.empty.get('statistics') or _why_no_statistics(inputs)}.*", ""]
+    else:
+        # every field the study's paired differences carry, whatever they are (workbench.study.paired owns them)
+        rows = [{k: v for k, v in dataclasses.asdict(d).items() if np.ndim(v) == 0} for d in inputs.paired]
+        save_table(pd.DataFrame(rows), tab_dir / "paired_differences.csv")
+        md += ["(`tables/paired_differences.csv`)", ""]
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(md).rstrip() + "\n")
     return path
+
+
+def _why_no_statistics(inputs: ReportInputs) -> str:
+    """Why a study has no paired differences: too few test trials, or a method missing."""
+    n = sum(len(te) for te in inputs.test.values())
+    methods = set() if inputs.rmse is None else set(inputs.rmse["method"])
+    if n < 2:
+        return (f"{n} test trial(s) — a paired difference needs at least 2; on a flight of a few segments use "
+                "`--holdout loso` (every segment tested once)")
+    if len(methods) < 2:
+        return "only one method could be scored, there is nothing to pair it with"
+    return "the study computed none for these trials"
+
+
+def _scores_section(inputs: ReportInputs, system: Any, tab_dir: Path) -> list[str]:
+    """The first answer: each method's held-out error with its interval and the Monte Carlo band's coverage."""
+    from workbench.study.scores import fmt
+
+    sc = inputs.scores
+    md = ["## Held-out prediction error", ""]
+    if sc is None or not len(sc):
+        return md + ["*None: no test trial was scored.*", ""]
+    save_table(sc, tab_dir / "heldout_scores.csv")
+    rows = []
+    for (label, method), g in sc.groupby(["label", "method"], sort=False):
+        row: dict[str, Any] = {"strategy": label, "method": METHOD_TITLES.get(method, method)}
+        for r in g.itertuples(index=False):
+            if r.metric.startswith("rmse_"):
+                unit = metric_unit(system, r.metric)
+                row[f"{r.metric.removeprefix('rmse_')} RMSE" + (f" [{unit}]" if unit else "")] = fmt(r.value, r.lo,
+                                                                                                    r.hi)
+            elif r.metric.startswith("band_"):
+                row["MC band coverage"] = fmt(r.value, r.lo, r.hi, share=True)
+        row["trials"] = int(g["n_trials"].max())
+        rows.append(row)
+    table = pd.DataFrame(rows).fillna("—")
+    return md + [_md_table(table), "",
+                 "*Mean over test trials of each trial's mean over its scored windows, [95 % Student-t interval "
+                 "over trials]; MC band coverage: share of the horizon's steps at which the recorded positions lie "
+                 "inside the 5–95 % Monte Carlo band (nominal 90 %); persistence has no band. "
+                 "`tables/heldout_scores.csv` holds every value.*", ""]
 
 
 def _envelope_line(envelope: pd.DataFrame | None) -> list[str]:
@@ -686,9 +776,22 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
         cov = result.coverage.copy()
         front = [c for c in ("label",) if c in cov.columns]
         cov = cov[front + [c for c in cov.columns if c not in front]]
+    from workbench.study.scores import heldout_scores
+
+    n_test = sum(len(te) for te in result.test.values())
+    if result.plants:
+        holdout = (f"leave-one-segment-out: each of {n_test} trials scored by models (and a plant) fitted on the "
+                   "others")
+    else:
+        holdout = f"{n_test} test trial(s) chosen at random (seed {result.seed}); the models never saw them"
+    empty = {}
+    if result.efficiency is None:
+        empty["efficiency"] = ("leave-one-segment-out has no data-efficiency curve (each fold trains on all other "
+                               "trials)" if result.plants else "the study ran without one (--no-efficiency)")
     return write_report(
         out_dir,
         ReportInputs(
+            holdout=holdout, scores=heldout_scores(result.table), empty=empty,
             train=result.train, test=result.test, models=result.models, baselines=result.baselines,
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
             stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,
