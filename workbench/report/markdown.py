@@ -467,10 +467,12 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
         with deferred_interrupt():
             old = temp_sibling(out_dir / "report", "old")
             old.mkdir()
-            for name in ("report.md", "figures"):  # the old report first: never an old report.md beside new figures
+            # the old report first: never an old report.md beside new figures
+            for name in ("report.md", "figures", "tables"):
                 if (out_dir / name).exists():
                     os.replace(out_dir / name, old / name)
-            for name in ("figures", "report.md"):  # the new report last: its presence says the figures are its own
+            # the new report last: its presence says the figures are its own
+            for name in ("figures", "tables", "report.md"):
                 os.replace(build / name, out_dir / name)
         shutil.rmtree(old, ignore_errors=True)
     finally:
@@ -503,13 +505,15 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
             "strategy": label,
             "train": len(tr),
             "test": 0 if te is None else len(te),
-            "samples": tr.n_samples + (0 if te is None else te.n_samples),
+            "samples": tr.n_samples + (0 if te is None else sum(len(d) for d in te if d.id not in set(tr.ids))),
             "subjects": len({d.meta.get("subject") for d in tr}),
             "sources": ", ".join(sorted({Path(str(d.meta.get("source", "?"))).name for d in tr}))[:80],
         })
     md += ["## Demonstrations", "", _md_table(pd.DataFrame(rows)), ""]
-    all_sets = {label: inputs.train[label] + inputs.test[label] if label in inputs.test else inputs.train[label]
-                for label in labels}
+    # leave-one-segment-out trains on every trial and tests each once: the same trials in both sets, drawn once
+    all_sets = {label: inputs.train[label].with_demos(
+        [*inputs.train[label], *(d for d in inputs.test.get(label, []) if d.id not in set(inputs.train[label].ids))])
+        for label in labels}
     save_figure(fig_demonstrations(all_sets), fig_dir / "demonstrations.png")
     md += ["![Demonstrations per strategy](figures/demonstrations.png)", "",
            "*Flown paths per strategy in the plane of the position roles; dots are start points, the bar is the pad "
@@ -660,9 +664,11 @@ def _why_no_statistics(inputs: ReportInputs) -> str:
 
 def _scores_section(inputs: ReportInputs, system: Any, tab_dir: Path) -> list[str]:
     """The first answer: each method's held-out error with its interval and the Monte Carlo band's coverage."""
-    from workbench.study.scores import fmt
+    from workbench.study.scores import fmt, heldout_scores
 
     sc = inputs.scores
+    if sc is None and inputs.rmse is not None and len(inputs.rmse):  # the rows the caller passed, scored here
+        sc = heldout_scores(pd.concat([inputs.rmse, *([inputs.band] if inputs.band is not None else [])]))
     md = ["## Held-out prediction error", ""]
     if sc is None or not len(sc):
         return md + ["*None: no test trial was scored.*", ""]
