@@ -138,30 +138,46 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
 
 def _print_study(ctx: Context, result: Any) -> None:
     from rich.markup import escape
-    from rich.table import Table
 
+    from workbench.models.names import METHOD_TITLES
+    from workbench.study.scores import fmt, heldout_scores
+
+    # the first answer: each method's held-out error with its interval (the numbers the first view shows)
+    scores = heldout_scores(result.table)
+    rows = []
+    for (label, method), g in scores.groupby(["label", "method"], sort=False):
+        by = {r.metric: r for r in g.itertuples(index=False)}
+        cell = {m: fmt(r.value, r.lo, r.hi, share=m.startswith("band_")) for m, r in by.items()}
+        rows.append([label, METHOD_TITLES.get(method, method), cell.get("rmse_position", "—"),
+                     cell.get("rmse_velocity", "—"), cell.get("band_position", "—")])
+    if rows:
+        ctx.say_table(["label", "method", "position RMSE", "velocity RMSE", "MC band"], rows,
+                      title="held-out prediction error (mean of trials [95 % interval])")
     summary = result.summary()
-    table = Table(*[str(c) for c in summary.columns], title="mean horizon RMSE on the test trials")
-    for row in summary.itertuples(index=False):
-        table.add_row(*[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row])
-    ctx.say(table)
+    ctx.say_table([str(c) for c in summary.columns],
+                  [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row]
+                   for row in summary.itertuples(index=False)], title="mean horizon RMSE on the test trials")
     if result.coverage is not None and len(result.coverage):
-        cov = Table(*[str(c) for c in result.coverage.columns], title="one-step coverage of ŵ by GMR bands [%]")
-        for row in result.coverage.itertuples(index=False):
-            cov.add_row(*[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row])
-        ctx.say(cov)
+        ctx.say_table([str(c) for c in result.coverage.columns],
+                      [[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row]
+                       for row in result.coverage.itertuples(index=False)],
+                      title="one-step coverage of ŵ by GMR bands [%]")
     check = getattr(result, "calibration_check", None)
     if check is not None and len(check):
         from workbench.study.calibration import check_table
 
-        shown = check_table(check)
-        t = Table(*shown.columns, title="one-step calibration: inputs at a limit excluded, against the sampling "
-                                        "spread (binomial over effective samples)")
-        for row in shown.itertuples(index=False):
-            t.add_row(*[str(v) for v in row])
-        ctx.say(t)
+        # the terminal's columns; the report's table (and its CSV) holds every count
+        shown = check_table(check).drop(columns=["inside [%]"]).rename(columns={
+                                                   "inside, limits excluded [%]": "inside [%]",
+                                                   "sampling 95 % range [%] (N_eff)": "95 % range [%] (N_eff)"})
+        keep = [c for c in ("label", "input", "band", "nominal [%]", "inside [%]", "95 % range [%] (N_eff)",
+                            "calibration") if c in shown.columns]
+        shown = shown[keep]
+        ctx.say_table(list(shown.columns), [[str(v) for v in row] for row in shown.itertuples(index=False)],
+                      title="one-step calibration: inputs at a limit excluded, against the sampling spread "
+                            "(binomial over effective samples)")
     if result.stats_text:
-        ctx.say(result.stats_text)
+        ctx.say_markdown(result.stats_text)
     _print_objective_comparison(ctx, result)
     for line in result.verdicts():
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
@@ -170,7 +186,6 @@ def _print_study(ctx: Context, result: Any) -> None:
 def _print_objective_comparison(ctx: Context, result: Any) -> None:
     """What the data identify about the task objective first (factors between strategies, then ratios), then every
     weight ratio per strategy with its interval or why it has none, and each part's structure check."""
-    from rich.table import Table
 
     from workbench.study.weights import NOT_EXPLAINED, compare_strategies, format_interval, identified_first
 
@@ -185,16 +200,16 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
     found = identified_first(table)
     ctx.say("what the data identify about the task objective (95 % intervals within ×10): "
             + ("; ".join(found) if found else "nothing"))
-    out = Table("ratio", "strategy", "estimate [95 % interval]", f"× vs {first}", "",
-                title="task-objective weight ratios inside coupled parts (diagonal cost, S = 0)")
+    head = ["ratio", "strategy", "estimate [95 % interval]", f"× vs {first}", "note"]
+    rows = []
     for r in table.itertuples():
         factor = getattr(r, "factor", float("nan"))
         note = r.note if r.strategy == first else (r.factor_note or r.note)
         if note and note.startswith(NOT_EXPLAINED):  # its mismatch is the part's, printed once under the table
             note = f"{NOT_EXPLAINED} (mismatch of {r.strategy}'s part below)"
-        out.add_row(r.ratio, str(r.strategy), format_interval(r.estimate, r.lo, r.hi),
-                    "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi), note or "")
-    ctx.say(out)
+        rows.append([r.ratio, str(r.strategy), format_interval(r.estimate, r.lo, r.hi),
+                     "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi), note or ""])
+    ctx.say_table(head, rows, title="task-objective weight ratios inside coupled parts (diagonal cost, S = 0)")
     for lb, wr in ratios.items():
         for f in wr.fits:
             ctx.say(f"  {lb}: {f.describe()}")
