@@ -376,7 +376,8 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
         check = calibration_counts(fitted["proposed"], list(te))
     timings["compare"] = time.perf_counter() - t0
     eff = None
-    sizes = [n for n in s.efficiency if n <= len(tr)]
+    # the curve ends where the models of the comparison stand: at every training trial
+    sizes = sorted({n for n in s.efficiency if n < len(tr)} | ({len(tr)} if s.efficiency else set()))
     if sizes:
         t0 = time.perf_counter()
         eff = _efficiency(label, system, tr, te, sizes, G, s, executor, progress)
@@ -401,6 +402,8 @@ def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: Demonstration
         sub = p.add_task(f"{label}: data efficiency", total=None) if p is not None else None
         eff = ev.data_efficiency(
             system, tr, te, sizes=sizes, n_steps=s.n_steps, repeats=s.repeats, seed=s.seed, n_components=G,
+            # scored like the comparison's tables: from every stride of each test trial, not its first state only
+            starts="initial" if s.stride is None else s.stride,
             progress=None if p is None else lambda d, t: p.update(sub, completed=d, total=t), executor=executor,
         )
         if p is not None:
