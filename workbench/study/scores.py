@@ -68,26 +68,31 @@ def fmt(value: float, lo: float = float("nan"), hi: float = float("nan"), *, sha
 
 
 def score_lines(scores: pd.DataFrame, label: str, units: dict[str, str] | None = None, *,
-                markdown: bool = True, band_level: float | None = 90.0) -> list[str]:
-    """One label's scores as short lines, one per method (proposed first, persistence beside it):
-    ``"proposed: position 0.0696 [0.051, 0.088] m · velocity 0.054 [0.04, 0.07] m/s · MC band holds 96 %"``
-    (``band_level``: the Monte Carlo band's nominal level in %, that of :func:`workbench.study.evaluate.compare`'s
-    default 5–95 percentiles)."""
+                markdown: bool = True) -> list[str]:
+    """One label's scores, one row per method (proposed first, persistence last): a Markdown table (method,
+    position RMSE, velocity RMSE, MC band coverage), or with ``markdown=False`` one line per method
+    (``"proposed: position 0.0696 [0.051, 0.088] m · velocity 0.054 [0.04, 0.07] m/s · MC band 96 % [90, 100]"``)."""
     units = units or {}
     s = scores[scores["label"] == str(label)]
     methods = list(dict.fromkeys(s["method"]))
     methods.sort(key=lambda m: (m != "proposed", m == "persistence"))
-    out = []
-    for m in methods:
-        parts = []
-        for r in s[s["method"] == m].itertuples(index=False):
-            if r.metric.startswith("rmse_"):
-                what = r.metric.removeprefix("rmse_")
-                unit = units.get(r.metric, "")
-                parts.append(f"{what} {fmt(r.value, r.lo, r.hi)}{' ' + unit if unit else ''}")
-            elif r.metric.startswith("band_"):
-                parts.append(f"MC band holds {fmt(r.value, r.lo, r.hi, share=True)}"
-                             + (f" of the track (nominal {band_level:g} %)" if band_level else ""))
-        name = METHOD_TITLES.get(m, m)
-        out.append((f"- **{name}**: " if markdown else f"{name}: ") + " · ".join(parts))
-    return out
+    metrics = [m for m in SCORE_METRICS if m in set(s["metric"])]
+
+    def head(metric: str) -> str:
+        if metric.startswith("rmse_"):
+            unit = units.get(metric, "")
+            return f"{metric.removeprefix('rmse_')} RMSE" + (f" [{unit}]" if unit else "")
+        return "MC band holds"
+
+    def cell(m: str, metric: str) -> str:
+        r = s[(s["method"] == m) & (s["metric"] == metric)]
+        if not len(r):
+            return "—"
+        r = r.iloc[0]
+        return fmt(r["value"], r["lo"], r["hi"], share=metric.startswith("band_"))
+
+    if markdown:
+        out = ["| method | " + " | ".join(head(m) for m in metrics) + " |", "|---" * (len(metrics) + 1) + "|"]
+        out += [f"| {METHOD_TITLES.get(m, m)} | " + " | ".join(cell(m, x) for x in metrics) + " |" for m in methods]
+        return out
+    return [f"{METHOD_TITLES.get(m, m)}: " + " · ".join(f"{head(x)} {cell(m, x)}" for x in metrics) for m in methods]

@@ -636,13 +636,14 @@ class SessionLogger:
         s = self.session
         s.scores, s.score_note = scores, note
         labels = [] if scores is None else list(dict.fromkeys(scores["label"]))
-        lines = ["**held-out prediction error** (RMSE, mean of trials [95 % interval]) — " + note]
+        lines = ["**held-out prediction error** (mean of trials [95 % interval]; MC band nominal 90 %) — " + note]
         for label in labels:
             part = score_lines(scores, label, dict(units or {}))
             head = [f"**{label}**"] if len(labels) > 1 or label not in ("", "all") else []
             lines += ["", *head, *part]
             self._static(f"label_scores/{entity_part(label)}", rr.TextDocument(
-                "\n".join([f"**held-out prediction error, {label}** — {note}", "", *part]),
+                "\n".join([f"**held-out prediction error, {label}** (mean of trials [95 % interval]; MC band "
+                           f"nominal 90 %) — {note}", "", *part]),
                 media_type=rr.MediaType.MARKDOWN))
         self._static("scores", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
 
