@@ -338,8 +338,14 @@ def fig_predictions(
             ax.set_xlabel("time since start [s]")
         for ax in axs[r]:
             ax.grid(alpha=0.3)
+    # one key for the figure, under its panels: a legend inside a panel covered the recorded track (seen)
+    handles, names = {}, []
     for ax in axs[0, : min(2, n_cols)]:
-        ax.legend(loc="best")
+        for h, n in zip(*ax.get_legend_handles_labels(), strict=True):
+            if n not in handles:
+                handles[n] = h
+                names.append(n)
+    fig.legend([handles[n] for n in names], names, loc="outside lower center", ncols=min(4, len(names)))
     return fig
 
 
