@@ -161,7 +161,7 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     if "scores" in s.entities:
         # the first question's answer where the eye lands: each method's held-out error beside the tracks
         side.insert(0, rrb.TextDocumentView(origin="/scores", name="held-out prediction error"))
-        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[5] + [4] * (len(side) - 1)),
+        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[6] + [3] * (len(side) - 1)),
                               column_shares=[3, 2], name="scene")
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
 
