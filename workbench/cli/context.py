@@ -63,8 +63,10 @@ class Context:
         return self.stdio.tidy(os.fspath(path))
 
     def say(self, *parts: Any, markup: bool = False) -> None:
-        """Print to the terminal, words wrapped at its width (never a line broken mid-word or running past it)."""
-        self.out.print(*parts, markup=markup, overflow="fold")
+        """Print: on a terminal, words wrapped at its width (never a line broken mid-word or running past it); to
+        a pipe or a file, each message on one line, so a command or a path in it can be copied (a table is still
+        sized to :data:`PIPE_WIDTH`)."""
+        self.out.print(*parts, markup=markup, overflow="fold", soft_wrap=not self.out.is_terminal)
 
     def say_table(self, header: Sequence[str], rows: Sequence[Sequence[Any]], title: str = "") -> None:
         """A table that fits the terminal: as a table where its cells fit the width unbroken, else in long form —

@@ -464,8 +464,8 @@ def run_loso(
     trials (``plants`` holds them by the left-out trial), so no trial is scored by a plant that saw it. The
     comparison table holds every trial once; a method that could not be fitted in some fold is left out for
     its label altogether (a mean over other folds would not be comparable) and named in ``failures``. One-step
-    coverage is the mean over the folds; there is no data-efficiency curve. ``models`` and ``baselines`` are
-    the last fold's; ``train`` is every trial of a label (each trains in all folds but its own).
+    coverage is the mean over the folds; there is no data-efficiency curve. ``models`` and ``baselines`` are,
+    per label, those of its last fold; ``train`` is every trial of a label (each trains in all folds but its own).
     """
 
     folds: list[tuple[str, StudyResult]] = []
@@ -500,8 +500,11 @@ def run_loso(
     plant = last.system
     stride = _stride_steps(stride_s, demos.dt)
     statistics = _statistics(table, demos, plant, n_steps, stride, seed)
+    # per label the models of its last fold (a fold holds only the label of the trial it leaves out)
+    models = {lb: m for _, r in folds for lb, m in r.models.items()}
+    baselines = {lb: b for _, r in folds for lb, b in r.baselines.items()}
     return StudyResult(
-        demos=demos, system=plant, train=train, test=test, models=last.models, baselines=last.baselines,
+        demos=demos, system=plant, train=train, test=test, models=models, baselines=baselines,
         table=table, coverage=coverage, efficiency=None, calibration=calibration,
         stats_text=statistics.text(), n_steps=n_steps,
         samples=samples, seed=seed, timings={k: v for _, r in folds for k, v in r.timings.items()},
