@@ -1,6 +1,9 @@
-"""The workbench's report: one Markdown file with PNG figures in the spirit of the method paper's figures.
+"""The workbench's report: one Markdown file with figures in the spirit of the method paper's, and its tables.
 
-Figures (``figures/`` beside the report), each drawn on a matplotlib :class:`~matplotlib.figure.Figure` with the
+It opens with the held-out prediction error of every method (:mod:`workbench.study.scores`) and how the test
+trials were chosen. Every figure is written as PNG (for the Markdown) and as SVG and PDF beside it, sized for one
+or two journal columns with print-sized text (:data:`PAPER_RC`); every statistics table also as CSV and LaTeX
+under ``tables/``. Figures (``figures/`` beside the report), each drawn on a matplotlib :class:`~matplotlib.figure.Figure` with the
 Agg canvas — no pyplot, no global backend, so the report runs headless and never touches a user's session:
 
 * ``demonstrations.png`` — the flown paths per strategy;
@@ -8,7 +11,7 @@ Agg canvas — no pyplot, no global backend, so the report runs headless and nev
 * ``variability.png`` — ŵ on a test trial with the GMR mean and 3σ band (eqs. (24)–(27));
 * ``calibration.png`` — one-step band coverage against the Gaussian nominal at 0.25σ … 3σ (the calibration curve);
 * ``predictions.png`` — predicted vs recorded trajectories of the three methods, with the Monte Carlo band;
-* ``rmse.png`` — horizon RMSE (eq. (35)) per method as box plots;
+* ``rmse.png`` — per-trial horizon RMSE (eq. (35)) per method as box plots, a trial's methods joined by a line;
 * ``data_efficiency.png`` — RMSE against the number of training demonstrations;
 
 and the comparison's statistics: paired differences with bootstrap intervals over whole trials, Wilcoxon / paired
