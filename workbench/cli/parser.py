@@ -309,7 +309,8 @@ def build_parser() -> argparse.ArgumentParser:
     _mapping_option(p)
     _output_options(p)
 
-    p = add("report", cmd_report, "fit, compare and write a Markdown report: figures (PNG, SVG, PDF) and tables (CSV, LaTeX)",
+    p = add("report", cmd_report,
+            "fit, compare and write a Markdown report: figures (PNG, SVG, PDF) and tables (CSV, LaTeX)",
             "workbench report demos.parquet -o report/")
     p.add_argument("demos", nargs="+", metavar="DEMOS", help="demonstrations or logs; - reads one from standard input")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="the report's folder (not -: it is a folder)")
