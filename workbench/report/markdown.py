@@ -4,7 +4,8 @@ It opens with the held-out prediction error of every method (:mod:`workbench.stu
 trials were chosen. Every figure is written as PNG (for the Markdown) and as SVG and PDF beside it, sized for one
 or two journal columns with print-sized text (:data:`PAPER_RC`); every statistics table also as CSV and LaTeX
 under ``tables/``. Figures (``figures/`` beside the report), each drawn on a matplotlib
-:class:`~matplotlib.figure.Figure` with the Agg canvas — no pyplot, no global backend, so the report runs headless and never touches a user's session:
+:class:`~matplotlib.figure.Figure` with the Agg canvas — no pyplot, no global backend, so the report runs headless
+and never touches a user's session:
 
 * ``demonstrations.png`` — the flown paths per strategy;
 * ``objective.png`` — normalized Q and R side by side per strategy, the attitude term called out;
