@@ -66,7 +66,10 @@ class Context:
         """Print: on a terminal, words wrapped at its width (never a line broken mid-word or running past it); to
         a pipe or a file, each message on one line, so a command or a path in it can be copied (a table is still
         sized to :data:`PIPE_WIDTH`)."""
-        self.out.print(*parts, markup=markup, overflow="fold", soft_wrap=not self.out.is_terminal)
+        if self.out.is_terminal:
+            self.out.print(*parts, markup=markup, overflow="fold")
+        else:  # an overflow mode would crop what soft wrapping leaves long
+            self.out.print(*parts, markup=markup, soft_wrap=True)
 
     def say_table(self, header: Sequence[str], rows: Sequence[Sequence[Any]], title: str = "") -> None:
         """A table that fits the terminal: as a table where its cells fit the width unbroken, else in long form —

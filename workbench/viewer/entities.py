@@ -6,12 +6,22 @@ logger import the blueprint without the blueprint importing the logger (no impor
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from workbench.viewer import style
 
-__all__ = ["LoggedSession", "entity_part"]
+__all__ = ["LoggedSession", "entity_part", "model_for"]
+
+
+def model_for(models: Any, demo: Any) -> Any:
+    """The model that explains ``demo``: one model for every trial, or a mapping by strategy label."""
+    if models is None:
+        return None
+    if not isinstance(models, Mapping):
+        return models
+    return models.get(demo.label)
 
 
 def entity_part(name: str) -> str:

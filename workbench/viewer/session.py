@@ -4,7 +4,6 @@ the blueprint are described in :mod:`workbench.viewer`."""
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import nullcontext
 from pathlib import Path
@@ -22,6 +21,7 @@ from workbench.study.pipeline import StudyResult
 from workbench.viewer import style, verdict
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import LoggedSession, entity_part
+from workbench.viewer.entities import model_for as _model_for
 from workbench.viewer.objective import (
     Heatmap,
     colors,
@@ -71,15 +71,6 @@ def new_recording(application_id: str = APPLICATION_ID, *, recording_id: str | N
 def _time_index(t: np.ndarray, step: np.ndarray | None = None) -> list[rr.TimeColumn]:
     step = np.arange(len(t)) if step is None else step
     return [rr.TimeColumn("time", duration=np.asarray(t, dtype=np.float64)), rr.TimeColumn("step", sequence=step)]
-
-
-def _model_for(models: Any, demo: Demonstration) -> Any:
-    """The model that explains ``demo``: one model for every trial, or a mapping by strategy label."""
-    if models is None:
-        return None
-    if not isinstance(models, Mapping):
-        return models
-    return models.get(demo.label)
 
 
 def _readable_modes(meta: Mapping[str, Any]) -> tuple[np.ndarray, list[str]] | None:
@@ -628,24 +619,11 @@ class SessionLogger:
                     s.entities.append("warnings")
 
     def log_scores(self, scores: Any, note: str, units: Mapping[str, str] | None = None) -> None:
-        """The held-out scores (:func:`workbench.study.scores.heldout_scores` rows) as a text under ``scores``
-        (every label) and ``label_scores/<label>`` (one label, for its prediction tabs); ``note`` says where they come
-        from, or why there are none."""
-        from workbench.study.scores import score_lines
+        """The held-out scores as text under ``scores`` and ``label_scores/<label>``
+        (:func:`workbench.viewer.heldout.log_scores`)."""
+        from workbench.viewer.heldout import log_scores
 
-        s = self.session
-        s.scores, s.score_note = scores, note
-        labels = [] if scores is None else list(dict.fromkeys(scores["label"]))
-        lines = ["**held-out prediction error** (mean of trials [95 % interval]; MC band nominal 90 %) — " + note]
-        for label in labels:
-            part = score_lines(scores, label, dict(units or {}))
-            head = [f"**{label}**"] if len(labels) > 1 or label not in ("", "all") else []
-            lines += ["", *head, *part]
-            self._static(f"label_scores/{entity_part(label)}", rr.TextDocument(
-                "\n".join([f"**held-out prediction error, {label}** (mean of trials [95 % interval]; MC band "
-                           f"nominal 90 %) — {note}", "", *part]),
-                media_type=rr.MediaType.MARKDOWN))
-        self._static("scores", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
+        log_scores(self, scores, note, units)
 
     def _log_heatmap(self, path: str, h: Heatmap, vmax: float) -> None:
         """Cell (i, j) covers [j, j+1] × [i, i+1] of the 2-D view; values centred in the cells at the block's
@@ -770,80 +748,13 @@ def log_session(
                 if k < len(d):
                     logger.log_predictions(d, methods, start=int(k), n_steps=n_steps, samples=samples, seed=seed)
     if models is not None:
+        from workbench.viewer.heldout import heldout_table, score_units, scores_of
+
         table, note = scores if scores is not None else heldout_table(demos, models, baselines, n_steps=n_steps,
                                                                        samples=samples, seed=seed)
-        logger.log_scores(_scores_of(table), note, _score_units(models))
+        logger.log_scores(scores_of(table), note, score_units(models))
     logger.log_key()  # last: it names only what was drawn (bands, ŵ)
     return logger.session
-
-
-def _scores_of(table: Any) -> Any:
-    from workbench.study.scores import heldout_scores
-
-    return None if table is None or not len(table) else heldout_scores(table)
-
-
-def _score_units(models: Any) -> dict[str, str]:
-    """The unit of each RMSE metric from a model's plant roles (``rmse_position`` → "m")."""
-    from workbench.study.evaluate import metric_blocks
-    from workbench.study.pipeline import metric_unit
-
-    first = next(iter(models.values()), None) if isinstance(models, Mapping) else models
-    system = getattr(first, "system", None)
-    if system is None:
-        return {}
-    return {f"rmse_{b}": metric_unit(system, f"rmse_{b}") for b in metric_blocks(system)}
-
-
-#: Windows of a view's held-out scores start every this many seconds of a trial (as ``evaluate``'s default).
-SCORE_STRIDE_S = 1.0
-
-
-def heldout_table(demos: DemonstrationSet, models: Any, baselines: Mapping[str, Mapping[str, Any]] | None = None,
-                  *, n_steps: int = 60, samples: int = 0, seed: int | None = 0) -> tuple[Any, str]:
-    """Score each model, its baselines and persistence on the trials it was not fitted on.
-
-    Returns the :func:`workbench.study.evaluate.compare` table (None where no trial is held out) and a sentence
-    stating the split: which trials are held out by the model's record of its training trials, the horizon and
-    the windows; or why nothing is scored.
-    """
-    import pandas as pd
-
-    from workbench.models.factory import make_model
-    from workbench.models.training import held_out, training_known
-    from workbench.study.evaluate import compare
-
-    groups: dict[int, tuple[Any, list[Demonstration]]] = {}
-    for d in demos:
-        m = _model_for(models, d)
-        if m is not None:
-            groups.setdefault(id(m), (m, []))[1].append(d)
-    parts, n_held, n_all, unknown = [], 0, 0, False
-    stride = max(1, int(round(SCORE_STRIDE_S / demos.dt)))
-    for model, trials in groups.values():
-        n_all += len(trials)
-        unknown |= not training_known(model)
-        keep = set(held_out(model, trials))
-        held = [d for d in trials if d.id in keep]
-        if not held:
-            continue
-        n_held += len(held)
-        label = held[0].label
-        methods = {"proposed": model, **((baselines or {}).get(label) or (baselines or {}).get(None) or {})}
-        if "persistence" not in methods:
-            with warnings.catch_warnings():  # it learns nothing from them: no "too few trials" warning
-                warnings.simplefilter("ignore")
-                methods["persistence"] = make_model("persistence", model.system).fit(held)
-        parts.append(compare(methods, held, n_steps=n_steps, starts=stride, samples=samples, seed=seed))
-    horizon = f"{n_steps * demos.dt:g} s horizon, windows every {SCORE_STRIDE_S:g} s"
-    if not n_held:
-        return None, (f"none: every one of the {n_all} trial(s) shown was used to fit the model (in-sample); "
-                      "score it with `workbench evaluate` or on a log it has not seen")
-    if unknown:
-        what = f"{n_held} trial(s), the model file does not record its training trials (they may be in-sample)"
-    else:
-        what = f"{n_held} of {n_all} trial(s) held out (not among the trials the model file records)"
-    return pd.concat(parts, ignore_index=True), f"{what}; {horizon}"
 
 
 # -- outputs ---------------------------------------------------------------------------------------------
@@ -862,19 +773,12 @@ def record_session(
     return path, session
 
 
-def study_note(result: StudyResult) -> str:
-    """Where a study's held-out scores come from: its test trials, the horizon, the windows."""
-    n = sum(len(te) for te in result.test.values())
-    stride = ("each trial's first state" if result.stride_steps is None
-              else f"windows every {result.stride_steps * result.demos.dt:g} s")
-    split = "leave-one-segment-out" if result.plants else "trials the models were not fitted on"
-    return f"{n} test trial(s), {split}; {result.n_steps * result.demos.dt:g} s horizon, {stride}"
-
-
 def record_study(
     result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
 ) -> Path:
     """One ``.rrd`` with every trial, both models' variability on the test trials and every method's predictions."""
+    from workbench.viewer.heldout import study_note
+
     focus = [te[0].id for te in result.test.values() if len(te)]
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
