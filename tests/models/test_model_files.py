@@ -32,3 +32,35 @@ def test_a_header_nested_beyond_the_parser_is_a_model_file_error(tmp_path):
     np.savez(path, __header__=np.frombuffer(text, dtype=np.uint8))
     with pytest.raises(ModelFileError, match="nested deeper"):
         load_model(path)  # the previous main let json's RecursionError out
+
+
+@pytest.mark.parametrize("name", sorted(MODEL_CLASSES))
+def test_an_old_file_does_not_know_its_training_trials(name):
+    from workbench.models.training import in_sample, split_words, training_known
+
+    model = load_model(DATA / f"{name}_0.1.0.npz")
+    assert not training_known(model) and model.train_ids_ is None and model.data_digest_ is None
+    assert in_sample(model, []) == []
+    assert "unknown" in split_words(model, [])
+
+
+def test_a_model_file_records_its_training_trials_and_their_digest(tmp_path, quadrotor, cs1_demos):
+    from workbench.data.digest import set_digest, trial_digest
+    from workbench.models import HumanBehaviorModel
+    from workbench.models.training import held_out, in_sample
+
+    train, test = cs1_demos.split(2, seed=0)
+    model = HumanBehaviorModel(quadrotor, n_components=2, fit_objective=False).fit(train)
+    back = load_model(model.save(tmp_path / "m.npz"))
+    assert back.train_ids_ == tuple(train.ids)
+    assert back.train_digests_ == tuple(trial_digest(d) for d in train)
+    assert back.data_digest_ == set_digest(train)
+    assert in_sample(back, cs1_demos) == list(train.ids)
+    assert held_out(back, cs1_demos) == list(test.ids)
+    # the same samples under another id are still in-sample (the digest knows them)
+    renamed = [type(d)(d.t, d.x, d.u, {**d.meta, "id": "other-" + d.id}) for d in train]
+    assert in_sample(back, renamed) == [d.id for d in renamed]
+    # one sample changed under a new id: held out
+    d = test[0]
+    moved = type(d)(d.t, d.x + 1e-6, d.u, {**d.meta, "id": "moved"})
+    assert in_sample(back, [moved]) == []

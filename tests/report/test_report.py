@@ -128,3 +128,29 @@ def test_the_calibration_figure_names_each_sigma_level_once_without_overlap():
         for i in range(len(boxes)):
             for j in range(i + 1, len(boxes)):
                 assert not boxes[i].overlaps(boxes[j]), (named[i].get_text(), named[j].get_text())
+
+
+@pytest.mark.parametrize("name", FIGURES)
+def test_every_figure_is_also_written_as_svg_and_pdf(report, name):
+    svg = (report["dir"] / "figures" / f"{name}.svg").read_text(encoding="utf-8")
+    assert "<svg" in svg and svg.rstrip().endswith("</svg>")
+    assert (report["dir"] / "figures" / f"{name}.pdf").read_bytes().startswith(b"%PDF")
+
+
+def test_the_statistics_tables_are_written_as_csv_and_latex(report):
+    from workbench.study.scores import heldout_scores
+
+    tables = report["dir"] / "tables"
+    comparison = pd.read_csv(tables / "comparison.csv")
+    expected = improvement_table(report["rmse"])
+    np.testing.assert_allclose(comparison["proposed"], expected["proposed"], rtol=1e-12)
+    scores = pd.read_csv(tables / "heldout_scores.csv")
+    rmse = report["rmse"]
+    mine = heldout_scores(rmse)
+    mine = mine[mine["metric"].str.startswith("rmse_")].reset_index(drop=True)
+    shown = scores[scores["metric"].str.startswith("rmse_")].reset_index(drop=True)
+    np.testing.assert_allclose(shown["value"], mine["value"], rtol=1e-12)
+    for name in ("comparison", "heldout_scores", "data_efficiency"):
+        assert r"\begin{tabular}" in (tables / f"{name}.tex").read_text(encoding="utf-8")
+    text = report["path"].read_text(encoding="utf-8")
+    assert "## Held-out prediction error" in text and "tables/heldout_scores.csv" in text

@@ -42,7 +42,7 @@ def test_a_calibrated_band_passes_and_a_narrow_one_is_called_narrow():
     rng = np.random.default_rng(7)
     ok = calibration_check(calibration_counts(_Band(1.0), _demos(rng, 1.0, rho=0.9)))
     narrow = calibration_check(calibration_counts(_Band(1.0), _demos(rng, 1.6, rho=0.9)))
-    assert (ok["verdict"] == "ok").all(), ok
+    assert (ok["verdict"] == "fits").all(), ok
     assert narrow.set_index("n_sigma").loc[1.0, "verdict"] == "too narrow"
     # the effective count shrinks with the correlation: an AR(1) indicator keeps (1 − ρ)/(1 + ρ) of the samples
     n_eff = ok.set_index("n_sigma").loc[1.0, "n_eff"]

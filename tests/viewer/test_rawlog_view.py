@@ -165,3 +165,50 @@ def _views(container):
     for c in getattr(container, "contents", None) or []:
         yield c
         yield from _views(c)
+
+
+def _series(path: Path, entity: str):
+    import numpy as np
+    import pyarrow as pa
+
+    t, v = [], []
+    for chunk in RrdReader(path).stream():
+        if str(chunk.entity_path) == entity and not chunk.is_static:
+            batch = chunk.to_record_batch()
+            t += list(batch.column("time").cast(pa.int64()).to_numpy() / 1e9)
+            v += [np.asarray(x, dtype=float)[0] for x in batch.column("Scalars:scalars").to_pylist()]
+    return np.asarray(t), np.asarray(v)
+
+
+def test_a_raw_log_opens_on_the_pilots_screen_attitude_in_degrees_and_named_sticks(tmp_path):
+    """The first tab: one plot per angle in degrees with its setpoint, the sticks named from RCMAP_*; the map is
+    zoomed to the track's extent."""
+    import numpy as np
+
+    from workbench.viewer.rawlog import map_zoom, pilot_views
+
+    raw = _quadplane_raw(tmp_path)
+    att = next(s for s in raw.streams if s.name == "ATTITUDE")
+    out = _recorded(raw, tmp_path / "raw.rrd")
+    t, roll = _series(out, "/log/pilot/roll/actual")
+    finite = np.isfinite(roll)
+    np.testing.assert_allclose(roll[finite], np.degrees(att.values[:, att.fields.index("roll")]), rtol=1e-12)
+    params = dict(raw.parameters)
+    rc = next(s for s in raw.streams if s.name == "RC_CHANNELS")
+    channel = int(params.get("RCMAP_THROTTLE", 3))
+    _, throttle = _series(out, "/log/pilot/sticks/throttle")
+    thr = throttle[np.isfinite(throttle)]
+    np.testing.assert_array_equal(thr, rc.values[:, rc.fields.index(f"chan{channel}_raw")])
+    import rerun as rr
+
+    from workbench.viewer.rawlog import LoggedRaw, log_raw, raw_views
+
+    logged = log_raw(rr.RecordingStream("raw_test2"), raw)
+    assert isinstance(logged, LoggedRaw) and logged.pilot["angles"] == ["roll", "pitch", "yaw"]
+    tabs = raw_views(logged)
+    assert tabs[0].name == pilot_views(logged.pilot, logged, logged.zoom)[0].name == "pilot"
+    names = [getattr(v, "name", "") for v in _views(tabs[0])]
+    assert any(str(n).startswith("roll [°]") for n in names) and any("sticks" in str(n) for n in names)
+    if raw.track is not None:
+        span = max(np.ptp(raw.track.lon), np.ptp(raw.track.lat))
+        assert logged.zoom == map_zoom(raw) and 2 ** logged.zoom * 256 * span / 360 < 2000

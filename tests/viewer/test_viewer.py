@@ -198,7 +198,9 @@ def test_model_tensors(setup):
 def test_blueprint_has_the_five_tabs(setup):
     assert RrdReader(setup["path"]).blueprints(), "the recording carries no default blueprint"
     names = _blueprint_names(setup["path"])
-    for tab in ("scene", "states", "inputs & variability", f"predictions · {setup['focus']}", "objective"):
+    # the model was fitted on every CS1 trial: its tab says the focus trial is in-sample
+    where = " (in-sample)" if setup["focus"] in setup["model"].train_ids_ else ""
+    for tab in ("scene", "states", "inputs & variability", f"predictions · {setup['focus']}{where}", "objective"):
         assert tab in names, (tab, names)
 
 

@@ -130,15 +130,21 @@ def _help(command: str) -> str:
     return sub.choices[command].format_help()
 
 
-def test_the_verdict_counts_coverage_against_a_gaussian():
-    rng = np.random.default_rng(0)
-    n = 20000
-    w, mu, sigma = rng.normal(size=n), np.zeros(n), np.ones(n)
-    cov = verdict.coverage(w, mu, sigma)
-    se = np.sqrt(verdict.NOMINAL_1SIGMA * (1 - verdict.NOMINAL_1SIGMA) / n)
-    assert abs(cov.inside_1sigma - verdict.NOMINAL_1SIGMA) < 4 * se and not cov.poor
-    wrong = verdict.coverage(w * 5, mu, sigma)  # a band five times too narrow
-    assert wrong.poor and wrong.inside_3sigma == pytest.approx(np.mean(np.abs(w * 5) <= 3))
+def test_the_band_verdict_judges_coverage_against_its_sampling_spread():
+    from scipy.stats import binom
+
+    from workbench.study.calibration import band_verdict
+
+    nominal, n = verdict.NOMINAL_1SIGMA, 2000
+    lo, hi = (np.asarray(binom.interval(0.95, n, nominal)) / n).tolist()
+    words = band_verdict([nominal, lo - 0.01, hi + 0.01, float("nan")], nominal, n)
+    assert list(words) == ["fits", "too narrow", "too wide", ""]
+    # 3σ: a band of other data misses most samples; one a little narrow misses a few more than nominal
+    n3 = 300
+    lo3 = binom.interval(0.95, n3, verdict.NOMINAL_3SIGMA)[0] / n3
+    assert str(band_verdict(lo3 - 0.005, verdict.NOMINAL_3SIGMA, n3)) == "too narrow"
+    assert str(band_verdict(0.97, verdict.NOMINAL_3SIGMA, n3)) == "too narrow"
+    assert str(band_verdict(0.85, verdict.NOMINAL_3SIGMA, n3)) == "does not fit"
 
 
 def _hue_shift(line: tuple[int, int, int], band: tuple[int, int, int], alpha: float) -> float:

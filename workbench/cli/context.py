@@ -18,6 +18,8 @@ __all__ = ['SAMPLE_LOGS']
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
 DEFAULT_MAPPING = "planar_quadrotor"
+#: The width of output that goes to a pipe or a file (no terminal to ask; COLUMNS overrides it).
+PIPE_WIDTH = 100
 EXIT_ERROR = 1
 EXIT_INTERNAL = 3
 
@@ -34,8 +36,9 @@ class Context:
         # with `-o -` standard output carries the file: every message goes to standard error instead
         data_out = any(is_stdio(getattr(args, k, None)) for k in ("output", "save"))
         self.out = Console(highlight=False, quiet=self.quiet, stderr=data_out)
-        if not self.out.is_terminal:  # piped or captured: wide tables instead of 80 columns
-            self.out = Console(highlight=False, quiet=self.quiet, width=140, stderr=data_out)
+        if not self.out.is_terminal and "COLUMNS" not in os.environ:
+            # piped or captured: lines a pager or an editor shows whole (the full tables are in files)
+            self.out = Console(highlight=False, quiet=self.quiet, width=PIPE_WIDTH, stderr=data_out)
         self.err = Console(stderr=True, highlight=False)
 
     def input_path(self, name: str | os.PathLike, what: str = "the input", suffix: str | None = None) -> Path:
@@ -60,7 +63,81 @@ class Context:
         return self.stdio.tidy(os.fspath(path))
 
     def say(self, *parts: Any, markup: bool = False) -> None:
-        self.out.print(*parts, soft_wrap=True, markup=markup)
+        """Print: on a terminal, words wrapped at its width (never a line broken mid-word or running past it); to
+        a pipe or a file, each message on one line, so a command or a path in it can be copied (a table is still
+        sized to :data:`PIPE_WIDTH`)."""
+        if self.out.is_terminal:
+            self.out.print(*parts, markup=markup, overflow="fold")
+        else:  # an overflow mode would crop what soft wrapping leaves long
+            self.out.print(*parts, markup=markup, soft_wrap=True)
+
+    def say_table(self, header: Sequence[str], rows: Sequence[Sequence[Any]], title: str = "") -> None:
+        """A table that fits the terminal: as a table where its cells fit the width unbroken, else in long form —
+        one block per row, the first cell as its heading and every other cell as ``column: value`` on its own
+        line — so no cell is cut to "propo…" or stacked a word per line."""
+        from rich.markup import escape
+        from rich.table import Table
+        from rich.text import Text
+
+        cells = [[str(c) for c in r] for r in rows]
+        header = [str(h) for h in header]
+
+        def fits(head: Sequence[str], body: Sequence[Sequence[str]]) -> bool:
+            widths = [max([len(h), *(len(r[j]) for r in body)]) for j, h in enumerate(head)]
+            # rich's box: a bar and a space either side of every cell, one more bar at the end
+            return sum(widths) + 3 * len(widths) + 1 <= self.out.width
+
+        def show(head: Sequence[str], body: Sequence[Sequence[str]], name: str) -> None:
+            table = Table(*head, title=name or None)
+            for r in body:
+                table.add_row(*(Text(c) for c in r))  # a cell's "[0.1, 0.2]" is text, not console markup
+            self.say(table)
+
+        if fits(header, cells):
+            show(header, cells, title)
+            return
+        groups = list(dict.fromkeys(r[0] for r in cells))
+        if len(header) > 2 and len(groups) < len(cells) and fits(header[1:], [r[1:] for r in cells]):
+            # one table per value of the first column (a strategy), that column in the tables' titles
+            if title:
+                self.say(f"[bold]{escape(title)}[/bold]", markup=True)
+            for g in groups:
+                show(header[1:], [r[1:] for r in cells if r[0] == g], f"{header[0]}: {g}")
+            return
+        if title:
+            self.say(f"[bold]{escape(title)}[/bold]", markup=True)
+        for r in cells:
+            self.say(f"[bold]{escape(header[0])}: {escape(r[0])}[/bold]", markup=True)
+            for h, c in zip(header[1:], r[1:], strict=True):
+                if c and c != "—":
+                    self.say(f"  {h}: {c}")
+
+    def say_markdown(self, text: str) -> None:
+        """Markdown for a terminal: its tables through :meth:`say_table`, the rest rendered (no raw ``|``, ``**``
+        or backticks)."""
+        from rich.markdown import Markdown
+
+        block: list[str] = []
+        lines = text.splitlines()
+        i = 0
+        while i < len(lines):
+            if lines[i].lstrip().startswith("|"):
+                if block:
+                    self.say(Markdown("\n".join(block)))
+                    block = []
+                rows = []
+                while i < len(lines) and lines[i].lstrip().startswith("|"):
+                    cells = [c.strip() for c in lines[i].strip().strip("|").split("|")]
+                    if not all(set(c) <= set("-: ") for c in cells):  # not the |---|---| rule
+                        rows.append(cells)
+                    i += 1
+                if rows:
+                    self.say_table(rows[0], [r + [""] * (len(rows[0]) - len(r)) for r in rows[1:]])
+                continue
+            block.append(lines[i])
+            i += 1
+        if block:
+            self.say(Markdown("\n".join(block)))
 
     def progress(self):
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn

@@ -246,11 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "ANOVA and paired t-tests across the methods (use --horizon 5 for the paper's)")
     p.add_argument("--n-test", type=int, default=1, metavar="N",
                    help="held-out trials per subject with --per-subject (default 1)")
-    p.add_argument("--holdout", choices=["auto", "split", "loso"], default="auto",
-                   help="test trials: one random split (--test-size), leave-one-segment-out (every trial tested "
-                        "once by models fitted on the others; no data-efficiency curve), or auto: the test trials a "
-                        "collected session recorded (role test), else leave-one-out when a label has fewer than 10 "
-                        "trials, else a split (default)")
+    _holdout_option(p)
     _study_options(p)
     _mapping_option(p)
     _executor_options(p)
@@ -321,13 +317,15 @@ def build_parser() -> argparse.ArgumentParser:
     _mapping_option(p)
     _output_options(p)
 
-    p = add("report", cmd_report, "fit, compare and write a Markdown report with PNG figures",
+    p = add("report", cmd_report,
+            "fit, compare and write a Markdown report: figures (PNG, SVG, PDF) and tables (CSV, LaTeX)",
             "workbench report demos.parquet -o report/")
     p.add_argument("demos", nargs="+", metavar="DEMOS", help="demonstrations or logs; - reads one from standard input")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="the report's folder (not -: it is a folder)")
     _format_option(p)
     p.add_argument("--label", nargs="+", help="strategy labels to include (default all)")
     p.add_argument("--title", default="Workbench report")
+    _holdout_option(p)
     _bootstrap_option(p)
     _power_option(p, 1)
     _study_options(p)
@@ -352,6 +350,15 @@ def _power_option(p: argparse.ArgumentParser, default: int) -> None:
                    help="simulated demonstration sets per size (n, 2n, 4n) of the power curve that says how many "
                         "demonstrations a weight ratio the data do not identify would need "
                         f"(default {default}; 0: none)")
+
+
+def _holdout_option(p: argparse.ArgumentParser) -> None:
+    """``--holdout``: one rule for ``evaluate`` and ``report``, so both score the same trials the same way."""
+    p.add_argument("--holdout", choices=["auto", "split", "loso"], default="auto",
+                   help="test trials: one random split (--test-size), leave-one-segment-out (every trial tested "
+                        "once by models fitted on the others; no data-efficiency curve), or auto: the test trials a "
+                        "collected session recorded (role test), else leave-one-out when a label has fewer than 10 "
+                        "trials, else a split (default)")
 
 
 def _bootstrap_option(p: argparse.ArgumentParser) -> None:

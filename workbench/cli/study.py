@@ -33,52 +33,13 @@ from workbench.errors import DataError
 __all__ = []
 
 def cmd_evaluate(ctx: Context) -> int:
-    from workbench.study import pipeline as study
 
     a = ctx.args
     output = ctx.output_path(a.output, ".parquet", "the results table") if a.output else None
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
     if a.per_subject:
         return _evaluate_per_subject(ctx, ds, output)
-    if len(ds) == 1:  # one manual segment: leave-one-segment-out would have nothing to train on
-        duration = float(ds[0].t[-1] - ds[0].t[0])
-        ds = study.split_in_time(ds, steps_of(a.horizon_s, ds.dt))
-        ctx.say(f"one manual segment ({duration:.1f} s): evaluated by a time split inside it, {len(ds)} contiguous "
-                "pieces each scored by models and a plant fitted on the others (parts of one flight, not "
-                "independent trials)")
-    smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
-    # a collected session declares its test trials (the protocol's test blocks, held-out trials): auto keeps them
-    recorded = recorded_test_ids(ds) if a.holdout == "auto" else None
-    loso = recorded is None and (a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW))
-    if recorded is not None:
-        ctx.say(f"test trials as recorded: the {len(recorded)} with role test; the other {len(ds) - len(recorded)} "
-                "train")
-    # a split study's strategies are independent tasks (run side by side on local processes, as in report and demo)
-    with ctx.executor(local_tasks=0 if loso else len(ds.labels)) as ex:
-        if loso:
-            ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
-                    "the others)")
-            result = study.run_loso(
-                ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
-                n_components=a.n_components,
-                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s,
-            )
-        else:
-            result = study.run_study(
-                ds,
-                study_plant(a.system, a.horizon_s),
-                test_size=a.test_size,
-                n_steps=steps_of(a.horizon_s, ds.dt),
-                n_components=a.n_components,
-                samples=a.samples,
-                efficiency=a.efficiency,
-                repeats=a.repeats,
-                seed=a.seed,
-                progress=ctx.progress,
-                executor=ex,
-                stride_s=a.stride_s,
-                test_ids=recorded,
-            )
+    result, loso = _holdout_study(ctx, ds)
     if loso and getattr(result.system, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
         # spread of the folds' plants, which the scores below used
@@ -106,6 +67,48 @@ def recorded_test_ids(ds: Any) -> list[str] | None:
         if {d.meta["role"] for d in part} != {"train", "test"}:
             return None
     return [d.id for d in ds if d.meta["role"] == "test"]
+
+
+def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0) -> tuple[Any, bool]:
+    """The study of ``evaluate`` and ``report`` (one rule, so both print the same numbers for the same data):
+    ``--holdout`` picks one random split or leave-one-segment-out; auto keeps the test trials a collected session
+    recorded, else leaves one out where a label has fewer than :data:`~workbench.study.pipeline.LOSO_BELOW`
+    trials, and evaluates one manual segment by a time split inside it. Returns the result and whether it left one
+    out."""
+    from workbench.study import pipeline as study
+
+    a = ctx.args
+    if len(ds) == 1:  # one manual segment: leave-one-segment-out would have nothing to train on
+        duration = float(ds[0].t[-1] - ds[0].t[0])
+        ds = study.split_in_time(ds, steps_of(a.horizon_s, ds.dt))
+        ctx.say(f"one manual segment ({duration:.1f} s): evaluated by a time split inside it, {len(ds)} contiguous "
+                "pieces each scored by models and a plant fitted on the others (parts of one flight, not "
+                "independent trials)")
+    smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
+    # a collected session declares its test trials (the protocol's test blocks, held-out trials): auto keeps them
+    recorded = recorded_test_ids(ds) if a.holdout == "auto" else None
+    loso = recorded is None and (a.holdout == "loso" or (a.holdout == "auto" and smallest < study.LOSO_BELOW))
+    if recorded is not None:
+        ctx.say(f"test trials as recorded: the {len(recorded)} with role test; the other {len(ds) - len(recorded)} "
+                "train")
+    # a split study's strategies are independent tasks (run side by side on local processes, as in report and demo)
+    with ctx.executor(local_tasks=0 if loso else len(ds.labels)) as ex:
+        if loso:
+            ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
+                    "the others)")
+            result = study.run_loso(
+                ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
+                n_components=a.n_components,
+                samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s,
+            )
+        else:
+            result = study.run_study(
+                ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
+                n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats,
+                seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s, bootstrap=bootstrap,
+                power=power, test_ids=recorded,
+            )
+    return result, loso
 
 
 def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
@@ -161,30 +164,46 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
 
 def _print_study(ctx: Context, result: Any) -> None:
     from rich.markup import escape
-    from rich.table import Table
 
+    from workbench.models.names import METHOD_TITLES
+    from workbench.study.scores import fmt, heldout_scores
+
+    # the first answer: each method's held-out error with its interval (the numbers the first view shows)
+    scores = heldout_scores(result.table)
+    rows = []
+    for (label, method), g in scores.groupby(["label", "method"], sort=False):
+        by = {r.metric: r for r in g.itertuples(index=False)}
+        cell = {m: fmt(r.value, r.lo, r.hi, share=m.startswith("band_")) for m, r in by.items()}
+        rows.append([label, METHOD_TITLES.get(method, method), cell.get("rmse_position", "—"),
+                     cell.get("rmse_velocity", "—"), cell.get("band_position", "—")])
+    if rows:
+        ctx.say_table(["label", "method", "position RMSE", "velocity RMSE", "MC band"], rows,
+                      title="held-out prediction error (mean of trials [95 % interval])")
     summary = result.summary()
-    table = Table(*[str(c) for c in summary.columns], title="mean horizon RMSE on the test trials")
-    for row in summary.itertuples(index=False):
-        table.add_row(*[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row])
-    ctx.say(table)
+    ctx.say_table([str(c) for c in summary.columns],
+                  [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row]
+                   for row in summary.itertuples(index=False)], title="mean horizon RMSE on the test trials")
     if result.coverage is not None and len(result.coverage):
-        cov = Table(*[str(c) for c in result.coverage.columns], title="one-step coverage of ŵ by GMR bands [%]")
-        for row in result.coverage.itertuples(index=False):
-            cov.add_row(*[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row])
-        ctx.say(cov)
+        ctx.say_table([str(c) for c in result.coverage.columns],
+                      [[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row]
+                       for row in result.coverage.itertuples(index=False)],
+                      title="one-step coverage of ŵ by GMR bands [%]")
     check = getattr(result, "calibration_check", None)
     if check is not None and len(check):
         from workbench.study.calibration import check_table
 
-        shown = check_table(check)
-        t = Table(*shown.columns, title="one-step calibration: inputs at a limit excluded, against the sampling "
-                                        "spread (binomial over effective samples)")
-        for row in shown.itertuples(index=False):
-            t.add_row(*[str(v) for v in row])
-        ctx.say(t)
+        # the terminal's columns; the report's table (and its CSV) holds every count
+        shown = check_table(check).drop(columns=["inside [%]"]).rename(columns={
+                                                   "inside, limits excluded [%]": "inside [%]",
+                                                   "sampling 95 % range [%] (N_eff)": "95 % range [%] (N_eff)"})
+        keep = [c for c in ("label", "input", "band", "nominal [%]", "inside [%]", "95 % range [%] (N_eff)",
+                            "calibration") if c in shown.columns]
+        shown = shown[keep]
+        ctx.say_table(list(shown.columns), [[str(v) for v in row] for row in shown.itertuples(index=False)],
+                      title="one-step calibration: inputs at a limit excluded, against the sampling spread "
+                            "(binomial over effective samples)")
     if result.stats_text:
-        ctx.say(result.stats_text)
+        ctx.say_markdown(result.stats_text)
     _print_objective_comparison(ctx, result)
     for line in result.verdicts():
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
@@ -193,7 +212,6 @@ def _print_study(ctx: Context, result: Any) -> None:
 def _print_objective_comparison(ctx: Context, result: Any) -> None:
     """What the data identify about the task objective first (factors between strategies, then ratios), then every
     weight ratio per strategy with its interval or why it has none, and each part's structure check."""
-    from rich.table import Table
 
     from workbench.study.weights import NOT_EXPLAINED, compare_strategies, format_interval, identified_first
 
@@ -208,16 +226,16 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
     found = identified_first(table)
     ctx.say("what the data identify about the task objective (95 % intervals within ×10): "
             + ("; ".join(found) if found else "nothing"))
-    out = Table("ratio", "strategy", "estimate [95 % interval]", f"× vs {first}", "",
-                title="task-objective weight ratios inside coupled parts (diagonal cost, S = 0)")
+    head = ["ratio", "strategy", "estimate [95 % interval]", f"× vs {first}", "note"]
+    rows = []
     for r in table.itertuples():
         factor = getattr(r, "factor", float("nan"))
         note = r.note if r.strategy == first else (r.factor_note or r.note)
         if note and note.startswith(NOT_EXPLAINED):  # its mismatch is the part's, printed once under the table
             note = f"{NOT_EXPLAINED} (mismatch of {r.strategy}'s part below)"
-        out.add_row(r.ratio, str(r.strategy), format_interval(r.estimate, r.lo, r.hi),
-                    "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi), note or "")
-    ctx.say(out)
+        rows.append([r.ratio, str(r.strategy), format_interval(r.estimate, r.lo, r.hi),
+                     "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi), note or ""])
+    ctx.say_table(head, rows, title="task-objective weight ratios inside coupled parts (diagonal cost, S = 0)")
     for lb, wr in ratios.items():
         for f in wr.fits:
             ctx.say(f"  {lb}: {f.describe()}")
@@ -232,23 +250,15 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
 
 def cmd_report(ctx: Context) -> int:
     from workbench.report.markdown import write_study_report
-    from workbench.study import pipeline as study
 
     a = ctx.args
     refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
-    recorded = recorded_test_ids(ds)  # a collected session's test trials are its test set, as in evaluate
-    if recorded is not None:
-        ctx.say(f"test trials as recorded: the {len(recorded)} with role test; the other {len(ds) - len(recorded)} "
-                "train")
-    with ctx.executor(local_tasks=len(ds.labels)) as ex:
-        result = study.run_study(
-            ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
-            n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
-            progress=ctx.progress, executor=ex, bootstrap=a.bootstrap, stride_s=a.stride_s, power=a.power,
-            test_ids=recorded,
-        )
-    print_plant(ctx, result.system, "(plant from the training trials)")
+    # evaluate's holdout rules, so both commands score a flight the same way (leave-one-segment-out on a few
+    # segments) and print the same numbers
+    result, loso = _holdout_study(ctx, ds, bootstrap=a.bootstrap, power=a.power)
+    print_plant(ctx, result.system, "(plants fitted without each left-out segment)" if loso
+                else "(plant from the training trials)")
     require_proposed(result)
     path = write_study_report(result, a.output, title=a.title)
     _print_study(ctx, result)

@@ -25,6 +25,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.digest import set_digest, trial_digest
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError, WorkbenchError
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import GainChoice, choose_gain
@@ -359,6 +360,10 @@ class BehaviorModel:
         self.n_demos_ = len(demos)
         self.n_samples_ = int(sum(len(d) for d in demos))
         self.labels_ = tuple(str(x) for x in labels)
+        # what the model was fitted on, so that a view or an evaluation can tell in-sample trials from held-out ones
+        self.train_ids_ = tuple(d.id for d in demos)
+        self.train_digests_ = tuple(trial_digest(d) for d in demos)
+        self.data_digest_ = set_digest(demos)
 
     def _check_noise(self) -> None:
         if self.noise not in _NOISE_KINDS:
@@ -616,6 +621,11 @@ class BehaviorModel:
                 "n_demos": self.n_demos_,
                 "n_samples": self.n_samples_,
                 "labels": list(self.labels_),
+                # None (unknown) for a model restored from a file written before these were recorded
+                "trial_ids": None if getattr(self, "train_ids_", None) is None else list(self.train_ids_),
+                "trial_digests": (None if getattr(self, "train_digests_", None) is None
+                                  else list(self.train_digests_)),
+                "data_digest": getattr(self, "data_digest_", None),
                 "goal_relative": bool(getattr(self, "goal_relative_", False)),
                 "noise_band_factor": float(self.noise_band_factor_),
                 "noise_band_coverage": None if math.isnan(self.noise_band_coverage_) else self.noise_band_coverage_,

@@ -151,6 +151,12 @@ class HumanBehaviorModel(TaskGMRModel):
         Whether predictions add the variability model's mean ``μ̂(x)`` to ``K̂x`` (False: "cv" found that it does
         not lower the held-out error, ``auto_.fallback``; the input band still comes from the variability model).
     labels_ : tuple of str
+    train_ids_, train_digests_ : tuple of str, or None
+        The training trials' ids and content digests (:func:`workbench.data.digest.trial_digest`); None for a
+        model read from a file written before they were recorded. :func:`workbench.models.training.in_sample`
+        tells a set's in-sample trials from these.
+    data_digest_ : str or None
+        The digest of the whole training set (:func:`workbench.data.digest.set_digest`).
     """
 
     _fitted_attr = "variability_"
@@ -376,6 +382,11 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]]) -> 
         model.n_demos_ = int(fit.get("n_demos", 0))
         model.n_samples_ = int(fit.get("n_samples", 0))
         model.labels_ = tuple(str(x) for x in fit.get("labels", []))
+        # files written before the training data were recorded: unknown (None), not "no trials"
+        ids, digests = fit.get("trial_ids"), fit.get("trial_digests")
+        model.train_ids_ = None if ids is None else tuple(str(x) for x in ids)
+        model.train_digests_ = None if digests is None else tuple(str(x) for x in digests)
+        model.data_digest_ = None if fit.get("data_digest") is None else str(fit["data_digest"])
         model.noise_band_factor_ = float(fit.get("noise_band_factor", 1.0))
         cov = fit.get("noise_band_coverage")
         model.noise_band_coverage_ = float("nan") if cov is None else float(cov)

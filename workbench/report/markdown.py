@@ -1,14 +1,18 @@
-"""The workbench's report: one Markdown file with PNG figures in the spirit of the method paper's figures.
+"""The workbench's report: one Markdown file with figures in the spirit of the method paper's, and its tables.
 
-Figures (``figures/`` beside the report), each drawn on a matplotlib :class:`~matplotlib.figure.Figure` with the
-Agg canvas — no pyplot, no global backend, so the report runs headless and never touches a user's session:
+It opens with the held-out prediction error of every method (:mod:`workbench.study.scores`) and how the test
+trials were chosen. Every figure is written as PNG (for the Markdown) and as SVG and PDF beside it, sized for one
+or two journal columns with print-sized text (:data:`PAPER_RC`); every statistics table also as CSV and LaTeX
+under ``tables/``. Figures (``figures/`` beside the report), each drawn on a matplotlib
+:class:`~matplotlib.figure.Figure` with the Agg canvas — no pyplot, no global backend, so the report runs headless
+and never touches a user's session:
 
 * ``demonstrations.png`` — the flown paths per strategy;
 * ``objective.png`` — normalized Q and R side by side per strategy, the attitude term called out;
 * ``variability.png`` — ŵ on a test trial with the GMR mean and 3σ band (eqs. (24)–(27));
 * ``calibration.png`` — one-step band coverage against the Gaussian nominal at 0.25σ … 3σ (the calibration curve);
 * ``predictions.png`` — predicted vs recorded trajectories of the three methods, with the Monte Carlo band;
-* ``rmse.png`` — horizon RMSE (eq. (35)) per method as box plots;
+* ``rmse.png`` — per-trial horizon RMSE (eq. (35)) per method as box plots, a trial's methods joined by a line;
 * ``data_efficiency.png`` — RMSE against the number of training demonstrations;
 
 and the comparison's statistics: method-level differences over refitted splits (the headline), paired differences of
@@ -18,6 +22,7 @@ and the mixed model's strategy terms (:mod:`workbench.study.findings`).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 from collections.abc import Mapping, Sequence
@@ -29,7 +34,6 @@ import numpy as np
 import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.patches import Rectangle
 
 from workbench.atomic import (
     atomic_path,
@@ -41,6 +45,8 @@ from workbench.atomic import (
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
 from workbench.models.factory import METHOD_TITLES
+from workbench.report.tables import md_table as _md_table
+from workbench.report.tables import save_table, scores_section, why_no_statistics
 from workbench.study.pipeline import StudyResult, improvement_table, metric_unit
 
 __all__ = [
@@ -59,19 +65,32 @@ __all__ = [
 _PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
 METHOD_COLORS = {"proposed": "#2ca02c", "ioc_only": "#d62728", "gmr_only": "#9467bd", "persistence": "#8c564b",
                  "recorded": "#282828"}
-DPI = 110
+DPI = 300
+#: A journal column (IEEE: 3.5 in); a figure is at most two columns wide, so its text prints at the size set here.
+COLUMN_WIDTH = 3.5
+#: Text and lines sized for print at that width (matplotlib rc parameters, applied while a report draws).
+PAPER_RC = {"font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8, "xtick.labelsize": 7, "ytick.labelsize": 7,
+            "legend.fontsize": 7, "lines.linewidth": 1.2, "axes.linewidth": 0.6, "savefig.dpi": DPI,
+            "pdf.fonttype": 42, "svg.fonttype": "none"}
 
 
 def _label_color(label: str, labels: Sequence[str]) -> str:
     return _PALETTE[list(labels).index(label) % len(_PALETTE)] if label in labels else "#7f7f7f"
 
 
+#: The vector formats written beside every PNG (a paper takes these; the PNG is for the Markdown).
+VECTOR_FORMATS = ("svg", "pdf")
+
+
 def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
-    """Render ``fig`` to a PNG at ``path`` atomically."""
+    """Render ``fig`` to a PNG at ``path`` and to SVG and PDF beside it (:data:`VECTOR_FORMATS`), each atomically."""
     path = Path(path)
     FigureCanvasAgg(fig)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
+    for fmt in VECTOR_FORMATS:
+        with atomic_path(path.with_suffix(f".{fmt}")) as tmp:
+            fig.savefig(tmp, format=fmt, bbox_inches="tight")
     return path
 
 
@@ -94,7 +113,8 @@ def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
     first = sets[labels[0]]
     plane = _plane(first.roles, first.state_names)
     rows = 1 if plane is not None else first.n_states
-    fig = Figure(figsize=(4.6 * len(labels), 3.8 if plane is not None else 1.9 * rows), layout="constrained")
+    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 3.2 * len(labels)), 2.8 if plane is not None else 1.4 * rows),
+                 layout="constrained")
     axs = fig.subplots(rows, len(labels), squeeze=False, sharey="row")
     for c, label in enumerate(labels):
         ds = sets[label]
@@ -118,7 +138,7 @@ def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
         if targets:
             tx, ty = targets[0][ix], targets[0][iy]
             ax.plot([tx - 0.5, tx + 0.5], [ty, ty], color="k", lw=4, solid_capstyle="butt", label="pad")
-            ax.legend(loc="upper right", fontsize=8)
+            ax.legend(loc="upper right")
         ax.set_title(f"{label}: {len(ds)} demonstrations")
         ax.set_xlabel(_titled(ds.state_names[ix], ds.roles))
         ax.grid(alpha=0.3)
@@ -129,7 +149,10 @@ def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
 
 
 def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_names: Sequence[str]) -> Figure:
-    """Normalized Q and R heatmaps side by side per strategy, the attitude weight Q_φφ outlined.
+    """Normalized Q and R heatmaps side by side per strategy.
+
+    No single entry is called out: the SDP's cost is one member of a family that explains the same gain (METHOD.md),
+    so an entry alone is not identified; the contrasts the data do identify are the report's weight-ratio table.
 
     A diverging color map symmetric about zero, every cell labelled with its value. Each block has one color scale
     shared by every strategy, so two strategies compare cell by cell; Q and R keep separate scales: R usually
@@ -138,10 +161,8 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
     """
     labels = [k for k, m in models.items() if getattr(m, "objective_", None) is not None]
     n, m = len(state_names), len(input_names)
-    fig = Figure(figsize=(10.0, 3.9 * max(1, len(labels))), layout="constrained")
+    fig = Figure(figsize=(COLUMN_WIDTH * 2, 2.8 * max(1, len(labels))), layout="constrained")
     axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
-    # the attitude weight is the plant's heading role, where it declares one
-    att = models[labels[0]].system.r.heading if labels else None
     blocks = {k: [np.asarray(models[lab].objective_.M_normalized)[sl, sl] for lab in labels]
               for k, sl in (("Q", slice(0, n)), ("R", slice(n, n + m)))}
     vmaxes = {k: max([float(np.abs(b).max()) for b in v] + [1e-12]) for k, v in blocks.items()}
@@ -159,14 +180,7 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
                 ax.text(j, i, text, ha="center", va="center", fontsize=7,
                         color="white" if abs(v) > 0.6 * vmax else "black")
             fig.colorbar(image, ax=ax, shrink=0.8)
-            ax.set_title(f"{label}: {title}", fontsize=10)
-        if att is not None:
-            row[0].add_patch(Rectangle((att - 0.5, att - 0.5), 1, 1, fill=False, ec="gold", lw=2.5))
-            q = np.diag(Mn[:n, :n])
-            rank = int((q > q[att]).sum()) + 1
-            row[0].set_title(
-                f"{label}: Q / λmax(M) — attitude weight Q_φφ = {q[att]:.3g} (rank {rank} of {n})", fontsize=10
-            )
+            ax.set_title(f"{label}: {title}")
     return fig
 
 
@@ -178,7 +192,7 @@ def fig_calibration(calibration: pd.DataFrame) -> Figure:
     calibrated, below it too narrow, above it too wide.
     """
     labels = list(dict.fromkeys(calibration["label"]))
-    fig = Figure(figsize=(3.6 * max(1, len(labels)), 3.6), layout="constrained")
+    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 2.6 * max(1, len(labels))), 2.6), layout="constrained")
     axs = fig.subplots(1, max(1, len(labels)), squeeze=False)[0]
     for ax, label in zip(axs, labels, strict=True):
         t = calibration[calibration["label"] == label]
@@ -202,10 +216,10 @@ def fig_calibration(calibration: pd.DataFrame) -> Figure:
         ax.set_ylim(0, 100)
         ax.set_aspect("equal")
         ax.set_xlabel("nominal coverage [%]")
-        ax.set_title(f"{label}: one-step band calibration", fontsize=9)
+        ax.set_title(f"{label}: one-step band calibration")
         ax.grid(alpha=0.3)
     axs[0].set_ylabel("observed coverage [%]")
-    axs[0].legend(fontsize=8)
+    axs[0].legend()
     return fig
 
 
@@ -213,30 +227,42 @@ def fig_variability(cases: Mapping[str, tuple[Demonstration, Any]], input_names:
     """ŵ = u − K̂x on a test trial per strategy with the GMR mean and ±3σ band; samples outside marked."""
     labels = list(cases)
     m = len(input_names)
-    fig = Figure(figsize=(5.2 * len(labels), 2.6 * m), layout="constrained")
+    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 3.5 * len(labels)), 1.8 * m), layout="constrained")
     axs = fig.subplots(m, len(labels), squeeze=False, sharex="col")
     for c, label in enumerate(labels):
         demo, model = cases[label]
         t = demo.t - demo.t[0]
         w = demo.u - demo.x @ np.asarray(model.K_).T
         mu, Sigma = model.variability(demo.x, x0=demo.x[0], target=demo.target)
+        words = _band_words(model, demo)
         sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
         for j in range(m):
             ax = axs[j, c]
+            # one colour per role across figures: the proposed model's green for its band, the recording's black
             ax.fill_between(t, mu[:, j] - 3 * sigma[:, j], mu[:, j] + 3 * sigma[:, j], step="post",
-                            color="#ffbb78", alpha=0.6, lw=0, label="GMR μ ± 3σ")
-            ax.step(t, mu[:, j], where="post", color="#ff7f0e", lw=1.2, label="GMR μ")
-            ax.step(t, w[:, j], where="post", color="#1f77b4", lw=1.0, label="ŵ")
+                            color=METHOD_COLORS["proposed"], alpha=0.22, lw=0, label="GMR μ ± 3σ")
+            ax.step(t, mu[:, j], where="post", color=METHOD_COLORS["proposed"], lw=1.2, label="GMR μ")
+            ax.step(t, w[:, j], where="post", color=METHOD_COLORS["recorded"], lw=0.8, label="ŵ")
             out = np.abs(w[:, j] - mu[:, j]) > 3 * sigma[:, j]
-            cover = 100.0 * (1.0 - out.mean())
             if out.any():
-                ax.plot(t[out], w[out, j], "x", color="#d62728", ms=5, label="outside 3σ")
-            ax.set_title(f"{label} {demo.id}: ŵ {input_names[j]} — {cover:.1f} % inside 3σ", fontsize=9)
+                ax.plot(t[out], w[out, j], "x", color=METHOD_COLORS["recorded"], ms=5, label="outside 3σ")
+            ax.set_title(f"{label} {demo.id}: ŵ {input_names[j]} — {words.get(input_names[j], '')}")
             ax.grid(alpha=0.3)
             ax.set_ylabel(f"ŵ {input_names[j]}")
         axs[-1, c].set_xlabel("time since start [s]")
-    axs[0, 0].legend(fontsize=7, loc="best")
+    axs[0, 0].legend(loc="best")
     return fig
+
+
+def _band_words(model: Any, demo: Demonstration) -> dict[str, str]:
+    """Per input, ``"3σ 98.2 % too narrow, 1σ 74 % fits"`` on this trial: the one verdict of the viewer and the
+    tables (:func:`workbench.study.calibration.band_verdict`)."""
+    from workbench.study.calibration import band_words, calibration_check, calibration_counts
+
+    if not callable(getattr(model, "input_distribution", None)):
+        return {}
+    check = calibration_check(calibration_counts(model, [demo], (1.0, 3.0)))
+    return {str(name): band_words(rows) for name, rows in check.groupby("input", sort=False)}
 
 
 def _band(pred: Any) -> tuple[np.ndarray, np.ndarray] | None:
@@ -261,7 +287,7 @@ def fig_predictions(
     plane = _plane(roles, state_names)
     shown = list(plane) if plane is not None else list(range(len(state_names)))
     n_cols = len(shown) + (plane is not None)
-    fig = Figure(figsize=(max(13.0, 3.4 * n_cols), 3.5 * len(labels)), layout="constrained")
+    fig = Figure(figsize=(COLUMN_WIDTH * 2, 1.9 * len(labels) * (2 if n_cols > 4 else 1)), layout="constrained")
     axs = fig.subplots(len(labels), n_cols, squeeze=False)
     for r, label in enumerate(labels):
         demo, preds = cases[label]
@@ -296,51 +322,63 @@ def fig_predictions(
                 ax.plot(tp[: len(x)], x[:, j], color=color, lw=1.4, ls="--", label=title if k == 0 else None)
         if ax_path is not None:
             ax_path.plot(demo.x[0, plane[0]], demo.x[0, plane[1]], "o", color="k", ms=5)
-            ax_path.set_title(f"{label} {demo.id}: path ({n_steps * dt:.1f} s horizon)", fontsize=9)
+            ax_path.set_title(f"{label} {demo.id}: path ({n_steps * dt:.1f} s horizon)")
             ax_path.set_xlabel(_titled(state_names[plane[0]], roles))
             ax_path.set_ylabel(_titled(state_names[plane[1]], roles))
         for ax, j in zip(ax_time, shown, strict=True):
             ax.set_title(f"{label} {demo.id}: {state_names[j]}(t)" if ax_path is None and j == shown[0]
-                         else f"{state_names[j]}(t)", fontsize=9)
+                         else f"{state_names[j]}(t)")
             ax.set_ylabel(_titled(state_names[j], roles))
             ax.set_xlabel("time since start [s]")
         for ax in axs[r]:
             ax.grid(alpha=0.3)
+    # one key for the figure, under its panels: a legend inside a panel covered the recorded track (seen)
+    handles, names = {}, []
     for ax in axs[0, : min(2, n_cols)]:
-        ax.legend(fontsize=7, loc="best")
+        for h, n in zip(*ax.get_legend_handles_labels(), strict=True):
+            if n not in handles:
+                handles[n] = h
+                names.append(n)
+    fig.legend([handles[n] for n in names], names, loc="outside lower center", ncols=min(4, len(names)))
     return fig
 
 
 def fig_rmse(table: pd.DataFrame, metrics: Sequence[tuple[str, str]]) -> Figure:
-    """Box plots of per-trial horizon RMSE (eq. (35)) per method, one panel per (metric, label).
+    """Per-trial horizon RMSE (eq. (35)) per method, one panel per (metric, label): a box over the trials, each
+    trial a dot, and one gray line joining a trial's dots across methods (the pairs the statistics compare).
 
-    ``table`` has columns ``label``, ``method``, ``metric``, ``value`` (one row per trial and start).
+    ``table`` has columns ``trial``, ``label``, ``method``, ``metric``, ``value`` (one row per trial and start);
+    a trial's windows are averaged first, as in the comparison's tables and paired differences.
     """
     labels = list(dict.fromkeys(table["label"]))
     methods = [m for m in METHOD_TITLES if m in set(table["method"])] + sorted(
         set(table["method"]) - set(METHOD_TITLES)
     )
-    fig = Figure(figsize=(4.0 * len(labels) * len(metrics) / 1.3, 3.6), layout="constrained")
-    axs = fig.subplots(1, len(labels) * len(metrics), squeeze=False)[0]
+    panels = len(labels) * len(metrics)
+    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 2.4 * panels), 2.6), layout="constrained")
+    axs = fig.subplots(1, panels, squeeze=False)[0]
     k = 0
     for metric, unit in metrics:
         for label in labels:
             ax = axs[k]
             k += 1
             sub = table[(table["label"] == label) & (table["metric"] == metric)]
-            data = [sub.loc[sub["method"] == m, "value"].to_numpy(dtype=float) for m in methods]
-            # no fliers: every trial is drawn as a dot on top
+            per = sub.groupby(["trial", "method"], sort=False)["value"].mean().unstack("method")
+            per = per.reindex(columns=methods)
+            data = [per[m].dropna().to_numpy(dtype=float) for m in methods]
+            for _, row in per.iterrows():  # the pairs: one trial scored by every method
+                ax.plot(np.arange(1, len(methods) + 1), row.to_numpy(float), "-", color="#b0b0b0", lw=0.6,
+                        zorder=1)
             bp = ax.boxplot(data, tick_labels=[METHOD_TITLES.get(m, m) for m in methods], patch_artist=True,
-                            widths=0.6, showfliers=False, medianprops={"color": "k"})
+                            widths=0.55, showfliers=False, medianprops={"color": "k"}, zorder=2)
             for patch, m in zip(bp["boxes"], methods, strict=True):
                 patch.set_facecolor(METHOD_COLORS.get(m, "#cccccc"))
-                patch.set_alpha(0.55)
-            for j, d in enumerate(data):
-                if len(d):
-                    ax.plot(np.full(len(d), j + 1) + np.linspace(-0.12, 0.12, len(d)), d, ".", color="k", ms=3)
-            ax.set_title(f"{label}: {metric.replace('_', ' ')}", fontsize=9)
+                patch.set_alpha(0.45)
+            for j, m in enumerate(methods):
+                ax.plot(np.full(len(data[j]), j + 1), data[j], ".", color=METHOD_COLORS.get(m, "k"), ms=4, zorder=3)
+            ax.set_title(f"{label}: {metric.removeprefix('rmse_').replace('_', ' ')}")
             ax.set_ylabel(f"RMSE [{unit}]" if unit else "RMSE")
-            ax.tick_params(axis="x", labelrotation=30)  # four or more method names overlap when horizontal
+            ax.tick_params(axis="x", labelrotation=45)  # four or more method names overlap when horizontal
             ax.grid(alpha=0.3, axis="y")
     return fig
 
@@ -356,7 +394,7 @@ def fig_data_efficiency(table: pd.DataFrame, unit: str = "m", what: str = "posit
     ``table`` has columns ``label``, ``method``, ``n_train`` and ``value`` (one row per trial and repeat).
     """
     labels = list(dict.fromkeys(table["label"]))
-    fig = Figure(figsize=(4.8 * len(labels), 3.6), layout="constrained")
+    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 3.0 * len(labels)), 2.6), layout="constrained")
     axs = fig.subplots(1, len(labels), squeeze=False, sharey=True)[0]
     for ax, label in zip(axs, labels, strict=True):
         sub = table[table["label"] == label]
@@ -370,10 +408,10 @@ def fig_data_efficiency(table: pd.DataFrame, unit: str = "m", what: str = "posit
         ax.minorticks_off()  # the log axis's minor labels (3×10⁰, …) only clutter a handful of sizes
         ax.set_xticks(sorted(set(sub["n_train"])), [str(v) for v in sorted(set(sub["n_train"]))])
         ax.set_xlabel("training demonstrations")
-        ax.set_title(f"{label}: data efficiency", fontsize=9)
+        ax.set_title(f"{label}: data efficiency")
         ax.grid(alpha=0.3)
     axs[0].set_ylabel(f"{what} [{unit}]" if unit else what)
-    axs[0].legend(fontsize=8)
+    axs[0].legend()
     return fig
 
 
@@ -412,15 +450,12 @@ class ReportInputs:
     ratio_comparison: pd.DataFrame | None = None
     paired: Sequence[Any] = ()
     calibration_check: pd.DataFrame | None = None
-
-
-def _md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
-    cols = [str(c) for c in df.columns]
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for row in df.itertuples(index=False):
-        cells = [format(v, floatfmt) if isinstance(v, float | np.floating) else str(v) for v in row]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    #: How the test trials were chosen (a random split, leave-one-segment-out): one sentence, shown first.
+    holdout: str = ""
+    #: Held-out scores (:func:`workbench.study.scores.heldout_scores`) of the comparison table.
+    scores: pd.DataFrame | None = None
+    #: Why a section has nothing to show, by section ("efficiency", "statistics", …).
+    empty: Mapping[str, str] = field(default_factory=dict)
 
 
 def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
@@ -437,15 +472,21 @@ def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
     build = temp_sibling(out_dir / "report")
     build.mkdir()
     try:
-        _write_report(build, inputs)
+        import matplotlib
+
+        with matplotlib.rc_context(PAPER_RC):  # text sized for print at a column's width, in every format
+            _write_report(build, inputs)
         with deferred_interrupt():
             old = temp_sibling(out_dir / "report", "old")
             old.mkdir()
-            for name in ("report.md", "figures"):  # the old report first: never an old report.md beside new figures
+            # the old report first: never an old report.md beside new figures
+            for name in ("report.md", "figures", "tables"):
                 if (out_dir / name).exists():
                     os.replace(out_dir / name, old / name)
-            for name in ("figures", "report.md"):  # the new report last: its presence says the figures are its own
-                os.replace(build / name, out_dir / name)
+            # the new report last: its presence says the figures are its own
+            for name in ("figures", "tables", "report.md"):
+                if name == "report.md" or (build / name).exists():
+                    os.replace(build / name, out_dir / name)
         shutil.rmtree(old, ignore_errors=True)
     finally:
         shutil.rmtree(build, ignore_errors=True)
@@ -460,9 +501,14 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     state_names, input_names, dt = any_set.state_names, any_set.input_names, any_set.dt
     md: list[str] = [f"# {inputs.title}", ""]
     md += [f"- {line}" for line in inputs.notes]
+    if inputs.holdout:
+        md += [f"- held out: {inputs.holdout}"]
     md += [""]
     md += [f"**{line}**\n" for line in inputs.verdicts]
     system = inputs.models[labels[0]].system
+    tab_dir = out_dir / "tables"
+    tab_dir.mkdir(parents=True, exist_ok=True)
+    md += scores_section(inputs, system, tab_dir)
 
     # data
     rows = []
@@ -472,13 +518,15 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
             "strategy": label,
             "train": len(tr),
             "test": 0 if te is None else len(te),
-            "samples": tr.n_samples + (0 if te is None else te.n_samples),
+            "samples": tr.n_samples + (0 if te is None else sum(len(d) for d in te if d.id not in set(tr.ids))),
             "subjects": len({d.meta.get("subject") for d in tr}),
             "sources": ", ".join(sorted({Path(str(d.meta.get("source", "?"))).name for d in tr}))[:80],
         })
     md += ["## Demonstrations", "", _md_table(pd.DataFrame(rows)), ""]
-    all_sets = {label: inputs.train[label] + inputs.test[label] if label in inputs.test else inputs.train[label]
-                for label in labels}
+    # leave-one-segment-out trains on every trial and tests each once: the same trials in both sets, drawn once
+    all_sets = {label: inputs.train[label].with_demos(
+        [*inputs.train[label], *(d for d in inputs.test.get(label, []) if d.id not in set(inputs.train[label].ids))])
+        for label in labels}
     save_figure(fig_demonstrations(all_sets), fig_dir / "demonstrations.png")
     md += ["![Demonstrations per strategy](figures/demonstrations.png)", "",
            "*Flown paths per strategy in the plane of the position roles; dots are start points, the bar is the pad "
@@ -520,8 +568,10 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     if any(getattr(m, "objective_", None) is not None for m in inputs.models.values()):
         save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
         md += ["![Normalized Q and R](figures/objective.png)", "",
-               "*Normalized cost blocks (M / λmax(M)) per strategy; the attitude weight is outlined. The SDP returns "
-               "the minimum-condition-number cost with the fitted gain, not a unique cost (see METHOD.md).*", ""]
+               "*Normalized cost blocks (M / λmax(M)) per strategy. The SDP returns the minimum-condition-number cost "
+               "with the fitted gain, not a unique cost (see METHOD.md): its entries are not identified one by one, "
+               "so none is called out here; the contrasts the data identify, with their intervals, are under "
+               "\"What the data identify\".*", ""]
 
     # variability and predictions on one test trial per label
     cases_w, cases_p = {}, {}
@@ -539,7 +589,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         cases_p[label] = (demo, preds)
     md += ["## Variability (TP-GMM + GMR)", ""]
     if inputs.coverage is not None and len(inputs.coverage):
-        md += ["One-step coverage of ŵ by the GMR bands on the test trials:", "",
+        save_table(inputs.coverage, tab_dir / "coverage.csv")
+        md += ["One-step coverage of ŵ by the GMR bands on the test trials (`tables/coverage.csv`):", "",
                _md_table(inputs.coverage, ".1f"), ""]
     if inputs.calibration_check is not None and len(inputs.calibration_check):
         from workbench.study.calibration import check_table
@@ -549,7 +600,9 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                "judged without them; it is called too narrow or too wide only where the share inside lies outside "
                "the binomial 95 % range of the nominal share over the effective number of samples (samples within "
                "a trial are correlated: N_eff = N(1 − ρ)/(1 + ρ), ρ the lag-1 autocorrelation of inside/outside).",
-               "", _md_table(check_table(inputs.calibration_check)), ""]
+               "", _md_table(check_table(inputs.calibration_check)), "",
+               "(`tables/calibration_check.csv`: every count and interval)", ""]
+        save_table(inputs.calibration_check, tab_dir / "calibration_check.csv")
     if inputs.calibration is not None and len(inputs.calibration):
         save_figure(fig_calibration(inputs.calibration), fig_dir / "calibration.png")
         md += ["![One-step band calibration](figures/calibration.png)", "",
@@ -569,15 +622,20 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     if inputs.rmse is not None and len(inputs.rmse):
         metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
-        md += [_md_table(improvement_table(inputs.rmse, inputs.paired)), ""]
+        improvement = improvement_table(inputs.rmse, inputs.paired)
+        save_table(improvement, tab_dir / "comparison.csv")
+        md += [_md_table(improvement), "", "(`tables/comparison.csv`)", ""]
         md += _envelope_line(inputs.envelope)
         md += [f"**{line}**\n" for line in inputs.verdicts]
         md += [
                "![RMSE per method](figures/rmse.png)", "",
-               "*Horizon RMSE (eq. (35)) per test trial and start point.*", ""]
+               "*Horizon RMSE (eq. (35)) per test trial (the mean of its windows, as in the table); boxes: quartiles "
+               "over trials; gray lines join one trial's errors across methods, the pairs the statistics compare.*",
+               ""]
     if inputs.band is not None and len(inputs.band):
         b = inputs.band.groupby(["label", "metric", "method"], sort=False)["value"].mean().unstack("method")
         b = (100.0 * b).rename(columns=METHOD_TITLES).reset_index()
+        save_table(b, tab_dir / "mc_band.csv")
         md += [f"Monte Carlo trajectory bands (5–95 %, {inputs.samples} rollouts): share of the horizon's steps "
                "at which every state of the block lies inside the band [%] (persistence has no band):", "",
                _md_table(b, ".1f"), ""]
@@ -587,12 +645,25 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                     fig_dir / "data_efficiency.png")
         eff = inputs.efficiency.groupby(["label", "n_train", "method"], sort=False)["value"].mean().unstack("method")
         eff = eff.rename(columns=METHOD_TITLES).reset_index()
+        save_table(eff, tab_dir / "data_efficiency.csv")
         md += ["## Data efficiency", "", _md_table(eff), "",
                "![Data efficiency](figures/data_efficiency.png)", "",
-               f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations.*",
-               ""]
+               f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations, "
+               "scored like the tables above (every window of every test trial, a trial's windows averaged); error "
+               "bars: ± one standard error of that mean over the random training subsets drawn at each size (the "
+               "last size is the whole training set, the models of the tables).*", ""]
+    elif inputs.empty.get("efficiency"):
+        md += ["## Data efficiency", "", f"*None: {inputs.empty['efficiency']}.*", ""]
+    md += ["## Statistics of the comparison", ""]
     if inputs.stats:
-        md += ["## Statistics of the comparison", "", inputs.stats, ""]
+        md += [inputs.stats, ""]
+    if not inputs.paired:
+        md += [f"*No paired differences: {inputs.empty.get('statistics') or why_no_statistics(inputs)}.*", ""]
+    else:
+        # every field the study's paired differences carry, whatever they are (workbench.study.paired owns them)
+        rows = [{k: v for k, v in dataclasses.asdict(d).items() if np.ndim(v) == 0} for d in inputs.paired]
+        save_table(pd.DataFrame(rows), tab_dir / "paired_differences.csv")
+        md += ["(`tables/paired_differences.csv`)", ""]
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(md).rstrip() + "\n")
     return path
@@ -687,9 +758,22 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
         cov = result.coverage.copy()
         front = [c for c in ("label",) if c in cov.columns]
         cov = cov[front + [c for c in cov.columns if c not in front]]
+    from workbench.study.scores import heldout_scores
+
+    n_test = sum(len(te) for te in result.test.values())
+    if result.plants:
+        holdout = (f"leave-one-segment-out: each of {n_test} trials scored by models (and a plant) fitted on the "
+                   "others")
+    else:
+        holdout = f"{n_test} test trial(s) chosen at random (seed {result.seed}); the models never saw them"
+    empty = {}
+    if result.efficiency is None:
+        empty["efficiency"] = ("leave-one-segment-out has no data-efficiency curve (each fold trains on all other "
+                               "trials)" if result.plants else "the study ran without one (--no-efficiency)")
     return write_report(
         out_dir,
         ReportInputs(
+            holdout=holdout, scores=heldout_scores(result.table), empty=empty,
             train=result.train, test=result.test, models=result.models, baselines=result.baselines,
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
             stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,

@@ -25,7 +25,8 @@ import scipy.stats
 from workbench.data.demonstrations import Demonstration
 from workbench.study.evaluate import nominal_coverage
 
-__all__ = ["saturated", "calibration_counts", "calibration_check", "PINNED_SHARE"]
+__all__ = ["saturated", "calibration_counts", "calibration_check", "band_verdict", "band_words", "check_table",
+           "PINNED_SHARE", "FITS", "TOO_NARROW", "TOO_WIDE", "DOES_NOT_FIT"]
 
 #: A value at the data's extreme counts as a pinned stick when at least this share of the samples sit on it.
 PINNED_SHARE = 0.01
@@ -69,11 +70,15 @@ def _lag1(indicators: Iterable[np.ndarray]) -> float:
 
 
 def calibration_counts(
-    model: Any, test: Sequence[Demonstration], n_sigmas: Sequence[float] = (1, 2, 3)
+    model: Any, test: Sequence[Demonstration], n_sigmas: Sequence[float] = (1, 2, 3), *, by_trial: bool = False
 ) -> pd.DataFrame:
     """Counts behind the calibration check, per input and level: ``input, n_sigma, n, n_saturated, hits,
     n_free, hits_free, n_eff`` (``free``: samples not at a limit; ``n_eff`` of the free samples). Counts of
-    several test sets (folds) add up."""
+    several test sets (folds) add up.
+
+    ``by_trial``: one row per trial, input and level (a ``trial`` column), the limits found over all of ``test``
+    as for the pooled rows, so a view's per-trial verdicts and its model's pooled one come from the same masks.
+    """
     demos = list(test)
     masks = saturated(demos, model.system)
     rows = []
@@ -82,17 +87,68 @@ def calibration_counts(
         mean, Sigma = model.input_distribution(d.x, d.x[0], d.target)
         dev.append(np.abs(d.u - mean))
         sig.append(np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None)))
-    for j, name in enumerate(model.system.input_names):
-        for c in n_sigmas:
-            inside = [(e[:, j] <= float(c) * s[:, j]).astype(float) for e, s in zip(dev, sig, strict=True)]
-            free = [z[~m[:, j]] for z, m in zip(inside, masks, strict=True)]
-            n_free = int(sum(len(z) for z in free))
-            rho = _lag1(free)
-            rows.append((name, float(c), int(sum(len(z) for z in inside)), int(sum(int(m[:, j].sum()) for m in masks)),
-                         float(sum(z.sum() for z in inside)), n_free, float(sum(z.sum() for z in free)),
-                         n_free * (1.0 - rho) / (1.0 + rho)))
-    return pd.DataFrame(rows, columns=["input", "n_sigma", "n", "n_saturated", "hits", "n_free", "hits_free",
-                                       "n_eff"])
+    groups = [(d.id, [i]) for i, d in enumerate(demos)] if by_trial else [(None, list(range(len(demos))))]
+    for trial, members in groups:
+        for j, name in enumerate(model.system.input_names):
+            for c in n_sigmas:
+                inside = [(dev[i][:, j] <= float(c) * sig[i][:, j]).astype(float) for i in members]
+                free = [z[~masks[i][:, j]] for z, i in zip(inside, members, strict=True)]
+                n_free = int(sum(len(z) for z in free))
+                rho = _lag1(free)
+                rows.append(((trial,) if by_trial else ()) + (
+                    name, float(c), int(sum(len(z) for z in inside)),
+                    int(sum(int(masks[i][:, j].sum()) for i in members)), float(sum(z.sum() for z in inside)),
+                    n_free, float(sum(z.sum() for z in free)), n_free * (1.0 - rho) / (1.0 + rho)))
+    columns = ["input", "n_sigma", "n", "n_saturated", "hits", "n_free", "hits_free", "n_eff"]
+    return pd.DataFrame(rows, columns=(["trial"] if by_trial else []) + columns)
+
+
+#: The four answers of :func:`band_verdict`, the only words any view, table or line uses for a band's calibration.
+FITS, TOO_NARROW, TOO_WIDE, DOES_NOT_FIT = "fits", "too narrow", "too wide", "does not fit"
+#: A band "does not fit" (rather than being "too narrow") where it misses this many times more samples than the
+#: upper end of the sampling range of a calibrated band's misses: a band of other data, not a slightly narrow one
+#: (at 3σ and a few hundred effective samples: below ~93 % inside, where a narrow band of the right data sits at
+#: 97–99 %).
+MISS_FACTOR = 10.0
+
+
+def band_verdict(coverage: Any, nominal: Any, n_eff: Any, ci: float = 95.0) -> np.ndarray:
+    """The one verdict on a band's coverage: "fits", "too narrow", "too wide" or "does not fit".
+
+    The observed share inside the band is judged against the binomial ``ci`` % interval of the nominal share over
+    ``n_eff`` effective samples (:func:`calibration_counts`): inside it the band fits; below it the band is too
+    narrow, and it does not fit at all where it misses more than :data:`MISS_FACTOR` times the interval's largest
+    share of misses; above it the band is too wide. A share without samples (NaN) gets "".
+
+    Parameters
+    ----------
+    coverage, nominal, n_eff : float or array_like (broadcast together)
+
+    Returns
+    -------
+    ndarray of str, the shape of the broadcast inputs (a 0-d array for scalars; ``str(...)`` reads it).
+    """
+    cov, nom, n = np.broadcast_arrays(np.asarray(coverage, dtype=float), np.asarray(nominal, dtype=float),
+                                      np.asarray(n_eff, dtype=float))
+    k = np.maximum(1, np.round(np.nan_to_num(n, nan=1.0))).astype(int)
+    lo, hi = scipy.stats.binom.interval(ci / 100.0, k, nom)
+    lo, hi = lo / k, hi / k
+    out = np.where(cov < lo, TOO_NARROW, np.where(cov > hi, TOO_WIDE, FITS)).astype(object)
+    out = np.where((cov < lo) & (1.0 - cov > MISS_FACTOR * (1.0 - lo)), DOES_NOT_FIT, out)
+    return np.where(np.isfinite(cov), out, "").astype(object)
+
+
+def band_words(check: pd.DataFrame, levels: Sequence[float] = (3.0, 1.0)) -> str:
+    """``"3σ 98.2 % too narrow, 1σ 74 % too wide"``: the check's rows of one input at ``levels`` (outer first,
+    the one a title must not lose), each with its share and :func:`band_verdict`'s word — the text the viewer's
+    titles, the terminal and the report print for a band."""
+    by = check.set_index("n_sigma")
+    parts = []
+    for c in levels:
+        if c in by.index:
+            r = by.loc[c]
+            parts.append(f"{c:g}σ {100 * float(r['coverage_free']):.{1 if c >= 3 else 0}f} % {r['verdict']}")
+    return ", ".join(parts)
 
 
 def calibration_check(counts: pd.DataFrame, ci: float = 95.0) -> pd.DataFrame:
@@ -108,7 +164,7 @@ def calibration_check(counts: pd.DataFrame, ci: float = 95.0) -> pd.DataFrame:
     -------
     DataFrame with ``[label,] input, n_sigma, nominal, coverage, coverage_free, saturated, n_eff, lo, hi,
     verdict``: ``lo``–``hi`` is the binomial interval of the nominal share over ``n_eff`` samples; the verdict is
-    "ok", "too narrow" (fewer inside than that) or "too wide".
+    :func:`band_verdict`'s ("fits", "too narrow", "too wide", "does not fit").
     """
     keys = [k for k in ("label", "input", "n_sigma") if k in counts.columns]
     g = counts.groupby(keys, sort=False)[["n", "n_saturated", "hits", "n_free", "hits_free", "n_eff"]].sum()
@@ -121,8 +177,7 @@ def calibration_check(counts: pd.DataFrame, ci: float = 95.0) -> pd.DataFrame:
         out = g[keys].assign(
             nominal=nominal, coverage=g["hits"] / g["n"], coverage_free=cov_free,
             saturated=g["n_saturated"] / g["n"], n_eff=g["n_eff"], lo=lo / n_eff, hi=hi / n_eff)
-    out["verdict"] = np.where(out["coverage_free"] < out["lo"], "too narrow",
-                              np.where(out["coverage_free"] > out["hi"], "too wide", "ok"))
+    out["verdict"] = band_verdict(out["coverage_free"].to_numpy(float), nominal, g["n_eff"].to_numpy(float), ci)
     return out
 
 

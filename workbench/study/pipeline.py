@@ -397,7 +397,8 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
         check = calibration_counts(fitted["proposed"], list(te))
     timings["compare"] = time.perf_counter() - t0
     eff = None
-    sizes = [n for n in s.efficiency if n <= len(tr)]
+    # the curve ends where the models of the comparison stand: at every training trial
+    sizes = sorted({n for n in s.efficiency if n < len(tr)} | ({len(tr)} if s.efficiency else set()))
     if sizes:
         t0 = time.perf_counter()
         eff = _efficiency(label, system, tr, te, sizes, G, s, executor, progress)
@@ -422,6 +423,8 @@ def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: Demonstration
         sub = p.add_task(f"{label}: data efficiency", total=None) if p is not None else None
         eff = ev.data_efficiency(
             system, tr, te, sizes=sizes, n_steps=s.n_steps, repeats=s.repeats, seed=s.seed, n_components=G,
+            # scored like the comparison's tables: from every stride of each test trial, not its first state only
+            starts="initial" if s.stride is None else s.stride,
             progress=None if p is None else lambda d, t: p.update(sub, completed=d, total=t), executor=executor,
         )
         if p is not None:
@@ -516,8 +519,8 @@ def run_loso(
     trials (``plants`` holds them by the left-out trial), so no trial is scored by a plant that saw it. The
     comparison table holds every trial once; a method that could not be fitted in some fold is left out for
     its label altogether (a mean over other folds would not be comparable) and named in ``failures``. One-step
-    coverage is the mean over the folds; there is no data-efficiency curve. ``models`` and ``baselines`` are
-    the last fold's; ``train`` is every trial of a label (each trains in all folds but its own).
+    coverage is the mean over the folds; there is no data-efficiency curve. ``models`` and ``baselines`` are,
+    per label, those of its last fold; ``train`` is every trial of a label (each trains in all folds but its own).
     """
 
     folds: list[tuple[str, StudyResult]] = []
@@ -552,8 +555,11 @@ def run_loso(
     plant = last.system
     stride = _stride_steps(stride_s, demos.dt)
     statistics = _statistics(table, demos, plant, n_steps, stride, seed)
+    # per label the models of its last fold (a fold holds only the label of the trial it leaves out)
+    models = {lb: m for _, r in folds for lb, m in r.models.items()}
+    baselines = {lb: b for _, r in folds for lb, b in r.baselines.items()}
     return StudyResult(
-        demos=demos, system=plant, train=train, test=test, models=last.models, baselines=last.baselines,
+        demos=demos, system=plant, train=train, test=test, models=models, baselines=baselines,
         table=table, coverage=coverage, efficiency=None, calibration=calibration,
         stats_text=statistics.text(), n_steps=n_steps,
         samples=samples, seed=seed, timings={k: v for _, r in folds for k, v in r.timings.items()},

@@ -15,8 +15,10 @@ Tabs (each only when it has something to show):
 
 How it reads: the key of a tab's colors is in its view titles or a small "key" text view, a legend only in the
 quiet corner of one plot; the plots of a tab share one time axis (``LinkAxis.LinkToGlobal``); a plot's y-range
-is the data's but never narrower than its unit's minimum span (:data:`workbench.viewer.style.MIN_SPAN`); ŵ and
-prediction titles carry the model's fit against nominal (:mod:`workbench.viewer.verdict`), and a model that does
+is the data's but never narrower than its unit's minimum span (:data:`workbench.viewer.style.MIN_SPAN`); ŵ titles
+carry the band's coverage and the one verdict of :func:`workbench.study.calibration.band_verdict`, the first view
+and every prediction tab each method's held-out RMSE (:mod:`workbench.study.scores`), trials a model was fitted on
+are marked "in-sample", and a model that does
 not fit the data says so in the first view's title. Side panels start collapsed and the time cursor at the
 start (the time panel is paused).
 """
@@ -122,6 +124,9 @@ def _scene_name(s: LoggedSession, across: str, up: str) -> str:
     bad = [m for m, v in s.verdicts.items() if not v.fits]
     if bad:  # a wrong model is seen in the first second: in the first view's title
         name = f"⚠ MODEL {', '.join(bad)} DOES NOT FIT THESE DATA (see objective) — " + name
+    inside = [m for m, v in s.verdicts.items() if v.all_in_sample]
+    if inside:  # a model shown on its own training trials: nothing here is a held-out number
+        name = f"⚠ {', '.join(inside)} SHOWN ON ITS TRAINING TRIALS (in-sample) — " + name
     if s.methods:
         words = {"proposed": "green", "ioc_only": "red", "gmr_only": "purple", "persistence": "brown"}
         name += " — " + ", ".join(f"{style.method_title(m)} {words[m]}" if m in words else style.method_title(m)
@@ -153,6 +158,11 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
             side.append(_overlay(s, s.title(name),
                                  [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in s.demo_ids],
                                  key=f"states/{entity_part(name)}"))
+    if "scores" in s.entities:
+        # the first question's answer where the eye lands: each method's held-out error beside the tracks
+        side.insert(0, rrb.TextDocumentView(origin="/scores", name="held-out prediction error"))
+        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[6] + [3] * (len(side) - 1)),
+                              column_shares=[3, 2], name="scene")
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
 
 
@@ -184,13 +194,24 @@ def _objective_tab(s: LoggedSession) -> Any:
     return rrb.Vertical(*rows, name="objective")
 
 
-def _fit_of(s: LoggedSession, demo_id: str) -> str:
-    """The fit figures of the model that explains ``demo_id`` (its trial's ŵ coverage against nominal)."""
-    parts = [s.fit_titles[k] for k in sorted(s.fit_titles) if k.startswith(f"demos/{entity_part(demo_id)}/")]
-    bad = [m for m, v in s.verdicts.items() if not v.fits]
-    head = f"⚠ model {', '.join(bad)} does not fit" if bad else ""
-    fit = parts[0].removeprefix("✓ ") if parts and bad else parts[0] if parts else ""  # no ✓ beside "does not fit"
-    return "; ".join(x for x in (head, "ŵ " + fit if fit else "") if x)
+def _score_title(s: LoggedSession, demo_id: str) -> str:
+    """``"held-out RMSE: proposed 0.0996 m, persistence 0.418 m"`` for the label of ``demo_id`` (the study's or
+    the view's held-out scores), or what the trial is when it has none."""
+    from workbench.models.names import METHOD_TITLES
+
+    where = " (this trial IN-SAMPLE)" if demo_id in s.in_sample else ""
+    if s.scores is None or not len(s.scores):
+        return "no held-out scores" + where
+    label = s.trial_labels.get(demo_id, "")
+    sc = s.scores[s.scores["label"] == label]
+    if not len(sc):
+        sc = s.scores[s.scores["label"] == s.scores["label"].iloc[0]]
+    metric = "rmse_position" if (sc["metric"] == "rmse_position").any() else str(sc["metric"].iloc[0])
+    rows = sc[sc["metric"] == metric].set_index("method")["value"]
+    shown = [m for m in ("proposed", "persistence") if m in rows.index]
+    what = metric.removeprefix("rmse_")
+    return (f"held-out {what} RMSE: " + ", ".join(f"{METHOD_TITLES.get(m, m)} {rows[m]:.3g}" for m in shown)
+            + where)
 
 
 def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
@@ -222,25 +243,33 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
         for name in s.input_names:
             p = f"demos/{entity_part(i)}/variability/{entity_part(name)}"
             fit = s.fit_titles.get(p)
-            if fit and fit.startswith("✓") and any(not v.fits for v in s.verdicts.values()):
-                fit = "⚠" + fit[1:]  # ŵ inside its bands, but the model meets data it was not fitted for
+            where = " (in-sample)" if i in s.in_sample else ""
             # what and the fit first, the trial last: a long title is cut at its end; the key view explains the
-            # colors and the nominal shares (no legend)
-            input_views.append(_plot(f"ŵ {name} " + (f"{fit} · " if fit else "· ") + i, [f"+ /{p}/**"],
+            # colors and the nominal shares (no legend); the verdict's words are the report's (band_verdict)
+            input_views.append(_plot(f"ŵ {name} " + (f"{fit} · " if fit else "· ") + i + where, [f"+ /{p}/**"],
                                      legend=rrb.PlotLegend(visible=False), y_range=s.ranges.get(p),
                                      window=s.trial_windows.get(i)))
     tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
     for i in [f for f in focus if f in s.predictions]:
         # one tab per focus trial: six plots of one trial are tall enough for a y-tick every few pixels rows
-        pred_views = []
-        fit = _fit_of(s, i)
+        pred_views: list[Any] = []
+        fit = _score_title(s, i) if "scores" in s.entities else ""
         for j, name in enumerate(s.state_names):
             key = f"demos/{entity_part(i)}/predictions/{entity_part(name)}"
             pred_views.append(_plot((f"{fit} · " if fit and j == 0 else "") + s.title(name),
                                     _prediction_paths(s, i, name),
                                     legend=rrb.PlotLegend(s.corners.get(key, "LeftTop"), visible=j == 0),
                                     y_range=s.ranges.get(key), window=s.windows.get(i)))
-        tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1, name=f"predictions · {i}"))
+        label_doc = f"label_scores/{entity_part(s.trial_labels.get(i, ''))}"
+        where = " (in-sample)" if i in s.in_sample else ""
+        grid = rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1)
+        if label_doc in s.entities:  # the label's held-out numbers under its plots, a few lines tall
+            tabs.append(rrb.Vertical(grid, rrb.TextDocumentView(origin=f"/{label_doc}", name="held-out prediction "
+                                                                "error"), row_shares=[5, 1],
+                                     name=f"predictions · {i}{where}"))
+        else:
+            tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1,
+                                 name=f"predictions · {i}{where}"))
     if s.models:
         tabs.append(_objective_tab(s))
     tabs += list(extra_tabs)  # e.g. the raw log's tabs (workbench.viewer.rawlog) behind a mapped flight

@@ -6,12 +6,22 @@ logger import the blueprint without the blueprint importing the logger (no impor
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from workbench.viewer import style
 
-__all__ = ["LoggedSession", "entity_part"]
+__all__ = ["LoggedSession", "entity_part", "model_for"]
+
+
+def model_for(models: Any, demo: Any) -> Any:
+    """The model that explains ``demo``: one model for every trial, or a mapping by strategy label."""
+    if models is None:
+        return None
+    if not isinstance(models, Mapping):
+        return models
+    return models.get(demo.label)
 
 
 def entity_part(name: str) -> str:
@@ -60,6 +70,10 @@ class LoggedSession:
     warnings: list[str] = field(default_factory=list)  # what the recording and the terminal warn of
     colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # trial → its color, for the key
     label_colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)  # strategy → its color
+    in_sample: list[str] = field(default_factory=list)  # trials a model shown was fitted on
+    scores: Any = None  # held-out scores (workbench.study.scores.heldout_scores rows), logged under /scores
+    score_note: str = ""  # where the scores come from (the split, the horizon), or why there are none
+    trial_labels: dict[str, str] = field(default_factory=dict)  # trial → its strategy label ("" without)
 
     def title(self, name: str) -> str:
         """``name [unit]`` for a state or input."""

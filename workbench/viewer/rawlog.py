@@ -36,7 +36,8 @@ from workbench.viewer.blueprint import time_axis
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import entity_part
 
-__all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_raw", "raw_blueprint", "raw_views", "with_breaks"]
+__all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_pilot", "log_raw", "map_zoom", "pilot_views",
+           "raw_blueprint", "raw_views", "with_breaks"]
 
 RAW_APPLICATION_ID = "workbench_log_raw"
 #: the segment lane's states: what a mapping kept, and why a piece was dropped
@@ -68,6 +69,8 @@ class LoggedRaw:
     gps: bool = False
     parameters: bool = False
     span: tuple[float, float] = (0.0, 0.0)
+    zoom: float = 17.0  # the map's zoom that fits the track (map_zoom)
+    pilot: dict = field(default_factory=dict)  # what log_pilot found, for the first tab
 
 
 def _index(raw: RawLog, t: np.ndarray, origin: float) -> list[rr.TimeColumn]:
@@ -204,6 +207,8 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
                                                                   colors=[(214, 39, 40)]), static=True)
         out.gps = send_columns(rec, f"{prefix}/gps/vehicle", _index(raw, tr.t, origin),
                                rr.GeoPoints.columns(positions=latlon))
+        out.zoom = map_zoom(raw)
+    out.pilot = log_pilot(rec, raw, prefix=prefix, origin=origin)
     return out
 
 
@@ -239,7 +244,8 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
                                 plot_legend=rrb.PlotLegend(s.corners.get(n, "LeftTop"), visible=True),
                                 axis_x=_whole_log(s.spans.get(n, s.span)))  # the stream's own span
              for n in s.streams]
-    tabs: list[rrb.Container | rrb.View] = []
+    # first, a pilot's screen (attitude with setpoints, sticks, modes, the track); every stream a click away
+    tabs: list[rrb.Container | rrb.View] = pilot_views(s.pilot, s, s.zoom) if s.pilot else []
     if plots:
         # the busiest stream first on screen (attitude or IMU in a flight log), the tabs in name order
         busiest = max(range(len(s.streams)), key=lambda k: (s.rows.get(s.streams[k], 0), -k))
@@ -252,7 +258,7 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
     elif lane_view is not None or messages is not None:
         tabs.append(rrb.Vertical(*(v for v in (lane_view, messages) if v is not None), name="raw streams"))
     if s.gps:
-        tabs.append(rrb.MapView(origin=f"{p}/gps", name="map", zoom=17.0))
+        tabs.append(rrb.MapView(origin=f"{p}/gps", name="map", zoom=s.zoom))
     if s.parameters:
         tabs.append(rrb.TextDocumentView(origin=f"{p}/parameters", name="parameters"))
     return tabs
@@ -264,3 +270,160 @@ def raw_blueprint(s: LoggedRaw) -> rrb.Blueprint:
                          rrb.SelectionPanel(state="collapsed"),
                          rrb.TimePanel(timeline="time", play_state="paused", state="collapsed"),
                          collapse_panels=False)
+
+
+# -- the pilot's first screen -------------------------------------------------------------------------------------
+#: Where each autopilot's logs keep the attitude and its setpoint: (stream, field per angle, unit), the setpoint's
+#: (stream, fields, unit). The first source a log has wins; angles are shown in degrees on one axis each.
+ATTITUDE_SOURCES: tuple[tuple[tuple[str, tuple[str, str, str], str], tuple[str, tuple[str, str, str], str] | None],
+                        ...] = (
+    (("ATT", ("Roll", "Pitch", "Yaw"), "deg"), ("ATT", ("DesRoll", "DesPitch", "DesYaw"), "deg")),  # ArduPilot .bin
+    (("ATTITUDE", ("roll", "pitch", "yaw"), "rad"), ("NAV_CONTROLLER_OUTPUT", ("nav_roll", "nav_pitch", ""),
+                                                     "deg")),  # MAVLink
+    (("vehicle_attitude", ("q[0]", "q[1]", "q[2]"), "quaternion"),
+     ("vehicle_attitude_setpoint", ("roll_body", "pitch_body", "yaw_body"), "rad")),  # PX4 ULog
+)
+#: Stick channels: ArduPilot's RC inputs by its RCMAP_* parameters, PX4's manual_control_setpoint by field
+#: (x pitch, y roll, z throttle, r yaw in PX4's convention).
+STICKS = ("roll", "pitch", "throttle", "yaw")
+_RC_STREAMS = (("RCIN", "C{n}"), ("RC_CHANNELS", "chan{n}_raw"), ("RC_CHANNELS_RAW", "chan{n}_raw"))
+_PX4_STICKS = {"roll": "y", "pitch": "x", "throttle": "z", "yaw": "r"}
+_ARDUPILOT_DEFAULT_MAP = {"roll": 1, "pitch": 2, "throttle": 3, "yaw": 4}
+
+
+def _field(stream: Any, name: str) -> np.ndarray | None:
+    return stream.values[:, stream.fields.index(name)] if name and name in stream.fields else None
+
+
+def _euler_deg(q: np.ndarray) -> np.ndarray:
+    """(N, 4) quaternions w, x, y, z → (N, 3) roll, pitch, yaw in degrees (scipy's intrinsic z-y-x)."""
+    from scipy.spatial.transform import Rotation
+
+    ok = np.isfinite(q).all(axis=1) & (np.linalg.norm(q, axis=1) > 0.5)
+    out = np.full((len(q), 3), np.nan)
+    if ok.any():
+        out[ok] = Rotation.from_quat(q[ok][:, [1, 2, 3, 0]]).as_euler("ZYX", degrees=True)[:, ::-1]
+    return out
+
+
+def _to_deg(values: np.ndarray, unit: str) -> np.ndarray:
+    return np.degrees(values) if unit == "rad" else values
+
+
+def _stick_channels(raw: RawLog) -> dict[str, int]:
+    """The RC channel of each stick from the log's RCMAP_* parameters (ArduPilot's defaults where absent)."""
+    params = {str(k): v for k, v in raw.parameters}
+    out = {}
+    for stick, default in _ARDUPILOT_DEFAULT_MAP.items():
+        try:
+            out[stick] = int(float(params.get(f"RCMAP_{stick.upper()}", default)))
+        except (TypeError, ValueError):
+            out[stick] = default
+    return out
+
+
+def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin: float | None = None) -> dict:
+    """The pilot's first screen: roll, pitch and yaw in degrees with their setpoints, and the sticks by name.
+
+    Logged under ``<prefix>/pilot/<angle>/{actual,setpoint}`` and ``<prefix>/pilot/sticks`` (one series per
+    stick, named roll / pitch / throttle / yaw); returns what was found: ``{"angles": [...], "sticks": bool,
+    "span": (t0, t1)}`` for :func:`pilot_views`.
+    """
+    origin = raw.t_start if origin is None else float(origin)
+    by_name = {s.name: s for s in raw.streams}
+    found: dict[str, Any] = {"angles": [], "sticks": False, "span": None, "prefix": prefix}
+    spans = []
+    for (name, fields, unit), setpoint in ATTITUDE_SOURCES:
+        s = by_name.get(name)
+        if s is None or not len(s.t):
+            continue
+        if unit == "quaternion":
+            q = np.column_stack([_field(s, f"q[{k}]") for k in range(4)]) if "q[3]" in s.fields else None
+            if q is None:
+                continue
+            angles = _euler_deg(q)
+        else:
+            cols = [_field(s, f) for f in fields]
+            if any(c is None for c in cols):
+                continue
+            angles = _to_deg(np.column_stack(cols), unit)
+        sp = by_name.get(setpoint[0]) if setpoint else None
+        for k, angle in enumerate(("roll", "pitch", "yaw")):
+            path = f"{prefix}/pilot/{angle}"
+            rec.log(f"{path}/actual", rr.SeriesLines(names=[f"{angle} [°]"], colors=[(230, 230, 230)],
+                                                     widths=[1.2]), static=True)
+            t_sent, v_sent = with_breaks(s.t, angles[:, k])
+            send_columns(rec, f"{path}/actual", _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent))
+            if sp is not None and setpoint is not None and (col := _field(sp, setpoint[1][k])) is not None:
+                rec.log(f"{path}/setpoint", rr.SeriesLines(names=[f"{angle} setpoint [°]"], colors=[(255, 127, 14)],
+                                                           widths=[1.2]), static=True)
+                t_sp, v_sp = with_breaks(sp.t, _to_deg(col, setpoint[2]))
+                send_columns(rec, f"{path}/setpoint", _index(raw, t_sp, origin), rr.Scalars.columns(scalars=v_sp))
+            found["angles"].append(angle)
+        spans.append((float(s.t[0]), float(s.t[-1])))
+        break
+    sticks: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    px4 = by_name.get("manual_control_setpoint")
+    if px4 is not None and len(px4.t):
+        for stick, f in _PX4_STICKS.items():
+            if (col := _field(px4, f)) is not None:
+                sticks[stick] = (px4.t, col)
+    else:
+        channels = _stick_channels(raw)
+        for stream, pattern in _RC_STREAMS:
+            s = by_name.get(stream)
+            if s is None or not len(s.t):
+                continue
+            for stick, n in channels.items():
+                if (col := _field(s, pattern.format(n=n))) is not None:
+                    sticks[stick] = (s.t, col)
+            if sticks:
+                break
+    colors = {"roll": (31, 119, 180), "pitch": (44, 160, 44), "throttle": (214, 39, 40), "yaw": (148, 103, 189)}
+    for stick, (t, v) in sticks.items():
+        path = f"{prefix}/pilot/sticks/{stick}"
+        rec.log(path, rr.SeriesLines(names=[stick], colors=[colors[stick]], widths=[1.0]), static=True)
+        t_sent, v_sent = with_breaks(t, v)
+        send_columns(rec, path, _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent))
+        spans.append((float(t[0]), float(t[-1])))
+    found["sticks"] = bool(sticks)
+    if spans:
+        found["span"] = (min(a for a, _ in spans) - origin, max(b for _, b in spans) - origin)
+    return found
+
+
+def map_zoom(raw: RawLog, viewport_px: float = 700.0) -> float:
+    """A web-map zoom level that fits the GPS track's extent into about ``viewport_px`` pixels (256-px tiles)."""
+    tr = raw.track
+    if tr is None or not len(tr.lat):
+        return 17.0
+    lat = np.asarray(tr.lat, dtype=float)
+    lon = np.asarray(tr.lon, dtype=float)
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    if not ok.any():
+        return 17.0
+    span_lon = float(np.ptp(lon[ok]))
+    span_lat = float(np.ptp(lat[ok])) / max(np.cos(np.radians(float(np.median(lat[ok])))), 0.1)
+    span = max(span_lon, span_lat, 1e-6)
+    return float(np.clip(np.log2(360.0 * viewport_px / 256.0 / span) - 0.3, 1.0, 21.0))
+
+
+def pilot_views(found: dict, logged: LoggedRaw, zoom: float) -> list[Any]:
+    """The first tab of a raw log: one plot per angle (degrees, its setpoint beside it), the sticks, the map."""
+    p = f"/{found['prefix']}/pilot"
+    window = found["span"] or bulk_span(logged)
+    plots = [rrb.TimeSeriesView(origin=f"{p}/{a}", name=f"{a} [°] (setpoint orange)", axis_x=_whole_log(window),
+                                plot_legend=rrb.PlotLegend(visible=False)) for a in found["angles"]]
+    if found["sticks"]:
+        plots.append(rrb.TimeSeriesView(origin=f"{p}/sticks", name="sticks: roll, pitch, throttle, yaw",
+                                        axis_x=_whole_log(window), plot_legend=rrb.PlotLegend("LeftTop")))
+    if logged.modes:
+        plots.append(rrb.StateTimelineView(origin="/", contents=[f"+ /{found['prefix']}/mode"], name="flight mode",
+                                           time_view=_whole_log(window)))
+    if not plots:
+        return []
+    column = rrb.Vertical(*plots)
+    if logged.gps:
+        return [rrb.Horizontal(column, rrb.MapView(origin=f"/{found['prefix']}/gps", name="track", zoom=zoom),
+                               column_shares=[3, 2], name="pilot")]
+    return [rrb.Vertical(*plots, name="pilot")]

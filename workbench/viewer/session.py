@@ -21,6 +21,7 @@ from workbench.study.pipeline import StudyResult
 from workbench.viewer import style, verdict
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import LoggedSession, entity_part
+from workbench.viewer.entities import model_for as _model_for
 from workbench.viewer.objective import (
     Heatmap,
     colors,
@@ -70,15 +71,6 @@ def new_recording(application_id: str = APPLICATION_ID, *, recording_id: str | N
 def _time_index(t: np.ndarray, step: np.ndarray | None = None) -> list[rr.TimeColumn]:
     step = np.arange(len(t)) if step is None else step
     return [rr.TimeColumn("time", duration=np.asarray(t, dtype=np.float64)), rr.TimeColumn("step", sequence=step)]
-
-
-def _model_for(models: Any, demo: Demonstration) -> Any:
-    """The model that explains ``demo``: one model for every trial, or a mapping by strategy label."""
-    if models is None:
-        return None
-    if not isinstance(models, Mapping):
-        return models
-    return models.get(demo.label)
 
 
 def _readable_modes(meta: Mapping[str, Any]) -> tuple[np.ndarray, list[str]] | None:
@@ -172,7 +164,6 @@ class SessionLogger:
         if s.labels:
             s.label_colors = {d.label: self.colors[d.id] for d in demos if d.label}
         self.offsets = {d.id: _log_time(d, origins) if s.clock == "log" else 0.0 for d in demos}
-        self.w_parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}  # by id(model), for verdicts
         self._extent: dict[str, list[float]] = {}
         self.label_ids: set[str] | None = None  # the start labels that do not collide (set by log_scene)
         # every mode of the set, so one mode has one color in every lane
@@ -363,6 +354,7 @@ class SessionLogger:
         if self.plane is not None:
             self._log_track(demo)
         s.demo_ids.append(demo.id)
+        s.trial_labels[demo.id] = str(demo.label or "")
         s.trial_windows[demo.id] = (float(t[0]), float(t[-1]))
         lo, hi = s.span or (float(t[0]), float(t[-1]))
         s.span = (min(lo, float(t[0])), max(hi, float(t[-1])))
@@ -398,7 +390,6 @@ class SessionLogger:
             sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
             outside = np.abs(w - mu) > 3.0 * sigma
             out.update(mu=mu, sigma=sigma, outside=outside)
-            self.w_parts.setdefault(id(model), []).append((w, mu, sigma))
         t = self._t(demo)
         index = _time_index(t)  # one pair of time columns serves every series of the trial
         for j, name in enumerate(s.input_names):
@@ -413,7 +404,6 @@ class SessionLogger:
             # ŵ, μ and the typical 3σ band set the scale; the band's start-up transient may run off the plot
             s.ranges[p] = data_range(w[:, j], m_j, np.median(m_j - 3 * s_j), np.median(m_j + 3 * s_j),
                                       min_span=self._min_span(name))
-            s.fit_titles[p] = verdict.coverage(w[:, j], m_j, s_j).short()
             s.corners[p] = quiet_corner([(t, w[:, j]), (t, m_j - 3 * s_j), (t, m_j + 3 * s_j)],
                                         (float(t[0]), float(t[-1])), s.ranges[p])
             for suffix, k, color in (("gmr", 1.0, style.SIGMA1_COLOR), ("gmr_3sigma", 3.0, style.SIGMA3_COLOR)):
@@ -584,15 +574,20 @@ class SessionLogger:
             lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ" + ("; Monte Carlo band of a prediction"
                                                                       if s.bands else ""),
                       "", "red ×: ŵ outside 3σ; blue: ŵ",
-                      "", f"ŵ titles: share inside 3σ and 1σ (nominal {100 * verdict.NOMINAL_3SIGMA:.1f} % and "
-                      f"{100 * verdict.NOMINAL_1SIGMA:.0f} %); ✓ fits, ✗ does not, ⚠ the model meets data it was "
-                      "not fitted for (see objective)"]
+                      "", f"ŵ titles: share of the inputs inside 3σ and 1σ (nominal {100 * verdict.NOMINAL_3SIGMA:.1f}"
+                      f" % and {100 * verdict.NOMINAL_1SIGMA:.0f} %), inputs at a limit left out, and the verdict "
+                      "against the spread sampling allows: fits, too narrow, too wide, does not fit (as in the "
+                      "report)"]
+        if s.in_sample:
+            lines += ["", f"in-sample (a model was fitted on them): {', '.join(s.in_sample[:4])}"
+                      f"{' …' if len(s.in_sample) > 4 else ''}"]
         self._static("key", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
 
     def log_verdicts(self, named: Mapping[str, Any], models: Any, *, source_dt: float | None = None) -> None:
         """Per model, whether it fits the trials it explains (:mod:`workbench.viewer.verdict`): a Markdown verdict
-        under ``models/<name>/verdict`` and, when it does not, a warning in ``warnings`` that the blueprint and
-        the terminal repeat."""
+        under ``models/<name>/verdict``, each trial's band verdict for the ŵ titles, the trials it was fitted on
+        (in-sample, named so wherever they are shown) and, when it does not fit, a warning in ``warnings`` that
+        the blueprint and the terminal repeat."""
         s = self.session
         for name, model in named.items():
             mine = [d for d in self.demos if _model_for(models, d) is model]
@@ -600,13 +595,20 @@ class SessionLogger:
                 continue
             subset = DemonstrationSet(mine, self.demos.state_names, self.demos.input_names, self.demos.dt,
                                       roles=getattr(self.demos, "roles", None))
-            v = verdict.verdict(name, model, subset, source_dt=source_dt, w_parts=self.w_parts.get(id(model), ()))
+            v = verdict.verdict(name, model, subset, source_dt=source_dt)
             s.verdicts[name] = v
-            cov = v.coverage.text() if v.coverage is not None else "no GMR bands"
+            s.in_sample.extend(i for i in v.in_sample if i not in s.in_sample)
+            if not any("states are" in m or "inputs are" in m for m in v.mismatches):
+                for (trial, inp), words in verdict.trial_band_titles(model, mine).items():
+                    s.fit_titles[f"demos/{entity_part(trial)}/variability/{entity_part(inp)}"] = words
+            head = f"{name} {'fits these data' if v.fits else 'DOES NOT FIT these data'}"
+            if v.all_in_sample:
+                head = f"{name} is shown on its own training trials (in-sample)"
             # no heading: the view above the summary is a few lines tall, its title already says fits / does not
-            lines = [f"**{name} {'fits these data' if v.fits else 'DOES NOT FIT these data'}** — ŵ over "
-                     f"{len(mine)} trial(s): {cov}", *([""] if v.mismatches else []),
-                     *(f"- {m}" for m in v.mismatches)]
+            lines = [f"**{head}** — input band over {v.sample_text()}: {v.band_text()}",
+                     *([""] if v.mismatches else []), *(f"- {m}" for m in v.mismatches)]
+            if v.in_sample and not v.all_in_sample:
+                lines += ["", f"in-sample: {', '.join(v.in_sample[:6])}{' …' if len(v.in_sample) > 6 else ''}"]
             self._static(f"models/{entity_part(name)}/verdict",
                          rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
             warning = v.warning()
@@ -615,6 +617,13 @@ class SessionLogger:
                 s.warnings.append(warning)
                 if "warnings" not in s.entities:
                     s.entities.append("warnings")
+
+    def log_scores(self, scores: Any, note: str, units: Mapping[str, str] | None = None) -> None:
+        """The held-out scores as text under ``scores`` and ``label_scores/<label>``
+        (:func:`workbench.viewer.heldout.log_scores`)."""
+        from workbench.viewer.heldout import log_scores
+
+        log_scores(self, scores, note, units)
 
     def _log_heatmap(self, path: str, h: Heatmap, vmax: float) -> None:
         """Cell (i, j) covers [j, j+1] × [i, i+1] of the 2-D view; values centred in the cells at the block's
@@ -675,6 +684,7 @@ def log_session(
     clock: str = "auto",
     origins: Mapping[str, float] | None = None,
     source_dt: float | None = None,
+    scores: tuple[Any, str] | None = None,
 ) -> LoggedSession:
     """Log a whole session and return what was logged (for :func:`default_blueprint`).
 
@@ -696,15 +706,23 @@ def log_session(
         ``inspect`` places its flight modes (default: since the log's first mapped sample).
     source_dt : float, optional
         The demonstrations' step before they were resampled to the models' (a mismatch the verdict names).
+    scores : (table, note), optional
+        A study's comparison table (:func:`workbench.study.evaluate.compare` rows of its test trials) and where it
+        comes from; by default the models are scored here on the trials they were not fitted on
+        (:func:`heldout_table`), and the note says how many those are, or that there are none.
     """
     logger = SessionLogger(rec, demos, clock=clock, origins=origins)
     by_id = {d.id: d for d in demos}
     if models is not None:
         if focus is None:
+            # the first held-out trial of each label: a model's own training trials say nothing about new data
+            from workbench.models.training import in_sample
+
+            inside = {i for d in demos if (m := _model_for(models, d)) is not None for i in in_sample(m, [d])}
             seen: dict[str | None, str] = {}
-            for d in demos:
+            for d in sorted(demos, key=lambda d: d.id in inside):
                 seen.setdefault(d.label, d.id)
-            focus = list(seen.values())
+            focus = [i for i in demos.ids if i in set(seen.values())]
         for fid in focus:
             if fid not in by_id:
                 raise DataError(f"no demonstration {fid!r} to predict from; ids present: {demos.ids[:10]}…")
@@ -729,6 +747,12 @@ def log_session(
             for k in starts:
                 if k < len(d):
                     logger.log_predictions(d, methods, start=int(k), n_steps=n_steps, samples=samples, seed=seed)
+    if models is not None:
+        from workbench.viewer.heldout import heldout_table, score_units, scores_of
+
+        table, note = scores if scores is not None else heldout_table(demos, models, baselines, n_steps=n_steps,
+                                                                       samples=samples, seed=seed)
+        logger.log_scores(scores_of(table), note, score_units(models))
     logger.log_key()  # last: it names only what was drawn (bands, ŵ)
     return logger.session
 
@@ -753,6 +777,8 @@ def record_study(
     result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
 ) -> Path:
     """One ``.rrd`` with every trial, both models' variability on the test trials and every method's predictions."""
+    from workbench.viewer.heldout import study_note
+
     focus = [te[0].id for te in result.test.values() if len(te)]
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
@@ -761,6 +787,6 @@ def record_study(
         out, _ = record_session(
             path, result.demos, application_id=APPLICATION_IDS["study"], models=result.models,
             baselines=result.baselines, focus=focus, n_steps=result.n_steps, samples=result.samples,
-            seed=result.seed, clock="trial",
+            seed=result.seed, clock="trial", scores=(result.table, study_note(result)),
         )
     return out

@@ -1,31 +1,43 @@
 """Does a model fit the data it is shown with? The verdict every model view carries in its title.
 
-Two kinds of evidence, both computed from the model and the demonstrations, never from the viewer's drawing:
+Three kinds of evidence, all computed from the model and the demonstrations, never from the viewer's drawing:
 
+* **in-sample** — which of the trials shown the model was fitted on (:mod:`workbench.models.training`, from the
+  trial ids and digests its file records): a model that fits its own training trials says nothing about a pilot's
+  next flight, so such trials are named "in-sample" wherever they are shown;
 * **mismatches** — what the model was fitted on differs from these data: state or input names, the vehicle
   roles, the sampling step (the data were resampled to the model's ``dt``), or states far outside the box of the
   training states (``state_envelope_``, :func:`workbench.models.behavior.state_envelope`);
-* **calibration** — the share of ``ŵ = u − K̂x`` inside the GMR's ±1σ and ±3σ bands (eqs. (24)–(27) of the
-  method paper) against the nominal 68.3 % and 99.7 % of a Gaussian. A model of these data lands near nominal; a
-  model of other data leaves most samples outside 3σ.
+* **calibration** — the share of the recorded inputs inside the model's ±1σ and ±3σ bands, judged by the one
+  function every view, table and line uses, :func:`workbench.study.calibration.band_verdict` ("fits", "too
+  narrow", "too wide", "does not fit" against the spread sampling allows; inputs at their limits left out).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pandas as pd
 from scipy.stats import norm
 
-__all__ = ["NOMINAL_1SIGMA", "NOMINAL_3SIGMA", "Coverage", "Verdict", "coverage", "verdict"]
+from workbench.models.training import in_sample, training_known
+from workbench.study.calibration import (
+    DOES_NOT_FIT,
+    FITS,
+    band_words,
+    calibration_check,
+    calibration_counts,
+)
+
+__all__ = ["NOMINAL_1SIGMA", "NOMINAL_3SIGMA", "LEVELS", "Verdict", "verdict", "trial_band_titles"]
 
 NOMINAL_1SIGMA = float(norm.cdf(1.0) - norm.cdf(-1.0))
 NOMINAL_3SIGMA = float(norm.cdf(3.0) - norm.cdf(-3.0))
-# A band is "poor" when its share inside 3σ falls this far below nominal: with a few hundred samples the
-# binomial spread of a calibrated band is ~1 point, the demo's models land within 1.5 points of 99.7 %.
-POOR_3SIGMA = 0.90
+#: The band levels a view shows (the report's table adds 2σ; the verdict of a level is the same function's).
+LEVELS = (1.0, 3.0)
 # States farther than this many training widths outside the training box mean the model meets a state space it
 # has never seen (the envelope itself already has a margin, ENVELOPE_MARGIN of the width).
 FAR_OUTSIDE = 1.0
@@ -33,70 +45,60 @@ FAR_SHARE = 0.2  # …for at least this share of the samples
 
 
 @dataclass(frozen=True)
-class Coverage:
-    """Shares of ŵ samples inside the GMR's ±1σ and ±3σ bands, over ``n`` samples (all inputs pooled)."""
-
-    inside_1sigma: float
-    inside_3sigma: float
-    n: int
-
-    @property
-    def poor(self) -> bool:
-        """Whether the 3σ band misses far more samples than a calibrated band would."""
-        return self.n > 0 and self.inside_3sigma < POOR_3SIGMA
-
-    def short(self) -> str:
-        """``"✓ 3σ 98.2 %, 1σ 74 %"``: a plot title's verdict (the nominal 99.7 % and 68 % are in the tab's key).
-
-        A plot title is cut at the width of its view (about 40 characters in a grid of four): the mark and the
-        3σ share come first, and a poor band says so in words.
-        """
-        if not self.n:
-            return "no samples"
-        head = "✗ DOES NOT FIT: " if self.poor else "✓ "
-        return f"{head}3σ {100 * self.inside_3sigma:.1f} %, 1σ {100 * self.inside_1sigma:.0f} %"
-
-    def text(self) -> str:
-        """``"✓ 3σ 99.1 % (nominal 99.7), 1σ 70 % (68)"``: the 3σ share first (titles are cut at their end), and
-        words a reader sees at once when the band is poor."""
-        if not self.n:
-            return "no samples"
-        head = "✗ DOES NOT FIT " if self.poor else "✓ "
-        return (f"{head}3σ {100 * self.inside_3sigma:.1f} % (nominal {100 * NOMINAL_3SIGMA:.1f}), "
-                f"1σ {100 * self.inside_1sigma:.0f} % ({100 * NOMINAL_1SIGMA:.0f})")
-
-
-def coverage(w: np.ndarray, mu: np.ndarray, sigma: np.ndarray) -> Coverage:
-    """The share of ``w`` within ``mu ± σ`` and ``mu ± 3σ`` (arrays of one shape; non-finite rows ignored)."""
-    w, mu, sigma = (np.asarray(a, dtype=float) for a in (w, mu, sigma))
-    ok = np.isfinite(w) & np.isfinite(mu) & np.isfinite(sigma)
-    dev = np.abs(w - mu)[ok]
-    s = sigma[ok]
-    if not dev.size:
-        return Coverage(float("nan"), float("nan"), 0)
-    return Coverage(float(np.mean(dev <= s)), float(np.mean(dev <= 3.0 * s)), int(dev.size))
-
-
-@dataclass(frozen=True)
 class Verdict:
-    """What a model meets: the mismatches with its training data (one sentence each) and ŵ's band coverage."""
+    """What a model meets: the mismatches with its training data (one sentence each), the calibration of its input
+    band over the trials shown (:func:`workbench.study.calibration.calibration_check` rows) and which of those
+    trials trained it."""
 
     model: str
     mismatches: tuple[str, ...]
-    coverage: Coverage | None
+    calibration: pd.DataFrame | None = None
+    n_trials: int = 0
+    in_sample: tuple[str, ...] = ()
+    training_known: bool = True
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def does_not_fit(self) -> tuple[str, ...]:
+        """The inputs whose band "does not fit" at some level."""
+        c = self.calibration
+        if c is None or not len(c):
+            return ()
+        return tuple(dict.fromkeys(c.loc[c["verdict"] == DOES_NOT_FIT, "input"]))
 
     @property
     def fits(self) -> bool:
-        return not self.mismatches and not (self.coverage is not None and self.coverage.poor)
+        return not self.mismatches and not self.does_not_fit
+
+    @property
+    def all_in_sample(self) -> bool:
+        return self.n_trials > 0 and len(self.in_sample) == self.n_trials
+
+    def band_text(self) -> str:
+        """``"u1: 3σ 98.2 % too narrow, 1σ 74 % too wide; u2: …"`` over the trials shown, or "no band"."""
+        c = self.calibration
+        if c is None or not len(c):
+            return "no band"
+        return "; ".join(f"{name}: {band_words(rows)}" for name, rows in c.groupby("input", sort=False))
+
+    def sample_text(self) -> str:
+        """Which trials the numbers come from: held-out, in-sample or unknown."""
+        if not self.training_known:
+            return f"{self.n_trials} trial(s); its training trials are unknown (model file predates their record)"
+        n_in = len(self.in_sample)
+        if n_in == self.n_trials:
+            return f"all {n_in} trial(s) IN-SAMPLE: it was fitted on them, so this says nothing about new data"
+        if n_in:
+            return f"{self.n_trials - n_in} held-out and {n_in} in-sample trial(s)"
+        return f"{self.n_trials} held-out trial(s)"
 
     def warning(self) -> str | None:
         """One line for the terminal and the recording, or None when nothing speaks against the model."""
         if self.fits:
             return None
         why = list(self.mismatches)
-        if self.coverage is not None and self.coverage.poor:
-            why.append(f"only {100 * self.coverage.inside_3sigma:.1f} % of ŵ inside the GMR 3σ band "
-                       f"(nominal {100 * NOMINAL_3SIGMA:.1f} %)")
+        if self.does_not_fit:
+            why.append(f"its input band does not fit ({self.band_text()})")
         return f"model {self.model} does not fit these data: " + "; ".join(why)
 
 
@@ -141,16 +143,35 @@ def mismatches(model: Any, state_names: Sequence[str], input_names: Sequence[str
     return out
 
 
-def verdict(name: str, model: Any, demos: Any, *, source_dt: float | None = None,
-            w_parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]] = ()) -> Verdict:
-    """The verdict on ``model`` shown with ``demos`` (a DemonstrationSet): mismatches and pooled ŵ coverage.
+def _calibrated(model: Any) -> bool:
+    return callable(getattr(model, "input_distribution", None)) and getattr(model, "system", None) is not None
 
-    ``w_parts`` are (ŵ, μ, σ) arrays of the trials the model explains, as the viewer logged them.
-    """
+
+def verdict(name: str, model: Any, demos: Any, *, source_dt: float | None = None) -> Verdict:
+    """The verdict on ``model`` shown with ``demos`` (a DemonstrationSet): mismatches, the calibration of its input
+    band pooled over the trials (the report's computation, :func:`workbench.study.calibration.calibration_check`)
+    and which trials are in-sample."""
+    demos = list(demos) if not hasattr(demos, "state_names") else demos
     X = np.concatenate([d.x for d in demos]) if len(demos) else None
     found = mismatches(model, demos.state_names, demos.input_names, getattr(demos, "roles", None), X,
                        source_dt=source_dt)
-    cov = None
-    if w_parts:
-        cov = coverage(*(np.concatenate([np.ravel(p[k]) for p in w_parts]) for k in range(3)))
-    return Verdict(name, tuple(found), cov)
+    check = None
+    if _calibrated(model) and len(demos) and not any("states are" in m or "inputs are" in m for m in found):
+        check = calibration_check(calibration_counts(model, list(demos), LEVELS))
+    return Verdict(name, tuple(found), check, len(demos), tuple(in_sample(model, demos)), training_known(model))
+
+
+def trial_band_titles(model: Any, demos: Sequence[Any]) -> dict[tuple[str, str], str]:
+    """Per (trial id, input): ``"3σ 98.2 % too narrow, 1σ 74 % fits"`` — each trial's band verdict by the same
+    function as the pooled one, the limits found over all of ``demos``."""
+    if not _calibrated(model) or not demos:
+        return {}
+    counts = calibration_counts(model, list(demos), LEVELS, by_trial=True)
+    out = {}
+    for (trial, name), rows in counts.groupby(["trial", "input"], sort=False):
+        check = calibration_check(rows.drop(columns="trial"))
+        out[(str(trial), str(name))] = band_words(check)
+    return out
+
+
+__all__ += ["FITS", "DOES_NOT_FIT"]

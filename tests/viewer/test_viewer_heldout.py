@@ -1,0 +1,102 @@
+"""The first question a user asks of a recording — how well does this model predict data it never saw — is
+answered where the eye lands: the demo's first view carries every method's held-out RMSE as ``results.csv`` holds
+it; a model shown on its own training trials is labelled in-sample; the viewer, the terminal and the report word a
+band's calibration with one function.
+
+Expected values are computed here from ``results.csv`` and the models' own record of their training trials.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pandas as pd
+
+from workbench.models import load_model
+from workbench.study.scores import fmt, heldout_scores
+
+_spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
+_loader = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_loader)
+recordings = _loader.load()
+
+_spec = importlib.util.spec_from_file_location("_test_viewer", Path(__file__).with_name("test_viewer.py"))
+_tv = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_tv)
+read_rrd, blueprint_names = _tv.read_rrd, _tv._blueprint_names
+
+
+def _text(ents: dict, path: str) -> str:
+    (text,) = [v for v in ents[path]["static:TextDocument:text"]]
+    return text[0] if isinstance(text, list) else text
+
+
+def test_the_demos_first_view_carries_the_held_out_rmse_of_results_csv():
+    paths = recordings.cli_recordings()
+    table = pd.read_csv(recordings.workdir() / "demo" / "results.csv")
+    scores = heldout_scores(table[table["table"] == "comparison"])
+    rmse = scores[scores["metric"].str.startswith("rmse_")]
+    assert set(rmse["method"]) >= {"proposed", "persistence"} and set(rmse["metric"]) >= {"rmse_position",
+                                                                                          "rmse_velocity"}
+    text = _text(read_rrd(paths["demo"]), "/scores")
+    for r in scores.itertuples(index=False):
+        shown = fmt(r.value, r.lo, r.hi, share=r.metric.startswith("band_"))
+        assert shown in text, (r, text)
+    names = blueprint_names(paths["demo"])
+    assert "held-out prediction error" in names  # the view beside the scene, in the first tab
+    proposed = rmse[(rmse["method"] == "proposed") & (rmse["metric"] == "rmse_position")]["value"].iloc[0]
+    assert any(n.startswith(f"held-out position RMSE: proposed {proposed:.3g}") for n in names), names
+
+
+def _view(*argv: str) -> None:
+    from workbench.cli import main
+
+    assert main(["view", *argv, "-q"]) == 0
+
+
+def test_a_model_viewed_on_its_own_training_trials_is_labelled_in_sample(tmp_path):
+    recordings.cli_recordings()
+    d = recordings.workdir() / "demo"
+    demos, model_path = d / "demos.parquet", d / "models" / "CS1.npz"
+    model = load_model(model_path)
+    trained = model.train_ids_
+    assert trained, "the demo's model file records its training trials"
+    out = tmp_path / "in.rrd"
+    _view(str(demos), "--model", str(model_path), "--label", "CS1", "--focus", trained[0], "--samples", "0",
+          "--horizon", "1", "--save", str(out))
+    names = blueprint_names(out)
+    assert f"predictions · {trained[0]} (in-sample)" in names, names
+    # by default the view focuses on a trial the model was not fitted on, and scores only those
+    out2 = tmp_path / "default.rrd"
+    _view(str(demos), "--model", str(model_path), "--label", "CS1", "--samples", "0", "--horizon", "1",
+          "--save", str(out2))
+    names = blueprint_names(out2)
+    tabs = [n for n in names if n.startswith("predictions · ")]
+    assert tabs and all("in-sample" not in n and n.split(" · ")[1] not in trained for n in tabs), tabs
+    text = _text(read_rrd(out2), "/scores")
+    from workbench.data.dataset import load_demonstrations
+
+    n_all = len(load_demonstrations(demos).by_label("CS1"))
+    assert f"{n_all - len(trained)} of {n_all} trial(s) held out" in text, text
+
+
+def test_the_viewer_and_the_report_word_a_band_with_one_function(monkeypatch):
+    """Replace the one verdict function: the viewer's titles and the report's table both print its answer."""
+    import workbench.study.calibration as cal
+    from workbench.data.dataset import load_demonstrations
+    from workbench.viewer import verdict
+
+    recordings.cli_recordings()
+    d = recordings.workdir() / "demo"
+    model = load_model(d / "models" / "CS1.npz")
+    demos = load_demonstrations(d / "demos.parquet").by_label("CS1")
+    held = [x for x in demos if x.id not in set(model.train_ids_)]
+    real = cal.band_verdict
+    monkeypatch.setattr(cal, "band_verdict", lambda *a, **k: real(*a, **k).astype(object) + " (sentinel)")
+    titles = verdict.trial_band_titles(model, held)
+    assert titles and all(t.count("(sentinel)") == len(verdict.LEVELS) for t in titles.values()), titles
+    v = verdict.verdict("CS1", model, demos.with_demos(held))
+    assert v.band_text().count("(sentinel)") == len(verdict.LEVELS) * len(demos.input_names)
+    table = cal.check_table(cal.calibration_check(cal.calibration_counts(model, held)))
+    assert table["calibration"].str.endswith("(sentinel)").all()

@@ -1,0 +1,121 @@
+"""Held-out scores of a session recording: which trials a model has not seen, its (and its baselines' and
+persistence's) prediction error on them, and the sentence that says where the numbers come from.
+
+:func:`workbench.viewer.session.log_session` calls :func:`heldout_table` where no study passed its own table, and
+logs :func:`scores_of` it under ``scores`` (:meth:`~workbench.viewer.session.SessionLogger.log_scores`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.study.pipeline import StudyResult
+from workbench.viewer.entities import entity_part
+from workbench.viewer.entities import model_for as _model_for
+
+__all__ = ["SCORE_STRIDE_S", "heldout_table", "log_scores", "score_units", "scores_of", "study_note"]
+
+
+def scores_of(table: Any) -> Any:
+    from workbench.study.scores import heldout_scores
+
+    return None if table is None or not len(table) else heldout_scores(table)
+
+
+def score_units(models: Any) -> dict[str, str]:
+    """The unit of each RMSE metric from a model's plant roles (``rmse_position`` → "m")."""
+    from workbench.study.evaluate import metric_blocks
+    from workbench.study.pipeline import metric_unit
+
+    first = next(iter(models.values()), None) if isinstance(models, Mapping) else models
+    system = getattr(first, "system", None)
+    if system is None:
+        return {}
+    return {f"rmse_{b}": metric_unit(system, f"rmse_{b}") for b in metric_blocks(system)}
+
+
+#: Windows of a view's held-out scores start every this many seconds of a trial (as ``evaluate``'s default).
+SCORE_STRIDE_S = 1.0
+
+
+def heldout_table(demos: DemonstrationSet, models: Any, baselines: Mapping[str, Mapping[str, Any]] | None = None,
+                  *, n_steps: int = 60, samples: int = 0, seed: int | None = 0) -> tuple[Any, str]:
+    """Score each model, its baselines and persistence on the trials it was not fitted on.
+
+    Returns the :func:`workbench.study.evaluate.compare` table (None where no trial is held out) and a sentence
+    stating the split: which trials are held out by the model's record of its training trials, the horizon and
+    the windows; or why nothing is scored.
+    """
+    import pandas as pd
+
+    from workbench.models.factory import make_model
+    from workbench.models.training import held_out, training_known
+    from workbench.study.evaluate import compare
+
+    groups: dict[int, tuple[Any, list[Demonstration]]] = {}
+    for d in demos:
+        m = _model_for(models, d)
+        if m is not None:
+            groups.setdefault(id(m), (m, []))[1].append(d)
+    parts, n_held, n_all, unknown = [], 0, 0, False
+    stride = max(1, int(round(SCORE_STRIDE_S / demos.dt)))
+    for model, trials in groups.values():
+        n_all += len(trials)
+        unknown |= not training_known(model)
+        keep = set(held_out(model, trials))
+        held = [d for d in trials if d.id in keep]
+        if not held:
+            continue
+        n_held += len(held)
+        label = held[0].label
+        methods = {"proposed": model, **((baselines or {}).get(label) or (baselines or {}).get(None) or {})}
+        if "persistence" not in methods:
+            with warnings.catch_warnings():  # it learns nothing from them: no "too few trials" warning
+                warnings.simplefilter("ignore")
+                methods["persistence"] = make_model("persistence", model.system).fit(held)
+        parts.append(compare(methods, held, n_steps=n_steps, starts=stride, samples=samples, seed=seed))
+    horizon = f"{n_steps * demos.dt:g} s horizon, windows every {SCORE_STRIDE_S:g} s"
+    if not n_held:
+        return None, (f"none: every one of the {n_all} trial(s) shown was used to fit the model (in-sample); "
+                      "score it with `workbench evaluate` or on a log it has not seen")
+    if unknown:
+        what = f"{n_held} trial(s), the model file does not record its training trials (they may be in-sample)"
+    else:
+        what = f"{n_held} of {n_all} trial(s) held out (not among the trials the model file records)"
+    return pd.concat(parts, ignore_index=True), f"{what}; {horizon}"
+
+
+
+def study_note(result: StudyResult) -> str:
+    """Where a study's held-out scores come from: its test trials, the horizon, the windows."""
+    n = sum(len(te) for te in result.test.values())
+    stride = ("each trial's first state" if result.stride_steps is None
+              else f"windows every {result.stride_steps * result.demos.dt:g} s")
+    split = "leave-one-segment-out" if result.plants else "trials the models were not fitted on"
+    return f"{n} test trial(s), {split}; {result.n_steps * result.demos.dt:g} s horizon, {stride}"
+
+
+def log_scores(logger: Any, scores: Any, note: str, units: Mapping[str, str] | None = None) -> None:
+    """The held-out scores (:func:`workbench.study.scores.heldout_scores` rows) as a text under ``scores``
+    (every label) and ``label_scores/<label>`` (one label, for its prediction tabs); ``note`` says where they come
+    from, or why there are none."""
+    import rerun as rr
+
+    from workbench.study.scores import score_lines
+
+    s = logger.session
+    s.scores, s.score_note = scores, note
+    labels = [] if scores is None else list(dict.fromkeys(scores["label"]))
+    lines = ["**held-out prediction error** (mean of trials [95 % interval]; MC band nominal 90 %) — " + note]
+    for label in labels:
+        part = score_lines(scores, label, dict(units or {}))
+        head = [f"**{label}**"] if len(labels) > 1 or label not in ("", "all") else []
+        lines += ["", *head, *part]
+        logger._static(f"label_scores/{entity_part(label)}", rr.TextDocument(
+            "\n".join([f"**held-out prediction error, {label}** (mean of trials [95 % interval]; MC band "
+                       f"nominal 90 %) — {note}", "", *part]),
+            media_type=rr.MediaType.MARKDOWN))
+    logger._static("scores", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
