@@ -47,7 +47,8 @@ def external():
     return external_file
 
 
-CLAIM = re.compile(r"(lower|higher|worse than \S+|better than \S+) by (\d+) % \[(-?\d+) %, (-?\d+) %\]")
+CLAIM = re.compile(r"(lower|higher|worse than \S+|better than \S+) by (\d+(?:\.\d)?) % "
+                   r"\[(-?\d+(?:\.\d)?) %, (-?\d+(?:\.\d)?) %\]")
 
 
 def _claims_shown(text: str) -> int:
@@ -57,7 +58,7 @@ def _claims_shown(text: str) -> int:
     """
     claims = CLAIM.findall(text)
     for _, est, lo, hi in claims:
-        assert 0 < int(lo) <= int(est) <= int(hi), f"a difference stated beyond its interval: {est} [{lo}, {hi}]"
+        assert 0 < float(lo) <= float(est) <= float(hi), f"a difference stated beyond its interval: {est} [{lo}, {hi}]"
     # the old style, "39.1 % lower", states a difference with no interval
     loose = re.findall(r"\d+(?:\.\d+)? % (?:lower|higher)", text)
     assert not loose, f"differences without intervals: {loose}"

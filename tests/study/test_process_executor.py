@@ -90,7 +90,7 @@ _REPORT = """
 import sys
 from workbench.cli import main
 sys.exit(main(["report", sys.argv[1], "-o", sys.argv[2], "--bootstrap", "8", "--samples", "4", "--efficiency", "2",
-               "--n-components", "2"]))
+               "--n-components", "2", "--holdout", "split"]))  # a split: 5 trials a label would leave one out, serially
 """
 
 

@@ -68,8 +68,10 @@ class Context:
         sized to :data:`PIPE_WIDTH`)."""
         if self.out.is_terminal:
             self.out.print(*parts, markup=markup, overflow="fold")
-        else:  # an overflow mode would crop what soft wrapping leaves long
+        elif all(isinstance(p, str) for p in parts):  # an overflow mode would crop what soft wrapping leaves long
             self.out.print(*parts, markup=markup, soft_wrap=True)
+        else:  # a renderable (rendered Markdown) wraps itself at the width; soft wrapping would crop its lines
+            self.out.print(*parts, markup=markup)
 
     def say_table(self, header: Sequence[str], rows: Sequence[Sequence[Any]], title: str = "") -> None:
         """A table that fits the terminal: as a table where its cells fit the width unbroken, else in long form —

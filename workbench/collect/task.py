@@ -43,7 +43,7 @@ def task_spec(system: LinearSystem | None = None, time_limit_s: float = TIME_LIM
         "u_min": sys_.u_min.tolist(),
         "u_max": sys_.u_max.tolist(),
         # indices by role, so the page draws position and attitude without naming a state
-        "index": {"x": int(r.position[side]), "y": int(r.position[up]), "phi": int(r.heading),
+        "index": {"x": int(r.position[side]), "y": int(r.position[up]), "attitude": int(r.heading),
                   "vx": int(r.velocity[side]), "vy": int(r.velocity[up])},
         "domain": {"x": list(DOMAIN[0]), "y": list(DOMAIN[1])},
         "pad": {"x": 0.0, "half_width": PAD_HALF_WIDTH},
@@ -78,11 +78,11 @@ def outcome(spec: dict[str, Any], x: Sequence[float], k: int) -> str | None:
     sides or above its top it has left; at the last step of the time limit it ends there.
     """
     i = spec["index"]
-    px, py, phi = x[i["x"]], x[i["y"]], x[i["phi"]]
+    px, py, tilt = x[i["x"]], x[i["y"]], x[i["attitude"]]
     if py <= 0.0:
         speed = math.hypot(x[i["vx"]], x[i["vy"]])
         on_pad = abs(px - spec["pad"]["x"]) <= spec["pad"]["half_width"]
-        gentle = speed < spec["landing"]["speed"] and abs(phi) < spec["landing"]["attitude"]
+        gentle = speed < spec["landing"]["speed"] and abs(tilt) < spec["landing"]["attitude"]
         return "landed" if on_pad and gentle else "crashed"
     (x_lo, x_hi), y_hi = spec["domain"]["x"], spec["domain"]["y"][1]
     if not (x_lo <= px <= x_hi and py <= y_hi):

@@ -99,7 +99,12 @@ def difference_sentence(change: float, lo: float, hi: float, ci: float = 95.0) -
 
 
 def _pct(v: float, signed: bool = False) -> str:
-    return f"{100 * v:{'+' if signed else ''}.0f} %" if np.isfinite(v) else "n/a"
+    """A percentage to whole per cent, but a nonzero value under 1 % to one decimal: a bound of 0.4 % printed as
+    "0 %" would state a difference next to an interval that seems to contain 0."""
+    if not np.isfinite(v):
+        return "n/a"
+    digits = 1 if 0 < abs(100 * v) < 0.95 else 0
+    return f"{100 * v:{'+' if signed else ''}.{digits}f} %"
 
 
 def per_trial(table: pd.DataFrame, metric: str, subjects: Mapping[str, str] | None = None) -> pd.DataFrame:

@@ -26,6 +26,7 @@ from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.names import METHOD_TITLES
 from workbench.study.method_level import FLOOR_METHODS, SPLITS
+from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
 __all__ = [
     "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "split_in_time", "improvement_table", "verdicts",
@@ -720,5 +721,3 @@ def _scope(d: Any) -> str:
     return "on the test trials (these fitted models)"
 
 
-def _pct(v: float) -> str:
-    return f"{100 * v:.0f} %" if np.isfinite(v) else "n/a"

@@ -330,7 +330,7 @@ function fly(x0, onEnd, slot = -1, help = null) {
 // The numbers above the scene: time, height, and speed and attitude green once within the landing limits.
 function hud(x, k) {
   const i = state.spec.index, L = state.spec.landing;
-  const speed = Math.hypot(x[i.vx], x[i.vy]), phi = x[i.phi];
+  const speed = Math.hypot(x[i.vx], x[i.vy]), phi = x[i.attitude];
   const mark = (ok, text) => `<span class="${ok ? "ok" : "notok"}">${text}</span>`;
   $("task-hud").innerHTML = `t ${(k * state.spec.dt).toFixed(1)} s · height ${x[i.y].toFixed(2)} m · ` +
     mark(speed < L.speed, `speed ${speed.toFixed(2)} m/s`) + " · " +

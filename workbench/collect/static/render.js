@@ -80,7 +80,7 @@ export class View {
       this.trail.forEach(([tx, ty], j) => (j ? ctx.lineTo(this.sx(tx), this.sy(ty)) : ctx.moveTo(this.sx(tx), this.sy(ty))));
       ctx.stroke();
     }
-    this.drawVehicle(x[i.x], x[i.y], x[i.phi], u ? u[1] : 0, info.outcome);
+    this.drawVehicle(x[i.x], x[i.y], x[i.attitude], u ? u[1] : 0, info.outcome);
   }
 
   drawVehicle(px, py, phi, thrust, outcome) {

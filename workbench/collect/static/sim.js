@@ -29,7 +29,7 @@ export function blend(spec, K, alpha, x, pilot) {
 // How a trial ends at sample k in state x, or null: the rules of workbench.collect.task.outcome.
 export function outcome(spec, x, k) {
   const i = spec.index;
-  const px = x[i.x], py = x[i.y], phi = x[i.phi];
+  const px = x[i.x], py = x[i.y], phi = x[i.attitude];
   if (py <= 0.0) {
     const speed = Math.hypot(x[i.vx], x[i.vy]);
     const onPad = Math.abs(px - spec.pad.x) <= spec.pad.half_width;
