@@ -369,7 +369,7 @@ def _demo_into(ctx: Context, ds: Any, out: Path, build: Path, timings: dict[str,
     from workbench.viewer import record_study
 
     t1 = time.perf_counter()
-    write_study_report(result, build, title="Workbench demo: sample logs")
+    write_study_report(result, build, title="Workbench demo: sample logs", vector=False)  # PNG: the budget
     timings["report"] = time.perf_counter() - t1
     rrd = out / "demo.rrd"
     t1 = time.perf_counter()

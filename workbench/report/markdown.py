@@ -22,6 +22,7 @@ and the mixed model's strategy terms (:mod:`workbench.study.findings`).
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
 import os
 import shutil
@@ -82,13 +83,18 @@ def _label_color(label: str, labels: Sequence[str]) -> str:
 VECTOR_FORMATS = ("svg", "pdf")
 
 
+#: Whether :func:`save_figure` writes the vector formats: :func:`write_study_report` turns them off for the demo,
+#: whose time budget they would break (SVG and PDF cost ~5.5 s of the demo's ~32 s; `workbench report` writes them).
+_VECTOR = contextvars.ContextVar("vector_figures", default=True)
+
+
 def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
     """Render ``fig`` to a PNG at ``path`` and to SVG and PDF beside it (:data:`VECTOR_FORMATS`), each atomically."""
     path = Path(path)
     FigureCanvasAgg(fig)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
-    for fmt in VECTOR_FORMATS:
+    for fmt in VECTOR_FORMATS if _VECTOR.get() else ():
         with atomic_path(path.with_suffix(f".{fmt}")) as tmp:
             fig.savefig(tmp, format=fmt, bbox_inches="tight")
     return path
@@ -745,8 +751,17 @@ def _predict(model: Any, demo: Demonstration, n_steps: int, samples: int, seed: 
     return model.predict(demo.x[0], n_steps, **kwargs)
 
 
-def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str = "Workbench report") -> Path:
-    """``out_dir/report.md`` with figures under ``out_dir/figures``."""
+def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str = "Workbench report",
+                       vector: bool = True) -> Path:
+    """``out_dir/report.md`` with figures under ``out_dir/figures`` (PNG, and SVG and PDF unless not ``vector``)."""
+    token = _VECTOR.set(vector)
+    try:
+        return _write_study_report(result, out_dir, title=title)
+    finally:
+        _VECTOR.reset(token)
+
+
+def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str) -> Path:
     notes = [
         f"{len(result.demos)} demonstrations, {result.demos.n_samples} samples, dt = {result.demos.dt:g} s; "
         f"states {list(result.demos.state_names)}, inputs {list(result.demos.input_names)}",
