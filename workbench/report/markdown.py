@@ -83,8 +83,7 @@ def _label_color(label: str, labels: Sequence[str]) -> str:
 VECTOR_FORMATS = ("svg", "pdf")
 
 
-#: Whether :func:`save_figure` writes the vector formats: :func:`write_study_report` turns them off for the demo,
-#: whose time budget they would break (SVG and PDF cost ~5.5 s of the demo's ~32 s; `workbench report` writes them).
+#: Whether :func:`save_figure` writes the vector formats (off for the demo: ~5.5 s of its 30 s budget).
 _VECTOR = contextvars.ContextVar("vector_figures", default=True)
 
 
