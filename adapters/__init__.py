@@ -137,7 +137,7 @@ def load(
     DataError
         The file is damaged beyond reading, or holds no demonstration under the mapping's rules.
     """
-    from adapters.mapping import load_mapping
+    from adapters.mapping import MappingError, load_mapping
     from adapters.pipeline import build
     from adapters.summary import VEHICLE_STREAMS
 
@@ -145,7 +145,10 @@ def load(
     if mapping is None:  # the shipped mapping made for the vehicle the log names (choose_mapping)
         mapping = choose_mapping(path, format=fmt.name)[0]
     m = load_mapping(mapping).for_format(fmt.name)
-    m.check_complete()
+    try:
+        m.check_complete()
+    except MappingError as e:  # the log's format (found from its content, maybe not its suffix) is half the cause
+        raise MappingError(f"{path}: read as a {fmt.name} log: {e}") from None
     # the vehicle's own streams too, so that a mapping made for another vehicle is refused by name
     streams = fmt.read(path, [*m.stream_candidates(), *VEHICLE_STREAMS])
     return build(streams, m, allow_still=allow_still)

@@ -236,3 +236,9 @@ def test_a_device_and_a_symlink_loop_are_refused(tmp_path):
     for path, cause in (("/dev/zero", "a device"), (loop, "cannot be read")):
         with pytest.raises(DataError, match=cause):
             adapters.inspect(path)
+
+
+def test_a_csv_behind_a_dataflash_header_names_the_file_not_only_the_mapping(originals):
+    """Found by the fuzzer on the merged code: a CSV whose first bytes are DataFlash's header (``A3 95``), read as a
+    DataFlash log by its content; the mapping has no DataFlash channels, and the error named only the mapping."""
+    assert _check_bytes(b"\xa3\x95\x80" + originals["csv"], ".mcap") == "error"
