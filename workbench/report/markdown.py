@@ -45,7 +45,7 @@ from workbench.atomic import (
 )
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
-from workbench.models.factory import METHOD_TITLES
+from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.report.tables import md_table as _md_table
 from workbench.report.tables import save_table, scores_section, why_no_statistics
 from workbench.study.pipeline import StudyResult, improvement_table, metric_unit
@@ -64,8 +64,7 @@ __all__ = [
 ]
 
 _PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
-METHOD_COLORS = {"proposed": "#2ca02c", "ioc_only": "#d62728", "gmr_only": "#9467bd", "persistence": "#8c564b",
-                 "recorded": "#282828"}
+METHOD_COLORS = {**{m.name: m.colour_hex for m in REGISTRY}, "recorded": "#282828"}  # the registry's, as the viewer's
 DPI = 300
 #: A journal column (IEEE: 3.5 in); a figure is at most two columns wide, so its text prints at the size set here.
 COLUMN_WIDTH = 3.5
@@ -264,7 +263,7 @@ def _band_words(model: Any, demo: Demonstration) -> dict[str, str]:
     tables (:func:`workbench.study.calibration.band_verdict`)."""
     from workbench.study.calibration import band_words, calibration_check, calibration_counts
 
-    if not callable(getattr(model, "input_distribution", None)):
+    if not model.models_inputs:
         return {}
     check = calibration_check(calibration_counts(model, [demo], (1.0, 3.0)))
     return {str(name): band_words(rows) for name, rows in check.groupby("input", sort=False)}
@@ -586,7 +585,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
             continue
         demo = te[0]
         model = inputs.models[label]
-        if callable(getattr(model, "variability", None)):
+        if model.has_variability:
             cases_w[label] = (demo, model)
         preds = {"proposed": _predict(model, demo, inputs.n_steps, inputs.samples, inputs.seed)}
         for method, bm in inputs.baselines.get(label, {}).items():

@@ -24,7 +24,7 @@ from workbench.atomic import atomic_write_table
 from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DataError, ModelError
-from workbench.models.names import METHOD_TITLES
+from workbench.models.registry import METHOD_TITLES, METHODS
 from workbench.study.method_level import FLOOR_METHODS, SPLITS
 from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
@@ -662,7 +662,7 @@ def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -
         row: dict[str, Any] = {"label": label, "metric": metric}
         for m in r.index:
             row[METHOD_TITLES.get(m, m)] = float(r[m])
-        for base in ("ioc_only", "gmr_only", "persistence"):
+        for base in (m for m in METHODS if m != "proposed"):
             d = by.get((str(label), metric, base))
             if d is not None:
                 row[f"vs {METHOD_TITLES[base]}"] = d.sentence()

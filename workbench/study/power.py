@@ -113,7 +113,7 @@ def as_fitted(model, demos) -> list:
     """The demonstrations as the model saw them: states relative to their targets when it is goal-relative."""
     from types import SimpleNamespace
 
-    from workbench.models.behavior import references
+    from workbench.models.fitting import references
 
     ds = list(demos)
     refs, _ = references(ds, model.system.n)
