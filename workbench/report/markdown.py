@@ -163,7 +163,7 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
     dominates M, and on one scale the structure of Q — which states the operator cares about, the paper's point —
     would vanish.
     """
-    labels = [k for k, m in models.items() if getattr(m, "objective_", None) is not None]
+    labels = [k for k, m in models.items() if m.has_gain and m.objective_ is not None]
     n, m = len(state_names), len(input_names)
     fig = Figure(figsize=(COLUMN_WIDTH * 2, 2.8 * max(1, len(labels))), layout="constrained")
     axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
@@ -541,16 +541,17 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     md += ["## Task objective (inverse LQR)", ""]
     obj_rows = []
     for label in labels:
-        o = getattr(inputs.models[label], "objective_", None)
+        model = inputs.models[label]
+        o = model.objective_ if model.has_gain else None
         if o is None:
-            reason = getattr(inputs.models[label], "objective_error_", None)
+            reason = model.objective_error_ if model.has_gain else None
             if reason:
                 obj_rows.append({"strategy": label, "α*": f"not found: {reason}"})
             continue
         n = len(state_names)
         Mn = np.asarray(o.M_normalized)
         oi = inputs.objectives.get(label)
-        choice = getattr(inputs.models[label], "gain_choice_", None)
+        choice = model.gain_choice_
         row = {"strategy": label, "gain K̂": "" if choice is None else choice.method, "α*": float(o.alpha),
                "forward-gain error": float(o.forward_gain_error)}
         q, r = np.diag(Mn[:n, :n]), np.diag(Mn[n:, n:])
@@ -568,8 +569,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         md += [_md_table(pd.DataFrame(obj_rows), ".3g"), ""]
         md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names,
                                         inputs.ratio_comparison)
-        md += [f"- {lb}: {c}" for lb in labels if (c := getattr(inputs.models[lb], "gain_choice_", None))] + [""]
-    if any(getattr(m, "objective_", None) is not None for m in inputs.models.values()):
+        md += [f"- {lb}: {m.gain_choice_}" for lb in labels if (m := inputs.models[lb]).has_gain] + [""]
+    if any(m.has_gain and m.objective_ is not None for m in inputs.models.values()):
         save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
         md += ["![Normalized Q and R](figures/objective.png)", "",
                "*Normalized cost blocks (M / λmax(M)) per strategy. The SDP returns the minimum-condition-number cost "

@@ -90,7 +90,7 @@ def simulate_like(model, demos, n_trials: int, seed: int = 0):
     starts = np.array([d.x[0] for d in ds])
     lo, hi = starts.min(axis=0), starts.max(axis=0)
     A, B = np.asarray(model.system.A, dtype=float), np.asarray(model.system.B, dtype=float)
-    scale = np.asarray(model.noise_scale_, dtype=float) / float(getattr(model, "noise_band_factor_", 1.0))
+    scale = np.asarray(model.noise_scale_, dtype=float) / float(model.noise_band_factor_)
     out = []
     for j in range(int(n_trials)):
         like = ds[int(rng.integers(len(ds)))]
