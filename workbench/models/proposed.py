@@ -18,7 +18,7 @@ for another pad flies to that pad; with any target unknown it is the paper's ``K
 
 All three share one interface (:class:`BehaviorModel`): ``fit(demos) -> self``, ``input_distribution(X, x0,
 target)``, ``predict(x0, n_steps, target, samples=…)``, ``predict_many(…)``, ``save(path)``; and
-:func:`workbench.models.factory.load_model` reads any of them back (format in :mod:`workbench.models.files`).
+:func:`workbench.models.storage.load_model` reads any of them back (format in :mod:`workbench.models.files`).
 """
 
 from __future__ import annotations
