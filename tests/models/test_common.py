@@ -93,14 +93,19 @@ def test_save_and_load_round_trip_predictions(name, data, fitted, tmp_path):
 
 
 def test_every_registered_class_is_checked():
-    """The registry is the list: a model class missing from it would escape these checks and load_model."""
-    from workbench.models import baselines, behavior, proposed
+    """The registry is the list: a model class in workbench/models/ missing from it would escape these checks and
+    load_model (every module is searched, so a class in a new module is found the day it is added)."""
+    import importlib
+    import inspect
+    import pkgutil
 
-    classes = {
-        obj.__name__
-        for module in (baselines, proposed)
-        for obj in vars(module).values()
-        if isinstance(obj, type) and issubclass(obj, behavior.BehaviorModel) and obj.__module__ == module.__name__
-        and not obj.__name__.startswith("_")
-    }
+    import workbench.models
+    from workbench.models.behavior import BehaviorModel
+
+    classes = set()
+    for info in pkgutil.iter_modules(workbench.models.__path__):
+        module = importlib.import_module(f"workbench.models.{info.name}")
+        classes |= {obj.__name__ for obj in vars(module).values()
+                    if isinstance(obj, type) and issubclass(obj, BehaviorModel) and obj.__module__ == module.__name__
+                    and not inspect.isabstract(obj) and not obj.__name__.startswith("_")}
     assert classes == set(MODEL_CLASSES)

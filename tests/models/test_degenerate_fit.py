@@ -9,7 +9,7 @@ import pytest
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DegenerateFitWarning, WorkbenchWarning
 from workbench.models import GMROnlyModel, HumanBehaviorModel, IOCOnlyModel
-from workbench.models.behavior import MIN_DISTINCT_DEMOS
+from workbench.models.fitting import MIN_DISTINCT_DEMOS
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_landings
 

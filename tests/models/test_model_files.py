@@ -24,6 +24,29 @@ def test_a_file_written_before_the_subpackages_loads_and_predicts_the_same(name)
     np.testing.assert_allclose(pred.x, expected[name], rtol=1e-9, atol=1e-12)
 
 
+MAIN_CASES = ("proposed", "proposed_cv", "proposed_goalless", "ioc_only", "gmr_only", "persistence")
+
+
+@pytest.mark.parametrize("case", MAIN_CASES)
+def test_a_file_written_by_the_main_before_the_registry_loads_and_predicts_the_same(case):
+    """Files written by the main of issue 30's second round (tests/fixtures/write_model_files.py, run with that
+    checkout): every model class, a "cv" proposed model and one fitted without targets, with the records added
+    since 0.1.0 (envelope, training trials, gain choice, auto settings). Means, bands and input distributions."""
+    expected = np.load(DATA / "main_model_predictions.npz")
+    model = load_model(DATA / f"main_{case}.npz")
+    x0, target, X = expected["x0"], expected["target"], expected["X"]
+    np.testing.assert_allclose(model.predict(x0, 20, target=target).x, expected[f"{case}/x"], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(model.predict(x0, 20).x, expected[f"{case}/x_free"], rtol=1e-9, atol=1e-12)
+    bands = model.predict(x0, 20, target=target, samples=16, seed=0).x_bands
+    if f"{case}/x_bands" in expected:
+        np.testing.assert_allclose(bands, expected[f"{case}/x_bands"], rtol=1e-9, atol=1e-12)
+    else:
+        assert bands is None
+    mean, cov = model.input_distribution(X, x0, target)
+    np.testing.assert_allclose(mean, expected[f"{case}/u_mean"], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(cov, expected[f"{case}/u_cov"], rtol=1e-9, atol=1e-12)
+
+
 def test_a_header_nested_beyond_the_parser_is_a_model_file_error(tmp_path):
     from workbench.models.files import ModelFileError
 

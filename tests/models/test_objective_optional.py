@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import workbench.models.behavior as behavior
+import workbench.models.fitting as fitting
 from workbench.errors import SolverError
 from workbench.models import HumanBehaviorModel
 from workbench.models.factory import load_model
@@ -22,7 +22,7 @@ def failing_sdp(monkeypatch):
     def fail(*args, **kwargs):
         raise SolverError(REASON)
 
-    monkeypatch.setattr(behavior, "inverse_lqr", fail)
+    monkeypatch.setattr(fitting, "inverse_lqr", fail)
 
 
 def test_a_failed_inverse_lqr_leaves_a_model_that_predicts(failing_sdp, tmp_path):

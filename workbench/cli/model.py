@@ -30,11 +30,14 @@ def cmd_fit(ctx: Context) -> int:
     print_plant(ctx, system)
     t0 = time.perf_counter()
     with ctx.progress() as progress:
+        from workbench.models.registry import method
+
+        kind = method(a.method).load_class()
         components = a.n_components
-        if components == "cv" and a.method != "proposed":
+        if components == "cv" and not kind.chooses_settings:
             raise DataError("--n-components cv chooses the proposed model's settings; use a number or 'bic' with "
                             f"--method {a.method}")
-        if components == "bic" and a.method != "ioc-only":
+        if components == "bic" and kind.has_components:
             from workbench.study.pipeline import select_components
 
             progress.add_task("choosing the number of components by BIC", total=None)
@@ -47,10 +50,10 @@ def cmd_fit(ctx: Context) -> int:
     model.save(output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
-    if a.bootstrap > 0 and getattr(model, "K_", None) is not None:
+    if a.bootstrap > 0 and model.has_gain:
         _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
         _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
-    elif getattr(model, "objective_", None) is not None:
+    elif model.has_gain and model.objective_ is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
     ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
     return 0
@@ -81,7 +84,7 @@ def _as_fitted(ds: Any, model: Any) -> Any:
     estimate is the model's own gain and objective; unchanged for a model of ``u = K̂x``."""
     from workbench.data.demonstrations import Demonstration
 
-    if not getattr(model, "goal_relative_", False):
+    if not (model.has_gain and model.goal_relative_):
         return ds
     return ds.with_demos([Demonstration(d.t, d.x - d.target, d.u, d.meta) for d in ds])
 
@@ -126,14 +129,12 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, pow
 def _print_model(ctx: Context, model: Any, ds: Any) -> None:
     import numpy as np
 
-    K = getattr(model, "K_", None)
-    if K is not None:
-        ctx.say("K̂ (u = K̂ x): " + np.array2string(np.asarray(K), precision=3, suppress_small=True))
-    choice = getattr(model, "gain_choice_", None)
-    if choice is not None:
-        ctx.say(str(choice))
-    o = getattr(model, "objective_", None)
-    if o is None and getattr(model, "objective_error_", None):
+    o = None
+    if model.has_gain:
+        ctx.say("K̂ (u = K̂ x): " + np.array2string(np.asarray(model.K_), precision=3, suppress_small=True))
+        ctx.say(str(model.gain_choice_))
+        o = model.objective_
+    if o is None and model.has_gain and model.objective_error_:
         ctx.say(f"task objective: not found ({model.objective_error_}); the model predicts without it")
     if o is not None:
         n = ds.n_states
@@ -142,10 +143,9 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
         ctx.say(f"α* = {o.alpha:.4g}, forward-gain error {o.forward_gain_error:.1e}")
         ctx.say("diag Q/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.state_names, q, strict=True)))
         ctx.say("diag R/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.input_names, r, strict=True)))
-    g = getattr(model, "n_components_", None) or getattr(model, "n_components", None)
-    if g is not None:
-        ctx.say(f"GMM components: {g}")
-    auto = getattr(model, "auto_", None)
+    if model.has_components:
+        ctx.say(f"GMM components: {model.n_components_}")
+    auto = model.auto_ if model.chooses_settings else None
     if auto is not None:
         ctx.say(f"chose G = {auto.n_components}, reg_covar = {auto.reg_covar:g} by {auto.folds}-fold cross-validation "
                 f"over the trials ({auto.criterion}); held-out 3 s RMSE per candidate: " + ", ".join(

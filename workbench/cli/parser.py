@@ -21,6 +21,7 @@ from workbench.cli.model import cmd_fit, cmd_predict
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
 from workbench.cli.view import VIEW_SAMPLES, cmd_live, cmd_replay, cmd_view
 from workbench.defaults import HORIZON_S, N_COMPONENTS, N_STEPS, ONLINE_HORIZON_S, STUDY_N_COMPONENTS
+from workbench.models.registry import REGISTRY
 
 __all__ = ['build_parser']
 
@@ -191,7 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-components", type=fit_n_components_arg, default=N_COMPONENTS, metavar="G|bic|cv",
                    help=f"GMM components G (default {N_COMPONENTS}, the paper's); bic: G by BIC; cv: the proposed "
                         "model chooses G and reg_covar by cross-validation over the trials (held-out 3 s predictions)")
-    p.add_argument("--method", choices=["proposed", "ioc-only", "gmr-only"], default="proposed",
+    p.add_argument("--method", choices=[m.cli_name for m in REGISTRY if m.fit_command], default="proposed",
                    help="the proposed model (default) or one of its baselines")
     p.add_argument("--keep-still", action="store_true",
                    help="keep segments in which no input moves beyond its resolution (default: reported and left "

@@ -165,7 +165,7 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
 def _print_study(ctx: Context, result: Any) -> None:
     from rich.markup import escape
 
-    from workbench.models.names import METHOD_TITLES
+    from workbench.models.registry import METHOD_TITLES
     from workbench.study.scores import fmt, heldout_scores
 
     # the first answer: each method's held-out error with its interval (the numbers the first view shows)

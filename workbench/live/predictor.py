@@ -221,11 +221,10 @@ class OnlinePredictor:
                  now: Callable[[], float] = time.time) -> None:
         m = load_mapping(mapping)
         m = m.for_format("tlog") if m.format is None else m
-        for attr in ("input_distribution", "predict"):
-            if not callable(getattr(model, attr, None)):
-                raise ModelError(
-                    f"live prediction needs a fitted behavior model with {attr}(); got {type(model).__name__}"
-                )
+        from workbench.models.behavior import BehaviorModel  # loaded already: the model is one
+
+        if not isinstance(model, BehaviorModel):
+            raise ModelError(f"live prediction needs a fitted behavior model; got {type(model).__name__}")
         system_ = model.system
         if tuple(system_.state_names) != tuple(m.state_names) or tuple(system_.input_names) != tuple(m.input_names):
             raise ModelError(
@@ -248,7 +247,7 @@ class OnlinePredictor:
         self.reader = MavlinkReader(self.aligner.streams, required=self.aligner.required, system=system,
                                     component=component, clock=clock,
                                     clock_field=clock_field, clock_scale=clock_scale)
-        self._has_w = callable(getattr(model, "variability", None))
+        self._has_w = model.has_variability
         self._pending: deque[tuple[AlignedStep, float]] = deque()
         self._recent: deque[LivePrediction] = deque(maxlen=_RECENT)
         self._latest: tuple[AlignedStep, float] | None = None

@@ -19,21 +19,19 @@ from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.defaults import N_COMPONENTS
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
-from workbench.models.behavior import (
-    BehaviorModel,
-    TaskGMRModel,
-    as_vector,
-    demo_list,
-    fit_gain,
-    fit_objective_or_reason,
+from workbench.models.behavior import BehaviorModel, MethodSettings
+from workbench.models.files import ModelFile
+from workbench.models.fitting import as_vector, demo_list, fit_gain, fit_objective_or_reason, references
+from workbench.models.prediction import Policy
+from workbench.models.storage import (
     gain_choice_restore,
     gain_choice_state,
+    gmr_restore,
+    gmr_state,
     objective_restore,
     objective_state,
-    references,
 )
-from workbench.models.files import ModelFile
-from workbench.models.prediction import Policy, Prediction
+from workbench.models.taskgmr import TaskGMRModel
 from workbench.plant.system import LinearSystem
 
 __all__ = ["IOCOnlyModel", "GMROnlyModel", "PersistenceModel"]
@@ -47,6 +45,10 @@ class GMROnlyModel(TaskGMRModel):
     """
 
     _fitted_attr = "variability_"
+
+    @classmethod
+    def for_method(cls, system: LinearSystem, settings: MethodSettings) -> GMROnlyModel:
+        return cls(system, n_components=settings.n_components, random_state=settings.random_state)
 
     def __init__(
         self,
@@ -102,10 +104,10 @@ class GMROnlyModel(TaskGMRModel):
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        return self._gmr_state()
+        return gmr_state(self)
 
     def _restore(self, mf: ModelFile) -> None:
-        self._gmr_restore(mf, self.system.m)
+        gmr_restore(self, mf, self.system.m)
 
 
 class IOCOnlyModel(BehaviorModel):
@@ -127,6 +129,12 @@ class IOCOnlyModel(BehaviorModel):
     """
 
     _fitted_attr = "K_"
+    has_gain: ClassVar[bool] = True
+    has_variability: ClassVar[bool] = True
+
+    @classmethod
+    def for_method(cls, system: LinearSystem, settings: MethodSettings) -> IOCOnlyModel:
+        return cls(system, gain_method=settings.gain_method)
 
     def __init__(
         self,
@@ -147,6 +155,9 @@ class IOCOnlyModel(BehaviorModel):
         self.noise_window = noise_window
         self.noise_folds = noise_folds
         self.noise_horizon_s = noise_horizon_s
+
+    def _fold_settings(self) -> dict[str, Any]:
+        return {**super()._fold_settings(), "fit_objective": False}
 
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> IOCOnlyModel:
         """K̂ by eqs. (12)-(14) and, optionally, the objective by eqs. (15)-(19); the residual second moment."""
@@ -221,8 +232,9 @@ class PersistenceModel(BehaviorModel):
     """
 
     _fitted_attr = "transition_"
-    #: No input distribution: one-step input coverage does not apply.
+    #: No input distribution: one-step input coverage does not apply, and no Monte Carlo band.
     models_inputs: ClassVar[bool] = False
+    draws_samples: ClassVar[bool] = False
 
     def __init__(self, system: LinearSystem) -> None:
         super().__init__(system)
@@ -251,12 +263,6 @@ class PersistenceModel(BehaviorModel):
 
         policy.mean = lambda X: np.zeros((X.shape[0], m))
         return policy
-
-    def predict_many(self, x0s: Any, n_steps: int, targets: Any = None, **kwargs: Any) -> list[Prediction]:
-        """As :meth:`BehaviorModel.predict_many`, without samples: a band of zero width would claim certainty."""
-        kwargs["samples"] = 0
-        kwargs.pop("return_samples", None)
-        return super().predict_many(x0s, n_steps, targets, **kwargs)
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         return {}, {"transition": self.transition_}

@@ -1,25 +1,29 @@
-"""What every behavior model shares: fitting helpers, predictions, Monte Carlo calibration, the model file.
+"""The declared interface of every behavior model: an abstract base class with capability flags.
 
 :class:`BehaviorModel` is the interface of the proposed model (:mod:`workbench.models.proposed`) and its baselines
 (:mod:`workbench.models.baselines`): ``fit(demos) -> self``, ``input_distribution(X, x0, target)``,
-``predict(x0, n_steps, target, samples=…)``, ``predict_many(…)``, ``save(path)``. A subclass supplies
-``fit``, ``_policy(x0, target)`` (its Gaussian over the operator's input for one task, as a batched callable)
-and the ``_state``/``_restore`` pair for the file (:mod:`workbench.models.files`).
-:class:`TaskGMRModel` adds the TP-GMM parts the proposed model and the GMR-only baseline share.
+``predict(x0, n_steps, target, samples=…)``, ``predict_many(…)``, ``save(path)``. A subclass implements the
+abstract ``fit``, ``_policy(x0, target)`` (its Gaussian over the operator's input for one task, as a batched
+callable) and the ``_state``/``_restore`` pair for the file (:mod:`workbench.models.storage`), and declares what
+it can do in the class flags below, which callers read instead of probing for attributes.
+
+Beside it, by job: fitting helpers (:mod:`workbench.models.fitting`), the TP-GMM parts the proposed model and the
+GMR-only baseline share (:mod:`workbench.models.taskgmr`), saving and restoring (:mod:`workbench.models.storage`),
+the methods' registry (:mod:`workbench.models.registry`).
 
 Equation numbers count every ``\\begin{equation}`` of the method paper's LaTeX in order.
 """
 
 from __future__ import annotations
 
-import dataclasses
+import abc
 import inspect
 import math
 import os
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -27,14 +31,9 @@ import numpy as np
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.digest import set_digest, trial_digest
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError, WorkbenchError
-from workbench.method.frames import FrameSpec
-from workbench.method.gain import GainChoice, choose_gain
-from workbench.method.inverse_lqr_sdp import inverse_lqr
-from workbench.method.objective import TaskObjective
-from workbench.method.variability import TaskConditional, TaskGMR, resolve_frame_spec
-from workbench.models.files import ModelFile, ModelFileError, write_model_file
+from workbench.models.files import ModelFile
+from workbench.models.fitting import as_vector, envelope_exit, goal_of, json_seed, state_envelope
 from workbench.models.prediction import (
-    RHO_MAX,
     Policy,
     Prediction,
     calibrate_band_scale,
@@ -45,24 +44,9 @@ from workbench.models.prediction import (
 )
 from workbench.plant.system import LinearSystem
 
-__all__ = [
-    "BehaviorModel",
-    "TaskGMRModel",
-    "RHO_MAX",
-    # helpers for the model classes
-    "demo_list",
-    "goal_of",
-    "references",
-    "fit_gain",
-    "as_vector",
-    "json_seed",
-    "objective_state",
-    "objective_restore",
-]
+__all__ = ["BehaviorModel", "MethodSettings"]
 
 _NOISE_KINDS = ("calibrated", "gmr")
-# Margin of the training-state envelope, as a fraction of each state's training range (see `state_envelope`).
-ENVELOPE_MARGIN = 0.1
 # Starts per held-out trial in the band calibration (every half horizon from the first state), and at most
 # this many held-out trials (spread evenly over the folds): enough for a coverage to ±0.5 %, and cheap.
 _CALIBRATION_STARTS = 3
@@ -71,163 +55,57 @@ _CALIBRATION_TRIALS = 30
 # calibrated on held-out coverage through these same models, so a looser fit is corrected for; at 1000
 # demonstrations the folds' EM was most of the fit (issue 11: 133 s of 171 s).
 _FOLD_MAX_ITER = 50
-# Fewer distinct demonstrations than this fit with a DegenerateFitWarning.
-MIN_DISTINCT_DEMOS = 3
-
-
-# ------------------------------------------------------------------------------------------------ helpers
-
-
-def demo_list(demos: DemonstrationSet | Iterable[Demonstration], system: LinearSystem, where: str) -> list:
-    """The demonstrations as a list, checked against the system (shapes, sampling step)."""
-    if isinstance(demos, Demonstration):
-        demos = [demos]
-    try:
-        out = list(demos)
-    except TypeError:
-        raise ModelError(
-            f"{where}: demos must be a DemonstrationSet or demonstrations, got {type(demos).__name__}"
-        ) from None
-    if not out:
-        raise ModelError(f"{where}: no demonstrations to fit")
-    n, m = system.n, system.m
-    for j, d in enumerate(out):
-        if not isinstance(d, Demonstration):
-            raise ModelError(f"{where}: item {j} is a {type(d).__name__}, not a Demonstration")
-        if d.x.shape[1] != n or d.u.shape[1] != m:
-            raise ModelError(
-                f"{where}: demonstration {d.id!r} has {d.x.shape[1]} states and {d.u.shape[1]} inputs; the "
-                f"system has n={n}, m={m}"
-            )
-    dt = getattr(demos, "dt", None)
-    if dt is not None and not math.isclose(float(dt), system.dt, rel_tol=1e-6):
-        raise ModelError(
-            f"{where}: the demonstrations are sampled at dt={dt:g} s but the system is discretized at "
-            f"dt={system.dt:g} s; resample the demonstrations or rebuild the system"
-        )
-    # identical copies (a file loaded twice, one trial repeated) add samples but no information
-    distinct = len({(d.x.tobytes(), d.u.tobytes()) for d in out})
-    if distinct < MIN_DISTINCT_DEMOS:
-        copies = f" ({len(out)} given; identical copies count once)" if distinct < len(out) else ""
-        warnings.warn(
-            f"{where}: fitting on {distinct} distinct demonstration(s){copies}; the gain, the variability's "
-            f"mixture and its noise rest on fewer than {MIN_DISTINCT_DEMOS} trials and will not generalize",
-            DegenerateFitWarning,
-            stacklevel=3,
-        )
-    return out
-
-
-def goal_of(d: Demonstration) -> np.ndarray:
-    """A demonstration's goal state: its known target, else its last state (the goal frame, eq. (33))."""
-    return d.target if d.target is not None else d.x[-1]
-
-
-def references(demos: Sequence[Demonstration], n: int) -> tuple[list[np.ndarray], bool]:
-    """The state each demonstration's linear term ``K̂(x − r)`` regulates to, and whether it is the target.
-
-    With every target known, ``r`` is the demonstration's target (the paper's coordinates put it at the
-    origin; a pad elsewhere then shifts the behavior with it). If any target is unknown, ``r = 0`` for all,
-    the paper's ``u = K̂x`` literally.
-    """
-    if all(d.target is not None for d in demos):
-        return [np.asarray(d.target, dtype=float) for d in demos], True
-    return [np.zeros(n) for _ in demos], False
-
-
-def fit_gain(
-    demos: Sequence[Demonstration], refs: Sequence[np.ndarray], system: LinearSystem, method: str
-) -> tuple[np.ndarray, GainChoice]:
-    """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.method.gain.choose_gain` on the shifted states, and which
-    estimator made it (``method`` may be the rule ``"iv-or-direct"``)."""
-    shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(demos, refs, strict=True)]
-    K, choice = choose_gain(shifted, system, method)
-    return np.ascontiguousarray(K), choice
-
-
-def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | None, str | None]:
-    """The task objective of ``K`` by inverse LQR (eqs. (15)-(19)) when ``model.fit_objective``, or why none.
-
-    The objective explains the gain; predictions never use it. So a solve that fails (no cost passes the
-    post-checks, the solver stops) is recorded, ``(None, reason)``, instead of taking the model with it: the
-    model still predicts, and a study keeps it in every comparison.
-    """
-    if not getattr(model, "fit_objective", False):
-        return None, None
-    try:
-        return inverse_lqr(model.system.A, model.system.B, K, structure=model.structure), None
-    except ModelError as exc:
-        return None, " ".join(str(exc).split())
-
-
-def gain_choice_state(model: Any) -> dict[str, str] | None:
-    """The model file's record of :class:`GainChoice` (None for a model without one)."""
-    c = getattr(model, "gain_choice_", None)
-    return None if c is None else {"requested": c.requested, "method": c.method, "reason": c.reason}
-
-
-def gain_choice_restore(model: Any, header: dict[str, Any]) -> None:
-    """``gain_choice_`` and ``gain_method_`` from a model file; files written before the record say only what
-    was requested, which was then the estimator used."""
-    rec = header.get("gain_choice")
-    if isinstance(rec, dict) and {"requested", "method", "reason"} <= set(rec):
-        model.gain_choice_ = GainChoice(str(rec["requested"]), str(rec["method"]), str(rec["reason"]))
-    else:
-        model.gain_choice_ = GainChoice(model.gain_method, model.gain_method, "as requested")
-    model.gain_method_ = model.gain_choice_.method
-
-
-def state_envelope(demos: Sequence[Demonstration]) -> np.ndarray:
-    """The box ``[lo; hi]`` (2, n) the training states span, widened by ``ENVELOPE_MARGIN`` of its width per state.
-
-    A rollout outside it asks the model (the gain, the GMR's components, the residual statistics) about states it
-    has never seen: the prediction says so (``Prediction.envelope_exit``) and evaluations count it.
-    """
-    X = np.concatenate([d.x for d in demos])
-    lo, hi = X.min(axis=0), X.max(axis=0)
-    pad = ENVELOPE_MARGIN * np.maximum(hi - lo, 1e-9)
-    return np.stack([lo - pad, hi + pad])
-
-
-def envelope_exit(X: np.ndarray, envelope: np.ndarray | None) -> int:
-    """First row of the trajectory ``X`` (H+1, n) outside the envelope, -1 if none (or no envelope)."""
-    if envelope is None:
-        return -1
-    outside = np.any((X < envelope[0]) | (X > envelope[1]), axis=1)
-    return int(np.argmax(outside)) if outside.any() else -1
-
-
-def as_vector(v: Any, n: int, what: str) -> np.ndarray:
-    """``v`` as n finite floats, or a ModelError naming ``what``."""
-    try:
-        a = np.asarray(v, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise ModelError(f"{what} must be {n} numbers, got {v!r}") from None
-    if a.shape != (n,) or not np.isfinite(a).all():
-        raise ModelError(f"{what} must be {n} finite numbers, got {np.asarray(v).tolist()!r}")
-    return a
-
-
-def json_seed(random_state: Any) -> int | None:
-    """An integer seed as itself; anything else (None, a Generator) as None, for the model file."""
-    return int(random_state) if isinstance(random_state, int | np.integer) else None
 
 
 # -------------------------------------------------------------------------------------------- base class
 
 
-class BehaviorModel:
+@dataclass(frozen=True)
+class MethodSettings:
+    """The settings a comparison gives every method (:func:`workbench.models.factory.make_model`); each class's
+    :meth:`BehaviorModel.for_method` takes the ones it has."""
+
+    n_components: int | str
+    random_state: int | None
+    gain_method: str
+    fit_objective: bool
+    cv_grid: dict[str, tuple] | None = None
+
+
+class BehaviorModel(abc.ABC):
     """What every behavior model offers: fit, the input distribution at a state, predictions, a file.
 
     Subclasses implement ``fit``, ``_policy(x0, target)`` (the input distribution for one task as a batched
-    callable) and the ``_state``/``_restore`` pair used by :meth:`save` and :func:`load_model`.
+    callable) and the ``_state``/``_restore`` pair used by :meth:`save` and
+    :func:`~workbench.models.storage.load_model`, and set the capability flags that differ from these defaults.
     """
 
     #: Learned attribute whose presence means "fitted".
     _fitted_attr: ClassVar[str] = "target_"
 
+    # -- capabilities: what callers may ask of a model of this class ----------------------------------------
+    #: Its Gaussian over the operator's input means something (one-step input coverage applies).
+    models_inputs: ClassVar[bool] = True
+    #: ``predict(…, samples=S)`` draws a Monte Carlo band (else it returns the mean alone).
+    draws_samples: ClassVar[bool] = True
+    #: A gain ``K_`` of ``u = K̂(x − r)`` (with ``gain_choice_``, ``goal_relative_``, ``objective_``).
+    has_gain: ClassVar[bool] = False
+    #: :meth:`variability` gives the Gaussian of ``ŵ`` at states.
+    has_variability: ClassVar[bool] = False
+    #: :meth:`residuals` gives a demonstration's ``ŵ = u − K̂(x − r)``.
+    has_residuals: ClassVar[bool] = False
+    #: A mixture of ``n_components`` Gaussians (``n_components_``, ``task_gmm``).
+    has_components: ClassVar[bool] = False
+    #: ``n_components="cv"`` chooses its settings by cross-validation.
+    chooses_settings: ClassVar[bool] = False
+
     def __init__(self, system: LinearSystem) -> None:
         self.system = system
+
+    @classmethod
+    def for_method(cls, system: LinearSystem, settings: MethodSettings) -> BehaviorModel:
+        """An unfitted model for a comparison with ``settings`` (the ones this class has); default: none."""
+        return cls(system)
 
     # -- scikit-learn conventions ---------------------------------------------------------------------------
     @classmethod
@@ -330,17 +208,34 @@ class BehaviorModel:
         return X
 
     # -- to implement -------------------------------------------------------------------------------------
-    def fit(self, demos: DemonstrationSet) -> BehaviorModel:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def fit(self, demos: DemonstrationSet) -> BehaviorModel:
+        """Learn from demonstrations; returns self."""
 
-    def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
+        """The Gaussian over the operator's input for one task, as a batched callable ``X -> (mean, cov)``."""
 
-    def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """This class's part of the model file: header entries and arrays (:mod:`workbench.models.storage`)."""
 
-    def _restore(self, mf: ModelFile) -> None:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _restore(self, mf: ModelFile) -> None:
+        """This class's learned attributes from its part of a model file."""
+
+    def variability(self, X: Any, x0: Any = None, target: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """The Gaussian of ``ŵ`` at states ``X`` (mean (N, m), covariance (N, m, m)); see :attr:`has_variability`."""
+        raise ModelError(f"{type(self).__name__} has no variability model of ŵ")
+
+    def residuals(self, demo: Demonstration) -> np.ndarray:
+        """``ŵ = u − K̂(x − r)`` of a demonstration; see :attr:`has_residuals`."""
+        raise ModelError(f"{type(self).__name__} has no residuals (no gain)")
+
+    def _fold_settings(self) -> dict[str, Any]:
+        """Settings of the cross-fitting fold models of :meth:`_fit_noise`, over this model's: the raw GMR noise
+        (the folds only whiten residuals), and whatever else residuals do not need."""
+        return {"noise": "gmr"}
 
     #: Monte Carlo noise per whitened input axis (:mod:`workbench.models.prediction`): scale and AR(1) coefficient.
     noise_scale_: np.ndarray
@@ -417,12 +312,7 @@ class BehaviorModel:
             held_out = []
             for fold in folds:
                 held = set(fold.tolist())
-                sub = self.clone()
-                sub.noise = "gmr"
-                if hasattr(sub, "fit_objective"):
-                    sub.fit_objective = False
-                if hasattr(sub, "max_iter"):
-                    sub.max_iter = min(int(sub.max_iter), _FOLD_MAX_ITER)
+                sub = type(self)(self.system, **{**self.get_params(), **self._fold_settings()})
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore", ConvergenceWarning)
@@ -533,6 +423,8 @@ class BehaviorModel:
         likewise gives each start's task start state (default the start itself).
         """
         self._check_fitted("predict")
+        if not self.draws_samples:  # a band of zero width would claim certainty
+            samples, return_samples = 0, False
         where = f"{type(self).__name__}.predict"
         X0 = self._states(x0s, where)
         Bn, n = X0.shape
@@ -594,204 +486,7 @@ class BehaviorModel:
 
     # -- files --------------------------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the fitted model to one ``.npz`` file (see :mod:`workbench.models.files`), atomically."""
-        self._check_fitted("save")
-        header, arrays = self._state()
-        sys_ = self.system
-        arrays = {"system/A": sys_.A, "system/B": sys_.B, "target": self.target_, "noise_rho": self.noise_rho_,
-                  "noise_scale": self.noise_scale_, **arrays}
-        if getattr(self, "goal_offset_", None) is not None:
-            arrays["goal_offset"] = self.goal_offset_
-        if getattr(self, "state_envelope_", None) is not None:
-            arrays["state_envelope"] = self.state_envelope_
-        if sys_.u_min is not None:
-            arrays["system/u_min"] = sys_.u_min
-        if sys_.u_max is not None:
-            arrays["system/u_max"] = sys_.u_max
-        header = {
-            "settings": self._settings_json(),
-            "system": {
-                "dt": sys_.dt,
-                "state_names": list(sys_.state_names),
-                "input_names": list(sys_.input_names),
-                "fit_residual": sys_.fit_residual,
-                "roles": sys_.roles.to_json(),
-            },
-            "fit": {
-                "n_demos": self.n_demos_,
-                "n_samples": self.n_samples_,
-                "labels": list(self.labels_),
-                # None (unknown) for a model restored from a file written before these were recorded
-                "trial_ids": None if getattr(self, "train_ids_", None) is None else list(self.train_ids_),
-                "trial_digests": (None if getattr(self, "train_digests_", None) is None
-                                  else list(self.train_digests_)),
-                "data_digest": getattr(self, "data_digest_", None),
-                "goal_relative": bool(getattr(self, "goal_relative_", False)),
-                "noise_band_factor": float(self.noise_band_factor_),
-                "noise_band_coverage": None if math.isnan(self.noise_band_coverage_) else self.noise_band_coverage_,
-            },
-            **header,
-        }
-        return write_model_file(path, type(self).__name__, header, arrays)
+        """Write the fitted model to one ``.npz`` file (:func:`workbench.models.storage.save_model`), atomically."""
+        from workbench.models.storage import save_model
 
-    def _settings_json(self) -> dict[str, Any]:
-        out = {}
-        for k, v in self.get_params().items():
-            if k == "random_state":
-                v = json_seed(v)
-            elif isinstance(v, FrameSpec):
-                v = list(v.kinds)
-            elif isinstance(v, tuple):
-                v = list(v)
-            elif isinstance(v, np.generic):
-                v = v.item()
-            out[k] = v
-        return out
-
-
-# -------------------------------------------------------------------------------------- shared GMR parts
-
-
-class TaskGMRModel(BehaviorModel):
-    """Shared parts of the two models whose input distribution comes from a TP-GMM: settings, frames, file."""
-
-    def _make_gmr(self) -> TaskGMR:
-        self.frame_spec_ = resolve_frame_spec(
-            self.frames, self.system.state_names, self.angle_index, self.position_idx, self.system.r
-        )
-        return TaskGMR(
-            self.frame_spec_,
-            n_components=self.n_components,
-            reg_covar=self.reg_covar,
-            standardize=self.standardize,
-            max_iter=self.max_iter,
-            tol=self.tol,
-            n_init=self.n_init,
-            random_state=self.random_state,
-        )
-
-    def _check_settings(self) -> None:
-        G = self.n_components
-        if isinstance(G, bool) or not isinstance(G, int | np.integer) or G < 1:
-            raise ModelError(f"{type(self).__name__}: n_components must be a positive integer, got {G!r}")
-        if not (isinstance(self.reg_covar, int | float) and math.isfinite(self.reg_covar) and self.reg_covar >= 0):
-            raise ModelError(f"{type(self).__name__}: reg_covar must be a finite number ≥ 0, got {self.reg_covar!r}")
-        self._check_noise()
-
-    def _fit_gmr(self, demos: list[Demonstration], Y_list: list[np.ndarray]) -> None:
-        gmr = self._make_gmr()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ConvergenceWarning)
-            gmr.fit([d.x for d in demos], Y_list, [goal_of(d) for d in demos])
-        for w in caught:
-            warnings.warn(f"{type(self).__name__}.fit: {w.message}", ConvergenceWarning, stacklevel=3)
-        self.variability_ = gmr
-        self.n_components_ = int(self.n_components)
-
-    def _conditional(self, x0: np.ndarray, target: np.ndarray) -> TaskConditional:
-        return self.variability_.conditional(x0, target)
-
-    def task_gmm(self, x0: Any, target: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The global GMM of the task (eq. (30)) in the user's units: weights (G,), means (G, D), covs."""
-        self._check_fitted("task_gmm")
-        return self.variability_.product(*self._task(x0, target))
-
-    def _gmr_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        tp = self.variability_.tpgmm_
-        spec = self.frame_spec_
-        header = {
-            "frames": {
-                "kinds": list(spec.kinds),
-                "angle_index": spec.angle_index,
-                "position_idx": list(spec.position_idx),
-            },
-            "tpgmm": {
-                "n_iter": int(getattr(tp, "n_iter_", 0)),
-                "converged": bool(getattr(tp, "converged_", True)),
-                "lower_bound": float(getattr(tp, "lower_bound_", float("nan")))
-                if math.isfinite(float(getattr(tp, "lower_bound_", float("nan"))))
-                else None,
-            },
-        }
-        arrays = {
-            "tpgmm/weights": tp.weights_,
-            "tpgmm/means": tp.means_,
-            "tpgmm/covariances": tp.covariances_,
-            "tpgmm/precisions_cholesky": tp.precisions_cholesky_,
-            "scale": self.variability_.scale_,
-        }
-        return header, arrays
-
-    def _gmr_restore(self, mf: ModelFile, d_out: int) -> None:
-        n = self.system.n
-        D = n + d_out
-        fr = mf.header.get("frames")
-        try:
-            spec = FrameSpec(tuple(fr["kinds"]), fr["angle_index"], tuple(fr["position_idx"]))
-        except (KeyError, TypeError, ValueError, ModelError) as exc:
-            raise ModelFileError(f"{mf.path}: damaged model file: frame specification {fr!r} ({exc})") from None
-        named = [*spec.position_idx, *([] if spec.angle_index is None else [spec.angle_index])]
-        if any(not 0 <= i < n for i in named) or len(set(spec.position_idx)) != len(spec.position_idx):
-            raise ModelFileError(f"{mf.path}: damaged model file: frame specification {fr!r} names states outside "
-                                 f"0…{n - 1} or one state twice")
-        w = mf.array("tpgmm/weights", (None,))
-        G = w.shape[0]
-        means = mf.array("tpgmm/means", (spec.n_frames, G, D))
-        covs = mf.array("tpgmm/covariances", (spec.n_frames, G, D, D))
-        prec = mf.array("tpgmm/precisions_cholesky", (spec.n_frames, G, D, D))
-        scale = mf.array("scale", (D,))
-        wrong_G = self.n_components != "cv" and G != self.n_components
-        if wrong_G or np.any(w < 0) or abs(w.sum() - 1) > 1e-6 or np.any(scale <= 0):
-            raise ModelFileError(f"{mf.path}: damaged model file: inconsistent TP-GMM parameters")
-        self.frame_spec_ = spec
-        try:
-            self.variability_ = TaskGMR.from_parameters(
-                spec, w, means, covs, scale, n, precisions_cholesky=prec, n_components=G,
-                reg_covar=getattr(self, "reg_covar_", self.reg_covar),
-                standardize=self.standardize, random_state=self.random_state,
-            )
-        except ModelError as exc:
-            raise ModelFileError(f"{mf.path}: damaged model file: {exc}") from None
-        tp = self.variability_.tpgmm_
-        info = mf.header.get("tpgmm", {}) or {}
-        tp.n_iter_ = int(info.get("n_iter", 0))
-        tp.converged_ = bool(info.get("converged", True))
-        lb = info.get("lower_bound")
-        tp.lower_bound_ = float("nan") if lb is None else float(lb)
-        self.n_components_ = G
-
-
-def objective_state(obj: TaskObjective | None) -> tuple[dict[str, Any] | None, dict[str, np.ndarray]]:
-    if obj is None:
-        return None, {}
-    header, arrays = {}, {}
-    for f in dataclasses.fields(obj):
-        v = getattr(obj, f.name)
-        if isinstance(v, np.ndarray):
-            arrays[f"objective/{f.name}"] = v
-        elif isinstance(v, float) and not math.isfinite(v):
-            header[f.name] = None
-        else:
-            header[f.name] = v.item() if isinstance(v, np.generic) else v
-    return header, arrays
-
-
-def objective_restore(mf: ModelFile) -> TaskObjective | None:
-    info = mf.header.get("objective")
-    if info is None:
-        return None
-    kwargs = {}
-    for f in dataclasses.fields(TaskObjective):
-        key = f"objective/{f.name}"
-        if key in mf.arrays:
-            a = np.array(mf.array(key), dtype=float)
-            a.setflags(write=False)
-            kwargs[f.name] = a
-        elif f.name in info:
-            v = info[f.name]
-            kwargs[f.name] = float("nan") if v is None and f.type in ("float", float) else v
-        else:
-            raise ModelFileError(f"{mf.path}: damaged model file: the task objective lacks {f.name!r}")
-    return TaskObjective(**kwargs)
-
-
+        return save_model(self, path)

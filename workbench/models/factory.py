@@ -6,23 +6,20 @@ every table: :func:`make_model` for one, :func:`make_models` for the comparison,
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from typing import Any
 
 from workbench.errors import DataError
 from workbench.method.gain import IV_OR_DIRECT
-from workbench.models.baselines import GMROnlyModel, IOCOnlyModel, PersistenceModel
-from workbench.models.behavior import BehaviorModel
-from workbench.models.files import read_model_file
-from workbench.models.names import METHOD_TITLES, METHODS
-from workbench.models.proposed import HumanBehaviorModel, restore_model
+from workbench.models.behavior import BehaviorModel, MethodSettings
+from workbench.models.registry import METHOD_TITLES, METHODS, model_classes
+from workbench.models.registry import method as registered
+from workbench.models.storage import load_model
 
 __all__ = ["METHODS", "METHOD_TITLES", "MODEL_CLASSES", "make_model", "make_models", "load_model"]
 
-MODEL_CLASSES: dict[str, type[BehaviorModel]] = {
-    cls.__name__: cls for cls in (HumanBehaviorModel, IOCOnlyModel, GMROnlyModel, PersistenceModel)
-}
+#: Every registered method's class by class name (what a model file records).
+MODEL_CLASSES: dict[str, type[BehaviorModel]] = model_classes()
 PAPER_N_COMPONENTS = 5  # G of the method paper's quadrotor study
 
 
@@ -54,17 +51,10 @@ def make_model(
     kind = method.replace("-", "_")
     if kind not in METHODS:
         raise DataError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
-    if n_components == "cv" and kind != "proposed":
+    cls = registered(kind).load_class()
+    if n_components == "cv" and not cls.chooses_settings:
         raise DataError(f"n_components='cv' chooses the proposed model's settings; {method} needs a number")
-    if kind == "proposed":
-        return HumanBehaviorModel(system, n_components=n_components, reg_covar="cv" if n_components == "cv" else 0.5,
-                                  random_state=random_state, gain_method=gain_method, fit_objective=fit_objective,
-                                  **(cv_grid or {}))
-    if kind == "ioc_only":
-        return IOCOnlyModel(system, gain_method=gain_method)
-    if kind == "gmr_only":
-        return GMROnlyModel(system, n_components=n_components, random_state=random_state)
-    return PersistenceModel(system)
+    return cls.for_method(system, MethodSettings(n_components, random_state, gain_method, fit_objective, cv_grid))
 
 
 def make_models(
@@ -86,20 +76,10 @@ def make_models(
     from workbench.models.autoconfig import DEFAULT_COMPONENT_GRID, DEFAULT_REG_COVAR_GRID
 
     grid = {"cv_components": DEFAULT_COMPONENT_GRID, "cv_reg_covars": DEFAULT_REG_COVAR_GRID}
-    return {m: make_model(m, system, n_components=n_components if m == "proposed" or n_components != "cv"
-                          else PAPER_N_COMPONENTS, random_state=random_state, gain_method=gain_method,
-                          fit_objective=fit_objective, cv_grid=grid if m == "proposed" else None) for m in methods}
-
-
-def load_model(path: str | os.PathLike) -> BehaviorModel:
-    """Read a model written by ``save`` (any of :data:`MODEL_CLASSES`); never executes code from the file.
-
-    The file names its class, not a module path, so files written before a module moved still load.
-
-    Raises
-    ------
-    ModelFileError
-        (a :class:`~workbench.errors.FormatError` and a :class:`~workbench.errors.ModelError`) for a missing,
-        foreign, damaged or newer-version file; the message names the file and the cause.
-    """
-    return restore_model(read_model_file(path), MODEL_CLASSES)
+    out = {}
+    for m in methods:
+        cv = registered(m).load_class().chooses_settings
+        out[m] = make_model(m, system, n_components=n_components if cv or n_components != "cv" else PAPER_N_COMPONENTS,
+                            random_state=random_state, gain_method=gain_method, fit_objective=fit_objective,
+                            cv_grid=grid if cv else None)
+    return out

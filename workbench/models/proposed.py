@@ -18,41 +18,36 @@ for another pad flies to that pad; with any target unknown it is the paper's ``K
 
 All three share one interface (:class:`BehaviorModel`): ``fit(demos) -> self``, ``input_distribution(X, x0,
 target)``, ``predict(x0, n_steps, target, samples=…)``, ``predict_many(…)``, ``save(path)``; and
-:func:`workbench.models.factory.load_model` reads any of them back (format in :mod:`workbench.models.files`).
+:func:`workbench.models.storage.load_model` reads any of them back (format in :mod:`workbench.models.files`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from collections.abc import Iterable, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
-from workbench.data.roles import Roles
 from workbench.defaults import N_COMPONENTS
-from workbench.errors import DataError, ModelError
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
-from workbench.models.baselines import GMROnlyModel
-from workbench.models.behavior import (
-    BehaviorModel,
-    TaskGMRModel,
-    demo_list,
-    fit_gain,
-    fit_objective_or_reason,
+from workbench.models.behavior import MethodSettings
+from workbench.models.files import ModelFile, ModelFileError
+from workbench.models.fitting import demo_list, fit_gain, fit_objective_or_reason, goal_of, references
+from workbench.models.prediction import Policy
+from workbench.models.storage import (
     gain_choice_restore,
     gain_choice_state,
-    goal_of,
+    gmr_restore,
+    gmr_state,
     objective_restore,
     objective_state,
-    references,
 )
-from workbench.models.files import ModelFile, ModelFileError
-from workbench.models.prediction import RHO_MAX, Policy
+from workbench.models.taskgmr import TaskGMRModel
 from workbench.plant.system import LinearSystem
 
-__all__ = ["HumanBehaviorModel", "restore_model"]
+__all__ = ["HumanBehaviorModel"]
 
 
 class HumanBehaviorModel(TaskGMRModel):
@@ -160,6 +155,10 @@ class HumanBehaviorModel(TaskGMRModel):
     """
 
     _fitted_attr = "variability_"
+    has_gain: ClassVar[bool] = True
+    has_variability: ClassVar[bool] = True
+    has_residuals: ClassVar[bool] = True
+    chooses_settings: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -206,6 +205,16 @@ class HumanBehaviorModel(TaskGMRModel):
         self.auto_criterion = auto_criterion
         self.cv_components = cv_components
         self.cv_reg_covars = cv_reg_covars
+
+    @classmethod
+    def for_method(cls, system: LinearSystem, settings: MethodSettings) -> HumanBehaviorModel:
+        s = settings
+        return cls(system, n_components=s.n_components, reg_covar="cv" if s.n_components == "cv" else 0.5,
+                   random_state=s.random_state, gain_method=s.gain_method, fit_objective=s.fit_objective,
+                   **(s.cv_grid or {}))
+
+    def _fold_settings(self) -> dict[str, Any]:
+        return {**super()._fold_settings(), "fit_objective": False}
 
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Algorithm 1: K̂ (eqs. (12)-(14)), the task objective (eqs. (15)-(19)), ŵ (eq. (20)), the TP-GMM."""
@@ -301,7 +310,7 @@ class HumanBehaviorModel(TaskGMRModel):
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        header, arrays = self._gmr_state()
+        header, arrays = gmr_state(self)
         obj_header, obj_arrays = objective_state(self.objective_)
         auto = getattr(self, "auto_", None)
         header = {**header, "objective": obj_header, "reg_covar_chosen": getattr(self, "reg_covar_", None),
@@ -327,79 +336,4 @@ class HumanBehaviorModel(TaskGMRModel):
             self.reg_covar_ = float(self.reg_covar if chosen is None else chosen)
         except (KeyError, TypeError, ValueError) as exc:
             raise ModelFileError(f"{mf.path}: damaged model file: auto settings ({exc})") from None
-        self._gmr_restore(mf, m)
-
-
-
-_RENAMED_SETTINGS = {"noise_horizon": "noise_horizon_s"}
-
-
-def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]]) -> BehaviorModel:
-    """The model a read model file holds, of the class it names among ``classes``
-    (:func:`workbench.models.factory.load_model` reads the file and knows the classes)."""
-    cls = classes.get(mf.model_class)
-    if cls is None:
-        raise ModelFileError(f"{mf.path}: unknown model class {mf.model_class!r}; known: {sorted(classes)}")
-    h = mf.header
-    try:
-        s = h["system"]
-        A = mf.array("system/A", (None, None))
-        B = mf.array("system/B", (A.shape[0], None))
-        system = LinearSystem(
-            A, B, float(s["dt"]), tuple(s["state_names"]), tuple(s["input_names"]),
-            u_min=mf.get("system/u_min"), u_max=mf.get("system/u_max"), fit_residual=s.get("fit_residual"),
-            roles=Roles.from_json(s.get("roles"), f"{mf.path}: roles"),
-        )
-    except ModelFileError:
-        raise
-    except (KeyError, TypeError, ValueError, DataError, ModelError) as exc:
-        raise ModelFileError(f"{mf.path}: damaged model file: system ({type(exc).__name__}: {exc})") from None
-    settings = h.get("settings") or {}
-    if not isinstance(settings, dict):
-        raise ModelFileError(f"{mf.path}: damaged model file: settings are a {type(settings).__name__}, not a table")
-    # settings renamed since a file was written: the old name still loads (files outlive the code's names)
-    settings = {_RENAMED_SETTINGS.get(k, k): v for k, v in settings.items()}
-    unknown = sorted(set(settings) - set(cls._param_names()))
-    if unknown:
-        raise ModelFileError(f"{mf.path}: damaged model file: unknown {cls.__name__} settings {unknown}")
-    for key in ("frames", "position_idx", "cv_components", "cv_reg_covars"):
-        if isinstance(settings.get(key), list):
-            settings[key] = tuple(settings[key])
-    for key in ("n_components", "reg_covar"):  # files written before the rename said "auto" for "cv"
-        if settings.get(key) == "auto":
-            settings[key] = "cv"
-    model = cls(system, **settings)
-    n, m = system.n, system.m
-    try:
-        model.target_ = np.array(mf.array("target", (n,)))
-        model.goal_offset_ = np.array(mf.array("goal_offset", (n,))) if "goal_offset" in mf.arrays else None
-        if "state_envelope" in mf.arrays:  # files written before the envelope existed predict without the flag
-            model.state_envelope_ = np.array(mf.array("state_envelope", (2, n)))
-        model.noise_rho_ = np.array(mf.array("noise_rho", (m,)))
-        model.noise_scale_ = np.array(mf.array("noise_scale", (m,)))
-        fit = h.get("fit") or {}
-        model.n_features_in_, model.n_outputs_ = n, m
-        model.n_demos_ = int(fit.get("n_demos", 0))
-        model.n_samples_ = int(fit.get("n_samples", 0))
-        model.labels_ = tuple(str(x) for x in fit.get("labels", []))
-        # files written before the training data were recorded: unknown (None), not "no trials"
-        ids, digests = fit.get("trial_ids"), fit.get("trial_digests")
-        model.train_ids_ = None if ids is None else tuple(str(x) for x in ids)
-        model.train_digests_ = None if digests is None else tuple(str(x) for x in digests)
-        model.data_digest_ = None if fit.get("data_digest") is None else str(fit["data_digest"])
-        model.noise_band_factor_ = float(fit.get("noise_band_factor", 1.0))
-        cov = fit.get("noise_band_coverage")
-        model.noise_band_coverage_ = float("nan") if cov is None else float(cov)
-        if not isinstance(model, GMROnlyModel):
-            model.goal_relative_ = bool(fit.get("goal_relative", False))
-        model._restore(mf)
-    except ModelFileError:
-        raise
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # AttributeError: a header entry not a table
-        raise ModelFileError(f"{mf.path}: damaged model file ({type(exc).__name__}: {exc})") from None
-    if np.any(model.noise_rho_ < 0) or np.any(model.noise_rho_ > RHO_MAX) or np.any(model.noise_scale_ < 0):
-        raise ModelFileError(
-            f"{mf.path}: damaged model file: noise scale {model.noise_scale_} or correlation {model.noise_rho_} "
-            f"outside their ranges"
-        )
-    return model
+        gmr_restore(self, mf, m)

@@ -45,7 +45,7 @@ from workbench.atomic import (
 )
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
-from workbench.models.factory import METHOD_TITLES
+from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.report.tables import md_table as _md_table
 from workbench.report.tables import save_table, scores_section, why_no_statistics
 from workbench.study.pipeline import StudyResult, improvement_table, metric_unit
@@ -64,8 +64,7 @@ __all__ = [
 ]
 
 _PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
-METHOD_COLORS = {"proposed": "#2ca02c", "ioc_only": "#d62728", "gmr_only": "#9467bd", "persistence": "#8c564b",
-                 "recorded": "#282828"}
+METHOD_COLORS = {**{m.name: m.colour_hex for m in REGISTRY}, "recorded": "#282828"}  # the registry's, as the viewer's
 DPI = 300
 #: A journal column (IEEE: 3.5 in); a figure is at most two columns wide, so its text prints at the size set here.
 COLUMN_WIDTH = 3.5
@@ -164,7 +163,7 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
     dominates M, and on one scale the structure of Q — which states the operator cares about, the paper's point —
     would vanish.
     """
-    labels = [k for k, m in models.items() if getattr(m, "objective_", None) is not None]
+    labels = [k for k, m in models.items() if m.has_gain and m.objective_ is not None]
     n, m = len(state_names), len(input_names)
     fig = Figure(figsize=(COLUMN_WIDTH * 2, 2.8 * max(1, len(labels))), layout="constrained")
     axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
@@ -264,7 +263,7 @@ def _band_words(model: Any, demo: Demonstration) -> dict[str, str]:
     tables (:func:`workbench.study.calibration.band_verdict`)."""
     from workbench.study.calibration import band_words, calibration_check, calibration_counts
 
-    if not callable(getattr(model, "input_distribution", None)):
+    if not model.models_inputs:
         return {}
     check = calibration_check(calibration_counts(model, [demo], (1.0, 3.0)))
     return {str(name): band_words(rows) for name, rows in check.groupby("input", sort=False)}
@@ -542,16 +541,17 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     md += ["## Task objective (inverse LQR)", ""]
     obj_rows = []
     for label in labels:
-        o = getattr(inputs.models[label], "objective_", None)
+        model = inputs.models[label]
+        o = model.objective_ if model.has_gain else None
         if o is None:
-            reason = getattr(inputs.models[label], "objective_error_", None)
+            reason = model.objective_error_ if model.has_gain else None
             if reason:
                 obj_rows.append({"strategy": label, "α*": f"not found: {reason}"})
             continue
         n = len(state_names)
         Mn = np.asarray(o.M_normalized)
         oi = inputs.objectives.get(label)
-        choice = getattr(inputs.models[label], "gain_choice_", None)
+        choice = model.gain_choice_
         row = {"strategy": label, "gain K̂": "" if choice is None else choice.method, "α*": float(o.alpha),
                "forward-gain error": float(o.forward_gain_error)}
         q, r = np.diag(Mn[:n, :n]), np.diag(Mn[n:, n:])
@@ -569,8 +569,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         md += [_md_table(pd.DataFrame(obj_rows), ".3g"), ""]
         md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names,
                                         inputs.ratio_comparison)
-        md += [f"- {lb}: {c}" for lb in labels if (c := getattr(inputs.models[lb], "gain_choice_", None))] + [""]
-    if any(getattr(m, "objective_", None) is not None for m in inputs.models.values()):
+        md += [f"- {lb}: {m.gain_choice_}" for lb in labels if (m := inputs.models[lb]).has_gain] + [""]
+    if any(m.has_gain and m.objective_ is not None for m in inputs.models.values()):
         save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
         md += ["![Normalized Q and R](figures/objective.png)", "",
                "*Normalized cost blocks (M / λmax(M)) per strategy. The SDP returns the minimum-condition-number cost "
@@ -586,7 +586,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
             continue
         demo = te[0]
         model = inputs.models[label]
-        if callable(getattr(model, "variability", None)):
+        if model.has_variability:
             cases_w[label] = (demo, model)
         preds = {"proposed": _predict(model, demo, inputs.n_steps, inputs.samples, inputs.seed)}
         for method, bm in inputs.baselines.get(label, {}).items():

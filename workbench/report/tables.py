@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from workbench.atomic import atomic_path, atomic_write_text
-from workbench.models.factory import METHOD_TITLES
+from workbench.models.registry import METHOD_TITLES
 from workbench.study.pipeline import metric_unit
 
 __all__ = ["md_table", "save_table", "scores_section", "why_no_statistics"]

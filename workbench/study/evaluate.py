@@ -297,7 +297,7 @@ def compare(
                             if metric not in done:  # a one-state block repeats a per-axis row of another
                                 done.add(metric)
                                 rows.append((d.id, _label(d), s, method, metric, value))
-            if one_step and getattr(model, "models_inputs", True):  # persistence has no input distribution
+            if one_step and model.models_inputs:  # persistence has no input distribution
                 cov = one_step_coverage(model, [d], method=method)
                 for r in cov.itertuples(index=False):
                     rows.append((d.id, _label(d), 0, method, f"coverage_{r.n_sigma:g}sigma_{r.input}", r.coverage))

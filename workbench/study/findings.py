@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import pandas as pd
 
-from workbench.models.names import METHOD_TITLES
+from workbench.models.registry import METHOD_TITLES
 from workbench.study.method_level import FLOOR_METHODS, MethodDifference
 from workbench.study.paired import ALL_LABELS, PairedDifference, paired_differences, per_trial
 from workbench.study.stats import MixedModelResult, SignFlipTest, holm, mixed_effects, sign_flip_tests

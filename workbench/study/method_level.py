@@ -36,6 +36,7 @@ from scipy import stats as sps
 from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
+from workbench.models.registry import REGISTRY
 from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
 
 __all__ = ["FLOOR_METHODS", "MethodDifference", "corrected_t", "split_scores", "split_tasks", "method_differences",
@@ -43,7 +44,7 @@ __all__ = ["FLOOR_METHODS", "MethodDifference", "corrected_t", "split_scores", "
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
-FLOOR_METHODS = ("ioc_only", "persistence")
+FLOOR_METHODS = tuple(m.name for m in REGISTRY if m.floor)
 #: Random train/test splits per strategy (Nadeau & Bengio used 15; 8 keeps the demo within its 30 s).
 SPLITS = 8
 #: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).
@@ -175,7 +176,7 @@ def split_scores(task: tuple) -> pd.DataFrame:
                 fitted[name] = model.fit(train)
             except ModelError:
                 continue
-            if getattr(templates[name], "variability_mean_", True) is False:
+            if templates[name].chooses_settings and templates[name].variability_mean_ is False:
                 # the study's model fell back to K̂x by cross-validation: the refits predict as it does
                 fitted[name].variability_mean_ = False
     if not fitted:

@@ -23,8 +23,9 @@ import pandas as pd
 from workbench.atomic import atomic_write_table
 from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
+from workbench.defaults import N_COMPONENTS
 from workbench.errors import ConvergenceWarning, DataError, ModelError
-from workbench.models.names import METHOD_TITLES
+from workbench.models.registry import METHOD_TITLES, METHODS
 from workbench.study.method_level import FLOOR_METHODS, SPLITS
 from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
@@ -125,12 +126,12 @@ class StudyResult:
         lines += [f"{'On ' + label + ', the' if label not in ('', 'None', UNLABELED) else 'The'} proposed model's task "
                   f"objective was not found ({reason}); it still predicts, and is compared as usual."
                   for label, model in self.models.items()
-                  if (reason := getattr(model, "objective_error_", None))]
+                  if model.has_gain and (reason := model.objective_error_)]
         lines += [f"{'On ' + label + ', the' if label not in ('', 'None', UNLABELED) else 'The'} proposed model "
                   "predicts with its task objective alone (K̂x, as IOC-only does): its variability model did not "
                   f"lower the held-out error in cross-validation ({auto.describe()})."
                   for label, model in self.models.items()
-                  if (auto := getattr(model, "auto_", None)) is not None and auto.fallback]
+                  if model.chooses_settings and (auto := model.auto_) is not None and auto.fallback]
         paired = () if self.statistics is None else self.statistics.headline
         return lines + verdicts(paired, self.metric)
 
@@ -387,7 +388,7 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
                     "cv" if s.n_components == "cv" else int(s.n_components))
     fitted, failed = _fit_each(system, tr, G, s.seed)
     if G == "cv":  # the data-efficiency fits take the G cross-validation chose on all training trials
-        G = int(getattr(fitted.get("proposed"), "n_components_", 5))
+        G = int(fitted["proposed"].n_components_ if "proposed" in fitted else N_COMPONENTS)
     timings["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     table = ev.compare(fitted, te, n_steps=s.n_steps, samples=s.samples, seed=s.seed,
@@ -405,7 +406,7 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
         eff = _efficiency(label, system, tr, te, sizes, G, s, executor, progress)
         timings["efficiency"] = time.perf_counter() - t0
     objective = None
-    if s.bootstrap > 0 and getattr(fitted.get("proposed"), "objective_", None) is not None:
+    if s.bootstrap > 0 and "proposed" in fitted and fitted["proposed"].objective_ is not None:
         t0 = time.perf_counter()
         objective = _objective_interval(label, fitted["proposed"], tr, s.bootstrap, s.seed + i, s.power)
         timings["objective intervals"] = time.perf_counter() - t0
@@ -612,7 +613,7 @@ def _statistics(table: pd.DataFrame, demos: DemonstrationSet, system: Any, n_ste
 def _settings_text(models: dict[str, Any]) -> str:
     """The proposed model's settings where cross-validation chose them, per label (with any fallback to K̂x)."""
     lines = [f"- {label}: {auto.describe()}" for label, model in models.items()
-             if (auto := getattr(model, "auto_", None)) is not None]
+             if model.chooses_settings and (auto := model.auto_) is not None]
     return ("\n\nThe proposed model's settings, chosen on each strategy's training trials:\n" + "\n".join(lines)
             if lines else "")
 
@@ -662,7 +663,7 @@ def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -
         row: dict[str, Any] = {"label": label, "metric": metric}
         for m in r.index:
             row[METHOD_TITLES.get(m, m)] = float(r[m])
-        for base in ("ioc_only", "gmr_only", "persistence"):
+        for base in (m for m in METHODS if m != "proposed"):
             d = by.get((str(label), metric, base))
             if d is not None:
                 row[f"vs {METHOD_TITLES[base]}"] = d.sentence()

@@ -90,7 +90,7 @@ def simulate_like(model, demos, n_trials: int, seed: int = 0):
     starts = np.array([d.x[0] for d in ds])
     lo, hi = starts.min(axis=0), starts.max(axis=0)
     A, B = np.asarray(model.system.A, dtype=float), np.asarray(model.system.B, dtype=float)
-    scale = np.asarray(model.noise_scale_, dtype=float) / float(getattr(model, "noise_band_factor_", 1.0))
+    scale = np.asarray(model.noise_scale_, dtype=float) / float(model.noise_band_factor_)
     out = []
     for j in range(int(n_trials)):
         like = ds[int(rng.integers(len(ds)))]
@@ -113,7 +113,7 @@ def as_fitted(model, demos) -> list:
     """The demonstrations as the model saw them: states relative to their targets when it is goal-relative."""
     from types import SimpleNamespace
 
-    from workbench.models.behavior import references
+    from workbench.models.fitting import references
 
     ds = list(demos)
     refs, _ = references(ds, model.system.n)

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 
-from workbench.models.names import METHOD_TITLES
+from workbench.models.registry import METHOD_TITLES
 
 __all__ = ["SCORE_METRICS", "heldout_scores", "score_lines", "fmt"]
 

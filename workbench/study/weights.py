@@ -462,7 +462,7 @@ class ObjectiveIntervals:
 
 def _used_gain(model) -> str:
     """The estimator that made the model's K̂ (its ``gain_method`` may be the rule "iv-or-direct")."""
-    return getattr(model, "gain_method_", None) or getattr(model, "gain_method", "direct")
+    return model.gain_method_
 
 
 def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv", ci: float = 95.0,
@@ -501,7 +501,7 @@ def objective_intervals(model, demos, n_boot: int = 100, seed: int = 0, ratio_ga
     from workbench.study.power import as_fitted
 
     method = _used_gain(model)
-    structure = getattr(model, "structure", "full")
+    structure = model.structure
     boot = bootstrap(as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
                      seed=seed)
     ratios, gain, note = ratio_bootstrap(model, demos, n_boot, seed, ratio_gain, boot.ci)

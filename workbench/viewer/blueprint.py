@@ -31,6 +31,7 @@ from typing import Any
 import rerun.blueprint as rrb
 from rerun.blueprint.components import LinkAxis
 
+from workbench.models.registry import REGISTRY
 from workbench.viewer import style
 from workbench.viewer.entities import LoggedSession, entity_part
 
@@ -128,7 +129,7 @@ def _scene_name(s: LoggedSession, across: str, up: str) -> str:
     if inside:  # a model shown on its own training trials: nothing here is a held-out number
         name = f"⚠ {', '.join(inside)} SHOWN ON ITS TRAINING TRIALS (in-sample) — " + name
     if s.methods:
-        words = {"proposed": "green", "ioc_only": "red", "gmr_only": "purple", "persistence": "brown"}
+        words = {m.name: style.color_name(m.colour) for m in REGISTRY}
         name += " — " + ", ".join(f"{style.method_title(m)} {words[m]}" if m in words else style.method_title(m)
                                   for m in s.methods)
         if s.bands:
@@ -197,7 +198,7 @@ def _objective_tab(s: LoggedSession) -> Any:
 def _score_title(s: LoggedSession, demo_id: str) -> str:
     """``"held-out RMSE: proposed 0.0996 m, persistence 0.418 m"`` for the label of ``demo_id`` (the study's or
     the view's held-out scores), or what the trial is when it has none."""
-    from workbench.models.names import METHOD_TITLES
+    from workbench.models.registry import METHOD_TITLES
 
     where = " (this trial IN-SAMPLE)" if demo_id in s.in_sample else ""
     if s.scores is None or not len(s.scores):

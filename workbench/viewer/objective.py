@@ -35,10 +35,10 @@ def heatmaps(model: Any, state_names: Sequence[str], input_names: Sequence[str])
     (eqs. (15)–(19) of the method paper)."""
     out = []
     states, inputs = tuple(state_names), tuple(input_names)
-    K = getattr(model, "K_", None)
-    if K is not None:
-        out.append(Heatmap("K", "K̂ (u = K̂x)", np.asarray(K, dtype=float), inputs, states))
-    objective = getattr(model, "objective_", None)
+    if not model.has_gain:
+        return out
+    out.append(Heatmap("K", "K̂ (u = K̂x)", np.asarray(model.K_, dtype=float), inputs, states))
+    objective = model.objective_
     if objective is not None:
         n = len(states)
         Mn = np.asarray(objective.M_normalized, dtype=float)
@@ -100,10 +100,10 @@ def _fmt_matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
 def model_summary(name: str, model: Any, state_names: Sequence[str], input_names: Sequence[str]) -> str:
     """A Markdown summary of a fitted model: gain, task objective (α, diagonal of normalized Q and R), GMM fit."""
     lines = [f"# Model {name}", "", f"`{type(model).__name__}`", ""]
-    K = getattr(model, "K_", None)
-    if K is not None:
-        lines += ["## Gain K̂ (u = K̂ x)", "", _fmt_matrix(np.asarray(K), input_names, state_names), ""]
-    objective = getattr(model, "objective_", None)
+    objective = None
+    if model.has_gain:
+        lines += ["## Gain K̂ (u = K̂ x)", "", _fmt_matrix(np.asarray(model.K_), input_names, state_names), ""]
+        objective = model.objective_
     if objective is not None:
         n = len(state_names)
         Mn = np.asarray(objective.M_normalized)

@@ -381,11 +381,9 @@ class SessionLogger:
         """
         s = self.session
         base = f"demos/{entity_part(demo.id)}/variability"
-        residuals = getattr(model, "residuals", None)
-        w = residuals(demo) if callable(residuals) else demo.u - demo.x @ np.asarray(model.K_).T
+        w = model.residuals(demo) if model.has_residuals else demo.u - demo.x @ np.asarray(model.K_).T
         out: dict[str, np.ndarray] = {"w": w}
-        has_gmr = callable(getattr(model, "variability", None))
-        if has_gmr:
+        if model.has_variability:
             mu, Sigma = model.variability(demo.x, x0=demo.x[0], target=demo.target)
             sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
             outside = np.abs(w - mu) > 3.0 * sigma
@@ -397,7 +395,7 @@ class SessionLogger:
             self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[style.W_COLOR], widths=[1.75],
                                                  interpolation_mode="StepAfter"))
             self._send(f"{p}/w", index, rr.Scalars.columns(scalars=w[:, j]))
-            if not has_gmr:
+            if not model.has_variability:
                 s.ranges[p] = data_range(w[:, j], min_span=self._min_span(name))
                 continue
             m_j, s_j = out["mu"][:, j], out["sigma"][:, j]

@@ -18,6 +18,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from workbench.models.registry import REGISTRY
+
 __all__ = [
     "METHOD_COLORS",
     "METHOD_TITLES",
@@ -49,15 +51,9 @@ PALETTE: tuple[tuple[int, int, int], ...] = (
     (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
 )
 RECORDED_COLOR = (225, 225, 225)
-METHOD_COLORS: dict[str, tuple[int, int, int]] = {
-    "recorded": RECORDED_COLOR,
-    "proposed": (44, 160, 44),
-    "ioc_only": (214, 39, 40),
-    "gmr_only": (148, 103, 189),
-    "persistence": (140, 86, 75),
-}
-METHOD_TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence",
-                 "recorded": "recorded"}
+# each method's colour and title are its registry entry's (workbench.models.registry), as in the report
+METHOD_COLORS: dict[str, tuple[int, int, int]] = {"recorded": RECORDED_COLOR, **{m.name: m.colour for m in REGISTRY}}
+METHOD_TITLES = {**{m.name: m.title for m in REGISTRY}, "recorded": "recorded"}
 # methods nobody named above get one of the colors no named method uses, the same one on every run
 _SPARE = ((227, 119, 194), (188, 189, 34), (23, 190, 207), (255, 127, 14), (31, 119, 180))
 W_COLOR = (110, 190, 255)  # ŵ: bright enough to read on top of its σ bands

@@ -7,7 +7,7 @@ Three kinds of evidence, all computed from the model and the demonstrations, nev
   next flight, so such trials are named "in-sample" wherever they are shown;
 * **mismatches** — what the model was fitted on differs from these data: state or input names, the vehicle
   roles, the sampling step (the data were resampled to the model's ``dt``), or states far outside the box of the
-  training states (``state_envelope_``, :func:`workbench.models.behavior.state_envelope`);
+  training states (``state_envelope_``, :func:`workbench.models.fitting.state_envelope`);
 * **calibration** — the share of the recorded inputs inside the model's ±1σ and ±3σ bands, judged by the one
   function every view, table and line uses, :func:`workbench.study.calibration.band_verdict` ("fits", "too
   narrow", "too wide", "does not fit" against the spread sampling allows; inputs at their limits left out).
@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import norm
 
+from workbench.models.behavior import BehaviorModel
 from workbench.models.training import in_sample, training_known
 from workbench.study.calibration import (
     DOES_NOT_FIT,
@@ -144,7 +145,7 @@ def mismatches(model: Any, state_names: Sequence[str], input_names: Sequence[str
 
 
 def _calibrated(model: Any) -> bool:
-    return callable(getattr(model, "input_distribution", None)) and getattr(model, "system", None) is not None
+    return isinstance(model, BehaviorModel)
 
 
 def verdict(name: str, model: Any, demos: Any, *, source_dt: float | None = None) -> Verdict:

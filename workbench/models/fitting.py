@@ -1,0 +1,161 @@
+"""Fitting helpers every behavior model shares: the demonstrations checked, goals and references, the gain, the
+task objective, the training states' envelope, vectors and seeds.
+
+Equation numbers count every ``\\begin{equation}`` of the method paper's LaTeX in order.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Iterable, Sequence
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.errors import DegenerateFitWarning, ModelError
+from workbench.method.gain import GainChoice, choose_gain
+from workbench.method.inverse_lqr_sdp import inverse_lqr
+from workbench.method.objective import TaskObjective
+from workbench.plant.system import LinearSystem
+
+__all__ = [
+    "ENVELOPE_MARGIN",
+    "MIN_DISTINCT_DEMOS",
+    "demo_list",
+    "goal_of",
+    "references",
+    "fit_gain",
+    "fit_objective_or_reason",
+    "state_envelope",
+    "envelope_exit",
+    "as_vector",
+    "json_seed",
+]
+
+# Margin of the training-state envelope, as a fraction of each state's training range (see `state_envelope`).
+ENVELOPE_MARGIN = 0.1
+# Fewer distinct demonstrations than this fit with a DegenerateFitWarning.
+MIN_DISTINCT_DEMOS = 3
+
+
+def demo_list(demos: DemonstrationSet | Iterable[Demonstration], system: LinearSystem, where: str) -> list:
+    """The demonstrations as a list, checked against the system (shapes, sampling step)."""
+    if isinstance(demos, Demonstration):
+        demos = [demos]
+    try:
+        out = list(demos)
+    except TypeError:
+        raise ModelError(
+            f"{where}: demos must be a DemonstrationSet or demonstrations, got {type(demos).__name__}"
+        ) from None
+    if not out:
+        raise ModelError(f"{where}: no demonstrations to fit")
+    n, m = system.n, system.m
+    for j, d in enumerate(out):
+        if not isinstance(d, Demonstration):
+            raise ModelError(f"{where}: item {j} is a {type(d).__name__}, not a Demonstration")
+        if d.x.shape[1] != n or d.u.shape[1] != m:
+            raise ModelError(
+                f"{where}: demonstration {d.id!r} has {d.x.shape[1]} states and {d.u.shape[1]} inputs; the "
+                f"system has n={n}, m={m}"
+            )
+    dt = getattr(demos, "dt", None)
+    if dt is not None and not math.isclose(float(dt), system.dt, rel_tol=1e-6):
+        raise ModelError(
+            f"{where}: the demonstrations are sampled at dt={dt:g} s but the system is discretized at "
+            f"dt={system.dt:g} s; resample the demonstrations or rebuild the system"
+        )
+    # identical copies (a file loaded twice, one trial repeated) add samples but no information
+    distinct = len({(d.x.tobytes(), d.u.tobytes()) for d in out})
+    if distinct < MIN_DISTINCT_DEMOS:
+        copies = f" ({len(out)} given; identical copies count once)" if distinct < len(out) else ""
+        warnings.warn(
+            f"{where}: fitting on {distinct} distinct demonstration(s){copies}; the gain, the variability's "
+            f"mixture and its noise rest on fewer than {MIN_DISTINCT_DEMOS} trials and will not generalize",
+            DegenerateFitWarning,
+            stacklevel=3,
+        )
+    return out
+
+
+def goal_of(d: Demonstration) -> np.ndarray:
+    """A demonstration's goal state: its known target, else its last state (the goal frame, eq. (33))."""
+    return d.target if d.target is not None else d.x[-1]
+
+
+def references(demos: Sequence[Demonstration], n: int) -> tuple[list[np.ndarray], bool]:
+    """The state each demonstration's linear term ``K̂(x − r)`` regulates to, and whether it is the target.
+
+    With every target known, ``r`` is the demonstration's target (the paper's coordinates put it at the
+    origin; a pad elsewhere then shifts the behavior with it). If any target is unknown, ``r = 0`` for all,
+    the paper's ``u = K̂x`` literally.
+    """
+    if all(d.target is not None for d in demos):
+        return [np.asarray(d.target, dtype=float) for d in demos], True
+    return [np.zeros(n) for _ in demos], False
+
+
+def fit_gain(
+    demos: Sequence[Demonstration], refs: Sequence[np.ndarray], system: LinearSystem, method: str
+) -> tuple[np.ndarray, GainChoice]:
+    """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.method.gain.choose_gain` on the shifted states, and which
+    estimator made it (``method`` may be the rule ``"iv-or-direct"``)."""
+    shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(demos, refs, strict=True)]
+    K, choice = choose_gain(shifted, system, method)
+    return np.ascontiguousarray(K), choice
+
+
+def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | None, str | None]:
+    """The task objective of ``K`` by inverse LQR (eqs. (15)-(19)) when ``model.fit_objective``, or why none.
+
+    The objective explains the gain; predictions never use it. So a solve that fails (no cost passes the
+    post-checks, the solver stops) is recorded, ``(None, reason)``, instead of taking the model with it: the
+    model still predicts, and a study keeps it in every comparison.
+    """
+    if not getattr(model, "fit_objective", False):
+        return None, None
+    try:
+        return inverse_lqr(model.system.A, model.system.B, K, structure=model.structure), None
+    except ModelError as exc:
+        return None, " ".join(str(exc).split())
+
+
+
+def state_envelope(demos: Sequence[Demonstration]) -> np.ndarray:
+    """The box ``[lo; hi]`` (2, n) the training states span, widened by ``ENVELOPE_MARGIN`` of its width per state.
+
+    A rollout outside it asks the model (the gain, the GMR's components, the residual statistics) about states it
+    has never seen: the prediction says so (``Prediction.envelope_exit``) and evaluations count it.
+    """
+    X = np.concatenate([d.x for d in demos])
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    pad = ENVELOPE_MARGIN * np.maximum(hi - lo, 1e-9)
+    return np.stack([lo - pad, hi + pad])
+
+
+def envelope_exit(X: np.ndarray, envelope: np.ndarray | None) -> int:
+    """First row of the trajectory ``X`` (H+1, n) outside the envelope, -1 if none (or no envelope)."""
+    if envelope is None:
+        return -1
+    outside = np.any((X < envelope[0]) | (X > envelope[1]), axis=1)
+    return int(np.argmax(outside)) if outside.any() else -1
+
+
+def as_vector(v: Any, n: int, what: str) -> np.ndarray:
+    """``v`` as n finite floats, or a ModelError naming ``what``."""
+    try:
+        a = np.asarray(v, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ModelError(f"{what} must be {n} numbers, got {v!r}") from None
+    if a.shape != (n,) or not np.isfinite(a).all():
+        raise ModelError(f"{what} must be {n} finite numbers, got {np.asarray(v).tolist()!r}")
+    return a
+
+
+def json_seed(random_state: Any) -> int | None:
+    """An integer seed as itself; anything else (None, a Generator) as None, for the model file."""
+    return int(random_state) if isinstance(random_state, int | np.integer) else None
+
