@@ -44,15 +44,16 @@ def identified_rows(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     return factors, ratios
 
 
-def fig_contrasts(factors: pd.DataFrame, ratios: pd.DataFrame, colors: Mapping[str, str]) -> Figure:
+def fig_contrasts(factors: pd.DataFrame, ratios: pd.DataFrame, colors: Mapping[str, str],
+                  column_width: float = 3.5) -> Figure:
     """A forest plot per kind of contrast (factors between strategies, with ×1 marked; ratios inside a part in
-    each strategy's colour): the estimate as a point, its interval as a line, on a log axis."""
-    from workbench.report.markdown import COLUMN_WIDTH  # the report's page geometry (imported late: no cycle)
+    each strategy's colour): the estimate as a point, its interval as a line, on a log axis; ``column_width`` in
+    inches (the report's :data:`~workbench.report.markdown.COLUMN_WIDTH`)."""
 
     panels = [(f, title) for f, title in ((factors, "factor between strategies"),
                                           (ratios, "weight ratio inside a coupled part")) if len(f)]
     n = max(1, max((len(f) for f, _ in panels), default=1))
-    fig = Figure(figsize=(COLUMN_WIDTH * (2 if len(panels) > 1 else 1.3), 0.9 + 0.32 * n), layout="constrained")
+    fig = Figure(figsize=(column_width * (2 if len(panels) > 1 else 1.3), 0.9 + 0.32 * n), layout="constrained")
     axs = fig.subplots(1, max(1, len(panels)), squeeze=False)[0]
     for ax, (rows, title) in zip(axs, panels, strict=False):
         y = np.arange(len(rows))[::-1]
@@ -72,7 +73,7 @@ def fig_contrasts(factors: pd.DataFrame, ratios: pd.DataFrame, colors: Mapping[s
 
 def objective_figure(objectives: Mapping[str, Any], labels: Sequence[str], table: pd.DataFrame | None,
                      path: str | os.PathLike, save: Callable[[Figure, os.PathLike], Any],
-                     colors: Mapping[str, str]) -> list[str]:
+                     colors: Mapping[str, str], column_width: float = 3.5) -> list[str]:
     """The Markdown of the objective figure, drawn and saved at ``path`` where the data identify a contrast; else
     one sentence saying why there is no figure."""
     from workbench.study.weights import compare_strategies
@@ -85,7 +86,7 @@ def objective_figure(objectives: Mapping[str, Any], labels: Sequence[str], table
     if not len(factors) and not len(identified):
         return ["*No objective figure: no weight ratio and no factor between strategies is identified (every "
                 "interval spans more than ×10).*", ""]
-    save(fig_contrasts(factors, identified, colors), os.fspath(path))
+    save(fig_contrasts(factors, identified, colors, column_width), os.fspath(path))
     parts = [what for rows, what in (
         (factors, "the factor between two strategies' ratios (dashed: ×1, no difference)"),
         (identified, "the weight ratios inside a coupled part, in each strategy's colour")) if len(rows)]

@@ -574,7 +574,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         md += [f"- {lb}: {c}" for lb in labels if (c := getattr(inputs.models[lb], "gain_choice_", None))] + [""]
     if obj_rows:  # only the contrasts the data identify, with their intervals (workbench/report/contrasts.py)
         md += objective_figure(inputs.objectives, labels, inputs.ratio_comparison, fig_dir / "objective.png",
-                               save_figure, {lb: _label_color(lb, labels) for lb in labels})
+                               save_figure, {lb: _label_color(lb, labels) for lb in labels}, COLUMN_WIDTH)
 
     # variability and predictions on one test trial per label
     cases_w, cases_p = {}, {}
