@@ -227,7 +227,7 @@ def fig_calibration(calibration: pd.DataFrame) -> Figure:
         ax.set_title(f"{label}: one-step band calibration")
         ax.grid(alpha=0.3)
     axs[0].set_ylabel("observed coverage [%]")
-    axs[0].legend(loc="center right")  # the curves run above it, the level names below
+    fig.legend(*axs[0].get_legend_handles_labels(), loc="outside lower center", ncols=3)  # never over a curve
     return fig
 
 
