@@ -74,7 +74,7 @@ def error_resolved(subsystem: float, code: float) -> bool:
 
 
 def error_text(subsystem: float, code: float, mode_table: str | None = None) -> str:
-    """``"EKFCHECK: EKFCHECK_BAD_VARIANCE"`` for subsystem 16, code 2; unknown numbers stay numbers."""
+    """``"EKFCHECK: BAD_VARIANCE"`` for subsystem 16, code 2; unknown numbers stay numbers."""
     s, c = int(subsystem), int(code)
     name = ERROR_SUBSYSTEMS.get(s)
     if name is None:
@@ -84,4 +84,6 @@ def error_text(subsystem: float, code: float, mode_table: str | None = None) -> 
     if name == "EKF_PRIMARY":
         return f"EKF_PRIMARY: core {c} is now the primary"
     codes = {**_GENERAL, **(_FAILSAFE if name.startswith("FAILSAFE_") else {}), **_BY_SUBSYSTEM.get(name, {})}
-    return f"{name}: {codes.get(c, f'code {c}')}"
+    # ArduPilot prefixes a subsystem's own codes with its name: said once ("EKFCHECK: BAD_VARIANCE")
+    text = codes.get(c, f"code {c}").removeprefix(name + "_").removeprefix(name.rstrip("S") + "_")
+    return f"{name}: {text}"

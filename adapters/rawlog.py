@@ -8,7 +8,7 @@ DataFlash ``.bin``) is shown as soon as its reader yields streams:
   has one (MAVLink: the message definitions' ``units``; a reader may give ``info["units"] = {stream: {field:
   unit}}``, as DataFlash FMTU does); MAVLink's ``sysid`` / ``compid`` header columns are left out;
 * **text** — MAVLink ``STATUSTEXT``, ULog logged messages (``info["logged_messages"]``), DataFlash ``MSG``,
-  ``ERR`` and ``EV`` (named by :mod:`adapters.events`: ``ARMED``, ``EKFCHECK: EKFCHECK_BAD_VARIANCE``), ROS 2
+  ``ERR`` and ``EV`` (named by :mod:`adapters.events`: ``ARMED``, ``EKFCHECK: BAD_VARIANCE``), ROS 2
   ``/rosout``, each with a severity;
 * **track** — latitude / longitude from the first stream that has a fix (``GLOBAL_POSITION_INT``,
   ``GPS_RAW_INT``, ``vehicle_global_position``, ``vehicle_gps_position``, ``sensor_gps``, ``GPS``); integer

@@ -234,4 +234,6 @@ def test_unknown_event_and_error_numbers_stay_numbers():
     assert event_name(250) == "event 250"
     assert error_text(200, 3) == "subsystem 200, code 3"
     assert error_text(16, 77) == "EKFCHECK: code 77"
+    assert error_text(16, 2) == "EKFCHECK: BAD_VARIANCE" and error_text(15, 2) == "PARACHUTES: TOO_LOW"
+    assert error_text(6, 1) == "FAILSAFE_BATT: FAILSAFE_OCCURRED"
     assert error_text(10, 6, "arducopter").endswith("RTL")  # a flight-mode error's code is the mode refused
