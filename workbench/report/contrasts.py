@@ -92,5 +92,5 @@ def objective_figure(objectives: Mapping[str, Any], labels: Sequence[str], table
         (identified, "the weight ratios inside a coupled part, in each strategy's colour")) if len(rows)]
     return [f"![Identified contrasts of the task objective](figures/{os.path.basename(path)})", "",
             "*The contrasts of the task objective the data identify (listed under \"What the data identify\"): "
-            f"{'; '.join(parts)}. Points are estimates, lines their profile intervals (as in the table above), on a "
+            f"{'; '.join(parts)}. Points are estimates, lines their intervals (those of the table above), on a "
             "log axis. The cost's entries one by one (Q, R above) are not identified and are not drawn.*", ""]
