@@ -203,7 +203,7 @@ def fig_calibration(calibration: pd.DataFrame) -> Figure:
     axs = fig.subplots(1, max(1, len(labels)), squeeze=False)[0]
     for ax, label in zip(axs, labels, strict=True):
         t = calibration[calibration["label"] == label]
-        ax.plot([0, 100], [0, 100], color="0.6", lw=1, ls="--", label="nominal")
+        ax.plot([0, 100], [0, 100], color="0.75", lw=0.8, ls="-", label="nominal")  # no input's dash
         for k, (inp, g) in enumerate(t.groupby("input", sort=False)):  # inputs in black/gray: hue is a strategy's
             g, st = g.sort_values("n_sigma"), input_style(k)
             ax.plot(100 * g["nominal"], 100 * g["coverage"], ms=2.5, label=str(inp), **st)

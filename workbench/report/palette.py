@@ -11,7 +11,7 @@ from __future__ import annotations
 __all__ = ["INPUT_STYLES", "input_style"]
 
 #: (colour, line style, marker) per input channel, in order
-INPUT_STYLES = (("#202020", "-", "o"), ("#808080", "--", "s"), ("#202020", ":", "^"), ("#808080", "-.", "D"))
+INPUT_STYLES = (("#202020", "-", "o"), ("#707070", "-.", "s"), ("#202020", ":", "^"), ("#707070", "--", "D"))
 
 
 def input_style(k: int) -> dict[str, str]:
