@@ -8,7 +8,8 @@ DataFlash ``.bin``) is shown as soon as its reader yields streams:
   has one (MAVLink: the message definitions' ``units``; a reader may give ``info["units"] = {stream: {field:
   unit}}``, as DataFlash FMTU does); MAVLink's ``sysid`` / ``compid`` header columns are left out;
 * **text** — MAVLink ``STATUSTEXT``, ULog logged messages (``info["logged_messages"]``), DataFlash ``MSG``,
-  ``ERR`` and ``EV``, ROS 2 ``/rosout``, each with a severity;
+  ``ERR`` and ``EV`` (named by :mod:`adapters.events`: ``ARMED``, ``EKFCHECK: BAD_VARIANCE``), ROS 2
+  ``/rosout``, each with a severity;
 * **track** — latitude / longitude from the first stream that has a fix (``GLOBAL_POSITION_INT``,
   ``GPS_RAW_INT``, ``vehicle_global_position``, ``vehicle_gps_position``, ``sensor_gps``, ``GPS``); integer
   degrees × 1e7 are recognised by their magnitude;
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from adapters.events import error_resolved, error_text, event_name
 from adapters.streams import Streams
 from adapters.summary import ModeSpan, summarize
 
@@ -146,10 +148,11 @@ def _text(streams: Streams) -> TextLog:
         rows += [(float(t), "INFO", str(x), "MSG") for t, x in zip(f["MSG"]["t"], f["MSG"]["Message"], strict=True)]
     if "ERR" in f and {"Subsys", "ECode"} <= set(f["ERR"].columns):
         e = f["ERR"]
-        rows += [(float(t), "ERROR", f"error: subsystem {int(a)}, code {int(b)}", "ERR")
+        table = streams.info.get("mode_table")
+        rows += [(float(t), "INFO" if error_resolved(a, b) else "ERROR", error_text(a, b, table), "ERR")
                  for t, a, b in zip(e["t"], e["Subsys"], e["ECode"], strict=True)]
     if "EV" in f and "Id" in f["EV"].columns:
-        rows += [(float(t), "INFO", f"event {int(i)}", "EV") for t, i in zip(f["EV"]["t"], f["EV"]["Id"], strict=True)]
+        rows += [(float(t), "INFO", event_name(i), "EV") for t, i in zip(f["EV"]["t"], f["EV"]["Id"], strict=True)]
     if "/rosout" in f and "msg" in f["/rosout"].columns:
         r = f["/rosout"]
         lv = r["level"].to_numpy() if "level" in r.columns else np.full(len(r), 20)

@@ -207,3 +207,33 @@ def test_map_drafts_a_mapping_for_each_dataflash_generation(tmp_path, style, veh
     path.write_text(draft.toml)
     ds = adapters.load(log, path)
     assert len(ds) >= 1 and set(ds.state_names) == set(adapters.load(log, draft.template).state_names)
+
+
+@pytest.mark.parametrize("style", ["old", "new"])
+def test_dataflash_events_and_errors_are_named(tmp_path, style):
+    """EV ids and ERR subsystem/code pairs read as ArduPilot names them (the raw view said "EV: event 10")."""
+    from adapters.events import ERROR_SUBSYSTEMS, EVENTS
+    from adapters.formats.dataflash_write import write_example
+
+    streams = adapters.read(write_example(tmp_path / f"{style}.bin", style, "copter", seconds=20.0, seed=1))
+    text = raw_log(streams).text
+    ev = [x for x, src in zip(text.texts, text.sources, strict=True) if src == "EV"]
+    assert ev == [EVENTS[int(i)] for i in streams.frames["EV"]["Id"]]
+    assert "ARMED" in ev and "DISARMED" in ev
+    err = [(x, lv) for x, lv, src in zip(text.texts, text.levels, text.sources, strict=True) if src == "ERR"]
+    codes = list(zip(streams.frames["ERR"]["Subsys"], streams.frames["ERR"]["ECode"], strict=True))
+    assert len(err) == len(codes)
+    for (x, level), (sub, code) in zip(err, codes, strict=True):
+        assert x.startswith(ERROR_SUBSYSTEMS[int(sub)] + ": ") and "code" not in x
+        assert level == ("INFO" if code == 0 else "ERROR")  # a cleared error is not an error
+
+
+def test_unknown_event_and_error_numbers_stay_numbers():
+    from adapters.events import error_text, event_name
+
+    assert event_name(250) == "event 250"
+    assert error_text(200, 3) == "subsystem 200, code 3"
+    assert error_text(16, 77) == "EKFCHECK: code 77"
+    assert error_text(16, 2) == "EKFCHECK: BAD_VARIANCE" and error_text(15, 2) == "PARACHUTES: TOO_LOW"
+    assert error_text(6, 1) == "FAILSAFE_BATT: FAILSAFE_OCCURRED"
+    assert error_text(10, 6, "arducopter").endswith("RTL")  # a flight-mode error's code is the mode refused

@@ -76,3 +76,23 @@ def test_report_without_bootstrap_says_so(tmp_path):
     assert res.objectives == {}
     text = write_study_report(res, tmp_path / "r").read_text()
     assert "No intervals" in text
+
+
+def test_the_objective_figure_draws_only_the_identified_contrasts(result, tmp_path):
+    """The figure's rows are exactly the table's identified factors and ratios, each with its own interval: no
+    entry of Q or R one by one (the attitude weight is not identified: METHOD.md), no unidentified ratio."""
+    from workbench.report.contrasts import fig_contrasts, identified_rows
+
+    table = compare_strategies({lb: oi.ratios for lb, oi in result.objectives.items()})
+    factors, ratios = identified_rows(table)
+    want_f = table[table["factor_identifiable"] == True]  # noqa: E712
+    want_r = table[table["identifiable"] == True]  # noqa: E712
+    assert len(factors) == len(want_f) and len(ratios) == len(want_r) and len(factors) + len(ratios) > 0
+    np.testing.assert_allclose(ratios["lo"], want_r["lo"].to_numpy(float))
+    np.testing.assert_allclose(factors["hi"], want_f["factor_hi"].to_numpy(float))
+    fig = fig_contrasts(factors, ratios, {"A": "#1f77b4", "B": "#ff7f0e"})
+    ticks = [t.get_text() for ax in fig.axes for t in ax.get_yticklabels()]
+    assert sorted(ticks) == sorted([*factors["label"], *ratios["label"]])
+    assert not any(t.startswith(("Q ", "R ")) or "λmax" in t for t in ticks)
+    text = write_study_report(result, tmp_path / "r").read_text()
+    assert "](figures/objective.png)" in text and (tmp_path / "r" / "figures" / "objective.svg").is_file()

@@ -212,3 +212,16 @@ def test_a_raw_log_opens_on_the_pilots_screen_attitude_in_degrees_and_named_stic
     if raw.track is not None:
         span = max(np.ptp(raw.track.lon), np.ptp(raw.track.lat))
         assert logged.zoom == map_zoom(raw) and 2 ** logged.zoom * 256 * span / 360 < 2000
+
+
+def test_the_raw_tab_opens_on_the_attitude_never_on_the_parameters():
+    """A tlog's busiest stream can be PARAM_VALUE (values to 4e7): the raw tab opens on ATTITUDE instead, and
+    without an attitude stream on the busiest stream that is not a parameter or format table."""
+    from workbench.viewer.rawlog import LoggedRaw, first_stream
+
+    s = LoggedRaw("log", "x.tlog", streams=["ATTITUDE", "PARAM_VALUE", "VFR_HUD"],
+                  rows={"ATTITUDE": 10, "PARAM_VALUE": 500, "VFR_HUD": 20})
+    assert s.streams[first_stream(s)] == "ATTITUDE"
+    s = LoggedRaw("log", "x.bin", streams=["FMT", "IMU", "PARM", "RCIN"],
+                  rows={"FMT": 900, "IMU": 300, "PARM": 800, "RCIN": 40})
+    assert s.streams[first_stream(s)] == "IMU"

@@ -239,6 +239,32 @@ def test_a_saved_live_recording_opens_collapsed_paused_and_every_event_has_a_lin
     assert RrdReader(path).recordings()
 
 
+def test_a_saved_live_recording_opens_at_the_vehicles_first_state_not_at_link_time_0(tmp_path):
+    """The vehicle's clock is its time since boot: what came before the first state (the waiting lines, a link
+    event) was stamped at link time 0, so a saved file opened minutes before any data. Held back, the event is
+    stamped at the first state and the placeholders are dropped; nothing on the link timeline precedes the data."""
+    from workbench.live.predictor import LiveEvent, LivePrediction
+
+    path = tmp_path / "live.rrd"
+    rec = rr.RecordingStream("workbench_live_test")
+    rec.save(path)
+    logger = LiveLogger(rec, ["x", "y"], ["u1"], plane=(0, 1, None), watched=False)
+    logger.event(LiveEvent("heard", 0.0, "heartbeat from system 1"))
+    first = 312.5  # s since the vehicle booted
+    for k in range(3):
+        logger.log(LivePrediction("flight-000", 0, k, first + 0.05 * k, 0.05 * k, np.zeros(2), np.zeros(1),
+                                  np.zeros(2), None, np.zeros(1), np.eye(1), None, None, None, None, None, 0.05))
+    logger.flush()
+    logger.finish()
+    rec.flush()
+    rec.disconnect()
+    ents = read_rrd(path)
+    stamps = [t for e in ents.values() for t in _flat(e.get("link_time", [])) if t is not None]
+    assert stamps and min(stamps) == first
+    assert "heartbeat from system 1" in _flat(ents["/live/events"]["TextLog:text"])
+    assert "/scene/live/waiting" not in ents or not _flat(ents["/scene/live/waiting"].get("Points2D:labels", []))
+
+
 def test_a_silent_live_recording_shows_the_port_it_waits_on_and_a_scene_to_wait_in():
     ents = read_rrd(recordings.cli_recording("live_silent"))
     status = _flat(ents["/live/status"]["TextDocument:text"])[-1]

@@ -228,7 +228,9 @@ def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: 
 
                 chosen, why = adapters.choose_mapping(f, format=None if ctx.stdio.format == "parquet"
                                                       else ctx.stdio.format)
-                ctx.say(f"{ctx.shown(f)}: mapping {chosen} ({why}; --mapping chooses another)")
+                # above the bar while it is drawn (printed beside it, the line ran on from the bar's, past 80 columns)
+                say = progress.console.print if progress.live.is_started else ctx.say
+                say(f"{ctx.shown(f)}: mapping {chosen} ({why}; --mapping chooses another)")
             ds = load_one(f, chosen, ctx.stdio.format, allow_still)
             if len(ds) and ds[0].meta.get("still"):
                 print(f"warning: {ds[0].meta['still']}", file=sys.stderr)

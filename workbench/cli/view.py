@@ -245,7 +245,8 @@ def cmd_live(ctx: Context) -> int:
     with link, viewer.open_output(rec, **out) as sink:
         logger = LiveLogger(rec, m.state_names, m.input_names, plane=plane, connection=a.connection,
                             vertical=scene is not None and scene.vertical,
-                            units={n: m.roles.unit(n) for n in m.state_names} if m.roles else None)
+                            units={n: m.roles.unit(n) for n in m.state_names} if m.roles else None,
+                            watched=not out["save"])
         if not out["save"]:
             rec.send_blueprint(live_blueprint([], m.state_names, m.input_names, scene=plane is not None,
                                               following=True))
@@ -264,6 +265,7 @@ def cmd_live(ctx: Context) -> int:
                              on_tick=on_tick, tick=0.25)
         finally:
             signal.signal(signal.SIGTERM, previous)
+        logger.finish()
         sink.blueprint = live_blueprint(logger.demo_ids, m.state_names, m.input_names, scene=plane is not None,
                                         bounds=logger.scene_bounds(), span=logger.link_span)
     c50, c99 = summary.percentiles("compute")

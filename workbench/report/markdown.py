@@ -8,7 +8,7 @@ under ``tables/``. Figures (``figures/`` beside the report), each drawn on a mat
 and never touches a user's session:
 
 * ``demonstrations.png`` — the flown paths per strategy;
-* ``objective.png`` — normalized Q and R side by side per strategy, the attitude term called out;
+* ``objective.png`` — the contrasts of the task objective the data identify, with their intervals;
 * ``variability.png`` — ŵ on a test trial with the GMR mean and 3σ band (eqs. (24)–(27));
 * ``calibration.png`` — one-step band coverage against the Gaussian nominal at 0.25σ … 3σ (the calibration curve);
 * ``predictions.png`` — predicted vs recorded trajectories of the three methods, with the Monte Carlo band;
@@ -46,8 +46,10 @@ from workbench.atomic import (
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
 from workbench.models.registry import METHOD_TITLES, REGISTRY
+from workbench.report.contrasts import objective_figure
+from workbench.report.palette import input_style
+from workbench.report.tables import efficiency_by_trial, save_table, scores_section, why_no_statistics
 from workbench.report.tables import md_table as _md_table
-from workbench.report.tables import save_table, scores_section, why_no_statistics
 from workbench.study.pipeline import StudyResult, improvement_table, metric_unit
 
 __all__ = [
@@ -142,7 +144,7 @@ def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
         if targets:
             tx, ty = targets[0][ix], targets[0][iy]
             ax.plot([tx - 0.5, tx + 0.5], [ty, ty], color="k", lw=4, solid_capstyle="butt", label="pad")
-            ax.legend(loc="upper right")
+            ax.legend(loc="lower right")  # the starts are at the top
         ax.set_title(f"{label}: {len(ds)} demonstrations")
         ax.set_xlabel(_titled(ds.state_names[ix], ds.roles))
         ax.grid(alpha=0.3)
@@ -200,12 +202,13 @@ def fig_calibration(calibration: pd.DataFrame) -> Figure:
     axs = fig.subplots(1, max(1, len(labels)), squeeze=False)[0]
     for ax, label in zip(axs, labels, strict=True):
         t = calibration[calibration["label"] == label]
-        ax.plot([0, 100], [0, 100], color="0.6", lw=1, ls="--", label="nominal")
-        for inp, g in t.groupby("input", sort=False):
-            g = g.sort_values("n_sigma")
-            line = ax.plot(100 * g["nominal"], 100 * g["coverage"], marker=".", label=str(inp))[0]
+        ax.plot([0, 100], [0, 100], color="0.75", lw=0.8, ls="-", label="nominal")  # no input's dash
+        for k, (inp, g) in enumerate(t.groupby("input", sort=False)):  # inputs in black/gray: hue is a strategy's
+            g, st = g.sort_values("n_sigma"), input_style(k)
+            ax.plot(100 * g["nominal"], 100 * g["coverage"], ms=2.5, label=str(inp), **st)
             marks = g[g["n_sigma"].isin([1.0, 2.0, 3.0])]
-            ax.scatter(100 * marks["nominal"], 100 * marks["coverage"], s=36, color=line.get_color(), zorder=3)
+            ax.scatter(100 * marks["nominal"], 100 * marks["coverage"], s=30, color=st["color"], marker=st["marker"],
+                       zorder=3)
         # the levels are named once per panel, on the nominal axis (every input shares them): per point, the 2σ
         # and 3σ labels of two inputs piled up in the top right corner, 4 points of nominal apart
         levels = t[t["n_sigma"].isin([1.0, 2.0, 3.0])].drop_duplicates("n_sigma").sort_values("n_sigma")
@@ -223,7 +226,7 @@ def fig_calibration(calibration: pd.DataFrame) -> Figure:
         ax.set_title(f"{label}: one-step band calibration")
         ax.grid(alpha=0.3)
     axs[0].set_ylabel("observed coverage [%]")
-    axs[0].legend()
+    fig.legend(*axs[0].get_legend_handles_labels(), loc="outside lower center", ncols=3)  # never over a curve
     return fig
 
 
@@ -254,7 +257,7 @@ def fig_variability(cases: Mapping[str, tuple[Demonstration, Any]], input_names:
             ax.grid(alpha=0.3)
             ax.set_ylabel(f"ŵ {input_names[j]}")
         axs[-1, c].set_xlabel("time since start [s]")
-    axs[0, 0].legend(loc="best")
+    fig.legend(*axs[0, 0].get_legend_handles_labels(), loc="outside lower center", ncols=4)  # not over ŵ
     return fig
 
 
@@ -393,13 +396,12 @@ def _metric_words(metric: str) -> str:
 
 
 def fig_data_efficiency(table: pd.DataFrame, unit: str = "m", what: str = "position RMSE") -> Figure:
-    """Mean RMSE (± standard error) against the number of training demonstrations, per method and label.
-
-    ``table`` has columns ``label``, ``method``, ``n_train`` and ``value`` (one row per trial and repeat).
-    """
+    """Mean RMSE (± standard error over test trials) against the number of training demonstrations, per method and
+    label, the key under the panels; ``table``: ``label, method, n_train, value`` (and ``trial``)."""
     labels = list(dict.fromkeys(table["label"]))
-    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 3.0 * len(labels)), 2.6), layout="constrained")
+    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 3.0 * len(labels)), 2.9), layout="constrained")
     axs = fig.subplots(1, len(labels), squeeze=False, sharey=True)[0]
+    table = efficiency_by_trial(table)  # a test trial's windows and subsets averaged: trials are the unit
     for ax, label in zip(axs, labels, strict=True):
         sub = table[table["label"] == label]
         for method, g in sub.groupby("method", sort=False):
@@ -415,7 +417,7 @@ def fig_data_efficiency(table: pd.DataFrame, unit: str = "m", what: str = "posit
         ax.set_title(f"{label}: data efficiency")
         ax.grid(alpha=0.3)
     axs[0].set_ylabel(f"{what} [{unit}]" if unit else what)
-    axs[0].legend()
+    fig.legend(*axs[0].get_legend_handles_labels(), loc="outside lower center", ncols=4)  # never over a point
     return fig
 
 
@@ -570,13 +572,9 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         md += _objective_interval_notes(inputs.objectives, labels, state_names, input_names,
                                         inputs.ratio_comparison)
         md += [f"- {lb}: {m.gain_choice_}" for lb in labels if (m := inputs.models[lb]).has_gain] + [""]
-    if any(m.has_gain and m.objective_ is not None for m in inputs.models.values()):
-        save_figure(fig_objective(inputs.models, state_names, input_names), fig_dir / "objective.png")
-        md += ["![Normalized Q and R](figures/objective.png)", "",
-               "*Normalized cost blocks (M / λmax(M)) per strategy. The SDP returns the minimum-condition-number cost "
-               "with the fitted gain, not a unique cost (see METHOD.md): its entries are not identified one by one, "
-               "so none is called out here; the contrasts the data identify, with their intervals, are under "
-               "\"What the data identify\".*", ""]
+    if obj_rows:  # only the contrasts the data identify, with their intervals (workbench/report/contrasts.py)
+        md += objective_figure(inputs.objectives, labels, inputs.ratio_comparison, fig_dir / "objective.png",
+                               save_figure, {lb: _label_color(lb, labels) for lb in labels}, COLUMN_WIDTH)
 
     # variability and predictions on one test trial per label
     cases_w, cases_p = {}, {}
@@ -648,15 +646,17 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         what = str(inputs.efficiency["metric"].iloc[0]) if "metric" in inputs.efficiency else "rmse_position"
         save_figure(fig_data_efficiency(inputs.efficiency, metric_unit(system, what), _metric_words(what)),
                     fig_dir / "data_efficiency.png")
-        eff = inputs.efficiency.groupby(["label", "n_train", "method"], sort=False)["value"].mean().unstack("method")
+        eff = efficiency_by_trial(inputs.efficiency).groupby(["label", "n_train", "method"], sort=False)["value"]
+        eff = eff.mean().unstack("method")
         eff = eff.rename(columns=METHOD_TITLES).reset_index()
         save_table(eff, tab_dir / "data_efficiency.csv")
         md += ["## Data efficiency", "", _md_table(eff), "",
                "![Data efficiency](figures/data_efficiency.png)", "",
                f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations, "
-               "scored like the tables above (every window of every test trial, a trial's windows averaged); error "
-               "bars: ± one standard error of that mean over the random training subsets drawn at each size (the "
-               "last size is the whole training set, the models of the tables).*", ""]
+               "scored like the tables above (every window of every test trial, a trial's windows and the random "
+               "training subsets drawn at that size averaged, then the mean over trials); error bars: ± one "
+               "standard error of that mean over the test trials (the last size is the whole training set, the "
+               "models of the tables).*", ""]
     elif inputs.empty.get("efficiency"):
         md += ["## Data efficiency", "", f"*None: {inputs.empty['efficiency']}.*", ""]
     md += ["## Statistics of the comparison", ""]

@@ -17,7 +17,7 @@ from workbench.atomic import atomic_path, atomic_write_text
 from workbench.models.registry import METHOD_TITLES
 from workbench.study.pipeline import metric_unit
 
-__all__ = ["md_table", "save_table", "scores_section", "why_no_statistics"]
+__all__ = ["efficiency_by_trial", "md_table", "save_table", "scores_section", "why_no_statistics"]
 
 
 def md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -83,3 +83,14 @@ def scores_section(inputs: Any, system: Any, tab_dir: Path) -> list[str]:
                  "over trials]; MC band coverage: share of the horizon's steps at which the recorded positions lie "
                  "inside the 5–95 % Monte Carlo band (nominal 90 %); persistence has no band. "
                  "`tables/heldout_scores.csv` holds every value.*", ""]
+
+
+def efficiency_by_trial(table: pd.DataFrame) -> pd.DataFrame:
+    """The data-efficiency rows scored like the comparison's tables: one value per label, method, size and test
+    trial — the mean over that trial's windows and over the random training subsets drawn at that size — so a
+    size's mean is over trials and its spread is between trials (the unit the statistics use). Rows without a
+    trial (a table from elsewhere) count one each."""
+    keys = ["label", "method", "n_train"]
+    if "trial" not in table or table["trial"].isna().all():
+        return table[[*keys, "value"]].copy()
+    return table.dropna(subset=["trial"]).groupby([*keys, "trial"], sort=False)["value"].mean().reset_index()

@@ -72,8 +72,12 @@ class LiveLogger:
 
     def __init__(self, rec: rr.RecordingStream, state_names: Sequence[str], input_names: Sequence[str], *,
                  plane: tuple[int, int, int | None] | None = None, connection: str | None = None,
-                 vertical: bool = False, units: Mapping[str, str] | None = None) -> None:
+                 vertical: bool = False, units: Mapping[str, str] | None = None, watched: bool = True) -> None:
         self.rec = rec
+        # a saved file (nobody watching) holds back what comes before the vehicle's first state: stamped at link
+        # time 0 it opened the file minutes before any data (the vehicle's clock is its time since boot)
+        self.watched = watched
+        self._pending: list[tuple[str, Any, bool]] = []  # (entity, archetype, a waiting placeholder)
         self.units = dict(units or {})
         self.connection = connection
         self.vertical = vertical
@@ -91,9 +95,9 @@ class LiveLogger:
         self._link_t = 0.0  # the vehicle's latest time: where events without a step of their own are stamped
         self.link_span: tuple[float, float] | None = None  # the first and last step on the link's clock
         self._at(0.0, 0.0, 0)
-        rec.log("live/events", rr.TextLog("waiting for the link", level="INFO"))
-        rec.log("live/status", rr.TextDocument("# Link\n\nwaiting for the first message …",
-                                               media_type=rr.MediaType.MARKDOWN))
+        self._early("live/events", rr.TextLog("waiting for the link", level="INFO"))
+        self._early("live/status", rr.TextDocument("# Link\n\nwaiting for the first message …",
+                                                   media_type=rr.MediaType.MARKDOWN))
         rec.log("live/compute_ms", rr.SeriesLines(names=["align + predict [ms]"], colors=[_PRED]), static=True)
         rec.log("live/latency_ms", rr.SeriesLines(names=["message → prediction [ms]"], colors=[_W]), static=True)
         if plane is not None:
@@ -102,8 +106,29 @@ class LiveLogger:
             # appear, and a line saying what it waits for (cleared at the first step)
             self._frame(([-2.0, 2.0], [-2.5, 0.5]))
             where = f" on {connection}" if connection else ""
-            rec.log("scene/live/waiting", rr.Points2D([[0.0, -1.0]], radii=[0.0], colors=[(200, 200, 200)],
-                                                     labels=[f"waiting for the vehicle's first state{where}"]))
+            self._early("scene/live/waiting", rr.Points2D([[0.0, -1.0]], radii=[0.0], colors=[(200, 200, 200)],
+                                                          labels=[f"waiting for the vehicle's first state{where}"]))
+
+    def _early(self, path: str, archetype: Any, placeholder: bool = True) -> bool:
+        """Log now, or — in a saved file before the vehicle's first state — hold back until its time is known
+        (:meth:`log` stamps held events at the first state, :meth:`finish` everything at 0 if none came); a
+        ``placeholder`` (waiting lines, the waiting status) is dropped once a state came. Returns whether held."""
+        if self.watched or self.link_span is not None:
+            self.rec.log(path, archetype)
+            return False
+        if placeholder:  # only the newest of each: a status replaces the previous one
+            self._pending = [e for e in self._pending if not (e[2] and e[0] == path)]
+        self._pending.append((path, archetype, placeholder))
+        return True
+
+    def finish(self) -> None:
+        """At the end of a saved session: what was held back while no state came, at link time 0 (a silent link's
+        file then opens on why it is empty)."""
+        if self._pending:
+            self._at(0.0, 0.0, 0)
+            for path, archetype, _ in self._pending:
+                self.rec.log(path, archetype)
+            self._pending = []
 
     # -- styling, once per segment ---------------------------------------------------------------------------
     def _style(self, demo_id: str) -> None:
@@ -146,6 +171,12 @@ class LiveLogger:
         new = p.demo_id not in self._styled
         self._style(p.demo_id)
         self._link_t = float(p.t)
+        if self.link_span is None and self._pending:  # the first state: held events at its time, no placeholder
+            self._at(p.t, p.t_rel, p.k)
+            for path, archetype, placeholder in self._pending:
+                if not placeholder:
+                    self.rec.log(path, archetype)
+            self._pending = []
         lo, hi = self.link_span or (self._link_t, self._link_t)
         self.link_span = (min(lo, self._link_t), max(hi, self._link_t))
         if new:
@@ -301,7 +332,7 @@ class LiveLogger:
         level = "WARN" if ev.kind in ("silent", "reset") else "INFO"
         # the event's own time is the wall clock; on the link timeline it sits at the vehicle's latest time
         self.rec.set_time("link_time", duration=self._link_t)
-        self.rec.log("live/events", rr.TextLog(ev.text, level=level))
+        self._early("live/events", rr.TextLog(ev.text, level=level), placeholder=False)
 
     def status(self, stats: LinkStats) -> None:
         """The link's counts as a small Markdown table (what was received, what was dropped and why)."""
@@ -319,7 +350,7 @@ class LiveLogger:
             *([f"- waiting for: {', '.join(stats.waiting_for)}"] if stats.waiting_for else []),
             "", "| count | n |", "|---|---|", *rows,
         ])
-        self.rec.log("live/status", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
+        self._early("live/status", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
 
 
 def link_state(stats: LinkStats) -> str:

@@ -48,6 +48,7 @@ SEGMENT_STATES = {
 # clock and time-stamp fields (time_boot_ms, timestamp_sample, armed_time_ms, TimeUS, stamp.sec, …): hidden by
 # default, since their ramp flattens every other line of a stream's plot
 _CLOCKISH = re.compile(r"time|stamp", re.IGNORECASE)
+MAX_ZOOM = 24.0  # the deepest map zoom map_zoom gives
 GAP_S = 1.0  # s: a stream silent for longer is drawn with a break (see with_breaks)
 _ARMED = {"armed": (214, 39, 40), "disarmed": (200, 200, 200)}
 
@@ -228,6 +229,22 @@ def bulk_span(s: LoggedRaw, share: float = 0.01) -> tuple[float, float]:
     return (min(a for a, _ in spans), max(b for _, b in spans)) if spans else s.span
 
 
+#: streams that describe the log rather than the flight: never the raw tab's first stream (a short log's busiest
+#: stream is its parameter list, PARAM_VALUE with values up to 4e7, or its format table)
+_NOT_FIRST = {"PARM", "PARAM_VALUE", "FMT", "FMTU", "UNIT", "MULT", "MSG", "STATUSTEXT", "FILE", "MISSION_ITEM",
+              "MISSION_ITEM_INT", "CMD", "MAV", "VER"}
+
+
+def first_stream(s: LoggedRaw) -> int:
+    """The raw tab's first stream: the attitude (ATT, ATTITUDE, vehicle_attitude) where the log has it, else the
+    busiest stream that is not a parameter or format table; the tabs themselves stay in name order."""
+    for (name, _, _), _sp in ATTITUDE_SOURCES:
+        if name in s.streams:
+            return s.streams.index(name)
+    flight = [k for k, n in enumerate(s.streams) if n.split("[")[0] not in _NOT_FIRST] or list(range(len(s.streams)))
+    return max(flight, key=lambda k: (s.rows.get(s.streams[k], 0), -k))
+
+
 def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
     """The raw log's tabs: streams (a plot per stream beside the mode lane and the messages), map, parameters."""
     p = f"/{s.prefix}"
@@ -247,9 +264,7 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
     # first, a pilot's screen (attitude with setpoints, sticks, modes, the track); every stream a click away
     tabs: list[rrb.Container | rrb.View] = pilot_views(s.pilot, s, s.zoom) if s.pilot else []
     if plots:
-        # the busiest stream first on screen (attitude or IMU in a flight log), the tabs in name order
-        busiest = max(range(len(s.streams)), key=lambda k: (s.rows.get(s.streams[k], 0), -k))
-        main: Any = rrb.Tabs(*plots, name="streams", active_tab=busiest)
+        main: Any = rrb.Tabs(*plots, name="streams", active_tab=first_stream(s))
         if lane_view is not None:
             # about 40 px a lane under its header: a third lane (segments) was cut at 1/6 of the height
             main = rrb.Vertical(main, lane_view, row_shares=[5, 1] if len(lanes) <= 2 else [3.5, 1])
@@ -363,11 +378,13 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
         spans.append((float(s.t[0]), float(s.t[-1])))
         break
     sticks: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    units: set[str] = set()
     px4 = by_name.get("manual_control_setpoint")
     if px4 is not None and len(px4.t):
         for stick, f in _PX4_STICKS.items():
             if (col := _field(px4, f)) is not None:
                 sticks[stick] = (px4.t, col)
+        units.add("normalized")  # PX4's sticks are -1…1 (throttle 0…1 or -1…1 by version), no unit in the log
     else:
         channels = _stick_channels(raw)
         for stream, pattern in _RC_STREAMS:
@@ -377,6 +394,7 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
             for stick, n in channels.items():
                 if (col := _field(s, pattern.format(n=n))) is not None:
                     sticks[stick] = (s.t, col)
+                    units.add(_pwm(s.units[s.fields.index(pattern.format(n=n))]))
             if sticks:
                 break
     colors = {"roll": (31, 119, 180), "pitch": (44, 160, 44), "throttle": (214, 39, 40), "yaw": (148, 103, 189)}
@@ -387,9 +405,15 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
         send_columns(rec, path, _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent))
         spans.append((float(t[0]), float(t[-1])))
     found["sticks"] = bool(sticks)
+    found["stick_unit"] = units.pop() if len(units) == 1 else ""  # the format's unit (FMTU, MAVLink's units)
     if spans:
         found["span"] = (min(a for a, _ in spans) - origin, max(b for _, b in spans) - origin)
     return found
+
+
+def _pwm(unit: str) -> str:
+    """A pulse width's unit as people write it: DataFlash's FMTU and MAVLink say ``us``."""
+    return "µs" if unit in ("us", "µs") else unit
 
 
 def map_zoom(raw: RawLog, viewport_px: float = 700.0) -> float:
@@ -405,7 +429,8 @@ def map_zoom(raw: RawLog, viewport_px: float = 700.0) -> float:
     span_lon = float(np.ptp(lon[ok]))
     span_lat = float(np.ptp(lat[ok])) / max(np.cos(np.radians(float(np.median(lat[ok])))), 0.1)
     span = max(span_lon, span_lat, 1e-6)
-    return float(np.clip(np.log2(360.0 * viewport_px / 256.0 / span) - 0.3, 1.0, 21.0))
+    # up to 24: a hover's 2 m track was a 50-px blob at 21 (the viewer draws past the tiles' own deepest level)
+    return float(np.clip(np.log2(360.0 * viewport_px / 256.0 / span) - 0.3, 1.0, MAX_ZOOM))
 
 
 def pilot_views(found: dict, logged: LoggedRaw, zoom: float) -> list[Any]:
@@ -415,7 +440,10 @@ def pilot_views(found: dict, logged: LoggedRaw, zoom: float) -> list[Any]:
     plots = [rrb.TimeSeriesView(origin=f"{p}/{a}", name=f"{a} [°] (setpoint orange)", axis_x=_whole_log(window),
                                 plot_legend=rrb.PlotLegend(visible=False)) for a in found["angles"]]
     if found["sticks"]:
-        plots.append(rrb.TimeSeriesView(origin=f"{p}/sticks", name="sticks: roll, pitch, throttle, yaw",
+        unit = found.get("stick_unit", "")
+        plots.append(rrb.TimeSeriesView(origin=f"{p}/sticks", name="sticks: roll, pitch, throttle, yaw"
+                                        + (f" [{unit}]" if unit and unit != "normalized" else
+                                           " (normalized)" if unit else ""),
                                         axis_x=_whole_log(window), plot_legend=rrb.PlotLegend("LeftTop")))
     if logged.modes:
         plots.append(rrb.StateTimelineView(origin="/", contents=[f"+ /{found['prefix']}/mode"], name="flight mode",
