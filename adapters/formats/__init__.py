@@ -18,7 +18,6 @@ import pkgutil
 from pathlib import Path
 
 from adapters.formats.base import Format
-from adapters.formats.files import read_bytes
 from workbench.errors import DataError, FormatError
 
 __all__ = ["Format", "FORMATS", "detect_format", "get_format", "sniff", "format_for_suffix", "log_suffixes",
@@ -84,6 +83,8 @@ def detect_format(path: str | os.PathLike) -> Format:
     FormatError
         No known format matches; the message lists the known formats and what the extension suggested.
     """
+    from adapters.formats.files import read_bytes  # workbench.atomic behind it: not for the parser's --help
+
     where = os.fspath(path)
     head = read_bytes(path, _HEAD)
     if not head:

@@ -157,3 +157,24 @@ def test_view_saves_the_raw_log(fmt, logs, tmp_path, capsys):
     assert main(["view", str(logs[fmt.name]), "--save", str(out)]) == 0
     assert f"(the raw log: {n_streams} streams" in capsys.readouterr().out
     assert out.stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_the_demo_runs_on_a_folder_of_every_format(tmp_path, capsys):
+    """``demo --logs DIR`` over one log per format (six trials a strategy each, enough for its split): every log
+    imported, the study and its outputs made (4 min under load, 41 s of CPU)."""
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    n = 0
+    for i, f in enumerate(ALL):
+        from workbench.sim.landing import simulate_landings
+
+        ds = (simulate_landings("CS1", 6, seed=2 * i, subject=f"s{i:02d}")
+              + simulate_landings("CS2", 6, seed=2 * i + 1, subject=f"s{i:02d}"))
+        adapters.write(ds, folder / f"landing_{f.name}{f.suffix}", MAPPING)
+        n += len(ds)
+    assert main(["demo", "--logs", str(folder), "--out", str(tmp_path / "out"), "--samples", "0",
+                 "--no-efficiency"]) == 0
+    out = capsys.readouterr().out
+    assert f"imported {n} demonstrations" in out and f"from {len(ALL)} logs" in out
+    assert all(f"1 {f.output_name}" in out for f in ALL)
