@@ -4,7 +4,8 @@ The formats come from the registry, never from a list here: a format added there
 added. Each one gets a log written by its own writer from simulated landings (through the planar-quadrotor mapping,
 which the writer inverts), then: ``inspect`` it, ``import`` it (the trials come back), ``import -`` from standard
 input (recognised by its bytes, and named with ``--format``), a folder of one log per format imported as a dataset,
-``demo --logs`` finding it, ``simulate -o - --output-format`` writing it, and ``view --save`` recording it.
+``demo --logs`` finding it (and, marked slow, running on it), ``simulate -o - --output-format`` writing it,
+``view --save`` recording it, and rerun's importer claiming it or passing it on.
 """
 
 from __future__ import annotations
@@ -178,3 +179,18 @@ def test_the_demo_runs_on_a_folder_of_every_format(tmp_path, capsys):
     out = capsys.readouterr().out
     assert f"imported {n} demonstrations" in out and f"from {len(ALL)} logs" in out
     assert all(f"1 {f.output_name}" in out for f in ALL)
+
+
+@pytest.mark.parametrize("fmt", ALL, ids=IDS)
+def test_rerun_importer_claims_the_formats_that_declare_it(fmt, logs, capfdbinary):
+    """``rerun-importer-workbench LOG``: an rrd stream for a format whose ``rerun_importer`` is true, else 66 (rerun
+    asks the next importer)."""
+    from workbench.cli.loader import INCOMPATIBLE
+    from workbench.cli.loader import main as importer
+
+    status = importer([str(logs[fmt.name])])
+    stream = capfdbinary.readouterr().out  # rerun writes to the file descriptor itself
+    if fmt.rerun_importer:
+        assert status == 0 and stream.startswith(b"RRF")
+    else:
+        assert status == INCOMPATIBLE and not stream
