@@ -10,7 +10,8 @@ on a uniform ``dt`` grid, the *segmenter* (:mod:`adapters.segment`) cuts the res
 >>> ds = adapters.load("flight.tlog", mapping="ardupilot_manual")       # doctest: +SKIP
 >>> print(adapters.inspect("flight.tlog"))                              # doctest: +SKIP
 
-Formats: MAVLink ``.tlog``, MCAP, PX4 ULog, CSV (:mod:`adapters.formats`), recognised by their first bytes.
+Formats: each declared by its own module in ``adapters/formats/declared/`` (:mod:`adapters.formats`), recognised by
+their first bytes.
 """
 
 from __future__ import annotations

@@ -20,14 +20,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from adapters.formats import log_suffixes
 from workbench.data.dataset import DatasetWriter, Partition, write_partitions
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError
 
 __all__ = ["LOG_SUFFIXES", "LogImport", "ImportReport", "expand_logs", "import_log", "import_logs"]
 
-#: Files a directory contributes: the readers' extensions and demonstration files.
-LOG_SUFFIXES = (".tlog", ".mcap", ".ulg", ".ulog", ".csv", ".parquet", ".pq")
+#: Files a directory contributes: every declared format's extensions (:mod:`adapters.formats`) and
+#: demonstration files.
+LOG_SUFFIXES = (*log_suffixes(), ".parquet", ".pq")
 
 
 @dataclass(frozen=True)

@@ -112,7 +112,7 @@ def _has(sel: Selector, streams: Streams, n_columns: int | None = 1) -> bool:
 def _pick(ch: Channel, streams: Streams, fmt: str) -> Channel | None:
     from adapters.transforms import TRANSFORMS
 
-    extra = BIN_CHANNELS.get(ch.name, []) if fmt not in ("tlog", "ulog", "mcap", "csv") else []
+    extra = BIN_CHANNELS.get(ch.name, []) if fmt == "dataflash" else []  # DataFlash's own field names
     variants = [*ch.variants, *(replace(e, name=ch.name) for e in extra)]
     for v in variants:
         # each source of a selector on its own: the TOML names the one this log has

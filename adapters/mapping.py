@@ -44,7 +44,7 @@ Schema
 
     [tlog.channels]                     # per-format overrides: [<format>.channels], [<format>.segment],
     x = "LOCAL_POSITION_NED.y"          # [<format>.meta], <format>.clock — merged over the tables above
-                                        # when a file of that format is read (tlog, mcap, ulog, csv)
+                                        # when a file of that format is read (a declared format's name)
 
 Errors in a mapping file are :class:`~workbench.errors.MappingError` naming the file and the key; a source
 that names a stream or field the log lacks is one too, listing the nearest names the log does contain.
@@ -65,6 +65,7 @@ import numpy as np
 if TYPE_CHECKING:
     import pandas as pd
 
+from adapters.formats import FORMATS
 from adapters.modes import MODE_TABLES, mode_name, mode_number
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
 from adapters.transforms import TRANSFORMS
@@ -87,7 +88,7 @@ __all__ = [
 ]
 
 MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
-FORMAT_NAMES = ("tlog", "dataflash", "mcap", "ulog", "csv")
+FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per declared format
 DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", *FORMAT_NAMES

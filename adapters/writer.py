@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from adapters.formats import FORMATS, get_format
+from adapters.formats import format_for_suffix, get_format
 from adapters.mapping import ChannelMapping, Selector, channel_inverse, load_mapping
 from adapters.meta import format_markers
 from workbench.data.demonstrations import DemonstrationSet
@@ -156,9 +156,8 @@ def format_for_path(path: str | os.PathLike, fmt: str | None = None) -> str:
     if fmt is not None:
         return get_format(fmt).name
     suffix = Path(path).suffix.lower()
-    for f in FORMATS.values():
-        if suffix in f.extensions:
-            return f.name
+    if (by_suffix := format_for_suffix(suffix)) is not None:
+        return by_suffix.name
     raise DataError(f"{os.fspath(path)}: cannot tell the format from the extension {suffix!r}; pass format=")
 
 
@@ -185,8 +184,8 @@ def write(
         if name in streams:
             raise DataError(f"extra stream {name!r} is also written by the mapping")
         streams[name] = frame
-    writer = get_format(fmt).write
-    if writer is None:
+    writer = get_format(fmt)
+    if not writer.writable:
         raise DataError(f"format {fmt!r} has no writer")
-    return writer(path, streams, **options)
+    return writer.write(path, streams, **options)
 

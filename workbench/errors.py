@@ -14,6 +14,7 @@ __all__ = [
     "MappingError",
     "ModelError",
     "SolverError",
+    "UsageError",
     "WorkbenchWarning",
     "ConvergenceWarning",
     "DegenerateFitWarning",
@@ -42,6 +43,12 @@ class ModelError(WorkbenchError, ValueError):
 
 class SolverError(ModelError):
     """Every solver in the chain failed or returned a solution that did not pass the post-checks."""
+
+
+class UsageError(WorkbenchError, ValueError):
+    """A command's arguments do not go together, or one is malformed in a way the parser cannot check (``predict``
+    without a trial or a state, ``-o -`` for a folder): the command line says so in one line with argparse's exit
+    status, 2."""
 
 
 class WorkbenchWarning(UserWarning):

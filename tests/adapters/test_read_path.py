@@ -89,8 +89,11 @@ def test_streams_still_take_dataframes():
     np.testing.assert_array_equal(cols["x"], frame["x"].to_numpy())
 
 
-def test_sniffing_uses_the_mcap_readers_magic():
-    from adapters.formats import MCAP_MAGIC
-    from adapters.formats.mcap import MAGIC
+@pytest.mark.parametrize("name", ["mcap", "ulog", "dataflash"])
+def test_sniffing_uses_the_readers_magic(name):
+    """A declaration keeps its own copy of the magic bytes (sniffing imports no reader); it is the reader's."""
+    import importlib
 
-    assert MCAP_MAGIC == MAGIC
+    declared = importlib.import_module(f"adapters.formats.declared.{name}")
+    reader = importlib.import_module(f"adapters.formats.{name}")
+    assert declared.MAGIC == reader.MAGIC

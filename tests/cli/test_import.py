@@ -29,3 +29,16 @@ def test_a_set_label_keeps_the_mappings_roles(copter_log, tmp_path, option):
     assert ds.labels == ["X"]
     assert ds.roles == expected.roles
     assert ds.ids == expected.ids
+
+
+def test_a_folder_with_a_dataflash_log_imports_it(copter_log, tmp_path, capsys):
+    """``import DIR/`` takes every declared format's files from a folder: a DataFlash ``.bin`` was left out (the
+    folder held "no logs"; fails on the previous main)."""
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    (folder / copter_log.name).write_bytes(copter_log.read_bytes())
+    expected = adapters.load(copter_log, mapping="ardupilot_manual")
+    out = tmp_path / "dataset"
+    assert main(["import", str(folder), "--mapping", "ardupilot_manual", "-o", f"{out}/"]) == 0
+    assert "from 1 of 1 logs" in capsys.readouterr().out
+    assert load_demonstrations(out).n_samples == expected.n_samples

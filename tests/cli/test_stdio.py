@@ -105,14 +105,14 @@ def test_fit_to_stdout_then_predict_reads_the_model_from_stdin(tmp_path):
 
 def test_stdin_is_read_once(monkeypatch, capsys):
     monkeypatch.setattr(sys, "stdin", _Stdin(TLOG.read_bytes()))
-    assert main(["view", "-", "--model", "-", "--save", "x.rrd"]) == 1
+    assert main(["view", "-", "--model", "-", "--save", "x.rrd"]) == 2  # a UsageError: argparse's status
     assert "already" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("args", [["report", str(TLOG), "-o", "-"], ["demo", "--out", "-"],
                                   ["simulate", "--sample-logs", "-"]])
 def test_a_folder_output_refuses_stdout(args, capsys):
-    assert main(args) == 1
+    assert main(args) == 2  # a UsageError: argparse's status
     err = capsys.readouterr().err
     assert "-:" in err and "folder" in err
 
@@ -123,7 +123,7 @@ def test_binary_to_a_terminal_is_refused(monkeypatch, capsys):
             return True
 
     monkeypatch.setattr(sys, "stdout", Tty())
-    assert main(["import", str(TLOG), "-o", "-"]) == 1
+    assert main(["import", str(TLOG), "-o", "-"]) == 2  # a UsageError: argparse's status
     assert "terminal" in capsys.readouterr().err
 
 

@@ -26,7 +26,7 @@ def test_a_glob_over_a_folder_of_logs_skips_what_is_not_a_log(tmp_path, capsys):
 
 
 def test_an_unknown_output_extension_names_the_ones_the_cli_takes(tmp_path, capsys):
-    assert main(["import", str(REPO / "sample_logs" / "landing_s00.tlog"), "-o", str(tmp_path / "out.json")]) == 1
+    assert main(["import", str(REPO / "sample_logs" / "landing_s00.tlog"), "-o", str(tmp_path / "out.json")]) == 2
     err = capsys.readouterr().err
     assert "format=" not in err and ".parquet" in err and ".csv" in err and "DIR/" in err
 

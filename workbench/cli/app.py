@@ -14,9 +14,10 @@ import warnings
 from collections.abc import Sequence
 
 from workbench import interrupts
-from workbench.cli.context import EXIT_ERROR, EXIT_INTERNAL, Context, one_line
+from workbench.cli.context import EXIT_ERROR, EXIT_INTERNAL, EXIT_USAGE, Context
 from workbench.cli.parser import build_parser
-from workbench.errors import WorkbenchError
+from workbench.cli.writing import one_line
+from workbench.errors import UsageError, WorkbenchError
 from workbench.threads import limit_threads
 
 __all__ = ["main"]
@@ -73,7 +74,8 @@ def _forget_escaped_interrupt() -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; the exit status (0 done, 1 a clear error, 3 an internal one, 130 interrupted).
+    """Run the command line; the exit status (0 done, 1 a clear error, 2 bad arguments as argparse's, 3 an internal
+    one, 130 interrupted).
 
     Called with no ``argv`` (the console script, ``python -m workbench``) this call is the whole process: Ctrl-C
     then ends it with the one line ``interrupted`` and status 130, never a traceback or an abort (see
@@ -135,7 +137,7 @@ def _run(argv: Sequence[str] | None) -> int:
         tidy = ctx.stdio.tidy if ctx is not None else str  # <stdin>, not the temporary file's name
         if isinstance(exc, WorkbenchError):
             print(f"error: {tidy(one_line(exc))}", file=sys.stderr)
-            return EXIT_ERROR
+            return EXIT_USAGE if isinstance(exc, UsageError) else EXIT_ERROR
         if isinstance(exc, OSError):
             where = f"{tidy(str(exc.filename))}: " if getattr(exc, "filename", None) else ""
             print(f"error: {where}{tidy(exc.strerror or one_line(exc))}", file=sys.stderr)

@@ -129,13 +129,13 @@ def cmd_collect(ctx: Context) -> int:
 
 
 def _models(specs: list[str]) -> dict[str, Any]:
-    from workbench.errors import DataError
+    from workbench.errors import UsageError
     from workbench.models import load_model
 
     out = {}
     for spec in specs:
         label, eq, path = spec.partition("=")
         if not eq or not label or not path:
-            raise DataError(f"--model {spec}: expected LABEL=MODEL.npz (the block label whose trials it predicts)")
+            raise UsageError(f"--model {spec}: expected LABEL=MODEL.npz (the block label whose trials it predicts)")
         out[label] = load_model(path)
     return out

@@ -1,27 +1,43 @@
-"""What the commands share: the run's context (output, progress), loading demonstrations and models, choosing the
-plant, printing it, and the option types.
+"""The run's context every command gets: its parsed options, its consoles (what it says, where, how wide), its
+progress bars, its executor and its standard input and output (:mod:`workbench.cli.stdio`).
+
+The helpers the commands share live by job beside it: the option types in :mod:`workbench.cli.options`, reading
+logs, demonstrations and models in :mod:`workbench.cli.reading`, writing and printing in
+:mod:`workbench.cli.writing`; their names are still found here (``from workbench.cli.context import load_demos``).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from workbench.cli.stdio import STDIN_NAME, Stdio, is_stdio
-from workbench.errors import DataError, ModelError, WorkbenchError
+from workbench.cli.reading import existing_path
+from workbench.cli.stdio import Stdio, is_stdio
+from workbench.errors import UsageError
 
-__all__ = ['SAMPLE_LOGS']
+__all__ = ["Context", "PIPE_WIDTH", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL"]
 
-SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
-DEFAULT_MAPPING = "planar_quadrotor"
 #: The width of output that goes to a pipe or a file (no terminal to ask; COLUMNS overrides it).
 PIPE_WIDTH = 100
 EXIT_ERROR = 1
+EXIT_USAGE = 2  # argparse's status for bad arguments; a UsageError gets it too
 EXIT_INTERNAL = 3
+#: Where the helpers that lived here went (split by job in issue 30)
+_MOVED = ("workbench.cli.options", "workbench.cli.reading", "workbench.cli.writing")
+
+
+def __getattr__(name: str) -> Any:
+    """A helper by its old address (``workbench.cli.context.load_demos``): from the module that now holds it."""
+    for module in _MOVED:
+        found = importlib.import_module(module)
+        if name in getattr(found, "__all__", ()):
+            return getattr(found, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class Context:
@@ -50,7 +66,7 @@ class Context:
         ``--output-format`` (else ``default_suffix``)."""
         fmt = getattr(self.args, "output_format", None)
         if fmt is not None and not is_stdio(name):
-            raise WorkbenchError(f"--output-format is for -o - (standard output); {name} is named by its extension")
+            raise UsageError(f"--output-format is for -o - (standard output); {name} is named by its extension")
         if not is_stdio(name):
             return Path(name)
         suffix = f".{fmt}" if fmt is not None else default_suffix
@@ -168,268 +184,3 @@ class Context:
             print(f"running tasks on {ex}", file=sys.stderr)
         return ex
 
-
-# -- input helpers -----------------------------------------------------------------------------------------
-def input_stem(name: str) -> str:
-    """A default output name's stem from an input's name (``stdin`` for ``-``)."""
-    return "stdin" if is_stdio(name) else Path(name).stem
-
-
-def existing_path(path: str | os.PathLike, what: str = "file") -> Path:
-    p = Path(path)
-    if not p.exists():
-        raise DataError(f"{p}: no such {what}")
-    return p
-
-
-def is_demo_file(path: Path) -> bool:
-    if path.suffix.lower() in (".parquet", ".pq"):
-        return True
-    if not path.is_dir():
-        return False  # a log: telling so must not import the dataset module, and pandas behind it (0.25 s)
-    from workbench.data.dataset import is_dataset
-
-    return is_dataset(path)
-
-
-def load_one(path: Path, mapping: str | None, format: str | None = None, allow_still: bool = False) -> Any:
-    from workbench.data.dataset import load_demonstrations
-
-    if is_demo_file(path):
-        return load_demonstrations(path)
-    import adapters
-
-    return adapters.load(path, mapping=mapping or DEFAULT_MAPPING,
-                         format=None if format in (None, "parquet") else format, allow_still=allow_still)
-
-
-def join_sets_named(sets: Sequence[Any], names: Sequence[str]) -> Any:
-    """One set from several files; a trial id seen twice is prefixed with its file's name."""
-    from workbench.data.dataset import join_sets
-
-    return join_sets(sets, names)
-
-
-def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None,
-               allow_still: bool = False):
-    """The demonstrations of ``paths``; ``allow_still`` (a viewer) shows a log whose position never moves, with a
-    warning naming it, where the other commands stop with that cause."""
-    if sum(is_stdio(p) for p in paths) > 1:
-        raise WorkbenchError("- (standard input) given twice: it can be read once")
-    files = [ctx.input_path(p, "the demonstrations") for p in paths]
-    sets = []
-    with ctx.progress() as progress:
-        task = progress.add_task("reading logs", total=len(files))
-        for f in files:
-            stdin = f == ctx.stdio.stdin_path
-            chosen = mapping
-            if mapping is None and not is_demo_file(f):
-                import adapters
-
-                chosen, why = adapters.choose_mapping(f, format=None if ctx.stdio.format == "parquet"
-                                                      else ctx.stdio.format)
-                # above the bar while it is drawn (printed beside it, the line ran on from the bar's, past 80 columns)
-                say = progress.console.print if progress.live.is_started else ctx.say
-                say(f"{ctx.shown(f)}: mapping {chosen} ({why}; --mapping chooses another)")
-            ds = load_one(f, chosen, ctx.stdio.format, allow_still)
-            if len(ds) and ds[0].meta.get("still"):
-                print(f"warning: {ds[0].meta['still']}", file=sys.stderr)
-            if stdin:  # the temporary file is gone once the command ends: the trials come from <stdin>
-                ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
-            skipped = {k: v for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v} if len(ds) else {}
-            if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
-                what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())
-                print(f"warning: {ctx.shown(f)}: skipped {what}", file=sys.stderr)
-            sets.append(ds)
-            progress.advance(task)
-    ds = join_sets_named(sets, [ctx.shown(f) for f in files])
-    if labels:
-        parts = [ds.by_label(label) for label in labels]
-        ds = parts[0]
-        for p in parts[1:]:
-            ds = ds + p
-    if not len(ds):
-        raise DataError(f"{', '.join(paths)}: no demonstrations")
-    return ds
-
-
-def system_for(ds: Any, choice: str = "auto", horizon_s: float = 3.0):
-    from workbench.plant.choice import choose_plant
-
-    return choose_plant(ds, choice, horizon_s)
-
-
-def study_plant(choice: str, horizon_s: float = 3.0) -> Callable[[Any], Any]:
-    from workbench.plant.choice import plant_rule
-
-    return plant_rule(choice, horizon_s)
-
-
-def pilot_only(ctx: Context, ds: Any, keep_still: bool) -> Any:
-    """The segments with pilot input (:mod:`workbench.data.excitation`); the others are named and left out
-    unless ``--keep-still``, and an input no segment moves is named too."""
-    from workbench.data.excitation import pilot_segments
-
-    kept, report = pilot_segments(ds, keep_still=keep_still)
-    for line in report.describe():
-        print(f"warning: {line}", file=sys.stderr)
-    if report.still_segments:
-        ctx.say(f"{'kept (--keep-still)' if keep_still else 'left out of fitting'}: {len(report.still_segments)} "
-                f"segment(s) without pilot input")
-    return kept
-
-
-def require_proposed(result: Any) -> None:
-    """A report and the demo show the proposed model: say why it is missing instead of failing inside them."""
-    for label in result.test:
-        if label not in result.models:
-            reason = result.failures.get(label, {}).get("proposed", "unknown cause")
-            raise ModelError(f"the proposed model could not be fitted on {label!r} (so no report): {reason}; "
-                             "`workbench evaluate` compares the methods that can be")
-
-
-def print_plant(ctx: Context, system: Any, note: str = "") -> None:
-    """An identified plant's report (held-out errors vs persistence, ρ, conditioning, checks); its warning on
-    stderr too, where a user looks for problems."""
-    report = getattr(system, "identification", None)
-    if report is None:
-        return
-    ctx.say(str(report) + (f"\n  {note}" if note else ""))
-    if report.warning:
-        print(f"warning: {report.warning}", file=sys.stderr)
-
-
-def load_model_file(path: str, ctx: Context | None = None):
-    from workbench.models.factory import load_model
-
-    return load_model(ctx.input_path(path, "the model", ".npz") if ctx is not None else existing_path(path))
-
-
-def demos_at_model_dt(ctx: Context, ds: Any, models: Sequence[Any], resample: bool, source: str) -> Any:
-    """``ds`` on the models' time step: refused when sampled at another (a model steps once per its own dt, so
-    its predictions would be drawn against the wrong times), resampled with ``--resample``."""
-    import math
-
-    dt = float(models[0].system.dt)
-    if any(not math.isclose(float(m.system.dt), dt, rel_tol=1e-6) for m in models[1:]):
-        steps = ", ".join(sorted({f"{float(m.system.dt):g}" for m in models}))
-        raise ModelError(f"the models step at different dt ({steps} s); show them one at a time")
-    try:
-        at_dt = models[0].demos_at_model_dt(ds, resample=resample)
-    except WorkbenchError as exc:
-        raise type(exc)(f"{source}: {exc}") from None
-    if at_dt is not ds:
-        ctx.say(f"resampled {source} from dt = {ds.dt:g} s to the model's dt = {dt:g} s (states linear, inputs held)")
-    return at_dt
-
-
-def n_components_arg(value: str, rules: tuple[str, ...] = ("bic",)) -> int | str:
-    """``--n-components``: a positive integer, or the name of the rule that chooses it (``bic``, ``cv``)."""
-    if value in rules:
-        return value
-    try:
-        g = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--n-components must be a positive integer or {' or '.join(map(repr, rules))}, got {value!r}") from None
-    if g < 1:
-        raise argparse.ArgumentTypeError(f"--n-components must be at least 1, got {g}")
-    return g
-
-
-def fit_n_components_arg(value: str) -> int | str:
-    return n_components_arg(value, ("bic", "cv"))
-
-
-def positive_float(value: str) -> float:
-    try:
-        v = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {value!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {value!r}")
-    return v
-
-
-#: What ``--speed`` accepts: beyond these a replay's waits overflow a float (1e-300) or round to nothing.
-SPEED_RANGE = (1e-3, 1e6)
-
-
-def speed_arg(value: str) -> float:
-    """A replay speed: a positive multiple of real time within :data:`SPEED_RANGE`."""
-    v = positive_float(value)
-    lo, hi = SPEED_RANGE
-    if not lo <= v <= hi:
-        raise argparse.ArgumentTypeError(f"expected a multiple of real time from {lo:g} to {hi:g}, got {value!r}")
-    return v
-
-
-def int_list(value: str) -> list[int]:
-    try:
-        out = [int(v) for v in value.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {value!r}") from None
-    if not out or min(out) < 1:
-        raise argparse.ArgumentTypeError(f"expected positive integers, got {value!r}")
-    return out
-
-
-def steps_of(seconds: float, dt: float) -> int:
-    return max(1, int(round(seconds / dt)))
-
-
-def write_demos(ds: Any, out: Path, mapping: str | None = None) -> None:
-    if out.suffix.lower() in (".parquet", ".pq"):
-        ds.save(out)
-        return
-    import adapters
-    from adapters.writer import FORMATS
-
-    extensions = [".parquet", *(e for f in FORMATS.values() for e in f.extensions)]
-    if out.suffix.lower() not in extensions:  # the command line has no format flag: the extension decides
-        raise DataError(f"{out}: cannot tell the format from the extension {out.suffix or '(none)'!r}; name the "
-                        f"output with one of {', '.join(dict.fromkeys(extensions))}, or DIR/ for a dataset")
-    adapters.write(ds, out, mapping or DEFAULT_MAPPING)
-
-
-def viewer_command(path: str | os.PathLike) -> str:
-    """How to open a recording, with the viewer this workbench would start (the venv's, found without PATH)."""
-    import shlex
-
-    from workbench.viewer.output import rerun_executable
-
-    def short(p: str) -> str:  # .venv/bin/rerun when run from the project, the full path from anywhere else
-        rel = os.path.relpath(p) if os.path.isabs(p) else p
-        return p if rel.startswith("..") else rel
-
-    return shlex.join([*(short(p) for p in rerun_executable()), str(path)])
-
-
-def output_kwargs(ctx: Context, default: Path) -> dict[str, Any]:
-    from workbench.viewer import has_display
-
-    a = ctx.args
-    if a.spawn or a.serve or a.save:
-        save = None if not a.save else str(ctx.output_path(a.save, ".rrd", "the recording"))
-        return {"save": save, "spawn": a.spawn, "serve": a.serve}
-    # headless by default when nothing could show a window
-    return {"save": str(default), "spawn": False, "serve": False} if not has_display() else {
-        "save": None, "spawn": True, "serve": False}
-
-
-def announce(ctx: Context, out: dict[str, Any], sink: Any, what: str) -> None:
-    if out["save"] and ctx.stdio.writes_stdout:
-        ctx.say(f"wrote {what} to standard output (an .rrd stream)")
-    elif out["save"]:
-        ctx.say(f"wrote {out['save']} ({what}); open it with:  {viewer_command(out['save'])}")
-    elif out["spawn"]:
-        ctx.say(f"sent {what} to the rerun viewer")
-    else:
-        ctx.say(f"serving {what} on 127.0.0.1 only: open {sink.url}  (Ctrl-C to stop)")
-        sink.wait()
-
-
-# -- entry point -------------------------------------------------------------------------------------------
-def one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return text or type(exc).__name__

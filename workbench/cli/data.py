@@ -7,9 +7,11 @@ import os
 import sys
 from pathlib import Path
 
-from workbench.cli.context import EXIT_ERROR, Context, is_demo_file, load_demos, write_demos
+from workbench.cli.context import EXIT_ERROR, Context
+from workbench.cli.reading import is_demo_file, load_demos
 from workbench.cli.stdio import is_stdio, refuse_stdio
-from workbench.errors import WorkbenchError
+from workbench.cli.writing import write_demos
+from workbench.errors import UsageError
 
 __all__ = []
 
@@ -25,7 +27,8 @@ def cmd_simulate(ctx: Context) -> int:
         ctx.say(f"wrote {len(files)} sample logs to {a.sample_logs}")
         return 0
     if not a.output:
-        raise WorkbenchError("simulate needs -o FILE (.parquet, .csv, .tlog or .mcap) or --sample-logs DIR")
+        raise UsageError("simulate needs -o FILE (.parquet or a log format's extension: .csv, .tlog, …) or "
+                             "--sample-logs DIR")
     from workbench.sim.landing import simulate_landings
 
     subjects = [None] if a.subjects == 0 else [f"s{i + 1:02d}" for i in range(a.subjects)]
@@ -134,7 +137,7 @@ def _import_dataset(ctx: Context) -> int:
 
     a = ctx.args
     if any(is_stdio(log) for log in a.logs):
-        raise WorkbenchError("- (standard input) is one log: import it into one file (-o FILE or -o -), not a "
+        raise UsageError("- (standard input) is one log: import it into one file (-o FILE or -o -), not a "
                              "dataset folder")
     files = expand_logs(a.logs)
     with ctx.executor() as ex, ctx.progress() as progress:

@@ -4,10 +4,10 @@ Rerun's viewer (and ``rr.log_file_from_path``) runs every executable on ``PATH``
 ``rerun-importer-`` (rerun 0.41; before it ``rerun-loader-``, still accepted with a deprecation warning: the package
 installs both names) on a file it is asked to open, passing the path and its settings; a loader either streams a
 recording to stdout (``rr.stdout()``) or exits with code 66 (``rr.EXTERNAL_DATA_LOADER_INCOMPATIBLE_EXIT_CODE``)
-to say the file is not for it. This one handles the logs the workbench reads by their first bytes — MAVLink
-``.tlog``, PX4 ULog, and every other binary log format registered in :mod:`adapters.formats` (the DataFlash
-``.bin`` once its reader is there) — and leaves MCAP to rerun's own loader (two loaders would log it twice) and
-CSV files to others (a CSV is too common to claim). The recording is the raw view of ``workbench view LOG``
+to say the file is not for it. This one handles the logs the workbench reads by their first bytes — every
+format declared in :mod:`adapters.formats` whose ``rerun_importer`` is true: MAVLink ``.tlog``, PX4 ULog, DataFlash
+``.bin`` — and leaves MCAP to rerun's own loader (two loaders would log it twice) and CSV files to others (a CSV
+is too common to claim). The recording is the raw view of ``workbench view LOG``
 (:mod:`workbench.viewer.rawlog`) with its blueprint, sent active: the viewer opens on the workbench's layout, as
 ``workbench view`` does, not on its own automatic grid.
 
@@ -23,10 +23,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["main", "INCOMPATIBLE", "NOT_OURS"]
+__all__ = ["main", "INCOMPATIBLE"]
 
 INCOMPATIBLE = 66  # rerun's EXTERNAL_DATA_LOADER_INCOMPATIBLE_EXIT_CODE, without importing rerun to say no
-NOT_OURS = frozenset({"mcap", "csv"})  # formats left to other loaders (see the module docstring)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -58,7 +57,7 @@ def _ours(path: str) -> bool:
     from workbench.errors import WorkbenchError
 
     try:
-        return detect_format(path).name not in NOT_OURS
+        return detect_format(path).rerun_importer
     except WorkbenchError:
         return False
 

@@ -8,17 +8,11 @@ import time
 from typing import Any
 
 from workbench.atomic import atomic_write_table
-from workbench.cli.context import (
-    Context,
-    demos_at_model_dt,
-    load_demos,
-    load_model_file,
-    pilot_only,
-    print_plant,
-    steps_of,
-    system_for,
-)
-from workbench.errors import DataError, WorkbenchError
+from workbench.cli.context import Context
+from workbench.cli.options import steps_of
+from workbench.cli.reading import demos_at_model_dt, load_demos, load_model_file, pilot_only, system_for
+from workbench.cli.writing import print_plant
+from workbench.errors import DataError, UsageError
 
 __all__ = []
 
@@ -35,7 +29,7 @@ def cmd_fit(ctx: Context) -> int:
         kind = method(a.method).load_class()
         components = a.n_components
         if components == "cv" and not kind.chooses_settings:
-            raise DataError("--n-components cv chooses the proposed model's settings; use a number or 'bic' with "
+            raise UsageError("--n-components cv chooses the proposed model's settings; use a number or 'bic' with "
                             f"--method {a.method}")
         if components == "bic" and kind.has_components:
             from workbench.study.pipeline import select_components
@@ -163,12 +157,12 @@ def cmd_predict(ctx: Context) -> int:
         try:
             x0 = np.array([float(v) for v in a.x0.split(",")])
         except ValueError:
-            raise DataError(f"--x0 must be comma-separated numbers, got {a.x0!r}") from None
+            raise UsageError(f"--x0 must be comma-separated numbers, got {a.x0!r}") from None
         target, t0, demo_id, task_x0, start = None, 0.0, "x0", None, 0
         names, in_names = model.system.state_names, model.system.input_names
     else:
         if not a.demos:
-            raise WorkbenchError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
+            raise UsageError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
         ds = load_demos(ctx, [a.demos], a.mapping)
         ids = ds.ids
         if a.demo and a.demo not in ids:

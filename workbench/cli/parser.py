@@ -6,18 +6,20 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
+from adapters.formats import FORMATS, log_suffixes
 from workbench.cli.collect import add_collect
-from workbench.cli.context import (
+from workbench.cli.context import Context
+from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
+from workbench.cli.model import cmd_fit, cmd_predict
+from workbench.cli.options import (
     DEFAULT_MAPPING,
     SAMPLE_LOGS,
-    Context,
     fit_n_components_arg,
     int_list,
     positive_float,
     speed_arg,
 )
-from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
-from workbench.cli.model import cmd_fit, cmd_predict
+from workbench.cli.stdio import input_formats, output_formats
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
 from workbench.cli.view import VIEW_SAMPLES, cmd_live, cmd_replay, cmd_view
 from workbench.defaults import HORIZON_S, N_COMPONENTS, N_STEPS, ONLINE_HORIZON_S, STUDY_N_COMPONENTS
@@ -104,14 +106,13 @@ def _executor_options(p: argparse.ArgumentParser) -> None:
                         "a path every worker reaches)")
 
 
-_STDIN_FORMATS = ["parquet", "mcap", "ulog", "dataflash", "tlog", "csv"]  # workbench.cli.stdio.input_formats()
-_DEMO_OUTPUTS = ["parquet", "csv", "tlog", "mcap", "ulg", "bin"]
 _TABLE_OUTPUTS = ["parquet", "csv"]
 
 
 def _format_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--format", choices=_STDIN_FORMATS, metavar="FORMAT",
-                   help="what the input holds (a file or - for standard input): " + ", ".join(_STDIN_FORMATS) +
+    names = input_formats()  # the declared log formats (adapters.formats) and parquet
+    p.add_argument("--format", choices=names, metavar="FORMAT",
+                   help="what the input holds (a file or - for standard input): " + ", ".join(names) +
                         " (default: recognised from its first bytes)")
 
 
@@ -150,9 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("simulate", cmd_simulate, "simulate landing demonstrations with synthetic operators",
             "workbench simulate --strategy CS1 CS2 --trials 30 -o demos.parquet")
-    p.add_argument("-o", "--output", metavar="FILE", help="demonstrations file: .parquet, .csv, .tlog or .mcap; "
-                   "- for standard output")
-    _output_format_option(p, _DEMO_OUTPUTS)
+    p.add_argument("-o", "--output", metavar="FILE", help="demonstrations file: .parquet or a log ("
+                   f"{', '.join(f.suffix for f in FORMATS.values() if f.writable)}); - for standard output")
+    _output_format_option(p, output_formats())
     p.add_argument("--strategy", nargs="+", default=["CS1", "CS2"], choices=["CS1", "CS2"],
                    help="control strategies: CS1 centre first, CS2 straight line (default both)")
     p.add_argument("--trials", type=int, default=30, help="trials per strategy and subject (default 30)")
@@ -162,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("inspect", cmd_inspect, "show what a log contains: streams, rates, fields, time span",
             "workbench inspect flight.tlog")
-    p.add_argument("log", help="a .tlog, .mcap, .ulg, .bin, .csv log or a demonstrations .parquet; - reads standard "
+    p.add_argument("log", help=f"a {', '.join(log_suffixes())} log or a demonstrations .parquet; - reads standard "
                    "input")
     _format_option(p)
 
@@ -176,7 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a demonstrations file (.parquet, .csv, …), - for standard output, or DIR/ for a dataset with "
                         "one Parquet file per log and subject, imported in parallel; a log that fails is reported and "
                         "the rest imported")
-    _output_format_option(p, _DEMO_OUTPUTS)
+    _output_format_option(p, output_formats())
     _format_option(p)
     # --set-label: on `import` the label is written, everywhere else --label filters; the old spelling still works
     p.add_argument("--set-label", "--label", dest="label", metavar="LABEL", help="set every trial's strategy label")

@@ -19,10 +19,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from workbench.errors import DataError, FormatError, WorkbenchError
+from workbench.errors import DataError, FormatError, UsageError, WorkbenchError
 
 __all__ = ["STDIO", "STDIN_NAME", "STDOUT_NAME", "Stdio", "is_stdio", "refuse_stdio", "input_formats",
-           "PARQUET_MAGIC"]
+           "stdin_formats", "output_formats", "PARQUET_MAGIC"]
 
 STDIO = "-"
 STDIN_NAME = "<stdin>"
@@ -41,14 +41,14 @@ def is_stdio(name: object) -> bool:
 def refuse_stdio(name: object, option: str, why: str) -> None:
     """A clear error for ``-`` where the output is a folder (or the input one), naming the option."""
     if is_stdio(name):
-        raise WorkbenchError(f"{option} -: {why}; name a folder instead")
+        raise UsageError(f"{option} -: {why}; name a folder instead")
 
 
 def _extensions() -> dict[str, str]:
-    """Format name → the extension its files carry (the first one a format lists), Parquet included."""
+    """Format name → the extension its files carry (the first one a declared format lists), Parquet included."""
     from adapters.formats import FORMATS
 
-    return {"parquet": ".parquet", **{name: f.extensions[0] for name, f in FORMATS.items()}}
+    return {"parquet": ".parquet", **{name: f.suffix for name, f in FORMATS.items()}}
 
 
 def input_formats() -> list[str]:
@@ -56,16 +56,29 @@ def input_formats() -> list[str]:
     return list(_extensions())
 
 
+def stdin_formats() -> list[str]:
+    """The formats standard input can hold: ``parquet`` and the declared formats whose ``stdin`` is true."""
+    from adapters.formats import FORMATS
+
+    return ["parquet", *(name for name, f in FORMATS.items() if f.stdin)]
+
+
+def output_formats() -> list[str]:
+    """What ``--output-format`` accepts for demonstrations: ``parquet`` and the extension (without its dot) of every
+    declared format with a writer (``bin`` for DataFlash)."""
+    from adapters.formats import FORMATS
+
+    return ["parquet", *(f.output_name for f in FORMATS.values() if f.writable)]
+
+
 def _sniff(head: bytes) -> str | None:
     """The format of bytes that carry no name: Parquet's magic, else what the log readers recognise."""
     if head.startswith(PARQUET_MAGIC):
         return "parquet"
-    from adapters.formats import FORMATS
+    from adapters.formats import sniff
 
-    for fmt in FORMATS.values():
-        if fmt.sniff(head):
-            return fmt.name
-    return None
+    fmt = sniff(head)
+    return None if fmt is None or not fmt.stdin else fmt.name
 
 
 class Stdio:
@@ -101,7 +114,7 @@ class Stdio:
             return Path(name)
         if self._stdin is not None:
             if what != self._stdin_for:
-                raise WorkbenchError(f"- (standard input) is already {self._stdin_for}; it cannot be {what} too")
+                raise UsageError(f"- (standard input) is already {self._stdin_for}; it cannot be {what} too")
             return self._stdin
         stream = sys.stdin
         if stream is None:
@@ -118,7 +131,9 @@ class Stdio:
         fmt = None if suffix is not None else self.format or _sniff(head[:4096])
         if fmt is None and suffix is None:
             raise FormatError(f"{STDIN_NAME}: cannot tell the format from the first bytes (standard input has no "
-                              f"file name to go by); give it with --format ({', '.join(input_formats())})")
+                              f"file name to go by); give it with --format ({', '.join(stdin_formats())})")
+        if fmt is not None and fmt not in stdin_formats():
+            raise UsageError(f"{STDIN_NAME}: {fmt} cannot come on standard input; name the file instead")
         path = self._temp() / f"stdin{suffix if fmt is None else _extensions()[fmt]}"
         try:
             with open(path, "wb") as f:
@@ -158,7 +173,7 @@ class Stdio:
                 raise WorkbenchError(f"-o -: there is no standard output to write {what} to")
             binary = suffix.lower() not in TEXT_SUFFIXES
             if binary and stream.isatty():
-                raise WorkbenchError(f"not writing {what} ({suffix.lstrip('.')}, binary) to a terminal: redirect "
+                raise UsageError(f"not writing {what} ({suffix.lstrip('.')}, binary) to a terminal: redirect "
                                      f"standard output to a file (> out{suffix}) or a pipe, or name a file{hint}")
             self._stdout = self._temp() / f"stdout{suffix}"
         return self._stdout

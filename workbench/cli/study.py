@@ -14,20 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from workbench.atomic import atomic_write_table, recover_swaps, swap_entries, temp_sibling
-from workbench.cli.context import (
-    SAMPLE_LOGS,
-    Context,
-    is_demo_file,
-    load_demos,
-    pilot_only,
-    print_plant,
-    require_proposed,
-    steps_of,
-    study_plant,
-    system_for,
-    viewer_command,
-)
+from workbench.cli.context import Context
+from workbench.cli.options import SAMPLE_LOGS, steps_of
+from workbench.cli.reading import is_demo_file, load_demos, pilot_only, require_proposed, study_plant, system_for
 from workbench.cli.stdio import is_stdio, refuse_stdio
+from workbench.cli.writing import print_plant, viewer_command
 from workbench.errors import DataError
 
 __all__ = []
@@ -286,6 +277,17 @@ def _import_in_background(modules: Sequence[str]) -> threading.Thread:
     return thread
 
 
+def demo_logs(folder: Path) -> list[Path]:
+    """The files ``demo --logs FOLDER`` imports, sorted: every declared log format's files and demonstration files
+    (:data:`adapters.batch.LOG_SUFFIXES`), not hidden ones; none for a folder that does not exist."""
+    from adapters.batch import LOG_SUFFIXES
+
+    if not folder.is_dir():
+        return []
+    return sorted(p for p in folder.iterdir()
+                  if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in LOG_SUFFIXES)
+
+
 def cmd_demo(ctx: Context) -> int:
     a = ctx.args
     refuse_stdio(a.out, "--out", "the demo writes a folder (report, models, data, recording)")
@@ -295,17 +297,18 @@ def cmd_demo(ctx: Context) -> int:
     if out.is_dir():
         recover_swaps(out, "demo")  # what a killed run left half done is undone before anything else
     logs = Path(a.logs) if a.logs else SAMPLE_LOGS
-    files = sorted(p for p in logs.iterdir() if p.is_file() and not p.name.startswith(".")) if logs.is_dir() else []
-    files = [p for p in files if p.suffix.lower() in (".tlog", ".mcap", ".csv", ".ulg", ".parquet")]
+    files = demo_logs(logs)
     if not files:
         if a.logs:
-            raise DataError(f"{logs}: no logs (.tlog, .mcap, .csv, .ulg) to import")
+            from adapters.batch import LOG_SUFFIXES
+
+            raise DataError(f"{logs}: no logs ({', '.join(LOG_SUFFIXES)}) to import")
         from workbench.cli.sample_logs import write_sample_logs
 
         logs = out / "sample_logs"
         ctx.say(f"{SAMPLE_LOGS} is empty; generating the sample logs into {logs}")
         write_sample_logs(logs, seed=0)
-        files = sorted(p for p in logs.iterdir() if p.suffix.lower() in (".tlog", ".mcap", ".csv", ".ulg"))
+        files = demo_logs(logs)
     # the interpreter and the command's modules before this function: part of what a user waits for
     timings = {"startup": _seconds_since_process_start(t_start)}
     t0 = time.perf_counter()

@@ -8,18 +8,11 @@ from pathlib import Path
 from typing import Any
 
 from workbench import interrupts
-from workbench.cli.context import (
-    DEFAULT_MAPPING,
-    Context,
-    announce,
-    demos_at_model_dt,
-    input_stem,
-    load_demos,
-    load_model_file,
-    output_kwargs,
-    steps_of,
-)
-from workbench.errors import DataError, WorkbenchError
+from workbench.cli.context import Context
+from workbench.cli.options import DEFAULT_MAPPING, steps_of
+from workbench.cli.reading import demos_at_model_dt, input_stem, load_demos, load_model_file
+from workbench.cli.writing import announce, output_kwargs
+from workbench.errors import DataError, UsageError
 
 __all__ = ["VIEW_SAMPLES"]
 
@@ -32,7 +25,7 @@ def _log_origins(paths: list[str]) -> dict[str, float]:
     """Each raw log's start as ``workbench inspect`` reckons it (the first message of any stream), so a
     flight's segments are drawn where ``inspect`` places its flight modes; demonstration files have none."""
     import adapters
-    from workbench.cli.context import is_demo_file
+    from workbench.cli.reading import is_demo_file
 
     out = {}
     for p in paths:
@@ -50,7 +43,7 @@ def _warn(ctx: Context, session: Any) -> None:
 def _raw_streams(ctx: Context, path: str) -> Any:
     """A raw log's every stream (for the raw view), or ``None`` for a demonstrations file."""
     import adapters
-    from workbench.cli.context import is_demo_file
+    from workbench.cli.reading import is_demo_file
 
     p = ctx.input_path(path, "the demonstrations")
     fmt = None if ctx.stdio.format == "parquet" else ctx.stdio.format
@@ -96,7 +89,7 @@ def cmd_view(ctx: Context) -> int:
             by_label[label] = load_model_file(path, ctx)
         if "" in by_label:
             if len(by_label) > 1:
-                raise WorkbenchError("give every --model a LABEL= (e.g. --model CS1=cs1.npz) or pass only one")
+                raise UsageError("give every --model a LABEL= (e.g. --model CS1=cs1.npz) or pass only one")
             models = by_label[""]
             named = {Path(a.model[0]).stem: models}
         else:
@@ -147,7 +140,7 @@ def cmd_replay(ctx: Context) -> int:
 
     a = ctx.args
     if not a.model:
-        raise WorkbenchError("replay needs --model MODEL.npz (predictions) or --to CONNECTION (send the log to a link)")
+        raise UsageError("replay needs --model MODEL.npz (predictions) or --to CONNECTION (send the log to a link)")
     ds = load_demos(ctx, [a.log], a.mapping)
     model = load_model_file(a.model, ctx)
     ds = demos_at_model_dt(ctx, ds, [model], a.resample, a.log)

@@ -54,7 +54,7 @@ import numpy as np
 from workbench import interrupts
 from workbench.data.dataset import DataRef, write_dataset
 from workbench.data.demonstrations import DemonstrationSet
-from workbench.errors import DataError, WorkbenchError
+from workbench.errors import DataError, UsageError, WorkbenchError
 
 __all__ = [
     "Executor", "SerialExecutor", "ProcessExecutor", "DaskExecutor", "Outcome", "make_executor", "local_executor",
@@ -659,5 +659,5 @@ def make_executor(
     if scheduler is None and not workers:
         return SerialExecutor()
     if scheduler is not None and workers:
-        raise WorkbenchError("give --workers N (a local cluster) or --scheduler ADDRESS (a running one), not both")
+        raise UsageError("give --workers N (a local cluster) or --scheduler ADDRESS (a running one), not both")
     return DaskExecutor(workers if scheduler is None else None, scheduler, staging=staging, retries=retries)

@@ -32,8 +32,9 @@ import rerun.blueprint as rrb
 from rerun.blueprint.components import LinkAxis
 
 from workbench.models.registry import REGISTRY
+from workbench.viewer import entities as paths
 from workbench.viewer import style
-from workbench.viewer.entities import LoggedSession, entity_part
+from workbench.viewer.entities import LoggedSession, query
 
 __all__ = ["session_blueprint", "time_axis", "time_panel"]
 
@@ -75,7 +76,7 @@ def _overlay(s: LoggedSession, name: str, contents: list[str], key: str | None =
 
 def _key(s: LoggedSession) -> list[rrb.TextDocumentView]:
     """The small text view naming what each color means (strategies or segments, methods, bands), if logged."""
-    return [rrb.TextDocumentView(origin="/key", name="key")] if "key" in s.entities else []
+    return [rrb.TextDocumentView(origin=paths.origin(paths.KEY), name="key")] if paths.KEY in s.entities else []
 
 
 def _plot(name: str, contents: list[str], *, legend: rrb.PlotLegend | None = None,
@@ -92,8 +93,8 @@ def _plot(name: str, contents: list[str], *, legend: rrb.PlotLegend | None = Non
 
 
 #: Where a replay or a live link logs each quantity's online overlay, under ``/demos/<trial>/online/``: the input's
-#: one-step prediction with its bands, and the state's rollout end.
-_ONLINE = {"inputs": "{name}/**", "states": "rollout_end/{name}"}
+#: one-step prediction with its bands (everything under the input's name), and the state's rollout end.
+_ONLINE = {"inputs": ((), True), "states": (("rollout_end",), False)}
 
 
 def online_plots(ids: Sequence[str], names: Sequence[str], kind: str, titles: Sequence[str],
@@ -102,21 +103,20 @@ def online_plots(ids: Sequence[str], names: Sequence[str], kind: str, titles: Se
     (``ids``: entity parts) recorded series under its online overlay, titled ``titles[j]`` (the title is the key:
     no legend over the data), on the tab's linked time axis, with ``y_ranges[j]`` where given."""
     out = []
+    above, recursive = _ONLINE[kind]
     for j, (name, title) in enumerate(zip(names, titles, strict=True)):
-        n = entity_part(name)
-        contents = [f"+ /demos/{i}/{kind}/{n}" for i in ids] + [
-            f"+ /demos/{i}/online/{_ONLINE[kind].format(name=n)}" for i in ids]
+        contents = [query(paths.series_path(i, kind, name)) for i in ids] + [
+            query(paths.series_path(i, "online", *above, name), recursive) for i in ids]
         out.append(_plot(title, contents, legend=rrb.PlotLegend(visible=False), linked=True,
                          y_range=None if y_ranges is None else y_ranges[j]))
     return out
 
 
 def _prediction_paths(s: LoggedSession, demo_id: str, name: str) -> list[str]:
-    out = [f"+ /demos/{entity_part(demo_id)}/states/{entity_part(name)}"]
+    out = [query(paths.series_path(demo_id, "states", name))]
     for start, methods in s.predictions.get(demo_id, []):
-        base = f"/demos/{entity_part(demo_id)}/predictions/from_{start}"
-        out += [f"+ {base}/{entity_part(m)}_band/{entity_part(name)}" for m in methods if m in s.bands]
-        out += [f"+ {base}/{entity_part(m)}/{entity_part(name)}" for m in methods]
+        out += [query(paths.prediction_path(demo_id, start, m, name, band=True)) for m in methods if m in s.bands]
+        out += [query(paths.prediction_path(demo_id, start, m, name)) for m in methods]
     return out
 
 
@@ -150,18 +150,18 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     for k, name in enumerate(plane):
         if focus and focus[0] in s.predictions:
             fid = focus[0]
-            key = f"demos/{entity_part(fid)}/predictions/{entity_part(name)}"
+            key = paths.prediction_plot(fid, name)
             side.append(_plot(f"{s.title(name)} · {fid}", _prediction_paths(s, fid, name),
                               legend=rrb.PlotLegend(s.corners.get(key, "RightTop"), visible=k == 0),
-                              y_range=s.ranges.get(f"demos/{entity_part(fid)}/predictions/{entity_part(name)}"),
+                              y_range=s.ranges.get(key),
                               window=s.windows.get(fid)))
         else:
             side.append(_overlay(s, s.title(name),
-                                 [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in s.demo_ids],
-                                 key=f"states/{entity_part(name)}"))
-    if "scores" in s.entities:
+                                 [query(paths.series_path(i, "states", name)) for i in s.demo_ids],
+                                 key=paths.overlay_plot("states", name)))
+    if paths.SCORES in s.entities:
         # the first question's answer where the eye lands: each method's held-out error beside the tracks
-        side.insert(0, rrb.TextDocumentView(origin="/scores", name="held-out prediction error"))
+        side.insert(0, rrb.TextDocumentView(origin=paths.origin(paths.SCORES), name="held-out prediction error"))
         return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[6] + [3] * (len(side) - 1)),
                               column_shares=[3, 2], name="scene")
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
@@ -178,13 +178,14 @@ def _objective_tab(s: LoggedSession) -> Any:
             n_rows, n_cols = s.heatmap_shapes.get((m, block), (1, 1))
             # the names stand left of and above the cells, the color bar right of them: the bounds leave room
             bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 1.6], y_range=[-0.8, n_rows + 0.1])
-            views.append(rrb.Spatial2DView(origin=f"/models/{entity_part(m)}/heatmap/{block}", visual_bounds=bounds,
+            views.append(rrb.Spatial2DView(origin=paths.origin(paths.model_path(m, f"heatmap/{block}")),
+                                           visual_bounds=bounds,
                                            name=f"{m}: {title}"))  # the color bar says the scale
             shares.append(max(n_cols, 4) + 3.0)  # a 2-column block (R) still gets room for its title
-        notes = [rrb.TextDocumentView(origin=f"/models/{entity_part(m)}/summary", name=f"{m}: summary")]
+        notes = [rrb.TextDocumentView(origin=paths.origin(paths.model_path(m, "summary")), name=f"{m}: summary")]
         if m in s.verdicts:
             v = s.verdicts[m]
-            notes.insert(0, rrb.TextDocumentView(origin=f"/models/{entity_part(m)}/verdict",
+            notes.insert(0, rrb.TextDocumentView(origin=paths.origin(paths.model_path(m, "verdict")),
                                                  name=f"{m}: {'fits' if v.fits else 'DOES NOT FIT'}"))
         # the summary's tables are wide: its column gets as much room as the heatmaps together
         # the verdict's view is a paragraph tall; with mismatches listed it needs more
@@ -226,47 +227,47 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
     if s.scene:
         tabs.append(_scene_tab(s, plane, focus))
     state_views: list[Any] = [
-        _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/states/{entity_part(name)}" for i in ids],
-                 key=f"states/{entity_part(name)}")
+        _overlay(s, s.title(name), [query(paths.series_path(i, "states", name)) for i in ids],
+                 key=paths.overlay_plot("states", name))
         for name in s.state_names
     ]
     if s.modes:
-        lanes = ["+ /flight/mode"] if s.clock == "log" else [f"+ /demos/{entity_part(i)}/mode" for i in s.modes]
+        lanes = [query(paths.FLIGHT_MODE)] if s.clock == "log" else [query(paths.mode_path(i)) for i in s.modes]
         state_views.append(rrb.StateTimelineView(origin="/", contents=lanes, name="flight mode",
                                                  time_view=time_axis(s.span) if s.clock == "log" else None))
     tabs.append(rrb.Grid(*state_views, *_key(s), name="states"))
     input_views: list[Any] = [
-        _overlay(s, s.title(name), [f"+ /demos/{entity_part(i)}/inputs/{entity_part(name)}" for i in ids],
-                 key=f"inputs/{entity_part(name)}")
+        _overlay(s, s.title(name), [query(paths.series_path(i, "inputs", name)) for i in ids],
+                 key=paths.overlay_plot("inputs", name))
         for name in s.input_names
     ]
     for i in [f for f in focus if f in s.variability]:
         for name in s.input_names:
-            p = f"demos/{entity_part(i)}/variability/{entity_part(name)}"
+            p = paths.series_path(i, "variability", name)
             fit = s.fit_titles.get(p)
             where = " (in-sample)" if i in s.in_sample else ""
             # what and the fit first, the trial last: a long title is cut at its end; the key view explains the
             # colors and the nominal shares (no legend); the verdict's words are the report's (band_verdict)
-            input_views.append(_plot(f"ŵ {name} " + (f"{fit} · " if fit else "· ") + i + where, [f"+ /{p}/**"],
-                                     legend=rrb.PlotLegend(visible=False), y_range=s.ranges.get(p),
-                                     window=s.trial_windows.get(i)))
+            input_views.append(_plot(f"ŵ {name} " + (f"{fit} · " if fit else "· ") + i + where,
+                                     [query(p, recursive=True)], legend=rrb.PlotLegend(visible=False),
+                                     y_range=s.ranges.get(p), window=s.trial_windows.get(i)))
     tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
     for i in [f for f in focus if f in s.predictions]:
         # one tab per focus trial: six plots of one trial are tall enough for a y-tick every few pixels rows
         pred_views: list[Any] = []
-        fit = _score_title(s, i) if "scores" in s.entities else ""
+        fit = _score_title(s, i) if paths.SCORES in s.entities else ""
         for j, name in enumerate(s.state_names):
-            key = f"demos/{entity_part(i)}/predictions/{entity_part(name)}"
+            key = paths.prediction_plot(i, name)
             pred_views.append(_plot((f"{fit} · " if fit and j == 0 else "") + s.title(name),
                                     _prediction_paths(s, i, name),
                                     legend=rrb.PlotLegend(s.corners.get(key, "LeftTop"), visible=j == 0),
                                     y_range=s.ranges.get(key), window=s.windows.get(i)))
-        label_doc = f"label_scores/{entity_part(s.trial_labels.get(i, ''))}"
+        label_doc = paths.label_scores_path(s.trial_labels.get(i, ""))
         where = " (in-sample)" if i in s.in_sample else ""
         grid = rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1)
         if label_doc in s.entities:  # the label's held-out numbers under its plots, a few lines tall
-            tabs.append(rrb.Vertical(grid, rrb.TextDocumentView(origin=f"/{label_doc}", name="held-out prediction "
-                                                                "error"), row_shares=[5, 1],
+            tabs.append(rrb.Vertical(grid, rrb.TextDocumentView(origin=paths.origin(label_doc),
+                                                                name="held-out prediction error"), row_shares=[5, 1],
                                      name=f"predictions · {i}{where}"))
         else:
             tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1,

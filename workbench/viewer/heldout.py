@@ -13,7 +13,7 @@ from typing import Any
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.study.pipeline import StudyResult
-from workbench.viewer.entities import entity_part
+from workbench.viewer.entities import SCORES, label_scores_path
 from workbench.viewer.entities import model_for as _model_for
 
 __all__ = ["SCORE_STRIDE_S", "heldout_table", "log_scores", "score_units", "scores_of", "study_note"]
@@ -114,8 +114,8 @@ def log_scores(logger: Any, scores: Any, note: str, units: Mapping[str, str] | N
         part = score_lines(scores, label, dict(units or {}))
         head = [f"**{label}**"] if len(labels) > 1 or label not in ("", "all") else []
         lines += ["", *head, *part]
-        logger._static(f"label_scores/{entity_part(label)}", rr.TextDocument(
+        logger._static(label_scores_path(label), rr.TextDocument(
             "\n".join([f"**held-out prediction error, {label}** (mean of trials [95 % interval]; MC band "
                        f"nominal 90 %) — {note}", "", *part]),
             media_type=rr.MediaType.MARKDOWN))
-    logger._static("scores", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
+    logger._static(SCORES, rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))

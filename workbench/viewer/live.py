@@ -37,7 +37,7 @@ from workbench.live.predictor import LinkStats, LiveEvent, LivePrediction
 from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS, style
 from workbench.viewer.blueprint import online_plots, time_axis
 from workbench.viewer.columns import send_columns
-from workbench.viewer.entities import entity_part  # the replay's entity names: both layouts read alike
+from workbench.viewer.entities import entity_part, query, series_path  # the replay's paths: both read alike
 from workbench.viewer.scene import scale_bar
 from workbench.viewer.session import UI
 
@@ -136,23 +136,24 @@ class LiveLogger:
             return
         self._styled.add(demo_id)
         self.demo_ids.append(demo_id)
-        base, rec = f"demos/{entity_part(demo_id)}", self.rec
+        rec = self.rec
         for name in self.state_names:
-            rec.log(f"{base}/states/{entity_part(name)}", rr.SeriesLines(names=[name], colors=[_RECORDED]), static=True)
-            rec.log(f"{base}/online/rollout_end/{entity_part(name)}",
+            rec.log(series_path(demo_id, "states", name), rr.SeriesLines(names=[name], colors=[_RECORDED]),
+                    static=True)
+            rec.log(series_path(demo_id, "online", "rollout_end", name),
                     rr.SeriesLines(names=[f"{name} forecast (rollout end)"], colors=[_PRED]), static=True)
         for name in self.input_names:
-            rec.log(f"{base}/inputs/{entity_part(name)}",
+            rec.log(series_path(demo_id, "inputs", name),
                     rr.SeriesLines(names=[f"{name} recorded"], colors=[_RECORDED], interpolation_mode="StepAfter"),
                     static=True)
-            p = f"{base}/online/{entity_part(name)}"
+            p = series_path(demo_id, "online", name)
             label = f"{name}: K̂x + μ(x)"
             self._bands(f"{p}/gmr", [f"{label} ± 1σ", f"{label} ± 3σ"], [_BAND, _BAND])
             rec.log(f"{p}/mean", rr.SeriesLines(names=[label], colors=[_PRED], widths=[1.5],
                                                 interpolation_mode="StepAfter"), static=True)
             rec.log(f"{p}/outside_3sigma", rr.SeriesPoints(names=[f"{name} outside 3σ"], colors=[_OUT],
                                                            markers=["cross"], marker_sizes=[4.0]), static=True)
-            v = f"{base}/variability/{entity_part(name)}"
+            v = series_path(demo_id, "variability", name)
             rec.log(f"{v}/w", rr.SeriesLines(names=[f"ŵ {name}"], colors=[_W], interpolation_mode="StepAfter"),
                     static=True)
             self._bands(f"{v}/gmr", ["GMR μ ± 1σ", "GMR μ ± 3σ"], [_BAND, _BAND])
@@ -189,20 +190,19 @@ class LiveLogger:
             self._at(p.t, p.t_rel, p.k)  # the event at the segment's first step on the link timeline
             label = p.meta.get("label")
             self.event(LiveEvent("segment", p.t, f"segment {p.demo_id} started" + (f" ({label})" if label else "")))
-        base = f"demos/{entity_part(p.demo_id)}"
         now = (p.t, p.t_rel, p.k)
         for j, name in enumerate(self.state_names):
-            self._row(f"{base}/states/{entity_part(name)}", now, p.x[j])
+            self._row(series_path(p.demo_id, "states", name), now, p.x[j])
         sigma = p.u_std
         for j, name in enumerate(self.input_names):
-            self._row(f"{base}/inputs/{entity_part(name)}", now, p.u[j])
-            o = f"{base}/online/{entity_part(name)}"
+            self._row(series_path(p.demo_id, "inputs", name), now, p.u[j])
+            o = series_path(p.demo_id, "online", name)
             self._row(f"{o}/gmr", now, (p.u_mean[j], sigma[j]), band=True)
             self._row(f"{o}/mean", now, p.u_mean[j])
             if abs(p.u[j] - p.u_mean[j]) > 3.0 * sigma[j]:
                 self._row(f"{o}/outside_3sigma", now, p.u[j])
             if p.w is not None:
-                v = f"{base}/variability/{entity_part(name)}"
+                v = series_path(p.demo_id, "variability", name)
                 self._row(f"{v}/w", now, p.w[j])
                 self._row(f"{v}/gmr", now, (p.w_mean[j], np.sqrt(max(p.w_cov[j, j], 0.0))), band=True)
         self._row("live/compute_ms", now, 1e3 * p.compute_seconds)
@@ -212,7 +212,7 @@ class LiveLogger:
             h = p.n_steps
             ahead = (p.t + h * p.dt, p.t_rel + h * p.dt, p.k + h)  # stamped with the time it forecasts
             for j, name in enumerate(self.state_names):
-                self._row(f"{base}/online/rollout_end/{entity_part(name)}", ahead, p.rollout_x[-1, j])
+                self._row(series_path(p.demo_id, "online", "rollout_end", name), ahead, p.rollout_x[-1, j])
         if self.plane is not None:
             across, up, _ = self.plane
             center = np.array([p.x[across], -p.x[up]])
@@ -392,7 +392,7 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
                            for n in input_names])
     states = online_plots(ids, state_names, "states", [f"{n}: recorded gray, rollout end green" for n in state_names])
     variability = [
-        rrb.TimeSeriesView(origin="/", contents=[f"+ /demos/{i}/variability/{entity_part(n)}/**" for i in ids],
+        rrb.TimeSeriesView(origin="/", contents=[query(series_path(i, "variability", n), True) for i in ids],
                            name=f"ŵ {n} blue, GMR μ ± 1σ/3σ band", axis_x=linked, plot_legend=quiet)
         for n in input_names
     ]

@@ -23,7 +23,7 @@ import rerun.blueprint as rrb
 
 from workbench import interrupts
 from workbench.atomic import atomic_path, deferred_interrupt
-from workbench.errors import WorkbenchError
+from workbench.errors import UsageError, WorkbenchError
 
 __all__ = ["has_display", "open_output", "rerun_executable"]
 
@@ -108,7 +108,7 @@ class open_output:
         spawn_port: int = 9876,
     ) -> None:
         if sum((save is not None, spawn, serve)) != 1:
-            raise WorkbenchError("choose exactly one output: --save FILE.rrd, --spawn or --serve")
+            raise UsageError("choose exactly one output: --save FILE.rrd, --spawn or --serve")
         self.rec = rec
         self.save = None if save is None else Path(save)
         self.spawn = spawn

@@ -32,7 +32,7 @@ from workbench.data.demonstrations import Demonstration
 from workbench.errors import DataError
 from workbench.viewer import style
 from workbench.viewer.blueprint import online_plots, time_panel
-from workbench.viewer.entities import entity_part
+from workbench.viewer.entities import entity_part, series_path
 from workbench.viewer.scene import Plane, plane_of, scale_bar
 from workbench.viewer.session import HAS_MEASUREMENTS, UI
 
@@ -102,13 +102,17 @@ def replay(
     n, m = demo.x.shape[1], demo.u.shape[1]
     state_names = tuple(state_names or (f"x{i}" for i in range(n)))
     input_names = tuple(input_names or (f"u{i}" for i in range(m)))
-    base = f"demos/{entity_part(demo.id)}"
     sbase = f"scene/replay/{entity_part(demo.id)}"
+    # every path once, before the loop (rerun's log call per step is the cost; a path built per step adds to it)
+    states = [series_path(demo.id, "states", n) for n in state_names]
+    inputs = [series_path(demo.id, "inputs", n) for n in input_names]
+    online = [series_path(demo.id, "online", n) for n in input_names]
+    rollout_end = [series_path(demo.id, "online", "rollout_end", n) for n in state_names]
     x_start, target = demo.x[0], demo.target
     if roles is None:
         roles = getattr(getattr(model, "system", None), "roles", None)
     plane = plane_of(roles, state_names)
-    _log_styles(rec, demo, base, sbase, state_names, input_names, plane, roles)
+    _log_styles(rec, demo, (states, inputs, online, rollout_end), sbase, state_names, plane, roles)
 
     t_rel = demo.t - demo.t[0]
     dt = float(np.median(np.diff(demo.t))) if len(demo) > 1 else 0.0
@@ -123,18 +127,17 @@ def replay(
         x, u = demo.x[k], demo.u[k]
         rec.set_time("time", duration=float(t_rel[k]))
         rec.set_time("step", sequence=k)
-        for j, name in enumerate(state_names):
-            rec.log(f"{base}/states/{entity_part(name)}", rr.Scalars(x[j]))
-        for j, name in enumerate(input_names):
-            rec.log(f"{base}/inputs/{entity_part(name)}", rr.Scalars(u[j]))
+        for j, path in enumerate(states):
+            rec.log(path, rr.Scalars(x[j]))
+        for j, path in enumerate(inputs):
+            rec.log(path, rr.Scalars(u[j]))
         # the model's one-step input Gaussian: K̂(x − r) + μ̂(x) and Σ̂(x), r the goal where the model is goal-relative
         u_mean, Sigma = model.input_distribution(x[None, :], x0=x_start, target=target)
         u_hat = u_mean[0]
         sigma = np.sqrt(np.clip(np.diagonal(Sigma[0]), 0.0, None))
         err[k] = u - u_hat
         inside[k] = np.abs(u - u_hat) <= 3.0 * sigma
-        for j, name in enumerate(input_names):
-            p = f"{base}/online/{entity_part(name)}"
+        for j, p in enumerate(online):
             # one entity, two series (±1σ and ±3σ bands): half the log calls of two entities per step
             rec.log(f"{p}/mean", rr.Scalars(u_hat[j]))
             if HAS_MEASUREMENTS:
@@ -155,8 +158,8 @@ def replay(
             # stamped with the time it forecasts, so the plot compares x(t) with its forecast from t − H·dt
             rec.set_time("time", duration=float(t_rel[k] + n_steps * dt))
             rec.set_time("step", sequence=k + n_steps)
-            for j, name in enumerate(state_names):
-                rec.log(f"{base}/online/rollout_end/{entity_part(name)}", rr.Scalars(xp[-1, j]))
+            for j, path in enumerate(rollout_end):
+                rec.log(path, rr.Scalars(xp[-1, j]))
             rec.set_time("time", duration=float(t_rel[k]))
             rec.set_time("step", sequence=k)
             if plane is not None:
@@ -177,16 +180,15 @@ def replay(
 
 
 
-def _log_styles(rec, demo, base, sbase, state_names, input_names, plane: Plane | None, roles: Any = None) -> None:
-    for name in state_names:
-        rec.log(f"{base}/states/{entity_part(name)}", rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC]),
+def _log_styles(rec, demo, series: tuple[list[str], ...], sbase, state_names, plane: Plane | None,
+                roles: Any = None) -> None:
+    states, inputs, online, rollout_end = series
+    for state, end in zip(states, rollout_end, strict=True):
+        rec.log(state, rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC]), static=True)
+        rec.log(end, rr.SeriesLines(names=["forecast (rollout end)"], colors=[_COLOR_PRED], widths=[1.5]), static=True)
+    for inp, p in zip(inputs, online, strict=True):
+        rec.log(inp, rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC], interpolation_mode="StepAfter"),
                 static=True)
-        rec.log(f"{base}/online/rollout_end/{entity_part(name)}",
-                rr.SeriesLines(names=["forecast (rollout end)"], colors=[_COLOR_PRED], widths=[1.5]), static=True)
-    for name in input_names:
-        rec.log(f"{base}/inputs/{entity_part(name)}",
-                rr.SeriesLines(names=["recorded"], colors=[_COLOR_REC], interpolation_mode="StepAfter"), static=True)
-        p = f"{base}/online/{entity_part(name)}"
         label = "K̂x + μ(x)"
         rec.log(f"{p}/mean", rr.SeriesLines(names=[label], colors=[_COLOR_PRED], widths=[1.5],
                                             interpolation_mode="StepAfter"), static=True)

@@ -18,9 +18,10 @@ from workbench.atomic import atomic_path
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError
 from workbench.study.pipeline import StudyResult
+from workbench.viewer import entities as paths
 from workbench.viewer import style, verdict
 from workbench.viewer.columns import send_columns
-from workbench.viewer.entities import LoggedSession, entity_part
+from workbench.viewer.entities import LoggedSession
 from workbench.viewer.entities import model_for as _model_for
 from workbench.viewer.objective import (
     Heatmap,
@@ -262,7 +263,7 @@ class SessionLogger:
     def _log_track(self, demo: Demonstration) -> None:
         p = self.plane
         assert p is not None
-        sbase = f"scene/demos/{entity_part(demo.id)}"
+        sbase = paths.scene_demo_path(demo.id)
         color = self.colors[demo.id]
         pts = p.view(demo.x)
         focus = demo.id in self.labelled
@@ -322,7 +323,6 @@ class SessionLogger:
     def log_demonstration(self, demo: Demonstration, model: Any = None, *, variability: bool = True) -> None:
         """States, inputs, the flown track and vehicle, mode lanes; with a model, ŵ and its GMR bands."""
         s = self.session
-        base = f"demos/{entity_part(demo.id)}"
         packed = style.packed(self.colors[demo.id])
         t = self._t(demo)
         index = _time_index(t)  # one pair of time columns serves every entity of the trial
@@ -330,20 +330,20 @@ class SessionLogger:
         state_style = rr.SeriesLines(colors=packed, widths=[1.5], names=[demo.id])
         input_style = rr.SeriesLines(colors=packed, widths=[1.5], names=[demo.id], interpolation_mode="StepAfter")
         for j, name in enumerate(s.state_names):
-            path = f"{base}/states/{entity_part(name)}"
+            path = paths.series_path(demo.id, "states", name)
             self._style(path, state_style)
             self._send(path, index, rr.Scalars.columns(scalars=demo.x[:, j]))
-            self._overlay_range(f"states/{entity_part(name)}", name, demo.x[:, j])
+            self._overlay_range(paths.overlay_plot("states", name), name, demo.x[:, j])
         for j, name in enumerate(s.input_names):
-            path = f"{base}/inputs/{entity_part(name)}"
+            path = paths.series_path(demo.id, "inputs", name)
             self._style(path, input_style)
             self._send(path, index, rr.Scalars.columns(scalars=demo.u[:, j]))
-            self._overlay_range(f"inputs/{entity_part(name)}", name, demo.u[:, j])
+            self._overlay_range(paths.overlay_plot("inputs", name), name, demo.u[:, j])
         modes = _readable_modes(demo.meta)
         if modes is not None:
             mt, names = modes
             # overlaid trials get a lane each; on a flight's clock its segments share the one lane of the flight
-            lane = "flight/mode" if s.clock == "log" else f"{base}/mode"
+            lane = paths.FLIGHT_MODE if s.clock == "log" else paths.mode_path(demo.id)
             lanes = {**self.mode_colors, style.NO_TRIAL_STATE: style.NO_TRIAL_COLOR}
             self._style(lane, rr.StateConfiguration(values=list(lanes), colors=style.packed(*lanes.values())))
             # the lane ends with the trial, in a dark state of its own (a null state would leave the gaps
@@ -380,7 +380,6 @@ class SessionLogger:
         Returns the logged arrays (``w``, ``mu``, ``sigma``, ``outside``) for the caller's summary.
         """
         s = self.session
-        base = f"demos/{entity_part(demo.id)}/variability"
         w = model.residuals(demo) if model.has_residuals else demo.u - demo.x @ np.asarray(model.K_).T
         out: dict[str, np.ndarray] = {"w": w}
         if model.has_variability:
@@ -391,7 +390,7 @@ class SessionLogger:
         t = self._t(demo)
         index = _time_index(t)  # one pair of time columns serves every series of the trial
         for j, name in enumerate(s.input_names):
-            p = f"{base}/{entity_part(name)}"
+            p = paths.series_path(demo.id, "variability", name)
             self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[style.W_COLOR], widths=[1.75],
                                                  interpolation_mode="StepAfter"))
             self._send(f"{p}/w", index, rr.Scalars.columns(scalars=w[:, j]))
@@ -450,8 +449,6 @@ class SessionLogger:
         x0 = demo.x[start]
         t_rel = self._t(demo)
         t0 = t_rel[start]
-        base = f"demos/{entity_part(demo.id)}/predictions/from_{start}"
-        sbase = f"scene/predictions/{entity_part(demo.id)}/from_{start}"
         results: dict[str, Any] = {}
         spans: dict[str, list[np.ndarray]] = {}
         points: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
@@ -473,13 +470,13 @@ class SessionLogger:
             color = style.method_color(method)
             title = style.method_title(method)
             for j, name in enumerate(s.state_names):
-                path = f"{base}/{entity_part(method)}/{entity_part(name)}"
+                path = paths.prediction_path(demo.id, start, method, name)
                 self._style(path, rr.SeriesLines(names=[title], colors=[color], widths=[2.0]))
                 self._send(path, _time_index(tp, steps), rr.Scalars.columns(scalars=x[:, j]))
                 spans.setdefault(name, []).append(x[:, j])
                 points.setdefault(name, []).append((tp, x[:, j]))
             if self.plane is not None:
-                self._static(f"{sbase}/{entity_part(method)}", rr.LineStrips2D(
+                self._static(paths.scene_prediction_path(demo.id, start, method), rr.LineStrips2D(
                     [self.plane.view(x)], colors=[color], radii=UI(2.0), labels=[title], show_labels=False,
                     draw_order=style.SCENE_ORDER["prediction"]))
             band = _prediction_band(pred)
@@ -490,7 +487,7 @@ class SessionLogger:
             if method not in s.bands:
                 s.bands.append(method)
             for j, name in enumerate(s.state_names):
-                path = f"{base}/{entity_part(method)}_band/{entity_part(name)}"
+                path = paths.prediction_path(demo.id, start, method, name, band=True)
                 mid, half = (lo[:, j] + hi[:, j]) / 2, np.abs(hi[:, j] - lo[:, j]) / 2
                 if HAS_MEASUREMENTS:
                     # the band is an area: value ± one "σ" spans exactly [lower, upper]; its centre line is hidden
@@ -505,7 +502,7 @@ class SessionLogger:
                 spans.setdefault(name, []).extend([lo[:, j], hi[:, j]])
                 points.setdefault(name, []).extend([(tp, lo[:, j]), (tp, hi[:, j])])
             if self.plane is not None:
-                self._static(f"{sbase}/{entity_part(method)}_band", envelope(
+                self._static(paths.scene_prediction_path(demo.id, start, method, band=True), envelope(
                     self.plane.view(lo), self.plane.view(hi), style.dimmed(color, 0.55), f"{title} MC {level}"))
         # the prediction plots are zoomed to the predictions; their y-range is set by what is visible there
         lo_t, hi_t = s.windows.get(demo.id, (t0, t_end))
@@ -513,7 +510,7 @@ class SessionLogger:
         w_lo, w_hi = s.windows[demo.id]
         seen = (t_rel >= w_lo - 1e-9) & (t_rel <= w_hi + 1e-9)
         for j, name in enumerate(s.state_names):
-            key = f"demos/{entity_part(demo.id)}/predictions/{entity_part(name)}"
+            key = paths.prediction_plot(demo.id, name)
             earlier = [np.asarray(s.ranges[key])] if key in s.ranges else []  # another start of the same trial
             s.ranges[key] = data_range(demo.x[seen, j], *spans.get(name, []), *earlier, margin=0.05,
                                         min_span=self._min_span(name))
@@ -540,18 +537,17 @@ class SessionLogger:
         ``scales`` (block → largest |entry|) puts several models on one color scale; by default the model's own.
         """
         s = self.session
-        base = f"models/{entity_part(name)}"
         blocks = heatmaps(model, s.state_names, s.input_names)
         scales = dict(scales) if scales is not None else shared_scales({name: blocks})
         for h in blocks:
             dims = ["input" if r in s.input_names else "state" for r in (h.rows[0], h.cols[0])]
-            self._static(f"{base}/{h.block}", rr.Tensor(h.values, dim_names=dims))
-            self._log_heatmap(f"{base}/heatmap/{h.block}", h, scales.get(h.block, 1.0))
+            self._static(paths.model_path(name, h.block), rr.Tensor(h.values, dim_names=dims))
+            self._log_heatmap(paths.model_path(name, f"heatmap/{h.block}"), h, scales.get(h.block, 1.0))
             s.scales.setdefault(h.block, scales.get(h.block, 1.0))
             s.heatmap_shapes[(name, h.block)] = h.values.shape
         s.heatmaps[name] = [(h.block, h.title) for h in blocks]
-        self._static(f"{base}/summary", rr.TextDocument(model_summary(name, model, s.state_names, s.input_names),
-                                                        media_type=rr.MediaType.MARKDOWN))
+        summary = model_summary(name, model, s.state_names, s.input_names)
+        self._static(paths.model_path(name, "summary"), rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN))
         s.models.append(name)
 
     def log_key(self) -> None:
@@ -579,7 +575,7 @@ class SessionLogger:
         if s.in_sample:
             lines += ["", f"in-sample (a model was fitted on them): {', '.join(s.in_sample[:4])}"
                       f"{' …' if len(s.in_sample) > 4 else ''}"]
-        self._static("key", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
+        self._static(paths.KEY, rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
 
     def log_verdicts(self, named: Mapping[str, Any], models: Any, *, source_dt: float | None = None) -> None:
         """Per model, whether it fits the trials it explains (:mod:`workbench.viewer.verdict`): a Markdown verdict
@@ -598,7 +594,7 @@ class SessionLogger:
             s.in_sample.extend(i for i in v.in_sample if i not in s.in_sample)
             if not any("states are" in m or "inputs are" in m for m in v.mismatches):
                 for (trial, inp), words in verdict.trial_band_titles(model, mine).items():
-                    s.fit_titles[f"demos/{entity_part(trial)}/variability/{entity_part(inp)}"] = words
+                    s.fit_titles[paths.series_path(trial, "variability", inp)] = words
             head = f"{name} {'fits these data' if v.fits else 'DOES NOT FIT these data'}"
             if v.all_in_sample:
                 head = f"{name} is shown on its own training trials (in-sample)"
@@ -607,7 +603,7 @@ class SessionLogger:
                      *([""] if v.mismatches else []), *(f"- {m}" for m in v.mismatches)]
             if v.in_sample and not v.all_in_sample:
                 lines += ["", f"in-sample: {', '.join(v.in_sample[:6])}{' …' if len(v.in_sample) > 6 else ''}"]
-            self._static(f"models/{entity_part(name)}/verdict",
+            self._static(paths.model_path(name, "verdict"),
                          rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
             warning = v.warning()
             if warning:
