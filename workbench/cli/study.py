@@ -231,6 +231,7 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
     """What the data identify about the task objective first (factors between strategies, then ratios), then every
     weight ratio per strategy with its interval or why it has none, and each part's structure check."""
 
+    from workbench.study.power import LAW
     from workbench.study.weights import NOT_EXPLAINED, compare_strategies, format_interval, identified_first
 
     objectives = getattr(result, "objectives", {})
@@ -262,8 +263,7 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
             "the gain departs from every diagonal cost's by more than its spread, and the row gives the closest "
             "diagonal cost with sandwich intervals; \"not identifiable\": the interval spans more than ×10, with the "
             "demonstrations a simulated power curve says would make it narrower than ×2: the fitted model flies n, "
-            "2n and 4n demonstrations and the spans are extrapolated by the √n law, log span · √n constant, which "
-            "is not checked beyond the largest simulated size)")
+            "2n and 4n demonstrations and the number comes from " + LAW + ")")
 
 
 def cmd_report(ctx: Context) -> int:
