@@ -26,3 +26,16 @@ def test_per_subject_holds_out_the_recorded_test_trials(tmp_path, capsys):
     # a subject's held-out trial is its own recorded one
     assert {(str(s), t) for s, t in zip(table["subject"], table["trial"], strict=True)} == {
         (d.meta["subject"], d.id) for d in ds if d.id in test_ids}
+
+
+def test_a_subject_without_a_recorded_test_trial_is_named():
+    import pytest
+
+    from workbench.errors import DataError
+    from workbench.plant.system import planar_quadrotor
+    from workbench.study.evaluate import per_subject
+
+    study = simulate_study(n_subjects=2, n_trials=3, strategy="CS2", seed=3)
+    only_s02 = [d.id for d in study if d.meta["subject"] == "s02"][:1]
+    with pytest.raises(DataError, match=r"subject 's01': 0 of its 3 trials are recorded test trials"):
+        per_subject(planar_quadrotor(), study, n_steps=10, test_ids=only_s02)
