@@ -64,3 +64,26 @@ def test_evaluate_with_identify_leaves_one_segment_out_and_prints_the_plant(few,
     assert "persistence" in out and "IOC-only" in out and "GMR-only" in out
     table = (tmp_path / "results.csv").read_text()
     assert "persistence" in table and all(i in table for i in few.ids)
+
+
+def test_the_folds_are_the_method_level_comparison_of_the_headline(few):
+    """Every fold refitted every method without its trial: the headline and the verdicts are method-level rows
+    from the folds (corrected resampled t with n_train = n − 1, n_test = 1), not the one-fit paired rows."""
+    from scipy import stats as sps
+
+    res = run_loso(few, planar_quadrotor(), **FAST)
+    st = res.statistics
+    assert st.method_level and st.headline == st.method_level
+    per = res.rmse[res.rmse["metric"] == st.metric].groupby(["trial", "method"])["value"].mean().unstack()
+    n = len(few)
+    for base in ("ioc_only", "persistence"):
+        d = st.method_difference("CS1", base)
+        assert d.n_splits == n and (d.n_train, d.n_test) == (n - 1, 1) and d.loo
+        c = 1.0 - per["proposed"] / per[base]
+        se = np.sqrt((1 / n + 1 / (n - 1)) * c.var(ddof=1))
+        half = sps.t.ppf(0.975, n - 1) * se
+        assert d.change == pytest.approx(c.mean()) and d.lo == pytest.approx(c.mean() - half)
+        assert d.hi == pytest.approx(c.mean() + half) and d.p_holm == d.p_holm  # a verdict's row: Holm p
+    text = res.stats_text
+    assert f"the {n} leave-one-out folds of each strategy's trials" in text
+    assert all("leave-one-out folds" in line for line in res.verdicts() if "as a method" in line)

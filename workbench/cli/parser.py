@@ -244,7 +244,8 @@ def build_parser() -> argparse.ArgumentParser:
     _output_format_option(p, _TABLE_OUTPUTS)
     _format_option(p)
     p.add_argument("--per-subject", action="store_true",
-                   help="the paper's multi-subject design: a model per subject, --n-test held-out trials each, "
+                   help="the paper's multi-subject design: a model per subject, --n-test held-out trials each "
+                        "(a collected session's recorded test trials with --holdout auto), "
                         "ANOVA and paired t-tests across the methods (use --horizon 5 for the paper's)")
     p.add_argument("--n-test", type=int, default=1, metavar="N",
                    help="held-out trials per subject with --per-subject (default 1)")

@@ -60,6 +60,18 @@ def recorded_test_ids(ds: Any) -> list[str] | None:
     return [d.id for d in ds if d.meta["role"] == "test"]
 
 
+def _recorded_per_subject(ds: Any) -> list[str] | None:
+    """:func:`recorded_test_ids` where every subject also has both a test and a training trial, else ``None``."""
+    recorded = recorded_test_ids(ds)
+    if recorded is None:
+        return None
+    for subject in {d.meta.get("subject") for d in ds}:
+        roles = {d.meta["role"] for d in ds if d.meta.get("subject") == subject}
+        if roles != {"train", "test"}:
+            return None
+    return recorded
+
+
 def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0) -> tuple[Any, bool]:
     """The study of ``evaluate`` and ``report`` (one rule, so both print the same numbers for the same data):
     ``--holdout`` picks one random split or leave-one-segment-out; auto keeps the test trials a collected session
@@ -119,6 +131,11 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
     # a dataset is read where it lies, each subject's partition by its own task: nothing to stage for workers
     source = a.demos[0] if len(a.demos) == 1 and not a.label and not is_stdio(a.demos[0]) and is_demo_file(
         Path(a.demos[0])) and Path(a.demos[0]).is_dir() else ds
+    # a collected session declares its test trials: auto keeps them here too, as for the split study
+    recorded = _recorded_per_subject(ds) if a.holdout == "auto" else None
+    if recorded is not None:
+        ctx.say(f"test trials as recorded: the {len(recorded)} with role test; the other {len(ds) - len(recorded)} "
+                "train")
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
         res = evaluate.per_subject(
@@ -126,12 +143,13 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
             lambda train: make_models(plant(train), n_components=components, random_state=seed), source,
             n_test=a.n_test,
             n_steps=steps_of(a.horizon_s, ds.dt), seed=a.seed,
-            progress=lambda done, total: progress.update(task, completed=done), executor=ex,
+            progress=lambda done, total: progress.update(task, completed=done), executor=ex, test_ids=recorded,
         )
     for failure in res.failures:
         print(f"warning: {failure}", file=sys.stderr)
     table = Table("subject", *[METHOD_TITLES.get(m, m) for m in res.groups],
-                  title=f"per-subject {res.metric} ({a.n_test} held-out trial(s) each, {a.horizon_s:g} s horizon)")
+                  title=f"per-subject {res.metric} ({'the recorded test trials' if recorded is not None else a.n_test}"
+                        f" held-out trial(s) each, {a.horizon_s:g} s horizon)")
     for i, subject in enumerate(res.subjects):
         table.add_row(subject, *[f"{g[i]:.4g}" for g in res.groups.values()])
     ctx.say(table)
@@ -204,6 +222,7 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
     """What the data identify about the task objective first (factors between strategies, then ratios), then every
     weight ratio per strategy with its interval or why it has none, and each part's structure check."""
 
+    from workbench.study.power import LAW
     from workbench.study.weights import NOT_EXPLAINED, compare_strategies, format_interval, identified_first
 
     objectives = getattr(result, "objectives", {})
@@ -235,8 +254,7 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
             "the gain departs from every diagonal cost's by more than its spread, and the row gives the closest "
             "diagonal cost with sandwich intervals; \"not identifiable\": the interval spans more than ×10, with the "
             "demonstrations a simulated power curve says would make it narrower than ×2: the fitted model flies n, "
-            "2n and 4n demonstrations and the spans are extrapolated by the √n law, log span · √n constant, which "
-            "is not checked beyond the largest simulated size)")
+            "2n and 4n demonstrations and the number comes from " + LAW + ")")
 
 
 def cmd_report(ctx: Context) -> int:

@@ -739,7 +739,7 @@ def _objective_interval_notes(
     curves = {lb: objectives[lb].power for lb in ratios if getattr(objectives[lb], "power", None) is not None}
     for lb, curve in curves.items():
         md += [f"Power curve of {lb} (demonstrations simulated from its fitted model, refitted; interval span by "
-               "number of demonstrations):", "", *[f"- {line}" for line in curve.describe()], ""]
+               f"number of demonstrations; needed: {curve.law}):", "", *[f"- {line}" for line in curve.describe()], ""]
     return md
 
 

@@ -485,15 +485,21 @@ class SubjectStudy:
 
 
 def _subject_task(task: tuple) -> tuple[pd.DataFrame | None, list[str], str]:
-    """One subject of :func:`per_subject`: read its trials, hold ``n_test`` out (seeded by the subject's name),
-    fit every method on the rest and score the held-out ones. Returns (table or None, failures, the plant's
-    primary metric)."""
-    ref, subject, n_test, seed, make_models, n_components, n_steps, starts = task
+    """One subject of :func:`per_subject`: read its trials, hold ``n_test`` out (seeded by the subject's name) or
+    the recorded test trials among them, fit every method on the rest and score the held-out ones. Returns (table
+    or None, failures, the plant's primary metric)."""
+    ref, subject, n_test, seed, make_models, n_components, n_steps, starts, recorded = task
     ds = ref.load(subject=subject)
-    if len(ds) <= n_test:
-        raise DataError(f"subject {subject!r} has {len(ds)} trials; needs more than n_test={n_test}")
-    rng = np.random.default_rng(task_seed(seed, "per_subject", subject))
-    test_ids = {ds[int(j)].id for j in rng.choice(len(ds), n_test, replace=False)}
+    if recorded is not None:
+        test_ids = {d.id for d in ds if d.id in recorded}
+        if not test_ids or len(test_ids) == len(ds):
+            raise DataError(f"subject {subject!r}: {len(test_ids)} of its {len(ds)} trials are recorded test trials; "
+                            "a held-out study needs at least one test and one training trial")
+    else:
+        if len(ds) <= n_test:
+            raise DataError(f"subject {subject!r} has {len(ds)} trials; needs more than n_test={n_test}")
+        rng = np.random.default_rng(task_seed(seed, "per_subject", subject))
+        test_ids = {ds[int(j)].id for j in rng.choice(len(ds), n_test, replace=False)}
     train = ds.filter(lambda d: d.id not in test_ids)
     test = ds.filter(lambda d: d.id in test_ids)
     models = models_for(make_models, train, n_components)
@@ -515,6 +521,7 @@ def per_subject(
     progress: Progress | None = None,
     *,
     executor: Any = None,
+    test_ids: Sequence[str] | None = None,
 ) -> SubjectStudy:
     """The multi-subject study of the paper: for every subject, fit each method on all but ``n_test`` of its
     trials (chosen at random, seeded), predict the held-out ones, then compare the methods within subjects.
@@ -541,6 +548,9 @@ def per_subject(
         held-out trials are drawn with a seed of its own (``seed`` and its name, :func:`~workbench.study.executor.
         task_seed`), so the study is the same whatever runs it, and a subject's split does not depend on the
         others.
+    test_ids : sequence of str, optional
+        The trials to hold out (e.g. those a collected session recorded with role test) instead of ``n_test``
+        drawn at random; every subject needs at least one of them and one other trial.
     """
     if isinstance(demos, str | os.PathLike):
         subjects = sorted(read_manifest(demos).subjects)
@@ -550,7 +560,9 @@ def per_subject(
         raise DataError(f"a multi-subject study needs trials of at least two subjects; found {subjects}")
     ex = executor if executor is not None else serial
     ref = ex.share(demos, by_subject=True)
-    tasks = [(ref, subject, n_test, seed, make_models, n_components, n_steps, starts) for subject in subjects]
+    recorded = None if test_ids is None else frozenset(str(i) for i in test_ids)
+    tasks = [(ref, subject, n_test, seed, make_models, n_components, n_steps, starts, recorded)
+             for subject in subjects]
     parts, failures = [], []
     for table, subject_failures, subject_metric in ex.map(_subject_task, tasks, progress=progress):
         metric = metric or subject_metric

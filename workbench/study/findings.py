@@ -84,17 +84,21 @@ class StudyStatistics:
         if ml:
             m0 = ml[0]
             k = sum(family)
+            splits = m0.splits_words("each strategy's")
+            refits = ("Each fold's models are the study's own fits of that fold." if m0.loo else
+                      "Settings chosen by cross-validation on the study's training trials are held fixed in the "
+                      "refits, which skip the task objective and the band calibration (neither changes a mean "
+                      "prediction).")
             lines.append(
                 f"- *Does the proposed method predict this operator better than a baseline method?* (the headline "
                 f"and the verdicts) The methods, for this operator: the proposed model and each baseline of the table "
-                f"refitted on each of {m0.n_splits} "
-                f"random splits of each strategy's {m0.units} and scored on that split's test part; the mean over "
+                f"refitted on each of {splits} and scored on that split's test part; the mean over "
                 f"splits of `1 − proposed / baseline` (mean per-trial {what} RMSE) with its {m0.ci:g} % interval "
                 "from the corrected resampled t (Nadeau & Bengio 2003: the spread of the splits inflated by "
-                "n_test / n_train for their overlapping training sets, t on splits − 1 df); p from the same t, "
-                f"Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts use. Settings chosen by "
-                "cross-validation on the study's training trials are held fixed in the refits, which skip the "
-                "task objective and the band calibration (neither changes a mean prediction).")
+                "n_test / n_train for their overlapping training sets, t on splits − 1 df"
+                + ("; for leave-one-out folds a heuristic, as Bouckaert & Frank 2004 use it for k-fold "
+                   "cross-validation" if m0.loo else "") + "); p from the same t, "
+                f"Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts use. {refits}")
         if self.paired:
             first = self.paired[0]
             how = ("resampling whole subjects, then whole trials within each" if first.resampled.startswith(
@@ -115,8 +119,9 @@ class StudyStatistics:
                          "residual variance over the methods, so its method terms are not shown: the rows above "
                          "answer the methods' question.")
         if ml:
-            lines += ["", f"Methods (refitted on every split; GMR-only, which no verdict uses, only as fitted models "
-                          f"below) — {self._ml_header()}", "",
+            which = ("refitted in every fold" if m0.loo else "refitted on every split; GMR-only, which no verdict "
+                     "uses, only as fitted models below")
+            lines += ["", f"Methods ({which}) — {self._ml_header()}", "",
                       f"| strategy | proposed vs | splits (train / test {ml[0].units}) | difference "
                       f"[{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|"]
             for d in ml:
@@ -156,6 +161,8 @@ class StudyStatistics:
 
     def _ml_header(self) -> str:
         m0 = self.method_level[0]
+        if m0.loo:
+            return f"{m0.splits_words()}, each training on all of its strategy's {m0.units} but the one it tests:"
         return (f"{m0.n_splits} random splits, {m0.n_train} training and {m0.n_test} test {m0.units} each "
                 "(summed over strategies in the pooled row):")
 

@@ -40,13 +40,15 @@ from workbench.models.registry import REGISTRY
 from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
 
 __all__ = ["FLOOR_METHODS", "MethodDifference", "corrected_t", "split_scores", "split_tasks", "method_differences",
-           "SPLITS"]
+           "fold_differences", "SPLITS", "LOO_FOLDS"]
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
 FLOOR_METHODS = tuple(m.name for m in REGISTRY if m.floor)
 #: Random train/test splits per strategy (Nadeau & Bengio used 15; 8 keeps the demo within its 30 s).
 SPLITS = 8
+#: The design of a leave-one-out study's method-level rows (:attr:`MethodDifference.design`).
+LOO_FOLDS = "leave-one-out folds"
 #: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).
 _SPLIT_MAX_ITER = 200
 
@@ -73,6 +75,9 @@ class MethodDifference:
         The per-split changes.
     units : str
         What was split: "trials" or "subjects".
+    design : str
+        How: "random splits" (:func:`split_tasks`) or "leave-one-out folds" (a leave-one-segment-out study's own
+        folds, :func:`workbench.study.pipeline.run_loso`: every trial the test part once, ``n_test`` 1).
     """
 
     method: str
@@ -92,6 +97,19 @@ class MethodDifference:
     units: str = "trials"
     p_holm: float = float("nan")
     ci: float = 95.0
+    design: str = "random splits"
+
+    @property
+    def loo(self) -> bool:
+        """Whether the splits are a leave-one-out study's folds."""
+        return self.design == LOO_FOLDS
+
+    def splits_words(self, whose: str = "the") -> str:
+        """"8 random splits of the trials" or "the 5 leave-one-out folds of the trials, each left out once";
+        ``whose`` instead of "the" before the units."""
+        if self.loo:
+            return f"the {self.n_splits} leave-one-out folds of {whose} {self.units}, each left out once"
+        return f"{self.n_splits} random splits of {whose} {self.units}"
 
     @property
     def shown(self) -> bool:
@@ -197,6 +215,7 @@ def method_differences(
     baselines: Sequence[str] | None = None,
     units: Mapping[str, str] | None = None,
     ci: float = 95.0,
+    design: str = "random splits",
 ) -> list[MethodDifference]:
     """The corrected resampled t of ``method`` against each baseline, per label and (several labels) pooled.
 
@@ -237,7 +256,37 @@ def method_differences(
             out.append(MethodDifference(
                 method=method, baseline=base, metric=metric, label=scope, change=mean, lo=lo, hi=hi, p=p, se=se,
                 df=df, n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
-                units="subjects" if what == {"subjects"} else "trials", ci=ci))
+                units="subjects" if what == {"subjects"} else "trials", ci=ci, design=design))
+    return out
+
+
+def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed", ci: float = 95.0
+                     ) -> list[MethodDifference]:
+    """Method-level rows from a leave-one-out study's own folds (no refit beyond the folds'): each fold refitted
+    every method on all trials of its label but one and scored that one, so fold ``j`` is a split with
+    ``n_train = n − 1`` and ``n_test = 1``, and ``c_j = 1 − method / baseline`` on its trial.
+
+    The folds' training sets overlap even more than random splits' do; the same correction
+    ``(1/J + n_test/n_train) s²`` is applied (for ``J = n`` folds of one trial it doubles ``s²/n`` nearly), as
+    Bouckaert & Frank (2004) do for k-fold cross-validation — a heuristic there, as no unbiased variance estimate
+    of a cross-validation mean exists (Bengio & Grandvalet 2004). Per label only: different labels' folds are
+    different trials, so there is no pooled row.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The study's comparison rows (``label, metric, method, trial, value``), every trial the test trial of its
+        own fold.
+    """
+    rows = table[table["metric"] == metric]
+    if rows.empty:
+        return []
+    per = rows.groupby(["label", "trial", "method"], sort=False)["value"].mean().reset_index()
+    out: list[MethodDifference] = []
+    for label, part in per.groupby("label", sort=False):
+        n = int(part["trial"].nunique())
+        scores = part.assign(split=part["trial"])[["label", "split", "trial", "method", "value"]]
+        out += method_differences(scores, {label: (n - 1, 1)}, metric, method, ci=ci, design=LOO_FOLDS)
     return out
 
 

@@ -521,7 +521,9 @@ def run_loso(
     trials (``plants`` holds them by the left-out trial), so no trial is scored by a plant that saw it. The
     comparison table holds every trial once; a method that could not be fitted in some fold is left out for
     its label altogether (a mean over other folds would not be comparable) and named in ``failures``. One-step
-    coverage is the mean over the folds; there is no data-efficiency curve. ``models`` and ``baselines`` are,
+    coverage is the mean over the folds; there is no data-efficiency curve. The folds are the method-level
+    comparison of the headline and the verdicts (:func:`~workbench.study.method_level.fold_differences`: every
+    method refitted without each trial). ``models`` and ``baselines`` are,
     per label, those of its last fold; ``train`` is every trial of a label (each trains in all folds but its own).
     """
 
@@ -556,7 +558,12 @@ def run_loso(
     train = {lbl: test[lbl] for lbl in labels}
     plant = last.system
     stride = _stride_steps(stride_s, demos.dt)
-    statistics = _statistics(table, demos, plant, n_steps, stride, seed)
+    # the folds refitted every method without their trial: they are the method-level comparison (no refit more)
+    from workbench.study.evaluate import primary_metric
+    from workbench.study.method_level import fold_differences
+
+    method_level = tuple(fold_differences(table, primary_metric(plant))) or None
+    statistics = _statistics(table, demos, plant, n_steps, stride, seed, method_level)
     # per label the models of its last fold (a fold holds only the label of the trial it leaves out)
     models = {lb: m for _, r in folds for lb, m in r.models.items()}
     baselines = {lb: b for _, r in folds for lb, b in r.baselines.items()}
@@ -718,7 +725,7 @@ def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
 def _scope(d: Any) -> str:
     """Which question a difference answers, as the verdict says it."""
     if hasattr(d, "n_splits"):
-        return f"as a method (both refitted on each of {d.n_splits} random splits of the trials)"
+        return f"as a method (both refitted on each of {d.splits_words()})"
     return "on the test trials (these fitted models)"
 
 

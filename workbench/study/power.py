@@ -11,10 +11,16 @@ ratios of :mod:`workbench.method.ratio_profile`), and each ratio's interval span
 
 The span is measured by the Wald approximation of the profile interval, ``exp(2 t se)`` with ``se`` from the
 minimum-distance fit's curvature ``(Gᵀ Σ⁻¹ G)⁻¹``: near the target span of ×2 the profile is close to quadratic, and
-a profile walk per simulated set would cost minutes. The demonstrations needed for a span below ×2 follow from the
-√n law fitted to the simulated spans (``log span · √n`` is constant), so they may lie beyond the simulated sizes;
-a ratio whose simulated estimate stays at a zero or infinite weight at the largest size needs more than simulated
-(``inf``).
+a profile walk per simulated set would cost minutes.
+
+The law (:data:`LAW`): between the simulated sizes the median log span is interpolated linearly in ``log n``; beyond
+the largest size it shrinks as ``1/√n`` from that size's median (``log span · √n`` constant). The √n law is the
+asymptotic one; it is anchored at the largest size because smaller sets are further from it — their critical value
+has fewer degrees of freedom and their profile is more curved, so their spans shrink faster than ``1/√n`` and a
+constant fitted through all sizes (this module's first law, the median of ``log span · √n`` over every set) over-
+predicts the demonstrations needed. ``tests/study/test_power_sim.py`` checks the law against sets simulated at a
+larger size than the curve's. A ratio whose simulated estimate stays at a zero or infinite weight at the largest
+size needs more than simulated (``inf``).
 """
 
 from __future__ import annotations
@@ -28,7 +34,11 @@ import pandas as pd
 from workbench.errors import DataError, ModelError
 from workbench.method import ratio_profile
 
-__all__ = ["PowerCurve", "simulate_like", "power_curve", "as_fitted"]
+__all__ = ["PowerCurve", "simulate_like", "power_curve", "as_fitted", "LAW"]
+
+#: The law behind "demonstrations needed", as the report states it.
+LAW = ("the median simulated log span interpolated in log n between the simulated sizes, and shrinking as 1/√n "
+       "from the largest simulated size beyond it")
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,8 +50,7 @@ class PowerCurve:
     spans : DataFrame
         ``ratio, n, repeat, span`` (inf where the simulated estimate is at a zero or infinite weight).
     needed : dict of str to float
-        Per ratio, the demonstrations for a span below ``target`` (√n law through the simulated spans; inf: more
-        than simulated).
+        Per ratio, the demonstrations for a span below ``target`` (:data:`LAW`; inf: more than simulated).
     target : float
     n_trials : int
         The demonstrations the model was fitted on.
@@ -51,6 +60,19 @@ class PowerCurve:
     needed: dict[str, float]
     target: float
     n_trials: int
+
+    def predicted_log_span(self, ratio: str, n: float) -> float:
+        """The law's log span of ``ratio`` at ``n`` demonstrations (inf: unbounded at the largest simulated size;
+        nan: not simulated)."""
+        med = _medians(self.spans[self.spans["ratio"] == ratio])
+        if med is None:
+            return float("nan")
+        return _law(med, float(n))
+
+    @property
+    def law(self) -> str:
+        """The law behind :attr:`needed`, in words (:data:`LAW`)."""
+        return LAW
 
     @property
     def largest(self) -> int:
@@ -193,7 +215,7 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
         for rep in range(int(repeats)):
             sim = simulate_like(model, demos, n, seed=int(rng.integers(2**31)))
             try:
-                # no jackknife: n refits per simulated set (up to 4n trials) for a span the √n law extrapolates
+                # no jackknife: n refits per simulated set (up to 4n trials) for a span the law extrapolates
                 gains = bootstrap_gain(as_fitted(model, sim), model.system, n_boot=n_boot, method=gain_method,
                                        seed=int(rng.integers(2**31)), jackknife=False)
                 spans = _log_spans(gains, model.system, ci, ratios)
@@ -202,17 +224,51 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
             rows += [{"ratio": r, "n": n, "repeat": rep, "span": float(np.exp(v)) if np.isfinite(v) else np.inf}
                      for r, v in spans.items()]
     table = pd.DataFrame(rows, columns=["ratio", "n", "repeat", "span"])
-    needed = {}
-    for ratio, g in table.groupby("ratio", sort=False):
-        bounded = g.groupby("n")["span"].apply(lambda v: bool(np.isfinite(v).all()))
-        if not bounded.iloc[-1]:
-            needed[ratio] = float("inf")
-            continue
-        # √n law: log span · √n is constant; its median over the simulated sets. It is not believed below the
-        # smallest size from which every simulated interval was bounded.
-        finite = g[np.isfinite(g["span"])]
-        c = float(np.median(np.log(finite["span"]) * np.sqrt(finite["n"])))
-        unbounded_below = bounded[~bounded.values].index
-        floor = float(bounded.index[bounded.index > unbounded_below.max()].min()) if len(unbounded_below) else 0.0
-        needed[ratio] = max(float((c / np.log(target)) ** 2), floor)
+    needed = {ratio: _needed(_medians(g), float(np.log(target))) for ratio, g in table.groupby("ratio", sort=False)}
     return PowerCurve(spans=table, needed=needed, target=float(target), n_trials=n0)
+
+
+def _medians(g: pd.DataFrame) -> pd.Series | None:
+    """Median log span per simulated size from the smallest size on which every larger one bounded every set
+    (inf at the largest size where some set there was unbounded); None where nothing was simulated."""
+    if g.empty:
+        return None
+    logs = np.log(g["span"].astype(float))
+    by = logs.groupby(g["n"]).agg(lambda v: float(np.median(v)) if np.isfinite(v).all() else float("inf"))
+    by = by.sort_index()
+    if not np.isfinite(by.iloc[-1]):
+        return by.iloc[-1:]
+    unbounded = by.index[~np.isfinite(by.to_numpy())]
+    # not believed below the smallest size from which every simulated interval was bounded
+    kept = by[by.index > unbounded.max()] if len(unbounded) else by
+    kept.attrs["floor"] = float(kept.index[0]) if len(unbounded) else 0.0
+    return kept
+
+
+def _law(med: pd.Series, n: float) -> float:
+    """:data:`LAW` at ``n`` from the median log spans ``med`` by size (sorted, finite but maybe the last)."""
+    sizes, logs = med.index.to_numpy(dtype=float), med.to_numpy(dtype=float)
+    if not np.isfinite(logs[-1]):
+        return float("inf")
+    if n >= sizes[-1] or len(sizes) == 1:
+        return float(logs[-1] * np.sqrt(sizes[-1] / n))
+    if n <= sizes[0]:  # below the simulated sizes: the same √n law from the smallest
+        return float(logs[0] * np.sqrt(sizes[0] / n))
+    return float(np.interp(np.log(n), np.log(sizes), logs))
+
+
+def _needed(med: pd.Series | None, log_target: float) -> float:
+    """The demonstrations for a log span below ``log_target`` by :data:`LAW` (inf: unbounded at the largest size),
+    never below the smallest size from which every simulated set was bounded."""
+    if med is None or not np.isfinite(med.iloc[-1]):
+        return float("inf")
+    sizes, logs = med.index.to_numpy(dtype=float), med.to_numpy(dtype=float)
+    if logs[-1] > log_target:
+        return float(sizes[-1] * (logs[-1] / log_target) ** 2)
+    # the first simulated size at or below the target (every larger one is too: the medians may wobble)
+    k = next(i for i in range(len(sizes)) if (logs[i:] <= log_target).all())
+    if k == 0:  # below the smallest size: the √n law from it
+        return max(float(sizes[0] * (logs[0] / log_target) ** 2), float(med.attrs.get("floor", 0.0)))
+    # between sizes k-1 and k, linear in log n
+    t = (logs[k - 1] - log_target) / (logs[k - 1] - logs[k])
+    return float(np.exp(np.log(sizes[k - 1]) + t * (np.log(sizes[k]) - np.log(sizes[k - 1]))))
