@@ -7,7 +7,7 @@ recording to stdout (``rr.stdout()``) or exits with code 66 (``rr.EXTERNAL_DATA_
 to say the file is not for it. This one handles the logs the workbench reads by their first bytes — MAVLink
 ``.tlog``, PX4 ULog, and every other binary log format registered in :mod:`adapters.formats` (the DataFlash
 ``.bin`` once its reader is there) — and leaves MCAP to rerun's own loader (two loaders would log it twice) and
-CSV files to others (a CSV is too common to claim). The recording is the raw view of ``workbench view LOG``
+CSV files to others (a CSV is too common to claim). The recording is the raw view of ``workbench view LOG --raw``
 (:mod:`workbench.viewer.rawlog`) with its blueprint, sent active: the viewer opens on the workbench's layout, as
 ``workbench view`` does, not on its own automatic grid.
 
