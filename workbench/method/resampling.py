@@ -20,7 +20,7 @@ except ImportError:  # pragma: no cover
     ThreadpoolController = None
 from workbench.method.closed_loop import single_threaded_blas, system_matrices
 from workbench.method.gain import GainMethod, demo_blocks, gain_from_arrays
-from workbench.method.inverse_lqr_sdp import InverseLQR, cached_problem
+from workbench.method.inverse_lqr_sdp import _SOLVER_CHAIN, InverseLQR, cached_problem
 from workbench.method.objective import _STRUCTURES, Structure, TaskObjective
 
 __all__ = ['BootstrapResult', 'GainBootstrap', 'bootstrap_gain', 'bootstrap']
@@ -155,7 +155,9 @@ def resample_solvers(point: TaskObjective | None) -> tuple[str, ...] | None:
     flight's gain, 90 % of a default ``fit``) to return, as a rule, nothing the checks accept: such a resample
     is counted as failed, with its reason, instead. ``None`` (every solver) where there is no point objective.
     """
-    return None if point is None or not getattr(point, "solver", "") else (str(point.solver).upper(),)
+    name = str(getattr(point, "solver", "") or "").upper()
+    # a structured cost found by its closest gain ("closest-gain") has no SDP solver: every resample does the same
+    return (name,) if name in _SOLVER_CHAIN else None
 
 
 def _run_resamples(
