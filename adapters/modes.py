@@ -26,12 +26,14 @@ PX4_NAV_STATE = {
 
 
 #: Pilot-flown modes in which the autopilot, not the pilot, closes a loop: what it holds while the sticks are
-#: centred (ArduCopter's and PX4's mode documentation). A demonstration flown in one carries it in
+#: centred (ArduCopter's, QuadPlane's and PX4's mode documentation). A demonstration flown in one carries it in
 #: ``meta["autopilot_holds"]``, so that a gain that does not bring those states back is explained by the mode.
 AUTOPILOT_HOLDS = {
     "ALT_HOLD": "the altitude",
     "LOITER": "the position and the altitude",
     "POSHOLD": "the position and the altitude",
+    "QHOVER": "the altitude",
+    "QLOITER": "the position and the altitude",
     "ALTCTL": "the altitude",
     "POSCTL": "the position and the altitude",
 }
