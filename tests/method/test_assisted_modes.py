@@ -67,3 +67,25 @@ def test_a_gain_that_does_not_bring_the_position_back_names_the_assisted_mode():
     with pytest.raises(ModelError) as exc:
         estimate_gain(plain, system)
     assert "autopilot" not in str(exc.value)
+
+
+def test_a_model_fitted_on_assisted_segments_names_the_mode_too():
+    # the models fit the gain on goal-relative copies of the demonstrations: the flight mode must come along
+    from workbench.models import IOCOnlyModel
+
+    A, B = np.array([[1.0, 0.1], [0.0, 1.0]]), np.array([[0.0], [0.1]])
+    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",))
+    rng = np.random.default_rng(1)
+    demos = []
+    for j in range(3):
+        x, u = np.empty((30, 2)), np.empty((30, 1))
+        x[0] = rng.normal(size=2)
+        for k in range(30):
+            u[k] = np.array([0.5, 0.5]) @ x[k] + 0.1 * rng.normal()
+            if k + 1 < 30:
+                x[k + 1] = A @ x[k] + B @ u[k]
+        demos.append(Demonstration(np.arange(30) * 0.1, x, u,
+                                   meta={"id": f"d{j}", "mode": "ALT_HOLD", "autopilot_holds": "the altitude"}))
+    ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1)
+    with pytest.raises(ModelError, match=r"3 of 3 demonstrations were flown in a mode where the autopilot"):
+        IOCOnlyModel(system, gain_method="direct").fit(ds)
