@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pymavlink import mavutil
 
-__all__ = ["MODE_TABLES", "mode_name", "mode_number", "heartbeat_table", "vehicle_kind"]
+__all__ = ["AUTOPILOT_HOLDS", "MODE_TABLES", "mode_name", "mode_number", "heartbeat_table", "vehicle_kind"]
 
 _ML = mavutil.mavlink
 
@@ -23,6 +23,20 @@ PX4_NAV_STATE = {
     12: "DESCEND", 13: "TERMINATION", 14: "OFFBOARD", 15: "STAB", 17: "AUTO_TAKEOFF", 18: "AUTO_LAND",
     19: "AUTO_FOLLOW_TARGET", 20: "AUTO_PRECLAND", 21: "ORBIT", 22: "AUTO_VTOL_TAKEOFF",
 }  # fmt: skip
+
+
+#: Pilot-flown modes in which the autopilot, not the pilot, closes a loop: what it holds while the sticks are
+#: centred (ArduCopter's, QuadPlane's and PX4's mode documentation). A demonstration flown in one carries it in
+#: ``meta["autopilot_holds"]``, so that a gain that does not bring those states back is explained by the mode.
+AUTOPILOT_HOLDS = {
+    "ALT_HOLD": "the altitude",
+    "LOITER": "the position and the altitude",
+    "POSHOLD": "the position and the altitude",
+    "QHOVER": "the altitude",
+    "QLOITER": "the position and the altitude",
+    "ALTCTL": "the altitude",
+    "POSCTL": "the position and the altitude",
+}
 
 
 def _px4_custom_modes() -> dict[int, str]:

@@ -30,7 +30,7 @@ from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
 from adapters.mapping import ChannelMapping, Selected, channel_values, resolve_channel, select
 from adapters.meta import table_meta, text_meta
-from adapters.modes import mode_name
+from adapters.modes import AUTOPILOT_HOLDS, mode_name
 from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect, mode_spans, split_at_landing
 from adapters.streams import Streams, clean_series, numeric
 from adapters.transforms import TRANSFORMS
@@ -250,6 +250,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 meta["still"] = still
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
+                if span.meta["mode"] in AUTOPILOT_HOLDS:
+                    meta["autopilot_holds"] = AUTOPILOT_HOLDS[span.meta["mode"]]
             if key is not None:
                 meta["demo"] = key
             rows.append((meta["id"], t, v, meta))

@@ -35,6 +35,11 @@ def _last(text: str) -> str:
     return (lines[-1] if lines else text.strip().splitlines()[-1] if text.strip() else "")[:220]
 
 
+def _short(text: str) -> str:
+    """A cause without the file's path (the row names the log)."""
+    return re.sub(r"^\S+: (mapping '\S+': )?", "", text)[:160].replace("|", "/")
+
+
 def _outcome(code: int, out: str, err: str, ok: str) -> str:
     return ok if code == 0 else f"stops: {_last(err) or _last(out)}".replace("|", "/")
 
@@ -64,8 +69,11 @@ def row(log: Path, timeout: float) -> list[str]:
                             or "compared")
         if code == 0 and "time split" in out:
             evaluate = "time split: " + evaluate
-        code, out, err = _run(["view", str(log), "--save", f"{tmp}/v.rrd", "-q"], timeout)
-        view = _outcome(code, out, err, "saved")
+        code, out, err = _run(["view", str(log), "--save", f"{tmp}/v.rrd"], timeout)
+        raw = re.search(r"warning: (.*); showing the raw log alone", err)
+        shown = re.search(r"\((\d+ demonstrations)\)", out)
+        view = _outcome(code, out, err, f"states ({shown.group(1)})" if shown and not raw
+                        else "raw log" + (f" (the mapping: {_short(raw.group(1))})" if raw else ""))
     return [log.name, inspect, imp, fit, evaluate, view, physics]
 
 
@@ -73,8 +81,11 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("folders", nargs="+")
     p.add_argument("--timeout", type=float, default=900.0)
+    p.add_argument("--only", nargs="*", default=None, metavar="NAME", help="only the logs with these file names")
     a = p.parse_args()
     logs = sorted(f for d in a.folders for f in Path(d).iterdir() if f.suffix in LOGS)
+    if a.only is not None:
+        logs = [f for f in logs if f.name in a.only]
     print("| log | inspect (vehicle; armed) | import, no --mapping | fit | evaluate (position RMSE per method) | "
           "view | physics check |")
     print("|---|---|---|---|---|---|---|")

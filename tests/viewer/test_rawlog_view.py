@@ -1,4 +1,4 @@
-"""The raw log in rerun (``workbench view LOG`` without a mapping) and ``rerun-loader-workbench`` through rerun's
+"""The raw log in rerun (``workbench view LOG --raw``) and ``rerun-loader-workbench`` through rerun's
 external data-loader protocol: path in, an rrd stream on stdout, exit code 66 for files it does not handle."""
 
 from __future__ import annotations
@@ -69,15 +69,16 @@ def test_loader_static_logs_only_the_timeless_part(tmp_path):
 
 
 @pytest.mark.slow
-def test_view_without_a_mapping_is_the_raw_view(tmp_path):
+def test_view_raw_is_the_raw_view(tmp_path):
     out = tmp_path / "raw.rrd"
-    r = subprocess.run([sys.executable, "-m", "workbench", "view", str(FLIGHT), "--save", str(out)],
+    r = subprocess.run([sys.executable, "-m", "workbench", "view", str(FLIGHT), "--raw", "--save", str(out)],
                        capture_output=True, text=True, cwd=REPO, timeout=300)
     assert r.returncode == 0, r.stderr
     paths = {str(c.entity_path) for c in RrdReader(out).stream()}
     raw = raw_log(adapters.read(FLIGHT))
     assert {f"/log/streams/{s.name}" for s in raw.streams} <= paths
     assert {"/log/mode", "/log/armed", "/log/messages", "/log/gps/vehicle", "/log/parameters"} <= paths
+    assert not [p for p in paths if p.startswith("/demos")]  # the log alone, no mapping's states
     verify = subprocess.run([str(Path(sys.executable).with_name("rerun")), "rrd", "verify", str(out)],
                             capture_output=True, text=True, timeout=120)
     assert verify.returncode == 0, verify.stderr

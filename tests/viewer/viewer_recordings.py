@@ -70,7 +70,7 @@ def cli_recordings() -> dict[str, Path]:
     _run("replay", str(demos), "--model", str(model), "--no-wait", "--horizon", "0.5", "--save", str(paths["replay"]))
     plane_log = quadplane_tlog(out / "quadplane.tlog")
     paths["plane_raw"] = out / "plane_raw.rrd"
-    _run("view", str(plane_log), "--save", str(paths["plane_raw"]))
+    _run("view", str(plane_log), "--raw", "--save", str(paths["plane_raw"]))
     paths["plane"] = out / "plane.rrd"  # a flight's clock: its segments share one mode lane
     _run("view", str(plane_log), "--mapping", "arduplane_manual", "--save", str(paths["plane"]))
     paths["live_silent"] = out / "live_silent.rrd"  # a link nobody sends to: the status and events only

@@ -7,7 +7,7 @@ recording to stdout (``rr.stdout()``) or exits with code 66 (``rr.EXTERNAL_DATA_
 to say the file is not for it. This one handles the logs the workbench reads by their first bytes — every
 format declared in :mod:`adapters.formats` whose ``rerun_importer`` is true: MAVLink ``.tlog``, PX4 ULog, DataFlash
 ``.bin`` — and leaves MCAP to rerun's own loader (two loaders would log it twice) and CSV files to others (a CSV
-is too common to claim). The recording is the raw view of ``workbench view LOG``
+is too common to claim). The recording is the raw view of ``workbench view LOG --raw``
 (:mod:`workbench.viewer.rawlog`) with its blueprint, sent active: the viewer opens on the workbench's layout, as
 ``workbench view`` does, not on its own automatic grid.
 

@@ -62,6 +62,10 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
                            progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.stopped:
         print(f"warning: bootstrap {result.stopped}", file=sys.stderr)
+    elif result.n_failed:
+        from workbench.method.resampling import failure_note
+
+        print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
     ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
             f"{result.ci:g} % percentile intervals):")
     for names, lo, hi, what in ((ds.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),

@@ -280,6 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
     _mapping_option(p)
+    p.add_argument("--raw", action="store_true",
+                   help="a raw log as it is (every stream, modes, messages), without a mapping's states")
     _output_options(p)
 
     p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",

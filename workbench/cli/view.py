@@ -51,7 +51,8 @@ def _raw_streams(ctx: Context, path: str) -> Any:
 
 
 def _view_raw(ctx: Context, streams: Any) -> int:
-    """``workbench view LOG`` without a mapping: the log as it is (workbench.viewer.rawlog)."""
+    """``workbench view LOG --raw`` (or a log no mapping makes demonstrations of): the log as it is
+    (workbench.viewer.rawlog)."""
     from adapters.rawlog import raw_log
     from workbench import viewer
     from workbench.viewer.rawlog import RAW_APPLICATION_ID, log_raw, raw_blueprint
@@ -77,9 +78,21 @@ def cmd_view(ctx: Context) -> int:
 
     a = ctx.args
     raw_streams = _raw_streams(ctx, a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
-    if raw_streams is not None and not a.mapping and not a.model:
+    if a.raw:
+        if raw_streams is None:
+            raise UsageError("--raw shows one raw log as it is: give one log (not demonstrations), no --label")
+        if a.mapping or a.model:
+            raise UsageError("--raw shows the log as it is: leave out --mapping and --model")
         return _view_raw(ctx, raw_streams)
-    ds = load_demos(ctx, a.inputs, a.mapping, a.label, allow_still=True)
+    mapping = a.mapping
+    if raw_streams is not None and not mapping:
+        # as import/fit/evaluate do: the vehicle's shipped mapping, so the first view shows its states; a log no
+        # mapping makes demonstrations of still opens, as it is, with the cause
+        mapping, ds = _default_mapped(ctx, a.inputs[0])
+        if ds is None:
+            return _view_raw(ctx, raw_streams)
+    else:
+        ds = load_demos(ctx, a.inputs, mapping, a.label, allow_still=True)
     source_dt = float(ds.dt)
     models, named = None, None
     if a.model:
@@ -107,12 +120,27 @@ def cmd_view(ctx: Context) -> int:
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
                 samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=origins, source_dt=source_dt,
             )
-            extra = (_raw_beside(rec, raw_streams, a.mapping, ds, origins.get(str(Path(a.inputs[0]))))
-                     if raw_streams is not None and a.mapping else [])
+            extra = (_raw_beside(rec, raw_streams, mapping, ds, origins.get(str(Path(a.inputs[0]))))
+                     if raw_streams is not None and mapping else [])
             sink.blueprint = viewer.default_blueprint(session, extra_tabs=extra)
     _warn(ctx, session)
     announce(ctx, out, sink, f"{len(ds)} demonstrations")
     return 0
+
+
+def _default_mapped(ctx: Context, path: str) -> tuple[str, Any]:
+    """The mapping chosen for the log's vehicle and the log's demonstrations under it, said on stdout; ``(name,
+    None)`` with the cause on stderr where that mapping makes none (the caller shows the raw log)."""
+    import adapters
+
+    p = ctx.input_path(path, "the demonstrations")
+    chosen, why = adapters.choose_mapping(p, format=None if ctx.stdio.format == "parquet" else ctx.stdio.format)
+    ctx.say(f"{ctx.shown(p)}: mapping {chosen} ({why}; --mapping chooses another, --raw shows the log alone)")
+    try:
+        return chosen, load_demos(ctx, [path], chosen, None, allow_still=True)
+    except DataError as e:
+        print(f"warning: {e}; showing the raw log alone", file=sys.stderr)
+        return chosen, None
 
 
 def _raw_beside(rec: Any, streams: Any, mapping: str, ds: Any, origin: float | None) -> list[Any]:

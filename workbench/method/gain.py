@@ -10,6 +10,7 @@ variability.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -170,10 +171,12 @@ def gain_from_arrays(
     method: GainMethod = "direct",
     lengths: Sequence[int] | None = None,
     state_names: Sequence[str] | None = None,
+    assisted: str = "",
 ) -> np.ndarray:
     """Estimate the gain ``K̂`` of ``u = K x`` from stacked data (step 1 of Algorithm 1).
 
-    ``state_names`` name, in the error for a gain that is not stabilizing, the states its slowest mode lies on.
+    ``state_names`` name, in the error for a gain that is not stabilizing, the states its slowest mode lies on;
+    ``assisted`` (:func:`assisted_note`) the flight modes whose autopilot held some of them.
 
     Parameters
     ----------
@@ -242,8 +245,23 @@ def gain_from_arrays(
         check_stabilizing(A, B, K)
     except ModelError as exc:
         raise ModelError(f"estimated gain ({method}, cond(X) = {cond_X:.3g}): {exc}"
-                         f"{_unstable_mode(A, B, K, state_names)}") from None
+                         f"{_unstable_mode(A, B, K, state_names)}{assisted}") from None
     return K
+
+
+def assisted_note(demos: Sequence[Any]) -> str:
+    """Which demonstrations were flown in a mode where the autopilot holds states (``meta["autopilot_holds"]``,
+    set by the adapters), as the likely cause of a gain that does not bring them back; ``""`` where none was."""
+    held = Counter((str(d.meta.get("mode", "")), str(d.meta["autopilot_holds"])) for d in demos
+                   if getattr(d, "meta", None) and d.meta.get("autopilot_holds"))
+    if not held:
+        return ""
+    n = sum(held.values())
+    modes = ", ".join(f"{mode} ({what})" for (mode, what), _ in held.most_common())
+    return (f". Likely cause: {n} of {len(demos)} demonstrations were flown in a mode where the autopilot, not the "
+            f"pilot, holds states — {modes}: there the sticks command rates and the autopilot brings the held "
+            "states back, so the pilot's own gain need not; model the segments of a mode the pilot flies alone "
+            "(STABILIZE, ACRO, MANUAL: a mapping that keeps only those)")
 
 
 def _unstable_mode(A: np.ndarray, B: np.ndarray, K: np.ndarray, names: Sequence[str] | None) -> str:
@@ -283,7 +301,8 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
     X, U, X_next = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))
     names = getattr(system, "state_names", None)
     return gain_from_arrays(X, U, X_next, A, B, method, lengths=[b[0].shape[1] for b in blocks],
-                            state_names=tuple(names) if names is not None else None)
+                            state_names=tuple(names) if names is not None else None,
+                            assisted=assisted_note(list(demos)))
 
 
 @dataclass(frozen=True)

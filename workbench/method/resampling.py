@@ -20,7 +20,7 @@ except ImportError:  # pragma: no cover
     ThreadpoolController = None
 from workbench.method.closed_loop import single_threaded_blas, system_matrices
 from workbench.method.gain import GainMethod, demo_blocks, gain_from_arrays
-from workbench.method.inverse_lqr_sdp import InverseLQR, cached_problem
+from workbench.method.inverse_lqr_sdp import _SOLVER_CHAIN, InverseLQR, cached_problem
 from workbench.method.objective import _STRUCTURES, Structure, TaskObjective
 
 __all__ = ['BootstrapResult', 'GainBootstrap', 'bootstrap_gain', 'bootstrap']
@@ -92,6 +92,18 @@ def stop_note(n_boot: int, done: int, failures: Sequence[str]) -> str:
             f"{EARLY_STOP_FAILED:.0%}), so the rest would not bound the intervals; commonest cause ({count}): {cause}")
 
 
+def failure_note(failures: Sequence[str]) -> str:
+    """How many resamples failed and the commonest cause (``""`` when none did), for the terminal."""
+    if not failures:
+        return ""
+    reasons = [f.split(": ", 1)[-1] for f in failures]  # "resample 7: <reason>"
+    # grouped by the reason's first clause: the numbers after it (ρ, λmin) differ from resample to resample
+    causes = Counter(r.split(": ")[0].split(";")[0][:120] for r in reasons)
+    cause, count = causes.most_common(1)[0]
+    example = next(r for r in reasons if r.startswith(cause)).split(";")[0][:200]
+    return f"{len(failures)} resample(s) failed; commonest cause ({count}): {example}"
+
+
 def _resample_fit(
     blocks: list, idx: np.ndarray, A: np.ndarray, B: np.ndarray, method: GainMethod, solver: InverseLQR | None
 ) -> tuple[np.ndarray, TaskObjective | None]:
@@ -119,22 +131,42 @@ def _resamples(blocks: list, draws: list, A: np.ndarray, B: np.ndarray, method: 
 
 def _bootstrap_block(task: tuple) -> list[tuple]:
     """A block of bootstrap resamples, run by a worker: it reads the demonstrations from their file."""
-    ref, A, B, method, structure, draws = task
+    ref, A, B, method, structure, solvers, draws = task
     blocks = demo_blocks(list(ref.load()), *B.shape)
-    return _resamples(blocks, draws, A, B, method, _solver(A, B, structure))
+    return _resamples(blocks, draws, A, B, method, _solver(A, B, structure, solvers))
 
 
-def _solver(A: np.ndarray, B: np.ndarray, structure: Structure | None) -> InverseLQR | None:
-    """The cached inverse-LQR problem of ``structure``; None for gains only."""
-    return None if structure is None else cached_problem(A, B, structure, True)
+def _solver(A: np.ndarray, B: np.ndarray, structure: Structure | None,
+            solvers: tuple[str, ...] | None = None) -> InverseLQR | None:
+    """The cached inverse-LQR problem of ``structure`` (None for gains only); with ``solvers``, a problem that
+    tries only those (compiled here: a bootstrap compiles it once)."""
+    if structure is None:
+        return None
+    if solvers is None:
+        return cached_problem(A, B, structure, True)
+    return InverseLQR(A, B, structure=structure, second_stage=True, solvers=solvers)
+
+
+def resample_solvers(point: TaskObjective | None) -> tuple[str, ...] | None:
+    """The solver chain of a bootstrap's resamples: the solver that solved the point estimate, alone.
+
+    The point estimate tries every solver in turn; a resample does not. A resample the point's solver cannot
+    solve would go on to SCS, which iterates to its limit (200,000 iterations, about 20 s a solve on a real
+    flight's gain, 90 % of a default ``fit``) to return, as a rule, nothing the checks accept: such a resample
+    is counted as failed, with its reason, instead. ``None`` (every solver) where there is no point objective.
+    """
+    name = str(getattr(point, "solver", "") or "").upper()
+    # a structured cost found by its closest gain ("closest-gain") has no SDP solver: every resample does the same
+    return (name,) if name in _SOLVER_CHAIN else None
 
 
 def _run_resamples(
     demos: Any, blocks: list, A: np.ndarray, B: np.ndarray, method: GainMethod, structure: Structure | None,
     n_boot: int, seed: int, progress: Callable[[int, int], None] | None, executor: Any,
+    solvers: tuple[str, ...] | None = None,
 ) -> list[tuple]:
     """Draw ``n_boot`` resamples of whole trials from one generator and fit each (see :func:`bootstrap`)."""
-    solver = _solver(A, B, structure)
+    solver = _solver(A, B, structure, solvers)
     rng = np.random.default_rng(seed)
     draws = [(b, rng.integers(0, len(blocks), size=len(blocks))) for b in range(n_boot)]
     # Resamples that draw the same trials (in any order) give the same fit: each distinct one is fitted once and
@@ -148,10 +180,10 @@ def _run_resamples(
     # a first look, then the rest only where it is worth it: when most resamples of the first look fail, the
     # remaining ones would cost minutes to deliver intervals of a few survivors (unbounded ones, often)
     fitted = _run_draws(demos, blocks, A, B, method, structure, solver, distinct[:EARLY_LOOK], 0, n, progress,
-                        executor)
+                        executor, solvers)
     if n > EARLY_LOOK and sum(r[4] is None for r in fitted) >= (1 - EARLY_STOP_FAILED) * len(fitted):
         fitted += _run_draws(demos, blocks, A, B, method, structure, solver, distinct[EARLY_LOOK:], len(fitted), n,
-                             progress, executor)
+                             progress, executor, solvers)
     if len(fitted) < n:  # stopped early: the distinct resamples fitted
         return fitted
     by_key = dict(zip(unique, fitted, strict=True))
@@ -161,7 +193,7 @@ def _run_resamples(
 def _run_draws(
     demos: Any, blocks: list, A: np.ndarray, B: np.ndarray, method: GainMethod, structure: Structure | None,
     solver: InverseLQR | None, draws: list, offset: int, n_boot: int, progress: Callable[[int, int], None] | None,
-    executor: Any,
+    executor: Any, solvers: tuple[str, ...] | None = None,
 ) -> list[tuple]:
     """Fit the resamples ``draws`` here or on the executor's workers (progress: ``offset`` done before, of
     ``n_boot``)."""
@@ -178,7 +210,7 @@ def _run_draws(
     # one resample per task in process (progress per resample); on workers ~4 blocks each amortize the setup
     size = max(1, math.ceil(len(draws) / (4 * executor.workers))) if executor.parallel else 1
     ref = executor.share(demos)
-    tasks = [(ref, A, B, method, structure, draws[i : i + size]) for i in range(0, len(draws), size)]
+    tasks = [(ref, A, B, method, structure, solvers, draws[i : i + size]) for i in range(0, len(draws), size)]
     report = None if progress is None else lambda done, total: progress(min(n_boot, offset + done * size), n_boot)
     return [r for block in executor.map(_bootstrap_block, tasks, progress=report) for r in block]
 
@@ -199,7 +231,7 @@ def _resampled(
     K0, obj0 = _resample_fit(blocks, np.arange(len(blocks)), A, B, method, _solver(A, B, structure))
     fits, failures = [], []
     for b, K, q_diag, r_diag, error in _run_resamples(demos, blocks, A, B, method, structure, n_boot, seed,
-                                                      progress, executor):
+                                                      progress, executor, resample_solvers(obj0)):
         if error is None:
             fits.append((K, q_diag, r_diag))
         else:

@@ -103,7 +103,8 @@ def fit_gain(
 ) -> tuple[np.ndarray, GainChoice]:
     """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.method.gain.choose_gain` on the shifted states, and which
     estimator made it (``method`` may be the rule ``"iv-or-direct"``)."""
-    shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(demos, refs, strict=True)]
+    shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id, meta=getattr(d, "meta", {}))  # meta: the flight mode
+                for d, r in zip(demos, refs, strict=True)]
     K, choice = choose_gain(shifted, system, method)
     return np.ascontiguousarray(K), choice
 

@@ -23,6 +23,7 @@ target)``, ``predict(x0, n_steps, target, samples=…)``, ``predict_many(…)``,
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable, Sequence
 from typing import Any, ClassVar
 
@@ -30,6 +31,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.defaults import N_COMPONENTS
+from workbench.errors import DegenerateFitWarning
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import MethodSettings
@@ -240,6 +242,8 @@ class HumanBehaviorModel(TaskGMRModel):
         from workbench.models.autoconfig import _CV_MAX_ITER, choose_settings
 
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
+        if len(ds) < 2:
+            return self._fit_uncrossed(demos, ds)
         auto = choose_settings(self, ds, components=self.cv_components, reg_covars=self.cv_reg_covars,
                                criterion=self.auto_criterion)
         # the chosen candidate is fitted as it was scored: EM capped as the candidates were
@@ -250,6 +254,27 @@ class HumanBehaviorModel(TaskGMRModel):
         self.auto_ = auto
         # the variability model did not lower the held-out error: predict with K̂x alone (said by auto_.describe())
         self.variability_mean_ = not auto.fallback
+        return self
+
+    def _fit_uncrossed(self, demos: Any, ds: Sequence[Demonstration]) -> HumanBehaviorModel:
+        """One demonstration (a fold of a two-segment flight): nothing to cross-validate the "cv" settings on, so
+        the constructor's defaults, said in a warning, with as many components as its samples carry."""
+        import inspect
+
+        from workbench.models.autoconfig import _SAMPLES_PER_COMPONENT
+
+        defaults = {k: p.default for k, p in inspect.signature(type(self).__init__).parameters.items()}
+        n_samples = sum(len(d) for d in ds)
+        G = int(self.n_components) if self.n_components != "cv" else int(defaults["n_components"])
+        G = max(1, min(G, n_samples // _SAMPLES_PER_COMPONENT))
+        reg = float(self.reg_covar) if self.reg_covar != "cv" else float(defaults["reg_covar"])
+        warnings.warn(f"HumanBehaviorModel.fit: {len(ds)} demonstration(s), nothing to cross-validate the 'cv' "
+                      f"settings on: fitted with G = {G}, reg_covar = {reg:g} (the defaults, G capped by the "
+                      f"{n_samples} samples)", DegenerateFitWarning, stacklevel=3)
+        chosen = type(self)(self.system, **{**self.get_params(), "n_components": G, "reg_covar": reg}).fit(demos)
+        self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
+        self.auto_ = None
+        self.variability_mean_ = True
         return self
 
     def residuals(self, demo: Demonstration) -> np.ndarray:

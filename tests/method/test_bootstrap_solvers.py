@@ -1,0 +1,66 @@
+"""The bootstrap's resamples try only the solver that solved the point estimate: the fallback chain (SCS iterating
+to 200,000 iterations, ~20 s a solve on a real flight's gain) is the point estimate's alone."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.method import bootstrap
+from workbench.method.inverse_lqr_sdp import InverseLQR
+from workbench.method.objective import forward_gain
+from workbench.method.resampling import failure_note
+from workbench.plant.system import LinearSystem
+
+
+def _demos(seed: int = 5, n_trials: int = 5):
+    rng = np.random.default_rng(seed)
+    A = np.array([[1.0, 0.1], [0.0, 0.95]])
+    B = np.array([[0.0], [0.1]])
+    system = LinearSystem(A, B, dt=0.1)
+    K = forward_gain(A, B, np.eye(2), np.eye(1), np.zeros((2, 1)))[0]
+    demos = []
+    for j in range(n_trials):
+        x, u = np.zeros((40, 2)), np.zeros((40, 1))
+        x[0] = rng.normal(size=2)
+        for k in range(40):
+            u[k] = K @ x[k] + 0.1 * rng.normal(size=1)
+            if k + 1 < 40:
+                x[k + 1] = A @ x[k] + B @ u[k]
+        demos.append(Demonstration(np.arange(40) * 0.1, x, u, meta={"id": f"d{j}"}))
+    return DemonstrationSet(demos, system.state_names, system.input_names, dt=0.1), system
+
+
+def test_resamples_do_not_fall_back_to_the_point_estimates_other_solvers(monkeypatch):
+    # every second stage fails with the first solver (as on real flights' gains): the point estimate goes on to
+    # SCS; each resample used to as well (one 20 s SCS solve per resample), and now stops at its stage 1
+    ds, system = _demos()
+    original = InverseLQR._run
+    scs_calls = []
+
+    def run(self, problem, solver):
+        if solver != self.solvers[0]:
+            scs_calls.append(solver)
+            return "infeasible"
+        if problem is self._stage2:
+            return "infeasible"
+        return original(self, problem, solver)
+
+    monkeypatch.setattr(InverseLQR, "_run", run)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = bootstrap(ds, system, n_boot=12, seed=1)
+    point_fallbacks = len(InverseLQR(system.A, system.B).solvers) - 1  # the point estimate's stage 2 only
+    assert res.objective.solver == InverseLQR(system.A, system.B).solvers[0]
+    assert res.n_ok == res.n_boot  # the resamples still fit: their stage-1 optimum
+    assert len(scs_calls) == point_fallbacks
+
+
+def test_the_failure_note_names_the_count_and_the_commonest_cause_once_across_numbers():
+    failures = [f"resample {i}: the gain is not stabilizing: spectral radius ρ(A + B K) = 1.00{i} ≥ 1"
+                for i in range(3)] + ["resample 9: rank(X) = 1 < 2"]
+    note = failure_note(failures)
+    assert note.startswith("4 resample(s) failed; commonest cause (3): the gain is not stabilizing")
+    assert failure_note([]) == ""
