@@ -171,7 +171,7 @@ def test_replay_no_wait(work):
 def test_report_writes_markdown_and_figures(work):
     out = work / "report"
     ok(wb("report", str(work / "demos.parquet"), "-o", str(out), "--label", "CS1", "--n-components", "3",
-          "--samples", "10", "--efficiency", "5,10", "--repeats", "1", "--horizon", "2"))
+          "--samples", "10", "--efficiency", "5,10", "--repeats", "1", "--horizon", "2", "--bootstrap", "12"))
     text = (out / "report.md").read_text()
     for fig in ("demonstrations", "objective", "variability", "predictions", "rmse", "data_efficiency"):
         assert (out / "figures" / f"{fig}.png").stat().st_size > 10_000
@@ -184,8 +184,9 @@ def test_report_writes_markdown_and_figures(work):
 
 def test_demo_end_to_end(tmp_path):
     out = tmp_path / "demo"
-    r = ok(wb("demo", "--out", str(out), "--n-components", "3", "--samples", "20", "--efficiency", "2,5",
-              "--repeats", "1", timeout=300))
+    # 12 resamples of the objective intervals (the default 100 was half the demo's time): every phase still runs
+    r = ok(wb("demo", "--out", str(out), "--n-components", "3", "--samples", "10", "--efficiency", "2,5",
+              "--repeats", "1", "--bootstrap", "12", timeout=300))
     assert f"rerun {out / 'demo.rrd'}" in r.stdout
     for f in ("demo.rrd", "report.md", "demos.parquet", "results.csv", "models/CS1.npz", "models/CS2.npz",
               "figures/predictions.png"):
