@@ -22,13 +22,12 @@ $(STAMP): pyproject.toml $(LOCK)
 demo: $(STAMP)
 	$(BIN)/workbench demo --out $(OUT)
 
-# The suite runs on pytest-xdist workers, one per core (`make test TEST_WORKERS=0` runs it in one process), tests
-# spread one by one except those of one xdist_group, which share a worker (the viewer's CLI recordings, made once);
+# The suite runs on pytest-xdist workers, one per core (`make test TEST_WORKERS=0` runs it in one process);
 # PYTEST_ARGS adds options (`make test PYTEST_ARGS='-k viewer'`). It prints its duration and the machine's load,
 # and a selection with no tests in it (pytest's exit status 5) is not a failure.
 TEST_WORKERS ?= auto
 PYTEST_ARGS  ?=
-RUN_PYTEST = start=$$(date +%s); status=0; $(1) -m pytest -n $(TEST_WORKERS) --dist loadgroup $(2) $(PYTEST_ARGS) || status=$$?; \
+RUN_PYTEST = start=$$(date +%s); status=0; $(1) -m pytest -n $(TEST_WORKERS) $(2) $(PYTEST_ARGS) || status=$$?; \
 	if [ $$status -eq 5 ]; then echo "$@: no tests collected"; status=0; fi; \
 	echo "$@: $$(( $$(date +%s) - start )) s on $$(nproc) cores, $$(uptime | sed 's/.*\(load average\)/\1/')"; \
 	exit $$status

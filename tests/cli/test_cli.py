@@ -6,6 +6,7 @@ ONE line on stderr naming the cause — never a traceback — and leave no outpu
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import re
@@ -60,9 +61,18 @@ def rrd_verify(path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def work(tmp_path_factory):
-    d = tmp_path_factory.mktemp("cli")
-    ok(wb("import", *map(str, LOGS), "--mapping", "planar_quadrotor", "-o", str(d / "demos.parquet")))
-    ok(wb("fit", str(d / "demos.parquet"), "--label", "CS1", "--n-components", "3", "-o", str(d / "cs1.npz")))
+    """The sample logs imported and a CS1 model fitted, made once per run: under pytest-xdist by the first worker
+    whose test needs them while it holds a file lock (the other waits, then reads them; tests/conftest.py names the
+    run's shared folder); each test writes its own outputs beside them."""
+    shared = os.environ.get("WORKBENCH_TEST_SHARED")
+    d = Path(shared) / "cli" if shared else tmp_path_factory.mktemp("cli")
+    d.mkdir(parents=True, exist_ok=True)
+    with open(d / ".lock", "a+") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (d / ".made").is_file():
+            ok(wb("import", *map(str, LOGS), "--mapping", "planar_quadrotor", "-o", str(d / "demos.parquet")))
+            ok(wb("fit", str(d / "demos.parquet"), "--label", "CS1", "--n-components", "3", "-o", str(d / "cs1.npz")))
+            (d / ".made").touch()
     return d
 
 

@@ -34,9 +34,6 @@ _loader = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_loader)
 recordings = _loader.load()  # one shared instance, so test_viewer_real.py reuses the same recordings
 
-# the CLI recordings are made once per run: their users run on one xdist worker (make test: --dist loadgroup)
-pytestmark = pytest.mark.xdist_group("viewer_recordings")
-
 HORIZON = 15
 SAMPLES = 40
 STARTS = (0, 25)

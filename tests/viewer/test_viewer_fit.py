@@ -24,9 +24,6 @@ _loader = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_loader)
 recordings = _loader.load()
 
-# the CLI recordings are made once per run: their users run on one xdist worker (make test: --dist loadgroup)
-pytestmark = pytest.mark.xdist_group("viewer_recordings")
-
 _spec = importlib.util.spec_from_file_location("_test_viewer", Path(__file__).with_name("test_viewer.py"))
 _tv = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_tv)

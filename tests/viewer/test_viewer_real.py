@@ -37,7 +37,6 @@ INSTALL = "apt-get update && apt-get install -y --no-install-recommends mesa-vul
 pytestmark = [
     pytest.mark.skipif(not glob.glob(LAVAPIPE), reason=f"no software Vulkan driver ({LAVAPIPE}); run: {INSTALL}"),
     pytest.mark.skipif(not RERUN.exists(), reason=f"no rerun viewer beside {sys.executable}"),
-    pytest.mark.xdist_group("viewer_recordings"),  # with the other users of the recordings, on one worker
 ]
 START_TIMEOUT = 60.0
 SETTLE = 2.0  # s after the first screenshot: the viewer has drawn a few frames, the time panel among them
