@@ -26,6 +26,18 @@ def external_file(name: str) -> Path:
     return path
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _shared_tmp(tmp_path_factory):
+    """``WORKBENCH_TEST_SHARED``: a folder of this run that every pytest-xdist worker sees (the parent of the
+    workers' own temporary folders), where expensive results are made once per run under a file lock (pytest-xdist's
+    "making session-scoped fixtures execute only once"); pytest removes it with its old runs."""
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    os.environ["WORKBENCH_TEST_SHARED"] = str(shared / "shared")
+    yield
+    os.environ.pop("WORKBENCH_TEST_SHARED", None)
+
+
 @pytest.fixture(scope="session")
 def quadrotor():
     return planar_quadrotor()

@@ -75,9 +75,10 @@ def assert_same_as_pymavlink(ours, per_type: dict[str, list]) -> None:
     """Counts, times, header ids and every field of every message type agree exactly (NaN == NaN)."""
     theirs = {k: v for k, v in per_type.items() if k != "BAD_DATA" and not k.startswith("UNKNOWN_")}
     assert ours.report.counts == {k: len(v) for k, v in theirs.items()}
-    assert set(ours.streams) == set(theirs)
+    streams = ours.streams  # made on each access: once here, not once per type
+    assert set(streams) == set(theirs)
     for name, msgs in theirs.items():
-        df = ours.streams[name]
+        df = streams[name]
         assert len(df) == len(msgs), name
         np.testing.assert_array_equal(df["t"].to_numpy(), [m._timestamp for m in msgs], err_msg=name)
         np.testing.assert_array_equal(df["sysid"].to_numpy(), [m.get_srcSystem() for m in msgs])
@@ -244,8 +245,9 @@ def test_dronekit_selected_types_and_columns():
     some = read_tlog(path, message_types=["ATTITUDE", "HEARTBEAT", "STATUSTEXT"])
     assert set(some.streams) == {"ATTITUDE", "HEARTBEAT", "STATUSTEXT"}
     assert some.report == full.report
+    full_streams = full.streams  # made on each access: once here, not once per type
     for name, df in some.streams.items():
-        pd.testing.assert_frame_equal(df, full.streams[name])
+        pd.testing.assert_frame_equal(df, full_streams[name])
     att = some.streams["ATTITUDE"]
     assert list(att.columns) == ["t", *mav.MAVLink_attitude_message.fieldnames, "sysid", "compid"]
     assert att["t"].dtype == np.float64 and att["roll"].dtype == np.float64
@@ -273,11 +275,12 @@ def test_typed_reads_equal_the_full_read_and_checksum_fewer_frames(monkeypatch):
         return real(buf, offsets, *args, **kwargs)
 
     monkeypatch.setattr(tlog_module, "crc_spans", counting)
-    for name in full.streams:
+    full_streams = full.streams  # made on each access: once here, not once per type
+    for name in full_streams:
         checked.clear()
         alone = read_streams(path, types=[name])
         assert list(alone) == [name]
-        pd.testing.assert_frame_equal(alone[name], full.streams[name])
+        pd.testing.assert_frame_equal(alone[name], full_streams[name])
         # The real flight has 1314 frames failing their checksum, so the typed walk meets invalid frames; still
         # far fewer frames are checksummed than the records the full read checks.
         assert sum(checked) < full.report.n_records / 2, (name, sum(checked))
@@ -323,9 +326,10 @@ def test_reading_in_small_blocks_gives_the_same_read(monkeypatch, block):
     assert path.stat().st_size > 100 * block
     blocks = read_tlog(path)
     assert blocks.report == whole.report
-    assert list(blocks.streams) == list(whole.streams)
-    for name, frame in whole.streams.items():
-        pd.testing.assert_frame_equal(blocks.streams[name], frame)
+    got, want = blocks.streams, whole.streams  # made on each access: once here, not once per type
+    assert list(got) == list(want)
+    for name, frame in want.items():
+        pd.testing.assert_frame_equal(got[name], frame)
         np.testing.assert_array_equal(blocks.time_us[name], whole.time_us[name])
 
 
@@ -397,8 +401,9 @@ def test_write_tlog_round_trips(tmp_path, version):
     assert ours.report.skipped_bytes == 0 and ours.report.n_records == n
     assert (ours.report.mavlink1_frames if version == 1 else ours.report.mavlink2_frames) == n
     layouts = load_dialect().by_name
+    streams = ours.streams  # made on each access: once here, not once per type
     for name, cols in records.items():
-        df = ours.streams[name]
+        df = streams[name]
         t_us = np.rint(np.asarray(cols["t"]) * 1e6).astype(np.uint64)
         np.testing.assert_array_equal(ours.time_us[name], t_us)
         np.testing.assert_array_equal(df["t"].to_numpy(), t_us * 1e-6)
@@ -420,9 +425,9 @@ def test_write_tlog_round_trips(tmp_path, version):
     # A stream as read can be written back unchanged.
     again = tmp_path / "again.tlog"
     write_tlog(again, ours.streams, mavlink_version=version)
-    back = read_tlog(again)
+    back_streams = read_tlog(again).streams
     for name, df in ours.streams.items():
-        pd.testing.assert_frame_equal(back.streams[name], df)
+        pd.testing.assert_frame_equal(back_streams[name], df)
 
 
 @pytest.mark.parametrize("version", [1, 2])
@@ -622,7 +627,7 @@ def read_mutated(data: bytes, folder: Path, originals: Counter):
     # A typed read (checksumming only what decides its streams) gives the full read's values.
     for name in ("ATTITUDE", "STATUSTEXT"):
         typed = read_streams(path, types=[name])
-        assert (name in typed) == (name in read.streams)
+        assert (name in typed) == (name in read.columns)
         if name in typed:
             pd.testing.assert_frame_equal(typed[name], read.streams[name])
     return read

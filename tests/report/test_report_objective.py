@@ -34,7 +34,7 @@ def test_study_bootstraps_each_strategy_objective(result):
 
 
 def test_report_shows_intervals_and_the_ratio_comparison(result, tmp_path):
-    text = write_study_report(result, tmp_path / "r").read_text()
+    text = write_study_report(result, tmp_path / "r", vector=False).read_text()
     section = text.split("## Task objective")[1].split("\n## ")[0]
     boot = result.objectives["A"].boot
     assert f"[{boot.Q_diag_lo[2]:.3g}, {boot.Q_diag_hi[2]:.3g}]" in section
@@ -55,7 +55,7 @@ def ratio_rows(section: str) -> list[list[str]]:
 def test_every_ratio_says_what_the_data_carry(result, tmp_path):
     # a finite estimate with its interval, or not identifiable with the demonstrations needed, or not of this
     # form with the mismatch: never a bare "∞ [0, ∞]" or an unexplained unbounded interval
-    text = write_study_report(result, tmp_path / "r").read_text()
+    text = write_study_report(result, tmp_path / "r", vector=False).read_text()
     section = text.split("## Task objective")[1].split("\n## ")[0]
     rows = ratio_rows(section)
     assert len(rows) == 12
@@ -74,7 +74,7 @@ def test_report_without_bootstrap_says_so(tmp_path):
     a = lqr_operator_demos(LQROperator(), 6, seed=43, system=system, label="A")
     res = run_study(a, system, n_components=2, samples=0, efficiency=None, n_steps=20)
     assert res.objectives == {}
-    text = write_study_report(res, tmp_path / "r").read_text()
+    text = write_study_report(res, tmp_path / "r", vector=False).read_text()
     assert "No intervals" in text
 
 

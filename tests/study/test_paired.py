@@ -117,6 +117,24 @@ def test_mixed_model_degrees_of_freedom_are_the_designs():
     assert by_kind["strategy"] == n_trials - subjects - 1
 
 
+def test_mixed_model_p_values_are_the_t_references_with_the_designs_degrees_of_freedom():
+    """The fast part of the level test below: each effect's p-value and interval come from Student's t with the
+    design's degrees of freedom (what holds the level with few trials), not from MixedLM's Wald z."""
+    import scipy.stats as sps
+
+    from workbench.study.stats import mixed_effects
+
+    m = mixed_effects(_null_long(np.random.default_rng(12), 4, 2, 2))
+    (e,) = [e for e in m.effects if e.term.startswith("method")]
+    assert e.df == (4 - 1) * (2 - 1)
+    est = np.log(e.factor)
+    se = (np.log(e.hi) - np.log(e.lo)) / (2 * sps.t.ppf(0.975, e.df))
+    assert np.log(e.hi) - est == pytest.approx(est - np.log(e.lo), rel=1e-9)  # symmetric on the log scale
+    assert e.p == pytest.approx(2 * sps.t.sf(abs(est) / se, e.df), rel=1e-9)
+    assert e.p > 2 * sps.norm.sf(abs(est) / se)  # heavier tails than the z MixedLM reports
+
+
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore")
 def test_mixed_model_p_values_hold_their_level_with_few_trials():
     # 4 trials, 2 methods, no method effect: MixedLM's Wald z rejects ~10 % (measured), the t reference with the

@@ -1,15 +1,22 @@
 """Every kind of recording the ``workbench`` command writes, made once per test session through the CLI itself.
 
 Shared by ``test_viewer.py`` (every chunk has rows) and ``test_viewer_real.py`` (the real viewer opens them).
-Small on purpose: one sample log (20 trials), two GMM components, a 1.5 s horizon, ten Monte Carlo rollouts.
+Small on purpose: one sample log (20 trials), two GMM components, a 1.5 s horizon, ten Monte Carlo rollouts,
+12 resamples for the objective's intervals.
 Test modules load this file with :func:`load` (pytest's importlib mode puts no test folder on ``sys.path``).
+Under pytest-xdist the workers share one set: the first worker to ask makes it under the run's common temporary
+folder (``tests/conftest.py`` names it in ``WORKBENCH_TEST_SHARED``) while holding a file lock, the others wait
+for the lock and read the list it left.
 """
 
 from __future__ import annotations
 
 import atexit
+import contextlib
+import fcntl
 import functools
 import importlib.util
+import json
 import os
 import shutil
 import sys
@@ -41,10 +48,26 @@ def _run(*argv: str) -> None:
 
 @functools.cache
 def workdir() -> Path:
-    """The folder of this session's recordings; ``demo/demos.parquet`` and ``demo/models/CS1.npz`` are in it."""
+    """The folder of this session's recordings; ``demo/demos.parquet`` and ``demo/models/CS1.npz`` are in it.
+
+    Inside a pytest run the folder is under the run's temporary folder, which every xdist worker sees and pytest
+    removes with its old runs; outside one, a private folder removed at exit.
+    """
+    shared = os.environ.get("WORKBENCH_TEST_SHARED")
+    if shared:
+        out = Path(shared) / "viewer-recordings"
+        out.mkdir(parents=True, exist_ok=True)
+        return out
     out = Path(tempfile.mkdtemp(prefix="workbench-viewer-"))
     atexit.register(shutil.rmtree, out, ignore_errors=True)
     return out
+
+
+@contextlib.contextmanager
+def _locked(path: Path):
+    with open(path, "a+") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)  # released when the file closes, also when the holder dies
+        yield
 
 
 @functools.cache
@@ -52,13 +75,28 @@ def cli_recordings() -> dict[str, Path]:
     """Name → ``.rrd`` written by the CLI: ``demo``, ``view``, ``view_model``, ``replay``, a writer-made QuadPlane
     log viewed raw (``plane_raw``) and with ``--mapping arduplane_manual`` (``plane``), a live session on a
     silent link (``live_silent``) and, where the shared real log is present, ``flight`` (``view
-    dronekit_flight.tlog --mapping ardupilot_manual``)."""
+    dronekit_flight.tlog --mapping ardupilot_manual``).
+
+    Made once per test run: a worker that finds the list another one wrote (after the last recording) reads it.
+    """
     out = workdir()
+    done = out / "recordings.json"
+    with _locked(out / ".lock"):
+        if done.is_file():
+            return {kind: Path(p) for kind, p in json.loads(done.read_text()).items()}
+        paths = _make_recordings(out)
+        tmp = done.with_suffix(".tmp")
+        tmp.write_text(json.dumps({kind: str(p) for kind, p in paths.items()}))
+        tmp.replace(done)
+    return paths
+
+
+def _make_recordings(out: Path) -> dict[str, Path]:
     logs = out / "logs"
-    logs.mkdir()
+    logs.mkdir(exist_ok=True)
     shutil.copy(SAMPLE_LOG, logs / SAMPLE_LOG.name)
     _run("demo", "--out", str(out / "demo"), "--logs", str(logs), "--no-efficiency", "--samples", "10",
-         "--n-components", "2", "--horizon", "1.5")
+         "--n-components", "2", "--horizon", "1.5", "--bootstrap", "12")
     demos, model = out / "demo" / "demos.parquet", out / "demo" / "models" / "CS1.npz"
     paths = {"demo": out / "demo" / "demo.rrd"}
     paths["view"] = out / "view.rrd"
