@@ -1,9 +1,9 @@
 """Kill ``workbench demo`` and ``workbench report`` at random moments and check what they leave.
 
-    PYTHONPATH=. nice .venv/bin/python bench/attack/kill_runs.py --runs 20 --dask-runs 6
+    PYTHONPATH=. nice .venv/bin/python bench/attack/kill_runs.py --runs 60 --dask-runs 6   # 20 per signal
 
 For each command: one complete run makes the *old* result set (seed 0); then ``--runs`` runs, each with another
-seed (so its results differ from the old set's), get SIGINT, SIGTERM or SIGKILL after a delay drawn uniformly
+seed (so its results differ from the old set's), get SIGINT, SIGTERM or SIGKILL (each a third of the runs) after a delay drawn uniformly
 from the first run's duration; ``report-dask`` is ``report --workers 2`` (a Dask ``LocalCluster``: nannies in
 the command, worker processes spawned by them), ``--dask-runs`` times. After each kill it checks:
 
@@ -93,8 +93,10 @@ def attack(kind: str, runs: int, rng: random.Random, base: Path, env: dict, demo
     old = _state(kind, out)
     print(f"{kind}: a complete run takes {duration:.0f} s", flush=True)
     tally: Counter = Counter()
-    for i in range(runs):
-        sig = rng.choice(SIGNALS)
+    # each signal equally often (runs // 3 each, the rest drawn), in a random order
+    signals = [*SIGNALS * (runs // len(SIGNALS)), *rng.sample(SIGNALS, runs % len(SIGNALS))]
+    rng.shuffle(signals)
+    for i, sig in enumerate(signals):
         delay = rng.uniform(0.3, duration)
         proc = subprocess.Popen(_command(kind, out, demos, 100 + i), env=env, cwd=REPO,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
