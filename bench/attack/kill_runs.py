@@ -3,9 +3,10 @@
     PYTHONPATH=. nice .venv/bin/python bench/attack/kill_runs.py --runs 60 --dask-runs 6   # 20 per signal
 
 For each command: one complete run makes the *old* result set (seed 0); then ``--runs`` runs, each with another
-seed (so its results differ from the old set's), get SIGINT, SIGTERM or SIGKILL (each a third of the runs) after a delay drawn uniformly
-from the first run's duration; ``report-dask`` is ``report --workers 2`` (a Dask ``LocalCluster``: nannies in
-the command, worker processes spawned by them), ``--dask-runs`` times. After each kill it checks:
+seed (so its results differ from the old set's), get SIGINT, SIGTERM or SIGKILL (each a third of the runs) after a
+delay drawn uniformly from the first run's duration; ``report-dask`` is ``report --workers 2`` (a Dask
+``LocalCluster``: nannies in the command, worker processes spawned by them), ``--dask-runs`` times. After each kill
+it checks:
 
 * **whole set**: the output folder holds the old set or a complete new one, never a mix (each seed-dependent file
   equal to the old set's, or every one different, and none missing);
