@@ -39,6 +39,7 @@ import zlib
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
@@ -244,6 +245,46 @@ def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int
         if len(got) != n_demos or got.n_samples < n_samples - 3:
             return f"stamp +{shift} us at byte {off}: {len(got)} trials / {got.n_samples} samples, not " \
                    f"{n_demos} / {n_samples}"
+        return None
+
+    return call, [path]
+
+
+def _mcap_messages(path: Path) -> tuple[Any, list]:
+    from mcap.reader import make_reader
+
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        return reader.get_summary(), list(reader.iter_messages(log_time_order=False))
+
+
+def attack_mcap_stamp(rng: random.Random, base: Path, source: tuple[Any, list], want) -> Prepared:
+    """One message's log_time moved (the MCAP twin of the tlog stamp): the file rewritten by mcap's own writer."""
+    from mcap.writer import Writer
+
+    import adapters
+
+    summary, messages = source
+    k = rng.randrange(len(messages))
+    shift = rng.choice([1, -1]) * 2 ** rng.randrange(20, 50)  # ns: 1 ms to 13 days
+    path = base / f"t{rng.randrange(10**9)}.mcap"
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        schemas = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
+        channels = {c.id: w.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0), c.metadata)
+                    for c in summary.channels.values()}
+        for i, (_, ch, m) in enumerate(messages):
+            w.add_message(channels[ch.id], max(0, m.log_time + (shift if i == k else 0)), m.data, m.publish_time,
+                          m.sequence)
+        w.finish()
+
+    def call() -> str | None:
+        got = adapters.load(path)
+        n_demos, n_samples = want
+        if len(got) != n_demos or got.n_samples < n_samples - 3:
+            return f"log_time {shift:+d} ns on message {k} ({messages[k][1].topic}): {len(got)} trials / " \
+                   f"{got.n_samples} samples, not {n_demos} / {n_samples}"
         return None
 
     return call, [path]
@@ -496,6 +537,8 @@ def main() -> None:
     honest = sum(min(max(b - a, 0.0), MAX_REPLAY_GAP) for a, b in zip(times, times[1:], strict=False))
     study = simulate_study(n_subjects=2, n_trials=2, strategy="CS1", seed=1)
     sample_mcap = (REPO / "sample_logs" / "landing_s01.mcap").read_bytes()
+    mcap_messages = _mcap_messages(REPO / "sample_logs" / "landing_s01.mcap")
+    mcap_ref = adapters.load(REPO / "sample_logs" / "landing_s01.mcap")
     for size in (8 << 20, 64 << 20, 512 << 20, 1 << 30):
         _mcap_bomb(size)  # compressed here, before any call is timed
     base = Path(tempfile.mkdtemp(prefix="wb-bounds-"))
@@ -508,6 +551,8 @@ def main() -> None:
         "CSV header width": lambda: attack_csv_header(rng, base),
         "MCAP declared sizes / damage": lambda: attack_mcap_sizes(rng, base, sample_mcap),
         "one bad tlog stamp": lambda: attack_stamp(rng, base, clean, offsets, want),
+        "one bad MCAP log_time": lambda: attack_mcap_stamp(rng, base, mcap_messages, (len(mcap_ref),
+                                                                                   mcap_ref.n_samples)),
         "mapping values": lambda: attack_mapping_values(rng, base),
         "dataset copies / special files": lambda: attack_dataset_files(rng, base, study),
         "replay waits / ports / speeds": lambda: attack_replay(rng, base, clean, offsets, honest),
