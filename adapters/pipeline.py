@@ -40,6 +40,14 @@ from workbench.errors import DataError, MappingError
 __all__ = ["build", "check_rules", "explain"]
 
 
+def _same(a: Any, b: Any) -> bool:
+    """Two rule values are equal (a missing one, pandas' NA, equals nothing)."""
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
+
+
 def _rule_series(sel: Selected, m: ChannelMapping, raw: bool = False, skipped: Counter | None = None,
                  what: str = "") -> tuple[np.ndarray, np.ndarray]:
     """A rule stream (demo field, mode, armed and landing flags, text markers) on its repaired time line.
@@ -66,9 +74,9 @@ def _rule_series(sel: Selected, m: ChannelMapping, raw: bool = False, skipped: C
         steps = np.diff(fixed)
         step = float(np.median(steps[steps > 0])) if (steps > 0).any() else 0.0
         for j in repaired.tolist():
-            if j + 1 < fixed.size and values[j] == values[j + 1]:
+            if j + 1 < fixed.size and _same(values[j], values[j + 1]):
                 fixed[j] = max(fixed[j + 1] - step, fixed[j - 1] if j > 0 else -np.inf)
-            elif j > 0 and values[j] == values[j - 1]:
+            elif j > 0 and _same(values[j], values[j - 1]):
                 fixed[j] = min(fixed[j - 1] + step, fixed[j + 1] if j + 1 < fixed.size else np.inf)
     if skipped is not None:
         for cause, n in dropped.items():
