@@ -167,3 +167,26 @@ def test_a_bad_stamp_on_a_disarming_heartbeat_splits_no_trial(tmp_path):
     got = adapters.load(bad, str(mapping))
     assert len(want) == len(flights_of(clean)) and want[2].t[-1] > 2.0
     assert [(d.meta["id"], len(d.t)) for d in got] == [(d.meta["id"], len(d.t)) for d in want]
+
+
+def test_a_repaired_demo_record_beside_a_missing_demo_value(tmp_path):
+    """A text demo field with a missing value (pandas' NA) next to a record whose stamp is repaired: comparing the
+    two must not raise ("boolean value of NA is ambiguous"); the NA row belongs to no trial."""
+    import pandas as pd
+
+    from adapters.mapping import load_mapping
+    from adapters.pipeline import build
+    from adapters.streams import Streams
+
+    n = 200
+    t = 0.05 * np.arange(n)
+    demo = pd.array(["a"] * 100 + [None] + ["b"] * 99, dtype="string")
+    bad = t.copy()
+    bad[50] -= 1000.0  # a record inside trial "a", to check the repair
+    bad[99] += 1000.0  # the last record of "a": its right neighbour is the missing value
+    frame = pd.DataFrame({"t": bad, "demo": demo, **{c: np.sin(t + k) for k, c in enumerate(
+        ["x", "y", "phi", "xdot", "ydot", "phidot", "u1", "u2"])}})
+    streams = Streams(str(tmp_path / "m.csv"), "csv", {"csv": frame})
+    got = build(streams, load_mapping("planar_quadrotor").for_format("csv"))
+    assert [d.meta["demo"] for d in got] == ["a", "b"]
+    assert got[0].meta["skipped"]["segment.demo: time outliers repaired"] == 2
