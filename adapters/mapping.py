@@ -311,7 +311,9 @@ def load_mapping(mapping: str | os.PathLike | ChannelMapping) -> ChannelMapping:
         raise MappingError(f"{path}: not valid TOML ({exc})") from None
     except RecursionError:  # tomllib parses nested arrays and tables by recursion
         raise MappingError(f"{path}: not a mapping: tables or arrays nested deeper than the parser goes") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:  # named by its byte: Python's codec text is the library's, not ours
+        raise MappingError(f"{path}: not a mapping: not UTF-8 text at byte {exc.start}") from None
+    except OSError as exc:
         raise MappingError(f"{path}: cannot read mapping ({exc})") from None
     raw.setdefault("name", path.stem)
     return _parse(raw, str(path))

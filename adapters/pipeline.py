@@ -32,7 +32,7 @@ from adapters.mapping import ChannelMapping, Selected, channel_values, resolve_c
 from adapters.meta import table_meta, text_meta
 from adapters.modes import AUTOPILOT_HOLDS, mode_name
 from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect, mode_spans, split_at_landing
-from adapters.streams import Streams, clean_series, numeric
+from adapters.streams import Streams, clean_series, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError, MappingError
@@ -40,18 +40,48 @@ from workbench.errors import DataError, MappingError
 __all__ = ["build", "check_rules", "explain"]
 
 
-def _ordered(t: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Rows with a finite time, sorted by it (stable): rule streams need only order, not strictness."""
-    keep = np.isfinite(t)
-    order = np.argsort(t[keep], kind="stable")
-    return (t[keep][order], *(a[keep][order] for a in arrays))
+def _same(a: Any, b: Any) -> bool:
+    """Two rule values are equal (a missing one, pandas' NA, equals nothing)."""
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
 
 
-def _rule_series(sel: Selected, m: ChannelMapping, raw: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _rule_series(sel: Selected, m: ChannelMapping, raw: bool = False, skipped: Counter | None = None,
+                 what: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """A rule stream (demo field, mode, armed and landing flags, text markers) on its repaired time line.
+
+    Rule streams decide where demonstrations start and end, so their clocks get the channels' robust repair
+    (:func:`adapters.streams.time_line`): a record whose stamp is off the stream's bulk is put back between its
+    neighbours in file order, not sorted to where the bad stamp points, where it would cut another trial's run
+    in two. Order need not be strict (two records may share a stamp), a single bad stamp is repaired even in a
+    sparse stream (a lost mode change would move a whole span), and no record is dropped for lying far from the
+    others at an end (events, unlike samples, may).
+    """
     t = stream_times(m.clock, sel.frame)[sel.rows]
     col = sel.columns[0]
     values = sel.frame[col].to_numpy()[sel.rows] if raw else numeric(sel.frame, col)[sel.rows]
-    return _ordered(t, values)
+    finite = np.isfinite(t)
+    t, values = t[finite], values[finite]
+    index, fixed, dropped = time_line(t, strict=False, repair_one=True, ends=False)
+    values = values[index]
+    # A repaired record saying what a neighbour says belongs to that neighbour's run: one typical step from it, not
+    # halfway to the other run, where it would open a span in a pause (the first record of a trial put inside the
+    # pause before it) or stretch its run into the next.
+    repaired = np.flatnonzero(fixed != t[index])
+    if repaired.size:
+        steps = np.diff(fixed)
+        step = float(np.median(steps[steps > 0])) if (steps > 0).any() else 0.0
+        for j in repaired.tolist():
+            if j + 1 < fixed.size and _same(values[j], values[j + 1]):
+                fixed[j] = max(fixed[j + 1] - step, fixed[j - 1] if j > 0 else -np.inf)
+            elif j > 0 and _same(values[j], values[j - 1]):
+                fixed[j] = min(fixed[j - 1] + step, fixed[j + 1] if j + 1 < fixed.size else np.inf)
+    if skipped is not None:
+        for cause, n in dropped.items():
+            skipped[f"{what}: {cause}"] += n
+    return fixed, values
 
 
 def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
@@ -59,19 +89,19 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
     spans: list[Span] | tuple[Span, ...] = EVERYTHING
     if seg.demo is not None:
         sel = select(seg.demo, streams, "segment.demo", m.name, n_columns=1)
-        t, values = _rule_series(sel, m, raw=True)
+        t, values = _rule_series(sel, m, raw=True, skipped=skipped, what="segment.demo")
         spans = intersect(spans, demo_spans(t, values))
     if seg.mode is not None:
         sel = select(seg.mode.selector, streams, "segment.mode", m.name, n_columns=1)
-        t, modes = _rule_series(sel, m)
+        t, modes = _rule_series(sel, m, skipped=skipped, what="segment.mode")
         spans = intersect(spans, mode_spans(t, modes, seg.mode.keep, seg.mode.names))
     if seg.armed is not None:
         sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
-        t, flags = _rule_series(sel, m)
+        t, flags = _rule_series(sel, m, skipped=skipped, what="segment.armed")
         spans = intersect(spans, flag_spans(t, seg.armed.truth(flags)))
     if seg.landing is not None and seg.landing.flag is not None:
         sel = select(seg.landing.flag.selector, streams, "segment.landing", m.name, n_columns=1)
-        t, flags = _rule_series(sel, m)
+        t, flags = _rule_series(sel, m, skipped=skipped, what="segment.landing")
         spans = intersect(spans, flag_spans(t, ~seg.landing.flag.truth(flags)))
     return list(spans)
 

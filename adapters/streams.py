@@ -31,7 +31,7 @@ import numpy as np
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["Streams", "split_source", "candidate_streams", "nearest", "clean_series"]
+__all__ = ["Streams", "split_source", "candidate_streams", "nearest", "clean_series", "time_line"]
 
 _INDEX = re.compile(r"\[(\d+)\]$")
 
@@ -189,8 +189,9 @@ REPAIR_SHARE = 0.1
 """Stamps off a stream's time line are repaired only while they are at most this share of it (else dropped)."""
 
 
-def _longest_increasing(t: np.ndarray) -> np.ndarray:
-    """A mask of a longest strictly increasing subsequence of ``t`` (patience sorting, O(n log n)).
+def _longest_increasing(t: np.ndarray, strict: bool = True) -> np.ndarray:
+    """A mask of a longest strictly increasing (``strict=False``: non-decreasing) subsequence of ``t`` (patience
+    sorting, O(n log n)).
 
     The bulk of a stream is the largest set of samples whose times agree with their order; a stamp that does not
     (one pushed forward by a corrupted high byte, one jumped back) falls outside it, whatever its size, so it can
@@ -198,11 +199,12 @@ def _longest_increasing(t: np.ndarray) -> np.ndarray:
     """
     import bisect
 
+    place = bisect.bisect_left if strict else bisect.bisect_right
     tails: list[float] = []
     tail_idx: list[int] = []
     prev = np.full(t.size, -1, dtype=np.int64)
     for i, x in enumerate(t.tolist()):
-        k = bisect.bisect_left(tails, x)
+        k = place(tails, x)
         if k == len(tails):
             tails.append(x)
             tail_idx.append(i)
@@ -254,22 +256,87 @@ def _end_outliers(t: np.ndarray, most: int = 3) -> np.ndarray:
     return out
 
 
+def time_line(t: np.ndarray, *, strict: bool = True, repair_one: bool = False,
+              ends: bool = True) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """Which samples of a stream (finite stamps, in file order) are on its time line, at which times.
+
+    The stream's time line is its longest increasing run of samples (in file order; ``strict``: strictly, else
+    non-decreasing), not the running maximum: one bad stamp costs at most that one sample, however far it points.
+    A sample off that line whose neighbours on it leave room is *repaired* (its time interpolated by position
+    between them: the sample was recorded there, only its stamp is wrong); one with no room is dropped, and so is
+    every one when more than :data:`REPAIR_SHARE` of the stream is off the line (no bulk to repair from) — except,
+    with ``repair_one``, a single one (a sparse stream, such as mode changes, has no share to spare, and a lost
+    mode change moves a whole span). With ``strict``, a stamp repeating the one before it is a duplicate sample
+    and is dropped. With ``ends``, samples beyond a gap longer than the rest of the stream at either end are
+    dropped (a stream of events, such as mode changes, has no such bulk: a boot mode minutes before a burst of
+    changes is not an outlier).
+
+    Returns
+    -------
+    index, t, dropped
+        The kept samples' positions in ``t`` (increasing), their times and the counts by cause:
+        ``"non-increasing time"`` (dropped), ``"time outliers repaired"`` (kept, restamped),
+        ``"time outliers at the ends"`` (dropped); zero counts omitted.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    index = np.arange(t.size)
+    dropped: dict[str, int] = {}
+    in_order = bool(np.all(t[1:] > t[:-1])) if strict else bool(np.all(t[1:] >= t[:-1]))
+    if t.size > 1 and not in_order:
+        if strict:
+            # A stamp repeating the one before it is a duplicate sample: dropped, never spread over time.
+            repeat = np.zeros(t.size, dtype=bool)
+            repeat[1:] = t[1:] == t[:-1]
+            if repeat.any():
+                dropped["non-increasing time"] = int(repeat.sum())
+                t, index = t[~repeat], index[~repeat]
+        on_line = np.zeros(t.size, dtype=bool)
+        bulk = ~_far_from_neighbours(t)
+        on_line[np.flatnonzero(bulk)[_longest_increasing(t[bulk], strict)]] = True
+        good = np.flatnonzero(on_line)
+        fixed = t.copy()
+        off = np.flatnonzero(~on_line)
+        # Position between the neighbouring samples on the line: strictly inside, so the result stays increasing.
+        right = np.searchsorted(good, off)
+        inside = (right > 0) & (right < good.size)
+        if off.size > REPAIR_SHARE * t.size and not (repair_one and off.size == 1):
+            # Most stamps disagree: there is no bulk to repair them from, only order to keep.
+            inside[:] = False
+        keep = on_line.copy()
+        if inside.any():
+            lo, hi = good[right[inside] - 1], good[right[inside]]
+            cand = off[inside]
+            new = t[lo] + (t[hi] - t[lo]) * (cand - lo) / (hi - lo)
+            if strict:
+                # A repeated stamp (equal to its left neighbour's) is a duplicate sample, not a damaged one.
+                ok = (new > t[lo]) & (new < t[hi]) & (t[cand] != t[lo])
+            else:
+                ok = np.ones(cand.size, dtype=bool)
+            fixed[cand[ok]] = new[ok]
+            keep[cand[ok]] = True
+            if ok.any():
+                dropped["time outliers repaired"] = int(ok.sum())
+        if not keep.all():
+            dropped["non-increasing time"] = dropped.get("non-increasing time", 0) + int((~keep).sum())
+        t, index = fixed[keep], index[keep]
+    if ends and t.size > 1:
+        far = _end_outliers(t)
+        if far.any():
+            dropped["time outliers at the ends"] = int(far.sum())
+            t, index = t[~far], index[~far]
+    return index, t, dropped
+
+
 def clean_series(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
     """Drop samples with a non-finite value; put samples whose stamp disagrees with the bulk of the stream back.
 
-    Time must increase strictly for interpolation. The stream's time line is its longest strictly increasing run
-    of samples (in file order), not the running maximum: one bad stamp costs at most that one sample, however
-    far it points. A sample off that line whose neighbours on it leave room is *repaired* (its time interpolated
-    by position between them: the sample was recorded there, only its stamp is wrong); a repeated stamp or one
-    with no room is dropped, and so is every one when more than :data:`REPAIR_SHARE` of the stream is off the
-    line (no bulk to repair from). ``values`` may be 2-D (samples × components).
+    Time must increase strictly for interpolation: the samples kept and their times are :func:`time_line`'s
+    (strict). ``values`` may be 2-D (samples × components).
 
     Returns
     -------
     t, values, dropped
-        The kept samples and counts by cause: ``"non-finite values"``, ``"non-increasing time"`` (dropped),
-        ``"time outliers repaired"`` (kept, restamped), ``"time outliers at the ends"`` (dropped: beyond a gap
-        longer than the rest of the stream); zero counts omitted.
+        The kept samples and counts by cause: ``"non-finite values"`` and :func:`time_line`'s.
     """
     t = np.asarray(t, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
@@ -278,45 +345,8 @@ def clean_series(t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndar
     if not finite.all():
         dropped["non-finite values"] = int((~finite).sum())
         t, values = t[finite], values[finite]
-    if t.size > 1 and not bool(np.all(t[1:] > t[:-1])):
-        # A stamp repeating the one before it is a duplicate sample: dropped, never spread over time.
-        repeat = np.zeros(t.size, dtype=bool)
-        repeat[1:] = t[1:] == t[:-1]
-        if repeat.any():
-            dropped["non-increasing time"] = int(repeat.sum())
-            t, values = t[~repeat], values[~repeat]
-        on_line = np.zeros(t.size, dtype=bool)
-        bulk = ~_far_from_neighbours(t)
-        on_line[np.flatnonzero(bulk)[_longest_increasing(t[bulk])]] = True
-        good = np.flatnonzero(on_line)
-        fixed = t.copy()
-        off = np.flatnonzero(~on_line)
-        # Position between the neighbouring samples on the line: strictly inside, so the result stays increasing.
-        right = np.searchsorted(good, off)
-        inside = (right > 0) & (right < good.size)
-        if off.size > REPAIR_SHARE * t.size:
-            # Most stamps disagree: there is no bulk to repair them from, only order to keep.
-            inside[:] = False
-        keep = on_line.copy()
-        if inside.any():
-            lo, hi = good[right[inside] - 1], good[right[inside]]
-            cand = off[inside]
-            new = t[lo] + (t[hi] - t[lo]) * (cand - lo) / (hi - lo)
-            # A repeated stamp (equal to its left neighbour's) is a duplicate sample, not a damaged one.
-            ok = (new > t[lo]) & (new < t[hi]) & (t[cand] != t[lo])
-            fixed[cand[ok]] = new[ok]
-            keep[cand[ok]] = True
-            if ok.any():
-                dropped["time outliers repaired"] = int(ok.sum())
-        if not keep.all():
-            dropped["non-increasing time"] = dropped.get("non-increasing time", 0) + int((~keep).sum())
-        t, values = fixed[keep], values[keep]
-    if t.size > 1:
-        ends = _end_outliers(t)
-        if ends.any():
-            dropped["time outliers at the ends"] = int(ends.sum())
-            t, values = t[~ends], values[~ends]
-    return t, values, dropped
+    index, t, line = time_line(t)
+    return t, values[index], {**dropped, **line}
 
 
 def numeric(frame: pd.DataFrame, column: str) -> np.ndarray:

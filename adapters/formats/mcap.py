@@ -481,9 +481,23 @@ def _decode_channel(
 
 
 def _sorted_by_time(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The rows in order of ``t`` (stable: messages logged at one time keep their file order)."""
+    """The rows in order of ``t`` (stable: messages logged at one time keep their file order) when the file's order
+    is not time's; the file's order when only a few stamps disagree with it.
+
+    MCAP lets a writer put a channel's messages out of ``log_time`` order (chunks written out of turn), and then
+    the stamps are right and the order is not. A few stamps off an otherwise ordered channel are damage: sorted,
+    a message stamped into another trial would move there and cut it in two; in file order the pipeline's
+    time-line repair (:func:`adapters.streams.time_line`) puts it back between its neighbours. "A few" is the
+    share the repair mends (:data:`adapters.streams.REPAIR_SHARE`).
+    """
+    from adapters.streams import REPAIR_SHARE, _longest_increasing
+
     t = columns["t"]
     if t.size < 2 or bool(np.all(t[1:] >= t[:-1])):
+        return columns
+    finite = np.isfinite(t)
+    off = t.size - int(_longest_increasing(t[finite], strict=False).sum())
+    if off <= REPAIR_SHARE * t.size:
         return columns
     order = np.argsort(t, kind="stable")
     return {k: v[order] for k, v in columns.items()}

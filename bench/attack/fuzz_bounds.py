@@ -4,20 +4,30 @@ Not part of the test suite: run it for a bounded time and read the counts.
 
     PYTHONPATH=. nice .venv/bin/python bench/attack/fuzz_bounds.py --seconds 30   # per surface
 
+Every input is built (and written) before its call, and every file is under 10 MB (:data:`MAX_INPUT`; the
+acceptance is about inputs under 10 MB; standard input is streamed by the harness, not built, and may be more).
+Each call runs in a child forked from this process (which has imported the workbench and holds no thread), so
+the peak memory is the call's own process (``wait4``'s ``ru_maxrss``, with its own children's, the workbench's
+imports included) and the time is the call's alone.
+
 Per surface: calls, clean errors (a ``WorkbenchError``, in the workbench's words), foreign errors (anything else,
 or a clean error quoting a library: ``ZstdError``, ``codec can't decode``, ``cannot fit``), hangs (a call over
-60 s), silent wrong results (a call that returned but lost or doubled data, accepted a meaningless value or
-waited past its bound) and the peak resident memory seen during the surface (this process, or the child for
-standard input).
+60 s; killed at twice that), silent wrong results (a call that returned but lost or doubled data, accepted a
+meaningless value or waited past its bound), the peak resident memory of a call, its longest time and the
+largest input file.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import random
 import re
+import resource
 import shutil
+import signal
+import socket
 import struct
 import subprocess
 import sys
@@ -27,9 +37,9 @@ import time
 import traceback
 import zlib
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
-
-import psutil
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
@@ -40,6 +50,53 @@ HANG_S = 60.0
 FOREIGN_TEXT = re.compile(r"ZstdError|codec can't decode|cannot fit|Traceback|RecursionError|OverflowError|"
                           r"need at least one array|WebSocketError|TypeError")
 TLOG = REPO / "sample_logs" / "landing_s00.tlog"
+MAX_INPUT = 10 << 20  # bytes: every generated input file is smaller
+
+
+def _call_in_child(call: Callable[[], str | None]) -> tuple[str, str | None, float, int]:
+    """Run ``call`` in a forked child: (kind, detail, seconds, peak RSS in bytes); kind is ``ok`` (detail: what
+    was wrong, if anything), ``clean``, ``foreign`` or ``hang``."""
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: the call, its verdict, its time; nothing of it returns but through the pipe
+        os.close(r)
+        code = 0
+        try:
+            start = time.monotonic()
+            try:
+                out = ["ok", call()]
+            except WorkbenchError as exc:
+                out = ["foreign" if FOREIGN_TEXT.search(str(exc)) else "clean", str(exc)[:300]]
+            except BaseException as exc:  # noqa: BLE001 - the point of the fuzzer: count what escapes
+                where = traceback.extract_tb(exc.__traceback__)[-1].filename if exc.__traceback__ else "?"
+                out = ["foreign", f"{type(exc).__name__}: {str(exc)[:200]} @ {where}"]
+            out.append(time.monotonic() - start)
+            out.append(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
+            os.write(w, json.dumps(out).encode()[:60_000])
+        except BaseException:  # noqa: BLE001
+            code = 1
+        finally:
+            os._exit(code)
+    os.close(w)
+    deadline = time.monotonic() + 2 * HANG_S
+    hung = False
+    while True:
+        done, _, usage = os.wait4(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            _, _, usage = os.wait4(pid, 0)
+            hung = True
+            break
+        time.sleep(0.01)
+    with os.fdopen(r, "rb") as f:
+        raw = f.read()
+    peak = usage.ru_maxrss * 1024
+    if hung or not raw:
+        return ("hang" if hung else "foreign"), ("killed" if hung else "child died"), 2 * HANG_S, peak
+    kind, detail, took, kids = json.loads(raw)
+    return kind, detail, took, max(peak, kids)
 
 
 class Tally:
@@ -48,73 +105,55 @@ class Tally:
         self.examples: dict[str, list[str]] = {}
         self.peak: dict[str, float] = {}
         self.slowest: dict[str, float] = {}
+        self.largest: dict[str, int] = {}
 
-    def run(self, surface: str, fn, *args) -> None:
+    def run(self, surface: str, prepare: Callable[[], tuple[Callable[[], str | None], list[Path]]]) -> None:
+        call, inputs = prepare()  # built here, outside the call's time and memory
         c = self.by_surface.setdefault(surface, Counter())
         c["calls"] += 1
-        start = time.monotonic()
+        size = max([q.stat().st_size for q in inputs if q.is_file()], default=0)
+        self.largest[surface] = max(self.largest.get(surface, 0), size)
         try:
-            wrong = fn(*args)
-        except WorkbenchError as exc:
-            if FOREIGN_TEXT.search(str(exc)):
-                c["foreign errors"] += 1
-                self.examples.setdefault(surface, []).append(f"library text: {str(exc)[:200]}")
-            else:
-                c["clean errors"] += 1
-            wrong = None
-        except Exception as exc:  # the point of the fuzzer: count what escapes as a foreign error
-            c["foreign errors"] += 1
-            self.examples.setdefault(surface, []).append(
-                f"{type(exc).__name__}: {str(exc)[:160]} @ {traceback.extract_tb(exc.__traceback__)[-1].filename}")
-            wrong = None
-        took = time.monotonic() - start
+            if size >= MAX_INPUT:
+                raise RuntimeError(f"the harness built a {size >> 20} MiB input")
+            kind, detail, took, peak = _call_in_child(call)
+        finally:
+            for q in inputs:
+                shutil.rmtree(q, ignore_errors=True) if q.is_dir() else q.unlink(missing_ok=True)
         self.slowest[surface] = max(self.slowest.get(surface, 0.0), took)
-        if took > HANG_S:
+        self.peak[surface] = max(self.peak.get(surface, 0.0), peak / 2**20)
+        if kind == "clean":
+            c["clean errors"] += 1
+        elif kind == "foreign":
+            c["foreign errors"] += 1
+            self.examples.setdefault(surface, []).append(str(detail))
+        if kind == "hang" or took > HANG_S:
             c["hangs"] += 1
-        if wrong:
+        if kind == "ok" and detail:
             c["silent wrong results"] += 1
-            self.examples.setdefault(surface, []).append(f"wrong: {wrong}")
+            self.examples.setdefault(surface, []).append(f"wrong: {detail}")
 
 
-class RssSampler:
-    """Peak resident memory of this process (and a child, when one is named), sampled every 20 ms."""
-
-    def __init__(self) -> None:
-        self.peak = 0
-        self.child: int | None = None
-        self._stop = threading.Event()
-        self._me = psutil.Process()
-        threading.Thread(target=self._loop, daemon=True).start()
-
-    def _loop(self) -> None:
-        while not self._stop.is_set():
-            rss = self._me.memory_info().rss
-            if self.child is not None:
-                try:
-                    rss = max(rss, psutil.Process(self.child).memory_info().rss)
-                except psutil.Error:
-                    pass
-            self.peak = max(self.peak, rss)
-            time.sleep(0.02)
-
-    def reset(self) -> None:
-        self.peak = 0
+Prepared = tuple[Callable[[], str | None], list[Path]]
 
 
 # -- CSV headers -------------------------------------------------------------------------------------------------
-def attack_csv_header(rng: random.Random, base: Path) -> str | None:
+def attack_csv_header(rng: random.Random, base: Path) -> Prepared:
     import adapters
 
-    width = rng.choice([3, 50, 1000, 9_999, 10_001, 100_000, 1_000_000])
-    name = rng.choice(["c", "x" * rng.choice([1, 100, 10_000])])
+    while True:  # a header the size of the acceptance's inputs at most: width x name length under 10 MB
+        width = rng.choice([3, 50, 1000, 9_999, 10_001, 100_000, 1_000_000])
+        name = rng.choice(["c", "x" * rng.choice([1, 100, 10_000])])
+        if width * (len(name) + len(str(width)) + 5) < MAX_INPUT - 1024:
+            break
     path = base / f"w{rng.randrange(10**9)}.csv"
     path.write_text("demo,t," + ",".join(f"{name}{i}" for i in range(width)) + "\n" + "a,0," +
                     ",".join("0" for _ in range(width)) + "\na,0.1," + ",".join("1" for _ in range(width)) + "\n")
-    try:
+
+    def call() -> None:
         adapters.inspect(path)
-    finally:
-        path.unlink()
-    return None
+
+    return call, [path]
 
 
 # -- MCAP: honest chunks declaring much, damaged chunks ------------------------------------------------------------
@@ -159,8 +198,7 @@ def _mcap_bomb(size: int) -> bytes:
     _BOMBS[size] = data
     return data
 
-
-def attack_mcap_sizes(rng: random.Random, base: Path, sample: bytes) -> str | None:
+def attack_mcap_sizes(rng: random.Random, base: Path, sample: bytes) -> Prepared:
     from fuzz_surfaces import _mutate  # noqa: PLC0415 - the same damage the last round used
 
     import adapters
@@ -171,11 +209,11 @@ def attack_mcap_sizes(rng: random.Random, base: Path, sample: bytes) -> str | No
         data = _mutate(rng, sample)
     path = base / f"m{rng.randrange(10**9)}.mcap"
     path.write_bytes(data)
-    try:
+
+    def call() -> None:
         adapters.inspect(path)
-    finally:
-        path.unlink()
-    return None
+
+    return call, [path]
 
 
 # -- one bad timestamp ---------------------------------------------------------------------------------------------
@@ -189,7 +227,7 @@ def _tlog_offsets(data: bytes) -> list[int]:
     return offs
 
 
-def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int], want) -> str | None:
+def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int], want) -> Prepared:
     import adapters
 
     data = bytearray(clean)
@@ -199,20 +237,61 @@ def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int
     data[off : off + 8] = struct.pack(">Q", max(0, stamp + shift))
     path = base / f"s{rng.randrange(10**9)}.tlog"
     path.write_bytes(bytes(data))
-    try:
+
+    def call() -> str | None:
         got = adapters.load(path)
-    finally:
-        path.unlink()
-    n_demos, n_samples = want
-    # one stamp costs at most its sample: the grid may lose a step where it sat, never a trial or a run of samples
-    if len(got) != n_demos or got.n_samples < n_samples - 3:
-        return f"stamp +{shift} us at byte {off}: {len(got)} trials / {got.n_samples} samples, not " \
-               f"{n_demos} / {n_samples}"
-    return None
+        n_demos, n_samples = want
+        # one stamp costs at most its sample: the grid may lose a step where it sat, never a trial or a run
+        if len(got) != n_demos or got.n_samples < n_samples - 3:
+            return f"stamp +{shift} us at byte {off}: {len(got)} trials / {got.n_samples} samples, not " \
+                   f"{n_demos} / {n_samples}"
+        return None
+
+    return call, [path]
+
+
+def _mcap_messages(path: Path) -> tuple[Any, list]:
+    from mcap.reader import make_reader
+
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        return reader.get_summary(), list(reader.iter_messages(log_time_order=False))
+
+
+def attack_mcap_stamp(rng: random.Random, base: Path, source: tuple[Any, list], want) -> Prepared:
+    """One message's log_time moved (the MCAP twin of the tlog stamp): the file rewritten by mcap's own writer."""
+    from mcap.writer import Writer
+
+    import adapters
+
+    summary, messages = source
+    k = rng.randrange(len(messages))
+    shift = rng.choice([1, -1]) * 2 ** rng.randrange(20, 50)  # ns: 1 ms to 13 days
+    path = base / f"t{rng.randrange(10**9)}.mcap"
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        schemas = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
+        channels = {c.id: w.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0), c.metadata)
+                    for c in summary.channels.values()}
+        for i, (_, ch, m) in enumerate(messages):
+            w.add_message(channels[ch.id], max(0, m.log_time + (shift if i == k else 0)), m.data, m.publish_time,
+                          m.sequence)
+        w.finish()
+
+    def call() -> str | None:
+        got = adapters.load(path)
+        n_demos, n_samples = want
+        if len(got) != n_demos or got.n_samples < n_samples - 3:
+            return f"log_time {shift:+d} ns on message {k} ({messages[k][1].topic}): {len(got)} trials / " \
+                   f"{got.n_samples} samples, not {n_demos} / {n_samples}"
+        return None
+
+    return call, [path]
 
 
 # -- mapping values ------------------------------------------------------------------------------------------------
-def attack_mapping_values(rng: random.Random, base: Path) -> str | None:
+def attack_mapping_values(rng: random.Random, base: Path) -> Prepared:
     import adapters
 
     text = (REPO / "adapters" / "mappings" / "planar_quadrotor.toml").read_text()
@@ -258,17 +337,18 @@ def attack_mapping_values(rng: random.Random, base: Path) -> str | None:
         meaningless = depth >= 50_000  # beyond the parser's recursion; shallower ones are plain TOML
     path = base / f"m{rng.randrange(10**9)}.toml"
     path.write_text(text)
-    try:
+
+    def call() -> str | None:
         adapters.load(TLOG, mapping=str(path))
-    finally:
-        path.unlink()
-    if meaningless and text != original:
-        return f"{kind} = {value}: accepted"
-    return None
+        if meaningless and text != original:
+            return f"{kind} = {value}: accepted"
+        return None
+
+    return call, [path]
 
 
 # -- datasets: copies, special files -------------------------------------------------------------------------------
-def attack_dataset_files(rng: random.Random, base: Path, study) -> str | None:
+def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
     from workbench.data.dataset import load_dataset, write_dataset
 
     root = base / f"ds{rng.randrange(10**9)}"
@@ -292,35 +372,34 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> str | None:
     elif action == "device":
         victim.with_name("zero.parquet").symlink_to("/dev/zero")
     elif action == "socket":
-        import socket
-
         s = socket.socket(socket.AF_UNIX)
         s.bind(str(victim.with_name("s.parquet")))
         s.close()
-    try:
+
+    def call() -> str | None:
         ds = load_dataset(root)
-    finally:
-        shutil.rmtree(root, ignore_errors=True)
-    if len(ds) != len(study):
-        return f"{action}: {len(ds)} trials, the dataset holds {len(study)}"
-    if action != "nothing":
-        return f"{action}: loaded without a word"
-    return None
+        if len(ds) != len(study):
+            return f"{action}: {len(ds)} trials, the dataset holds {len(study)}"
+        if action != "nothing":
+            return f"{action}: loaded without a word"
+        return None
+
+    return call, [*(q for q in root.rglob("*") if q.is_file() and not q.is_symlink()), root]
 
 
 # -- replay waits, link ports, speeds ------------------------------------------------------------------------------
-def attack_replay(rng: random.Random, base: Path, clean: bytes, offsets: list[int], honest: float) -> str | None:
+def attack_replay(rng: random.Random, base: Path, clean: bytes, offsets: list[int], honest: float) -> Prepared:
     from adapters.link import mavlink
     from workbench.cli import main
 
     if rng.random() < 0.3:
         port = rng.choice([-1, 0, 65536, 99999, 2**32, 2**64])
         speed = rng.choice(["1e-300", "1e300", "0", "-1", "nan", "inf", "1"])
-        code = main(["replay", str(TLOG), "--to", f"udpout:127.0.0.1:{port}", "--speed", speed, "-q"]) \
-            if speed == "1" else None
-        if code is not None and code != 1:
-            return f"port {port}: exit {code}"
-        if speed != "1":
+
+        def call_args() -> str | None:
+            if speed == "1":
+                code = main(["replay", str(TLOG), "--to", f"udpout:127.0.0.1:{port}", "--speed", speed, "-q"])
+                return f"port {port}: exit {code}" if code != 1 else None
             try:
                 main(["replay", str(TLOG), "--to", "udpout:127.0.0.1:14599", "--speed", speed, "-q"])
             except SystemExit as exc:
@@ -328,41 +407,47 @@ def attack_replay(rng: random.Random, base: Path, clean: bytes, offsets: list[in
                     return f"--speed {speed}: exit {exc.code}"
                 raise WorkbenchError("refused by the parser") from None
             return f"--speed {speed}: accepted"
-        return None
+
+        return call_args, []
     data = bytearray(clean)
     off = rng.choice(offsets)
     (stamp,) = struct.unpack(">Q", data[off : off + 8])
     data[off : off + 8] = struct.pack(">Q", stamp + 2 ** rng.randrange(20, 44))
     path = base / f"r{rng.randrange(10**9)}.tlog"
     path.write_bytes(bytes(data))
-    now = [0.0]
 
-    def sleep(s: float) -> None:
-        now[0] += s
+    def call() -> str | None:
+        now = [0.0]
 
-    try:
+        def sleep(s: float) -> None:
+            now[0] += s
+
         mavlink.send_tlog(path, "udpout:127.0.0.1:14599", speed=1.0, clock=lambda: now[0], sleep=sleep)
-    finally:
-        path.unlink()
-    if now[0] > honest + 2 * mavlink.MAX_REPLAY_GAP + 1:
-        return f"waited {now[0]:.0f} s for a log of {honest:.0f} s"
-    return None
+        if now[0] > honest + 2 * mavlink.MAX_REPLAY_GAP + 1:
+            return f"waited {now[0]:.0f} s for a log of {honest:.0f} s"
+        return None
+
+    return call, [path]
 
 
 # -- schedulers ----------------------------------------------------------------------------------------------------
-def attack_scheduler(rng: random.Random, empty: str) -> str | None:
+def attack_scheduler(rng: random.Random, empty: str) -> Prepared:
     from workbench.study.executor import DaskExecutor
 
     address = rng.choice([f"{s}://127.0.0.1:8786" for s in ("tls", "ucx", "ws", "wss", "udp", "http")]
                          + [empty, "tcp://127.0.0.1:99999", "tcp://[::1", "127.0.0.1:1"])
-    start = time.monotonic()
-    ex = DaskExecutor(scheduler=address, timeout=3, worker_wait=2.0)
-    ex.close()
-    return f"{address}: connected" if time.monotonic() - start < 100 else None
+
+    def call() -> str | None:
+        start = time.monotonic()
+        ex = DaskExecutor(scheduler=address, timeout=3, worker_wait=2.0)
+        ex.close()
+        return f"{address}: connected" if time.monotonic() - start < 100 else None
+
+    return call, []
 
 
 # -- nesting -------------------------------------------------------------------------------------------------------
-def attack_nesting(rng: random.Random, base: Path) -> str | None:
+def attack_nesting(rng: random.Random, base: Path) -> Prepared:
     import numpy as np
 
     from workbench.models import load_model
@@ -371,37 +456,60 @@ def attack_nesting(rng: random.Random, base: Path) -> str | None:
     text = ("[" * depth + "]" * depth).encode()
     path = base / f"n{rng.randrange(10**9)}.npz"
     np.savez(path, __header__=np.frombuffer(text, dtype=np.uint8))
-    try:
+
+    def call() -> str | None:
         load_model(path)
-    finally:
-        path.unlink()
-    return "a nested header loaded as a model"
+        return "a nested header loaded as a model"
+
+    return call, [path]
 
 
 # -- large standard input ------------------------------------------------------------------------------------------
-def attack_stdin_size(rng: random.Random, sampler: RssSampler) -> str | None:
+def attack_stdin_size(rng: random.Random) -> Prepared:
+    """Standard input streamed by the harness (not built: the point is that ``-`` does not hold it); the call
+    is ``workbench inspect -``, whose peak memory is the child's children's."""
     size = rng.choice([64 << 20, 256 << 20, 1 << 30])
     head = TLOG.read_bytes()[: 1 << 16]
-    proc = subprocess.Popen([sys.executable, "-m", "workbench", "inspect", "-", "-q"], stdin=subprocess.PIPE,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=REPO,
-                            env={**os.environ, "PYTHONPATH": str(REPO)})
-    sampler.child = proc.pid
-    try:
-        proc.stdin.write(head)
-        block = bytes(1 << 20)
-        for _ in range((size - len(head)) >> 20):
-            proc.stdin.write(block)
-        proc.stdin.close()
-    except BrokenPipeError:
-        pass
-    err = proc.stderr.read().decode(errors="replace")
-    code = proc.wait(timeout=HANG_S * 2)
-    sampler.child = None
-    if code not in (0, 1) or "Traceback" in err:
-        raise RuntimeError(f"inspect - ({size >> 20} MiB): exit {code}: {err[-200:]}")
-    if code == 1:
-        raise WorkbenchError(err.strip())
-    return None
+
+    def call() -> str | None:
+        proc = subprocess.Popen([sys.executable, "-m", "workbench", "inspect", "-", "-q"], stdin=subprocess.PIPE,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=REPO,
+                                env={**os.environ, "PYTHONPATH": str(REPO)})
+        try:
+            proc.stdin.write(head)
+            block = bytes(1 << 20)
+            for _ in range((size - len(head)) >> 20):
+                proc.stdin.write(block)
+            proc.stdin.close()
+        except BrokenPipeError:
+            pass
+        err = proc.stderr.read().decode(errors="replace")
+        code = proc.wait(timeout=HANG_S * 2)
+        if code not in (0, 1) or "Traceback" in err:
+            raise RuntimeError(f"inspect - ({size >> 20} MiB): exit {code}: {err[-200:]}")
+        if code == 1:
+            raise WorkbenchError(err.strip())
+        return None
+
+    return call, []
+
+
+def _empty_scheduler() -> tuple[subprocess.Popen, str]:
+    """A Dask scheduler with no workers, in its own process (this one must hold no thread: it forks)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                             "--port", str(port), "--dashboard-address", ":0", "--no-show"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    address = f"tcp://127.0.0.1:{port}"
+    for _ in range(300):
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return proc, address
+        time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError("the empty Dask scheduler did not start")
 
 
 def main() -> None:
@@ -413,7 +521,10 @@ def main() -> None:
     rng = random.Random(args.seed)
     sys.path.insert(0, str(Path(__file__).parent))
 
+    import pandas  # noqa: F401 - imported once here, so every forked call starts with it as a command would
+
     import adapters
+    import workbench.cli  # noqa: F401
     from workbench.sim.landing import simulate_study
 
     clean = TLOG.read_bytes()
@@ -426,42 +537,49 @@ def main() -> None:
     honest = sum(min(max(b - a, 0.0), MAX_REPLAY_GAP) for a, b in zip(times, times[1:], strict=False))
     study = simulate_study(n_subjects=2, n_trials=2, strategy="CS1", seed=1)
     sample_mcap = (REPO / "sample_logs" / "landing_s01.mcap").read_bytes()
+    mcap_messages = _mcap_messages(REPO / "sample_logs" / "landing_s01.mcap")
+    mcap_ref = adapters.load(REPO / "sample_logs" / "landing_s01.mcap")
+    for size in (8 << 20, 64 << 20, 512 << 20, 1 << 30):
+        _mcap_bomb(size)  # compressed here, before any call is timed
     base = Path(tempfile.mkdtemp(prefix="wb-bounds-"))
-    from dask.distributed import LocalCluster
-
-    cluster = LocalCluster(n_workers=0, processes=False, protocol="tcp://", dashboard_address=":0")
-    tally, sampler = Tally(), RssSampler()
+    scheduler, empty = _empty_scheduler()
+    if threading.active_count() > 1:
+        print(f"warning: {threading.active_count()} threads before forking", file=sys.stderr)
+    baseline = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    tally = Tally()
     surfaces = {
         "CSV header width": lambda: attack_csv_header(rng, base),
         "MCAP declared sizes / damage": lambda: attack_mcap_sizes(rng, base, sample_mcap),
         "one bad tlog stamp": lambda: attack_stamp(rng, base, clean, offsets, want),
+        "one bad MCAP log_time": lambda: attack_mcap_stamp(rng, base, mcap_messages, (len(mcap_ref),
+                                                                                   mcap_ref.n_samples)),
         "mapping values": lambda: attack_mapping_values(rng, base),
         "dataset copies / special files": lambda: attack_dataset_files(rng, base, study),
         "replay waits / ports / speeds": lambda: attack_replay(rng, base, clean, offsets, honest),
-        "schedulers (schemes, no workers)": lambda: attack_scheduler(rng, cluster.scheduler_address),
+        "schedulers (schemes, no workers)": lambda: attack_scheduler(rng, empty),
         "nested model header": lambda: attack_nesting(rng, base),
-        "stdin size": lambda: attack_stdin_size(rng, sampler),
+        "stdin size (streamed, 64 MiB-1 GiB)": lambda: attack_stdin_size(rng),
     }
     if args.only:
         surfaces = {k: v for k, v in surfaces.items() if any(o.lower() in k.lower() for o in args.only)}
     try:
-        for name, call in surfaces.items():
-            sampler.reset()
+        for name, prepare in surfaces.items():
             end = time.monotonic() + args.seconds
             while time.monotonic() < end:
-                tally.run(name, call)
-            tally.peak[name] = sampler.peak / 2**20
+                tally.run(name, prepare)
             print(f"{name}: {dict(tally.by_surface[name])}, peak {tally.peak[name]:.0f} MiB, slowest call "
-                  f"{tally.slowest[name]:.1f} s", flush=True)
+                  f"{tally.slowest[name]:.1f} s, largest input {tally.largest[name] / 2**20:.2f} MiB", flush=True)
     finally:
-        cluster.close()
+        scheduler.kill()
+        scheduler.wait()
         shutil.rmtree(base, ignore_errors=True)
     keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
-    print("| surface | " + " | ".join(keys) + " | peak MiB | slowest call s |")
-    print("|---|" + "---|" * (len(keys) + 2))
+    print(f"\nEach call forked from a process at {baseline:.0f} MiB (the workbench's imports, the sample logs).")
+    print("| surface | " + " | ".join(keys) + " | peak MiB | longest call s | largest input MiB |")
+    print("|---|" + "---|" * (len(keys) + 3))
     for name, c in tally.by_surface.items():
         print(f"| {name} | " + " | ".join(str(c.get(k, 0)) for k in keys)
-              + f" | {tally.peak[name]:.0f} | {tally.slowest[name]:.1f} |")
+              + f" | {tally.peak[name]:.0f} | {tally.slowest[name]:.1f} | {tally.largest[name] / 2**20:.2f} |")
     for name, ex in tally.examples.items():
         for e in list(dict.fromkeys(ex))[:8]:
             print(f"{name}: {e}")
@@ -469,3 +587,4 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+

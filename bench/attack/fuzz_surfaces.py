@@ -8,7 +8,8 @@ Each surface gets the same share of the time. Per surface it counts calls, clean
 one line naming the cause), foreign errors (anything else: a traceback from inside a library), hangs (a call
 over its time limit) and silent wrong results (a call that returned but broke an invariant the surface
 promises: a dataset read differently by pandas, a file read from outside the folder, a count that does not add
-up, an old report beside new figures).
+up, an old report beside new figures). Each call runs in a child forked from this process, which measures its
+peak memory (``wait4``) and time.
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ import sys
 import tempfile
 import threading
 import time
-import traceback
 from collections import Counter
 from pathlib import Path
 
@@ -36,33 +36,39 @@ sys.path.insert(0, str(REPO))
 
 from workbench.errors import WorkbenchError  # noqa: E402
 
-HANG_S = 20.0
+HANG_S = 60.0  # the acceptance's bound for a call on an input under 10 MB
 
 
 class Tally:
-    def __init__(self) -> None:
+    """Each call in a child forked from this process (:func:`fuzz_bounds._call_in_child`): its peak memory and its
+    time are its own. A call's random choices come from a generator seeded by this process's, drawn per call."""
+
+    def __init__(self, rng: random.Random) -> None:
+        self.rng = rng
         self.by_surface: dict[str, Counter] = {}
         self.examples: dict[str, list[str]] = {}
+        self.peak: dict[str, float] = {}
+        self.slowest: dict[str, float] = {}
 
     def run(self, surface: str, fn, *args) -> None:
+        from fuzz_bounds import _call_in_child
+
         c = self.by_surface.setdefault(surface, Counter())
         c["calls"] += 1
-        start = time.monotonic()
-        try:
-            wrong = fn(*args)
-        except WorkbenchError:
+        args = tuple(random.Random(self.rng.getrandbits(64)) if isinstance(a, random.Random) else a for a in args)
+        kind, detail, took, peak = _call_in_child(lambda: fn(*args))
+        self.slowest[surface] = max(self.slowest.get(surface, 0.0), took)
+        self.peak[surface] = max(self.peak.get(surface, 0.0), peak / 2**20)
+        if kind == "clean":
             c["clean errors"] += 1
-            wrong = None
-        except Exception as exc:  # the point of the fuzzer: count what escapes as a foreign error
+        elif kind == "foreign":
             c["foreign errors"] += 1
-            self.examples.setdefault(surface, []).append(
-                f"{type(exc).__name__}: {str(exc)[:160]} @ {traceback.extract_tb(exc.__traceback__)[-1].filename}")
-            wrong = None
-        if time.monotonic() - start > HANG_S:
+            self.examples.setdefault(surface, []).append(str(detail))
+        if kind == "hang" or took > HANG_S:
             c["hangs"] += 1
-        if wrong:
+        if kind == "ok" and detail:
             c["silent wrong results"] += 1
-            self.examples.setdefault(surface, []).append(f"wrong: {wrong}")
+            self.examples.setdefault(surface, []).append(f"wrong: {detail}")
 
 
 # -- datasets ----------------------------------------------------------------------------------------------------
@@ -391,6 +397,9 @@ def main() -> None:
     ap.add_argument("--only", action="append", help="run only the surfaces whose name contains this")
     args = ap.parse_args()
     rng = random.Random(args.seed)
+    sys.path.insert(0, str(Path(__file__).parent))
+
+    import pandas  # noqa: F401 - imported once here, so every forked call starts with it as a command would
 
     import adapters
     from adapters.link.mavlink import tlog_frames
@@ -403,7 +412,7 @@ def main() -> None:
     frames = list(tlog_frames(tlog))
     model = HumanBehaviorModel(planar_quadrotor(), n_components=2, noise_folds=0).fit(
         adapters.load(tlog, mapping="planar_quadrotor").by_label("CS1")[:4])
-    tally = Tally()
+    tally = Tally(rng)
     base = Path(tempfile.mkdtemp(prefix="wb-attack-"))
     logs = {"tlog": tlog.read_bytes(), "mcap": (REPO / "sample_logs" / "landing_s01.mcap").read_bytes(),
             "csv": (REPO / "sample_logs" / "landing_s02.csv").read_bytes()}
@@ -431,10 +440,11 @@ def main() -> None:
     finally:
         shutil.rmtree(base, ignore_errors=True)
     keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
-    print("| surface | " + " | ".join(keys) + " |")
-    print("|---|" + "---|" * len(keys))
+    print("| surface | " + " | ".join(keys) + " | peak MiB | longest call s |")
+    print("|---|" + "---|" * (len(keys) + 2))
     for name, c in tally.by_surface.items():
-        print(f"| {name} | " + " | ".join(str(c.get(k, 0)) for k in keys) + " |")
+        print(f"| {name} | " + " | ".join(str(c.get(k, 0)) for k in keys)
+              + f" | {tally.peak[name]:.0f} | {tally.slowest[name]:.1f} |")
     for name, ex in tally.examples.items():
         for e in dict.fromkeys(ex):
             print(f"{name}: {e}")

@@ -1,10 +1,12 @@
 """Kill ``workbench demo`` and ``workbench report`` at random moments and check what they leave.
 
-    PYTHONPATH=. nice .venv/bin/python bench/attack/kill_runs.py --runs 20
+    PYTHONPATH=. nice .venv/bin/python bench/attack/kill_runs.py --runs 60 --dask-runs 6   # 20 per signal
 
 For each command: one complete run makes the *old* result set (seed 0); then ``--runs`` runs, each with another
-seed (so its results differ from the old set's), get SIGINT, SIGTERM or SIGKILL after a delay drawn uniformly
-from the first run's duration. After each kill it checks:
+seed (so its results differ from the old set's), get SIGINT, SIGTERM or SIGKILL (each a third of the runs) after a
+delay drawn uniformly from the first run's duration; ``report-dask`` is ``report --workers 2`` (a Dask
+``LocalCluster``: nannies in the command, worker processes spawned by them), ``--dask-runs`` times. After each kill
+it checks:
 
 * **whole set**: the output folder holds the old set or a complete new one, never a mix (each seed-dependent file
   equal to the old set's, or every one different, and none missing);
@@ -34,7 +36,8 @@ import psutil
 
 REPO = Path(__file__).resolve().parents[2]
 FAST = ["--samples", "0", "--no-efficiency", "--bootstrap", "20"]
-SEED_FILES = {"demo": ["results.csv", "report.md", "models"], "report": ["report.md", "figures"]}
+SEED_FILES = {"demo": ["results.csv", "report.md", "models"], "report": ["report.md", "figures"],
+              "report-dask": ["report.md", "figures"]}
 SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGKILL]
 
 
@@ -42,7 +45,8 @@ def _command(kind: str, out: Path, demos: Path, seed: int) -> list[str]:
     base = [sys.executable, "-m", "workbench"]
     if kind == "demo":
         return [*base, "demo", "--out", str(out), "--seed", str(seed), *FAST]
-    return [*base, "report", str(demos), "-o", str(out), "--seed", str(seed), *FAST]
+    dask = ["--workers", "2"] if kind == "report-dask" else []
+    return [*base, "report", str(demos), "-o", str(out), "--seed", str(seed), *FAST, *dask]
 
 
 def _digest(path: Path) -> str:
@@ -90,8 +94,10 @@ def attack(kind: str, runs: int, rng: random.Random, base: Path, env: dict, demo
     old = _state(kind, out)
     print(f"{kind}: a complete run takes {duration:.0f} s", flush=True)
     tally: Counter = Counter()
-    for i in range(runs):
-        sig = rng.choice(SIGNALS)
+    # each signal equally often (runs // 3 each, the rest drawn), in a random order
+    signals = [*SIGNALS * (runs // len(SIGNALS)), *rng.sample(SIGNALS, runs % len(SIGNALS))]
+    rng.shuffle(signals)
+    for i, sig in enumerate(signals):
         delay = rng.uniform(0.3, duration)
         proc = subprocess.Popen(_command(kind, out, demos, 100 + i), env=env, cwd=REPO,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -137,7 +143,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--only", choices=["demo", "report"])
+    parser.add_argument("--dask-runs", type=int, default=6, help="runs of report --workers 2 (0: none)")
+    parser.add_argument("--only", choices=["demo", "report", "report-dask"])
     args = parser.parse_args()
     rng = random.Random(args.seed)
     env = {**os.environ, "PYTHONPATH": str(REPO)}
@@ -146,8 +153,12 @@ def main() -> None:
         demos = base / "demos.parquet"
         subprocess.run([sys.executable, "-m", "workbench", "import", *sorted(map(str, (REPO / "sample_logs").glob(
             "landing_s0*"))), "-o", str(demos)], env=env, cwd=REPO, check=True, capture_output=True)
-        for kind in ([args.only] if args.only else ["demo", "report"]):
-            tally = attack(kind, args.runs, rng, base, env, demos)
+        kinds = [args.only] if args.only else ["demo", "report", "report-dask"]
+        for kind in kinds:
+            runs = args.dask_runs if kind == "report-dask" else args.runs
+            if runs <= 0:
+                continue
+            tally = attack(kind, runs, rng, base, env, demos)
             print(f"== {kind}: " + ", ".join(f"{k} {v}" for k, v in sorted(tally.items())), flush=True)
 
 

@@ -441,3 +441,47 @@ def test_a_log_with_no_arming_record_does_not_say_never_armed(tmp_path):
     assert summary.armed == () and not summary.armed_known
     assert summary.armed_text == "armed: no arming record in this log"
     assert "never armed" not in str(summary)
+
+
+def _records(data: bytes):
+    """(offset, type id) of every message of a DataFlash log, by the lengths its FMT messages declare."""
+    lengths = {128: 89}
+    off = 0
+    while off + 3 <= len(data) and data[off : off + 2] == b"\xa3\x95":
+        kind = data[off + 2]
+        if kind == 128:
+            lengths[data[off + 3]] = data[off + 4]
+        yield off, kind
+        off += lengths[kind]
+
+
+def test_a_bad_stamp_on_a_mode_change_moves_no_span(logs, tmp_path):
+    """One MODE message's TimeUS pushed past the next mode change: the previous main sorted it there, so the
+    flight kept the old mode's name until then and an AUTO stretch was imported as ALT_HOLD; now the mode stream
+    gets the channels' time-line repair and the import equals the clean one."""
+    import struct
+
+    mapping = tmp_path / "bin.toml"
+    mapping.write_text(
+        'name = "bin_test"\ndt = 0.1\nstates = ["roll", "pitch"]\ninputs = ["thr"]\n'
+        '[channels]\nroll = "ATT.Roll"\npitch = "ATT.Pitch"\nthr = "RCIN.C3"\n'
+        '[segment]\ngap = 1.0\nmin_duration = 1.0\n'
+        'mode = { source = "MODE.ModeNum", names = "arducopter", keep = ["STABILIZE", "ALT_HOLD"] }\n'
+    )
+    clean = logs("new", "copter")
+    data = bytearray(clean.read_bytes())
+    mode_type = adapters.read(clean).info["formats"]["MODE"]["type"]
+    modes = adapters.read(clean, ["MODE"])["MODE"]
+    offsets = [off for off, kind in _records(bytes(data)) if kind == mode_type]
+    assert len(offsets) == len(modes)
+    k = int(np.flatnonzero(modes["ModeNum"].to_numpy() == 2)[0])  # ALT_HOLD
+    t = modes["t"].to_numpy()
+    shift = 0.5 * (t[k + 1] + t[k + 2]) - t[k]  # between the next two mode changes
+    (stamp,) = struct.unpack("<Q", data[offsets[k] + 3 : offsets[k] + 11])
+    data[offsets[k] + 3 : offsets[k] + 11] = struct.pack("<Q", stamp + int(shift * 1e6))
+    bad = tmp_path / clean.name
+    bad.write_bytes(bytes(data))
+    assert adapters.read(bad, ["MODE"])["MODE"]["t"].iloc[k] == pytest.approx(t[k] + shift, abs=1e-6)
+    want, got = adapters.load(clean, mapping), adapters.load(bad, mapping)
+    assert [(d.meta["mode"], len(d.t)) for d in got] == [(d.meta["mode"], len(d.t)) for d in want]
+    assert "ALT_HOLD" in [d.meta["mode"] for d in want]

@@ -223,3 +223,18 @@ def test_deeply_nested_toml_is_a_mapping_error(tmp_path):
     path = _mapping(tmp_path, BASE + "deep = " + "[" * 100_000 + "]" * 100_000 + "\n")
     with pytest.raises(MappingError, match="nested deeper"):
         load_mapping(path)  # the previous main let tomllib's RecursionError out
+
+
+def test_a_mapping_that_is_not_utf8_is_named_by_its_byte(tmp_path):
+    """Python's codec text ("'utf-8' codec can't decode byte 0xff") was the message; a library's words."""
+    from adapters.mapping import load_mapping
+    from workbench.errors import MappingError
+
+    text = b'name = "m"\ndt = 0.1\n# caf\xe9\n'
+    path = tmp_path / "latin1.toml"
+    path.write_bytes(text)
+    with pytest.raises(MappingError) as info:
+        load_mapping(path)
+    at = text.index(b"\xe9")
+    assert str(path) in str(info.value) and f"not UTF-8 text at byte {at}" in str(info.value)
+    assert "codec" not in str(info.value)

@@ -202,3 +202,59 @@ def test_protobuf_messages_are_decoded_and_flattened(tmp_path):
     frame = mcap.read(path)["/stamp"]
     np.testing.assert_array_equal(frame["seconds"], [100, 101, 102])
     np.testing.assert_array_equal(frame["nanos"], [0, 5, 10])
+
+
+@pytest.mark.parametrize("into", [2, 17])
+def test_one_bad_log_time_splits_no_trial(tmp_path, into):
+    """One /quadrotor/state message (it carries the demo field) with its log_time moved into another trial: the
+    previous main's reader sorted the channel by log_time, which moved the message there and cut that trial in
+    two (21 trials instead of 20); in file order the pipeline repairs its stamp."""
+    from pathlib import Path
+
+    import adapters
+
+    clean = Path(__file__).resolve().parents[2] / "sample_logs" / "landing_s01.mcap"
+    with clean.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        messages = list(reader.iter_messages(log_time_order=False))
+    state = [i for i, (_, ch, _) in enumerate(messages) if ch.topic == "/quadrotor/state"]
+    k = state[len(state) // 2]
+    want = adapters.load(clean)
+    # into the middle of trial `into` (before or after the message's own, in the middle of the log)
+    middle = want[into].meta["t0"] + 0.5 * float(want[into].t[-1])
+    shift_ns = int(middle * 1e9) - messages[k][2].log_time
+    bad = tmp_path / clean.name
+    with bad.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        schemas = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
+        channels = {c.id: w.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0), c.metadata)
+                    for c in summary.channels.values()}
+        for i, (_, ch, m) in enumerate(messages):
+            at = m.log_time + (shift_ns if i == k else 0)
+            w.add_message(channels[ch.id], at, m.data, m.publish_time, m.sequence)
+        w.finish()
+    got = adapters.load(bad)
+    assert abs(shift_ns) > 5e9
+    assert [(d.meta["id"], len(d.t)) for d in got] == [(d.meta["id"], len(d.t)) for d in want]
+    assert got[0].meta["skipped"]["segment.demo: time outliers repaired"] == 1
+
+
+def test_a_channel_written_out_of_time_order_is_read_in_time_order(tmp_path):
+    """Chunks written out of turn (the second half of a channel's messages first): the stamps are right and the
+    order is not, so the reader sorts by log_time (more stamps disagree with the order than the repair mends)."""
+    path = tmp_path / "swapped.mcap"
+    times = 1_000_000_000 + 10_000_000 * np.arange(40)
+    order = np.r_[np.arange(20, 40), np.arange(20)]
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        schema = w.register_schema("v", "jsonschema", json.dumps({"type": "object"}).encode())
+        channel = w.register_channel("/v", "json", schema)
+        for i in order:
+            w.add_message(channel, int(times[i]), json.dumps({"v": int(i)}).encode(), int(times[i]))
+        w.finish()
+    frame = mcap.read(path)["/v"]
+    np.testing.assert_array_equal(frame["v"].to_numpy(), np.arange(40))
+    np.testing.assert_allclose(frame["t"].to_numpy(), times * 1e-9)

@@ -237,3 +237,43 @@ def test_unknown_event_and_error_numbers_stay_numbers():
     assert error_text(16, 2) == "EKFCHECK: BAD_VARIANCE" and error_text(15, 2) == "PARACHUTES: TOO_LOW"
     assert error_text(6, 1) == "FAILSAFE_BATT: FAILSAFE_OCCURRED"
     assert error_text(10, 6, "arducopter").endswith("RTL")  # a flight-mode error's code is the mode refused
+
+
+def _ulog_data(data: bytes, topic: str) -> list[int]:
+    """Offsets of the timestamps of a topic's data messages in a ULog file (header 16 bytes, then messages of
+    ``uint16 size, uint8 type, payload``; ``A`` subscribes a message id to a topic, ``D`` carries its data)."""
+    import struct
+
+    ids, out, off = set(), [], 16
+    while off + 3 <= len(data):
+        size, kind = struct.unpack_from("<HB", data, off)
+        body = data[off + 3 : off + 3 + size]
+        if kind == ord("A") and body[3:].decode() == topic:
+            ids.add(struct.unpack_from("<H", body, 1)[0])
+        elif kind == ord("D") and struct.unpack_from("<H", body, 0)[0] in ids:
+            out.append(off + 5)
+        off += 3 + size
+    return out
+
+
+def test_a_bad_stamp_on_vehicle_status_splits_no_flight(flights, tmp_path):
+    """One vehicle_status from a pause (AUTO_RTL) stamped into the middle of a flight: the previous main sorted
+    it there and cut the flight in two; the mode stream now gets the channels' time-line repair."""
+    import struct
+
+    clean = _px4_log(tmp_path / "px4.ulg", flights, 0)
+    data = bytearray(clean.read_bytes())
+    status = adapters.read(clean, ["vehicle_status"])["vehicle_status"]
+    offsets = _ulog_data(bytes(data), "vehicle_status")
+    assert len(offsets) == len(status)
+    want = adapters.load(clean, "px4_manual")
+    k = int(np.flatnonzero(status["nav_state"].to_numpy() == 5)[0])  # the first AUTO_RTL record, before flight 0
+    middle = want[1].meta["t0"] + 0.5 * float(want[1].t[-1])
+    (stamp,) = struct.unpack_from("<Q", data, offsets[k])
+    struct.pack_into("<Q", data, offsets[k], int(round(middle * 1e6)))
+    assert stamp != int(round(middle * 1e6))
+    bad = tmp_path / "bad" / clean.name
+    bad.parent.mkdir()
+    bad.write_bytes(bytes(data))
+    got = adapters.load(bad, "px4_manual")
+    assert [(d.meta["id"], len(d.t)) for d in got] == [(d.meta["id"], len(d.t)) for d in want]

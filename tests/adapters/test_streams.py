@@ -97,3 +97,96 @@ def test_inspect_spans_the_bulk_and_counts_a_stamp_pushed_ahead(tmp_path):
     want, got = adapters.inspect(clean), adapters.inspect(bad)
     assert got.duration == pytest.approx(want.duration)  # the previous main showed 2**36 us more, without a word
     assert dict(got.skipped)["stamps off their stream's time line (not in the spans)"] == 1
+
+
+def _shifted(data: bytes, off: int, shift_us: int) -> bytes:
+    out = bytearray(data)
+    (stamp,) = struct.unpack(">Q", out[off : off + 8])
+    out[off : off + 8] = struct.pack(">Q", stamp + shift_us)
+    return bytes(out)
+
+
+def _stamp(data: bytes, off: int) -> float:
+    return struct.unpack(">Q", data[off : off + 8])[0] * 1e-6
+
+
+def _inside_another(at: float, own, spans: dict) -> bool:
+    return any(a < at < b for key, (a, b) in spans.items() if key != own)
+
+
+@pytest.mark.parametrize("shift_us", [-(2**23), 2**25, -(2**25), 2**23])
+def test_a_bad_stamp_on_the_demo_field_splits_no_trial(tmp_path, shift_us):
+    """The demo field decides where trials start and end: one of its records stamped into another trial's time
+    must not cut that trial in two (the fuzzer's 21 trials instead of 20 at bytes 231480 and 379078 of the
+    sample tlog). The previous main sorted the rule stream by its stamps; now it gets the channels' repair."""
+    clean = REPO / "sample_logs" / "landing_s00.tlog"
+    data = clean.read_bytes()
+    streams = adapters.read(clean)
+    demo = streams["NAMED_VALUE_INT"]
+    spans = {k: (float(g["t"].min()), float(g["t"].max())) for k, g in demo.groupby("value")}
+    records = [off for off, msgid in _tlog_records(data) if msgid == 252]  # NAMED_VALUE_INT, one per sample
+    assert len(records) == len(demo)
+    values = demo["value"].to_numpy()
+    # the first record, from a tenth of the way in, whose shifted stamp lies inside another trial
+    k = next(i for i in range(len(records) // 10, len(records))
+             if _inside_another(_stamp(data, records[i]) + shift_us * 1e-6, values[i], spans))
+    bad = tmp_path / "bad.tlog"
+    bad.write_bytes(_shifted(data, records[k], shift_us))
+    want, got = adapters.load(clean), adapters.load(bad)
+    assert [(d.meta["id"], len(d.t)) for d in got] == [(d.meta["id"], len(d.t)) for d in want]
+    assert got[0].meta["skipped"] == {"segment.demo: time outliers repaired": 1}
+
+
+def flights_of(path: Path) -> list:
+    """The trials the sample log's own demo field marks (what an armed rule must find too)."""
+    return list(adapters.load(path))
+
+
+def test_a_bad_stamp_on_a_disarming_heartbeat_splits_no_trial(tmp_path):
+    """An armed rule (HEARTBEAT.base_mode): a disarmed HEARTBEAT from a pause stamped into a flight must not end
+    that flight there (the previous main sorted it into the flight and cut it in two)."""
+    clean = REPO / "sample_logs" / "landing_s00.tlog"
+    data = clean.read_bytes()
+    text = (REPO / "adapters" / "mappings" / "planar_quadrotor.toml").read_text()
+    text = text.replace('demo = { source = "NAMED_VALUE_INT.value", where = { name = "demo" } }',
+                        'armed = { source = "HEARTBEAT.base_mode", bitmask = 128 }')
+    assert "armed =" in text
+    mapping = tmp_path / "armed.toml"
+    mapping.write_text(text)
+    beats = adapters.read(clean)["HEARTBEAT"]
+    records = [off for off, msgid in _tlog_records(data) if msgid == 0]
+    assert len(records) == len(beats)
+    disarmed = np.flatnonzero((beats["base_mode"].to_numpy() & 128) == 0)
+    want = adapters.load(clean, str(mapping))
+    # into the middle of the third flight (its t0 and length on the log clock), from the first pause's HEARTBEAT
+    middle = want[2].meta["t0"] + 0.5 * float(want[2].t[-1])
+    k = int(disarmed[0])
+    shift_us = int(round((middle - _stamp(data, records[k])) * 1e6))
+    bad = tmp_path / clean.name  # ids are the file's stem here
+    bad.write_bytes(_shifted(data, records[k], shift_us))
+    got = adapters.load(bad, str(mapping))
+    assert len(want) == len(flights_of(clean)) and want[2].t[-1] > 2.0
+    assert [(d.meta["id"], len(d.t)) for d in got] == [(d.meta["id"], len(d.t)) for d in want]
+
+
+def test_a_repaired_demo_record_beside_a_missing_demo_value(tmp_path):
+    """A text demo field with a missing value (pandas' NA) next to a record whose stamp is repaired: comparing the
+    two must not raise ("boolean value of NA is ambiguous"); the NA row belongs to no trial."""
+    import pandas as pd
+
+    from adapters.mapping import load_mapping
+    from adapters.pipeline import build
+    from adapters.streams import Streams
+
+    n = 200
+    t = 0.05 * np.arange(n)
+    demo = pd.array(["a"] * 100 + [None] + ["b"] * 99, dtype="string")
+    bad = t.copy()
+    bad[50] -= 1000.0  # a record inside trial "a", to check the repair
+    bad[99] += 1000.0  # the last record of "a": its right neighbour is the missing value
+    frame = pd.DataFrame({"t": bad, "demo": demo, **{c: np.sin(t + k) for k, c in enumerate(
+        ["x", "y", "phi", "xdot", "ydot", "phidot", "u1", "u2"])}})
+    streams = Streams(str(tmp_path / "m.csv"), "csv", {"csv": frame})
+    got = build(streams, load_mapping("planar_quadrotor").for_format("csv"))
+    assert [d.meta["demo"] for d in got] == ["a", "b"]
+    assert got[0].meta["skipped"]["segment.demo: time outliers repaired"] == 2

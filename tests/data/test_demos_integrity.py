@@ -155,3 +155,26 @@ def test_a_dataset_file_with_a_name_that_is_not_utf8_is_a_clear_error(small, tmp
     with pytest.raises(FormatError, match="not a readable Parquet file") as info:
         load_demonstrations(root)
     assert part.name in str(info.value)
+
+
+@pytest.mark.parametrize("reader", ["file", "dataset"])
+def test_workbench_metadata_that_is_not_utf8_is_named_in_our_words(small, tmp_path, reader):
+    """A damaged byte in the stored workbench metadata: the message quoted Python's codec ("'utf-8' codec can't
+    decode byte 0x9d in position 515"), a library's text (found by the attack round's datasets surface once
+    its calls were judged like fuzz_bounds's); now it names the byte."""
+    from workbench.data.dataset import load_demonstrations, write_dataset
+
+    root = tmp_path / "ds"
+    write_dataset(small, root)
+    part = next(root.rglob("*.parquet"))
+    table = pq.read_table(part)
+    raw = table.schema.metadata[b"workbench"]
+    at = len(raw) // 2
+    damaged = raw[:at] + b"\x9d" + raw[at + 1 :]
+    with pytest.raises(UnicodeDecodeError):
+        damaged.decode()
+    pq.write_table(table.replace_schema_metadata({**table.schema.metadata, b"workbench": damaged}), part)
+    with pytest.raises(FormatError) as info:
+        load_demonstrations(root) if reader == "dataset" else DemonstrationSet.load(part)
+    text = str(info.value)
+    assert part.name in text and f"not UTF-8 text at byte {at}" in text and "codec" not in text

@@ -356,3 +356,18 @@ def test_fit_noise_recovers_an_ar1_process():
     print(f"\nAR(1) noise fit: scale {scale.round(3)} (true {s}), rho {rho_hat.round(3)} (true {rho})")
     np.testing.assert_allclose(scale, s, rtol=0.05)
     assert rho_hat[0] < 0.1 and abs(rho_hat[1] - 0.8) < 0.05
+
+
+def test_a_model_header_that_is_not_utf8_is_named_by_its_byte(tmp_path):
+    """A model file whose JSON header holds a byte that is not UTF-8: the message quoted Python's codec."""
+    from workbench.models import load_model
+    from workbench.models.files import ModelFileError
+
+    header = b'{"format": "caf\xe9"}'
+    path = tmp_path / "m.npz"
+    np.savez(path, __header__=np.frombuffer(header, dtype=np.uint8))
+    with pytest.raises(ModelFileError) as info:
+        load_model(path)
+    text = str(info.value)
+    at = header.index(b"\xe9")
+    assert f"not UTF-8 text at byte {at}" in text and "codec" not in text

@@ -46,7 +46,7 @@ from typing import Any
 from urllib.parse import quote, unquote
 
 from workbench.atomic import refuse_special_file, remove_leftovers, swap_in, temp_sibling
-from workbench.data.demonstrations import DemonstrationSet
+from workbench.data.demonstrations import DemonstrationSet, metadata_fault
 from workbench.errors import DataError, FormatError
 
 __all__ = [
@@ -355,7 +355,7 @@ def _read_partitions(root: Path, wanted: Sequence[str] | None = None) -> tuple[l
         try:
             meta = pq.read_metadata(path)
         except (pa.ArrowException, OSError, UnicodeDecodeError) as exc:  # a column name that is not UTF-8
-            raise FormatError(f"{path}: not a readable Parquet file ({' '.join(str(exc).split())})") from None
+            raise FormatError(f"{path}: not a readable Parquet file ({metadata_fault(exc)})") from None
         raw = (meta.metadata or {}).get(b"workbench")
         info = None
         if raw is not None:
@@ -364,7 +364,7 @@ def _read_partitions(root: Path, wanted: Sequence[str] | None = None) -> tuple[l
                 info = header.get("dataset")
                 ids = tuple(str(m["id"]) for m in header["demos"])
             except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
-                raise FormatError(f"{path}: damaged workbench metadata ({exc})") from None
+                raise FormatError(f"{path}: damaged workbench metadata ({metadata_fault(exc)})") from None
         if not isinstance(info, dict):
             foreign.append(rel)
             continue

@@ -38,6 +38,14 @@ MIN_SAMPLES = 2
 DT_TOLERANCE = 1e-3  # relative deviation of a sampling interval from dt that is still "uniform"
 
 
+def metadata_fault(exc: BaseException) -> str:
+    """Why stored metadata could not be read, in the workbench's words: bytes that are not UTF-8 text are named by
+    their position (Python's codec text, "'utf-8' codec can't decode byte 0x9d", is the library's, not ours)."""
+    if isinstance(exc, UnicodeDecodeError):
+        return f"not UTF-8 text at byte {exc.start}"
+    return " ".join(str(exc).split())
+
+
 def _checksum(header: Mapping[str, Any], table: Any, where: str = "table") -> str:
     """SHA-256 of a set's metadata (canonical JSON, without the checksum itself) and of its decoded columns.
 
@@ -503,7 +511,7 @@ class DemonstrationSet(Sequence[Demonstration]):
             roles = Roles.from_json(header.get("roles"), f"{path}: roles")
             meta = {str(m.get("id")): m for m in metas}
         except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as exc:
-            raise FormatError(f"{path}: damaged workbench metadata ({exc})") from None
+            raise FormatError(f"{path}: damaged workbench metadata ({metadata_fault(exc)})") from None
         if version > FORMAT_VERSION:
             raise FormatError(
                 f"{path}: format version {version} is newer than this workbench reads ({FORMAT_VERSION}); upgrade"

@@ -185,7 +185,9 @@ def read_model_file(path: str | os.PathLike) -> ModelFile:
         raise ModelFileError(f"{path}: damaged model file: header has dtype {raw.dtype}, shape {raw.shape}")
     try:
         header = json.loads(raw.tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except UnicodeDecodeError as exc:  # named by its byte: Python's codec text is the library's, not ours
+        raise ModelFileError(f"{path}: damaged model file: header is not UTF-8 text at byte {exc.start}") from None
+    except json.JSONDecodeError as exc:
         raise ModelFileError(f"{path}: damaged model file: header is not JSON ({exc})") from None
     except RecursionError:
         raise ModelFileError(f"{path}: damaged model file: header nested deeper than the JSON parser goes") from None
