@@ -152,10 +152,10 @@ def test_view_saves_a_recording(fmt, logs, demos, tmp_path, capsys):
 
 @pytest.mark.parametrize("fmt", ALL, ids=IDS)
 def test_view_saves_the_raw_log(fmt, logs, tmp_path, capsys):
-    """``view LOG`` without a mapping: the log's own streams."""
+    """``view LOG --raw``: the log's own streams."""
     out = tmp_path / "raw.rrd"
     n_streams = len(adapters.read(logs[fmt.name]))
-    assert main(["view", str(logs[fmt.name]), "--save", str(out)]) == 0
+    assert main(["view", str(logs[fmt.name]), "--raw", "--save", str(out)]) == 0
     assert f"(the raw log: {n_streams} streams" in capsys.readouterr().out
     assert out.stat().st_size > 0
 

@@ -540,7 +540,7 @@ def test_ctrl_c_ends_live_with_a_complete_recording(fitted, records, tmp_path):
 
 def test_replay_needs_a_model_or_a_link(tmp_path):
     r = subprocess.run([*WB, "replay", str(TLOG)], capture_output=True, text=True, cwd=tmp_path)
-    assert r.returncode == 1 and "--to CONNECTION" in r.stderr
+    assert r.returncode == 2 and "--to CONNECTION" in r.stderr  # a usage error, as argparse's
     r = subprocess.run([*WB, "replay", str(REPO / "sample_logs" / "landing_s01.mcap"), "--to", "udpout:127.0.0.1:9"],
                        capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 1 and "not a MAVLink telemetry log" in r.stderr

@@ -587,11 +587,20 @@ def _spawning_without_interrupts() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
+    # Another thread of this process (the progress bar's, the pool's) may take the Ctrl-C that this one blocks;
+    # Python then runs the handler here at once, and a KeyboardInterrupt between a worker's start and the write of
+    # its start-up data left that worker reading an empty pipe (EOFError traceback from multiprocessing's
+    # spawn_main, found by the merged suite). Held until every worker is started, then raised as it would have been.
+    held: list[int] = []
+    handler = signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        signal.signal(signal.SIGINT, handler)
+        if held:
+            signal.raise_signal(signal.SIGINT)
 
 
 def _quiet_interrupts() -> None:
