@@ -6,9 +6,10 @@ every signature named in :data:`USED_BY` has them and lists the ones not yet con
 
 from __future__ import annotations
 
-__all__ = ["DT_PAPER_S", "HORIZON_S", "N_COMPONENTS", "N_STEPS", "ONLINE_HORIZON_S", "STUDY_N_COMPONENTS"]
+__all__ = ["DT_PAPER_S", "HORIZON_S", "N_COMPONENTS", "N_STEPS", "ONLINE_HORIZON_S", "REG_COVAR", "STUDY_N_COMPONENTS"]
 
 N_COMPONENTS = 5  # G, Gaussian components of the TP-GMM / GMR (the paper's)
+REG_COVAR = 0.5  # the variability model's covariance regularizer, in standardized units
 # evaluate / report / demo choose G (1, 2 or 5) and the regularizer by cross-validation, and may fall back to K̂x
 STUDY_N_COMPONENTS = "cv"
 DT_PAPER_S = 0.05  # the planar quadrotor's sampling step in seconds (the paper's)

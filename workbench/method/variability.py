@@ -28,7 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from workbench.data.roles import ResolvedRoles
-from workbench.defaults import N_COMPONENTS
+from workbench.defaults import N_COMPONENTS, REG_COVAR
 from workbench.errors import ConvergenceWarning, ModelError
 from workbench.method.frames import Frame, FrameSpec, frames_for_demo, frames_for_task
 from workbench.method.gmr import ConditionalGMM
@@ -128,7 +128,7 @@ class TaskGMR:
         self,
         spec: FrameSpec,
         n_components: int = N_COMPONENTS,
-        reg_covar: float = 0.5,
+        reg_covar: float = REG_COVAR,
         standardize: bool = True,
         max_iter: int = 1000,
         tol: float = 1e-6,

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
-from workbench.defaults import N_COMPONENTS
+from workbench.defaults import N_COMPONENTS, REG_COVAR
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
@@ -55,7 +55,7 @@ class GMROnlyModel(TaskGMRModel):
         system: LinearSystem,
         n_components: int = N_COMPONENTS,
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
-        reg_covar: float = 0.5,
+        reg_covar: float = REG_COVAR,
         standardize: bool = True,
         random_state: int | None = 0,
         max_iter: int = 1000,

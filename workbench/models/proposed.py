@@ -30,7 +30,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
-from workbench.defaults import N_COMPONENTS
+from workbench.defaults import N_COMPONENTS, REG_COVAR
 from workbench.errors import DegenerateFitWarning
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
@@ -169,7 +169,7 @@ class HumanBehaviorModel(TaskGMRModel):
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
         gain_method: str = IV_OR_DIRECT,
         structure: str = "full",
-        reg_covar: float | str = 0.5,
+        reg_covar: float | str = REG_COVAR,
         standardize: bool = True,
         random_state: int | None = 0,
         fit_objective: bool = True,
@@ -259,15 +259,12 @@ class HumanBehaviorModel(TaskGMRModel):
     def _fit_uncrossed(self, demos: Any, ds: Sequence[Demonstration]) -> HumanBehaviorModel:
         """One demonstration (a fold of a two-segment flight): nothing to cross-validate the "cv" settings on, so
         the constructor's defaults, said in a warning, with as many components as its samples carry."""
-        import inspect
-
         from workbench.models.autoconfig import _SAMPLES_PER_COMPONENT
 
-        defaults = {k: p.default for k, p in inspect.signature(type(self).__init__).parameters.items()}
         n_samples = sum(len(d) for d in ds)
-        G = int(self.n_components) if self.n_components != "cv" else int(defaults["n_components"])
+        G = int(self.n_components) if self.n_components != "cv" else N_COMPONENTS
         G = max(1, min(G, n_samples // _SAMPLES_PER_COMPONENT))
-        reg = float(self.reg_covar) if self.reg_covar != "cv" else float(defaults["reg_covar"])
+        reg = float(self.reg_covar) if self.reg_covar != "cv" else REG_COVAR
         warnings.warn(f"HumanBehaviorModel.fit: {len(ds)} demonstration(s), nothing to cross-validate the 'cv' "
                       f"settings on: fitted with G = {G}, reg_covar = {reg:g} (the defaults, G capped by the "
                       f"{n_samples} samples)", DegenerateFitWarning, stacklevel=3)
