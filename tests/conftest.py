@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 from pathlib import Path
 
 import pytest
@@ -24,6 +25,29 @@ def external_file(name: str) -> Path:
             pytest.fail(f"CI must have the external logs: {reason}")
         pytest.skip(reason)
     return path
+
+
+# A suite started in the background of a non-interactive shell (`make test &` in a script) inherits SIGINT ignored
+# (POSIX: asynchronous commands ignore SIGINT), and so would every command a test starts: the Ctrl-C tests then
+# failed (a BrokenProcessPool where "interrupted" was expected) though nothing was wrong with the code.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+@pytest.fixture(autouse=True)
+def _signal_handlers_restored(request):
+    """A test that leaves SIGINT/SIGTERM handled differently breaks every later Ctrl-C test in its worker (one
+    left SIGINT ignored: the interrupt tests then failed on whichever xdist worker ran them next)."""
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, set())
+    yield
+    changed = [sig.name for sig, h in before.items() if signal.getsignal(sig) is not h]
+    for sig, h in before.items():
+        signal.signal(sig, h)
+    if signal.pthread_sigmask(signal.SIG_SETMASK, mask) != mask:
+        changed.append("the signal mask")
+    if changed:
+        pytest.fail(f"{request.node.nodeid} left the handler of {', '.join(changed)} changed", pytrace=False)
 
 
 @pytest.fixture(scope="session", autouse=True)
