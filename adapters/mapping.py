@@ -78,6 +78,7 @@ if TYPE_CHECKING:
 
 from adapters.formats import FORMATS
 from adapters.modes import MODE_TABLES, mode_name, mode_number
+from adapters.reference import REFERENCE_FORMS, ReferenceRule
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
 from adapters.transforms import TRANSFORMS
 from workbench.data.roles import Roles
@@ -110,7 +111,6 @@ _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
 _META_KEYS = {"source", "key", "text", "fields", "prefix"}
 _REFERENCE_KEYS = {"estimate", "gps", "form", "scale", "always_logged", "unknown", "fix", "accuracy"}
-REFERENCE_FORMS = ("north_east", "speed_course")
 
 
 @dataclass(frozen=True)
@@ -209,40 +209,6 @@ class MetaRules:
     text: Selector | None = None
     fields: tuple[str, ...] = DEFAULT_META_FIELDS
     prefix: str = "wb"
-
-
-@dataclass(frozen=True)
-class ReferenceRule:
-    """An independent velocity source the mapped velocity must follow (the GPS's own), and the estimator's
-    world-frame horizontal velocity the mapped states are made from, compared in the north–east plane (no frame
-    or heading needed).
-
-    ``form`` says what the ``gps`` columns are: ``"north_east"`` (m/s) or ``"speed_course"`` (ground speed,
-    course in degrees from north), each column times ``scale`` first. ``always_logged``: the log holds the gps
-    stream whenever the vehicle has a GPS (an ArduPilot DataFlash log), so a log without it flew without one.
-    """
-
-    estimate: Selector
-    gps: Selector
-    form: str = "north_east"
-    scale: tuple[float, float] = (1.0, 1.0)
-    always_logged: bool = False
-    unknown: float | None = None
-    #: the gps stream's fix field and the least value of a fix with a velocity (3: a 3D fix); rows below are left out
-    fix: tuple[str, float] | None = None
-    #: the receiver's velocity accuracy (m/s): a GPS velocity that spreads less says "not moving" within its noise,
-    #: and there is nothing for the estimate to follow
-    accuracy: float = 0.0
-
-    def north_east(self, raw: np.ndarray) -> np.ndarray:
-        """The gps columns (rows × 2) as north, east velocity in m/s (NaN where a column holds ``unknown``)."""
-        raw = np.asarray(raw, dtype=np.float64)
-        if self.unknown is not None:
-            raw = np.where(raw == self.unknown, np.nan, raw)
-        a, b = raw[:, 0] * self.scale[0], raw[:, 1] * self.scale[1]
-        if self.form == "speed_course":
-            return np.column_stack([a * np.cos(np.deg2rad(b)), a * np.sin(np.deg2rad(b))])
-        return np.column_stack([a, b])
 
 
 @dataclass(frozen=True)

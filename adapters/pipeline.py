@@ -197,7 +197,7 @@ def _flip_note(streams: Streams, m: ChannelMapping, mode: str, start: float, cut
             f"pilot flying)")
 
 
-def _velocity_reference(streams: Streams, m: ChannelMapping, windows: list[tuple[float, float]]) -> str:
+def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, float]]) -> str:
     """Whether the mapped velocity's estimator follows the log's own GPS velocity inside the kept segments.
 
     The rule is the coefficient of determination of the GPS velocity by the estimate, ``1 − Σ|v − v_gps|² /
@@ -351,7 +351,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
         )
 
     if not still:
-        still = _velocity_reference(streams, m, [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts])
+        still = follows_gps(streams, m, [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts])
         if still and not allow_still:
             raise DataError(still)
     report = {**{k: int(v) for k, v in streams.skipped.items() if v}, **{k: int(v) for k, v in skipped.items() if v}}
