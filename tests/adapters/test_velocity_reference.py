@@ -25,6 +25,14 @@ def _copter_bin(tmp_path, name, edit=None, seconds=30.0):
     return dataflash_write.write(tmp_path / name, streams, **options), streams
 
 
+def _own_gps(streams, options):
+    """A GPS velocity of its own, drawn apart from the EKF's: the EKF does not follow it."""
+    rng = np.random.default_rng(11)
+    n = len(streams["GPS"])
+    streams["GPS"]["Spd"] = np.round(rng.uniform(0, 5, n), 2)
+    streams["GPS"]["GCrs"] = np.round(rng.uniform(0, 360, n), 2)
+
+
 def _explained(streams, ds) -> float:
     """1 − Σ|v − v_gps|² / Σ|v_gps − mean|² over the GPS samples inside the demonstrations (north and east)."""
     gps, ekf = streams["GPS"], streams["EKF1"]
@@ -49,13 +57,7 @@ def test_the_example_log_s_ekf_follows_its_gps_and_imports(tmp_path):
 def test_an_ekf_velocity_that_does_not_follow_the_gps_is_named_at_import(tmp_path):
     # erle_copter_83.BIN: EKF1.VN/VE correlate 0.2 / 0.6 with the GPS's own velocity, and the identified plant's
     # A[xdot, phi] came out 0.2 of g·dt; the fit then stopped at "the gain is not stabilizing"
-    def own_gps(streams, options):
-        rng = np.random.default_rng(11)
-        n = len(streams["GPS"])
-        streams["GPS"]["Spd"] = np.round(rng.uniform(0, 5, n), 2)
-        streams["GPS"]["GCrs"] = np.round(rng.uniform(0, 360, n), 2)
-
-    path, streams = _copter_bin(tmp_path, "wandering.bin", own_gps)
+    path, streams = _copter_bin(tmp_path, "wandering.bin", _own_gps)
     with pytest.raises(DataError, match=r"EKF1 velocity does not follow the GPS velocity \(GPS Spd, GCrs\)") as info:
         adapters.load(path, "ardupilot_manual")
     message = str(info.value)
@@ -152,3 +154,22 @@ def test_the_fit_names_a_plant_that_fails_its_physics_check_first(tmp_path):
     line = _physics_first(failing, error)
     assert line.startswith(f"the identified plant is not physics: {check.name} is {weak.ratio:.2g} × g·dt")
     assert line.endswith(str(error)) and "\n" not in line
+
+
+def test_the_viewer_shows_such_a_log_with_the_cause_beside_its_states(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from workbench.viewer import entities, session
+
+    path, _ = _copter_bin(tmp_path, "wandering.bin", _own_gps)
+    ds = adapters.load(path, "ardupilot_manual", allow_still=True)
+    rec = session.new_recording()
+    rec.save(tmp_path / "v.rrd")
+    session.SessionLogger(rec, ds, clock="log").log_key()
+    rec.flush()
+    rec.disconnect()
+    texts = [row for chunk in RrdReader(tmp_path / "v.rrd").stream() if chunk.entity_path == f"/{entities.KEY}"
+             for name in chunk.to_record_batch().schema.names if name.endswith("text")
+             for row in chunk.to_record_batch().column(name).to_pylist()]
+    cause = ds[0].meta["still"].split(": mapping 'ardupilot_manual': ", 1)[1]
+    assert any(f"**not for fitting**: {cause}" in str(t) for t in texts), texts
