@@ -11,6 +11,7 @@ import math
 import re
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import adapters
@@ -173,3 +174,44 @@ def test_the_viewer_shows_such_a_log_with_the_cause_beside_its_states(tmp_path):
              for row in chunk.to_record_batch().column(name).to_pylist()]
     cause = ds[0].meta["still"].split(": mapping 'ardupilot_manual': ", 1)[1]
     assert any(f"**not for fitting**: {cause}" in str(t) for t in texts), texts
+
+
+@pytest.mark.parametrize("follows", [True, False])
+def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follows):
+    # the tlog side of ardupilot_manual: LOCAL_POSITION_NED.vx,vy against GPS_RAW_INT.vel (cm/s), cog (cdeg)
+    from pymavlink import mavutil
+
+    from adapters.mapping import load_mapping
+    from adapters.modes import mode_number
+    from adapters.writer import demo_streams
+    from workbench.sim.landing import simulate_landings
+
+    epoch = 1_704_067_200.0
+    ds = simulate_landings("CS1", 2, seed=3)
+    streams = demo_streams(ds, load_mapping("ardupilot_manual").for_format("tlog"), epoch=epoch, pause=2.0)
+    for frame in streams.values():
+        frame["time_boot_ms"] = np.rint((frame["t"].to_numpy() - epoch) * 1000.0).astype(np.int64)
+    rng = np.random.default_rng(5)
+    local = streams["LOCAL_POSITION_NED"]
+    local["vx"] = rng.normal(0.0, 1.0, len(local))  # north: the simulated flight has only its east velocity
+    gps = local.iloc[::2]
+    vn, ve = gps["vx"].to_numpy(), gps["vy"].to_numpy()
+    if not follows:
+        vn, ve = rng.permutation(vn), rng.permutation(ve)
+    streams["GPS_RAW_INT"] = pd.DataFrame({
+        "t": gps["t"].to_numpy(), "time_usec": gps["time_boot_ms"].to_numpy() * 1000, "fix_type": 3,
+        "vel": np.rint(100 * np.hypot(vn, ve)).astype(np.int64),
+        "cog": np.rint(100 * np.mod(np.degrees(np.arctan2(ve, vn)), 360.0)).astype(np.int64) % 36000})
+    ml = mavutil.mavlink
+    streams["HEARTBEAT"] = pd.DataFrame({
+        "t": streams["ATTITUDE"]["t"].to_numpy()[::50], "type": ml.MAV_TYPE_QUADROTOR,
+        "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        "base_mode": ml.MAV_MODE_FLAG_SAFETY_ARMED | ml.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        "custom_mode": mode_number("arducopter", "STABILIZE"), "system_status": 4, "mavlink_version": 3})
+    path = adapters.FORMATS["tlog"].write(tmp_path / "f.tlog", streams)
+    if follows:
+        assert len(adapters.load(path, "ardupilot_manual")) == len(ds)
+    else:
+        with pytest.raises(DataError, match=r"LOCAL_POSITION_NED velocity does not follow the GPS velocity "
+                                            r"\(GPS_RAW_INT vel, cog\)"):
+            adapters.load(path, "ardupilot_manual")
