@@ -286,7 +286,9 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     DataError
         No demonstration found (saying how many spans and pieces the rules gave), a channel without any
         usable sample, or (unless ``allow_still``: a viewer shows such a log, with the cause in every
-        demonstration's ``meta["still"]``) a position or velocity that never moves in the whole log.
+        demonstration's ``meta["still"]``) a position or velocity that never moves in the whole log, a velocity that
+        does not follow the GPS's (:func:`follows_gps`), or no GPS stream where the mapping says there is always one;
+        nothing left once the segments are cut at the vehicle's flips (``meta["flipped"]`` names each cut).
     """
     m = mapping
     m.check_complete()
