@@ -122,8 +122,10 @@ def load(
     """Load a log as demonstrations with a mapping (a shipped name, a TOML path, or a ChannelMapping; by default
     the one :func:`choose_mapping` chooses).
 
-    A position or velocity that never moves in the whole log (no GPS) is an error naming it, unless
-    ``allow_still`` (for looking at the log: the cause is then in each demonstration's ``meta["still"]``).
+    A position or velocity that never moves in the whole log (no GPS), an estimated velocity that does not follow
+    the log's GPS velocity (the mapping's ``[reference]``) or a log without the GPS stream the mapping says is always
+    logged (dead reckoning) is an error naming it, unless ``allow_still`` (for looking at the log: the cause is then
+    in each demonstration's ``meta["still"]``). A segment is cut where the vehicle flipped (``meta["flipped"]``).
 
     Only the streams the mapping names are read. Each demonstration's ``meta`` has ``id``, ``source``,
     ``format``, ``mapping``, ``t0`` (its start on the log clock), ``skipped`` (counts by cause for the file)

@@ -42,6 +42,17 @@ Schema
     fields = ["id", "label", …]         # which columns / keys to take (default: id label subject target
                                         # success outcome)
 
+    [reference]                         # an independent velocity the mapped one must follow (optional)
+    estimate = "EKF1.VN,VE"             # the estimator's north, east velocity (m/s) the states are made from
+    gps = "GPS.Spd,GCrs"                # the GPS's own velocity: form "speed_course" (speed, course in degrees)
+    form = "speed_course"               # or "north_east"; scale = [0.01, 0.01] converts the gps columns
+    always_logged = true                # the log holds the gps stream whenever the vehicle has a GPS, so a log
+                                        # without it flew without one (the estimator dead-reckons)
+    unknown = 65535                     # a raw gps value that means "not known" (MAVLink's UINT16_MAX)
+    fix = { field = "Status", min = 3 } # the gps rows with a velocity: a 3D fix
+    accuracy = 0.1                      # m/s, the receiver's velocity accuracy: a GPS velocity spreading less
+                                        # than it says "not moving", and no verdict is given
+
     [tlog.channels]                     # per-format overrides: [<format>.channels], [<format>.segment],
     x = "LOCAL_POSITION_NED.y"          # [<format>.meta], <format>.clock — merged over the tables above
                                         # when a file of that format is read (a declared format's name)
@@ -67,6 +78,7 @@ if TYPE_CHECKING:
 
 from adapters.formats import FORMATS
 from adapters.modes import MODE_TABLES, mode_name, mode_number
+from adapters.reference import REFERENCE_FORMS, ReferenceRule
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
 from adapters.transforms import TRANSFORMS
 from workbench.data.roles import Roles
@@ -79,6 +91,7 @@ __all__ = [
     "SegmentRules",
     "MetaRules",
     "ClockSpec",
+    "ReferenceRule",
     "load_mapping",
     "shipped_mappings",
     "MAPPINGS_DIR",
@@ -91,11 +104,13 @@ MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
 FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per declared format
 DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
-    "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", *FORMAT_NAMES
+    "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", "reference",
+    *FORMAT_NAMES
 }
 _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
 _META_KEYS = {"source", "key", "text", "fields", "prefix"}
+_REFERENCE_KEYS = {"estimate", "gps", "form", "scale", "always_logged", "unknown", "fix", "accuracy"}
 
 
 @dataclass(frozen=True)
@@ -224,6 +239,7 @@ class ChannelMapping:
     format: str | None = None
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
     roles: Roles = field(default_factory=Roles)
+    reference: ReferenceRule | None = None
 
     def for_format(self, fmt: str) -> ChannelMapping:
         """This mapping with the ``[<fmt>.…]`` overrides merged in (itself when there are none)."""
@@ -264,6 +280,8 @@ class ChannelMapping:
         if seg.landing is not None and seg.landing.flag is not None:
             out.append(seg.landing.flag.selector)
         out += [s for s in (self.meta.source, self.meta.text) if s]
+        if self.reference is not None:
+            out += [self.reference.estimate, self.reference.gps]
         return out
 
     def stream_candidates(self) -> list[str]:
@@ -490,6 +508,45 @@ def _meta(raw: Any, path: str) -> MetaRules:
     )
 
 
+def _reference(raw: Any, path: str) -> ReferenceRule | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        raise _fail(path, "reference", f"must be a table, got {raw!r}")
+    if unknown := sorted(set(raw) - _REFERENCE_KEYS):
+        raise _fail(path, "reference", f"unknown key(s) {unknown}; allowed: {sorted(_REFERENCE_KEYS)}")
+    for key in ("estimate", "gps"):
+        if key not in raw:
+            raise _fail(path, f"reference.{key}", "missing (a source of two fields, \"STREAM.A,B\")")
+    form = raw.get("form", "north_east")
+    if form not in REFERENCE_FORMS:
+        raise _fail(path, "reference.form", f"must be one of {list(REFERENCE_FORMS)}, got {form!r}")
+    scale = raw.get("scale", [1.0, 1.0])
+    if not isinstance(scale, list) or len(scale) != 2:
+        raise _fail(path, "reference.scale", f"must be two numbers (one per gps column), got {scale!r}")
+    always = raw.get("always_logged", False)
+    if not isinstance(always, bool):
+        raise _fail(path, "reference.always_logged", f"must be true or false, got {always!r}")
+    return ReferenceRule(
+        estimate=_selector(raw["estimate"], path, "reference.estimate"),
+        gps=_selector(raw["gps"], path, "reference.gps"),
+        form=form,
+        scale=tuple(_number(v, path, "reference.scale", positive=True) for v in scale),
+        always_logged=always,
+        unknown=_number(raw["unknown"], path, "reference.unknown") if "unknown" in raw else None,
+        fix=_fix(raw.get("fix"), path),
+        accuracy=_number(raw.get("accuracy", 0.0), path, "reference.accuracy"),
+    )
+
+
+def _fix(raw: Any, path: str) -> tuple[str, float] | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, dict) or set(raw) != {"field", "min"} or not isinstance(raw["field"], str):
+        raise _fail(path, "reference.fix", f"must be {{ field = \"…\", min = … }}, got {raw!r}")
+    return raw["field"], _number(raw["min"], path, "reference.fix.min")
+
+
 def _clock(raw: Any, path: str) -> ClockSpec:
     if raw is None or raw in ("log", "arrival"):
         return ClockSpec()
@@ -549,6 +606,7 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
         description=str(raw.get("description", "")),
         raw=dict(raw),
         roles=roles,
+        reference=_reference(raw.get("reference"), at),
     )
 
 

@@ -169,6 +169,100 @@ def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
     return f"{streams.path}: mapping {m.name!r}: {'; '.join(parts)} — {cause}, so there is nothing to fit"
 
 
+#: Beyond this tilt the thrust points below the horizon: the vehicle is upside down (a flip), whatever its frame.
+FLIP = math.pi / 2
+
+
+def _flip_at(m: ChannelMapping, values: np.ndarray) -> int | None:
+    """The first row at which the heading role's angle (the tilt) is beyond 90°, ``None`` where it never is."""
+    name = m.roles.heading
+    if name is None or name not in m.state_names:
+        return None
+    per_unit = {"": 1.0, "rad": 1.0, "deg": math.pi / 180.0}.get(m.roles.unit(name))
+    if per_unit is None:
+        return None
+    beyond = np.flatnonzero(np.abs(values[:, m.state_names.index(name)] * per_unit) > FLIP)
+    return int(beyond[0]) if beyond.size else None
+
+
+def _flip_note(streams: Streams, m: ChannelMapping, mode: str, start: float, cut: float, after: np.ndarray) -> str:
+    """How a segment was cut at a flip: where, and how far the angle went (in degrees)."""
+    name = m.roles.heading or ""
+    per_unit = {"": 1.0, "rad": 1.0, "deg": math.pi / 180.0}.get(m.roles.unit(name), 1.0)
+    peak = float(after[np.argmax(np.abs(after))]) * per_unit
+    source = resolve_channel(m.channel(name), streams).selector.describe()
+    what = "dropped" if cut <= start else f"cut at {cut:.1f} s"
+    return (f"the {mode + ' ' if mode else ''}segment from {start:.1f} s {what}: {name} ({source}) "
+            f"reaches {math.degrees(peak):.0f}° — the vehicle flipped (the flight after a flip is a crash, not a "
+            f"pilot flying)")
+
+
+def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, float]]) -> str:
+    """Whether the mapped velocity's estimator follows the log's own GPS velocity inside the kept segments.
+
+    The rule is the coefficient of determination of the GPS velocity by the estimate, ``1 − Σ|v − v_gps|² /
+    Σ|v_gps − mean v_gps|²`` over the GPS samples in the segments (north and east together): below 0 the estimate
+    explains less of the GPS velocity than a constant would, so it is not the vehicle's velocity and no plant
+    identified from it can be physics. A log without the GPS stream, where the mapping says such a log flew
+    without GPS, dead-reckons. ``""`` where the velocity follows, or where there is nothing to compare.
+    """
+    ref = m.reference
+    if ref is None or not windows:
+        return ""
+    head = f"{streams.path}: mapping {m.name!r}"
+    try:
+        gps = select(ref.gps, streams, "reference.gps", m.name, n_columns=2)
+    except MappingError:
+        heads = {src.split(".")[0] for src in ref.gps.sources}
+        if not ref.always_logged or any(len(streams.frames.get(h, ())) for h in heads):
+            return ""  # the stream is there with other fields (a mapping's matter), or its absence proves nothing
+        moving = ", ".join((*m.roles.position, *m.roles.velocity))
+        return (f"{head}: the log has no GPS stream ({ref.gps.describe()}), yet {moving} move: the estimator "
+                f"dead-reckons from the IMU alone, its position and velocity drift; the plant's physics cannot be "
+                f"identified from them")
+    try:
+        est = select(ref.estimate, streams, "reference.estimate", m.name, n_columns=2)
+    except MappingError:
+        return ""
+    tg = stream_times(m.clock, gps.frame)[gps.rows]
+    g = ref.north_east(np.column_stack([numeric(gps.frame, c)[gps.rows] for c in gps.columns]))
+    if ref.fix is not None and ref.fix[0] in gps.frame.columns:  # without a fix the receiver has no velocity
+        g[~(numeric(gps.frame, ref.fix[0])[gps.rows] >= ref.fix[1])] = np.nan
+    te = stream_times(m.clock, est.frame)[est.rows]
+    e = np.column_stack([numeric(est.frame, c)[est.rows] for c in est.columns])
+    ok_e = np.isfinite(te) & np.isfinite(e).all(axis=1)
+    te, e = te[ok_e], e[ok_e]
+    order = np.argsort(te, kind="stable")
+    te, e = te[order], e[order]
+    if te.size < 2:
+        return ""
+    inside = np.zeros(tg.size, dtype=bool)
+    for a, b in windows:
+        inside |= (tg >= a) & (tg <= b)
+    inside &= np.isfinite(tg) & np.isfinite(g).all(axis=1) & (tg >= te[0]) & (tg <= te[-1])
+    # fewer samples than the two components' means and one more each leave no spread to judge the estimate by
+    if inside.sum() < 3:
+        return ""
+    tg, g = tg[inside], g[inside]
+    v = np.column_stack([np.interp(tg, te, e[:, k]) for k in range(2)])
+    spread = float(((g - g.mean(axis=0)) ** 2).sum())
+    if spread == 0.0 or np.sqrt(spread / len(g)) <= ref.accuracy:
+        return ""  # the GPS says "not moving" within its own accuracy: nothing to follow
+    explained = 1.0 - float(((v - g) ** 2).sum()) / spread
+    if explained >= 0.0:
+        return ""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = [float(np.corrcoef(v[:, k], g[:, k])[0, 1]) for k in range(2)]
+    rms = float(np.sqrt(((v - g) ** 2).sum(axis=1).mean()))
+    sd = float(np.sqrt(spread / len(g)))
+    return (f"{head}: {est.stream} velocity does not follow the GPS velocity ({gps.stream} "
+            f"{', '.join(gps.columns)}): over the {len(g)} GPS samples in the kept segments it explains "
+            f"{explained:.2f} of the GPS velocity's variance (below 0: a constant does better; correlation north "
+            f"{corr[0]:.2f}, east {corr[1]:.2f}; RMS difference {rms:.2g} m/s against the GPS velocity's spread "
+            f"{sd:.2g} m/s) — the estimator is not converged or not the one that flew; the plant's physics cannot "
+            f"be identified from it")
+
+
 def _unique(ids: list[str]) -> list[str]:
     seen: Counter = Counter(ids)
     count: Counter = Counter()
@@ -192,7 +286,9 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     DataError
         No demonstration found (saying how many spans and pieces the rules gave), a channel without any
         usable sample, or (unless ``allow_still``: a viewer shows such a log, with the cause in every
-        demonstration's ``meta["still"]``) a position or velocity that never moves in the whole log.
+        demonstration's ``meta["still"]``) a position or velocity that never moves in the whole log, a velocity that
+        does not follow the GPS's (:func:`follows_gps`), or no GPS stream where the mapping says there is always one;
+        nothing left once the segments are cut at the vehicle's flips (``meta["flipped"]`` names each cut).
     """
     m = mapping
     m.check_complete()
@@ -213,6 +309,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     log_start = min(float(s.t[0]) for s in series)
 
     found: list[tuple[Span, list[np.ndarray], list[np.ndarray]]] = []
+    flips: list[str] = []
     n_pieces = 0
     for span in spans:
         kept_t, kept_v = [], []
@@ -223,6 +320,12 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 skipped["samples on the ground"] += on_ground
             for i, j in ranges:
                 n_pieces += 1
+                flip = _flip_at(m, piece.values[i:j])
+                if flip is not None:
+                    flips.append(_flip_note(streams, m, str(span.meta.get("mode", "")), float(piece.t[i]) - log_start,
+                                            float(piece.t[i + flip]) - log_start, piece.values[i + flip:j, :n_states]
+                                            [:, m.state_names.index(m.roles.heading)]))
+                    j = i + flip
                 t = piece.t[i:j]
                 if j - i < 2 or t[-1] - t[0] < m.segment.min_duration - 1e-9:
                     skipped["pieces shorter than min_duration"] += 1
@@ -231,6 +334,9 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 kept_v.append(piece.values[i:j])
         if kept_t:
             found.append((span, kept_t, kept_v))
+    if not found and flips:
+        raise DataError(f"{streams.path}: mapping {m.name!r}: no demonstration left once cut at the vehicle's flips "
+                        f"(pieces under min_duration = {m.segment.min_duration:g} s dropped): {'; '.join(flips)}")
     if not found:
         no_input = _silent_channels(series, spans, set(m.input_names))
         if no_input:
@@ -246,6 +352,10 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             f"skipped: {dict(skipped) or 'nothing'}"
         )
 
+    if not still:
+        still = follows_gps(streams, m, [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts])
+        if still and not allow_still:
+            raise DataError(still)
     report = {**{k: int(v) for k, v in streams.skipped.items() if v}, **{k: int(v) for k, v in skipped.items() if v}}
     # a marker without a demo key belongs to the demonstration containing it, else to the next one
     by_span: dict[int, dict[str, Any]] = {}
@@ -278,6 +388,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             }
             if still:
                 meta["still"] = still
+            if flips:
+                meta["flipped"] = "; ".join(flips)
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
                 if span.meta["mode"] in AUTOPILOT_HOLDS:

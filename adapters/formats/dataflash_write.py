@@ -328,6 +328,14 @@ def write(
 
 
 # ------------------------------------------------------------------------------------------------ examples
+def _gps_follows_ekf(cols: dict[str, Any], t: np.ndarray, ekf: pd.DataFrame, cast: Any) -> None:
+    """The GPS's ground speed and course from the EKF's north/east velocity at the GPS's times, as a real log's
+    (the EKF fuses that GPS); the random values drawn for them are drawn all the same, so the draws after keep."""
+    vn, ve = (np.interp(t, ekf["t"].to_numpy(), ekf[k].to_numpy(np.float64)) for k in ("VN", "VE"))
+    cols["Spd"] = cast(np.hypot(vn, ve)).astype(cols["Spd"].dtype)
+    cols["GCrs"] = cast(np.mod(np.degrees(np.arctan2(ve, vn)), 360.0)).astype(cols["GCrs"].dtype)
+
+
 def example_streams(style: str = "new", vehicle: str = "copter", seconds: float = 60.0, *, rate: float = 1.0,
                     seed: int = 0) -> tuple[dict[str, pd.DataFrame], dict[str, Any]]:
     """A realistic log's streams and :func:`write` options: an ArduCopter 3.2-era (``"old"``) or a 4.x-era
@@ -437,6 +445,7 @@ def example_streams(style: str = "new", vehicle: str = "copter", seconds: float 
                 "Spd": rng.uniform(0, 5, n).astype(np.float32), "GCrs": rng.uniform(0, 360, n).astype(np.float32),
                 "VZ": rng.normal(0, 0.3, n).astype(np.float32), "Yaw": np.zeros(n, np.float32),
                 "U": np.ones(n, np.uint8)}
+        _gps_follows_ekf(cols, t, out[f"{ekf}[0]"], np.float32)
         add("GPS[0]", t, "BIHBcLLfffffB", cols, "-s-S-DUmnhnh-", "-C---GG00000-")
     else:
         cols = {"Status": np.full(n, 3, np.uint8), "TimeMS": gms, "Week": np.full(n, week, np.uint16),
@@ -445,6 +454,7 @@ def example_streams(style: str = "new", vehicle: str = "copter", seconds: float 
                 "Alt": np.round(521 + wave(n, 30), 2), "Spd": np.round(rng.uniform(0, 5, n), 2),
                 "GCrs": np.round(rng.uniform(0, 360, n), 2), "VZ": rng.normal(0, 0.3, n).astype(np.float32),
                 "T": np.round((t - t0) * 1000 + t0 * 1000).astype(np.uint32)}
+        _gps_follows_ekf(cols, t, out["EKF1"], lambda v: np.round(v, 2))
         add("GPS", t, "BIHBcLLeeEefI", cols)
     # RC in/out, 10 Hz
     t = clock(10, 0.004)

@@ -258,7 +258,10 @@ def test_the_shipped_ardupilot_mappings_read_dataflash_logs_of_each_generation(t
 
 def test_the_real_dataflash_log_imports_with_the_shipped_copter_mapping(external):
     path = external("erle_copter_83.BIN")
-    ds = adapters.load(path, mapping="ardupilot_manual")
+    # its EKF1 velocity does not follow its GPS's (bench/real_logs.md): import names that; the viewer shows the log
+    with pytest.raises(DataError, match=r"EKF1 velocity does not follow the GPS velocity \(GPS Spd, GCrs\)"):
+        adapters.load(path, mapping="ardupilot_manual")
+    ds = adapters.load(path, mapping="ardupilot_manual", allow_still=True)
     modes = {d.meta.get("mode") for d in ds}
     assert len(ds) >= 1 and modes <= {"STABILIZE", "ALT_HOLD", "LOITER"}
     # the mode lane of `inspect` and the demonstrations agree on the pilot-flown modes the log has

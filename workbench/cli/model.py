@@ -12,7 +12,7 @@ from workbench.cli.context import Context
 from workbench.cli.options import steps_of
 from workbench.cli.reading import demos_at_model_dt, load_demos, load_model_file, pilot_only, system_for
 from workbench.cli.writing import print_plant
-from workbench.errors import DataError, UsageError
+from workbench.errors import DataError, ModelError, UsageError
 
 __all__ = []
 
@@ -40,7 +40,11 @@ def cmd_fit(ctx: Context) -> int:
         progress.add_task(f"fitting {a.method} model on {len(ds)} demonstrations", total=None)
         from workbench.models.factory import make_model
 
-        model = make_model(a.method, system, n_components=components, random_state=a.seed, gain_method=a.gain).fit(ds)
+        try:
+            model = make_model(a.method, system, n_components=components, random_state=a.seed,
+                               gain_method=a.gain).fit(ds)
+        except ModelError as exc:
+            raise ModelError(_physics_first(system, exc)) from None
     model.save(output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
@@ -51,6 +55,14 @@ def cmd_fit(ctx: Context) -> int:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
     ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
     return 0
+
+
+def _physics_first(system: Any, exc: Exception) -> str:
+    """A fit's failure on a plant that fails its physics check: the physics first (the real cause: no gain fitted
+    on such a plant means anything), then what the fit said."""
+    report = getattr(system, "identification", None)
+    failure = report.physics_failure if report is not None else ""
+    return f"the identified plant is not physics: {failure}; so the fit failed: {exc}" if failure else str(exc)
 
 
 def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct") -> None:

@@ -85,6 +85,8 @@ def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: 
             ds = load_one(f, chosen, ctx.stdio.format, allow_still)
             if len(ds) and ds[0].meta.get("still"):
                 print(f"warning: {ds[0].meta['still']}", file=sys.stderr)
+            if len(ds) and ds[0].meta.get("flipped"):  # the segments cut where the vehicle turned upside down
+                print(f"warning: {ctx.shown(f)}: {ds[0].meta['flipped']}", file=sys.stderr)
             if stdin:  # the temporary file is gone once the command ends: the trials come from <stdin>
                 ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
             skipped = {k: v for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v} if len(ds) else {}

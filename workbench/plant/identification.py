@@ -125,6 +125,12 @@ class IdentificationReport:
         return "identified plant: " + "; ".join(self.warnings) if self.warnings else None
 
     @property
+    def physics_failure(self) -> str:
+        """The failed physical checks, each naming its state pair, its ratio to g·dt and the likely cause;
+        ``""`` where every check passes (a fit that fails on such a plant fails for this first)."""
+        return "; ".join(_disagreement(c) for c in self.checks if not c.within())
+
+    @property
     def horizon_s(self) -> float:
         return self.n_steps * self.dt
 

@@ -4,6 +4,7 @@ the blueprint are described in :mod:`workbench.viewer`."""
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import nullcontext
 from pathlib import Path
@@ -572,6 +573,11 @@ class SessionLogger:
                       f" % and {100 * verdict.NOMINAL_1SIGMA:.0f} %), inputs at a limit left out, and the verdict "
                       "against the spread sampling allows: fits, too narrow, too wide, does not fit (as in the "
                       "report)"]
+        # why the import would stop (a position that never moves, a velocity that does not follow the GPS) or what it
+        # cut (a flip): the viewer shows such a log all the same, and says so beside the states
+        causes = dict.fromkeys(str(d.meta[k]) for d in self.demos for k in ("still", "flipped") if d.meta.get(k))
+        for cause in causes:
+            lines += ["", f"**not for fitting**: {re.sub(r'^.*?: mapping [^:]*: ', '', cause)}"]
         if s.in_sample:
             lines += ["", f"in-sample (a model was fitted on them): {', '.join(s.in_sample[:4])}"
                       f"{' …' if len(s.in_sample) > 4 else ''}"]

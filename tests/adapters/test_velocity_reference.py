@@ -1,0 +1,217 @@
+"""The real causes a mapped flight cannot give a plant's physics: an estimated velocity that does not follow the
+log's own GPS velocity, a log without any GPS stream (dead reckoning), and a vehicle that flipped.
+
+Each built on a synthetic ArduCopter DataFlash log (:func:`adapters.formats.dataflash_write.example_streams`, whose
+GPS ground speed and course follow its EKF's velocity, as a real log's do) with one thing changed.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import adapters
+from adapters.formats import dataflash_write
+from workbench.errors import DataError, ModelError
+
+
+def _copter_bin(tmp_path, name, edit=None, seconds=30.0):
+    streams, options = dataflash_write.example_streams("old", "copter", seconds=seconds, seed=3)
+    if edit is not None:
+        edit(streams, options)
+    return dataflash_write.write(tmp_path / name, streams, **options), streams
+
+
+def _own_gps(streams, options):
+    """A GPS velocity of its own, drawn apart from the EKF's: the EKF does not follow it."""
+    rng = np.random.default_rng(11)
+    n = len(streams["GPS"])
+    streams["GPS"]["Spd"] = np.round(rng.uniform(0, 5, n), 2)
+    streams["GPS"]["GCrs"] = np.round(rng.uniform(0, 360, n), 2)
+
+
+def _explained(streams, ds) -> float:
+    """1 − Σ|v − v_gps|² / Σ|v_gps − mean|² over the GPS samples inside the demonstrations (north and east)."""
+    gps, ekf = streams["GPS"], streams["EKF1"]
+    tg = gps["t"].to_numpy()
+    course = np.deg2rad(gps["GCrs"].to_numpy(np.float64))
+    g = np.column_stack([gps["Spd"] * np.cos(course), gps["Spd"] * np.sin(course)])
+    inside = np.zeros(tg.size, dtype=bool)
+    for d in ds:
+        inside |= (tg >= d.meta["t0"]) & (tg <= d.meta["t0"] + d.t[-1])
+    tg, g = tg[inside], g[inside]
+    v = np.column_stack([np.interp(tg, ekf["t"], ekf[k]) for k in ("VN", "VE")])
+    return 1.0 - float(((v - g) ** 2).sum()) / float(((g - g.mean(axis=0)) ** 2).sum())
+
+
+def test_the_example_log_s_ekf_follows_its_gps_and_imports(tmp_path):
+    path, streams = _copter_bin(tmp_path, "clean.bin")
+    ds = adapters.load(path, "ardupilot_manual")
+    assert len(ds) and not ds[0].meta.get("still") and not ds[0].meta.get("flipped")
+    assert _explained(streams, ds) > 0.9  # the GPS velocity is the EKF's, up to the log's rounding
+
+
+def test_an_ekf_velocity_that_does_not_follow_the_gps_is_named_at_import(tmp_path):
+    # erle_copter_83.BIN: EKF1.VN/VE correlate 0.2 / 0.6 with the GPS's own velocity, and the identified plant's
+    # A[xdot, phi] came out 0.2 of g·dt; the fit then stopped at "the gain is not stabilizing"
+    path, streams = _copter_bin(tmp_path, "wandering.bin", _own_gps)
+    with pytest.raises(DataError, match=r"EKF1 velocity does not follow the GPS velocity \(GPS Spd, GCrs\)") as info:
+        adapters.load(path, "ardupilot_manual")
+    message = str(info.value)
+    assert "\n" not in message and "the estimator is not converged or not the one that flew" in message
+    looked = adapters.load(path, "ardupilot_manual", allow_still=True)  # the viewer shows it, with the cause
+    assert looked[0].meta["still"] == message
+    explained = _explained(streams, looked)
+    assert explained < 0
+    assert float(re.search(r"it explains (-?[\d.]+) of", message).group(1)) == pytest.approx(explained, abs=0.006)
+
+
+def test_a_gps_that_does_not_move_beyond_its_accuracy_gives_no_verdict(tmp_path):
+    # a vehicle standing still: the GPS velocity is its receiver's noise, there is nothing to follow
+    def parked(streams, options):
+        streams["GPS"]["Spd"] = 0.01
+        streams["GPS"]["GCrs"] = np.linspace(0, 360, len(streams["GPS"]))
+
+    path, _ = _copter_bin(tmp_path, "parked.bin", parked)
+    ds = adapters.load(path, "ardupilot_manual")
+    assert len(ds) and not ds[0].meta.get("still")
+
+
+def test_a_log_without_any_gps_stream_is_named_dead_reckoning(tmp_path):
+    # erlerobot/logs pxf/copter/30-3-2015/72.BIN: no GPS message at all, yet EKF1's position and velocity move
+    def no_gps(streams, options):
+        del streams["GPS"]
+
+    path, _ = _copter_bin(tmp_path, "no_gps.bin", no_gps)
+    assert "GPS" not in adapters.read(path).frames
+    with pytest.raises(DataError, match=r"the log has no GPS stream \(GPS\.Spd,GCrs.*\), yet x, y, xdot, ydot move: "
+                                        r"the estimator dead-reckons"):
+        adapters.load(path, "ardupilot_manual")
+    assert "dead-reckons" in adapters.load(path, "ardupilot_manual", allow_still=True)[0].meta["still"]
+
+
+def test_a_flip_cuts_its_segment_and_drops_the_flight_after_it(tmp_path):
+    # erlerobot/logs pxf/copter/15-12-2014/16.BIN: ATT.Roll reaches -177°; the flight after it is a crash
+    _copter_bin(tmp_path, "clean.bin", seconds=60.0)
+    first = adapters.load(tmp_path / "clean.bin", "ardupilot_manual")[0]
+    start, end = first.meta["t0"], first.meta["t0"] + first.t[-1]
+    at = end - 1.0  # the flip, a second before the segment's end: the piece before it is longer than min_duration
+    upside_down = -170.0
+
+    def flip(streams, options):
+        att = streams["ATT"]
+        att.loc[att["t"] >= at, "Roll"] = upside_down
+
+    path, streams = _copter_bin(tmp_path, "flip.bin", flip, seconds=60.0)
+    ds = adapters.load(path, "ardupilot_manual")
+    assert len(ds) == 1  # the segments after the flip start upside down: dropped
+    kept = ds[0]
+    assert kept.meta["t0"] == pytest.approx(start)
+    # cut at the first grid step beyond 90°: the roll interpolated between the ATT samples either side of the flip
+    step = float(np.median(np.diff(streams["ATT"]["t"]))) + (kept.t[1] - kept.t[0])
+    assert at - step - 1e-9 < kept.meta["t0"] + kept.t[-1] < at
+    phi = kept.x[:, ds.state_names.index("phi")]
+    assert np.abs(phi).max() <= math.pi / 2
+    note = kept.meta["flipped"]
+    assert f"reaches {upside_down:.0f}° — the vehicle flipped" in note
+    assert re.search(r"the STABILIZE segment from [\d.]+ s cut at [\d.]+ s: phi \(ATT\.Roll\)", note)
+    assert "the ALT_HOLD segment from" in note and "dropped" in note
+
+
+def test_a_flight_flipped_throughout_says_so_in_one_line(tmp_path):
+    def flipped(streams, options):
+        streams["ATT"]["Roll"] = 175.0
+
+    path, _ = _copter_bin(tmp_path, "flipped.bin", flipped)
+    with pytest.raises(DataError, match=r"no demonstration left once cut at the vehicle's flips") as info:
+        adapters.load(path, "ardupilot_manual")
+    assert "\n" not in str(info.value) and "reaches 175°" in str(info.value)
+
+
+def test_the_fit_names_a_plant_that_fails_its_physics_check_first(tmp_path):
+    # erle_copter_83.BIN's plant: A[xdot, phi] a fifth of g·dt; the fit said only "the gain is not stabilizing"
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from workbench.cli.model import _physics_first
+    from workbench.plant.choice import choose_plant
+    from workbench.plant.identification import PhysicalCheck
+
+    path, _ = _copter_bin(tmp_path, "clean.bin")
+    report = choose_plant(adapters.load(path, "ardupilot_manual"), "identify").identification
+    (check,) = report.checks
+    weak = PhysicalCheck(check.name, check.expected / 5, check.expected, check.note)
+    passing = SimpleNamespace(identification=replace(report, checks=(replace(weak, value=check.expected),)))
+    failing = SimpleNamespace(identification=replace(report, checks=(weak,)))
+    assert passing.identification.physics_failure == ""
+    failure = failing.identification.physics_failure
+    assert failure.startswith(f"{check.name} is {weak.ratio:.2g} × g·dt") and "likely cause" in failure
+    error = ModelError("the gain is not stabilizing: ρ = 1.02")
+    assert _physics_first(passing, error) == str(error)
+    line = _physics_first(failing, error)
+    assert line.startswith(f"the identified plant is not physics: {check.name} is {weak.ratio:.2g} × g·dt")
+    assert line.endswith(str(error)) and "\n" not in line
+
+
+def test_the_viewer_shows_such_a_log_with_the_cause_beside_its_states(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from workbench.viewer import entities, session
+
+    path, _ = _copter_bin(tmp_path, "wandering.bin", _own_gps)
+    ds = adapters.load(path, "ardupilot_manual", allow_still=True)
+    rec = session.new_recording()
+    rec.save(tmp_path / "v.rrd")
+    session.SessionLogger(rec, ds, clock="log").log_key()
+    rec.flush()
+    rec.disconnect()
+    texts = [row for chunk in RrdReader(tmp_path / "v.rrd").stream() if chunk.entity_path == f"/{entities.KEY}"
+             for name in chunk.to_record_batch().schema.names if name.endswith("text")
+             for row in chunk.to_record_batch().column(name).to_pylist()]
+    cause = ds[0].meta["still"].split(": mapping 'ardupilot_manual': ", 1)[1]
+    assert any(f"**not for fitting**: {cause}" in str(t) for t in texts), texts
+
+
+@pytest.mark.parametrize("follows", [True, False])
+def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follows):
+    # the tlog side of ardupilot_manual: LOCAL_POSITION_NED.vx,vy against GPS_RAW_INT.vel (cm/s), cog (cdeg)
+    from pymavlink import mavutil
+
+    from adapters.mapping import load_mapping
+    from adapters.modes import mode_number
+    from adapters.writer import demo_streams
+    from workbench.sim.landing import simulate_landings
+
+    epoch = 1_704_067_200.0
+    ds = simulate_landings("CS1", 2, seed=3)
+    streams = demo_streams(ds, load_mapping("ardupilot_manual").for_format("tlog"), epoch=epoch, pause=2.0)
+    for frame in streams.values():
+        frame["time_boot_ms"] = np.rint((frame["t"].to_numpy() - epoch) * 1000.0).astype(np.int64)
+    rng = np.random.default_rng(5)
+    local = streams["LOCAL_POSITION_NED"]
+    local["vx"] = rng.normal(0.0, 1.0, len(local))  # north: the simulated flight has only its east velocity
+    gps = local.iloc[::2]
+    vn, ve = gps["vx"].to_numpy(), gps["vy"].to_numpy()
+    if not follows:
+        vn, ve = rng.permutation(vn), rng.permutation(ve)
+    streams["GPS_RAW_INT"] = pd.DataFrame({
+        "t": gps["t"].to_numpy(), "time_usec": gps["time_boot_ms"].to_numpy() * 1000, "fix_type": 3,
+        "vel": np.rint(100 * np.hypot(vn, ve)).astype(np.int64),
+        "cog": np.rint(100 * np.mod(np.degrees(np.arctan2(ve, vn)), 360.0)).astype(np.int64) % 36000})
+    ml = mavutil.mavlink
+    streams["HEARTBEAT"] = pd.DataFrame({
+        "t": streams["ATTITUDE"]["t"].to_numpy()[::50], "type": ml.MAV_TYPE_QUADROTOR,
+        "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        "base_mode": ml.MAV_MODE_FLAG_SAFETY_ARMED | ml.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        "custom_mode": mode_number("arducopter", "STABILIZE"), "system_status": 4, "mavlink_version": 3})
+    path = adapters.FORMATS["tlog"].write(tmp_path / "f.tlog", streams)
+    if follows:
+        assert len(adapters.load(path, "ardupilot_manual")) == len(ds)
+    else:
+        with pytest.raises(DataError, match=r"LOCAL_POSITION_NED velocity does not follow the GPS velocity "
+                                            r"\(GPS_RAW_INT vel, cog\)"):
+            adapters.load(path, "ardupilot_manual")
