@@ -192,24 +192,34 @@ def test_report_writes_markdown_and_figures(work):
     assert "Mixed-effects model" not in text and "corrected resampled t" in text
 
 
-def test_demo_end_to_end(tmp_path):
-    out = tmp_path / "demo"
-    # 12 resamples of the objective intervals (the default 100 was half the demo's time): every phase still runs
-    r = ok(wb("demo", "--out", str(out), "--n-components", "3", "--samples", "10", "--efficiency", "2,5",
-              "--repeats", "1", "--bootstrap", "12", timeout=300))
-    assert f"rerun {out / 'demo.rrd'}" in r.stdout
+def test_demo_end_to_end():
+    # the demo the viewer tests share (tests/viewer/viewer_recordings.py: 12 resamples of the objective intervals,
+    # two points of the data-efficiency curve, every phase runs), checked here rather than run a second time
+    out, said = _recordings().demo_run()
+    assert f"rerun {out / 'demo.rrd'}" in said
     for f in ("demo.rrd", "report.md", "demos.parquet", "results.csv", "models/CS1.npz", "models/CS2.npz",
-              "figures/predictions.png"):
+              "figures/predictions.png", "figures/data_efficiency.png"):
         assert (out / f).is_file(), f
     rrd_verify(out / "demo.rrd")
     load_model(out / "models" / "CS2.npz")
     # the phases it prints account for its whole time (issue 18): the top-level parts add up to the total, the
     # strategies' own phases (in brackets, process time of the workers) aside
-    done = next(line for line in r.stdout.splitlines() if line.startswith("done in"))
+    done = next(line for line in said.splitlines() if line.startswith("done in"))
     total = float(re.match(r"done in ([\d.]+) s", done).group(1))
     top = re.sub(r"\[[^\]]*\]", "", done.split("(", 1)[1])
     parts = [float(v) for v in re.findall(r"([\d.]+) s\b", top)]
     assert len(parts) >= 8 and abs(sum(parts) - total) <= 0.05 * len(parts) + 1e-9, done
+
+
+def _recordings():
+    """tests/viewer/viewer_recordings.py, the run's shared CLI recordings (pytest's importlib mode: by path)."""
+    import importlib.util
+
+    path = REPO / "tests" / "viewer" / "viewer_recordings.py"
+    spec = importlib.util.spec_from_file_location("_viewer_recordings", path)
+    loader = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(loader)
+    return loader.load()
 
 
 # -- bad input -------------------------------------------------------------------------------------------

@@ -39,11 +39,18 @@ def load():
     return sys.modules[name]
 
 
-def _run(*argv: str) -> None:
+def _run(*argv: str, quiet: bool = True) -> str:
+    """``workbench ARGV`` in this process; what it printed on stdout."""
+    import io
+    from contextlib import redirect_stdout
+
     from workbench.cli import main
 
-    code = main([*argv, "-q"])
-    assert code == 0, f"workbench {' '.join(argv)} exited {code}"
+    said = io.StringIO()
+    with redirect_stdout(said):
+        code = main([*argv, "-q"] if quiet else list(argv))
+    assert code == 0, f"workbench {' '.join(argv)} exited {code}: {said.getvalue()[-2000:]}"
+    return said.getvalue()
 
 
 @functools.cache
@@ -95,8 +102,11 @@ def _make_recordings(out: Path) -> dict[str, Path]:
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
     shutil.copy(SAMPLE_LOG, logs / SAMPLE_LOG.name)
-    _run("demo", "--out", str(out / "demo"), "--logs", str(logs), "--no-efficiency", "--samples", "10",
-         "--n-components", "2", "--horizon", "1.5", "--bootstrap", "12")
+    # every phase of the demo runs (a data-efficiency curve of two points too); what it printed is kept for
+    # tests/cli/test_cli.py, which checks the demo end to end on this run instead of a second one
+    said = _run("demo", "--out", str(out / "demo"), "--logs", str(logs), "--efficiency", "2,5", "--repeats", "1",
+                "--samples", "10", "--n-components", "2", "--horizon", "1.5", "--bootstrap", "12", quiet=False)
+    (out / "demo" / "said.txt").write_text(said, encoding="utf-8")
     demos, model = out / "demo" / "demos.parquet", out / "demo" / "models" / "CS1.npz"
     paths = {"demo": out / "demo" / "demo.rrd"}
     paths["view"] = out / "view.rrd"
@@ -161,6 +171,13 @@ def quadplane_tlog(path: Path) -> Path:
                                          "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA, "base_mode": 129,
                                          "custom_mode": modes, "system_status": 4, "mavlink_version": 3})
     return adapters.FORMATS["tlog"].write(path, streams)
+
+
+def demo_run() -> tuple[Path, str]:
+    """The shared demo's output folder and what it printed (made with the recordings)."""
+    cli_recordings()
+    folder = workdir() / "demo"
+    return folder, (folder / "said.txt").read_text(encoding="utf-8")
 
 
 def cli_recording(kind: str) -> Path:
