@@ -177,8 +177,12 @@ def test_the_viewer_shows_such_a_log_with_the_cause_beside_its_states(tmp_path):
 
 
 @pytest.mark.parametrize("follows", [True, False])
-def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follows):
-    # the tlog side of ardupilot_manual: LOCAL_POSITION_NED.vx,vy against GPS_RAW_INT.vel (cm/s), cog (cdeg)
+@pytest.mark.parametrize(("mapping", "vehicle", "table", "mode"), [
+    ("ardupilot_manual", "MAV_TYPE_QUADROTOR", "arducopter", "STABILIZE"),
+    ("arduplane_manual", "MAV_TYPE_FIXED_WING", "arduplane", "FBWA")])
+def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follows, mapping, vehicle, table, mode):
+    # the tlog side of ardupilot_manual / arduplane_manual: LOCAL_POSITION_NED.vx,vy (the EKF's ground velocity,
+    # a plane's too) against GPS_RAW_INT.vel (cm/s), cog (cdeg)
     from pymavlink import mavutil
 
     from adapters.mapping import load_mapping
@@ -188,7 +192,7 @@ def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follow
 
     epoch = 1_704_067_200.0
     ds = simulate_landings("CS1", 2, seed=3)
-    streams = demo_streams(ds, load_mapping("ardupilot_manual").for_format("tlog"), epoch=epoch, pause=2.0)
+    streams = demo_streams(ds, load_mapping(mapping).for_format("tlog"), epoch=epoch, pause=2.0)
     for frame in streams.values():
         frame["time_boot_ms"] = np.rint((frame["t"].to_numpy() - epoch) * 1000.0).astype(np.int64)
     rng = np.random.default_rng(5)
@@ -204,14 +208,47 @@ def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follow
         "cog": np.rint(100 * np.mod(np.degrees(np.arctan2(ve, vn)), 360.0)).astype(np.int64) % 36000})
     ml = mavutil.mavlink
     streams["HEARTBEAT"] = pd.DataFrame({
-        "t": streams["ATTITUDE"]["t"].to_numpy()[::50], "type": ml.MAV_TYPE_QUADROTOR,
+        "t": streams["ATTITUDE"]["t"].to_numpy()[::50], "type": getattr(ml, vehicle),
         "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA,
         "base_mode": ml.MAV_MODE_FLAG_SAFETY_ARMED | ml.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-        "custom_mode": mode_number("arducopter", "STABILIZE"), "system_status": 4, "mavlink_version": 3})
+        "custom_mode": mode_number(table, mode), "system_status": 4, "mavlink_version": 3})
     path = adapters.FORMATS["tlog"].write(tmp_path / "f.tlog", streams)
     if follows:
-        assert len(adapters.load(path, "ardupilot_manual")) == len(ds)
+        assert len(adapters.load(path, mapping)) == len(ds)
     else:
         with pytest.raises(DataError, match=r"LOCAL_POSITION_NED velocity does not follow the GPS velocity "
                                             r"\(GPS_RAW_INT vel, cog\)"):
-            adapters.load(path, "ardupilot_manual")
+            adapters.load(path, mapping)
+
+
+# ------------------------------------------------------------------------------ arduplane_manual's reference
+
+
+def _plane_bin(tmp_path, name, style, own_gps):
+    """An ArduPlane DataFlash log (old: EKF1 / GPS, new: NKF1[k] / GPS[0]), its GPS velocity its own if asked."""
+    streams, options = dataflash_write.example_streams(style, "plane", seconds=60.0, seed=3)
+    gps = "GPS" if style == "old" else "GPS[0]"
+    if own_gps:
+        rng = np.random.default_rng(11)
+        n = len(streams[gps])
+        streams[gps]["Spd"] = rng.uniform(0, 5, n).astype(np.float32)
+        streams[gps]["GCrs"] = rng.uniform(0, 360, n).astype(np.float32)
+    return dataflash_write.write(tmp_path / name, streams, **options)
+
+
+@pytest.mark.parametrize("style", ["old", "new"])
+def test_a_plane_s_ekf_velocity_is_checked_against_its_dataflash_gps(tmp_path, style):
+    # arduplane_manual's states are the EKF's ground velocity (not the airspeed): the GPS's is their reference
+    assert len(adapters.load(_plane_bin(tmp_path, "follows.bin", style, False), "arduplane_manual"))
+    ekf = "EKF1" if style == "old" else "NKF1"
+    gps = "GPS" if style == "old" else r"GPS\[0\]"
+    with pytest.raises(DataError, match=rf"{ekf}(\[0\])? velocity does not follow the GPS velocity \({gps} Spd"):
+        adapters.load(_plane_bin(tmp_path, "own.bin", style, True), "arduplane_manual")
+
+
+def test_a_plane_dataflash_log_without_gps_is_named_dead_reckoning(tmp_path):
+    streams, options = dataflash_write.example_streams("old", "plane", seconds=60.0, seed=3)
+    del streams["GPS"]
+    path = dataflash_write.write(tmp_path / "no_gps.bin", streams, **options)
+    with pytest.raises(DataError, match=r"the log has no GPS stream .* the estimator dead-reckons"):
+        adapters.load(path, "arduplane_manual")
