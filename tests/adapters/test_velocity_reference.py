@@ -213,6 +213,7 @@ def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follow
         "base_mode": ml.MAV_MODE_FLAG_SAFETY_ARMED | ml.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
         "custom_mode": mode_number(table, mode), "system_status": 4, "mavlink_version": 3})
     path = adapters.FORMATS["tlog"].write(tmp_path / "f.tlog", streams)
+    _draft_acts_as_shipped(path, tmp_path)  # `workbench map`'s draft checks the same
     if follows:
         assert len(adapters.load(path, mapping)) == len(ds)
     else:
@@ -252,3 +253,46 @@ def test_a_plane_dataflash_log_without_gps_is_named_dead_reckoning(tmp_path):
     path = dataflash_write.write(tmp_path / "no_gps.bin", streams, **options)
     with pytest.raises(DataError, match=r"the log has no GPS stream .* the estimator dead-reckons"):
         adapters.load(path, "arduplane_manual")
+
+
+# ----------------------------------------------------------------------------- a drafted mapping's reference
+
+
+def _draft_acts_as_shipped(path, tmp_path):
+    """`workbench map`'s draft of the log holds a [reference], and imports or refuses as its template does."""
+    from adapters.draft import draft_mapping
+
+    draft = draft_mapping(adapters.read(path), name="drafted")
+    assert "\n[reference]\n" in draft.toml
+    toml = tmp_path / "drafted.toml"
+    toml.write_text(draft.toml)
+    outcomes = []
+    for mapping in (draft.template, toml):
+        try:
+            outcomes.append(len(adapters.load(path, mapping)))
+        except DataError as exc:
+            # the draft's grid step and segment rules are its own (the log's slowest stream): the numbers may differ
+            outcomes.append(re.sub(r"-?\d+(\.\d+)?", "#", str(exc).replace(repr(draft.template), "'drafted'")))
+    assert type(outcomes[0]) is type(outcomes[1])
+    if isinstance(outcomes[0], str):
+        assert outcomes[0] == outcomes[1]
+    return outcomes[1]
+
+
+@pytest.mark.parametrize(("style", "vehicle"), [("old", "copter"), ("new", "plane")])
+@pytest.mark.parametrize("case", ["follows", "own", "no_gps"])
+def test_a_drafted_mapping_checks_the_velocity_as_the_shipped_one_does(tmp_path, style, vehicle, case):
+    streams, options = dataflash_write.example_streams(style, vehicle, seconds=60.0, seed=3)
+    gps = "GPS" if style == "old" else "GPS[0]"
+    if case == "own":
+        rng = np.random.default_rng(11)
+        streams[gps]["Spd"] = rng.uniform(0, 5, len(streams[gps])).astype(np.float32)
+        streams[gps]["GCrs"] = rng.uniform(0, 360, len(streams[gps])).astype(np.float32)
+    elif case == "no_gps":
+        del streams[gps]
+    outcome = _draft_acts_as_shipped(dataflash_write.write(tmp_path / "f.bin", streams, **options), tmp_path)
+    if case == "follows":
+        assert isinstance(outcome, int) and outcome > 0
+    else:
+        assert isinstance(outcome, str)
+        assert ("velocity does not follow the GPS velocity" if case == "own" else "dead-reckons") in outcome
