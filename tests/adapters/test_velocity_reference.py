@@ -296,3 +296,44 @@ def test_a_drafted_mapping_checks_the_velocity_as_the_shipped_one_does(tmp_path,
     else:
         assert isinstance(outcome, str)
         assert ("velocity does not follow the GPS velocity" if case == "own" else "dead-reckons") in outcome
+
+
+# ------------------------------------------------------------------------------------ px4_manual's reference
+
+
+@pytest.mark.parametrize("topic", ["vehicle_gps_position", "sensor_gps"])  # the receiver's topic before / from v1.14
+@pytest.mark.parametrize("follows", [True, False])
+def test_a_ulog_s_local_velocity_is_checked_against_its_gps_topic(tmp_path, follows, topic):
+    # px4_manual: vehicle_local_position.vx,vy against the receiver's vel_n_m_s, vel_e_m_s (3D fix only)
+    from adapters.formats import ulog
+    from adapters.mapping import load_mapping
+    from adapters.writer import demo_streams, layout
+    from workbench.sim.landing import simulate_landings
+
+    flights = simulate_landings("CS1", 2, seed=3)
+    streams = demo_streams(flights, load_mapping("px4_manual").for_format("ulog"), epoch=0.0, pause=2.0)
+    spans = layout(flights, 0.0, 2.0)
+    t = np.arange(0.0, spans[-1][1] + 1.0, 0.5)
+    in_flight = np.zeros(t.size, dtype=bool)
+    for a, b in spans:
+        in_flight |= (t >= a) & (t <= b)
+    streams["vehicle_status"] = pd.DataFrame({  # STAB in flight, AUTO_RTL between, armed throughout
+        "t": t, "nav_state": np.where(in_flight, 15, 5).astype(np.uint8), "arming_state": np.uint8(2)})
+    rng = np.random.default_rng(5)
+    local = streams["vehicle_local_position"]
+    local["vx"] = rng.normal(0.0, 1.0, len(local)).astype(local["vy"].dtype)  # the simulated flight has no north
+    gps = local.iloc[::4]
+    vn, ve = gps["vx"].to_numpy(), gps["vy"].to_numpy()
+    if not follows:
+        vn, ve = rng.permutation(vn), rng.permutation(ve)
+    streams[topic] = pd.DataFrame({"t": gps["t"].to_numpy(), "fix_type": np.uint8(3),
+                                   "vel_n_m_s": vn.astype(np.float32), "vel_e_m_s": ve.astype(np.float32)})
+    path = ulog.write(tmp_path / "f.ulg", streams, info={"sys_name": "PX4", "ver_sw_release": "v1.14.0"})
+    _draft_acts_as_shipped(path, tmp_path)  # `workbench map`'s draft checks the same
+    if follows:
+        assert len(adapters.load(path, "px4_manual")) == len(flights)
+    else:
+        with pytest.raises(DataError, match=rf"vehicle_local_position velocity does not follow the GPS velocity "
+                                            rf"\({topic} vel_n_m_s, vel_e_m_s\)") as info:
+            adapters.load(path, "px4_manual")
+        assert "\n" not in str(info.value)
