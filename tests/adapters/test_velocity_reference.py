@@ -337,3 +337,30 @@ def test_a_ulog_s_local_velocity_is_checked_against_its_gps_topic(tmp_path, foll
                                             rf"\({topic} vel_n_m_s, vel_e_m_s\)") as info:
             adapters.load(path, "px4_manual")
         assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("cause", ["own_gps", "no_gps"])
+def test_a_stop_for_the_velocity_after_flips_says_how_many_segments_were_cut(tmp_path, cause):
+    # the viewer draws the cuts; the terminal's one line must not hide that the flight was cut before the check
+    clean = adapters.load(_copter_bin(tmp_path, "clean.bin", seconds=60.0)[0], "ardupilot_manual")
+    first = clean[0]
+    at = first.meta["t0"] + first.t[-1] - 1.0
+    later = {d.meta["id"].split(".")[0] for d in clean if d.meta["t0"] > at}  # segments that start upside down
+
+    def edit(streams, options):
+        att = streams["ATT"]
+        att.loc[att["t"] >= at, "Roll"] = -170.0
+        if cause == "own_gps":
+            _own_gps(streams, options)
+        else:
+            del streams["GPS"]
+
+    path, _ = _copter_bin(tmp_path, "flip.bin", edit, seconds=60.0)
+    with pytest.raises(DataError) as info:
+        adapters.load(path, "ardupilot_manual")
+    message = str(info.value)
+    assert ("does not follow the GPS velocity" if cause == "own_gps" else "dead-reckons") in message
+    n = 1 + len(later)
+    assert "\n" not in message and message.endswith(
+        f"({n} segment{'s' if n > 1 else ''} cut or dropped at the vehicle's flips before this check: `workbench "
+        f"view` shows where)")
