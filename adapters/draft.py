@@ -5,7 +5,9 @@ The draft recognises the vehicle (MAVLink ``HEARTBEAT`` autopilot and type, the 
 that kind of vehicle as its template (its manual modes, roles, segmentation), and picks for every state and
 input the first source whose stream and fields the log has, among the template's alternatives for this format
 (old and new PX4 topics and fields, ``RC_CHANNELS`` / ``RC_CHANNELS_RAW``) and the DataFlash names
-(:data:`BIN_CHANNELS`). The grid step follows the slowest chosen stream. What it cannot decide — a channel
+(:data:`BIN_CHANNELS`). The template's ``[reference]`` (the GPS velocity the estimated one must follow) is
+written with the sources the log has, so a drafted mapping is checked as the shipped one is. The grid step
+follows the slowest chosen stream. What it cannot decide — a channel
 with no source in the log, no armed flag, no manual mode — is listed in :attr:`Draft.undecided`, and the TOML
 says it in comments.
 """
@@ -247,6 +249,7 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
         undecided.append("armed: no armed flag found (a DataFlash log's arming is an EV event, not a held flag); "
                          "disarmed spans are not dropped")
         lines.append("# armed: no armed flag found in this log")
+    lines += _reference_lines(template, streams, chosen)
     for u in undecided:
         lines.insert(3, f"# undecided: {u}")
     text = "\n".join(lines) + "\n"
@@ -271,6 +274,37 @@ def _mode_selector(sel: Selector | None, streams: Streams) -> Selector | None:
         if candidate is not None and _has(candidate, streams):
             return candidate
     return None
+
+
+def _reference_lines(template: ChannelMapping, streams: Streams, chosen: dict[str, Channel]) -> list[str]:
+    """The template's ``[reference]`` with the sources this log has: the estimator the chosen velocity channels
+    read (else the first present) and the GPS stream; the whole GPS list where the template says the log always
+    holds one and it does not (import then names dead reckoning, as the shipped mapping does). None without the
+    estimator's velocity, or without a GPS stream the template knows (nothing to check against)."""
+    ref = template.reference
+    if ref is None:
+        return []
+    present = [src for src in ref.estimate.sources if _has(replace(ref.estimate, source=src, alternatives=()),
+                                                          streams, 2)]
+    used = {_stream_of(chosen[v], streams) for v in template.roles.velocity if v in chosen}
+    estimate = next((src for src in present if src.split(".")[0] in used), present[0] if present else None)
+    gps = next((src for src in ref.gps.sources if _has(replace(ref.gps, source=src, alternatives=()), streams, 2)),
+               None)
+    if estimate is None or (gps is None and not ref.always_logged):
+        return []
+    table: dict[str, object] = {"estimate": estimate, "gps": gps if gps is not None else list(ref.gps.sources),
+                                "form": ref.form, "scale": list(ref.scale)}
+    if ref.always_logged:
+        table["always_logged"] = True
+    if ref.unknown is not None:
+        table["unknown"] = ref.unknown
+    if ref.fix is not None:
+        table["fix"] = {"field": ref.fix[0], "min": ref.fix[1]}
+    table["accuracy"] = ref.accuracy
+    why = ("no GPS stream in this log, and this firmware logs one whenever it has a GPS: import names dead reckoning"
+           if gps is None else f"{estimate} must follow {gps} (the shipped {template.name!r} checks the same)")
+    return ["", f"# the GPS's own velocity: {why}", "[reference]",
+            *(f"{k} = {_toml_value(v)}" for k, v in table.items())]
 
 
 def _armed_rule(rule: FlagRule | None, streams: Streams) -> dict[str, object] | None:

@@ -355,7 +355,10 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     if not still:
         still = follows_gps(streams, m, [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts])
         if still and not allow_still:
-            raise DataError(still)
+            # the terminal shows only this line; the cuts the viewer draws are counted in it
+            cut = (f" ({len(flips)} segment{'s' if len(flips) > 1 else ''} cut or dropped at the vehicle's flips "
+                   f"before this check: `workbench view` shows where)") if flips else ""
+            raise DataError(still + cut)
     report = {**{k: int(v) for k, v in streams.skipped.items() if v}, **{k: int(v) for k, v in skipped.items() if v}}
     # a marker without a demo key belongs to the demonstration containing it, else to the next one
     by_span: dict[int, dict[str, Any]] = {}

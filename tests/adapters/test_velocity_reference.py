@@ -177,8 +177,12 @@ def test_the_viewer_shows_such_a_log_with_the_cause_beside_its_states(tmp_path):
 
 
 @pytest.mark.parametrize("follows", [True, False])
-def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follows):
-    # the tlog side of ardupilot_manual: LOCAL_POSITION_NED.vx,vy against GPS_RAW_INT.vel (cm/s), cog (cdeg)
+@pytest.mark.parametrize(("mapping", "vehicle", "table", "mode"), [
+    ("ardupilot_manual", "MAV_TYPE_QUADROTOR", "arducopter", "STABILIZE"),
+    ("arduplane_manual", "MAV_TYPE_FIXED_WING", "arduplane", "FBWA")])
+def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follows, mapping, vehicle, table, mode):
+    # the tlog side of ardupilot_manual / arduplane_manual: LOCAL_POSITION_NED.vx,vy (the EKF's ground velocity,
+    # a plane's too) against GPS_RAW_INT.vel (cm/s), cog (cdeg)
     from pymavlink import mavutil
 
     from adapters.mapping import load_mapping
@@ -188,7 +192,7 @@ def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follow
 
     epoch = 1_704_067_200.0
     ds = simulate_landings("CS1", 2, seed=3)
-    streams = demo_streams(ds, load_mapping("ardupilot_manual").for_format("tlog"), epoch=epoch, pause=2.0)
+    streams = demo_streams(ds, load_mapping(mapping).for_format("tlog"), epoch=epoch, pause=2.0)
     for frame in streams.values():
         frame["time_boot_ms"] = np.rint((frame["t"].to_numpy() - epoch) * 1000.0).astype(np.int64)
     rng = np.random.default_rng(5)
@@ -204,14 +208,159 @@ def test_a_tlog_s_local_velocity_is_checked_against_gps_raw_int(tmp_path, follow
         "cog": np.rint(100 * np.mod(np.degrees(np.arctan2(ve, vn)), 360.0)).astype(np.int64) % 36000})
     ml = mavutil.mavlink
     streams["HEARTBEAT"] = pd.DataFrame({
-        "t": streams["ATTITUDE"]["t"].to_numpy()[::50], "type": ml.MAV_TYPE_QUADROTOR,
+        "t": streams["ATTITUDE"]["t"].to_numpy()[::50], "type": getattr(ml, vehicle),
         "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA,
         "base_mode": ml.MAV_MODE_FLAG_SAFETY_ARMED | ml.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-        "custom_mode": mode_number("arducopter", "STABILIZE"), "system_status": 4, "mavlink_version": 3})
+        "custom_mode": mode_number(table, mode), "system_status": 4, "mavlink_version": 3})
     path = adapters.FORMATS["tlog"].write(tmp_path / "f.tlog", streams)
+    _draft_acts_as_shipped(path, tmp_path)  # `workbench map`'s draft checks the same
     if follows:
-        assert len(adapters.load(path, "ardupilot_manual")) == len(ds)
+        assert len(adapters.load(path, mapping)) == len(ds)
     else:
         with pytest.raises(DataError, match=r"LOCAL_POSITION_NED velocity does not follow the GPS velocity "
                                             r"\(GPS_RAW_INT vel, cog\)"):
-            adapters.load(path, "ardupilot_manual")
+            adapters.load(path, mapping)
+
+
+# ------------------------------------------------------------------------------ arduplane_manual's reference
+
+
+def _plane_bin(tmp_path, name, style, own_gps):
+    """An ArduPlane DataFlash log (old: EKF1 / GPS, new: NKF1[k] / GPS[0]), its GPS velocity its own if asked."""
+    streams, options = dataflash_write.example_streams(style, "plane", seconds=60.0, seed=3)
+    gps = "GPS" if style == "old" else "GPS[0]"
+    if own_gps:
+        rng = np.random.default_rng(11)
+        n = len(streams[gps])
+        streams[gps]["Spd"] = rng.uniform(0, 5, n).astype(np.float32)
+        streams[gps]["GCrs"] = rng.uniform(0, 360, n).astype(np.float32)
+    return dataflash_write.write(tmp_path / name, streams, **options)
+
+
+@pytest.mark.parametrize("style", ["old", "new"])
+def test_a_plane_s_ekf_velocity_is_checked_against_its_dataflash_gps(tmp_path, style):
+    # arduplane_manual's states are the EKF's ground velocity (not the airspeed): the GPS's is their reference
+    assert len(adapters.load(_plane_bin(tmp_path, "follows.bin", style, False), "arduplane_manual"))
+    ekf = "EKF1" if style == "old" else "NKF1"
+    gps = "GPS" if style == "old" else r"GPS\[0\]"
+    with pytest.raises(DataError, match=rf"{ekf}(\[0\])? velocity does not follow the GPS velocity \({gps} Spd"):
+        adapters.load(_plane_bin(tmp_path, "own.bin", style, True), "arduplane_manual")
+
+
+def test_a_plane_dataflash_log_without_gps_is_named_dead_reckoning(tmp_path):
+    streams, options = dataflash_write.example_streams("old", "plane", seconds=60.0, seed=3)
+    del streams["GPS"]
+    path = dataflash_write.write(tmp_path / "no_gps.bin", streams, **options)
+    with pytest.raises(DataError, match=r"the log has no GPS stream .* the estimator dead-reckons"):
+        adapters.load(path, "arduplane_manual")
+
+
+# ----------------------------------------------------------------------------- a drafted mapping's reference
+
+
+def _draft_acts_as_shipped(path, tmp_path):
+    """`workbench map`'s draft of the log holds a [reference], and imports or refuses as its template does."""
+    from adapters.draft import draft_mapping
+
+    draft = draft_mapping(adapters.read(path), name="drafted")
+    assert "\n[reference]\n" in draft.toml
+    toml = tmp_path / "drafted.toml"
+    toml.write_text(draft.toml)
+    outcomes = []
+    for mapping in (draft.template, toml):
+        try:
+            outcomes.append(len(adapters.load(path, mapping)))
+        except DataError as exc:
+            # the draft's grid step and segment rules are its own (the log's slowest stream): the numbers may differ
+            outcomes.append(re.sub(r"-?\d+(\.\d+)?", "#", str(exc).replace(repr(draft.template), "'drafted'")))
+    assert type(outcomes[0]) is type(outcomes[1])
+    if isinstance(outcomes[0], str):
+        assert outcomes[0] == outcomes[1]
+    return outcomes[1]
+
+
+@pytest.mark.parametrize(("style", "vehicle"), [("old", "copter"), ("new", "plane")])
+@pytest.mark.parametrize("case", ["follows", "own", "no_gps"])
+def test_a_drafted_mapping_checks_the_velocity_as_the_shipped_one_does(tmp_path, style, vehicle, case):
+    streams, options = dataflash_write.example_streams(style, vehicle, seconds=60.0, seed=3)
+    gps = "GPS" if style == "old" else "GPS[0]"
+    if case == "own":
+        rng = np.random.default_rng(11)
+        streams[gps]["Spd"] = rng.uniform(0, 5, len(streams[gps])).astype(np.float32)
+        streams[gps]["GCrs"] = rng.uniform(0, 360, len(streams[gps])).astype(np.float32)
+    elif case == "no_gps":
+        del streams[gps]
+    outcome = _draft_acts_as_shipped(dataflash_write.write(tmp_path / "f.bin", streams, **options), tmp_path)
+    if case == "follows":
+        assert isinstance(outcome, int) and outcome > 0
+    else:
+        assert isinstance(outcome, str)
+        assert ("velocity does not follow the GPS velocity" if case == "own" else "dead-reckons") in outcome
+
+
+# ------------------------------------------------------------------------------------ px4_manual's reference
+
+
+@pytest.mark.parametrize("topic", ["vehicle_gps_position", "sensor_gps"])  # the receiver's topic before / from v1.14
+@pytest.mark.parametrize("follows", [True, False])
+def test_a_ulog_s_local_velocity_is_checked_against_its_gps_topic(tmp_path, follows, topic):
+    # px4_manual: vehicle_local_position.vx,vy against the receiver's vel_n_m_s, vel_e_m_s (3D fix only)
+    from adapters.formats import ulog
+    from adapters.mapping import load_mapping
+    from adapters.writer import demo_streams, layout
+    from workbench.sim.landing import simulate_landings
+
+    flights = simulate_landings("CS1", 2, seed=3)
+    streams = demo_streams(flights, load_mapping("px4_manual").for_format("ulog"), epoch=0.0, pause=2.0)
+    spans = layout(flights, 0.0, 2.0)
+    t = np.arange(0.0, spans[-1][1] + 1.0, 0.5)
+    in_flight = np.zeros(t.size, dtype=bool)
+    for a, b in spans:
+        in_flight |= (t >= a) & (t <= b)
+    streams["vehicle_status"] = pd.DataFrame({  # STAB in flight, AUTO_RTL between, armed throughout
+        "t": t, "nav_state": np.where(in_flight, 15, 5).astype(np.uint8), "arming_state": np.uint8(2)})
+    rng = np.random.default_rng(5)
+    local = streams["vehicle_local_position"]
+    local["vx"] = rng.normal(0.0, 1.0, len(local)).astype(local["vy"].dtype)  # the simulated flight has no north
+    gps = local.iloc[::4]
+    vn, ve = gps["vx"].to_numpy(), gps["vy"].to_numpy()
+    if not follows:
+        vn, ve = rng.permutation(vn), rng.permutation(ve)
+    streams[topic] = pd.DataFrame({"t": gps["t"].to_numpy(), "fix_type": np.uint8(3),
+                                   "vel_n_m_s": vn.astype(np.float32), "vel_e_m_s": ve.astype(np.float32)})
+    path = ulog.write(tmp_path / "f.ulg", streams, info={"sys_name": "PX4", "ver_sw_release": "v1.14.0"})
+    _draft_acts_as_shipped(path, tmp_path)  # `workbench map`'s draft checks the same
+    if follows:
+        assert len(adapters.load(path, "px4_manual")) == len(flights)
+    else:
+        with pytest.raises(DataError, match=rf"vehicle_local_position velocity does not follow the GPS velocity "
+                                            rf"\({topic} vel_n_m_s, vel_e_m_s\)") as info:
+            adapters.load(path, "px4_manual")
+        assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("cause", ["own_gps", "no_gps"])
+def test_a_stop_for_the_velocity_after_flips_says_how_many_segments_were_cut(tmp_path, cause):
+    # the viewer draws the cuts; the terminal's one line must not hide that the flight was cut before the check
+    clean = adapters.load(_copter_bin(tmp_path, "clean.bin", seconds=60.0)[0], "ardupilot_manual")
+    first = clean[0]
+    at = first.meta["t0"] + first.t[-1] - 1.0
+    later = {d.meta["id"].split(".")[0] for d in clean if d.meta["t0"] > at}  # segments that start upside down
+
+    def edit(streams, options):
+        att = streams["ATT"]
+        att.loc[att["t"] >= at, "Roll"] = -170.0
+        if cause == "own_gps":
+            _own_gps(streams, options)
+        else:
+            del streams["GPS"]
+
+    path, _ = _copter_bin(tmp_path, "flip.bin", edit, seconds=60.0)
+    with pytest.raises(DataError) as info:
+        adapters.load(path, "ardupilot_manual")
+    message = str(info.value)
+    assert ("does not follow the GPS velocity" if cause == "own_gps" else "dead-reckons") in message
+    n = 1 + len(later)
+    assert "\n" not in message and message.endswith(
+        f"({n} segment{'s' if n > 1 else ''} cut or dropped at the vehicle's flips before this check: `workbench "
+        f"view` shows where)")
