@@ -23,6 +23,14 @@ def result():
                      power=1)
 
 
+@pytest.fixture(scope="module")
+def report_folder(result, tmp_path_factory):
+    """The report of ``result``, written once (vector figures included) for the tests that read it."""
+    out = tmp_path_factory.mktemp("objective-report") / "r"
+    write_study_report(result, out)
+    return out
+
+
 def test_study_bootstraps_each_strategy_objective(result):
     assert set(result.objectives) == {"A", "B"}
     for label, oi in result.objectives.items():
@@ -33,8 +41,8 @@ def test_study_bootstraps_each_strategy_objective(result):
         assert oi.ratio_gain == "iv"
 
 
-def test_report_shows_intervals_and_the_ratio_comparison(result, tmp_path):
-    text = write_study_report(result, tmp_path / "r", vector=False).read_text()
+def test_report_shows_intervals_and_the_ratio_comparison(result, report_folder):
+    text = (report_folder / "report.md").read_text()
     section = text.split("## Task objective")[1].split("\n## ")[0]
     boot = result.objectives["A"].boot
     assert f"[{boot.Q_diag_lo[2]:.3g}, {boot.Q_diag_hi[2]:.3g}]" in section
@@ -52,10 +60,10 @@ def ratio_rows(section: str) -> list[list[str]]:
     return [[c.strip() for c in line.strip("|").split("|")] for line in table.splitlines()[2:]]
 
 
-def test_every_ratio_says_what_the_data_carry(result, tmp_path):
+def test_every_ratio_says_what_the_data_carry(report_folder):
     # a finite estimate with its interval, or not identifiable with the demonstrations needed, or not of this
     # form with the mismatch: never a bare "∞ [0, ∞]" or an unexplained unbounded interval
-    text = write_study_report(result, tmp_path / "r", vector=False).read_text()
+    text = (report_folder / "report.md").read_text()
     section = text.split("## Task objective")[1].split("\n## ")[0]
     rows = ratio_rows(section)
     assert len(rows) == 12
@@ -78,7 +86,7 @@ def test_report_without_bootstrap_says_so(tmp_path):
     assert "No intervals" in text
 
 
-def test_the_objective_figure_draws_only_the_identified_contrasts(result, tmp_path):
+def test_the_objective_figure_draws_only_the_identified_contrasts(result, report_folder):
     """The figure's rows are exactly the table's identified factors and ratios, each with its own interval: no
     entry of Q or R one by one (the attitude weight is not identified: METHOD.md), no unidentified ratio."""
     from workbench.report.contrasts import fig_contrasts, identified_rows
@@ -94,5 +102,5 @@ def test_the_objective_figure_draws_only_the_identified_contrasts(result, tmp_pa
     ticks = [t.get_text() for ax in fig.axes for t in ax.get_yticklabels()]
     assert sorted(ticks) == sorted([*factors["label"], *ratios["label"]])
     assert not any(t.startswith(("Q ", "R ")) or "λmax" in t for t in ticks)
-    text = write_study_report(result, tmp_path / "r").read_text()
-    assert "](figures/objective.png)" in text and (tmp_path / "r" / "figures" / "objective.svg").is_file()
+    text = (report_folder / "report.md").read_text()
+    assert "](figures/objective.png)" in text and (report_folder / "figures" / "objective.svg").is_file()
