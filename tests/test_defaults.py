@@ -70,3 +70,29 @@ def test_the_command_line_uses_the_tables_defaults():
                 table = ONLINE if name in ONLINE_COMMANDS else TABLE
                 assert a.default == table[a.dest], f"workbench {name} {a.option_strings}: {a.default}"
     assert seen >= 4
+
+
+def test_every_command_resamples_the_objective_as_many_times_by_default():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    found = {name: a.default for name, p in sub.choices.items() for a in p._actions if a.dest == "bootstrap"}
+    assert {"fit", "report", "demo"} <= set(found)
+    assert set(found.values()) == {defaults.OBJECTIVE_RESAMPLES}, found
+
+
+def test_the_documented_table_is_the_table():
+    """docs/architecture.md's "Defaults" table has one row per entry of workbench/defaults.py, with its value."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "architecture.md").read_text(encoding="utf-8")
+    section = text.split("## Defaults", 1)[1].split("\n## ", 1)[0]
+    rows = dict(re.findall(r"^\| `(\w+)` \| ([^|]+?) \|", section, flags=re.M))
+    assert set(rows) == set(defaults.__all__), set(rows) ^ set(defaults.__all__)
+    for name, shown in rows.items():
+        value = getattr(defaults, name)
+        number = re.match(r"[-\d.]+", shown.strip("`\" "))
+        if isinstance(value, str):
+            assert shown.strip("`\" ") == value, (name, shown)
+        else:
+            assert number and float(number.group()) == float(value), (name, shown)

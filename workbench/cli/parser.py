@@ -22,7 +22,14 @@ from workbench.cli.options import (
 from workbench.cli.stdio import input_formats, output_formats
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
 from workbench.cli.view import VIEW_SAMPLES, cmd_live, cmd_replay, cmd_view
-from workbench.defaults import HORIZON_S, N_COMPONENTS, N_STEPS, ONLINE_HORIZON_S, STUDY_N_COMPONENTS
+from workbench.defaults import (
+    HORIZON_S,
+    N_COMPONENTS,
+    N_STEPS,
+    OBJECTIVE_RESAMPLES,
+    ONLINE_HORIZON_S,
+    STUDY_N_COMPONENTS,
+)
 from workbench.models.registry import REGISTRY
 
 __all__ = ['build_parser']
@@ -204,10 +211,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(direct), the paper's DMD, or instrumental variables only (iv: consistent when the "
                         "operator's variability is autocorrelated)")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialization (default 0)")
-    p.add_argument("--bootstrap", type=int, default=100, metavar="N",
-                   help="resample the trials N times (default 100; 0: no intervals) and print 95 %% intervals of "
-                        "K̂, the normalized Q, R diagonals and the weight ratios inside coupled parts (the paper "
-                        "gives none)")
+    p.add_argument("--bootstrap", type=int, default=OBJECTIVE_RESAMPLES, metavar="N",
+                   help=f"resample the trials N times (default {OBJECTIVE_RESAMPLES}; 0: no intervals) and print 95 "
+                        "%% intervals of K̂, the normalized Q, R diagonals and the weight ratios inside coupled parts "
+                        "(the paper gives none)")
     _power_option(p, 0)
     _system_option(p)
     _mapping_option(p)
@@ -367,6 +374,6 @@ def _holdout_option(p: argparse.ArgumentParser) -> None:
 
 
 def _bootstrap_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bootstrap", type=int, default=100, metavar="N",
+    p.add_argument("--bootstrap", type=int, default=OBJECTIVE_RESAMPLES, metavar="N",
                    help="resamples of each strategy's training trials for the intervals of its task objective and "
-                        "weight ratios (default 100; 0: point estimates only)")
+                        f"weight ratios (default {OBJECTIVE_RESAMPLES}; 0: point estimates only)")

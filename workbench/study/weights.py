@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from workbench.defaults import OBJECTIVE_RESAMPLES
 from workbench.errors import DataError, ModelError
 from workbench.method import ratio_profile
 
@@ -465,8 +466,9 @@ def _used_gain(model) -> str:
     return model.gain_method_
 
 
-def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv", ci: float = 95.0,
-                    progress: Callable[[int, int], None] | None = None) -> tuple[WeightRatios | None, str, str]:
+def ratio_bootstrap(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: int = 0, ratio_gain: str = "iv",
+                    ci: float = 95.0, progress: Callable[[int, int], None] | None = None
+                    ) -> tuple[WeightRatios | None, str, str]:
     """Weight ratios of a fitted model's demonstrations: ``(ratios or None, gain method, note)``.
 
     The gain is estimated by ``ratio_gain`` (default instrumental variables: least squares is biased in closed
@@ -487,7 +489,7 @@ def ratio_bootstrap(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: 
     return None, ratio_gain, note.strip()
 
 
-def objective_intervals(model, demos, n_boot: int = 100, seed: int = 0, ratio_gain: str = "iv",
+def objective_intervals(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: int = 0, ratio_gain: str = "iv",
                         power: int = 0) -> ObjectiveIntervals:
     """Bootstrap a fitted model's objective over its training demonstrations (whole trials resampled).
 
