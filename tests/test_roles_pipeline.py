@@ -94,7 +94,7 @@ def _cli(*argv: str) -> str:
 
 # -- the whole pipeline --------------------------------------------------------------------------------------
 def test_every_pipeline_step_runs_on_the_plant(plant, tmp_path, monkeypatch):
-    from workbench.report import markdown
+    from workbench.report import figure_files
 
     name, system, ds = plant
     demos = tmp_path / "demos.parquet"
@@ -103,7 +103,7 @@ def test_every_pipeline_step_runs_on_the_plant(plant, tmp_path, monkeypatch):
     # figures' vector copies (tests/report): those were four fifths of this test's time
     common = ("--n-components", "2", "--system", "identify")
     no_resampling = ("--bootstrap", "0")
-    monkeypatch.setattr(markdown, "VECTOR_FORMATS", ())
+    monkeypatch.setattr(figure_files, "VECTOR_FORMATS", ())
 
     # fit: the model file keeps the roles
     model_file = tmp_path / "model.npz"

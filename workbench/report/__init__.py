@@ -12,7 +12,7 @@ _EXPORTS = {
     "fig_predictions": "markdown",
     "fig_rmse": "markdown",
     "fig_variability": "markdown",
-    "save_figure": "markdown",
+    "save_figure": "figure_files",
     "write_report": "markdown",
 }
 __all__ = list(_EXPORTS)

@@ -22,7 +22,6 @@ and the mixed model's strategy terms (:mod:`workbench.study.findings`).
 
 from __future__ import annotations
 
-import contextvars
 import dataclasses
 import os
 import shutil
@@ -31,14 +30,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import matplotlib
 import numpy as np
 import pandas as pd
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from workbench.atomic import (
-    atomic_path,
     atomic_write_text,
     deferred_interrupt,
     remove_leftovers,
@@ -48,6 +44,7 @@ from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.roles import Roles
 from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.report.contrasts import objective_figure
+from workbench.report.figure_files import DPI, save_figure, vector_figures
 from workbench.report.palette import input_style
 from workbench.report.tables import efficiency_by_trial, save_table, scores_section, why_no_statistics
 from workbench.report.tables import md_table as _md_table
@@ -62,13 +59,11 @@ __all__ = [
     "fig_predictions",
     "fig_rmse",
     "fig_variability",
-    "save_figure",
     "write_report",
 ]
 
 _PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
 METHOD_COLORS = {**{m.name: m.colour_hex for m in REGISTRY}, "recorded": "#282828"}  # the registry's, as the viewer's
-DPI = 300
 #: A journal column (IEEE: 3.5 in); a figure is at most two columns wide, so its text prints at the size set here.
 COLUMN_WIDTH = 3.5
 #: Text and lines sized for print at that width (matplotlib rc parameters, applied while a report draws).
@@ -79,32 +74,6 @@ PAPER_RC = {"font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8, "xtick.lab
 
 def _label_color(label: str, labels: Sequence[str]) -> str:
     return _PALETTE[list(labels).index(label) % len(_PALETTE)] if label in labels else "#7f7f7f"
-
-
-#: The vector formats written beside every PNG (a paper takes these; the PNG is for the Markdown).
-VECTOR_FORMATS = ("svg", "pdf")
-
-
-#: Whether :func:`save_figure` writes the vector formats (off for the demo: ~5.5 s of its 30 s budget).
-_VECTOR = contextvars.ContextVar("vector_figures", default=True)
-
-
-def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
-    """Render ``fig`` to a PNG at ``path`` and to SVG and PDF beside it (:data:`VECTOR_FORMATS`), each atomically."""
-    path = Path(path)
-    canvas = FigureCanvasAgg(fig)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
-    vector = VECTOR_FORMATS if _VECTOR.get() else ()
-    if vector:
-        # The layout and the crop the PNG was drawn with, kept for the vector copies: each savefig would otherwise
-        # run the constrained layout twice more and draw once more to find the same tight box (60 % of the time).
-        box = fig.get_tightbbox(canvas.get_renderer()).padded(matplotlib.rcParams["savefig.pad_inches"])
-        fig.set_layout_engine("none")
-    for fmt in vector:
-        with atomic_path(path.with_suffix(f".{fmt}")) as tmp:
-            fig.savefig(tmp, format=fmt, bbox_inches=box)
-    return path
 
 
 def _plane(roles: Roles | None, state_names: Sequence[str]) -> tuple[int, int] | None:
@@ -760,11 +729,11 @@ def _predict(model: Any, demo: Demonstration, n_steps: int, samples: int, seed: 
 def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str = "Workbench report",
                        vector: bool = True) -> Path:
     """``out_dir/report.md`` with figures under ``out_dir/figures`` (PNG, and SVG and PDF unless not ``vector``)."""
-    token = _VECTOR.set(vector)
+    token = vector_figures.set(vector)
     try:
         return _write_study_report(result, out_dir, title=title)
     finally:
-        _VECTOR.reset(token)
+        vector_figures.reset(token)
 
 
 def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str) -> Path:
