@@ -35,8 +35,11 @@ def _check(stdout: str, report: str, assert_claims_shown) -> None:
 
 
 def test_report_prints_paired_differences_with_intervals(tmp_path, assert_claims_shown):
+    from workbench.cli import main
+
     data = tmp_path / "s.parquet"
-    _wb("simulate", "--strategy", "CS1", "CS2", "--trials", "8", "--subjects", "2", "-o", str(data))
+    assert main(["simulate", "--strategy", "CS1", "CS2", "--trials", "8", "--subjects", "2", "-o", str(data),
+                 "-q"]) == 0
     r = _wb("report", str(data), "-o", str(tmp_path / "rep"), "--n-components", "2", "--horizon", "1.5",
             "--samples", "0", "--no-efficiency", "--bootstrap", "0", "--test-size", "0.4")
     _check(r.stdout, (tmp_path / "rep" / "report.md").read_text(), assert_claims_shown)

@@ -12,6 +12,7 @@ import pytest
 from rich.console import Console
 
 from workbench.cli import context, main
+from workbench.report import figure_files
 from workbench.sim.landing import simulate_landings
 
 BAR = "━"  # rich's bar (and pulse) character
@@ -48,6 +49,7 @@ def _run(monkeypatch, argv: list[str], terminal: bool) -> tuple[int, str]:
         self.err = Console(file=buf, force_terminal=terminal, width=100, highlight=False)
 
     monkeypatch.setattr(context.Context, "__init__", patched)
+    monkeypatch.setattr(figure_files, "VECTOR_FORMATS", ())  # the bars, not the figures' vector copies
     return main(argv), buf.getvalue()
 
 
