@@ -159,11 +159,11 @@ def _link_unknown(c: _Candidates, strong: np.ndarray, n: int) -> np.ndarray:
     # the start of one is garbage that happens to parse (8 bytes inserted after a magic byte made a MAVLink 1 header
     # of id 255 whose length ended it exactly at a record's start, and the record inside it was lost; hypothesis)
     firm = np.sort(s[strong])
-    inside = np.searchsorted(firm, s[weak], side="right")
-    swallows = (inside < firm.size) & (firm[np.minimum(inside, firm.size - 1)] < end[weak])
-    weak = weak[~swallows]
-    if weak.size == 0:
-        return accepted
+    if firm.size:
+        inside = np.searchsorted(firm, s[weak], side="right")
+        weak = weak[~((inside < firm.size) & (firm[np.minimum(inside, firm.size - 1)] < end[weak]))]
+        if weak.size == 0:
+            return accepted
     w_start, w_end = s[weak], end[weak]
     # Starts are unique and sorted: the candidate starting at a frame's end, if any, is found by one search.
     at = np.minimum(np.searchsorted(s, w_end), s.size - 1)
