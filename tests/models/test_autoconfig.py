@@ -143,3 +143,21 @@ def test_fallback_to_the_task_objective_is_chosen_by_held_out_error_and_kept(qua
     back = load_model(tmp_path / "m.npz")
     assert back.variability_mean_ is False and back.auto_.fallback and back.auto_.ioc_only_rmse == 1.0
     np.testing.assert_allclose(back.predict(d.x[0], 30, d.target).x, fell.predict(d.x[0], 30, d.target).x)
+
+
+def test_no_candidate_on_every_fold_says_why_the_fits_failed(quad, small, monkeypatch):
+    """Where every candidate fails on a fold for a reason the grid cannot change (the fold's gain, say), the error
+    names that reason and the fold, not only that no candidate fitted (the real logs' "no candidate of G …")."""
+    cause = "the gain is not stabilizing on these trials"
+
+    def refuse(self, demos):
+        raise ModelError(cause)
+
+    monkeypatch.setattr(HumanBehaviorModel, "fit", refuse)
+    model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0)
+    with pytest.raises(ModelError, match="could be fitted on every fold") as err:
+        ac.choose_settings(model, small, components=(1, 2), reg_covars=(0.3,), folds=2)
+    seed = model.random_state if isinstance(model.random_state, int) else 0
+    n_train = len(small) - len(ac._folds(len(small), 2, seed)[0])  # the first fold's held-out trials left out
+    assert f"fold 1 ({n_train} training trials): {cause}" in str(err.value)
+    assert str(err.value).count(cause) == 1  # one reason, said once, however many candidates failed for it

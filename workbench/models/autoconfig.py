@@ -178,6 +178,7 @@ def choose_settings(
     rmse = {(G, r): [] for G in Gs for r in regs}
     loglik = {(G, r): [] for G in Gs for r in regs}
     ioc: list[float] = []
+    causes: dict[str, tuple[int, int]] = {}  # why a candidate could not be fitted → (first fold, its trials)
     for fold, test_idx in enumerate(parts):
         held = set(test_idx.tolist())
         train = [demos[j] for j in range(len(demos)) if j not in held]
@@ -206,9 +207,10 @@ def choose_settings(
                         # the fold's K̂x alone: every candidate of a fold shares its gain, so any one scores it
                         candidate.variability_mean_ = False
                         ioc.append(_rollout_rmse(candidate, test, H, idx, spread))
-                except ModelError:
+                except ModelError as exc:
                     rmse[(G, r)].append(math.nan)
                     loglik[(G, r)].append(math.nan)
+                    causes.setdefault(str(exc), (fold + 1, len(train)))
     rows = []
     for (G, r), errs in rmse.items():
         complete = len(errs) == k and np.all(np.isfinite(errs)) and np.all(np.isfinite(loglik[(G, r)]))
@@ -217,8 +219,10 @@ def choose_settings(
                      "heldout_loglik": float(np.mean(loglik[(G, r)])) if complete else math.nan})
     valid = [row for row in rows if math.isfinite(row["heldout_rmse"])]
     if not valid:
+        # the fits' own reason, which the grid cannot change when it is the gain's (one trial per fold, say)
+        why = "; ".join(f"fold {f} ({n} training trials): {c}" for c, (f, n) in list(causes.items())[:2])
         raise ModelError(f"auto settings: no candidate of G {Gs} × reg_covar {regs} could be fitted on every fold "
-                         f"of {len(demos)} demonstrations")
+                         f"of {len(demos)} demonstrations" + (f": {why}" if why else ""))
     if criterion == "prediction":
         best = min(valid, key=lambda row: (row["heldout_rmse"], row["n_components"]))
     else:
