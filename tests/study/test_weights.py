@@ -106,9 +106,10 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
     return s
 
 
-def test_ratio_intervals_on_a_few_seeds():
+def test_ratio_intervals_on_a_seed():
+    # a smoke test of the whole chain on one seed (two operators); coverage proper is the slow tests' below
     own: list = []
-    s = summarize(coverage(seeds=(20, 21), n_boot=40, own=own))
+    s = summarize(coverage(seeds=(20,), n_boot=40, own=own))
     # LQR operators: their parts are of the diagonal form (untested: no restrictions; no mismatch shown)
     assert (s["explained"] == 1.0).all()
     # the position ratios are identifiable (interval within 10×) and cover their factor
