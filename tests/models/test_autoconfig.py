@@ -161,3 +161,23 @@ def test_no_candidate_on_every_fold_says_why_the_fits_failed(quad, small, monkey
     n_train = len(small) - len(ac._folds(len(small), 2, seed)[0])  # the first fold's held-out trials left out
     assert f"fold 1 ({n_train} training trials): {cause}" in str(err.value)
     assert str(err.value).count(cause) == 1  # one reason, said once, however many candidates failed for it
+
+
+def test_folds_nothing_fits_on_fall_back_to_the_defaults_and_say_why(quad, small, monkeypatch):
+    """A flight of two or three segments: when no candidate fits on any fold split, the model is fitted on all the
+    demonstrations with the defaults (as with one demonstration) and the warning says why, instead of no model."""
+    from workbench.defaults import N_COMPONENTS, REG_COVAR
+    from workbench.errors import DegenerateFitWarning
+
+    reason = "auto settings: no candidate could be fitted on every fold: fold 1 (1 training trials): too few"
+
+    def impossible(*args, **kwargs):
+        raise ac.NoCandidateFitted(reason)
+
+    monkeypatch.setattr(ac, "choose_settings", impossible)
+    with pytest.warns(DegenerateFitWarning, match="nothing to cross-validate") as caught:
+        model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0).fit(small)
+    assert any(reason in str(w.message) for w in caught)
+    n_samples = sum(len(d) for d in small)
+    assert model.n_components_ == max(1, min(N_COMPONENTS, n_samples // ac._SAMPLES_PER_COMPONENT))
+    assert model.reg_covar_ == REG_COVAR and model.auto_ is None

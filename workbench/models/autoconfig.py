@@ -31,7 +31,7 @@ import numpy as np
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
 
 __all__ = ["AutoSettings", "choose_settings", "COMPONENT_GRID", "REG_COVAR_GRID", "CRITERIA",
-           "DEFAULT_COMPONENT_GRID", "DEFAULT_REG_COVAR_GRID"]
+           "DEFAULT_COMPONENT_GRID", "DEFAULT_REG_COVAR_GRID", "NoCandidateFitted"]
 
 COMPONENT_GRID = (1, 2, 3, 5, 8)
 REG_COVAR_GRID = (0.1, 0.3, 1.0)
@@ -46,6 +46,11 @@ _CV_MAX_ITER = 200
 _CV_STARTS = 4
 # A candidate needs this many samples per free TP-GMM parameter per frame to be worth fitting.
 _SAMPLES_PER_COMPONENT = 20
+
+
+class NoCandidateFitted(ModelError):
+    """No candidate setting could be fitted on every fold: there is nothing to choose between (each fold too small
+    for the fit, say); the settings cannot be cross-validated on these demonstrations."""
 
 
 @dataclass(frozen=True)
@@ -221,8 +226,8 @@ def choose_settings(
     if not valid:
         # the fits' own reason, which the grid cannot change when it is the gain's (one trial per fold, say)
         why = "; ".join(f"fold {f} ({n} training trials): {c}" for c, (f, n) in list(causes.items())[:2])
-        raise ModelError(f"auto settings: no candidate of G {Gs} × reg_covar {regs} could be fitted on every fold "
-                         f"of {len(demos)} demonstrations" + (f": {why}" if why else ""))
+        raise NoCandidateFitted(f"auto settings: no candidate of G {Gs} × reg_covar {regs} could be fitted on every "
+                                f"fold of {len(demos)} demonstrations" + (f": {why}" if why else ""))
     if criterion == "prediction":
         best = min(valid, key=lambda row: (row["heldout_rmse"], row["n_components"]))
     else:

@@ -239,13 +239,18 @@ class HumanBehaviorModel(TaskGMRModel):
 
     def _fit_auto(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Choose the "cv" settings by cross-validation, then fit with them (the settings stay "cv")."""
-        from workbench.models.autoconfig import _CV_MAX_ITER, choose_settings
+        from workbench.models.autoconfig import _CV_MAX_ITER, NoCandidateFitted, choose_settings
 
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
         if len(ds) < 2:
             return self._fit_uncrossed(demos, ds)
-        auto = choose_settings(self, ds, components=self.cv_components, reg_covars=self.cv_reg_covars,
-                               criterion=self.auto_criterion)
+        try:
+            auto = choose_settings(self, ds, components=self.cv_components, reg_covars=self.cv_reg_covars,
+                                   criterion=self.auto_criterion)
+        except NoCandidateFitted as exc:
+            # every fold too small to fit on (a flight of two or three segments): as with one demonstration, the
+            # defaults on all of them, and the reason said, rather than no model
+            return self._fit_uncrossed(demos, ds, because=str(exc))
         # the chosen candidate is fitted as it was scored: EM capped as the candidates were
         chosen = type(self)(self.system, **{**self.get_params(), "n_components": auto.n_components,
                                             "reg_covar": auto.reg_covar,
@@ -256,17 +261,19 @@ class HumanBehaviorModel(TaskGMRModel):
         self.variability_mean_ = not auto.fallback
         return self
 
-    def _fit_uncrossed(self, demos: Any, ds: Sequence[Demonstration]) -> HumanBehaviorModel:
-        """One demonstration (a fold of a two-segment flight): nothing to cross-validate the "cv" settings on, so
-        the constructor's defaults, said in a warning, with as many components as its samples carry."""
+    def _fit_uncrossed(self, demos: Any, ds: Sequence[Demonstration], because: str = "") -> HumanBehaviorModel:
+        """One demonstration (a fold of a two-segment flight), or folds none of the candidates could be fitted on
+        (``because``): nothing to cross-validate the "cv" settings on, so the constructor's defaults, said in a
+        warning, with as many components as its samples carry."""
         from workbench.models.autoconfig import _SAMPLES_PER_COMPONENT
 
         n_samples = sum(len(d) for d in ds)
         G = int(self.n_components) if self.n_components != "cv" else N_COMPONENTS
         G = max(1, min(G, n_samples // _SAMPLES_PER_COMPONENT))
         reg = float(self.reg_covar) if self.reg_covar != "cv" else REG_COVAR
+        why = f" ({because})" if because else ""
         warnings.warn(f"HumanBehaviorModel.fit: {len(ds)} demonstration(s), nothing to cross-validate the 'cv' "
-                      f"settings on: fitted with G = {G}, reg_covar = {reg:g} (the defaults, G capped by the "
+                      f"settings on{why}: fitted with G = {G}, reg_covar = {reg:g} (the defaults, G capped by the "
                       f"{n_samples} samples)", DegenerateFitWarning, stacklevel=3)
         chosen = type(self)(self.system, **{**self.get_params(), "n_components": G, "reg_covar": reg}).fit(demos)
         self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
