@@ -158,3 +158,16 @@ def test_the_statistics_tables_are_written_as_csv_and_latex(report):
         assert r"\begin{tabular}" in (tables / f"{name}.tex").read_text(encoding="utf-8")
     text = report["path"].read_text(encoding="utf-8")
     assert "## Held-out prediction error" in text and "tables/heldout_scores.csv" in text
+
+
+def test_saving_a_figure_leaves_its_layout_engine_as_it_was(tmp_path):
+    """The vector copies reuse the PNG's layout by switching the engine off while they are written; the caller's
+    figure gets its engine back."""
+    from matplotlib.figure import Figure
+
+    from workbench.report.figure_files import save_figure
+
+    fig = Figure(layout="constrained")
+    fig.subplots().plot([0, 1], [0, 1])
+    save_figure(fig, tmp_path / "f.png")
+    assert fig.get_constrained_layout() and (tmp_path / "f.svg").is_file() and (tmp_path / "f.pdf").is_file()

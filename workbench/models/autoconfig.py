@@ -200,12 +200,14 @@ def choose_settings(
                 continue
             for r in regs:
                 candidate = type(model)(system, **{**settings, "n_components": int(G), "reg_covar": float(r)})
+                fitted = False
                 try:
                     with warnings.catch_warnings():
                         # a fold may hold few trials and stop EM early; the held-out score judges the result
                         warnings.simplefilter("ignore", ConvergenceWarning)
                         warnings.simplefilter("ignore", DegenerateFitWarning)
                         candidate.fit(train)
+                    fitted = True
                     rmse[(G, r)].append(_rollout_rmse(candidate, test, H, idx, spread))
                     loglik[(G, r)].append(float(candidate.score_samples(test).mean()))
                     if fallback and len(ioc) == fold:
@@ -215,7 +217,8 @@ def choose_settings(
                 except ModelError as exc:
                     rmse[(G, r)].append(math.nan)
                     loglik[(G, r)].append(math.nan)
-                    causes.setdefault(str(exc), (fold + 1, len(train)))
+                    if not fitted:  # the fit's own reason (a scoring failure is not the fold's size)
+                        causes.setdefault(str(exc), (fold + 1, len(train)))
     rows = []
     for (G, r), errs in rmse.items():
         complete = len(errs) == k and np.all(np.isfinite(errs)) and np.all(np.isfinite(loglik[(G, r)]))
@@ -226,8 +229,11 @@ def choose_settings(
     if not valid:
         # the fits' own reason, which the grid cannot change when it is the gain's (one trial per fold, say)
         why = "; ".join(f"fold {f} ({n} training trials): {c}" for c, (f, n) in list(causes.items())[:2])
-        raise NoCandidateFitted(f"auto settings: no candidate of G {Gs} × reg_covar {regs} could be fitted on every "
-                                f"fold of {len(demos)} demonstrations" + (f": {why}" if why else ""))
+        # only fits that failed (a fold too small for them) fall back to the defaults; a grid whose every candidate
+        # was skipped for want of samples, or a scoring failure, stays an error
+        error = NoCandidateFitted if causes else ModelError
+        raise error(f"auto settings: no candidate of G {Gs} × reg_covar {regs} could be fitted on every fold of "
+                    f"{len(demos)} demonstrations" + (f": {why}" if why else ""))
     if criterion == "prediction":
         best = min(valid, key=lambda row: (row["heldout_rmse"], row["n_components"]))
     else:

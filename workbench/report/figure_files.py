@@ -29,12 +29,18 @@ def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
     vector = VECTOR_FORMATS if vector_figures.get() else ()
-    if vector:
-        # The layout and the crop the PNG was drawn with, kept for the vector copies: each savefig would otherwise
-        # run the constrained layout twice more and draw once more to find the same tight box (60 % of the time).
-        box = fig.get_tightbbox(canvas.get_renderer()).padded(matplotlib.rcParams["savefig.pad_inches"])
-        fig.set_layout_engine("none")
-    for fmt in vector:
-        with atomic_path(path.with_suffix(f".{fmt}")) as tmp:
-            fig.savefig(tmp, format=fmt, bbox_inches=box)
+    if not vector:
+        return path
+    # The layout and the crop the PNG was drawn with, kept for the vector copies: each savefig would otherwise run
+    # the constrained layout twice more and draw once more to find the same tight box (60 % of the time). The
+    # caller's figure gets its layout engine back.
+    box = fig.get_tightbbox(canvas.get_renderer()).padded(matplotlib.rcParams["savefig.pad_inches"])
+    engine = fig.get_layout_engine()
+    fig.set_layout_engine("none")
+    try:
+        for fmt in vector:
+            with atomic_path(path.with_suffix(f".{fmt}")) as tmp:
+                fig.savefig(tmp, format=fmt, bbox_inches=box)
+    finally:
+        fig.set_layout_engine(engine)
     return path
