@@ -178,7 +178,7 @@ def _flip_at(m: ChannelMapping, values: np.ndarray) -> int | None:
     name = m.roles.heading
     if name is None or name not in m.state_names:
         return None
-    per_unit = {"": 1.0, "rad": 1.0, "deg": math.pi / 180.0}.get(m.roles.unit(name))
+    per_unit = m.roles.radians_per_unit(name)
     if per_unit is None:
         return None
     beyond = np.flatnonzero(np.abs(values[:, m.state_names.index(name)] * per_unit) > FLIP)
@@ -188,7 +188,7 @@ def _flip_at(m: ChannelMapping, values: np.ndarray) -> int | None:
 def _flip_note(streams: Streams, m: ChannelMapping, mode: str, start: float, cut: float, after: np.ndarray) -> str:
     """How a segment was cut at a flip: where, and how far the angle went (in degrees)."""
     name = m.roles.heading or ""
-    per_unit = {"": 1.0, "rad": 1.0, "deg": math.pi / 180.0}.get(m.roles.unit(name), 1.0)
+    per_unit = m.roles.radians_per_unit(name) or 1.0
     peak = float(after[np.argmax(np.abs(after))]) * per_unit
     source = resolve_channel(m.channel(name), streams).selector.describe()
     what = "dropped" if cut <= start else f"cut at {cut:.1f} s"

@@ -18,6 +18,7 @@ maps state and input names to unit strings for axis titles (``"m"``, ``"rad/s"``
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,6 +26,8 @@ from typing import Any
 from workbench.errors import DataError
 
 __all__ = ["Roles", "ResolvedRoles"]
+
+_RADIANS_PER_UNIT = {"": 1.0, "rad": 1.0, "deg": math.pi / 180.0}
 
 
 @dataclass(frozen=True)
@@ -100,6 +103,11 @@ class Roles:
     def unit(self, name: str) -> str:
         """The unit of a state or input, ``""`` where none is declared."""
         return dict(self.units).get(name, "")
+
+    def radians_per_unit(self, name: str) -> float | None:
+        """What one unit of an angle state is in radians (no unit declared: radians); ``None`` where its unit is
+        not an angle's."""
+        return _RADIANS_PER_UNIT.get(self.unit(name))
 
     def check(self, state_names: Sequence[str], where: str = "roles") -> None:
         """Raise :class:`DataError` naming the role whose state is not among ``state_names``."""

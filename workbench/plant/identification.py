@@ -311,8 +311,7 @@ def _checks(A: np.ndarray, r: ResolvedRoles, roles: Roles, state_names: Sequence
         return ()
     across = plane[0]
     v = r.velocity[r.position.index(across)]
-    unit = roles.unit(state_names[r.heading])
-    per_unit = {"": 1.0, "rad": 1.0, "deg": np.pi / 180.0}.get(unit)
+    per_unit = roles.radians_per_unit(state_names[r.heading])
     if per_unit is None:
         return ()
     name = f"A[{state_names[v]}, {state_names[r.heading]}]"
