@@ -18,6 +18,7 @@ _EXPORTS = {
     "join_sets": "dataset",
     "Demonstration": "demonstrations",
     "DemonstrationSet": "demonstrations",
+    "PilotTask": "pilot_task",
     "Roles": "roles",
     "ResolvedRoles": "roles",
 }
