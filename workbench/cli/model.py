@@ -42,14 +42,17 @@ def cmd_fit(ctx: Context) -> int:
 
         try:
             model = make_model(a.method, system, n_components=components, random_state=a.seed,
-                               gain_method=a.gain).fit(ds)
+                               gain_method=a.gain, timing=a.timing).fit(ds)
         except ModelError as exc:
             raise ModelError(_physics_first(system, exc)) from None
     model.save(output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
-        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
+        from workbench.models.fitting import timing_setting
+
+        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_,
+                         timing_setting(model))
         _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
     elif model.has_gain and model.objective_ is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
@@ -65,12 +68,14 @@ def _physics_first(system: Any, exc: Exception) -> str:
     return f"the identified plant is not physics: {failure}; so the fit failed: {exc}" if failure else str(exc)
 
 
-def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct") -> None:
-    from workbench.method.resampling import bootstrap
+def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct",
+                     timing: Any = "none") -> None:
+    from workbench.method.resampling import GAIN_INTERVAL, bootstrap
 
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
-        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex,
+        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain if gain in ("direct", "dmd") else "iv",
+                           executor=ex, timing=timing,
                            progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.stopped:
         print(f"warning: bootstrap {result.stopped}", file=sys.stderr)
@@ -78,8 +83,10 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
         from workbench.method.resampling import failure_note
 
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
-    ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
-            f"{result.ci:g} % percentile intervals):")
+    ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, {result.ci:g} % "
+            f"intervals: the objective's percentiles, K̂'s {GAIN_INTERVAL}):")
+    if result.timing is not None:
+        ctx.say(f"  {result.timing.describe()}")
     for names, lo, hi, what in ((ds.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
                                 (ds.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
         ctx.say(f"  diag {what}: " + ", ".join(

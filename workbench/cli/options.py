@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 
 __all__ = ["SAMPLE_LOGS", "DEFAULT_MAPPING", "SPEED_RANGE", "n_components_arg", "fit_n_components_arg",
-           "positive_float", "speed_arg", "int_list", "steps_of"]
+           "positive_float", "speed_arg", "int_list", "steps_of", "timing_arg"]
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
 DEFAULT_MAPPING = "planar_quadrotor"
@@ -30,6 +30,21 @@ def n_components_arg(value: str, rules: tuple[str, ...] = ("bic",)) -> int | str
 
 def fit_n_components_arg(value: str) -> int | str:
     return n_components_arg(value, ("bic", "cv"))
+
+
+def timing_arg(value: str) -> str | tuple[float, float]:
+    """``--timing``: ``identify``, ``none``, or a given ``DELAY,LAG`` in seconds (the reaction delay and lag)."""
+    if value in ("identify", "none"):
+        return value
+    parts = value.split(",")
+    try:
+        delay, lag = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--timing must be 'identify', 'none' or DELAY,LAG in seconds (e.g. 0.2,0.08), got {value!r}") from None
+    if not (0 <= delay <= 0.5 and 0 <= lag <= 0.3):
+        raise argparse.ArgumentTypeError(f"--timing: a delay in [0, 0.5] s and a lag in [0, 0.3] s, got {value!r}")
+    return delay, lag
 
 
 def positive_float(value: str) -> float:

@@ -46,10 +46,11 @@ import numpy as np
 
 from workbench.errors import DataError, ModelError
 from workbench.frozen import readonly
-from workbench.method.closed_loop import as_matrix, single_threaded_blas
+from workbench.method.closed_loop import as_matrix, single_threaded_blas, spectral_radius
 
 __all__ = ["TimingData", "TimingFit", "PilotTiming", "fit_timing", "identify_timing", "lag_decay", "seen_weights",
-           "seen_states", "DELAY_MAX_S", "LAG_MAX_S", "STARTS"]
+           "seen_states", "timed_spectral_radius", "recorded_dead_zone", "stick_of", "read_through", "DELAY_MAX_S",
+           "LAG_MAX_S", "STARTS"]
 
 #: The longest reaction delay and lag searched (seconds): human delays are 0.1-0.3 s, lags 0.05-0.15 s (METHOD.md).
 DELAY_MAX_S = 0.5
@@ -64,7 +65,7 @@ _REFINE = 3
 #: Relative eigenvalue below which a direction of the instruments carries nothing (the starts never move it).
 _RANK_TOL = 1e-10
 #: Rows of all trials per block of the instruments' sums (bounds memory on long flights).
-_BLOCK_ROWS = 200_000
+_BLOCK_ROWS = 100_000
 
 
 def lag_decay(lag_s: float, dt: float) -> float:
@@ -115,6 +116,30 @@ def seen_weights(delay_s: Any, lag_s: Any, dt: float) -> tuple[np.ndarray, np.nd
     return l0, beta
 
 
+def timed_spectral_radius(A: Any, B: Any, K: Any, delay_s: float, lag_s: float, dt: float) -> float:
+    """The spectral radius of the loop a pilot with gain ``K``, delay and lag flies (eq. (T1) closed around the
+    plant): state ``[x[k], …, x[k − l0 − 2], r[k − 1]]``, ``r[k] = a r[k−1] + (1 − a) K Σ_j β_j x[k − l0 − j]``,
+    ``x[k+1] = A x[k] + B r[k]``. The demonstrations were flown, so the pilot's loop was stable; without a delay
+    and a lag it is ``ρ(A + B K)`` (Assumption 3)."""
+    A, B, K = (np.asarray(v, dtype=float) for v in (A, B, K))
+    n, m = B.shape
+    l0, beta = seen_weights(delay_s, lag_s, dt)
+    l0, beta = int(l0[0]), beta[0]
+    a = lag_decay(lag_s, dt)
+    L = l0 + 3  # states x[k] … x[k − l0 − 2]
+    N = n * L + m
+    M = np.zeros((N, N))
+    G = np.zeros((m, n * L))  # r[k] = a r[k−1] + (1 − a) K x̃[k], x̃ from the state
+    for j in range(3):
+        G[:, n * (l0 + j) : n * (l0 + j + 1)] += (1.0 - a) * beta[j] * K
+    M[:n, :n] = A
+    M[:n] += B @ np.concatenate([G, a * np.eye(m)], axis=1)
+    for i in range(1, L):
+        M[n * i : n * (i + 1), n * (i - 1) : n * i] = np.eye(n)
+    M[n * L :, :] = np.concatenate([G, a * np.eye(m)], axis=1)
+    return spectral_radius(M)
+
+
 def seen_states(x: Any, delay_s: float, lag_s: float, dt: float, start: str = "steady") -> np.ndarray:
     """``x̃_k`` of eq. (T1) at every sample of one trial: what the pilot's stick at sample ``k`` has seen.
 
@@ -132,11 +157,11 @@ def seen_states(x: Any, delay_s: float, lag_s: float, dt: float, start: str = "s
         onset = int(l0[0]) + 1
         out[: min(onset, N)] = 0.0
         if onset < N:
-            out[onset] = _onset_weight(np.array([delay_s]), np.array([lag_s]), dt)[0] * x[0]
+            out[onset] = onset_weight(np.array([delay_s]), np.array([lag_s]), dt)[0] * x[0]
     return out
 
 
-def _onset_weight(delay: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+def onset_weight(delay: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
     """A rest start's onset row (the first sample after the reaction at ``d``): the lag's weight on the part of the
     sample after the reaction, ``(1 − e^{−g dt/τ}) / (1 − a)``, ``g dt = t_{k_o} − d`` (1 without a lag)."""
     onset = np.floor(delay / dt + 1e-9).astype(int) + 1
@@ -149,8 +174,38 @@ def _onset_weight(delay: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------ the rows
 
 
-def _trials(demos: Iterable[Any], n: int, m: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Each demonstration's ``(x, u)``, checked; a single sample (no transition) is left out."""
+def recorded_dead_zone(d: Any) -> float:
+    """The dead zone a demonstration's device recorded (``meta["calibration"]["deadzone"]``, stick units; the
+    collect page's gamepad calibration), 0 where none was recorded."""
+    meta = getattr(d, "meta", None)
+    cal = meta.get("calibration") if isinstance(meta, dict) else None
+    value = cal.get("deadzone") if isinstance(cal, dict) else None
+    try:
+        width = float(value) if value is not None else 0.0
+    except (TypeError, ValueError):
+        return 0.0
+    return width if 0.0 < width < 1.0 and math.isfinite(width) else 0.0
+
+
+def stick_of(u: np.ndarray, dead_zone: float) -> np.ndarray:
+    """The stick behind inputs read through a dead zone (the page's rule: ``u = sign(r)(|r| − δ)/(1 − δ)`` outside
+    it, 0 inside): ``r = sign(u)(δ + (1 − δ)|u|)``, and 0 where ``u`` is 0 (somewhere inside ``[−δ, δ]``)."""
+    if not dead_zone:
+        return u
+    return np.where(u == 0, 0.0, np.sign(u) * (dead_zone + (1.0 - dead_zone) * np.abs(u)))
+
+
+def read_through(stick: np.ndarray, dead_zone: float) -> np.ndarray:
+    """The device's reading of a stick through its dead zone (``static/input.js``'s rule)."""
+    if not dead_zone:
+        return stick
+    a = np.abs(stick)
+    return np.where(a <= dead_zone, 0.0, np.sign(stick) * (a - dead_zone) / (1.0 - dead_zone))
+
+
+def _trials(demos: Iterable[Any], n: int, m: int) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Each demonstration's ``(x, stick, dead zone)``, checked (the stick is the input read back through the dead
+    zone its device recorded); a single sample (no transition) is left out."""
     out = []
     for j, d in enumerate(demos):
         ident = getattr(d, "id", None)
@@ -160,7 +215,8 @@ def _trials(demos: Iterable[Any], n: int, m: int) -> list[tuple[np.ndarray, np.n
         if len(x) != len(u):
             raise DataError(f"{name}: x has {len(x)} samples but u has {len(u)}")
         if len(x) >= 2:
-            out.append((x, u))
+            width = recorded_dead_zone(d)
+            out.append((x, stick_of(u, width), width))
     return out
 
 
@@ -190,6 +246,10 @@ class TimingData:
         Sampling step (s).
     start : {"steady", "rest", "auto"}
         How the trials start (module docstring).
+
+    Where a trial's device recorded a dead zone (:func:`recorded_dead_zone`), eq. (T1) is written for the stick
+    behind its inputs (:func:`stick_of`); a sample inside the dead zone reads 0 whatever the stick did there, so a
+    dead zone wide against the pilot's inputs leaves the gain biased (a censored sample is taken as 0).
     """
 
     def __init__(self, demos: Iterable[Any], n: int, m: int, dt: float, start: str = "auto") -> None:
@@ -201,15 +261,18 @@ class TimingData:
         if not trials:
             raise DataError("no demonstration has two or more samples: there is no transition to fit a timing to")
         if start == "auto":
-            scale = max(float(np.abs(u).max()) for _, u in trials) or 1.0
-            start = "rest" if all(np.abs(u[0]).max() <= 1e-12 * scale for _, u in trials) else "steady"
+            scale = max(float(np.abs(u).max()) for _, u, _ in trials) or 1.0
+            start = "rest" if all(np.abs(u[0]).max() <= 1e-12 * scale for _, u, _ in trials) else "steady"
         self.start, self.n, self.m, self.dt = start, n, m, float(dt)
+        widths = sorted({w for _, _, w in trials})
+        #: The dead zone the devices recorded (the largest, where trials differ), 0 where none did.
+        self.dead_zone = float(widths[-1])
         self.n_lags = _n_lags(dt)
         rest = start == "rest"
-        self.rows = [_rows(x, u, self.n_lags, rest) for x, u in trials]
+        self.rows = [_rows(x, u, self.n_lags, rest) for x, u, _ in trials]
         self.lengths = np.array([len(r) for r in self.rows])
         # the instruments: each trial's first state and a constant, at every sample time
-        self.z0 = np.array([np.append(x[0], 1.0) for x, _ in trials])
+        self.z0 = np.array([np.append(x[0], 1.0) for x, _, _ in trials])
         self.q = self.rows[0].shape[1]
         with single_threaded_blas():
             self.VV = np.array([r.T @ r for r in self.rows])
@@ -218,18 +281,17 @@ class TimingData:
     def n_trials(self) -> int:
         return len(self.rows)
 
-    def metric(self, counts: np.ndarray | None = None, instruments: bool = True, relevance: bool = True) -> _Metric:
-        """The sums of eq. (T1) over the trials, each counted ``counts[j]`` times (a resample's multiplicities);
-        ``relevance``: also the instruments' part beyond chance (:meth:`_Metric.relevance`)."""
+    def metric(self, counts: np.ndarray | None = None, instruments: bool = True) -> _Metric:
+        """The sums of eq. (T1) over the trials, each counted ``counts[j]`` times (a resample's multiplicities)."""
         c = np.ones(self.n_trials) if counts is None else np.asarray(counts, dtype=float)
         rows = float(c @ self.lengths)
         early = self._early_raw(c) if self.start == "rest" else None
         VV = np.tensordot(c, self.VV, axes=1)
         if not instruments:
             return _Metric(self, {"VV": VV, "MP": VV}, rows, early={"VV": early, "MP": early}, iv=False)
-        MP, MD, early_p = self._instrumented(c, relevance)
-        sums = {"VV": VV, "MP": MP} if MD is None else {"VV": VV, "MP": MP, "MR": MP - MD}
-        return _Metric(self, sums, rows, early={"VV": early, "MP": early_p, "MR": early_p}, iv=True)
+        MP, MD, early_p, early_r = self._instrumented(c)
+        sums = {"VV": VV, "MP": MP, "MR": MP - MD}
+        return _Metric(self, sums, rows, early={"VV": early, "MP": early_p, "MR": early_r}, iv=True)
 
     def _onset_rows(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Trials with a row ``k``, their rows ``v`` there and their ``b = [u_prev, u, x0]`` (the onset row)."""
@@ -248,20 +310,21 @@ class TimingData:
             out[k] = ((v * w[:, None]).T @ v, (b * w[:, None]).T @ b)
         return out
 
-    def _instrumented(self, c: np.ndarray, own: bool = True
-                      ) -> tuple[np.ndarray, np.ndarray | None, dict[int, tuple[np.ndarray, np.ndarray]] | None]:
+    def _instrumented(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, Any, Any]:
         """``Σ_k A_kᵀ S_k⁺ A_k`` (the instruments' projection, per sample time ``k``: ``S_k = Σ_j c_j z_j z_jᵀ``,
-        ``A_k = Σ_j c_j z_j v_jkᵀ``); with ``own``, its part from each trial's own rows (the leverage
-        ``h_jk = z_jᵀ S_k⁺ z_j`` times ``c_j² v vᵀ``), which the relevance leaves out: by chance alone the
-        instruments "explain" that much; for a rest start, the early times' terms as stored and as onset rows."""
+        ``A_k = Σ_j c_j z_j v_jkᵀ``) and its part from each trial's own rows (the leverage ``h_jk = z_jᵀ S_k⁺ z_j``
+        times ``c_j² v vᵀ``): by chance alone the instruments "explain" that much of any noise, which the criterion
+        and the relevance leave out; for a rest start, the early times' terms of both (as stored and as onset
+        rows)."""
         q, m, n = self.q, self.m, self.n
         keep = c > 0
         z, lengths = self.z0[keep], self.lengths[keep]
         rows = [r for r, k in zip(self.rows, keep, strict=True) if k]
         cw = c[keep]
         T = int(lengths.max())
-        MP, MD = np.zeros((q, q)), (np.zeros((q, q)) if own else None)
+        MP, MD = np.zeros((q, q)), np.zeros((q, q))
         early: dict[int, tuple[np.ndarray, np.ndarray]] | None = {} if self.start == "rest" else None
+        early_r: dict[int, tuple[np.ndarray, np.ndarray]] | None = {} if self.start == "rest" else None
         step = max(self.n_lags, _BLOCK_ROWS // max(len(rows), 1))
         for k0 in range(0, T, step):
             k1 = min(T, k0 + step)
@@ -278,16 +341,18 @@ class TimingData:
             Rz = R @ z.T  # (C, a, J)
             RA = (Rz * w.T[:, None, :]) @ np.swapaxes(V, 0, 1)  # R_k A_k: (C, a, q)
             MP += RA.reshape(-1, q).T @ RA.reshape(-1, q)
-            if early is not None and k0 == 0:
+            h = (Rz**2).sum(axis=1).T  # z_jᵀ S_k⁺ z_j, (J, C)
+            own = np.sqrt(cw[:, None] ** 2 * (w > 0) * h)  # (J, C)
+            Vw = V * own[..., None]
+            MD += Vw.reshape(-1, q).T @ Vw.reshape(-1, q)
+            if early is not None and early_r is not None and k0 == 0:
                 for k in range(min(self.n_lags, k1)):
                     b = np.concatenate([V[:, k, : 2 * m], z[:, :n]], axis=1)
                     RB = (Rz[k] * w[:, k][None, :]) @ b
+                    bw = b * own[:, k][:, None]
                     early[k] = (RA[k].T @ RA[k], RB.T @ RB)
-            if MD is not None:
-                h = (Rz**2).sum(axis=1).T  # z_jᵀ S_k⁺ z_j, (J, C)
-                Vw = (V * np.sqrt(cw[:, None] ** 2 * (w > 0) * h)[..., None]).reshape(-1, q)
-                MD += Vw.T @ Vw
-        return MP, MD, early
+                    early_r[k] = (RA[k].T @ RA[k] - Vw[:, k].T @ Vw[:, k], RB.T @ RB - bw.T @ bw)
+        return MP, MD, early, early_r
 
 
 # ------------------------------------------------------------------------------------------------ one fit
@@ -299,7 +364,7 @@ class _Metric:
 
     A rest start's rows up to its onset row — the first sample after the pilot's reaction, ``k_o = ⌊d/dt⌋ + 1`` —
     are not sums of stored columns: before it the pilot has seen nothing (``x̃ = 0``), and at it the stick moved for
-    only part of the sample, ``x̃ = w x[0]`` (:func:`_onset_weight`; the vehicle rests until the pilot acts). Their
+    only part of the sample, ``x̃ = w x[0]`` (:func:`onset_weight`; the vehicle rests until the pilot acts). Their
     stored rows are taken out of the sums (``early``) and these put in.
     """
 
@@ -348,7 +413,7 @@ class _Metric:
         onset = l0 + 1
         B, n, m = len(delay), d.n, d.m
         H_xx, H_xc, H_cc = np.empty((B, n, n)), np.empty((B, n, m)), np.empty((B, m))
-        weight = _onset_weight(delay, tau, d.dt)
+        weight = onset_weight(delay, tau, d.dt)
         for k in np.unique(onset):
             i = np.flatnonzero(onset == k)
             split = self._split(kind, int(k))
@@ -389,8 +454,12 @@ class _Metric:
         """The criterion and (with ``gains``) the gains (batch, m, n) at every ``(d, τ)`` pair.
 
         With instruments: LIML per input, ``κ_i = min_K (c_i − x̃K)ᵀP(c_i − x̃K) / (c_i − x̃K)ᵀ(c_i − x̃K)``, the
-        smallest generalized eigenvalue of the ``[c_i, x̃]`` moments, summed over the inputs. Without: least
-        squares, the residual sum of squares relative to ``c_i``'s (scale-free, as ``κ``).
+        smallest generalized eigenvalue of the ``[c_i, x̃]`` moments, summed over the inputs: the share of the
+        residual the trials' starts explain, which for noise alone is the same at any ``(d, τ)`` (the
+        instruments' leverage), so a wrong timing can only add to it. On a pilot the model does not fit (the
+        landing simulator's cascade) the misfit counts for less where the lag amplifies the noise, and the
+        longest lag wins with a gain that does not stabilize the plant: :func:`identify_timing` refuses that.
+        Without instruments: least squares, the residual sum of squares relative to ``c_i``'s (scale-free, as κ).
         """
         Hr = self.blocks("VV", delay, lag_s)
         n, m = self.data.n, self.data.m
@@ -421,8 +490,6 @@ class _Metric:
         each trial's own rows give by chance (1 for least squares; NaN where not computed)."""
         if not self.iv:
             return 1.0
-        if "MR" not in self.sums:
-            return float("nan")
         H_iv = self.blocks("MR", np.array([delay]), np.array([lag_s]))[0][0]
         H_raw = self.blocks("VV", np.array([delay]), np.array([lag_s]))[0][0]
         Lc = np.linalg.cholesky(H_raw)
@@ -509,7 +576,7 @@ def _search(metric: _Metric, delay_s: float | None, lag_s: float | None
 
 
 def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None = None,
-               lag_s: float | None = None, counts: np.ndarray | None = None, _relevance: bool = True) -> TimingFit:
+               lag_s: float | None = None, counts: np.ndarray | None = None) -> TimingFit:
     """Fit eq. (T1): ``(d̂, τ̂)`` by the criterion (or the ones given), and ``K̂`` at them.
 
     Parameters
@@ -528,7 +595,7 @@ def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None 
         if v is not None and not (0.0 <= v <= top):
             raise DataError(f"{name} must lie in [0, {top:g}] s, got {v!r}")
     with single_threaded_blas():
-        metric = data.metric(counts, instruments=method == "liml", relevance=_relevance)
+        metric = data.metric(counts, instruments=method == "liml")
         try:
             d_hat, t_hat, K, delays, profile = _search(metric, delay_s, lag_s)
         except np.linalg.LinAlgError as exc:
@@ -560,6 +627,8 @@ class PilotTiming:
         ``"liml"`` or ``"direct"`` (see :func:`fit_timing`).
     reason : str
         Why that method (the instruments' relevance, or the cause of the fallback to least squares).
+    dead_zone : float
+        The dead zone the devices recorded (0: none), through which the inputs were read back to the stick.
     start : str
         How the trials were taken to start (``"steady"`` or ``"rest"``).
     relevance : float
@@ -591,17 +660,22 @@ class PilotTiming:
     ci: float
     seed: int
     reason: str = ""
+    dead_zone: float = 0.0
 
     def describe(self) -> str:
         """One line for the terminal: the delay and the lag with their intervals, and how they were found."""
         def part(name: str, key: str, v: float, lo: float, hi: float) -> str:
             if key in self.fixed:
                 return f"{name} {v:.3g} s (given)"
+            if not self.n_boot:
+                return f"{name} {v:.3g} s"
             return f"{name} {v:.3g} s [{lo:.3g}, {hi:.3g}]"
 
         how = ("instrumental variables on the trials' starts (LIML)" if self.method == "liml" else
                "least squares (the starts do not move every state: biased in closed loop)")
         start = "at rest" if self.start == "rest" else "steady"
+        if self.dead_zone:
+            start += f"; the inputs read back through the devices' recorded dead zone {self.dead_zone:.3g}"
         boot = (f"{self.ci:g} % intervals over {self.n_boot - self.n_failed} resamples of {self.n_trials} trials"
                 if self.n_boot else "no intervals")
         return (f"pilot timing: {part('reaction delay', 'delay', self.delay_s, self.delay_lo, self.delay_hi)}, "
@@ -613,6 +687,7 @@ class PilotTiming:
         return {"delay_s": self.delay_s, "delay_ci": [self.delay_lo, self.delay_hi], "lag_s": self.lag_s,
                 "lag_ci": [self.lag_lo, self.lag_hi], "method": self.method, "start": self.start,
                 "relevance": self.relevance, "reason": self.reason, "fixed": list(self.fixed),
+                "dead_zone": self.dead_zone,
                 "n_trials": self.n_trials,
                 "n_boot": self.n_boot, "n_failed": self.n_failed, "ci": self.ci}
 
@@ -621,7 +696,7 @@ def identify_timing(
     demos: Iterable[Any],
     plant: Any,
     *,
-    method: str = "auto",
+    method: str = "liml",
     delay_s: float | None = None,
     lag_s: float | None = None,
     start: str = "auto",
@@ -638,9 +713,14 @@ def identify_timing(
         In the coordinates the gain acts on (goal-relative: states minus their targets).
     plant : LinearSystem
         Anything with ``n``, ``m`` and ``dt``.
-    method : {"auto", "liml", "direct"}
-        ``"auto"``: LIML where its instruments explain the seen states beyond chance (relevance > 0), else least
-        squares (``method`` of the result says which; ``reason`` why).
+    method : {"liml", "direct"}
+        ``"liml"``: instrumental variables on the trials' starts, refused (``ModelError``, which says why) where
+        they explain the seen states no better than chance (relevance ≤ 0), where the best fit lies at the end of
+        the range searched (:data:`DELAY_MAX_S`, :data:`LAG_MAX_S`: no interior optimum) or, for a plant with
+        ``A`` and ``B``,
+        where the pilot's own loop at the best-fitting timing would not be stable
+        (:func:`timed_spectral_radius`: a pilot the model does not fit, whose best fit is the longest lag with a
+        gain no pilot could fly with); ``"direct"``: least squares, biased in closed loop.
     delay_s, lag_s : float, optional
         Given values instead of estimated ones (``0, 0``: the paper's ``u = K x``, the gain alone resampled).
     start : {"auto", "steady", "rest"}
@@ -655,39 +735,44 @@ def identify_timing(
     Raises
     ------
     ModelError
-        If the fit on all trials fails (a singular problem: the demonstrations do not excite every state).
+        If the fit on all trials fails (a singular problem: the demonstrations do not excite every state), or is
+        refused (``method="liml"``).
     """
     if not 0 < ci < 100:
         raise DataError(f"ci must be a percentage in (0, 100), got {ci}")
     if isinstance(n_boot, bool) or not isinstance(n_boot, int | np.integer) or n_boot < 0:
         raise DataError(f"n_boot must be a non-negative integer, got {n_boot!r}")
-    if method not in ("auto", "liml", "direct"):
-        raise DataError(f"the timing is identified by 'auto', 'liml' or 'direct', not {method!r}")
+    if method not in ("liml", "direct"):
+        raise DataError(f"the timing is identified by 'liml' or 'direct', not {method!r}")
     data = TimingData(demos, int(plant.n), int(plant.m), float(plant.dt), start)
-    reason = "as requested"
-    if method == "direct":
-        point = fit_timing(data, "direct", delay_s=delay_s, lag_s=lag_s)
-    else:
-        try:
-            point = fit_timing(data, "liml", delay_s=delay_s, lag_s=lag_s)
-            if method == "auto":
-                reason = f"instruments relevant: {point.relevance:.2g} beyond chance"
-                if not point.relevance > 0:
-                    raise ModelError(f"the trials' starts explain the seen states no better than chance "
-                                     f"(relevance {point.relevance:.2g})")
-        except ModelError as exc:
-            if method == "liml":
-                raise
-            reason = f"fallback to least squares: {exc}"
-            point = fit_timing(data, "direct", delay_s=delay_s, lag_s=lag_s)
-    method = point.method
+    point = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s)
+    reason = "least squares, as requested"
+    if method == "liml":
+        reason = f"instruments relevant: {point.relevance:.2g} beyond chance"
+        if not point.relevance > 0:
+            raise ModelError(f"the trials' starts explain the seen states no better than chance (relevance "
+                             f"{point.relevance:.2g}): they do not move every state")
+        ends = [f"{name} {v:.3g} s" for name, v, top, given in (("delay", point.delay_s, DELAY_MAX_S, delay_s),
+                                                                ("lag", point.lag_s, LAG_MAX_S, lag_s))
+                if given is None and v >= top - 1e-6]
+        if ends:
+            raise ModelError(f"the best-fitting timing lies at the end of the range searched ({', '.join(ends)}; "
+                             f"a human's delay is 0.1-0.3 s, a lag 0.05-0.15 s): the timing model does not fit "
+                             "this pilot")
+        if hasattr(plant, "A") and hasattr(plant, "B"):
+            rho = timed_spectral_radius(plant.A, plant.B, point.K, point.delay_s, point.lag_s, data.dt)
+            if not rho < 1.0:
+                raise ModelError(f"at the best-fitting timing (delay {point.delay_s:.3g} s, lag {point.lag_s:.3g} s) "
+                                 f"the pilot's own loop would not be stable (spectral radius {rho:.4g} with the delay "
+                                 "and the lag), though the demonstrations were flown: the timing model does not fit "
+                                 "this pilot")
     rng = np.random.default_rng(seed)
     J = data.n_trials
     fits, failed = [], 0
     for b in range(int(n_boot)):
         counts = np.bincount(rng.integers(0, J, size=J), minlength=J)
         try:
-            fits.append(fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts, _relevance=False))
+            fits.append(fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts))
         except (ModelError, np.linalg.LinAlgError):
             failed += 1
         if progress is not None:
@@ -704,4 +789,4 @@ def identify_timing(
         K_samples=readonly(np.array([f.K for f in fits]).reshape(len(fits), data.m, data.n)),
         delay_samples=readonly(d_s), lag_samples=readonly(t_s), method=method, start=data.start,
         relevance=point.relevance, fixed=fixed, n_trials=J, n_boot=int(n_boot), n_failed=failed, ci=float(ci),
-        seed=int(seed), reason=reason)
+        seed=int(seed), reason=reason, dead_zone=data.dead_zone)

@@ -16,12 +16,12 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
-from workbench.defaults import N_COMPONENTS, REG_COVAR
+from workbench.defaults import N_COMPONENTS, REG_COVAR, TIMING
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
 from workbench.models.files import ModelFile
-from workbench.models.fitting import as_vector, demo_list, fit_gain, fit_objective_or_reason, references
+from workbench.models.fitting import as_vector, demo_list, fit_objective_or_reason, fit_timed_gain, references
 from workbench.models.prediction import Policy
 from workbench.models.storage import (
     gain_choice_restore,
@@ -32,6 +32,7 @@ from workbench.models.storage import (
     objective_state,
 )
 from workbench.models.taskgmr import TaskGMRModel
+from workbench.models.timed import commands
 from workbench.plant.system import LinearSystem
 
 __all__ = ["IOCOnlyModel", "GMROnlyModel", "PersistenceModel"]
@@ -120,8 +121,9 @@ class IOCOnlyModel(BehaviorModel):
     Parameters
     ----------
     system : LinearSystem
-    gain_method, structure
-        As for :class:`HumanBehaviorModel`.
+    gain_method, timing, structure
+        As for :class:`HumanBehaviorModel` (with the pilot's timing, the residuals are of the pilot's command at the
+        seen state).
     fit_objective : bool
         Also solve the inverse LQR (``objective_``); off by default, the prediction does not use it.
     noise, noise_window, noise_folds, noise_horizon
@@ -134,12 +136,13 @@ class IOCOnlyModel(BehaviorModel):
 
     @classmethod
     def for_method(cls, system: LinearSystem, settings: MethodSettings) -> IOCOnlyModel:
-        return cls(system, gain_method=settings.gain_method)
+        return cls(system, gain_method=settings.gain_method, timing=settings.timing)
 
     def __init__(
         self,
         system: LinearSystem,
         gain_method: str = IV_OR_DIRECT,
+        timing: str | tuple[float, float] = TIMING,
         structure: str = "full",
         fit_objective: bool = False,
         noise: str = "calibrated",
@@ -149,6 +152,7 @@ class IOCOnlyModel(BehaviorModel):
     ) -> None:
         super().__init__(system)
         self.gain_method = gain_method
+        self.timing = timing
         self.structure = structure
         self.fit_objective = fit_objective
         self.noise = noise
@@ -164,10 +168,18 @@ class IOCOnlyModel(BehaviorModel):
         self._check_noise()
         ds = demo_list(demos, self.system, "IOCOnlyModel.fit")
         refs, self.goal_relative_ = references(ds, self.system.n)
-        K, self.gain_choice_ = fit_gain(ds, refs, self.system, self.gain_method)
+        K, self.gain_choice_, self.timing_, pt = fit_timed_gain(ds, refs, self.system, self.gain_method, self.timing)
+        self.pilot_timing_ = None if pt is None else pt.to_dict()
         self.gain_method_ = self.gain_choice_.method
         self.objective_, self.objective_error_ = fit_objective_or_reason(self, K)
-        W = [d.u - (d.x - r) @ K.T for d, r in zip(ds, refs, strict=True)]
+        t = self._timing()
+        W = []
+        for d, r in zip(ds, refs, strict=True):
+            if t is None:
+                W.append(d.u - (d.x - r) @ K.T)
+            else:
+                seen, command, acted = commands(d.x, d.u, t)
+                W.append((command - (seen - r) @ K.T)[acted])
         Wall = np.concatenate(W)
         m = self.system.m
         # a tiny floor keeps the factor defined for an input that never deviates from K̂x

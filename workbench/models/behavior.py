@@ -31,6 +31,7 @@ import numpy as np
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.digest import set_digest, trial_digest
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError, WorkbenchError
+from workbench.models import timed
 from workbench.models.files import ModelFile
 from workbench.models.fitting import as_vector, envelope_exit, goal_of, json_seed, state_envelope
 from workbench.models.prediction import (
@@ -70,6 +71,7 @@ class MethodSettings:
     gain_method: str
     fit_objective: bool
     cv_grid: dict[str, tuple] | None = None
+    timing: Any = "identify"  # defaults.TIMING: the pilot's timing (workbench.method.timing)
 
 
 class BehaviorModel(abc.ABC):
@@ -189,6 +191,19 @@ class BehaviorModel(abc.ABC):
         """The (A, B) a rollout steps with: the plant's (the persistence baseline replaces it)."""
         return self.system.A, self.system.B
 
+    def _timing(self) -> timed.Timing | None:
+        """The pilot's timing the model applies between its policy and the plant (:mod:`workbench.models.timed`), or
+        None: the policy's input acts at once (the paper's ``u = K x``; every model fitted without timing)."""
+        t = getattr(self, "timing_", None)
+        return t if t is not None and t.active else None
+
+    def pasts(self, demo: Demonstration, starts: Sequence[int]) -> list[timed.Past] | None:
+        """What rollouts from samples ``starts`` of a recorded trial need from before them (the states and the stick
+        a delayed, lagged pilot still acts on), for :meth:`predict_many`'s ``pasts``; None for a model without
+        timing (it needs nothing)."""
+        t = self._timing()
+        return None if t is None else timed.pasts_from(demo.x, demo.u, starts, t)
+
     def _reference(self, target: np.ndarray) -> np.ndarray:
         """The state the linear term regulates to for a task: its target if fitted goal-relative, else 0."""
         return target if getattr(self, "goal_relative_", False) else np.zeros(self.system.n)
@@ -275,13 +290,20 @@ class BehaviorModel(abc.ABC):
 
     def _whitened(self, demos: Sequence[Demonstration], unseen: bool = False) -> list[np.ndarray]:
         """``L(x)⁻¹(u − m(x))`` along every demonstration, in its own task frames (for ``unseen`` trials, the goal
-        a prediction would use: the known target, else :meth:`default_target`, never the recorded end)."""
+        a prediction would use: the known target, else :meth:`default_target`, never the recorded end). With the
+        pilot's timing, of the command at the seen state on the samples the pilot acted on."""
         m = self.system.m
+        t = self._timing()
         out = []
         for d in demos:
-            mean, Sigma = self._policy(d.x[0], self._goal_for(d) if unseen else goal_of(d))(d.x)
+            policy = self._policy(d.x[0], self._goal_for(d) if unseen else goal_of(d))
+            X, U = d.x, d.u
+            if t is not None:
+                seen, command, acted = timed.commands(d.x, d.u, t)
+                X, U = seen[acted], command[acted]
+            mean, Sigma = policy(X)
             L = psd_sqrt(Sigma + 1e-12 * np.eye(m))
-            out.append(np.linalg.solve(L, (d.u - mean)[..., None])[..., 0])
+            out.append(np.linalg.solve(L, (U - mean)[..., None])[..., 0])
         return out
 
     def _fit_noise(self, demos: list[Demonstration]) -> None:
@@ -335,7 +357,8 @@ class BehaviorModel(abc.ABC):
                 starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CALIBRATION_STARTS]
                 if starts:
                     X_true = np.stack([d.x[s : s + H + 1] for s in starts])
-                    cases.append((sub._policy(d.x[0], sub._goal_for(d)), d.x[starts], X_true))
+                    cases.append((sub._policy(d.x[0], sub._goal_for(d)), d.x[starts], X_true, sub.pasts(d, starts),
+                                  sub._timing()))
         self.noise_scale_, self.noise_rho_ = scale, rho
         if cases:
             idx = self.system.r.position or tuple(range(self.system.n))
@@ -343,15 +366,48 @@ class BehaviorModel(abc.ABC):
             self.noise_scale_ = scale * factor
             self.noise_band_factor_, self.noise_band_coverage_ = factor, cov
 
-    def input_distribution(self, X: Any, x0: Any, target: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    def input_distribution_along(self, demo: Demonstration, target: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """The model's Gaussian over each recorded input of a trial, given the trial before it: mean (N, m) and
+        covariance (N, m, m), in the trial's task (its first state, ``target`` or its own target).
+
+        Without the pilot's timing this is :meth:`input_distribution` at the recorded states; with it, the input
+        the stick reaches from its previous reading toward the command for the state the pilot saw
+        (:func:`workbench.models.timed.one_step`).
+        """
+        self._check_fitted("input_distribution_along")
+        tgt = demo.target if target is None else target
+        policy = self._policy(*self._task(demo.x[0], tgt))
+        t = self._timing()
+        if t is None:
+            return policy(self._states(demo.x, f"{type(self).__name__}.input_distribution_along"))
+        return timed.one_step(policy, demo.x, demo.u, t)
+
+    def input_distribution(self, X: Any, x0: Any, target: Any = None, *,
+                           pasts: Sequence[timed.Past | None] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The model's Gaussian over the operator's input at states ``X`` for the task (``x0``, ``target``).
 
         Returns the mean (N, m) and covariance (N, m, m). For the proposed model this is
-        ``K̂x + μ̂(x)`` and ``Σ̂(x)`` (eqs. (20), (24)-(27)); ``target`` defaults to the training target.
+        ``K̂x + μ̂(x)`` and ``Σ̂(x)`` (eqs. (20), (24)-(27)); ``target`` defaults to the training target. With the
+        pilot's timing and ``pasts`` (one per row, :meth:`pasts`), the input each row's stick reaches from the one
+        before toward the command for the state the pilot saw (as :meth:`input_distribution_along`); without
+        ``pasts``, the command's Gaussian at ``X`` itself.
         """
         self._check_fitted("input_distribution")
         X = self._states(X, f"{type(self).__name__}.input_distribution")
-        return self._policy(*self._task(x0, target))(X)
+        policy = self._policy(*self._task(x0, target))
+        t = self._timing()
+        if t is None or pasts is None:
+            return policy(X)
+        if len(pasts) != len(X):
+            raise ModelError(f"{type(self).__name__}.input_distribution: one past per state, got {len(pasts)} for "
+                             f"{len(X)}")
+        st = timed.Stepper(t, X, pasts, 0)
+        seen, kind = st.seen()
+        mean, cov = policy(seen)
+        share = np.where(kind == 1, 0.0, np.where(kind == 2, t.onset_weight, 1.0)) * (1.0 - t.a)
+        if t.start != "rest":  # a settled stick (no stick before: the trial's first sample) is the command itself
+            share = np.where([p is None or p.stick is None for p in pasts], 1.0, share)
+        return st.advance(mean, kind), cov * (share**2)[:, None, None]
 
     def predict(
         self,
@@ -365,6 +421,7 @@ class BehaviorModel(abc.ABC):
         percentiles: Sequence[float] = (5, 50, 95),
         return_samples: bool = False,
         task_x0: Any = None,
+        past: timed.Past | None = None,
     ) -> Prediction:
         """Predict ``horizon`` steps from ``x0`` (the section "Trajectory Prediction" of the method paper).
 
@@ -389,6 +446,9 @@ class BehaviorModel(abc.ABC):
         task_x0 : (n,) array, optional
             The start state of the task (the start frame, eq. (33)); default ``x0``. When predicting from
             the middle of a trial, pass the trial's first state.
+        past : Past, optional
+            For a model with the pilot's timing: the states and the stick before ``x0`` (:meth:`pasts`); default a
+            trial's first sample (steady there, or at rest, as the model's trials started).
         """
         self._check_fitted("predict")
         x0 = as_vector(x0, self.system.n, f"{type(self).__name__}.predict: start state x0")
@@ -402,6 +462,7 @@ class BehaviorModel(abc.ABC):
             percentiles=percentiles,
             return_samples=return_samples,
             task_x0s=None if task_x0 is None else [task_x0],
+            pasts=None if past is None else [past],
         )[0]
 
     def predict_many(
@@ -416,11 +477,14 @@ class BehaviorModel(abc.ABC):
         percentiles: Sequence[float] = (5, 50, 95),
         return_samples: bool = False,
         task_x0s: Any = None,
+        pasts: Sequence[timed.Past | None] | None = None,
     ) -> list[Prediction]:
         """:meth:`predict` from every row of ``x0s`` (B, n); starts sharing a task roll out as one batch.
 
         ``targets`` is one (n,) target for all, a (B, n) array, or None (training target); ``task_x0s``
-        likewise gives each start's task start state (default the start itself).
+        likewise gives each start's task start state (default the start itself); ``pasts`` each start's
+        :class:`~workbench.models.timed.Past` (:meth:`pasts`), which a model with the pilot's timing rolls out from
+        (the delayed states and the lagged stick carried in); a model without timing ignores it.
         """
         self._check_fitted("predict")
         if not self.draws_samples:  # a band of zero width would claim certainty
@@ -450,6 +514,9 @@ class BehaviorModel(abc.ABC):
                 raise ModelError(f"{where}: task_x0s must be ({Bn}, {n}), got {np.shape(task_x0s)}")
         if targets is None:
             T = np.array([self.default_target(t0) for t0 in T0])
+        if pasts is not None and len(pasts) != Bn:
+            raise ModelError(f"{where}: pasts must give one past per start ({Bn}), got {len(pasts)}")
+        timing = self._timing()
         sys_ = self.system
         A, B = self._dynamics()
         clip_fn = sys_.clip if clip else None
@@ -461,14 +528,24 @@ class BehaviorModel(abc.ABC):
         method = type(self).__name__
         for idx in groups.values():
             policy = self._policy(T0[idx[0]], T[idx[0]])
-            Xm, Um, Sm = rollout_mean(A, B, policy, X0[idx], int(n_steps), clip_fn)
+            if timing is None:
+                Xm, Um, Sm = rollout_mean(A, B, policy, X0[idx], int(n_steps), clip_fn)
+            else:
+                Xm, Um, Sm = timed.rollout_mean(A, B, policy, X0[idx], int(n_steps), timing,
+                                                None if pasts is None else [pasts[b] for b in idx], clip_fn)
             for j, b in enumerate(idx):
                 extra: dict[str, Any] = {}
                 if samples:
-                    Xs, Us = rollout_samples(
-                        A, B, policy, X0[b], int(n_steps), int(samples), rng, self.noise_rho_, clip_fn,
-                        self.noise_scale_,
-                    )
+                    if timing is None:
+                        Xs, Us = rollout_samples(
+                            A, B, policy, X0[b], int(n_steps), int(samples), rng, self.noise_rho_, clip_fn,
+                            self.noise_scale_,
+                        )
+                    else:
+                        Xs, Us = timed.rollout_samples(
+                            A, B, policy, X0[b], int(n_steps), int(samples), rng, timing,
+                            None if pasts is None else pasts[b], self.noise_rho_, clip_fn, self.noise_scale_,
+                        )
                     extra = {
                         "percentiles": pct,
                         "x_bands": np.percentile(Xs, pct, axis=0),

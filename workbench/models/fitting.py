@@ -16,7 +16,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DegenerateFitWarning, ModelError
-from workbench.method.gain import GainChoice, choose_gain
+from workbench.method.gain import IV_OR_DIRECT, GainChoice, _unstable_mode, assisted_note, choose_gain
 from workbench.method.inverse_lqr_sdp import inverse_lqr
 from workbench.method.objective import TaskObjective
 from workbench.plant.system import LinearSystem
@@ -28,6 +28,9 @@ __all__ = [
     "goal_of",
     "references",
     "fit_gain",
+    "fit_timed_gain",
+    "check_timing",
+    "timing_setting",
     "fit_objective_or_reason",
     "state_envelope",
     "envelope_exit",
@@ -107,6 +110,84 @@ def fit_gain(
                 for d, r in zip(demos, refs, strict=True)]
     K, choice = choose_gain(shifted, system, method)
     return np.ascontiguousarray(K), choice
+
+
+def check_timing(timing: Any, where: str) -> str | tuple[float, float]:
+    """A model's ``timing`` setting: ``"identify"``, ``"none"`` or a given ``(delay_s, lag_s)`` pair."""
+    if timing in ("identify", "none"):
+        return timing
+    try:
+        delay, lag = (float(v) for v in timing)
+    except (TypeError, ValueError):
+        raise ModelError(f"{where}: timing must be 'identify', 'none' or (delay_s, lag_s), got {timing!r}") from None
+    if not (math.isfinite(delay) and math.isfinite(lag) and delay >= 0 and lag >= 0):
+        raise ModelError(f"{where}: a given timing must be two durations ≥ 0 s, got {timing!r}")
+    return delay, lag
+
+
+def timing_setting(model: Any) -> str | tuple[float, float]:
+    """The timing a resample of a fitted model's trials fits its gain with (``bootstrap(…, timing=…)``): the model's
+    ``timing`` where it fitted one, ``"none"`` where it has none (``timing="none"``, or not identifiable)."""
+    if getattr(model, "timing_", None) is None:
+        return "none"
+    return check_timing(getattr(model, "timing", "identify"), type(model).__name__)
+
+
+def fit_timed_gain(
+    demos: Sequence[Demonstration], refs: Sequence[np.ndarray], system: LinearSystem, method: str, timing: Any
+) -> tuple[np.ndarray, GainChoice, Any, Any]:
+    """K̂ of ``u = K̂(x − r)`` with the pilot's timing (:mod:`workbench.method.timing`), and which estimator made it.
+
+    ``timing="none"``: the paper's instantaneous gain, :func:`fit_gain` (no timing). Otherwise the delay and the lag
+    are identified (``"identify"``) or given (``(delay_s, lag_s)``) and K̂ is the gain on the state the pilot saw:
+    LIML on the trials' starts (``method`` ``"iv"`` or ``"iv-or-direct"``) or least squares (``"direct"``); the DMD
+    gain of eq. (14) has no timing. The gain on the seen state is checked in the loop the pilot flew, with the
+    delay and the lag (:func:`~workbench.method.timing.timed_spectral_radius`), not in ``A + B K̂`` (whose inverse
+    LQR then records its own failure). Where LIML refuses (the starts explain nothing beyond chance, or the gain at
+    the best-fitting timing does not stabilize the plant: a trial or two, or a pilot the timing model does not
+    fit), ``"iv-or-direct"`` with ``timing="identify"`` fits the paper's instantaneous gain and says why.
+
+    Returns
+    -------
+    K, choice, timing, pilot_timing
+        ``timing`` the :class:`~workbench.models.timed.Timing` a model applies (None without timing) and
+        ``pilot_timing`` the :class:`~workbench.method.timing.PilotTiming` point estimate (None without timing).
+    """
+    from workbench.method.timing import identify_timing, timed_spectral_radius
+    from workbench.models.timed import Timing
+
+    timing = check_timing(timing, "fit")
+    if timing == "none":
+        K, choice = fit_gain(demos, refs, system, method)
+        return K, choice, None, None
+    if method == "dmd":
+        raise ModelError("the DMD gain (eq. (14)) is the paper's instantaneous u = Kx: it has no timing; fit with "
+                         "timing='none', or another gain method")
+    shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id, meta=getattr(d, "meta", {}))
+               for d, r in zip(demos, refs, strict=True)]
+    given = {} if timing == "identify" else {"delay_s": timing[0], "lag_s": timing[1]}
+    how = "direct" if method == "direct" else "liml"
+    try:
+        pt = identify_timing(shifted, system, method=how, n_boot=0, **given)
+        K = np.ascontiguousarray(pt.K)
+        rho = timed_spectral_radius(system.A, system.B, K, pt.delay_s, pt.lag_s, system.dt)
+        if not rho < 1.0:  # the loop the pilot flew, with the delay and the lag (Assumption 3 with timing)
+            names = getattr(system, "state_names", None)
+            raise ModelError(f"estimated gain ({pt.method}, with the pilot's timing): the pilot's loop with the delay "
+                             f"and the lag is not stable (spectral radius {rho:.6g} ≥ 1)"
+                             f"{_unstable_mode(system.A, system.B, K, tuple(names) if names is not None else None)}"
+                             f"{assisted_note(list(demos))}")
+    except ModelError as exc:
+        if timing != "identify" or method != IV_OR_DIRECT:
+            raise
+        # too little in the demonstrations to tell the pilot's timing (a trial or two, starts that move nothing):
+        # the paper's instantaneous gain, and the reason said
+        K, choice = fit_gain(demos, refs, system, method)
+        why = " ".join(str(exc).split())
+        return K, GainChoice(method, choice.method, f"{choice.reason}; no timing: it could not be identified "
+                                                     f"({why})"), None, None
+    choice = GainChoice(method, pt.method, f"{pt.reason}; {pt.describe()}")
+    return K, choice, Timing(pt.delay_s, pt.lag_s, system.dt, pt.start, pt.dead_zone), pt
 
 
 def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | None, str | None]:
