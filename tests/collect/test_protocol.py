@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from workbench.collect.protocol import block_order, load_protocol, plan
+from workbench.collect.plan import block_order, plan
+from workbench.collect.protocol import load_protocol
 from workbench.errors import DataError
 
 from .conftest import write_protocol
@@ -33,7 +34,8 @@ def test_paper_multi_subject_holds_one_trial_out_at_random():
     held = []
     for j, subject in enumerate(f"s{k:02d}" for k in range(10)):
         items = plan(p, subject, j)
-        assert items[0].kind == "practice" and items[1].kind == "break"
+        assert [i.kind for i in items[:3]] == ["message", "practice", "break"]  # the briefing, then practice
+        assert items[0].duration_s == 300 and items[0].title == "Briefing"
         trials = _trials(items)
         assert len(trials) == 11 and sum(t.role == "test" for t in trials) == 1
         held.append(next(t.trial for t in trials if t.role == "test"))

@@ -15,7 +15,7 @@ from workbench.collect.task import outcome, replay, step
 from workbench.data.dataset import is_dataset, load_demonstrations
 from workbench.errors import DataError
 
-from .conftest import pilot_gain, rerun_entities, write_protocol
+from .conftest import join, pilot_gain, rerun_entities, write_protocol
 
 
 def _protocol(tmp_path: Path):
@@ -44,7 +44,7 @@ def flown(session: Session, subject: str, slot: int, y_ref: float = -0.3) -> dic
 
 def test_a_trial_is_written_as_a_partition_the_workbench_reads(tmp_path):
     s = Session(tmp_path / "out", _protocol(tmp_path))
-    s.register("s01", {})
+    join(s, "s01", {})
     payload = flown(s, "s01", 0)
     out = s.write_trial(payload)
     assert out["trials_done"] == 1 and out["next"]["slot"] == 1
@@ -62,7 +62,7 @@ def test_the_mcap_holds_states_inputs_and_raw_events(tmp_path):
     from mcap.reader import make_reader
 
     s = Session(tmp_path / "out", _protocol(tmp_path))
-    s.register("s01", {})
+    join(s, "s01", {})
     payload = flown(s, "s01", 0)
     trial_id = s.write_trial(payload)["id"]
     path = tmp_path / "out" / HIDDEN / "mcap" / "s01" / f"{trial_id}.mcap"
@@ -81,7 +81,7 @@ def test_the_mcap_holds_states_inputs_and_raw_events(tmp_path):
 
 def test_the_mcap_opens_in_rerun(tmp_path):
     s = Session(tmp_path / "out", _protocol(tmp_path))
-    s.register("s01", {})
+    join(s, "s01", {})
     trial_id = s.write_trial(flown(s, "s01", 0))["id"]
     entities = rerun_entities(tmp_path / "out" / HIDDEN / "mcap" / "s01" / f"{trial_id}.mcap", tmp_path / "t.rrd")
     assert {"/trial/state", "/trial/input", "/input/events", "/display/frames"} <= entities
@@ -99,7 +99,7 @@ def test_the_mcap_opens_in_rerun(tmp_path):
 ])
 def test_a_trial_the_plant_does_not_reproduce_is_refused_and_nothing_written(tmp_path, damage, message):
     s = Session(tmp_path / "out", _protocol(tmp_path))
-    s.register("s01", {})
+    join(s, "s01", {})
     payload = flown(s, "s01", 0)
     damage(payload)
     with pytest.raises(DataError, match=message):
@@ -110,12 +110,12 @@ def test_a_trial_the_plant_does_not_reproduce_is_refused_and_nothing_written(tmp
 def test_resume_reads_the_disk(tmp_path):
     p = _protocol(tmp_path)
     s = Session(tmp_path / "out", p)
-    s.register("s01", {})
+    join(s, "s01", {})
     assert s.status("s01")["next"]["kind"] == "instructions"
     s.advance("s01", s.status("s01")["next"]["key"])
     s.write_trial(flown(s, "s01", 0))
     again = Session(tmp_path / "out", p)  # a new server on the same folder
-    status = again.register("s01", {})
+    status = again.status("s01")
     assert status["trials_done"] == 1 and status["next"]["slot"] == 1
     assert status["next"]["x0"] == s.start("s01", 1)
     with pytest.raises(DataError, match="already recorded"):
@@ -124,9 +124,10 @@ def test_resume_reads_the_disk(tmp_path):
 
 def test_a_session_folder_is_only_resumed_by_its_own_protocol(tmp_path):
     Session(tmp_path / "out", _protocol(tmp_path))
-    with pytest.raises(DataError, match="a session of protocol 'p'"):
+    with pytest.raises(DataError, match="a session of another protocol") as info:
         Session(tmp_path / "out", load_protocol("paper_single_subject"))
-    with pytest.raises(DataError, match="same --max-trials"):
+    assert "\n" not in str(info.value) and "--new-session" in str(info.value)
+    with pytest.raises(DataError, match=r"blocks\[0\]\.trials: 2 → 1"):
         Session(tmp_path / "out", _protocol(tmp_path).shortened(1))
     with pytest.raises(DataError, match="--seed 0, not 3"):
         Session(tmp_path / "out", _protocol(tmp_path), seed=3)
@@ -136,20 +137,43 @@ def test_a_session_folder_is_only_resumed_by_its_own_protocol(tmp_path):
         Session(tmp_path / "other", _protocol(tmp_path))
 
 
+def test_an_edited_protocol_file_of_the_same_name_does_not_resume_the_session(tmp_path):
+    """The attack's case: the same file name and trial counts, another time limit (and consent): refused, naming
+    what changed; the session stores the protocol's text and digest. Fails on the previous main (accepted)."""
+    path = write_protocol(tmp_path / "p.toml", [{"label": "CS1", "instructions": "c1", "trials": 2}], time_limit_s=30)
+    s = Session(tmp_path / "out", load_protocol(path))
+    join(s, "s01")
+    s.write_trial(flown(s, "s01", 0))
+    head = json.loads((tmp_path / "out" / HIDDEN / "session.json").read_text())
+    assert head["protocol_text"] == path.read_text() and head["protocol_fingerprint"] == s.protocol.fingerprint
+    write_protocol(path, [{"label": "CS1", "instructions": "c1", "trials": 2}], time_limit_s=5)
+    with pytest.raises(DataError, match=r"time_limit_s: 30\.0 → 5\.0"):
+        Session(tmp_path / "out", load_protocol(path))
+    path.write_text(path.read_text().replace("time_limit_s = 5", "time_limit_s = 30")
+                    .replace("A test session.", "Another consent text."))
+    with pytest.raises(DataError, match="consent: 'A test session.' → 'Another consent text.'"):
+        Session(tmp_path / "out", load_protocol(path))
+    # asked for, a new session starts; the old one is kept whole, out of the dataset
+    fresh = Session(tmp_path / "out", load_protocol(path), new_session=True)
+    assert fresh.subjects() == [] and not list((tmp_path / "out").glob("subject=*"))
+    kept = list((tmp_path / "out" / HIDDEN / "previous").glob("*/subject=s01/*.parquet"))
+    assert len(kept) == 1
+
+
 def test_subject_fields_are_checked(tmp_path):
     s = Session(tmp_path / "out", load_protocol("paper_multi_subject"))
     with pytest.raises(DataError, match="not a number"):
-        s.register("s01", {"age": "old"})
+        join(s, "s01", {"age": "old"})
     with pytest.raises(DataError, match="not one of"):
-        s.register("s01", {"gaming": "hourly"})
-    assert s.register("s01", {"age": "31", "gaming": "weekly"})["fields"] == {"age": 31.0, "gaming": "weekly"}
+        join(s, "s01", {"gaming": "hourly"})
+    assert join(s, "s01", {"age": "31", "gaming": "weekly"})["fields"] == {"age": 31.0, "gaming": "weekly"}
 
 
 def test_recorded_practice_stays_out_of_the_dataset(tmp_path):
     path = write_protocol(tmp_path / "p.toml", [{"label": "A", "instructions": "a", "trials": 1}])
     path.write_text(path.read_text() + "[practice]\nduration_s = 5\nrecorded = true\n")
     s = Session(tmp_path / "out", load_protocol(path))
-    s.register("s01", {})
+    join(s, "s01", {})
     payload = flown(s, "s01", 0)
     payload["x0"] = s.start("s01", 0)
     assert s.write_practice(payload)["recorded"]
@@ -164,7 +188,7 @@ def test_a_multi_subject_folder_is_what_evaluate_per_subject_view_and_report_rea
 
     s = Session(tmp_path / "out", load_protocol("paper_multi_subject").shortened(6, 0))
     for j in range(4):
-        s.register(f"s{j:02d}", {})
+        join(s, f"s{j:02d}", {})
         for item in s.plan(f"s{j:02d}"):
             if item.kind == "trial":
                 s.write_trial(flown(s, f"s{j:02d}", item.slot, y_ref=-0.15 - 0.1 * j))
@@ -214,7 +238,7 @@ def test_a_blended_trial_keeps_the_pilots_input_apart_and_is_checked_against_the
 
     model = _StubModel()
     s = Session(tmp_path / "out", _assisted(tmp_path, "blend", 0.4), models={"CS1": model})
-    status = s.register("s01", {})
+    status = join(s, "s01", {})
     s.advance("s01", status["next"]["key"])
     help_ = s.status("s01")["next"]["help"]
     assert help_["kind"] == "blend" and help_["alpha"] == 0.4 and np.array_equal(help_["K"], model.K_)
@@ -243,38 +267,63 @@ def test_a_blended_trial_keeps_the_pilots_input_apart_and_is_checked_against_the
 def test_a_shown_prediction_is_the_models_path_from_the_start(tmp_path):
     model = _StubModel()
     s = Session(tmp_path / "out", _assisted(tmp_path, "show"), models={"CS1": model})
-    s.register("s01", {})
+    join(s, "s01", {})
     s.advance("s01", s.status("s01")["next"]["key"])
     path = np.array(s.status("s01")["next"]["help"]["path"])
     full = model.predict(s.start("s01", 0), s.spec["max_steps"]).x[:, :2]
     assert np.array_equal(path, full[: len(path)]) and path[-1, 1] <= 0 < path[-2, 1]  # drawn to the ground
 
 
-def _as_device(payload: dict, kind: str) -> dict:
-    """The payload with raw readings and a stated calibration that do not give its inputs: a gamepad whose raw
-    readings came from other rest offsets than the stated ones, or the keyboard (whose ramp never gives an LQR
-    pilot's inputs). That they agree when they should is the browser tests' (page and server, bit for bit)."""
+def _as_device(session: Session, payload: dict, kind: str) -> dict:
+    """The payload with raw readings and a complete, recorded calibration that do not give its inputs: a gamepad
+    whose raw readings came from other rest offsets than the stated ones, or the keyboard (whose ramp never gives
+    an LQR pilot's inputs). That they agree when they should is the browser tests' (page and server, bit for bit)."""
     u = np.array(payload["u"])
     if kind == "gamepad":
-        cal = {"kind": "gamepad", "axes": [2, 1], "signs": [1, -1], "offsets": [0.0, 0.3, 0.15, 0.0], "deadzone": 0.05}
+        noise = 0.01
+        cal = {"kind": "gamepad", "axes": [2, 1], "signs": [1, -1], "offsets": [0.0, 0.3, 0.15, 0.0],
+               "deadzone": min(0.3, 3 * noise), "expo": 0.0, "rule": "latest", "rest_noise": noise,
+               "confirmed": [True, True]}
         true_offsets = [0.0, 0.1, -0.05, 0.0]
         raw = np.zeros_like(u)
         for i, (a, sign) in enumerate(zip(cal["axes"], cal["signs"], strict=True)):
             off, v = true_offsets[a], sign * u[:, i]
             raw[:, i] = off + v * np.where(v >= 0, 1 - off, 1 + off)
-        return {**payload, "raw": raw.tolist(), "calibration": cal}
-    return {**payload, "raw": np.sign(u).tolist(), "calibration": {"kind": "keyboard", "ramp_steps": 5}}
+    else:
+        cal = {"kind": "keyboard", "ramp_steps": 5, "ramp_per_step": 0.2, "confirmed": True}
+        raw = np.sign(u)
+    session.calibrate(payload["subject"], cal)
+    return {**payload, "raw": raw.tolist(), "calibration": cal}
 
 
 @pytest.mark.parametrize("kind", ["gamepad", "keyboard"])
 def test_inputs_that_are_not_the_stated_calibration_of_the_raw_sticks_are_refused(tmp_path, kind):
     s = Session(tmp_path / "out", _protocol(tmp_path))
-    s.register("s01", {})
-    payload = _as_device(flown(s, "s01", 0), kind)
+    join(s, "s01", {})
+    payload = _as_device(s, flown(s, "s01", 0), kind)
     with pytest.raises(DataError, match="not the stated calibration of the raw stick reading"):
         s.write_trial(payload)
     assert not list((tmp_path / "out").glob("subject=*/*"))
     if kind == "gamepad":
-        payload["calibration"]["offsets"] = "x"
-        with pytest.raises(DataError, match="a gamepad needs axes, signs, offsets"):
-            s.write_trial(payload)
+        with pytest.raises(DataError, match="not the subject's recorded calibration"):
+            s.write_trial({**payload, "calibration": {**payload["calibration"], "offsets": [0.0, 0.1, -0.05, 0.0]}})
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"confirmed": [True, False]}, "must be confirmed"),
+    ({"rest_noise": None}, "rest must be measured"),
+    ({"axes": [1, 1]}, "two different axes"),
+    ({"expo": 0.5}, "must be the protocol's"),
+    ({"deadzone": 0.05}, "must be the protocol's"),
+])
+def test_an_incomplete_calibration_is_refused(tmp_path, change, message):
+    """Calibration cannot be skipped: rest measured, both assignments confirmed, the protocol's settings."""
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    join(s, "s01")
+    cal = {"kind": "gamepad", "axes": [2, 1], "signs": [1, -1], "offsets": [0.0] * 4, "deadzone": 0.0, "expo": 0.0,
+           "rule": "latest", "rest_noise": 0.0, "confirmed": [True, True]}
+    s.calibrate("s01", cal)
+    with pytest.raises(DataError, match=message):
+        s.calibrate("s01", {**cal, **change})
+    with pytest.raises(DataError, match="every key must be tried"):
+        s.calibrate("s01", {"kind": "keyboard", "ramp_steps": 5, "confirmed": False})
