@@ -196,8 +196,6 @@ def routes(session: Session, *, on_trial: Callable[[dict[str, Any], dict[str, An
         return out
 
     def live(p: Any) -> dict[str, Any]:
-        if on_live is None:
-            return {}
         p = _need(p, "subject", "slot", "k0", "x")
         subject = check_subject(p["subject"])
         x, k0, slot = p["x"], p["k0"], p["slot"]
@@ -209,6 +207,8 @@ def routes(session: Session, *, on_trial: Callable[[dict[str, Any], dict[str, An
                 and isinstance(slot, int) and not isinstance(slot, bool) and -1 <= slot <= 100_000):
             raise RequestError("live: expected {subject, slot, k0 (a step of the trial), x: [[state], …]} with at "
                                "most 200 states")
+        if on_live is None:
+            return {}
         items = {i.slot: i for i in session.plan(subject) if i.kind == "trial"}
         item = items.get(slot)
         on_live({**p, "subject": subject}, None if item is None else item.to_json())

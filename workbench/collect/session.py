@@ -491,9 +491,13 @@ class Session:
             if self._partition(subject, trial_id).is_file():
                 raise DataError(f"{where}: already recorded; the page is behind (reload it to resume)")
             mcap = self.out / HIDDEN / "mcap" / subject / f"{trial_id}.mcap"
-            _write_mcap(mcap, streams, demo_meta)
-            _write_partition(self, subject, trial_id, demo["x"], demo["u"], demo_meta,
-                             order=int(doc["index"]) * 100_000 + slot)
+            try:
+                _write_mcap(mcap, streams, demo_meta)
+                _write_partition(self, subject, trial_id, demo["x"], demo["u"], demo_meta,
+                                 order=int(doc["index"]) * 100_000 + slot)
+            except BaseException:
+                mcap.unlink(missing_ok=True)  # a disk that filled up between the two: no MCAP of an unwritten trial
+                raise
             row = records.trial_row(demo_meta, len(demo["u"]), self.spec["dt"])
             fresh = self.subject_doc(subject)
             fresh.setdefault("rows", {})[str(slot)] = row
