@@ -103,17 +103,23 @@ def join(session: Session, subject: str, fields: dict | None = None, confirm: bo
     return session.register(subject, fields or {}, {"sha256": session.protocol.consent_sha256}, confirm)
 
 
+def _toml(value) -> str:
+    if isinstance(value, dict):  # an inline table
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
+    return json.dumps(value)
+
+
 def write_protocol(path: Path, blocks: list[dict], **top) -> Path:
     """A small protocol file for a test."""
     lines = [f'title = "{top.get("title", "Test protocol")}"', 'consent = "A test session."']
-    for key in ("counterbalance", "time_limit_s"):
+    for key in ("counterbalance", "time_limit_s", "subjects"):
         if key in top:
             lines.append(f"{key} = {json.dumps(top[key])}")
     if "breaks" in top:
         lines += ["[breaks]", *(f"{k} = {json.dumps(v)}" for k, v in top["breaks"].items())]
     for b in blocks:
         lines.append("[[blocks]]")
-        lines += [f"{k} = {json.dumps(v)}" for k, v in b.items()]
+        lines += [f"{k} = {_toml(v)}" for k, v in b.items()]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
 

@@ -327,3 +327,127 @@ def test_an_incomplete_calibration_is_refused(tmp_path, change, message):
         s.calibrate("s01", {**cal, **change})
     with pytest.raises(DataError, match="every key must be tried"):
         s.calibrate("s01", {"kind": "keyboard", "ramp_steps": 5, "confirmed": False})
+
+
+def test_consent_is_recorded_and_declining_is_a_recorded_path(tmp_path):
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    sha = s.protocol.consent_sha256
+    assert s.decline("s07", {"sha256": sha}) == {"recorded": True, "agreed": False}
+    s.decline("", {"sha256": sha})
+    with pytest.raises(DataError, match="not the consent text of this session"):
+        s.register("s01", {}, {"sha256": "0" * 64})
+    join(s, "s01")
+    records = json.loads((tmp_path / "out" / HIDDEN / "consent.json").read_text())
+    assert [(r["subject"], r["agreed"], r["consent_sha256"]) for r in records] == [
+        ("s07", False, sha), (None, False, sha), ("s01", True, sha)]
+    assert all(r["at"] for r in records) and s.subjects() == ["s01"]  # a decline registers nobody
+    assert s.subject_doc("s01")["consent"]["sha256"] == sha
+
+
+def test_an_id_already_registered_or_not_declared_must_be_confirmed(tmp_path):
+    from workbench.errors import RequestError
+
+    events = []
+    path = write_protocol(tmp_path / "p.toml", [{"label": "A", "instructions": "a", "trials": 1}],
+                          subjects=["s01", "s02"])
+    s = Session(tmp_path / "out", load_protocol(path), on_event=lambda kind, text: events.append((kind, text)))
+    join(s, "s01")
+    with pytest.raises(RequestError) as info:  # typed again in a new browser: not silently joined
+        join(s, "s01")
+    assert info.value.status == 409 and info.value.extra == {"confirm": "repeated"}
+    with pytest.raises(RequestError) as info:
+        join(s, "s1")  # a typo of s01
+    assert info.value.status == 409 and "not one of this session's declared subject IDs" in str(info.value)
+    join(s, "s1", confirm=True)
+    assert s.subjects() == ["s01", "s1"] and [k for k, _ in events] == ["warning"]
+    assert "not one of the declared subjects" in s.subject_doc("s1")["warnings"][0]["text"]
+
+
+def test_trials_csv_and_the_data_dictionary_describe_every_trial_and_key(tmp_path):
+    import pandas as pd
+
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    join(s, "s01")
+    s.start_trial("s01", 0)
+    s.start_trial("s01", 0)  # the first start was lost (a reload): an interruption, two attempts
+    s.write_trial(flown(s, "s01", 0) | {"interruptions": [[1.5, "page hidden", 0.8]]})
+    s.write_trial(flown(s, "s01", 1))
+    table = pd.read_csv(tmp_path / "out" / HIDDEN / "trials.csv")
+    ds = load_demonstrations(tmp_path / "out")
+    assert list(table["id"]) == ds.ids and list(table["outcome"]) == [d.meta["outcome"] for d in ds]
+    first = ds[0].meta
+    assert first["attempts"] == 2 and first["started"] and [g["kind"] for g in first["interruptions"]] == [
+        "restarted", "page hidden"]
+    assert table.loc[0, "interruptions"] == "restarted; page hidden 0.8 s" and table.loc[0, "attempts"] == 2
+    assert first["outcome_reason"].startswith(first["outcome"].split()[0]) and "m/s" in first["outcome_reason"]
+    text = (tmp_path / "out" / HIDDEN / "data_dictionary.md").read_text()
+    from workbench.collect.records import COLUMNS
+
+    for column in table.columns:
+        assert f"| `{column}` |" in text
+    for key in first:  # every metadata key a trial carries is explained
+        assert f"| `{key}` |" in text, key
+    for name in (*ds.state_names, *ds.input_names):
+        assert f"| `{name}` |" in text
+    assert [c for c, _ in COLUMNS] == list(table.columns)
+
+
+def test_an_exclusion_from_the_command_line_is_in_the_trial_and_the_summary(tmp_path, capsys):
+    from workbench.cli import main
+
+    s = Session(tmp_path / "out", _protocol(tmp_path))
+    join(s, "s01")
+    trial = s.write_trial(flown(s, "s01", 0))["id"]
+    assert main(["collect", "--out", str(tmp_path / "out"), "--exclude", trial]) == 2  # a note is needed
+    assert main(["collect", "--out", str(tmp_path / "out"), "--exclude", trial, "--note", "pad fell off"]) == 0
+    (d,) = load_demonstrations(tmp_path / "out")
+    assert d.meta["excluded"] is True and d.meta["exclusion_note"] == "pad fell off"
+    assert "True,pad fell off" in (tmp_path / "out" / HIDDEN / "trials.csv").read_text()
+    assert main(["collect", "--out", str(tmp_path / "out"), "--include", trial]) == 0
+    (d,) = load_demonstrations(tmp_path / "out")
+    assert d.meta["excluded"] is False
+    assert main(["collect", "--out", str(tmp_path / "out"), "--exclude", "nope", "--note", "x"]) == 1
+    assert "no trial 'nope'" in capsys.readouterr().err
+
+
+def test_a_stopping_rule_ends_a_block_once_enough_trials_landed(tmp_path):
+    path = write_protocol(tmp_path / "p.toml", [{"label": "A", "instructions": "a", "trials": 4,
+                                                 "stop": {"landed": 1}}, {"label": "B", "instructions": "b",
+                                                                          "trials": 1}])
+    s = Session(tmp_path / "out", load_protocol(path))
+    join(s, "s01")
+    s.advance("s01", "instructions0")
+    landed = flown(s, "s01", 0, y_ref=-0.02)  # a slow descent lands
+    assert landed["outcome"] == "landed"
+    status = s.write_trial(landed)
+    assert status["trials_skipped"] == 3 and status["trials_total"] == 2 and status["next"]["label"] == "B"
+
+
+def test_a_fit_step_is_run_once_its_model_ready_before_the_subject_goes_on(tmp_path):
+    """The plumbing of a fit step (the fit itself is the slow tests'): started when the subject reaches it, the
+    step refused until the record is there, the model's failure said in one line."""
+    from workbench.collect.fitting import model_paths
+    from workbench.errors import RequestError
+
+    calls = []
+
+    def runner(task):
+        out, subject, label, source, min_trials, seed = task
+        calls.append(task)
+        raise DataError(f"subject {subject}: 0 landed, not excluded {label} train trial(s)")
+
+    path = write_protocol(tmp_path / "p.toml", [{"label": "A", "instructions": "a", "trials": 1}])
+    path.write_text(path.read_text() + '[[blocks]]\nfit = { label = "A" }\n[[blocks]]\nlabel = "A"\n'
+                    'instructions = "b"\ntrials = 1\nrole = "test"\nassist = "show"\n')
+    s = Session(tmp_path / "out", load_protocol(path), fit_runner=runner)
+    join(s, "s01")
+    s.advance("s01", "instructions0")
+    status = s.write_trial(flown(s, "s01", 0))
+    assert status["next"]["kind"] == "fit"
+    s.fits.wait()
+    assert len(calls) == 1 and calls[0][1:5] == ("s01", "A", "train", 3)
+    state = s.status("s01")["next"]["fit"]
+    assert state["state"] == "failed" and "0 landed" in state["reason"]
+    with pytest.raises(RequestError, match="the model of A is failed"):
+        s.advance("s01", "fit1")
+    assert model_paths(tmp_path / "out", "s01", "A")[2].is_file()
