@@ -158,10 +158,13 @@ def new_page(browser, gamepad: bool, viewport: tuple[int, int] = (1100, 760)):
 
 
 def consent(page, url: str, subject: str) -> None:
-    """The consent screen (the ID given in the link), agreed; the subject form has no fields to fill."""
+    """The consent screen (the ID given in the link), agreed; the subject form's fields (if any) left empty."""
     page.goto(f"{url}?subject={subject}")
     page.wait_for_selector("#screen-consent:not([hidden])")
     page.click("#consent-agree")
+    page.wait_for_selector("#screen-subject:not([hidden]), #screen-calibration:not([hidden])")
+    if page.is_visible("#subject-continue"):
+        page.click("#subject-continue")
 
 
 def calibrate(page, rest: list[float] | None = None) -> None:

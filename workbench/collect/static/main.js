@@ -126,7 +126,7 @@ function consent(subject) {
 
 function subjectForm(subject) {
   const p = state.config.protocol;
-  show("subject");
+  if (p.fields.length) show("subject"); // without fields, straight on (the screen only to confirm an ID)
   $("subject-line").textContent = `Subject ID: ${subject}`;
   $("confirm-box").hidden = true;
   $("subject-continue").hidden = false;
@@ -162,6 +162,7 @@ function subjectForm(subject) {
     } catch (err) {
       if (err.status === 409 && err.data && err.data.confirm) {
         // an ID already registered, or not among the declared ones: the subject confirms or changes it
+        show("subject");
         $("confirm-text").textContent = err.message;
         $("confirm-box").hidden = false;
         $("subject-continue").hidden = true;
