@@ -384,12 +384,13 @@ class Session:
                 "summary": self.summary(subject) if nxt.kind == "end" else None}
 
     def summary(self, subject: str) -> list[dict[str, Any]]:
-        """Per block label and role: trials finished and landed, from the subject's trial records."""
+        """Per block label, role and assistance: trials finished and landed, from the subject's trial records."""
         doc = self.subject_doc(subject)
         rows: dict[tuple[str, str], dict[str, Any]] = {}
         for _, r in sorted((doc.get("rows") or {}).items(), key=lambda kv: int(kv[0])):
-            s = rows.setdefault((r["label"], r["role"]), {"label": r["label"], "role": r["role"], "trials": 0,
-                                                          "landed": 0})
+            key = (r["label"], r["role"], r.get("assist", "none"))
+            s = rows.setdefault(key, {"label": r["label"], "role": r["role"], "assist": key[2], "trials": 0,
+                                      "landed": 0})
             s["trials"] += 1
             s["landed"] += r["outcome"] == "landed"
         return list(rows.values())
