@@ -63,7 +63,8 @@ class Session:
         Start a new session in a folder that holds one of another protocol (the old one is kept aside).
     on_event : callable(kind, text), optional
         Told of what the experimenter should see at once: ``warning`` (an unknown or repeated subject ID),
-        ``fit`` (a fit step's result), ``consent`` (a subject declined).
+        ``fit`` (a fit step's result), ``consent`` (a subject declined), ``exclusion`` (the experimenter excluded
+        a trial, or included it again).
 
     Raises
     ------
@@ -544,7 +545,10 @@ class Session:
     def exclude(self, trial_id: str, excluded: bool = True, note: str = "") -> dict[str, Any]:
         """The experimenter excludes a trial from the analysis (or includes it again), with a note."""
         with self._lock:
-            return records.set_exclusion(self.out, trial_id, excluded, note)
+            row = records.set_exclusion(self.out, trial_id, excluded, note)
+        self._event("exclusion", f"{trial_id} " + (f"excluded ({row['exclusion_note']})" if row["excluded"]
+                                                    else "included again"))
+        return row
 
     def overview(self) -> dict[str, Any]:
         """The whole session for the experimenter's page: every subject's progress, trials and fits."""
