@@ -27,10 +27,10 @@ from adapters.mapping import (
     FlagRule,
     Selector,
     load_mapping,
-    select,
     shipped_mappings,
 )
 from adapters.modes import mode_name
+from adapters.selection import select
 from adapters.streams import Streams
 from adapters.summary import log_modes, summarize
 from workbench.errors import DataError, MappingError

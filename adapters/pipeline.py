@@ -2,7 +2,7 @@
 
 Every format goes through the same steps once its reader has produced :class:`~adapters.streams.Streams`:
 
-1. **channels** — each state and input is picked from its stream (:func:`adapters.mapping.select`), put on
+1. **channels** — each state and input is picked from its stream (:func:`adapters.selection.select`), put on
    the mapping's clock (:mod:`adapters.clock`), converted (scale, offset, sign, transform) and cleaned
    (non-finite values and time going backwards dropped and counted);
 2. **spans** — the segmentation rules' spans, intersected (:mod:`adapters.segment`);
@@ -28,10 +28,11 @@ import numpy as np
 
 from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
-from adapters.mapping import ChannelMapping, Selected, channel_values, resolve_channel, select
+from adapters.mapping import ChannelMapping
 from adapters.meta import table_meta, text_meta
 from adapters.modes import AUTOPILOT_HOLDS, mode_name
 from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect, mode_spans, split_at_landing
+from adapters.selection import Selected, channel_values, resolve_channel, select
 from adapters.streams import Streams, clean_series, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet

@@ -25,8 +25,9 @@ import numpy as np
 import pandas as pd
 
 from adapters.formats import format_for_suffix, get_format
-from adapters.mapping import ChannelMapping, Selector, channel_inverse, load_mapping
+from adapters.mapping import ChannelMapping, Selector, load_mapping
 from adapters.meta import format_markers
+from adapters.selection import channel_inverse
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, MappingError
 

@@ -42,11 +42,12 @@ import numpy as np
 import pandas as pd
 
 from adapters.align import GRID_TOLERANCE, Series, sample
-from adapters.mapping import Channel, ChannelMapping, Selector, channel_convert, load_mapping
+from adapters.mapping import Channel, ChannelMapping, Selector, load_mapping
 from adapters.meta import text_meta
 from adapters.modes import mode_name
 from adapters.pipeline import _valid_target
 from adapters.segment import demo_key
+from adapters.selection import channel_convert
 from adapters.streams import field_columns, nearest, split_source
 from adapters.transforms import TRANSFORMS
 from workbench.errors import MappingError

@@ -7,7 +7,8 @@ import pandas as pd
 import pytest
 
 import adapters
-from adapters.mapping import channel_inverse, channel_values, load_mapping, select, shipped_mappings
+from adapters.mapping import load_mapping, shipped_mappings
+from adapters.selection import channel_inverse, channel_values, select
 from adapters.streams import Streams
 from adapters.transforms import TRANSFORMS
 from workbench.errors import MappingError
