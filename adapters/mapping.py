@@ -13,6 +13,8 @@ Schema
     states = ["x", "y", "phi", …]       # channel names, in order (required)
     inputs = ["u1", "u2"]               # (required)
     clock = "log"                       # or { field = "time_boot_ms", scale = 0.001 }: see adapters.clock
+    rc_map = "ardupilot"                # whose RC map gives a {roll}, {pitch}, {throttle}, {yaw} stick its channel:
+                                        # RCMAP_ROLL … (adapters.sticks.RC_MAPS: "ardupilot", "px4")
 
     [channels]                          # one entry per state and input
     x = "LOCAL_POSITION_NED.y"          # a source: "STREAM.FIELD" or "STREAM:FIELD" (for topics with dots)
@@ -23,6 +25,8 @@ Schema
     u2 = { source = "MANUAL_CONTROL.z", scale = 0.001, offset = 0.0, sign = 1 }
     # value = sign * scale * transform(field) + offset; `where = { sysid = 1 }` keeps matching rows only
     u1 = ["manual_control_setpoint.y", "manual_control_setpoint.roll"]   # alternatives: the first present wins
+    u1 = { source = "RCIN.C{roll}", transform = "pwm" }   # a stick by its role: the channel the log's RC map gives
+                                        # it (needs rc_map; adapters.sticks)
     u2 = [{ source = "manual_control_setpoint.z", scale = 2.0, offset = -1.0 },   # alternative channels, each
           { source = "manual_control_setpoint.throttle" }]                        # with its own conversion
 
@@ -53,6 +57,9 @@ Schema
     accuracy = 0.1                      # m/s, the receiver's velocity accuracy: a GPS velocity spreading less
                                         # than it says "not moving", and no verdict is given
 
+    [setpoints]                         # what an input commands, which it must move with (adapters.sticks.check)
+    u1 = "ATT.DesRoll"                  # a channel like those above (alternatives, transform, …)
+
     [tlog.channels]                     # per-format overrides: [<format>.channels], [<format>.segment],
     x = "LOCAL_POSITION_NED.y"          # [<format>.meta], <format>.clock — merged over the tables above
                                         # when a file of that format is read (a declared format's name)
@@ -79,6 +86,7 @@ if TYPE_CHECKING:
 from adapters.formats import FORMATS
 from adapters.modes import MODE_TABLES, mode_name, mode_number
 from adapters.reference import REFERENCE_FORMS, ReferenceRule
+from adapters.sticks import PARAMETER_STREAMS, RC_MAPS, ROLES, placeholders
 from adapters.streams import candidate_streams, nearest
 from adapters.transforms import TRANSFORMS
 from workbench.data.roles import Roles
@@ -104,7 +112,7 @@ FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per decl
 DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", "reference",
-    *FORMAT_NAMES
+    "rc_map", "setpoints", *FORMAT_NAMES
 }
 _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
@@ -239,6 +247,12 @@ class ChannelMapping:
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
     roles: Roles = field(default_factory=Roles)
     reference: ReferenceRule | None = None
+    #: whose RC map gives a stick named by role its channel (a key of adapters.sticks.RC_MAPS)
+    rc_map: str | None = None
+    #: per input, what it commands (its ``name`` is the input's): the stick must move with it (adapters.sticks)
+    setpoints: tuple[Channel, ...] = ()
+    #: the sticks named by role, once resolved against a log (adapters.sticks.resolve); () before
+    sticks: tuple[Any, ...] = ()
 
     def for_format(self, fmt: str) -> ChannelMapping:
         """This mapping with the ``[<fmt>.…]`` overrides merged in (itself when there are none)."""
@@ -281,6 +295,7 @@ class ChannelMapping:
         out += [s for s in (self.meta.source, self.meta.text) if s]
         if self.reference is not None:
             out += [self.reference.estimate, self.reference.gps]
+        out += [v.selector for c in self.setpoints for v in c.variants]
         return out
 
     def stream_candidates(self) -> list[str]:
@@ -291,6 +306,8 @@ class ChannelMapping:
                 names.update(dict.fromkeys(candidate_streams(source)))
                 if ":" not in source and "." not in source:
                     names[source] = None  # a whole stream (a meta table)
+        if self.rc_map is not None:  # the parameters that name the sticks' channels
+            names.update(dict.fromkeys(PARAMETER_STREAMS))
         return list(names)
 
 
@@ -384,11 +401,11 @@ def _selector(value: Any, path: str, where: str, extra: Iterable[str] = ()) -> S
     return Selector(first, tuple(sorted(cond.items())), tuple(rest))
 
 
-def _channel(name: str, value: Any, path: str) -> Channel:
-    where = f"channels.{name}"
+def _channel(name: str, value: Any, path: str, table: str = "channels") -> Channel:
+    where = f"{table}.{name}"
     if isinstance(value, list) and value and any(isinstance(v, dict) for v in value):
         # alternative channels: [table or source, …], the first whose stream and fields a file has wins
-        first, *rest = (_channel(name, v, path) for v in value)
+        first, *rest = (_channel(name, v, path, table) for v in value)
         return replace(first, alternatives=tuple(rest))
     if _sources(value) is not None:
         return Channel(name, _selector(value, path, where))
@@ -587,6 +604,7 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
     if extra:
         raise _fail(at, "channels", f"{extra} are neither states nor inputs")
     channels = tuple(_channel(n, chans[n], at) for n in (*states, *inputs) if n in chans)
+    rc_map, setpoints = _sticks(raw, at, channels, inputs)
     try:
         roles = Roles.from_json(raw.get("roles"), f"{at}: [roles]")
         roles.check(states, f"{at}: [roles]")
@@ -606,7 +624,33 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
         raw=dict(raw),
         roles=roles,
         reference=_reference(raw.get("reference"), at),
+        rc_map=rc_map,
+        setpoints=setpoints,
     )
+
+
+def _sticks(raw: Mapping[str, Any], path: str, channels: tuple[Channel, ...],
+            inputs: tuple[str, ...]) -> tuple[str | None, tuple[Channel, ...]]:
+    """``rc_map`` and ``[setpoints]``: sticks named by role need a known RC map; a setpoint belongs to an input."""
+    rc_map = raw.get("rc_map")
+    if rc_map is not None and rc_map not in RC_MAPS:
+        raise _fail(path, "rc_map", f"unknown RC map {rc_map!r}; known: {', '.join(RC_MAPS)}")
+    for ch in channels:
+        for source in (s for v in ch.variants for s in v.selector.sources):
+            for role in placeholders(source):
+                if role not in ROLES:
+                    raise _fail(path, f"channels.{ch.name}", f"{{{role}}} in {source!r} is not a stick; name one of "
+                                f"{', '.join('{' + r + '}' for r in ROLES)}")
+                if rc_map is None:
+                    raise _fail(path, f"channels.{ch.name}", f"{source!r} names the {role} stick by its role, but "
+                                f"the mapping says no rc_map (whose RC map gives it a channel: "
+                                f"{', '.join(RC_MAPS)})")
+    table = raw.get("setpoints", {})
+    if not isinstance(table, dict):
+        raise _fail(path, "setpoints", f"must be a table of input = source, got {table!r}")
+    if unknown := sorted(set(table) - set(inputs)):
+        raise _fail(path, "setpoints", f"{unknown} are not inputs; inputs: {list(inputs)}")
+    return rc_map, tuple(_channel(n, table[n], path, "setpoints") for n in inputs if n in table)
 
 
 def suggest_mapping(fmt: str, table: str | None, modes: Iterable[str], exclude: str = "") -> str | None:

@@ -33,6 +33,9 @@ from adapters.meta import table_meta, text_meta
 from adapters.modes import AUTOPILOT_HOLDS, mode_name
 from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect, mode_spans, split_at_landing
 from adapters.selection import Selected, channel_values, resolve_channel, select
+from adapters.sticks import check as check_sticks
+from adapters.sticks import describe as describe_sticks
+from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams, clean_series, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
@@ -293,6 +296,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     """
     m = mapping
     m.check_complete()
+    m = resolve_sticks(m, streams)  # a stick named by role, on the channel the log's RC map gives it
     skipped: Counter = Counter()
     check_rules(streams, m)  # a log never armed, or without a kept mode, says so before any channel is read
     series = _channels(streams, m, skipped)
@@ -353,8 +357,15 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             f"skipped: {dict(skipped) or 'nothing'}"
         )
 
+    windows = [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts]
+    stick_cause, stick_note = check_sticks(m, streams, windows)
+    if stick_cause and not still:
+        if not allow_still:
+            raise DataError(stick_cause)
+        still = stick_cause
+    sticks = "; ".join(x for x in (describe_sticks(m, streams), stick_note) if x)
     if not still:
-        still = follows_gps(streams, m, [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts])
+        still = follows_gps(streams, m, windows)
         if still and not allow_still:
             # the terminal shows only this line; the cuts the viewer draws are counted in it
             cut = (f" ({len(flips)} segment{'s' if len(flips) > 1 else ''} cut or dropped at the vehicle's flips "
@@ -392,6 +403,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             }
             if still:
                 meta["still"] = still
+            if sticks:
+                meta["sticks"] = sticks
             if flips:
                 meta["flipped"] = "; ".join(flips)
             if "mode" in span.meta:
@@ -525,6 +538,7 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
     skipped: Counter = Counter()
     try:
         m.check_complete()
+        m = resolve_sticks(m, streams)
         series = _channels(streams, m, skipped)
         seg = m.segment
         rules = replace(m, segment=replace(seg, armed=None, landing=None))

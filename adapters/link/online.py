@@ -48,6 +48,7 @@ from adapters.modes import mode_name
 from adapters.pipeline import _valid_target
 from adapters.segment import demo_key
 from adapters.selection import channel_convert
+from adapters.sticks import with_defaults
 from adapters.streams import field_columns, nearest, split_source
 from adapters.transforms import TRANSFORMS
 from workbench.errors import MappingError
@@ -319,6 +320,8 @@ class OnlineAligner:
                  stem: str = "live") -> None:
         m = load_mapping(mapping)
         m.check_complete()
+        if not m.sticks:  # a live link sends no parameter dump before its data: the firmware's default RC map
+            m = with_defaults(m)
         self.mapping = m
         self.dt = float(m.dt)
         self.gap = float(m.segment.gap)
