@@ -173,6 +173,10 @@ def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
     return f"{streams.path}: mapping {m.name!r}: {'; '.join(parts)} — {cause}, so there is nothing to fit"
 
 
+#: A flight's GPS speed must pass this many times the receiver's velocity accuracy somewhere in its kept segments for
+#: the velocity to be judged or the plant identified: below it the velocity is the receiver's noise (a hover).
+MOTION_OVER_ACCURACY = 10.0
+
 #: Beyond this tilt the thrust points below the horizon: the vehicle is upside down (a flip), whatever its frame.
 FLIP = math.pi / 2
 
@@ -207,8 +211,11 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
     The rule is the coefficient of determination of the GPS velocity by the estimate, ``1 − Σ|v − v_gps|² /
     Σ|v_gps − mean v_gps|²`` over the GPS samples in the segments (north and east together): below 0 the estimate
     explains less of the GPS velocity than a constant would, so it is not the vehicle's velocity and no plant
-    identified from it can be physics. A log without the GPS stream, where the mapping says such a log flew
-    without GPS, dead-reckons. ``""`` where the velocity follows, or where there is nothing to compare.
+    identified from it can be physics. Before it, the flight must move: a GPS speed that never passes
+    :data:`MOTION_OVER_ACCURACY` times the receiver's accuracy (a hover, a vehicle standing) is too little motion to
+    judge the estimate or identify the plant by, and says so (its own cause, not the estimator's). A log without the
+    GPS stream, where the mapping says such a log flew without GPS, dead-reckons. ``""`` where the velocity
+    follows, or where there is nothing to compare.
     """
     ref = m.reference
     if ref is None or not windows:
@@ -248,10 +255,18 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
     if inside.sum() < 3:
         return ""
     tg, g = tg[inside], g[inside]
+    speed = float(np.hypot(g[:, 0], g[:, 1]).max())
+    motion = MOTION_OVER_ACCURACY * ref.accuracy
+    if speed < motion:
+        return (f"{head}: too little motion to identify the plant: the GPS speed ({gps.stream} "
+                f"{', '.join(gps.columns)}) never passes {motion:g} m/s in the kept segments (ten times the receiver's "
+                f"{ref.accuracy:g} m/s velocity accuracy): at most {speed:.2g} m/s over {len(g)} GPS samples — the "
+                f"velocities are the receiver's noise, and neither the estimator nor the plant's physics can be judged "
+                f"from them")
     v = np.column_stack([np.interp(tg, te, e[:, k]) for k in range(2)])
     spread = float(((g - g.mean(axis=0)) ** 2).sum())
-    if spread == 0.0 or np.sqrt(spread / len(g)) <= ref.accuracy:
-        return ""  # the GPS says "not moving" within its own accuracy: nothing to follow
+    if spread == 0.0:
+        return ""
     explained = 1.0 - float(((v - g) ** 2).sum()) / spread
     if explained >= 0.0:
         return ""
