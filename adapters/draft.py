@@ -213,6 +213,8 @@ def _flag_toml(rule: FlagRule) -> dict[str, object]:
         out["bitmask"] = rule.bitmask
     if rule.equals is not None:
         out["equals"] = rule.equals
+    if rule.on:
+        out.update(on=list(rule.on), off=list(rule.off))
     return out
 
 

@@ -36,7 +36,8 @@ Schema
     demo = { source = "NAMED_VALUE_INT.value", where = { name = "demo" } }   # explicit demo field
     mode = { source = "HEARTBEAT.custom_mode", where = { autopilot = 3 }, names = "arducopter",
              keep = ["STABILIZE"] }     # flight-mode spans (names from adapters.modes, or numbers)
-    armed = { source = "HEARTBEAT.base_mode", bitmask = 128 }   # or equals = 2; truthy otherwise
+    armed = { source = "HEARTBEAT.base_mode", bitmask = 128 }   # or equals = 2; truthy otherwise; or events:
+                                        # { source = "EV.Id", on = [10], off = [11] } (ARMED / DISARMED)
     landing = { state = "y", below = 0.0 }   # end at touchdown; or { source = "…landed" } (true = landed)
 
     [meta]                              # where per-demonstration metadata come from (all optional)
@@ -175,13 +176,24 @@ class ModeRule:
 
 @dataclass(frozen=True)
 class FlagRule:
-    """A truthy stream: ``value & bitmask`` when a bitmask is given, ``value == equals``, else ``value != 0``."""
+    """A truthy stream: ``value & bitmask`` when a bitmask is given, ``value == equals``, else ``value != 0``; or
+    events (``on`` / ``off`` values, e.g. DataFlash ``EV`` ids ARMED 10 / DISARMED 11): rows of other values say
+    nothing, and the flag holds from one event to the next (:meth:`events`)."""
 
     selector: Selector
     bitmask: int | None = None
     equals: float | None = None
+    on: tuple[float, ...] = ()
+    off: tuple[float, ...] = ()
+
+    def events(self, values: np.ndarray) -> np.ndarray:
+        """The rows that are events of an event rule (every row of a held flag)."""
+        v = np.asarray(values, dtype=np.float64)
+        return np.isin(v, self.on + self.off) if self.on else np.ones(v.shape, dtype=bool)
 
     def truth(self, values: np.ndarray) -> np.ndarray:
+        if self.on:
+            return np.isin(np.asarray(values, dtype=np.float64), self.on)
         v = np.nan_to_num(np.asarray(values, dtype=np.float64))
         if self.bitmask is not None:
             return (v.astype(np.int64) & self.bitmask) != 0
@@ -439,9 +451,16 @@ def _channel(name: str, value: Any, path: str, table: str = "channels") -> Chann
 
 
 def _flag(value: Any, path: str, where: str) -> FlagRule:
-    sel = _selector(value, path, where, extra=("bitmask", "equals"))
+    sel = _selector(value, path, where, extra=("bitmask", "equals", "on", "off"))
     bitmask = value.get("bitmask") if isinstance(value, dict) else None
     equals = value.get("equals") if isinstance(value, dict) else None
+    events = {k: value.get(k) for k in ("on", "off")} if isinstance(value, dict) else {}
+    if any(v is not None for v in events.values()):
+        if bitmask is not None or equals is not None or not all(isinstance(v, list) and v for v in events.values()):
+            raise _fail(path, where, "events need both on = [values] and off = [values], and neither bitmask nor "
+                        "equals")
+        on, off = (tuple(_number(x, path, f"{where}.{k}") for x in events[k]) for k in ("on", "off"))
+        return FlagRule(sel, on=on, off=off)
     if bitmask is not None and (isinstance(bitmask, bool) or not isinstance(bitmask, int) or not 0 < bitmask < 2**63):
         raise _fail(path, f"{where}.bitmask", f"must be a positive integer below 2**63, got {bitmask!r}")
     if equals is not None:

@@ -28,10 +28,19 @@ import numpy as np
 
 from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
-from adapters.mapping import ChannelMapping
+from adapters.mapping import ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
 from adapters.modes import AUTOPILOT_HOLDS, mode_name
-from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect, mode_spans, split_at_landing
+from adapters.segment import (
+    EVERYTHING,
+    Span,
+    demo_spans,
+    event_spans,
+    flag_spans,
+    intersect,
+    mode_spans,
+    split_at_landing,
+)
 from adapters.selection import Selected, channel_values, resolve_channel, select
 from adapters.sticks import check as check_sticks
 from adapters.sticks import describe as describe_sticks
@@ -100,14 +109,40 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
         t, modes = _rule_series(sel, m, skipped=skipped, what="segment.mode")
         spans = intersect(spans, mode_spans(t, modes, seg.mode.keep, seg.mode.names))
     if seg.armed is not None:
-        sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
-        t, flags = _rule_series(sel, m, skipped=skipped, what="segment.armed")
-        spans = intersect(spans, flag_spans(t, seg.armed.truth(flags)))
+        armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped)
+        spans = intersect(spans, armed if armed is not None else EVERYTHING)
     if seg.landing is not None and seg.landing.flag is not None:
-        sel = select(seg.landing.flag.selector, streams, "segment.landing", m.name, n_columns=1)
-        t, flags = _rule_series(sel, m, skipped=skipped, what="segment.landing")
-        spans = intersect(spans, flag_spans(t, ~seg.landing.flag.truth(flags)))
+        flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True)
+        spans = intersect(spans, flying if flying is not None else EVERYTHING)
     return list(spans)
+
+
+def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
+                invert: bool = False) -> list[Span] | None:
+    """The spans a flag rule holds in (``invert``: does not hold); ``None`` where an event rule's stream is not in
+    the log at all (the firmware records no such events: old ArduPlane logs declare no ``EV``), so the rule says
+    nothing. A stream the log declares but never wrote holds no event: no span."""
+    if rule.on and not _declared(streams, rule.selector):
+        return None
+    if rule.on and not any(h in streams for h in _heads(rule.selector)):
+        return []  # declared, never written
+    sel = select(rule.selector, streams, what, m.name, n_columns=1)
+    t, flags = _rule_series(sel, m, skipped=skipped, what=what)
+    if rule.on:
+        events = rule.events(flags)
+        truth = rule.truth(flags[events])
+        return event_spans(t[events], ~truth if invert else truth)
+    truth = rule.truth(flags)
+    return flag_spans(t, ~truth if invert else truth)
+
+
+def _heads(sel: Selector) -> list[str]:
+    return [src.split(":")[0] if ":" in src else src.split(".")[0] for src in sel.sources]
+
+
+def _declared(streams: Streams, sel: Selector) -> bool:
+    """Whether the log has, or declares without a message, one of a selector's streams."""
+    return any(h in streams or h in streams.counts for h in _heads(sel))
 
 
 def _metadata(streams: Streams, m: ChannelMapping) -> tuple[dict[str, dict], list[tuple[float, dict]]]:
@@ -493,7 +528,18 @@ def check_rules(streams: Streams, m: ChannelMapping) -> None:
     """
     seg = m.segment
     _check_vehicle(streams, m)
-    if seg.armed is not None:
+    if seg.armed is not None and seg.armed.on:
+        armed = _flag_spans(streams, m, seg.armed, "segment.armed")
+        if armed is not None and not armed:
+            heads = [h for h in _heads(seg.armed.selector) if h in streams or h in streams.counts]
+            n = sum(int(streams.counts.get(h, 0)) for h in heads)
+            on = " or ".join(f"{v:g}" for v in seg.armed.on)
+            raise DataError(
+                f"{streams.path}: never armed: the log records arming as events ({seg.armed.selector.describe()} = "
+                f"{on} on arming) and holds none among its {n} {'/'.join(heads)} message(s), so mapping {m.name!r} "
+                f"has no flight to import"
+            )
+    elif seg.armed is not None:
         sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
         _, flags = _rule_series(sel, m)
         if flags.size and not seg.armed.truth(flags).any():
@@ -560,9 +606,8 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
         spans = _spans(streams, rules, skipped)
         armed = EVERYTHING
         if seg.armed is not None:
-            sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
-            t, flags = _rule_series(sel, m)
-            armed = flag_spans(t, seg.armed.truth(flags))
+            armed = _flag_spans(streams, m, seg.armed, "segment.armed")
+            armed = EVERYTHING if armed is None else armed
     except WorkbenchError as exc:
         ends = [float(f["t"].min()) for f in streams.frames.values() if len(f)]
         ends += [float(f["t"].max()) for f in streams.frames.values() if len(f)]

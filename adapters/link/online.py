@@ -413,6 +413,8 @@ class OnlineAligner:
                     keep = int(v) in rule.keep
                     runs.add(s.t, (keep, mode_name(rule.names, v) if keep else None))
             else:  # armed (in force while true), landed (in force while false)
+                if getattr(rule, "on", ()) and not rule.events(np.array([v]))[0]:
+                    return  # an event of another kind (EV's SET_HOME) says nothing of the flag
                 flag = bool(rule.truth(np.array([v]))[0])
                 runs.add(s.t, (flag if truth else not flag, None))
 

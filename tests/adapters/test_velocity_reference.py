@@ -360,7 +360,6 @@ def test_a_stop_for_the_velocity_after_flips_says_how_many_segments_were_cut(tmp
     clean = adapters.load(_copter_bin(tmp_path, "clean.bin", seconds=60.0)[0], "ardupilot_manual")
     first = clean[0]
     at = first.meta["t0"] + first.t[-1] - 1.0
-    later = {d.meta["id"].split(".")[0] for d in clean if d.meta["t0"] > at}  # segments that start upside down
 
     def edit(streams, options):
         att = streams["ATT"]
@@ -375,7 +374,10 @@ def test_a_stop_for_the_velocity_after_flips_says_how_many_segments_were_cut(tmp
         adapters.load(path, "ardupilot_manual")
     message = str(info.value)
     assert ("does not follow the GPS velocity" if cause == "own_gps" else "dead-reckons") in message
-    n = 1 + len(later)
+    # as many as the viewer lists: the cut segment and every piece after it that starts upside down
+    cuts = adapters.load(path, "ardupilot_manual", allow_still=True)[0].meta["flipped"].split("; the ")
+    n = len(cuts)
+    assert n >= 2 and "cut at" in cuts[0] and all("dropped" in c for c in cuts[1:])
     assert "\n" not in message and message.endswith(
         f"({n} segment{'s' if n > 1 else ''} cut or dropped at the vehicle's flips before this check: `workbench "
         f"view` shows where)")
