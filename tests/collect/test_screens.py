@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from workbench.collect.fitting import fit_subject
+from workbench.collect.fitting import in_process
 
 from .conftest import calibrate, join, new_page, pilot_gain, pilot_js, write_protocol
 from .test_session import flown
@@ -59,7 +59,7 @@ class Shots:
 
 def test_every_page_at_two_sizes(browser, serve, tmp_path):
     shots = Shots(Path(os.environ.get("WORKBENCH_SCREENS") or tmp_path / "screens"))
-    run = serve(_protocol(tmp_path), fit_runner=fit_subject)
+    run = serve(_protocol(tmp_path), runner=in_process)
     s = run.session
     context, page = new_page(browser, gamepad=True)
     try:
