@@ -49,10 +49,10 @@ N_TRIALS = 30
 KINDS = ("percentile", "basic", "normal", "studentized")
 
 
-def _timed(seed: int, dead_zone: float = 0.0) -> LQROperator:
+def _timed(seed: int, dead_zone: float = 0.0, start: str = "rest") -> LQROperator:
     rng = np.random.default_rng([seed, 41])
     return LQROperator(**SLOW_PILOT, delay_s=float(rng.uniform(0.15, 0.25)), lag_s=float(rng.uniform(0.05, 0.1)),
-                       dead_zone=dead_zone, start="rest")
+                       dead_zone=dead_zone, start=start)
 
 
 def operator(name: str, seed: int):
@@ -68,8 +68,8 @@ def operator(name: str, seed: int):
         return (lambda n, s: simulate_landings("CS1", n_trials=n, seed=s)), None, None, None
     if name == "erratic":
         return (lambda n, s: erratic_operator_demos(n_trials=n, seed=s)), None, None, None
-    if name in ("delayed", "delayed+dead-zone"):
-        op = _timed(seed, 0.05 if name.endswith("dead-zone") else 0.0)
+    if name in ("delayed", "delayed+dead-zone", "delayed-steady"):
+        op = _timed(seed, 0.05 if name.endswith("dead-zone") else 0.0, "steady" if name.endswith("steady") else "rest")
         return (lambda n, s: lqr_operator_demos(op, n, seed=s, label="timed")), op.gain(quad), op.delay_s, op.lag_s
     raise SystemExit(f"unknown operator {name!r}")
 

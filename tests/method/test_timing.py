@@ -108,3 +108,44 @@ def test_intervals_fixed_values_and_bad_input(quad):
         tm.TimingData(ds, quad.n, quad.m, quad.dt, start="sometimes")
     with pytest.raises(DataError, match="no demonstration has two"):
         tm.TimingData([SimpleNamespace(x=ds[0].x[:1], u=ds[0].u[:1])], 6, 2, quad.dt)
+
+
+@pytest.mark.slow
+def test_the_landing_simulators_cascade_is_refused(quad):
+    # no delay, no lag, saturations: its best fit is the longest lag searched (30 trials; with 12 it is not)
+    from workbench.errors import ModelError
+    from workbench.sim.landing import simulate_landings
+
+    with pytest.raises(ModelError, match="end of the range searched"):
+        tm.identify_timing(simulate_landings("CS1", 30, seed=11), quad, n_boot=0)
+
+
+def test_a_refused_timing_falls_back_to_the_rule_in_every_resample(quad):
+    # three trials: the starts explain nothing beyond chance, so no timing on all trials; the default rule then
+    # gives the paper's gain there, and each resample decides again
+    from workbench.errors import ModelError
+    from workbench.method.gain import choose_gain
+    from workbench.method.resampling import bootstrap_gain
+
+    ds = lqr_operator_demos(LQROperator(), 3, seed=8, system=quad)
+    with pytest.raises(ModelError, match="no better than chance"):
+        tm.identify_timing(ds, quad, n_boot=0)
+    g = bootstrap_gain(ds, quad, n_boot=2, method="iv", seed=0, jackknife=False, timing="identify-or-none")
+    K, _ = choose_gain(ds, quad)
+    np.testing.assert_allclose(g.K, K, atol=1e-10)
+    assert g.timing.method == "none" and "pilot timing: none" in g.timing.describe()
+    assert g.K_samples.shape == (2 - g.n_failed, 2, 6)
+
+
+def test_the_gains_interval_is_the_estimate_plus_minus_t_standard_deviations():
+    from scipy import stats
+
+    from workbench.method.resampling import gain_interval
+
+    rng = np.random.default_rng(3)
+    K = rng.normal(size=(2, 3))
+    samples = K + rng.normal(scale=0.1, size=(50, 2, 3))
+    lo, hi = gain_interval(K, samples, n_trials=20, ci=95.0)
+    half = stats.t.ppf(0.975, 19) * samples.std(axis=0, ddof=1)
+    np.testing.assert_allclose(lo, K - half)
+    np.testing.assert_allclose(hi, K + half)

@@ -30,7 +30,13 @@ from workbench.method.gain import GainMethod, demo_blocks, gain_from_arrays
 from workbench.method.inverse_lqr_sdp import _SOLVER_CHAIN, InverseLQR, cached_problem
 from workbench.method.objective import _STRUCTURES, Structure, TaskObjective
 
-__all__ = ['BootstrapResult', 'GainBootstrap', 'bootstrap_gain', 'bootstrap', 'gain_interval', 'GAIN_INTERVAL']
+__all__ = ['BootstrapResult', 'GainBootstrap', 'bootstrap_gain', 'bootstrap', 'gain_interval', 'GAIN_INTERVAL',
+           'IDENTIFY_OR_NONE']
+
+#: The default models' timing rule as a resampling's ``timing``: the pilot's timing where the timing model fits the
+#: resample, the paper's instantaneous gain (instruments, else least squares) where it does not (every choice of the
+#: default gain inside every resample).
+IDENTIFY_OR_NONE = "identify-or-none"
 
 #: How K̂'s intervals are made from its resamples (see the module docstring and :func:`gain_interval`).
 GAIN_INTERVAL = "t over trials"
@@ -256,9 +262,21 @@ def _timed_resampled(
     from workbench.method.timing import identify_timing
 
     A, B = system_matrices(system.A, system.B)
-    given = {} if timing == "identify" else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
+    given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
     how = "direct" if method == "direct" else "liml"
-    pt = identify_timing(list(demos), system, method=how, n_boot=n_boot, seed=seed, progress=progress, **given)
+    fallback = None
+    if timing == IDENTIFY_OR_NONE:  # the model's rule, decided again in every resample
+        blocks = demo_blocks(list(demos), *B.shape)
+
+        def fallback(counts: np.ndarray) -> np.ndarray:
+            idx = np.repeat(np.arange(len(blocks)), counts)
+            try:
+                return _resample_fit(blocks, idx, A, B, "iv", None)[0]
+            except ModelError:
+                return _resample_fit(blocks, idx, A, B, "direct", None)[0]
+
+    pt = identify_timing(list(demos), system, method=how, n_boot=n_boot, seed=seed, progress=progress,
+                         fallback=fallback, **given)
     solver = _solver(A, B, structure)
     obj0 = None if solver is None else solver.solve(np.asarray(pt.K))
     fits, failures = [], [f"resample: the timing fit failed ({pt.n_failed})"] * pt.n_failed
@@ -388,14 +406,23 @@ def bootstrap_gain(
 
 def _timed_leave_one_out(demos: Any, system: Any, method: GainMethod, timing: Any) -> np.ndarray | None:
     """:func:`_leave_one_out` of the gain with the pilot's timing (re-identified without each trial)."""
-    from workbench.method.timing import TimingData, fit_timing
+    from workbench.method.timing import TimingData, fit_timing, refusal
 
-    given = {} if timing == "identify" else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
+    given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
     data = TimingData(list(demos), system.n, system.m, system.dt)
     how = "direct" if method == "direct" else "liml"
+    A, B = system_matrices(system.A, system.B)
+    blocks = demo_blocks(list(demos), *B.shape)
+    out = []
     try:
-        return np.array([fit_timing(data, how, counts=np.arange(data.n_trials) != j, **given).K
-                         for j in range(data.n_trials)])
+        for j in range(data.n_trials):
+            fit = fit_timing(data, how, counts=np.arange(data.n_trials) != j, **given)
+            if timing == IDENTIFY_OR_NONE and refusal(fit, system):  # the rule, decided without trial j too
+                fit_K = _resample_fit(blocks, np.delete(np.arange(len(blocks)), j), A, B, "iv", None)[0]
+            else:
+                fit_K = fit.K
+            out.append(fit_K)
+        return np.array(out)
     except (ModelError, np.linalg.LinAlgError):
         return None
 

@@ -49,8 +49,8 @@ from workbench.frozen import readonly
 from workbench.method.closed_loop import as_matrix, single_threaded_blas, spectral_radius
 
 __all__ = ["TimingData", "TimingFit", "PilotTiming", "fit_timing", "identify_timing", "lag_decay", "seen_weights",
-           "seen_states", "timed_spectral_radius", "recorded_dead_zone", "stick_of", "read_through", "DELAY_MAX_S",
-           "LAG_MAX_S", "STARTS"]
+           "seen_states", "refusal", "timed_spectral_radius", "recorded_dead_zone", "stick_of", "read_through",
+           "DELAY_MAX_S", "LAG_MAX_S", "STARTS"]
 
 #: The longest reaction delay and lag searched (seconds): human delays are 0.1-0.3 s, lags 0.05-0.15 s (METHOD.md).
 DELAY_MAX_S = 0.5
@@ -114,6 +114,32 @@ def seen_weights(delay_s: Any, lag_s: Any, dt: float) -> tuple[np.ndarray, np.nd
         norm = -np.expm1(-dt / t)
         beta[lagged] = np.stack([e0a - ya, ya + 2.0 * e0b - yb, yb - e0b], axis=1) / norm[:, None]
     return l0, beta
+
+
+def refusal(fit: TimingFit, plant: Any, delay_s: float | None = None, lag_s: float | None = None) -> str:
+    """Why a LIML fit of the timing is not a model of this pilot (``""``: it is): its starts explain the seen
+    states no better than chance, its best fit lies at the end of the range searched (no interior optimum: a
+    pilot the timing model does not fit, the longest lag wins), or the pilot's own loop at that timing
+    (:func:`timed_spectral_radius`, for a plant with ``A`` and ``B``) would not be stable though the
+    demonstrations were flown. ``delay_s``/``lag_s``: values given, not searched."""
+    if fit.method != "liml":
+        return ""
+    if not fit.relevance > 0:
+        return (f"the trials' starts explain the seen states no better than chance (relevance {fit.relevance:.2g}): "
+                "they do not move every state")
+    ends = [f"{name} {v:.3g} s" for name, v, top, given in (("delay", fit.delay_s, DELAY_MAX_S, delay_s),
+                                                            ("lag", fit.lag_s, LAG_MAX_S, lag_s))
+            if given is None and v >= top - 1e-6]
+    if ends:
+        return (f"the best-fitting timing lies at the end of the range searched ({', '.join(ends)}; a human's delay "
+                "is 0.1-0.3 s, a lag 0.05-0.15 s): the timing model does not fit this pilot")
+    if hasattr(plant, "A") and hasattr(plant, "B"):
+        rho = timed_spectral_radius(plant.A, plant.B, fit.K, fit.delay_s, fit.lag_s, float(plant.dt))
+        if not rho < 1.0:
+            return (f"at the best-fitting timing (delay {fit.delay_s:.3g} s, lag {fit.lag_s:.3g} s) the pilot's own "
+                    f"loop would not be stable (spectral radius {rho:.4g} with the delay and the lag), though the "
+                    "demonstrations were flown: the timing model does not fit this pilot")
+    return ""
 
 
 def timed_spectral_radius(A: Any, B: Any, K: Any, delay_s: float, lag_s: float, dt: float) -> float:
@@ -661,6 +687,7 @@ class PilotTiming:
     seed: int
     reason: str = ""
     dead_zone: float = 0.0
+    n_timed: int = -1  # resamples fitted with timing (the rest, with a fallback rule, without); -1: all
 
     def describe(self) -> str:
         """One line for the terminal: the delay and the lag with their intervals, and how they were found."""
@@ -678,6 +705,10 @@ class PilotTiming:
             start += f"; the inputs read back through the devices' recorded dead zone {self.dead_zone:.3g}"
         boot = (f"{self.ci:g} % intervals over {self.n_boot - self.n_failed} resamples of {self.n_trials} trials"
                 if self.n_boot else "no intervals")
+        if 0 <= self.n_timed < self.n_boot - self.n_failed:
+            boot += f" ({self.n_timed} of them fitted with a timing, the rest without: the model's rule)"
+        if self.method == "none":
+            return f"pilot timing: none ({self.reason.removeprefix('no timing: ')}); {boot}"
         return (f"pilot timing: {part('reaction delay', 'delay', self.delay_s, self.delay_lo, self.delay_hi)}, "
                 f"{part('neuromuscular lag', 'lag', self.lag_s, self.lag_lo, self.lag_hi)} — by {how}, the trials "
                 f"starting {start}; {boot}")
@@ -704,6 +735,7 @@ def identify_timing(
     seed: int = 0,
     ci: float = 95.0,
     progress: Callable[[int, int], None] | None = None,
+    fallback: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> PilotTiming:
     """Identify the pilot's delay and lag with intervals, and the gain on the seen state (module docstring).
 
@@ -731,6 +763,12 @@ def identify_timing(
     ci : float
         Interval level in percent (percentile intervals of the delay and the lag).
     progress : callable(done, total), optional
+    fallback : callable(counts) -> K, optional
+        A fit the timing model does not fit (:func:`refusal`) takes this gain instead, of the same trials (their
+        multiplicities ``counts``), rather than being refused: the model's rule ("iv-or-direct": the paper's gain
+        where the timing is refused) decided again on all trials and in every resample (``method`` ``"none"``
+        where the point is without timing; a resample without timing is left out of the delay's and the lag's
+        intervals).
 
     Raises
     ------
@@ -747,32 +785,27 @@ def identify_timing(
     data = TimingData(demos, int(plant.n), int(plant.m), float(plant.dt), start)
     point = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s)
     reason = "least squares, as requested"
+    K_point = point.K
+    timed = True
     if method == "liml":
         reason = f"instruments relevant: {point.relevance:.2g} beyond chance"
-        if not point.relevance > 0:
-            raise ModelError(f"the trials' starts explain the seen states no better than chance (relevance "
-                             f"{point.relevance:.2g}): they do not move every state")
-        ends = [f"{name} {v:.3g} s" for name, v, top, given in (("delay", point.delay_s, DELAY_MAX_S, delay_s),
-                                                                ("lag", point.lag_s, LAG_MAX_S, lag_s))
-                if given is None and v >= top - 1e-6]
-        if ends:
-            raise ModelError(f"the best-fitting timing lies at the end of the range searched ({', '.join(ends)}; "
-                             f"a human's delay is 0.1-0.3 s, a lag 0.05-0.15 s): the timing model does not fit "
-                             "this pilot")
-        if hasattr(plant, "A") and hasattr(plant, "B"):
-            rho = timed_spectral_radius(plant.A, plant.B, point.K, point.delay_s, point.lag_s, data.dt)
-            if not rho < 1.0:
-                raise ModelError(f"at the best-fitting timing (delay {point.delay_s:.3g} s, lag {point.lag_s:.3g} s) "
-                                 f"the pilot's own loop would not be stable (spectral radius {rho:.4g} with the delay "
-                                 "and the lag), though the demonstrations were flown: the timing model does not fit "
-                                 "this pilot")
+        why = refusal(point, plant, delay_s, lag_s)
+        if why and fallback is None:
+            raise ModelError(why)
+        if why:  # the rule's other gain, and the reason
+            K_point, timed, reason = np.asarray(fallback(np.ones(data.n_trials, dtype=int))), False, f"no timing: {why}"
     rng = np.random.default_rng(seed)
     J = data.n_trials
-    fits, failed = [], 0
+    fits, failed, K_all = [], 0, []
     for b in range(int(n_boot)):
         counts = np.bincount(rng.integers(0, J, size=J), minlength=J)
         try:
-            fits.append(fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts))
+            fit = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts)
+            if fallback is not None and refusal(fit, plant, delay_s, lag_s):
+                K_all.append(np.asarray(fallback(counts)))  # this resample's rule: no timing
+            else:
+                fits.append(fit)
+                K_all.append(fit.K)
         except (ModelError, np.linalg.LinAlgError):
             failed += 1
         if progress is not None:
@@ -785,8 +818,8 @@ def identify_timing(
     fixed = tuple(name for name, v in (("delay", delay_s), ("lag", lag_s)) if v is not None)
     return PilotTiming(
         delay_s=point.delay_s, lag_s=point.lag_s, delay_lo=float(d_lo), delay_hi=float(d_hi), lag_lo=float(t_lo),
-        lag_hi=float(t_hi), K=readonly(point.K),
-        K_samples=readonly(np.array([f.K for f in fits]).reshape(len(fits), data.m, data.n)),
-        delay_samples=readonly(d_s), lag_samples=readonly(t_s), method=method, start=data.start,
+        lag_hi=float(t_hi), K=readonly(K_point),
+        K_samples=readonly(np.array(K_all).reshape(len(K_all), data.m, data.n)),
+        delay_samples=readonly(d_s), lag_samples=readonly(t_s), method=method if timed else "none", start=data.start,
         relevance=point.relevance, fixed=fixed, n_trials=J, n_boot=int(n_boot), n_failed=failed, ci=float(ci),
-        seed=int(seed), reason=reason, dead_zone=data.dead_zone)
+        seed=int(seed), reason=reason, dead_zone=data.dead_zone, n_timed=len(fits))

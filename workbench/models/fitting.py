@@ -126,11 +126,15 @@ def check_timing(timing: Any, where: str) -> str | tuple[float, float]:
 
 
 def timing_setting(model: Any) -> str | tuple[float, float]:
-    """The timing a resample of a fitted model's trials fits its gain with (``bootstrap(…, timing=…)``): the model's
-    ``timing`` where it fitted one, ``"none"`` where it has none (``timing="none"``, or not identifiable)."""
+    """The timing a resample of a fitted model's trials fits its gain with (``bootstrap(…, timing=…)``): the default
+    rule ("identify" with "iv-or-direct") decided again in every resample (``"identify-or-none"``, whichever way it
+    went on all trials), a given or required timing as it is, and ``"none"`` for a model fitted without."""
+    setting = check_timing(getattr(model, "timing", "none"), type(model).__name__)
+    if setting == "identify" and getattr(model, "gain_method", None) == IV_OR_DIRECT:
+        return "identify-or-none"
     if getattr(model, "timing_", None) is None:
         return "none"
-    return check_timing(getattr(model, "timing", "identify"), type(model).__name__)
+    return setting
 
 
 def fit_timed_gain(
