@@ -40,13 +40,13 @@ def test_resamples_do_not_fall_back_to_the_point_estimates_other_solvers(monkeyp
     original = InverseLQR._run
     scs_calls = []
 
-    def run(self, problem, solver):
+    def run(self, problem, solver, stage=1):
         if solver != self.solvers[0]:
             scs_calls.append(solver)
             return "infeasible"
         if problem is self._stage2:
             return "infeasible"
-        return original(self, problem, solver)
+        return original(self, problem, solver, stage)
 
     monkeypatch.setattr(InverseLQR, "_run", run)
     with warnings.catch_warnings():

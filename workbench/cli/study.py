@@ -9,17 +9,27 @@ import shutil
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from workbench.atomic import atomic_write_table, recover_swaps, swap_entries, temp_sibling
 from workbench.cli.context import Context
 from workbench.cli.options import SAMPLE_LOGS, steps_of
-from workbench.cli.reading import is_demo_file, load_demos, pilot_only, require_proposed, study_plant, system_for
+from workbench.cli.reading import (
+    is_demo_file,
+    load_demos,
+    per_group_path,
+    pilot_only,
+    plant_group_parts,
+    require_proposed,
+    study_plant,
+    system_for,
+)
 from workbench.cli.stdio import is_stdio, refuse_stdio
 from workbench.cli.writing import print_plant, viewer_command
-from workbench.errors import DataError
+from workbench.data.plant_groups import describe_groups
+from workbench.errors import DataError, ModelError, UsageError
 
 __all__ = []
 
@@ -28,8 +38,39 @@ def cmd_evaluate(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".parquet", "the results table") if a.output else None
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
+    parts = plant_group_parts(ctx, ds, getattr(a, "plant_group", None))
+    if len(parts) > 1 and output is not None and ctx.stdio.writes_stdout:
+        raise UsageError(f"-o - writes one table, but these demonstrations are {len(parts)} plant groups "
+                         f"({', '.join(str(g) for g, _ in parts)}): name one with --plant-group")
+    return for_each_group(ctx, parts, "evaluated", lambda group, part: _evaluate_group(
+        ctx, part, output if len(parts) == 1 or output is None else per_group_path(output, group)))
+
+
+def for_each_group(ctx: Context, parts: list[tuple[str | None, Any]], done: str, run: Callable[[Any, Any], Any]) -> int:
+    """Run a command's work on each plant group's demonstrations (its own plant and models), each under a heading
+    that names the group; with several groups, one group's failure is a warning and the others still run."""
+    if len(parts) == 1:
+        run(*parts[0])
+        return 0
+    failed = []
+    for group, part in parts:
+        ctx.say("")
+        ctx.say(f"[bold]plant group {group}[/bold] ({describe_groups(part)})", markup=True)
+        try:
+            run(group, part)
+        except (DataError, ModelError) as exc:
+            print(f"warning: plant group {group}: not {done}: {exc}", file=sys.stderr)
+            failed.append(f"{group}: {exc}")
+    if len(failed) == len(parts):
+        raise ModelError(f"no plant group could be {done}: {'; '.join(failed)}")
+    return 0
+
+
+def _evaluate_group(ctx: Context, ds: Any, output: Path | None) -> None:
+    a = ctx.args
     if a.per_subject:
-        return _evaluate_per_subject(ctx, ds, output)
+        _evaluate_per_subject(ctx, ds, output)
+        return
     result, loso = _holdout_study(ctx, ds)
     if loso and getattr(result.system, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
@@ -45,7 +86,6 @@ def cmd_evaluate(ctx: Context) -> int:
     if output is not None:
         result.save_tables(output)
         ctx.say(f"wrote {'standard output' if ctx.stdio.writes_stdout else output}")
-    return 0
 
 
 def recorded_test_ids(ds: Any) -> list[str] | None:
@@ -258,21 +298,29 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
 
 
 def cmd_report(ctx: Context) -> int:
-    from workbench.report.markdown import write_study_report
-
     a = ctx.args
     refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
+    parts = plant_group_parts(ctx, ds, getattr(a, "plant_group", None))
+    # one plant group: the report in -o; several: a report of each in -o/GROUP/, each titled with its group
+    return for_each_group(ctx, parts, "reported", lambda group, part: _report_group(
+        ctx, part, Path(a.output) if len(parts) == 1 else Path(a.output) / str(group).replace(" ", "-"),
+        a.title if group is None else f"{a.title} (plant group {group})"))
+
+
+def _report_group(ctx: Context, ds: Any, folder: Path, title: str) -> None:
+    from workbench.report.markdown import write_study_report
+
+    a = ctx.args
     # evaluate's holdout rules, so both commands score a flight the same way (leave-one-segment-out on a few
     # segments) and print the same numbers
     result, loso = _holdout_study(ctx, ds, bootstrap=a.bootstrap, power=a.power)
     print_plant(ctx, result.system, "(plants fitted without each left-out segment)" if loso
                 else "(plant from the training trials)")
     require_proposed(result)
-    path = write_study_report(result, a.output, title=a.title)
+    path = write_study_report(result, folder, title=title)
     _print_study(ctx, result)
-    ctx.say(f"wrote {path} with figures in {Path(a.output) / 'figures'}")
-    return 0
+    ctx.say(f"wrote {path} with figures in {folder / 'figures'}")
 
 
 #: What the demo needs after its study (the report, the recording, the models its workers send back): imported by a

@@ -95,11 +95,12 @@ def cmd_view(ctx: Context) -> int:
         ds = load_demos(ctx, a.inputs, mapping, a.label, allow_still=True)
     source_dt = float(ds.dt)
     models, named = None, None
+    by_label: dict[str, Any] = {}
+    for spec in a.model or ():
+        label, _, path = spec.rpartition("=")
+        by_label[label] = load_model_file(path, ctx)
+    ds = _of_plant_group(ctx, ds, a.plant_group, by_label.values())
     if a.model:
-        by_label: dict[str, Any] = {}
-        for spec in a.model:
-            label, _, path = spec.rpartition("=")
-            by_label[label] = load_model_file(path, ctx)
         if "" in by_label:
             if len(by_label) > 1:
                 raise UsageError("give every --model a LABEL= (e.g. --model CS1=cs1.npz) or pass only one")
@@ -126,6 +127,24 @@ def cmd_view(ctx: Context) -> int:
     _warn(ctx, session)
     announce(ctx, out, sink, f"{len(ds)} demonstrations")
     return 0
+
+
+def _of_plant_group(ctx: Context, ds: Any, name: str | None, models: Any) -> Any:
+    """The segments a view shows: the plant group ``name`` (``--plant-group``), else the groups the models' plants
+    were identified for (a model predicts only where its stick commands what it did), else every segment; said."""
+    from workbench.data.plant_groups import describe_groups, plant_groups, select_plant_group
+
+    if name:
+        return select_plant_group(ds, name)
+    wanted = {getattr(m.system, "plant_group", None) for m in models}
+    if None in wanted or not wanted or set(plant_groups(ds)) <= wanted:
+        return ds
+    kept = ds.with_demos([d for d in ds if d.meta.get("plant_group") in wanted])
+    if not len(kept):
+        raise DataError(f"the model's plant group ({', '.join(sorted(wanted))}) is none of these segments' "
+                        f"({describe_groups(ds)}); --plant-group names the segments to show")
+    ctx.say(f"showing plant group {describe_groups(kept)}: the model's (--plant-group shows another)")
+    return kept
 
 
 def _default_mapped(ctx: Context, path: str) -> tuple[str, Any]:

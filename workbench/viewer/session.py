@@ -17,6 +17,7 @@ import rerun.blueprint as rrb
 
 from workbench.atomic import atomic_path
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.plant_groups import describe_groups, plant_groups
 from workbench.errors import DataError
 from workbench.study.pipeline import StudyResult
 from workbench.viewer import entities as paths
@@ -565,6 +566,8 @@ class SessionLogger:
             lines.append(f"- {style.color_name(color)}: {', '.join(uniq[:3])}{' …' if len(uniq) > 3 else ''}")
         if len(by_color) > len(shown):
             lines.append(f"- … {len(by_color) - len(shown)} more")
+        if any(plant_groups(self.demos)):  # what the sticks command in the segments' modes: each group its own plant
+            lines += ["", f"**plant groups**: {describe_groups(self.demos)}"]
         if s.variability:  # the bands and ŵ only where a model drew them: a key names what is on screen
             lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ" + ("; Monte Carlo band of a prediction"
                                                                       if s.bands else ""),
