@@ -132,3 +132,67 @@ def test_selecting_a_group_names_the_groups_there_are(copter_bin):
     with pytest.raises(DataError, match=r"no demonstration in plant group 'surface'; the groups here: angle: 2 "
                                         r"segments \(STABILIZE, 50 s\); velocity\+climb: 2 segments \(LOITER, 50 s\)"):
         select_plant_group(ds, "surface")
+
+
+def test_view_shows_a_models_plant_group_and_keys_every_group(copter_bin, tmp_path):
+    from types import SimpleNamespace
+
+    from rerun.chunk import RrdReader
+
+    from workbench.cli.view import _of_plant_group
+    from workbench.viewer import entities, session
+
+    ds = adapters.load(copter_bin, "ardupilot_manual")
+    said: list[str] = []
+    ctx = SimpleNamespace(say=said.append)
+    angle = SimpleNamespace(system=SimpleNamespace(plant_group="angle"))
+    shown = _of_plant_group(ctx, ds, None, [angle])  # a model predicts only where the stick commands what it did
+    assert [d.id for d in shown] == [d.id for d in select_plant_group(ds, "angle")]
+    assert said == ["showing plant group angle: 2 segments (STABILIZE, 50 s): the model's (--plant-group shows "
+                    "another)"]
+    assert len(_of_plant_group(ctx, ds, None, [])) == len(ds)  # no model: every segment
+    assert len(_of_plant_group(ctx, ds, "velocity+climb", [angle])) == 2  # the group named wins
+    # the key names every segment's group
+    rec = session.new_recording()
+    rec.save(tmp_path / "v.rrd")
+    session.SessionLogger(rec, ds, clock="log").log_key()
+    rec.flush()
+    rec.disconnect()
+    texts = [text for chunk in RrdReader(tmp_path / "v.rrd").stream() if chunk.entity_path == f"/{entities.KEY}"
+             for name in chunk.to_record_batch().schema.names if name.endswith("text")
+             for row in chunk.to_record_batch().column(name).to_pylist() for text in row]
+    assert any("**plant groups**: angle: 2 segments (STABILIZE" in t and "velocity+climb: 2 segments (LOITER" in t
+               for t in texts)
+
+
+@pytest.mark.slow
+def test_view_of_a_model_shows_its_plant_group(copter_bin, tmp_path, capsys):
+    from rerun.chunk import RrdReader
+
+    model = tmp_path / "m.npz"
+    assert main(["fit", str(copter_bin), "-o", str(model), "--method", "ioc-only", "--bootstrap", "0",
+                 "--plant-group", "angle", "-q"]) == 0
+    rrd = tmp_path / "v.rrd"
+    assert main(["view", str(copter_bin), "--model", str(model), "--samples", "0", "--save", str(rrd)]) == 0
+    assert "showing plant group angle: 2 segments (STABILIZE" in capsys.readouterr().out
+    ids = {d.id for d in select_plant_group(adapters.load(copter_bin, "ardupilot_manual"), "angle")}
+    assert {str(c.entity_path).split("/")[2] for c in RrdReader(rrd).stream()
+            if str(c.entity_path).startswith("/demos/")} == ids
+
+
+@pytest.mark.slow
+def test_evaluate_and_report_run_each_group_on_its_own_plant(copter_bin, tmp_path, capsys):
+    table = tmp_path / "r.parquet"
+    fast = ["--no-efficiency", "--samples", "0", "--n-components", "1"]
+    assert main(["evaluate", str(copter_bin), "-o", str(table), *fast]) == 0
+    said = capsys.readouterr().out
+    for group in ("angle", "velocity+climb"):
+        assert f"plant group {group} ({group}: 2 segments" in said
+        assert f"plant identification (plant group {group}" in said
+        assert (tmp_path / f"r.{group}.parquet").is_file()
+    assert said.index("plant group angle (") < said.index("plant identification (plant group angle") < said.index(
+        "plant group velocity+climb (")
+    out = tmp_path / "report"
+    assert main(["report", str(copter_bin), "-o", str(out), "--bootstrap", "0", "--power", "0", *fast]) == 0
+    for group in ("angle", "velocity+climb"):
+        assert f"(plant group {group})" in (out / group / "report.md").read_text().splitlines()[0]
