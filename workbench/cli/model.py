@@ -86,8 +86,11 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
-        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
-        _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
+        try:
+            _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
+            _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
+        except (DataError, ModelError) as exc:  # the model is written: intervals that cannot be had do not unmake it
+            print(f"warning: intervals not computed: {exc}", file=sys.stderr)
     elif model.has_gain and model.objective_ is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
 
