@@ -1,5 +1,6 @@
-"""The inverse LQR's second stage gives SCS a short try (issue 41 §5: a default fit on a real log within 30 s): the
-stage only breaks a tie on the α-optimal face, and SCS's full 200,000 iterations (≈ 20 s) never passed its checks."""
+"""SCS, the fallback where Clarabel fails, gets a short try (issue 41 §5: a default fit on a real log within 30 s), and
+the second stage (a tie-break on the α-optimal face) a shorter one: 200,000 iterations (≈ 20 s) never passed the
+checks on real flights' gains."""
 
 from __future__ import annotations
 
@@ -25,5 +26,5 @@ def test_the_second_stage_runs_scs_on_a_shorter_budget_than_the_first(monkeypatc
     problem._run(problem._stage2, "SCS", 2)
     stage1, stage2 = seen[False]["max_iters"], seen[True]["max_iters"]
     assert stage1 == sdp._SOLVER_OPTIONS["SCS"]["max_iters"]
-    assert stage2 == sdp._STAGE2_OPTIONS["SCS"]["max_iters"] and stage2 * 10 <= stage1
+    assert stage2 == sdp._STAGE2_OPTIONS["SCS"]["max_iters"] < stage1
     assert seen[True]["eps_abs"] == seen[False]["eps_abs"]  # the same accuracy asked, fewer iterations allowed

@@ -45,17 +45,17 @@ SECOND_STAGE_SLACK = 1.001
 
 # Tighter Clarabel tolerances than 1e-8 do not buy accuracy here: on 40 random 6x2 gains they make it stop
 # at "almost solved" more often, and the second-stage M then varies by ~1e-6 between near-identical gains.
+# SCS is the fallback where Clarabel fails, which on real flights' gains means an ill-conditioned problem (α* of
+# 1e4-1e6): there SCS ran to its iteration limit and returned "optimal_inaccurate" with M far from ⪰ I in every case
+# seen (9 of 9 solves on three real logs' plant groups, 8 at stage 2 and 1 at stage 1, each 200,000 iterations and
+# 21-104 s; bench/real_logs.md, "A default fit a pilot waits for"), so its budget is what a hopeless try may cost in a
+# fit a pilot waits for: 20,000 iterations at stage 1 (a few seconds) and 10,000 at stage 2, which only breaks a tie
+# on the α-optimal face.
 _SOLVER_OPTIONS: dict[str, dict[str, Any]] = {
     "CLARABEL": {"tol_gap_abs": 1e-8, "tol_gap_rel": 1e-8, "tol_feas": 1e-8, "max_iter": 200},
-    "SCS": {"eps_abs": 1e-8, "eps_rel": 1e-8, "max_iters": 200_000},
+    "SCS": {"eps_abs": 1e-8, "eps_rel": 1e-8, "max_iters": 20_000},
     "CVXOPT": {"abstol": 1e-9, "reltol": 1e-9, "feastol": 1e-9},
 }
-
-
-# The second stage only breaks a tie on the α-optimal face, and its checks (M ⪰ I to 1e-6 at α* up to 1e6) ask for an
-# accuracy a first-order solver does not reach where Clarabel's interior point stopped short of it: SCS then ran its
-# 200,000 iterations (≈ 20 s on this machine) and returned nothing the checks accepted (bench/real_logs.md, "A
-# default fit a pilot waits for"). A second stage gets a short SCS try; stage 1 keeps the full budget.
 _STAGE2_OPTIONS: dict[str, dict[str, Any]] = {"SCS": {"max_iters": 10_000}}
 
 

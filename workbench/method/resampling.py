@@ -151,8 +151,9 @@ def resample_solvers(point: TaskObjective | None) -> tuple[str, ...] | None:
     """The solver chain of a bootstrap's resamples: the solver that solved the point estimate, alone.
 
     The point estimate tries every solver in turn; a resample does not. A resample the point's solver cannot
-    solve would go on to SCS, which iterates to its limit (200,000 iterations, about 20 s a solve on a real
-    flight's gain, 90 % of a default ``fit``) to return, as a rule, nothing the checks accept: such a resample
+    solve would go on to SCS, which iterates to its limit (its budget in :mod:`~workbench.method.inverse_lqr_sdp`;
+    once 200,000 iterations, about 20 s a solve on a real flight's gain, 90 % of a default ``fit``) to return, as a
+    rule, nothing the checks accept: such a resample
     is counted as failed, with its reason, instead. ``None`` (every solver) where there is no point objective.
     """
     name = str(getattr(point, "solver", "") or "").upper()
