@@ -124,6 +124,11 @@ def test_fit_writes_a_model_per_group_or_the_group_named(copter_bin, tmp_path, c
     assert main(["fit", str(copter_bin), "-o", str(one), "--plant-group", "rate"]) == 1
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert err.startswith("error: no demonstration in plant group 'rate'; the groups here: angle: 2 segments")
+    # standard output holds one model: several groups are a usage error that names them, before any fit
+    assert main(["fit", str(copter_bin), "-o", "-", "--method", "gmr-only", "--n-components", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err == ("error: -o - writes one model, but these demonstrations are 2 plant groups (angle, velocity+climb): "
+                   "name one with --plant-group")
 
 
 def test_selecting_a_group_names_the_groups_there_are(copter_bin):
