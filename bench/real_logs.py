@@ -42,7 +42,8 @@ def _last(text: str) -> str:
 
 
 def _short(text: str) -> str:
-    """A cause without the file's path (the row names the log)."""
+    """A cause without ``error:`` and the file's path (the row names the log)."""
+    text = re.sub(r"^error: ", "", text.strip())
     return re.sub(r"^\S+: (mapping '\S+': )?", "", text)[:160].replace("|", "/")
 
 
