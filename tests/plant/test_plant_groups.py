@@ -166,8 +166,8 @@ def test_view_shows_a_models_plant_group_and_keys_every_group(copter_bin, tmp_pa
     texts = [text for chunk in RrdReader(tmp_path / "v.rrd").stream() if chunk.entity_path == f"/{entities.KEY}"
              for name in chunk.to_record_batch().schema.names if name.endswith("text")
              for row in chunk.to_record_batch().column(name).to_pylist() for text in row]
-    assert any("**plant groups**: angle: 2 segments (STABILIZE" in t and "velocity+climb: 2 segments (LOITER" in t
-               for t in texts)
+    assert any("**plant groups**" in t and "- angle: 2 segments (STABILIZE" in t
+               and "- velocity+climb: 2 segments (LOITER" in t for t in texts)
 
 
 @pytest.mark.slow

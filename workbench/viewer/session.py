@@ -17,7 +17,7 @@ import rerun.blueprint as rrb
 
 from workbench.atomic import atomic_path
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
-from workbench.data.plant_groups import describe_groups, plant_groups
+from workbench.data.plant_groups import by_plant_group, describe_groups, plant_groups
 from workbench.errors import DataError
 from workbench.study.pipeline import StudyResult
 from workbench.viewer import entities as paths
@@ -567,7 +567,8 @@ class SessionLogger:
         if len(by_color) > len(shown):
             lines.append(f"- … {len(by_color) - len(shown)} more")
         if any(plant_groups(self.demos)):  # what the sticks command in the segments' modes: each group its own plant
-            lines += ["", f"**plant groups**: {describe_groups(self.demos)}"]
+            lines += ["", "**plant groups** (each its own plant and model)", ""]
+            lines += [f"- {describe_groups(part)}" for part in by_plant_group(self.demos).values()]
         if s.variability:  # the bands and ŵ only where a model drew them: a key names what is on screen
             lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ" + ("; Monte Carlo band of a prediction"
                                                                       if s.bands else ""),
