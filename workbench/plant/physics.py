@@ -91,7 +91,8 @@ class StickResponse:
         if not self.settles:
             return (f"{self.input} → {self.state}: the {self.what} loop does not settle in the identified plant "
                     "(no steady state per full stick)")
-        return (f"{self.input} → {self.state}: {self.per_full_stick:.3g} {self.unit} of {self.what} per full stick "
+        gap = "" if self.unit.startswith("°") else " "
+        return (f"{self.input} → {self.state}: {self.per_full_stick:.3g}{gap}{self.unit} of {self.what} per full stick "
                 f"(time constant {self.time_constant_s:.2g} s)")
 
 
