@@ -163,6 +163,10 @@ def row(log: Path, timeout: float) -> tuple[list[str], dict[str, str]]:
                         else "raw log" + (f" (the mapping: {_short(raw.group(1))})" if raw else ""))
     group_cell = (groups.group(1).replace(" (--plant-group NAME takes one)", "") if groups else "—").replace("|", "/")
     status = {"imported": str(imported), "fitted": str(fitted), "compared": str(compared)}
+    stop = imp.split(": ", 1)[1] if not imported else None
+    fit, evaluate, inputs = ("same stop" if stop is not None and c == stop else c for c in (fit, evaluate, inputs))
+    if plants.replace("—", "").strip(": ") == "":
+        plants = "—"
     return [log.name, inspect, imp, group_cell, fit, plants, evaluate, inputs, view], status
 
 
