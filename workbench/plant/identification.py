@@ -231,6 +231,19 @@ def _rank(M: np.ndarray) -> int:
     return int((s > 1e-10 * max(M.shape) * s[0]).sum()) if s.size and s[0] > 0 else 0
 
 
+def _unexcited(Z: np.ndarray, labels: Sequence[str]) -> str:
+    """What the data leave unexcited, for a user: the columns that are 0 throughout, else the combination of columns
+    the smallest singular direction of the (column-scaled) regressor is made of."""
+    zero = [labels[j] for j in np.flatnonzero(~np.any(Z != 0, axis=0))]
+    if zero:
+        return f"{', '.join(zero)} never move{'s' if len(zero) == 1 else ''} (0 in every sample)"
+    scale = np.sqrt(np.mean(Z**2, axis=0))
+    v = np.linalg.svd(Z / scale, full_matrices=False)[2][-1]
+    top = np.argsort(-np.abs(v))[:3]
+    parts = [f"{v[j]:+.2f}·{labels[j]}" for j in top if abs(v[j]) > 0.1]
+    return f"the scaled columns combine to (almost) nothing along {' '.join(parts)}"
+
+
 def _normalized_cond(M: np.ndarray) -> float:
     scale = np.sqrt(np.mean(M**2, axis=0))
     scale[scale == 0] = 1.0
@@ -332,9 +345,11 @@ def identify_plant(
     cols = layout.columns
     rank = _rank(Z[:, cols])
     if rank < len(cols):
+        labels = [*names, *demos.input_names]
         raise ModelError(
             f"identify: the data excite only {rank} of {len(cols)} state and input directions "
-            f"(cond [X; U] = {np.linalg.cond(Z[:, cols]):.3g}); record more varied demonstrations"
+            f"(cond [X; U] = {np.linalg.cond(Z[:, cols]):.3g}): {_unexcited(Z[:, cols], [labels[j] for j in cols])}; "
+            "record more varied demonstrations"
         )
     AB = _fit(layout, Z, Xn)
     A, B = AB[:, :n], AB[:, n:]
