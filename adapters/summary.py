@@ -261,6 +261,10 @@ def summarize(streams: Streams) -> LogSummary:
     ends = [s.t_end for s in summaries if math.isfinite(s.t_end)]
     modes, armed, vehicle = _modes(streams)
     t_end = max(ends) if ends else 0.0
+    t_start = min(starts) if starts else 0.0
+    # a span is shown within the streams' time lines: a damaged stamp (10^13 s) never makes a mode last for ages
+    modes = [ModeSpan(max(m.start, t_start), min(m.end, t_end), m.mode) for m in modes
+             if m.end >= t_start and m.start <= t_end]
     try:
         size = os.path.getsize(streams.path)
     except OSError:
@@ -270,11 +274,11 @@ def summarize(streams: Streams) -> LogSummary:
         path=streams.path,
         format=streams.format,
         size_bytes=int(size),
-        t_start=min(starts) if starts else 0.0,
+        t_start=t_start,
         t_end=t_end,
         streams=tuple(sorted(summaries, key=lambda s: s.name)),
         modes=tuple(modes),
-        armed=tuple((s.start, min(s.end, t_end)) for s in armed),
+        armed=tuple((max(s.start, t_start), min(s.end, t_end)) for s in armed if s.end >= t_start and s.start <= t_end),
         skipped=tuple(sorted([(str(k), int(v)) for k, v in streams.skipped.items() if v]
                              + ([("stamps off their stream's time line (not in the spans)", outliers)]
                                 if outliers else []))),

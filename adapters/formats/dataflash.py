@@ -89,6 +89,9 @@ Where this reader and ``DFReader_binary`` differ (the tests check that they agre
 
 * DFReader's index pass stops at the first head of an undescribed type (a damaged type id) and its parser then
   reads on with the types found so far; this reader resyncs and keeps every FMT on the chain;
+* a head of a type before that type's FMT is not a message here (a logger writes a type's FMT before its first
+  message): damaged leading bytes that happen to hold one are skipped bytes, never decoded into a time of
+  10¹³ s; DFReader's index pass learns every FMT of the file first and decodes it;
 * a type whose FMT length does not match its format: DFReader's parser skips 3 bytes (the head) and
   resyncs; here the head is skipped byte by byte (the same messages are lost);
 * a type redefined differently: DFReader applies whichever FMT it parsed last; here the first one holds, and
@@ -265,10 +268,15 @@ class _Chain:
     invalid: list[str]
 
 
-def _walk(heads: np.ndarray, kinds: np.ndarray, lengths: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The chain of messages from the first known head: indices into the known heads, and those heads."""
+def _walk(heads: np.ndarray, kinds: np.ndarray, lengths: np.ndarray, n: int,
+          since: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The chain of messages from the first known head: indices into the known heads, and those heads. A head of a
+    type before the FMT that defines it (``since``, per type) is not a message: DFReader knows a type only from
+    its FMT on."""
     length = lengths[kinds]
     known = length > 0
+    if since is not None:
+        known &= heads >= since[kinds]
     pos, length = heads[known], length[known]
     m = pos.size
     if m == 0:
@@ -336,8 +344,9 @@ def _scan(buf: np.ndarray) -> _Chain:
     parser = _FmtParser(buf)
     fmt_type = dataclasses.replace(_FMT_TYPE_DEF, unit_mults={})  # FMTU may describe FMT: a copy per read
 
-    def definitions(fmt_positions: np.ndarray) -> tuple[dict[int, _Type], int, list[str], int]:
+    def definitions(fmt_positions: np.ndarray) -> tuple[dict[int, _Type], int, list[str], int, np.ndarray]:
         types = {FMT_TYPE: fmt_type}
+        since = np.zeros(256, np.int64)  # where each type's FMT is: its messages start there
         conflicts, invalid, n_invalid = 0, [], 0
         for p, d in parser.parse(fmt_positions):
             if isinstance(d, str):
@@ -349,7 +358,8 @@ def _scan(buf: np.ndarray) -> _Chain:
                 conflicts += 0 if types[d.type].same_layout(d) else 1
                 continue
             types[d.type] = d
-        return types, conflicts, invalid, n_invalid
+            since[d.type] = p
+        return types, conflicts, invalid, n_invalid, since
 
     # Start from every FMT head where there are few (a log has tens to hundreds), else from FMT alone: either
     # way the FMTs on the chain then decide, until the chain and its FMTs agree.
@@ -357,17 +367,18 @@ def _scan(buf: np.ndarray) -> _Chain:
     start = fmt_heads if fmt_heads.size <= _MAX_FMT_HEADS else fmt_heads[:0]
     found = definitions(start)
     for _ in range(_MAX_FIXPOINT):  # (a chain that never settles keeps the types of its last walk)
-        types = found[0]
+        types, since = found[0], found[4]
         lengths = np.zeros(256, np.int64)
         for t, d in types.items():
             lengths[t] = d.length
-        chain, pos = _walk(heads, kinds, lengths, n)
+        chain, pos = _walk(heads, kinds, lengths, n, since)
         pos = pos[chain]
         kind = buf[pos + 2] if pos.size else np.empty(0, np.uint8)
         found = definitions(pos[kind == FMT_TYPE])
-        if found[0].keys() == types.keys() and all(found[0][k] is types[k] for k in types):
+        if found[0].keys() == types.keys() and all(found[0][k] is types[k] for k in types) and \
+                np.array_equal(found[4], since):
             break
-    _, conflicts, invalid, n_invalid = found
+    _, conflicts, invalid, n_invalid, _ = found
     skipped: dict[str, int] = {}
     if pos.size:
         ends = pos + lengths[kind]
