@@ -645,10 +645,15 @@ def _vehicle(log: _Log) -> tuple[int | None, str]:
             return 5, text
     ver = log.id_of("VER")
     build = log.column(ver, "BU") if ver is not None else None
-    if build is not None and build.size and int(build[0]) in _BUILD_TYPES:
+    if build is not None and build.size and _whole(build.tolist()[0]) and int(build[0]) in _BUILD_TYPES:
         fws = log.column(ver, "FWS")
         return _BUILD_TYPES[int(build[0])], str(fws[0]) if fws is not None else ""
     return None, ""
+
+
+def _whole(value: Any) -> bool:
+    """Whether a field's value is a whole number (a crafted FMT may declare a mode as a float holding NaN)."""
+    return isinstance(value, int) or (isinstance(value, float) and value.is_integer())
 
 
 def _flight_modes(log: _Log, mav_type: int | None, t_end: float) -> list[tuple[str, float, float]]:
@@ -663,9 +668,9 @@ def _flight_modes(log: _Log, mav_type: int | None, t_end: float) -> list[tuple[s
     elif "ModeNum" in d.columns:
         table = mavutil.mode_mapping_bynumber(mav_type) if mav_type is not None else None
         nums = log.column(mode, "ModeNum").tolist()
-        names = [(table.get(int(m), "UNKNOWN") if table is not None else str(m)) for m in nums]
+        names = [(table.get(int(m), "UNKNOWN") if table is not None and _whole(m) else str(m)) for m in nums]
     elif "Mode" in d.columns:
-        names = [mavutil.mode_string_acm(int(m)) for m in log.column(mode, "Mode").tolist()]
+        names = [mavutil.mode_string_acm(int(m)) if _whole(m) else str(m) for m in log.column(mode, "Mode").tolist()]
     else:
         return []
     spans: list[list[Any]] = []
@@ -683,9 +688,9 @@ def _armed_spans(log: _Log, t_end: float) -> list[tuple[float, float]]:
     ev = log.id_of("EV")
     if arm is not None and log.column(arm, "ArmState") is not None:
         t = log.t[log.index[arm]]
-        state = np.asarray(log.column(arm, "ArmState")).astype(np.int64) != 0
+        state = np.asarray(log.column(arm, "ArmState"), dtype=np.float64) != 0  # a float field may hold NaN
     elif ev is not None and log.column(ev, "Id") is not None:
-        ids = np.asarray(log.column(ev, "Id")).astype(np.int64)
+        ids = np.asarray(log.column(ev, "Id"), dtype=np.float64)  # an FMT may declare Id a float: NaN stays NaN
         keep = (ids == 10) | (ids == 11)  # ArduPilot LogEvent ARMED / DISARMED
         t = log.t[log.index[ev]][keep]
         state = ids[keep] == 10

@@ -35,6 +35,12 @@ class DataFlash(Format):
 
         return dataflash.read(path, topics)
 
+    def text_messages(self, streams):
+        """``MSG`` text, ``ERR`` and ``EV`` named as ArduPilot names them (:mod:`adapters.events`)."""
+        from adapters.textlog import dataflash_rows
+
+        return dataflash_rows(streams)
+
     def write(self, path, streams, **options):
         from adapters.formats import dataflash_write
 
