@@ -80,6 +80,12 @@ _MAX_RATIO = 40_000
 MAX_CHUNK_BYTES = 64 << 20
 MAX_DECOMPRESSED_BYTES = 512 << 20
 MAX_TOTAL_RATIO = 1000
+#: Ceiling on the decoded columns all messages make together (numbers at 8 bytes a value, text at its length and an
+#: object's): chunks are decoded one at a time and their raw bytes dropped, so a read holds at most one chunk's
+#: messages and this (a 536 kB file of 8 honest 60 MB chunks of tiny messages took inspect to 1.5 GB before).
+MAX_DECODED_BYTES = 256 << 20
+#: Messages outside chunks are decoded in batches of this many
+_BATCH = 200_000
 
 
 class _Damage(ValueError):
@@ -90,9 +96,17 @@ class _Damage(ValueError):
 
 
 class _Scan:
-    """What a pass over the file collected: channels, schemas, raw messages per channel, skips."""
+    """What a pass over the file collected: channels, schemas, skips, and per channel its messages decoded into
+    columns chunk by chunk (:meth:`flush`): the raw messages of one chunk (or batch) at a time."""
 
-    def __init__(self) -> None:
+    def __init__(self, where: str = "", topics: set[str] | None = None) -> None:
+        self.where = where
+        self.topics = topics
+        self.parts: dict[int, list[dict[str, np.ndarray]]] = defaultdict(list)
+        self.undecodable: dict[int, int] = defaultdict(int)
+        self.decoded = 0  # bytes of the decoded columns so far
+        self.pending = 0  # raw messages not yet decoded
+        self._factories: list | None = None
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.messages: dict[int, tuple[list[int], list[bytes]]] = defaultdict(lambda: ([], []))
@@ -103,6 +117,42 @@ class _Scan:
         self.chunks_read = 0
         self.bad_chunks: list[tuple[int, str]] = []  # (byte offset of the chunk record, why it was skipped)
         self.declared = 0  # uncompressed bytes the chunks read so far declare
+
+    def add(self, cid: int, log_time: int, data: bytes) -> None:
+        """A raw message, decoded at the next :meth:`flush` (one is due every :data:`_BATCH` messages)."""
+        times, datas = self.messages[cid]
+        times.append(log_time)
+        datas.append(data)
+        self.pending += 1
+        if self.pending >= _BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        """Decode the pending messages of every known channel into columns, drop their bytes, and hold the decoded
+        total against :data:`MAX_DECODED_BYTES`."""
+        for cid in list(self.messages):
+            ch = self.channels.get(cid)
+            if ch is None:
+                continue  # its channel record may come later in a damaged file: decoded then, or counted without
+            times, datas = self.messages.pop(cid)
+            if self.topics is not None and ch.topic not in self.topics:
+                continue
+            if self._factories is None:
+                self._factories = decoder_factories()
+            schema = self.schemas.get(ch.schema_id) if ch.schema_id else None
+            for at in range(0, len(datas), _BATCH):  # in pieces: the decoders' buffers stay small
+                frame, bad = decode_channel(ch, schema, times[at:at + _BATCH], datas[at:at + _BATCH], self._factories)
+                self.undecodable[cid] += bad
+                if frame is None:
+                    continue
+                self.decoded += _nbytes(frame)
+                if self.decoded > MAX_DECODED_BYTES:
+                    raise DataError(f"{self.where}: its messages decode to more than the {MAX_DECODED_BYTES} bytes "
+                                    f"of columns a read may hold (at {ch.topic!r}); refused (raise "
+                                    "adapters.formats.mcap.MAX_DECODED_BYTES for a larger recording)")
+                self.parts[cid].append(frame)
+            del times, datas
+        self.pending = sum(len(t) for t, _ in self.messages.values())
 
     def chunk_failed(self, offset: int, exc: BaseException, n_bytes: int) -> None:
         self.skipped["bytes"] += n_bytes
@@ -181,7 +231,7 @@ def _decompress(chunk: Chunk, size_limit: int) -> bytes:
 def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
     """Collect a decompressed chunk's records; all or nothing (a damaged chunk adds no message)."""
     pos, n = 0, len(buf)
-    found: list[tuple[int, int, bytes]] = []
+    found: dict[int, tuple[list[int], list[bytes]]] = defaultdict(lambda: ([], []))
     counted: dict[int, int] = defaultdict(int)
     new_channels, new_schemas = [], []
     unpack_rec, unpack_msg = _REC.unpack_from, _MSG.unpack_from
@@ -198,7 +248,9 @@ def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
             cid, _seq, log_time, _pub = unpack_msg(buf, body)
             counted[cid] += 1
             if wanted is None or cid in wanted:
-                found.append((cid, log_time, buf[body + _MSG.size : end]))
+                times, datas = found[cid]
+                times.append(log_time)
+                datas.append(buf[body + _MSG.size : end])
         elif op == _OP_CHANNEL:
             new_channels.append(Channel.read(ReadDataStream(io.BytesIO(buf[body:end]))))
         elif op == _OP_SCHEMA:
@@ -210,10 +262,12 @@ def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
         scan.channels.setdefault(c.id, c)
     for cid, k in counted.items():
         scan.counts[cid] += k
-    for cid, log_time, data in found:
-        times, datas = scan.messages[cid]
-        times.append(log_time)
-        datas.append(data)
+    for cid, (times, datas) in found.items():
+        held_times, held = scan.messages[cid]
+        held_times.extend(times)
+        held.extend(datas)
+    del found, times, datas
+    scan.flush()  # decoded now, the chunk's raw messages dropped: a read holds one chunk's at a time
 
 
 def _read_indexed(f, size: int, topics: set[str] | None, scan: _Scan, where: str) -> bool:
@@ -288,9 +342,7 @@ def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan, where: str)
                 scan.metadata[record.name] = dict(record.metadata)
             elif isinstance(record, Message):
                 scan.counts[record.channel_id] += 1
-                times, datas = scan.messages[record.channel_id]
-                times.append(record.log_time)
-                datas.append(record.data)
+                scan.add(record.channel_id, record.log_time, record.data)
             good = f.tell()
     except DataError:
         raise
@@ -298,11 +350,6 @@ def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan, where: str)
         scan.skipped["bytes"] += max(0, size - good)
         scan.notes.append(f"unreadable record at byte {good} ({_why(exc)}); the {size - good} bytes from there on "
                           "are cut off or damaged")
-    if topics is not None:
-        keep = {cid for cid, c in scan.channels.items() if c.topic in topics}
-        for cid in list(scan.messages):
-            if cid not in keep:
-                del scan.messages[cid]
 
 
 def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Streams:
@@ -324,11 +371,11 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
                 raise DataError(f"{where}: empty file, not an MCAP file")
             if f.read(8) != MAGIC:
                 raise FormatError(f"{where}: not an MCAP file (the first 8 bytes are not the MCAP magic)")
-            scan = _Scan()
+            scan = _Scan(where, topic_set)
             bad_summary = _bad_summary(f, size)
             indexed = bad_summary is None and _read_indexed(f, size, topic_set, scan, where)
             if not indexed:
-                scan = _Scan()
+                scan = _Scan(where, topic_set)
                 if bad_summary is not None:
                     scan.skipped["summary bytes"], why = bad_summary
                     scan.notes.append(why)
@@ -382,18 +429,14 @@ def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:
             skipped["messages without a channel"] = skipped.get("messages without a channel", 0) + k
         else:
             counts[ch.topic] += k
-    factories = decoder_factories()
-    for cid, (times, datas) in scan.messages.items():
-        ch = scan.channels.get(cid)
-        if ch is None:
-            continue
-        schema = scan.schemas.get(ch.schema_id) if ch.schema_id else None
-        frame, bad = decode_channel(ch, schema, times, datas, factories)
+    scan.flush()
+    for cid in list(scan.parts):
+        ch = scan.channels[cid]
+        by_topic[ch.topic].append(_concat(scan.parts.pop(cid)))
+    for cid, bad in scan.undecodable.items():
         if bad:
-            key = f"{ch.topic}: undecodable messages"
+            key = f"{scan.channels[cid].topic}: undecodable messages"
             skipped[key] = skipped.get(key, 0) + bad
-        if frame is not None:
-            by_topic[ch.topic].append(frame)
     frames = {}
     for topic, parts in by_topic.items():
         if len(parts) == 1:
@@ -413,6 +456,40 @@ def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:
     }
     return Streams(where, "mcap", frames, counts=dict(counts), skipped={k: v for k, v in skipped.items() if v},
                    info=info)
+
+
+def _nbytes(columns: dict[str, np.ndarray]) -> int:
+    """The memory decoded columns hold: their buffers, and each text value's characters and object."""
+    total = 0
+    for v in columns.values():
+        total += v.nbytes
+        if v.dtype.kind == "O":
+            total += sum(len(x) + 50 if isinstance(x, str) else 32 for x in v.tolist())
+    return total
+
+
+def _concat(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """One channel's columns from its chunks' parts, column by column (each part's column freed as it is joined). A
+    field some parts lack is NaN (text: None) there; an indexed element (``q[3]``) some parts lack belongs to an
+    array whose length varies, which is left out as within one chunk."""
+    if len(parts) == 1:
+        return parts[0]
+    names = list(dict.fromkeys(k for p in parts for k in p))
+    lengths = [len(p["t"]) for p in parts]
+    out: dict[str, np.ndarray] = {}
+    for name in names:
+        if not all(name in p for p in parts) and name.endswith("]"):
+            for p in parts:
+                p.pop(name, None)
+            continue
+        pieces = []
+        for p, n in zip(parts, lengths, strict=True):
+            v = p.pop(name, None)
+            pieces.append(v if v is not None else np.full(n, np.nan))
+        if any(v.dtype.kind == "O" for v in pieces) and not all(v.dtype.kind == "O" for v in pieces):
+            pieces = [v.astype(object) for v in pieces]
+        out[name] = np.concatenate(pieces)
+    return out
 
 
 def _sorted_by_time(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
