@@ -118,6 +118,7 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import datetime as _dt
+import functools
 import os
 import struct
 from collections.abc import Iterable
@@ -125,7 +126,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pandas as pd
 from numpy.lib.stride_tricks import sliding_window_view
 from pymavlink import mavutil
 from pymavlink.DFReader import MULT_TO_PREFIX
@@ -154,6 +154,7 @@ CHAR_TYPES: dict[str, tuple[str, float | None]] = {
 
 
 TEXT_CHARS = frozenset("nNZ")
+_CHAR_DTYPES = {c: np.dtype(t) for c, (t, _) in CHAR_TYPES.items()}
 _FMT_STRUCT = struct.Struct("<BB4s16s64s")
 _TIME_SCALE = {"TimeUS": 1e-6, "TimeMS": 1e-3}
 
@@ -192,12 +193,33 @@ class _Type:
     length: int
     format: str
     columns: list[str]  # as in the FMT (DFReader's names)
-    dtype: np.dtype = field(repr=False)  # packed, fields f0…, itemsize length - 3
-    names: list[str] = field(default_factory=list)  # unique field names, one per format char
+    offsets: list[int] = field(repr=False)  # each field's byte offset in the payload
     mults: list[float | None] = field(default_factory=list)
     units: list[str] | None = None
     unit_mults: dict[str, float] = field(default_factory=dict)
     instance: int | None = None  # index of the instance field (FMTU '#')
+
+    @functools.cached_property
+    def names(self) -> list[str]:
+        """Unique field names, one per format character: ``t`` is ``t_``, a missing or repeated name ``<name>_<i>``."""
+        names, seen = [], set()
+        for i in range(len(self.format)):
+            c = self.columns[i] if i < len(self.columns) else ""
+            if c == "t":
+                c = "t_"
+            if not c or c in seen:
+                c = f"{c or 'field'}_{i}"
+            seen.add(c)
+            names.append(c)
+        return names
+
+    @functools.cached_property
+    def dtype(self) -> np.dtype:
+        """The payload as a packed structured dtype (fields f0…, itemsize length − 3), built for the types that have
+        messages only: a 4.x log describes 180 types and writes 70."""
+        return np.dtype({"names": [f"f{i}" for i in range(len(self.format))],
+                         "formats": [_CHAR_DTYPES[c] for c in self.format], "offsets": self.offsets,
+                         "itemsize": self.length - 3})
 
     def same_layout(self, other: _Type) -> bool:
         return (self.name, self.length, self.format, self.columns) == (other.name, other.length, other.format,
@@ -228,28 +250,15 @@ def _define(type_id: int, length: int, name: str, fmt: str, columns: str) -> _Ty
     if length < 3:
         return f"length {length} is shorter than the 3-byte head"
     cols = columns.split(",") if columns else []
-    offsets, formats, mults = [], [], []
+    offsets, mults = [], []
     size = 0
     for c in fmt:
-        dt = np.dtype(CHAR_TYPES[c][0])
         offsets.append(size)
-        formats.append(dt)
         mults.append(CHAR_TYPES[c][1])
-        size += dt.itemsize
+        size += _CHAR_DTYPES[c].itemsize
     if size + 3 != length:
         return f"length {length} does not match format {fmt!r} ({size + 3} bytes)"
-    dtype = np.dtype({"names": [f"f{i}" for i in range(len(fmt))], "formats": formats, "offsets": offsets,
-                      "itemsize": size})
-    names, seen = [], set()
-    for i in range(len(fmt)):
-        c = cols[i] if i < len(cols) else ""
-        if c == "t":
-            c = "t_"
-        if not c or c in seen:
-            c = f"{c or 'field'}_{i}"
-        seen.add(c)
-        names.append(c)
-    return _Type(type_id, name, length, fmt, cols, dtype, names, mults)
+    return _Type(type_id, name, length, fmt, cols, offsets, mults)
 
 
 _FMT_TYPE_DEF = _define(FMT_TYPE, FMT_LENGTH, "FMT", FMT_FORMAT, FMT_COLUMNS)
@@ -413,6 +422,8 @@ class _Log:
         self.index = {t: order[bounds[t]:bounds[t + 1]] for t in np.flatnonzero(self.counts).tolist()
                       if t in self.types}
         self._columns: dict[int, dict[str, np.ndarray]] = {}  # decoded fields of the few types info reads
+        self._windows: dict[int, np.ndarray] = {}  # the buffer seen as rows of n bytes, per n (a view each)
+        self._ids: dict[str, int] | None = None  # type id by name, of the types with messages (id_of)
         self.t = self._times()
 
     def offsets(self, t: int) -> np.ndarray:
@@ -422,7 +433,10 @@ class _Log:
         """``size`` bytes at each offset of ``at``, as a (len(at), size) uint8 array."""
         if size == 0:
             return np.zeros((at.size, 0), np.uint8)
-        return np.ascontiguousarray(sliding_window_view(self.buf, size)[at])
+        window = self._windows.get(size)
+        if window is None:
+            window = self._windows[size] = sliding_window_view(self.buf, size)
+        return window[at]  # fancy indexing: a fresh contiguous (len(at), size) array
 
     def field(self, t: int, i: int, at: np.ndarray | None = None) -> np.ndarray:
         """Field ``i`` of the messages of type ``t`` (at offsets ``at``, all by default), raw."""
@@ -490,10 +504,13 @@ class _Log:
         return tm[idx]
 
     def id_of(self, name: str) -> int | None:
-        for t, d in self.types.items():
-            if d.name == name and t in self.index:
-                return t
-        return None
+        """The type id of the first type named ``name`` that has messages, or None."""
+        if self._ids is None:
+            self._ids = {}
+            for t, d in self.types.items():
+                if t in self.index:
+                    self._ids.setdefault(d.name, t)
+        return self._ids.get(name)
 
 
 def _decode_text(raw: np.ndarray) -> np.ndarray:
@@ -537,7 +554,7 @@ def _units(log: _Log) -> None:
     mult_ids = log.column(fmtu_id, "MultIds")
     for row, ft in enumerate(ftypes):
         target = log.types.get(int(ft)) if isinstance(ft, int | float) and float(ft).is_integer() else None
-        if target is None:
+        if target is None or int(ft) not in log.index:  # units of a type without messages name no stream
             continue
         if unit_ids is not None:
             uid = str(unit_ids[row])
@@ -618,7 +635,7 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
         if t not in log.index and t != FMT_TYPE and d.name and d.name not in counts:  # never armed)
             counts[d.name] = 0
     want = None if wanted is None else set(wanted)
-    frames: dict[str, pd.DataFrame] = {}
+    frames: dict[str, dict[str, np.ndarray]] = {}  # numpy columns: a DataFrame is built when one is asked for
     for t, name in names.items():
         parts = instances.get(t, {name: None})
         chosen = [s for s in parts if want is None or name in want or s in want]
@@ -626,7 +643,7 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
             continue
         for s in chosen:
             rows = log.index[t] if parts[s] is None else parts[s]
-            frames[s] = pd.DataFrame({"t": log.t[rows], **log.decode(t, rows)}, copy=False)  # fresh arrays
+            frames[s] = {"t": log.t[rows], **log.decode(t, rows)}
     info = _info(log, names, instances)
     return Streams(where, "dataflash", frames, counts=counts, skipped=dict(log.chain.skipped), info=info)
 
