@@ -31,6 +31,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from adapters.rawlog import RawLog
+from workbench import palette
 from workbench.viewer import style
 from workbench.viewer.blueprint import time_axis
 from workbench.viewer.columns import send_columns
@@ -41,16 +42,14 @@ __all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_pilot", "lo
 
 RAW_APPLICATION_ID = "workbench_log_raw"
 #: the segment lane's states: what a mapping kept, and why a piece was dropped
-SEGMENT_STATES = {
-    "kept": (44, 160, 44), "disarmed": (150, 150, 150), "too short": (255, 127, 14), "gap": (214, 39, 40),
-    "missing channel": (148, 103, 189), "not mapped": (60, 60, 60),
-}  # fmt: skip
+SEGMENT_STATES = {k: palette.LANE_STATES[k] for k in ("kept", "disarmed", "too short", "gap", "missing channel",
+                                                          "not mapped")}
 # clock and time-stamp fields (time_boot_ms, timestamp_sample, armed_time_ms, TimeUS, stamp.sec, …): hidden by
 # default, since their ramp flattens every other line of a stream's plot
 _CLOCKISH = re.compile(r"time|stamp", re.IGNORECASE)
 MAX_ZOOM = 24.0  # the deepest map zoom map_zoom gives
 GAP_S = 1.0  # s: a stream silent for longer is drawn with a break (see with_breaks)
-_ARMED = {"armed": (214, 39, 40), "disarmed": (200, 200, 200)}
+_ARMED = {k: palette.LANE_STATES[k] for k in ("armed", "disarmed")}
 
 
 @dataclass
@@ -203,9 +202,9 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
         tr = raw.track
         latlon = np.column_stack([tr.lat, tr.lon])
         rec.log(f"{prefix}/gps/track", rr.GeoLineStrings(lat_lon=[latlon], radii=rr.Radius.ui_points(2.0),
-                                                         colors=[(31, 119, 180)]), static=True)
+                                                         colors=[palette.STRATEGY_COLORS[0]]), static=True)
         rec.log(f"{prefix}/gps/vehicle", rr.GeoPoints.from_fields(radii=rr.Radius.ui_points(6.0),
-                                                                  colors=[(214, 39, 40)]), static=True)
+                                                                  colors=[style.RECORDED_COLOR]), static=True)
         out.gps = send_columns(rec, f"{prefix}/gps/vehicle", _index(raw, tr.t, origin),
                                rr.GeoPoints.columns(positions=latlon))
         out.zoom = map_zoom(raw)
@@ -365,12 +364,12 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
         sp = by_name.get(setpoint[0]) if setpoint else None
         for k, angle in enumerate(("roll", "pitch", "yaw")):
             path = f"{prefix}/pilot/{angle}"
-            rec.log(f"{path}/actual", rr.SeriesLines(names=[f"{angle} [°]"], colors=[(230, 230, 230)],
+            rec.log(f"{path}/actual", rr.SeriesLines(names=[f"{angle} [°]"], colors=[style.RECORDED_COLOR],
                                                      widths=[1.2]), static=True)
             t_sent, v_sent = with_breaks(s.t, angles[:, k])
             send_columns(rec, f"{path}/actual", _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent))
             if sp is not None and setpoint is not None and (col := _field(sp, setpoint[1][k])) is not None:
-                rec.log(f"{path}/setpoint", rr.SeriesLines(names=[f"{angle} setpoint [°]"], colors=[(255, 127, 14)],
+                rec.log(f"{path}/setpoint", rr.SeriesLines(names=[f"{angle} setpoint [°]"], colors=[palette.SETPOINT],
                                                            widths=[1.2]), static=True)
                 t_sp, v_sp = with_breaks(sp.t, _to_deg(col, setpoint[2]))
                 send_columns(rec, f"{path}/setpoint", _index(raw, t_sp, origin), rr.Scalars.columns(scalars=v_sp))
@@ -397,7 +396,7 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
                     units.add(_pwm(s.units[s.fields.index(pattern.format(n=n))]))
             if sticks:
                 break
-    colors = {"roll": (31, 119, 180), "pitch": (44, 160, 44), "throttle": (214, 39, 40), "yaw": (148, 103, 189)}
+    colors = palette.STICK_COLORS
     for stick, (t, v) in sticks.items():
         path = f"{prefix}/pilot/sticks/{stick}"
         rec.log(path, rr.SeriesLines(names=[stick], colors=[colors[stick]], widths=[1.0]), static=True)
@@ -437,7 +436,7 @@ def pilot_views(found: dict, logged: LoggedRaw, zoom: float) -> list[Any]:
     """The first tab of a raw log: one plot per angle (degrees, its setpoint beside it), the sticks, the map."""
     p = f"/{found['prefix']}/pilot"
     window = found["span"] or bulk_span(logged)
-    plots = [rrb.TimeSeriesView(origin=f"{p}/{a}", name=f"{a} [°] (setpoint orange)", axis_x=_whole_log(window),
+    plots = [rrb.TimeSeriesView(origin=f"{p}/{a}", name=f"{a} [°] (setpoint light orange)", axis_x=_whole_log(window),
                                 plot_legend=rrb.PlotLegend(visible=False)) for a in found["angles"]]
     if found["sticks"]:
         unit = found.get("stick_unit", "")

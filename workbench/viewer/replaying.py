@@ -250,11 +250,14 @@ def replay_blueprint(
     ids = [entity_part(i) for i in demo_ids]
     inputs = online_plots(
         ids, input_names, "inputs",
-        [f"{unit(n)}: recorded gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×" for n in input_names],
+        [f"{unit(n)}: recorded {style.color_name(_COLOR_REC)}, online K̂x + μ(x) {style.color_name(_COLOR_PRED)} "
+         f"± 1σ/3σ gray band, outside 3σ {style.color_name(_COLOR_OUT)} ×" for n in input_names],
         [y_range([d.u[:, j] for d in shown], n) for j, n in enumerate(input_names)],
     )
     states = online_plots(
-        ids, state_names, "states", [f"{unit(n)}: recorded gray, rollout end green" for n in state_names],
+        ids, state_names, "states",
+        [f"{unit(n)}: recorded {style.color_name(_COLOR_REC)}, rollout end {style.color_name(_COLOR_PRED)}"
+         for n in state_names],
         [y_range([d.x[:, j] for d in shown], n) for j, n in enumerate(state_names)],
     )
     plane = plane_of(roles, state_names)

@@ -392,7 +392,7 @@ class SessionLogger:
         index = _time_index(t)  # one pair of time columns serves every series of the trial
         for j, name in enumerate(s.input_names):
             p = paths.series_path(demo.id, "variability", name)
-            self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[style.W_COLOR], widths=[1.75],
+            self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[self.colors[demo.id]], widths=[1.75],
                                                  interpolation_mode="StepAfter"))
             self._send(f"{p}/w", index, rr.Scalars.columns(scalars=w[:, j]))
             if not model.has_variability:
@@ -441,8 +441,8 @@ class SessionLogger:
 
         Time series under ``demos/<id>/predictions/from_<start>/<method>/<state>``, predicted paths as line
         strips under ``scene/predictions/<id>/from_<start>/<method>``; the proposed model's Monte Carlo
-        percentile band (``samples > 0``) under ``…/<method>_band/<state>`` (a filled band in the method's light
-        color) and as a sweep of boxes in the scene. Returns the predictions by method.
+        percentile band (``samples > 0``) under ``…/<method>_band/<state>`` (a filled band in the one band gray) and
+        as a sweep of boxes in the scene (a dark tint of the same gray). Returns the predictions by method.
         """
         s = self.session
         if not 0 <= start < len(demo):
@@ -504,7 +504,8 @@ class SessionLogger:
                 points.setdefault(name, []).extend([(tp, lo[:, j]), (tp, hi[:, j])])
             if self.plane is not None:
                 self._static(paths.scene_prediction_path(demo.id, start, method, band=True), envelope(
-                    self.plane.view(lo), self.plane.view(hi), style.dimmed(color, 0.55), f"{title} MC {level}"))
+                    self.plane.view(lo), self.plane.view(hi), style.dimmed(style.BAND_COLOR, 0.55),
+                    f"{title} MC {level}"))
         # the prediction plots are zoomed to the predictions; their y-range is set by what is visible there
         lo_t, hi_t = s.windows.get(demo.id, (t0, t_end))
         s.windows[demo.id] = (min(lo_t, t0), max(hi_t, t_end))
@@ -568,7 +569,7 @@ class SessionLogger:
         if s.variability:  # the bands and ŵ only where a model drew them: a key names what is on screen
             lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ" + ("; Monte Carlo band of a prediction"
                                                                       if s.bands else ""),
-                      "", "red ×: ŵ outside 3σ; blue: ŵ",
+                      "", f"{style.color_name(style.OUTLIER_COLOR)} ×: ŵ outside 3σ; ŵ in its trial's {what} color",
                       "", f"ŵ titles: share of the inputs inside 3σ and 1σ (nominal {100 * verdict.NOMINAL_3SIGMA:.1f}"
                       f" % and {100 * verdict.NOMINAL_1SIGMA:.0f} %), inputs at a limit left out, and the verdict "
                       "against the spread sampling allows: fits, too narrow, too wide, does not fit (as in the "
