@@ -89,7 +89,7 @@ def test_report_without_bootstrap_says_so(tmp_path):
 def test_the_objective_figure_draws_only_the_identified_contrasts(result, report_folder):
     """The figure's rows are exactly the table's identified factors and ratios, each with its own interval: no
     entry of Q or R one by one (the attitude weight is not identified: METHOD.md), no unidentified ratio."""
-    from workbench.report.contrasts import math_label, fig_contrasts, identified_rows
+    from workbench.report.contrasts import fig_contrasts, identified_rows, math_label
 
     table = compare_strategies({lb: oi.ratios for lb, oi in result.objectives.items()})
     factors, ratios = identified_rows(table)

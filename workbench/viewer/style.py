@@ -63,7 +63,8 @@ SCENE_ORDER = {"band": 1.0, "ground": 1.5, "pad": 2.0, "dimmed": 2.5, "track": 3
 # counts, a roll of a milliradian) must not fill a plot and read as bang-bang input or oscillation
 MIN_SPAN = {"m": 1.0, "m/s": 0.5, "rad": 0.1, "rad/s": 0.2, "deg": 5.0, "deg/s": 10.0, "stick": 0.2, "": 0.0}
 COLOR_NAMES = {**{c: n for n, c in palette.OKABE_ITO.items()}, (153, 204, 102): "lime", (255, 170, 187): "pink",
-               (166, 118, 29): "brown", (170, 136, 204): "mauve", (238, 221, 136): "light yellow", palette.RECORDED_SCREEN: "light gray", palette.BAND: "gray",
+               (166, 118, 29): "brown", (170, 136, 204): "mauve", (238, 221, 136): "light yellow",
+               palette.RECORDED_SCREEN: "light gray", palette.BAND: "gray",
                palette.OUTLIER: "magenta"}
 OUTLIER_COLOR = palette.OUTLIER
 # a mode lane's state where no trial is flown (between a flight's segments, after an overlaid trial's end)
