@@ -184,14 +184,12 @@ def _print_study(ctx: Context, result: Any) -> None:
         by = {r.metric: r for r in g.itertuples(index=False)}
         cell = {m: fmt(r.value, r.lo, r.hi, share=m.startswith("band_")) for m, r in by.items()}
         rows.append([label, METHOD_TITLES.get(method, method), cell.get("rmse_position", "—"),
-                     cell.get("rmse_velocity", "—"), cell.get("band_position", "—")])
+                     cell.get("rmse_velocity", "—"), cell.get("band_position", "—"), str(int(g["n_trials"].max()))])
     if rows:
-        ctx.say_table(["label", "method", "position RMSE", "velocity RMSE", "MC band"], rows,
+        ctx.say_table(["label", "method", "position RMSE", "velocity RMSE", "MC band", "trials"], rows,
                       title="held-out prediction error (mean of trials [95 % interval])")
-    summary = result.summary()
-    ctx.say_table([str(c) for c in summary.columns],
-                  [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row]
-                   for row in summary.itertuples(index=False)], title="mean horizon RMSE on the test trials")
+    # the methods' differences are the statistics' tables below, each saying which comparison it is: a percentage
+    # here, beside two means it does not compare, read as their ratio (issue 38)
     if result.coverage is not None and len(result.coverage):
         ctx.say_table([str(c) for c in result.coverage.columns],
                       [[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row]
@@ -211,11 +209,35 @@ def _print_study(ctx: Context, result: Any) -> None:
         ctx.say_table(list(shown.columns), [[str(v) for v in row] for row in shown.itertuples(index=False)],
                       title="one-step calibration: inputs at a limit excluded, against the sampling spread "
                             "(binomial over effective samples)")
+    _print_efficiency(ctx, result)
     if result.stats_text:
         ctx.say_markdown(result.stats_text)
     _print_objective_comparison(ctx, result)
     for line in result.verdicts():
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
+
+
+def _print_efficiency(ctx: Context, result: Any) -> None:
+    """The data-efficiency curve: the mean held-out error of each method by the number of training demonstrations,
+    computed as the report's table (:func:`workbench.report.tables.efficiency_means`); its last row per strategy is the
+    comparison's own models, the numbers of the table above."""
+    from workbench.models.registry import METHOD_TITLES
+    from workbench.report.tables import efficiency_means
+    from workbench.study.pipeline import metric_unit
+
+    eff = getattr(result, "efficiency", None)
+    if eff is None or not len(eff):
+        return
+    means = efficiency_means(eff)
+    methods = [c for c in means.columns if c not in ("label", "n_train")]
+    metric = str(eff["metric"].iloc[0]) if "metric" in eff else "rmse_position"
+    unit = metric_unit(result.system, metric) if result.system is not None else ""
+    what = metric.removeprefix("rmse_").replace("_", " ")
+    ctx.say_table(["label", "n train", *[METHOD_TITLES.get(m, m) for m in methods]],
+                  [[str(r["label"]), str(int(r["n_train"])), *[f"{r[m]:.3g}" for m in methods]]
+                   for _, r in means.iterrows()],
+                  title=f"data efficiency: mean {what} RMSE{f' [{unit}]' if unit else ''} on the test trials by "
+                        "training demonstrations (the last of each strategy: the models above)")
 
 
 def _print_objective_comparison(ctx: Context, result: Any) -> None:
@@ -314,7 +336,7 @@ def cmd_demo(ctx: Context) -> int:
     out = Path(a.out)
     if out.is_dir():
         recover_swaps(out, "demo")  # what a killed run left half done is undone before anything else
-    logs = Path(a.logs) if a.logs else SAMPLE_LOGS
+    logs = Path(a.logs) if a.logs else _as_given(SAMPLE_LOGS)
     files = demo_logs(logs)
     if not files:
         if a.logs:
@@ -418,6 +440,16 @@ def _demo_into(ctx: Context, ds: Any, out: Path, build: Path, timings: dict[str,
     parts = ", ".join(f"{k} {v:.1f} s" for k, v in timings.items())
     ctx.say(f"done in {total:.1f} s ({parts})")
     return 0
+
+
+def _as_given(path: Path) -> Path:
+    """``path`` as a user in the current folder would type it (``sample_logs``), the absolute path elsewhere: the
+    demo's default folder printed the way a given one is, not as ``/work/…/sample_logs``."""
+    try:
+        rel = Path(os.path.relpath(path))
+    except ValueError:  # another drive
+        return path
+    return path if rel.parts[:1] == ("..",) else rel
 
 
 def _seconds_since_process_start(now: float) -> float:

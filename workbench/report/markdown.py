@@ -59,7 +59,7 @@ from workbench.report.figures import (  # the figures live in their own module; 
     fig_rmse,
     fig_variability,
 )
-from workbench.report.tables import efficiency_by_trial, save_table, scores_section, why_no_statistics
+from workbench.report.tables import efficiency_means, save_table, scores_section, why_no_statistics
 from workbench.report.tables import md_table as _md_table
 from workbench.study.pipeline import StudyResult, improvement_table, metric_unit
 
@@ -286,6 +286,10 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
         improvement = improvement_table(inputs.rmse, inputs.paired)
+        # a percentage says which comparison it is: the columns beside these means are the methods' differences
+        # over refitted splits, not the ratio of the two means they stand next to (issue 38)
+        improvement = improvement.rename(columns={c: f"{c} {_which_comparison(inputs.paired)}"
+                                                  for c in improvement.columns if str(c).startswith("vs ")})
         save_table(improvement, tab_dir / "comparison.csv")
         md += [_md_table(improvement), "", "(`tables/comparison.csv`)", ""]
         md += _envelope_line(inputs.envelope)
@@ -306,9 +310,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         what = str(inputs.efficiency["metric"].iloc[0]) if "metric" in inputs.efficiency else "rmse_position"
         save_figure(fig_data_efficiency(inputs.efficiency, metric_unit(system, what), _metric_words(what)),
                     fig_dir / "data_efficiency.png")
-        eff = efficiency_by_trial(inputs.efficiency).groupby(["label", "n_train", "method"], sort=False)["value"]
-        eff = eff.mean().unstack("method")
-        eff = eff.rename(columns=METHOD_TITLES).reset_index()
+        eff = efficiency_means(inputs.efficiency).rename(columns=METHOD_TITLES)
         save_table(eff, tab_dir / "data_efficiency.csv")
         md += ["## Data efficiency", "", _md_table(eff), "",
                "![Data efficiency](figures/data_efficiency.png)", "",
@@ -332,6 +334,16 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(md).rstrip() + "\n")
     return path
+
+
+def _which_comparison(paired: Sequence[Any]) -> str:
+    """``"(as methods, over 8 refits)"`` for method-level differences, ``"(these fitted models)"`` for paired ones."""
+    first = next(iter(paired), None)
+    n = getattr(first, "n_splits", None)
+    if n is None:
+        return "(these fitted models, on these test trials)"
+    design = getattr(first, "design", "random splits")
+    return f"(as methods, over {n} {'leave-one-out folds' if 'leave' in str(design) else 'refits'})"
 
 
 def _envelope_line(envelope: pd.DataFrame | None) -> list[str]:

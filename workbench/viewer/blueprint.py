@@ -186,7 +186,7 @@ def _objective_tab(s: LoggedSession) -> Any:
         if m in s.verdicts:
             v = s.verdicts[m]
             notes.insert(0, rrb.TextDocumentView(origin=paths.origin(paths.model_path(m, "verdict")),
-                                                 name=f"{m}: {'fits' if v.fits else 'DOES NOT FIT'}"))
+                                                 name=f"{m}: {v.head(short=True)}"))
         # the summary's tables are wide: its column gets as much room as the heatmaps together
         # the verdict's view is a paragraph tall; with mismatches listed it needs more
         fits = m not in s.verdicts or s.verdicts[m].fits

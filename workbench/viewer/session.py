@@ -602,7 +602,7 @@ class SessionLogger:
             if not any("states are" in m or "inputs are" in m for m in v.mismatches):
                 for (trial, inp), words in verdict.trial_band_titles(model, mine).items():
                     s.fit_titles[paths.series_path(trial, "variability", inp)] = words
-            head = f"{name} {'fits these data' if v.fits else 'DOES NOT FIT these data'}"
+            head = f"{name}: {v.head()}"
             if v.all_in_sample:
                 head = f"{name} is shown on its own training trials (in-sample)"
             # no heading: the view above the summary is a few lines tall, its title already says fits / does not
@@ -685,7 +685,7 @@ def log_session(
     clock: str = "auto",
     origins: Mapping[str, float] | None = None,
     source_dt: float | None = None,
-    scores: tuple[Any, str] | None = None,
+    scores: tuple[Any, str | Mapping[str, str]] | None = None,
 ) -> LoggedSession:
     """Log a whole session and return what was logged (for :func:`default_blueprint`).
 
@@ -778,7 +778,7 @@ def record_study(
     result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
 ) -> Path:
     """One ``.rrd`` with every trial, both models' variability on the test trials and every method's predictions."""
-    from workbench.viewer.heldout import study_note
+    from workbench.viewer.heldout import study_notes
 
     focus = [te[0].id for te in result.test.values() if len(te)]
     bar = progress() if progress is not None else nullcontext()
@@ -788,6 +788,6 @@ def record_study(
         out, _ = record_session(
             path, result.demos, application_id=APPLICATION_IDS["study"], models=result.models,
             baselines=result.baselines, focus=focus, n_steps=result.n_steps, samples=result.samples,
-            seed=result.seed, clock="trial", scores=(result.table, study_note(result)),
+            seed=result.seed, clock="trial", scores=(result.table, study_notes(result)),
         )
     return out
