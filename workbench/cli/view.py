@@ -73,10 +73,46 @@ def _view_raw(ctx: Context, streams: Any) -> int:
     return 0
 
 
+def _view_overlay(ctx: Context) -> int:
+    """``workbench view A B … --raw``: the logs on one clock, one colour each (:mod:`workbench.viewer.overlay`)."""
+    from adapters.rawlog import raw_log
+    from workbench import viewer
+    from workbench.viewer.overlay import OVERLAY_APPLICATION_ID, log_overlay, overlay_blueprint
+
+    a = ctx.args
+    raws = []
+    for path in a.inputs:
+        streams = _raw_streams(ctx, path)
+        if streams is None:
+            raise UsageError(f"{path}: --raw overlays logs as they are, not demonstrations")
+        raws.append(raw_log(streams))
+    align = list(a.align or [])
+    if not align:  # arming where every log records one: the moment two flights most often share
+        align = ["arming" if r.armed else "start" for r in raws]
+    stem = "_".join(input_stem(p) for p in a.inputs[:3])
+    out = output_kwargs(ctx, Path("out") / f"{stem}.overlay.rrd")
+    rec = viewer.new_recording(OVERLAY_APPLICATION_ID)
+    with ctx.progress() as progress:
+        progress.add_task(f"logging {len(raws)} logs on one clock", total=None)
+        with viewer.open_output(rec, **out) as sink:
+            logged = log_overlay(rec, raws, align)
+            sink.blueprint = overlay_blueprint(logged)
+    for name, how in zip(logged.names, logged.aligned, strict=True):
+        ctx.say(f"{name}: 0 s at {how}")
+    announce(ctx, out, sink, f"{len(raws)} logs on one clock")
+    return 0
+
+
 def cmd_view(ctx: Context) -> int:
     from workbench import viewer
 
     a = ctx.args
+    if a.align and not (a.raw and len(a.inputs) > 1):
+        raise UsageError("--align puts several raw logs on one clock: give two or more logs with --raw")
+    if a.raw and len(a.inputs) > 1:
+        if a.mapping or a.model or a.label:
+            raise UsageError("--raw shows the logs as they are: leave out --mapping, --model and --label")
+        return _view_overlay(ctx)
     raw_streams = _raw_streams(ctx, a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
     if a.raw:
         if raw_streams is None:
