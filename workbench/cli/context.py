@@ -220,7 +220,7 @@ def narrowed_tables(header: Sequence[str], cells: Sequence[Sequence[str]], title
         for j, h in enumerate(head):
             widest = max([len(r[j]) for r in body] or [0])
             longest_word = max((len(w) for w in h.split()), default=0)
-            table.add_column(h, width=max(widest, longest_word) if light else None, no_wrap=not light)
+            table.add_column(Text(h), width=max(widest, longest_word) if light else None, no_wrap=not light)
         for r in body:
             table.add_row(*(Text(c) for c in r))  # a cell's "[0.1, 0.2]" is text, not console markup
         return table

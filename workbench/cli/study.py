@@ -231,7 +231,8 @@ def _print_efficiency(ctx: Context, result: Any) -> None:
     means = efficiency_means(eff)
     methods = [c for c in means.columns if c not in ("label", "n_train")]
     metric = str(eff["metric"].iloc[0]) if "metric" in eff else "rmse_position"
-    unit = metric_unit(result.system, metric) if result.system is not None else ""
+    plant = next((m.system for m in result.models.values() if getattr(m, "system", None) is not None), None)
+    unit = metric_unit(plant, metric) if plant is not None else ""
     what = metric.removeprefix("rmse_").replace("_", " ")
     ctx.say_table(["label", "n train", *[METHOD_TITLES.get(m, m) for m in methods]],
                   [[str(r["label"]), str(int(r["n_train"])), *[f"{r[m]:.3g}" for m in methods]]
