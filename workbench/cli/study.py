@@ -359,7 +359,8 @@ def cmd_demo(ctx: Context) -> int:
     for f in files:
         by_format[f.suffix.lstrip(".")] = by_format.get(f.suffix.lstrip("."), 0) + 1
     ctx.say(
-        f"imported {len(ds)} demonstrations ({ds.n_samples} samples; labels {ds.labels}) from {len(files)} logs "
+        f"imported {len(ds)} demonstrations ({ds.n_samples} samples; labels "
+        f"{', '.join(map(str, ds.labels)) or 'none'}) from {len(files)} logs "
         f"({', '.join(f'{v} {k}' for k, v in by_format.items())}) in {logs}"
     )
     out.mkdir(parents=True, exist_ok=True)

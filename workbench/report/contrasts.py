@@ -50,6 +50,17 @@ def math_label(text: str) -> str:
     return re.sub(r"\b([QRS])_([A-Za-z0-9]+)", lambda m: f"${m[1]}_{{{m[2]}}}$", text)
 
 
+def _three_labels(ax: Any, values: Sequence[float]) -> None:
+    """At least three labelled ticks on a log axis that spans under three decades: 1, 2 and 5 of each decade
+    labelled (a span of one decade had only its two powers of ten)."""
+    from matplotlib.ticker import LogFormatterSciNotation, LogLocator
+
+    v = np.asarray([x for x in values if np.isfinite(x) and x > 0], dtype=float)
+    if v.size and np.log10(v.max() / v.min()) < 3:
+        ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False))
+
+
 def fig_contrasts(factors: pd.DataFrame, ratios: pd.DataFrame, colors: Mapping[str, str],
                   column_width: float = 3.5) -> Figure:
     """A forest plot per kind of contrast (factors between strategies, with ×1 marked; ratios inside a part in
@@ -71,6 +82,7 @@ def fig_contrasts(factors: pd.DataFrame, ratios: pd.DataFrame, colors: Mapping[s
         if rows is factors:
             ax.axvline(1.0, color="0.6", lw=0.8, ls="--", zorder=0)  # no difference between the strategies
         ax.set_xscale("log")
+        _three_labels(ax, [*rows["lo"], *rows["hi"], *([1.0] if rows is factors else [])])
         ax.set_yticks(y, [math_label(str(v)) for v in rows["label"]])
         ax.set_ylim(-0.6, len(rows) - 0.4)
         ax.set_title(title)

@@ -435,7 +435,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
 def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str) -> Path:
     notes = [
         f"{len(result.demos)} demonstrations, {result.demos.n_samples} samples, dt = {result.demos.dt:g} s; "
-        f"states {list(result.demos.state_names)}, inputs {list(result.demos.input_names)}",
+        f"states {', '.join(result.demos.state_names)}; inputs {', '.join(result.demos.input_names)}",
         f"prediction horizon {result.n_steps} steps ({result.n_steps * result.demos.dt:.2f} s); "
         f"{result.samples} Monte Carlo rollouts per band; seed {result.seed}",
     ]

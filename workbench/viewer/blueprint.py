@@ -133,7 +133,7 @@ def _scene_name(s: LoggedSession, across: str, up: str) -> str:
         name += " — " + ", ".join(f"{style.method_title(m)} {words[m]}" if m in words else style.method_title(m)
                                   for m in s.methods)
         if s.bands:
-            name += ", MC band dark"
+            name += ", MC band gray"
     return name
 
 
@@ -147,12 +147,14 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     if plane is None:
         return rrb.Horizontal(scene, name="scene")
     side = []
-    for k, name in enumerate(plane):
+    for name in plane:
         if focus and focus[0] in s.predictions:
             fid = focus[0]
             key = paths.prediction_plot(fid, name)
             side.append(_plot(f"{s.title(name)} · {fid}", _prediction_paths(s, fid, name),
-                              legend=rrb.PlotLegend(s.corners.get(key, "RightTop"), visible=k == 0),
+                              # no legend: the scene's title names every colour, and a legend covered a third
+                              # of a plot this small (seen with rrd-look)
+                              legend=rrb.PlotLegend(s.corners.get(key, "RightTop"), visible=False),
                               y_range=s.ranges.get(key),
                               window=s.windows.get(fid)))
         else:
@@ -162,7 +164,8 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     if paths.SCORES in s.entities:
         # the first question's answer where the eye lands: each method's held-out error beside the tracks
         side.insert(0, rrb.TextDocumentView(origin=paths.origin(paths.SCORES), name="held-out prediction error"))
-        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[6] + [3] * (len(side) - 1)),
+        # the plots tall enough for three labelled ticks, the scores' two tables still whole
+        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[5] + [4] * (len(side) - 1)),
                               column_shares=[3, 2], name="scene")
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
 
@@ -177,7 +180,7 @@ def _objective_tab(s: LoggedSession) -> Any:
                 continue  # the cross term is ~0 for the paper's structure; its numbers are in the summary
             n_rows, n_cols = s.heatmap_shapes.get((m, block), (1, 1))
             # the names stand left of and above the cells, the color bar right of them: the bounds leave room
-            bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 1.6], y_range=[-0.8, n_rows + 0.1])
+            bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 1.6], y_range=[-1.1, n_rows + 0.1])
             views.append(rrb.Spatial2DView(origin=paths.origin(paths.model_path(m, f"heatmap/{block}")),
                                            visual_bounds=bounds,
                                            name=f"{m}: {title}"))  # the color bar says the scale
@@ -189,7 +192,8 @@ def _objective_tab(s: LoggedSession) -> Any:
                                                  name=f"{m}: {v.head(short=True)}"))
         # the summary's tables are wide: its column gets as much room as the heatmaps together
         # the verdict's view is a paragraph tall; with mismatches listed it needs more
-        fits = m not in s.verdicts or s.verdicts[m].fits
+        # the verdict's paragraph whole: taller where it lists what does not fit or what the band misses
+        fits = m not in s.verdicts or s.verdicts[m].head(short=True) == "fits"
         rows.append(rrb.Horizontal(*views, rrb.Vertical(*notes, row_shares=[1 if fits else 2, 3] if len(notes) > 1
                                                         else None),
                                    column_shares=[*shares, max(0.6 * sum(shares), 1.0)]))
@@ -241,17 +245,26 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
                  key=paths.overlay_plot("inputs", name))
         for name in s.input_names
     ]
+    w_rows: list[Any] = []
     for i in [f for f in focus if f in s.variability]:
+        row = []
         for name in s.input_names:
             p = paths.series_path(i, "variability", name)
             fit = s.fit_titles.get(p)
             where = " (in-sample)" if i in s.in_sample else ""
-            # what and the fit first, the trial last: a long title is cut at its end; the key view explains the
-            # colors and the nominal shares (no legend); the verdict's words are the report's (band_verdict)
-            input_views.append(_plot(f"ŵ {name} " + (f"{fit} · " if fit else "· ") + i + where,
-                                     [query(p, recursive=True)], legend=rrb.PlotLegend(visible=False),
-                                     y_range=s.ranges.get(p), window=s.trial_windows.get(i)))
-    tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
+            # the trial first (a long title is cut at its end, and the trial says which row this is), then the
+            # input and the band's verdict (the report's words, band_verdict); the key view explains the colors
+            # and the nominal shares (no legend)
+            row.append(_plot(f"{i}{where} · ŵ {name}" + (f" · {fit}" if fit else ""),
+                             [query(p, recursive=True)], legend=rrb.PlotLegend(visible=False),
+                             y_range=s.ranges.get(p), window=s.trial_windows.get(i)))
+        w_rows.append(rrb.Horizontal(*row))
+    if w_rows:
+        # a row per focus trial, its inputs side by side: plots twice as wide as in a grid of four, so a time axis
+        # of a few seconds gets more than its "+0s" label (seen with rrd-look)
+        tabs.append(rrb.Vertical(rrb.Horizontal(*input_views, *_key(s)), *w_rows, name="inputs & variability"))
+    else:
+        tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
     for i in [f for f in focus if f in s.predictions]:
         # one tab per focus trial: six plots of one trial are tall enough for a y-tick every few pixels rows
         pred_views: list[Any] = []
@@ -266,8 +279,11 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
         where = " (in-sample)" if i in s.in_sample else ""
         grid = rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1)
         if label_doc in s.entities:  # the label's held-out numbers under its plots, a few lines tall
+            # the table sized to its rows (a title, a header and a row per method, ~24 px each, of ~900 px)
+            doc = 24.0 * (len(s.methods) + 5)
             tabs.append(rrb.Vertical(grid, rrb.TextDocumentView(origin=paths.origin(label_doc),
-                                                                name="held-out prediction error"), row_shares=[5, 1],
+                                                                name="held-out prediction error"),
+                                     row_shares=[max(900.0 - doc, 300.0), doc],
                                      name=f"predictions · {i}{where}"))
         else:
             tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1,

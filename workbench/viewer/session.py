@@ -26,12 +26,9 @@ from workbench.viewer.entities import LoggedSession
 from workbench.viewer.entities import model_for as _model_for
 from workbench.viewer.objective import (
     Heatmap,
-    colors,
     heatmaps,
     model_summary,
     shared_scales,
-    text_colors,
-    value_text,
 )
 from workbench.viewer.output import has_display, open_output
 from workbench.viewer.scene import Plane, envelope, label_spots, plane_of, scale_bar
@@ -381,6 +378,8 @@ class SessionLogger:
         Returns the logged arrays (``w``, ``mu``, ``sigma``, ``outside``) for the caller's summary.
         """
         s = self.session
+        if not model.has_residuals and not model.has_gain:
+            return {}  # a model of the inputs alone (GMR-only) has no ŵ = u − K̂x to draw
         w = model.residuals(demo) if model.has_residuals else demo.u - demo.x @ np.asarray(model.K_).T
         out: dict[str, np.ndarray] = {"w": w}
         if model.has_variability:
@@ -627,32 +626,10 @@ class SessionLogger:
         log_scores(self, scores, note, units)
 
     def _log_heatmap(self, path: str, h: Heatmap, vmax: float) -> None:
-        """Cell (i, j) covers [j, j+1] × [i, i+1] of the 2-D view; values centred in the cells at the block's
-        precision in a color that contrasts with the cell, names outside, a color bar to the right."""
-        rows, cols = h.values.shape
-        self._static(f"{path}/cells", rr.Image(colors(h.values, vmax), magnification_filter="Nearest", draw_order=0.0))
-        ii, jj = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
-        centres = np.column_stack([jj.ravel() + 0.5, ii.ravel() + 0.5])
-        texts = [value_text(v, vmax) for v in h.values.ravel()]
-        self._static(f"{path}/values", rr.Points2D(centres, radii=UI(0.1), colors=text_colors(h.values, vmax),
-                                                   labels=texts, show_labels=True, draw_order=5.0))
-        row_pts = np.column_stack([np.full(rows, -0.7), np.arange(rows) + 0.5])
-        col_pts = np.column_stack([np.arange(cols) + 0.5, np.full(cols, -0.3)])
-        self._static(f"{path}/rows", rr.Points2D(row_pts, radii=UI(0.1), colors=[(230, 230, 230)],
-                                                 labels=list(h.rows), show_labels=True, draw_order=5.0))
-        self._static(f"{path}/cols", rr.Points2D(col_pts, radii=UI(0.1), colors=[(230, 230, 230)],
-                                                 labels=list(h.cols), show_labels=True, draw_order=5.0))
-        # the color bar: +vmax at the top, −vmax at the bottom, as tall as the block, a third of a cell wide
-        steps = np.linspace(vmax, -vmax, 21)[:, None]
-        x0, height = cols + 0.35, float(max(rows, 1))
-        self._static(f"{path}/colorbar", rr.Transform3D(translation=[x0, 0.0, 0.0],
-                                                        scale=[0.35, height / len(steps), 1.0]))
-        self._static(f"{path}/colorbar/image", rr.Image(colors(steps, vmax), magnification_filter="Nearest",
-                                                        draw_order=0.0))
-        ticks = np.array([[x0 + 0.9, 0.15], [x0 + 0.9, height / 2], [x0 + 0.9, height - 0.15]])
-        self._static(f"{path}/colorbar_ticks", rr.Points2D(
-            ticks, radii=UI(0.1), colors=[(230, 230, 230)], show_labels=True, draw_order=5.0,
-            labels=[f"+{vmax:.2g}", "0", f"−{vmax:.2g}"]))
+        """One block as a labelled heatmap (:func:`workbench.viewer.objective.log_heatmap`)."""
+        from workbench.viewer.objective import log_heatmap
+
+        log_heatmap(self._static, path, h, vmax)
 
 
 def _prediction_band(pred: Any) -> tuple[np.ndarray, np.ndarray, str] | None:

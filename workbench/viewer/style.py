@@ -34,6 +34,8 @@ __all__ = [
     "dimmed",
     "min_span",
     "data_range",
+    "readable",
+    "abbreviate_mode",
     "quiet_corner",
     "label_color",
     "light",
@@ -116,6 +118,23 @@ def mode_colors(modes: Sequence[str]) -> dict[str, tuple[int, int, int]]:
     return {m: _MODE_PALETTE[k % len(_MODE_PALETTE)] for k, m in enumerate(modes)}
 
 
+#: A mode span shorter than this share of its lane is labelled by its abbreviation (:func:`abbreviate_mode`):
+#: rerun cuts a state's name at its span's end ("STAI" for STABILIZE), which reads as another word
+SHORT_SPAN = 0.06
+
+
+def abbreviate_mode(name: str) -> str:
+    """A flight mode's short name, by one rule: names of up to five letters stay; a one-word name keeps its first
+    four letters (STABILIZE → STAB, LOITER → LOIT); a name of several words keeps the first word's first three
+    letters and each other word's first (ALT_HOLD → ALTH, AUTO_RTL → AUTR); the abbreviation ends with "." so it is
+    not read as a word of its own."""
+    words = [w for w in name.replace("-", "_").replace(" ", "_").split("_") if w]
+    if len(name) <= 5 or not words:
+        return name
+    short = words[0][:4] if len(words) == 1 else words[0][:3] + "".join(w[0] for w in words[1:])
+    return short + "."
+
+
 def dimmed(color: Sequence[int], amount: float = 0.6) -> tuple[int, int, int]:
     """``color`` mixed with the background by ``amount``: the trials that are not in focus, the scene's envelope."""
     c, b = np.asarray(tuple(color)[:3], dtype=float), np.asarray(BACKGROUND, dtype=float)
@@ -154,7 +173,38 @@ def data_range(*arrays: object, margin: float = 0.08, min_span: float = 0.0) -> 
     if hi - lo < min_span:
         mid = (lo + hi) / 2
         lo, hi = mid - min_span / 2, mid + min_span / 2
-    return float(lo), float(hi)
+    return readable(float(lo), float(hi))
+
+
+#: The most labels rerun's plot puts on an axis: it labels multiples of one power of ten, at least ~25 px apart
+#: (measured with rrd-look: 0.1 m steps labelled 31 px apart, not 17 px apart), so a plot ~250 px tall — the
+#: workbench's layouts give every plot that much — shows at most about ten
+MAX_LABELS = 10
+MIN_LABELS = 3
+
+
+def readable(lo: float, hi: float, min_labels: int = MIN_LABELS) -> tuple[float, float]:
+    """``(lo, hi)`` widened, where needed, to hold ``min_labels`` multiples of the power of ten rerun labels.
+
+    rerun's plots (egui_plot) label only multiples of a power of ten, the smallest whose labels do not crowd: a
+    y-range of 0.8–2.7 m got the labels 1 and 2, a range of −0.6–0.3 m the label 0 alone (seen with rrd-look). The
+    step is estimated for a plot ~250 px tall (:data:`MAX_LABELS`); a taller one labels more, never fewer.
+    """
+    span = hi - lo
+    if not (np.isfinite(span) and span > 0):
+        return lo, hi
+    step = 10.0 ** np.ceil(np.log10(span / MAX_LABELS))
+    k0, k1 = int(np.ceil(lo / step - 1e-9)), int(np.floor(hi / step + 1e-9))
+    while k1 - k0 + 1 < min_labels:
+        # widen on the side with more room to the next multiple, so the data stay centred
+        if (lo - (k0 - 1) * step) <= ((k1 + 1) * step - hi):
+            k0 -= 1
+        else:
+            k1 += 1
+    lo, hi = min(lo, k0 * step), max(hi, k1 * step)
+    # a label on the very edge of a plot is cut in half: a little room beyond the outer multiples
+    edge = 0.04 * (hi - lo)
+    return float(lo - edge if np.isclose(lo, k0 * step) else lo), float(hi + edge if np.isclose(hi, k1 * step) else hi)
 
 
 def quiet_corner(series: Sequence[tuple[np.ndarray, np.ndarray]], t_range: tuple[float, float],

@@ -142,10 +142,10 @@ def mismatches(model: Any, state_names: Sequence[str], input_names: Sequence[str
     out = []
     names = tuple(getattr(system, "state_names", ()) or ())
     if names and tuple(state_names) != names:
-        out.append(f"its states are {list(names)}, these data's {list(state_names)}")
+        out.append(f"its states are {', '.join(names)}, these data's {', '.join(state_names)}")
     inputs = tuple(getattr(system, "input_names", ()) or ())
     if inputs and tuple(input_names) != inputs:
-        out.append(f"its inputs are {list(inputs)}, these data's {list(input_names)}")
+        out.append(f"its inputs are {', '.join(inputs)}, these data's {', '.join(input_names)}")
     mine = _roles_json(getattr(system, "roles", None))
     if mine is not None and roles is not None and mine != _roles_json(roles):
         out.append("its vehicle roles differ from these data's (another mapping or vehicle)")
