@@ -102,10 +102,12 @@ class Context:
         cells = [[str(c) for c in r] for r in rows]
         header = [str(h) for h in header]
         width = self.out.width
-        for table in narrowed_tables(header, cells, title):
-            if _fits(table, width):
-                self.say(table)
-                return
+        # of the forms that fit, the one with the fewest lines (a wrapped note column is shortest with the tightest
+        # numbers beside it); the first of equals (the least narrowed)
+        fitting = [(n, k, t) for k, t in enumerate(narrowed_tables(header, cells, title)) if (n := _fits(t, width))]
+        if fitting:
+            self.say(min(fitting, key=lambda f: (f[0], f[1]))[2])
+            return
         groups = list(dict.fromkeys(r[0] for r in cells))
         if len(header) > 2 and len(groups) < len(cells):
             # one table per value of the first column (a strategy), that column in the tables' titles
@@ -217,10 +219,18 @@ def narrowed_tables(header: Sequence[str], cells: Sequence[Sequence[str]], title
         table = Table(title=title or None, box=box.SIMPLE_HEAD if light else box.HEAVY_HEAD,
                       pad_edge=not light, collapse_padding=light, show_edge=not light,
                       padding=(0, 0) if tight else (0, 1))
+        prose = {j for j in range(len(head)) if any(_is_prose(r[j]) for r in body)}
+        table.prose = prose if light else set()  # type: ignore[attr-defined] - read by _fits
         for j, h in enumerate(head):
             widest = max([len(r[j]) for r in body] or [0])
-            longest_word = max((len(w) for w in h.split()), default=0)
-            table.add_column(Text(h), width=max(widest, longest_word) if light else None, no_wrap=not light)
+            longest_word = max((len(w) for w in (h + " " + " ".join(r[j] for r in body)).split()), default=0)
+            if light and j in prose:
+                # a note in words wraps at its spaces inside its column (numbers never do): the table keeps its
+                # form where a sentence is wider than the terminal
+                table.add_column(Text(h), min_width=longest_word, ratio=1, no_wrap=False)
+            else:
+                table.add_column(Text(h), width=max(widest, max((len(w) for w in h.split()), default=0))
+                                 if light else None, no_wrap=not light)
         for r in body:
             table.add_row(*(Text(c) for c in r))  # a cell's "[0.1, 0.2]" is text, not console markup
         return table
@@ -237,8 +247,9 @@ def _tight(cell: str) -> str:
     return re.sub(r"(\d) %", r"\1%", cell.replace(", ", ",")) if any(ch.isdigit() for ch in cell) else cell
 
 
-def _fits(table: Any, width: int) -> bool:
-    """Whether rich draws ``table`` within ``width`` columns with every cell whole on one line (headers may wrap)."""
+def _fits(table: Any, width: int) -> int:
+    """The number of lines rich draws ``table`` in within ``width`` columns with every cell whole on one line
+    (headers and notes in words may wrap), or 0 where it cannot."""
     from rich.console import Console
 
     with open(os.devnull, "w") as sink:
@@ -246,8 +257,17 @@ def _fits(table: Any, width: int) -> bool:
         console.print(table)
         lines = console.export_text().splitlines()
     if any(len(line) > width for line in lines):
-        return False
-    cells = [str(c) for col in table.columns for c in col._cells]
-    words = [w for col in table.columns for w in str(col.header).split()]  # a header may wrap, never be cut
-    return all(any(c in line for line in lines) for c in cells if c) and all(
+        return 0
+    prose = getattr(table, "prose", set())
+    cells = [str(c) for j, col in enumerate(table.columns) if j not in prose for c in col._cells]
+    # a header and a note in words may wrap, never be cut: every word of them is on some line
+    words = [w for col in table.columns for w in str(col.header).split()]
+    words += [w for j, col in enumerate(table.columns) if j in prose for c in col._cells for w in str(c).split()]
+    whole = all(any(c in line for line in lines) for c in cells if c) and all(
         any(w in line for line in lines) for w in words)
+    return len(lines) if whole else 0
+
+
+def _is_prose(cell: str) -> bool:
+    """A cell in words (a note, a verdict): five words or more, longer than any number with its interval."""
+    return len(cell) > 30 and len(cell.split()) >= 5 and sum(ch.isalpha() for ch in cell) > len(cell) / 2

@@ -180,7 +180,8 @@ def _objective_tab(s: LoggedSession) -> Any:
                 continue  # the cross term is ~0 for the paper's structure; its numbers are in the summary
             n_rows, n_cols = s.heatmap_shapes.get((m, block), (1, 1))
             # the names stand left of and above the cells, the color bar right of them: the bounds leave room
-            bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 1.6], y_range=[-1.1, n_rows + 0.1])
+            # room right of the colour bar for its "+0.25" labels (they were cut at the view's edge)
+            bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 2.5], y_range=[-1.1, n_rows + 0.1])
             views.append(rrb.Spatial2DView(origin=paths.origin(paths.model_path(m, f"heatmap/{block}")),
                                            visual_bounds=bounds,
                                            name=f"{m}: {title}"))  # the color bar says the scale

@@ -19,7 +19,7 @@ Timelines: ``link_time`` (the vehicle's clock, continuous: what the time panel f
 the segment's first step, as the replay) and ``step``. Every event and status is on ``link_time`` — stamped with
 the vehicle's latest time (0 before the first step), so a silent link still has a timeline and its tabs say why
 they are empty. Bands share the session's and the replay's neutral tint (:data:`workbench.viewer.style.BAND_COLOR`),
-the predicted mean its own green line (``…/online/<input>/mean``).
+the predicted mean its own line in the proposed model's colour (``…/online/<input>/mean``).
 """
 
 from __future__ import annotations
@@ -388,9 +388,8 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
     linked = rrb.TimeAxis(link=LinkAxis.LinkToGlobal)
     quiet = rrb.PlotLegend(visible=False)  # the key is in each title: no legend over the data
     inputs = online_plots(ids, input_names, "inputs",
-                          [f"{n}: operator {style.color_name(_RECORDED)}, online K̂x + μ(x) "
-                           f"{style.color_name(_PRED)} ± 1σ/3σ gray band, outside 3σ {style.color_name(_OUT)} ×"
-                           for n in input_names])
+                          [f"{n} · operator {style.color_name(_RECORDED)} · K̂x+μ {style.color_name(_PRED)} "
+                           f"· {style.color_name(_OUT)} × outside 3σ" for n in input_names])
     states = online_plots(ids, state_names, "states",
                           [f"{n}: recorded {style.color_name(_RECORDED)}, rollout end {style.color_name(_PRED)}"
                            for n in state_names])
