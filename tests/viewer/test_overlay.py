@@ -78,3 +78,20 @@ def test_two_logs_of_other_formats_and_rates_overlay_on_one_clock(tmp_path):
     arm = raw_log(tlog).armed[0][0] - raw_log(tlog).t_start
     tlog_first = next(v for p, v in first_t.items() if "dronekit" in p)
     assert tlog_first < 0 and abs(tlog_first + arm) < 5.0
+
+
+def test_subjects_overlay_on_the_trials_clock_one_colour_each():
+    from workbench.sim.landing import simulate_landings
+    from workbench.viewer import session
+
+    ds = simulate_landings("CS1", n_trials=4, seed=0)
+    ds = ds.with_demos([d.with_meta(subject=f"p{k % 2}") for k, d in enumerate(ds)])
+    logger = session.SessionLogger(session.new_recording(), ds, color_by="subject")
+    by_subject: dict[str, set] = {}
+    for d in ds:
+        by_subject.setdefault(d.meta["subject"], set()).add(logger.colors[d.id])
+    assert all(len(c) == 1 for c in by_subject.values())  # one colour per subject …
+    assert len({next(iter(c)) for c in by_subject.values()}) == 2  # … and two subjects, two colours
+    assert set(logger.session.label_colors) == {"p0", "p1"}  # the key names subjects, not the strategy
+    with pytest.raises(DataError, match="--color-by"):
+        session.SessionLogger(session.new_recording(), ds, color_by="pilot_shoe_size")

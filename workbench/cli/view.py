@@ -155,6 +155,7 @@ def cmd_view(ctx: Context) -> int:
             session = viewer.log_session(
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
                 samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=origins, source_dt=source_dt,
+                color_by=a.color_by,
             )
             extra = (_raw_beside(rec, raw_streams, mapping, ds, origins.get(str(Path(a.inputs[0]))))
                      if raw_streams is not None and mapping else [])

@@ -164,8 +164,12 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     if paths.SCORES in s.entities:
         # the first question's answer where the eye lands: each method's held-out error beside the tracks
         side.insert(0, rrb.TextDocumentView(origin=paths.origin(paths.SCORES), name="held-out prediction error"))
-        # the plots tall enough for three labelled ticks, the scores' two tables still whole
-        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[5] + [4] * (len(side) - 1)),
+        # the scores' tables whole (a line is ~22 px of the ~940 px column: a title of two lines, per label its
+        # name, a header, a row per method and a gap), the plots sharing the rest, tall enough for three ticks
+        labels = max(len(s.label_colors), 1)
+        doc = 22.0 * (3 + labels * (3 + max(len(s.methods), 1)))
+        plots = max((940.0 - doc) / max(len(side) - 1, 1), 250.0)
+        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[doc] + [plots] * (len(side) - 1)),
                               column_shares=[3, 2], name="scene")
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
 

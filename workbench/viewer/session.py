@@ -146,7 +146,7 @@ class SessionLogger:
     """
 
     def __init__(self, rec: rr.RecordingStream, demos: DemonstrationSet, *, clock: str = "trial",
-                 origins: Mapping[str, float] | None = None) -> None:
+                 origins: Mapping[str, float] | None = None, color_by: str = "label") -> None:
         self.rec = rec
         self.demos = demos
         s = self.session = LoggedSession(tuple(demos.state_names), tuple(demos.input_names))
@@ -158,10 +158,21 @@ class SessionLogger:
             s.plane_names = (s.state_names[self.plane.across], s.state_names[self.plane.up])
         s.units = {n: roles.unit(n) for n in (*s.state_names, *s.input_names)} if roles else {}
         ids = [d.id for d in demos]
-        self.colors = style.trial_colors(ids, [d.label for d in demos], s.labels)
+        self.color_by = color_by
+        if color_by != "label":
+            # subjects, sessions (any meta key) laid over each other on the trials' clock, one colour each
+            groups = [None if d.meta.get(color_by) is None else str(d.meta.get(color_by)) for d in demos]
+            known = list(dict.fromkeys(g for g in groups if g is not None))
+            if not known:
+                raise DataError(f"no trial records {color_by!r}; --color-by takes a key every trial's metadata has "
+                                "(subject, session, label, …)")
+            self.colors = style.trial_colors(ids, groups, known)
+            s.label_colors = {g: style.label_color(g, known) for g in known}
+        else:
+            self.colors = style.trial_colors(ids, [d.label for d in demos], s.labels)
+            if s.labels:
+                s.label_colors = {d.label: self.colors[d.id] for d in demos if d.label}
         s.colors = dict(self.colors)
-        if s.labels:
-            s.label_colors = {d.label: self.colors[d.id] for d in demos if d.label}
         self.offsets = {d.id: _log_time(d, origins) if s.clock == "log" else 0.0 for d in demos}
         self._extent: dict[str, list[float]] = {}
         self.label_ids: set[str] | None = None  # the start labels that do not collide (set by log_scene)
@@ -555,9 +566,12 @@ class SessionLogger:
         """The tab's key as a small text (``key``): what each trial color, method color and band means."""
         s = self.session
         by_color: dict[tuple[int, int, int], list[str]] = {}
+        by = self.color_by
         for d in self.demos:
-            by_color.setdefault(self.colors[d.id], []).append(d.label if s.labels and d.label else d.id)
-        what = "strategy" if s.labels else "segment" if s.clock == "log" else "trial"
+            name = (str(d.meta.get(by)) if by != "label" and d.meta.get(by) is not None
+                    else d.label if s.labels and d.label else d.id)
+            by_color.setdefault(self.colors[d.id], []).append(name)
+        what = (by if by != "label" else "strategy" if s.labels else "segment" if s.clock == "log" else "trial")
         lines = [f"**{what} colors**", ""]
         shown = list(by_color.items())[:12]
         for color, names in shown:
@@ -663,6 +677,7 @@ def log_session(
     origins: Mapping[str, float] | None = None,
     source_dt: float | None = None,
     scores: tuple[Any, str | Mapping[str, str]] | None = None,
+    color_by: str = "label",
 ) -> LoggedSession:
     """Log a whole session and return what was logged (for :func:`default_blueprint`).
 
@@ -688,8 +703,11 @@ def log_session(
         A study's comparison table (:func:`workbench.study.evaluate.compare` rows of its test trials) and where it
         comes from; by default the models are scored here on the trials they were not fitted on
         (:func:`heldout_table`), and the note says how many those are, or that there are none.
+    color_by : str
+        The trials' colours: one per strategy label (default), or per value of another metadata key — ``subject``
+        or ``session`` lays subjects or sessions over each other on the trials' clock.
     """
-    logger = SessionLogger(rec, demos, clock=clock, origins=origins)
+    logger = SessionLogger(rec, demos, clock=clock, origins=origins, color_by=color_by)
     by_id = {d.id: d for d in demos}
     if models is not None:
         if focus is None:
