@@ -216,7 +216,7 @@ def narrowed_tables(header: Sequence[str], cells: Sequence[Sequence[str]], title
     from rich.text import Text
 
     def make(head: Sequence[str], body: Sequence[Sequence[str]], light: bool, tight: bool = False) -> Any:
-        table = Table(title=title or None, box=box.SIMPLE_HEAD if light else box.HEAVY_HEAD,
+        table = Table(title=Text(title) if title else None, box=box.SIMPLE_HEAD if light else box.HEAVY_HEAD,
                       pad_edge=not light, collapse_padding=light, show_edge=not light,
                       padding=(0, 0) if tight else (0, 1))
         prose = {j for j in range(len(head)) if any(_is_prose(r[j]) for r in body)}

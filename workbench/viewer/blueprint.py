@@ -164,10 +164,11 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     if paths.SCORES in s.entities:
         # the first question's answer where the eye lands: each method's held-out error beside the tracks
         side.insert(0, rrb.TextDocumentView(origin=paths.origin(paths.SCORES), name="held-out prediction error"))
-        # the scores' tables whole (a line is ~22 px of the ~940 px column: a title of two lines, per label its
-        # name, a header, a row per method and a gap), the plots sharing the rest, tall enough for three ticks
+        # the scores' tables whole (a line is ~26 px of the ~940 px column, measured with rrd-look: a title of two
+        # lines, per label its name, a header, a row per method and a gap of two), the plots sharing the rest, tall
+        # enough for three ticks
         labels = max(len(s.label_colors), 1)
-        doc = 22.0 * (3 + labels * (3 + max(len(s.methods), 1)))
+        doc = 26.0 * (3 + labels * (4 + max(len(s.methods), 1)))
         plots = max((940.0 - doc) / max(len(side) - 1, 1), 250.0)
         return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[doc] + [plots] * (len(side) - 1)),
                               column_shares=[3, 2], name="scene")
@@ -244,7 +245,8 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
         lanes = [query(paths.FLIGHT_MODE)] if s.clock == "log" else [query(paths.mode_path(i)) for i in s.modes]
         state_views.append(rrb.StateTimelineView(origin="/", contents=lanes, name="flight mode",
                                                  time_view=time_axis(s.span) if s.clock == "log" else None))
-    tabs.append(rrb.Grid(*state_views, *_key(s), name="states"))
+    # three columns: a plot of a 12 s trial four to a row was too narrow for more than two time labels
+    tabs.append(rrb.Grid(*state_views, *_key(s), grid_columns=3, name="states"))
     input_views: list[Any] = [
         _overlay(s, s.title(name), [query(paths.series_path(i, "inputs", name)) for i in ids],
                  key=paths.overlay_plot("inputs", name))

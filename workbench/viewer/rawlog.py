@@ -438,6 +438,8 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
         send_columns(rec, path, _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent))
         spans.append((float(t[0]), float(t[-1])))
     found["sticks"] = bool(sticks)
+    if sticks:  # the range from the sticks' values, wide enough for three labelled ticks (a ULog's showed 0 and 1)
+        found["ranges"]["sticks"] = style.data_range(*(v for _, v in sticks.values()))
     found["stick_unit"] = units.pop() if len(units) == 1 else ""  # the format's unit (FMTU, MAVLink's units)
     if spans:
         found["span"] = (min(a for a, _ in spans) - origin, max(b for _, b in spans) - origin)
@@ -479,7 +481,9 @@ def pilot_views(found: dict, logged: LoggedRaw, zoom: float) -> list[Any]:
         plots.append(rrb.TimeSeriesView(origin=f"{p}/sticks", name="sticks: roll, pitch, throttle, yaw"
                                         + (f" [{unit}]" if unit and unit != "normalized" else
                                            " (normalized)" if unit else ""),
-                                        axis_x=_whole_log(window), plot_legend=rrb.PlotLegend("LeftTop")))
+                                        axis_x=_whole_log(window), plot_legend=rrb.PlotLegend("LeftTop"),
+                                        axis_y=rrb.ScalarAxis(range=list(ranges["sticks"])) if "sticks" in ranges
+                                        else None))
     lane = None
     if logged.modes:
         lane = rrb.StateTimelineView(origin="/", contents=[f"+ /{found['prefix']}/mode"], name="flight mode",
