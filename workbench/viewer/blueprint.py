@@ -167,8 +167,10 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
         # the scores' tables whole (a line is ~26 px of the ~940 px column, measured with rrd-look: a title of two
         # lines, per label its name, a header, a row per method and a gap of two), the plots sharing the rest, tall
         # enough for three ticks
-        labels = max(len(s.label_colors), 1)
-        doc = 26.0 * (3 + labels * (4 + max(len(s.methods), 1)))
+        scored = s.scores if s.scores is not None and len(s.scores) else None
+        labels = max(len(set(scored["label"])) if scored is not None else len(s.label_colors), 1)
+        rows = len(set(scored["method"])) if scored is not None else len(s.methods)
+        doc = 26.0 * (3 + labels * (4 + max(rows, 1)))
         plots = max((940.0 - doc) / max(len(side) - 1, 1), 250.0)
         return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[doc] + [plots] * (len(side) - 1)),
                               column_shares=[3, 2], name="scene")
@@ -246,7 +248,8 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
         state_views.append(rrb.StateTimelineView(origin="/", contents=lanes, name="flight mode",
                                                  time_view=time_axis(s.span) if s.clock == "log" else None))
     # three columns: a plot of a 12 s trial four to a row was too narrow for more than two time labels
-    tabs.append(rrb.Grid(*state_views, *_key(s), grid_columns=3, name="states"))
+    # (two on a flight's clock: minutes of flight need the width for a time label per minute)
+    tabs.append(rrb.Grid(*state_views, *_key(s), grid_columns=2 if s.clock == "log" else 3, name="states"))
     input_views: list[Any] = [
         _overlay(s, s.title(name), [query(paths.series_path(i, "inputs", name)) for i in ids],
                  key=paths.overlay_plot("inputs", name))
@@ -269,7 +272,11 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
     if w_rows:
         # a row per focus trial, its inputs side by side: plots twice as wide as in a grid of four, so a time axis
         # of a few seconds gets more than its "+0s" label (seen with rrd-look)
-        tabs.append(rrb.Vertical(rrb.Horizontal(*input_views, *_key(s)), *w_rows, name="inputs & variability"))
+        # the inputs one above the other, three quarters of the width: side by side beside the key, a flight's
+        # 13 minutes got one time label ("+10m", seen with rrd-look)
+        top = rrb.Horizontal(rrb.Vertical(*input_views), *_key(s), column_shares=[3, 1]) if _key(s) else \
+            rrb.Vertical(*input_views)
+        tabs.append(rrb.Vertical(top, *w_rows, name="inputs & variability"))
     else:
         tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
     for i in [f for f in focus if f in s.predictions]:
