@@ -171,8 +171,11 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
         labels = max(len(set(scored["label"])) if scored is not None else len(s.label_colors), 1)
         rows = len(set(scored["method"])) if scored is not None else len(s.methods)
         doc = 26.0 * (3 + labels * (4 + max(rows, 1)))
-        plots = max((940.0 - doc) / max(len(side) - 1, 1), 250.0)
-        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[doc] + [plots] * (len(side) - 1)),
+        # the two position plots side by side under the scores: each as tall as the space left (one above the
+        # other, ~175 px each, the x plot kept a single "0" label; seen with rrd-look), a 3 s window still wide
+        # enough for a label per second
+        plots = max(940.0 - doc, 300.0)
+        return rrb.Horizontal(scene, rrb.Vertical(side[0], rrb.Horizontal(*side[1:]), row_shares=[doc, plots]),
                               column_shares=[3, 2], name="scene")
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
 
