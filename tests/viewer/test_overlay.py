@@ -95,3 +95,15 @@ def test_subjects_overlay_on_the_trials_clock_one_colour_each():
     assert set(logger.session.label_colors) == {"p0", "p1"}  # the key names subjects, not the strategy
     with pytest.raises(DataError, match="--color-by"):
         session.SessionLogger(session.new_recording(), ds, color_by="pilot_shoe_size")
+
+
+@pytest.mark.skipif(not (EXTERNAL / "erle_copter_83.BIN").is_file(), reason="the shared real logs are absent")
+def test_mapped_logs_of_different_dt_name_the_way_out_and_resample_on_request(tmp_path, capsys):
+    from workbench.cli import main
+
+    logs = [str(EXTERNAL / "dronekit_flight.tlog"), str(EXTERNAL / "erle_copter_83.BIN")]
+    assert main(["view", *logs, "--save", str(tmp_path / "a.rrd"), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "different dt" in err and "--resample" in err and "--raw" in err
+    assert main(["view", *logs, "--resample", "--save", str(tmp_path / "b.rrd"), "-q"]) == 0
+    assert (tmp_path / "b.rrd").stat().st_size > 0

@@ -128,7 +128,13 @@ def cmd_view(ctx: Context) -> int:
         if ds is None:
             return _view_raw(ctx, raw_streams)
     else:
-        ds = load_demos(ctx, a.inputs, mapping, a.label, allow_still=True)
+        try:
+            ds = load_demos(ctx, a.inputs, mapping, a.label, allow_still=True)
+        except DataError as exc:
+            if len(a.inputs) < 2 or " dt " not in f" {exc} ":
+                raise
+            # logs of several rates in one view: on one grid, or the way out named
+            ds = _several_on_one_grid(ctx, a.inputs, mapping, a.label, a.resample)
     source_dt = float(ds.dt)
     models, named = None, None
     if a.model:
@@ -163,6 +169,26 @@ def cmd_view(ctx: Context) -> int:
     _warn(ctx, session)
     announce(ctx, out, sink, f"{len(ds)} demonstrations")
     return 0
+
+
+def _several_on_one_grid(ctx: Context, paths: list[str], mapping: str | None, labels: Any, resample: bool) -> Any:
+    """Several logs or demonstration files in one view: on one time grid, the finest of theirs, where
+    ``--resample`` is given; without it, logs of different dt are one line naming both ways out."""
+    import math
+
+    parts = [load_demos(ctx, [p], mapping, labels, allow_still=True) for p in paths]
+    steps = sorted({float(d.dt) for d in parts})
+    if len(steps) > 1 and not all(math.isclose(steps[0], s, rel_tol=1e-6) for s in steps):
+        shown = ", ".join(f"{p} dt {d.dt:g} s" for p, d in zip(paths, parts, strict=True))
+        if not resample:
+            raise DataError(f"{shown}: sampled at different dt; --resample puts them on the finest grid "
+                            f"({steps[0]:g} s, states linear, inputs held), --raw overlays the logs as recorded")
+        parts = [d if math.isclose(float(d.dt), steps[0], rel_tol=1e-6) else d.resample(steps[0]) for d in parts]
+        ctx.say(f"resampled to dt = {steps[0]:g} s ({shown})")
+    ds = parts[0]
+    for d in parts[1:]:
+        ds = ds + d
+    return ds
 
 
 def _default_mapped(ctx: Context, path: str) -> tuple[str, Any]:
