@@ -44,6 +44,7 @@ def test_a_missing_event_names_the_log_and_the_way_out():
         alignment_time(_raw(height=(np.arange(10.0) + 100, np.zeros(10))), "takeoff")
 
 
+@pytest.mark.slow  # two real logs read and logged: ~20 s (the alignment itself is the fast tests' above)
 @pytest.mark.skipif(not (EXTERNAL / "erle_copter_83.BIN").is_file(), reason="the shared real logs are absent")
 def test_two_logs_of_other_formats_and_rates_overlay_on_one_clock(tmp_path):
     from rerun.chunk import RrdReader
@@ -97,6 +98,7 @@ def test_subjects_overlay_on_the_trials_clock_one_colour_each():
         session.SessionLogger(session.new_recording(), ds, color_by="pilot_shoe_size")
 
 
+@pytest.mark.slow  # two real logs mapped twice: ~50 s
 @pytest.mark.skipif(not (EXTERNAL / "erle_copter_83.BIN").is_file(), reason="the shared real logs are absent")
 def test_mapped_logs_of_different_dt_name_the_way_out_and_resample_on_request(tmp_path, capsys):
     from workbench.cli import main
