@@ -179,7 +179,9 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
 
     o = None
     if model.has_gain:
-        ctx.say("K̂ (u = K̂ x): " + np.array2string(np.asarray(model.K_), precision=3, suppress_small=True))
+        K = np.asarray(model.K_)
+        ctx.say_table(["K̂ (u = K̂ x)", *ds.state_names],
+                      [[name, *(f"{v:.3g}" for v in row)] for name, row in zip(ds.input_names, K, strict=True)])
         ctx.say(str(model.gain_choice_))
         o = model.objective_
     if o is None and model.has_gain and model.objective_error_:

@@ -298,7 +298,15 @@ def build_parser() -> argparse.ArgumentParser:
     _plant_group_option(p, "each segment keyed by its group")
     _mapping_option(p)
     p.add_argument("--raw", action="store_true",
-                   help="a raw log as it is (every stream, modes, messages), without a mapping's states")
+                   help="a raw log as it is (every stream, modes, messages), without a mapping's states; with "
+                        "several logs, all of them on one clock (an overlay)")
+    p.add_argument("--color-by", default="label", metavar="KEY",
+                   help="one colour per strategy label (default) or per value of another key of the trials' "
+                        "metadata: subject or session overlays subjects or sessions on the trials' clock")
+    p.add_argument("--align", nargs="+", metavar="WHEN",
+                   help="with several raw logs: where each log's 0 s is: arming, takeoff, start or seconds after its "
+                        "start; one for all or one per log (default: arming where each log records one, else its "
+                        "start)")
     _output_options(p)
 
     p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",
