@@ -81,6 +81,7 @@ from adapters.modes import MODE_TABLES, mode_name, mode_number
 from adapters.reference import REFERENCE_FORMS, ReferenceRule
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
 from adapters.transforms import TRANSFORMS
+from workbench.data.pilot_task import task_table
 from workbench.data.roles import Roles
 from workbench.errors import DataError, MappingError
 
@@ -105,7 +106,7 @@ FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per decl
 DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", "reference",
-    *FORMAT_NAMES
+    "task", *FORMAT_NAMES
 }
 _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
@@ -240,6 +241,9 @@ class ChannelMapping:
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
     roles: Roles = field(default_factory=Roles)
     reference: ReferenceRule | None = None
+    #: The pilot's task (``[task]``: regulate, relative_to, reference): overrides what a fit decides from the data;
+    #: written into every demonstration's ``meta["task"]`` (:mod:`workbench.data.pilot_task`). Empty: the data decide.
+    task: Mapping[str, Any] = field(default_factory=dict)
 
     def for_format(self, fmt: str) -> ChannelMapping:
         """This mapping with the ``[<fmt>.…]`` overrides merged in (itself when there are none)."""
@@ -591,7 +595,8 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
     try:
         roles = Roles.from_json(raw.get("roles"), f"{at}: [roles]")
         roles.check(states, f"{at}: [roles]")
-    except DataError as exc:
+        task = task_table(raw.get("task"), f"{at}: task")
+    except (DataError, ValueError) as exc:
         raise MappingError(str(exc)) from None
     return ChannelMapping(
         name=str(raw.get("name", Path(path).stem)),
@@ -607,7 +612,9 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
         raw=dict(raw),
         roles=roles,
         reference=_reference(raw.get("reference"), at),
+        task=task,
     )
+
 
 
 def suggest_mapping(fmt: str, table: str | None, modes: Iterable[str], exclude: str = "") -> str | None:

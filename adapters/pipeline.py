@@ -393,6 +393,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 meta["still"] = still
             if flips:
                 meta["flipped"] = "; ".join(flips)
+            if m.task:  # the mapping's [task]: what a fit of these trials regulates, relative to what
+                meta["task"] = dict(m.task)
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
                 if span.meta["mode"] in AUTOPILOT_HOLDS:
