@@ -142,16 +142,21 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
     would vanish.
     """
     labels = [k for k, m in models.items() if m.has_gain and m.objective_ is not None]
-    n, m = len(state_names), len(input_names)
+    # the objective weighs the states each model regulates (a free flight's positions are not among them)
+    regulated = {lab: tuple(models[lab].plant_regulated.state_names) for lab in labels}
+    n, m = max([len(v) for v in regulated.values()] or [len(state_names)]), len(input_names)
     fig = Figure(figsize=(COLUMN_WIDTH * 2, 2.8 * max(1, len(labels))), layout="constrained")
     axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
-    blocks = {k: [np.asarray(models[lab].objective_.M_normalized)[sl, sl] for lab in labels]
-              for k, sl in (("Q", slice(0, n)), ("R", slice(n, n + m)))}
+    blocks = {"Q": [np.asarray(models[lab].objective_.M_normalized)[: len(regulated[lab]), : len(regulated[lab])]
+                    for lab in labels],
+              "R": [np.asarray(models[lab].objective_.M_normalized)[len(regulated[lab]):, len(regulated[lab]):]
+                    for lab in labels]}
     vmaxes = {k: max([float(np.abs(b).max()) for b in v] + [1e-12]) for k, v in blocks.items()}
     for row, label in zip(axs, labels, strict=True):
         Mn = np.asarray(models[label].objective_.M_normalized)
+        n = len(regulated[label])
         for ax, block, names, title, vmax in (
-            (row[0], Mn[:n, :n], state_names, "Q / λmax(M)", vmaxes["Q"]),
+            (row[0], Mn[:n, :n], regulated[label], "Q / λmax(M)", vmaxes["Q"]),
             (row[1], Mn[n:, n:], input_names, "R / λmax(M)", vmaxes["R"]),
         ):
             image = ax.imshow(block, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
@@ -526,7 +531,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
             if reason:
                 obj_rows.append({"strategy": label, "α*": f"not found: {reason}"})
             continue
-        n = len(state_names)
+        names = model.plant_regulated.state_names  # the objective weighs the regulated states
+        n = len(names)
         Mn = np.asarray(o.M_normalized)
         oi = inputs.objectives.get(label)
         choice = model.gain_choice_
@@ -534,12 +540,12 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                "forward-gain error": float(o.forward_gain_error)}
         q, r = np.diag(Mn[:n, :n]), np.diag(Mn[n:, n:])
         if oi is None:
-            row.update({f"Q {s}": float(v) for s, v in zip(state_names, q, strict=True)})
+            row.update({f"Q {s}": float(v) for s, v in zip(names, q, strict=True)})
             row.update({f"R {s}": float(v) for s, v in zip(input_names, r, strict=True)})
         else:
             b = oi.boot
             row.update({f"Q {s}": f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
-                        for s, v, lo, hi in zip(state_names, q, b.Q_diag_lo, b.Q_diag_hi, strict=True)})
+                        for s, v, lo, hi in zip(names, q, b.Q_diag_lo, b.Q_diag_hi, strict=True)})
             row.update({f"R {s}": f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
                         for s, v, lo, hi in zip(input_names, r, b.R_diag_lo, b.R_diag_hi, strict=True)})
         obj_rows.append(row)
