@@ -35,6 +35,8 @@ blocks stay in their order) is counterbalanced across subjects::
     held_out = 0                    # of the trials, this many (drawn per subject) are test trials instead
     assist = "none"                 # none | show (the model's predicted path) | blend (see below)
     blend = 0.3                     # with assist = "blend": the model's share α of the input
+    reference = "horizontal-first"  # optional: the path the instruction asks for (line | horizontal-first); a fit
+                                    # then regulates the deviation from it, with its feedforward
 
 Assisted blocks need a fitted model of their label (``workbench collect --model CS1=cs1.npz``). ``show`` draws the
 model's mean predicted path from the trial's start; ``blend`` gives the plant ``u = (1 − α) u_pilot + α
@@ -57,6 +59,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.data.pilot_task import REFERENCES
 from workbench.errors import DataError
 
 __all__ = ["Field", "Block", "Protocol", "Item", "load_protocol", "SHIPPED", "plan"]
@@ -94,6 +97,10 @@ class Block:
     held_out: int = 0
     assist: str = "none"
     blend: float = 0.0
+    #: The reference the instruction asks the pilot to follow (:data:`workbench.data.pilot_task.REFERENCES`), written
+    #: into each trial's ``meta["reference"]``; a fit of the trials then regulates the deviation from it. None: the
+    #: goal (the pad), as the paper's fits.
+    reference: str | None = None
 
 
 @dataclass(frozen=True)
@@ -228,7 +235,8 @@ def parse_protocol(doc: dict, source: str, name: str) -> Protocol:
         where = f"blocks[{j}]."
         if not isinstance(b, dict):
             raise DataError(f"{source}: blocks[{j}]: expected a table ([[blocks]])")
-        _unknown(b, {"label", "instructions", "trials", "role", "held_out", "assist", "blend"}, source, where)
+        _unknown(b, {"label", "instructions", "trials", "role", "held_out", "assist", "blend", "reference"}, source,
+                 where)
         label = _get(b, "label", str, source, where)
         if not label or not all(c.isalnum() or c in "_-" for c in label):
             raise DataError(f"{source}: {where}label: {label!r} must be letters, digits, '_' or '-'")
@@ -249,7 +257,11 @@ def parse_protocol(doc: dict, source: str, name: str) -> Protocol:
         if assist == "blend" and not 0 < alpha <= 1 or assist != "blend" and "blend" in b:
             raise DataError(f"{source}: {where}blend: the model's share must be in (0, 1], and only with "
                             f"assist = \"blend\" (got {alpha!r} with assist = {assist!r})")
-        blocks.append(Block(label, _get(b, "instructions", str, source, where), trials, role, held, assist, alpha))
+        reference = _get(b, "reference", str, source, where, None)
+        if reference is not None and reference not in REFERENCES:
+            raise DataError(f"{source}: {where}reference: {reference!r} is not one of {', '.join(REFERENCES)}")
+        blocks.append(Block(label, _get(b, "instructions", str, source, where), trials, role, held, assist, alpha,
+                            reference))
     return Protocol(
         name=name, title=title, consent=consent, fields=tuple(fields), blocks=tuple(blocks),
         practice_s=_seconds(practice, "duration_s", source, "practice."),

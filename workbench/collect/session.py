@@ -320,6 +320,9 @@ class Session:
             "device": demo["device"], "calibration": demo["calibration"], "timing": demo["timing"],
             "finished": _now(),
         }
+        reference = self.protocol.blocks[item.block].reference
+        if reference is not None:  # the path the block's instruction asks for: a fit regulates the deviation from it
+            demo_meta["reference"] = reference
         if help_ is not None:
             demo_meta["assist"] = {k: help_[k] for k in ("kind", "alpha", "K", "law")}
             demo_meta["pilot_u"] = demo["pilot"].tolist()  # the pilot's own input; ``u`` is what the plant got
