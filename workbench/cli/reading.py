@@ -83,6 +83,9 @@ def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: 
                 say = progress.console.print if progress.live.is_started else ctx.say
                 say(f"{ctx.shown(f)}: mapping {chosen} ({why}; --mapping chooses another)")
             ds = load_one(f, chosen, ctx.stdio.format, allow_still)
+            if len(ds) and ds[0].meta.get("sticks"):  # the channels the log's RC map gave the sticks, and the check
+                (progress.console.print if progress.live.is_started else ctx.say)(
+                    f"{ctx.shown(f)}: {ds[0].meta['sticks']}")
             if len(ds) and ds[0].meta.get("still"):
                 print(f"warning: {ds[0].meta['still']}", file=sys.stderr)
             if len(ds) and ds[0].meta.get("flipped"):  # the segments cut where the vehicle turned upside down
