@@ -102,11 +102,12 @@ class VirtualSubject:
                          delay_s=self.delay_s)
 
     def varied(self, rng: np.random.Generator, spread: float = 0.1) -> VirtualSubject:
-        """Another subject of the same kind: its pace, delay, hand and learned dead zone vary (its cost does not:
-        the cost is the instruction's)."""
+        """Another subject of the same kind: its pace, delay and hand vary (its cost does not: the cost is the
+        instruction's; nor its dead-zone compensation, learned to the pad's: an over- or under-compensation adds a
+        relay ``±(learned − dead zone)`` to every command, which no linear pilot model carries)."""
         f = lambda: math.exp(spread * rng.standard_normal())  # noqa: E731
         return replace(self, speed_mps=self.speed_mps * f(), delay_s=self.delay_s * f(),
-                       noise=tuple(v * f() for v in self.noise), learned_deadzone=self.learned_deadzone * f())
+                       noise=tuple(v * f() for v in self.noise))
 
 
 #: The instructed subjects' costs: a soft lateral position weight (the reference carries the path) and a roll-stick

@@ -28,6 +28,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -47,6 +48,8 @@ SPEED_BOUNDS_MPS = (0.1, 5.0)
 _TERMINAL = 100.0
 # Regularization of the non-position states (keeps the Riccati pass well posed on any plant).
 _EPS = 1e-6
+# How far (in log speed) around the positions' fit a sharper criterion searches: ±35 %.
+_NEAR = 0.35
 # Horizons are rounded up to a multiple of this many steps (the batch's and the cached tables' lengths).
 _ROUND = 100
 
@@ -236,9 +239,13 @@ class ReferenceGenerator:
 
 
 def fit_speed(gen: ReferenceGenerator, trials: Sequence[tuple[np.ndarray, np.ndarray]], kind: str,
-              bounds: tuple[float, float] = SPEED_BOUNDS_MPS) -> float:
-    """The speed along the path whose reference comes closest to the trials' positions (least squares over every
-    sample), searched on a log scale within ``bounds``.
+              bounds: tuple[float, float] = SPEED_BOUNDS_MPS, cost: Any = None) -> float:
+    """The speed along the path that fits the trials best, searched on a log scale within ``bounds``.
+
+    By default the reference comes closest to the trials' positions (least squares over every sample); ``cost``
+    (a callable of the trials' references, ``[(x_ref, u_ff), …]``, returning a number to minimize) replaces that
+    criterion — a model's pilot lags its reference, so the positions alone prefer a reference slower than the one
+    the pilot regulates to (:func:`workbench.models.regulator.settle_task` minimizes the regulator's residual).
 
     Parameters
     ----------
@@ -253,16 +260,25 @@ def fit_speed(gen: ReferenceGenerator, trials: Sequence[tuple[np.ndarray, np.nda
     goals = np.array([g for _, g in trials])
     lengths = [len(x) for x, _ in trials]
 
-    def cost(log_v: float) -> float:
-        refs = gen.trajectories(x0s, goals, kind, float(np.exp(log_v)), lengths)
+    def positions(refs: list[tuple[np.ndarray, np.ndarray]]) -> float:
         return float(sum(np.sum((x[:, pos] - r[:, pos]) ** 2) for (x, _), (r, _) in zip(trials, refs, strict=True)))
 
+    def search(criterion: Any, grid: np.ndarray) -> float:
+        """A grid, then a bounded refinement between the best point's neighbours (the criteria are not unimodal far
+        from their optimum)."""
+
+        def objective(log_v: float) -> float:
+            return criterion(gen.trajectories(x0s, goals, kind, float(np.exp(log_v)), lengths))
+
+        costs = [objective(v) for v in grid]
+        i = int(np.argmin(costs))
+        a, b = grid[max(0, i - 1)], grid[min(len(grid) - 1, i + 1)]
+        res = scipy.optimize.minimize_scalar(objective, bounds=(a, b), method="bounded", options={"xatol": 2e-3})
+        return float(res.x) if res.fun <= costs[i] else float(grid[i])
+
     lo, hi = (math.log(b) for b in bounds)
-    # a coarse grid first (the cost is not unimodal far from the optimum), then a bounded refinement around its best
-    grid = np.linspace(lo, hi, 8)
-    costs = [cost(v) for v in grid]
-    i = int(np.argmin(costs))
-    a, b = grid[max(0, i - 1)], grid[min(len(grid) - 1, i + 1)]
-    res = scipy.optimize.minimize_scalar(cost, bounds=(a, b), method="bounded", options={"xatol": 5e-3})
-    best = float(res.x) if res.fun <= costs[i] else float(grid[i])
+    best = search(positions, np.linspace(lo, hi, 8))
+    if cost is not None:
+        # the positions' optimum is near (within tens of percent); the sharper criterion decides there
+        best = search(cost, np.clip(best + np.linspace(-_NEAR, _NEAR, 15), lo, hi))
     return float(np.exp(best))

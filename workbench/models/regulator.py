@@ -65,9 +65,38 @@ def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
         task = task.with_(plant_group=str(group))
     if task.relative_to == "reference" and not task.reference_speed_mps > 0:
         gen = _generator(system)
-        speed = fit_speed(gen, [(d.x, d.target) for d in demos], task.reference)
+        speed = fit_speed(gen, [(d.x, d.target) for d in demos], task.reference,
+                          cost=_pace(system, task, demos))
         task = task.with_(reference_speed_mps=speed)
     return task
+
+
+def _pace(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> Any:
+    """The criterion a reference's pace is fitted by: how well the regulator ``u − u_ff = K (x − x_ref)`` explains the
+    inputs through the instruments of the ``iv`` gain (the 2SLS fit's projected residual, a GMM criterion: consistent
+    where least squares is not, the pilot's own drift having made its states). The positions alone prefer a reference
+    slower than the one the pilot follows: a soft position loop leaves it behind for long."""
+    from workbench.method.gain import iv_instruments
+
+    idx = list(task.regulated_indices(system.state_names))
+    lag = delay_steps(task, system.dt)
+
+    def misfit(refs: list[tuple[np.ndarray, np.ndarray]]) -> float:
+        E, U, Z = [], [], []
+        for d, (x_ref, u_ff) in zip(demos, refs, strict=True):
+            e, u = (d.x - x_ref)[:, idx], d.u - u_ff
+            if lag:
+                e, u = e[:-lag], u[lag:]
+            E.append(e)
+            U.append(u)
+            Z.append(iv_instruments(e.T, [len(e)]).T)
+        E, U, Z = np.concatenate(E), np.concatenate(U), np.concatenate(Z)
+        Q, _ = np.linalg.qr(Z)  # P_Z = Q Qᵀ
+        PE, PU = Q.T @ E, Q.T @ U
+        K = np.linalg.lstsq(PE, PU, rcond=None)[0]
+        return float(np.sum((PU - PE @ K) ** 2))
+
+    return misfit
 
 
 def regulator_plant(system: LinearSystem, idx: Sequence[int]) -> LinearSystem:
