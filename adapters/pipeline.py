@@ -30,7 +30,7 @@ from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
 from adapters.mapping import ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
-from adapters.modes import AUTOPILOT_HOLDS, mode_name
+from adapters.modes import AUTOPILOT_HOLDS, mode_name, plant_group
 from adapters.segment import (
     EVERYTHING,
     Span,
@@ -48,6 +48,7 @@ from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams, clean_series, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
 from workbench.errors import DataError, MappingError
 
 __all__ = ["build", "check_rules", "explain"]
@@ -408,7 +409,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
         )
 
     windows = [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts]
-    stick_cause, stick_note = check_sticks(m, streams, windows)
+    stick_cause, stick_note = check_sticks(m, streams, [(float(t[0]), float(t[-1]), span.meta.get("mode"))
+                                                        for span, ts, _ in found for t in ts])
     if stick_cause and not still:
         if not allow_still:
             raise DataError(stick_cause)
@@ -461,6 +463,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 meta["task"] = dict(m.task)
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
+                # what the sticks command in this mode: segments of different groups are different plants
+                meta[PLANT_GROUP_KEY] = plant_group(m.segment.mode.names if m.segment.mode else None, meta["mode"])
                 if span.meta["mode"] in AUTOPILOT_HOLDS:
                     meta["autopilot_holds"] = AUTOPILOT_HOLDS[span.meta["mode"]]
             if key is not None:

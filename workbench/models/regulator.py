@@ -117,7 +117,8 @@ def regulator_plant(system: LinearSystem, idx: Sequence[int]) -> LinearSystem:
     names = tuple(system.state_names[i] for i in idx)
     try:
         return LinearSystem(system.A[np.ix_(idx, idx)], system.B[idx], system.dt, names, system.input_names,
-                            u_min=system.u_min, u_max=system.u_max, roles=system.roles.restricted(names))
+                            u_min=system.u_min, u_max=system.u_max, roles=system.roles.restricted(names),
+                            plant_group=getattr(system, "plant_group", None))
     except ModelError as exc:
         raise ModelError(f"the regulated states ({', '.join(names)}) do not make a plant the pilot's inputs can "
                          f"regulate: {exc}; regulate more states (--task …@states)") from None
