@@ -100,7 +100,7 @@ class Session:
         self.jobs = Jobs(on_done=self._job_done, runner=runner)
         self.fits = FitJobs(self.out, self.seed, self.jobs)
         self.stops = StopChecks(self.out, self.seed, self.jobs)
-        records.write_data_dictionary(self.out, protocol, self.spec)
+        records.write_data_dictionary(self.out, protocol, self.spec, self.system.roles)
 
     # -- the folder --------------------------------------------------------------------------------------
     @property
