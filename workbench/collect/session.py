@@ -515,6 +515,9 @@ class Session:
             "attempts": max(1, len(starts)), "interruptions": lost + demo["interruptions"],
             "excluded": False, "exclusion_note": "",
         }
+        reference = getattr(self.protocol.steps[item.block], "reference", None)
+        if reference is not None:  # the path the block's instruction asks for: a fit regulates the deviation from it
+            demo_meta["reference"] = reference
         if help_ is not None:
             demo_meta["assist"] = {k: help_[k] for k in ("kind", "alpha", "K", "law", "model")}
             demo_meta["pilot_u"] = demo["pilot"].tolist()  # the pilot's own input; ``u`` is what the plant got

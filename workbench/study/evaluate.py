@@ -285,7 +285,7 @@ def compare(
         st = _starts(N, n_steps, starts)
         for method, model in models.items():
             preds = model.predict_many(
-                d.x[st], int(n_steps), d.target, task_x0s=d.x[0], samples=int(samples), seed=rng,
+                d.x[st], int(n_steps), d.target, task_x0s=d.x[0], task_steps=st, samples=int(samples), seed=rng,
                 percentiles=(lo_q, hi_q), clip=clip,
             )
             for s, p in zip(st, preds, strict=True):
