@@ -100,7 +100,7 @@ class Session:
         self.jobs = Jobs(on_done=self._job_done, runner=runner)
         self.fits = FitJobs(self.out, self.seed, self.jobs)
         self.stops = StopChecks(self.out, self.seed, self.jobs)
-        records.write_data_dictionary(self.out, protocol, self.spec)
+        records.write_data_dictionary(self.out, protocol, self.spec, self.system.roles)
 
     # -- the folder --------------------------------------------------------------------------------------
     @property
@@ -515,6 +515,9 @@ class Session:
             "attempts": max(1, len(starts)), "interruptions": lost + demo["interruptions"],
             "excluded": False, "exclusion_note": "",
         }
+        reference = getattr(self.protocol.steps[item.block], "reference", None)
+        if reference is not None:  # the path the block's instruction asks for: a fit regulates the deviation from it
+            demo_meta["reference"] = reference
         if help_ is not None:
             demo_meta["assist"] = {k: help_[k] for k in ("kind", "alpha", "K", "law", "model")}
             demo_meta["pilot_u"] = demo["pilot"].tolist()  # the pilot's own input; ``u`` is what the plant got

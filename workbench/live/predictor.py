@@ -400,7 +400,7 @@ class OnlinePredictor:
         X = st.x[None, :]
         timed = self._past(st)
         past = None if timed is None else timed[0]
-        u_mean, u_cov = model.input_distribution(X, x0=st.x0, target=target,
+        u_mean, u_cov = model.input_distribution(X, x0=st.x0, target=target, steps=[st.k],
                                                  pasts=None if past is None else [past])
         w = w_mean = w_cov = None
         if self._has_w:
@@ -412,7 +412,8 @@ class OnlinePredictor:
                 w, w_mean, w_cov = self._command_residual(st, past, timed[1], target)
         rollout_x = rollout_u = None
         if self.rollout_steps:
-            pred = model.predict(st.x, self.rollout_steps, target=target, task_x0=st.x0, past=past)
+            pred = model.predict(st.x, self.rollout_steps, target=target, task_x0=st.x0, task_step=int(st.k),
+                                 past=past)
             rollout_x, rollout_u = np.asarray(pred.x), np.asarray(pred.u)
         p = LivePrediction(
             demo_id=st.demo_id, segment=st.segment, k=st.k, t=st.t, t_rel=st.t_rel, x=readonly(st.x), u=readonly(st.u),

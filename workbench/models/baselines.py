@@ -16,13 +16,15 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.pilot_task import PilotTask
 from workbench.defaults import N_COMPONENTS, REG_COVAR, TIMING
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
 from workbench.models.files import ModelFile
-from workbench.models.fitting import as_vector, demo_list, fit_objective_or_reason, fit_timed_gain, references
+from workbench.models.fitting import as_vector, demo_list
 from workbench.models.prediction import Policy
+from workbench.models.regulator import fit_regulator, settle_task
 from workbench.models.storage import (
     gain_choice_restore,
     gain_choice_state,
@@ -32,7 +34,7 @@ from workbench.models.storage import (
     objective_state,
 )
 from workbench.models.taskgmr import TaskGMRModel
-from workbench.models.timed import commands
+from workbench.models.timed import commands, seen_steps
 from workbench.plant.system import LinearSystem
 
 __all__ = ["IOCOnlyModel", "GMROnlyModel", "PersistenceModel"]
@@ -49,7 +51,8 @@ class GMROnlyModel(TaskGMRModel):
 
     @classmethod
     def for_method(cls, system: LinearSystem, settings: MethodSettings) -> GMROnlyModel:
-        return cls(system, n_components=settings.n_components, random_state=settings.random_state)
+        return cls(system, n_components=settings.n_components, random_state=settings.random_state,
+                   task=settings.task)
 
     def __init__(
         self,
@@ -68,8 +71,10 @@ class GMROnlyModel(TaskGMRModel):
         noise_window: float = 2.0,
         noise_folds: int = 3,
         noise_horizon_s: float = 3.0,
+        task: PilotTask | str | dict | None = None,
     ) -> None:
         super().__init__(system)
+        self.task = task
         self.n_components = n_components
         self.frames = frames
         self.reg_covar = reg_covar
@@ -89,6 +94,9 @@ class GMROnlyModel(TaskGMRModel):
         """EM on ``[x; u]`` of every demonstration in its own frames (eqs. (28)-(29), (36)-(37))."""
         self._check_settings()
         ds = demo_list(demos, self.system, "GMROnlyModel.fit")
+        # the same regulated states as the proposed model's (its task decided the same way); no gain, no reference
+        self.task_ = settle_task(self, ds)
+        self.regulated_ = self.task_.regulated_indices(self.system.state_names)
         U = [d.u for d in ds]
         self._fit_common(ds, getattr(demos, "labels", []))
         self._fit_gmr(ds, U)
@@ -97,11 +105,12 @@ class GMROnlyModel(TaskGMRModel):
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
         cond = self._conditional(x0, target)
+        idx = list(self.regulated_idx)
 
         def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            return cond.predict(X)
+            return cond.predict(X[:, idx])
 
-        policy.mean = cond.predict_mean
+        policy.mean = lambda X: cond.predict_mean(X[:, idx])
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -136,7 +145,7 @@ class IOCOnlyModel(BehaviorModel):
 
     @classmethod
     def for_method(cls, system: LinearSystem, settings: MethodSettings) -> IOCOnlyModel:
-        return cls(system, gain_method=settings.gain_method, timing=settings.timing)
+        return cls(system, gain_method=settings.gain_method, timing=settings.timing, task=settings.task)
 
     def __init__(
         self,
@@ -149,8 +158,10 @@ class IOCOnlyModel(BehaviorModel):
         noise_window: float = 2.0,
         noise_folds: int = 3,
         noise_horizon_s: float = 3.0,
+        task: PilotTask | str | dict | None = None,
     ) -> None:
         super().__init__(system)
+        self.task = task
         self.gain_method = gain_method
         self.timing = timing
         self.structure = structure
@@ -167,19 +178,17 @@ class IOCOnlyModel(BehaviorModel):
         """K̂ by eqs. (12)-(14) and, optionally, the objective by eqs. (15)-(19); the residual second moment."""
         self._check_noise()
         ds = demo_list(demos, self.system, "IOCOnlyModel.fit")
-        refs, self.goal_relative_ = references(ds, self.system.n)
-        K, self.gain_choice_, self.timing_, pt = fit_timed_gain(ds, refs, self.system, self.gain_method, self.timing)
-        self.pilot_timing_ = None if pt is None else pt.to_dict()
-        self.gain_method_ = self.gain_choice_.method
-        self.objective_, self.objective_error_ = fit_objective_or_reason(self, K)
+        fit_regulator(self, ds)
+        K = self.K_
         t = self._timing()
         W = []
-        for d, r in zip(ds, refs, strict=True):
+        for d in ds:
+            linear = self._linear(d.x[0], d.target if d.target is not None else d.x[-1])
             if t is None:
-                W.append(d.u - (d.x - r) @ K.T)
+                W.append(d.u - linear(d.x, np.arange(len(d.x))))
             else:
                 seen, command, acted = commands(d.x, d.u, t)
-                W.append((command - (seen - r) @ K.T)[acted])
+                W.append((command - linear(seen, seen_steps(len(seen), t)))[acted])
         Wall = np.concatenate(W)
         m = self.system.m
         # a tiny floor keeps the factor defined for an input that never deviates from K̂x
@@ -202,12 +211,14 @@ class IOCOnlyModel(BehaviorModel):
         return x0, self.default_target(x0) if target is None else as_vector(target, n, "target")
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
-        KT, cov, m = self.K_.T, self.residual_cov_, self.system.m
-        offset = self._reference(target) @ KT
+        cov, m = self.residual_cov_, self.system.m
+        linear = self._linear(x0, target)
 
-        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            return X @ KT - offset, np.broadcast_to(cov, (X.shape[0], m, m))
+        def policy(X: np.ndarray, k: Any = None) -> tuple[np.ndarray, np.ndarray]:
+            return linear(X, k), np.broadcast_to(cov, (X.shape[0], m, m))
 
+        policy.mean = linear
+        policy.timed = linear.timed
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

@@ -34,6 +34,7 @@ def make_model(
     fit_objective: bool = True,
     cv_grid: dict[str, tuple] | None = None,
     timing: Any = TIMING,
+    task: Any = None,
 ) -> BehaviorModel:
     """An unfitted model of ``method`` (one of :data:`METHODS`; ``ioc-only`` spellings are accepted).
 
@@ -51,6 +52,9 @@ def make_model(
         ``cv_components`` / ``cv_reg_covars`` of a "cv" proposed model (default the full grids).
     timing : "identify", "none" or (delay_s, lag_s)
         The pilot's timing of the proposed and IOC-only models (:mod:`workbench.method.timing`).
+    task : PilotTask, str, dict or None
+        What the pilot regulates and relative to what (:mod:`workbench.data.pilot_task`): None decides it from the
+        demonstrations; otherwise an override (the command line's ``--task``, a mapping's ``[task]``).
     """
     kind = method.replace("-", "_")
     if kind not in METHODS:
@@ -59,7 +63,7 @@ def make_model(
     if n_components == "cv" and not cls.chooses_settings:
         raise DataError(f"n_components='cv' chooses the proposed model's settings; {method} needs a number")
     return cls.for_method(system, MethodSettings(n_components, random_state, gain_method, fit_objective, cv_grid,
-                                                 timing))
+                                                 timing=timing, task=task))
 
 
 def make_models(
@@ -70,6 +74,7 @@ def make_models(
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = False,
+    task: Any = None,
 ) -> dict[str, BehaviorModel]:
     """Unfitted ``{method: model}`` for a comparison, with the paper's settings (G, start/goal frames).
 
@@ -86,5 +91,5 @@ def make_models(
         cv = registered(m).load_class().chooses_settings
         out[m] = make_model(m, system, n_components=n_components if cv or n_components != "cv" else PAPER_N_COMPONENTS,
                             random_state=random_state, gain_method=gain_method, fit_objective=fit_objective,
-                            cv_grid=grid if cv else None)
+                            cv_grid=grid if cv else None, task=task)
     return out

@@ -22,7 +22,7 @@ from workbench.errors import ModelError
 from workbench.method.timing import lag_decay, onset_weight, read_through, seen_weights, stick_of
 from workbench.models.prediction import psd_sqrt
 
-__all__ = ["Timing", "Past", "pasts_from", "Stepper", "commands", "one_step"]
+__all__ = ["Timing", "Past", "pasts_from", "Stepper", "commands", "one_step", "ask", "seen_steps"]
 
 
 @dataclass(frozen=True)
@@ -81,9 +81,11 @@ class Timing:
         """A rest start's first sample after the pilot's reaction."""
         return self.l0 + 1
 
-    def stepper(self, x0: np.ndarray, pasts: Sequence[Past | None] | None, n_steps: int) -> Stepper:
-        """A :class:`Stepper` of timed rollouts from the starts ``x0`` (S, n)."""
-        return Stepper(self, x0, pasts, n_steps)
+    def stepper(self, x0: np.ndarray, pasts: Sequence[Past | None] | None, n_steps: int,
+                steps0: Any = None) -> Stepper:
+        """A :class:`Stepper` of timed rollouts from the starts ``x0`` (S, n) (``steps0``: each start's step since its
+        task began, default its sample in its trial)."""
+        return Stepper(self, x0, pasts, n_steps, steps0)
 
     def as_json(self) -> dict[str, Any]:
         return {"delay_s": self.delay_s, "lag_s": self.lag_s, "dt": self.dt, "start": self.start,
@@ -125,6 +127,24 @@ def pasts_from(x: np.ndarray, u: np.ndarray, starts: Sequence[int], timing: Timi
     return out
 
 
+def ask(policy: Any, X: np.ndarray, k: Any, mean: bool = False) -> Any:
+    """The policy (or its ``mean``) at states ``X``; ``k``: each row's step since the task began, which a policy of a
+    pilot who follows a reference reads (``policy.timed``; :data:`workbench.models.prediction.Policy`)."""
+    timed = bool(getattr(policy, "timed", False))
+    if mean:
+        f = getattr(policy, "mean", None)
+        if f is None:
+            return ask(policy, X, k)[0]
+        return f(X, k) if timed else f(X)
+    return policy(X, k) if timed else policy(X)
+
+
+def seen_steps(n: int, timing: Timing, k0: int = 0) -> np.ndarray:
+    """The steps since the task began of the states a pilot saw at samples ``k0 … k0 + n − 1`` (its delay earlier:
+    the reference it compared them with is that old too)."""
+    return np.arange(k0, k0 + n) - timing.l0
+
+
 class Stepper:
     """Timed rollouts of a batch of ``S`` starts: the seen state of each step, and the input from the command.
 
@@ -134,7 +154,8 @@ class Stepper:
     part of the sample).
     """
 
-    def __init__(self, timing: Timing, x0: np.ndarray, pasts: Sequence[Past | None] | None, n_steps: int) -> None:
+    def __init__(self, timing: Timing, x0: np.ndarray, pasts: Sequence[Past | None] | None, n_steps: int,
+                 steps0: Any = None) -> None:
         self.t = timing
         S, n = x0.shape
         m = None
@@ -158,6 +179,8 @@ class Stepper:
             if past is not None and past.stick is not None:
                 m = len(past.stick)
         self.hist[:, P] = x0
+        # each start's step since its task began (a reference's policy reads it): given, else its sample in its trial
+        self.task0 = self.k0.copy() if steps0 is None else np.broadcast_to(np.asarray(steps0, dtype=int), (S,)).copy()
         self._sticks = sticks
         self._m = m
         self.h = 0
@@ -176,6 +199,10 @@ class Stepper:
                 first = np.clip(P - self.k0[at], 0, None)  # the trial's first state in the buffer
                 x[at] = self.hist[np.flatnonzero(at), first]
         return x, kind
+
+    def steps(self) -> np.ndarray:
+        """The step since the task began of each row's seen state (this step's, the delay earlier)."""
+        return self.task0 + self.h - self.t.l0
 
     def advance(self, command: np.ndarray, kind: np.ndarray) -> np.ndarray:
         """The stick after this step's command (per row: its kind, from :meth:`seen`) and the device's reading."""
@@ -238,7 +265,7 @@ def one_step(policy: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x: n
         st.h = k
         s, kind = st.seen()
         seen[k], kinds[k] = s[0], kind[0]
-    mean_c, cov_c = policy(seen)
+    mean_c, cov_c = ask(policy, seen, seen_steps(N, t))
     c = np.where((kinds == 1)[:, None], 0.0, np.where((kinds == 2)[:, None], t.onset_weight * mean_c, mean_c))
     prev = np.concatenate([np.zeros_like(r[:1]) if t.start == "rest" else r[:1], r[:-1]])
     if t.start != "rest":
@@ -251,32 +278,33 @@ def one_step(policy: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x: n
 
 
 def rollout_mean(A: np.ndarray, B: np.ndarray, policy: Any, x0: np.ndarray, n_steps: int, timing: Timing,
-                 pasts: Sequence[Past | None] | None = None, clip: Callable[[np.ndarray], np.ndarray] | None = None
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 pasts: Sequence[Past | None] | None = None, clip: Callable[[np.ndarray], np.ndarray] | None = None,
+                 steps0: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`workbench.models.prediction.rollout_mean` with the pilot's timing: states (Bt, H+1, n), inputs
-    (Bt, H, m) and each input's one-step covariance (Bt, H, m, m)."""
+    (Bt, H, m) and each input's one-step covariance (Bt, H, m, m). ``steps0``: each start's step since its task
+    began (default its sample in its trial, from ``pasts``)."""
     n, m = B.shape
     x = np.atleast_2d(np.asarray(x0, dtype=float))
     Bt = x.shape[0]
-    st = Stepper(timing, x, pasts, n_steps)
+    st = Stepper(timing, x, pasts, n_steps, steps0)
     X = np.empty((Bt, n_steps + 1, n))
     U = np.empty((Bt, n_steps, m))
     S = np.empty((Bt, n_steps, m, m))
     X[:, 0] = x
-    mean_only = getattr(policy, "mean", None) or (lambda Z: policy(Z)[0])
     seen_all = np.empty((Bt, n_steps, n))
     kinds = np.empty((Bt, n_steps), dtype=int)
+    steps = np.empty((Bt, n_steps), dtype=int)
     for k in range(n_steps):
         seen, kind = st.seen()
-        seen_all[:, k], kinds[:, k] = seen, kind
-        u = st.advance(mean_only(seen), kind)
+        seen_all[:, k], kinds[:, k], steps[:, k] = seen, kind, st.steps()
+        u = st.advance(ask(policy, seen, steps[:, k], mean=True), kind)
         u = clip(u) if clip is not None else u
         U[:, k] = u
         x = x @ A.T + u @ B.T
         X[:, k + 1] = x
         st.push(x)
     if n_steps:
-        _, cov = policy(seen_all.reshape(Bt * n_steps, n))
+        _, cov = ask(policy, seen_all.reshape(Bt * n_steps, n), steps.reshape(-1))
         share = np.where(kinds == 1, 0.0, np.where(kinds == 2, timing.onset_weight, 1.0)) * (1.0 - timing.a)
         for s, past in enumerate(pasts if pasts is not None else [None] * Bt):
             if timing.start != "rest" and (past is None or past.stick is None):
@@ -287,8 +315,8 @@ def rollout_mean(A: np.ndarray, B: np.ndarray, policy: Any, x0: np.ndarray, n_st
 
 def rollout_samples(A: np.ndarray, B: np.ndarray, policy: Any, x0: np.ndarray, n_steps: int, n_samples: int,
                     rng: np.random.Generator, timing: Timing, past: Past | None = None,
-                    rho: Any = 0.0, clip: Callable[[np.ndarray], np.ndarray] | None = None, scale: Any = 1.0
-                    ) -> tuple[np.ndarray, np.ndarray]:
+                    rho: Any = 0.0, clip: Callable[[np.ndarray], np.ndarray] | None = None, scale: Any = 1.0,
+                    step0: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`workbench.models.prediction.rollout_samples` with the pilot's timing: the AR(1) draws perturb the
     command (what the pilot varies), which reaches the plant through the lag."""
     n, m = B.shape
@@ -296,7 +324,7 @@ def rollout_samples(A: np.ndarray, B: np.ndarray, policy: Any, x0: np.ndarray, n
     rho = np.broadcast_to(np.asarray(rho, dtype=float), (m,))
     scale = np.broadcast_to(np.asarray(scale, dtype=float), (m,))
     innov = np.sqrt(1.0 - rho**2)
-    st = Stepper(timing, x, [past] * n_samples, n_steps)
+    st = Stepper(timing, x, [past] * n_samples, n_steps, step0)
     X = np.empty((n_samples, n_steps + 1, n))
     U = np.empty((n_samples, n_steps, m))
     X[:, 0] = x
@@ -305,7 +333,7 @@ def rollout_samples(A: np.ndarray, B: np.ndarray, policy: Any, x0: np.ndarray, n
         if k:
             z = rho * z + innov * rng.standard_normal((n_samples, m))
         seen, kind = st.seen()
-        mean, cov = policy(seen)
+        mean, cov = ask(policy, seen, st.steps())
         u = st.advance(mean + np.einsum("sij,sj->si", psd_sqrt(cov), scale * z), kind)
         u = clip(u) if clip is not None else u
         U[:, k] = u

@@ -478,16 +478,17 @@ def ratio_bootstrap(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: int =
     """
     from workbench.method.resampling import bootstrap_gain
     from workbench.models.fitting import timing_setting
-    from workbench.study.power import as_fitted
+    from workbench.study.power import as_fitted, regulated_plant
 
     shifted = as_fitted(model, demos)
+    plant = regulated_plant(model)
     note = ""
     timing = timing_setting(model)  # the gain the model has: on the seen state where it has the pilot's timing
     for gain in dict.fromkeys((ratio_gain, _used_gain(model))):
         try:
-            gains = bootstrap_gain(shifted, model.system, n_boot=n_boot, method=gain, seed=seed, progress=progress,
+            gains = bootstrap_gain(shifted, plant, n_boot=n_boot, method=gain, seed=seed, progress=progress,
                                    timing=timing)
-            return weight_ratios(gains, model.system, ci), gain, note.strip()
+            return weight_ratios(gains, plant, ci), gain, note.strip()
         except ModelError as exc:
             note += f"weight ratios with gain {gain!r} failed: {exc}. "
     return None, ratio_gain, note.strip()
@@ -505,11 +506,11 @@ def objective_intervals(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: i
     """
     from workbench.method.resampling import bootstrap
     from workbench.models.fitting import timing_setting
-    from workbench.study.power import as_fitted
+    from workbench.study.power import as_fitted, regulated_plant
 
     method = _used_gain(model)
     structure = model.structure
-    boot = bootstrap(as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
+    boot = bootstrap(as_fitted(model, demos), regulated_plant(model), n_boot=n_boot, method=method, structure=structure,
                      seed=seed, timing=timing_setting(model))
     ratios, gain, note = ratio_bootstrap(model, demos, n_boot, seed, ratio_gain, boot.ci)
     curve = None
