@@ -323,7 +323,8 @@ def check(m: ChannelMapping, streams: Streams,
             moved = f"correlation {r_mapped:+.2f}" if np.isfinite(r_mapped) else "it does not move there"
             causes.append(
                 f"{sp.name} reads {mapped.label}{how}, which does not move with {target.label}, what it commands: "
-                f"{moved} over the {tt.size} samples of the kept segments, where {best[0]} correlates "
+                f"{moved} over the {tt.size} samples of the kept segments in which the stick commands it, where "
+                f"{best[0]} correlates "
                 f"{best[1]:+.2f} — the stick is on {best[0]}; a mapping whose {sp.name} reads it imports this log")
         elif np.isfinite(r_mapped) and abs(r_mapped) >= STRONG:
             notes.append(f"{sp.name} moves with {target.label} (r = {r_mapped:+.2f})")
