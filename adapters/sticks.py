@@ -271,22 +271,26 @@ def _correlation(stick: _Series, target_t: np.ndarray, target_v: np.ndarray) -> 
     return float(np.corrcoef(x, y)[0, 1])
 
 
-def commands_setpoint(mode: str | None) -> bool:
-    """Whether in ``mode`` the sticks command the attitude setpoint themselves: not where the autopilot holds the
-    position (LOITER, POSHOLD, QLOITER, PX4's POSCTL: the stick asks for a velocity, and the position controller's
-    lean follows the vehicle's heading and drift; erlerobot/logs 22-12-2014/37.BIN's LOITER DesRoll correlates
-    −0.83 with the yaw stick). A segment of no known mode is checked."""
-    from adapters.modes import AUTOPILOT_HOLDS
+def commands_setpoint(group: str | None) -> bool:
+    """Whether in a segment of plant group ``group`` (:data:`workbench.data.plant_groups.PLANT_GROUPS`, the mode's
+    :func:`adapters.modes.plant_group`) the stick commands the attitude setpoint itself: a lean or bank angle. Not
+    where it asks for a velocity (LOITER, POSHOLD, QLOITER, POSCTL: the position controller's lean turns with the
+    heading; erlerobot/logs 22-12-2014/37.BIN's LOITER DesRoll correlated −0.83 with the yaw stick) or a rate (ACRO:
+    the setpoint integrates the stick), nor in a mode no table describes. A segment of no mode rule is checked."""
+    from workbench.data.plant_groups import PLANT_GROUPS
 
-    return "position" not in AUTOPILOT_HOLDS.get(mode or "", "")
+    if group is None:
+        return True
+    kind = PLANT_GROUPS.get(group)
+    return kind is not None and kind.lateral in ("angle", "bank")
 
 
 def check(m: ChannelMapping, streams: Streams,
           windows: Sequence[tuple[float, float] | tuple[float, float, str | None]]) -> tuple[str, str]:
     """Whether each input with a setpoint (``[setpoints]``) moves with it over ``windows`` (the kept segments, each
-    with its flight mode where known; those of a mode in which the stick does not command the setpoint are left
-    out, :func:`commands_setpoint`): ``(cause, note)``, the cause one line (``""`` where every checked stick moves
-    with its setpoint), the note what was checked.
+    with its plant group where the mapping has a mode rule; those in which the stick does not command the setpoint
+    are left out, :func:`commands_setpoint`): ``(cause, note)``, the cause one line (``""`` where every checked
+    stick moves with its setpoint), the note what was checked.
 
     A setpoint is explained by the sticks where some channel of the input's stream correlates with it at least
     :data:`STRONG`; the input then moves with it unless it explains less than :data:`SHARE` of what the best channel
