@@ -9,8 +9,9 @@ from typing import Any
 
 from workbench.atomic import atomic_write_table
 from workbench.cli.context import Context
+from workbench.cli.inputs import resolve
 from workbench.cli.options import steps_of
-from workbench.cli.reading import demos_at_model_dt, load_demos, load_model_file, pilot_only, system_for
+from workbench.cli.reading import demos_at_model_dt, system_for
 from workbench.cli.writing import print_plant
 from workbench.errors import DataError, ModelError, UsageError
 
@@ -19,7 +20,7 @@ __all__ = []
 def cmd_fit(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".npz", "the model")  # before the work: `-o -` to a terminal is refused
-    ds = pilot_only(ctx, load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None), a.keep_still)
+    ds = ctx.read(resolve(a, ctx.stdio, [a.demos], purpose="fit")).demos
     system = system_for(ds, a.system)
     print_plant(ctx, system)
     t0 = time.perf_counter()
@@ -168,7 +169,10 @@ def cmd_predict(ctx: Context) -> int:
 
     a = ctx.args
     output = ctx.output_path(a.output, ".parquet", "the prediction")
-    model = load_model_file(a.model, ctx)
+    if a.x0 is None and not a.demos:
+        raise UsageError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
+    inputs = resolve(a, ctx.stdio, [a.demos] if a.x0 is None else [], models=[a.model])
+    model = ctx.models(inputs)[""]
     if a.x0 is not None:
         try:
             x0 = np.array([float(v) for v in a.x0.split(",")])
@@ -177,17 +181,22 @@ def cmd_predict(ctx: Context) -> int:
         target, t0, demo_id, task_x0, start = None, 0.0, "x0", None, 0
         names, in_names = model.system.state_names, model.system.input_names
     else:
-        if not a.demos:
-            raise UsageError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
-        ds = load_demos(ctx, [a.demos], a.mapping)
+        got = ctx.read(inputs)
+        ds = got.demos
         ids = ds.ids
         if a.demo and a.demo not in ids:
+            why = got.selected.why_left_out(a.demo) if got.selected is not None else None
+            if why is not None:
+                raise DataError(f"{a.demos}: trial {a.demo!r} is left out ({why}); --role, --outcome and "
+                                "--include-excluded choose which trials count")
             raise DataError(f"{a.demos}: no demonstration {a.demo!r}; ids present: {ids[:10]}")
         demo = ds[ids.index(a.demo)] if a.demo else ds[0]
         if not 0 <= a.start < len(demo):
             raise DataError(f"{a.demos}: --start {a.start} outside trial {demo.id!r} (0…{len(demo) - 1})")
         t0 = float(demo.t[a.start])
-        at_dt = demos_at_model_dt(ctx, ds, [model], a.resample, a.demos)
+        at_dt, note = demos_at_model_dt(ds, [model], a.resample, a.demos)
+        if note:
+            ctx.say(note)
         if at_dt is not ds:
             # --start counts samples of the file; on the model's grid the start is the sample nearest its time
             demo = at_dt[ids.index(demo.id)]

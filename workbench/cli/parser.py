@@ -218,6 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     _power_option(p, 0)
     _system_option(p)
     _mapping_option(p)
+    _selection_options(p, "fit")
     _executor_options(p)
 
     p = add("predict", cmd_predict, "predict a trajectory with a fitted model from a recorded or given state",
@@ -240,6 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet; - for standard output")
     _output_format_option(p, _TABLE_OUTPUTS)
     _mapping_option(p)
+    _selection_options(p, "look")
 
     p = add("evaluate", cmd_evaluate,
             "compare the proposed model with IOC-only, GMR-only and persistence on held-out trials; data efficiency",
@@ -259,6 +261,7 @@ def build_parser() -> argparse.ArgumentParser:
     _holdout_option(p)
     _study_options(p)
     _mapping_option(p)
+    _selection_options(p, "study")
     _executor_options(p)
 
     p = add("map", cmd_map, "draft a mapping from a log: the vehicle, its firmware's field names, the streams "
@@ -289,6 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
     _mapping_option(p)
     p.add_argument("--raw", action="store_true",
                    help="a raw log as it is (every stream, modes, messages), without a mapping's states")
+    _selection_options(p, "look")
     _output_options(p)
 
     p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",
@@ -311,6 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
     _mapping_option(p)
+    _selection_options(p, "look")
     _output_options(p)
 
     p = add("live", cmd_live, "predict the pilot online from a vehicle's live MAVLink telemetry, into rerun",
@@ -342,6 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     _power_option(p, 1)
     _study_options(p)
     _mapping_option(p)
+    _selection_options(p, "study")
     _executor_options(p)
 
     p = add("demo", cmd_demo, "the whole pipeline on the sample logs: import, fit CS1 and CS2, compare, report, .rrd",
@@ -352,9 +358,26 @@ def build_parser() -> argparse.ArgumentParser:
     _bootstrap_option(p)
     _power_option(p, 1)
     _mapping_option(p)
+    _selection_options(p, "study")
 
     add_collect(add)
     return parser
+
+
+def _selection_options(p: argparse.ArgumentParser, purpose: str) -> None:
+    """``--role``, ``--outcome``, ``--include-excluded``: which of a collected session's trials count
+    (:mod:`workbench.data.selection`); the defaults are the purpose's."""
+    g = p.add_argument_group("which trials (of a session recorded by `workbench collect`)")
+    role = {"fit": "train", "study": "train,test (the test trials held out)", "look": "all"}[purpose]
+    outcome = "all" if purpose == "look" else "landed"
+    g.add_argument("--role", metavar="train|test|all",
+                   help=f"the trials of these recorded roles, comma-separated (default {role}; trials that record "
+                        "no role are kept)")
+    g.add_argument("--outcome", metavar="landed|crashed|…|all",
+                   help=f"the trials of these recorded outcomes, comma-separated: landed, crashed, left-the-domain, "
+                        f"time-limit (default {outcome} on a collected session)")
+    g.add_argument("--include-excluded", action="store_true",
+                   help="keep the trials the experimenter marked excluded (default: left out, and said so)")
 
 
 def _power_option(p: argparse.ArgumentParser, default: int) -> None:

@@ -18,13 +18,15 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError
 
+if TYPE_CHECKING:  # for the hints only: `workbench --help` builds its --role/--outcome without numpy or pandas
+    from workbench.data.demonstrations import Demonstration, DemonstrationSet
+
 __all__ = ["ALL", "ROLES", "PURPOSES", "Selection", "Selected", "select_trials", "recorded_test_ids",
-           "is_excluded", "outcome_of", "parse_choice"]
+           "unrecorded_split", "is_excluded", "outcome_of", "parse_choice"]
 
 #: The word for "every value" of a role or an outcome.
 ALL = "all"
@@ -201,7 +203,10 @@ def select_trials(
         if why == "excluded":
             note = str(d.meta.get("exclusion_note") or "").strip()
             notes.append(f"{d.id}: {note}" if note else d.id)
-    left_out = tuple(Counter(why for _, why in reasons).items())
+    # said in the order a reader asks: which roles, which outcomes, what the experimenter struck
+    order = {"excluded": 2}
+    left_out = tuple(sorted(Counter(why for _, why in reasons).items(),
+                            key=lambda kv: order.get(kv[0], 0 if kv[0].startswith("role") else 1)))
     if not kept:
         what = ", ".join(f"{n} {why}" for why, n in left_out)
         raise DataError(f"no trial left to use: all {len(demos)} were left out ({what}); --role, --outcome and "
@@ -259,13 +264,28 @@ def _check_asked(demos: DemonstrationSet, key: str, asked: tuple[str, ...] | Non
 def recorded_test_ids(demos: DemonstrationSet, by: str | None = None) -> list[str] | None:
     """The ids of the trials recorded as test trials (``meta["role"]``, written by ``workbench collect``), when
     every trial has a role, train or test, and every label (and every value of the metadata key ``by``, e.g.
-    ``"subject"``) has both; else ``None`` (the study then draws its test trials)."""
-    if not len(demos) or any(_role_of(d) not in ("train", "test") for d in demos):
-        return None
+    ``"subject"``) has both; else ``None`` (the study then draws its test trials; :func:`unrecorded_split` says
+    why)."""
+    return None if unrecorded_split(demos, by) else [d.id for d in demos if _role_of(d) == "test"]
+
+
+def unrecorded_split(demos: DemonstrationSet, by: str | None = None) -> str:
+    """Why the trials do not carry a recorded train/test split (empty when they do): no role, a role other than
+    train or test, or a strategy (and ``by`` value) without a training or a test trial among them."""
+    if not len(demos):
+        return "no trials"
+    roles = [_role_of(d) for d in demos]
+    if all(r is None for r in roles):
+        return "the trials record no role"
+    if any(r not in ("train", "test") for r in roles):
+        other = sorted({str(r) for r in roles if r not in ("train", "test")})
+        return f"some trials record no role train or test ({', '.join(other)})"
     groups: dict[Any, set[str]] = {}
-    for d in demos:
-        key = (d.label, d.meta.get(by) if by else None)
-        groups.setdefault(key, set()).add(_role_of(d))
-    if any(roles != {"train", "test"} for roles in groups.values()):
-        return None
-    return [d.id for d in demos if _role_of(d) == "test"]
+    for d, r in zip(demos, roles, strict=True):
+        groups.setdefault((d.label, d.meta.get(by) if by else None), set()).add(str(r))
+    gaps = []
+    for (label, value), got in groups.items():
+        if got != {"train", "test"}:
+            name = " ".join(str(v) for v in (label, value) if v is not None) or "the trials"
+            gaps.append(f"{name} has no {'test' if 'test' not in got else 'training'} trial")
+    return "; ".join(gaps)
