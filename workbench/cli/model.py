@@ -50,12 +50,55 @@ def cmd_fit(ctx: Context) -> int:
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
-        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
-        _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
+        _print_intervals(ctx, model, ds, system, a.bootstrap, a.seed, a.power)
     elif model.has_gain and model.objective_ is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
     ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
-    return 0
+    return 0  # the model is written: the fit succeeded, whatever its intervals could be computed from
+
+
+def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int, seed: int, power: int) -> None:
+    """The model's intervals, each part on its own: a part that cannot be computed (no task objective to resample,
+    every resample failing) is said to be not computed, with its reason, and the others are still printed; the
+    model, already written, stands either way."""
+    from workbench.errors import WorkbenchError
+
+    fitted = _as_fitted(ds, model)
+    if model.objective_ is None and getattr(model, "objective_error_", None):
+        ctx.say("intervals of the task objective (Q, R): not computed, since inverse LQR found no objective for the "
+                "gain (above); the gain's own intervals follow")
+        parts = [("intervals of K̂", lambda: _print_gain_intervals(ctx, fitted, system, n_boot, seed,
+                                                                   model.gain_method_))]
+    else:
+        parts = [("intervals of K̂, Q and R", lambda: _print_bootstrap(ctx, fitted, system, n_boot, seed,
+                                                                       model.gain_method_))]
+    parts.append(("weight ratios", lambda: _print_ratios(ctx, model, ds, n_boot, seed, power)))
+    for what, run in parts:
+        try:
+            run()
+        except WorkbenchError as exc:
+            ctx.say(f"{what}: not computed ({' '.join(str(exc).split())})")
+
+
+def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str) -> None:
+    """Percentile intervals of K̂ alone, over resamples of whole trials (no inverse LQR per resample)."""
+    import numpy as np
+
+    from workbench.method.resampling import bootstrap_gain
+
+    with ctx.executor() as ex, ctx.progress() as progress:
+        task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
+        result = bootstrap_gain(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex, jackknife=False,
+                                progress=lambda done, total: progress.update(task, completed=done, total=total))
+    if result.n_failed:
+        from workbench.method.resampling import failure_note
+
+        print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
+    lo, hi = np.percentile(np.asarray(result.K_samples), [2.5, 97.5], axis=0)
+    ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % percentile intervals):")
+    for i, u in enumerate(ds.input_names):
+        ctx.say(f"  K̂ row {u}: " + ", ".join(
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(ds.state_names, lo[i], hi[i], strict=True)))
 
 
 def _physics_first(system: Any, exc: Exception) -> str:
