@@ -181,13 +181,9 @@ def _arming_recorded(streams: Streams) -> bool:
     """Whether the log can say when the vehicle was armed (a held flag or arming events), so that no armed span
     means never armed; planes' old DataFlash logs carry neither."""
     if streams.format == "dataflash":
-        formats = streams.info.get("formats") or {}
-        if "ARM" in formats:
-            return True
-        if "EV" in streams and "Id" in streams.columns("EV"):
-            ids = np.asarray(streams.columns("EV")["Id"]).astype(np.int64)
-            return bool(np.isin(ids, (10, 11)).any())
-        return False
+        # ARM messages, or EV declared by the log's FMTs: a firmware that logs events logs ARMED, so a log of it
+        # without one never armed (old ArduPlane logs declare no EV: they do not say)
+        return "ARM" in (streams.info.get("formats") or {}) or "EV" in streams.counts
     if "HEARTBEAT" in streams:
         return "base_mode" in streams.columns("HEARTBEAT")
     if "vehicle_status" in streams:

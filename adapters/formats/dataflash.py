@@ -603,6 +603,9 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
             counts.update({label: int(rows.size) for label, rows in instances[t].items()})
         else:
             counts[name] = int(log.index[t].size)
+    for t, d in log.types.items():  # declared by an FMT, never written: a stream of no message (EV in a log that
+        if t not in log.index and t != FMT_TYPE and d.name and d.name not in counts:  # never armed)
+            counts[d.name] = 0
     want = None if wanted is None else set(wanted)
     frames: dict[str, pd.DataFrame] = {}
     for t, name in names.items():
@@ -679,6 +682,9 @@ def _armed_spans(log: _Log, t_end: float) -> list[tuple[float, float]]:
         return []
     spans: list[tuple[float, float]] = []
     start = None
+    if state.size and not state[0]:  # disarmed first: the log began armed (adapters.segment.event_spans)
+        finite = log.t[np.isfinite(log.t)]
+        start = float(finite.min()) if finite.size else None
     for ti, s in zip(t.tolist(), state.tolist(), strict=True):
         if s and start is None:
             start = ti

@@ -71,9 +71,12 @@ def read_demos(inputs: Inputs, progress: Any, *, select: bool = True) -> Read:
     from workbench.data.dataset import join_sets
 
     sets = []
+    notes: list[str] = []
     task = progress.add_task("reading logs", total=len(inputs.sources))
     for source in inputs.sources:
         ds = load_one(source, inputs.allow_still)
+        if len(ds) and ds[0].meta.get("sticks"):  # the channels the log's RC map gave the sticks, and the check
+            notes.append(f"{source.shown}: {ds[0].meta['sticks']}")
         _warn_about(source, ds)
         if source.stdin:  # the spooled file is gone once the command ends: the trials come from <stdin>
             ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
@@ -87,7 +90,6 @@ def read_demos(inputs: Inputs, progress: Any, *, select: bool = True) -> Read:
             ds = ds + p
     if not len(ds):
         raise DataError(f"{inputs.names}: no demonstrations")
-    notes: list[str] = []
     selected = None
     if select:
         from workbench.data.selection import select_trials
