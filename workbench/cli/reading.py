@@ -68,7 +68,7 @@ def read_demos(inputs: Inputs, progress: Any, *, select: bool = True) -> Read:
     """The demonstrations of ``inputs``: every source read (``progress``: a rich ``Progress`` to advance), joined,
     kept to ``inputs.labels``, and (``select``) to the trials ``inputs.selection`` means for ``inputs.purpose``;
     then, for a fit or a study, the segments with pilot input (:func:`pilot_only`)."""
-    from workbench.data.dataset import join_sets
+    from workbench.data.dataset import join_sets, refuse_copies
 
     sets = []
     notes: list[str] = []
@@ -82,7 +82,10 @@ def read_demos(inputs: Inputs, progress: Any, *, select: bool = True) -> Read:
             ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
         sets.append(ds)
         progress.advance(task)
-    ds = join_sets(sets, [s.shown for s in inputs.sources])
+    names = [s.shown for s in inputs.sources]
+    if len(sets) > 1 or not (inputs.sources[0].demos and inputs.sources[0].path.is_dir()):  # a dataset checks itself
+        refuse_copies(sets, names, "")
+    ds = join_sets(sets, names)
     if inputs.labels:
         parts = [ds.by_label(label) for label in inputs.labels]
         ds = parts[0]
