@@ -9,6 +9,7 @@ from pathlib import Path
 
 from workbench.cli.context import EXIT_ERROR, Context
 from workbench.cli.inputs import resolve
+from workbench.cli.options import MAX_SIMULATED_TRIALS
 from workbench.cli.stdio import is_stdio, refuse_stdio
 from workbench.cli.writing import write_demos
 from workbench.errors import UsageError
@@ -31,6 +32,9 @@ def cmd_simulate(ctx: Context) -> int:
                              "--sample-logs DIR")
     from workbench.sim.landing import simulate_landings
 
+    if len(a.strategy) * max(a.subjects, 1) * max(a.trials, 0) > MAX_SIMULATED_TRIALS:
+        raise UsageError(f"--trials {a.trials} × --subjects {a.subjects} × {len(a.strategy)} strategies: more than "
+                         f"{MAX_SIMULATED_TRIALS} trials in one call; simulate fewer, or several files into a dataset")
     subjects = [None] if a.subjects == 0 else [f"s{i + 1:02d}" for i in range(a.subjects)]
     sets = []
     with ctx.progress() as progress:

@@ -187,7 +187,9 @@ def resolve(
     for name in demos:
         path = existing_path(stdio.input(name, what))
         shown = STDIN_NAME if is_stdio(name) else os.fspath(path)
-        demo_file = is_demo_file(path)
+        # --format says what a file holds, whatever its name: parquet is demonstrations, a log format a log
+        given_format = None if is_stdio(name) else stdio.format
+        demo_file = is_demo_file(path) if given_format is None else given_format == "parquet"
         chosen, note = None, ""
         if not demo_file and mapping:
             chosen = given_mapping

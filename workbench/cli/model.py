@@ -10,7 +10,7 @@ from typing import Any
 from workbench.atomic import atomic_write_table
 from workbench.cli.context import Context
 from workbench.cli.inputs import resolve
-from workbench.cli.options import steps_of
+from workbench.cli.options import rollout_budget, steps_of
 from workbench.cli.reading import demos_at_model_dt, system_for
 from workbench.cli.writing import print_plant
 from workbench.errors import DataError, ModelError, UsageError
@@ -252,6 +252,7 @@ def cmd_predict(ctx: Context) -> int:
         names, in_names = ds.state_names, ds.input_names
     dt = model.system.dt  # the model steps at its own dt, whatever the demonstrations' sampling
     n_steps = steps_of(a.horizon_s, dt)
+    rollout_budget(a.samples, n_steps)
     # from inside a trial, the task's start frame stays at the trial's first state
     kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0}
     if a.samples:

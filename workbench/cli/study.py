@@ -16,7 +16,7 @@ from typing import Any
 from workbench.atomic import atomic_write_table, recover_swaps, swap_entries, temp_sibling
 from workbench.cli.context import Context
 from workbench.cli.inputs import resolve
-from workbench.cli.options import SAMPLE_LOGS, steps_of
+from workbench.cli.options import SAMPLE_LOGS, rollout_budget, steps_of
 from workbench.cli.reading import require_proposed, study_plant, system_for
 from workbench.cli.stdio import refuse_stdio
 from workbench.cli.writing import print_plant, viewer_command
@@ -72,6 +72,7 @@ def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0,
         ctx.say(f"one manual segment ({duration:.1f} s): evaluated by a time split inside it, {len(ds)} contiguous "
                 "pieces each scored by models and a plant fitted on the others (parts of one flight, not "
                 "independent trials)")
+    rollout_budget(a.samples, steps_of(a.horizon_s, ds.dt))
     smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
     # a collected session declares its test trials (the protocol's test blocks, held-out trials): auto keeps them
     recorded = recorded_test_ids(ds) if a.holdout == "auto" else None
@@ -357,6 +358,7 @@ def cmd_demo(ctx: Context) -> int:
     t0 = time.perf_counter()
     ds = ctx.read(resolve(a, ctx.stdio, [str(f) for f in files], purpose="study")).demos
     timings["import"] = time.perf_counter() - t0
+    rollout_budget(a.samples, steps_of(a.horizon_s, ds.dt))
     by_format: dict[str, int] = {}
     for f in files:
         by_format[f.suffix.lstrip(".")] = by_format.get(f.suffix.lstrip("."), 0) + 1

@@ -10,7 +10,7 @@ from typing import Any
 from workbench import interrupts
 from workbench.cli.context import Context
 from workbench.cli.inputs import Inputs, resolve
-from workbench.cli.options import DEFAULT_MAPPING, steps_of
+from workbench.cli.options import DEFAULT_MAPPING, rollout_budget, steps_of
 from workbench.cli.reading import default_output, demos_at_model_dt
 from workbench.cli.writing import announce, output_kwargs
 from workbench.errors import DataError, UsageError
@@ -98,6 +98,8 @@ def cmd_view(ctx: Context) -> int:
         if note:
             ctx.say(note)
     n_steps = steps_of(a.horizon_s, ds.dt)
+    if models is not None:
+        rollout_budget(a.samples, n_steps)
     out = output_kwargs(ctx, default_output(a.inputs[0], ".rrd"))
     rec = viewer.new_recording(viewer.APPLICATION_IDS["session" if models is not None else "log"])
     with ctx.progress() as progress:
