@@ -1,5 +1,6 @@
-"""Attack round on bounds and losses (issue 29): hostile sizes, bad stamps, meaningless mapping values, copied
-and special files in datasets, replay waits, schedulers, nesting, large standard input.
+"""Attack round on bounds and losses (issue 29; issue 36: altered dataset copies, model files that expand, hostile
+numbers on the command line): hostile sizes, bad stamps, meaningless mapping values, copied and special files in
+datasets, replay waits, schedulers, nesting, large standard input.
 Not part of the test suite: run it for a bounded time and read the counts.
 
     PYTHONPATH=. nice .venv/bin/python bench/attack/fuzz_bounds.py --seconds 30   # per surface
@@ -49,6 +50,9 @@ from workbench.errors import WorkbenchError  # noqa: E402
 HANG_S = 60.0
 FOREIGN_TEXT = re.compile(r"ZstdError|codec can't decode|cannot fit|Traceback|RecursionError|OverflowError|"
                           r"need at least one array|WebSocketError|TypeError")
+#: Python's own words in a command's error line (an internal error's class name, a limit, a library's parser).
+PYTHON_TEXT = re.compile(r"Traceback|\w+Error:|Exceeds the limit|integer string conversion|cannot convert float|"
+                         r"C error|--debug for the traceback|magic bytes not found")
 TLOG = REPO / "sample_logs" / "landing_s00.tlog"
 MAX_INPUT = 10 << 20  # bytes: every generated input file is smaller
 
@@ -354,9 +358,11 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
     root = base / f"ds{rng.randrange(10**9)}"
     write_dataset(study, root)
     victim = next(root.rglob("*.parquet"))
-    action = rng.choice(["copy", "copy_other_subject", "fifo", "self_link", "dangling_link", "device", "socket",
-                         "nothing"])
-    if action == "copy":
+    action = rng.choice(["copy", "copy_other_subject", "copy_shifted", "copy_ulp", "copy_shorter", "fifo",
+                         "self_link", "dangling_link", "device", "socket", "nothing"])
+    if action in ("copy_shifted", "copy_ulp", "copy_shorter"):  # a copy altered so neither bytes nor ids repeat
+        _altered_copy(victim, victim.with_name(f"{victim.stem} (copy).parquet"), action.removeprefix("copy_"))
+    elif action == "copy":
         shutil.copyfile(victim, victim.with_name(f"{victim.stem} (copy).parquet"))
     elif action == "copy_other_subject":
         other = root / "subject=zz"
@@ -385,6 +391,133 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
         return None
 
     return call, [*(q for q in root.rglob("*") if q.is_file() and not q.is_symlink()), root]
+
+
+def _altered_copy(src: Path, dst: Path, how: str) -> None:
+    """``src`` rewritten to ``dst`` with every trial shifted by one sample, 1 ulp off or one sample shorter and
+    renamed, keeping its dataset metadata (a partition of the same dataset to every reader)."""
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    from workbench.data.demonstrations import Demonstration, DemonstrationSet
+
+    ds = DemonstrationSet.load(src)
+    out = []
+    for d in ds:
+        t, x, u = d.t, d.x, d.u
+        if how == "shifted":
+            t, x, u = t[:-1], x[1:], u[1:]
+        elif how == "ulp":
+            x, u = np.nextafter(x, np.inf), np.nextafter(u, -np.inf)
+        else:
+            t, x, u = t[:-1], x[:-1], u[:-1]
+        out.append(Demonstration(t, x, u, {**d.meta, "id": f"{d.id}-{how}"}))
+    info = json.loads(pq.read_metadata(src).metadata[b"workbench"])["dataset"]
+    ds.with_demos(out).save(dst, dataset=info)
+
+
+# -- model files that expand --------------------------------------------------------------------------------------
+def attack_model_size(rng: random.Random, base: Path, model: Path, demos: Path) -> Prepared:
+    """A model file whose one array is ``size`` bytes of deflated zeros, declared as such (an honest archive: 2 GiB
+    deflate to about 2 MB), given to ``predict``."""
+    import io
+    import zipfile
+
+    import numpy as np
+
+    size = rng.choice([8 << 20, 64 << 20, 512 << 20, 2 << 30])
+    path = base / f"m{rng.randrange(10**9)}.npz"
+    n = size // 8
+    with zipfile.ZipFile(model) as zin, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zout:
+        header = json.loads(np.load(io.BytesIO(zin.read("__header__.npy"))).tobytes())
+        name = rng.choice([k for k in header["arrays"] if header["arrays"][k]["shape"]])
+        header["arrays"][name]["shape"] = [n]
+        for info in zin.infolist():
+            if info.filename == f"{name}.npy":
+                buf = io.BytesIO()
+                np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False, "shape": (n,)})
+                with zout.open(info.filename, "w", force_zip64=True) as f:
+                    f.write(buf.getvalue())
+                    for start in range(0, n * 8, 1 << 24):
+                        f.write(bytes(min(1 << 24, n * 8 - start)))
+            elif info.filename == "__header__.npy":
+                buf = io.BytesIO()
+                np.save(buf, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+                zout.writestr(info.filename, buf.getvalue())
+            else:
+                zout.writestr(info.filename, zin.read(info))
+    out = base / f"p{rng.randrange(10**9)}.csv"
+
+    def call() -> str | None:
+        from workbench.cli import main
+
+        return _cli(main, ["predict", "--model", str(path), str(demos), "-o", str(out), "-q"])
+
+    return call, [path, out]
+
+
+def _cli(main: Callable[[list[str]], int], argv: list[str]) -> str | None:
+    """A command run in this (forked) process, judged by its status and its one line: a clean error is raised as
+    one (its text checked for Python's), status 3 or Python text is foreign."""
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse's exit for bad arguments
+            code = exc.code
+    text = buf.getvalue().strip()
+    if code == 3 or PYTHON_TEXT.search(text):
+        raise RuntimeError(f"exit {code}: {text[-300:]}")
+    if code:
+        raise WorkbenchError(text.splitlines()[-1] if text else f"exit {code} without a word")
+    return None
+
+
+# -- numbers on the command line ----------------------------------------------------------------------------------
+def attack_numbers(rng: random.Random, base: Path, model: Path, demos: Path) -> Prepared:
+    """A hostile number in an option or a mapping: huge, negative, 5000 digits, inf, nan, -0, 1e308."""
+    words = ["-1", "0", "-0", "1e308", "inf", "-inf", "nan", "9" * 5000, str(2**64), "1e-300", "2.5", "x"]
+    value = rng.choice(words)
+    out = base / f"o{rng.randrange(10**9)}"
+    option = rng.choice(["--seed", "--horizon", "--samples", "--bootstrap", "--power", "--test-size", "--n-test",
+                         "--repeats", "--subjects", "--trials", "--workers", "--stride", "--start", "--n-components",
+                         "--speed", "--sysid", "--duration", "--silence", "mapping"])
+    inputs: list[Path] = []
+    if option == "mapping":
+        text = (REPO / "adapters" / "mappings" / "planar_quadrotor.toml").read_text(encoding="utf-8")
+        key = rng.choice(["gap = 0.25", "min_duration = 0.1", "dt = 0.05"])
+        mapping = base / f"m{rng.randrange(10**9)}.toml"
+        mapping.write_text(text.replace(key, f"{key.split('=')[0]}= {value}"), encoding="utf-8")
+        inputs.append(mapping)
+        argv = ["import", str(TLOG), "--mapping", str(mapping), "-o", f"{out}.parquet"]
+    elif option in ("--subjects", "--trials"):
+        argv = ["simulate", option, value, "--strategy", "CS1", "-o", f"{out}.parquet"]
+        if option == "--subjects" and value not in ("-1", "x", "inf", "nan", "-inf", "1e308", "2.5", "-0", "0"):
+            argv += ["--trials", "1"]
+    elif option in ("--speed", "--sysid", "--duration", "--silence"):
+        argv = ["live", "udpin:127.0.0.1:1", "--model", str(model), option, value, "--duration", "0.1", "--save",
+                f"{out}.rrd"] if option != "--duration" else ["live", "udpin:127.0.0.1:1", "--model", str(model),
+                                                             option, value, "--save", f"{out}.rrd"]
+        if option == "--speed":
+            argv = ["replay", str(demos), "--model", str(model), "--speed", value, "--no-wait", "--save", f"{out}.rrd"]
+    elif option in ("--test-size", "--n-test", "--repeats", "--workers", "--stride", "--power"):
+        argv = ["evaluate", str(demos), option, value, "--samples", "0", "--no-efficiency", "--n-components", "1",
+                "--holdout", "split"]
+        if option == "--n-test":
+            argv += ["--per-subject"]
+    else:
+        argv = ["predict", "--model", str(model), str(demos), option, value, "-o", f"{out}.csv"]
+    inputs += [Path(f"{out}{s}") for s in (".parquet", ".csv", ".rrd")]
+
+    def call() -> str | None:
+        from workbench.cli import main
+
+        return _cli(main, argv)
+
+    return call, inputs
 
 
 # -- replay waits, link ports, speeds ------------------------------------------------------------------------------
@@ -536,6 +669,13 @@ def main() -> None:
     times = [t for t, _ in tlog_frames(TLOG)]
     honest = sum(min(max(b - a, 0.0), MAX_REPLAY_GAP) for a, b in zip(times, times[1:], strict=False))
     study = simulate_study(n_subjects=2, n_trials=2, strategy="CS1", seed=1)
+    fixtures = Path(tempfile.mkdtemp(prefix="wb-bounds-fixtures-"))
+    demos = simulate_study(n_subjects=2, n_trials=4, strategy="CS1", seed=2).save(fixtures / "demos.parquet")
+    model = fixtures / "model.npz"
+    from workbench.cli import main as cli_main
+
+    if cli_main(["fit", str(demos), "--method", "ioc-only", "--bootstrap", "0", "-q", "-o", str(model)]) != 0:
+        raise SystemExit("could not fit the model the model-file surfaces start from")
     sample_mcap = (REPO / "sample_logs" / "landing_s01.mcap").read_bytes()
     mcap_messages = _mcap_messages(REPO / "sample_logs" / "landing_s01.mcap")
     mcap_ref = adapters.load(REPO / "sample_logs" / "landing_s01.mcap")
@@ -558,6 +698,8 @@ def main() -> None:
         "replay waits / ports / speeds": lambda: attack_replay(rng, base, clean, offsets, honest),
         "schedulers (schemes, no workers)": lambda: attack_scheduler(rng, empty),
         "nested model header": lambda: attack_nesting(rng, base),
+        "model file sizes (deflated 8 MiB-2 GiB, predict)": lambda: attack_model_size(rng, base, model, demos),
+        "numbers (options and a mapping's)": lambda: attack_numbers(rng, base, model, demos),
         "stdin size (streamed, 64 MiB-1 GiB)": lambda: attack_stdin_size(rng),
     }
     if args.only:
@@ -573,6 +715,7 @@ def main() -> None:
         scheduler.kill()
         scheduler.wait()
         shutil.rmtree(base, ignore_errors=True)
+        shutil.rmtree(fixtures, ignore_errors=True)
     keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
     print(f"\nEach call forked from a process at {baseline:.0f} MiB (the workbench's imports, the sample logs).")
     print("| surface | " + " | ".join(keys) + " | peak MiB | longest call s | largest input MiB |")
