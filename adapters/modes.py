@@ -10,6 +10,8 @@ pymavlink does not carry; it is listed here from PX4's ``vehicle_status.msg``.
 
 from __future__ import annotations
 
+import math
+
 from pymavlink import mavutil
 
 __all__ = ["AUTOPILOT_HOLDS", "MODE_TABLES", "mode_name", "mode_number", "heartbeat_table", "vehicle_kind"]
@@ -91,9 +93,16 @@ def vehicle_kind(autopilot: int, mav_type: int) -> str:
     return f"{ap.name if ap else autopilot} {ty.name if ty else mav_type}"
 
 
-def mode_name(table: str | None, number: float) -> str:
-    """The name of mode ``number`` in ``table``; the number as text where unknown."""
-    n = int(number)
+def mode_name(table: str | None, number: object) -> str:
+    """The name of mode ``number`` in ``table``; the number as text where unknown, and a value that is no mode
+    number (NaN, null, text: a log is not trusted to hold one) as it is."""
+    try:
+        f = float(number)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        return "null" if number is None else str(number)
+    if not math.isfinite(f) or not f.is_integer():
+        return str(f)
+    n = int(f)
     return MODE_TABLES.get(table or "", {}).get(n, str(n))
 
 

@@ -408,7 +408,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
         )
 
     windows = [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts]
-    stick_cause, stick_note = check_sticks(m, streams, windows)
+    stick_cause, stick_note = check_sticks(m, streams, [(float(t[0]), float(t[-1]), span.meta.get("mode"))
+                                                        for span, ts, _ in found for t in ts])
     if stick_cause and not still:
         if not allow_still:
             raise DataError(stick_cause)

@@ -271,10 +271,22 @@ def _correlation(stick: _Series, target_t: np.ndarray, target_v: np.ndarray) -> 
     return float(np.corrcoef(x, y)[0, 1])
 
 
-def check(m: ChannelMapping, streams: Streams, windows: Sequence[tuple[float, float]]) -> tuple[str, str]:
-    """Whether each input with a setpoint (``[setpoints]``) moves with it over ``windows`` (the kept segments):
-    ``(cause, note)``, the cause one line (``""`` where every checked stick moves with its setpoint), the note what
-    was checked.
+def commands_setpoint(mode: str | None) -> bool:
+    """Whether in ``mode`` the sticks command the attitude setpoint themselves: not where the autopilot holds the
+    position (LOITER, POSHOLD, QLOITER, PX4's POSCTL: the stick asks for a velocity, and the position controller's
+    lean follows the vehicle's heading and drift; erlerobot/logs 22-12-2014/37.BIN's LOITER DesRoll correlates
+    −0.83 with the yaw stick). A segment of no known mode is checked."""
+    from adapters.modes import AUTOPILOT_HOLDS
+
+    return "position" not in AUTOPILOT_HOLDS.get(mode or "", "")
+
+
+def check(m: ChannelMapping, streams: Streams,
+          windows: Sequence[tuple[float, float] | tuple[float, float, str | None]]) -> tuple[str, str]:
+    """Whether each input with a setpoint (``[setpoints]``) moves with it over ``windows`` (the kept segments, each
+    with its flight mode where known; those of a mode in which the stick does not command the setpoint are left
+    out, :func:`commands_setpoint`): ``(cause, note)``, the cause one line (``""`` where every checked stick moves
+    with its setpoint), the note what was checked.
 
     A setpoint is explained by the sticks where some channel of the input's stream correlates with it at least
     :data:`STRONG`; the input then moves with it unless it explains less than :data:`SHARE` of what the best channel
@@ -282,6 +294,7 @@ def check(m: ChannelMapping, streams: Streams, windows: Sequence[tuple[float, fl
     """
     from adapters.selection import resolve_channel
 
+    windows = [(w[0], w[1]) for w in windows if len(w) < 3 or commands_setpoint(w[2])]  # type: ignore[misc]
     if not m.setpoints or not windows:
         return "", ""
     by_input = {s.input: s for s in m.sticks}

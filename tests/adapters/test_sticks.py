@@ -117,6 +117,30 @@ def test_a_mapped_channel_that_does_not_move_with_the_commanded_roll_is_stopped(
     assert len(adapters.load(path, copy))
 
 
+def test_segments_where_the_autopilot_commands_the_attitude_are_not_judged(tmp_path):
+    # erlerobot/logs pxf/copter/22-12-2014/37.BIN: in LOITER the position controller's DesRoll turns with the
+    # heading and correlated -0.83 with the yaw stick (C4), over a DesRoll spread three times ALT_HOLD's; pooled
+    # over every kept segment, the roll stick (C2, +0.95 in ALT_HOLD) was called the wrong channel
+    path, streams = _copter_bin(tmp_path, "loiter.bin", {"RCMAP_ROLL": 2, "RCMAP_PITCH": 1}, roll_on=2, seconds=100.0)
+    modes = adapters.read(path).info["flight_modes"]
+    loiter = [(a, b) for name, a, b in modes if name == "LOITER"]
+    assert loiter
+    rc, att = streams["RCIN"], streams["ATT"]
+    ta = att["t"].to_numpy()
+    yaw = np.sin(rc["t"].to_numpy() / 0.9)
+    rc["C4"] = _pwm(yaw)
+    for a, b in loiter:
+        inside = (ta >= a) & (ta <= b)
+        held = np.searchsorted(rc["t"].to_numpy(), ta[inside], side="right") - 1
+        att.loc[inside, "DesRoll"] = np.round(-90 * yaw[held], 2)
+    options = dataflash_write.example_streams("old", "copter", seconds=100.0, seed=3)[1]
+    path = dataflash_write.write(tmp_path / "loiter.bin", streams, **options)
+    ds = adapters.load(path, "ardupilot_manual")
+    assert "LOITER" in {d.meta["mode"] for d in ds}
+    r = float(re.search(r"u1 moves with ATT\.DesRoll \(r = ([+-][\d.]+)\)", ds[0].meta["sticks"]).group(1))
+    assert r > 0.9  # judged on the STABILIZE and ALT_HOLD segments, where the stick commands the lean
+
+
 def test_a_stick_that_never_moves_its_setpoint_gives_no_verdict(tmp_path):
     # the example log's sticks are noise that no setpoint follows: no channel reaches a large correlation
     streams, options = dataflash_write.example_streams("old", "copter", seconds=30.0, seed=3)

@@ -152,6 +152,7 @@ def serve(tmp_path):
 
 def new_page(browser, gamepad: bool, viewport: tuple[int, int] = (1100, 760)):
     context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
+    context.set_default_timeout(60_000)  # a shared machine under load: a wait's deadline, not a speed check
     if gamepad:
         context.add_init_script(PAD_SCRIPT)
     return context, context.new_page()

@@ -168,6 +168,8 @@ def test_message_fit_and_input_steps_are_read_and_laid_out(tmp_path):
     ([{"label": "A", "instructions": "a", "trials": 1}, {"fit": {"label": "A", "from": "test"}}], "fit.from"),
     ([{"label": "A", "instructions": "a", "trials": 1}, {"message": {"text": "x", "colour": 1}}], "message.colour"),
     ([{"label": "A", "instructions": "a", "trials": 3, "stop": {"landed": 4}}], "stop.landed"),
+    ([{"label": "A", "instructions": "a", "trials": 3, "stop": {"identified": "phi"}}], "stop.identified"),
+    ([{"label": "A", "instructions": "a", "trials": 3, "stop": {"min_trials": 3}}], "stop.min_trials"),
 ])
 def test_a_fit_or_message_step_that_cannot_work_is_one_line(tmp_path, blocks, message):
     lines = ['consent = "x"']

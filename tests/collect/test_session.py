@@ -431,7 +431,7 @@ def test_a_fit_step_is_run_once_its_model_ready_before_the_subject_goes_on(tmp_p
 
     calls = []
 
-    def runner(task):
+    def runner(fn, task):
         out, subject, label, source, min_trials, seed = task
         calls.append(task)
         raise DataError(f"subject {subject}: 0 landed, not excluded {label} train trial(s)")
@@ -439,7 +439,7 @@ def test_a_fit_step_is_run_once_its_model_ready_before_the_subject_goes_on(tmp_p
     path = write_protocol(tmp_path / "p.toml", [{"label": "A", "instructions": "a", "trials": 1}])
     path.write_text(path.read_text() + '[[blocks]]\nfit = { label = "A" }\n[[blocks]]\nlabel = "A"\n'
                     'instructions = "b"\ntrials = 1\nrole = "test"\nassist = "show"\n')
-    s = Session(tmp_path / "out", load_protocol(path), fit_runner=runner)
+    s = Session(tmp_path / "out", load_protocol(path), runner=runner)
     join(s, "s01")
     s.advance("s01", "instructions0")
     status = s.write_trial(flown(s, "s01", 0))
@@ -451,3 +451,58 @@ def test_a_fit_step_is_run_once_its_model_ready_before_the_subject_goes_on(tmp_p
     with pytest.raises(RequestError, match="the model of A is failed"):
         s.advance("s01", "fit1")
     assert model_paths(tmp_path / "out", "s01", "A")[2].is_file()
+
+
+def _identifying(tmp_path, runner):
+    path = write_protocol(tmp_path / "p.toml", [
+        {"label": "A", "instructions": "a", "trials": 6, "stop": {"identified": "Q_phi / R_u1", "min_trials": 3}},
+        {"label": "B", "instructions": "b", "trials": 1}])
+    s = Session(tmp_path / "out", load_protocol(path), runner=runner)
+    join(s, "s01")
+    s.advance("s01", "instructions0")
+    return s
+
+
+def test_a_block_ends_once_its_contrast_is_identified(tmp_path):
+    """The plumbing of the stopping rule on identification (the check itself is the slow test's): checked in the
+    background from min_trials landed on, the block's other trials skipped once a check says identified."""
+    from workbench.collect.stopping import check_identified
+    from workbench.collect.subjects import write_json
+
+    seen = []
+
+    def runner(fn, task):
+        assert fn is check_identified
+        out, subject, group, ids, ratio, seed = task
+        seen.append(len(ids))
+        record = {"kind": "stop", "subject": subject, "group": group, "n": len(ids), "ratio": ratio, "ids": ids,
+                  "identified": len(ids) >= 4, "interval": f"{ratio} = 1 [0.5, 2]"}
+        write_json(tmp_path / "out" / HIDDEN / "stops" / subject / f"{group}-{len(ids)}.json", record)
+        return record
+
+    s = _identifying(tmp_path, runner)
+    for slot in range(6):
+        status = s.write_trial(flown(s, "s01", slot, y_ref=-0.05))
+        s.jobs.wait()
+        status = s.status("s01")
+        if status["next"]["label"] == "B":
+            break
+    assert seen == [3, 4] and slot == 3  # checked on 3 (not yet), then on 4: identified, 2 trials skipped
+    assert status["trials_skipped"] == 2 and status["trials_done"] == 4
+
+
+@pytest.mark.slow
+def test_the_identification_check_is_the_weight_ratios_bootstrap(tmp_path):
+    from workbench.collect.fitting import in_process
+    from workbench.collect.stopping import check_identified
+
+    s = _identifying(tmp_path, in_process)
+    for slot in range(3):
+        s.write_trial(flown(s, "s01", slot, y_ref=-0.05 - 0.01 * slot))
+    s.status("s01")
+    s.jobs.wait()
+    (record,) = s.stops.records("s01", "instructions0")
+    assert record["n"] == 3 and record["interval"].startswith("Q_phi / R_u1 = ") and isinstance(
+        record["identified"], bool)
+    with pytest.raises(DataError, match="'Q_nope / R_u1' is not a weight ratio of this plant"):
+        check_identified((str(tmp_path / "out"), "s01", "g", record["ids"], "Q_nope / R_u1", 0))

@@ -181,8 +181,8 @@ def cmd_collect(ctx: Context) -> int:
         ctx.say(f"no subject has started; {a.out} holds no trials")
     for subject in session.subjects():
         status = session.status(subject)
-        parts = ", ".join(f"{r['label']} {r['role']} {r['landed']}/{r['trials']} landed"
-                          for r in session.summary(subject)) or "no trials"
+        parts = ", ".join(f"{r['label']} {r['role']}{'' if r['assist'] == 'none' else ' ' + r['assist']} "
+                          f"{r['landed']}/{r['trials']} landed" for r in session.summary(subject)) or "no trials"
         ctx.say(f"{subject}: {status['trials_done']} of {status['trials_total']} trials ({parts})")
     if session.subjects():
         ctx.say(f"one line per trial: {Path(a.out) / '_collect' / 'trials.csv'}; what each column and key means: "

@@ -54,6 +54,7 @@ class ExperimenterView:
         self.models = dict(models or {})
         self.fitted: dict[tuple[str, str], Any] = {}
         self.fit_lines: dict[tuple[str, str], str] = {}
+        self.exclusions: dict[str, str] = {}
         self.out, self.saved = out, saved
         self.n_steps = max(1, int(round(horizon_s / spec["dt"])))
         self.t0 = time.monotonic()
@@ -153,10 +154,18 @@ class ExperimenterView:
             self._summary()
 
     def event(self, kind: str, text: str) -> None:
-        """A warning (an unknown or repeated subject ID), a declined consent or a fit's result, in the log."""
+        """A warning (an unknown or repeated subject ID), a declined consent, a fit's result or an exclusion, in the
+        log; exclusions also in the summary."""
         with self.lock:
             self._clock()
             self.rec.log("outcomes", self.rr.TextLog(f"{kind}: {text}", level="WARN" if kind == "warning" else "INFO"))
+            if kind == "exclusion":
+                trial, _, rest = text.partition(" ")
+                if rest.startswith("excluded"):
+                    self.exclusions[trial] = rest
+                else:
+                    self.exclusions.pop(trial, None)
+                self._summary()
 
     def fit(self, record: Mapping[str, Any]) -> None:
         """A fit step's result: the model then predicts that subject's label live, and the summary shows it with
@@ -188,6 +197,9 @@ class ExperimenterView:
             text += ["", "## Fits (each subject's model, from their landed training trials)", "",
                      "| subject | label | trials | held-out position RMSE | model digest |", "|---|---|---|---|---|",
                      *(self.fit_lines[k] for k in sorted(self.fit_lines))]
+        if self.exclusions:
+            text += ["", "## Excluded from the analysis", "",
+                     *(f"- `{trial}` {why}" for trial, why in sorted(self.exclusions.items()))]
         text += ["", "## Where", ""]
         if self.out is not None:
             text.append(f"- trials: `{self.out}` (one line each: `{Path(self.out) / '_collect' / 'trials.csv'}`)")

@@ -29,7 +29,8 @@ from workbench.collect.subjects import now, read_json, write_json
 from workbench.defaults import HORIZON_S
 from workbench.errors import DataError, WorkbenchError
 
-__all__ = ["FitJobs", "fit_subject", "default_model", "model_paths", "file_digest"]
+__all__ = ["Jobs", "FitJobs", "fit_subject", "default_model", "model_paths", "file_digest", "in_process",
+           "load_fitted"]
 
 
 def default_model(system: Any, seed: int = 0) -> Any:
@@ -89,8 +90,9 @@ def fit_subject(task: tuple) -> dict[str, Any]:
         held = [{"id": str(r.trial), "error": float(r.value)} for r in rows.itertuples(index=False)]
     errors = [h["error"] for h in held]
     record = {
-        "subject": subject, "label": label, "from": source, "model": path.name, "digest": file_digest(path),
-        "data_digest": model.data_digest_, "train_ids": list(model.train_ids_), "n_train": len(train),
+        "kind": "fit", "subject": subject, "label": label, "from": source, "model": path.name,
+        "digest": file_digest(path), "data_digest": model.data_digest_, "train_ids": list(model.train_ids_),
+        "n_train": len(train),
         "metric": metric, "horizon_s": n_steps * system.dt, "held_out": held,
         "held_out_error": (sum(errors) / len(errors)) if errors else None,
         "n_components": getattr(model, "n_components", None), "fitted": now(),
@@ -100,71 +102,51 @@ def fit_subject(task: tuple) -> dict[str, Any]:
     return record
 
 
-class FitJobs:
-    """The fit steps running for a session: at most one per (subject, label), each in a worker process.
+class Jobs:
+    """Background work of a session (fit steps, stopping rules' checks), at most one running per key, each task
+    run by ``runner(fn, task)`` (default: in a worker process); ``on_done(result)`` is told of each end, from the
+    job's thread. A task's record file is written by the task itself; a failure is written here, in one line."""
 
-    ``on_done(record_or_failure)`` is called from the job's thread when one ends (the CLI prints it and the
-    experimenter's view shows it).
-    """
-
-    def __init__(self, out: Path, seed: int = 0, on_done: Callable[[dict[str, Any]], None] | None = None,
-                 run: Callable[[tuple], dict[str, Any]] | None = None) -> None:
-        self.out = Path(out)
-        self.seed = seed
+    def __init__(self, on_done: Callable[[dict[str, Any]], None] | None = None,
+                 runner: Callable[[Callable, tuple], dict[str, Any]] | None = None) -> None:
         self.on_done = on_done
-        self._run = run or _in_worker
+        self._runner = runner or _in_worker
         self._lock = threading.Lock()
-        self._running: dict[tuple[str, str], threading.Thread] = {}
+        self._running: dict[tuple, threading.Thread] = {}
 
-    def state(self, subject: str, label: str) -> dict[str, Any]:
-        """``{"state": "ready"|"failed"|"fitting"|"waiting", …}`` with the record or the failure's reason."""
-        _, record, failed = model_paths(self.out, subject, label)
-        if record.is_file():
-            return {"state": "ready", **read_json(record, "fit record")}
-        if failed.is_file():
-            return {"state": "failed", **read_json(failed, "fit failure")}
+    def running(self, key: tuple) -> bool:
         with self._lock:
-            running = (subject, label) in self._running
-        return {"state": "fitting" if running else "waiting"}
+            return key in self._running
 
-    def start(self, subject: str, label: str, source: str, min_trials: int) -> None:
-        """Start the fit unless it is done, failed or running (a resumed session starts it again)."""
-        if self.state(subject, label)["state"] != "waiting":
-            return
+    def start(self, key: tuple, fn: Callable[[tuple], dict[str, Any]], task: tuple, failed: Path,
+              what: dict[str, Any]) -> None:
+        """Run ``fn(task)`` unless a job of ``key`` is running; ``what`` names it in a failure's record."""
         with self._lock:
-            if (subject, label) in self._running:
+            if key in self._running:
                 return
-            task = (str(self.out), subject, label, source, min_trials, self.seed)
-            thread = threading.Thread(target=self._job, args=(task,), name=f"fit-{subject}-{label}", daemon=True)
-            self._running[(subject, label)] = thread
+            thread = threading.Thread(target=self._job, args=(key, fn, task, failed, what), daemon=True,
+                                      name="-".join(map(str, key)))
+            self._running[key] = thread
         thread.start()
 
-    def retry(self, subject: str, label: str) -> None:
-        """Forget a failed fit, so that the subject's next status starts it again."""
-        model_paths(self.out, subject, label)[2].unlink(missing_ok=True)
-
-    def _job(self, task: tuple) -> None:
-        _, subject, label, *_ = task
+    def _job(self, key: tuple, fn: Callable, task: tuple, failed: Path, what: dict[str, Any]) -> None:
         try:
-            result = self._run(task)
+            result = {"state": "ready", **self._runner(fn, task)}
         except WorkbenchError as exc:
-            result = {"state": "failed", "subject": subject, "label": label, "reason": " ".join(str(exc).split()),
-                      "at": now()}
-            write_json(model_paths(self.out, subject, label)[2], result)
+            result = {"state": "failed", **what, "reason": " ".join(str(exc).split()), "at": now()}
+            write_json(failed, result)
         except Exception as exc:  # a worker that died (BrokenProcessPool) or a bug: said, never lost
-            result = {"state": "failed", "subject": subject, "label": label,
-                      "reason": f"{type(exc).__name__}: {' '.join(str(exc).split())}", "at": now()}
-            write_json(model_paths(self.out, subject, label)[2], result)
-        else:
-            result = {"state": "ready", **result}
+            result = {"state": "failed", **what, "reason": f"{type(exc).__name__}: {' '.join(str(exc).split())}",
+                      "at": now()}
+            write_json(failed, result)
         finally:
             with self._lock:
-                self._running.pop((subject, label), None)
+                self._running.pop(key, None)
         if self.on_done is not None:
             self.on_done(result)
 
     def wait(self, timeout_s: float = 120.0) -> None:
-        """Wait for every running fit (tests, and the server's shutdown)."""
+        """Wait for every running job (tests, and the server's shutdown)."""
         deadline = time.monotonic() + timeout_s
         while True:
             with self._lock:
@@ -174,12 +156,48 @@ class FitJobs:
             threads[0].join(timeout=max(0.0, deadline - time.monotonic()))
 
 
-def _in_worker(task: tuple) -> dict[str, Any]:
+class FitJobs:
+    """The fit steps of a session: :func:`fit_subject` per (subject, label), on :class:`Jobs`."""
+
+    def __init__(self, out: Path, seed: int, jobs: Jobs) -> None:
+        self.out, self.seed, self.jobs = Path(out), seed, jobs
+
+    def state(self, subject: str, label: str) -> dict[str, Any]:
+        """``{"state": "ready"|"failed"|"fitting"|"waiting", …}`` with the record or the failure's reason."""
+        _, record, failed = model_paths(self.out, subject, label)
+        if record.is_file():
+            return {"state": "ready", **read_json(record, "fit record")}
+        if failed.is_file():
+            return {"state": "failed", **read_json(failed, "fit failure")}
+        return {"state": "fitting" if self.jobs.running(("fit", subject, label)) else "waiting"}
+
+    def start(self, subject: str, label: str, source: str, min_trials: int) -> None:
+        """Start the fit unless it is done, failed or running (a resumed session starts it again)."""
+        if self.state(subject, label)["state"] != "waiting":
+            return
+        task = (str(self.out), subject, label, source, min_trials, self.seed)
+        self.jobs.start(("fit", subject, label), fit_subject, task, model_paths(self.out, subject, label)[2],
+                        {"kind": "fit", "subject": subject, "label": label})
+
+    def retry(self, subject: str, label: str) -> None:
+        """Forget a failed fit, so that the subject's next status starts it again."""
+        model_paths(self.out, subject, label)[2].unlink(missing_ok=True)
+
+    def wait(self, timeout_s: float = 120.0) -> None:
+        self.jobs.wait(timeout_s)
+
+
+def _in_worker(fn: Callable[[tuple], dict[str, Any]], task: tuple) -> dict[str, Any]:
     from workbench.study.executor import ProcessExecutor
 
     with ProcessExecutor(workers=1) as ex:
-        (record,) = ex.map(fit_subject, [task])
+        (record,) = ex.map(fn, [task])
     return record
+
+
+def in_process(fn: Callable[[tuple], dict[str, Any]], task: tuple) -> dict[str, Any]:
+    """A runner of :class:`Jobs` that runs the task here (tests, scripts)."""
+    return fn(task)
 
 
 def load_fitted(out: Path, subject: str, label: str, cache: dict) -> tuple[Any, dict[str, Any]]:

@@ -43,6 +43,7 @@ class Item:
     text: str = ""
     group: str = ""
     stop_landed: int = 0
+    stop_identified: str = ""
     min_trials: int = 0
     model: str = ""
 
@@ -92,7 +93,8 @@ def plan(protocol: Protocol, subject: str, subject_index: int) -> list[Item]:
             continue
         group = f"instructions{n}"
         items.append(Item(group, "instructions", block=j, label=s.label, role=s.role, instructions=s.instructions,
-                          n_trials=s.trials, assist=s.assist, blend=s.blend, group=group, stop_landed=s.stop_landed))
+                          n_trials=s.trials, assist=s.assist, blend=s.blend, group=group, stop_landed=s.stop_landed,
+                          stop_identified=s.stop_identified, min_trials=s.stop_min_trials))
         test = set()
         if s.held_out:
             rng = np.random.default_rng([zlib.crc32(f"{subject}/held_out/{j}".encode())])
@@ -103,7 +105,8 @@ def plan(protocol: Protocol, subject: str, subject_index: int) -> list[Item]:
                 items.append(Item(f"break-block{n}-{t}", "break", protocol.break_s, group=group))
             items.append(Item(f"trial{slot}", "trial", block=j, label=s.label, role="test" if t in test else s.role,
                               instructions=s.instructions, slot=slot, trial=t + 1, n_trials=s.trials,
-                              assist=s.assist, blend=s.blend, group=group, stop_landed=s.stop_landed, model=model))
+                              assist=s.assist, blend=s.blend, group=group, stop_landed=s.stop_landed,
+                              stop_identified=s.stop_identified, min_trials=s.stop_min_trials, model=model))
             slot += 1
     items.append(Item("end", "end"))
     return items

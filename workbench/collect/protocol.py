@@ -50,7 +50,10 @@ by registration order or, better, by the experimenter's declared subject IDs::
     held_out = 0                    # of the trials, this many (drawn per subject) are test trials instead
     assist = "none"                 # none | show (the model's predicted path) | blend (see below)
     blend = 0.3                     # with assist = "blend": the model's share α of the input
-    stop = { landed = 10 }          # optional: the block ends once this many of its trials landed
+    stop = { landed = 10 }          # optional: the block ends once this many of its trials landed, or
+                                    # once a contrast of the objective is identified (checked in a worker after
+                                    # each landed trial from min_trials on; the weight ratios' bootstrap):
+                                    # stop = { identified = "Q_phi / R_u1", min_trials = 5, landed = 30 }
 
     [[blocks]]                      # this subject's model of CS1, from their landed, not excluded train trials
     fit = { label = "CS1", from = "train", min_trials = 5, break_s = 60 }
@@ -95,6 +98,8 @@ ASSISTS = ("none", "show", "blend")
 FIELD_TYPES = ("text", "number", "choice")
 DEVICES = ("any", "gamepad")
 GAMEPAD_RULES = ("latest", "mean")
+#: A weight ratio of the objective, as :func:`workbench.method.ratio_profile.ratio_names` names them.
+RATIO_PATTERN = re.compile(r"[QR]_\w{1,40} / R_\w{1,40}")
 #: A label names files and folders: short, plain.
 LABEL_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,31}")
 #: Every bound a protocol is checked against (a protocol past one is refused on the first count over it).
@@ -137,6 +142,8 @@ class Block:
     assist: str = "none"
     blend: float = 0.0
     stop_landed: int = 0  # 0: no stopping rule; else the block ends once this many of its trials landed
+    stop_identified: str = ""  # a weight ratio ("Q_phi / R_u1"): the block ends once its interval identifies it
+    stop_min_trials: int = 0  # landed trials before the identification is first checked
     kind: str = "trials"
 
 
@@ -242,7 +249,8 @@ class Protocol:
         for s in self.steps:
             if isinstance(s, Block) and max_trials is not None:
                 s = replace(s, trials=min(s.trials, max_trials), held_out=min(s.held_out, max_trials - 1),
-                            stop_landed=min(s.stop_landed, max_trials))
+                            stop_landed=min(s.stop_landed, max_trials),
+                            stop_min_trials=min(s.stop_min_trials, max_trials))
             elif isinstance(s, Message) and cut is not None:
                 s = replace(s, min_s=min(s.min_s, cut))
             elif isinstance(s, FitStep) and cut is not None:
@@ -402,9 +410,17 @@ def _block(r: _Reader, b: dict, where: str) -> Block:
         raise r.fail(where + "blend", f"the model's share must be in (0, 1], and only with assist = \"blend\" (got "
                                       f"{_short(alpha)} with assist = {_short(assist)})")
     stop = r.get(b, "stop", dict, where, {})
-    r.known(stop, {"landed"}, where + "stop.")
-    landed = r.integer(stop, "landed", where + "stop.", 0, 1, trials) if stop else 0
-    return Block(label, r.text(b, "instructions", where), trials, role, held, assist, alpha, landed)
+    r.known(stop, {"landed", "identified", "min_trials"}, where + "stop.")
+    landed = r.integer(stop, "landed", where + "stop.", 0, 1, trials) if "landed" in stop else 0
+    identified = r.text(stop, "identified", where + "stop.", "", limit=80)
+    if identified and not RATIO_PATTERN.fullmatch(identified):
+        raise r.fail(where + "stop.identified", f"{_short(identified)} is not a weight ratio such as "
+                                                "\"Q_phi / R_u1\" or \"R_u2 / R_u1\"")
+    least = r.integer(stop, "min_trials", where + "stop.", 5, 3, trials) if identified else 0
+    if "min_trials" in stop and not identified:
+        raise r.fail(where + "stop.min_trials", "goes with stop.identified")
+    return Block(label, r.text(b, "instructions", where), trials, role, held, assist, alpha, landed, identified,
+                 least)
 
 
 def _step(r: _Reader, b: Any, j: int) -> Step:

@@ -37,7 +37,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("trial", "its number within its block, from 1"),
     ("block", "its block's index in the protocol's [[blocks]] (0-based)"),
     ("outcome", "landed, crashed, left the domain or time limit"),
-    ("outcome_reason", "why, with the numbers against the rules (e.g. crashed: 0.42 m/s > 0.1 m/s)"),
+    ("outcome_reason", "why, with the numbers against the rules (e.g. crashed: 0.420 m/s ≥ 0.1 m/s)"),
     ("samples", "physics steps recorded (one per 0.05 s)"),
     ("duration_s", "simulated time flown, s"),
     ("started", "when the subject started it (server clock, UTC ISO 8601)"),

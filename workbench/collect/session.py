@@ -36,9 +36,10 @@ import numpy as np
 
 from workbench.collect import records
 from workbench.collect.checks import checked_trial, measured_deadzone
-from workbench.collect.fitting import FitJobs, load_fitted
+from workbench.collect.fitting import FitJobs, Jobs, load_fitted
 from workbench.collect.plan import Item, plan
 from workbench.collect.protocol import Protocol, condition_order, first_difference
+from workbench.collect.stopping import StopChecks
 from workbench.collect.subjects import LIMITS, check_fields, check_subject, now, read_json, write_json
 from workbench.collect.task import draw_start, task_spec
 from workbench.errors import DataError, RequestError
@@ -63,7 +64,11 @@ class Session:
         Start a new session in a folder that holds one of another protocol (the old one is kept aside).
     on_event : callable(kind, text), optional
         Told of what the experimenter should see at once: ``warning`` (an unknown or repeated subject ID),
-        ``fit`` (a fit step's result), ``consent`` (a subject declined).
+        ``fit`` (a fit step's result), ``consent`` (a subject declined), ``exclusion`` (the experimenter excluded
+        a trial, or included it again), ``stop`` (a stopping rule's check).
+    runner : callable(fn, task), optional
+        How fit steps and stopping checks run (:class:`~workbench.collect.fitting.Jobs`; default: in a worker
+        process; :func:`~workbench.collect.fitting.in_process` runs them here).
 
     Raises
     ------
@@ -74,7 +79,7 @@ class Session:
     def __init__(self, out: str | Path, protocol: Protocol, *, system: LinearSystem | None = None, seed: int = 0,
                  models: dict[str, Any] | None = None, model_digests: dict[str, str] | None = None,
                  new_session: bool = False, on_event: Callable[[str, str], None] | None = None,
-                 fit_runner: Callable[[tuple], dict[str, Any]] | None = None) -> None:
+                 runner: Callable[[Callable, tuple], dict[str, Any]] | None = None) -> None:
         self.out = Path(out)
         self.protocol = protocol
         self.system = system or planar_quadrotor()
@@ -92,7 +97,9 @@ class Session:
         self._lock = threading.Lock()
         self._fitted_cache: dict = {}
         self._open(new_session)
-        self.fits = FitJobs(self.out, self.seed, on_done=self._fit_done, run=fit_runner)
+        self.jobs = Jobs(on_done=self._job_done, runner=runner)
+        self.fits = FitJobs(self.out, self.seed, self.jobs)
+        self.stops = StopChecks(self.out, self.seed, self.jobs)
         records.write_data_dictionary(self.out, protocol, self.spec)
 
     # -- the folder --------------------------------------------------------------------------------------
@@ -327,43 +334,57 @@ class Session:
         return {i.slot for i in self.plan(subject)
                 if i.kind == "trial" and self._partition(subject, self.trial_id(subject, i)).is_file()}
 
-    def _outcome(self, subject: str, doc: dict[str, Any], item: Item) -> str | None:
+    def _row(self, subject: str, doc: dict[str, Any], item: Item) -> dict[str, Any]:
         row = (doc.get("rows") or {}).get(str(item.slot))
         if row is not None:
-            return row.get("outcome")
+            return row
         import pyarrow.parquet as pq  # a kill between the partition and the subject's record: the file says
 
         header = json.loads((pq.read_metadata(self._partition(subject, self.trial_id(subject, item))).metadata
                              or {}).get(b"workbench", b"{}"))
-        return (header.get("demos") or [{}])[0].get("outcome")
+        meta = (header.get("demos") or [{}])[0]
+        return {"outcome": meta.get("outcome"), "excluded": bool(meta.get("excluded", False))}
 
-    def _progress(self, subject: str) -> tuple[list[Item], list[int], set[int], set[int]]:
-        """The plan, the indices of its finished steps, the finished and the skipped trial slots."""
+    def _progress(self, subject: str) -> tuple[list[Item], list[int], set[int], set[int], dict[str, list[str]]]:
+        """The plan, the indices of its finished steps, the finished and the skipped trial slots, and per block
+        (by its instructions' key) the IDs of its landed, not excluded trials."""
         doc = self.subject_doc(subject)
         items = plan(self.protocol, subject, int(doc["index"]))
         done_slots = {i.slot for i in items if i.kind == "trial"
                       and self._partition(subject, self.trial_id(subject, i)).is_file()}
         landed: dict[str, int] = {}
+        usable: dict[str, list[str]] = {}
+        identified: dict[str, bool] = {}
         skipped: set[int] = set()
         finished = []
         for j, i in enumerate(items):
             if i.kind == "trial":
                 if i.slot in done_slots:
-                    landed[i.group] = landed.get(i.group, 0) + (self._outcome(subject, doc, i) == "landed")
+                    row = self._row(subject, doc, i)
+                    landed[i.group] = landed.get(i.group, 0) + (row.get("outcome") == "landed")
+                    if row.get("outcome") == "landed" and not row.get("excluded"):
+                        usable.setdefault(i.group, []).append(self.trial_id(subject, i))
                     finished.append(j)
-                elif i.stop_landed and landed.get(i.group, 0) >= i.stop_landed:
+                    continue
+                if i.stop_identified and i.group not in identified:
+                    identified[i.group] = self.stops.identified(subject, i.group) is not None
+                if (i.stop_landed and landed.get(i.group, 0) >= i.stop_landed) or identified.get(i.group):
                     skipped.add(i.slot)  # the block's stopping rule is met: its other trials are not flown
                     finished.append(j)
             elif i.key in doc["done"]:
                 finished.append(j)
-        return items, finished, done_slots, skipped
+        return items, finished, done_slots, skipped, usable
 
     def status(self, subject: str) -> dict[str, Any]:
         """Where a subject is: the next step (with its start state for a trial, its model's state for a fit),
         trials done, skipped and to do."""
         doc = self.subject_doc(subject)
-        items, finished, done_slots, skipped = self._progress(subject)
+        items, finished, done_slots, skipped, usable = self._progress(subject)
         trials = [i for i in items if i.kind == "trial"]
+        for i in trials:  # a block stopping on identification: its check, on its landed trials so far
+            if i.stop_identified and i.slot not in done_slots and i.slot not in skipped:
+                self.stops.poll(subject, i.group, usable.get(i.group, []), i.stop_identified, i.min_trials)
+                break
         # steps are taken in order: the next one follows the last finished one (instructions shown before a
         # block's trials are not asked for again when the tab closed after its first trial)
         nxt = items[finished[-1] + 1 if finished else 0]
@@ -384,12 +405,13 @@ class Session:
                 "summary": self.summary(subject) if nxt.kind == "end" else None}
 
     def summary(self, subject: str) -> list[dict[str, Any]]:
-        """Per block label and role: trials finished and landed, from the subject's trial records."""
+        """Per block label, role and assistance: trials finished and landed, from the subject's trial records."""
         doc = self.subject_doc(subject)
         rows: dict[tuple[str, str], dict[str, Any]] = {}
         for _, r in sorted((doc.get("rows") or {}).items(), key=lambda kv: int(kv[0])):
-            s = rows.setdefault((r["label"], r["role"]), {"label": r["label"], "role": r["role"], "trials": 0,
-                                                          "landed": 0})
+            key = (r["label"], r["role"], r.get("assist", "none"))
+            s = rows.setdefault(key, {"label": r["label"], "role": r["role"], "assist": key[2], "trials": 0,
+                                      "landed": 0})
             s["trials"] += 1
             s["landed"] += r["outcome"] == "landed"
         return list(rows.values())
@@ -421,7 +443,15 @@ class Session:
         starts where it would have."""
         return draw_start(self.spec, [self.seed, zlib.crc32(subject.encode()), slot])
 
-    def _fit_done(self, result: dict[str, Any]) -> None:
+    def _job_done(self, result: dict[str, Any]) -> None:
+        if result.get("kind") == "stop":
+            if result.get("state") == "failed":
+                text = f"{result['subject']}: stopping rule's check on {result['n']} trials failed: {result['reason']}"
+            else:
+                text = (f"{result['subject']}: stopping rule after {result['n']} landed trials: {result['interval']}"
+                        + ("; identified, the block ends" if result["identified"] else "; the block goes on"))
+            self._event("stop", text)
+            return
         if result.get("state") == "ready":
             err = result.get("held_out_error")
             text = (f"{result['subject']}: model of {result['label']} fitted on {result['n_train']} landed trials in "
@@ -450,7 +480,7 @@ class Session:
         slot = payload.get("slot")
         if self.subject_doc(subject) is None:
             raise DataError(f"subject {subject!r}: not registered in this session")
-        _, _, done, skipped = self._progress(subject)
+        _, _, done, skipped, _ = self._progress(subject)
         items = {i.slot: i for i in self.plan(subject) if i.kind == "trial"}
         if not isinstance(slot, int) or isinstance(slot, bool) or slot not in items:
             raise DataError(f"trial: slot {str(slot)[:20]} is not a trial of subject {subject!r}'s plan")
@@ -543,7 +573,10 @@ class Session:
     def exclude(self, trial_id: str, excluded: bool = True, note: str = "") -> dict[str, Any]:
         """The experimenter excludes a trial from the analysis (or includes it again), with a note."""
         with self._lock:
-            return records.set_exclusion(self.out, trial_id, excluded, note)
+            row = records.set_exclusion(self.out, trial_id, excluded, note)
+        self._event("exclusion", f"{trial_id} " + (f"excluded ({row['exclusion_note']})" if row["excluded"]
+                                                    else "included again"))
+        return row
 
     def overview(self) -> dict[str, Any]:
         """The whole session for the experimenter's page: every subject's progress, trials and fits."""

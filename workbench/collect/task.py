@@ -94,7 +94,7 @@ def outcome(spec: dict[str, Any], x: Sequence[float], k: int) -> str | None:
 
 def reason(spec: dict[str, Any], x: Sequence[float], end: str) -> str:
     """Why a trial ended as it did, with the numbers against the rules (what the page shows the subject and the
-    trial's ``outcome_reason``): e.g. ``"crashed: 0.42 m/s > 0.1 m/s"``; the same words as ``static/sim.js``."""
+    trial's ``outcome_reason``): e.g. ``"crashed: 0.420 m/s ≥ 0.1 m/s"``; the same words as ``static/sim.js``."""
     i = spec["index"]
     speed = math.hypot(x[i["vx"]], x[i["vy"]])
     tilt = abs(x[i["attitude"]]) * 180 / math.pi
@@ -107,10 +107,10 @@ def reason(spec: dict[str, Any], x: Sequence[float], end: str) -> str:
         why = []
         if off > spec["pad"]["half_width"]:
             why.append(f"{off:.2f} m from the pad's centre > {spec['pad']['half_width']:g} m")
-        if speed >= spec["landing"]["speed"]:
-            why.append(f"{speed:.2f} m/s > {spec['landing']['speed']:g} m/s")
+        if speed >= spec["landing"]["speed"]:  # three decimals: a speed just at the limit does not read as 0.10
+            why.append(f"{speed:.3f} m/s ≥ {spec['landing']['speed']:g} m/s")
         if tilt >= limit_tilt:
-            why.append(f"{tilt:.1f}° > {limit_tilt:.0f}°")
+            why.append(f"{tilt:.2f}° ≥ {limit_tilt:.0f}°")
         return "crashed: " + ", ".join(why)
     if end == "left the domain":
         (x_lo, x_hi), y_hi = spec["domain"]["x"], spec["domain"]["y"][1]

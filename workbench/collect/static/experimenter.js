@@ -34,8 +34,10 @@ function fitCell(label, f) {
                 try { await api("/api/experimenter/refit", { subject: f.subject, label }); refresh(); }
                 catch (err) { fail(err.message); } } }, "fit again"));
   }
-  const err = f.held_out_error == null ? "no held-out trials" :
-    `held-out ${f.metric} ${f.held_out_error.toFixed(3)} over ${f.held_out.length} trial(s), ${f.horizon_s} s`;
+  const metric = f.metric === "rmse_position" ? "position RMSE" : f.metric;
+  const err = f.held_out_error == null ? "not checked (no held-out trials)" :
+    `held-out ${metric} ${f.held_out_error.toFixed(3)} m over ${f.held_out.length} trial(s) (${f.horizon_s} s ` +
+    "predictions from each start)";
   return el("span", { class: "ok" }, `${label}: fitted on ${f.n_train} landed trials; ${err}; digest ${f.digest.slice(0, 12)}`);
 }
 

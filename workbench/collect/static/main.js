@@ -190,14 +190,20 @@ function resumed(s, fresh = false) {
   calibration();
 }
 
+// An axis by what it is on a pad of the standard mapping (axes 0–3: the left and the right stick), else its number.
+function axisName(pad, k) {
+  const names = ["left stick, left–right", "left stick, up–down", "right stick, left–right", "right stick, up–down"];
+  return pad.mapping === "standard" && k < names.length ? `axis ${k} (${names[k]})` : `axis ${k}`;
+}
+
 // -- calibration --------------------------------------------------------------------------------------------
 // A gamepad: rest measured, then each input assigned by moving the stick and confirmed (the assignment stays on
 // the screen until confirmed or redone). The keyboard: every arrow tried. Nothing continues before that.
 function calibration() {
   show("calibration");
   const settings = state.config.protocol.input;
-  $("ramp-line").textContent = `A held key moves its stick by ${KEY_RAMP} per step, to full deflection in ` +
-    `${(state.spec.dt / KEY_RAMP).toFixed(2)} s, and a held key quickly tilts the quadrotor too far.`;
+  $("ramp-line").textContent = `A held key moves its stick ${KEY_RAMP} per step (full deflection in ` +
+    `${(state.spec.dt / KEY_RAMP).toFixed(2)} s) and soon tilts the quadrotor too far.`;
   let live = true;
   const pick = () => {
     const p = firstPad();
@@ -211,10 +217,9 @@ function calibration() {
     $("pad-steps").hidden = !pad; $("keys-help").hidden = pad || padOnly; $("pad-needed").hidden = pad || !padOnly;
     $("device-line").textContent = pad ? `Gamepad: ${state.device.id}` : "Input: the keyboard";
     if (!pad) {
-      for (const axis of ["u1", "u2"]) {
-        const k = state.keyboard.tried;
-        $(`tried-${axis}`).textContent = `${k.has(`${axis}-`) ? "✓" : "·"} ${k.has(`${axis}+`) ? "✓" : "·"}`;
-      }
+      const k = state.keyboard.tried, mark = (key) => (k.has(key) ? "✓" : "○");
+      $("tried-u1").textContent = `tried: ← ${mark("u1-")}  → ${mark("u1+")}`;
+      $("tried-u2").textContent = `tried: ↑ ${mark("u2+")}  ↓ ${mark("u2-")}`;
     }
     const ready = pad ? state.device.ready : !padOnly && state.keyboard.ready;
     $("calibration-next").innerHTML = ready ? "Try the sticks, then press <kbd>Space</kbd> to continue."
@@ -260,8 +265,8 @@ function calibration() {
       const k = d.reduce((best, v, kk) => (Math.abs(v) > Math.abs(d[best]) ? kk : best), 0);
       if (Math.abs(d[k]) > 0.5) {
         pad.axes[i] = k; pad.signs[i] = Math.sign(d[k]);
-        $(`axis-u${i + 1}`).textContent = `axis ${k}${pad.signs[i] < 0 ? " (inverted)" : ""}: is this the stick ` +
-          "you moved? Confirm, or press Assign again.";
+        $(`axis-u${i + 1}`).textContent = `${axisName(pad, k)}${pad.signs[i] < 0 ? " (inverted)" : ""}: is this ` +
+          "the stick you moved? Confirm, or press Assign again.";
         $(`confirm-u${i + 1}`).hidden = false;
         return;
       }
@@ -273,13 +278,14 @@ function calibration() {
     const pad = state.device;
     const other = pad.axes[1 - i];
     if (pad.confirmed[1 - i] && other === pad.axes[i]) {
-      $(`axis-u${i + 1}`).textContent = `axis ${other} is already the other input's: press Assign and use another stick`;
+      $(`axis-u${i + 1}`).textContent = `${axisName(pad, other)} is already the other input's: press Assign and use ` +
+        "another stick";
       $(`confirm-u${i + 1}`).hidden = true;
       return;
     }
     pad.confirmed[i] = true;
     $(`confirm-u${i + 1}`).hidden = true;
-    $(`axis-u${i + 1}`).textContent = `✓ axis ${pad.axes[i]}${pad.signs[i] < 0 ? " (inverted)" : ""}`;
+    $(`axis-u${i + 1}`).textContent = `✓ ${axisName(pad, pad.axes[i])}${pad.signs[i] < 0 ? " (inverted)" : ""}`;
   };
   for (const i of [0, 1]) {
     $(`assign-u${i + 1}`).onclick = assign(i);
@@ -404,7 +410,7 @@ function end(s) {
   state.last = null;
   message("Thank you!", `${last}The experiment is over and every trial is saved. You can close this page.`);
   const rows = {};
-  for (const r of (s.summary || [])) rows[`${r.label} (${r.role})`] = r;
+  for (const r of (s.summary || [])) rows[`${r.label} (${r.role}${r.assist !== "none" ? `, assisted: ${r.assist}` : ""})`] = r;
   const table = $("summary");
   table.innerHTML = "<tr><th>block</th><th>trials</th><th>landed</th></tr>" + Object.entries(rows)
     .map(([k, r]) => `<tr><td>${k}</td><td>${r.trials}</td><td>${r.landed}</td></tr>`).join("");
@@ -422,11 +428,15 @@ function shown(raw) {
 // -- flying -------------------------------------------------------------------------------------------------
 let view = null;
 
-function taskScreen(label, overlay) {
+// The overlay (instructions, the last outcome) sits on the half of the scene away from the start, so that the
+// start position and an assisted trial's predicted path stay in view before Space.
+function taskScreen(label, overlay, x0 = null) {
   show("task");
   if (!view) view = new View($("scene"), state.spec);
   $("task-label").textContent = label;
   $("task-overlay").innerHTML = overlay;
+  const across = x0 ? x0[state.spec.index.x] - state.spec.pad.x : 0;
+  $("task-overlay").className = across > 0 ? "on-left" : "on-right";
 }
 
 // With the experimenter's view on, the states flown so far go to the server every LIVE_EVERY steps (not stored).
@@ -523,7 +533,7 @@ function trial(item) {
     ? "<p><b>Assisted:</b> the dashed blue line is the path your model predicts.</p>"
     : `<p><b>Assisted:</b> your input is blended with your model's (its share ${help.alpha}).</p>`;
   taskScreen(label, `${last}<p>${item.instructions}</p>${assisted}${rulesLine()}` +
-                    `<p>Press <kbd>Space</kbd> to start ${role} trial ${item.trial} of ${item.n_trials}.</p>`);
+                    `<p>Press <kbd>Space</kbd> to start ${role} trial ${item.trial} of ${item.n_trials}.</p>`, item.x0);
   view.guide = help && help.kind === "show" ? help.path : null;
   view.trail = [];
   view.draw(item.x0, [0, 0]);
@@ -571,7 +581,7 @@ function practice(item) {
     }
     const x0 = practiceStart();
     taskScreen(`Practice · ${clock(left)} left`, `${last}<p>Practice: land on the pad.</p>${rulesLine()}` +
-               "<p>Press <kbd>Space</kbd> to start.</p>");
+               "<p>Press <kbd>Space</kbd> to start.</p>", x0);
     view.guide = null;
     view.trail = [];
     view.draw(x0, [0, 0]);

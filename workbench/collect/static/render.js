@@ -58,8 +58,9 @@ export class View {
     ctx.fillStyle = "rgba(90, 120, 200, 0.10)"; ctx.fillRect(bx, by, bw, bh);
     ctx.strokeStyle = "rgba(90, 120, 200, 0.45)"; ctx.setLineDash([3, 3]); ctx.strokeRect(bx, by, bw, bh);
     ctx.setLineDash([]);
-    ctx.fillStyle = "#4a5f99"; ctx.textAlign = "left"; ctx.font = "12px system-ui, sans-serif";
-    ctx.fillText("start box", bx + 4, by + 14);
+    // labelled outside the box, on its left (no start is there, so the vehicle never covers the label)
+    ctx.fillStyle = "#4a5f99"; ctx.textAlign = "right"; ctx.font = "12px system-ui, sans-serif";
+    ctx.fillText("start box", bx - 6, by + bh / 2 + 4);
     // ground and pad
     ctx.fillStyle = "#6b7d5a"; ctx.fillRect(0, this.sy(0), w, h - this.sy(0));
     ctx.fillStyle = "#2e9e57";

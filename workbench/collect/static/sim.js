@@ -54,8 +54,8 @@ export function reason(spec, x, end) {
   if (end === "crashed") {
     const why = [];
     if (off > spec.pad.half_width) why.push(`${off.toFixed(2)} m from the pad's centre > ${spec.pad.half_width} m`);
-    if (speed >= L.speed) why.push(`${speed.toFixed(2)} m/s > ${L.speed} m/s`);
-    if (tilt >= limitTilt) why.push(`${tilt.toFixed(1)}° > ${limitTilt.toFixed(0)}°`);
+    if (speed >= L.speed) why.push(`${speed.toFixed(3)} m/s ≥ ${L.speed} m/s`);
+    if (tilt >= limitTilt) why.push(`${tilt.toFixed(2)}° ≥ ${limitTilt.toFixed(0)}°`);
     return `crashed: ${why.join(", ")}`;
   }
   if (end === "left the domain") {
