@@ -94,6 +94,8 @@ CASES = {
                                        "-o", str(f["dir"] / "p.csv")], 2, "--horizon: expected a finite number"),
     "a horizon past any float step count": (lambda f: ["evaluate", str(f["demos"]), "--horizon", "1e308"], 2,
                                             "--horizon: expected at most 600 s"),
+    "a stride past any step count": (lambda f: ["evaluate", str(f["demos"]), "--stride", "1e308"], 2,
+                                     "--stride: expected at most 600 s"),
     "a horizon that is not a number": (lambda f: ["replay", str(f["demos"]), "--model", str(f["model"]), "--horizon",
                                                   "nan", "--no-wait"], 2, "--horizon: expected a finite number"),
     "more rollouts than a band draws": (lambda f: ["predict", "--model", str(f["model"]), str(f["demos"]),

@@ -13,9 +13,8 @@ from workbench.errors import UsageError
 
 __all__ = ["SAMPLE_LOGS", "DEFAULT_MAPPING", "SPEED_RANGE", "MAX_HORIZON_S", "MAX_ROLLOUT_STEPS",
            "MAX_SIMULATED_TRIALS", "MAX_SEED", "MAX_WORKERS", "n_components_arg", "fit_n_components_arg",
-           "positive_float",
-           "horizon_arg", "online_horizon_arg", "fraction_arg", "int_range", "seed_arg", "count_arg", "positive_int",
-           "rollout_budget", "speed_arg", "int_list", "steps_of"]
+           "positive_float", "horizon_arg", "seconds_arg", "online_horizon_arg", "fraction_arg", "int_range",
+           "seed_arg", "count_arg", "positive_int", "rollout_budget", "speed_arg", "int_list", "steps_of"]
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
 DEFAULT_MAPPING = "planar_quadrotor"
@@ -78,6 +77,15 @@ MAX_WORKERS = 256
 
 def horizon_arg(value: str) -> float:
     """``--horizon``: positive seconds, at most :data:`MAX_HORIZON_S`."""
+    v = positive_float(value)
+    if v > MAX_HORIZON_S:
+        raise argparse.ArgumentTypeError(f"expected at most {MAX_HORIZON_S:g} s, got {_shown(value)}")
+    return v
+
+
+def seconds_arg(value: str) -> float:
+    """A span of seconds on a trial's clock (``--stride``): positive, at most :data:`MAX_HORIZON_S` (a stride past a
+    trial's length scores its first state only, and an infinite one no step count holds)."""
     v = positive_float(value)
     if v > MAX_HORIZON_S:
         raise argparse.ArgumentTypeError(f"expected at most {MAX_HORIZON_S:g} s, got {_shown(value)}")

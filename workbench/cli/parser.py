@@ -24,6 +24,7 @@ from workbench.cli.options import (
     online_horizon_arg,
     positive_float,
     positive_int,
+    seconds_arg,
     seed_arg,
     speed_arg,
 )
@@ -80,7 +81,7 @@ def _study_options(
                    help="skip the data-efficiency curve")
     p.add_argument("--repeats", type=positive_int, default=repeats, metavar="R",
                    help=f"random training subsets per size on the data-efficiency curve (default {repeats})")
-    p.add_argument("--stride", dest="stride_s", type=positive_float, default=1.0, metavar="SECONDS",
+    p.add_argument("--stride", dest="stride_s", type=seconds_arg, default=1.0, metavar="SECONDS",
                    help="score predictions from every SECONDS of each test trial whose record covers the horizon, "
                         "and from its first state (default 1.0)")
     p.add_argument("--first-state-only", dest="stride_s", action="store_const", const=None,
