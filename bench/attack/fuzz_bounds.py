@@ -130,9 +130,11 @@ class Tally:
             c["clean errors"] += 1
         elif kind == "foreign":
             c["foreign errors"] += 1
-            self.examples.setdefault(surface, []).append(str(detail))
+            self.examples.setdefault(surface, []).append(f"{detail}" + (f" ({call.what})" if hasattr(call, "what")
+                                                                           else ""))
         if kind == "hang" or took > HANG_S:
             c["hangs"] += 1
+            self.examples.setdefault(surface, []).append(f"hang: {getattr(call, 'what', detail)}")
         if kind == "ok" and detail:
             c["silent wrong results"] += 1
             self.examples.setdefault(surface, []).append(f"wrong: {detail}")
@@ -497,6 +499,10 @@ def attack_numbers(rng: random.Random, base: Path, model: Path, demos: Path) -> 
         argv = ["simulate", option, value, "--strategy", "CS1", "-o", f"{out}.parquet"]
         if option == "--subjects" and value not in ("-1", "x", "inf", "nan", "-inf", "1e308", "2.5", "-0", "0"):
             argv += ["--trials", "1"]
+    elif option == "--duration" and value in ("1e308", str(2**64), "9" * 5000):
+        # a finite duration is a request to listen that long (as no --duration is: until Ctrl-C), not a hang
+        argv = ["live", "udpin:127.0.0.1:1", "--model", str(model), "--duration", "0.1", "--silence", value,
+                "--save", f"{out}.rrd"]
     elif option in ("--speed", "--sysid", "--duration", "--silence"):
         argv = ["live", "udpin:127.0.0.1:1", "--model", str(model), option, value, "--duration", "0.1", "--save",
                 f"{out}.rrd"] if option != "--duration" else ["live", "udpin:127.0.0.1:1", "--model", str(model),
@@ -517,6 +523,7 @@ def attack_numbers(rng: random.Random, base: Path, model: Path, demos: Path) -> 
 
         return _cli(main, argv)
 
+    call.what = " ".join(a if len(a) < 40 else f"{a[:12]}…({len(a)})" for a in argv)  # named where it hangs
     return call, inputs
 
 

@@ -69,6 +69,31 @@ def _big_int_in_a_model(files) -> list[str]:
     return ["predict", "--model", str(bad), "--x0", "0,2,0,0,0,0", "-o", str(files["dir"] / "p.csv")]
 
 
+def _bounds_of_another_shape(files) -> list[str]:
+    """A model file whose plant's input bounds have 100 entries for its 2 inputs (header and arrays agree)."""
+    import io
+    import zipfile
+
+    import numpy as np
+
+    bad = files["dir"] / "bounds.npz"
+    with zipfile.ZipFile(files["model"]) as zin, zipfile.ZipFile(bad, "w") as zout:
+        for info in zin.infolist():
+            data = zin.read(info)
+            if info.filename == "__header__.npy":
+                header = json.loads(np.load(io.BytesIO(data)).tobytes())
+                header["arrays"]["system/u_min"]["shape"] = [100]
+                buf = io.BytesIO()
+                np.save(buf, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+                data = buf.getvalue()
+            elif info.filename == "system/u_min.npy":
+                buf = io.BytesIO()
+                np.save(buf, np.zeros(100))
+                data = buf.getvalue()
+            zout.writestr(info.filename, data)
+    return ["predict", "--model", str(bad), "--x0", "0,2,0,0,0,0", "-o", str(files["dir"] / "p.csv")]
+
+
 # name -> (arguments, the status, what the line must say)
 CASES = {
     "a 5000-digit integer in a mapping": (
@@ -80,6 +105,8 @@ CASES = {
     "a 5000-digit integer in a file's metadata": (_big_int_in_metadata, 1, r"damaged workbench metadata \(a number "
                                                                         r"too long to read\)"),
     "a 5000-digit integer in a model file's header": (_big_int_in_a_model, 1, "header holds a number too long"),
+    "a model's plant whose bounds do not fit it": (_bounds_of_another_shape, 1, r"damaged model file: system: its "
+                                                   r"values do not fit together \(system/A \(6, 6\)"),
     "a negative seed": (lambda f: ["fit", str(f["demos"]), "--seed", "-1", "-o", str(f["dir"] / "m2.npz")], 2,
                         r"--seed: expected an integer from 0 to 4294967295, got '-1'"),
     "a seed past 2**32": (lambda f: ["evaluate", str(f["demos"]), "--seed", "99999999999999999999999"], 2,
