@@ -27,7 +27,6 @@ import random
 import re
 import resource
 import shutil
-import signal
 import socket
 import struct
 import subprocess
@@ -35,7 +34,6 @@ import sys
 import tempfile
 import threading
 import time
-import traceback
 import zlib
 from collections import Counter
 from collections.abc import Callable
@@ -47,60 +45,14 @@ sys.path.insert(0, str(REPO))
 
 from workbench.errors import WorkbenchError  # noqa: E402
 
-HANG_S = 60.0
-FOREIGN_TEXT = re.compile(r"ZstdError|codec can't decode|cannot fit|Traceback|RecursionError|OverflowError|"
-                          r"need at least one array|WebSocketError|TypeError")
+sys.path.insert(0, str(Path(__file__).parent))
+from harness import HANG_S, _call_in_child, _mutate  # noqa: E402 - the shared harness
+
 #: Python's own words in a command's error line (an internal error's class name, a limit, a library's parser).
 PYTHON_TEXT = re.compile(r"Traceback|\w+Error:|Exceeds the limit|integer string conversion|cannot convert float|"
                          r"C error|--debug for the traceback|magic bytes not found")
 TLOG = REPO / "sample_logs" / "landing_s00.tlog"
 MAX_INPUT = 10 << 20  # bytes: every generated input file is smaller
-
-
-def _call_in_child(call: Callable[[], str | None]) -> tuple[str, str | None, float, int]:
-    """Run ``call`` in a forked child: (kind, detail, seconds, peak RSS in bytes); kind is ``ok`` (detail: what
-    was wrong, if anything), ``clean``, ``foreign`` or ``hang``."""
-    r, w = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: the call, its verdict, its time; nothing of it returns but through the pipe
-        os.close(r)
-        code = 0
-        try:
-            start = time.monotonic()
-            try:
-                out = ["ok", call()]
-            except WorkbenchError as exc:
-                out = ["foreign" if FOREIGN_TEXT.search(str(exc)) else "clean", str(exc)[:300]]
-            except BaseException as exc:  # noqa: BLE001 - the point of the fuzzer: count what escapes
-                where = traceback.extract_tb(exc.__traceback__)[-1].filename if exc.__traceback__ else "?"
-                out = ["foreign", f"{type(exc).__name__}: {str(exc)[:200]} @ {where}"]
-            out.append(time.monotonic() - start)
-            out.append(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
-            os.write(w, json.dumps(out).encode()[:60_000])
-        except BaseException:  # noqa: BLE001
-            code = 1
-        finally:
-            os._exit(code)
-    os.close(w)
-    deadline = time.monotonic() + 2 * HANG_S
-    hung = False
-    while True:
-        done, _, usage = os.wait4(pid, os.WNOHANG)
-        if done:
-            break
-        if time.monotonic() > deadline:
-            os.kill(pid, signal.SIGKILL)
-            _, _, usage = os.wait4(pid, 0)
-            hung = True
-            break
-        time.sleep(0.01)
-    with os.fdopen(r, "rb") as f:
-        raw = f.read()
-    peak = usage.ru_maxrss * 1024
-    if hung or not raw:
-        return ("hang" if hung else "foreign"), ("killed" if hung else "child died"), 2 * HANG_S, peak
-    kind, detail, took, kids = json.loads(raw)
-    return kind, detail, took, max(peak, kids)
 
 
 class Tally:
@@ -205,7 +157,6 @@ def _mcap_bomb(size: int) -> bytes:
     return data
 
 def attack_mcap_sizes(rng: random.Random, base: Path, sample: bytes) -> Prepared:
-    from fuzz_surfaces import _mutate  # noqa: PLC0415 - the same damage the last round used
 
     import adapters
 
