@@ -130,16 +130,21 @@ def _same_samples(demos: Sequence[Demonstration]) -> list[tuple[int, int, str]]:
     mix = np.random.default_rng(0x5EED).integers(1, 2**62, size=scale.size, dtype=np.int64) | 1
     hashed = [_hashes(z, GRID * scale, mix) for z in rows]
     distinct = [np.unique(h) for h in hashed]
-    owners: dict[int, list[int]] = defaultdict(list)
-    for t, hs in enumerate(distinct):
-        if hs.size >= MIN_DISTINCT:
-            for h in hs.tolist():
-                owners[h].append(t)
+    told = [t for t, hs in enumerate(distinct) if hs.size >= MIN_DISTINCT]
     shared: dict[tuple[int, int], int] = defaultdict(int)
-    for ts in owners.values():
-        if 1 < len(ts) <= _COMMON:
-            for a in range(len(ts)):
-                for b in range(a + 1, len(ts)):
+    if told:
+        # every (hash, trial) pair sorted by hash: a run of one hash across 2 to _COMMON trials is a shared row
+        keys = np.concatenate([distinct[t] for t in told])
+        owner = np.repeat(np.array(told), [distinct[t].size for t in told])
+        order = np.argsort(keys, kind="stable")
+        keys, owner = keys[order], owner[order]
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+        counts = np.diff(np.r_[starts, keys.size])
+        for start, count in zip(starts[(counts > 1) & (counts <= _COMMON)].tolist(),
+                                counts[(counts > 1) & (counts <= _COMMON)].tolist(), strict=True):
+            ts = sorted(owner[start:start + count].tolist())
+            for a in range(count):
+                for b in range(a + 1, count):
                     shared[(ts[a], ts[b])] += 1
     out = []
     tol = TOLERANCE * scale
