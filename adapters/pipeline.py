@@ -30,7 +30,7 @@ from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
 from adapters.mapping import ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
-from adapters.modes import AUTOPILOT_HOLDS, mode_name
+from adapters.modes import AUTOPILOT_HOLDS, mode_name, plant_group
 from adapters.segment import (
     EVERYTHING,
     Span,
@@ -48,6 +48,7 @@ from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams, clean_series, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
 from workbench.errors import DataError, MappingError
 
 __all__ = ["build", "check_rules", "explain"]
@@ -458,8 +459,12 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 meta["sticks"] = sticks
             if flips:
                 meta["flipped"] = "; ".join(flips)
+            if m.task:  # the mapping's [task]: what a fit of these trials regulates, relative to what
+                meta["task"] = dict(m.task)
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
+                # what the sticks command in this mode: segments of different groups are different plants
+                meta[PLANT_GROUP_KEY] = plant_group(m.segment.mode.names if m.segment.mode else None, meta["mode"])
                 if span.meta["mode"] in AUTOPILOT_HOLDS:
                     meta["autopilot_holds"] = AUTOPILOT_HOLDS[span.meta["mode"]]
             if key is not None:

@@ -42,7 +42,7 @@ def test_shipped_mappings_load_for_their_formats():
         m.check_complete()
         assert m.state_names == ("x", "y", "phi", "xdot", "ydot", "phidot") and m.input_names == ("u1", "u2")
     ardupilot = load_mapping("ardupilot_manual").for_format("tlog")
-    assert ardupilot.segment.mode.keep == (0, 2, 5)  # STABILIZE, ALT_HOLD, LOITER
+    assert ardupilot.segment.mode.keep == (0, 2, 5, 16, 1)  # STABILIZE, ALT_HOLD, LOITER, POSHOLD, ACRO
     assert ardupilot.channel("u1").selector.alternatives == ("RC_CHANNELS_RAW.chan{roll}_raw",)  # by role
     px4 = load_mapping("px4_manual").for_format("ulog")
     assert px4.channel("phi").transform == "quaternion_roll"

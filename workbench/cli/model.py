@@ -11,7 +11,7 @@ from workbench.atomic import atomic_write_table
 from workbench.cli.context import Context
 from workbench.cli.inputs import resolve
 from workbench.cli.options import rollout_budget, steps_of
-from workbench.cli.reading import demos_at_model_dt, system_for
+from workbench.cli.reading import demos_at_model_dt, per_group_path, plant_group_parts, system_for
 from workbench.cli.writing import print_plant
 from workbench.errors import DataError, ModelError, UsageError
 
@@ -21,6 +21,37 @@ def cmd_fit(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".npz", "the model")  # before the work: `-o -` to a terminal is refused
     ds = ctx.read(resolve(a, ctx.stdio, [a.demos], purpose="fit")).demos
+    parts, line = plant_group_parts(ds, a.plant_group)
+    if line:
+        ctx.say(line)
+    if len(parts) == 1:
+        _fit_one(ctx, parts[0][1], output)
+        ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
+        return 0  # the model is written: the fit succeeded, whatever its intervals could be computed from
+    if ctx.stdio.writes_stdout:
+        raise UsageError(f"-o - writes one model, but these demonstrations are {len(parts)} plant groups "
+                         f"({', '.join(str(g) for g, _ in parts)}): name one with --plant-group")
+    written, failed = [], []
+    for group, part in parts:
+        path = per_group_path(output, group)
+        ctx.say(f"[bold]plant group {group}[/bold]", markup=True)
+        try:
+            _fit_one(ctx, part, path)
+        except (DataError, ModelError) as exc:  # one group's failure is that group's: the others still fit
+            print(f"warning: plant group {group}: not fitted: {exc}", file=sys.stderr)
+            failed.append(f"{group}: {exc}")
+            continue
+        written.append(path)
+    if not written:
+        raise ModelError(f"no plant group could be fitted: {'; '.join(failed)}")
+    ctx.say(f"wrote {len(written)} model(s), one per plant group: {', '.join(str(p) for p in written)}"
+            + (f"; {len(failed)} group(s) not fitted (warnings above)" if failed else ""))
+    return 0
+
+
+def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
+    """Fit, save and describe one model of one plant group's demonstrations (its own plant)."""
+    a = ctx.args
     system = system_for(ds, a.system)
     print_plant(ctx, system)
     t0 = time.perf_counter()
@@ -43,18 +74,18 @@ def cmd_fit(ctx: Context) -> int:
 
         try:
             model = make_model(a.method, system, n_components=components, random_state=a.seed,
-                               gain_method=a.gain).fit(ds)
+                               gain_method=a.gain, task=a.task).fit(ds)
         except ModelError as exc:
             raise ModelError(_physics_first(system, exc)) from None
     model.save(output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
+    if getattr(model, "task_", None) is not None:
+        ctx.say(model.task_.describe(system.state_names))
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
-        _print_intervals(ctx, model, ds, system, a.bootstrap, a.seed, a.power)
+        _print_intervals(ctx, model, ds, model.plant_regulated, a.bootstrap, a.seed, a.power)
     elif model.has_gain and model.objective_ is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
-    ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
-    return 0  # the model is written: the fit succeeded, whatever its intervals could be computed from
 
 
 def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int, seed: int, power: int) -> None:
@@ -96,9 +127,9 @@ def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed:
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
     lo, hi = np.percentile(np.asarray(result.K_samples), [2.5, 97.5], axis=0)
     ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % percentile intervals):")
-    for i, u in enumerate(ds.input_names):
+    for i, u in enumerate(system.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
-            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(ds.state_names, lo[i], hi[i], strict=True)))
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, lo[i], hi[i], strict=True)))
 
 
 def _physics_first(system: Any, exc: Exception) -> str:
@@ -124,23 +155,21 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
     ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
             f"{result.ci:g} % percentile intervals):")
-    for names, lo, hi, what in ((ds.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
-                                (ds.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
+    for names, lo, hi, what in ((system.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
+                                (system.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
         ctx.say(f"  diag {what}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(names, lo, hi, strict=True)))
-    for i, u in enumerate(ds.input_names):
+    for i, u in enumerate(system.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
-            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(ds.state_names, result.K_lo[i], result.K_hi[i], strict=True)))
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, result.K_lo[i], result.K_hi[i],
+                                                         strict=True)))
 
 
 def _as_fitted(ds: Any, model: Any) -> Any:
-    """The trials as a goal-relative model fitted them (states minus their targets), so the bootstrap's point
-    estimate is the model's own gain and objective; unchanged for a model of ``u = K̂x``."""
-    from workbench.data.demonstrations import Demonstration
-
-    if not (model.has_gain and model.goal_relative_):
-        return ds
-    return ds.with_demos([Demonstration(d.t, d.x - d.target, d.u, d.meta) for d in ds])
+    """The trials as the model's regulator saw them (the regulated states relative to the goal or the reference,
+    the input net of its feedforward: :meth:`~workbench.models.behavior.BehaviorModel.pilot_view`), so the
+    bootstrap's point estimate is the model's own gain and objective."""
+    return model.pilot_view(ds)
 
 
 def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, power: int = 0) -> None:
@@ -185,17 +214,22 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
 
     o = None
     if model.has_gain:
-        ctx.say("K̂ (u = K̂ x): " + np.array2string(np.asarray(model.K_), precision=3, suppress_small=True))
+        K = np.asarray(model.K_)
+        ctx.say_table(["K̂ (u = K̂ x)", *ds.state_names],
+                      [[name, *(f"{v:.3g}" for v in row)] for name, row in zip(ds.input_names, K, strict=True)])
         ctx.say(str(model.gain_choice_))
+        if getattr(model, "stability_", None) is not None:
+            ctx.say(model.stability_.describe())
         o = model.objective_
     if o is None and model.has_gain and model.objective_error_:
         ctx.say(f"task objective: not found ({model.objective_error_}); the model predicts without it")
     if o is not None:
-        n = ds.n_states
+        names = model.plant_regulated.state_names  # the objective weighs the regulated states
+        n = len(names)
         q = np.diag(np.asarray(o.M_normalized)[:n, :n])
         r = np.diag(np.asarray(o.M_normalized)[n:, n:])
         ctx.say(f"α* = {o.alpha:.4g}, forward-gain error {o.forward_gain_error:.1e}")
-        ctx.say("diag Q/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.state_names, q, strict=True)))
+        ctx.say("diag Q/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(names, q, strict=True)))
         ctx.say("diag R/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.input_names, r, strict=True)))
     if model.has_components:
         ctx.say(f"GMM components: {model.n_components_}")
@@ -254,7 +288,7 @@ def cmd_predict(ctx: Context) -> int:
     n_steps = steps_of(a.horizon_s, dt)
     rollout_budget(a.samples, n_steps)
     # from inside a trial, the task's start frame stays at the trial's first state
-    kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0}
+    kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0, "task_step": int(start)}
     if a.samples:
         kwargs.update(samples=a.samples, seed=a.seed)
     pred = model.predict(x0, n_steps, **kwargs)

@@ -14,7 +14,7 @@ from workbench.errors import UsageError
 __all__ = ["SAMPLE_LOGS", "DEFAULT_MAPPING", "SPEED_RANGE", "MAX_HORIZON_S", "MAX_ROLLOUT_STEPS",
            "MAX_SIMULATED_TRIALS", "MAX_SEED", "MAX_WORKERS", "n_components_arg", "fit_n_components_arg",
            "positive_float", "horizon_arg", "seconds_arg", "online_horizon_arg", "fraction_arg", "int_range",
-           "seed_arg", "count_arg", "positive_int", "rollout_budget", "speed_arg", "int_list", "steps_of"]
+           "seed_arg", "count_arg", "positive_int", "rollout_budget", "speed_arg", "int_list", "steps_of", "task_arg"]
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
 DEFAULT_MAPPING = "planar_quadrotor"
@@ -162,3 +162,16 @@ def int_list(value: str) -> list[int]:
 
 def steps_of(seconds: float, dt: float) -> int:
     return max(1, int(round(seconds / dt)))
+
+
+def task_arg(value: str) -> str:
+    """``--task``: what the pilot regulates and relative to what (``goal``, ``zero``, ``reference:line``,
+    ``reference:horizontal-first``, each optionally ``@state,state,…`` or ``@inner``; or ``@states`` alone),
+    checked here so a typo is a usage error; the fit reads it with :func:`workbench.data.pilot_task.parse_task`."""
+    from workbench.data.pilot_task import parse_task
+
+    try:
+        parse_task(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return value

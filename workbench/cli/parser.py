@@ -27,6 +27,7 @@ from workbench.cli.options import (
     seconds_arg,
     seed_arg,
     speed_arg,
+    task_arg,
 )
 from workbench.cli.stdio import input_formats, output_formats
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
@@ -97,6 +98,13 @@ def _system_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--system", choices=["auto", "paper", "identify"], default="auto",
                    help="plant (A, B): the paper's planar quadrotor, identified from the data by least squares, "
                    "or auto (the paper's for its state layout at dt 0.05 s, else identified)")
+
+
+def _plant_group_option(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--plant-group", metavar="GROUP",
+                   help="only the segments of this plant group (what the sticks command in their flight mode: angle, "
+                        "angle+climb, velocity+climb, rate, surface, bank, …); default: every group the data hold, "
+                        f"{what}")
 
 
 def _output_options(p: argparse.ArgumentParser) -> None:
@@ -225,8 +233,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"resample the trials N times (default {OBJECTIVE_RESAMPLES}; 0: no intervals) and print 95 "
                         "%% intervals of K̂, the normalized Q, R diagonals and the weight ratios inside coupled parts "
                         "(the paper gives none)")
+    _task_option(p)
     _power_option(p, 0)
     _system_option(p)
+    _plant_group_option(p, "a model of each written beside -o as MODEL.GROUP.npz")
     _mapping_option(p)
     _selection_options(p, "fit")
     _executor_options(p)
@@ -271,6 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="held-out trials per subject with --per-subject (default 1)")
     _holdout_option(p)
     _study_options(p)
+    _plant_group_option(p, "each evaluated on its own plant (with -o, a table per group: FILE.GROUP.parquet)")
     _mapping_option(p)
     _selection_options(p, "study")
     _executor_options(p)
@@ -300,9 +311,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resample", action="store_true",
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
+    _plant_group_option(p, "each segment keyed by its group")
     _mapping_option(p)
     p.add_argument("--raw", action="store_true",
-                   help="a raw log as it is (every stream, modes, messages), without a mapping's states")
+                   help="a raw log as it is (every stream, modes, messages), without a mapping's states; with "
+                        "several logs, all of them on one clock (an overlay)")
+    p.add_argument("--color-by", default="label", metavar="KEY",
+                   help="one colour per strategy label (default) or per value of another key of the trials' "
+                        "metadata: subject or session overlays subjects or sessions on the trials' clock")
+    p.add_argument("--align", nargs="+", metavar="WHEN",
+                   help="with several raw logs: where each log's 0 s is: arming, takeoff, start or seconds after its "
+                        "start; one for all or one per log (default: arming where each log records one, else its "
+                        "start)")
     _selection_options(p, "look")
     _output_options(p)
 
@@ -358,6 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bootstrap_option(p)
     _power_option(p, 1)
     _study_options(p)
+    _task_option(p)
+    _plant_group_option(p, "a report of each in DIR/GROUP/")
     _mapping_option(p)
     _selection_options(p, "study")
     _executor_options(p)
@@ -390,6 +412,14 @@ def _selection_options(p: argparse.ArgumentParser, purpose: str) -> None:
                         f"time-limit (default {outcome} on a collected session)")
     g.add_argument("--include-excluded", action="store_true",
                    help="keep the trials the experimenter marked excluded (default: left out, and said so)")
+
+
+def _task_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--task", type=task_arg, metavar="REL[@STATES]",
+                   help="what the pilot regulates, relative to what: goal, zero or reference:line / "
+                        "reference:horizontal-first, optionally @state,state,… (or @inner: all but the positions); "
+                        "default: decided from the trials (their goals, a reference they declare, the plant's "
+                        "positions: a free flight regulates its inner loops) and printed")
 
 
 def _power_option(p: argparse.ArgumentParser, default: int) -> None:

@@ -21,7 +21,8 @@ from workbench.defaults import HORIZON_S
 from workbench.errors import DataError, ModelError, WorkbenchError
 
 __all__ = ["Read", "read_demos", "read_models", "load_one", "system_for", "study_plant", "pilot_only",
-           "require_proposed", "demos_at_model_dt", "input_stem", "is_demo_file"]
+           "require_proposed", "demos_at_model_dt", "input_stem", "is_demo_file", "plant_group_parts",
+           "per_group_path"]
 
 
 @dataclass(frozen=True)
@@ -112,6 +113,31 @@ def read_models(inputs: Inputs) -> dict[str, Any]:
     from workbench.models.factory import load_model
 
     return {m.label: load_model(m.path) for m in inputs.models}
+
+
+def plant_group_parts(ds: Any, name: str | None) -> tuple[list[tuple[str | None, Any]], str]:
+    """The demonstrations by plant group (:mod:`workbench.data.plant_groups`), each a plant and a model of its own,
+    and the line that says so: the group ``name`` alone (``--plant-group``), else every group in the data."""
+    from workbench.data.plant_groups import by_plant_group, describe_groups, select_plant_group
+
+    if name:
+        part = select_plant_group(ds, name)
+        return [(name, part)], f"plant group {describe_groups(part)} (--plant-group)"
+    parts = by_plant_group(ds)
+    line = ""
+    if len(parts) > 1:
+        line = (f"{len(parts)} plant groups, a plant and a model for each (--plant-group NAME takes one): "
+                f"{describe_groups(ds)}")
+    elif next(iter(parts)) is not None:
+        line = f"plant group {describe_groups(ds)}"
+    return list(parts.items()), line
+
+
+def per_group_path(path: Path, group: str | None) -> Path:
+    """``m.npz`` → ``m.angle+climb.npz``: where a command writes one plant group's output of several."""
+    if group is None:
+        return path
+    return path.with_name(f"{path.stem}.{group.replace(' ', '-')}{path.suffix}")
 
 
 def system_for(ds: Any, choice: str = "auto", horizon_s: float = HORIZON_S):

@@ -9,7 +9,7 @@ from typing import Any
 
 from workbench import interrupts
 from workbench.cli.context import Context
-from workbench.cli.inputs import Inputs, resolve
+from workbench.cli.inputs import Inputs, input_stem, resolve
 from workbench.cli.options import DEFAULT_MAPPING, rollout_budget, steps_of
 from workbench.cli.reading import default_output, demos_at_model_dt
 from workbench.cli.writing import announce, output_kwargs
@@ -59,15 +59,51 @@ def _view_raw(ctx: Context, streams: Any) -> int:
     return 0
 
 
+def _view_overlay(ctx: Context, inputs: Inputs) -> int:
+    """``workbench view A B … --raw``: the logs on one clock, one colour each (:mod:`workbench.viewer.overlay`)."""
+    import adapters
+    from adapters.rawlog import raw_log
+    from workbench import viewer
+    from workbench.viewer.overlay import OVERLAY_APPLICATION_ID, log_overlay, overlay_blueprint
+
+    a = ctx.args
+    raws = []
+    for source in inputs.sources:
+        if source.demos:
+            raise UsageError(f"{source.shown}: --raw overlays logs as they are, not demonstrations")
+        raws.append(raw_log(adapters.read(source.path, format=source.format)))
+    align = list(a.align or [])
+    if not align:  # arming where every log records one: the moment two flights most often share
+        align = ["arming" if r.armed else "start" for r in raws]
+    stem = "_".join(input_stem(p) for p in a.inputs[:3])
+    out = output_kwargs(ctx, Path("out") / f"{stem}.overlay.rrd")  # under out/, never beside the inputs
+    rec = viewer.new_recording(OVERLAY_APPLICATION_ID)
+    with ctx.progress() as progress:
+        progress.add_task(f"logging {len(raws)} logs on one clock", total=None)
+        with viewer.open_output(rec, **out) as sink:
+            logged = log_overlay(rec, raws, align)
+            sink.blueprint = overlay_blueprint(logged)
+    for name, how in zip(logged.names, logged.aligned, strict=True):
+        ctx.say(f"{name}: 0 s at {how}")
+    announce(ctx, out, sink, f"{len(raws)} logs on one clock")
+    return 0
+
+
 def cmd_view(ctx: Context) -> int:
     import adapters
     from workbench import viewer
 
     a = ctx.args
+    if a.align and not (a.raw and len(a.inputs) > 1):
+        raise UsageError("--align puts several raw logs on one clock: give two or more logs with --raw")
+    if a.raw and len(a.inputs) > 1 and (a.mapping or a.model or a.label):
+        raise UsageError("--raw shows the logs as they are: leave out --mapping, --model and --label")
     if a.raw and (a.mapping or a.model):
         raise UsageError("--raw shows the log as it is: leave out --mapping and --model")
     inputs = resolve(a, ctx.stdio, a.inputs, models=a.model or [], labelled_models=True, allow_still=True,
                      mapping=not a.raw, mapping_hint="--mapping chooses another, --raw shows the log alone")
+    if a.raw and len(inputs.sources) > 1:
+        return _view_overlay(ctx, inputs)
     first = inputs.sources[0]
     one_log = len(inputs.sources) == 1 and not a.label and not first.demos
     raw_streams = adapters.read(first.path, format=first.format) if one_log else None
@@ -78,17 +114,22 @@ def cmd_view(ctx: Context) -> int:
     try:
         got = ctx.read(inputs)
     except DataError as e:
-        if raw_streams is None or a.mapping:
+        if raw_streams is not None and not a.mapping:
+            # the mapping chosen for the log's vehicle makes no demonstrations of it: the log opens as it is, with
+            # the cause
+            print(f"warning: {e}; showing the raw log alone", file=sys.stderr)
+            return _view_raw(ctx, raw_streams)
+        if len(inputs.sources) < 2 or " dt " not in f" {e} ":
             raise
-        # the mapping chosen for the log's vehicle makes no demonstrations of it: the log opens as it is, with the cause
-        print(f"warning: {e}; showing the raw log alone", file=sys.stderr)
-        return _view_raw(ctx, raw_streams)
-    ds = got.demos
+        # logs of several rates in one view: on one grid, or the way out named
+        got = None
+    ds = got.demos if got is not None else _several_on_one_grid(ctx, inputs, a.resample)
     mapping = first.mapping
     source_dt = float(ds.dt)
     models, named = None, None
-    if inputs.models:
-        by_label = ctx.models(inputs)
+    by_label = ctx.models(inputs) if inputs.models else {}
+    ds = _of_plant_group(ctx, ds, a.plant_group, by_label.values())
+    if by_label:
         if "" in by_label:
             models = by_label[""]
             named = {Path(inputs.models[0].given).stem: models}
@@ -109,6 +150,7 @@ def cmd_view(ctx: Context) -> int:
             session = viewer.log_session(
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
                 samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=origins, source_dt=source_dt,
+                color_by=a.color_by,
             )
             extra = (_raw_beside(rec, raw_streams, mapping, ds, origins.get(str(first.path)))
                      if raw_streams is not None and mapping else [])
@@ -116,6 +158,45 @@ def cmd_view(ctx: Context) -> int:
     _warn(ctx, session)
     announce(ctx, out, sink, f"{len(ds)} demonstrations")
     return 0
+
+
+def _of_plant_group(ctx: Context, ds: Any, name: str | None, models: Any) -> Any:
+    """The segments a view shows: the plant group ``name`` (``--plant-group``), else the groups the models' plants
+    were identified for (a model predicts only where its stick commands what it did), else every segment; said."""
+    from workbench.data.plant_groups import describe_groups, plant_groups, select_plant_group
+
+    if name:
+        return select_plant_group(ds, name)
+    wanted = {getattr(m.system, "plant_group", None) for m in models}
+    if None in wanted or not wanted or set(plant_groups(ds)) <= wanted:
+        return ds
+    kept = ds.with_demos([d for d in ds if d.meta.get("plant_group") in wanted])
+    if not len(kept):
+        raise DataError(f"the model's plant group ({', '.join(sorted(wanted))}) is none of these segments' "
+                        f"({describe_groups(ds)}); --plant-group names the segments to show")
+    ctx.say(f"showing plant group {describe_groups(kept)}: the model's (--plant-group shows another)")
+    return kept
+
+
+def _several_on_one_grid(ctx: Context, inputs: Inputs, resample: bool) -> Any:
+    """Several logs or demonstration files in one view: on one time grid, the finest of theirs, where
+    ``--resample`` is given; without it, logs of different dt are one line naming both ways out."""
+    import math
+    from dataclasses import replace
+
+    parts = [ctx.read(replace(inputs, sources=(s,))).demos for s in inputs.sources]
+    steps = sorted({float(d.dt) for d in parts})
+    if len(steps) > 1 and not all(math.isclose(steps[0], s, rel_tol=1e-6) for s in steps):
+        shown = ", ".join(f"{s.shown} dt {d.dt:g} s" for s, d in zip(inputs.sources, parts, strict=True))
+        if not resample:
+            raise DataError(f"{shown}: sampled at different dt; --resample puts them on the finest grid "
+                            f"({steps[0]:g} s, states linear, inputs held), --raw overlays the logs as recorded")
+        parts = [d if math.isclose(float(d.dt), steps[0], rel_tol=1e-6) else d.resample(steps[0]) for d in parts]
+        ctx.say(f"resampled to dt = {steps[0]:g} s ({shown})")
+    ds = parts[0]
+    for d in parts[1:]:
+        ds = ds + d
+    return ds
 
 
 def _raw_beside(rec: Any, streams: Any, mapping: str, ds: Any, origin: float | None) -> list[Any]:
