@@ -73,6 +73,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
@@ -356,7 +357,8 @@ def load_mapping(mapping: str | os.PathLike | ChannelMapping) -> ChannelMapping:
                 f"mapping {text!r}: no such file and not a shipped mapping; shipped: {', '.join(shipped_mappings())}"
             )
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+        raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MappingError(f"{path}: not valid TOML ({exc})") from None
     except RecursionError:  # tomllib parses nested arrays and tables by recursion
@@ -365,8 +367,20 @@ def load_mapping(mapping: str | os.PathLike | ChannelMapping) -> ChannelMapping:
         raise MappingError(f"{path}: not a mapping: not UTF-8 text at byte {exc.start}") from None
     except OSError as exc:
         raise MappingError(f"{path}: cannot read mapping ({exc})") from None
+    except ValueError:  # Python's limit on an integer's digits (4300), in tomllib: named by its line, in our words
+        raise MappingError(f"{path}{_long_number_line(text)}: a number too long to read (more than "
+                           f"{sys.get_int_max_str_digits()} digits); a mapping's numbers are at most "
+                           f"{MAX_MAGNITUDE:g}") from None
     raw.setdefault("name", path.stem)
     return _parse(raw, str(path))
+
+
+def _long_number_line(text: str) -> str:
+    """``, line N`` of the first run of digits longer than Python converts (empty where none is found)."""
+    import re
+
+    m = re.search(rf"\d{{{sys.get_int_max_str_digits() + 1},}}", text)
+    return "" if m is None else f", line {text.count(chr(10), 0, m.start()) + 1}"
 
 
 def _fail(path: str, where: str, message: str) -> MappingError:

@@ -299,8 +299,14 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]] | No
         )
     except ModelFileError:
         raise
-    except (KeyError, TypeError, ValueError, DataError, ModelError) as exc:
-        raise ModelFileError(f"{mf.path}: damaged model file: system ({type(exc).__name__}: {exc})") from None
+    except (DataError, ModelError) as exc:  # the plant's own checks, in its words
+        raise ModelFileError(f"{mf.path}: damaged model file: system: {exc}") from None
+    except KeyError as exc:
+        raise ModelFileError(f"{mf.path}: damaged model file: system: its header has no {exc.args[0]!r}") from None
+    except (TypeError, ValueError):  # numpy's broadcasting or a float() of text: said by the arrays' shapes
+        shapes = ", ".join(f"{k} {tuple(v.shape)}" for k, v in mf.arrays.items() if k.startswith("system/"))
+        raise ModelFileError(f"{mf.path}: damaged model file: system: its values do not fit together "
+                             f"({shapes})") from None
     settings = h.get("settings") or {}
     if not isinstance(settings, dict):
         raise ModelFileError(f"{mf.path}: damaged model file: settings are a {type(settings).__name__}, not a table")
