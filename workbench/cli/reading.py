@@ -109,22 +109,20 @@ def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: 
     return ds
 
 
-def plant_group_parts(ctx: Context, ds: Any, name: str | None) -> list[tuple[str | None, Any]]:
+def plant_group_parts(ds: Any, name: str | None) -> tuple[list[tuple[str | None, Any]], str | None]:
     """The demonstrations by plant group (:mod:`workbench.data.plant_groups`), each a plant and a model of its own:
-    the group ``name`` alone (``--plant-group``), else every group in the data, said in one line."""
+    the group ``name`` alone (``--plant-group``), else every group in the data; and the one line that says so
+    (``None`` for data without groups)."""
     from workbench.data.plant_groups import by_plant_group, describe_groups, select_plant_group
 
     if name:
         part = select_plant_group(ds, name)
-        ctx.say(f"plant group {describe_groups(part)} (--plant-group)")
-        return [(name, part)]
+        return [(name, part)], f"plant group {describe_groups(part)} (--plant-group)"
     parts = by_plant_group(ds)
     if len(parts) > 1:
-        ctx.say(f"{len(parts)} plant groups, a plant and a model for each (--plant-group NAME takes one): "
-                f"{describe_groups(ds)}")
-    elif next(iter(parts)) is not None:
-        ctx.say(f"plant group {describe_groups(ds)}")
-    return list(parts.items())
+        return list(parts.items()), (f"{len(parts)} plant groups, a plant and a model for each (--plant-group NAME "
+                                     f"takes one): {describe_groups(ds)}")
+    return list(parts.items()), (f"plant group {describe_groups(ds)}" if next(iter(parts)) is not None else None)
 
 
 def per_group_path(path: Path, group: str | None) -> Path:

@@ -39,7 +39,9 @@ def cmd_evaluate(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".parquet", "the results table") if a.output else None
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
-    parts = plant_group_parts(ctx, ds, getattr(a, "plant_group", None))
+    parts, said = plant_group_parts(ds, getattr(a, "plant_group", None))
+    if said:
+        ctx.say(said)
     if len(parts) > 1 and output is not None and ctx.stdio.writes_stdout:
         raise UsageError(f"-o - writes one table, but these demonstrations are {len(parts)} plant groups "
                          f"({', '.join(str(g) for g, _ in parts)}): name one with --plant-group")
@@ -387,7 +389,9 @@ def cmd_report(ctx: Context) -> int:
     a = ctx.args
     refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
-    parts = plant_group_parts(ctx, ds, getattr(a, "plant_group", None))
+    parts, said = plant_group_parts(ds, getattr(a, "plant_group", None))
+    if said:
+        ctx.say(said)
     # one plant group: the report in -o; several: a report of each in -o/GROUP/, each titled with its group
     return for_each_group(ctx, parts, "reported", lambda group, part: _report_group(
         ctx, part, Path(a.output) if len(parts) == 1 else Path(a.output) / str(group).replace(" ", "-"),
