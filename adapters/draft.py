@@ -38,8 +38,8 @@ from adapters.mapping import (
     shipped_mappings,
 )
 from adapters.modes import mode_name
+from adapters.rc_maps import fill, placeholders
 from adapters.selection import select
-from adapters.sticks import _fill, placeholders
 from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams
 from adapters.summary import log_modes, summarize
@@ -136,7 +136,7 @@ def _pick(ch: Channel, streams: Streams, fmt: str, numbers: dict[str, int]) -> C
             if any(r not in numbers for r in placeholders(source)):
                 continue
             one = replace(v, selector=replace(v.selector, source=source, alternatives=()))
-            filled = replace(one.selector, source=_fill(source, numbers))
+            filled = replace(one.selector, source=fill(source, numbers))
             if _has(filled, streams, TRANSFORMS[one.transform].n_columns):
                 return one
     return None
@@ -312,7 +312,7 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
 
 
 def _stream_of(ch: Channel, streams: Streams, numbers: dict[str, int]) -> str:
-    return select(replace(ch.selector, source=_fill(ch.selector.source, numbers)), streams, "", "").stream
+    return select(replace(ch.selector, source=fill(ch.selector.source, numbers)), streams, "", "").stream
 
 
 def _selector_table(sel: Selector) -> dict[str, object]:

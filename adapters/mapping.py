@@ -14,7 +14,7 @@ Schema
     inputs = ["u1", "u2"]               # (required)
     clock = "log"                       # or { field = "time_boot_ms", scale = 0.001 }: see adapters.clock
     rc_map = "ardupilot"                # whose RC map gives a {roll}, {pitch}, {throttle}, {yaw} stick its channel:
-                                        # RCMAP_ROLL … (adapters.sticks.RC_MAPS: "ardupilot", "px4")
+                                        # RCMAP_ROLL … (adapters.rc_maps.RC_MAPS: "ardupilot", "px4")
 
     [channels]                          # one entry per state and input
     x = "LOCAL_POSITION_NED.y"          # a source: "STREAM.FIELD" or "STREAM:FIELD" (for topics with dots)
@@ -77,17 +77,23 @@ import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
-
-if TYPE_CHECKING:
-    pass
+from typing import Any
 
 from adapters.formats import FORMATS
 from adapters.modes import MODE_TABLES, mode_name, mode_number
+from adapters.rc_maps import PARAMETER_STREAMS, RC_MAPS, ROLES, placeholders
 from adapters.reference import REFERENCE_FORMS, ReferenceRule
-from adapters.sticks import PARAMETER_STREAMS, RC_MAPS, ROLES, placeholders
+from adapters.rules import (
+    DEFAULT_META_FIELDS,
+    Channel,
+    ClockSpec,
+    FlagRule,
+    LandingRule,
+    MetaRules,
+    ModeRule,
+    SegmentRules,
+    Selector,
+)
 from adapters.streams import candidate_streams, nearest
 from adapters.transforms import TRANSFORMS
 from workbench.data.roles import Roles
@@ -110,7 +116,6 @@ __all__ = [
 
 MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
 FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per declared format
-DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", "reference",
     "rc_map", "setpoints", *FORMAT_NAMES
@@ -119,123 +124,6 @@ _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
 _META_KEYS = {"source", "key", "text", "fields", "prefix"}
 _REFERENCE_KEYS = {"estimate", "gps", "form", "scale", "always_logged", "unknown", "fix", "accuracy"}
-
-
-@dataclass(frozen=True)
-class Selector:
-    """A field of a stream, optionally restricted to rows whose columns equal given values (``where``).
-
-    ``alternatives`` are further sources tried in order when ``source`` is not in a file (e.g. RC_CHANNELS,
-    else RC_CHANNELS_RAW); writers use ``source``.
-    """
-
-    source: str
-    where: tuple[tuple[str, Any], ...] = ()
-    alternatives: tuple[str, ...] = ()
-
-    @property
-    def sources(self) -> tuple[str, ...]:
-        return (self.source, *self.alternatives)
-
-    def describe(self) -> str:
-        cond = ", ".join(f"{k} = {v!r}" for k, v in self.where)
-        return " or ".join(self.sources) + (f" where {cond}" if cond else "")
-
-
-@dataclass(frozen=True)
-class Channel:
-    """One state or input: ``sign * scale * transform(source) + offset``."""
-
-    name: str
-    selector: Selector
-    transform: str = "identity"
-    scale: float = 1.0
-    offset: float = 0.0
-    sign: float = 1.0
-    params: tuple[tuple[str, Any], ...] = ()
-    #: further channels tried in order when this one's source is not in a file (another firmware's field names,
-    #: each with its own conversion); writers and the online path use the first
-    alternatives: tuple[Channel, ...] = ()
-
-    @property
-    def gain(self) -> float:
-        return self.sign * self.scale
-
-    @property
-    def variants(self) -> tuple[Channel, ...]:
-        """This channel (without its alternatives) and each alternative, in the order they are tried."""
-        return (replace(self, alternatives=()), *self.alternatives)
-
-
-@dataclass(frozen=True)
-class ModeRule:
-    selector: Selector
-    keep: tuple[int, ...]
-    names: str | None = None
-
-
-@dataclass(frozen=True)
-class FlagRule:
-    """A truthy stream: ``value & bitmask`` when a bitmask is given, ``value == equals``, else ``value != 0``; or
-    events (``on`` / ``off`` values, e.g. DataFlash ``EV`` ids ARMED 10 / DISARMED 11): rows of other values say
-    nothing, and the flag holds from one event to the next (:meth:`events`)."""
-
-    selector: Selector
-    bitmask: int | None = None
-    equals: float | None = None
-    on: tuple[float, ...] = ()
-    off: tuple[float, ...] = ()
-
-    def events(self, values: np.ndarray) -> np.ndarray:
-        """The rows that are events of an event rule (every row of a held flag)."""
-        v = np.asarray(values, dtype=np.float64)
-        return np.isin(v, self.on + self.off) if self.on else np.ones(v.shape, dtype=bool)
-
-    def truth(self, values: np.ndarray) -> np.ndarray:
-        if self.on:
-            return np.isin(np.asarray(values, dtype=np.float64), self.on)
-        v = np.nan_to_num(np.asarray(values, dtype=np.float64))
-        if self.bitmask is not None:
-            return (v.astype(np.int64) & self.bitmask) != 0
-        if self.equals is not None:
-            return v == self.equals
-        return v != 0
-
-
-@dataclass(frozen=True)
-class LandingRule:
-    """Touchdown: a state at or below ``below`` (``state``), or a truthy landed flag (``flag``)."""
-
-    state: str | None = None
-    below: float = 0.0
-    flag: FlagRule | None = None
-
-
-@dataclass(frozen=True)
-class SegmentRules:
-    gap: float
-    min_duration: float
-    demo: Selector | None = None
-    mode: ModeRule | None = None
-    armed: FlagRule | None = None
-    landing: LandingRule | None = None
-
-
-@dataclass(frozen=True)
-class MetaRules:
-    source: Selector | None = None
-    key: str = "demo"
-    text: Selector | None = None
-    fields: tuple[str, ...] = DEFAULT_META_FIELDS
-    prefix: str = "wb"
-
-
-@dataclass(frozen=True)
-class ClockSpec:
-    """``field=None``: the stream's own ``t``; else that field × ``scale``, anchored on ``t`` (adapters.clock)."""
-
-    field: str | None = None
-    scale: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -259,7 +147,7 @@ class ChannelMapping:
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
     roles: Roles = field(default_factory=Roles)
     reference: ReferenceRule | None = None
-    #: whose RC map gives a stick named by role its channel (a key of adapters.sticks.RC_MAPS)
+    #: whose RC map gives a stick named by role its channel (a key of adapters.rc_maps.RC_MAPS)
     rc_map: str | None = None
     #: per input, what it commands (its ``name`` is the input's): the stick must move with it (adapters.sticks)
     setpoints: tuple[Channel, ...] = ()

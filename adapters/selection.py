@@ -19,7 +19,7 @@ from workbench.errors import MappingError
 if TYPE_CHECKING:
     import pandas as pd
 
-    from adapters.mapping import Channel, Selector
+    from adapters.rules import Channel, Selector
 
 __all__ = ["Selected", "select", "resolve_channel", "channel_values", "channel_convert", "channel_inverse"]
 
