@@ -359,14 +359,14 @@ def _verify(text: str, streams: Streams, description: str) -> None:
     from adapters.mapping import _parse
     from adapters.transforms import TRANSFORMS
 
-    where = f"{streams.path}: cannot draft a mapping"
+    cannot = f"{streams.path}: cannot draft a mapping"
     try:
         raw = tomllib.loads(text)
         m = resolve_sticks(_parse(raw, "<draft>"), streams)
     except (tomllib.TOMLDecodeError, MappingError) as exc:
-        raise DataError(f"{where}: the draft does not read back ({exc})") from None
+        raise DataError(f"{cannot}: the draft does not read back ({exc})") from None
     if raw.get("description") != description:
-        raise DataError(f"{where}: the draft's description does not read back as written")
+        raise DataError(f"{cannot}: the draft's description does not read back as written")
     checks = [(f"channel {c.name}", c.selector, TRANSFORMS[c.transform].n_columns) for c in (*m.channels,
                                                                                              *m.setpoints)]
     seg = m.segment
@@ -376,7 +376,7 @@ def _verify(text: str, streams: Streams, description: str) -> None:
         checks.append(("reference.estimate", m.reference.estimate, 2))
     for what, sel, n in checks:
         if not _has(sel, streams, n):
-            raise DataError(f"{where}: its {what} reads {sel.describe()}, which is not in this log")
+            raise DataError(f"{cannot}: its {what} reads {sel.describe()}, which is not in this log")
 
 
 def _reference_lines(template: ChannelMapping, streams: Streams, chosen: dict[str, Channel]) -> list[str]:

@@ -165,7 +165,7 @@ class ChannelMapping:
                 merged[key] = {**merged[key], **value}
             else:
                 merged[key] = value
-        out = _parse(merged, self.path, where=f"[{fmt}]")
+        out = _parse(merged, self.path, section=f"[{fmt}]")
         return replace(out, format=fmt, raw=self.raw)
 
     def check_complete(self) -> None:
@@ -253,8 +253,8 @@ def load_mapping(mapping: str | os.PathLike | ChannelMapping) -> ChannelMapping:
     return _parse(raw, str(path))
 
 
-def _fail(path: str, where: str, message: str) -> MappingError:
-    return MappingError(f"{path}: {where}: {message}")
+def _fail(path: str, key: str, message: str) -> MappingError:
+    return MappingError(f"{path}: {key}: {message}")
 
 
 #: The largest magnitude a mapping's number may have (scales, offsets, durations, transform parameters): beyond
@@ -262,17 +262,17 @@ def _fail(path: str, where: str, message: str) -> MappingError:
 MAX_MAGNITUDE = 1e12
 
 
-def _number(value: Any, path: str, where: str, *, positive: bool = False) -> float:
+def _number(value: Any, path: str, key: str, *, positive: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise _fail(path, where, f"must be a finite number, got {value!r}")
+        raise _fail(path, key, f"must be a finite number, got {value!r}")
     try:
         number = float(value)  # an integer beyond float64 (10**400) overflows here, not in the conversion
     except OverflowError:
         number = math.inf
     if not math.isfinite(number) or abs(number) > MAX_MAGNITUDE:
-        raise _fail(path, where, f"must be a finite number of magnitude at most {MAX_MAGNITUDE:g}, got {value!r}")
+        raise _fail(path, key, f"must be a finite number of magnitude at most {MAX_MAGNITUDE:g}, got {value!r}")
     if positive and number <= 0:
-        raise _fail(path, where, f"must be positive, got {value!r}")
+        raise _fail(path, key, f"must be positive, got {value!r}")
     return number
 
 
@@ -285,74 +285,74 @@ def _sources(value: Any) -> tuple[str, ...] | None:
     return None
 
 
-def _selector(value: Any, path: str, where: str, extra: Iterable[str] = ()) -> Selector:
+def _selector(value: Any, path: str, key: str, extra: Iterable[str] = ()) -> Selector:
     if _sources(value) is not None:
         first, *rest = _sources(value)
         return Selector(first, (), tuple(rest))
     if not isinstance(value, dict) or _sources(value.get("source")) is None:
-        raise _fail(path, where, f"must be a source (or list of them) or a table with a 'source', got {value!r}")
+        raise _fail(path, key, f"must be a source (or list of them) or a table with a 'source', got {value!r}")
     allowed = {"source", "where", *extra}
     if unknown := sorted(set(value) - allowed):
-        raise _fail(path, where, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+        raise _fail(path, key, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
     cond = value.get("where", {})
     if not isinstance(cond, dict) or not all(isinstance(v, str | int | float) for v in cond.values()):
-        raise _fail(path, f"{where}.where", f"must be a table of column = value, got {cond!r}")
+        raise _fail(path, f"{key}.where", f"must be a table of column = value, got {cond!r}")
     first, *rest = _sources(value["source"])
     return Selector(first, tuple(sorted(cond.items())), tuple(rest))
 
 
 def _channel(name: str, value: Any, path: str, table: str = "channels") -> Channel:
-    where = f"{table}.{name}"
+    key = f"{table}.{name}"
     if isinstance(value, list) and value and any(isinstance(v, dict) for v in value):
         # alternative channels: [table or source, …], the first whose stream and fields a file has wins
         first, *rest = (_channel(name, v, path, table) for v in value)
         return replace(first, alternatives=tuple(rest))
     if _sources(value) is not None:
-        return Channel(name, _selector(value, path, where))
+        return Channel(name, _selector(value, path, key))
     if not isinstance(value, dict):
-        raise _fail(path, where, f"must be a source string or a table, got {value!r}")
+        raise _fail(path, key, f"must be a source string or a table, got {value!r}")
     transform = value.get("transform", "identity")
     if not isinstance(transform, str) or transform not in TRANSFORMS:
-        raise _fail(path, f"{where}.transform", f"unknown transform {transform!r}; known: {sorted(TRANSFORMS)}")
+        raise _fail(path, f"{key}.transform", f"unknown transform {transform!r}; known: {sorted(TRANSFORMS)}")
     params = TRANSFORMS[transform].params
-    sel = _selector(value, path, where, extra=(_CHANNEL_KEYS | set(params)) - {"source", "where"})
-    sign = _number(value.get("sign", 1), path, f"{where}.sign")
+    sel = _selector(value, path, key, extra=(_CHANNEL_KEYS | set(params)) - {"source", "where"})
+    sign = _number(value.get("sign", 1), path, f"{key}.sign")
     if sign not in (1.0, -1.0):
-        raise _fail(path, f"{where}.sign", f"must be 1 or -1, got {sign!r}")
-    scale = _number(value.get("scale", 1.0), path, f"{where}.scale")
+        raise _fail(path, f"{key}.sign", f"must be 1 or -1, got {sign!r}")
+    scale = _number(value.get("scale", 1.0), path, f"{key}.scale")
     if abs(scale) < 1 / MAX_MAGNITUDE:
-        raise _fail(path, f"{where}.scale", f"must not be zero or below {1 / MAX_MAGNITUDE:g} in magnitude, "
+        raise _fail(path, f"{key}.scale", f"must not be zero or below {1 / MAX_MAGNITUDE:g} in magnitude, "
                     f"got {scale!r}")
     if transform == "pwm":
-        lo, hi = (_number(value.get(k, d), path, f"{where}.{k}") for k, d in (("pwm_min", 1000), ("pwm_max", 2000)))
+        lo, hi = (_number(value.get(k, d), path, f"{key}.{k}") for k, d in (("pwm_min", 1000), ("pwm_max", 2000)))
         if not lo < hi:
-            raise _fail(path, where, f"pwm_min ({lo:g}) must be below pwm_max ({hi:g}): the stick's range in µs")
+            raise _fail(path, key, f"pwm_min ({lo:g}) must be below pwm_max ({hi:g}): the stick's range in µs")
     return Channel(
         name,
         sel,
         transform=transform,
         scale=scale,
-        offset=_number(value.get("offset", 0.0), path, f"{where}.offset"),
+        offset=_number(value.get("offset", 0.0), path, f"{key}.offset"),
         sign=sign,
-        params=tuple((p, _number(value[p], path, f"{where}.{p}")) for p in params if p in value),
+        params=tuple((p, _number(value[p], path, f"{key}.{p}")) for p in params if p in value),
     )
 
 
-def _flag(value: Any, path: str, where: str) -> FlagRule:
-    sel = _selector(value, path, where, extra=("bitmask", "equals", "on", "off"))
+def _flag(value: Any, path: str, key: str) -> FlagRule:
+    sel = _selector(value, path, key, extra=("bitmask", "equals", "on", "off"))
     bitmask = value.get("bitmask") if isinstance(value, dict) else None
     equals = value.get("equals") if isinstance(value, dict) else None
     events = {k: value.get(k) for k in ("on", "off")} if isinstance(value, dict) else {}
     if any(v is not None for v in events.values()):
         if bitmask is not None or equals is not None or not all(isinstance(v, list) and v for v in events.values()):
-            raise _fail(path, where, "events need both on = [values] and off = [values], and neither bitmask nor "
+            raise _fail(path, key, "events need both on = [values] and off = [values], and neither bitmask nor "
                         "equals")
-        on, off = (tuple(_number(x, path, f"{where}.{k}") for x in events[k]) for k in ("on", "off"))
+        on, off = (tuple(_number(x, path, f"{key}.{k}") for x in events[k]) for k in ("on", "off"))
         return FlagRule(sel, on=on, off=off)
     if bitmask is not None and (isinstance(bitmask, bool) or not isinstance(bitmask, int) or not 0 < bitmask < 2**63):
-        raise _fail(path, f"{where}.bitmask", f"must be a positive integer below 2**63, got {bitmask!r}")
+        raise _fail(path, f"{key}.bitmask", f"must be a positive integer below 2**63, got {bitmask!r}")
     if equals is not None:
-        equals = _number(equals, path, f"{where}.equals")
+        equals = _number(equals, path, f"{key}.equals")
     return FlagRule(sel, bitmask, equals)
 
 
@@ -486,8 +486,8 @@ def _names(raw: Any, path: str, key: str) -> tuple[str, ...]:
     return tuple(raw)
 
 
-def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping:
-    at = f"{path}{' ' + where if where else ''}"
+def _parse(raw: Mapping[str, Any], path: str, section: str = "") -> ChannelMapping:
+    at = f"{path}{' ' + section if section else ''}"
     if unknown := sorted(set(raw) - _TOP_KEYS):
         raise _fail(at, "top level", f"unknown key(s) {unknown}; allowed: {sorted(_TOP_KEYS)}")
     if "dt" not in raw:
@@ -505,7 +505,7 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
         raise _fail(at, "channels", f"must be a table, got {chans!r}")
     per_format = any(isinstance(raw.get(f), dict) and "channels" in raw[f] for f in FORMAT_NAMES)
     missing = [n for n in (*states, *inputs) if n not in chans]
-    if missing and not (per_format and not where):
+    if missing and not (per_format and not section):
         raise _fail(at, "channels", f"no source for {missing}")
     extra = sorted(set(chans) - set(states) - set(inputs))
     if extra:

@@ -56,7 +56,8 @@ class Channel:
     alternatives: tuple[Channel, ...] = ()
 
     @property
-    def gain(self) -> float:
+    def factor(self) -> float:
+        """``sign * scale``: what the transformed field is multiplied by (not a gain: K̂ is the gain)."""
         return self.sign * self.scale
 
     @property

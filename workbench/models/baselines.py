@@ -124,7 +124,7 @@ class IOCOnlyModel(BehaviorModel):
         As for :class:`HumanBehaviorModel`.
     fit_objective : bool
         Also solve the inverse LQR (``objective_``); off by default, the prediction does not use it.
-    noise, noise_window, noise_folds, noise_horizon
+    noise, noise_window, noise_folds, noise_horizon_s
         Monte Carlo noise, as for :class:`HumanBehaviorModel` (whitened by the constant residual Gaussian).
     """
 

@@ -104,7 +104,7 @@ class HumanBehaviorModel(TaskGMRModel):
         tried).
     noise_folds : int
         Cross-fitting folds for the calibration (0 or 1: in-sample residuals, no band calibration).
-    noise_horizon : float
+    noise_horizon_s : float
         Seconds of the held-out Monte Carlo rollouts on which the band is calibrated to 90 % coverage (and of
         the held-out rollouts that score the "cv" candidates).
     auto_criterion : {"prediction", "likelihood"}
