@@ -62,7 +62,8 @@ def test_every_registered_method_reaches_every_consumer(entry, quadrotor):
 
 # Literals naming methods on purpose (a choice among the methods, not a list of them), with why.
 CHOSEN = {
-    ("workbench/viewer/blueprint.py", ("proposed", "persistence")): "the score title: the model against no operator",
+    ("workbench/viewer/tabs/predictions.py", ("proposed", "persistence")):
+        "the score title: the model against no operator",
 }
 
 
