@@ -51,6 +51,12 @@ from workbench.plant.system import LinearSystem
 
 __all__ = ["HumanBehaviorModel"]
 
+#: The method this module's class is (read by workbench.models.registry from this text, without importing it).
+DECLARED_METHODS = (
+    {"name": "proposed", "title": "proposed", "class": "HumanBehaviorModel", "order": 0, "colour": 0, "dash": "-",
+     "marker": "o"},
+)
+
 
 class HumanBehaviorModel(TaskGMRModel):
     """The proposed model: task objective by inverse LQR plus TP-GMM variability (Algorithm 1).
