@@ -96,6 +96,7 @@ from adapters.rules import (
 )
 from adapters.streams import candidate_streams, nearest
 from adapters.transforms import TRANSFORMS
+from workbench.data.pilot_task import task_table
 from workbench.data.roles import Roles
 from workbench.errors import DataError, MappingError
 
@@ -118,7 +119,7 @@ MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
 FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per declared format
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", "reference",
-    "rc_map", "setpoints", *FORMAT_NAMES
+    "rc_map", "setpoints", "task", *FORMAT_NAMES
 }
 _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
@@ -147,6 +148,9 @@ class ChannelMapping:
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
     roles: Roles = field(default_factory=Roles)
     reference: ReferenceRule | None = None
+    #: The pilot's task (``[task]``: regulate, relative_to, reference): overrides what a fit decides from the data;
+    #: written into every demonstration's ``meta["task"]`` (:mod:`workbench.data.pilot_task`). Empty: the data decide.
+    task: Mapping[str, Any] = field(default_factory=dict)
     #: whose RC map gives a stick named by role its channel (a key of adapters.rc_maps.RC_MAPS)
     rc_map: str | None = None
     #: per input, what it commands (its ``name`` is the input's): the stick must move with it (adapters.sticks)
@@ -515,7 +519,8 @@ def _parse(raw: Mapping[str, Any], path: str, section: str = "") -> ChannelMappi
     try:
         roles = Roles.from_json(raw.get("roles"), f"{at}: [roles]")
         roles.check(states, f"{at}: [roles]")
-    except DataError as exc:
+        task = task_table(raw.get("task"), f"{at}: task")
+    except (DataError, ValueError) as exc:
         raise MappingError(str(exc)) from None
     return ChannelMapping(
         name=str(raw.get("name", Path(path).stem)),
@@ -533,6 +538,7 @@ def _parse(raw: Mapping[str, Any], path: str, section: str = "") -> ChannelMappi
         reference=_reference(raw.get("reference"), at),
         rc_map=rc_map,
         setpoints=setpoints,
+        task=task,
     )
 
 

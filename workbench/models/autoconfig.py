@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
+from workbench.models.regulator import settle_task
 
 __all__ = ["AutoSettings", "choose_settings", "COMPONENT_GRID", "REG_COVAR_GRID", "CRITERIA",
            "DEFAULT_COMPONENT_GRID", "DEFAULT_REG_COVAR_GRID", "NoCandidateFitted"]
@@ -126,7 +127,8 @@ def _rollout_rmse(model, demos, n_steps: int, idx: Sequence[int], spread: np.nda
             continue
         starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CV_STARTS] or [0]
         goal = model._goal_for(d)
-        preds = model.predict_many(d.x[starts], H, [goal] * len(starts), task_x0s=[d.x[0]] * len(starts))
+        preds = model.predict_many(d.x[starts], H, [goal] * len(starts), task_x0s=[d.x[0]] * len(starts),
+                                   task_steps=starts)
         for s, p in zip(starts, preds, strict=True):
             diff = (p.x[1:, idx] - d.x[s + 1 : s + H + 1, idx]) / spread
             errs.append(float(np.sqrt(np.mean(np.sum(diff**2, axis=1)))))
@@ -189,6 +191,12 @@ def choose_settings(
         train = [demos[j] for j in range(len(demos)) if j not in held]
         test = [demos[j] for j in test_idx]
         n_train = sum(len(d) for d in train)
+        # the fold's task (a reference's speed fitted on its training trials) is settled once for its candidates
+        try:
+            fold_task = settle_task(model, train)
+        except ModelError as exc:
+            causes.setdefault(str(exc), (fold + 1, len(train)))
+            continue
         if system.r.position:
             spread = np.ones(len(idx))
         else:
@@ -199,7 +207,8 @@ def choose_settings(
             if G * _SAMPLES_PER_COMPONENT > n_train:
                 continue
             for r in regs:
-                candidate = type(model)(system, **{**settings, "n_components": int(G), "reg_covar": float(r)})
+                candidate = type(model)(system, **{**settings, "n_components": int(G), "reg_covar": float(r),
+                                                   "task": fold_task})
                 fitted = False
                 try:
                     with warnings.catch_warnings():

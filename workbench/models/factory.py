@@ -32,6 +32,7 @@ def make_model(
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
     cv_grid: dict[str, tuple] | None = None,
+    task: Any = None,
 ) -> BehaviorModel:
     """An unfitted model of ``method`` (one of :data:`METHODS`; ``ioc-only`` spellings are accepted).
 
@@ -47,6 +48,9 @@ def make_model(
         Whether the proposed model also solves for its task objective (predictions never need it).
     cv_grid : dict, optional
         ``cv_components`` / ``cv_reg_covars`` of a "cv" proposed model (default the full grids).
+    task : PilotTask, str, dict or None
+        What the pilot regulates and relative to what (:mod:`workbench.data.pilot_task`): None decides it from the
+        demonstrations; otherwise an override (the command line's ``--task``, a mapping's ``[task]``).
     """
     kind = method.replace("-", "_")
     if kind not in METHODS:
@@ -54,7 +58,8 @@ def make_model(
     cls = registered(kind).load_class()
     if n_components == "cv" and not cls.chooses_settings:
         raise DataError(f"n_components='cv' chooses the proposed model's settings; {method} needs a number")
-    return cls.for_method(system, MethodSettings(n_components, random_state, gain_method, fit_objective, cv_grid))
+    return cls.for_method(system, MethodSettings(n_components, random_state, gain_method, fit_objective, cv_grid,
+                                                 task))
 
 
 def make_models(
@@ -65,6 +70,7 @@ def make_models(
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = False,
+    task: Any = None,
 ) -> dict[str, BehaviorModel]:
     """Unfitted ``{method: model}`` for a comparison, with the paper's settings (G, start/goal frames).
 
@@ -81,5 +87,5 @@ def make_models(
         cv = registered(m).load_class().chooses_settings
         out[m] = make_model(m, system, n_components=n_components if cv or n_components != "cv" else PAPER_N_COMPONENTS,
                             random_state=random_state, gain_method=gain_method, fit_objective=fit_objective,
-                            cv_grid=grid if cv else None)
+                            cv_grid=grid if cv else None, task=task)
     return out

@@ -109,8 +109,11 @@ def fit_gain(
     return np.ascontiguousarray(K), choice
 
 
-def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | None, str | None]:
-    """The task objective of ``K`` by inverse LQR (eqs. (15)-(19)) when ``model.fit_objective``, or why none.
+def fit_objective_or_reason(model: Any, K: np.ndarray, plant: LinearSystem | None = None
+                            ) -> tuple[TaskObjective | None, str | None]:
+    """The task objective of ``K`` by inverse LQR (eqs. (15)-(19)) when ``model.fit_objective``, or why none;
+    ``plant``: the plant ``K`` acts on (default the model's; the regulated states' for a model that regulates
+    some of them, :func:`workbench.models.regulator.regulator_plant`).
 
     The objective explains the gain; predictions never use it. So a solve that fails (no cost passes the
     post-checks, the solver stops) is recorded, ``(None, reason)``, instead of taking the model with it: the
@@ -118,8 +121,9 @@ def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | 
     """
     if not getattr(model, "fit_objective", False):
         return None, None
+    plant = model.system if plant is None else plant
     try:
-        return inverse_lqr(model.system.A, model.system.B, K, structure=model.structure), None
+        return inverse_lqr(plant.A, plant.B, K, structure=model.structure), None
     except ModelError as exc:
         return None, " ".join(str(exc).split())
 

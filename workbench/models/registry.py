@@ -53,6 +53,9 @@ class Method:
         than hue, for colour-blind readers and grayscale prints.
     marker : str
         Its marker in every figure (matplotlib's ``"o"``, ``"s"``, …).
+    in_paper : bool
+        One of the methods the method paper compared (the groups of its multi-subject one-way ANOVA, which
+        ``evaluate --per-subject`` runs beside its own analysis).
     """
 
     name: str
@@ -63,6 +66,7 @@ class Method:
     floor: bool = False
     dash: str = "-"
     marker: str = "o"
+    in_paper: bool = False
 
     @property
     def cli_name(self) -> str:
@@ -79,19 +83,19 @@ class Method:
 
 
 _MODELS = Path(__file__).resolve().parent
-_KEYS = {"name", "title", "class", "order", "colour", "fit_command", "floor", "dash", "marker"}
+_KEYS = {"name", "title", "class", "order", "colour", "fit_command", "floor", "in_paper", "dash", "marker"}
 
 
 def _entry(raw: Any, module: str, where: str) -> tuple[int, Method]:
     """One declared method: ``{"name", "title", "class", "order", "colour"}`` (``colour`` an index into the
-    palette's method colours) and, optionally, ``fit_command``, ``floor``, ``dash`` and ``marker``."""
+    palette's method colours) and, optionally, ``fit_command``, ``floor``, ``in_paper``, ``dash`` and ``marker``."""
     if not isinstance(raw, dict) or not {"name", "title", "class", "order", "colour"} <= set(raw) \
             or set(raw) - _KEYS:
         raise TypeError(f"{where}: a declared method is a table of {sorted(_KEYS)} (name, title, class, order and "
                         f"colour required), got {raw!r}")
     if not isinstance(raw["colour"], int) or not 0 <= raw["colour"] < len(_COLORS):
         raise TypeError(f"{where}: colour is an index into the palette's {len(_COLORS)} method colours")
-    options = {k: raw[k] for k in ("fit_command", "floor", "dash", "marker") if k in raw}
+    options = {k: raw[k] for k in ("fit_command", "floor", "in_paper", "dash", "marker") if k in raw}
     return int(raw["order"]), Method(str(raw["name"]), str(raw["title"]), _COLORS[raw["colour"]],
                                      f"{module}:{raw['class']}", **options)
 

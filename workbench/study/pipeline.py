@@ -176,7 +176,7 @@ def select_components(
 
 
 def _fit_each(
-    system: Any, train: DemonstrationSet, components: int | str, seed: int
+    system: Any, train: DemonstrationSet, components: int | str, seed: int, task: Any = None
 ) -> tuple[dict[str, Any], dict[str, str]]:
     """Every method that can be fitted, and why the others cannot (a ModelError's message).
 
@@ -188,7 +188,8 @@ def _fit_each(
     from workbench.models.factory import make_models
 
     fitted, failures = {}, {}
-    for name, model in make_models(system, n_components=components, random_state=seed, fit_objective=True).items():
+    for name, model in make_models(system, n_components=components, random_state=seed, fit_objective=True,
+                                   task=task).items():
         try:
             fitted[name] = model.fit(train)
         except ModelError as exc:
@@ -228,6 +229,7 @@ def run_study(
     stride_s: float | None = 1.0,
     power: int = 0,
     method_splits: int = SPLITS,
+    task: Any = None,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
 
@@ -246,6 +248,9 @@ def run_study(
     ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
     cannot be fitted is left out of the comparison and named in ``failures`` and :meth:`StudyResult.verdicts`.
+
+    ``task``: what the pilot regulates and relative to what, for every method (:mod:`workbench.data.pilot_task`;
+    None: each model decides it from its training trials, the same way).
 
     ``executor`` (:mod:`workbench.study.executor`): a parallel one runs each strategy as one task (its fits,
     scores, data-efficiency curve and objective intervals); otherwise the strategies run here in turn and the
@@ -275,7 +280,7 @@ def run_study(
     system = plant_for(system, demos.with_demos(all_train))
     settings = _LabelSettings(n_components=n_components, seed=seed, n_steps=n_steps, samples=samples, stride=stride,
                               efficiency=tuple(efficiency or ()), repeats=repeats, bootstrap=int(bootstrap),
-                              power=int(power))
+                              power=int(power), task=task)
     # the strategies are independent: with a parallel executor each is one task (fit, compare, data efficiency,
     # objective intervals), else they run here in turn and the data-efficiency points go to the executor
     by_label = bool(getattr(executor, "parallel", False)) and len(splits) > 1
@@ -355,6 +360,7 @@ class _LabelSettings:
     repeats: int
     bootstrap: int
     power: int
+    task: Any = None
 
 
 @dataclass(frozen=True)
@@ -386,7 +392,7 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
     t0 = time.perf_counter()
     G: int | str = (select_components(tr, system, seed=s.seed) if s.n_components == "bic" else
                     "cv" if s.n_components == "cv" else int(s.n_components))
-    fitted, failed = _fit_each(system, tr, G, s.seed)
+    fitted, failed = _fit_each(system, tr, G, s.seed, s.task)
     if G == "cv":  # the data-efficiency fits take the G cross-validation chose on all training trials
         G = int(fitted["proposed"].n_components_ if "proposed" in fitted else N_COMPONENTS)
     timings["fit"] = time.perf_counter() - t0
@@ -525,6 +531,7 @@ def run_loso(
     progress: Callable[[], Any] | None = None,
     executor: Any = None,
     stride_s: float | None = 1.0,
+    task: Any = None,
 ) -> StudyResult:
     """Leave-one-segment-out: every trial is the test set once, the others train (:func:`run_study` per fold).
 
@@ -543,13 +550,14 @@ def run_loso(
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
         what = f"fitting and comparing, leave-one-segment-out ({len(demos)} folds)"
-        task = p.add_task(what, total=len(demos)) if p is not None else None
+        bar = p.add_task(what, total=len(demos)) if p is not None else None
         for d in demos:
             res = run_study(demos, system, n_steps=n_steps, n_components=n_components, samples=samples,
-                            efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s)
+                            efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s,
+                            task=task)
             folds.append((d.id, res))
             if p is not None:
-                p.advance(task)
+                p.advance(bar)
     failures: dict[str, dict[str, str]] = {}
     for trial, res in folds:
         for label, by_method in res.failures.items():

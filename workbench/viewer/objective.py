@@ -40,6 +40,7 @@ def heatmaps(model: Any, state_names: Sequence[str], input_names: Sequence[str])
     out.append(Heatmap("K", "K̂ (u = K̂x)", np.asarray(model.K_, dtype=float), inputs, states))
     objective = model.objective_
     if objective is not None:
+        states = tuple(model.plant_regulated.state_names)  # the objective weighs the regulated states
         n = len(states)
         Mn = np.asarray(objective.M_normalized, dtype=float)
         out += [
@@ -105,6 +106,7 @@ def model_summary(name: str, model: Any, state_names: Sequence[str], input_names
         lines += ["## Gain K̂ (u = K̂ x)", "", _fmt_matrix(np.asarray(model.K_), input_names, state_names), ""]
         objective = model.objective_
     if objective is not None:
+        state_names = model.plant_regulated.state_names  # the objective weighs the regulated states
         n = len(state_names)
         Mn = np.asarray(objective.M_normalized)
         lines += [
