@@ -118,3 +118,17 @@ def test_parse_task_reads_the_command_line():
     assert parse_task("reference:line@x,y") == {"relative_to": "reference", "reference": "line",
                                                "regulated": ("x", "y")}
     assert parse_task(None) == {}
+
+
+def test_a_free_flight_keeps_its_positions_where_the_inner_states_are_no_more_than_the_inputs():
+    """Two double integrators flown freely: the velocities alone are as many as the inputs, so no objective could
+    be told apart on them (Assumption 2); the regulator keeps every state and says why."""
+    states = ("p1", "p2", "v1", "v2")
+    roles = Roles(position=("p1", "p2"), velocity=("v1", "v2"))
+    demos = [Demonstration(np.arange(5) * 0.1, np.zeros((5, 4)) + j, np.zeros((5, 2)), {"id": f"d{j}"})
+             for j in range(3)]
+    task = decide_task(DemonstrationSet(demos, states, ("a1", "a2"), 0.1, roles=roles))
+    assert (task.relative_to, task.regulated) == ("zero", ())
+    assert "Assumption 2" in task.decided_by
+    wide = decide_task(_set(lambda j: {}))  # six states, two inputs: the inner loops as before
+    assert wide.regulated == ("phi", "xdot", "ydot", "phidot")

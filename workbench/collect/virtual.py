@@ -120,11 +120,22 @@ CS1_SUBJECT = VirtualSubject(name="cs1", reference="horizontal-first", q=_Q, r=_
 CS2_SUBJECT = VirtualSubject(name="cs2", reference="line", q=(*_Q[:2], 30.0 * _Q[2], *_Q[3:]), r=_R)
 
 
-def contrast_truth(first: VirtualSubject, second: VirtualSubject, state: str = "phi", input_: str = "u1",
-                   plant: LinearSystem | None = None) -> float:
-    """The true factor between two subjects' weight ratios ``Q_state / R_input`` (second over first)."""
+def contrast_truth(first: VirtualSubject, second: VirtualSubject, state: str | None = None,
+                   input_: str | None = None, plant: LinearSystem | None = None) -> float:
+    """The true factor between two subjects' weight ratios ``Q_state / R_input`` (second over first).
+
+    ``state`` defaults to the one state whose weight the two subjects' instructions change, ``input_`` to the
+    plant's first input.
+    """
     plant = plant or planar_quadrotor()
-    i, k = plant.state_names.index(state), plant.input_names.index(input_)
+    if state is None:
+        changed = [j for j, (a, b) in enumerate(zip(first.q, second.q, strict=True)) if a != b]
+        if len(changed) != 1:
+            raise ValueError(f"the subjects' weights differ on {len(changed)} states; name the state to compare")
+        i = changed[0]
+    else:
+        i = plant.state_names.index(state)
+    k = 0 if input_ is None else plant.input_names.index(input_)
     return float((second.q[i] / second.r[k]) / (first.q[i] / first.r[k]))
 
 

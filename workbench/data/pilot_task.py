@@ -239,6 +239,14 @@ def decide_task(demos: Any, override: str | Mapping[str, Any] | PilotTask | None
     by = "the mapping's [task]" if mapped else "asked"
     if regulated is None:
         regulated = _inner(state_names, positions) if rel == "zero" and positions else ()
+        n_inputs = len(getattr(demos, "input_names", ()) or ())
+        if regulated and len(regulated) <= n_inputs:
+            # as many inputs as inner states: any stabilizing gain is optimal for some cost, so inverse LQR could
+            # tell no objective apart (Assumption 2 needs m < n); the positions stay in the regulator
+            why = why.replace("; nobody steers back to an absolute position, so the positions are left out", "")
+            why += (f"; the positions stay in, since {len(regulated)} inner states for {n_inputs} inputs leave no "
+                    "objective to identify (Assumption 2)")
+            regulated = ()
     elif regulated in (("inner",), ("all",)):
         why += f"; {regulated[0]} states as {by}"
         regulated = _inner(state_names, positions) if regulated == ("inner",) else ()

@@ -37,6 +37,7 @@ class _Named(list):
     def __init__(self, demos: Sequence[Any], system: LinearSystem) -> None:
         super().__init__(demos)
         self.state_names = system.state_names
+        self.input_names = system.input_names
         self.roles = system.roles
 
 

@@ -200,6 +200,11 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
 
     # objective
     md += ["## Task objective (inverse LQR)", ""]
+    # what each strategy's pilot regulates, relative to what, and its loop's stability with its interval
+    tasks = [f"- {lb}: {m.task_.describe(state_names)}"
+             + (f"; {m.stability_.describe()}" if getattr(m, "stability_", None) is not None else "")
+             for lb in labels if getattr(m := inputs.models.get(lb), "task_", None) is not None]
+    md += [*tasks, ""] if tasks else []
     obj_rows = []
     for label in labels:
         model = inputs.models[label]
