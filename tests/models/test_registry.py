@@ -73,7 +73,13 @@ def copies(source: str, where: str) -> list[str]:
     names = set(METHODS) | {m.cli_name for m in REGISTRY}  # the command line's spellings too
     titles = {m.title for m in REGISTRY} - names
     found = []
-    for node in ast.walk(ast.parse(source)):
+    tree = ast.parse(source)
+    declared = {id(n) for node in ast.walk(tree) if isinstance(node, ast.Assign)
+                and any(isinstance(t, ast.Name) and t.id == "DECLARED_METHODS" for t in node.targets)
+                for n in ast.walk(node)}  # a method's declaration beside its class is the registry's own source
+    for node in ast.walk(tree):
+        if id(node) in declared:
+            continue
         if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in titles:
             found.append(f"{where}:{node.lineno}: {node.value!r}")
         items = (node.keys if isinstance(node, ast.Dict) else node.elts

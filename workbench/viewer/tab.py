@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from workbench.defaults import N_STEPS
 from workbench.viewer.entities import LoggedSession, model_for
 
 if TYPE_CHECKING:
@@ -34,7 +35,7 @@ class SessionRun:
     named_models: Mapping[str, Any] = field(default_factory=dict)
     baselines: Mapping[Any, Mapping[str, Any]] = field(default_factory=dict)
     focus: tuple[str, ...] = ()
-    n_steps: int = 0
+    n_steps: int = N_STEPS
     samples: int = 0
     starts: tuple[int, ...] = (0,)
     seed: int | None = 0
