@@ -62,7 +62,7 @@ __all__ = [
     "coverage_summary",
     "nominal_coverage",
     "compare",
-    "summarize",
+    "method_means",
     "improvement",
     "method_groups",
     "data_efficiency",
@@ -319,7 +319,7 @@ def compare(
     return pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
 
 
-def summarize(table: pd.DataFrame) -> pd.DataFrame:
+def method_means(table: pd.DataFrame) -> pd.DataFrame:
     """Mean value per metric (rows) and method (columns) of a :func:`compare` table.
 
     Every trial weighs the same: values are first averaged over the starts within a trial.
@@ -330,7 +330,7 @@ def summarize(table: pd.DataFrame) -> pd.DataFrame:
 
 def improvement(table: pd.DataFrame, metric: str, method: str, baseline: str) -> float:
     """How much lower ``method``'s mean ``metric`` is than ``baseline``'s, in percent (the paper's figure)."""
-    s = summarize(table[table["metric"] == metric])
+    s = method_means(table[table["metric"] == metric])
     if metric not in s.index or method not in s.columns or baseline not in s.columns:
         raise DataError(f"table has no {metric!r} for both {method!r} and {baseline!r}")
     a, b = float(s.loc[metric, method]), float(s.loc[metric, baseline])
