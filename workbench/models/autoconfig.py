@@ -128,7 +128,7 @@ def _rollout_rmse(model, demos, n_steps: int, idx: Sequence[int], spread: np.nda
         starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CV_STARTS] or [0]
         goal = model._goal_for(d)
         preds = model.predict_many(d.x[starts], H, [goal] * len(starts), task_x0s=[d.x[0]] * len(starts),
-                                   task_steps=starts)
+                                   task_steps=starts, pasts=model.pasts(d, starts))
         for s, p in zip(starts, preds, strict=True):
             diff = (p.x[1:, idx] - d.x[s + 1 : s + H + 1, idx]) / spread
             errs.append(float(np.sqrt(np.mean(np.sum(diff**2, axis=1)))))

@@ -29,6 +29,7 @@ from workbench.models.files import ModelFile, ModelFileError, read_model_file, w
 from workbench.models.fitting import json_seed
 from workbench.models.prediction import RHO_MAX
 from workbench.models.registry import model_classes
+from workbench.models.timed import Timing
 from workbench.plant.system import LinearSystem
 
 __all__ = [
@@ -119,6 +120,9 @@ def save_model(model: StoredModel, path: str | os.PathLike) -> Path:
             "stability": None if getattr(model, "stability_", None) is None else model.stability_.to_dict(),
             "noise_band_factor": float(model.noise_band_factor_),
             "noise_band_coverage": None if math.isnan(model.noise_band_coverage_) else model.noise_band_coverage_,
+            # the pilot's timing the model applies (None: none; files written before it existed have none)
+            "timing": None if getattr(model, "timing_", None) is None else model.timing_.as_json(),
+            "pilot_timing": getattr(model, "pilot_timing_", None),
         },
         **header,
     }
@@ -344,7 +348,7 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[StoredModel]] | None
     unknown = sorted(set(settings) - set(cls._param_names()))
     if unknown:
         raise ModelFileError(f"{mf.path}: damaged model file: unknown {cls.__name__} settings {unknown}")
-    for key in ("frames", "position_idx", "cv_components", "cv_reg_covars"):
+    for key in ("frames", "position_idx", "cv_components", "cv_reg_covars", "timing"):
         if isinstance(settings.get(key), list):
             settings[key] = tuple(settings[key])
     for key in ("n_components", "reg_covar"):  # files written before the rename said "auto" for "cv"
@@ -379,6 +383,12 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[StoredModel]] | None
         model.noise_band_coverage_ = float("nan") if cov is None else float(cov)
         if model.has_gain:  # the linear term's reference; a model without a gain has none
             model.goal_relative_ = bool(fit.get("goal_relative", False))
+        timing = fit.get("timing")
+        try:
+            model.timing_ = None if timing is None else Timing.from_json(timing)
+        except ModelError as exc:
+            raise ModelFileError(f"{mf.path}: damaged model file: timing ({exc})") from None
+        model.pilot_timing_ = fit.get("pilot_timing")
         _restore_task(model, fit, mf)
         model._restore(mf)
     except ModelFileError:

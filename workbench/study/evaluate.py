@@ -180,7 +180,7 @@ def one_step_coverage(
     name = method or type(model).__name__
     input_names = list(model.system.input_names)
     for d in _demos(test):
-        mean, Sigma = model.input_distribution(d.x, d.x[0], d.target)
+        mean, Sigma = model.input_distribution_along(d)  # with the pilot's timing: given the trial before each
         sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
         dev = np.abs(d.u - mean)
         for c in n_sigmas:
@@ -286,7 +286,7 @@ def compare(
         for method, model in models.items():
             preds = model.predict_many(
                 d.x[st], int(n_steps), d.target, task_x0s=d.x[0], task_steps=st, samples=int(samples), seed=rng,
-                percentiles=(lo_q, hi_q), clip=clip,
+                percentiles=(lo_q, hi_q), clip=clip, pasts=model.pasts(d, st),
             )
             for s, p in zip(st, preds, strict=True):
                 h = min(int(n_steps), N - 1 - s)
