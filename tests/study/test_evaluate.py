@@ -102,7 +102,7 @@ def test_compare_table_is_tidy_and_matches_direct_predictions(small):
     p = models["proposed"].predict(d.x[s], 30, d.target, task_x0=d.x[0], past=None if pasts is None else pasts[0])
     got = df[(df.trial == d.id) & (df.start == s) & (df.method == "proposed") & (df.metric == "rmse_position")]
     assert got.value.item() == pytest.approx(ev.horizon_rmse(p.x, d.x[s : s + 31], (0, 1)), rel=1e-12)
-    summary = ev.summarize(df)
+    summary = ev.method_means(df)
     assert summary.loc["rmse_position", "proposed"] == pytest.approx(
         df[(df.metric == "rmse_position") & (df.method == "proposed")].groupby("trial")["value"].mean().mean()
     )

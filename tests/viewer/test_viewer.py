@@ -28,6 +28,7 @@ from workbench.models import HumanBehaviorModel, IOCOnlyModel
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_landings
 from workbench.viewer import columns, objective, output, replay, replay_blueprint, session, style
+from workbench.viewer.tabs.objective import log_models
 
 _spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
 _loader = importlib.util.module_from_spec(_spec)
@@ -451,7 +452,7 @@ def test_heatmaps_of_two_models_share_one_diverging_scale(tmp_path, setup):
     rec = viewer.new_recording()
     path = tmp_path / "objective.rrd"
     with viewer.open_output(rec, save=path):
-        viewer.SessionLogger(rec, demos).log_models({"CS1": model, "IOC": ioc})
+        log_models(viewer.SessionLogger(rec, demos), {"CS1": model, "IOC": ioc})
     ents = read_rrd(path)
     vmax = max(np.abs(model.K_).max(), np.abs(ioc.K_).max())
     for name, m in (("CS1", model), ("IOC", ioc)):

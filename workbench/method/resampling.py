@@ -179,12 +179,10 @@ def _bootstrap_block(task: tuple) -> list[tuple]:
 def _solver(A: np.ndarray, B: np.ndarray, structure: Structure | None,
             solvers: tuple[str, ...] | None = None) -> InverseLQR | None:
     """The cached inverse-LQR problem of ``structure`` (None for gains only); with ``solvers``, a problem that
-    tries only those (compiled here: a bootstrap compiles it once)."""
+    tries only those (compiled once per process and solver chain: a bootstrap's blocks share it)."""
     if structure is None:
         return None
-    if solvers is None:
-        return cached_problem(A, B, structure, True)
-    return InverseLQR(A, B, structure=structure, second_stage=True, solvers=solvers)
+    return cached_problem(A, B, structure, True, solvers)
 
 
 def resample_solvers(point: TaskObjective | None) -> tuple[str, ...] | None:

@@ -6,7 +6,7 @@ another operator, so :func:`choose_settings` picks them on the demonstrations at
 are split into folds (samples inside one trial are strongly correlated), every candidate is fitted on the
 other folds, and scored on the held-out ones by
 
-* ``"prediction"`` (default): the RMSE of mean rollouts of ``noise_horizon`` seconds from several starts of each
+* ``"prediction"`` (default): the RMSE of mean rollouts of ``noise_horizon_s`` seconds from several starts of each
   held-out trial, over the position states (all states, each divided by its training spread, on a plant
   without position roles) — the quantity the workbench's evaluations compare;
 * ``"likelihood"``: the mean held-out log-likelihood of ``[x; ŵ]`` under the TP-GMM (eq. (29)).

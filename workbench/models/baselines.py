@@ -39,6 +39,18 @@ from workbench.plant.system import LinearSystem
 
 __all__ = ["IOCOnlyModel", "GMROnlyModel", "PersistenceModel"]
 
+#: The methods this module's classes are (read by workbench.models.registry from this text, without importing it):
+#: persistence learns nothing worth a file (no ``fit --method``); IOC-only and persistence are the floors the
+#: proposed model must beat before a verdict calls it better; IOC-only and GMR-only are the paper's baselines.
+DECLARED_METHODS = (
+    {"name": "ioc_only", "title": "IOC-only", "class": "IOCOnlyModel", "order": 10, "colour": 1, "floor": True,
+     "in_paper": True, "dash": "--", "marker": "s"},
+    {"name": "gmr_only", "title": "GMR-only", "class": "GMROnlyModel", "order": 20, "colour": 2, "in_paper": True,
+     "dash": "-.", "marker": "^"},
+    {"name": "persistence", "title": "persistence", "class": "PersistenceModel", "order": 90, "colour": 3,
+     "fit_command": False, "floor": True, "dash": ":", "marker": "D"},
+)
+
 
 class GMROnlyModel(TaskGMRModel):
     """Baseline: a TP-GMM on ``ξ' = [x; u]`` read out by GMR, the paper's appendix (eqs. (36)-(37)).
@@ -135,7 +147,7 @@ class IOCOnlyModel(BehaviorModel):
         seen state).
     fit_objective : bool
         Also solve the inverse LQR (``objective_``); off by default, the prediction does not use it.
-    noise, noise_window, noise_folds, noise_horizon
+    noise, noise_window, noise_folds, noise_horizon_s
         Monte Carlo noise, as for :class:`HumanBehaviorModel` (whitened by the constant residual Gaussian).
     """
 

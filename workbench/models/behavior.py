@@ -323,7 +323,7 @@ class BehaviorModel(abc.ABC):
             raise ModelError(f"{type(self).__name__}: noise_window must be a positive number of seconds, got {w!r}")
         h = self.noise_horizon_s
         if isinstance(h, bool) or not isinstance(h, int | float) or not (h > 0 and math.isfinite(h)):
-            raise ModelError(f"{type(self).__name__}: noise_horizon must be a positive number of seconds, got {h!r}")
+            raise ModelError(f"{type(self).__name__}: noise_horizon_s must be a positive number of seconds, got {h!r}")
         k = self.noise_folds
         if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 0:
             raise ModelError(f"{type(self).__name__}: noise_folds must be a non-negative integer, got {k!r}")
@@ -353,7 +353,7 @@ class BehaviorModel(abc.ABC):
         models, each fitted without the trials it is scored on (in-sample residuals are smaller and would
         make the band too narrow): first the scale and AR(1) coefficient of the whitened residuals
         (:func:`~workbench.models.prediction.fit_noise`), then the factor on the scale for which 90 % Monte Carlo
-        bands over ``noise_horizon`` seconds cover the held-out trials' positions (the plant's position roles,
+        bands over ``noise_horizon_s`` seconds cover the held-out trials' positions (the plant's position roles,
         else every state) 90 % of the time (:func:`~workbench.models.prediction.calibrate_band_scale`). A held-out
         trial's goal frame sits where a prediction would put it (its target, else :meth:`default_target`), not at
         its recorded end, which a prediction cannot know. With too

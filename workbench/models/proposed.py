@@ -54,6 +54,12 @@ from workbench.plant.system import LinearSystem
 
 __all__ = ["HumanBehaviorModel"]
 
+#: The method this module's class is (read by workbench.models.registry from this text, without importing it).
+DECLARED_METHODS = (
+    {"name": "proposed", "title": "proposed", "class": "HumanBehaviorModel", "order": 0, "colour": 0, "in_paper": True,
+     "dash": "-", "marker": "o"},
+)
+
 
 class HumanBehaviorModel(TaskGMRModel):
     """The proposed model: task objective by inverse LQR plus TP-GMM variability (Algorithm 1).
@@ -112,7 +118,7 @@ class HumanBehaviorModel(TaskGMRModel):
         tried).
     noise_folds : int
         Cross-fitting folds for the calibration (0 or 1: in-sample residuals, no band calibration).
-    noise_horizon : float
+    noise_horizon_s : float
         Seconds of the held-out Monte Carlo rollouts on which the band is calibrated to 90 % coverage (and of
         the held-out rollouts that score the "cv" candidates).
     task : PilotTask, str, dict or None

@@ -31,10 +31,10 @@ import rerun.blueprint as rrb
 from workbench.data.demonstrations import Demonstration
 from workbench.errors import DataError
 from workbench.viewer import style
-from workbench.viewer.blueprint import online_plots, time_panel
 from workbench.viewer.entities import entity_part, series_path
 from workbench.viewer.scene import Plane, plane_of, scale_bar
 from workbench.viewer.session import HAS_MEASUREMENTS, UI
+from workbench.viewer.views import online_plots, time_panel
 
 __all__ = ["ReplayStats", "replay", "replay_blueprint"]
 
