@@ -108,7 +108,9 @@ def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int
         try:
             run()
         except WorkbenchError as exc:
-            ctx.say(f"{what}: not computed ({' '.join(str(exc).split())})")
+            # a warning where a user looks for what went wrong (stderr), naming the part; the model stands
+            print(f"warning: intervals not computed: {' '.join(str(exc).split())} ({what}; the model is written)",
+                  file=sys.stderr)
 
 
 def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str) -> None:
