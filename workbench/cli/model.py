@@ -21,9 +21,9 @@ def cmd_fit(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".npz", "the model")  # before the work: `-o -` to a terminal is refused
     ds = ctx.read(resolve(a, ctx.stdio, [a.demos], purpose="fit")).demos
-    parts, line = plant_group_parts(ds, a.plant_group)
-    if line:
-        ctx.say(line)
+    parts, said = plant_group_parts(ds, a.plant_group)
+    if said:
+        ctx.say(said)
     if len(parts) == 1:
         _fit_one(ctx, parts[0][1], output)
         ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
