@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from typing import Any
@@ -74,7 +75,7 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
 
         try:
             model = make_model(a.method, system, n_components=components, random_state=a.seed,
-                               gain_method=a.gain, task=a.task).fit(ds)
+                               gain_method=a.gain, timing=a.timing, task=a.task).fit(ds)
         except ModelError as exc:
             raise ModelError(_physics_first(system, exc)) from None
     model.save(output)
@@ -83,26 +84,34 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
         ctx.say(model.task_.describe(system.state_names))
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
-        _print_intervals(ctx, model, ds, model.plant_regulated, a.bootstrap, a.seed, a.power)
+        _print_intervals(ctx, model, ds, model.plant_regulated, a.bootstrap, a.seed, a.power, output)
     elif model.has_gain and model.objective_ is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
 
 
-def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int, seed: int, power: int) -> None:
+def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int, seed: int, power: int,
+                     output: Any) -> None:
     """The model's intervals, each part on its own: a part that cannot be computed (no task objective to resample,
     every resample failing) is said to be not computed, with its reason, and the others are still printed; the
-    model, already written, stands either way."""
+    model, already written, stands either way (rewritten to ``output`` where the resamples gave the pilot's delay
+    and lag intervals, which its task carries)."""
     from workbench.errors import WorkbenchError
+    from workbench.models.fitting import timing_setting
 
     fitted = _as_fitted(ds, model)
+    timing = timing_setting(model)
+
+    def with_objective() -> None:
+        boot = _print_bootstrap(ctx, fitted, system, n_boot, seed, model.gain_method_, timing)
+        if _with_timing_intervals(model, boot):
+            model.save(output)
     if model.objective_ is None and getattr(model, "objective_error_", None):
         ctx.say("intervals of the task objective (Q, R): not computed, since inverse LQR found no objective for the "
                 "gain (above); the gain's own intervals follow")
         parts = [("intervals of K̂", lambda: _print_gain_intervals(ctx, fitted, system, n_boot, seed,
-                                                                   model.gain_method_))]
+                                                                   model.gain_method_, timing))]
     else:
-        parts = [("intervals of K̂, Q and R", lambda: _print_bootstrap(ctx, fitted, system, n_boot, seed,
-                                                                       model.gain_method_))]
+        parts = [("intervals of K̂, Q and R", with_objective)]
     parts.append(("weight ratios", lambda: _print_ratios(ctx, model, ds, n_boot, seed, power)))
     for what, run in parts:
         try:
@@ -113,22 +122,23 @@ def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int
                   file=sys.stderr)
 
 
-def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str) -> None:
-    """Percentile intervals of K̂ alone, over resamples of whole trials (no inverse LQR per resample)."""
-    import numpy as np
-
-    from workbench.method.resampling import bootstrap_gain
+def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str,
+                          timing: Any = "none") -> None:
+    """K̂'s intervals alone (:func:`~workbench.method.resampling.gain_interval`), over resamples of whole trials (no
+    inverse LQR per resample)."""
+    from workbench.method.resampling import GAIN_INTERVAL, bootstrap_gain
 
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
         result = bootstrap_gain(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex, jackknife=False,
+                                timing=timing,
                                 progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.n_failed:
         from workbench.method.resampling import failure_note
 
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
-    lo, hi = np.percentile(np.asarray(result.K_samples), [2.5, 97.5], axis=0)
-    ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % percentile intervals):")
+    lo, hi = result.interval(95.0)
+    ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % intervals, {GAIN_INTERVAL}):")
     for i, u in enumerate(system.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, lo[i], hi[i], strict=True)))
@@ -142,12 +152,14 @@ def _physics_first(system: Any, exc: Exception) -> str:
     return f"the identified plant is not physics: {failure}; so the fit failed: {exc}" if failure else str(exc)
 
 
-def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct") -> None:
-    from workbench.method.resampling import bootstrap
+def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct",
+                     timing: Any = "none") -> Any:
+    from workbench.method.resampling import GAIN_INTERVAL, bootstrap
 
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
-        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex,
+        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain if gain in ("direct", "dmd") else "iv",
+                           executor=ex, timing=timing,
                            progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.stopped:
         print(f"warning: bootstrap {result.stopped}", file=sys.stderr)
@@ -155,8 +167,10 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
         from workbench.method.resampling import failure_note
 
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
-    ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
-            f"{result.ci:g} % percentile intervals):")
+    ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, {result.ci:g} % "
+            f"intervals: the objective's percentiles, K̂'s {GAIN_INTERVAL}):")
+    if result.timing is not None:
+        ctx.say(f"  {result.timing.describe()}")
     for names, lo, hi, what in ((system.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
                                 (system.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
         ctx.say(f"  diag {what}: " + ", ".join(
@@ -165,6 +179,23 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
         ctx.say(f"  K̂ row {u}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, result.K_lo[i], result.K_hi[i],
                                                          strict=True)))
+    return result
+
+
+def _with_timing_intervals(model: Any, result: Any) -> bool:
+    """Write the bootstrap's intervals of the pilot's delay and lag into the model's task (``task_.extra``:
+    ``delay_s_interval``, ``lag_s_interval``); whether there were any."""
+    pt = getattr(result, "timing", None)
+    task = getattr(model, "task_", None)
+    if pt is None or task is None or getattr(model, "timing_", None) is None:
+        return False
+    bounds = {"delay_s_interval": (pt.delay_lo, pt.delay_hi), "lag_s_interval": (pt.lag_lo, pt.lag_hi)}
+    extra = {k: [float(lo), float(hi)] for k, (lo, hi) in bounds.items()
+             if lo is not None and hi is not None and math.isfinite(lo) and math.isfinite(hi)}
+    if not extra:
+        return False
+    model.task_ = task.with_(extra={**task.extra, **extra})
+    return True
 
 
 def _as_fitted(ds: Any, model: Any) -> Any:

@@ -14,7 +14,8 @@ from workbench.errors import UsageError
 __all__ = ["SAMPLE_LOGS", "DEFAULT_MAPPING", "SPEED_RANGE", "MAX_HORIZON_S", "MAX_ROLLOUT_STEPS",
            "MAX_SIMULATED_TRIALS", "MAX_SEED", "MAX_WORKERS", "n_components_arg", "fit_n_components_arg",
            "positive_float", "horizon_arg", "seconds_arg", "online_horizon_arg", "fraction_arg", "int_range",
-           "seed_arg", "count_arg", "positive_int", "rollout_budget", "speed_arg", "int_list", "steps_of", "task_arg"]
+           "seed_arg", "count_arg", "positive_int", "rollout_budget", "speed_arg", "int_list", "steps_of",
+           "timing_arg", "task_arg"]
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
 DEFAULT_MAPPING = "planar_quadrotor"
@@ -37,6 +38,23 @@ def n_components_arg(value: str, rules: tuple[str, ...] = ("bic",)) -> int | str
 
 def fit_n_components_arg(value: str) -> int | str:
     return n_components_arg(value, ("bic", "cv"))
+
+
+def timing_arg(value: str) -> str | tuple[float, float]:
+    """``--timing``: ``identify``, ``none``, or a given ``DELAY,LAG`` in seconds (the reaction delay and lag)."""
+    if value in ("identify", "none"):
+        return value
+    parts = value.split(",")
+    try:
+        delay, lag = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--timing must be 'identify', 'none' or DELAY,LAG in seconds (e.g. 0.2,0.08), got {_shown(value)}"
+        ) from None
+    if not (0 <= delay <= 0.5 and 0 <= lag <= 0.3):
+        raise argparse.ArgumentTypeError(
+            f"--timing: a delay in [0, 0.5] s and a lag in [0, 0.3] s, got {_shown(value)}")
+    return delay, lag
 
 
 def _shown(value: str) -> str:

@@ -28,6 +28,7 @@ from workbench.cli.options import (
     seed_arg,
     speed_arg,
     task_arg,
+    timing_arg,
 )
 from workbench.cli.stdio import input_formats, output_formats
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
@@ -39,6 +40,7 @@ from workbench.defaults import (
     OBJECTIVE_RESAMPLES,
     ONLINE_HORIZON_S,
     STUDY_N_COMPONENTS,
+    TIMING,
 )
 from workbench.models.registry import REGISTRY
 
@@ -228,6 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "squares (iv-or-direct, default; the choice and its reason are printed), least squares "
                         "(direct), the paper's DMD, or instrumental variables only (iv: consistent when the "
                         "operator's variability is autocorrelated)")
+    p.add_argument("--timing", type=timing_arg, default=TIMING, metavar="identify|none|DELAY,LAG",
+                   help="the pilot's reaction delay and neuromuscular lag: identified and used by the gain, the "
+                        "objective and every prediction (identify, default; printed with intervals), none (the "
+                        "paper's u = K x), or given in seconds (e.g. 0.2,0.08)")
     p.add_argument("--seed", type=seed_arg, default=0, help="seed of the k-means initialization (default 0)")
     p.add_argument("--bootstrap", type=count_arg, default=OBJECTIVE_RESAMPLES, metavar="N",
                    help=f"resample the trials N times (default {OBJECTIVE_RESAMPLES}; 0: no intervals) and print 95 "

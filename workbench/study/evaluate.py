@@ -62,7 +62,7 @@ __all__ = [
     "coverage_summary",
     "nominal_coverage",
     "compare",
-    "summarize",
+    "method_means",
     "improvement",
     "method_groups",
     "data_efficiency",
@@ -180,7 +180,7 @@ def one_step_coverage(
     name = method or type(model).__name__
     input_names = list(model.system.input_names)
     for d in _demos(test):
-        mean, Sigma = model.input_distribution(d.x, d.x[0], d.target)
+        mean, Sigma = model.input_distribution_along(d)  # with the pilot's timing: given the trial before each
         sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
         dev = np.abs(d.u - mean)
         for c in n_sigmas:
@@ -286,7 +286,7 @@ def compare(
         for method, model in models.items():
             preds = model.predict_many(
                 d.x[st], int(n_steps), d.target, task_x0s=d.x[0], task_steps=st, samples=int(samples), seed=rng,
-                percentiles=(lo_q, hi_q), clip=clip,
+                percentiles=(lo_q, hi_q), clip=clip, pasts=model.pasts(d, st),
             )
             for s, p in zip(st, preds, strict=True):
                 h = min(int(n_steps), N - 1 - s)
@@ -319,7 +319,7 @@ def compare(
     return pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
 
 
-def summarize(table: pd.DataFrame) -> pd.DataFrame:
+def method_means(table: pd.DataFrame) -> pd.DataFrame:
     """Mean value per metric (rows) and method (columns) of a :func:`compare` table.
 
     Every trial weighs the same: values are first averaged over the starts within a trial.
@@ -330,7 +330,7 @@ def summarize(table: pd.DataFrame) -> pd.DataFrame:
 
 def improvement(table: pd.DataFrame, metric: str, method: str, baseline: str) -> float:
     """How much lower ``method``'s mean ``metric`` is than ``baseline``'s, in percent (the paper's figure)."""
-    s = summarize(table[table["metric"] == metric])
+    s = method_means(table[table["metric"] == metric])
     if metric not in s.index or method not in s.columns or baseline not in s.columns:
         raise DataError(f"table has no {metric!r} for both {method!r} and {baseline!r}")
     a, b = float(s.loc[metric, method]), float(s.loc[metric, baseline])
