@@ -35,7 +35,6 @@ import tempfile
 import threading
 import time
 import zlib
-from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -46,7 +45,8 @@ sys.path.insert(0, str(REPO))
 from workbench.errors import WorkbenchError  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from harness import HANG_S, _call_in_child, _mutate  # noqa: E402 - the shared harness
+import harness  # noqa: E402 - the shared harness
+from harness import HANG_S, _call_in_child, _mutate  # noqa: E402
 
 #: Python's own words in a command's error line (an internal error's class name, a limit, a library's parser).
 PYTHON_TEXT = re.compile(r"Traceback|\w+Error:|Exceeds the limit|integer string conversion|cannot convert float|"
@@ -55,41 +55,28 @@ TLOG = REPO / "sample_logs" / "landing_s00.tlog"
 MAX_INPUT = 10 << 20  # bytes: every generated input file is smaller
 
 
-class Tally:
+class Tally(harness.Tally):
+    """:class:`harness.Tally` with the largest input built per surface (every one under :data:`MAX_INPUT`)."""
+
     def __init__(self) -> None:
-        self.by_surface: dict[str, Counter] = {}
-        self.examples: dict[str, list[str]] = {}
-        self.peak: dict[str, float] = {}
-        self.slowest: dict[str, float] = {}
+        super().__init__()
         self.largest: dict[str, int] = {}
 
     def run(self, surface: str, prepare: Callable[[], tuple[Callable[[], str | None], list[Path]]]) -> None:
         call, inputs = prepare()  # built here, outside the call's time and memory
-        c = self.by_surface.setdefault(surface, Counter())
-        c["calls"] += 1
         size = max([q.stat().st_size for q in inputs if q.is_file()], default=0)
         self.largest[surface] = max(self.largest.get(surface, 0), size)
         try:
             if size >= MAX_INPUT:
                 raise RuntimeError(f"the harness built a {size >> 20} MiB input")
-            kind, detail, took, peak = _call_in_child(call)
+            outcome = _call_in_child(call)
         finally:
             for q in inputs:
                 shutil.rmtree(q, ignore_errors=True) if q.is_dir() else q.unlink(missing_ok=True)
-        self.slowest[surface] = max(self.slowest.get(surface, 0.0), took)
-        self.peak[surface] = max(self.peak.get(surface, 0.0), peak / 2**20)
-        if kind == "clean":
-            c["clean errors"] += 1
-        elif kind == "foreign":
-            c["foreign errors"] += 1
-            self.examples.setdefault(surface, []).append(f"{detail}" + (f" ({call.what})" if hasattr(call, "what")
-                                                                           else ""))
-        if kind == "hang" or took > HANG_S:
-            c["hangs"] += 1
-            self.examples.setdefault(surface, []).append(f"hang: {getattr(call, 'what', detail)}")
-        if kind == "ok" and detail:
-            c["silent wrong results"] += 1
-            self.examples.setdefault(surface, []).append(f"wrong: {detail}")
+        self.record(surface, outcome, getattr(call, "what", None))
+
+    def columns(self, surface: str) -> dict[str, str]:
+        return {**super().columns(surface), "largest input MiB": f"{self.largest[surface] / 2**20:.2f}"}
 
 
 Prepared = tuple[Callable[[], str | None], list[Path]]
@@ -674,16 +661,8 @@ def main() -> None:
         scheduler.wait()
         shutil.rmtree(base, ignore_errors=True)
         shutil.rmtree(fixtures, ignore_errors=True)
-    keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
     print(f"\nEach call forked from a process at {baseline:.0f} MiB (the workbench's imports, the sample logs).")
-    print("| surface | " + " | ".join(keys) + " | peak MiB | longest call s | largest input MiB |")
-    print("|---|" + "---|" * (len(keys) + 3))
-    for name, c in tally.by_surface.items():
-        print(f"| {name} | " + " | ".join(str(c.get(k, 0)) for k in keys)
-              + f" | {tally.peak[name]:.0f} | {tally.slowest[name]:.1f} | {tally.largest[name] / 2**20:.2f} |")
-    for name, ex in tally.examples.items():
-        for e in list(dict.fromkeys(ex))[:8]:
-            print(f"{name}: {e}")
+    tally.print_table(most_examples=8)
 
 
 if __name__ == "__main__":
