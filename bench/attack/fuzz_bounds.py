@@ -21,7 +21,6 @@ largest input file.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import random
 import re
@@ -42,6 +41,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
+from tests import forgeries  # noqa: E402 - the inputs the tests forge too
 from workbench.errors import WorkbenchError  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -194,34 +194,14 @@ def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int
     return call, [path]
 
 
-def _mcap_messages(path: Path) -> tuple[Any, list]:
-    from mcap.reader import make_reader
-
-    with path.open("rb") as f:
-        reader = make_reader(f)
-        return reader.get_summary(), list(reader.iter_messages(log_time_order=False))
-
-
 def attack_mcap_stamp(rng: random.Random, base: Path, source: tuple[Any, list], want) -> Prepared:
     """One message's log_time moved (the MCAP twin of the tlog stamp): the file rewritten by mcap's own writer."""
-    from mcap.writer import Writer
-
     import adapters
 
     summary, messages = source
     k = rng.randrange(len(messages))
     shift = rng.choice([1, -1]) * 2 ** rng.randrange(20, 50)  # ns: 1 ms to 13 days
-    path = base / f"t{rng.randrange(10**9)}.mcap"
-    with path.open("wb") as f:
-        w = Writer(f)
-        w.start()
-        schemas = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
-        channels = {c.id: w.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0), c.metadata)
-                    for c in summary.channels.values()}
-        for i, (_, ch, m) in enumerate(messages):
-            w.add_message(channels[ch.id], max(0, m.log_time + (shift if i == k else 0)), m.data, m.publish_time,
-                          m.sequence)
-        w.finish()
+    path = forgeries.write_mcap(base / f"t{rng.randrange(10**9)}.mcap", summary, messages, k, shift)
 
     def call() -> str | None:
         got = adapters.load(path)
@@ -301,7 +281,7 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
     action = rng.choice(["copy", "copy_other_subject", "copy_shifted", "copy_ulp", "copy_shorter", "fifo",
                          "self_link", "dangling_link", "device", "socket", "nothing"])
     if action in ("copy_shifted", "copy_ulp", "copy_shorter"):  # a copy altered so neither bytes nor ids repeat
-        _altered_copy(victim, victim.with_name(f"{victim.stem} (copy).parquet"), action.removeprefix("copy_"))
+        forgeries.altered_copy(victim, victim.with_name(f"{victim.stem} (copy).parquet"), action.removeprefix("copy_"))
     elif action == "copy":
         shutil.copyfile(victim, victim.with_name(f"{victim.stem} (copy).parquet"))
     elif action == "copy_other_subject":
@@ -333,59 +313,14 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
     return call, [*(q for q in root.rglob("*") if q.is_file() and not q.is_symlink()), root]
 
 
-def _altered_copy(src: Path, dst: Path, how: str) -> None:
-    """``src`` rewritten to ``dst`` with every trial shifted by one sample, 1 ulp off or one sample shorter and
-    renamed, keeping its dataset metadata (a partition of the same dataset to every reader)."""
-    import numpy as np
-    import pyarrow.parquet as pq
-
-    from workbench.data.demonstrations import Demonstration, DemonstrationSet
-
-    ds = DemonstrationSet.load(src)
-    out = []
-    for d in ds:
-        t, x, u = d.t, d.x, d.u
-        if how == "shifted":
-            t, x, u = t[:-1], x[1:], u[1:]
-        elif how == "ulp":
-            x, u = np.nextafter(x, np.inf), np.nextafter(u, -np.inf)
-        else:
-            t, x, u = t[:-1], x[:-1], u[:-1]
-        out.append(Demonstration(t, x, u, {**d.meta, "id": f"{d.id}-{how}"}))
-    info = json.loads(pq.read_metadata(src).metadata[b"workbench"])["dataset"]
-    ds.with_demos(out).save(dst, dataset=info)
-
-
 # -- model files that expand --------------------------------------------------------------------------------------
 def attack_model_size(rng: random.Random, base: Path, model: Path, demos: Path) -> Prepared:
     """A model file whose one array is ``size`` bytes of deflated zeros, declared as such (an honest archive: 2 GiB
     deflate to about 2 MB), given to ``predict``."""
-    import io
-    import zipfile
-
-    import numpy as np
-
     size = rng.choice([8 << 20, 64 << 20, 512 << 20, 2 << 30])
-    path = base / f"m{rng.randrange(10**9)}.npz"
-    n = size // 8
-    with zipfile.ZipFile(model) as zin, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zout:
-        header = json.loads(np.load(io.BytesIO(zin.read("__header__.npy"))).tobytes())
-        name = rng.choice([k for k in header["arrays"] if header["arrays"][k]["shape"]])
-        header["arrays"][name]["shape"] = [n]
-        for info in zin.infolist():
-            if info.filename == f"{name}.npy":
-                buf = io.BytesIO()
-                np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False, "shape": (n,)})
-                with zout.open(info.filename, "w", force_zip64=True) as f:
-                    f.write(buf.getvalue())
-                    for start in range(0, n * 8, 1 << 24):
-                        f.write(bytes(min(1 << 24, n * 8 - start)))
-            elif info.filename == "__header__.npy":
-                buf = io.BytesIO()
-                np.save(buf, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
-                zout.writestr(info.filename, buf.getvalue())
-            else:
-                zout.writestr(info.filename, zin.read(info))
+    arrays = forgeries.model_header(model)["arrays"]
+    name = rng.choice([k for k in arrays if arrays[k]["shape"]])
+    path = forgeries.inflated(model, base / f"m{rng.randrange(10**9)}.npz", name, size)
     out = base / f"p{rng.randrange(10**9)}.csv"
 
     def call() -> str | None:
@@ -622,7 +557,7 @@ def main() -> None:
     if cli_main(["fit", str(demos), "--method", "ioc-only", "--bootstrap", "0", "-q", "-o", str(model)]) != 0:
         raise SystemExit("could not fit the model the model-file surfaces start from")
     sample_mcap = (REPO / "sample_logs" / "landing_s01.mcap").read_bytes()
-    mcap_messages = _mcap_messages(REPO / "sample_logs" / "landing_s01.mcap")
+    mcap_messages = forgeries.mcap_messages(REPO / "sample_logs" / "landing_s01.mcap")
     mcap_ref = adapters.load(REPO / "sample_logs" / "landing_s01.mcap")
     for size in (8 << 20, 64 << 20, 512 << 20, 1 << 30):
         _mcap_bomb(size)  # compressed here, before any call is timed

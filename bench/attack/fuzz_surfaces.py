@@ -21,18 +21,17 @@ import random
 import re
 import shutil
 import signal
-import socket
 import struct
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
+from tests import forgeries  # noqa: E402 - the peers the tests fake too
 from workbench.errors import WorkbenchError  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -195,27 +194,15 @@ def attack_scheduler(rng: random.Random) -> str | None:
         except OSError:
             pass
 
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen()
-    threading.Thread(target=lambda: _accept_once(srv, respond), daemon=True).start()
+    srv, address = forgeries.serve(respond)
     start = time.monotonic()
     try:
-        check_scheduler(f"tcp://127.0.0.1:{srv.getsockname()[1]}", timeout=2)
+        check_scheduler(address, timeout=2)
     finally:
         srv.close()
         if time.monotonic() - start > 5:
             raise RuntimeError(f"{kind}: {time.monotonic() - start:.1f} s")
     return f"{kind}: accepted as a Dask scheduler"
-
-
-def _accept_once(srv, respond):
-    try:
-        conn, _ = srv.accept()
-    except OSError:
-        return
-    with conn:
-        respond(conn)
 
 
 # -- interrupted writes ------------------------------------------------------------------------------------------
