@@ -172,8 +172,6 @@ def _tlog_offsets(data: bytes) -> list[int]:
 
 
 def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int], want) -> Prepared:
-    import adapters
-
     data = bytearray(clean)
     off = rng.choice(offsets)
     (stamp,) = struct.unpack(">Q", data[off : off + 8])
@@ -181,37 +179,32 @@ def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int
     data[off : off + 8] = struct.pack(">Q", max(0, stamp + shift))
     path = base / f"s{rng.randrange(10**9)}.tlog"
     path.write_bytes(bytes(data))
+    return _loads_whole(path, want, f"stamp +{shift} us at byte {off}"), [path]
+
+
+def _loads_whole(path: Path, want: tuple[int, int], what: str) -> Callable[[], str | None]:
+    """The call: ``path`` loads into ``want`` = (trials, samples). One bad stamp costs at most its sample: the grid
+    may lose a step where it sat, never a trial or a run."""
 
     def call() -> str | None:
+        import adapters
+
         got = adapters.load(path)
         n_demos, n_samples = want
-        # one stamp costs at most its sample: the grid may lose a step where it sat, never a trial or a run
         if len(got) != n_demos or got.n_samples < n_samples - 3:
-            return f"stamp +{shift} us at byte {off}: {len(got)} trials / {got.n_samples} samples, not " \
-                   f"{n_demos} / {n_samples}"
+            return f"{what}: {len(got)} trials / {got.n_samples} samples, not {n_demos} / {n_samples}"
         return None
 
-    return call, [path]
+    return call
 
 
 def attack_mcap_stamp(rng: random.Random, base: Path, source: tuple[Any, list], want) -> Prepared:
     """One message's log_time moved (the MCAP twin of the tlog stamp): the file rewritten by mcap's own writer."""
-    import adapters
-
     summary, messages = source
     k = rng.randrange(len(messages))
     shift = rng.choice([1, -1]) * 2 ** rng.randrange(20, 50)  # ns: 1 ms to 13 days
     path = forgeries.write_mcap(base / f"t{rng.randrange(10**9)}.mcap", summary, messages, k, shift)
-
-    def call() -> str | None:
-        got = adapters.load(path)
-        n_demos, n_samples = want
-        if len(got) != n_demos or got.n_samples < n_samples - 3:
-            return f"log_time {shift:+d} ns on message {k} ({messages[k][1].topic}): {len(got)} trials / " \
-                   f"{got.n_samples} samples, not {n_demos} / {n_samples}"
-        return None
-
-    return call, [path]
+    return _loads_whole(path, want, f"log_time {shift:+d} ns on message {k} ({messages[k][1].topic})"), [path]
 
 
 # -- mapping values ------------------------------------------------------------------------------------------------
