@@ -12,10 +12,13 @@ from rerun.chunk import RrdReader
 __all__ = ["blueprint_names", "key_texts", "read_rrd"]
 
 
-def read_rrd(path: Path) -> dict[str, dict[str, list]]:
-    """Per entity path: every column of every recording chunk, static ones under key ``static:<column>``."""
+def read_rrd(path: Path, static: bool = True) -> dict[str, dict[str, list]]:
+    """Per entity path: every column of every recording chunk, static ones under key ``static:<column>`` (left out
+    with ``static=False``: then an entity logged only once, statically, is absent)."""
     out: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for chunk in RrdReader(path).stream():
+        if chunk.is_static and not static:
+            continue
         batch = chunk.to_record_batch()
         for name in batch.schema.names:
             if name == "rerun.controls.RowId":
