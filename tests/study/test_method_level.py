@@ -123,21 +123,50 @@ def test_paired_rows_say_which_question_they_answer():
     assert "holds the fitted models fixed" in stats.text()
 
 
-def test_a_split_refits_the_fitted_models_settings_and_fallback():
-    """The refits take the settings cross-validation chose and its fallback to K̂x: a fallen-back proposed model
-    scores exactly as IOC-only on every split, so the method-level difference is 0, never a made-up gain."""
-    from workbench.models.factory import make_models
+def test_every_split_reruns_every_choice_on_its_own_training_part(monkeypatch):
+    """Each split reruns the default model's cross-validation (and so its fallback) and identifies its own plant on its
+    training part: neither ever sees a trial that split scores (the previous main held the study's choice fixed)."""
+    import workbench.models.autoconfig as ac
     from workbench.plant.system import planar_quadrotor
     from workbench.sim.operators import lqr_operator_demos
-    from workbench.study.method_level import split_scores, split_tasks
+    from workbench.study.method_level import SplitPlan, split_scores, split_tasks
 
-    system = planar_quadrotor()
     ds = lqr_operator_demos(n_trials=6, seed=11)
-    models = make_models(system, ["proposed", "ioc_only"], n_components=1)
-    models = {k: m.fit(ds) for k, m in models.items()}
-    models["proposed"].variability_mean_ = False
-    tasks, sizes, units = split_tasks({"LQR": ds}, {"LQR": models}, "rmse_position", 20, 10, 0.34, 3, seed=0)
+    seen: dict[str, list[set[str]]] = {"cv": [], "plant": []}
+
+    def choose(model, demos, **kwargs):
+        seen["cv"].append({d.id for d in demos})
+        return ac.AutoSettings(1, 1.0, "prediction", 2, ({"n_components": 1, "reg_covar": 1.0, "heldout_rmse": 1.0,
+                                                          "chosen": True},), 1.0, True, 0.0, 0.1)
+
+    def plant(train):
+        seen["plant"].append({d.id for d in train})
+        return planar_quadrotor()
+
+    monkeypatch.setattr(ac, "choose_settings", choose)
+    plan = SplitPlan(plant=plant, n_components="cv", seed=0)
+    tasks, sizes, units = split_tasks({"LQR": ds}, plan, "rmse_position", 20, 10, 0.34, 3, seed=0)
     assert sizes == {"LQR": (4, 2)} and units == {"LQR": "trials"} and len(tasks) == 3
-    scores = pd.concat([split_scores(t) for t in tasks], ignore_index=True)
+    parts = [split_scores(t) for t in tasks]
+    for task, part, cv, made in zip(tasks, parts, seen["cv"], seen["plant"], strict=True):
+        test_ids = {ds[int(i)].id for i in task[3]}
+        assert cv and made and not (cv | made) & test_ids  # only the split's training trials
+        assert set(part["trial"]) == test_ids and part["fell_back"].all()
+    scores = pd.concat(parts, ignore_index=True)
     (d,) = method_differences(scores, sizes, "rmse_position", "proposed", ["ioc_only"])
-    assert d.changes == pytest.approx((0.0, 0.0, 0.0), abs=1e-12) and not d.shown
+    # fallen back in every split: the same predictions as IOC-only, said in words, no interval (never [0, 0])
+    assert d.n_fallback == 3 and d.identical and not d.shown
+    assert d.changes == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    assert d.sentence().startswith("the same predictions") and "fell back to K̂x in all 3 splits" in d.sentence()
+    assert "%" not in d.sentence() and d.lo != d.lo
+
+
+def test_no_interval_of_zero_width():
+    """Splits that all give the same change have no spread: no interval, said in words (the previous main printed
+    "[+0 %, +0 %]")."""
+    mean, lo, hi, p, se, df = corrected_t([0.05, 0.05, 0.05, 0.05], n_train=24, n_test=6)
+    assert mean == pytest.approx(0.05) and np.isnan(lo) and np.isnan(hi) and np.isnan(p) and se == 0
+    from workbench.study.paired import difference_sentence
+
+    words = difference_sentence(mean, lo, hi)
+    assert words.startswith("no interval") and "%" not in words

@@ -30,7 +30,7 @@ from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_landings
 from workbench.sim.operators import LQROperator, erratic_operator_demos, lqr_operator_demos
 from workbench.study import evaluate as ev
-from workbench.study.method_level import _cheap, corrected_t, method_differences, split_scores, split_tasks
+from workbench.study.method_level import SplitPlan, _refit, corrected_t, method_differences, split_scores, split_tasks
 
 pytestmark = pytest.mark.slow
 
@@ -70,7 +70,8 @@ def _pool_means(models: dict, pool) -> dict[str, float]:
 def _fit(models: dict, train) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return {k: m.fit(train) for k, m in _cheap(models).items()}
+        plant = next(iter(models.values())).system
+        return _refit(SplitPlan(plant, G, 0, tuple(models)), train)[0]
 
 
 _CACHE: dict[str, dict] = {}
@@ -93,7 +94,8 @@ def _family_run(family: str) -> dict:
     intervals, self_shown, self_cover = [], 0, []
     for r in range(REPLICATES):
         ds = sim(N_TRIALS, _seed(family, r))
-        tasks, sizes, units = split_tasks({family: ds}, {family: templates}, METRIC, N_STEPS, STRIDE, TEST_SIZE,
+        plan = SplitPlan(system, G, 0, ("proposed", "ioc_only"))
+        tasks, sizes, units = split_tasks({family: ds}, plan, METRIC, N_STEPS, STRIDE, TEST_SIZE,
                                           SPLITS, seed=r)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

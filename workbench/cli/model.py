@@ -12,6 +12,7 @@ from workbench.cli.context import Context
 from workbench.cli.options import steps_of
 from workbench.cli.reading import demos_at_model_dt, load_demos, load_model_file, pilot_only, system_for
 from workbench.cli.writing import print_plant
+from workbench.defaults import DEFAULT_N_COMPONENTS
 from workbench.errors import DataError, ModelError, UsageError
 
 __all__ = []
@@ -27,12 +28,13 @@ def cmd_fit(ctx: Context) -> int:
         from workbench.models.registry import method
 
         kind = method(a.method).load_class()
-        components = a.n_components
-        if components == "cv" and not kind.chooses_settings:
-            raise UsageError("--n-components cv chooses the proposed model's settings; use a number or 'bic' with "
-                            f"--method {a.method}")
+        # not given: the default model's rule (its baselines take the paper's G)
+        components = DEFAULT_N_COMPONENTS if a.n_components is None else a.n_components
+        if a.n_components == "cv" and not kind.chooses_settings:
+            raise UsageError("--n-components cv chooses the proposed model's settings; use a number, 'bic' or "
+                             f"'paper' with --method {a.method}")
         if components == "bic" and kind.has_components:
-            from workbench.study.pipeline import select_components
+            from workbench.models.selection import select_components
 
             progress.add_task("choosing the number of components by BIC", total=None)
             components = select_components(ds, system, seed=a.seed)

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from types import SimpleNamespace
 from typing import Any
 
@@ -28,6 +30,7 @@ __all__ = [
     "goal_of",
     "references",
     "fit_gain",
+    "shared_gains",
     "fit_objective_or_reason",
     "state_envelope",
     "envelope_exit",
@@ -98,15 +101,42 @@ def references(demos: Sequence[Demonstration], n: int) -> tuple[list[np.ndarray]
     return [np.zeros(n) for _ in demos], False
 
 
+# Gains already estimated inside a `shared_gains` block, by the trials (their identities), references, plant and method.
+_GAINS: ContextVar[dict | None] = ContextVar("workbench_shared_gains", default=None)
+
+
+@contextmanager
+def shared_gains() -> Iterator[None]:
+    """Inside this block, :func:`fit_gain` on the same trial objects (with the same references, plant and method)
+    estimates K̂ once: the candidates of one cross-validation fold all fit the same gain. The trials must stay alive
+    (and unchanged) for the block, as they do for the folds of one cross-validation."""
+    token = _GAINS.set({})
+    try:
+        yield
+    finally:
+        _GAINS.reset(token)
+
+
 def fit_gain(
     demos: Sequence[Demonstration], refs: Sequence[np.ndarray], system: LinearSystem, method: str
 ) -> tuple[np.ndarray, GainChoice]:
     """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.method.gain.choose_gain` on the shifted states, and which
     estimator made it (``method`` may be the rule ``"iv-or-direct"``)."""
+    memo = _GAINS.get()
+    key = None
+    if memo is not None:
+        key = (tuple(id(d) for d in demos), b"".join(np.asarray(r, dtype=float).tobytes() for r in refs), id(system),
+               method)
+        if key in memo:
+            K, choice = memo[key]
+            return K.copy(), choice
     shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id, meta=getattr(d, "meta", {}))  # meta: the flight mode
                 for d, r in zip(demos, refs, strict=True)]
     K, choice = choose_gain(shifted, system, method)
-    return np.ascontiguousarray(K), choice
+    K = np.ascontiguousarray(K)
+    if memo is not None:
+        memo[key] = (K.copy(), choice)
+    return K, choice
 
 
 def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | None, str | None]:
