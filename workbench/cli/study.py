@@ -188,6 +188,7 @@ def _print_study(ctx: Context, result: Any) -> None:
     if rows:
         ctx.say_table(["label", "method", "position RMSE", "velocity RMSE", "MC band"], rows,
                       title="held-out prediction error (mean of trials [95 % interval])")
+    _print_inputs(ctx, result.table)
     summary = result.summary()
     ctx.say_table([str(c) for c in summary.columns],
                   [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row]
@@ -216,6 +217,26 @@ def _print_study(ctx: Context, result: Any) -> None:
     _print_objective_comparison(ctx, result)
     for line in result.verdicts():
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
+
+
+def _print_inputs(ctx: Context, table: Any) -> None:
+    """Each method's held-out error in predicting the pilot's own input, against the models with no pilot, and the
+    headline sentences that name the no-pilot model they compare with."""
+    from workbench.study.input_prediction import input_headlines, input_scores, title
+    from workbench.study.scores import fmt
+
+    scores = input_scores(table)
+    if scores.empty:
+        return
+    rows = []
+    for (label, method), g in scores.groupby(["label", "method"], sort=False):
+        cell = {r.metric: fmt(r.value, r.lo, r.hi) for r in g.itertuples(index=False)}
+        rows.append([label, title(method), cell.get("input_step", "—"), cell.get("input_horizon", "—")])
+    ctx.say_table(["label", "method", "one step ahead", "over the horizon"], rows,
+                  title="held-out error in predicting the pilot's input (RMS over the inputs, mean of trials "
+                        "[95 % interval])")
+    for line in input_headlines(table):
+        ctx.say(line)
 
 
 def _print_objective_comparison(ctx: Context, result: Any) -> None:

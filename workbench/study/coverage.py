@@ -63,7 +63,7 @@ def _pool_means(fitted: dict, pool) -> dict[str, float]:
     """Per method, the mean over trials of each trial's mean error over its windows (as a split scores)."""
     from workbench.study import evaluate as ev
 
-    table = ev.compare(fitted, pool, n_steps=N_STEPS, starts=STRIDE)
+    table = ev.compare(fitted, pool, n_steps=N_STEPS, starts=STRIDE, inputs=False)
     table = table[table["metric"] == METRIC]
     return table.groupby(["method", "trial"])["value"].mean().groupby("method").mean().to_dict()
 

@@ -262,7 +262,8 @@ def split_scores(task: tuple) -> pd.DataFrame:
     cols = ["label", "split", "trial", "method", "value", "fell_back"]
     if not fitted:
         return pd.DataFrame(columns=cols)
-    table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride)
+    table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride,
+                       inputs=False)
     table = table[table["metric"] == metric]
     per = table.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
     out = per.assign(label=label, split=j, fell_back=fell_back)[cols]
