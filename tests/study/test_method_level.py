@@ -170,3 +170,18 @@ def test_no_interval_of_zero_width():
 
     words = difference_sentence(mean, lo, hi)
     assert words.startswith("no interval") and "%" not in words
+
+
+def test_a_simulated_run_keeps_every_splits_change_and_fallback():
+    """The coverage study's run (cheap form: fixed G, 2 splits): one change and one fallback flag per split, the
+    self-comparison on each split's halves, and intervals from the first J splits."""
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.families import family
+    from workbench.study.coverage import run_interval, simulated_run
+
+    run = simulated_run(family("LQR"), "LQR", 5, planar_quadrotor(), n_trials=6, test_size=0.34, splits=2,
+                        n_components=1)
+    assert (run.n_train, run.n_test) == (4, 2) and len(run.changes) == len(run.fell_back) == 2
+    assert len(run.self_changes) == 2 and not any(run.fell_back)  # a fixed G never falls back
+    mean, lo, hi = run_interval(run, 2)
+    assert mean == pytest.approx(np.mean(run.changes[:2])) and lo < mean < hi
