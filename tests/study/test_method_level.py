@@ -185,3 +185,26 @@ def test_a_simulated_run_keeps_every_splits_change_and_fallback():
     assert len(run.self_changes) == 2 and not any(run.fell_back)  # a fixed G never falls back
     mean, lo, hi = run_interval(run, 2)
     assert mean == pytest.approx(np.mean(run.changes[:2])) and lo < mean < hi
+
+
+def test_the_studys_own_split_is_its_first_method_level_split_and_a_refit_gives_its_scores():
+    """With a fixed plant the study's own random split is the first of its method-level splits, its fits reused:
+    refitting that split as every other split is refitted gives the same change (so nothing but time is saved)."""
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.operators import lqr_operator_demos
+    from workbench.study.method_level import SplitPlan, split_scores, split_tasks
+    from workbench.study.pipeline import run_study
+
+    ds = lqr_operator_demos(n_trials=8, seed=13)
+    plant = planar_quadrotor()
+    res = run_study(ds, plant, n_components=1, samples=0, efficiency=None, n_steps=20, method_splits=3,
+                    test_size=0.25)
+    (row,) = [d for d in res.statistics.method_level if d.baseline == "ioc_only"]
+    test_ids = {d.id for d in res.test["LQR"]}
+    whole = res.train["LQR"].with_demos([*res.train["LQR"], *res.test["LQR"]])
+    first = {"LQR": [i for i, d in enumerate(whole) if d.id in test_ids]}
+    tasks, _, _ = split_tasks({"LQR": whole}, SplitPlan(plant, 1, 0), "rmse_position", 20, 20, 0.25, 3, seed=0,
+                              first=first)
+    assert {whole[int(i)].id for i in tasks[0][3]} == test_ids
+    fresh = split_scores(tasks[0]).groupby("method")["value"].mean()
+    assert row.changes[0] == pytest.approx(1 - fresh["proposed"] / fresh["ioc_only"], rel=1e-9)

@@ -274,8 +274,9 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
             "covariance metric, with profile intervals simultaneous over each part's ratios; \"not of this form\": "
             "the gain departs from every diagonal cost's by more than its spread, and the row gives the closest "
             "diagonal cost with sandwich intervals; \"not identifiable\": the interval spans more than ×10, with the "
-            "demonstrations a simulated power curve says would make it narrower than ×2: the fitted model flies n, "
-            "2n and 4n demonstrations and the number comes from " + LAW + ")")
+            "demonstrations a simulated power curve says would make it narrower than ×2: the fitted model flies n/2, "
+            "n and 2n demonstrations (at least 3 sets of each, more until the curve is monotone) and the number, "
+            "with its 90 % interval over the sets, comes from " + LAW + ")")
 
 
 def cmd_report(ctx: Context) -> int:

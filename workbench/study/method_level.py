@@ -365,11 +365,15 @@ def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed",
 def split_tasks(
     by_label: Mapping[str, DemonstrationSet], plan: SplitPlan | Mapping[str, SplitPlan], metric: str, n_steps: int,
     stride: int | None, test_size: float, splits: int, seed: int, share: Any = None,
+    first: Mapping[str, Sequence[int]] | None = None,
 ) -> tuple[list[tuple], dict[str, tuple[int, int]], dict[str, str]]:
     """The split tasks of every label (for :func:`split_scores`), each label's (n_train, n_test) and units.
 
     ``plan``: what every split reruns (:class:`SplitPlan`), one for all labels or one per label.
     ``share``: the executor's ``share`` (a worker then reads the label's trials from where they were staged).
+    ``first``: per label, the test trials' indices of its first split (a random split already made, e.g. the
+    study's own, whose scores the caller has); the other ``splits − 1`` are drawn here. Only where the label's
+    splits are of trials (not whole subjects).
     """
     tasks, sizes, units = [], {}, {}
     for key, (label, ds) in enumerate(by_label.items()):
@@ -378,7 +382,10 @@ def split_tasks(
             continue
         ref = share(ds) if share is not None else ds
         n_trials = []
-        for j, test_units in enumerate(_split_indices(len(groups), test_size, splits, seed, key)):
+        drawn = _split_indices(len(groups), test_size, splits, seed, key)
+        if first is not None and label in first and what == "trials":
+            drawn = [np.asarray(first[label], dtype=int), *drawn[: splits - 1]]
+        for j, test_units in enumerate(drawn):
             test_idx = np.array(sorted(i for u in test_units for i in groups[int(u)]))
             n_trials.append(len(test_idx))
             tasks.append((label, j, ref, test_idx, plan if isinstance(plan, SplitPlan) else plan[label], metric,

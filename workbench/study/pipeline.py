@@ -303,9 +303,13 @@ def run_study(
         t0 = time.perf_counter()
         plan = SplitPlan(plant=plant_spec, n_components=n_components, seed=seed)
         with_proposed = [lb for lb, part in zip(splits, parts, strict=True) if "proposed" in part.fitted]
+        # a fixed plant: the study's own split is one of the random splits, and its fits are that split's refits
+        # (the same settings, data and seeds give the same mean predictions), so its scores are reused
+        own = {} if callable(plant_spec) else {lb: (tr, te, part) for (lb, (tr, te)), part
+                                               in zip(splits.items(), parts, strict=True) if lb in with_proposed}
         method_level = _method_level({lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()
                                       if lb in with_proposed}, plan, system,
-                                     n_steps, stride, test_size, int(method_splits), seed, executor, progress)
+                                     n_steps, stride, test_size, int(method_splits), seed, executor, progress, own)
         timings["method-level splits"] = time.perf_counter() - t0
     statistics = _statistics(table, demos, system, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
@@ -654,10 +658,13 @@ def _settings_text(models: dict[str, Any]) -> str:
 
 def _method_level(by_label: dict[str, DemonstrationSet], plan: SplitPlan, system: Any,
                   n_steps: int, stride: int | None, test_size: float, splits: int, seed: int, executor: Any,
-                  progress: Callable[[], Any] | None) -> Any:
+                  progress: Callable[[], Any] | None, own: dict[str, tuple] | None = None) -> Any:
     """Every method rerun (:class:`~workbench.study.method_level.SplitPlan`: the proposed model and the baselines the
     verdicts judge it against) on ``splits`` random splits of each label's trials, scored on the headline metric, as
-    :class:`~workbench.study.method_level.MethodDifference` rows (:mod:`workbench.study.method_level`)."""
+    :class:`~workbench.study.method_level.MethodDifference` rows (:mod:`workbench.study.method_level`).
+
+    ``own``: per label the study's (train, test, part) where its fits are a split's refits (a fixed plant): that
+    split is the first of the label's and its scores are the study's."""
     from workbench.study.evaluate import primary_metric
     from workbench.study.executor import serial
     from workbench.study.method_level import method_differences, split_scores, split_tasks
@@ -666,19 +673,37 @@ def _method_level(by_label: dict[str, DemonstrationSet], plan: SplitPlan, system
     metric = primary_metric(system)
     if not by_label:
         return None
+    own = own or {}
+    first = {lb: [i for i, d in enumerate(by_label[lb]) if d.id in {t.id for t in te}]
+             for lb, (_, te, _) in own.items()}
     tasks, sizes, units = split_tasks(by_label, plan, metric, n_steps, stride, test_size, splits, seed,
-                                      share=ex.share if getattr(ex, "parallel", False) else None)
+                                      share=ex.share if getattr(ex, "parallel", False) else None, first=first)
     if not tasks:
         return None
+    reused = {i: _own_scores(own[t[0]][2], t[0], metric, plan.methods) for i, t in enumerate(tasks)
+              if t[1] == 0 and t[0] in own and units.get(t[0]) == "trials"}
+    todo = [t for i, t in enumerate(tasks) if i not in reused]
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
-        task = p.add_task(f"refitting on {splits} splits", total=len(tasks)) if p is not None else None
-        parts = ex.map(split_scores, tasks, progress=None if p is None else lambda d, t: p.update(task, completed=d))
+        task = p.add_task(f"refitting on {splits} splits", total=len(todo)) if p is not None else None
+        done = iter(ex.map(split_scores, todo, progress=None if p is None else
+                           lambda d, t: p.update(task, completed=d)))
+    parts = [reused[i] if i in reused else next(done) for i in range(len(tasks))]
     sizes = {lb: sz for lb, sz in sizes.items()}
     scores = pd.concat([pt for pt in parts if len(pt)], ignore_index=True) if any(len(pt) for pt in parts) else None
     if scores is None:
         return None
     return tuple(method_differences(scores, sizes, metric, "proposed", units=units))
+
+
+def _own_scores(part: _LabelPart, label: str, metric: str, methods: Sequence[str]) -> pd.DataFrame:
+    """The study's own split as a method-level split's rows (:func:`~workbench.study.method_level.split_scores`):
+    each method's per-trial mean of ``metric``, and whether the proposed model fell back."""
+    model = part.fitted.get("proposed")
+    fell = bool(model is not None and model.chooses_settings and model.auto_ is not None and model.auto_.fallback)
+    rows = part.table[(part.table["metric"] == metric) & part.table["method"].isin(list(methods))]
+    per = rows.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
+    return per.assign(label=label, split=0, fell_back=fell)[["label", "split", "trial", "method", "value", "fell_back"]]
 
 
 def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -> pd.DataFrame:

@@ -221,7 +221,7 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
     demos : DemonstrationSet
         Its training demonstrations (the task: starts, lengths, targets).
     sizes : sequence of int, optional
-        Numbers of demonstrations to simulate; default ``n``, ``2n`` and ``4n`` for ``n`` training trials.
+        Numbers of demonstrations to simulate; default ``n/2``, ``n`` and ``2n`` for ``n`` training trials.
     n_boot : int
         Resampled gains per simulated set for the gain's covariance.
     ratios : sequence of str, optional
@@ -233,7 +233,9 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
     from workbench.method.resampling import bootstrap_gain
 
     n0 = len(demos)
-    sizes = sorted({int(v) for v in (sizes if sizes is not None else (n0, 2 * n0, 4 * n0))})
+    # half, once and twice the trials at hand: the sizes tests/study/test_power_sim.py checks the law's
+    # extrapolation from (to 4n)
+    sizes = sorted({int(v) for v in (sizes if sizes is not None else (max(2, n0 // 2), n0, 2 * n0))})
     if not sizes or sizes[0] < 2:
         raise DataError(f"power_curve: sizes must be numbers of demonstrations ≥ 2, got {sizes}")
     if int(repeats) < 1:
@@ -244,7 +246,7 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
     def one_set(n: int, rep: int) -> None:
         sim = simulate_like(model, demos, n, seed=int(rng.integers(2**31)))
         try:
-            # no jackknife: n refits per simulated set (up to 4n trials) for a span the law extrapolates
+            # no jackknife: n refits per simulated set (up to 2n trials) for a span the law extrapolates
             gains = bootstrap_gain(as_fitted(model, sim), model.system, n_boot=n_boot, method=gain,
                                    seed=int(rng.integers(2**31)), jackknife=False)
             spans = _log_spans(gains, model.system, ci, ratios)
