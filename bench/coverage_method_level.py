@@ -38,6 +38,7 @@ RESULTS = ROOT / "bench" / "coverage_method_level.jsonl"
 SEED0 = 9000  # this study's seeds; the acceptance test's start at 7000
 N_TRIALS, TEST_SIZE = 30, 0.2
 J_CHOICES = (4, 6, 8, 10, 12, 16)
+FACTORS = (1.0, 2.0, 4.0)  # multiples of Nadeau & Bengio's overlap term weighed beside it
 
 
 def _seed(family: str, k: int) -> int:
@@ -100,8 +101,9 @@ def summary(path: Path, ci: float = 95.0) -> str:
     from workbench.study.coverage import CoverageRun, run_interval
 
     rec = _records(path)
-    lines = ["| pilot | truth [%] (± MC SE, sets; fell back) | runs | J | covers | zero-width | median width "
-             "[points] | oracle width | self: difference shown |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| pilot | truth [%] (± MC SE, sets; fell back) | runs | J | covers | words: fell back in every split | "
+             "zero-width | median width [points] | oracle width | self: difference shown |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for name in dict.fromkeys(r["family"] for r in rec):
         truth = [r["change"] for r in rec if r["kind"] == "truth" and r["family"] == name]
         fells = sum(r["fell_back"] for r in rec if r["kind"] == "truth" and r["family"] == name)
@@ -112,9 +114,12 @@ def summary(path: Path, ci: float = 95.0) -> str:
         mu, se = float(np.mean(truth)), float(np.std(truth, ddof=1) / math.sqrt(len(truth))) if len(truth) > 1 else 0
         for J in (j for j in J_CHOICES if j <= min(len(r.changes) for r in runs)):
             iv = [run_interval(r, J, ci) for r in runs]
+            # a run whose proposed method fell back in every split says so in words: right where the truth is 0
+            same = [all(c == 0.0 for c in r.changes[:J]) for r in runs]
             means = np.array([m for m, _, _ in iv])
-            covers = sum(lo <= mu <= hi for _, lo, hi in iv)
-            zero = sum(not (hi > lo) for _, lo, hi in iv)
+            covers = sum((abs(mu) <= 2 * se) if s else bool(lo <= mu <= hi)
+                         for (_, lo, hi), s in zip(iv, same, strict=True))
+            zero = sum(bool(np.isfinite(lo) and lo == hi) for _, lo, hi in iv)
             widths = [100 * (hi - lo) for _, lo, hi in iv if hi > lo]
             # the oracle: the width the estimates' own spread over independent samples calls for
             z = sps.norm.ppf(0.5 + ci / 200)
@@ -122,8 +127,28 @@ def summary(path: Path, ci: float = 95.0) -> str:
             selfs = [run_interval(r, J, ci, self_comparison=True) for r in runs if len(r.self_changes) >= J]
             shown = sum(lo > 0 or hi < 0 for _, lo, hi in selfs)
             lines.append(f"| {name} | {100 * mu:+.1f} (± {100 * se:.1f}, {len(truth)}; {fells}) | {len(runs)} | {J} | "
-                         f"{covers}/{len(runs)} | {zero} | {np.median(widths) if widths else math.nan:.1f} | "
-                         f"{oracle:.1f} | {shown}/{len(selfs)} |")
+                         f"{covers}/{len(runs)} | {sum(same)} | {zero} | "
+                         f"{np.median(widths) if widths else math.nan:.1f} | {oracle:.1f} | {shown}/{len(selfs)} |")
+    lines += ["", "Coverage with the overlap term n_test/n_train of the corrected resampled t multiplied by a factor "
+              "(1: Nadeau & Bengio's), and the median width [points]:", "",
+              "| pilot | J | " + " | ".join(f"×{f:g}" for f in FACTORS) + " |", "|---|---|" + "---|" * len(FACTORS)]
+    for name in dict.fromkeys(r["family"] for r in rec):
+        truth = [r["change"] for r in rec if r["kind"] == "truth" and r["family"] == name]
+        runs = [CoverageRun(name, r["seed"], r["n_train"], r["n_test"], tuple(r["changes"]), tuple(r["fell_back"]),
+                            tuple(r["self_changes"])) for r in rec if r["kind"] == "run" and r["family"] == name]
+        if len(truth) < 2 or not runs:
+            continue
+        mu, se = float(np.mean(truth)), float(np.std(truth, ddof=1) / math.sqrt(len(truth)))
+        for J in (j for j in J_CHOICES if j <= min(len(r.changes) for r in runs)):
+            cells = []
+            for f in FACTORS:
+                iv = [run_interval(r, J, ci, factor=f) for r in runs]
+                same = [all(c == 0.0 for c in r.changes[:J]) for r in runs]
+                k = sum((abs(mu) <= 2 * se) if s else bool(lo <= mu <= hi) for (_, lo, hi), s in zip(iv, same,
+                                                                                                    strict=True))
+                w = [100 * (hi - lo) for _, lo, hi in iv if hi > lo]
+                cells.append(f"{k}/{len(runs)} ({np.median(w) if w else math.nan:.1f})")
+            lines.append(f"| {name} | {J} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

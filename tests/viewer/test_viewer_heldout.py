@@ -142,3 +142,17 @@ def test_the_pilots_own_input_is_judged_in_evaluate_report_and_viewer(tmp_path):
                in line for line in out.splitlines())
     for r in evaluated.itertuples(index=False):
         assert fmt(r.value, r.lo, r.hi) in out
+
+
+def test_the_demos_report_and_output_print_no_number_where_nothing_is_identified():
+    """No interval of [0, 0], [0, ∞] or ∞ as a number, no zero-width difference, no "−0.0 %" — in the demo's
+    report and in what it printed (evaluate's printer) (issue 40 §3)."""
+    import re
+
+    recordings.cli_recordings()
+    demo = recordings.workdir() / "demo"
+    for text in ((demo / "report.md").read_text(encoding="utf-8"), (demo / "said.txt").read_text(encoding="utf-8")):
+        assert "∞" not in text and not re.search(r"\binf\b", text)
+        assert not re.search(r"\[\s*0(\.0+)?\s*,\s*0(\.0+)?\s*\]", text)  # [0, 0]
+        assert not re.search(r"\[[+−-]?0(\.0+)? %, [+−-]?0(\.0+)? %\]", text)  # [+0 %, +0 %]
+        assert not re.search(r"[−-]0\.0 %", text)

@@ -244,7 +244,7 @@ class HumanBehaviorModel(TaskGMRModel):
 
     def _fit_auto(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Choose the "cv" settings by cross-validation, then fit with them (the settings stay "cv")."""
-        from workbench.models.autoconfig import _CV_MAX_ITER, NoCandidateFitted, choose_settings
+        from workbench.models.autoconfig import _CV_MAX_ITER, _CV_TOL, NoCandidateFitted, choose_settings
 
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
         if len(ds) < 2:
@@ -256,10 +256,11 @@ class HumanBehaviorModel(TaskGMRModel):
             # every fold too small to fit on (a flight of two or three segments): as with one demonstration, the
             # defaults on all of them, and the reason said, rather than no model
             return self._fit_uncrossed(demos, ds, because=str(exc))
-        # the chosen candidate is fitted as it was scored: EM capped as the candidates were
+        # the chosen candidate is fitted as it was scored: EM capped and stopped as the candidates' was
         chosen = type(self)(self.system, **{**self.get_params(), "n_components": auto.n_components,
                                             "reg_covar": auto.reg_covar,
-                                            "max_iter": min(int(self.max_iter), _CV_MAX_ITER)}).fit(demos)
+                                            "max_iter": min(int(self.max_iter), _CV_MAX_ITER),
+                                            "tol": max(float(self.tol), _CV_TOL)}).fit(demos)
         self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
         self.auto_ = auto
         # the variability model did not lower the held-out error: predict with K̂x alone (said by auto_.describe())

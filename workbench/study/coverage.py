@@ -116,14 +116,15 @@ def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, tes
     return CoverageRun(family, seed, n_train, n_test, changes, fell, tuple(selfs))
 
 
-def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_comparison: bool = False
-                 ) -> tuple[float, float, float]:
+def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_comparison: bool = False,
+                 factor: float = 1.0) -> tuple[float, float, float]:
     """The corrected resampled t interval of a run from its first ``J`` splits (all by default): (mean, lo, hi);
     NaN bounds where the splits did not vary. ``self_comparison``: the self-comparison's interval (each copy trained
-    on half the split's training part)."""
+    on half the split's training part). ``factor``: the overlap term ``n_test/n_train`` multiplied by it (1: Nadeau &
+    Bengio's), for a study that weighs other corrections."""
     c = list(run.self_changes if self_comparison else run.changes)[: J or None]
     n_train = run.n_train // 2 if self_comparison else run.n_train
-    mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci)
+    mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1))
     return mean, lo, hi
 
 

@@ -150,13 +150,14 @@ class MethodDifference:
         return f"{self.n_fallback} of {self.n_splits}" if self.n_fallback else "none"
 
 
-def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0
-                ) -> tuple[float, float, float, float, float, float]:
+def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0,
+                overlap: float | None = None) -> tuple[float, float, float, float, float, float]:
     """Mean, interval, two-sided p, standard error and df of the corrected resampled t (Nadeau & Bengio 2003).
 
     ``var = (1/J + n_test/n_train) · s²`` of the ``J`` per-split values; t reference on ``J − 1`` df. Where every
     split gave the same value there is no spread to make an interval from: the bounds and p are NaN (an interval of
-    zero width would claim a certainty the splits cannot give).
+    zero width would claim a certainty the splits cannot give). ``overlap`` replaces ``n_test/n_train`` (for a
+    coverage study weighing other corrections).
     """
     c = np.asarray(changes, dtype=float)
     c = c[np.isfinite(c)]
@@ -164,7 +165,8 @@ def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float =
     if J < 2:
         return (float(c.mean()) if J else np.nan), np.nan, np.nan, np.nan, np.nan, float(max(J - 1, 0))
     mean = float(c.mean())
-    se = float(np.sqrt((1.0 / J + n_test / max(n_train, 1)) * c.var(ddof=1)))
+    rho = n_test / max(n_train, 1) if overlap is None else float(overlap)
+    se = float(np.sqrt((1.0 / J + rho) * c.var(ddof=1)))
     df = float(J - 1)
     if se == 0.0:  # every split gave the same change: nothing varies, so no interval (never one of zero width)
         return mean, np.nan, np.nan, np.nan, 0.0, df

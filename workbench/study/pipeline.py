@@ -431,12 +431,13 @@ def _chosen(model: Any) -> dict[str, Any] | None:
     objective and the band calibration; None without a model."""
     if model is None:
         return None
-    from workbench.models.autoconfig import _CV_MAX_ITER
+    from workbench.models.autoconfig import _CV_MAX_ITER, _CV_TOL
 
     params = {**model.get_params(), "n_components": int(model.n_components_), "reg_covar": float(model.reg_covar_),
               "variability_mean": bool(model.variability_mean_), "fit_objective": False, "noise_folds": 0}
-    if model.auto_ is not None:  # the chosen candidate was fitted with EM capped as the candidates were
+    if model.auto_ is not None:  # the chosen candidate was fitted with EM capped and stopped as the candidates were
         params["max_iter"] = min(int(params["max_iter"]), _CV_MAX_ITER)
+        params["tol"] = max(float(params["tol"]), _CV_TOL)
     return params
 
 
