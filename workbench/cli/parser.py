@@ -368,7 +368,7 @@ def _power_option(p: argparse.ArgumentParser, default: int) -> None:
     p.add_argument("--power", type=int, default=default, metavar="N",
                    help="the power curve that says how many demonstrations a weight ratio the data do not identify "
                         "would need: simulated demonstration sets per size (n/2, n, 2n) to start with — at least 3, "
-                        "and more, up to 9, while the curve is not monotone; the number comes with its interval "
+                        "and more, up to 6, while the curve is not monotone; the number comes with its interval "
                         f"(default {default}; 0: none)")
 
 

@@ -260,19 +260,35 @@ def run_study(
                               power=int(power))
     # the strategies are independent: with a parallel executor each is one task (fit, compare, data efficiency,
     # objective intervals), else they run here in turn and the data-efficiency points go to the executor
-    by_label = bool(getattr(executor, "parallel", False)) and len(splits) > 1
+    parallel = bool(getattr(executor, "parallel", False))
+    by_label = parallel and len(splits) > 1
+    jobs = None
+    if method_splits > 0 and test_ids is None:
+        jobs = _SplitJobs.make(splits, SplitPlan(plant=plant_spec, n_components=n_components, seed=seed), system,
+                               n_steps, stride, test_size, int(method_splits), seed,
+                               executor if parallel else None)
     parts: list[_LabelPart] = []
+    split_parts: list[pd.DataFrame] | None = None
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
-        # short: on an 80-column terminal the bar leaves the description ~25 characters (the strategies' count is
-        # the bar's total)
-        task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
         if by_label:
-            tasks = [(label, i, executor.share(tr), executor.share(te), system, settings)
-                     for i, (label, (tr, te)) in enumerate(splits.items())]
-            parts = executor.map(_study_label, tasks,
-                                 progress=None if p is None else lambda d, t: p.update(task, completed=d))
+            # the method-level splits do not wait for the strategies: one map over both, so a worker that finishes
+            # its strategy early refits splits while the other still computes (a power curve, say)
+            todo = jobs.todo if jobs is not None else []
+            what = f"fitting, comparing, {int(method_splits)} splits" if todo else "fitting and comparing"
+            task = p.add_task(what, total=len(splits) + len(todo)) if p is not None else None
+            tasks = [("label", (label, i, executor.share(tr), executor.share(te), system, settings))
+                     for i, (label, (tr, te)) in enumerate(splits.items())] + [("split", t) for t in todo]
+            out = executor.map(_study_task, tasks,
+                               progress=None if p is None else lambda d, t: p.update(task, completed=d))
+            parts = [o for o, (kind, _) in zip(out, tasks, strict=True) if kind == "label"]
+            split_parts = [o for o, (kind, _) in zip(out, tasks, strict=True) if kind == "split"]
+            if todo:  # process time on the workers, as the strategies' phases are
+                timings["method-level splits"] = sum(o.attrs.get("seconds", 0.0) for o in split_parts)
         else:
+            # short: on an 80-column terminal the bar leaves the description ~25 characters (the strategies' count
+            # is the bar's total)
+            task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
             for i, (label, (tr, te)) in enumerate(splits.items()):
                 parts.append(_study_label((label, i, tr, te, system, settings), executor=executor, progress=p))
                 if p is not None:
@@ -299,18 +315,12 @@ def run_study(
     eff_parts = [part.efficiency for part in parts if part.efficiency is not None]
     table = pd.concat(rmse_parts, ignore_index=True)
     method_level = None
-    if method_splits > 0 and test_ids is None:
-        t0 = time.perf_counter()
-        plan = SplitPlan(plant=plant_spec, n_components=n_components, seed=seed)
-        with_proposed = [lb for lb, part in zip(splits, parts, strict=True) if "proposed" in part.fitted]
-        # a fixed plant: the study's own split is one of the random splits, and its fits are that split's refits
-        # (the same settings, data and seeds give the same mean predictions), so its scores are reused
-        own = {} if callable(plant_spec) else {lb: (tr, te, part) for (lb, (tr, te)), part
-                                               in zip(splits.items(), parts, strict=True) if lb in with_proposed}
-        method_level = _method_level({lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()
-                                      if lb in with_proposed}, plan, system,
-                                     n_steps, stride, test_size, int(method_splits), seed, executor, progress, own)
-        timings["method-level splits"] = time.perf_counter() - t0
+    if jobs is not None:
+        if split_parts is None:  # run here, after the strategies (serial, or one strategy on a parallel executor)
+            t0 = time.perf_counter()
+            split_parts = jobs.run(executor, progress)
+            timings["method-level splits"] = time.perf_counter() - t0
+        method_level = jobs.rows(split_parts, dict(zip(splits, parts, strict=True)))
     statistics = _statistics(table, demos, system, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
@@ -657,44 +667,89 @@ def _settings_text(models: dict[str, Any]) -> str:
             if lines else "")
 
 
-def _method_level(by_label: dict[str, DemonstrationSet], plan: SplitPlan, system: Any,
-                  n_steps: int, stride: int | None, test_size: float, splits: int, seed: int, executor: Any,
-                  progress: Callable[[], Any] | None, own: dict[str, tuple] | None = None) -> Any:
-    """Every method rerun (:class:`~workbench.study.method_level.SplitPlan`: the proposed model and the baselines the
-    verdicts judge it against) on ``splits`` random splits of each label's trials, scored on the headline metric, as
-    :class:`~workbench.study.method_level.MethodDifference` rows (:mod:`workbench.study.method_level`).
+def _study_task(task: tuple) -> Any:
+    """One task of a study's executor: a strategy (:func:`_study_label`) or a method-level split
+    (:func:`~workbench.study.method_level.split_scores`, its seconds in ``attrs``)."""
+    kind, payload = task
+    if kind == "label":
+        return _study_label(payload)
+    from workbench.study.method_level import split_scores
 
-    ``own``: per label the study's (train, test, part) where its fits are a split's refits (a fixed plant): that
-    split is the first of the label's and its scores are the study's."""
-    from workbench.study.evaluate import primary_metric
-    from workbench.study.executor import serial
-    from workbench.study.method_level import method_differences, split_scores, split_tasks
+    t0 = time.perf_counter()
+    out = split_scores(payload)
+    out.attrs["seconds"] = time.perf_counter() - t0
+    return out
 
-    ex = executor if executor is not None else serial
-    metric = primary_metric(system)
-    if not by_label:
-        return None
-    own = own or {}
-    first = {lb: [i for i, d in enumerate(by_label[lb]) if d.id in {t.id for t in te}]
-             for lb, (_, te, _) in own.items()}
-    tasks, sizes, units = split_tasks(by_label, plan, metric, n_steps, stride, test_size, splits, seed,
-                                      share=ex.share if getattr(ex, "parallel", False) else None, first=first)
-    if not tasks:
-        return None
-    reused = {i: _own_scores(own[t[0]][2], t[0], metric, plan.methods) for i, t in enumerate(tasks)
-              if t[1] == 0 and t[0] in own and units.get(t[0]) == "trials"}
-    todo = [t for i, t in enumerate(tasks) if i not in reused]
-    bar = progress() if progress is not None else nullcontext()
-    with bar as p:
-        task = p.add_task(f"refitting on {splits} splits", total=len(todo)) if p is not None else None
-        done = iter(ex.map(split_scores, todo, progress=None if p is None else
-                           lambda d, t: p.update(task, completed=d)))
-    parts = [reused[i] if i in reused else next(done) for i in range(len(tasks))]
-    sizes = {lb: sz for lb, sz in sizes.items()}
-    scores = pd.concat([pt for pt in parts if len(pt)], ignore_index=True) if any(len(pt) for pt in parts) else None
-    if scores is None:
-        return None
-    return tuple(method_differences(scores, sizes, metric, "proposed", units=units))
+
+@dataclass(frozen=True)
+class _SplitJobs:
+    """The method-level splits of a study (:mod:`workbench.study.method_level`): every method rerun
+    (:class:`~workbench.study.method_level.SplitPlan`: the proposed model and the baselines the verdicts judge it
+    against) on random splits of each label's trials, scored on the headline metric.
+
+    With a fixed plant the study's own random split is each label's first split: its fits are exactly that split's
+    refits (the same settings, trials and seeds), so its scores are the study's (``reuse``) and only the other
+    splits are tasks (``todo``)."""
+
+    tasks: tuple
+    sizes: dict
+    units: dict
+    metric: str
+    methods: tuple[str, ...]
+    reuse: frozenset[int]
+
+    @classmethod
+    def make(cls, splits: dict[str, tuple], plan: SplitPlan, system: Any, n_steps: int, stride: int | None,
+             test_size: float, n_splits: int, seed: int, executor: Any) -> _SplitJobs:
+        from workbench.study.evaluate import primary_metric
+        from workbench.study.method_level import split_tasks
+
+        metric = primary_metric(system)
+        by_label = {lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()}
+        first = {} if callable(plan.plant) else {
+            lb: [i for i, d in enumerate(by_label[lb]) if d.id in {t.id for t in te}] for lb, (_, te) in splits.items()}
+        tasks, sizes, units = split_tasks(by_label, plan, metric, n_steps, stride, test_size, n_splits, seed,
+                                          share=None if executor is None else executor.share, first=first)
+        reuse = frozenset(i for i, t in enumerate(tasks) if t[1] == 0 and t[0] in first and units[t[0]] == "trials")
+        return cls(tuple(tasks), sizes, units, metric, plan.methods, reuse)
+
+    @property
+    def todo(self) -> list[tuple]:
+        return [t for i, t in enumerate(self.tasks) if i not in self.reuse]
+
+    def run(self, executor: Any, progress: Callable[[], Any] | None) -> list[pd.DataFrame]:
+        """The splits' scores, refitted on ``executor`` (in the order of :attr:`todo`)."""
+        from workbench.study.executor import serial
+        from workbench.study.method_level import split_scores
+
+        ex = executor if executor is not None else serial
+        todo = self.todo
+        if not todo:
+            return []
+        bar = progress() if progress is not None else nullcontext()
+        with bar as p:
+            task = p.add_task(f"refitting on {len(todo)} splits", total=len(todo)) if p is not None else None
+            return list(ex.map(split_scores, todo, progress=None if p is None else
+                               lambda d, t: p.update(task, completed=d)))
+
+    def rows(self, done: list[pd.DataFrame], parts: dict[str, _LabelPart]) -> Any:
+        """:class:`~workbench.study.method_level.MethodDifference` rows of the labels whose proposed model the study
+        fitted, from the refitted splits' scores (``done``, in the order of :attr:`todo`) and the study's own."""
+        from workbench.study.method_level import method_differences
+
+        refits = iter(done)
+        scores = []
+        for i, t in enumerate(self.tasks):
+            label = t[0]
+            part = next(refits) if i not in self.reuse else None
+            if "proposed" not in parts[label].fitted:
+                continue
+            scores.append(_own_scores(parts[label], label, self.metric, self.methods) if part is None else part)
+        scores = [s for s in scores if len(s)]
+        if not scores:
+            return None
+        return tuple(method_differences(pd.concat(scores, ignore_index=True), self.sizes, self.metric, "proposed",
+                                        units=self.units)) or None
 
 
 def _own_scores(part: _LabelPart, label: str, metric: str, methods: Sequence[str]) -> pd.DataFrame:

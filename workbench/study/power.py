@@ -45,7 +45,7 @@ __all__ = ["PowerCurve", "simulate_like", "power_curve", "as_fitted", "LAW", "MI
 
 #: Simulated sets per size at least (a median of fewer is one set's accident), and at most while the curve is not yet
 #: monotone; resamples of the sets behind the 90 % interval of the number needed.
-MIN_SETS, MAX_SETS = 3, 9
+MIN_SETS, MAX_SETS = 3, 6
 NEEDED_RESAMPLES = 200
 #: The law behind "demonstrations needed", as the report states it.
 LAW = ("the median simulated log span interpolated in log n between the simulated sizes, and shrinking as 1/√n "
