@@ -9,7 +9,7 @@ LOCK   := requirements.lock
 LATEST := .venv-latest
 PIP     = -m pip --disable-pip-version-check
 
-.PHONY: demo test test-all test-latest lint bench sample-logs lock clean
+.PHONY: demo test test-all test-latest lint bench sample-logs lock clean readme-screenshot
 
 # A changed lock reinstalls: pip moves every package to its pinned version (pip itself first).
 $(STAMP): pyproject.toml $(LOCK)
@@ -21,6 +21,12 @@ $(STAMP): pyproject.toml $(LOCK)
 ## demo: set up .venv, then run the main job on sample_logs/ (report + rerun recording in $(OUT)/)
 demo: $(STAMP)
 	$(BIN)/workbench demo --out $(OUT)
+
+## readme-screenshot: the README's picture (docs/viewer.png, docs/viewer.json) of the demo's first view, taken by
+## rerun's own viewer from $(OUT)/demo.rrd (made first if missing); tests/test_readme.py says when it is stale
+readme-screenshot: $(STAMP)
+	@test -s $(OUT)/demo.rrd || $(BIN)/workbench demo --out $(OUT)
+	$(BIN)/python -m workbench.viewer.screenshot $(OUT)/demo.rrd docs/viewer.png
 
 # The suite runs on pytest-xdist workers, one per core (`make test TEST_WORKERS=0` runs it in one process);
 # PYTEST_ARGS adds options (`make test PYTEST_ARGS='-k viewer'`). It prints its duration and the machine's load,

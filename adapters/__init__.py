@@ -161,7 +161,8 @@ def choose_mapping(path: str | os.PathLike, *, format: str | None = None) -> tup
     """The shipped mapping for the vehicle a log names, and why: ``("ardupilot_manual", "made for ArduCopter
     V3.3-dev")``; ``planar_quadrotor`` (the simulator's and the testbed's logs) where the log names no vehicle a
     shipped mapping is made for."""
-    from adapters.mapping import MappingError, load_mapping, mapping_for_vehicle, resolve_channel, select
+    from adapters.mapping import MappingError, load_mapping, mapping_for_vehicle
+    from adapters.selection import resolve_channel, select
     from adapters.summary import VEHICLE_STREAMS, log_vehicle
     from adapters.transforms import TRANSFORMS
 

@@ -19,11 +19,16 @@ messages (``HEARTBEAT``). A mapping picks explicitly (``clock = …``):
 
 from __future__ import annotations
 
-import numpy as np
-import pandas as pd
+from typing import TYPE_CHECKING
 
-from adapters.mapping import ClockSpec
+import numpy as np
+
 from adapters.streams import numeric
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from adapters.mapping import ClockSpec
 
 __all__ = ["stream_times"]
 

@@ -10,12 +10,20 @@ written with the sources the log has, so a drafted mapping is checked as the shi
 follows the slowest chosen stream. What it cannot decide — a channel
 with no source in the log, no armed flag, no manual mode — is listed in :attr:`Draft.undecided`, and the TOML
 says it in comments.
+
+Sticks are written by their role (``RCIN.C{roll}``, with the template's ``rc_map``), as the shipped mappings name
+them, after checking that the channel the log's RC map gives each is in the log; the template's ``[setpoints]`` go
+with them (the sources the log has). Every source the draft writes is checked against the log before it is
+returned (:func:`_verify`): a draft imports the log it was drafted from, or is not written.
+
+Text from the log (its path, the firmware string, mode names) is written as TOML strings or escaped into comments,
+never as syntax: a firmware string holding a newline and ``clock = …`` stays one comment line (:func:`toml_string`).
 """
 
 from __future__ import annotations
 
-import json
 import math
+import tomllib
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -27,10 +35,12 @@ from adapters.mapping import (
     FlagRule,
     Selector,
     load_mapping,
-    select,
     shipped_mappings,
 )
 from adapters.modes import mode_name
+from adapters.selection import select
+from adapters.sticks import _fill, placeholders
+from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams
 from adapters.summary import log_modes, summarize
 from workbench.errors import DataError, MappingError
@@ -48,8 +58,10 @@ BIN_CHANNELS: dict[str, list[Channel]] = {
     "xdot": [Channel("xdot", Selector(f"{s}.Yaw,VN,VE"), transform="heading_right") for s in ("XKF1", "NKF1", "EKF1")],
     "ydot": [Channel("ydot", Selector(f"{s}.VD"), transform="ned_up") for s in ("XKF1", "NKF1", "EKF1")],
     "phidot": [Channel("phidot", Selector("IMU.GyrX")), Channel("phidot", Selector("RATE.R"), scale=_DEG)],
-    "u1": [Channel("u1", Selector("RCIN.C1"), transform="pwm", params=(("pwm_min", 1000.0), ("pwm_max", 2000.0)))],
-    "u2": [Channel("u2", Selector("RCIN.C3"), transform="pwm", params=(("pwm_min", 1000.0), ("pwm_max", 2000.0)))],
+    "u1": [Channel("u1", Selector("RCIN.C{roll}"), transform="pwm", params=(("pwm_min", 1000.0),
+                                                                             ("pwm_max", 2000.0)))],
+    "u2": [Channel("u2", Selector("RCIN.C{throttle}"), transform="pwm", params=(("pwm_min", 1000.0),
+                                                                                 ("pwm_max", 2000.0)))],
 }
 _BIN_FIRMWARE = (("copter", "arducopter"), ("plane", "arduplane"), ("rover", "ardurover"), ("sub", "ardusub"))
 _STEPS = (0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
@@ -111,7 +123,9 @@ def _has(sel: Selector, streams: Streams, n_columns: int | None = 1) -> bool:
         return False
 
 
-def _pick(ch: Channel, streams: Streams, fmt: str) -> Channel | None:
+def _pick(ch: Channel, streams: Streams, fmt: str, numbers: dict[str, int]) -> Channel | None:
+    """The first variant of ``ch`` (and, for DataFlash, of :data:`BIN_CHANNELS`) whose source this log has, each
+    source tried on its own; a stick by role is tried on the channel ``numbers`` gives it and keeps its role."""
     from adapters.transforms import TRANSFORMS
 
     extra = BIN_CHANNELS.get(ch.name, []) if fmt == "dataflash" else []  # DataFlash's own field names
@@ -119,15 +133,45 @@ def _pick(ch: Channel, streams: Streams, fmt: str) -> Channel | None:
     for v in variants:
         # each source of a selector on its own: the TOML names the one this log has
         for source in v.selector.sources:
+            if any(r not in numbers for r in placeholders(source)):
+                continue
             one = replace(v, selector=replace(v.selector, source=source, alternatives=()))
-            if _has(one.selector, streams, TRANSFORMS[one.transform].n_columns):
+            filled = replace(one.selector, source=_fill(source, numbers))
+            if _has(filled, streams, TRANSFORMS[one.transform].n_columns):
                 return one
     return None
 
 
+#: Characters a TOML basic string must escape (tab may stay, but is escaped too: one line, whatever the text).
+_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def toml_string(text: str) -> str:
+    """``text`` as a TOML basic string, on one line whatever it holds: quotes and backslashes escaped, every
+    control character (U+0000–U+001F, U+007F) and line or paragraph separator as ``\\uXXXX``, a lone surrogate
+    (which TOML cannot hold) as U+FFFD. Log text goes into a draft only through this."""
+    out = []
+    for ch in str(text):
+        code = ord(ch)
+        if ch in _ESCAPES:
+            out.append(_ESCAPES[ch])
+        elif code < 0x20 or code == 0x7F or code in (0x85, 0x2028, 0x2029):
+            out.append(f"\\u{code:04X}")
+        elif 0xD800 <= code <= 0xDFFF:
+            out.append("\\uFFFD")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
+def _comment(text: str) -> str:
+    """A comment line: log text in it escaped as in :func:`toml_string`, so it cannot end the comment."""
+    return "# " + toml_string(text)[1:-1]
+
+
 def _toml_value(v: object) -> str:
     if isinstance(v, str):
-        return json.dumps(v)
+        return toml_string(v)
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int | float):
@@ -169,6 +213,8 @@ def _flag_toml(rule: FlagRule) -> dict[str, object]:
         out["bitmask"] = rule.bitmask
     if rule.equals is not None:
         out["equals"] = rule.equals
+    if rule.on:
+        out.update(on=list(rule.on), off=list(rule.off))
     return out
 
 
@@ -189,8 +235,10 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
                         "shipped mapping and change its sources")
     undecided: list[str] = []
     chosen: dict[str, Channel] = {}
+    resolved = resolve_sticks(template, streams)  # the channels the log's RC map gives the sticks
+    numbers = {s.role: s.number for s in resolved.sticks}
     for ch in template.channels:
-        picked = _pick(ch, streams, fmt)
+        picked = _pick(ch, streams, fmt, numbers)
         if picked is None:
             undecided.append(f"{ch.name}: none of {', '.join(v.selector.describe() for v in ch.variants)} is in "
                              f"this log")
@@ -198,22 +246,26 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
             chosen[ch.name] = picked
     if undecided:
         raise DataError(f"{streams.path}: cannot draft a mapping for {vehicle}: " + "; ".join(undecided))
-    streams_used = sorted({_stream_of(c, streams) for c in chosen.values()})
+    streams_used = sorted({_stream_of(c, streams, numbers) for c in chosen.values()})
     slowest = max(_period(streams, s) for s in streams_used)
     dt = next((s for s in _STEPS if s >= slowest * 0.999), _STEPS[-1])
     seg = template.segment
+    description = f"drafted for {vehicle} from {template.name}"
     gap = max(seg.gap, 5 * dt)
     min_duration = max(seg.min_duration, 10 * dt)
     lines = [
-        f"# Drafted by `workbench map` from {streams.path}",
-        f"# vehicle: {vehicle or 'unknown'}; template: the shipped mapping {template.name!r}",
+        _comment(f"Drafted by `workbench map` from {streams.path}"),
+        _comment(f"vehicle: {vehicle or 'unknown'}; template: the shipped mapping {template.name!r}"),
         f"# grid step: the slowest chosen stream arrives every {slowest:.3g} s (median)",
         f"name = {_toml_value(name or 'drafted')}",
-        f"description = {_toml_value(f'drafted for {vehicle} from {template.name}')}",
+        f"description = {_toml_value(description)}",
         f"dt = {dt!r}",
         f"states = {_toml_value(list(template.state_names))}",
         f"inputs = {_toml_value(list(template.input_names))}",
     ]
+    by_role = any(placeholders(c.selector.source) for c in chosen.values())
+    if by_role:
+        lines.append(f"rc_map = {_toml_value(template.rc_map)}   # the sticks' channels: the log's RC map")
     clock = template.clock
     if clock.field is not None:
         if all(clock.field in streams.columns(s) for s in streams_used):
@@ -229,6 +281,7 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
         others = [v.selector.source for v in ch.variants if v.selector.source != c.selector.source]
         note = f"  # chosen over {', '.join(others)}" if others else ""
         lines.append(f"{ch.name} = {_channel_toml(c)}{note}")
+    lines += _setpoint_lines(resolved, streams)
     lines += ["", "[segment]", f"gap = {gap!r}", f"min_duration = {min_duration!r}"]
     mode = seg.mode
     keep = [mode_name(mode.names, k) for k in mode.keep] if mode is not None else []
@@ -251,14 +304,15 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
         lines.append("# armed: no armed flag found in this log")
     lines += _reference_lines(template, streams, chosen)
     for u in undecided:
-        lines.insert(3, f"# undecided: {u}")
+        lines.insert(3, _comment(f"undecided: {u}"))
     text = "\n".join(lines) + "\n"
+    _verify(text, streams, description)
     return Draft(text, vehicle, template.name, tuple((k, c.selector.source) for k, c in chosen.items()),
                  tuple(undecided))
 
 
-def _stream_of(ch: Channel, streams: Streams) -> str:
-    return select(ch.selector, streams, "", "").stream
+def _stream_of(ch: Channel, streams: Streams, numbers: dict[str, int]) -> str:
+    return select(replace(ch.selector, source=_fill(ch.selector.source, numbers)), streams, "", "").stream
 
 
 def _selector_table(sel: Selector) -> dict[str, object]:
@@ -269,11 +323,60 @@ def _selector_table(sel: Selector) -> dict[str, object]:
 
 
 def _mode_selector(sel: Selector | None, streams: Streams) -> Selector | None:
-    """The template's mode source when the log has it, else a DataFlash MODE field."""
-    for candidate in (sel, Selector("MODE.ModeNum"), Selector("MODE.Mode")):
-        if candidate is not None and _has(candidate, streams):
+    """The first of the template's mode sources the log has (each on its own: an ArduCopter V3.3-dev log's MODE has
+    ``Mode, ThrCrs`` and no ``ModeNum``), else a DataFlash MODE field."""
+    sources = [*(sel.sources if sel is not None else ()), "MODE.ModeNum", "MODE.Mode"]
+    for source in dict.fromkeys(sources):
+        candidate = Selector(source, sel.where if sel is not None and source in sel.sources else ())
+        if _has(candidate, streams):
             return candidate
     return None
+
+
+def _setpoint_lines(template: ChannelMapping, streams: Streams) -> list[str]:
+    """The template's ``[setpoints]`` with the first source of each the log has (none: the sticks unchecked)."""
+    from adapters.transforms import TRANSFORMS
+
+    table = []
+    for sp in template.setpoints:
+        for v in sp.variants:
+            found = next((src for src in v.selector.sources
+                          if _has(replace(v.selector, source=src, alternatives=()), streams,
+                                  TRANSFORMS[v.transform].n_columns)), None)
+            if found is not None:
+                one = replace(v, selector=replace(v.selector, source=found, alternatives=()))
+                table.append(f"{sp.name} = {_channel_toml(one)}")
+                break
+    if not table:
+        return []
+    return ["", "# what each stick commands: import checks that the stick moves with it", "[setpoints]", *table]
+
+
+def _verify(text: str, streams: Streams, description: str) -> None:
+    """The draft parses as the mapping it says (its description, its keys), and every source it reads — channels
+    (sticks through the log's RC map), mode and armed rules, setpoints, the estimator's velocity — is in the log;
+    a GPS source a log lacks is the one exception, written so that import names dead reckoning."""
+    from adapters.mapping import _parse
+    from adapters.transforms import TRANSFORMS
+
+    where = f"{streams.path}: cannot draft a mapping"
+    try:
+        raw = tomllib.loads(text)
+        m = resolve_sticks(_parse(raw, "<draft>"), streams)
+    except (tomllib.TOMLDecodeError, MappingError) as exc:
+        raise DataError(f"{where}: the draft does not read back ({exc})") from None
+    if raw.get("description") != description:
+        raise DataError(f"{where}: the draft's description does not read back as written")
+    checks = [(f"channel {c.name}", c.selector, TRANSFORMS[c.transform].n_columns) for c in (*m.channels,
+                                                                                             *m.setpoints)]
+    seg = m.segment
+    checks += [(what, rule.selector, 1) for what, rule in (("segment.mode", seg.mode), ("segment.armed", seg.armed))
+               if rule is not None]
+    if m.reference is not None:
+        checks.append(("reference.estimate", m.reference.estimate, 2))
+    for what, sel, n in checks:
+        if not _has(sel, streams, n):
+            raise DataError(f"{where}: its {what} reads {sel.describe()}, which is not in this log")
 
 
 def _reference_lines(template: ChannelMapping, streams: Streams, chosen: dict[str, Channel]) -> list[str]:
@@ -286,7 +389,7 @@ def _reference_lines(template: ChannelMapping, streams: Streams, chosen: dict[st
         return []
     present = [src for src in ref.estimate.sources if _has(replace(ref.estimate, source=src, alternatives=()),
                                                           streams, 2)]
-    used = {_stream_of(chosen[v], streams) for v in template.roles.velocity if v in chosen}
+    used = {_stream_of(chosen[v], streams, {}) for v in template.roles.velocity if v in chosen}
     estimate = next((src for src in present if src.split(".")[0] in used), present[0] if present else None)
     gps = next((src for src in ref.gps.sources if _has(replace(ref.gps, source=src, alternatives=()), streams, 2)),
                None)
@@ -308,10 +411,12 @@ def _reference_lines(template: ChannelMapping, streams: Streams, chosen: dict[st
 
 
 def _armed_rule(rule: FlagRule | None, streams: Streams) -> dict[str, object] | None:
-    candidates = [rule] if rule is not None else []
+    """The first armed source the log has, each source on its own (the template's, else DataFlash's ARM)."""
+    candidates = [replace(rule, selector=replace(rule.selector, source=src, alternatives=()))
+                  for src in rule.selector.sources] if rule is not None else []
     candidates.append(FlagRule(Selector("ARM.ArmState")))
     for r in candidates:
-        if r is not None and _has(r.selector, streams):
+        if _has(r.selector, streams):
             return _flag_toml(r)
     return None
 

@@ -10,9 +10,14 @@ that could not be entered (named with the vehicle's mode table, :mod:`adapters.m
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
+import numpy as np
+
 from adapters.modes import mode_name
 
-__all__ = ["EVENTS", "ERROR_SUBSYSTEMS", "event_name", "error_text", "error_resolved"]
+__all__ = ["EVENTS", "ERROR_SUBSYSTEMS", "event_name", "error_text", "error_resolved", "as_int", "shown"]
 
 #: ``EV`` ids (``LogEvent``)
 EVENTS = {
@@ -60,22 +65,56 @@ _BY_SUBSYSTEM = {
 }
 
 
-def event_name(event_id: float) -> str:
-    """``"ARMED"`` for ``EV`` id 10; ``"event 200"`` for an id ArduPilot does not name."""
-    n = int(event_id)
-    return EVENTS.get(n, f"event {n}")
+def as_int(value: Any) -> int | None:
+    """``value`` as an integer where it is a finite whole number (a numpy scalar, a float 3.0), else ``None``."""
+    if isinstance(value, bool | np.bool_):
+        return int(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating) and math.isfinite(value) and float(value).is_integer():
+        return int(value)
+    return None
 
 
-def error_resolved(subsystem: float, code: float) -> bool:
+def shown(value: Any) -> str:
+    """A value as the raw view shows it: text as is, a missing one as ``null``, numbers as Python prints them
+    (``nan``, ``inf``, ``3``)."""
+    if value is None:
+        return "null"
+    if isinstance(value, str):
+        return value
+    if isinstance(value, float | np.floating):
+        if math.isnan(value):
+            return "nan"
+        if float(value).is_integer():
+            return str(int(value))
+    try:
+        return str(value.item() if isinstance(value, np.generic) else value)
+    except Exception:  # noqa: BLE001 - an object whose str fails still has a name
+        return type(value).__name__
+
+
+def event_name(event_id: Any) -> str:
+    """``"ARMED"`` for ``EV`` id 10; ``"event 200"`` for an id ArduPilot does not name; ``"event nan"``,
+    ``"event null"`` for a value that is no id (a log is not trusted to hold one)."""
+    n = as_int(event_id)
+    return EVENTS.get(n, f"event {n}") if n is not None else f"event {shown(event_id)}"
+
+
+def error_resolved(subsystem: Any, code: Any) -> bool:
     """Whether an ``ERR`` message reports an error cleared (code 0) rather than raised; a flight-mode error's code
-    is a mode number, and an EKF-primary change's a core index: those are raised."""
-    name = ERROR_SUBSYSTEMS.get(int(subsystem), "")
-    return int(code) == 0 and name not in ("FLIGHT_MODE", "EKF_PRIMARY")
+    is a mode number, and an EKF-primary change's a core index: those are raised. A value that is no number is not
+    a clearance."""
+    s, c = as_int(subsystem), as_int(code)
+    return s is not None and c == 0 and ERROR_SUBSYSTEMS.get(s, "") not in ("FLIGHT_MODE", "EKF_PRIMARY")
 
 
-def error_text(subsystem: float, code: float, mode_table: str | None = None) -> str:
-    """``"EKFCHECK: BAD_VARIANCE"`` for subsystem 16, code 2; unknown numbers stay numbers."""
-    s, c = int(subsystem), int(code)
+def error_text(subsystem: Any, code: Any, mode_table: str | None = None) -> str:
+    """``"EKFCHECK: BAD_VARIANCE"`` for subsystem 16, code 2; unknown numbers stay numbers, and values that are no
+    numbers are shown as they are (``"subsystem nan, code null"``)."""
+    s, c = as_int(subsystem), as_int(code)
+    if s is None or c is None:
+        return f"subsystem {shown(subsystem)}, code {shown(code)}"
     name = ERROR_SUBSYSTEMS.get(s)
     if name is None:
         return f"subsystem {s}, code {c}"

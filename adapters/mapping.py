@@ -13,6 +13,8 @@ Schema
     states = ["x", "y", "phi", …]       # channel names, in order (required)
     inputs = ["u1", "u2"]               # (required)
     clock = "log"                       # or { field = "time_boot_ms", scale = 0.001 }: see adapters.clock
+    rc_map = "ardupilot"                # whose RC map gives a {roll}, {pitch}, {throttle}, {yaw} stick its channel:
+                                        # RCMAP_ROLL … (adapters.sticks.RC_MAPS: "ardupilot", "px4")
 
     [channels]                          # one entry per state and input
     x = "LOCAL_POSITION_NED.y"          # a source: "STREAM.FIELD" or "STREAM:FIELD" (for topics with dots)
@@ -23,6 +25,8 @@ Schema
     u2 = { source = "MANUAL_CONTROL.z", scale = 0.001, offset = 0.0, sign = 1 }
     # value = sign * scale * transform(field) + offset; `where = { sysid = 1 }` keeps matching rows only
     u1 = ["manual_control_setpoint.y", "manual_control_setpoint.roll"]   # alternatives: the first present wins
+    u1 = { source = "RCIN.C{roll}", transform = "pwm" }   # a stick by its role: the channel the log's RC map gives
+                                        # it (needs rc_map; adapters.sticks)
     u2 = [{ source = "manual_control_setpoint.z", scale = 2.0, offset = -1.0 },   # alternative channels, each
           { source = "manual_control_setpoint.throttle" }]                        # with its own conversion
 
@@ -32,7 +36,8 @@ Schema
     demo = { source = "NAMED_VALUE_INT.value", where = { name = "demo" } }   # explicit demo field
     mode = { source = "HEARTBEAT.custom_mode", where = { autopilot = 3 }, names = "arducopter",
              keep = ["STABILIZE"] }     # flight-mode spans (names from adapters.modes, or numbers)
-    armed = { source = "HEARTBEAT.base_mode", bitmask = 128 }   # or equals = 2; truthy otherwise
+    armed = { source = "HEARTBEAT.base_mode", bitmask = 128 }   # or equals = 2; truthy otherwise; or events:
+                                        # { source = "EV.Id", on = [10], off = [11] } (ARMED / DISARMED)
     landing = { state = "y", below = 0.0 }   # end at touchdown; or { source = "…landed" } (true = landed)
 
     [meta]                              # where per-demonstration metadata come from (all optional)
@@ -52,6 +57,9 @@ Schema
     fix = { field = "Status", min = 3 } # the gps rows with a velocity: a 3D fix
     accuracy = 0.1                      # m/s, the receiver's velocity accuracy: a GPS velocity spreading less
                                         # than it says "not moving", and no verdict is given
+
+    [setpoints]                         # what an input commands, which it must move with (adapters.sticks.check)
+    u1 = "ATT.DesRoll"                  # a channel like those above (alternatives, transform, …)
 
     [tlog.channels]                     # per-format overrides: [<format>.channels], [<format>.segment],
     x = "LOCAL_POSITION_NED.y"          # [<format>.meta], <format>.clock — merged over the tables above
@@ -74,12 +82,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    import pandas as pd
+    pass
 
 from adapters.formats import FORMATS
 from adapters.modes import MODE_TABLES, mode_name, mode_number
 from adapters.reference import REFERENCE_FORMS, ReferenceRule
-from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
+from adapters.sticks import PARAMETER_STREAMS, RC_MAPS, ROLES, placeholders
+from adapters.streams import candidate_streams, nearest
 from adapters.transforms import TRANSFORMS
 from workbench.data.roles import Roles
 from workbench.errors import DataError, MappingError
@@ -96,7 +105,6 @@ __all__ = [
     "shipped_mappings",
     "MAPPINGS_DIR",
     "FORMAT_NAMES",
-    "resolve_channel",
     "suggest_mapping",
 ]
 
@@ -105,7 +113,7 @@ FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per decl
 DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", "reference",
-    *FORMAT_NAMES
+    "rc_map", "setpoints", *FORMAT_NAMES
 }
 _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
@@ -168,13 +176,24 @@ class ModeRule:
 
 @dataclass(frozen=True)
 class FlagRule:
-    """A truthy stream: ``value & bitmask`` when a bitmask is given, ``value == equals``, else ``value != 0``."""
+    """A truthy stream: ``value & bitmask`` when a bitmask is given, ``value == equals``, else ``value != 0``; or
+    events (``on`` / ``off`` values, e.g. DataFlash ``EV`` ids ARMED 10 / DISARMED 11): rows of other values say
+    nothing, and the flag holds from one event to the next (:meth:`events`)."""
 
     selector: Selector
     bitmask: int | None = None
     equals: float | None = None
+    on: tuple[float, ...] = ()
+    off: tuple[float, ...] = ()
+
+    def events(self, values: np.ndarray) -> np.ndarray:
+        """The rows that are events of an event rule (every row of a held flag)."""
+        v = np.asarray(values, dtype=np.float64)
+        return np.isin(v, self.on + self.off) if self.on else np.ones(v.shape, dtype=bool)
 
     def truth(self, values: np.ndarray) -> np.ndarray:
+        if self.on:
+            return np.isin(np.asarray(values, dtype=np.float64), self.on)
         v = np.nan_to_num(np.asarray(values, dtype=np.float64))
         if self.bitmask is not None:
             return (v.astype(np.int64) & self.bitmask) != 0
@@ -240,6 +259,12 @@ class ChannelMapping:
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
     roles: Roles = field(default_factory=Roles)
     reference: ReferenceRule | None = None
+    #: whose RC map gives a stick named by role its channel (a key of adapters.sticks.RC_MAPS)
+    rc_map: str | None = None
+    #: per input, what it commands (its ``name`` is the input's): the stick must move with it (adapters.sticks)
+    setpoints: tuple[Channel, ...] = ()
+    #: the sticks named by role, once resolved against a log (adapters.sticks.resolve); () before
+    sticks: tuple[Any, ...] = ()
 
     def for_format(self, fmt: str) -> ChannelMapping:
         """This mapping with the ``[<fmt>.…]`` overrides merged in (itself when there are none)."""
@@ -282,6 +307,7 @@ class ChannelMapping:
         out += [s for s in (self.meta.source, self.meta.text) if s]
         if self.reference is not None:
             out += [self.reference.estimate, self.reference.gps]
+        out += [v.selector for c in self.setpoints for v in c.variants]
         return out
 
     def stream_candidates(self) -> list[str]:
@@ -292,6 +318,8 @@ class ChannelMapping:
                 names.update(dict.fromkeys(candidate_streams(source)))
                 if ":" not in source and "." not in source:
                     names[source] = None  # a whole stream (a meta table)
+        if self.rc_map is not None:  # the parameters that name the sticks' channels
+            names.update(dict.fromkeys(PARAMETER_STREAMS))
         return list(names)
 
 
@@ -385,11 +413,11 @@ def _selector(value: Any, path: str, where: str, extra: Iterable[str] = ()) -> S
     return Selector(first, tuple(sorted(cond.items())), tuple(rest))
 
 
-def _channel(name: str, value: Any, path: str) -> Channel:
-    where = f"channels.{name}"
+def _channel(name: str, value: Any, path: str, table: str = "channels") -> Channel:
+    where = f"{table}.{name}"
     if isinstance(value, list) and value and any(isinstance(v, dict) for v in value):
         # alternative channels: [table or source, …], the first whose stream and fields a file has wins
-        first, *rest = (_channel(name, v, path) for v in value)
+        first, *rest = (_channel(name, v, path, table) for v in value)
         return replace(first, alternatives=tuple(rest))
     if _sources(value) is not None:
         return Channel(name, _selector(value, path, where))
@@ -423,9 +451,16 @@ def _channel(name: str, value: Any, path: str) -> Channel:
 
 
 def _flag(value: Any, path: str, where: str) -> FlagRule:
-    sel = _selector(value, path, where, extra=("bitmask", "equals"))
+    sel = _selector(value, path, where, extra=("bitmask", "equals", "on", "off"))
     bitmask = value.get("bitmask") if isinstance(value, dict) else None
     equals = value.get("equals") if isinstance(value, dict) else None
+    events = {k: value.get(k) for k in ("on", "off")} if isinstance(value, dict) else {}
+    if any(v is not None for v in events.values()):
+        if bitmask is not None or equals is not None or not all(isinstance(v, list) and v for v in events.values()):
+            raise _fail(path, where, "events need both on = [values] and off = [values], and neither bitmask nor "
+                        "equals")
+        on, off = (tuple(_number(x, path, f"{where}.{k}") for x in events[k]) for k in ("on", "off"))
+        return FlagRule(sel, on=on, off=off)
     if bitmask is not None and (isinstance(bitmask, bool) or not isinstance(bitmask, int) or not 0 < bitmask < 2**63):
         raise _fail(path, f"{where}.bitmask", f"must be a positive integer below 2**63, got {bitmask!r}")
     if equals is not None:
@@ -588,6 +623,7 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
     if extra:
         raise _fail(at, "channels", f"{extra} are neither states nor inputs")
     channels = tuple(_channel(n, chans[n], at) for n in (*states, *inputs) if n in chans)
+    rc_map, setpoints = _sticks(raw, at, channels, inputs)
     try:
         roles = Roles.from_json(raw.get("roles"), f"{at}: [roles]")
         roles.check(states, f"{at}: [roles]")
@@ -607,7 +643,33 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
         raw=dict(raw),
         roles=roles,
         reference=_reference(raw.get("reference"), at),
+        rc_map=rc_map,
+        setpoints=setpoints,
     )
+
+
+def _sticks(raw: Mapping[str, Any], path: str, channels: tuple[Channel, ...],
+            inputs: tuple[str, ...]) -> tuple[str | None, tuple[Channel, ...]]:
+    """``rc_map`` and ``[setpoints]``: sticks named by role need a known RC map; a setpoint belongs to an input."""
+    rc_map = raw.get("rc_map")
+    if rc_map is not None and rc_map not in RC_MAPS:
+        raise _fail(path, "rc_map", f"unknown RC map {rc_map!r}; known: {', '.join(RC_MAPS)}")
+    for ch in channels:
+        for source in (s for v in ch.variants for s in v.selector.sources):
+            for role in placeholders(source):
+                if role not in ROLES:
+                    raise _fail(path, f"channels.{ch.name}", f"{{{role}}} in {source!r} is not a stick; name one of "
+                                f"{', '.join('{' + r + '}' for r in ROLES)}")
+                if rc_map is None:
+                    raise _fail(path, f"channels.{ch.name}", f"{source!r} names the {role} stick by its role, but "
+                                f"the mapping says no rc_map (whose RC map gives it a channel: "
+                                f"{', '.join(RC_MAPS)})")
+    table = raw.get("setpoints", {})
+    if not isinstance(table, dict):
+        raise _fail(path, "setpoints", f"must be a table of input = source, got {table!r}")
+    if unknown := sorted(set(table) - set(inputs)):
+        raise _fail(path, "setpoints", f"{unknown} are not inputs; inputs: {list(inputs)}")
+    return rc_map, tuple(_channel(n, table[n], path, "setpoints") for n in inputs if n in table)
 
 
 def suggest_mapping(fmt: str, table: str | None, modes: Iterable[str], exclude: str = "") -> str | None:
@@ -641,148 +703,3 @@ def mapping_for_vehicle(fmt: str, table: str | None) -> str | None:
         if rule is not None and rule.names == table:
             return name
     return None
-
-
-# ---------------------------------------------------------------------------------------------- resolving
-
-
-def _missing_stream(sel: Selector, streams: Streams, what: str, mapping: str) -> MappingError:
-    head = sel.source.split(":")[0] if ":" in sel.source else sel.source.split(".")[0]
-    names = streams.names
-    near = nearest(head, names)
-    listing = ", ".join(names[:40]) + (f", … ({len(names)} in all)" if len(names) > 40 else "")
-    heads = [candidate_streams(src)[0] if candidate_streams(src) else src for src in sel.sources]
-    empty = [s for s in heads if s in streams.counts and not streams.counts[s]]
-    lost = [s for s in heads if streams.counts.get(s) and s not in streams]
-    if lost and streams.skipped:  # counted by the file's index, but every message of it was in damaged data
-        damage = ", ".join(f"{k} {v}" for k, v in streams.skipped.items())
-        return MappingError(
-            f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but every message of "
-            f"{', '.join(map(repr, lost))} in {streams.path} ({streams.format}) is in damaged data the reader "
-            f"skipped ({damage}): the file is corrupt there"
-        )
-    if empty:  # declared by the file but never written: the stream exists, its data do not
-        return MappingError(
-            f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but {streams.path} "
-            f"({streams.format}) holds no message of {', '.join(map(repr, empty))} (the file declares the stream "
-            f"but the vehicle never wrote it)"
-        )
-    return MappingError(
-        f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but {streams.path} "
-        f"({streams.format}) has no such stream{'; nearest: ' + ', '.join(near) if near else ''}; "
-        f"it has: {listing or 'no streams'}"
-    )
-
-
-def _missing_field(name: str, stream: str, frame: pd.DataFrame, streams: Streams, what: str, mapping: str):
-    fields = [c for c in frame.columns if c != "t"]
-    near = nearest(name, fields)
-    return MappingError(
-        f"mapping {mapping!r}: {what}: stream {stream!r} of {streams.path} has no field {name!r}"
-        f"{'; nearest: ' + ', '.join(near) if near else ''}; its fields: {', '.join(map(str, fields))}"
-    )
-
-
-@dataclass(frozen=True)
-class Selected:
-    """Rows of one stream picked by a selector: the stream's name and frame, a row mask and the field columns."""
-
-    stream: str
-    frame: pd.DataFrame
-    rows: np.ndarray
-    columns: tuple[str, ...]
-    dropped_other_systems: int = 0
-
-
-def select(sel: Selector, streams: Streams, what: str, mapping: str, *, n_columns: int | None = None) -> Selected:
-    """Find a selector's stream, rows and field columns in ``streams``; a MappingError names what is missing.
-
-    Where a MAVLink stream carries several (sysid, compid) sources and ``where`` picks none, the most frequent
-    source is kept, so two vehicles (or a ground station) are never mixed into one channel.
-    """
-    first_error: MappingError | None = None
-    for source in sel.sources:
-        try:
-            return _select_one(sel, source, streams, what, mapping, n_columns)
-        except MappingError as exc:  # another firmware's names: try the next alternative
-            first_error = first_error or exc
-    raise first_error if first_error is not None else _missing_stream(sel, streams, what, mapping)
-
-
-def resolve_channel(ch: Channel, streams: Streams) -> Channel:
-    """The first of a channel's variants whose stream and fields ``streams`` has (the channel itself when none
-    has: selecting it then raises the MappingError that names what is missing)."""
-    if not ch.alternatives:
-        return ch
-    for variant in ch.variants:
-        try:
-            select(variant.selector, streams, "", "", n_columns=TRANSFORMS[variant.transform].n_columns)
-            return variant
-        except MappingError:
-            continue
-    return replace(ch, alternatives=())
-
-
-def _select_one(sel: Selector, source: str, streams: Streams, what: str, mapping: str,
-                n_columns: int | None) -> Selected:
-    split = split_source(source, streams.frames)
-    if split is None and source in streams.frames and n_columns is None:
-        split = (source, "")
-    if split is None:
-        raise _missing_stream(sel, streams, what, mapping)
-    stream, fld = split
-    frame = streams.frames[stream]
-    rows = np.ones(len(frame), dtype=bool)
-    for col, value in sel.where:
-        if col not in frame.columns:
-            raise _missing_field(col, stream, frame, streams, f"{what} (where)", mapping)
-        series = frame[col]
-        if isinstance(value, str):
-            rows &= series.astype(str).to_numpy() == value
-        else:
-            rows &= numeric(frame, col) == float(value)
-    dropped = 0
-    where_cols = {c for c, _ in sel.where}
-    if {"sysid", "compid"} <= set(frame.columns) and not where_cols & {"sysid", "compid"} and rows.any():
-        key = frame["sysid"].to_numpy().astype(np.int64) * 256 + frame["compid"].to_numpy().astype(np.int64)
-        values, counts = np.unique(key[rows], return_counts=True)
-        if values.size > 1:
-            keep = rows & (key == values[np.argmax(counts)])
-            dropped = int(rows.sum() - keep.sum())
-            rows = keep
-    if fld == "" and n_columns is not None:
-        raise MappingError(f"mapping {mapping!r}: {what}: source {source!r} names stream {stream!r} but no field; "
-                           f"write {stream}.<field> (fields: {', '.join(map(str, list(frame.columns)[:12]))})")
-    if fld == "":
-        return Selected(stream, frame, rows, (), dropped)
-    cols = []
-    for name in fld.split(","):  # "roll,pitch,yaw": several fields of one stream, for one transform
-        found = field_columns(frame, name.strip())
-        if not found:
-            raise _missing_field(name.strip(), stream, frame, streams, what, mapping)
-        cols += found
-    if n_columns is not None and len(cols) != n_columns:
-        raise MappingError(
-            f"mapping {mapping!r}: {what} needs {n_columns} column(s) from {sel.source!r}, "
-            f"but stream {stream!r} has {len(cols)}: {cols}"
-        )
-    return Selected(stream, frame, rows, tuple(cols), dropped)
-
-
-def channel_values(ch: Channel, sel: Selected) -> np.ndarray:
-    """The channel's values for the selected rows: ``sign * scale * transform(columns) + offset``."""
-    raw = np.column_stack([numeric(sel.frame, c)[sel.rows] for c in sel.columns])
-    return channel_convert(ch, raw)
-
-
-def channel_convert(ch: Channel, raw: np.ndarray) -> np.ndarray:
-    """``sign * scale * transform(raw) + offset`` of raw field columns (rows × columns), offline and online."""
-    tr = TRANSFORMS[ch.transform]
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        return ch.gain * tr.forward(raw, dict(ch.params)) + ch.offset
-
-
-def channel_inverse(ch: Channel, values: np.ndarray) -> np.ndarray:
-    """Field columns that :func:`channel_values` maps back onto ``values`` (for the writers)."""
-    tr = TRANSFORMS[ch.transform]
-    return tr.inverse((np.asarray(values, dtype=np.float64) - ch.offset) / ch.gain, dict(ch.params))

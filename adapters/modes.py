@@ -10,9 +10,14 @@ pymavlink does not carry; it is listed here from PX4's ``vehicle_status.msg``.
 
 from __future__ import annotations
 
+import math
+
 from pymavlink import mavutil
 
-__all__ = ["AUTOPILOT_HOLDS", "MODE_TABLES", "mode_name", "mode_number", "heartbeat_table", "vehicle_kind"]
+from workbench.data.plant_groups import PLANT_GROUPS
+
+__all__ = ["AUTOPILOT_HOLDS", "MODE_TABLES", "STICKS", "plant_group", "mode_name", "mode_number", "heartbeat_table",
+           "vehicle_kind"]
 
 _ML = mavutil.mavlink
 
@@ -25,18 +30,39 @@ PX4_NAV_STATE = {
 }  # fmt: skip
 
 
-#: Pilot-flown modes in which the autopilot, not the pilot, closes a loop: what it holds while the sticks are
-#: centred (ArduCopter's, QuadPlane's and PX4's mode documentation). A demonstration flown in one carries it in
-#: ``meta["autopilot_holds"]``, so that a gain that does not bring those states back is explained by the mode.
-AUTOPILOT_HOLDS = {
-    "ALT_HOLD": "the altitude",
-    "LOITER": "the position and the altitude",
-    "POSHOLD": "the position and the altitude",
-    "QHOVER": "the altitude",
-    "QLOITER": "the position and the altitude",
-    "ALTCTL": "the altitude",
-    "POSCTL": "the position and the altitude",
+#: What the pilot's sticks command in each pilot-flown mode, per mode table: the mode's plant group
+#: (:mod:`workbench.data.plant_groups`). ArduCopter's, ArduPlane's (with the QuadPlane's Q modes) and PX4's flight-mode
+#: documentation: the roll stick commands a lean angle in STABILIZE, ALT_HOLD, QSTABILIZE, QHOVER and PX4's
+#: multicopter MANUAL / STABILIZED / ALTCTL; a roll rate in ACRO (SPORT with a climb rate); a velocity in LOITER,
+#: POSHOLD, FLOWHOLD, QLOITER and POSCTL; a plane's MANUAL, STABILIZE and TRAINING move its control surfaces, its FBWA
+#: a bank angle (FBWB and CRUISE with a climb rate). The throttle commands a climb rate wherever the autopilot holds
+#: the altitude. PX4's MANUAL is the multicopter's (an attitude); a PX4 plane's MANUAL would be "surface". A kept mode
+#: not listed here gets a plant of its own, named after the mode (:func:`plant_group`).
+STICKS: dict[str, dict[str, str]] = {
+    "arducopter": {"STABILIZE": "angle", "ALT_HOLD": "angle+climb", "LOITER": "velocity+climb",
+                   "POSHOLD": "velocity+climb", "FLOWHOLD": "velocity+climb", "ACRO": "rate", "SPORT": "rate+climb"},
+    "arduplane": {"MANUAL": "surface", "STABILIZE": "surface", "TRAINING": "surface", "FBWA": "bank",
+                  "FBWB": "bank+climb", "CRUISE": "bank+climb", "QSTABILIZE": "angle", "QHOVER": "angle+climb",
+                  "QLOITER": "velocity+climb", "QACRO": "rate"},
+    "px4": {"MANUAL": "angle", "STABILIZED": "angle", "ALTCTL": "angle+climb", "POSCTL": "velocity+climb",
+            "ACRO": "rate"},
+    "px4_nav_state": {"MANUAL": "angle", "STAB": "angle", "ALTCTL": "angle+climb", "POSCTL": "velocity+climb",
+                      "ACRO": "rate"},
 }
+
+
+def plant_group(table: str | None, mode: str) -> str:
+    """The plant group of ``mode`` in mode table ``table`` (:data:`STICKS`); a mode the table does not list gets a
+    group of its own, ``"mode NAME"``, so that it is never pooled with a mode whose sticks command another thing."""
+    return STICKS.get(table or "", {}).get(mode) or f"mode {mode}"
+
+
+#: Pilot-flown modes in which the autopilot, not the pilot, closes a loop: what it holds while the sticks are
+#: centred, read off each mode's plant group (a velocity stick: the position; a climb-rate throttle: the altitude).
+#: A demonstration flown in one carries it in ``meta["autopilot_holds"]``, so that a gain that does not bring those
+#: states back is explained by the mode.
+AUTOPILOT_HOLDS = {mode: PLANT_GROUPS[group].holds for groups in STICKS.values() for mode, group in groups.items()
+                   if PLANT_GROUPS[group].holds}
 
 
 def _px4_custom_modes() -> dict[int, str]:
@@ -91,9 +117,16 @@ def vehicle_kind(autopilot: int, mav_type: int) -> str:
     return f"{ap.name if ap else autopilot} {ty.name if ty else mav_type}"
 
 
-def mode_name(table: str | None, number: float) -> str:
-    """The name of mode ``number`` in ``table``; the number as text where unknown."""
-    n = int(number)
+def mode_name(table: str | None, number: object) -> str:
+    """The name of mode ``number`` in ``table``; the number as text where unknown, and a value that is no mode
+    number (NaN, null, text: a log is not trusted to hold one) as it is."""
+    try:
+        f = float(number)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        return "null" if number is None else str(number)
+    if not math.isfinite(f) or not f.is_integer():
+        return str(f)
+    n = int(f)
     return MODE_TABLES.get(table or "", {}).get(n, str(n))
 
 

@@ -2,7 +2,7 @@
 
 Every format goes through the same steps once its reader has produced :class:`~adapters.streams.Streams`:
 
-1. **channels** — each state and input is picked from its stream (:func:`adapters.mapping.select`), put on
+1. **channels** — each state and input is picked from its stream (:func:`adapters.selection.select`), put on
    the mapping's clock (:mod:`adapters.clock`), converted (scale, offset, sign, transform) and cleaned
    (non-finite values and time going backwards dropped and counted);
 2. **spans** — the segmentation rules' spans, intersected (:mod:`adapters.segment`);
@@ -28,13 +28,27 @@ import numpy as np
 
 from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
-from adapters.mapping import ChannelMapping, Selected, channel_values, resolve_channel, select
+from adapters.mapping import ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
-from adapters.modes import AUTOPILOT_HOLDS, mode_name
-from adapters.segment import EVERYTHING, Span, demo_spans, flag_spans, intersect, mode_spans, split_at_landing
+from adapters.modes import AUTOPILOT_HOLDS, mode_name, plant_group
+from adapters.segment import (
+    EVERYTHING,
+    Span,
+    demo_spans,
+    event_spans,
+    flag_spans,
+    intersect,
+    mode_spans,
+    split_at_landing,
+)
+from adapters.selection import Selected, channel_values, resolve_channel, select
+from adapters.sticks import check as check_sticks
+from adapters.sticks import describe as describe_sticks
+from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams, clean_series, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
 from workbench.errors import DataError, MappingError
 
 __all__ = ["build", "check_rules", "explain"]
@@ -96,14 +110,40 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
         t, modes = _rule_series(sel, m, skipped=skipped, what="segment.mode")
         spans = intersect(spans, mode_spans(t, modes, seg.mode.keep, seg.mode.names))
     if seg.armed is not None:
-        sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
-        t, flags = _rule_series(sel, m, skipped=skipped, what="segment.armed")
-        spans = intersect(spans, flag_spans(t, seg.armed.truth(flags)))
+        armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped)
+        spans = intersect(spans, armed if armed is not None else EVERYTHING)
     if seg.landing is not None and seg.landing.flag is not None:
-        sel = select(seg.landing.flag.selector, streams, "segment.landing", m.name, n_columns=1)
-        t, flags = _rule_series(sel, m, skipped=skipped, what="segment.landing")
-        spans = intersect(spans, flag_spans(t, ~seg.landing.flag.truth(flags)))
+        flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True)
+        spans = intersect(spans, flying if flying is not None else EVERYTHING)
     return list(spans)
+
+
+def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
+                invert: bool = False) -> list[Span] | None:
+    """The spans a flag rule holds in (``invert``: does not hold); ``None`` where an event rule's stream is not in
+    the log at all (the firmware records no such events: old ArduPlane logs declare no ``EV``), so the rule says
+    nothing. A stream the log declares but never wrote holds no event: no span."""
+    if rule.on and not _declared(streams, rule.selector):
+        return None
+    if rule.on and not any(h in streams for h in _heads(rule.selector)):
+        return []  # declared, never written
+    sel = select(rule.selector, streams, what, m.name, n_columns=1)
+    t, flags = _rule_series(sel, m, skipped=skipped, what=what)
+    if rule.on:
+        events = rule.events(flags)
+        truth = rule.truth(flags[events])
+        return event_spans(t[events], ~truth if invert else truth)
+    truth = rule.truth(flags)
+    return flag_spans(t, ~truth if invert else truth)
+
+
+def _heads(sel: Selector) -> list[str]:
+    return [src.split(":")[0] if ":" in src else src.split(".")[0] for src in sel.sources]
+
+
+def _declared(streams: Streams, sel: Selector) -> bool:
+    """Whether the log has, or declares without a message, one of a selector's streams."""
+    return any(h in streams or h in streams.counts for h in _heads(sel))
 
 
 def _metadata(streams: Streams, m: ChannelMapping) -> tuple[dict[str, dict], list[tuple[float, dict]]]:
@@ -169,6 +209,10 @@ def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
     return f"{streams.path}: mapping {m.name!r}: {'; '.join(parts)} — {cause}, so there is nothing to fit"
 
 
+#: A flight's GPS speed must pass this many times the receiver's velocity accuracy somewhere in its kept segments for
+#: the velocity to be judged or the plant identified: below it the velocity is the receiver's noise (a hover).
+MOTION_OVER_ACCURACY = 10.0
+
 #: Beyond this tilt the thrust points below the horizon: the vehicle is upside down (a flip), whatever its frame.
 FLIP = math.pi / 2
 
@@ -203,8 +247,11 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
     The rule is the coefficient of determination of the GPS velocity by the estimate, ``1 − Σ|v − v_gps|² /
     Σ|v_gps − mean v_gps|²`` over the GPS samples in the segments (north and east together): below 0 the estimate
     explains less of the GPS velocity than a constant would, so it is not the vehicle's velocity and no plant
-    identified from it can be physics. A log without the GPS stream, where the mapping says such a log flew
-    without GPS, dead-reckons. ``""`` where the velocity follows, or where there is nothing to compare.
+    identified from it can be physics. Before it, the flight must move: a GPS speed that never passes
+    :data:`MOTION_OVER_ACCURACY` times the receiver's accuracy (a hover, a vehicle standing) is too little motion to
+    judge the estimate or identify the plant by, and says so (its own cause, not the estimator's). A log without the
+    GPS stream, where the mapping says such a log flew without GPS, dead-reckons. ``""`` where the velocity
+    follows, or where there is nothing to compare.
     """
     ref = m.reference
     if ref is None or not windows:
@@ -244,10 +291,18 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
     if inside.sum() < 3:
         return ""
     tg, g = tg[inside], g[inside]
+    speed = float(np.hypot(g[:, 0], g[:, 1]).max())
+    motion = MOTION_OVER_ACCURACY * ref.accuracy
+    if speed < motion:
+        return (f"{head}: too little motion to identify the plant: the GPS speed ({gps.stream} "
+                f"{', '.join(gps.columns)}) never passes {motion:g} m/s in the kept segments (ten times the receiver's "
+                f"{ref.accuracy:g} m/s velocity accuracy): at most {speed:.2g} m/s over {len(g)} GPS samples — the "
+                f"velocities are the receiver's noise, and neither the estimator nor the plant's physics can be judged "
+                f"from them")
     v = np.column_stack([np.interp(tg, te, e[:, k]) for k in range(2)])
     spread = float(((g - g.mean(axis=0)) ** 2).sum())
-    if spread == 0.0 or np.sqrt(spread / len(g)) <= ref.accuracy:
-        return ""  # the GPS says "not moving" within its own accuracy: nothing to follow
+    if spread == 0.0:
+        return ""
     explained = 1.0 - float(((v - g) ** 2).sum()) / spread
     if explained >= 0.0:
         return ""
@@ -292,6 +347,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     """
     m = mapping
     m.check_complete()
+    m = resolve_sticks(m, streams)  # a stick named by role, on the channel the log's RC map gives it
     skipped: Counter = Counter()
     check_rules(streams, m)  # a log never armed, or without a kept mode, says so before any channel is read
     series = _channels(streams, m, skipped)
@@ -352,8 +408,16 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             f"skipped: {dict(skipped) or 'nothing'}"
         )
 
+    windows = [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts]
+    stick_cause, stick_note = check_sticks(m, streams, [(float(t[0]), float(t[-1]), span.meta.get("mode"))
+                                                        for span, ts, _ in found for t in ts])
+    if stick_cause and not still:
+        if not allow_still:
+            raise DataError(stick_cause)
+        still = stick_cause
+    sticks = "; ".join(x for x in (describe_sticks(m, streams), stick_note) if x)
     if not still:
-        still = follows_gps(streams, m, [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts])
+        still = follows_gps(streams, m, windows)
         if still and not allow_still:
             # the terminal shows only this line; the cuts the viewer draws are counted in it
             cut = (f" ({len(flips)} segment{'s' if len(flips) > 1 else ''} cut or dropped at the vehicle's flips "
@@ -391,10 +455,14 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             }
             if still:
                 meta["still"] = still
+            if sticks:
+                meta["sticks"] = sticks
             if flips:
                 meta["flipped"] = "; ".join(flips)
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
+                # what the sticks command in this mode: segments of different groups are different plants
+                meta[PLANT_GROUP_KEY] = plant_group(m.segment.mode.names if m.segment.mode else None, meta["mode"])
                 if span.meta["mode"] in AUTOPILOT_HOLDS:
                     meta["autopilot_holds"] = AUTOPILOT_HOLDS[span.meta["mode"]]
             if key is not None:
@@ -464,7 +532,18 @@ def check_rules(streams: Streams, m: ChannelMapping) -> None:
     """
     seg = m.segment
     _check_vehicle(streams, m)
-    if seg.armed is not None:
+    if seg.armed is not None and seg.armed.on:
+        armed = _flag_spans(streams, m, seg.armed, "segment.armed")
+        if armed is not None and not armed:
+            heads = [h for h in _heads(seg.armed.selector) if h in streams or h in streams.counts]
+            n = sum(int(streams.counts.get(h, 0)) for h in heads)
+            on = " or ".join(f"{v:g}" for v in seg.armed.on)
+            raise DataError(
+                f"{streams.path}: never armed: the log records arming as events ({seg.armed.selector.describe()} = "
+                f"{on} on arming) and holds none among its {n} {'/'.join(heads)} message(s), so mapping {m.name!r} "
+                f"has no flight to import"
+            )
+    elif seg.armed is not None:
         sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
         _, flags = _rule_series(sel, m)
         if flags.size and not seg.armed.truth(flags).any():
@@ -524,15 +603,15 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
     skipped: Counter = Counter()
     try:
         m.check_complete()
+        m = resolve_sticks(m, streams)
         series = _channels(streams, m, skipped)
         seg = m.segment
         rules = replace(m, segment=replace(seg, armed=None, landing=None))
         spans = _spans(streams, rules, skipped)
         armed = EVERYTHING
         if seg.armed is not None:
-            sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
-            t, flags = _rule_series(sel, m)
-            armed = flag_spans(t, seg.armed.truth(flags))
+            armed = _flag_spans(streams, m, seg.armed, "segment.armed")
+            armed = EVERYTHING if armed is None else armed
     except WorkbenchError as exc:
         ends = [float(f["t"].min()) for f in streams.frames.values() if len(f)]
         ends += [float(f["t"].max()) for f in streams.frames.values() if len(f)]

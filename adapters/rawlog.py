@@ -7,13 +7,15 @@ DataFlash ``.bin``) is shown as soon as its reader yields streams:
 * **numbers** — every numeric column of every stream on the log's own clock, with its unit where the format
   has one (MAVLink: the message definitions' ``units``; a reader may give ``info["units"] = {stream: {field:
   unit}}``, as DataFlash FMTU does); MAVLink's ``sysid`` / ``compid`` header columns are left out;
-* **text** — MAVLink ``STATUSTEXT``, ULog logged messages (``info["logged_messages"]``), DataFlash ``MSG``,
-  ``ERR`` and ``EV`` (named by :mod:`adapters.events`: ``ARMED``, ``EKFCHECK: BAD_VARIANCE``), ROS 2
-  ``/rosout``, each with a severity;
+* **text** — what the log's format declares (:meth:`adapters.formats.base.Format.text_messages`, read by
+  :mod:`adapters.textlog`): MAVLink ``STATUSTEXT``, ULog logged messages, DataFlash ``MSG``, ``ERR`` and ``EV``
+  (named by :mod:`adapters.events`: ``ARMED``, ``EKFCHECK: BAD_VARIANCE``), ROS 2 ``/rosout`` and text-only
+  MCAP topics (``std_msgs/String``), each with a severity; a value that is no number is shown as it is;
 * **track** — latitude / longitude from the first stream that has a fix (``GLOBAL_POSITION_INT``,
   ``GPS_RAW_INT``, ``vehicle_global_position``, ``vehicle_gps_position``, ``sensor_gps``, ``GPS``); integer
   degrees × 1e7 are recognised by their magnitude;
-* **parameters** — ``PARAM_VALUE`` (MAVLink), ULog parameters (``info["parameters"]``), ``PARM`` (DataFlash);
+* **parameters** — ``PARAM_VALUE`` (MAVLink), ULog parameters, ``PARM`` (DataFlash), the last value of each
+  (:func:`adapters.sticks.log_parameters`);
 * **modes** and **armed spans** — as ``workbench inspect`` names them (:mod:`adapters.summary`).
 """
 
@@ -25,14 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from adapters.events import error_resolved, error_text, event_name
+from adapters.sticks import log_parameters
 from adapters.streams import Streams
 from adapters.summary import ModeSpan, summarize
+from adapters.textlog import LEVELS
 
 __all__ = ["RawLog", "NumericStream", "TextLog", "Track", "raw_log", "LEVELS"]
 
-#: severity names, most severe first (rerun's TextLogLevel names); syslog / MAVLink severities index into it
-LEVELS = ("CRITICAL", "CRITICAL", "CRITICAL", "ERROR", "WARN", "INFO", "INFO", "DEBUG")
 _HEADER_COLUMNS = {"sysid", "compid"}  # MAVLink frame header, not a field of the message
 # (stream, latitude field, longitude field), most precise first
 _TRACKS = (
@@ -46,8 +47,6 @@ _TRACKS = (
     ("GPS", "Lat", "Lng"),
     ("POS", "Lat", "Lng"),
 )
-_PARAMS = (("PARAM_VALUE", "param_id", "param_value"), ("PARM", "Name", "Value"))
-_ROS_LEVELS = {10: "DEBUG", 20: "INFO", 30: "WARN", 40: "ERROR", 50: "CRITICAL"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,30 +134,12 @@ def _numeric(streams: Streams, name: str, frame: pd.DataFrame) -> NumericStream 
 
 
 def _text(streams: Streams) -> TextLog:
-    rows: list[tuple[float, str, str, str]] = []
-    f = streams.frames
-    if "STATUSTEXT" in f and "text" in f["STATUSTEXT"].columns:
-        s = f["STATUSTEXT"]
-        sev = s["severity"].to_numpy() if "severity" in s.columns else np.full(len(s), 6)
-        rows += [(float(t), LEVELS[int(v) if 0 <= v < 8 else 6], str(x), "STATUSTEXT")
-                 for t, v, x in zip(s["t"], sev, s["text"], strict=True)]
-    for t, level, x in streams.info.get("logged_messages", []) or []:
-        rows.append((float(t), LEVELS[level if 0 <= level < 8 else 6], str(x), "logged message"))
-    if "MSG" in f and "Message" in f["MSG"].columns:
-        rows += [(float(t), "INFO", str(x), "MSG") for t, x in zip(f["MSG"]["t"], f["MSG"]["Message"], strict=True)]
-    if "ERR" in f and {"Subsys", "ECode"} <= set(f["ERR"].columns):
-        e = f["ERR"]
-        table = streams.info.get("mode_table")
-        rows += [(float(t), "INFO" if error_resolved(a, b) else "ERROR", error_text(a, b, table), "ERR")
-                 for t, a, b in zip(e["t"], e["Subsys"], e["ECode"], strict=True)]
-    if "EV" in f and "Id" in f["EV"].columns:
-        rows += [(float(t), "INFO", event_name(i), "EV") for t, i in zip(f["EV"]["t"], f["EV"]["Id"], strict=True)]
-    if "/rosout" in f and "msg" in f["/rosout"].columns:
-        r = f["/rosout"]
-        lv = r["level"].to_numpy() if "level" in r.columns else np.full(len(r), 20)
-        rows += [(float(t), _ROS_LEVELS.get(int(v), "INFO"), str(x), "/rosout")
-                 for t, v, x in zip(r["t"], lv, r["msg"], strict=True)]
-    rows = [r for r in rows if math.isfinite(r[0])]
+    """The text messages the log's format declares (:meth:`adapters.formats.base.Format.text_messages`), in time
+    order; a message without a finite time is left out."""
+    from adapters.formats import FORMATS
+
+    fmt = FORMATS.get(streams.format)
+    rows = [r for r in (fmt.text_messages(streams) if fmt is not None else []) if math.isfinite(r[0])]
     rows.sort(key=lambda r: r[0])
     return TextLog(np.array([r[0] for r in rows], dtype=np.float64), tuple(r[1] for r in rows),
                    tuple(r[2] for r in rows), tuple(r[3] for r in rows))
@@ -183,15 +164,8 @@ def _track(streams: Streams) -> Track | None:
 
 
 def _parameters(streams: Streams) -> tuple[tuple[str, float | str], ...]:
-    params: dict[str, float | str] = {}
-    for name, key, value in _PARAMS:
-        frame = streams.frames.get(name)
-        if frame is not None and {key, value} <= set(frame.columns):
-            for k, v in zip(frame[key].astype(str), frame[value].to_numpy(dtype=np.float64), strict=True):
-                params[k.strip("\x00")] = float(v)  # the last value sent is the one in force
-    for k, v in (streams.info.get("parameters", {}) or {}).items():
-        params.setdefault(str(k), v if isinstance(v, int | float | str) else str(v))
-    return tuple(sorted(params.items()))
+    """The log's parameters, the last value of each (:func:`adapters.sticks.log_parameters`)."""
+    return tuple(sorted(log_parameters(streams).items()))
 
 
 def raw_log(streams: Streams) -> RawLog:

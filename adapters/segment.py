@@ -84,6 +84,15 @@ def flag_spans(t: np.ndarray, flag: np.ndarray) -> list[Span]:
     return spans
 
 
+def event_spans(t: np.ndarray, on: np.ndarray) -> list[Span]:
+    """Spans between an "on" event and the next "off" (``on`` per event row, in time order); a first event that is
+    "off" means the flag held from the log's start (a log that began armed), the last state holds to its end."""
+    on = np.asarray(on, dtype=bool)
+    if on.size and not on[0]:
+        t, on = np.r_[-math.inf, t], np.r_[True, on]
+    return flag_spans(t, on)
+
+
 def mode_spans(t: np.ndarray, modes: np.ndarray, keep: tuple[int, ...], table: str | None) -> list[Span]:
     """Spans of kept flight modes (zero-order hold), one per run, ``meta["mode"]`` its name."""
     finite = np.isfinite(modes)

@@ -106,11 +106,24 @@ class LogSummary:
 
 
 def _float(column: Any) -> np.ndarray:
-    """A numeric column as float64 (a missing value in an object column as NaN)."""
+    """A numeric column as float64: a missing value, or text, in an object column as NaN."""
     try:
         return np.asarray(column, dtype=np.float64)
-    except (TypeError, ValueError):
-        return np.array([np.nan if v is None else v for v in column], dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        def number(v: Any) -> float:
+            try:
+                return float(v)
+            except (TypeError, ValueError, OverflowError):
+                return math.nan
+
+        return np.array([number(v) for v in np.asarray(column).tolist()], dtype=np.float64)
+
+
+def _ints(column: Any) -> np.ndarray:
+    """A numeric column as int64, -1 where a value is not a finite number (a HEARTBEAT field holding null)."""
+    v = _float(column)
+    ok = np.isfinite(v) & (np.abs(v) < 2**62)
+    return np.where(ok, v, -1).astype(np.int64)
 
 
 def _stream_summary(name: str, columns: dict[str, np.ndarray], count: int) -> tuple[StreamSummary, int]:
@@ -143,14 +156,14 @@ def _mode_spans(t: np.ndarray, modes: np.ndarray, table: str) -> list[ModeSpan]:
 
 def _heartbeat_rows(hb: dict[str, np.ndarray]) -> tuple[np.ndarray, str | None, str]:
     """The vehicle's HEARTBEAT rows (the most frequent vehicle source), its mode table and its description."""
-    autopilot = np.asarray(hb["autopilot"]).astype(np.int64)
-    kind = np.asarray(hb["type"]).astype(np.int64)
+    autopilot = _ints(hb["autopilot"])
+    kind = _ints(hb["type"])
     tables = np.array([heartbeat_table(a, k) or "" for a, k in zip(autopilot, kind, strict=True)])
     rows = tables != ""
     if not rows.any():
         return rows, None, ""
     if {"sysid", "compid"} <= set(hb):  # two vehicles (or a companion) are never mixed
-        key = np.asarray(hb["sysid"]).astype(np.int64) * 256 + np.asarray(hb["compid"]).astype(np.int64)
+        key = _ints(hb["sysid"]) * 256 + _ints(hb["compid"])
         values, counts = np.unique(key[rows], return_counts=True)
         rows &= key == values[np.argmax(counts)]
     # a vehicle reports one type; the most frequent wins over a stray message
@@ -181,13 +194,9 @@ def _arming_recorded(streams: Streams) -> bool:
     """Whether the log can say when the vehicle was armed (a held flag or arming events), so that no armed span
     means never armed; planes' old DataFlash logs carry neither."""
     if streams.format == "dataflash":
-        formats = streams.info.get("formats") or {}
-        if "ARM" in formats:
-            return True
-        if "EV" in streams and "Id" in streams.columns("EV"):
-            ids = np.asarray(streams.columns("EV")["Id"]).astype(np.int64)
-            return bool(np.isin(ids, (10, 11)).any())
-        return False
+        # ARM messages, or EV declared by the log's FMTs: a firmware that logs events logs ARMED, so a log of it
+        # without one never armed (old ArduPlane logs declare no EV: they do not say)
+        return "ARM" in (streams.info.get("formats") or {}) or "EV" in streams.counts
     if "HEARTBEAT" in streams:
         return "base_mode" in streams.columns("HEARTBEAT")
     if "vehicle_status" in streams:
@@ -203,8 +212,8 @@ def _modes(streams: Streams) -> tuple[list[ModeSpan], list[Span], str]:
         rows, table, vehicle = _heartbeat_rows(hb)
         if rows.any():
             t = _float(hb["t"])[rows]
-            modes = np.asarray(hb["custom_mode"])[rows]
-            armed = (np.asarray(hb["base_mode"])[rows].astype(np.int64) & 128) != 0  # MAV_MODE_FLAG_SAFETY_ARMED
+            modes = _float(hb["custom_mode"])[rows]
+            armed = (np.maximum(_ints(hb["base_mode"])[rows], 0) & 128) != 0  # MAV_MODE_FLAG_SAFETY_ARMED
             return _mode_spans(t, modes, table), flag_spans(t, armed), vehicle
     vs = streams.columns("vehicle_status") if "vehicle_status" in streams else None
     if vs is not None and "nav_state" in vs:
@@ -265,6 +274,10 @@ def summarize(streams: Streams) -> LogSummary:
     ends = [s.t_end for s in summaries if math.isfinite(s.t_end)]
     modes, armed, vehicle = _modes(streams)
     t_end = max(ends) if ends else 0.0
+    t_start = min(starts) if starts else 0.0
+    # a span is shown within the streams' time lines: a damaged stamp (10^13 s) never makes a mode last for ages
+    modes = [ModeSpan(max(m.start, t_start), min(m.end, t_end), m.mode) for m in modes
+             if m.end >= t_start and m.start <= t_end]
     try:
         size = os.path.getsize(streams.path)
     except OSError:
@@ -274,11 +287,11 @@ def summarize(streams: Streams) -> LogSummary:
         path=streams.path,
         format=streams.format,
         size_bytes=int(size),
-        t_start=min(starts) if starts else 0.0,
+        t_start=t_start,
         t_end=t_end,
         streams=tuple(sorted(summaries, key=lambda s: s.name)),
         modes=tuple(modes),
-        armed=tuple((s.start, min(s.end, t_end)) for s in armed),
+        armed=tuple((max(s.start, t_start), min(s.end, t_end)) for s in armed if s.end >= t_start and s.start <= t_end),
         skipped=tuple(sorted([(str(k), int(v)) for k, v in streams.skipped.items() if v]
                              + ([("stamps off their stream's time line (not in the spans)", outliers)]
                                 if outliers else []))),

@@ -25,8 +25,10 @@ import numpy as np
 import pandas as pd
 
 from adapters.formats import format_for_suffix, get_format
-from adapters.mapping import ChannelMapping, Selector, channel_inverse, load_mapping
+from adapters.mapping import ChannelMapping, Selector, load_mapping
 from adapters.meta import format_markers
+from adapters.selection import channel_inverse
+from adapters.sticks import with_defaults
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, MappingError
 
@@ -92,6 +94,8 @@ def demo_streams(
     """
     m = mapping
     m.check_complete()
+    if not m.sticks:  # sticks named by role go on the firmware's default channels unless resolved (sticks.resolve)
+        m = with_defaults(m)
     if (tuple(ds.state_names), tuple(ds.input_names)) != (m.state_names, m.input_names):
         raise MappingError(
             f"mapping {m.name!r} maps states {list(m.state_names)} and inputs {list(m.input_names)}, but the set "

@@ -17,6 +17,7 @@ factory, CDR through ``mcap_ros2``'s), and pymavlink's ``DFReader_binary`` + ``r
 
 from __future__ import annotations
 
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -427,18 +428,83 @@ def bench_dataflash(tmp: Path) -> list[dict]:
     return rows
 
 
+_DFREADER_COLUMNS = """
+def dfreader_columns(path):
+    reader = DFReader.DFReader_binary(str(path))
+    n = 0
+    while (m := reader.recv_msg()) is not None:
+        n += len(m.to_dict())  # every column of every message, as DFReader gives it (multiplied, text decoded)
+    reader.close()
+    return n
+"""
+
+#: FMT-rich ArduCopter 3.4 – 4.6 logs recorded by others (bench/real_logs.md says where each comes from), looked
+#: for in the folder given with --logs (never in the repository)
+FMT_RICH = ("beastayyg_log_0036_mechanical_failure.bin", "beastayyg_sample.bin", "erle_pxf_copter_Erle-Brain3.BIN",
+            "erle_erlebrain_APM_22.BIN", "erle_pxf_copter_PXFv2.0b+Rpi.BIN", "amc_backend_log_80k.bin")
+
+
+def bench_dataflash_columns(tmp: Path, logs: Path | None = None) -> list[dict]:
+    """Every column of every message of FMT-rich ArduCopter 3.4 – 4.6 logs: ``dataflash.read`` (all types, every
+    field decoded into numpy columns, multipliers applied, text decoded) against DFReader's ``recv_msg`` loop with
+    ``to_dict()`` of each message (every field as DFReader decodes it) and, beside it, the bare ``recv_msg`` loop
+    (DFReader unpacks every field; it applies multipliers and decodes text only when a column is asked for)."""
+    import contextlib
+    import io
+
+    from pymavlink import DFReader
+
+    from adapters.formats import dataflash, dataflash_write
+
+    namespace = {"DFReader": DFReader}
+    exec(_DFREADER_COLUMNS, namespace)  # the same source the subprocess cases run
+    columns = namespace["dfreader_columns"]
+    big = tmp / "generated_copter.bin"
+    if not big.exists():
+        dataflash_write.write_example(big, "new", "copter", seconds=300.0, rate=7.0, seed=2)
+    cases = [(logs / name, name) for name in FMT_RICH if logs is not None and (logs / name).exists()]
+    cases.append((big, "generated ArduCopter 4.x-style log (FMTU, instances)"))
+    rows = []
+    for path, label in cases:
+        ours = dataflash.read(path)
+        firmware = ours.info.get("firmware", "")
+        n = _check_dataflash(path)
+        values = sum((len(c) - 1) * len(c["t"]) for c in (ours.columns(k) for k in ours.frames))
+        case = (f"{label} ({firmware.split(' (')[0]}, {path.stat().st_size / 1e6:.2f} MB, {len(ours.frames)} streams "
+                f"of {len(ours.info['formats'])} written types, {n} messages, every column)")
+        with contextlib.redirect_stdout(io.StringIO()):  # DFReader prints what it skips
+            warm = interleaved({"ours": lambda p=path: dataflash.read(p), "columns": lambda p=path: columns(p),
+                                "recv": lambda p=path: _dfreader(p)}, 5)
+        row = _row("DataFlash", case, "warm, all columns", warm["ours"], warm["columns"],
+                   "pymavlink DFReader_binary recv_msg + to_dict", fields=values)
+        rows.append(_target(row, 10.0, "≥ 10×"))
+        rows.append(_row("DataFlash", case, "warm, all columns", warm["ours"], warm["recv"],
+                         "pymavlink DFReader_binary recv_msg (bare)"))
+    return rows
+
+
 def run() -> list[dict]:
     with tempfile.TemporaryDirectory(prefix="bench_readers_") as tmp:
         tmp = Path(tmp)
-        return bench_csv(tmp) + bench_ulog() + bench_tlog(tmp) + bench_mcap(tmp) + bench_dataflash(tmp)
+        logs = Path(os.environ["WORKBENCH_REAL_LOGS"]) if os.environ.get("WORKBENCH_REAL_LOGS") else None
+        return (bench_csv(tmp) + bench_ulog() + bench_tlog(tmp) + bench_mcap(tmp) + bench_dataflash(tmp)
+                + bench_dataflash_columns(tmp, logs))
 
 
 if __name__ == "__main__":
+    import argparse
+
     from harness import markdown_table
 
-    sections = {"dataflash": bench_dataflash, "tlog": bench_tlog}
-    if sys.argv[1:2] and sys.argv[1] in sections:  # one section alone: python bench/bench_readers.py tlog
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("section", nargs="?", choices=["dataflash", "dataflash-columns", "tlog"],
+                        help="one section alone (all by default)")
+    parser.add_argument("--logs", type=Path, help="a folder holding the FMT-rich real logs of FMT_RICH")
+    args = parser.parse_args()
+    sections = {"dataflash": bench_dataflash, "tlog": bench_tlog,
+                "dataflash-columns": lambda tmp: bench_dataflash_columns(tmp, args.logs)}
+    if args.section:  # one section alone: python bench/bench_readers.py dataflash-columns --logs /work/team/logs
         with tempfile.TemporaryDirectory(prefix="bench_readers_") as tmp:
-            print(markdown_table(sections[sys.argv[1]](Path(tmp))))
+            print(markdown_table(sections[args.section](Path(tmp))))
     else:
         print(markdown_table(run()))

@@ -1,10 +1,11 @@
 """Real logs recorded by others, tried as a new user would: ``inspect``, ``import`` / ``fit`` / ``evaluate`` without
-``--mapping``, and ``view``; one row per log with each command's outcome (its last line when it stopped) and the
-identified plant's physics check (``A[xdot, phi]`` against g·dt).
+``--mapping``, and ``view``; one row per log with each command's outcome (its last line when it stopped), per plant
+group (what the sticks command in the segments' modes: each group is its own plant and model), the identified
+plants' physics checks and stick responses, and the held-out comparison's position and input prediction errors.
 
 The logs are not in the repository (their origins and licences: ``bench/real_logs.md``); put them in a folder and
-run ``python bench/real_logs.py FOLDER [FOLDER …] > table.md`` (each command has ``--timeout`` seconds). Nothing here
-tunes a default: the table is read, not optimised.
+run ``python bench/real_logs.py FOLDER [FOLDER …] > table.md`` (each command has ``--timeout`` seconds). The last
+lines count the outcomes. Nothing here tunes a default: the table is read, not optimised.
 """
 
 from __future__ import annotations
@@ -14,12 +15,17 @@ import re
 import subprocess
 import sys
 import tempfile
+from collections import Counter
 from pathlib import Path
 
 BIN = Path(sys.executable).parent
 LOGS = (".bin", ".BIN", ".tlog", ".ulg")
-CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?"
-                   r"ratio (-?[\d.e+-]+), (NOT )?within", re.S)
+GROUP_BLOCK = re.compile(r"plant identification \(plant group ([^,]+),")
+CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?ratio (-?[\d.e+-]+), (NOT )?within")
+STICK = re.compile(r"stick: (\w+) → (\w+): (.*?) per full stick \(time constant ([\d.e+-]+) s\)"
+                   r"|stick: (\w+) → (\w+): the (.*?) loop does not settle")
+METHODS = ("proposed", "ioc_only", "gmr_only", "persistence")
+TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence"}
 
 
 def _run(args: list[str], timeout: float) -> tuple[int, str, str]:
@@ -36,37 +42,118 @@ def _last(text: str) -> str:
 
 
 def _short(text: str) -> str:
-    """A cause without the file's path (the row names the log)."""
+    """A cause without ``error:`` and the file's path (the row names the log)."""
+    text = re.sub(r"^error: ", "", text.strip())
     return re.sub(r"^\S+: (mapping '\S+': )?", "", text)[:160].replace("|", "/")
 
 
 def _outcome(code: int, out: str, err: str, ok: str) -> str:
-    return ok if code == 0 else f"stops: {_last(err) or _last(out)}".replace("|", "/")
+    return ok if code == 0 else f"stops: {_short(_last(err) or _last(out))}".replace("|", "/")
 
 
-def row(log: Path, timeout: float) -> list[str]:
+def _not_fitted(err: str, what: str) -> dict[str, str]:
+    """``warning: plant group G: not fitted: cause`` lines, per group."""
+    found = {}
+    for m in re.finditer(rf"warning: plant group (\S+): not {what}: (.*)", err):
+        found[m.group(1)] = _short(m.group(2))[:140]
+    return found
+
+
+def physics(out: str) -> str:
+    """Per plant group: the physics check's ratio and what each stick commands (from the plant reports printed)."""
+    text = " ".join(out.split())  # the terminal's line wrapping undone
+    parts = []
+    blocks = GROUP_BLOCK.split(text)
+    if len(blocks) == 1:
+        blocks = ["", "—", text]
+    seen = set()
+    for group, body in zip(blocks[1::2], blocks[2::2], strict=True):
+        if group in seen:
+            continue
+        seen.add(group)
+        cells = []
+        if (c := CHECK.search(body)) is not None:
+            cells.append(f"{c.group(1)} {c.group(4)}× ({'NOT ' if c.group(5) else ''}within ×2)")
+        for s in STICK.finditer(body):
+            cells.append(f"{s.group(1)}→{s.group(2)} {s.group(3)}, τ {s.group(4)} s" if s.group(1)
+                         else f"{s.group(5)}→{s.group(6)}: no steady state")
+        parts.append(f"{group}: {'; '.join(cells) or '—'}")
+    return " / ".join(parts) or "—"
+
+
+def fit_cell(code: int, out: str, err: str) -> str:
+    if code != 0:
+        return _outcome(code, out, err, "")
+    wrote = re.search(r"wrote (\d+) model\(s\), one per plant group: (.*?)(;|$)", out, re.M)
+    failed = _not_fitted(err, "fitted")
+    if wrote is None:
+        group = re.search(r"^plant group (\S+):", out, re.M)
+        return f"fitted ({group.group(1)})" if group else "fitted"
+    groups = [Path(p.strip()).stem.split(".", 1)[-1] for p in wrote.group(2).split(",")]
+    return "fitted " + ", ".join(groups) + "".join(f"; {g} not fitted: {c}" for g, c in failed.items())
+
+
+def _means(table: Path) -> dict[str, dict[str, float]]:
+    """Per method, the mean over test trials (each trial's windows averaged first) of each RMSE metric."""
+    import pandas as pd
+
+    t = pd.read_parquet(table)
+    t = t[(t.get("table", "comparison") == "comparison") & t["metric"].str.startswith("rmse_")]
+    per_trial = t.groupby(["method", "metric", "trial"])["value"].mean().groupby(["method", "metric"]).mean()
+    out: dict[str, dict[str, float]] = {}
+    for (method, metric), v in per_trial.items():
+        out.setdefault(method, {})[metric] = float(v)
+    return out
+
+
+def evaluate_cells(code: int, out: str, err: str, tables: list[Path]) -> tuple[str, str]:
+    """The position RMSE per method and the input prediction error per method, per plant group."""
+    if code != 0:
+        stop = _outcome(code, out, err, "")
+        return stop, stop
+    pos, inp = [], []
+    failed = _not_fitted(err, "evaluated")
+    blocks = dict(zip(*(lambda b: (b[1::2], b[2::2]))(re.split(r"^plant group (\S+) \(", out, flags=re.M)),
+                      strict=True))
+    for table in tables:
+        group = table.stem.split(".", 1)[1] if "." in table.stem else ""
+        means = _means(table)
+        head = f"{group}: " if group else ""
+        left = [_short(ln.strip().split("could not be fitted and is left out of the comparison: ")[-1])[:120]
+                for ln in blocks.get(group, out).splitlines() if "proposed could not be fitted" in ln]
+        pos.append(head + ", ".join(f"{TITLES[m]} {means[m]['rmse_position']:.3g}" for m in METHODS
+                                    if 'rmse_position' in means.get(m, {}))
+                   + (f" (proposed left out: {left[0]})" if left else ""))
+        inputs = sorted({k for v in means.values() for k in v if "input" in k or k.startswith("rmse_u")})
+        inp.append(head + ("; ".join(f"{k}: " + ", ".join(f"{TITLES[m]} {means[m][k]:.3g}" for m in METHODS
+                                                           if k in means.get(m, {})) for k in inputs)
+                           or "— (no input score in this evaluate)"))
+    pos += [f"{g} not evaluated: {c}" for g, c in failed.items()]
+    return " / ".join(pos) or "compared", " / ".join(inp) or "—"
+
+
+def row(log: Path, timeout: float) -> tuple[list[str], dict[str, str]]:
     with tempfile.TemporaryDirectory() as tmp:
         code, out, err = _run(["inspect", str(log)], timeout)
         head = out.splitlines()
         vehicle = next((ln for ln in head if ln.startswith("flight modes")), "")
-        vehicle = vehicle[vehicle.find("(") + 1: vehicle.find(")")] if "(" in vehicle else ""
+        vehicle = vehicle[vehicle.find("(") + 1: vehicle.find("):")] if "):" in vehicle else ""
         armed = next((ln for ln in head if ln.startswith("armed")), "")
         inspect = f"{vehicle or '?'}; {armed}" if code == 0 else _outcome(code, out, err, "")
         code, out, err = _run(["import", str(log), "-o", f"{tmp}/d.parquet"], timeout)
         chosen = re.search(r"mapping (\S+) \(", out + err)
+        imported = code == 0
         imp = _outcome(code, out, err, re.sub(r".*(wrote \d+ demonstrations).*", r"\1", _last(out)))
         imp = f"{chosen.group(1) if chosen else '?'}: {imp}"
         code, out, err = _run(["fit", str(log), "-o", f"{tmp}/m.npz"], timeout)
-        fit = _outcome(code, out, err, "fitted")
-        m = CHECK.search(" ".join((out + err).split()))  # the terminal's line wrapping undone
-        physics = f"{m.group(1)} / (g·dt) = {m.group(4)} ({'NOT ' if m.group(5) else ''}within ×2)" if m else "—"
-        stop = re.search(r"bootstrap stopped after (\d+ of \d+) resamples", err)
-        if stop:
-            fit += f" (bootstrap stopped after {stop.group(1)})"
-        code, out, err = _run(["evaluate", str(log)], timeout)
-        lines = [ln for ln in out.splitlines() if ln.startswith("│") and "rmse_position" in ln]
-        evaluate = _outcome(code, out, err, " / ".join(" ".join(ln.strip("│ ").split()) for ln in lines)
-                            or "compared")
+        groups = re.search(r"^(\d+ plant groups.*|plant group .*)$", out, re.M)
+        fit = fit_cell(code, out, err)
+        fitted = code == 0
+        plants = physics(out + err)
+        code, out, err = _run(["evaluate", str(log), "-o", f"{tmp}/r.parquet"], timeout)
+        tables = sorted(Path(tmp).glob("r*.parquet"))
+        evaluate, inputs = evaluate_cells(code, out, err, tables)
+        compared = code == 0 and any("proposed" in _means(t) for t in tables)
         if code == 0 and "time split" in out:
             evaluate = "time split: " + evaluate
         code, out, err = _run(["view", str(log), "--save", f"{tmp}/v.rrd"], timeout)
@@ -74,7 +161,13 @@ def row(log: Path, timeout: float) -> list[str]:
         shown = re.search(r"\((\d+ demonstrations)\)", out)
         view = _outcome(code, out, err, f"states ({shown.group(1)})" if shown and not raw
                         else "raw log" + (f" (the mapping: {_short(raw.group(1))})" if raw else ""))
-    return [log.name, inspect, imp, fit, evaluate, view, physics]
+    group_cell = (groups.group(1).replace(" (--plant-group NAME takes one)", "") if groups else "—").replace("|", "/")
+    status = {"imported": str(imported), "fitted": str(fitted), "compared": str(compared)}
+    stop = imp.split(": ", 1)[1] if not imported else None
+    fit, evaluate, inputs = ("same stop" if stop is not None and c == stop else c for c in (fit, evaluate, inputs))
+    if plants.replace("—", "").strip(": ") == "":
+        plants = "—"
+    return [log.name, inspect, imp, group_cell, fit, plants, evaluate, inputs, view], status
 
 
 def main() -> int:
@@ -86,11 +179,16 @@ def main() -> int:
     logs = sorted(f for d in a.folders for f in Path(d).iterdir() if f.suffix in LOGS)
     if a.only is not None:
         logs = [f for f in logs if f.name in a.only]
-    print("| log | inspect (vehicle; armed) | import, no --mapping | fit | evaluate (position RMSE per method) | "
-          "view | physics check |")
-    print("|---|---|---|---|---|---|---|")
+    print("| log | inspect (vehicle; armed) | import, no --mapping | plant groups | fit | physics and sticks per "
+          "group | evaluate (position RMSE per method, m) | input prediction (RMSE per method) | view |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    counts: Counter = Counter()
     for log in logs:
-        print("| " + " | ".join(row(log, a.timeout)) + " |", flush=True)
+        cells, status = row(log, a.timeout)
+        print("| " + " | ".join(cells) + " |", flush=True)
+        counts.update(k for k, v in status.items() if v == "True")
+    print(f"\n{len(logs)} logs: {counts['imported']} imported, {counts['fitted']} fitted (a model for at least one "
+          f"plant group), {counts['compared']} compared with the proposed model in the held-out evaluation.")
     return 0
 
 

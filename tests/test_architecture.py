@@ -20,7 +20,7 @@ REPO = Path(__file__).resolve().parents[1]
 # floor -> the prefixes on it; a module may import its own floor and the floors below, never above
 FLOORS: dict[int, tuple[str, ...]] = {
     0: ("workbench.errors", "workbench.atomic", "workbench.frozen", "workbench.threads", "workbench.exports",
-        "workbench.interrupts", "workbench.defaults"),
+        "workbench.interrupts", "workbench.defaults", "workbench.palette"),
     1: ("workbench.data",),
     2: ("workbench.plant", "workbench.method", "workbench.sim", "adapters"),
     3: ("workbench.models",),
@@ -203,7 +203,7 @@ def test_the_tree_and_the_architecture_page_agree():
 
 def test_workbench_has_few_modules_at_its_top_and_none_too_long():
     top = sorted(p.name for p in (REPO / "workbench").glob("*.py"))
-    assert len(top) <= 9, top
+    assert len(top) <= 10, top  # the tenth: palette.py, the one palette the viewer and the report share
     long = {str(p.relative_to(REPO)): n for p in PATHS.values() if (n := len(p.read_text().splitlines())) > 800}
     assert not long, long
 

@@ -216,3 +216,28 @@ def test_shell_examples_run(block, tmp_path):
     script = "set -e\n" + "\n".join(lines) + "\nwait\n"
     out = subprocess.run(["bash", "-c", script], cwd=repo, capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+
+
+def test_the_screenshot_is_the_one_make_took():
+    """docs/viewer.png is what `make readme-screenshot` saved: its record beside it has its digest and the scores
+    its first view shows (so a PNG edited or copied in by hand is caught here)."""
+    import hashlib
+    import json
+
+    record = json.loads((REPO / "docs" / "viewer.json").read_text(encoding="utf-8"))
+    assert record["png_sha256"] == hashlib.sha256((REPO / "docs" / "viewer.png").read_bytes()).hexdigest()
+    assert "held-out prediction error" in record["scores"]
+
+
+@pytest.mark.slow
+def test_the_screenshot_shows_what_the_demo_prints_now(tmp_path):
+    """Stale when the demo's first view would show other scores than the screenshot recorded: run the demo, read
+    its recording's scores and compare (run `make readme-screenshot` to renew it)."""
+    import json
+
+    from workbench.cli import main
+    from workbench.viewer.screenshot import first_view_scores
+
+    assert main(["demo", "--out", str(tmp_path / "demo"), "-q"]) == 0
+    record = json.loads((REPO / "docs" / "viewer.json").read_text(encoding="utf-8"))
+    assert first_view_scores(tmp_path / "demo" / "demo.rrd") == record["scores"], "run: make readme-screenshot"

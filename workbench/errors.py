@@ -12,6 +12,7 @@ __all__ = [
     "DataError",
     "FormatError",
     "MappingError",
+    "RequestError",
     "ModelError",
     "SolverError",
     "UsageError",
@@ -49,6 +50,17 @@ class UsageError(WorkbenchError, ValueError):
     """A command's arguments do not go together, or one is malformed in a way the parser cannot check (``predict``
     without a trial or a state, ``-o -`` for a folder): the command line says so in one line with argparse's exit
     status, 2."""
+
+
+class RequestError(DataError):
+    """A request to the testbed's server that it refuses (``workbench collect``): ``status`` is its HTTP status
+    (400 bad input, 403 a foreign origin or a missing token, 409 to be confirmed, 413 too large, 415 not JSON …);
+    ``extra`` is sent with the one-line message (e.g. what the page should ask the subject to confirm)."""
+
+    def __init__(self, message: str, status: int = 400, **extra: object) -> None:
+        super().__init__(message)
+        self.status = status
+        self.extra = extra
 
 
 class WorkbenchWarning(UserWarning):

@@ -52,6 +52,9 @@ class Format(ABC):
     rerun_importer : bool
         Whether ``rerun-importer-workbench`` claims the format's files for rerun's viewer (not MCAP, which rerun
         reads itself, nor a text format too common to claim).
+
+    A format that holds text messages (status text, logged messages, events) says which in :meth:`text_messages`;
+    the raw view shows what it returns and names no stream itself.
     """
 
     name: ClassVar[str]
@@ -68,6 +71,10 @@ class Format(ABC):
     @abstractmethod
     def read(self, path: str | os.PathLike, topics: Iterable[str] | None = None) -> Streams:
         """The file's streams (only ``topics``, where given: stream names the caller needs)."""
+
+    def text_messages(self, streams: Streams) -> list[tuple[float, str, str, str]]:
+        """The log's text messages as ``(t, level, text, source)`` (:mod:`adapters.textlog`); none by default."""
+        return []
 
     def write(self, path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], **options: Any) -> Path:
         """Write ``streams`` as a file of this format (atomically); returns the path."""

@@ -89,6 +89,9 @@ Where this reader and ``DFReader_binary`` differ (the tests check that they agre
 
 * DFReader's index pass stops at the first head of an undescribed type (a damaged type id) and its parser then
   reads on with the types found so far; this reader resyncs and keeps every FMT on the chain;
+* a head of a type before that type's FMT is not a message here (a logger writes a type's FMT before its first
+  message): damaged leading bytes that happen to hold one are skipped bytes, never decoded into a time of
+  10¹³ s; DFReader's index pass learns every FMT of the file first and decodes it;
 * a type whose FMT length does not match its format: DFReader's parser skips 3 bytes (the head) and
   resyncs; here the head is skipped byte by byte (the same messages are lost);
 * a type redefined differently: DFReader applies whichever FMT it parsed last; here the first one holds, and
@@ -114,25 +117,22 @@ from __future__ import annotations
 
 import bisect
 import dataclasses
-import datetime as _dt
+import functools
 import os
 import struct
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
-import pandas as pd
 from numpy.lib.stride_tricks import sliding_window_view
-from pymavlink import mavutil
 from pymavlink.DFReader import MULT_TO_PREFIX
 
+from adapters.formats.dataflash_info import log_info
 from adapters.formats.files import read_bytes
-from adapters.modes import heartbeat_table
 from adapters.streams import Streams
 from workbench.errors import DataError, FormatError
 
-__all__ = ["MAGIC", "looks_like_dataflash", "read"]
+__all__ = ["MAGIC", "read"]
 
 MAGIC = b"\xa3\x95\x80"
 HEAD1, HEAD2 = 0xA3, 0x95
@@ -151,32 +151,15 @@ CHAR_TYPES: dict[str, tuple[str, float | None]] = {
 
 
 TEXT_CHARS = frozenset("nNZ")
+_CHAR_DTYPES = {c: np.dtype(t) for c, (t, _) in CHAR_TYPES.items()}
 _FMT_STRUCT = struct.Struct("<BB4s16s64s")
 _TIME_SCALE = {"TimeUS": 1e-6, "TimeMS": 1e-3}
 
 
-# DFReader's vehicle detection from MSG text (DFReader._add_msg), and VER.BU build types
-_MAV_TYPES = {"rover": 10, "plane": 1, "copter": 2, "tracker": 5, "sub": 12, "blimp": 7}
-_BUILD_TYPES = {1: 10, 2: 2, 3: 1, 4: 5, 7: 12, 13: 4, 12: 7}
-_VEHICLE_NAMES = {10: "ArduRover", 1: "ArduPlane", 2: "ArduCopter", 4: "ArduCopter (heli)", 5: "AntennaTracker",
-                  12: "ArduSub", 7: "Blimp"}
-
-
-# GPS − UTC (leap seconds) from the dates they took effect; DFReader subtracts 18 always
-_LEAP = tuple((_dt.datetime(y, m, 1, tzinfo=_dt.UTC).timestamp(), s)
-              for y, m, s in ((2017, 1, 18), (2015, 7, 17), (2012, 7, 16), (2009, 1, 15)))
-
-
-_GPS_EPOCH = 315964800.0  # 1980-01-06 in Unix seconds
 _MAX_FIXPOINT = 6
 _MAX_FMT_HEADS = 4096  # FMT heads decoded up front; more (hostile bytes): only those on the chain
 _MAX_JUMPS = 20_000  # more irregular heads than this (hostile bytes): the chain by pointer doubling instead
 _MAX_INSTANCES = 256  # more instance values than this in one type: damage, not sensors (one stream)
-
-
-def looks_like_dataflash(head: bytes) -> bool:
-    """Whether a file's first bytes are a DataFlash log's: an FMT message head ``A3 95 80``."""
-    return head.startswith(MAGIC)
 
 
 # ------------------------------------------------------------------------------------------------ types
@@ -189,12 +172,33 @@ class _Type:
     length: int
     format: str
     columns: list[str]  # as in the FMT (DFReader's names)
-    dtype: np.dtype = field(repr=False)  # packed, fields f0…, itemsize length - 3
-    names: list[str] = field(default_factory=list)  # unique field names, one per format char
+    offsets: list[int] = field(repr=False)  # each field's byte offset in the payload
     mults: list[float | None] = field(default_factory=list)
     units: list[str] | None = None
     unit_mults: dict[str, float] = field(default_factory=dict)
     instance: int | None = None  # index of the instance field (FMTU '#')
+
+    @functools.cached_property
+    def names(self) -> list[str]:
+        """Unique field names, one per format character: ``t`` is ``t_``, a missing or repeated name ``<name>_<i>``."""
+        names, seen = [], set()
+        for i in range(len(self.format)):
+            c = self.columns[i] if i < len(self.columns) else ""
+            if c == "t":
+                c = "t_"
+            if not c or c in seen:
+                c = f"{c or 'field'}_{i}"
+            seen.add(c)
+            names.append(c)
+        return names
+
+    @functools.cached_property
+    def dtype(self) -> np.dtype:
+        """The payload as a packed structured dtype (fields f0…, itemsize length − 3), built for the types that have
+        messages only: a 4.x log describes 180 types and writes 70."""
+        return np.dtype({"names": [f"f{i}" for i in range(len(self.format))],
+                         "formats": [_CHAR_DTYPES[c] for c in self.format], "offsets": self.offsets,
+                         "itemsize": self.length - 3})
 
     def same_layout(self, other: _Type) -> bool:
         return (self.name, self.length, self.format, self.columns) == (other.name, other.length, other.format,
@@ -225,28 +229,15 @@ def _define(type_id: int, length: int, name: str, fmt: str, columns: str) -> _Ty
     if length < 3:
         return f"length {length} is shorter than the 3-byte head"
     cols = columns.split(",") if columns else []
-    offsets, formats, mults = [], [], []
+    offsets, mults = [], []
     size = 0
     for c in fmt:
-        dt = np.dtype(CHAR_TYPES[c][0])
         offsets.append(size)
-        formats.append(dt)
         mults.append(CHAR_TYPES[c][1])
-        size += dt.itemsize
+        size += _CHAR_DTYPES[c].itemsize
     if size + 3 != length:
         return f"length {length} does not match format {fmt!r} ({size + 3} bytes)"
-    dtype = np.dtype({"names": [f"f{i}" for i in range(len(fmt))], "formats": formats, "offsets": offsets,
-                      "itemsize": size})
-    names, seen = [], set()
-    for i in range(len(fmt)):
-        c = cols[i] if i < len(cols) else ""
-        if c == "t":
-            c = "t_"
-        if not c or c in seen:
-            c = f"{c or 'field'}_{i}"
-        seen.add(c)
-        names.append(c)
-    return _Type(type_id, name, length, fmt, cols, dtype, names, mults)
+    return _Type(type_id, name, length, fmt, cols, offsets, mults)
 
 
 _FMT_TYPE_DEF = _define(FMT_TYPE, FMT_LENGTH, "FMT", FMT_FORMAT, FMT_COLUMNS)
@@ -265,10 +256,15 @@ class _Chain:
     invalid: list[str]
 
 
-def _walk(heads: np.ndarray, kinds: np.ndarray, lengths: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The chain of messages from the first known head: indices into the known heads, and those heads."""
+def _walk(heads: np.ndarray, kinds: np.ndarray, lengths: np.ndarray, n: int,
+          since: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The chain of messages from the first known head: indices into the known heads, and those heads. A head of a
+    type before the FMT that defines it (``since``, per type) is not a message: DFReader knows a type only from
+    its FMT on."""
     length = lengths[kinds]
     known = length > 0
+    if since is not None:
+        known &= heads >= since[kinds]
     pos, length = heads[known], length[known]
     m = pos.size
     if m == 0:
@@ -336,8 +332,9 @@ def _scan(buf: np.ndarray) -> _Chain:
     parser = _FmtParser(buf)
     fmt_type = dataclasses.replace(_FMT_TYPE_DEF, unit_mults={})  # FMTU may describe FMT: a copy per read
 
-    def definitions(fmt_positions: np.ndarray) -> tuple[dict[int, _Type], int, list[str], int]:
+    def definitions(fmt_positions: np.ndarray) -> tuple[dict[int, _Type], int, list[str], int, np.ndarray]:
         types = {FMT_TYPE: fmt_type}
+        since = np.zeros(256, np.int64)  # where each type's FMT is: its messages start there
         conflicts, invalid, n_invalid = 0, [], 0
         for p, d in parser.parse(fmt_positions):
             if isinstance(d, str):
@@ -349,7 +346,8 @@ def _scan(buf: np.ndarray) -> _Chain:
                 conflicts += 0 if types[d.type].same_layout(d) else 1
                 continue
             types[d.type] = d
-        return types, conflicts, invalid, n_invalid
+            since[d.type] = p
+        return types, conflicts, invalid, n_invalid, since
 
     # Start from every FMT head where there are few (a log has tens to hundreds), else from FMT alone: either
     # way the FMTs on the chain then decide, until the chain and its FMTs agree.
@@ -357,17 +355,18 @@ def _scan(buf: np.ndarray) -> _Chain:
     start = fmt_heads if fmt_heads.size <= _MAX_FMT_HEADS else fmt_heads[:0]
     found = definitions(start)
     for _ in range(_MAX_FIXPOINT):  # (a chain that never settles keeps the types of its last walk)
-        types = found[0]
+        types, since = found[0], found[4]
         lengths = np.zeros(256, np.int64)
         for t, d in types.items():
             lengths[t] = d.length
-        chain, pos = _walk(heads, kinds, lengths, n)
+        chain, pos = _walk(heads, kinds, lengths, n, since)
         pos = pos[chain]
         kind = buf[pos + 2] if pos.size else np.empty(0, np.uint8)
         found = definitions(pos[kind == FMT_TYPE])
-        if found[0].keys() == types.keys() and all(found[0][k] is types[k] for k in types):
+        if found[0].keys() == types.keys() and all(found[0][k] is types[k] for k in types) and \
+                np.array_equal(found[4], since):
             break
-    _, conflicts, invalid, n_invalid = found
+    _, conflicts, invalid, n_invalid, _ = found
     skipped: dict[str, int] = {}
     if pos.size:
         ends = pos + lengths[kind]
@@ -402,6 +401,8 @@ class _Log:
         self.index = {t: order[bounds[t]:bounds[t + 1]] for t in np.flatnonzero(self.counts).tolist()
                       if t in self.types}
         self._columns: dict[int, dict[str, np.ndarray]] = {}  # decoded fields of the few types info reads
+        self._windows: dict[int, np.ndarray] = {}  # the buffer seen as rows of n bytes, per n (a view each)
+        self._ids: dict[str, int] | None = None  # type id by name, of the types with messages (id_of)
         self.t = self._times()
 
     def offsets(self, t: int) -> np.ndarray:
@@ -411,7 +412,10 @@ class _Log:
         """``size`` bytes at each offset of ``at``, as a (len(at), size) uint8 array."""
         if size == 0:
             return np.zeros((at.size, 0), np.uint8)
-        return np.ascontiguousarray(sliding_window_view(self.buf, size)[at])
+        window = self._windows.get(size)
+        if window is None:
+            window = self._windows[size] = sliding_window_view(self.buf, size)
+        return window[at]  # fancy indexing: a fresh contiguous (len(at), size) array
 
     def field(self, t: int, i: int, at: np.ndarray | None = None) -> np.ndarray:
         """Field ``i`` of the messages of type ``t`` (at offsets ``at``, all by default), raw."""
@@ -478,11 +482,19 @@ class _Log:
         idx[: int(np.argmax(has))] = int(np.argmax(has))
         return tm[idx]
 
+    def is_text(self, t: int, name: str) -> bool:
+        """Whether field ``name`` of type ``t`` is text (``n``, ``N``, ``Z``)."""
+        d = self.types[t]
+        return name in d.columns and d.format[d.columns.index(name)] in TEXT_CHARS
+
     def id_of(self, name: str) -> int | None:
-        for t, d in self.types.items():
-            if d.name == name and t in self.index:
-                return t
-        return None
+        """The type id of the first type named ``name`` that has messages, or None."""
+        if self._ids is None:
+            self._ids = {}
+            for t, d in self.types.items():
+                if t in self.index:
+                    self._ids.setdefault(d.name, t)
+        return self._ids.get(name)
 
 
 def _decode_text(raw: np.ndarray) -> np.ndarray:
@@ -526,7 +538,7 @@ def _units(log: _Log) -> None:
     mult_ids = log.column(fmtu_id, "MultIds")
     for row, ft in enumerate(ftypes):
         target = log.types.get(int(ft)) if isinstance(ft, int | float) and float(ft).is_integer() else None
-        if target is None:
+        if target is None or int(ft) not in log.index:  # units of a type without messages name no stream
             continue
         if unit_ids is not None:
             uid = str(unit_ids[row])
@@ -603,8 +615,11 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
             counts.update({label: int(rows.size) for label, rows in instances[t].items()})
         else:
             counts[name] = int(log.index[t].size)
+    for t, d in log.types.items():  # declared by an FMT, never written: a stream of no message (EV in a log that
+        if t not in log.index and t != FMT_TYPE and d.name and d.name not in counts:  # never armed)
+            counts[d.name] = 0
     want = None if wanted is None else set(wanted)
-    frames: dict[str, pd.DataFrame] = {}
+    frames: dict[str, dict[str, np.ndarray]] = {}  # numpy columns: a DataFrame is built when one is asked for
     for t, name in names.items():
         parts = instances.get(t, {name: None})
         chosen = [s for s in parts if want is None or name in want or s in want]
@@ -612,153 +627,6 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
             continue
         for s in chosen:
             rows = log.index[t] if parts[s] is None else parts[s]
-            frames[s] = pd.DataFrame({"t": log.t[rows], **log.decode(t, rows)}, copy=False)  # fresh arrays
-    info = _info(log, names, instances)
+            frames[s] = {"t": log.t[rows], **log.decode(t, rows)}
+    info = log_info(log, names, instances)
     return Streams(where, "dataflash", frames, counts=counts, skipped=dict(log.chain.skipped), info=info)
-
-
-# ------------------------------------------------------------------------------------------------ info
-def _vehicle(log: _Log) -> tuple[int | None, str]:
-    """DFReader's mav_type from the first MSG naming a vehicle (or VER's build type), and the firmware text."""
-    msg = log.id_of("MSG")
-    texts = log.column(msg, "Message") if msg is not None else None
-    for text in (texts.tolist() if texts is not None else []):
-        text = str(text)
-        for key, mav in (("Rover", 10), ("Plane", 1), ("Copter", 2), ("ArduSub", 12), ("Blimp", 7)):
-            if text.find(key) != -1:
-                return mav, text
-        if text.startswith("Antenna"):
-            return 5, text
-    ver = log.id_of("VER")
-    build = log.column(ver, "BU") if ver is not None else None
-    if build is not None and build.size and int(build[0]) in _BUILD_TYPES:
-        fws = log.column(ver, "FWS")
-        return _BUILD_TYPES[int(build[0])], str(fws[0]) if fws is not None else ""
-    return None, ""
-
-
-def _flight_modes(log: _Log, mav_type: int | None, t_end: float) -> list[tuple[str, float, float]]:
-    mode = log.id_of("MODE")
-    if mode is None:
-        return []
-    d = log.types[mode]
-    t = log.t[log.index[mode]]
-    text_mode = "Mode" in d.columns and d.format[d.columns.index("Mode")] in TEXT_CHARS
-    if text_mode:
-        names = [str(m).upper() for m in log.column(mode, "Mode").tolist()]
-    elif "ModeNum" in d.columns:
-        table = mavutil.mode_mapping_bynumber(mav_type) if mav_type is not None else None
-        nums = log.column(mode, "ModeNum").tolist()
-        names = [(table.get(int(m), "UNKNOWN") if table is not None else str(m)) for m in nums]
-    elif "Mode" in d.columns:
-        names = [mavutil.mode_string_acm(int(m)) for m in log.column(mode, "Mode").tolist()]
-    else:
-        return []
-    spans: list[list[Any]] = []
-    for name, ti in zip(names, t.tolist(), strict=True):
-        if spans and spans[-1][0] == name:
-            continue
-        if spans:
-            spans[-1][2] = ti
-        spans.append([name, ti, t_end])
-    return [(n, float(a), float(b)) for n, a, b in spans]
-
-
-def _armed_spans(log: _Log, t_end: float) -> list[tuple[float, float]]:
-    arm = log.id_of("ARM")
-    ev = log.id_of("EV")
-    if arm is not None and log.column(arm, "ArmState") is not None:
-        t = log.t[log.index[arm]]
-        state = np.asarray(log.column(arm, "ArmState")).astype(np.int64) != 0
-    elif ev is not None and log.column(ev, "Id") is not None:
-        ids = np.asarray(log.column(ev, "Id")).astype(np.int64)
-        keep = (ids == 10) | (ids == 11)  # ArduPilot LogEvent ARMED / DISARMED
-        t = log.t[log.index[ev]][keep]
-        state = ids[keep] == 10
-    else:
-        return []
-    spans: list[tuple[float, float]] = []
-    start = None
-    for ti, s in zip(t.tolist(), state.tolist(), strict=True):
-        if s and start is None:
-            start = ti
-        elif not s and start is not None:
-            spans.append((float(start), float(ti)))
-            start = None
-    if start is not None:
-        spans.append((float(start), float(t_end)))
-    return spans
-
-
-def _utc(log: _Log) -> float | None:
-    """Unix time at boot (t = 0) from the first GPS message with GPS time, as DFReader finds its time base."""
-    for name in ("GPS", "GPS2"):
-        g = log.id_of(name)
-        if g is None:
-            continue
-        d = log.types[g]
-        if {"GWk", "GMS", "TimeUS"} <= set(d.columns):
-            week, ms, boot, scale = (log.column(g, "GWk"), log.column(g, "GMS"), log.column(g, "TimeUS"), 1e-6)
-        elif {"Week", "TimeMS", "T"} <= set(d.columns):
-            week, ms, boot, scale = (log.column(g, "Week"), log.column(g, "TimeMS"), log.column(g, "T"), 1e-3)
-        else:
-            continue
-        try:
-            week, ms, boot = (np.asarray(a, dtype=np.float64) for a in (week, ms, boot))
-        except (TypeError, ValueError):
-            continue
-        good = np.flatnonzero((week > 0) & (boot != 0) & np.isfinite(week + ms + boot))
-        if not good.size:
-            continue
-        k = int(good[0])
-        gps = _GPS_EPOCH + 7 * 86400 * week[k] + ms[k] * 0.001
-        leap = next((s for since, s in _LEAP if gps - 18 >= since), 14)
-        return float(gps - leap - boot[k] * scale)
-    return None
-
-
-def _info(log: _Log, names: dict[int, str], instances: dict[int, dict[str, np.ndarray]]) -> dict[str, Any]:
-    t_all = log.t
-    finite = t_all[np.isfinite(t_all)]
-    t_end = float(finite.max()) if finite.size else float("nan")
-    mav_type, firmware = _vehicle(log)
-    info: dict[str, Any] = {"n_messages": int(log.chain.pos.size)}
-    if firmware:
-        info["firmware"] = firmware
-    if mav_type is not None:
-        info["mav_type"] = mav_type
-        info["vehicle"] = _VEHICLE_NAMES.get(mav_type, str(mav_type))
-        table = heartbeat_table(3, mav_type)  # MAV_AUTOPILOT_ARDUPILOTMEGA
-        if table:
-            info["mode_table"] = table
-    info["flight_modes"] = _flight_modes(log, mav_type, t_end)
-    info["armed_spans"] = _armed_spans(log, t_end)
-    boot = _utc(log)
-    if boot is not None and finite.size and abs(boot) < 1e11:
-        info["utc_time_at_boot"] = boot
-        start = _dt.datetime.fromtimestamp(boot + float(finite[0]), tz=_dt.UTC)
-        info["utc_start"] = start.isoformat(timespec="milliseconds")
-    units: dict[str, dict[str, str]] = {}
-    mults: dict[str, dict[str, float]] = {}
-    for t, name in names.items():
-        d = log.types[t]
-        streams = list(instances[t]) if t in instances else [name]
-        if d.units is not None:
-            u = {n: d.units[i] for i, n in enumerate(d.names) if i < len(d.units)}
-            units.update((s, u) for s in streams)
-        if d.unit_mults:
-            mults.update((s, dict(d.unit_mults)) for s in streams)
-    if units:
-        info["units"] = units
-    if mults:
-        info["multipliers"] = mults
-    info["instances"] = {names[t]: list(parts) for t, parts in instances.items()}
-    info["formats"] = {names[t]: {"type": t, "length": log.types[t].length, "format": log.types[t].format,
-                                  "columns": list(log.types[t].columns)} for t in names}
-    parm = log.id_of("PARM")
-    if parm is not None and log.column(parm, "Name") is not None and log.column(parm, "Value") is not None:
-        info["params"] = dict(zip(log.column(parm, "Name").tolist(),
-                                  np.asarray(log.column(parm, "Value"), dtype=np.float64).tolist(), strict=True))
-    if log.chain.invalid:
-        info["invalid_formats"] = log.chain.invalid[:20]
-    return info

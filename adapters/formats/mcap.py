@@ -38,27 +38,22 @@ time).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import io
-import json
 import os
 import struct
 import zlib
 from collections import defaultdict
-from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.compute as pc
-import pyarrow.json as pajson
 from mcap.data_stream import ReadDataStream
-from mcap.decoder import DecoderFactory
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, get_chunk_data_stream
 
+from adapters.formats.mcap_decode import MAX_ARRAY, JsonDecoderFactory, decode_channel, decoder_factories
 from adapters.formats.mcap_write import write  # the writer, beside the reader under one name
 from adapters.streams import Streams, as_frame
 from workbench.errors import DataError, FormatError
@@ -69,8 +64,6 @@ if TYPE_CHECKING:
 __all__ = ["MAGIC", "JsonDecoderFactory", "decoder_factories", "read", "write", "MAX_ARRAY"]
 
 MAGIC = b"\x89MCAP0\r\n"
-#: Longest array flattened into indexed columns; longer ones (images, point clouds) are not numeric channels.
-MAX_ARRAY = 256
 _REC = struct.Struct("<BQ")
 _MSG = struct.Struct("<HIQQ")
 _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x03, 0x04, 0x05, 0x06
@@ -87,36 +80,33 @@ _MAX_RATIO = 40_000
 MAX_CHUNK_BYTES = 64 << 20
 MAX_DECOMPRESSED_BYTES = 512 << 20
 MAX_TOTAL_RATIO = 1000
+#: Ceiling on the decoded columns all messages make together (numbers at 8 bytes a value, text at its length and an
+#: object's): chunks are decoded one at a time and their raw bytes dropped, so a read holds at most one chunk's
+#: messages and this (a 536 kB file of 8 honest 60 MB chunks of tiny messages took inspect to 1.5 GB before).
+MAX_DECODED_BYTES = 256 << 20
+#: Messages outside chunks are decoded in batches of this many
+_BATCH = 200_000
 
 
 class _Damage(ValueError):
     """A check of the reader's own failed: its text is the cause, in the workbench's words."""
 
 
-class JsonDecoderFactory(DecoderFactory):
-    """Decodes ``json`` messages (with a ``jsonschema`` schema or none) to Python objects."""
-
-    def decoder_for(self, message_encoding: str, schema: Schema | None) -> Callable[[bytes], Any] | None:
-        if message_encoding != "json" or (schema is not None and schema.encoding not in ("jsonschema", "")):
-            return None
-        return json.loads
-
-
-def decoder_factories() -> list[DecoderFactory]:
-    """The decoder factories the workbench reads MCAP with: JSON, ROS 2 CDR, protobuf."""
-    from mcap_protobuf.decoder import DecoderFactory as ProtobufFactory
-    from mcap_ros2.decoder import DecoderFactory as Ros2Factory
-
-    return [JsonDecoderFactory(), Ros2Factory(), ProtobufFactory()]
-
-
 # ------------------------------------------------------------------------------------------------ reading
 
 
 class _Scan:
-    """What a pass over the file collected: channels, schemas, raw messages per channel, skips."""
+    """What a pass over the file collected: channels, schemas, skips, and per channel its messages decoded into
+    columns chunk by chunk (:meth:`flush`): the raw messages of one chunk (or batch) at a time."""
 
-    def __init__(self) -> None:
+    def __init__(self, where: str = "", topics: set[str] | None = None) -> None:
+        self.where = where
+        self.topics = topics
+        self.parts: dict[int, list[dict[str, np.ndarray]]] = defaultdict(list)
+        self.undecodable: dict[int, int] = defaultdict(int)
+        self.decoded = 0  # bytes of the decoded columns so far
+        self.pending = 0  # raw messages not yet decoded
+        self._factories: list | None = None
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.messages: dict[int, tuple[list[int], list[bytes]]] = defaultdict(lambda: ([], []))
@@ -127,6 +117,42 @@ class _Scan:
         self.chunks_read = 0
         self.bad_chunks: list[tuple[int, str]] = []  # (byte offset of the chunk record, why it was skipped)
         self.declared = 0  # uncompressed bytes the chunks read so far declare
+
+    def add(self, cid: int, log_time: int, data: bytes) -> None:
+        """A raw message, decoded at the next :meth:`flush` (one is due every :data:`_BATCH` messages)."""
+        times, datas = self.messages[cid]
+        times.append(log_time)
+        datas.append(data)
+        self.pending += 1
+        if self.pending >= _BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        """Decode the pending messages of every known channel into columns, drop their bytes, and hold the decoded
+        total against :data:`MAX_DECODED_BYTES`."""
+        for cid in list(self.messages):
+            ch = self.channels.get(cid)
+            if ch is None:
+                continue  # its channel record may come later in a damaged file: decoded then, or counted without
+            times, datas = self.messages.pop(cid)
+            if self.topics is not None and ch.topic not in self.topics:
+                continue
+            if self._factories is None:
+                self._factories = decoder_factories()
+            schema = self.schemas.get(ch.schema_id) if ch.schema_id else None
+            for at in range(0, len(datas), _BATCH):  # in pieces: the decoders' buffers stay small
+                frame, bad = decode_channel(ch, schema, times[at:at + _BATCH], datas[at:at + _BATCH], self._factories)
+                self.undecodable[cid] += bad
+                if frame is None:
+                    continue
+                self.decoded += _nbytes(frame)
+                if self.decoded > MAX_DECODED_BYTES:
+                    raise DataError(f"{self.where}: its messages decode to more than the {MAX_DECODED_BYTES} bytes "
+                                    f"of columns a read may hold (at {ch.topic!r}); refused (raise "
+                                    "adapters.formats.mcap.MAX_DECODED_BYTES for a larger recording)")
+                self.parts[cid].append(frame)
+            del times, datas
+        self.pending = sum(len(t) for t, _ in self.messages.values())
 
     def chunk_failed(self, offset: int, exc: BaseException, n_bytes: int) -> None:
         self.skipped["bytes"] += n_bytes
@@ -205,7 +231,7 @@ def _decompress(chunk: Chunk, size_limit: int) -> bytes:
 def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
     """Collect a decompressed chunk's records; all or nothing (a damaged chunk adds no message)."""
     pos, n = 0, len(buf)
-    found: list[tuple[int, int, bytes]] = []
+    found: dict[int, tuple[list[int], list[bytes]]] = defaultdict(lambda: ([], []))
     counted: dict[int, int] = defaultdict(int)
     new_channels, new_schemas = [], []
     unpack_rec, unpack_msg = _REC.unpack_from, _MSG.unpack_from
@@ -222,7 +248,9 @@ def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
             cid, _seq, log_time, _pub = unpack_msg(buf, body)
             counted[cid] += 1
             if wanted is None or cid in wanted:
-                found.append((cid, log_time, buf[body + _MSG.size : end]))
+                times, datas = found[cid]
+                times.append(log_time)
+                datas.append(buf[body + _MSG.size : end])
         elif op == _OP_CHANNEL:
             new_channels.append(Channel.read(ReadDataStream(io.BytesIO(buf[body:end]))))
         elif op == _OP_SCHEMA:
@@ -234,10 +262,12 @@ def _chunk_records(buf: bytes, scan: _Scan, wanted: set[int] | None) -> None:
         scan.channels.setdefault(c.id, c)
     for cid, k in counted.items():
         scan.counts[cid] += k
-    for cid, log_time, data in found:
-        times, datas = scan.messages[cid]
-        times.append(log_time)
-        datas.append(data)
+    for cid, (times, datas) in found.items():
+        held_times, held = scan.messages[cid]
+        held_times.extend(times)
+        held.extend(datas)
+    del found, times, datas
+    scan.flush()  # decoded now, the chunk's raw messages dropped: a read holds one chunk's at a time
 
 
 def _read_indexed(f, size: int, topics: set[str] | None, scan: _Scan, where: str) -> bool:
@@ -312,9 +342,7 @@ def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan, where: str)
                 scan.metadata[record.name] = dict(record.metadata)
             elif isinstance(record, Message):
                 scan.counts[record.channel_id] += 1
-                times, datas = scan.messages[record.channel_id]
-                times.append(record.log_time)
-                datas.append(record.data)
+                scan.add(record.channel_id, record.log_time, record.data)
             good = f.tell()
     except DataError:
         raise
@@ -322,11 +350,6 @@ def _read_linear(f, size: int, topics: set[str] | None, scan: _Scan, where: str)
         scan.skipped["bytes"] += max(0, size - good)
         scan.notes.append(f"unreadable record at byte {good} ({_why(exc)}); the {size - good} bytes from there on "
                           "are cut off or damaged")
-    if topics is not None:
-        keep = {cid for cid, c in scan.channels.items() if c.topic in topics}
-        for cid in list(scan.messages):
-            if cid not in keep:
-                del scan.messages[cid]
 
 
 def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Streams:
@@ -348,11 +371,11 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
                 raise DataError(f"{where}: empty file, not an MCAP file")
             if f.read(8) != MAGIC:
                 raise FormatError(f"{where}: not an MCAP file (the first 8 bytes are not the MCAP magic)")
-            scan = _Scan()
+            scan = _Scan(where, topic_set)
             bad_summary = _bad_summary(f, size)
             indexed = bad_summary is None and _read_indexed(f, size, topic_set, scan, where)
             if not indexed:
-                scan = _Scan()
+                scan = _Scan(where, topic_set)
                 if bad_summary is not None:
                     scan.skipped["summary bytes"], why = bad_summary
                     scan.notes.append(why)
@@ -406,18 +429,14 @@ def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:
             skipped["messages without a channel"] = skipped.get("messages without a channel", 0) + k
         else:
             counts[ch.topic] += k
-    factories = decoder_factories()
-    for cid, (times, datas) in scan.messages.items():
-        ch = scan.channels.get(cid)
-        if ch is None:
-            continue
-        schema = scan.schemas.get(ch.schema_id) if ch.schema_id else None
-        frame, bad = _decode_channel(ch, schema, times, datas, factories)
+    scan.flush()
+    for cid in list(scan.parts):
+        ch = scan.channels[cid]
+        by_topic[ch.topic].append(_concat(scan.parts.pop(cid)))
+    for cid, bad in scan.undecodable.items():
         if bad:
-            key = f"{ch.topic}: undecodable messages"
+            key = f"{scan.channels[cid].topic}: undecodable messages"
             skipped[key] = skipped.get(key, 0) + bad
-        if frame is not None:
-            by_topic[ch.topic].append(frame)
     frames = {}
     for topic, parts in by_topic.items():
         if len(parts) == 1:
@@ -439,45 +458,38 @@ def _to_streams(where: str, scan: _Scan, indexed: bool) -> Streams:
                    info=info)
 
 
-def _decode_channel(
-    ch: Channel, schema: Schema | None, times: list[int], datas: list[bytes], factories: list[DecoderFactory]
-) -> tuple[dict[str, np.ndarray] | None, int]:
-    """One channel's messages as numpy columns (``t`` + flattened fields) and the number that did not decode."""
-    t_ns = np.asarray(times, dtype=np.uint64)
-    if ch.message_encoding == "json" and (schema is None or schema.encoding in ("jsonschema", "")):
-        table = _json_bulk(datas, schema)
-        if table is not None:
-            return _frame(t_ns, _arrow_columns(table)), 0
-        objects, keep = [], []
-        for i, data in enumerate(datas):
-            try:
-                obj = json.loads(data)
-            except (ValueError, UnicodeDecodeError, RecursionError):
-                continue
-            if isinstance(obj, dict):
-                objects.append(obj)
-                keep.append(i)
-        return _records_frame(t_ns[keep], objects), len(datas) - len(keep)
-    decoder = None
-    for factory in factories:
-        try:
-            # the ROS 2 schema parser prints a damaged schema's lines to stderr before it raises
-            with contextlib.redirect_stderr(io.StringIO()):
-                decoder = factory.decoder_for(ch.message_encoding, schema)
-        except Exception:  # noqa: BLE001 - a schema the decoder cannot parse: nothing of it decodes
-            decoder = None
-        if decoder is not None:
-            break
-    if decoder is None:
-        return None, len(datas)
-    objects, keep = [], []
-    for i, data in enumerate(datas):
-        try:
-            objects.append(_plain(decoder(data)))
-        except Exception:  # noqa: BLE001 - third-party decoders raise anything on bad bytes
+def _nbytes(columns: dict[str, np.ndarray]) -> int:
+    """The memory decoded columns hold: their buffers, and each text value's characters and object."""
+    total = 0
+    for v in columns.values():
+        total += v.nbytes
+        if v.dtype.kind == "O":
+            total += sum(len(x) + 50 if isinstance(x, str) else 32 for x in v.tolist())
+    return total
+
+
+def _concat(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """One channel's columns from its chunks' parts, column by column (each part's column freed as it is joined). A
+    field some parts lack is NaN (text: None) there; an indexed element (``q[3]``) some parts lack belongs to an
+    array whose length varies, which is left out as within one chunk."""
+    if len(parts) == 1:
+        return parts[0]
+    names = list(dict.fromkeys(k for p in parts for k in p))
+    lengths = [len(p["t"]) for p in parts]
+    out: dict[str, np.ndarray] = {}
+    for name in names:
+        if not all(name in p for p in parts) and name.endswith("]"):
+            for p in parts:
+                p.pop(name, None)
             continue
-        keep.append(i)
-    return _records_frame(t_ns[keep], objects), len(datas) - len(keep)
+        pieces = []
+        for p, n in zip(parts, lengths, strict=True):
+            v = p.pop(name, None)
+            pieces.append(v if v is not None else np.full(n, np.nan))
+        if any(v.dtype.kind == "O" for v in pieces) and not all(v.dtype.kind == "O" for v in pieces):
+            pieces = [v.astype(object) for v in pieces]
+        out[name] = np.concatenate(pieces)
+    return out
 
 
 def _sorted_by_time(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -503,216 +515,3 @@ def _sorted_by_time(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: v[order] for k, v in columns.items()}
 
 
-def _frame(t_ns: np.ndarray, columns: dict[str, Any]) -> dict[str, np.ndarray]:
-    """A channel's stream as numpy columns: ``t`` in seconds, then the flattened fields."""
-    data = {"t": t_ns.astype(np.float64) * 1e-9}
-    data.update((k, np.asarray(v)) for k, v in columns.items() if k != "t")
-    return data
-
-
-def _records_frame(t_ns: np.ndarray, objects: list[Any]) -> dict[str, np.ndarray]:
-    if not objects:
-        return {"t": np.empty(0)}
-    columns = _uniform_columns([_flatten_py(o if isinstance(o, dict) else {"value": o}) for o in objects])
-    if columns is not None:
-        return _frame(t_ns, columns)
-    try:
-        table = pa.Table.from_pylist([o if isinstance(o, dict) else {"value": o} for o in objects])
-        return _frame(t_ns, _arrow_columns(table))
-    except (pa.ArrowException, TypeError, ValueError, OverflowError):
-        # fields whose types differ between messages: pandas' record reader makes common columns of them
-        import pandas as pd
-
-        flat = [_flatten_py(o if isinstance(o, dict) else {"value": o}) for o in objects]
-        frame = pd.DataFrame.from_records(flat)
-        return _frame(t_ns, {str(c): frame[c].to_numpy() for c in frame.columns})
-
-
-def _plain(obj: Any) -> Any:
-    """A decoded ROS 2 / protobuf message as plain dicts, lists and scalars."""
-    if obj is None or isinstance(obj, bool | int | float | str):
-        return obj
-    if isinstance(obj, bytes | bytearray | memoryview):
-        return list(bytes(obj)) if len(obj) <= MAX_ARRAY else None
-    if isinstance(obj, np.ndarray):
-        return obj.tolist() if obj.size <= MAX_ARRAY else None
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, list | tuple) or type(obj).__name__ in ("array", "RepeatedScalarContainer",
-                                                                "RepeatedCompositeContainer"):
-        items = list(obj)
-        return [_plain(v) for v in items] if len(items) <= MAX_ARRAY else None
-    slots = getattr(type(obj), "__slots__", None)
-    if slots and not isinstance(obj, dict):
-        return {s: _plain(getattr(obj, s)) for s in slots}
-    descriptor = getattr(obj, "DESCRIPTOR", None)
-    if descriptor is not None and hasattr(descriptor, "fields"):
-        return {fd.name: _plain(getattr(obj, fd.name)) for fd in descriptor.fields}
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    return None
-
-
-def _uniform_columns(flat: list[dict]) -> dict[str, np.ndarray] | None:
-    """Columns of flattened messages that all have the same fields, each field of one kind (bool, int, float, str),
-    as numpy arrays; None otherwise (pyarrow then works out common types and nulls).
-
-    What ``pa.Table.from_pylist`` gives for such messages, without it: Arrow's conversion from Python objects
-    imports pandas (≈ 0.4 s), more than decoding a small file.
-    """
-    keys = list(flat[0])
-    if any(len(f) != len(keys) or f.keys() != flat[0].keys() for f in flat):
-        return None
-    out: dict[str, np.ndarray] = {}
-    for key in keys:
-        values = [f[key] for f in flat]
-        kinds = {type(v) for v in values}
-        if kinds == {bool}:
-            out[key] = np.array(values, dtype=bool)
-        elif kinds == {int} and all(-(2**63) <= v < 2**63 for v in values):
-            out[key] = np.array(values, dtype=np.int64)
-        elif kinds == {float}:
-            out[key] = np.array(values, dtype=np.float64)
-        elif kinds == {str}:
-            text = np.empty(len(values), dtype=object)
-            text[:] = values
-            out[key] = text
-        else:
-            return None
-    return out
-
-
-def _flatten_py(obj: dict, prefix: str = "", out: dict | None = None) -> dict:
-    out = {} if out is None else out
-    for key, value in obj.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            _flatten_py(value, name + ".", out)
-        elif isinstance(value, list):
-            if len(value) <= MAX_ARRAY:
-                for i, item in enumerate(value):
-                    if isinstance(item, dict):
-                        _flatten_py(item, f"{name}[{i}].", out)
-                    elif not isinstance(item, list):
-                        out[f"{name}[{i}]"] = item
-        else:
-            out[name] = value
-    return out
-
-
-def _arrow_type(schema: Any) -> pa.DataType | None:
-    """The pyarrow type a JSON Schema node decodes to, or None to let pyarrow infer it."""
-    if not isinstance(schema, dict):
-        return None
-    kind = schema.get("type")
-    if isinstance(kind, list):
-        kinds = [k for k in kind if k != "null"]
-        kind = kinds[0] if len(kinds) == 1 else None
-    if kind == "number":
-        return pa.float64()
-    if kind == "integer":
-        return pa.int64()
-    if kind == "boolean":
-        return pa.bool_()
-    if kind == "string":
-        return pa.string()
-    if kind == "array":
-        item = _arrow_type(schema.get("items"))
-        return pa.list_(item) if item is not None else None
-    if kind == "object":
-        props = schema.get("properties")
-        if not isinstance(props, dict):
-            return None
-        fields = [(str(k), _arrow_type(v)) for k, v in props.items()]
-        if any(t is None for _, t in fields) or not fields:
-            return None
-        return pa.struct(fields)
-    return None
-
-
-def _json_bulk(datas: list[bytes], schema: Schema | None) -> pa.Table | None:
-    """All messages of a JSON channel parsed in one go by pyarrow, or None where that cannot be trusted."""
-    if not datas:
-        return None
-    explicit = None
-    if schema is not None and schema.data:
-        try:
-            typ = _arrow_type(json.loads(schema.data))
-        except (ValueError, UnicodeDecodeError, RecursionError):
-            typ = None
-        if isinstance(typ, pa.StructType):
-            explicit = pa.schema(list(typ))
-    # one message per line: raw newlines can only be whitespace between tokens in valid JSON
-    blob = b"\n".join(d.replace(b"\n", b" ").replace(b"\r", b" ") for d in datas)
-    if any(not d.strip() for d in datas):
-        return None
-    try:
-        table = pajson.read_json(
-            io.BytesIO(blob),
-            read_options=pajson.ReadOptions(use_threads=True, block_size=max(1 << 20, len(blob) // 4 + 1)),
-            parse_options=pajson.ParseOptions(explicit_schema=explicit, unexpected_field_behavior="infer"),
-        )
-    except (pa.ArrowException, ValueError):
-        return None
-    return table if table.num_rows == len(datas) else None
-
-
-def _arrow_columns(table: pa.Table) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for name, column in zip(table.column_names, table.columns, strict=True):
-        _flatten_arrow(str(name), column.combine_chunks(), out)
-    return out
-
-
-def _bits(buffer: Any, offset: int, n: int) -> np.ndarray:
-    """An Arrow bitmap (validity or booleans, least significant bit first) as a boolean array."""
-    return np.unpackbits(np.frombuffer(buffer, dtype=np.uint8), bitorder="little")[offset : offset + n].astype(bool)
-
-
-def _numpy(arr: pa.Array) -> np.ndarray:
-    """A numeric or boolean Arrow array without nulls as a numpy array (a copy), read from its value buffer.
-
-    Arrow's own ``to_numpy`` imports pandas (≈ 0.4 s, more than the read of a small file) to check its version.
-    """
-    typ = arr.type
-    if pa.types.is_boolean(typ):
-        return _bits(arr.buffers()[1], arr.offset, len(arr))
-    kind = "f" if pa.types.is_floating(typ) else "i" if pa.types.is_signed_integer(typ) else "u"
-    dtype = np.dtype(f"<{kind}{typ.bit_width // 8}")
-    return np.frombuffer(arr.buffers()[1], dtype=dtype, count=len(arr), offset=arr.offset * dtype.itemsize).copy()
-
-
-def _flatten_arrow(name: str, arr: pa.Array, out: dict[str, Any]) -> None:
-    typ = arr.type
-    if pa.types.is_struct(typ):
-        for i, child in enumerate(arr.flatten()):
-            _flatten_arrow(f"{name}.{typ.field(i).name}", child, out)
-    elif pa.types.is_list(typ) or pa.types.is_large_list(typ) or pa.types.is_fixed_size_list(typ):
-        lengths = pc.list_value_length(arr).drop_null()
-        if len(lengths) == 0:
-            return
-        bounds = pc.min_max(lengths).as_py()
-        if bounds["min"] != bounds["max"] or bounds["max"] > MAX_ARRAY:
-            return
-        child = arr.flatten() if arr.null_count == 0 else None
-        if child is not None and (pa.types.is_integer(child.type) or pa.types.is_floating(child.type)) \
-                and child.null_count == 0 and len(child) == len(arr) * bounds["max"]:
-            # equal-length lists of numbers: one strided view per element, no per-element compute call (whose
-            # Python-int argument makes pyarrow import pandas)
-            values = _numpy(child).reshape(len(arr), bounds["max"])
-            for i in range(bounds["max"]):
-                out[f"{name}[{i}]"] = np.ascontiguousarray(values[:, i])
-            return
-        for i in range(bounds["max"]):
-            _flatten_arrow(f"{name}[{i}]", pc.list_element(arr, i), out)
-    elif pa.types.is_integer(typ) or pa.types.is_floating(typ) or pa.types.is_boolean(typ):
-        if arr.null_count:
-            values = _numpy(pc.cast(arr, pa.float64()))
-            values[~_bits(arr.buffers()[0], arr.offset, len(arr))] = np.nan
-            out[name] = values
-        else:
-            out[name] = _numpy(arr)
-    elif pa.types.is_string(typ) or pa.types.is_large_string(typ):
-        out[name] = np.array(arr.to_pylist(), dtype=object)
-    elif pa.types.is_null(typ):
-        out[name] = np.full(len(arr), np.nan)

@@ -96,7 +96,7 @@ def _read_pyulog(where: str, data: bytes, names: list[str] | None) -> Streams:
         frames[_stream_name(d.name, d.multi_id)] = columns
     counts = dict.fromkeys(ulog.message_formats, 0)
     counts.update({k: len(v["t"]) for k, v in frames.items()})
-    skipped = _drop_zero_stamps(frames, int(ulog.start_timestamp), int(ulog.last_timestamp))
+    skipped = _place_zero_stamps(frames, int(ulog.start_timestamp), int(ulog.last_timestamp))
     if ulog.file_corruption:
         skipped["corrupt regions"] = 1
     if ulog.dropouts:
@@ -316,7 +316,7 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
     frames = {stream: columns for _, stream, columns in sorted(items, key=lambda i: i[0])}
     counts = dict.fromkeys(formats, 0)
     counts.update({k: len(v["t"]) for k, v in frames.items()})
-    skipped = _drop_zero_stamps(frames, int(start_timestamp), int(last_timestamp))
+    skipped = _place_zero_stamps(frames, int(start_timestamp), int(last_timestamp))
     if dropouts:
         skipped["logger dropouts"] = dropouts
     info = {
@@ -329,26 +329,33 @@ def _read_fast(where: str, data: bytes, names: set[str] | None) -> Streams:
     return Streams(where, "ulog", frames, counts=counts, skipped=skipped, info=info)
 
 
-def _drop_zero_stamps(frames: dict[str, dict[str, Any]], start_timestamp: int, last_timestamp: int) -> dict[str, int]:
-    """Drop the rows stamped 0 from a log whose clock runs far from 0, and count them.
+def _place_zero_stamps(frames: dict[str, dict[str, Any]], start_timestamp: int, last_timestamp: int) -> dict[str, int]:
+    """Put the rows stamped 0 of a log whose clock runs far from 0 at the log's start, and count them.
 
-    A topic published before its publisher set a time (a parameter update at boot, a transponder report) carries
-    timestamp 0 while the bulk of the log runs on a clock that started at ``start_timestamp`` (in SITL, the
-    Unix time: 1.7e15 µs). Kept, such rows stretch the log's span to decades; pyulog's span
-    (``last_timestamp - start_timestamp``) ignores them. They are dropped where they would lie farther from the
-    log's start than the log is long (so more than double its span); nearer, they are kept as pyulog keeps them.
+    A topic published before its publisher set a time (a parameter update at boot, a transponder report, pyulog's
+    sample.ulg's ekf2_innovations and sensor_preflight: 20,343 rows) carries timestamp 0 while the bulk of the log
+    runs on a clock that started at ``start_timestamp`` (in SITL, the Unix time: 1.7e15 µs). At 0, such rows
+    stretch the log's span to decades; pyulog's span (``last_timestamp - start_timestamp``) ignores them, and
+    pyulog keeps them. So they are kept, placed at the log's start, where 0 lies farther from it than the log is
+    long (so more than double its span), and counted (``skipped["rows stamped 0, placed at the log's start"]``);
+    nearer, they keep their 0 as in pyulog.
     """
     if start_timestamp <= max(last_timestamp - start_timestamp, 0):
         return {}
-    dropped = 0
-    for name, columns in frames.items():
+    placed = 0
+    for columns in frames.values():
         zero = columns["t"] == 0.0
         n = int(np.count_nonzero(zero))
         if n:
-            keep = ~zero
-            frames[name] = {k: np.asarray(v)[keep] for k, v in columns.items()}
-            dropped += n
-    return {"rows stamped 0": dropped} if dropped else {}
+            t = np.array(columns["t"], dtype=np.float64)
+            t[zero] = start_timestamp * 1e-6
+            columns["t"] = t
+            placed += n
+    return {PLACED_AT_START: placed} if placed else {}
+
+
+#: What the rows stamped 0 of a log on a far clock are counted as (:func:`_place_zero_stamps`)
+PLACED_AT_START = "rows stamped 0, placed at the log's start"
 
 
 def release_name(msg_info: dict[str, Any]) -> str:

@@ -42,11 +42,13 @@ import numpy as np
 import pandas as pd
 
 from adapters.align import GRID_TOLERANCE, Series, sample
-from adapters.mapping import Channel, ChannelMapping, Selector, channel_convert, load_mapping
+from adapters.mapping import Channel, ChannelMapping, Selector, load_mapping
 from adapters.meta import text_meta
 from adapters.modes import mode_name
 from adapters.pipeline import _valid_target
 from adapters.segment import demo_key
+from adapters.selection import channel_convert
+from adapters.sticks import with_defaults
 from adapters.streams import field_columns, nearest, split_source
 from adapters.transforms import TRANSFORMS
 from workbench.errors import MappingError
@@ -318,6 +320,8 @@ class OnlineAligner:
                  stem: str = "live") -> None:
         m = load_mapping(mapping)
         m.check_complete()
+        if not m.sticks:  # a live link sends no parameter dump before its data: the firmware's default RC map
+            m = with_defaults(m)
         self.mapping = m
         self.dt = float(m.dt)
         self.gap = float(m.segment.gap)
@@ -409,6 +413,8 @@ class OnlineAligner:
                     keep = int(v) in rule.keep
                     runs.add(s.t, (keep, mode_name(rule.names, v) if keep else None))
             else:  # armed (in force while true), landed (in force while false)
+                if getattr(rule, "on", ()) and not rule.events(np.array([v]))[0]:
+                    return  # an event of another kind (EV's SET_HOME) says nothing of the flag
                 flag = bool(rule.truth(np.array([v]))[0])
                 runs.add(s.t, (flag if truth else not flag, None))
 

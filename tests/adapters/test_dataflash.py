@@ -52,7 +52,7 @@ def _timed(fmt) -> bool:
 def assert_same_as_dfreader(ours, path: Path, *, times: bool = True) -> dict[str, list]:
     """Counts, every field of every message, ``t`` and units equal DFReader's."""
     msgs, reader = dfreader(path)
-    assert dict(ours.counts) == {k: len(v) for k, v in msgs.items()}
+    assert {k: v for k, v in ours.counts.items() if v} == {k: len(v) for k, v in msgs.items()}  # 0: declared, unwritten
     base = reader.clock.timebase if reader.clock is not None else 0.0
     first_timed = min((m._seq for ms in msgs.values() for m in ms[:1] if _timed(m.fmt)), default=0)
     for name, ms in msgs.items():
@@ -365,6 +365,38 @@ def test_damaged_type_id_resyncs_where_dfreader_stops_indexing(logs, tmp_path):
     assert sum(ours.counts.values()) == sum(ours0.counts.values()) - 1
     assert ours.skipped["bytes"] > 0
     assert_same_as_dfreader(ours, path)
+
+
+def test_damaged_leading_bytes_are_recognised_and_read_like_dfreader(logs, tmp_path):
+    """A log whose first bytes are damaged, one of them a message head of a type defined further on with a time of
+    2^64 µs: DFReader resyncs past them and knows a type only from its FMT on. Before, the log was "not a log format
+    the workbench knows", and forced with --format dataflash, inspect printed a mode span of 10^13 s."""
+    src = logs("new", "copter")
+    data = bytearray(src.read_bytes())
+    att = adapters.read(src).info["formats"]["ATT"]["type"]
+    att_fmt = data.find(bytes([0xA3, 0x95, 0x80, att]))
+    damage = 89  # the FMT that describes FMT itself; the others, ATT's among them, follow
+    assert att_fmt > damage
+    rng = np.random.default_rng(3)
+    data[:damage] = rng.integers(0, 0xA3, damage, dtype=np.uint8).tobytes()
+    data[10:23] = bytes([0xA3, 0x95, att]) + b"\xff" * 10  # a head whose TimeUS would be 1.8e13 s
+    path = tmp_path / "leading.bin"
+    path.write_bytes(bytes(data))
+    assert adapters.detect_format(path).name == "dataflash"
+    ours = adapters.read(path)
+    msgs, _ = dfreader(path)
+    # DFReader's index pass learns every FMT of the file first, and so decodes the head before ATT's FMT too; with
+    # the FMT of FMT damaged it reads no instance from FMTU (IMU, not IMU[0] and IMU[1]): counted by type
+    expected = {k.split("[")[0]: len(v) - (k == "ATT") for k, v in msgs.items()}
+    by_type: dict[str, int] = defaultdict(int)
+    for k, v in ours.counts.items():
+        by_type[k.split("[")[0]] += v
+    assert {k: v for k, v in by_type.items() if v} == expected
+    summary = adapters.inspect(path)
+    assert summary.duration == pytest.approx(adapters.inspect(src).duration, abs=1e-6)
+    assert summary.modes and all(0 <= m.duration <= summary.duration + 1e-9 for m in summary.modes)
+    assert all(summary.t_start <= m.start <= m.end <= summary.t_end for m in summary.modes)
+    assert ours.skipped["bytes"] >= damage
 
 
 @pytest.mark.parametrize(

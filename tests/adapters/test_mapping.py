@@ -7,7 +7,8 @@ import pandas as pd
 import pytest
 
 import adapters
-from adapters.mapping import channel_inverse, channel_values, load_mapping, select, shipped_mappings
+from adapters.mapping import load_mapping, shipped_mappings
+from adapters.selection import channel_inverse, channel_values, select
 from adapters.streams import Streams
 from adapters.transforms import TRANSFORMS
 from workbench.errors import MappingError
@@ -41,8 +42,8 @@ def test_shipped_mappings_load_for_their_formats():
         m.check_complete()
         assert m.state_names == ("x", "y", "phi", "xdot", "ydot", "phidot") and m.input_names == ("u1", "u2")
     ardupilot = load_mapping("ardupilot_manual").for_format("tlog")
-    assert ardupilot.segment.mode.keep == (0, 2, 5)  # STABILIZE, ALT_HOLD, LOITER
-    assert ardupilot.channel("u1").selector.alternatives == ("RC_CHANNELS_RAW.chan1_raw",)
+    assert ardupilot.segment.mode.keep == (0, 2, 5, 16, 1)  # STABILIZE, ALT_HOLD, LOITER, POSHOLD, ACRO
+    assert ardupilot.channel("u1").selector.alternatives == ("RC_CHANNELS_RAW.chan{roll}_raw",)  # by role
     px4 = load_mapping("px4_manual").for_format("ulog")
     assert px4.channel("phi").transform == "quaternion_roll"
 

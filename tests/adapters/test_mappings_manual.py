@@ -83,8 +83,8 @@ def test_shipped_manual_mappings_keep_the_pilot_flown_modes():
         rule = load_mapping(name).for_format(fmt).segment.mode
         return {MODE_TABLES[rule.names][k] for k in rule.keep}
 
-    assert kept("ardupilot_manual", "tlog") == {"STABILIZE", "ALT_HOLD", "LOITER"}
-    assert kept("arduplane_manual", "tlog") == {"FBWA", "QSTABILIZE", "QHOVER", "QLOITER"}
+    assert kept("ardupilot_manual", "tlog") == {"STABILIZE", "ALT_HOLD", "LOITER", "POSHOLD", "ACRO"}
+    assert kept("arduplane_manual", "tlog") == {"MANUAL", "FBWA", "QSTABILIZE", "QHOVER", "QLOITER"}
     assert {"MANUAL", "POSCTL", "ALTCTL"} <= kept("px4_manual", "ulog")
     assert {"MANUAL", "POSCTL", "ALTCTL"} <= kept("px4_manual", "tlog")
     for name in ("ardupilot_manual", "arduplane_manual", "px4_manual"):

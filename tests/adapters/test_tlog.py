@@ -216,6 +216,40 @@ def test_short_mavlink1_frame_after_mavlink2_frame(tmp_path):
     np.testing.assert_array_equal(read.streams["ATTITUDE"]["time_boot_ms"], [1, 2])
 
 
+def test_console_text_inside_a_frame_costs_pymavlink_the_next_record_and_not_this_reader(tmp_path):
+    """An ArduPilot SITL tlog holds the simulator's console text among its frames, and the reader found 5 more
+    HEARTBEATs in one than pymavlink. The difference, explained: where the text is written inside a frame after
+    its length byte, pymavlink reads that frame's declared length on (through the text), reports it as BAD_DATA,
+    and so consumes the next record's timestamp and the start of its frame: a complete, checksummed HEARTBEAT it
+    never returns. The reader here starts each record where a timestamp and a checksummed frame agree."""
+    sender = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    text, cut, n, hit = b"APM: Ready to FLY\n", 6, 40, (3, 11, 19, 27, 35)
+    clean, dirty, lost = bytearray(), bytearray(), []
+    for k in range(n):
+        att = mav.MAVLink_attitude_message(k, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6).pack(sender)
+        hb = mav.MAVLink_heartbeat_message(2, 3, 81, k, 4, 3).pack(sender)
+        a, b = stamp(1_000_000 * (2 * k + 1)), stamp(1_000_000 * (2 * k + 2))
+        clean += a + att + b + hb
+        dirty += a + (att[:cut] + text + att[cut:] if k in hit else att)
+        if k in hit:
+            lost.append((len(dirty), b + hb))
+        dirty += b + hb
+    for name, data in (("clean.tlog", clean), ("sitl.tlog", dirty)):
+        (tmp_path / name).write_bytes(bytes(data))
+    per_type, _ = pymavlink_decode(tmp_path / "clean.tlog")
+    assert read_tlog(tmp_path / "clean.tlog").report.counts == {k: len(v) for k, v in per_type.items()}
+    ours = read_tlog(tmp_path / "sitl.tlog")
+    per_type, _ = pymavlink_decode(tmp_path / "sitl.tlog")
+    assert ours.report.counts == {"ATTITUDE": n - len(hit), "HEARTBEAT": n}
+    assert len(per_type["HEARTBEAT"]) == n - len(hit) and len(per_type["BAD_DATA"]) >= len(hit)
+    # the HEARTBEATs only this reader returns are those records: whole and checksummed where they lie
+    missing = sorted(set(ours.streams["HEARTBEAT"]["custom_mode"]) - {m.custom_mode for m in per_type["HEARTBEAT"]})
+    assert missing == list(hit)
+    for at, record in lost:
+        assert bytes(dirty[at:at + len(record)]) == record
+        assert mav.MAVLink(None).decode(bytearray(record[8:])).custom_mode in hit  # pymavlink's own decoder
+
+
 # --------------------------------------------------------------------------------- the real log
 
 

@@ -150,8 +150,28 @@ def test_topics_stamped_0_do_not_stretch_the_span_of_a_log_on_a_far_clock(tmp_pa
     read = adapters.read(path)
     summary = summarize(read)
     assert summary.duration == pytest.approx(t[-1] - t[0], abs=1e-5)
-    assert read.skipped["rows stamped 0"] == 2
-    assert read.n_rows("manual_control_setpoint") == 10
+    # kept, as pyulog keeps them (its sample.ulg: two whole topics, 20,343 rows), at the log's start, and counted
+    assert read.skipped[ulog.PLACED_AT_START] == 2
+    assert read.n_rows("manual_control_setpoint") == 11 and read.n_rows("parameter_update") == 1
+    for name, frame in streams.items():
+        got = read.columns(name)["t"]
+        np.testing.assert_allclose(got, np.where(frame["t"] == 0.0, start, frame["t"]), rtol=0, atol=1e-6)
+
+
+def test_topics_stamped_0_throughout_are_all_kept(tmp_path):
+    # PX4/pyulog's sample.ulg: ekf2_innovations (3,271 rows) and sensor_preflight (17,072) are stamped 0 throughout
+    from pyulog import ULog
+
+    start = 112.5
+    t = start + 0.1 * np.arange(700)
+    streams = {"vehicle_attitude": pd.DataFrame({"t": t, "q[0]": np.ones(t.size, np.float32)}),
+               "sensor_preflight": pd.DataFrame({"t": np.zeros(40), "accel": np.ones(40, np.float32)})}
+    path = ulog.write(tmp_path / "zero.ulg", streams, timestamp_us=int(start * 1e6))
+    read = ulog.read(path)
+    peer = {d.name: len(d.data["timestamp"]) for d in ULog(str(path)).data_list}
+    assert {name: read.n_rows(name) for name in read.frames} == peer
+    assert read.skipped[ulog.PLACED_AT_START] == 40
+    assert (read.columns("sensor_preflight")["t"] == start).all()
 
 
 def test_a_log_whose_clock_starts_near_0_keeps_its_rows_stamped_0(tmp_path):

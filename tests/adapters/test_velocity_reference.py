@@ -70,15 +70,30 @@ def test_an_ekf_velocity_that_does_not_follow_the_gps_is_named_at_import(tmp_pat
     assert float(re.search(r"it explains (-?[\d.]+) of", message).group(1)) == pytest.approx(explained, abs=0.006)
 
 
-def test_a_gps_that_does_not_move_beyond_its_accuracy_gives_no_verdict(tmp_path):
-    # a vehicle standing still: the GPS velocity is its receiver's noise, there is nothing to follow
-    def parked(streams, options):
-        streams["GPS"]["Spd"] = 0.01
-        streams["GPS"]["GCrs"] = np.linspace(0, 360, len(streams["GPS"]))
+@pytest.mark.parametrize("top", [0.01, 0.8])
+def test_too_little_motion_is_its_own_cause(tmp_path, top):
+    # a vehicle standing (0.01 m/s) and a 28 s hover whose GPS speed never passes 0.8 m/s: the velocities are the
+    # receiver's noise; the hover was called "the estimator is not converged or not the one that flew"
+    rng = np.random.default_rng(4)
 
-    path, _ = _copter_bin(tmp_path, "parked.bin", parked)
-    ds = adapters.load(path, "ardupilot_manual")
-    assert len(ds) and not ds[0].meta.get("still")
+    def hover(streams, options):
+        n = len(streams["GPS"])
+        streams["GPS"]["Spd"] = np.round(rng.uniform(0, top, n), 2)
+        streams["GPS"]["GCrs"] = np.round(rng.uniform(0, 360, n), 2)
+
+    path, streams = _copter_bin(tmp_path, "hover.bin", hover)
+    with pytest.raises(DataError, match=r"too little motion to identify the plant: the GPS speed \(GPS Spd, GCrs\) "
+                                        r"never passes 1 m/s in the kept segments") as info:
+        adapters.load(path, "ardupilot_manual")
+    message = str(info.value)
+    assert "not converged" not in message and "\n" not in message
+    looked = adapters.load(path, "ardupilot_manual", allow_still=True)
+    gps = streams["GPS"]
+    inside = np.zeros(len(gps), dtype=bool)
+    for d in looked:
+        inside |= (gps["t"] >= d.meta["t0"]) & (gps["t"] <= d.meta["t0"] + d.t[-1])
+    fastest = float(gps["Spd"][inside].max())
+    assert f"at most {fastest:.2g} m/s over {int(inside.sum())} GPS samples" in message
 
 
 def test_a_log_without_any_gps_stream_is_named_dead_reckoning(tmp_path):
@@ -138,11 +153,13 @@ def test_the_fit_names_a_plant_that_fails_its_physics_check_first(tmp_path):
     from types import SimpleNamespace
 
     from workbench.cli.model import _physics_first
+    from workbench.data.plant_groups import select_plant_group
     from workbench.plant.choice import choose_plant
     from workbench.plant.identification import PhysicalCheck
 
     path, _ = _copter_bin(tmp_path, "clean.bin")
-    report = choose_plant(adapters.load(path, "ardupilot_manual"), "identify").identification
+    stabilize = select_plant_group(adapters.load(path, "ardupilot_manual"), "angle")  # one plant per kind of stick
+    report = choose_plant(stabilize, "identify").identification
     (check,) = report.checks
     weak = PhysicalCheck(check.name, check.expected / 5, check.expected, check.note)
     passing = SimpleNamespace(identification=replace(report, checks=(replace(weak, value=check.expected),)))
@@ -345,7 +362,6 @@ def test_a_stop_for_the_velocity_after_flips_says_how_many_segments_were_cut(tmp
     clean = adapters.load(_copter_bin(tmp_path, "clean.bin", seconds=60.0)[0], "ardupilot_manual")
     first = clean[0]
     at = first.meta["t0"] + first.t[-1] - 1.0
-    later = {d.meta["id"].split(".")[0] for d in clean if d.meta["t0"] > at}  # segments that start upside down
 
     def edit(streams, options):
         att = streams["ATT"]
@@ -360,7 +376,10 @@ def test_a_stop_for_the_velocity_after_flips_says_how_many_segments_were_cut(tmp
         adapters.load(path, "ardupilot_manual")
     message = str(info.value)
     assert ("does not follow the GPS velocity" if cause == "own_gps" else "dead-reckons") in message
-    n = 1 + len(later)
+    # as many as the viewer lists: the cut segment and every piece after it that starts upside down
+    cuts = adapters.load(path, "ardupilot_manual", allow_still=True)[0].meta["flipped"].split("; the ")
+    n = len(cuts)
+    assert n >= 2 and "cut at" in cuts[0] and all("dropped" in c for c in cuts[1:])
     assert "\n" not in message and message.endswith(
         f"({n} segment{'s' if n > 1 else ''} cut or dropped at the vehicle's flips before this check: `workbench "
         f"view` shows where)")

@@ -52,3 +52,42 @@ def test_evaluate_at_80_columns_has_no_line_over_80_and_no_raw_markdown():
     assert "held-out prediction error" in body
     assert not [line for line in lines if line.lstrip().startswith("|")], "a Markdown table reached the terminal"
     assert "**" not in body and "`" not in body
+
+
+def _printed(header, rows, width, title=""):
+    import io
+
+    from rich.console import Console
+
+    from workbench.cli.context import Context
+
+    ctx = Context.__new__(Context)
+    ctx.quiet = False
+    buf = io.StringIO()
+    ctx.out = Console(file=buf, width=width, force_terminal=True, color_system=None)
+    ctx.say_table(header, rows, title)
+    return buf.getvalue()
+
+
+def test_a_wide_table_narrows_itself_before_it_turns_into_a_list():
+    """At 80 columns a table keeps its form: a light frame, headers wrapped at their spaces, abbreviated words,
+    fewer digits; every cell whole. The key/value list comes only where no narrowing fits."""
+    header = ["label", "method", "position RMSE", "velocity RMSE", "MC band", "trials"]
+    rows = [["CS1", "persistence", "0.0812 [0.0041, 0.16]", "0.0505 [0.035, 0.066]", "83 % [31, 100]", "6"],
+            ["CS2", "proposed", "0.0245 [0, 0.077]", "0.0413 [0.0044, 0.078]", "79 % [0, 100]", "6"]]
+    wide = _printed(header, rows, 200)
+    narrow = _printed(header, rows, 80)
+    assert all(len(line) <= 80 for line in narrow.splitlines())
+    assert "  method: persistence" not in narrow  # not the long form
+    assert len(narrow.splitlines()) <= 1.3 * len(wide.splitlines())
+    assert "persistence" in narrow and "83% [31,100]" in narrow  # every cell whole, if tighter
+    # the check can fail: at 30 columns nothing narrows enough, and the long form it falls back to says so
+    assert "  method: persistence" in _printed(header, rows, 30)
+
+
+def test_narrowing_steps_shorten_headers_and_digits():
+    from workbench.cli.context import abbreviate, fewer_digits
+
+    assert abbreviate("position RMSE") == "pos. RMSE"
+    assert fewer_digits("0.1106 [0.072, 0.15]") == "0.11 [0.072, 0.15]"
+    assert fewer_digits("8 (24 / 6)") == "8 (24 / 6)" and fewer_digits("u2") == "u2"

@@ -37,6 +37,7 @@ PAD_SCRIPT = """
     const c = window.collect, trial = c && c.trial;
     let axes = [0, 0, 0, 0];
     if (window.__pilot && trial && !trial.ended) axes = window.__pilot(trial.x, trial.k);
+    else if (window.__axes) axes = window.__axes.slice();  // a stick held on the calibration screen
     // a worn pad: at rest its axes read window.__rest, not 0 (what the calibration screen measures), and at full
     // deflection still ±1 (the ends of the axis's range)
     const worn = (v, r) => (Math.abs(v) === 1 ? v : r + v * (v >= 0 ? 1 - r : 1 + r));
@@ -77,8 +78,9 @@ def calibrated(raw: np.ndarray, cal: dict) -> np.ndarray:
         d = raw[:, i] - off
         travel = np.where(d >= 0, 1 - off, 1 + off)
         v = cal["signs"][i] * np.where(travel > 0, d / np.where(travel > 0, travel, 1.0), 0.0)
-        a, dz = np.abs(v), cal["deadzone"]
-        out[:, i] = np.where(a <= dz, 0.0, np.clip(np.sign(v) * (a - dz) / (1 - dz), -1, 1))
+        a, dz, e = np.abs(v), cal["deadzone"], cal.get("expo", 0.0)
+        m = np.minimum(1.0, (a - dz) / (1 - dz))
+        out[:, i] = np.where(a <= dz, 0.0, np.sign(v) * ((1 - e) * m + e * m * m * m))
     return out
 
 
@@ -96,28 +98,40 @@ def browser():
         b.close()
 
 
+def join(session: Session, subject: str, fields: dict | None = None, confirm: bool = False) -> dict:
+    """Register a subject who agreed to the session's consent text (what the page sends)."""
+    return session.register(subject, fields or {}, {"sha256": session.protocol.consent_sha256}, confirm)
+
+
+def _toml(value) -> str:
+    if isinstance(value, dict):  # an inline table
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
+    return json.dumps(value)
+
+
 def write_protocol(path: Path, blocks: list[dict], **top) -> Path:
     """A small protocol file for a test."""
     lines = [f'title = "{top.get("title", "Test protocol")}"', 'consent = "A test session."']
-    for key in ("counterbalance", "time_limit_s"):
+    for key in ("counterbalance", "time_limit_s", "subjects"):
         if key in top:
             lines.append(f"{key} = {json.dumps(top[key])}")
     if "breaks" in top:
         lines += ["[breaks]", *(f"{k} = {json.dumps(v)}" for k, v in top["breaks"].items())]
     for b in blocks:
         lines.append("[[blocks]]")
-        lines += [f"{k} = {json.dumps(v)}" for k, v in b.items()]
+        lines += [f"{k} = {_toml(v)}" for k, v in b.items()]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
 
 
 class Running:
-    """A session served in this process."""
+    """A session served in this process (the experimenter's page open with ``key``)."""
 
-    def __init__(self, out: Path, protocol) -> None:
-        self.session = Session(out, protocol)
-        self.server = Server(make_app(self.session), port=0).start()
+    def __init__(self, out: Path, protocol, key: str = "test-key", **session) -> None:
+        self.session = Session(out, protocol, **session)
+        self.server = Server(make_app(self.session, key=key), port=0).start()
         self.url = self.server.url
+        self.key = key
         self.out = out
 
 
@@ -125,9 +139,9 @@ class Running:
 def serve(tmp_path):
     running = []
 
-    def start(protocol, out: Path | None = None) -> Running:
+    def start(protocol, out: Path | None = None, **session) -> Running:
         p = load_protocol(protocol) if isinstance(protocol, str | Path) else protocol
-        r = Running(out or tmp_path / "session", p)
+        r = Running(out or tmp_path / "session", p, **session)
         running.append(r)
         return r
 
@@ -136,27 +150,50 @@ def serve(tmp_path):
         r.server.stop()
 
 
-def new_page(browser, gamepad: bool):
-    context = browser.new_context(viewport={"width": 1100, "height": 760})
+def new_page(browser, gamepad: bool, viewport: tuple[int, int] = (1100, 760)):
+    context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
+    context.set_default_timeout(60_000)  # a shared machine under load: a wait's deadline, not a speed check
     if gamepad:
         context.add_init_script(PAD_SCRIPT)
     return context, context.new_page()
 
 
-def register(page, url: str, subject: str, rest: list[float] | None = None) -> None:
-    """Consent, the subject form, and the calibration screen: with its defaults, or with a pad whose axes rest at
-    ``rest`` and whose rest offsets the screen measures."""
+def consent(page, url: str, subject: str) -> None:
+    """The consent screen (the ID given in the link), agreed; the subject form's fields (if any) left empty."""
     page.goto(f"{url}?subject={subject}")
     page.wait_for_selector("#screen-consent:not([hidden])")
-    page.keyboard.press("Space")
-    page.wait_for_selector("#screen-subject:not([hidden])")
-    page.click("#subject-form button[type=submit]")
+    page.click("#consent-agree")
+    page.wait_for_selector("#screen-subject:not([hidden]), #screen-calibration:not([hidden])")
+    if page.is_visible("#subject-continue"):
+        page.click("#subject-continue")
+
+
+def calibrate(page, rest: list[float] | None = None) -> None:
+    """The calibration screen done as a subject does it: a gamepad's rest measured (its axes resting at ``rest``)
+    and both sticks assigned by moving them and confirmed; or each arrow key tapped."""
     page.wait_for_selector("#screen-calibration:not([hidden])")
-    if rest is not None:
+    if page.is_visible("#pad-steps"):
         page.evaluate("rest => { window.__rest = rest; }", rest)
         page.click("#measure-rest")
         page.wait_for_function("() => document.querySelector('#rest-result').textContent.includes('dead zone')")
+        for i, axes in ((1, [0, 0, 1, 0]), (2, [0, -1, 0, 0])):  # right stick right; left stick up
+            page.click(f"#assign-u{i}")  # then the stick is moved and held
+            page.wait_for_function(f"() => document.querySelector('#axis-u{i}').textContent.includes('now')")
+            page.evaluate("axes => { window.__axes = axes; }", axes)
+            page.wait_for_selector(f"#confirm-u{i}:not([hidden])")
+            page.evaluate("() => { window.__axes = null; }")
+            page.click(f"#confirm-u{i}")
+    else:
+        for key in ("ArrowLeft", "ArrowRight", "ArrowUp", "ArrowDown"):
+            page.keyboard.press(key)
+    page.wait_for_function("() => document.querySelector('#calibration-next').textContent.includes('Space')")
     page.keyboard.press("Space")
+
+
+def register(page, url: str, subject: str, rest: list[float] | None = None) -> None:
+    """Consent, the subject form and the calibration screen, as a subject does them."""
+    consent(page, url, subject)
+    calibrate(page, rest)
 
 
 def rerun_entities(mcap: Path, rrd: Path) -> set[str]:

@@ -16,7 +16,7 @@ import pytest
 from workbench.collect.session import HIDDEN
 from workbench.data.dataset import is_dataset, load_demonstrations
 
-from .conftest import calibrated, new_page, pilot_gain, pilot_js, register, rerun_entities, write_protocol
+from .conftest import calibrate, calibrated, new_page, pilot_gain, pilot_js, register, rerun_entities, write_protocol
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -37,22 +37,42 @@ def _pad_said(page, xs: np.ndarray) -> np.ndarray:
 
 
 def test_a_gamepad_subject_flies_a_protocol_and_the_inputs_are_the_pads(browser, serve, tmp_path):
-    run = serve(write_protocol(tmp_path / "p.toml", [{"label": "CS1", "instructions": "Land.", "trials": 1}]))
+    """The default suite's one browser flight: consent, a calibration done in full, a briefing, one trial with
+    the time limit stated, the pad read at the display rate with every read recorded, the outcome's reason after
+    the last trial."""
+    path = write_protocol(tmp_path / "p.toml", [{"message": {"title": "Briefing", "text": "Read this."}},
+                                                {"label": "CS1", "instructions": "Land.", "trials": 1}])
+    path.write_text(path.read_text() + '[input]\nexpo = 0.3\n')
+    run = serve(path)
     context, page = new_page(browser, gamepad=True)
     try:
         rest = [0.0, 0.12, -0.09, 0.0]  # the sticks' axes (2 and 1) rest off centre, by more than a dead zone
         register(page, run.url, "pad01", rest=rest)
         page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(20.0), -6.0)}; }}")  # a quick descent
-        page.wait_for_selector("#screen-message:not([hidden])")  # the block's instructions
+        page.wait_for_selector("#screen-message:not([hidden])")
+        assert page.inner_text("#message-title") == "Briefing"
         page.keyboard.press("Space")
+        page.wait_for_function("() => document.querySelector('#message-title').textContent === 'Block: CS1'")
+        page.keyboard.press("Space")
+        page.wait_for_selector("#screen-task:not([hidden])")
+        assert "within 30 s" in page.inner_text("#task-overlay")
         _fly_next(page)  # one trial: the order of several is test_session's and the slow tests' (default suite: fast)
         page.wait_for_selector("#summary:not([hidden])")
         ds = load_demonstrations(run.out)
+        (d,) = ds
+        assert f"Your last trial: Crashed ({d.meta['outcome_reason']})" in page.inner_text("#message-text")
+        reads = _mcap_inputs(run.out, d.id, ("step", "raw_u1", "raw_u2"), topic="/input/reads")
+        steps = reads[:, 0].astype(int)
+        assert len(reads) >= len(d) and set(steps) <= set(range(len(d)))  # every display-rate read, recorded
+        last = np.array([reads[steps <= k][-1, 1:] for k in range(len(d))])  # the rule: the latest read
+        assert np.array_equal(d.u, calibrated(last, d.meta["calibration"]))
+        assert d.meta["input"]["expo"] == 0.3 == d.meta["calibration"]["expo"]
         assert [d.meta["trial"] for d in ds] == [1] and {d.meta["subject"] for d in ds} == {"pad01"}
         for d in ds:
             cal = d.meta["calibration"]
             assert cal["kind"] == "gamepad" and d.meta["device"]["id"] == "Scripted pad (test)"
-            assert np.allclose(cal["offsets"], rest, atol=1e-12) and cal["deadzone"] >= 0.05  # measured, recorded
+            assert np.allclose(cal["offsets"], rest, atol=1e-12)  # measured, recorded
+            assert cal["deadzone"] == min(0.3, 3 * cal["rest_noise"]) and cal["confirmed"] == [True, True]
             said = _pad_said(page, d.x)
             raw = said[:, cal["axes"]]
             mcap_raw = _mcap_inputs(run.out, d.id)
@@ -69,11 +89,12 @@ def test_a_gamepad_subject_flies_a_protocol_and_the_inputs_are_the_pads(browser,
         context.close()
 
 
-def _mcap_inputs(out: Path, trial_id: str, fields: tuple[str, ...] = ("u1", "u2", "raw_u1", "raw_u2")) -> np.ndarray:
+def _mcap_inputs(out: Path, trial_id: str, fields: tuple[str, ...] = ("u1", "u2", "raw_u1", "raw_u2"),
+                 topic: str = "/trial/input") -> np.ndarray:
     from mcap.reader import make_reader
 
     with open(out / HIDDEN / "mcap" / trial_id.split("-")[0] / f"{trial_id}.mcap", "rb") as f:
-        rows = [json.loads(m.data) for _, c, m in make_reader(f).iter_messages(topics=["/trial/input"])]
+        rows = [json.loads(m.data) for _, c, m in make_reader(f).iter_messages(topics=[topic])]
     return np.array([[r[k] for k in fields] for r in rows])
 
 
@@ -85,6 +106,7 @@ def _mcap_events(out: Path, trial_id: str) -> list[tuple[str, str]]:
                                                   make_reader(f).iter_messages(topics=["/input/events"]))]
 
 
+@pytest.mark.slow
 def test_a_keyboard_subject_flies_and_the_keys_and_ramp_are_recorded(browser, serve, tmp_path):
     run = serve(write_protocol(tmp_path / "p.toml", [{"label": "CS2", "instructions": "Land.", "trials": 1}]))
     context, page = new_page(browser, gamepad=False)
@@ -154,7 +176,7 @@ def test_killing_server_and_browser_mid_trial_loses_only_that_trial(browser, tmp
         page.goto(f"{url}?subject=s01")
         page.wait_for_selector("#resume-note:not([hidden])")
         assert "1 of 3 trials are done" in page.inner_text("#resume-note")
-        page.keyboard.press("Space")
+        calibrate(page)  # the sticks checked again
         page.wait_for_selector("#screen-task:not([hidden])")
         assert "trial 2 of 3" in page.inner_text("#task-label")
         status = json.loads(page.evaluate("async () => JSON.stringify(await (await fetch('/api/subject/s01')).json())"))

@@ -12,7 +12,7 @@ from workbench.collect.protocol import load_protocol
 from workbench.collect.session import Session
 from workbench.data.dataset import load_demonstrations
 
-from .conftest import write_protocol
+from .conftest import join, write_protocol
 from .test_session import flown
 
 
@@ -22,7 +22,7 @@ def collected(tmp_path):
         {"label": "CS1", "instructions": "c1", "trials": 3},
         {"label": "CS1", "instructions": "c1 again", "trials": 1, "role": "test"}]))
     s = Session(tmp_path / "out", protocol)
-    s.register("s01", {})
+    join(s, "s01", {})
     for slot in range(4):
         s.write_trial(flown(s, "s01", slot, y_ref=-0.6 - 0.1 * slot))
     return tmp_path / "out"

@@ -13,13 +13,14 @@ from workbench.cli.parser import build_parser
 from workbench.collect.server import Server, make_app
 from workbench.collect.session import Session
 
+from .conftest import join
 from .test_session import _protocol
 
 
 @pytest.fixture
 def url(tmp_path):
     session = Session(tmp_path / "out", _protocol(tmp_path))
-    session.register("s01", {})
+    join(session, "s01", {})
     server = Server(make_app(session), port=0).start()
     yield server.url.rstrip("/")
     server.stop()
@@ -47,7 +48,7 @@ def _trial(**change) -> bytes:
     ("/api/trial", _trial(u=[["0.5", "0"]] * 3), "u: not a list of number lists"),
     ("/api/trial", _trial(raw=[[True, False]] * 3), "raw: not a list of number lists"),
     ("/api/practice", _trial(x0=["a"] * 6), "practice: x0"),
-    ("/api/practice", _trial(x0=[1e400] * 6), "practice: x0"),
+    ("/api/practice", _trial(x0=[1e400] * 6), "not JSON of finite numbers"),
 ])
 def test_bad_input_is_a_400_of_one_line(url, path, body, message):
     status, answer = _post(url + path, body)

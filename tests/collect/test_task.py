@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from workbench.collect.task import OUTCOMES, outcome, replay, step, task_spec
+from workbench.collect.task import OUTCOMES, outcome, reason, replay, step, task_spec
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_trial
 
@@ -81,6 +81,25 @@ def test_page_and_server_end_trials_by_the_same_rules(sim_page):
     ours = [outcome(spec, x, int(k)) for x, k in zip(states.tolist(), ks, strict=True)]
     assert page == ours
     assert set(ours) >= {None, *OUTCOMES}  # every rule was exercised
+    # and give each end the same reason, in the same words (what the subject reads, what the trial records)
+    ended = [(x, o) for x, o in zip(states.tolist(), ours, strict=True) if o is not None]
+    page_why = sim_page.evaluate("cases => cases.map(([x, o]) => sim.reason(spec, x, o))", ended)
+    assert page_why == [reason(spec, x, o) for x, o in ended]
+    assert {w.split(":")[0] for w in page_why} == {"landed", "crashed", "left the area", "out of time"}
+
+
+def test_the_page_and_the_server_calibrate_a_stick_to_the_same_bits(sim_page):
+    """Offsets, signs, dead zone and expo: input.js calibrate and checks.calibrate agree to the bit."""
+    from workbench.collect.checks import calibrate
+
+    rng = np.random.default_rng(5)
+    cases = [[float(r), float(o), float(sg), float(dz), float(e)] for r, o, sg, dz, e in zip(
+        rng.uniform(-1, 1, 300), rng.uniform(-0.2, 0.2, 300), rng.choice([-1.0, 1.0], 300),
+        rng.choice([0.0, 0.01, 0.05, 0.2], 300), rng.choice([0.0, 0.3, 1.0], 300), strict=True)]
+    cases += [[1.0, 0.1, 1.0, 0.05, 0.3], [-1.0, 0.1, -1.0, 0.0, 0.5], [0.1, 0.1, 1.0, 0.0, 0.0]]
+    page = sim_page.evaluate("async (cases) => { const input = await import('/static/input.js');"
+                             " return cases.map((c) => input.calibrate(...c)); }", cases)
+    assert page == [calibrate(*c) for c in cases]
 
 
 @pytest.mark.parametrize("frame_ms", [10.0, 25.0, 50.0])

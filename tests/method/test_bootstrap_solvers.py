@@ -40,13 +40,13 @@ def test_resamples_do_not_fall_back_to_the_point_estimates_other_solvers(monkeyp
     original = InverseLQR._run
     scs_calls = []
 
-    def run(self, problem, solver):
+    def run(self, problem, solver, stage=1):
         if solver != self.solvers[0]:
             scs_calls.append(solver)
             return "infeasible"
         if problem is self._stage2:
             return "infeasible"
-        return original(self, problem, solver)
+        return original(self, problem, solver, stage)
 
     monkeypatch.setattr(InverseLQR, "_run", run)
     with warnings.catch_warnings():
@@ -64,3 +64,14 @@ def test_the_failure_note_names_the_count_and_the_commonest_cause_once_across_nu
     note = failure_note(failures)
     assert note.startswith("4 resample(s) failed; commonest cause (3): the gain is not stabilizing")
     assert failure_note([]) == ""
+
+
+def test_a_long_cause_is_printed_whole_not_cut_mid_word():
+    from workbench.method.resampling import stop_note
+
+    cause = ("the instruments leave a state direction unexcited: its squared canonical correlation is 0.01 < 0.05, so "
+             "the starts of the demonstrations do not move every state (e.g. all start at the same height). Use "
+             "more varied start states")
+    failures = [f"resample {k}: {cause}" for k in range(3)]
+    assert failure_note(failures).endswith("more varied start states")
+    assert stop_note(10, 2, failures).endswith("more varied start states")

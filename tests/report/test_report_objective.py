@@ -89,7 +89,7 @@ def test_report_without_bootstrap_says_so(tmp_path):
 def test_the_objective_figure_draws_only_the_identified_contrasts(result, report_folder):
     """The figure's rows are exactly the table's identified factors and ratios, each with its own interval: no
     entry of Q or R one by one (the attitude weight is not identified: METHOD.md), no unidentified ratio."""
-    from workbench.report.contrasts import fig_contrasts, identified_rows
+    from workbench.report.contrasts import fig_contrasts, identified_rows, math_label
 
     table = compare_strategies({lb: oi.ratios for lb, oi in result.objectives.items()})
     factors, ratios = identified_rows(table)
@@ -100,7 +100,9 @@ def test_the_objective_figure_draws_only_the_identified_contrasts(result, report
     np.testing.assert_allclose(factors["hi"], want_f["factor_hi"].to_numpy(float))
     fig = fig_contrasts(factors, ratios, {"A": "#1f77b4", "B": "#ff7f0e"})
     ticks = [t.get_text() for ax in fig.axes for t in ax.get_yticklabels()]
-    assert sorted(ticks) == sorted([*factors["label"], *ratios["label"]])
+    # the weights in mathtext ($Q_{y}$ / $R_{u2}$), the rest of each label as the table writes it
+    assert sorted(ticks) == sorted(math_label(v) for v in [*factors["label"], *ratios["label"]])
+    assert all("$Q_{" in t or "$R_{" in t for t in ticks)
     assert not any(t.startswith(("Q ", "R ")) or "λmax" in t for t in ticks)
     text = (report_folder / "report.md").read_text()
     assert "](figures/objective.png)" in text and (report_folder / "figures" / "objective.svg").is_file()

@@ -169,7 +169,7 @@ def test_bands_keep_line_colors_and_sit_under_the_scene_lines(setup_session):
     for method in ("proposed", "ioc_only", "gmr_only", "persistence"):
         for alpha in (0.1, 0.2, 0.3):
             assert _hue_shift(style.method_color(method), style.BAND_COLOR, alpha) < 5.0
-    assert _hue_shift(style.method_color("ioc_only"), style.light(style.method_color("proposed"), 0.45), 0.3) > 5.0
+    assert _hue_shift(style.method_color("ioc_only"), style.light(style.method_color("persistence"), 0.45), 0.3) > 5.0
     # in the scene, draw order is honored: the envelope is under every track and prediction line
     band_orders = [o for p, c in ents.items() if p.endswith("_band") and p.startswith("/scene/")
                    for o in _flat(c["static:LineStrips2D:draw_order"])]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,7 +21,8 @@ from workbench.cli.reading import existing_path
 from workbench.cli.stdio import Stdio, is_stdio
 from workbench.errors import UsageError
 
-__all__ = ["Context", "PIPE_WIDTH", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL"]
+__all__ = ["Context", "PIPE_WIDTH", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL", "narrowed_tables", "abbreviate",
+           "fewer_digits"]
 
 #: The width of output that goes to a pipe or a file (no terminal to ask; COLUMNS overrides it).
 PIPE_WIDTH = 100
@@ -90,38 +92,33 @@ class Context:
             self.out.print(*parts, markup=markup)
 
     def say_table(self, header: Sequence[str], rows: Sequence[Sequence[Any]], title: str = "") -> None:
-        """A table that fits the terminal: as a table where its cells fit the width unbroken, else in long form —
-        one block per row, the first cell as its heading and every other cell as ``column: value`` on its own
-        line — so no cell is cut to "propo…" or stacked a word per line."""
+        """A table that fits the terminal, narrowed step by step before it changes form (:func:`narrowed_tables`):
+        as it is; with a light frame and headers wrapped at their spaces (a cell is never broken); with
+        abbreviated headers; with fewer significant digits. Only where none fits, one table per value of the first
+        column (a strategy), and last the long form — one block per row, the first cell as its heading and every
+        other cell as ``column: value`` — so no cell is cut to "propo…" or stacked a word per line."""
         from rich.markup import escape
-        from rich.table import Table
-        from rich.text import Text
 
         cells = [[str(c) for c in r] for r in rows]
         header = [str(h) for h in header]
-
-        def fits(head: Sequence[str], body: Sequence[Sequence[str]]) -> bool:
-            widths = [max([len(h), *(len(r[j]) for r in body)]) for j, h in enumerate(head)]
-            # rich's box: a bar and a space either side of every cell, one more bar at the end
-            return sum(widths) + 3 * len(widths) + 1 <= self.out.width
-
-        def show(head: Sequence[str], body: Sequence[Sequence[str]], name: str) -> None:
-            table = Table(*head, title=name or None)
-            for r in body:
-                table.add_row(*(Text(c) for c in r))  # a cell's "[0.1, 0.2]" is text, not console markup
-            self.say(table)
-
-        if fits(header, cells):
-            show(header, cells, title)
+        width = self.out.width
+        # of the forms that fit, the one with the fewest lines (a wrapped note column is shortest with the tightest
+        # numbers beside it); the first of equals (the least narrowed)
+        fitting = [(n, k, t) for k, t in enumerate(narrowed_tables(header, cells, title)) if (n := _fits(t, width))]
+        if fitting:
+            self.say(min(fitting, key=lambda f: (f[0], f[1]))[2])
             return
         groups = list(dict.fromkeys(r[0] for r in cells))
-        if len(header) > 2 and len(groups) < len(cells) and fits(header[1:], [r[1:] for r in cells]):
+        if len(header) > 2 and len(groups) < len(cells):
             # one table per value of the first column (a strategy), that column in the tables' titles
-            if title:
-                self.say(f"[bold]{escape(title)}[/bold]", markup=True)
-            for g in groups:
-                show(header[1:], [r[1:] for r in cells if r[0] == g], f"{header[0]}: {g}")
-            return
+            parts = [[t for t in narrowed_tables(header[1:], [r[1:] for r in cells if r[0] == g],
+                                                 f"{header[0]}: {g}") if _fits(t, width)] for g in groups]
+            if all(parts):
+                if title:
+                    self.say(f"[bold]{escape(title)}[/bold]", markup=True)
+                for p in parts:
+                    self.say(p[0])
+                return
         if title:
             self.say(f"[bold]{escape(title)}[/bold]", markup=True)
         for r in cells:
@@ -184,3 +181,93 @@ class Context:
             print(f"running tasks on {ex}", file=sys.stderr)
         return ex
 
+
+#: Words a narrow terminal's table headers shorten, longest first (each stays readable on its own).
+ABBREVIATIONS = (
+    ("difference [95 % interval]", "difference [95 %]"), ("estimate [95 % interval]", "estimate [95 %]"),
+    ("[95 % interval]", "[95 %]"), ("(mean of trials [95 % interval])", "(mean [95 %])"),
+    ("position", "pos."), ("velocity", "vel."), ("strategy", "strat."), ("interval", "int."),
+    ("trials", "tr."), ("windows", "win."), ("nominal", "nom."), ("calibration", "calib."), ("proposed", "prop."),
+    ("persistence", "persist."), ("coverage", "cov."), ("corrected", "corr."), ("baseline", "base"),
+)
+_NUMBER = re.compile(r"(?<![\w.])(-?\d+\.\d+)(e[+-]?\d+)?(?![\w.])")
+
+
+def abbreviate(text: str) -> str:
+    """A header with the words of :data:`ABBREVIATIONS` shortened."""
+    for long, short in ABBREVIATIONS:
+        text = text.replace(long, short)
+    return text
+
+
+def fewer_digits(cell: str, digits: int = 2) -> str:
+    """Every decimal number of ``cell`` at ``digits`` significant digits (``0.1106 [0.072, 0.15]`` →
+    ``0.11 [0.072, 0.15]``); integers and words stay."""
+    return _NUMBER.sub(lambda m: f"{float(m.group(0)):.{digits}g}", cell)
+
+
+def narrowed_tables(header: Sequence[str], cells: Sequence[Sequence[str]], title: str = "") -> list[Any]:
+    """The same table, each narrower than the last: as it is (a heavy frame, headers whole); a light frame with
+    headers that may wrap at their spaces (a cell never breaks: each column is at least its widest cell); then
+    abbreviated headers (:func:`abbreviate`); then fewer significant digits (:func:`fewer_digits`); then one space
+    between columns and none inside a number's unit or an interval (``83% [31,100]``)."""
+    from rich import box
+    from rich.table import Table
+    from rich.text import Text
+
+    def make(head: Sequence[str], body: Sequence[Sequence[str]], light: bool, tight: bool = False) -> Any:
+        table = Table(title=Text(title) if title else None, box=box.SIMPLE_HEAD if light else box.HEAVY_HEAD,
+                      pad_edge=not light, collapse_padding=light, show_edge=not light,
+                      padding=(0, 0) if tight else (0, 1))
+        prose = {j for j in range(len(head)) if any(_is_prose(r[j]) for r in body)}
+        table.prose = prose if light else set()  # type: ignore[attr-defined] - read by _fits
+        for j, h in enumerate(head):
+            widest = max([len(r[j]) for r in body] or [0])
+            longest_word = max((len(w) for w in (h + " " + " ".join(r[j] for r in body)).split()), default=0)
+            if light and j in prose:
+                # a note in words wraps at its spaces inside its column (numbers never do): the table keeps its
+                # form where a sentence is wider than the terminal
+                table.add_column(Text(h), min_width=longest_word, ratio=1, no_wrap=False)
+            else:
+                table.add_column(Text(h), width=max(widest, max((len(w) for w in h.split()), default=0))
+                                 if light else None, no_wrap=not light)
+        for r in body:
+            table.add_row(*(Text(c) for c in r))  # a cell's "[0.1, 0.2]" is text, not console markup
+        return table
+
+    short = [abbreviate(h) for h in header]
+    digits = [[fewer_digits(c) for c in r] for r in cells]
+    tight = [[_tight(c) for c in r] for r in digits]
+    return [make(header, cells, False), make(header, cells, True), make(short, cells, True),
+            make(short, digits, True), make(short, tight, True, tight=True)]
+
+
+def _tight(cell: str) -> str:
+    """``"83 % [31, 100]"`` → ``"83% [31,100]"``: the spaces a number's unit and an interval's comma can lose."""
+    return re.sub(r"(\d) %", r"\1%", cell.replace(", ", ",")) if any(ch.isdigit() for ch in cell) else cell
+
+
+def _fits(table: Any, width: int) -> int:
+    """The number of lines rich draws ``table`` in within ``width`` columns with every cell whole on one line
+    (headers and notes in words may wrap), or 0 where it cannot."""
+    from rich.console import Console
+
+    with open(os.devnull, "w") as sink:
+        console = Console(width=width, record=True, file=sink)
+        console.print(table)
+        lines = console.export_text().splitlines()
+    if any(len(line) > width for line in lines):
+        return 0
+    prose = getattr(table, "prose", set())
+    cells = [str(c) for j, col in enumerate(table.columns) if j not in prose for c in col._cells]
+    # a header and a note in words may wrap, never be cut: every word of them is on some line
+    words = [w for col in table.columns for w in str(col.header).split()]
+    words += [w for j, col in enumerate(table.columns) if j in prose for c in col._cells for w in str(c).split()]
+    whole = all(any(c in line for line in lines) for c in cells if c) and all(
+        any(w in line for line in lines) for w in words)
+    return len(lines) if whole else 0
+
+
+def _is_prose(cell: str) -> bool:
+    """A cell in words (a note, a verdict): five words or more, longer than any number with its interval."""
+    return len(cell) > 30 and len(cell.split()) >= 5 and sum(ch.isalpha() for ch in cell) > len(cell) / 2

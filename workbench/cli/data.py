@@ -44,7 +44,8 @@ def cmd_simulate(ctx: Context) -> int:
         ds = ds + s
     out = ctx.output_path(a.output, ".parquet", "the demonstrations")
     write_demos(ds, out)
-    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples) to {_named(ctx, out)}")
+    labels = ", ".join(map(str, ds.labels)) or "none"
+    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples, labels {labels}) to {_named(ctx, out)}")
     return 0
 
 
@@ -68,7 +69,7 @@ def cmd_inspect(ctx: Context) -> int:
         ds = load_demonstrations(path)
         ctx.say(f"[bold]{escape(ctx.shown(path))}[/bold]: workbench demonstrations, {len(ds)} trials, "
                 f"{ds.n_samples} samples, dt {ds.dt} s", markup=True)
-        ctx.say(f"states {list(ds.state_names)}, inputs {list(ds.input_names)}")
+        ctx.say(f"states {', '.join(ds.state_names)}; inputs {', '.join(ds.input_names)}")
         table = Table("id", "label", "subject", "samples", "duration [s]", "success", "source")
         for d in ds:
             table.add_row(d.id, str(d.label), str(d.meta.get("subject")), str(len(d)), f"{d.duration:.2f}",
@@ -172,5 +173,6 @@ def cmd_import(ctx: Context) -> int:
     if a.label:
         ds = ds.with_demos(d.with_meta(label=a.label) for d in ds)  # keeps the mapping's roles
     write_demos(ds, out, a.mapping)
-    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples, labels {ds.labels}) to {_named(ctx, out)}")
+    labels = ", ".join(map(str, ds.labels)) or "none"
+    ctx.say(f"wrote {len(ds)} demonstrations ({ds.n_samples} samples, labels {labels}) to {_named(ctx, out)}")
     return 0

@@ -10,7 +10,15 @@ from typing import Any
 from workbench.atomic import atomic_write_table
 from workbench.cli.context import Context
 from workbench.cli.options import steps_of
-from workbench.cli.reading import demos_at_model_dt, load_demos, load_model_file, pilot_only, system_for
+from workbench.cli.reading import (
+    demos_at_model_dt,
+    load_demos,
+    load_model_file,
+    per_group_path,
+    pilot_only,
+    plant_group_parts,
+    system_for,
+)
 from workbench.cli.writing import print_plant
 from workbench.defaults import DEFAULT_N_COMPONENTS
 from workbench.errors import DataError, ModelError, UsageError
@@ -21,6 +29,35 @@ def cmd_fit(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".npz", "the model")  # before the work: `-o -` to a terminal is refused
     ds = pilot_only(ctx, load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None), a.keep_still)
+    parts = plant_group_parts(ctx, ds, a.plant_group)
+    if len(parts) == 1:
+        _fit_one(ctx, parts[0][1], output)
+        ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
+        return 0
+    if ctx.stdio.writes_stdout:
+        raise UsageError(f"-o - writes one model, but these demonstrations are {len(parts)} plant groups "
+                         f"({', '.join(str(g) for g, _ in parts)}): name one with --plant-group")
+    written, failed = [], []
+    for group, part in parts:
+        path = per_group_path(output, group)
+        ctx.say(f"[bold]plant group {group}[/bold]", markup=True)
+        try:
+            _fit_one(ctx, part, path)
+        except (DataError, ModelError) as exc:  # one group's failure is that group's: the others still fit
+            print(f"warning: plant group {group}: not fitted: {exc}", file=sys.stderr)
+            failed.append(f"{group}: {exc}")
+            continue
+        written.append(path)
+    if not written:
+        raise ModelError(f"no plant group could be fitted: {'; '.join(failed)}")
+    ctx.say(f"wrote {len(written)} model(s), one per plant group: {', '.join(str(p) for p in written)}"
+            + (f"; {len(failed)} group(s) not fitted (warnings above)" if failed else ""))
+    return 0
+
+
+def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
+    """Fit, save and describe one model of one plant group's demonstrations (its own plant)."""
+    a = ctx.args
     system = system_for(ds, a.system)
     print_plant(ctx, system)
     t0 = time.perf_counter()
@@ -51,12 +88,13 @@ def cmd_fit(ctx: Context) -> int:
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
-        _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
-        _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
+        try:
+            _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
+            _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
+        except (DataError, ModelError) as exc:  # the model is written: intervals that cannot be had do not unmake it
+            print(f"warning: intervals not computed: {exc}", file=sys.stderr)
     elif model.has_gain and model.objective_ is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
-    ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
-    return 0
 
 
 def _physics_first(system: Any, exc: Exception) -> str:
@@ -143,7 +181,9 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
 
     o = None
     if model.has_gain:
-        ctx.say("K̂ (u = K̂ x): " + np.array2string(np.asarray(model.K_), precision=3, suppress_small=True))
+        K = np.asarray(model.K_)
+        ctx.say_table(["K̂ (u = K̂ x)", *ds.state_names],
+                      [[name, *(f"{v:.3g}" for v in row)] for name, row in zip(ds.input_names, K, strict=True)])
         ctx.say(str(model.gain_choice_))
         o = model.objective_
     if o is None and model.has_gain and model.objective_error_:

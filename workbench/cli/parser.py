@@ -92,6 +92,13 @@ def _system_option(p: argparse.ArgumentParser) -> None:
                    "or auto (the paper's for its state layout at dt 0.05 s, else identified)")
 
 
+def _plant_group_option(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--plant-group", metavar="GROUP",
+                   help="only the segments of this plant group (what the sticks command in their flight mode: angle, "
+                        "angle+climb, velocity+climb, rate, surface, bank, …); default: every group the data hold, "
+                        f"{what}")
+
+
 def _output_options(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--save", metavar="FILE.rrd",
@@ -224,6 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(the paper gives none)")
     _power_option(p, 0)
     _system_option(p)
+    _plant_group_option(p, "a model of each written beside -o as MODEL.GROUP.npz")
     _mapping_option(p)
     _executor_options(p)
 
@@ -265,6 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="held-out trials per subject with --per-subject (default 1)")
     _holdout_option(p)
     _study_options(p)
+    _plant_group_option(p, "each evaluated on its own plant (with -o, a table per group: FILE.GROUP.parquet)")
     _mapping_option(p)
     _executor_options(p)
 
@@ -293,9 +302,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resample", action="store_true",
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
+    _plant_group_option(p, "each segment keyed by its group")
     _mapping_option(p)
     p.add_argument("--raw", action="store_true",
-                   help="a raw log as it is (every stream, modes, messages), without a mapping's states")
+                   help="a raw log as it is (every stream, modes, messages), without a mapping's states; with "
+                        "several logs, all of them on one clock (an overlay)")
+    p.add_argument("--color-by", default="label", metavar="KEY",
+                   help="one colour per strategy label (default) or per value of another key of the trials' "
+                        "metadata: subject or session overlays subjects or sessions on the trials' clock")
+    p.add_argument("--align", nargs="+", metavar="WHEN",
+                   help="with several raw logs: where each log's 0 s is: arming, takeoff, start or seconds after its "
+                        "start; one for all or one per log (default: arming where each log records one, else its "
+                        "start)")
     _output_options(p)
 
     p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",
@@ -348,6 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     _bootstrap_option(p)
     _power_option(p, 1)
     _study_options(p)
+    _plant_group_option(p, "a report of each in DIR/GROUP/")
     _mapping_option(p)
     _executor_options(p)
 

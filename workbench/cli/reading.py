@@ -83,6 +83,9 @@ def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: 
                 say = progress.console.print if progress.live.is_started else ctx.say
                 say(f"{ctx.shown(f)}: mapping {chosen} ({why}; --mapping chooses another)")
             ds = load_one(f, chosen, ctx.stdio.format, allow_still)
+            if len(ds) and ds[0].meta.get("sticks"):  # the channels the log's RC map gave the sticks, and the check
+                (progress.console.print if progress.live.is_started else ctx.say)(
+                    f"{ctx.shown(f)}: {ds[0].meta['sticks']}")
             if len(ds) and ds[0].meta.get("still"):
                 print(f"warning: {ds[0].meta['still']}", file=sys.stderr)
             if len(ds) and ds[0].meta.get("flipped"):  # the segments cut where the vehicle turned upside down
@@ -104,6 +107,31 @@ def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: 
     if not len(ds):
         raise DataError(f"{', '.join(paths)}: no demonstrations")
     return ds
+
+
+def plant_group_parts(ctx: Context, ds: Any, name: str | None) -> list[tuple[str | None, Any]]:
+    """The demonstrations by plant group (:mod:`workbench.data.plant_groups`), each a plant and a model of its own:
+    the group ``name`` alone (``--plant-group``), else every group in the data, said in one line."""
+    from workbench.data.plant_groups import by_plant_group, describe_groups, select_plant_group
+
+    if name:
+        part = select_plant_group(ds, name)
+        ctx.say(f"plant group {describe_groups(part)} (--plant-group)")
+        return [(name, part)]
+    parts = by_plant_group(ds)
+    if len(parts) > 1:
+        ctx.say(f"{len(parts)} plant groups, a plant and a model for each (--plant-group NAME takes one): "
+                f"{describe_groups(ds)}")
+    elif next(iter(parts)) is not None:
+        ctx.say(f"plant group {describe_groups(ds)}")
+    return list(parts.items())
+
+
+def per_group_path(path: Path, group: str | None) -> Path:
+    """``m.npz`` → ``m.angle+climb.npz``: where a command writes one plant group's output of several."""
+    if group is None:
+        return path
+    return path.with_name(f"{path.stem}.{group.replace(' ', '-')}{path.suffix}")
 
 
 def system_for(ds: Any, choice: str = "auto", horizon_s: float = 3.0):

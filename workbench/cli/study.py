@@ -5,21 +5,32 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import shutil
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from workbench.atomic import atomic_write_table, recover_swaps, swap_entries, temp_sibling
 from workbench.cli.context import Context
 from workbench.cli.options import SAMPLE_LOGS, steps_of
-from workbench.cli.reading import is_demo_file, load_demos, pilot_only, require_proposed, study_plant, system_for
+from workbench.cli.reading import (
+    is_demo_file,
+    load_demos,
+    per_group_path,
+    pilot_only,
+    plant_group_parts,
+    require_proposed,
+    study_plant,
+    system_for,
+)
 from workbench.cli.stdio import is_stdio, refuse_stdio
 from workbench.cli.writing import print_plant, viewer_command
-from workbench.errors import DataError
+from workbench.data.plant_groups import describe_groups
+from workbench.errors import DataError, ModelError, UsageError
 
 __all__ = []
 
@@ -28,8 +39,39 @@ def cmd_evaluate(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".parquet", "the results table") if a.output else None
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
+    parts = plant_group_parts(ctx, ds, getattr(a, "plant_group", None))
+    if len(parts) > 1 and output is not None and ctx.stdio.writes_stdout:
+        raise UsageError(f"-o - writes one table, but these demonstrations are {len(parts)} plant groups "
+                         f"({', '.join(str(g) for g, _ in parts)}): name one with --plant-group")
+    return for_each_group(ctx, parts, "evaluated", lambda group, part: _evaluate_group(
+        ctx, part, output if len(parts) == 1 or output is None else per_group_path(output, group)))
+
+
+def for_each_group(ctx: Context, parts: list[tuple[str | None, Any]], done: str, run: Callable[[Any, Any], Any]) -> int:
+    """Run a command's work on each plant group's demonstrations (its own plant and models), each under a heading
+    that names the group; with several groups, one group's failure is a warning and the others still run."""
+    if len(parts) == 1:
+        run(*parts[0])
+        return 0
+    failed = []
+    for group, part in parts:
+        ctx.say("")
+        ctx.say(f"[bold]plant group {group}[/bold] ({describe_groups(part)})", markup=True)
+        try:
+            run(group, part)
+        except (DataError, ModelError) as exc:
+            print(f"warning: plant group {group}: not {done}: {exc}", file=sys.stderr)
+            failed.append(f"{group}: {exc}")
+    if len(failed) == len(parts):
+        raise ModelError(f"no plant group could be {done}: {'; '.join(failed)}")
+    return 0
+
+
+def _evaluate_group(ctx: Context, ds: Any, output: Path | None) -> None:
+    a = ctx.args
     if a.per_subject:
-        return _evaluate_per_subject(ctx, ds, output)
+        _evaluate_per_subject(ctx, ds, output)
+        return
     result, loso = _holdout_study(ctx, ds)
     if loso and getattr(result.system, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
@@ -45,7 +87,6 @@ def cmd_evaluate(ctx: Context) -> int:
     if output is not None:
         result.save_tables(output)
         ctx.say(f"wrote {'standard output' if ctx.stdio.writes_stdout else output}")
-    return 0
 
 
 def recorded_test_ids(ds: Any) -> list[str] | None:
@@ -153,10 +194,7 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
     for i, subject in enumerate(res.subjects):
         table.add_row(subject, *[f"{g[i]:.4g}" for g in res.groups.values()])
     ctx.say(table)
-    ctx.say(f"{res.rm_anova} (methods are a within-subject factor: every subject is scored under each)")
-    ctx.say("paired t-tests over subjects (Holm-corrected):")
-    for r in res.ttests.values():
-        ctx.say(f"  {r}")
+    _print_anovas(ctx, res, METHOD_TITLES)
     paired = paired_differences(res.table.assign(label=""), res.metric,
                                 subjects={str(t): str(s) for t, s in zip(res.table["trial"], res.table["subject"],
                                                                           strict=True)}, seed=a.seed)
@@ -171,7 +209,41 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
     return 0
 
 
-def _print_study(ctx: Context, result: Any) -> None:
+def _print_anovas(ctx: Context, res: Any, titles: dict[str, str]) -> None:
+    """Ours (methods within subjects) and the paper's (methods as independent groups) side by side, labelled,
+    with the difference between them said once."""
+    def named(r: Any) -> str:
+        return str(r).replace(f"{r.a} vs {r.b}", f"{titles.get(r.a, r.a)} vs {titles.get(r.b, r.b)}", 1)
+
+    rm = res.rm_anova
+    ctx.say(f"ours: {rm} (methods are a within-subject factor: every subject is scored under each)")
+    ctx.say("  paired t-tests over subjects (Holm-corrected):")
+    for r in res.ttests.values():
+        ctx.say(f"    {named(r)}")
+    paper = res.paper_anova
+    if paper is None:
+        return
+    names = ", ".join(titles.get(m, m) for m in paper.groups)
+    ctx.say(f"the paper's analysis, as the paper ran it: {paper} ({names}; the paper reported F(2, 27) = 4.55, "
+            "p = 0.02, η² = 0.25 for its 10 subjects)")
+    ctx.say("  pairwise two-sample Student t-tests, methods as independent groups (Holm; the paper names no "
+            "correction), mean differences with 95 % intervals:")
+    for r in res.paper_ttests.values():
+        ctx.say(f"    {named(r)}")
+    ctx.say(f"the difference: the paper's ANOVA treats each method's {len(res.subjects)} subjects as "
+            f"{len(paper.groups)} independent groups (F({paper.df_between:g}, {paper.df_within:g})); every subject "
+            f"was scored by every method, so ours compares the methods within subjects (F({rm.df_num:g}, "
+            f"{rm.df_den:g})), which takes the subjects' own spread out of the error, and it includes "
+            + ", ".join(titles.get(m, m) for m in res.groups if m not in paper.groups)
+            + "; where the two disagree, the within-subject test is the one this design supports")
+
+
+#: The statistics' long explanations a terminal leaves to the report where one was written (demo, report): each
+#: from its first line to the next blank line, replaced by a pointer to the report's section
+_REPORT_ONLY = ("Which number answers which question:",)
+
+
+def _print_study(ctx: Context, result: Any, report: Path | None = None) -> None:
     from rich.markup import escape
 
     from workbench.models.registry import METHOD_TITLES
@@ -184,20 +256,19 @@ def _print_study(ctx: Context, result: Any) -> None:
         by = {r.metric: r for r in g.itertuples(index=False)}
         cell = {m: fmt(r.value, r.lo, r.hi, share=m.startswith("band_")) for m, r in by.items()}
         rows.append([label, METHOD_TITLES.get(method, method), cell.get("rmse_position", "—"),
-                     cell.get("rmse_velocity", "—"), cell.get("band_position", "—")])
+                     cell.get("rmse_velocity", "—"), cell.get("band_position", "—"), str(int(g["n_trials"].max()))])
     if rows:
-        ctx.say_table(["label", "method", "position RMSE", "velocity RMSE", "MC band"], rows,
+        ctx.say_table(["label", "method", "position RMSE", "velocity RMSE", "MC band", "trials"], rows,
                       title="held-out prediction error (mean of trials [95 % interval])")
     _print_inputs(ctx, result.table)
-    summary = result.summary()
-    ctx.say_table([str(c) for c in summary.columns],
-                  [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row]
-                   for row in summary.itertuples(index=False)], title="mean horizon RMSE on the test trials")
+    # the methods' differences are the statistics' tables below, each saying which comparison it is: a percentage
+    # here, beside two means it does not compare, read as their ratio (issue 38)
     if result.coverage is not None and len(result.coverage):
-        ctx.say_table([str(c) for c in result.coverage.columns],
-                      [[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row]
-                       for row in result.coverage.itertuples(index=False)],
-                      title="one-step coverage of ŵ by GMR bands [%]")
+        # "inside 1σ [%] (nominal 68.3)" → "1σ (68.3)": the title says the rest, and the header stays one line
+        head = [re.sub(r"inside (\S+) \[%\] \(nominal ([\d.]+)\)", r"\1 (\2)", str(c)) for c in result.coverage.columns]
+        ctx.say_table(head, [[f"{v:.1f}" if isinstance(v, float) else str(v) for v in row]
+                             for row in result.coverage.itertuples(index=False)],
+                      title="ŵ inside GMR bands [%] (nominal)")
     check = getattr(result, "calibration_check", None)
     if check is not None and len(check):
         from workbench.study.calibration import check_table
@@ -210,11 +281,11 @@ def _print_study(ctx: Context, result: Any) -> None:
                             "calibration") if c in shown.columns]
         shown = shown[keep]
         ctx.say_table(list(shown.columns), [[str(v) for v in row] for row in shown.itertuples(index=False)],
-                      title="one-step calibration: inputs at a limit excluded, against the sampling spread "
-                            "(binomial over effective samples)")
+                      title="one-step calibration (inputs at a limit left out)")
+    _print_efficiency(ctx, result)
     if result.stats_text:
-        ctx.say_markdown(result.stats_text)
-    _print_objective_comparison(ctx, result)
+        ctx.say_markdown(_leave_to_report(result.stats_text, report))
+    _print_objective_comparison(ctx, result, report)
     for line in result.verdicts():
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
 
@@ -239,7 +310,50 @@ def _print_inputs(ctx: Context, table: Any) -> None:
         ctx.say(line)
 
 
-def _print_objective_comparison(ctx: Context, result: Any) -> None:
+def _leave_to_report(text: str, report: Path | None) -> str:
+    """``text`` with the blocks of :data:`_REPORT_ONLY` replaced by one line naming the report's section, where a
+    report was written (the terminal of ``demo`` and ``report``; ``evaluate`` prints them whole)."""
+    if report is None:
+        return text
+    lines, out, skipping = text.splitlines(), [], False
+    for line in lines:
+        if any(line.startswith(head) for head in _REPORT_ONLY):
+            out.append(f"{line.rstrip(':')} — the methods over refitted splits by the corrected resampled t, these "
+                       "fitted models by the bootstrap, chance by exact sign-flip tests, the strategies by a mixed "
+                       f"model — at length in {report}, under \"Statistics of the comparison\".")
+            skipping = True
+            continue
+        if skipping and not line.strip():
+            skipping = False
+        if not skipping:
+            out.append(line)
+    return "\n".join(out)
+
+
+def _print_efficiency(ctx: Context, result: Any) -> None:
+    """The data-efficiency curve: the mean held-out error of each method by the number of training demonstrations,
+    computed as the report's table (:func:`workbench.report.tables.efficiency_means`); its last row per strategy is the
+    comparison's own models, the numbers of the table above."""
+    from workbench.models.registry import METHOD_TITLES
+    from workbench.report.tables import efficiency_means
+    from workbench.study.pipeline import metric_unit
+
+    eff = getattr(result, "efficiency", None)
+    if eff is None or not len(eff):
+        return
+    means = efficiency_means(eff)
+    methods = [c for c in means.columns if c not in ("label", "n_train")]
+    metric = str(eff["metric"].iloc[0]) if "metric" in eff else "rmse_position"
+    plant = next((m.system for m in result.models.values() if getattr(m, "system", None) is not None), None)
+    unit = metric_unit(plant, metric) if plant is not None else ""
+    what = metric.removeprefix("rmse_").replace("_", " ")
+    ctx.say_table(["label", "n", *[METHOD_TITLES.get(m, m) for m in methods]],
+                  [[str(r["label"]), str(int(r["n_train"])), *[f"{r[m]:.3g}" for m in methods]]
+                   for _, r in means.iterrows()],
+                  title=f"data efficiency: mean {what} RMSE{f' [{unit}]' if unit else ''} by n training trials")
+
+
+def _print_objective_comparison(ctx: Context, result: Any, report: Path | None = None) -> None:
     """What the data identify about the task objective first (factors between strategies, then ratios), then every
     weight ratio per strategy with its interval or why it has none, and each part's structure check."""
 
@@ -255,46 +369,65 @@ def _print_objective_comparison(ctx: Context, result: Any) -> None:
         table = compare_strategies(ratios)
     first = next(iter(ratios))
     found = identified_first(table)
-    ctx.say("what the data identify about the task objective (95 % intervals within ×10): "
-            + ("; ".join(found) if found else "nothing"))
+    ctx.say("what the data identify about the task objective (95 % intervals within ×10):"
+            + ("" if found else " nothing"))
+    for line in found:  # one per line: a list read down, not a paragraph of semicolons
+        ctx.say(f"  {line}")
     head = ["ratio", "strategy", "estimate [95 % interval]", f"× vs {first}", "note"]
     rows = []
+    footnotes: dict[str, int] = {}
     for r in table.itertuples():
         factor = getattr(r, "factor", float("nan"))
         note = r.note if r.strategy == first else (r.factor_note or r.note)
         if note and note.startswith(NOT_EXPLAINED):  # its mismatch is the part's, printed once under the table
-            note = f"{NOT_EXPLAINED} (mismatch of {r.strategy}'s part below)"
+            note = NOT_EXPLAINED
+        elif note and ": " in note:
+            # the verdict in the table, its reason once under it: twelve rows repeating a sentence were 70 lines
+            # at 80 columns
+            word, why = note.split(": ", 1)
+            note = f"{word} [{footnotes.setdefault(why, len(footnotes) + 1)}]"
         rows.append([r.ratio, str(r.strategy), format_interval(r.estimate, r.lo, r.hi),
                      "" if factor != factor else format_interval(factor, r.factor_lo, r.factor_hi), note or ""])
     ctx.say_table(head, rows, title="task-objective weight ratios inside coupled parts (diagonal cost, S = 0)")
+    for why, k in footnotes.items():
+        ctx.say(f"  [{k}] {why}")
     for lb, wr in ratios.items():
         for f in wr.fits:
             ctx.say(f"  {lb}: {f.describe()}")
-    ctx.say("(estimates: the diagonal cost whose gain is closest to the jackknife bias-corrected gain in its "
-            "covariance metric, with profile intervals simultaneous over each part's ratios; \"not of this form\": "
-            "the gain departs from every diagonal cost's by more than its spread, and the row gives the closest "
-            "diagonal cost with sandwich intervals; \"not identifiable\": the interval spans more than ×10, with the "
-            "demonstrations a simulated power curve says would make it narrower than ×2: the fitted model flies n/2, "
-            "n and 2n demonstrations (at least 3 sets of each, more until the curve is monotone) and the number, "
-            "with its 90 % interval over the sets, comes from " + LAW + ")")
+    if report is not None:  # the report explains the estimates and notes at length
+        ctx.say(f"(how the estimates, intervals and notes are made: {report}, \"Weight ratios inside coupled parts\")")
+        return
+    ctx.say("(estimates: the diagonal cost closest to the bias-corrected gain, profile intervals simultaneous per "
+            "part; \"not of this form\": no diagonal cost within the gain's spread, the row gives the closest one "
+            "with sandwich intervals, the part's mismatch above; \"not identifiable\": wider than ×10, with the "
+            "demonstrations a simulated power curve (n/2, n, 2n; at least 3 sets each, more until monotone) says "
+            "would make it narrower than ×2, with its 90 % interval; the report says how: " + LAW.split(",")[0] + ")")
 
 
 def cmd_report(ctx: Context) -> int:
-    from workbench.report.markdown import write_study_report
-
     a = ctx.args
     refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
     ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
+    parts = plant_group_parts(ctx, ds, getattr(a, "plant_group", None))
+    # one plant group: the report in -o; several: a report of each in -o/GROUP/, each titled with its group
+    return for_each_group(ctx, parts, "reported", lambda group, part: _report_group(
+        ctx, part, Path(a.output) if len(parts) == 1 else Path(a.output) / str(group).replace(" ", "-"),
+        a.title if group is None else f"{a.title} (plant group {group})"))
+
+
+def _report_group(ctx: Context, ds: Any, folder: Path, title: str) -> None:
+    from workbench.report.markdown import write_study_report
+
+    a = ctx.args
     # evaluate's holdout rules, so both commands score a flight the same way (leave-one-segment-out on a few
     # segments) and print the same numbers
     result, loso = _holdout_study(ctx, ds, bootstrap=a.bootstrap, power=a.power)
     print_plant(ctx, result.system, "(plants fitted without each left-out segment)" if loso
                 else "(plant from the training trials)")
     require_proposed(result)
-    path = write_study_report(result, a.output, title=a.title)
-    _print_study(ctx, result)
-    ctx.say(f"wrote {path} with figures in {Path(a.output) / 'figures'}")
-    return 0
+    path = write_study_report(result, folder, title=title)
+    _print_study(ctx, result, path)
+    ctx.say(f"wrote {path} with figures in {folder / 'figures'}")
 
 
 #: What the demo needs after its study (the report, the recording, the models its workers send back): imported by a
@@ -336,7 +469,7 @@ def cmd_demo(ctx: Context) -> int:
     out = Path(a.out)
     if out.is_dir():
         recover_swaps(out, "demo")  # what a killed run left half done is undone before anything else
-    logs = Path(a.logs) if a.logs else SAMPLE_LOGS
+    logs = Path(a.logs) if a.logs else _as_given(SAMPLE_LOGS)
     files = demo_logs(logs)
     if not files:
         if a.logs:
@@ -358,7 +491,8 @@ def cmd_demo(ctx: Context) -> int:
     for f in files:
         by_format[f.suffix.lstrip(".")] = by_format.get(f.suffix.lstrip("."), 0) + 1
     ctx.say(
-        f"imported {len(ds)} demonstrations ({ds.n_samples} samples; labels {ds.labels}) from {len(files)} logs "
+        f"imported {len(ds)} demonstrations ({ds.n_samples} samples; labels "
+        f"{', '.join(map(str, ds.labels)) or 'none'}) from {len(files)} logs "
         f"({', '.join(f'{v} {k}' for k, v in by_format.items())}) in {logs}"
     )
     out.mkdir(parents=True, exist_ok=True)
@@ -423,7 +557,7 @@ def _demo_into(ctx: Context, ds: Any, out: Path, build: Path, timings: dict[str,
     report = out / "report.md"
     timings["files"] += time.perf_counter() - t1
     t1 = time.perf_counter()
-    _print_study(ctx, result)
+    _print_study(ctx, result, report)
     ctx.say("")
     rows = [
         ("report", f"{report}  (figures in {out / 'figures'})"),
@@ -440,6 +574,16 @@ def _demo_into(ctx: Context, ds: Any, out: Path, build: Path, timings: dict[str,
     parts = ", ".join(f"{k} {v:.1f} s" for k, v in timings.items())
     ctx.say(f"done in {total:.1f} s ({parts})")
     return 0
+
+
+def _as_given(path: Path) -> Path:
+    """``path`` as a user in the current folder would type it (``sample_logs``), the absolute path elsewhere: the
+    demo's default folder printed the way a given one is, not as ``/work/…/sample_logs``."""
+    try:
+        rel = Path(os.path.relpath(path))
+    except ValueError:  # another drive
+        return path
+    return path if rel.parts[:1] == ("..",) else rel
 
 
 def _seconds_since_process_start(now: float) -> float:

@@ -73,10 +73,46 @@ def _view_raw(ctx: Context, streams: Any) -> int:
     return 0
 
 
+def _view_overlay(ctx: Context) -> int:
+    """``workbench view A B … --raw``: the logs on one clock, one colour each (:mod:`workbench.viewer.overlay`)."""
+    from adapters.rawlog import raw_log
+    from workbench import viewer
+    from workbench.viewer.overlay import OVERLAY_APPLICATION_ID, log_overlay, overlay_blueprint
+
+    a = ctx.args
+    raws = []
+    for path in a.inputs:
+        streams = _raw_streams(ctx, path)
+        if streams is None:
+            raise UsageError(f"{path}: --raw overlays logs as they are, not demonstrations")
+        raws.append(raw_log(streams))
+    align = list(a.align or [])
+    if not align:  # arming where every log records one: the moment two flights most often share
+        align = ["arming" if r.armed else "start" for r in raws]
+    stem = "_".join(input_stem(p) for p in a.inputs[:3])
+    out = output_kwargs(ctx, Path("out") / f"{stem}.overlay.rrd")
+    rec = viewer.new_recording(OVERLAY_APPLICATION_ID)
+    with ctx.progress() as progress:
+        progress.add_task(f"logging {len(raws)} logs on one clock", total=None)
+        with viewer.open_output(rec, **out) as sink:
+            logged = log_overlay(rec, raws, align)
+            sink.blueprint = overlay_blueprint(logged)
+    for name, how in zip(logged.names, logged.aligned, strict=True):
+        ctx.say(f"{name}: 0 s at {how}")
+    announce(ctx, out, sink, f"{len(raws)} logs on one clock")
+    return 0
+
+
 def cmd_view(ctx: Context) -> int:
     from workbench import viewer
 
     a = ctx.args
+    if a.align and not (a.raw and len(a.inputs) > 1):
+        raise UsageError("--align puts several raw logs on one clock: give two or more logs with --raw")
+    if a.raw and len(a.inputs) > 1:
+        if a.mapping or a.model or a.label:
+            raise UsageError("--raw shows the logs as they are: leave out --mapping, --model and --label")
+        return _view_overlay(ctx)
     raw_streams = _raw_streams(ctx, a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
     if a.raw:
         if raw_streams is None:
@@ -92,14 +128,21 @@ def cmd_view(ctx: Context) -> int:
         if ds is None:
             return _view_raw(ctx, raw_streams)
     else:
-        ds = load_demos(ctx, a.inputs, mapping, a.label, allow_still=True)
+        try:
+            ds = load_demos(ctx, a.inputs, mapping, a.label, allow_still=True)
+        except DataError as exc:
+            if len(a.inputs) < 2 or " dt " not in f" {exc} ":
+                raise
+            # logs of several rates in one view: on one grid, or the way out named
+            ds = _several_on_one_grid(ctx, a.inputs, mapping, a.label, a.resample)
     source_dt = float(ds.dt)
     models, named = None, None
+    by_label: dict[str, Any] = {}
+    for spec in a.model or ():
+        label, _, path = spec.rpartition("=")
+        by_label[label] = load_model_file(path, ctx)
+    ds = _of_plant_group(ctx, ds, a.plant_group, by_label.values())
     if a.model:
-        by_label: dict[str, Any] = {}
-        for spec in a.model:
-            label, _, path = spec.rpartition("=")
-            by_label[label] = load_model_file(path, ctx)
         if "" in by_label:
             if len(by_label) > 1:
                 raise UsageError("give every --model a LABEL= (e.g. --model CS1=cs1.npz) or pass only one")
@@ -119,6 +162,7 @@ def cmd_view(ctx: Context) -> int:
             session = viewer.log_session(
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
                 samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=origins, source_dt=source_dt,
+                color_by=a.color_by,
             )
             extra = (_raw_beside(rec, raw_streams, mapping, ds, origins.get(str(Path(a.inputs[0]))))
                      if raw_streams is not None and mapping else [])
@@ -126,6 +170,44 @@ def cmd_view(ctx: Context) -> int:
     _warn(ctx, session)
     announce(ctx, out, sink, f"{len(ds)} demonstrations")
     return 0
+
+
+def _of_plant_group(ctx: Context, ds: Any, name: str | None, models: Any) -> Any:
+    """The segments a view shows: the plant group ``name`` (``--plant-group``), else the groups the models' plants
+    were identified for (a model predicts only where its stick commands what it did), else every segment; said."""
+    from workbench.data.plant_groups import describe_groups, plant_groups, select_plant_group
+
+    if name:
+        return select_plant_group(ds, name)
+    wanted = {getattr(m.system, "plant_group", None) for m in models}
+    if None in wanted or not wanted or set(plant_groups(ds)) <= wanted:
+        return ds
+    kept = ds.with_demos([d for d in ds if d.meta.get("plant_group") in wanted])
+    if not len(kept):
+        raise DataError(f"the model's plant group ({', '.join(sorted(wanted))}) is none of these segments' "
+                        f"({describe_groups(ds)}); --plant-group names the segments to show")
+    ctx.say(f"showing plant group {describe_groups(kept)}: the model's (--plant-group shows another)")
+    return kept
+
+
+def _several_on_one_grid(ctx: Context, paths: list[str], mapping: str | None, labels: Any, resample: bool) -> Any:
+    """Several logs or demonstration files in one view: on one time grid, the finest of theirs, where
+    ``--resample`` is given; without it, logs of different dt are one line naming both ways out."""
+    import math
+
+    parts = [load_demos(ctx, [p], mapping, labels, allow_still=True) for p in paths]
+    steps = sorted({float(d.dt) for d in parts})
+    if len(steps) > 1 and not all(math.isclose(steps[0], s, rel_tol=1e-6) for s in steps):
+        shown = ", ".join(f"{p} dt {d.dt:g} s" for p, d in zip(paths, parts, strict=True))
+        if not resample:
+            raise DataError(f"{shown}: sampled at different dt; --resample puts them on the finest grid "
+                            f"({steps[0]:g} s, states linear, inputs held), --raw overlays the logs as recorded")
+        parts = [d if math.isclose(float(d.dt), steps[0], rel_tol=1e-6) else d.resample(steps[0]) for d in parts]
+        ctx.say(f"resampled to dt = {steps[0]:g} s ({shown})")
+    ds = parts[0]
+    for d in parts[1:]:
+        ds = ds + d
+    return ds
 
 
 def _default_mapped(ctx: Context, path: str) -> tuple[str, Any]:

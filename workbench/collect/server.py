@@ -1,165 +1,66 @@
-"""The experiment server: a Starlette application served by uvicorn on 127.0.0.1, the page and its JSON API.
+"""The experiment server: a Starlette application served by uvicorn on 127.0.0.1, behind the testbed's guard.
 
-Routes (all JSON but the page and its files)::
-
-    GET  /                      the page (static/index.html); ?subject=ID preselects the subject
-    GET  /static/…              its ES modules and style sheet, served from this package (no CDN, no build step)
-    GET  /api/config            the protocol as the page shows it, and the task (:func:`.task.task_spec`)
-    GET  /api/subject/{id}      a subject's status (the next step, trials done), or {"registered": false}
-    POST /api/subject           register {subject, fields}; a known subject resumes
-    POST /api/calibration       {subject, calibration}
-    POST /api/advance           {subject, key}: a practice, break or instructions step is over
-    POST /api/trial             a finished trial: replayed through the plant, then written (MCAP, Parquet)
-    POST /api/practice          a practice trial: checked; kept only if the protocol records practice
-    POST /api/live              states of a trial in flight, for the experimenter's view (never stored)
-
-A request body larger than :data:`MAX_BODY` is refused before it is read whole; bad input is a 400 whose
-``error`` is one line (the page shows it).
+:func:`make_app` joins the routes (:mod:`.routes`) and the guard (:mod:`.guard`: the host allow-list, the origin and
+content-type checks, tokens, security headers); :class:`Server` serves it with header and body timeouts and a bound
+on connections. ``--host`` other than this machine's loopback needs a token in the page's URL
+(:func:`new_token`), which the command prints.
 """
 
 from __future__ import annotations
 
-import json
+import secrets
 import signal
 import socket
 import threading
-from collections.abc import Callable
-from pathlib import Path
+from collections.abc import Callable, Iterable
 from typing import Any
 
+from workbench.collect.guard import (
+    HEADER_TIMEOUT_S,
+    LOCAL_HOSTS,
+    MAX_BODY,
+    MAX_CONNECTIONS,
+    Guard,
+    guarded_h11,
+)
+from workbench.collect.routes import STATIC, routes
 from workbench.collect.session import Session
-from workbench.errors import WorkbenchError
+from workbench.errors import UsageError
 
-__all__ = ["make_app", "Server", "STATIC", "MAX_BODY"]
+__all__ = ["make_app", "Server", "STATIC", "MAX_BODY", "new_token", "LOCAL_HOSTS"]
 
-STATIC = Path(__file__).with_name("static")
-#: The largest request body read: a 30 s trial with every input event is well under 1 MB.
-MAX_BODY = 8 << 20
+
+def new_token() -> str:
+    """A random token for a URL (128 bits)."""
+    return secrets.token_urlsafe(16)
 
 
 def make_app(session: Session, *, on_trial: Callable[[dict[str, Any], dict[str, Any]], None] | None = None,
-             on_live: Callable[[dict[str, Any], dict[str, Any] | None], None] | None = None) -> Any:
-    """The Starlette application of one session.
+             on_live: Callable[[dict[str, Any], dict[str, Any] | None], None] | None = None,
+             hosts: Iterable[str] = LOCAL_HOSTS, token: str | None = None, key: str | None = None) -> Any:
+    """The guarded Starlette application of one session.
 
     ``on_trial(result, payload)`` is called with each written trial's result and what the page sent;
     ``on_live(piece, item)`` with each piece of a trial in flight (the page sends them only when it is given).
+    ``hosts`` are the host names answered, ``token`` the subject's page's token (None: none needed, on this
+    machine only), ``key`` the experimenter's page's key (None: that page is closed).
     """
     from starlette.applications import Starlette
-    from starlette.requests import Request
-    from starlette.responses import FileResponse, JSONResponse, Response
-    from starlette.routing import Mount, Route
-    from starlette.staticfiles import StaticFiles
 
-    def error(message: str, status: int = 400) -> JSONResponse:
-        return JSONResponse({"error": message}, status_code=status)
-
-    async def body(request: Request) -> Any:
-        declared = request.headers.get("content-length")
-        if declared is not None and (not declared.isdigit() or int(declared) > MAX_BODY):
-            raise WorkbenchError(f"request body of {declared} bytes; at most {MAX_BODY}")
-        data = bytearray()
-        async for chunk in request.stream():
-            data += chunk
-            if len(data) > MAX_BODY:
-                raise WorkbenchError(f"request body over {MAX_BODY} bytes")
-        try:
-            return json.loads(data)
-        except ValueError as exc:
-            raise WorkbenchError(f"request body is not JSON ({exc})") from None
-        except RecursionError:  # a few MB of '[' nest deeper than the parser recurses
-            raise WorkbenchError("request body is JSON nested too deeply") from None
-
-    def handler(work: Callable[[Any], Any]) -> Callable:
-        async def endpoint(request: Request) -> JSONResponse:
-            from starlette.concurrency import run_in_threadpool
-
-            try:
-                payload = await body(request) if request.method == "POST" else request
-                return JSONResponse(await run_in_threadpool(work, payload))
-            except WorkbenchError as exc:
-                return error(" ".join(str(exc).split()))
-
-        return endpoint
-
-    async def index(request: Request) -> FileResponse:
-        # no-store: a reloaded page always runs the modules this server ships
-        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
-
-    async def no_icon(request: Request) -> Response:
-        return Response(status_code=204)
-
-    def config(_: Any) -> dict[str, Any]:
-        return {"protocol": session.protocol.to_json(), "task": session.spec, "live": on_live is not None}
-
-    def subject_status(request: Any) -> dict[str, Any]:
-        subject = request.path_params["subject"]
-        if session.subject_doc(subject) is None:
-            return {"registered": False, "subject": subject}
-        return {"registered": True, **session.status(subject)}
-
-    def register(p: Any) -> dict[str, Any]:
-        _need(p, "subject")
-        return {"registered": True, **session.register(p["subject"], p.get("fields", {}))}
-
-    def calibrate(p: Any) -> dict[str, Any]:
-        _need(p, "subject")
-        session.calibrate(p["subject"], p.get("calibration"))
-        return session.status(p["subject"])
-
-    def advance(p: Any) -> dict[str, Any]:
-        _need(p, "subject", "key")
-        return session.advance(p["subject"], str(p["key"]))
-
-    def trial(p: Any) -> dict[str, Any]:
-        out = session.write_trial(p)
-        if on_trial is not None:
-            on_trial(out, p)
-        return out
-
-    def live(p: Any) -> dict[str, Any]:
-        if on_live is None:
-            return {}
-        _need(p, "subject", "slot", "k0", "x")
-        x = p["x"]
-        n = len(session.spec["state_names"])
-        if not (isinstance(x, list) and len(x) <= 200 and all(
-                isinstance(r, list) and len(r) == n and all(isinstance(v, int | float) for v in r) for r in x)
-                and isinstance(p["k0"], int) and isinstance(p["slot"], int)):
-            raise WorkbenchError("live: expected {subject, slot, k0, x: [[state], …]} with at most 200 states")
-        items = {i.slot: i for i in session.plan(str(p["subject"])) if i.kind == "trial"}
-        item = items.get(p["slot"])
-        on_live(p, None if item is None else item.to_json())
-        return {}
-
-    routes = [
-        Route("/", index),
-        Route("/favicon.ico", no_icon),
-        Route("/api/config", handler(config)),
-        Route("/api/subject/{subject}", handler(subject_status)),
-        Route("/api/subject", handler(register), methods=["POST"]),
-        Route("/api/calibration", handler(calibrate), methods=["POST"]),
-        Route("/api/advance", handler(advance), methods=["POST"]),
-        Route("/api/trial", handler(trial), methods=["POST"]),
-        Route("/api/practice", handler(session.write_practice), methods=["POST"]),
-        Route("/api/live", handler(live), methods=["POST"]),
-        Mount("/static", StaticFiles(directory=STATIC), name="static"),
-    ]
-    return Starlette(routes=routes)
-
-
-def _need(p: Any, *keys: str) -> None:
-    if not isinstance(p, dict) or any(k not in p for k in keys):
-        raise WorkbenchError(f"expected a JSON object with {', '.join(keys)}")
+    app = Starlette(routes=routes(session, on_trial=on_trial, on_live=on_live))
+    return Guard(app, hosts, token=token, key=key)
 
 
 class Server:
     """uvicorn serving an application on ``host:port`` (``port`` 0: a free one), in this thread or another.
 
     The socket is bound here, before the server runs, so :attr:`url` is known (and a taken port is an error)
-    at once.
+    at once. Connections that are slow to send their headers are closed (:data:`~.guard.HEADER_TIMEOUT_S`), at most
+    :data:`~.guard.MAX_CONNECTIONS` are served at once, idle keep-alive connections close after 5 s.
     """
 
-    def __init__(self, app: Any, host: str = "127.0.0.1", port: int = 8765) -> None:
+    def __init__(self, app: Any, host: str = "127.0.0.1", port: int = 8765, *,
+                 header_timeout_s: float = HEADER_TIMEOUT_S) -> None:
         import uvicorn
 
         self.sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
@@ -168,7 +69,7 @@ class Server:
             self.sock.bind((host, port))
         except OSError as exc:
             self.sock.close()
-            raise WorkbenchError(f"cannot listen on {host}:{port} ({exc.strerror}); choose another --port") from None
+            raise UsageError(f"cannot listen on {host}:{port} ({exc.strerror}); choose another --port") from None
         self.host, self.port = host, self.sock.getsockname()[1]
 
         class _Uvicorn(uvicorn.Server):
@@ -179,13 +80,20 @@ class Server:
                     self.force_exit = True
                 self.should_exit = True
 
-        self.server = _Uvicorn(uvicorn.Config(app, log_level="warning", lifespan="off"))
+        config = uvicorn.Config(app, log_level="warning", lifespan="off", http=guarded_h11(header_timeout_s),
+                                limit_concurrency=MAX_CONNECTIONS, timeout_keep_alive=5, access_log=False)
+        self.server = _Uvicorn(config)
         self._thread: threading.Thread | None = None
+
+    def url_for(self, host: str | None = None, query: str = "") -> str:
+        """The URL of the page on ``host`` (default the address listened on), with ``query``."""
+        host = host or self.host
+        host = f"[{host}]" if ":" in host else host
+        return f"http://{host}:{self.port}/" + (f"?{query}" if query else "")
 
     @property
     def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/"
+        return self.url_for()
 
     def run(self) -> None:
         """Serve until Ctrl-C (in the main thread) or :meth:`stop`."""
@@ -207,3 +115,4 @@ class Server:
         if self._thread is not None:
             self._thread.join(timeout=5)
         self.sock.close()
+

@@ -22,7 +22,7 @@ import numpy as np
 from workbench.plant.system import LinearSystem, planar_quadrotor
 from workbench.sim.landing import DOMAIN, LANDING_ATTITUDE, LANDING_SPEED, PAD_HALF_WIDTH, START_BOX, TIME_LIMIT
 
-__all__ = ["task_spec", "step", "replay", "outcome", "draw_start", "blend", "OUTCOMES"]
+__all__ = ["task_spec", "step", "replay", "outcome", "reason", "draw_start", "blend", "OUTCOMES"]
 
 #: What can end a trial; ``None`` from :func:`outcome` means it goes on.
 OUTCOMES = ("landed", "crashed", "left the domain", "time limit")
@@ -90,6 +90,37 @@ def outcome(spec: dict[str, Any], x: Sequence[float], k: int) -> str | None:
     if k >= spec["max_steps"]:
         return "time limit"
     return None
+
+
+def reason(spec: dict[str, Any], x: Sequence[float], end: str) -> str:
+    """Why a trial ended as it did, with the numbers against the rules (what the page shows the subject and the
+    trial's ``outcome_reason``): e.g. ``"crashed: 0.420 m/s ≥ 0.1 m/s"``; the same words as ``static/sim.js``."""
+    i = spec["index"]
+    speed = math.hypot(x[i["vx"]], x[i["vy"]])
+    tilt = abs(x[i["attitude"]]) * 180 / math.pi
+    limit_tilt = spec["landing"]["attitude"] * 180 / math.pi
+    off = abs(x[i["x"]] - spec["pad"]["x"])
+    if end == "landed":
+        return (f"landed: {speed:.2f} m/s < {spec['landing']['speed']:g} m/s, {tilt:.1f}° < {limit_tilt:.0f}°, "
+                f"{off:.2f} m from the pad's centre")
+    if end == "crashed":
+        why = []
+        if off > spec["pad"]["half_width"]:
+            why.append(f"{off:.2f} m from the pad's centre > {spec['pad']['half_width']:g} m")
+        if speed >= spec["landing"]["speed"]:  # three decimals: a speed just at the limit does not read as 0.10
+            why.append(f"{speed:.3f} m/s ≥ {spec['landing']['speed']:g} m/s")
+        if tilt >= limit_tilt:
+            why.append(f"{tilt:.2f}° ≥ {limit_tilt:.0f}°")
+        return "crashed: " + ", ".join(why)
+    if end == "left the domain":
+        (x_lo, x_hi), y_hi = spec["domain"]["x"], spec["domain"]["y"][1]
+        px, py = x[i["x"]], x[i["y"]]
+        side = (f"x = {px:.2f} m < {x_lo:g} m" if px < x_lo else f"x = {px:.2f} m > {x_hi:g} m" if px > x_hi
+                else f"height {py:.2f} m > {y_hi:g} m")
+        return f"left the area: {side}"
+    if end == "time limit":
+        return f"out of time: {spec['time_limit_s']:g} s"
+    return str(end)
 
 
 def replay(spec: dict[str, Any], x0: Sequence[float], u: np.ndarray) -> tuple[np.ndarray, str | None, int]:

@@ -45,11 +45,18 @@ SECOND_STAGE_SLACK = 1.001
 
 # Tighter Clarabel tolerances than 1e-8 do not buy accuracy here: on 40 random 6x2 gains they make it stop
 # at "almost solved" more often, and the second-stage M then varies by ~1e-6 between near-identical gains.
+# SCS is the fallback where Clarabel fails, which on real flights' gains means an ill-conditioned problem (α* of
+# 1e4-1e6): there SCS ran to its iteration limit and returned "optimal_inaccurate" with M far from ⪰ I in every case
+# seen (9 of 9 solves on three real logs' plant groups, 8 at stage 2 and 1 at stage 1, each 200,000 iterations and
+# 21-104 s; bench/real_logs.md, "A default fit a pilot waits for"), so its budget is what a hopeless try may cost in a
+# fit a pilot waits for: 20,000 iterations at stage 1 (a few seconds) and 10,000 at stage 2, which only breaks a tie
+# on the α-optimal face.
 _SOLVER_OPTIONS: dict[str, dict[str, Any]] = {
     "CLARABEL": {"tol_gap_abs": 1e-8, "tol_gap_rel": 1e-8, "tol_feas": 1e-8, "max_iter": 200},
-    "SCS": {"eps_abs": 1e-8, "eps_rel": 1e-8, "max_iters": 200_000},
+    "SCS": {"eps_abs": 1e-8, "eps_rel": 1e-8, "max_iters": 20_000},
     "CVXOPT": {"abstol": 1e-9, "reltol": 1e-9, "feastol": 1e-9},
 }
+_STAGE2_OPTIONS: dict[str, dict[str, Any]] = {"SCS": {"max_iters": 10_000}}
 
 
 _SOLVER_CHAIN = ("CLARABEL", "SCS", "CVXOPT")
@@ -180,13 +187,14 @@ class InverseLQR:
         )
         self._built = True
 
-    def _run(self, problem: cp.Problem, solver: str) -> str:
+    def _run(self, problem: cp.Problem, solver: str, stage: int = 1) -> str:
+        options = {**_SOLVER_OPTIONS.get(solver, {}), **(_STAGE2_OPTIONS.get(solver, {}) if stage == 2 else {})}
         with warnings.catch_warnings():
             # cvxpy warns on inaccurate solutions; the post-checks below decide on those.
             warnings.simplefilter("ignore", UserWarning)
             # No warm start: Clarabel would otherwise update the solver cached from the previous gain, and the
             # answer for a gain would depend on which gain was solved before it.
-            problem.solve(solver=solver, warm_start=False, **_SOLVER_OPTIONS.get(solver, {}))
+            problem.solve(solver=solver, warm_start=False, **options)
         return str(problem.status)
 
     def _values(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -294,7 +302,7 @@ class InverseLQR:
         alpha_star: float | None = None,
     ) -> TaskObjective | None:
         try:
-            status = self._run(problem, solver)
+            status = self._run(problem, solver, stage)
         except _SOLVER_EXCEPTIONS as exc:
             attempts.append(_Attempt(solver, stage, "error", note=_brief(f"{type(exc).__name__}: {exc}")))
             return None

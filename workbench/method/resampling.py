@@ -86,8 +86,11 @@ def stop_note(n_boot: int, done: int, failures: Sequence[str]) -> str:
     cause, for the terminal."""
     if done >= n_boot:
         return ""
+    # grouped by the cause's first 160 characters, shown whole (a cut cause read "…do not mov" in the terminal)
+    whole = {f.split(": ", 1)[-1].split(";")[0][:160]: f.split(": ", 1)[-1].split(";")[0] for f in failures}
     causes = Counter(f.split(": ", 1)[-1].split(";")[0][:160] for f in failures)
-    cause, count = causes.most_common(1)[0] if causes else ("", 0)
+    key, count = causes.most_common(1)[0] if causes else ("", 0)
+    cause = whole.get(key, key)
     return (f"stopped after {done} of {n_boot} resamples: {len(failures)} of them failed (more than "
             f"{EARLY_STOP_FAILED:.0%}), so the rest would not bound the intervals; commonest cause ({count}): {cause}")
 
@@ -100,7 +103,7 @@ def failure_note(failures: Sequence[str]) -> str:
     # grouped by the reason's first clause: the numbers after it (ρ, λmin) differ from resample to resample
     causes = Counter(r.split(": ")[0].split(";")[0][:120] for r in reasons)
     cause, count = causes.most_common(1)[0]
-    example = next(r for r in reasons if r.startswith(cause)).split(";")[0][:200]
+    example = next(r for r in reasons if r.startswith(cause)).split(";")[0]  # whole: the terminal wraps it
     return f"{len(failures)} resample(s) failed; commonest cause ({count}): {example}"
 
 
@@ -151,8 +154,9 @@ def resample_solvers(point: TaskObjective | None) -> tuple[str, ...] | None:
     """The solver chain of a bootstrap's resamples: the solver that solved the point estimate, alone.
 
     The point estimate tries every solver in turn; a resample does not. A resample the point's solver cannot
-    solve would go on to SCS, which iterates to its limit (200,000 iterations, about 20 s a solve on a real
-    flight's gain, 90 % of a default ``fit``) to return, as a rule, nothing the checks accept: such a resample
+    solve would go on to SCS, which iterates to its limit (its budget in :mod:`~workbench.method.inverse_lqr_sdp`;
+    once 200,000 iterations, about 20 s a solve on a real flight's gain, 90 % of a default ``fit``) to return, as a
+    rule, nothing the checks accept: such a resample
     is counted as failed, with its reason, instead. ``None`` (every solver) where there is no point objective.
     """
     name = str(getattr(point, "solver", "") or "").upper()

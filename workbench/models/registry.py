@@ -17,6 +17,8 @@ import importlib
 from dataclasses import dataclass
 from typing import Any
 
+from workbench.palette import METHOD_COLORS as _COLORS
+
 __all__ = ["Method", "REGISTRY", "METHODS", "METHOD_TITLES", "method", "model_classes"]
 
 
@@ -31,13 +33,18 @@ class Method:
     title : str
         Its name in tables, figures and views (``"IOC-only"``).
     colour : (int, int, int)
-        RGB (tab10), the same in the viewer and the report.
+        RGB from :data:`workbench.palette.METHOD_COLORS` (Okabe–Ito), the same in the viewer and the report.
     model_class : str
         ``"module:Class"`` of its model, a :class:`~workbench.models.behavior.BehaviorModel`.
     fit_command : bool
         ``workbench fit --method`` offers it (persistence learns nothing worth a file).
     floor : bool
         A baseline the proposed model must beat before a verdict calls it better (the study's verdicts).
+    dash : str
+        Its line style in every figure (matplotlib's ``"-"``, ``"--"``, ``"-."``, ``":"``): methods differ by more
+        than hue, for colour-blind readers and grayscale prints.
+    marker : str
+        Its marker in every figure (matplotlib's ``"o"``, ``"s"``, …).
     """
 
     name: str
@@ -46,6 +53,8 @@ class Method:
     model_class: str
     fit_command: bool = True
     floor: bool = False
+    dash: str = "-"
+    marker: str = "o"
 
     @property
     def cli_name(self) -> str:
@@ -63,11 +72,12 @@ class Method:
 
 # in table order: the proposed model first, persistence (the floor every model must beat) last
 REGISTRY: tuple[Method, ...] = (
-    Method("proposed", "proposed", (44, 160, 44), "workbench.models.proposed:HumanBehaviorModel"),
-    Method("ioc_only", "IOC-only", (214, 39, 40), "workbench.models.baselines:IOCOnlyModel", floor=True),
-    Method("gmr_only", "GMR-only", (148, 103, 189), "workbench.models.baselines:GMROnlyModel"),
-    Method("persistence", "persistence", (140, 86, 75), "workbench.models.baselines:PersistenceModel",
-           fit_command=False, floor=True),
+    Method("proposed", "proposed", _COLORS[0], "workbench.models.proposed:HumanBehaviorModel", dash="-", marker="o"),
+    Method("ioc_only", "IOC-only", _COLORS[1], "workbench.models.baselines:IOCOnlyModel", floor=True, dash="--",
+           marker="s"),
+    Method("gmr_only", "GMR-only", _COLORS[2], "workbench.models.baselines:GMROnlyModel", dash="-.", marker="^"),
+    Method("persistence", "persistence", _COLORS[3], "workbench.models.baselines:PersistenceModel",
+           fit_command=False, floor=True, dash=":", marker="D"),
 )
 METHODS: tuple[str, ...] = tuple(m.name for m in REGISTRY)
 METHOD_TITLES: dict[str, str] = {m.name: m.title for m in REGISTRY}

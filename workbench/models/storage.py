@@ -71,6 +71,7 @@ def save_model(model: BehaviorModel, path: str | os.PathLike) -> Path:
             "input_names": list(sys_.input_names),
             "fit_residual": sys_.fit_residual,
             "roles": sys_.roles.to_json(),
+            "plant_group": sys_.plant_group,
         },
         "fit": {
             "n_demos": model.n_demos_,
@@ -228,6 +229,15 @@ def gmr_restore(model: Any, mf: ModelFile, d_out: int) -> None:
 _RENAMED_SETTINGS = {"noise_horizon": "noise_horizon_s"}
 
 
+def _text_or_none(value: Any, where: str) -> str | None:
+    """A header's optional text field: ``None`` where absent (files written before it), else the text itself."""
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise ModelFileError(f"{where}: expected text, got {type(value).__name__}")
+    return value
+
+
 def load_model(path: str | os.PathLike) -> BehaviorModel:
     """Read a model written by ``save`` (any registered method's class); never executes code from the file.
 
@@ -258,6 +268,7 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]] | No
             A, B, float(s["dt"]), tuple(s["state_names"]), tuple(s["input_names"]),
             u_min=mf.get("system/u_min"), u_max=mf.get("system/u_max"), fit_residual=s.get("fit_residual"),
             roles=Roles.from_json(s.get("roles"), f"{mf.path}: roles"),
+            plant_group=_text_or_none(s.get("plant_group"), f"{mf.path}: system plant_group"),
         )
     except ModelFileError:
         raise

@@ -5,7 +5,8 @@ from workbench.exports import lazy_exports
 
 _EXPORTS = {
     "IdentificationReport": "identification",
-    "PhysicalCheck": "identification",
+    "PhysicalCheck": "physics",
+    "StickResponse": "physics",
     "identify_plant": "identification",
     "choose_plant": "choice",
     "plant_rule": "choice",

@@ -18,9 +18,13 @@ how good the plant is where it was not fitted: one-step and multi-step (the mode
 segment left out in turn (leave-one-segment-out; a log with fewer than three segments is cut into contiguous
 pieces first), against persistence (every state held, positions moved on at their recorded velocity); the
 spectral radius ρ(A), also without the integrators; the conditioning of the regressor; the physical checks
-that apply (the across-velocity's response to the heading angle vs g·dt); and one warning line when the plant
-is unstable beyond its integrators, worse than persistence, or ill-conditioned. The checks are reported,
-never enforced.
+of the segments' plant group and what each stick commands in it (:mod:`workbench.plant.physics`); and one warning
+line when the plant is unstable beyond its integrators, worse than persistence, or ill-conditioned. The checks are
+reported, never enforced.
+
+One plant per kind of stick: demonstrations of different plant groups (:mod:`workbench.data.plant_groups`: a lean
+angle in STABILIZE, a velocity in LOITER) are never pooled into one (A, B); identification refuses them, naming the
+groups, and the caller identifies each group's plant from its own segments.
 """
 
 from __future__ import annotations
@@ -31,9 +35,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from workbench.data.plant_groups import describe_groups, plant_groups
 from workbench.data.roles import ResolvedRoles, Roles
 from workbench.errors import ModelError
 from workbench.frozen import readonly
+from workbench.plant.physics import GRAVITY, PhysicalCheck, StickResponse, group_checks, stick_responses
+from workbench.plant.physics import disagreement as _disagreement
 
 if TYPE_CHECKING:
     from workbench.data.demonstrations import DemonstrationSet
@@ -41,6 +48,7 @@ if TYPE_CHECKING:
 __all__ = [
     "IdentificationReport",
     "PhysicalCheck",
+    "StickResponse",
     "identify_plant",
     "resolve_structure",
     "STRUCTURES",
@@ -49,37 +57,11 @@ __all__ = [
 ]
 
 STRUCTURES = ("auto", "kinematic", "free")
-GRAVITY = 9.80665  # m/s², standard gravity
 #: Condition number of the column-normalized regressor above which the fit is called ill-conditioned.
 ILL_CONDITIONED = 1e4
 #: |λ| above 1 + this counts as unstable (the paper's plant has eigenvalues exactly on the unit circle).
 UNSTABLE_TOL = 1e-6
 MIN_SEGMENTS = 3
-
-
-@dataclass(frozen=True)
-class PhysicalCheck:
-    """One physical expectation on an identified entry, reported (not enforced)."""
-
-    name: str
-    value: float
-    expected: float
-    note: str = ""
-
-    @property
-    def ratio(self) -> float:
-        """``value / expected``."""
-        return self.value / self.expected if self.expected else float("nan")
-
-    def within(self, factor: float = 2.0) -> bool:
-        """Whether ``value`` is within ``factor`` of ``expected`` (same sign)."""
-        r = self.ratio
-        return bool(np.isfinite(r) and 1.0 / factor <= r <= factor)
-
-    def __str__(self) -> str:
-        verdict = "within a factor 2" if self.within() else "NOT within a factor 2"
-        return (f"{self.name} = {self.value:.4g}, expected {self.expected:.4g} ({self.note}); "
-                f"ratio {self.ratio:.3g}, {verdict}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,6 +96,8 @@ class IdentificationReport:
     checks: tuple[PhysicalCheck, ...] = ()
     warnings: tuple[str, ...] = ()
     position_pull: float = 0.0  # max |A[i, p]| over positions p and the other rows i (0 when translation invariant)
+    plant_group: str | None = None  # what the sticks command in these segments' modes (workbench.data.plant_groups)
+    responses: tuple[StickResponse, ...] = ()  # what each stick commands in this plant (workbench.plant.physics)
 
     def __post_init__(self) -> None:
         for name in ("one_step_rmse", "one_step_rmse_persistence", "horizon_rmse", "horizon_rmse_persistence"):
@@ -135,8 +119,9 @@ class IdentificationReport:
         return self.n_steps * self.dt
 
     def __str__(self) -> str:
+        group = f"plant group {self.plant_group}, " if self.plant_group else ""
         lines = [
-            f"plant identification ({self.structure}, dt {self.dt:g} s, {self.n_pairs} sample pairs, "
+            f"plant identification ({group}{self.structure}, dt {self.dt:g} s, {self.n_pairs} sample pairs, "
             f"{self.n_segments} segments; held out: {self.validation})",
         ]
         lines += [f"  fixed: {f}" for f in self.fixed]
@@ -162,6 +147,7 @@ class IdentificationReport:
             f"{self.condition_number:.3g}"
         )
         lines += [f"  check: {c}" for c in self.checks]
+        lines += [f"  stick: {r}" for r in self.responses]
         if self.warning:
             lines.append(f"  warning: {self.warning}")
         return "\n".join(lines)
@@ -245,6 +231,19 @@ def _rank(M: np.ndarray) -> int:
     return int((s > 1e-10 * max(M.shape) * s[0]).sum()) if s.size and s[0] > 0 else 0
 
 
+def _unexcited(Z: np.ndarray, labels: Sequence[str]) -> str:
+    """What the data leave unexcited, for a user: the columns that are 0 throughout, else the combination of columns
+    the smallest singular direction of the (column-scaled) regressor is made of."""
+    zero = [labels[j] for j in np.flatnonzero(~np.any(Z != 0, axis=0))]
+    if zero:
+        return f"{', '.join(zero)} never move{'s' if len(zero) == 1 else ''} (0 in every sample)"
+    scale = np.sqrt(np.mean(Z**2, axis=0))
+    v = np.linalg.svd(Z / scale, full_matrices=False)[2][-1]
+    top = np.argsort(-np.abs(v))[:3]
+    parts = [f"{v[j]:+.2f}·{labels[j]}" for j in top if abs(v[j]) > 0.1]
+    return f"the scaled columns combine to (almost) nothing along {' '.join(parts)}"
+
+
 def _normalized_cond(M: np.ndarray) -> float:
     scale = np.sqrt(np.mean(M**2, axis=0))
     scale[scale == 0] = 1.0
@@ -304,29 +303,6 @@ def _beyond_integrators(A: np.ndarray, n_int: int) -> float:
     return float(np.abs(lam).max()) if lam.size else 0.0
 
 
-def _checks(A: np.ndarray, r: ResolvedRoles, roles: Roles, state_names: Sequence[str], dt: float):
-    """The across-velocity's response to the heading angle vs g·dt, where the roles say which those are."""
-    plane = r.plane
-    if r.heading is None or plane is None or not r.has_velocity:
-        return ()
-    across = plane[0]
-    v = r.velocity[r.position.index(across)]
-    per_unit = roles.radians_per_unit(state_names[r.heading])
-    if per_unit is None:
-        return ()
-    name = f"A[{state_names[v]}, {state_names[r.heading]}]"
-    return (PhysicalCheck(name, float(A[v, r.heading]), GRAVITY * dt * per_unit,
-                          f"g·dt: tilting by the heading angle accelerates {state_names[v]}"),)
-
-
-def _disagreement(c: PhysicalCheck) -> str:
-    """A failed check as a warning that names the state pair and what usually makes it disagree."""
-    return (f"{c.name} is {c.ratio:.2g} × g·dt (physics: 1): the velocity does not respond to the angle as a tilt "
-            "would; likely cause: the angle is not the tilt along that velocity's axis (a body roll paired with a "
-            "world-frame velocity on a vehicle that turns: declare the states in the heading frame), or the "
-            "velocity is an estimate that does not follow the tilt (no GPS, estimator not converged)")
-
-
 def identify_plant(
     demos: DemonstrationSet, structure: str = "auto", horizon_s: float = 3.0, translation_invariant: bool = False
 ) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
@@ -350,6 +326,13 @@ def identify_plant(
     """
     if not len(demos):
         raise ModelError("identify needs at least one demonstration")
+    groups = plant_groups(demos)
+    if len(groups) > 1:
+        # a stick that commands a lean angle in one mode and a velocity in another is two plants, not one
+        raise ModelError(
+            f"identify: one plant per kind of stick, but these demonstrations span {len(groups)} plant groups "
+            f"({describe_groups(demos)}); identify each group's plant from its own segments (`--plant-group`)")
+    group = groups[0]
     n, m, dt = demos.n_states, demos.n_inputs, float(demos.dt)
     names = tuple(demos.state_names)
     roles = demos.roles
@@ -362,9 +345,11 @@ def identify_plant(
     cols = layout.columns
     rank = _rank(Z[:, cols])
     if rank < len(cols):
+        labels = [*names, *demos.input_names]
         raise ModelError(
             f"identify: the data excite only {rank} of {len(cols)} state and input directions "
-            f"(cond [X; U] = {np.linalg.cond(Z[:, cols]):.3g}); record more varied demonstrations"
+            f"(cond [X; U] = {np.linalg.cond(Z[:, cols]):.3g}): {_unexcited(Z[:, cols], [labels[j] for j in cols])}; "
+            "record more varied demonstrations"
         )
     AB = _fit(layout, Z, Xn)
     A, B = AB[:, :n], AB[:, n:]
@@ -400,7 +385,8 @@ def identify_plant(
     rho = float(np.abs(np.linalg.eigvals(A)).max())
     rho_free = _beyond_integrators(A, n_int)
     cond = _normalized_cond(Z[:, cols])
-    checks = _checks(A, r, roles, names, dt)
+    checks = group_checks(A, r, roles, names, dt, group)
+    responses = stick_responses(A, B, r, roles, names, tuple(demos.input_names), dt, group)
     elsewhere = ", no position elsewhere" if translation_invariant else ""
     fixed = tuple(f"{names[p]}[k+1] = {names[p]}[k] + dt·{names[v]}[k] (no input{elsewhere})" for p, v in pairs)
     positions = list(r.position) if n_int else []
@@ -428,6 +414,6 @@ def identify_plant(
         horizon_rmse_persistence=rm["h_p"], one_step_score=scores["one"], one_step_score_persistence=scores["one_p"],
         horizon_score=scores["h"], horizon_score_persistence=scores["h_p"], spectral_radius=rho,
         spectral_radius_beyond_integrators=rho_free, n_integrators=n_int, condition_number=cond, fixed=fixed,
-        checks=checks, warnings=tuple(warns), position_pull=pull,
+        checks=checks, warnings=tuple(warns), position_pull=pull, plant_group=group, responses=responses,
     )
     return A, B, residual, report

@@ -61,6 +61,9 @@ class LinearSystem:
         Which states are positions, velocities and the heading angle (:mod:`workbench.data.roles`); none by default.
     identification : IdentificationReport, optional
         For a plant from :meth:`identify`: its held-out errors, ρ(A), conditioning and physical checks.
+    plant_group : str, optional
+        What the pilot's sticks command in this plant (:mod:`workbench.data.plant_groups`: ``"angle"`` for a lean
+        angle, ``"velocity+climb"`` for LOITER's …); a plant identified from demonstrations of one group carries it.
 
     Raises
     ------
@@ -79,6 +82,7 @@ class LinearSystem:
     fit_residual: float | None = field(default=None)
     roles: Roles = field(default_factory=Roles)
     identification: IdentificationReport | None = field(default=None, repr=False)
+    plant_group: str | None = None
 
     def __post_init__(self) -> None:
         A = np.array(self.A, dtype=np.float64)
@@ -176,7 +180,8 @@ class LinearSystem:
         ``structure="kinematic"`` the position rows are fixed by kinematics, ``p[k+1] = p[k] + dt·v[k]`` for the
         roles' position / velocity pairs (no input moves a position directly), and the other rows are fitted
         (with ``translation_invariant=True`` on everything but the positions, so no state depends on an absolute
-        position); ``"free"`` fits every entry of ``[A B]``; ``"auto"`` (the
+        position); ``"free"`` fits every entry of ``[A B]``; demonstrations of different plant groups are refused
+        (one plant per kind of stick); ``"auto"`` (the
         default) is kinematic when ``demos.roles`` pair positions with velocities, else free — so data without
         roles are identified as before. The RMS one-step residual on all data is ``fit_residual``; the held-out
         check (leave-one-segment-out, ``horizon_s`` seconds ahead, against persistence), ρ(A), conditioning,
@@ -205,6 +210,7 @@ class LinearSystem:
             fit_residual=residual,
             roles=demos.roles,
             identification=report,
+            plant_group=report.plant_group,
         )
 
 

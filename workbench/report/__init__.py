@@ -5,13 +5,13 @@ from workbench.exports import lazy_exports
 
 _EXPORTS = {
     "ReportInputs": "markdown",
-    "fig_data_efficiency": "markdown",
-    "fig_demonstrations": "markdown",
-    "fig_objective": "markdown",
-    "fig_calibration": "markdown",
-    "fig_predictions": "markdown",
-    "fig_rmse": "markdown",
-    "fig_variability": "markdown",
+    "fig_data_efficiency": "figures",
+    "fig_demonstrations": "figures",
+    "fig_objective": "figures",
+    "fig_calibration": "figures",
+    "fig_predictions": "figures",
+    "fig_rmse": "figures",
+    "fig_variability": "figures",
     "save_figure": "figure_files",
     "write_report": "markdown",
 }

@@ -11,6 +11,7 @@ them). The figure draws exactly those rows, on a log axis, as a point and its in
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -20,8 +21,8 @@ from matplotlib.figure import Figure
 
 __all__ = ["identified_rows", "fig_contrasts", "objective_figure"]
 
-#: a contrast between strategies is drawn in black: it belongs to no single strategy's colour
-FACTOR_COLOR = "#282828"
+#: a contrast between strategies is drawn in the recording's black: it belongs to no single strategy's colour
+FACTOR_COLOR = "#000000"
 
 
 def identified_rows(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -44,6 +45,22 @@ def identified_rows(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     return factors, ratios
 
 
+def math_label(text: str) -> str:
+    """``"Q_y / R_u2 (CS2 / CS1)"`` with each weight in mathtext: ``$Q_{y}$ / $R_{u2}$ (CS2 / CS1)``."""
+    return re.sub(r"\b([QRS])_([A-Za-z0-9]+)", lambda m: f"${m[1]}_{{{m[2]}}}$", text)
+
+
+def _three_labels(ax: Any, values: Sequence[float]) -> None:
+    """At least three labelled ticks on a log axis that spans under three decades: 1, 2 and 5 of each decade
+    labelled (a span of one decade had only its two powers of ten)."""
+    from matplotlib.ticker import LogFormatterSciNotation, LogLocator
+
+    v = np.asarray([x for x in values if np.isfinite(x) and x > 0], dtype=float)
+    if v.size and np.log10(v.max() / v.min()) < 3:
+        ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False))
+
+
 def fig_contrasts(factors: pd.DataFrame, ratios: pd.DataFrame, colors: Mapping[str, str],
                   column_width: float = 3.5) -> Figure:
     """A forest plot per kind of contrast (factors between strategies, with ×1 marked; ratios inside a part in
@@ -53,7 +70,8 @@ def fig_contrasts(factors: pd.DataFrame, ratios: pd.DataFrame, colors: Mapping[s
     panels = [(f, title) for f, title in ((factors, "factor between strategies"),
                                           (ratios, "weight ratio inside a coupled part")) if len(f)]
     n = max(1, max((len(f) for f, _ in panels), default=1))
-    fig = Figure(figsize=(column_width * (2 if len(panels) > 1 else 1.3), 0.9 + 0.32 * n), layout="constrained")
+    # one column for one panel, two (7.16 in, IEEE's double column) for both
+    fig = Figure(figsize=(7.16 if len(panels) > 1 else column_width, 1.1 + 0.32 * n), layout="constrained")
     axs = fig.subplots(1, max(1, len(panels)), squeeze=False)[0]
     for ax, (rows, title) in zip(axs, panels, strict=False):
         y = np.arange(len(rows))[::-1]
@@ -64,9 +82,11 @@ def fig_contrasts(factors: pd.DataFrame, ratios: pd.DataFrame, colors: Mapping[s
         if rows is factors:
             ax.axvline(1.0, color="0.6", lw=0.8, ls="--", zorder=0)  # no difference between the strategies
         ax.set_xscale("log")
-        ax.set_yticks(y, list(rows["label"]))
+        _three_labels(ax, [*rows["lo"], *rows["hi"], *([1.0] if rows is factors else [])])
+        ax.set_yticks(y, [math_label(str(v)) for v in rows["label"]])
         ax.set_ylim(-0.6, len(rows) - 0.4)
         ax.set_title(title)
+        ax.set_xlabel("factor [×] (log scale)" if rows is factors else "weight ratio (log scale)")
         ax.grid(axis="x", alpha=0.3)
     return fig
 

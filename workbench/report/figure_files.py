@@ -6,7 +6,6 @@ import contextvars
 import os
 from pathlib import Path
 
-import matplotlib
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -25,22 +24,21 @@ vector_figures = contextvars.ContextVar("vector_figures", default=True)
 def save_figure(fig: Figure, path: str | os.PathLike) -> Path:
     """Render ``fig`` to a PNG at ``path`` and to SVG and PDF beside it (:data:`VECTOR_FORMATS`), each atomically."""
     path = Path(path)
-    canvas = FigureCanvasAgg(fig)
+    FigureCanvasAgg(fig)  # the Agg canvas: no pyplot, no global backend
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=DPI, format="png", bbox_inches="tight")
+        # the figure's own size, not a tight crop: a paper's column (3.5 in) or two (7.16 in) exactly
+        fig.savefig(tmp, dpi=DPI, format="png")
     vector = VECTOR_FORMATS if vector_figures.get() else ()
     if not vector:
         return path
-    # The layout and the crop the PNG was drawn with, kept for the vector copies: each savefig would otherwise run
-    # the constrained layout twice more and draw once more to find the same tight box (60 % of the time). The
-    # caller's figure gets its layout engine back.
-    box = fig.get_tightbbox(canvas.get_renderer()).padded(matplotlib.rcParams["savefig.pad_inches"])
+    # The layout the PNG was drawn with, kept for the vector copies: each savefig would otherwise run the
+    # constrained layout again. The caller's figure gets its layout engine back.
     engine = fig.get_layout_engine()
     fig.set_layout_engine("none")
     try:
         for fmt in vector:
             with atomic_path(path.with_suffix(f".{fmt}")) as tmp:
-                fig.savefig(tmp, format=fmt, bbox_inches=box)
+                fig.savefig(tmp, format=fmt)
     finally:
         fig.set_layout_engine(engine)
     return path

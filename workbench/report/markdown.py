@@ -32,7 +32,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
 
 from workbench.atomic import (
     atomic_write_text,
@@ -41,12 +40,26 @@ from workbench.atomic import (
     temp_sibling,
 )
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
-from workbench.data.roles import Roles
-from workbench.models.registry import METHOD_TITLES, REGISTRY
+from workbench.models.registry import METHOD_TITLES
 from workbench.report.contrasts import objective_figure
-from workbench.report.figure_files import DPI, save_figure, vector_figures
-from workbench.report.palette import input_style
-from workbench.report.tables import efficiency_by_trial, save_table, scores_section, why_no_statistics
+from workbench.report.figure_files import save_figure, vector_figures
+from workbench.report.figures import (  # the figures live in their own module; their names are kept here
+    COLUMN_WIDTH,
+    DOUBLE_WIDTH,
+    METHOD_COLORS,
+    PAPER_RC,
+    _label_color,
+    _metric_words,
+    _plane,
+    fig_calibration,
+    fig_data_efficiency,
+    fig_demonstrations,
+    fig_objective,
+    fig_predictions,
+    fig_rmse,
+    fig_variability,
+)
+from workbench.report.tables import efficiency_means, save_table, scores_section, why_no_statistics
 from workbench.report.tables import md_table as _md_table
 from workbench.study.pipeline import StudyResult, improvement_table, metric_unit
 
@@ -60,341 +73,11 @@ __all__ = [
     "fig_rmse",
     "fig_variability",
     "write_report",
+    "COLUMN_WIDTH",
+    "DOUBLE_WIDTH",
+    "METHOD_COLORS",
 ]
 
-_PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
-METHOD_COLORS = {**{m.name: m.colour_hex for m in REGISTRY}, "recorded": "#282828"}  # the registry's, as the viewer's
-#: A journal column (IEEE: 3.5 in); a figure is at most two columns wide, so its text prints at the size set here.
-COLUMN_WIDTH = 3.5
-#: Text and lines sized for print at that width (matplotlib rc parameters, applied while a report draws).
-PAPER_RC = {"font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8, "xtick.labelsize": 7, "ytick.labelsize": 7,
-            "legend.fontsize": 7, "lines.linewidth": 1.2, "axes.linewidth": 0.6, "savefig.dpi": DPI,
-            "pdf.fonttype": 42, "svg.fonttype": "none"}
-
-
-def _label_color(label: str, labels: Sequence[str]) -> str:
-    return _PALETTE[list(labels).index(label) % len(_PALETTE)] if label in labels else "#7f7f7f"
-
-
-def _plane(roles: Roles | None, state_names: Sequence[str]) -> tuple[int, int] | None:
-    """The (across, up) position states of the plant's roles, or None: then there is no path to draw."""
-    return (roles or Roles()).resolve(state_names).plane
-
-
-def _titled(name: str, roles: Roles | None) -> str:
-    """``name [unit]`` with the roles' unit, the bare name where none is declared."""
-    unit = roles.unit(name) if roles else ""
-    return f"{name} [{unit}]" if unit else name
-
-
-# -- figures ----------------------------------------------------------------------------------------------
-def fig_demonstrations(sets: Mapping[str, DemonstrationSet]) -> Figure:
-    """Flown paths of every trial in the plane of the position roles, one panel per strategy; a plant without
-    a plane gets every state against time instead."""
-    labels = list(sets)
-    first = sets[labels[0]]
-    plane = _plane(first.roles, first.state_names)
-    rows = 1 if plane is not None else first.n_states
-    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 3.2 * len(labels)), 2.8 if plane is not None else 1.4 * rows),
-                 layout="constrained")
-    axs = fig.subplots(rows, len(labels), squeeze=False, sharey="row")
-    for c, label in enumerate(labels):
-        ds = sets[label]
-        color = _label_color(label, labels)
-        if plane is None:
-            for j, name in enumerate(ds.state_names):
-                ax = axs[j, c]
-                for d in ds:
-                    ax.plot(d.t - d.t[0], d.x[:, j], color=color, lw=0.9, alpha=0.55)
-                ax.set_ylabel(_titled(name, ds.roles))
-                ax.grid(alpha=0.3)
-            axs[0, c].set_title(f"{label}: {len(ds)} demonstrations")
-            axs[-1, c].set_xlabel("time since start [s]")
-            continue
-        ix, iy = plane
-        ax = axs[0, c]
-        for d in ds:
-            ax.plot(d.x[:, ix], d.x[:, iy], color=color, lw=0.9, alpha=0.55)
-            ax.plot(d.x[0, ix], d.x[0, iy], "o", color=color, ms=3)
-        targets = [d.target for d in ds if d.target is not None]
-        if targets:
-            tx, ty = targets[0][ix], targets[0][iy]
-            ax.plot([tx - 0.5, tx + 0.5], [ty, ty], color="k", lw=4, solid_capstyle="butt", label="pad")
-            ax.legend(loc="lower right")  # the starts are at the top
-        ax.set_title(f"{label}: {len(ds)} demonstrations")
-        ax.set_xlabel(_titled(ds.state_names[ix], ds.roles))
-        ax.grid(alpha=0.3)
-        ax.set_aspect("equal", adjustable="datalim")
-    if plane is not None:
-        axs[0, 0].set_ylabel(_titled(first.state_names[plane[1]], first.roles))
-    return fig
-
-
-def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_names: Sequence[str]) -> Figure:
-    """Normalized Q and R heatmaps side by side per strategy.
-
-    No single entry is called out: the SDP's cost is one member of a family that explains the same gain (METHOD.md),
-    so an entry alone is not identified; the contrasts the data do identify are the report's weight-ratio table.
-
-    A diverging color map symmetric about zero, every cell labelled with its value. Each block has one color scale
-    shared by every strategy, so two strategies compare cell by cell; Q and R keep separate scales: R usually
-    dominates M, and on one scale the structure of Q — which states the operator cares about, the paper's point —
-    would vanish.
-    """
-    labels = [k for k, m in models.items() if m.has_gain and m.objective_ is not None]
-    n, m = len(state_names), len(input_names)
-    fig = Figure(figsize=(COLUMN_WIDTH * 2, 2.8 * max(1, len(labels))), layout="constrained")
-    axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
-    blocks = {k: [np.asarray(models[lab].objective_.M_normalized)[sl, sl] for lab in labels]
-              for k, sl in (("Q", slice(0, n)), ("R", slice(n, n + m)))}
-    vmaxes = {k: max([float(np.abs(b).max()) for b in v] + [1e-12]) for k, v in blocks.items()}
-    for row, label in zip(axs, labels, strict=True):
-        Mn = np.asarray(models[label].objective_.M_normalized)
-        for ax, block, names, title, vmax in (
-            (row[0], Mn[:n, :n], state_names, "Q / λmax(M)", vmaxes["Q"]),
-            (row[1], Mn[n:, n:], input_names, "R / λmax(M)", vmaxes["R"]),
-        ):
-            image = ax.imshow(block, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
-            ax.set_xticks(range(len(names)), names)
-            ax.set_yticks(range(len(names)), names)
-            for (i, j), v in np.ndenumerate(block):
-                text = "0" if abs(v) < 5e-4 * vmax else f"{v:.2g}"
-                ax.text(j, i, text, ha="center", va="center", fontsize=7,
-                        color="white" if abs(v) > 0.6 * vmax else "black")
-            fig.colorbar(image, ax=ax, shrink=0.8)
-            ax.set_title(f"{label}: {title}")
-    return fig
-
-
-def fig_calibration(calibration: pd.DataFrame) -> Figure:
-    """One-step band calibration: share of recorded inputs inside ``μ̂ ± cσ̂`` against the Gaussian nominal.
-
-    One panel per strategy, one line per input, points at every level ``c`` of the study (1σ, 2σ, 3σ marked by
-    larger points and named once, on dotted lines at their nominal coverage); on the diagonal the band is
-    calibrated, below it too narrow, above it too wide.
-    """
-    labels = list(dict.fromkeys(calibration["label"]))
-    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 2.6 * max(1, len(labels))), 2.6), layout="constrained")
-    axs = fig.subplots(1, max(1, len(labels)), squeeze=False)[0]
-    for ax, label in zip(axs, labels, strict=True):
-        t = calibration[calibration["label"] == label]
-        ax.plot([0, 100], [0, 100], color="0.75", lw=0.8, ls="-", label="nominal")  # no input's dash
-        for k, (inp, g) in enumerate(t.groupby("input", sort=False)):  # inputs in black/gray: hue is a strategy's
-            g, st = g.sort_values("n_sigma"), input_style(k)
-            ax.plot(100 * g["nominal"], 100 * g["coverage"], ms=2.5, label=str(inp), **st)
-            marks = g[g["n_sigma"].isin([1.0, 2.0, 3.0])]
-            ax.scatter(100 * marks["nominal"], 100 * marks["coverage"], s=30, color=st["color"], marker=st["marker"],
-                       zorder=3)
-        # the levels are named once per panel, on the nominal axis (every input shares them): per point, the 2σ
-        # and 3σ labels of two inputs piled up in the top right corner, 4 points of nominal apart
-        levels = t[t["n_sigma"].isin([1.0, 2.0, 3.0])].drop_duplicates("n_sigma").sort_values("n_sigma")
-        for r in levels.itertuples():
-            x = 100 * r.nominal
-            ax.axvline(x, color="0.75", lw=0.8, ls=":", zorder=0)
-            # 2σ left of its line, 3σ right of its: the two lines are close
-            ha, dx = {2.0: ("right", -2), 3.0: ("left", 2)}.get(float(r.n_sigma), ("center", 0))
-            ax.annotate(f"{r.n_sigma:g}σ", (x, 0), xytext=(dx, 3), textcoords="offset points", fontsize=7,
-                        ha=ha, va="bottom", color="0.3")
-        ax.set_xlim(0, 100)
-        ax.set_ylim(0, 100)
-        ax.set_aspect("equal")
-        ax.set_xlabel("nominal coverage [%]")
-        ax.set_title(f"{label}: one-step band calibration")
-        ax.grid(alpha=0.3)
-    axs[0].set_ylabel("observed coverage [%]")
-    fig.legend(*axs[0].get_legend_handles_labels(), loc="outside lower center", ncols=3)  # never over a curve
-    return fig
-
-
-def fig_variability(cases: Mapping[str, tuple[Demonstration, Any]], input_names: Sequence[str]) -> Figure:
-    """ŵ = u − K̂x on a test trial per strategy with the GMR mean and ±3σ band; samples outside marked."""
-    labels = list(cases)
-    m = len(input_names)
-    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 3.5 * len(labels)), 1.8 * m), layout="constrained")
-    axs = fig.subplots(m, len(labels), squeeze=False, sharex="col")
-    for c, label in enumerate(labels):
-        demo, model = cases[label]
-        t = demo.t - demo.t[0]
-        w = demo.u - demo.x @ np.asarray(model.K_).T
-        mu, Sigma = model.variability(demo.x, x0=demo.x[0], target=demo.target)
-        words = _band_words(model, demo)
-        sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
-        for j in range(m):
-            ax = axs[j, c]
-            # one colour per role across figures: the proposed model's green for its band, the recording's black
-            ax.fill_between(t, mu[:, j] - 3 * sigma[:, j], mu[:, j] + 3 * sigma[:, j], step="post",
-                            color=METHOD_COLORS["proposed"], alpha=0.22, lw=0, label="GMR μ ± 3σ")
-            ax.step(t, mu[:, j], where="post", color=METHOD_COLORS["proposed"], lw=1.2, label="GMR μ")
-            ax.step(t, w[:, j], where="post", color=METHOD_COLORS["recorded"], lw=0.8, label="ŵ")
-            out = np.abs(w[:, j] - mu[:, j]) > 3 * sigma[:, j]
-            if out.any():
-                ax.plot(t[out], w[out, j], "x", color=METHOD_COLORS["recorded"], ms=5, label="outside 3σ")
-            ax.set_title(f"{label} {demo.id}: ŵ {input_names[j]} — {words.get(input_names[j], '')}")
-            ax.grid(alpha=0.3)
-            ax.set_ylabel(f"ŵ {input_names[j]}")
-        axs[-1, c].set_xlabel("time since start [s]")
-    fig.legend(*axs[0, 0].get_legend_handles_labels(), loc="outside lower center", ncols=4)  # not over ŵ
-    return fig
-
-
-def _band_words(model: Any, demo: Demonstration) -> dict[str, str]:
-    """Per input, ``"3σ 98.2 % too narrow, 1σ 74 % fits"`` on this trial: the one verdict of the viewer and the
-    tables (:func:`workbench.study.calibration.band_verdict`)."""
-    from workbench.study.calibration import band_words, calibration_check, calibration_counts
-
-    if not model.models_inputs:
-        return {}
-    check = calibration_check(calibration_counts(model, [demo], (1.0, 3.0)))
-    return {str(name): band_words(rows) for name, rows in check.groupby("input", sort=False)}
-
-
-def _band(pred: Any) -> tuple[np.ndarray, np.ndarray] | None:
-    for lo, hi in (("x_lower", "x_upper"), ("x_lo", "x_hi"), ("x_low", "x_high")):
-        if getattr(pred, lo, None) is not None and getattr(pred, hi, None) is not None:
-            return np.asarray(getattr(pred, lo)), np.asarray(getattr(pred, hi))
-    return None
-
-
-def fig_predictions(
-    cases: Mapping[str, tuple[Demonstration, Mapping[str, Any]]],
-    state_names: Sequence[str],
-    dt: float,
-    roles: Roles | None = None,
-) -> Figure:
-    """Predicted vs recorded trajectory on a test trial per strategy: the path in the plane of the position
-    roles and each position against time; without a plane, every state against time.
-
-    ``cases[label] = (demo, {method: Prediction})`` with every prediction starting at the trial's first state.
-    """
-    labels = list(cases)
-    plane = _plane(roles, state_names)
-    shown = list(plane) if plane is not None else list(range(len(state_names)))
-    n_cols = len(shown) + (plane is not None)
-    fig = Figure(figsize=(COLUMN_WIDTH * 2, 1.9 * len(labels) * (2 if n_cols > 4 else 1)), layout="constrained")
-    axs = fig.subplots(len(labels), n_cols, squeeze=False)
-    for r, label in enumerate(labels):
-        demo, preds = cases[label]
-        t = demo.t - demo.t[0]
-        n_steps = max(len(np.asarray(p.x)) for p in preds.values()) - 1
-        tp = np.arange(n_steps + 1) * dt
-        n_rec = min(len(demo), n_steps + 1)
-        ax_path = axs[r, 0] if plane is not None else None
-        ax_time = list(axs[r, 1:] if plane is not None else axs[r])
-        if ax_path is not None:
-            ix, iy = plane
-            ax_path.plot(demo.x[:, ix], demo.x[:, iy], color="#9a9a9a", lw=1.0, label="recorded (whole trial)")
-            ax_path.plot(demo.x[:n_rec, ix], demo.x[:n_rec, iy], color=METHOD_COLORS["recorded"], lw=2.0,
-                         label="recorded (horizon)")
-        for ax, j in zip(ax_time, shown, strict=True):
-            ax.plot(t[:n_rec], demo.x[:n_rec, j], color=METHOD_COLORS["recorded"], lw=2.0, label="recorded")
-        for method, pred in preds.items():
-            x = np.asarray(pred.x)
-            color = METHOD_COLORS.get(method, "k")
-            title = METHOD_TITLES.get(method, method)
-            band = _band(pred)
-            if band is not None:
-                lo, hi = band
-                level = getattr(pred, "band_level", None)
-                name = f"{title} {100 * level:.0f} % MC band" if level else f"{title} MC band"
-                for k, (ax, j) in enumerate(zip(ax_time, shown, strict=True)):
-                    ax.fill_between(tp[: len(lo)], lo[:, j], hi[:, j], color=color, alpha=0.18, lw=0,
-                                    label=name if k == 0 else None)
-            if ax_path is not None:
-                ax_path.plot(x[:, plane[0]], x[:, plane[1]], color=color, lw=1.4, ls="--", label=title)
-            for k, (ax, j) in enumerate(zip(ax_time, shown, strict=True)):
-                ax.plot(tp[: len(x)], x[:, j], color=color, lw=1.4, ls="--", label=title if k == 0 else None)
-        if ax_path is not None:
-            ax_path.plot(demo.x[0, plane[0]], demo.x[0, plane[1]], "o", color="k", ms=5)
-            ax_path.set_title(f"{label} {demo.id}: path ({n_steps * dt:.1f} s horizon)")
-            ax_path.set_xlabel(_titled(state_names[plane[0]], roles))
-            ax_path.set_ylabel(_titled(state_names[plane[1]], roles))
-        for ax, j in zip(ax_time, shown, strict=True):
-            ax.set_title(f"{label} {demo.id}: {state_names[j]}(t)" if ax_path is None and j == shown[0]
-                         else f"{state_names[j]}(t)")
-            ax.set_ylabel(_titled(state_names[j], roles))
-            ax.set_xlabel("time since start [s]")
-        for ax in axs[r]:
-            ax.grid(alpha=0.3)
-    # one key for the figure, under its panels: a legend inside a panel covered the recorded track (seen)
-    handles, names = {}, []
-    for ax in axs[0, : min(2, n_cols)]:
-        for h, n in zip(*ax.get_legend_handles_labels(), strict=True):
-            if n not in handles:
-                handles[n] = h
-                names.append(n)
-    fig.legend([handles[n] for n in names], names, loc="outside lower center", ncols=min(4, len(names)))
-    return fig
-
-
-def fig_rmse(table: pd.DataFrame, metrics: Sequence[tuple[str, str]]) -> Figure:
-    """Per-trial horizon RMSE (eq. (35)) per method, one panel per (metric, label): a box over the trials, each
-    trial a dot, and one gray line joining a trial's dots across methods (the pairs the statistics compare).
-
-    ``table`` has columns ``trial``, ``label``, ``method``, ``metric``, ``value`` (one row per trial and start);
-    a trial's windows are averaged first, as in the comparison's tables and paired differences.
-    """
-    labels = list(dict.fromkeys(table["label"]))
-    methods = [m for m in METHOD_TITLES if m in set(table["method"])] + sorted(
-        set(table["method"]) - set(METHOD_TITLES)
-    )
-    panels = len(labels) * len(metrics)
-    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 2.4 * panels), 2.6), layout="constrained")
-    axs = fig.subplots(1, panels, squeeze=False)[0]
-    k = 0
-    for metric, unit in metrics:
-        for label in labels:
-            ax = axs[k]
-            k += 1
-            sub = table[(table["label"] == label) & (table["metric"] == metric)]
-            per = sub.groupby(["trial", "method"], sort=False)["value"].mean().unstack("method")
-            per = per.reindex(columns=methods)
-            data = [per[m].dropna().to_numpy(dtype=float) for m in methods]
-            for _, row in per.iterrows():  # the pairs: one trial scored by every method
-                ax.plot(np.arange(1, len(methods) + 1), row.to_numpy(float), "-", color="#b0b0b0", lw=0.6,
-                        zorder=1)
-            bp = ax.boxplot(data, tick_labels=[METHOD_TITLES.get(m, m) for m in methods], patch_artist=True,
-                            widths=0.55, showfliers=False, medianprops={"color": "k"}, zorder=2)
-            for patch, m in zip(bp["boxes"], methods, strict=True):
-                patch.set_facecolor(METHOD_COLORS.get(m, "#cccccc"))
-                patch.set_alpha(0.45)
-            for j, m in enumerate(methods):
-                ax.plot(np.full(len(data[j]), j + 1), data[j], ".", color=METHOD_COLORS.get(m, "k"), ms=4, zorder=3)
-            ax.set_title(f"{label}: {metric.removeprefix('rmse_').replace('_', ' ')}")
-            ax.set_ylabel(f"RMSE [{unit}]" if unit else "RMSE")
-            ax.tick_params(axis="x", labelrotation=45)  # four or more method names overlap when horizontal
-            ax.grid(alpha=0.3, axis="y")
-    return fig
-
-
-def _metric_words(metric: str) -> str:
-    """``rmse_position`` → ``position RMSE``."""
-    return f"{metric.removeprefix('rmse_').replace('_', ' ')} RMSE"
-
-
-def fig_data_efficiency(table: pd.DataFrame, unit: str = "m", what: str = "position RMSE") -> Figure:
-    """Mean RMSE (± standard error over test trials) against the number of training demonstrations, per method and
-    label, the key under the panels; ``table``: ``label, method, n_train, value`` (and ``trial``)."""
-    labels = list(dict.fromkeys(table["label"]))
-    fig = Figure(figsize=(min(COLUMN_WIDTH * 2, 3.0 * len(labels)), 2.9), layout="constrained")
-    axs = fig.subplots(1, len(labels), squeeze=False, sharey=True)[0]
-    table = efficiency_by_trial(table)  # a test trial's windows and subsets averaged: trials are the unit
-    for ax, label in zip(axs, labels, strict=True):
-        sub = table[table["label"] == label]
-        for method, g in sub.groupby("method", sort=False):
-            stats = g.groupby("n_train")["value"].agg(["mean", "std", "count"]).sort_index()
-            se = stats["std"].fillna(0.0) / np.sqrt(stats["count"])
-            color = METHOD_COLORS.get(method, "k")
-            ax.errorbar(stats.index, stats["mean"], yerr=se, marker="o", ms=4, capsize=3, color=color,
-                        label=METHOD_TITLES.get(method, method))
-        ax.set_xscale("log")
-        ax.minorticks_off()  # the log axis's minor labels (3×10⁰, …) only clutter a handful of sizes
-        ax.set_xticks(sorted(set(sub["n_train"])), [str(v) for v in sorted(set(sub["n_train"]))])
-        ax.set_xlabel("training demonstrations")
-        ax.set_title(f"{label}: data efficiency")
-        ax.grid(alpha=0.3)
-    axs[0].set_ylabel(f"{what} [{unit}]" if unit else what)
-    fig.legend(*axs[0].get_legend_handles_labels(), loc="outside lower center", ncols=4)  # never over a point
-    return fig
 
 
 # -- the report -------------------------------------------------------------------------------------------
@@ -596,7 +279,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                "Gaussian puts there, for c from 0.25σ to 3σ: on the diagonal the band is calibrated at every level, "
                "below it too narrow.*", ""]
     if cases_w:
-        save_figure(fig_variability(cases_w, input_names), fig_dir / "variability.png")
+        units = {n: any_set.roles.unit(n) for n in input_names} if any_set.roles else {}
+        save_figure(fig_variability(cases_w, input_names, units), fig_dir / "variability.png")
         md += ["![Residual variability with GMR bands](figures/variability.png)", "",
                "*ŵ = u − K̂x on a test trial with the GMR mean μ(x) and its ±3σ band (eqs. (24)–(27)).*", ""]
     md += ["## Predictions", ""]
@@ -609,6 +293,10 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
         improvement = improvement_table(inputs.rmse, inputs.paired)
+        # a percentage says which comparison it is: the columns beside these means are the methods' differences
+        # over refitted splits, not the ratio of the two means they stand next to (issue 38)
+        improvement = improvement.rename(columns={c: f"{c} {_which_comparison(inputs.paired)}"
+                                                  for c in improvement.columns if str(c).startswith("vs ")})
         save_table(improvement, tab_dir / "comparison.csv")
         md += [_md_table(improvement), "", "(`tables/comparison.csv`)", ""]
         md += _envelope_line(inputs.envelope)
@@ -629,9 +317,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         what = str(inputs.efficiency["metric"].iloc[0]) if "metric" in inputs.efficiency else "rmse_position"
         save_figure(fig_data_efficiency(inputs.efficiency, metric_unit(system, what), _metric_words(what)),
                     fig_dir / "data_efficiency.png")
-        eff = efficiency_by_trial(inputs.efficiency).groupby(["label", "n_train", "method"], sort=False)["value"]
-        eff = eff.mean().unstack("method")
-        eff = eff.rename(columns=METHOD_TITLES).reset_index()
+        eff = efficiency_means(inputs.efficiency).rename(columns=METHOD_TITLES)
         save_table(eff, tab_dir / "data_efficiency.csv")
         md += ["## Data efficiency", "", _md_table(eff), "",
                "![Data efficiency](figures/data_efficiency.png)", "",
@@ -656,6 +342,16 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(md).rstrip() + "\n")
     return path
+
+
+def _which_comparison(paired: Sequence[Any]) -> str:
+    """``"(as methods, over 8 refits)"`` for method-level differences, ``"(these fitted models)"`` for paired ones."""
+    first = next(iter(paired), None)
+    n = getattr(first, "n_splits", None)
+    if n is None:
+        return "(these fitted models, on these test trials)"
+    design = getattr(first, "design", "random splits")
+    return f"(as methods, over {n} {'leave-one-out folds' if 'leave' in str(design) else 'refits'})"
 
 
 def _envelope_line(envelope: pd.DataFrame | None) -> list[str]:
@@ -747,7 +443,7 @@ def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title
 def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str) -> Path:
     notes = [
         f"{len(result.demos)} demonstrations, {result.demos.n_samples} samples, dt = {result.demos.dt:g} s; "
-        f"states {list(result.demos.state_names)}, inputs {list(result.demos.input_names)}",
+        f"states {', '.join(result.demos.state_names)}; inputs {', '.join(result.demos.input_names)}",
         f"prediction horizon {result.n_steps} steps ({result.n_steps * result.demos.dt:.2f} s); "
         f"{result.samples} Monte Carlo rollouts per band; seed {result.seed}",
     ]

@@ -17,7 +17,7 @@ from workbench.atomic import atomic_path, atomic_write_text
 from workbench.models.registry import METHOD_TITLES
 from workbench.study.pipeline import metric_unit
 
-__all__ = ["efficiency_by_trial", "md_table", "save_table", "scores_section", "why_no_statistics"]
+__all__ = ["efficiency_by_trial", "efficiency_means", "md_table", "save_table", "scores_section", "why_no_statistics"]
 
 
 def md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -94,3 +94,16 @@ def efficiency_by_trial(table: pd.DataFrame) -> pd.DataFrame:
     if "trial" not in table or table["trial"].isna().all():
         return table[[*keys, "value"]].copy()
     return table.dropna(subset=["trial"]).groupby([*keys, "trial"], sort=False)["value"].mean().reset_index()
+
+
+def efficiency_means(table: pd.DataFrame) -> pd.DataFrame:
+    """The data-efficiency curve as one row per label and size, one column per method (by name): the mean over
+    test trials of :func:`efficiency_by_trial` — the report's table and the terminal's, one computation."""
+    eff = efficiency_by_trial(table).groupby(["label", "n_train", "method"], sort=False)["value"].mean()
+    out = eff.unstack("method")
+    from workbench.models.registry import METHODS
+
+    out = out[[m for m in METHODS if m in out.columns] + [m for m in out.columns if m not in METHODS]].reset_index()
+    out.columns.name = None
+    return out.sort_values(["label", "n_train"], key=lambda c: c if c.name == "n_train" else
+                           c.map({v: i for i, v in enumerate(dict.fromkeys(table["label"]))}), kind="stable")

@@ -29,7 +29,7 @@ import inspect
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -41,7 +41,15 @@ from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
 from workbench.models.factory import make_models as make_models_for_plant
 from workbench.study.executor import serial, task_seed
-from workbench.study.stats import RMAnovaResult, TTestResult, pairwise_ttests, repeated_measures_anova
+from workbench.study.stats import (
+    OneWayAnovaResult,
+    RMAnovaResult,
+    TTestResult,
+    one_way_anova,
+    pairwise_ttests,
+    repeated_measures_anova,
+    student_ttests,
+)
 
 __all__ = [
     "STATE_BLOCK",
@@ -58,12 +66,16 @@ __all__ = [
     "method_groups",
     "data_efficiency",
     "per_subject",
+    "PAPER_METHODS",
     "cross_validate",
     "SubjectStudy",
     "models_for",
     "pairwise_ttests",
     "TTestResult",
 ]
+
+#: The methods the method paper's multi-subject study compared (its one-way ANOVA's three groups).
+PAPER_METHODS = ("proposed", "ioc_only", "gmr_only")
 
 #: The overall block of a plant without position roles (every state), and the prefix of its per-state blocks.
 STATE_BLOCK = "state"
@@ -484,6 +496,11 @@ class SubjectStudy:
     subjects : tuple of str
     failures : tuple of str
         Subjects or methods that could not be fitted (left out of the statistics).
+    paper_anova : OneWayAnovaResult or None
+        The paper's own test, run as it did: a one-way ANOVA over its three methods (:data:`PAPER_METHODS`) as
+        independent groups (F(2, 27) for 10 subjects), beside ``rm_anova``; None where fewer than two are scored.
+    paper_ttests : dict
+        The paper's pairwise two-sample Student t-tests over those methods (Holm), with 95 % intervals.
     """
 
     table: pd.DataFrame
@@ -493,6 +510,8 @@ class SubjectStudy:
     metric: str
     subjects: tuple[str, ...]
     failures: tuple[str, ...] = ()
+    paper_anova: OneWayAnovaResult | None = None
+    paper_ttests: dict[tuple[str, str], TTestResult] = field(default_factory=dict)
 
 
 def _subject_task(task: tuple) -> tuple[pd.DataFrame | None, list[str], str]:
@@ -588,6 +607,7 @@ def per_subject(
     if len(wide) < 2:
         raise DataError(f"fewer than two subjects have {metric!r} for every method; failures: {failures}")
     groups = {str(m): wide[m].to_numpy(dtype=float) for m in wide.columns}
+    paper = {m: groups[m] for m in PAPER_METHODS if m in groups}
     return SubjectStudy(
         table=table,
         groups=groups,
@@ -596,6 +616,8 @@ def per_subject(
         metric=metric,
         subjects=tuple(str(s) for s in wide.index),
         failures=tuple(failures),
+        paper_anova=one_way_anova(paper) if len(paper) >= 2 else None,
+        paper_ttests=student_ttests(paper) if len(paper) >= 2 else {},
     )
 
 

@@ -395,11 +395,15 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
         check = calibration_counts(fitted["proposed"], list(te))
     timings["compare"] = time.perf_counter() - t0
     eff = None
-    # the curve ends where the models of the comparison stand: at every training trial
-    sizes = sorted({n for n in s.efficiency if n < len(tr)} | ({len(tr)} if s.efficiency else set()))
-    if sizes:
+    # the curve ends where the models of the comparison stand: at every training trial its point is the comparison's
+    # own rows (those models, those windows), not a refit with fewer of the settings cross-validation chose
+    sizes = sorted({n for n in s.efficiency if n < len(tr)})
+    if s.efficiency:
         t0 = time.perf_counter()
-        eff = _efficiency(label, system, tr, te, sizes, fitted, G, s, executor, progress)
+        eff = full_size_rows(table, len(tr), ev.primary_metric(system), label)
+        if sizes:
+            eff = pd.concat([_efficiency(label, system, tr, te, sizes, fitted, G, s, executor, progress), eff],
+                            ignore_index=True)
         timings["efficiency"] = time.perf_counter() - t0
     objective = None
     if s.bootstrap > 0 and "proposed" in fitted and fitted["proposed"].objective_ is not None:
@@ -408,6 +412,14 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
         timings["objective intervals"] = time.perf_counter() - t0
     return _LabelPart(fitted=fitted, failures=failed, table=table, coverage=cov, check=check, efficiency=eff,
                       objective=objective, timings=timings)
+
+
+def full_size_rows(table: pd.DataFrame, n_train: int, metric: str, label: str) -> pd.DataFrame:
+    """The data-efficiency curve's last point, at every training trial: the comparison ``table``'s own rows of
+    ``metric`` (the models of the headline, scored on the same windows), in the curve's columns."""
+    rows = table[table["metric"] == metric]
+    return rows.assign(n_train=n_train, repeat=0, label=label)[
+        ["n_train", "repeat", "trial", "label", "start", "method", "metric", "value"]].reset_index(drop=True)
 
 
 @dataclass(frozen=True)

@@ -133,7 +133,7 @@ def _scene_name(s: LoggedSession, across: str, up: str) -> str:
         name += " — " + ", ".join(f"{style.method_title(m)} {words[m]}" if m in words else style.method_title(m)
                                   for m in s.methods)
         if s.bands:
-            name += ", MC band dark"
+            name += ", MC band gray"
     return name
 
 
@@ -147,12 +147,14 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     if plane is None:
         return rrb.Horizontal(scene, name="scene")
     side = []
-    for k, name in enumerate(plane):
+    for name in plane:
         if focus and focus[0] in s.predictions:
             fid = focus[0]
             key = paths.prediction_plot(fid, name)
             side.append(_plot(f"{s.title(name)} · {fid}", _prediction_paths(s, fid, name),
-                              legend=rrb.PlotLegend(s.corners.get(key, "RightTop"), visible=k == 0),
+                              # no legend: the scene's title names every colour, and a legend covered a third
+                              # of a plot this small (seen with rrd-look)
+                              legend=rrb.PlotLegend(s.corners.get(key, "RightTop"), visible=False),
                               y_range=s.ranges.get(key),
                               window=s.windows.get(fid)))
         else:
@@ -162,7 +164,18 @@ def _scene_tab(s: LoggedSession, plane: Sequence[str] | None, focus: Sequence[st
     if paths.SCORES in s.entities:
         # the first question's answer where the eye lands: each method's held-out error beside the tracks
         side.insert(0, rrb.TextDocumentView(origin=paths.origin(paths.SCORES), name="held-out prediction error"))
-        return rrb.Horizontal(scene, rrb.Vertical(*side, row_shares=[6] + [3] * (len(side) - 1)),
+        # the scores' tables whole (a line is ~26 px of the ~940 px column, measured with rrd-look: a title of two
+        # lines, per label its name, a header, a row per method and a gap of two), the plots sharing the rest, tall
+        # enough for three ticks
+        scored = s.scores if s.scores is not None and len(s.scores) else None
+        labels = max(len(set(scored["label"])) if scored is not None else len(s.label_colors), 1)
+        rows = len(set(scored["method"])) if scored is not None else len(s.methods)
+        doc = 26.0 * (3 + labels * (4 + max(rows, 1)))
+        # the two position plots side by side under the scores: each as tall as the space left (one above the
+        # other, ~175 px each, the x plot kept a single "0" label; seen with rrd-look), a 3 s window still wide
+        # enough for a label per second
+        plots = max(940.0 - doc, 300.0)
+        return rrb.Horizontal(scene, rrb.Vertical(side[0], rrb.Horizontal(*side[1:]), row_shares=[doc, plots]),
                               column_shares=[3, 2], name="scene")
     return rrb.Horizontal(scene, rrb.Vertical(*side), column_shares=[3, 2], name="scene")
 
@@ -177,7 +190,8 @@ def _objective_tab(s: LoggedSession) -> Any:
                 continue  # the cross term is ~0 for the paper's structure; its numbers are in the summary
             n_rows, n_cols = s.heatmap_shapes.get((m, block), (1, 1))
             # the names stand left of and above the cells, the color bar right of them: the bounds leave room
-            bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 1.6], y_range=[-0.8, n_rows + 0.1])
+            # room right of the colour bar for its "+0.25" labels (they were cut at the view's edge)
+            bounds = rrb.VisualBounds2D(x_range=[-1.4, n_cols + 2.5], y_range=[-1.1, n_rows + 0.1])
             views.append(rrb.Spatial2DView(origin=paths.origin(paths.model_path(m, f"heatmap/{block}")),
                                            visual_bounds=bounds,
                                            name=f"{m}: {title}"))  # the color bar says the scale
@@ -186,10 +200,11 @@ def _objective_tab(s: LoggedSession) -> Any:
         if m in s.verdicts:
             v = s.verdicts[m]
             notes.insert(0, rrb.TextDocumentView(origin=paths.origin(paths.model_path(m, "verdict")),
-                                                 name=f"{m}: {'fits' if v.fits else 'DOES NOT FIT'}"))
+                                                 name=f"{m}: {v.head(short=True)}"))
         # the summary's tables are wide: its column gets as much room as the heatmaps together
         # the verdict's view is a paragraph tall; with mismatches listed it needs more
-        fits = m not in s.verdicts or s.verdicts[m].fits
+        # the verdict's paragraph whole: taller where it lists what does not fit or what the band misses
+        fits = m not in s.verdicts or s.verdicts[m].head(short=True) == "fits"
         rows.append(rrb.Horizontal(*views, rrb.Vertical(*notes, row_shares=[1 if fits else 2, 3] if len(notes) > 1
                                                         else None),
                                    column_shares=[*shares, max(0.6 * sum(shares), 1.0)]))
@@ -235,23 +250,38 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
         lanes = [query(paths.FLIGHT_MODE)] if s.clock == "log" else [query(paths.mode_path(i)) for i in s.modes]
         state_views.append(rrb.StateTimelineView(origin="/", contents=lanes, name="flight mode",
                                                  time_view=time_axis(s.span) if s.clock == "log" else None))
-    tabs.append(rrb.Grid(*state_views, *_key(s), name="states"))
+    # three columns: a plot of a 12 s trial four to a row was too narrow for more than two time labels
+    # (two on a flight's clock: minutes of flight need the width for a time label per minute)
+    tabs.append(rrb.Grid(*state_views, *_key(s), grid_columns=2 if s.clock == "log" else 3, name="states"))
     input_views: list[Any] = [
         _overlay(s, s.title(name), [query(paths.series_path(i, "inputs", name)) for i in ids],
                  key=paths.overlay_plot("inputs", name))
         for name in s.input_names
     ]
+    w_rows: list[Any] = []
     for i in [f for f in focus if f in s.variability]:
+        row = []
         for name in s.input_names:
             p = paths.series_path(i, "variability", name)
             fit = s.fit_titles.get(p)
             where = " (in-sample)" if i in s.in_sample else ""
-            # what and the fit first, the trial last: a long title is cut at its end; the key view explains the
-            # colors and the nominal shares (no legend); the verdict's words are the report's (band_verdict)
-            input_views.append(_plot(f"ŵ {name} " + (f"{fit} · " if fit else "· ") + i + where,
-                                     [query(p, recursive=True)], legend=rrb.PlotLegend(visible=False),
-                                     y_range=s.ranges.get(p), window=s.trial_windows.get(i)))
-    tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
+            # the trial first (a long title is cut at its end, and the trial says which row this is), then the
+            # input and the band's verdict (the report's words, band_verdict); the key view explains the colors
+            # and the nominal shares (no legend)
+            row.append(_plot(f"{i}{where} · ŵ {name}" + (f" · {fit}" if fit else ""),
+                             [query(p, recursive=True)], legend=rrb.PlotLegend(visible=False),
+                             y_range=s.ranges.get(p), window=s.trial_windows.get(i)))
+        w_rows.append(rrb.Horizontal(*row))
+    if w_rows:
+        # a row per focus trial, its inputs side by side: plots twice as wide as in a grid of four, so a time axis
+        # of a few seconds gets more than its "+0s" label (seen with rrd-look)
+        # the inputs one above the other, three quarters of the width: side by side beside the key, a flight's
+        # 13 minutes got one time label ("+10m", seen with rrd-look)
+        top = rrb.Horizontal(rrb.Vertical(*input_views), *_key(s), column_shares=[3, 1]) if _key(s) else \
+            rrb.Vertical(*input_views)
+        tabs.append(rrb.Vertical(top, *w_rows, name="inputs & variability"))
+    else:
+        tabs.append(rrb.Grid(*input_views, *_key(s), name="inputs & variability"))
     for i in [f for f in focus if f in s.predictions]:
         # one tab per focus trial: six plots of one trial are tall enough for a y-tick every few pixels rows
         pred_views: list[Any] = []
@@ -266,8 +296,11 @@ def session_blueprint(session: LoggedSession, *, extra_tabs: Sequence[Any] = (),
         where = " (in-sample)" if i in s.in_sample else ""
         grid = rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1)
         if label_doc in s.entities:  # the label's held-out numbers under its plots, a few lines tall
+            # the table sized to its rows (a title, a header and a row per method, ~24 px each, of ~900 px)
+            doc = 24.0 * (len(s.methods) + 5)
             tabs.append(rrb.Vertical(grid, rrb.TextDocumentView(origin=paths.origin(label_doc),
-                                                                name="held-out prediction error"), row_shares=[5, 1],
+                                                                name="held-out prediction error"),
+                                     row_shares=[max(900.0 - doc, 300.0), doc],
                                      name=f"predictions · {i}{where}"))
         else:
             tabs.append(rrb.Grid(*pred_views, grid_columns=len(s.state_names) // 2 or 1,

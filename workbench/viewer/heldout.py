@@ -16,7 +16,7 @@ from workbench.study.pipeline import StudyResult
 from workbench.viewer.entities import SCORES, label_scores_path
 from workbench.viewer.entities import model_for as _model_for
 
-__all__ = ["SCORE_STRIDE_S", "heldout_table", "log_scores", "score_units", "scores_of", "study_note"]
+__all__ = ["SCORE_STRIDE_S", "heldout_table", "log_scores", "score_units", "scores_of", "study_note", "study_notes"]
 
 
 def scores_of(table: Any) -> Any:
@@ -91,24 +91,33 @@ def heldout_table(demos: DemonstrationSet, models: Any, baselines: Mapping[str, 
 
 
 
-def study_note(result: StudyResult) -> str:
-    """Where a study's held-out scores come from: its test trials, the horizon, the windows."""
-    n = sum(len(te) for te in result.test.values())
+def study_note(result: StudyResult, label: str | None = None) -> str:
+    """Where a study's held-out scores come from: its test trials (of ``label`` only, where given), the horizon,
+    the windows."""
+    n = sum(len(te) for lb, te in result.test.items() if label is None or str(lb) == str(label))
     stride = ("each trial's first state" if result.stride_steps is None
               else f"windows every {result.stride_steps * result.demos.dt:g} s")
     split = "leave-one-segment-out" if result.plants else "trials the models were not fitted on"
-    return f"{n} test trial(s), {split}; {result.n_steps * result.demos.dt:g} s horizon, {stride}"
+    return f"{n} test trial{'s' if n != 1 else ''}, {split}; {result.n_steps * result.demos.dt:g} s horizon, {stride}"
 
 
-def log_scores(logger: Any, scores: Any, note: str, units: Mapping[str, str] | None = None) -> None:
+def study_notes(result: StudyResult) -> dict[str, str]:
+    """:func:`study_note` of the whole study (key ``""``) and of each label: a label's table counts its own trials."""
+    return {"": study_note(result), **{str(lb): study_note(result, lb) for lb in result.test}}
+
+
+def log_scores(logger: Any, scores: Any, note: str | Mapping[str, str],
+               units: Mapping[str, str] | None = None) -> None:
     """The held-out scores (:func:`workbench.study.scores.heldout_scores` rows) as a text under ``scores``
     (every label) and ``label_scores/<label>`` (one label, for its prediction tabs); ``note`` says where they come
-    from, or why there are none."""
+    from, or why there are none: one sentence, or one per label (:func:`study_notes`, key ``""`` the whole)."""
     import rerun as rr
 
     from workbench.study.input_prediction import input_lines
     from workbench.study.scores import score_lines
 
+    notes = {"": note} if isinstance(note, str) else dict(note)
+    note = notes[""]
     s = logger.session
     s.scores, s.score_note = scores, note
     labels = [] if scores is None else list(dict.fromkeys(scores["label"]))
@@ -123,6 +132,6 @@ def log_scores(logger: Any, scores: Any, note: str, units: Mapping[str, str] | N
         lines += ["", *head, *part]
         logger._static(label_scores_path(label), rr.TextDocument(
             "\n".join([f"**held-out prediction error, {label}** (mean of trials [95 % interval]; MC band "
-                       f"nominal 90 %) — {note}", "", *part]),
+                       f"nominal 90 %) — {notes.get(str(label), note)}", "", *part]),
             media_type=rr.MediaType.MARKDOWN))
     logger._static(SCORES, rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))

@@ -19,7 +19,7 @@ Timelines: ``link_time`` (the vehicle's clock, continuous: what the time panel f
 the segment's first step, as the replay) and ``step``. Every event and status is on ``link_time`` — stamped with
 the vehicle's latest time (0 before the first step), so a silent link still has a timeline and its tabs say why
 they are empty. Bands share the session's and the replay's neutral tint (:data:`workbench.viewer.style.BAND_COLOR`),
-the predicted mean its own green line (``…/online/<input>/mean``).
+the predicted mean its own line in the proposed model's colour (``…/online/<input>/mean``).
 """
 
 from __future__ import annotations
@@ -44,10 +44,10 @@ from workbench.viewer.session import UI
 __all__ = ["LIVE_APPLICATION_ID", "LiveLogger", "link_state", "live_blueprint"]
 
 LIVE_APPLICATION_ID = "workbench_live"
-_RECORDED = (200, 200, 200)
+_RECORDED = style.RECORDED_COLOR
 _PRED = METHOD_COLORS["proposed"]
 _BAND = style.BAND_COLOR
-_W = style.W_COLOR
+_W = style.PALETTE[0]  # ŵ in its segment's colour (a live flight has no strategy): the first segment colour
 _OUT = style.OUTLIER_COLOR
 _RECENT = 3
 
@@ -388,9 +388,11 @@ def live_blueprint(demo_ids: Sequence[str], state_names: Sequence[str], input_na
     linked = rrb.TimeAxis(link=LinkAxis.LinkToGlobal)
     quiet = rrb.PlotLegend(visible=False)  # the key is in each title: no legend over the data
     inputs = online_plots(ids, input_names, "inputs",
-                          [f"{n}: operator gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×"
-                           for n in input_names])
-    states = online_plots(ids, state_names, "states", [f"{n}: recorded gray, rollout end green" for n in state_names])
+                          [f"{n} · operator {style.color_name(_RECORDED)} · K̂x+μ {style.color_name(_PRED)} "
+                           f"· {style.color_name(_OUT)} × outside 3σ" for n in input_names])
+    states = online_plots(ids, state_names, "states",
+                          [f"{n}: recorded {style.color_name(_RECORDED)}, rollout end {style.color_name(_PRED)}"
+                           for n in state_names])
     variability = [
         rrb.TimeSeriesView(origin="/", contents=[query(series_path(i, "variability", n), True) for i in ids],
                            name=f"ŵ {n} blue, GMR μ ± 1σ/3σ band", axis_x=linked, plot_legend=quiet)

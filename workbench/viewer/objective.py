@@ -127,7 +127,7 @@ def model_summary(name: str, model: Any, state_names: Sequence[str], input_names
                         ("n_samples_", "training samples"), ("labels_", "labels"), ("noise_rho_", "noise lag-1 ρ")):
         value = getattr(model, attr, None)
         if value is not None:
-            diag.append(f"- {title}: {np.array2string(value, precision=3) if isinstance(value, np.ndarray) else value}")
+            diag.append(f"- {title}: {_words(value)}")
     tp = getattr(getattr(model, "variability_", None), "tpgmm_", None)
     if tp is not None:
         for attr, title in (("n_iter_", "EM iterations"), ("converged_", "EM converged"),
@@ -139,3 +139,53 @@ def model_summary(name: str, model: Any, state_names: Sequence[str], input_names
         lines += ["## Fit", "", *diag, ""]
     return "\n".join(lines)
 
+
+def _words(value: object) -> str:
+    """A value as a person writes it: ``start, goal`` (not ``('start', 'goal')``), ``none`` (not ``[]``), numbers at
+    3 significant digits."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return ", ".join(_words(v) for v in value) or "none"
+    if isinstance(value, float):
+        return f"{value:.3g}"
+    return str(value)
+
+
+def log_heatmap(static: Any, path: str, h: Heatmap, vmax: float) -> None:
+    """One block as a heatmap through ``static(path, archetype)``: cell (i, j) covers [j, j+1] × [i, i+1] of the
+    2-D view; values centred in the cells at the block's precision in a color that contrasts with the cell, names
+    outside, a color bar to the right."""
+    import rerun as rr
+
+    UI = rr.components.Radius.ui_points  # noqa: N806 - widths in screen points, as the session's
+    rows, cols = h.values.shape
+    static(f"{path}/cells", rr.Image(colors(h.values, vmax), magnification_filter="Nearest", draw_order=0.0))
+    ii, jj = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+    centres = np.column_stack([jj.ravel() + 0.5, ii.ravel() + 0.5])
+    texts = [value_text(v, vmax) for v in h.values.ravel()]
+    # a value only where it is not 0 at the block's precision: rerun draws every label on a gray box, and
+    # thirty "0" boxes hid the colours they label (seen with rrd-look); a white cell reads as 0
+    shown = np.array([t != "0" for t in texts], dtype=bool)
+    static(f"{path}/values", rr.Points2D(centres[shown], radii=UI(0.1),
+                                               colors=text_colors(h.values, vmax)[shown],
+                                               labels=[t for t, k in zip(texts, shown, strict=True) if k],
+                                               show_labels=True, draw_order=5.0))
+    row_pts = np.column_stack([np.full(rows, -0.7), np.arange(rows) + 0.5])
+    # the column names above the block, clear of its first row (at -0.3 their boxes sat on it)
+    col_pts = np.column_stack([np.arange(cols) + 0.5, np.full(cols, -0.65)])
+    static(f"{path}/rows", rr.Points2D(row_pts, radii=UI(0.1), colors=[(230, 230, 230)],
+                                             labels=list(h.rows), show_labels=True, draw_order=5.0))
+    static(f"{path}/cols", rr.Points2D(col_pts, radii=UI(0.1), colors=[(230, 230, 230)],
+                                             labels=list(h.cols), show_labels=True, draw_order=5.0))
+    # the color bar: +vmax at the top, −vmax at the bottom, as tall as the block, a third of a cell wide
+    steps = np.linspace(vmax, -vmax, 21)[:, None]
+    x0, height = cols + 0.35, float(max(rows, 1))
+    static(f"{path}/colorbar", rr.Transform3D(translation=[x0, 0.0, 0.0],
+                                                    scale=[0.35, height / len(steps), 1.0]))
+    static(f"{path}/colorbar/image", rr.Image(colors(steps, vmax), magnification_filter="Nearest",
+                                                    draw_order=0.0))
+    ticks = np.array([[x0 + 0.9, 0.15], [x0 + 0.9, height / 2], [x0 + 0.9, height - 0.15]])
+    static(f"{path}/colorbar_ticks", rr.Points2D(
+        ticks, radii=UI(0.1), colors=[(230, 230, 230)], show_labels=True, draw_order=5.0,
+        labels=[f"+{vmax:.2g}", "0", f"−{vmax:.2g}"]))

@@ -31,6 +31,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from adapters.rawlog import RawLog
+from workbench import palette
 from workbench.viewer import style
 from workbench.viewer.blueprint import time_axis
 from workbench.viewer.columns import send_columns
@@ -41,16 +42,14 @@ __all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_pilot", "lo
 
 RAW_APPLICATION_ID = "workbench_log_raw"
 #: the segment lane's states: what a mapping kept, and why a piece was dropped
-SEGMENT_STATES = {
-    "kept": (44, 160, 44), "disarmed": (150, 150, 150), "too short": (255, 127, 14), "gap": (214, 39, 40),
-    "missing channel": (148, 103, 189), "not mapped": (60, 60, 60),
-}  # fmt: skip
+SEGMENT_STATES = {k: palette.LANE_STATES[k] for k in ("kept", "disarmed", "too short", "gap", "missing channel",
+                                                          "not mapped")}
 # clock and time-stamp fields (time_boot_ms, timestamp_sample, armed_time_ms, TimeUS, stamp.sec, …): hidden by
 # default, since their ramp flattens every other line of a stream's plot
 _CLOCKISH = re.compile(r"time|stamp", re.IGNORECASE)
 MAX_ZOOM = 24.0  # the deepest map zoom map_zoom gives
 GAP_S = 1.0  # s: a stream silent for longer is drawn with a break (see with_breaks)
-_ARMED = {"armed": (214, 39, 40), "disarmed": (200, 200, 200)}
+_ARMED = {k: palette.LANE_STATES[k] for k in ("armed", "disarmed")}
 
 
 @dataclass
@@ -176,8 +175,15 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
                                                          style.data_range(shown, margin=0.0))
     if raw.modes:
         colors = style.mode_colors(list(dict.fromkeys(m.mode for m in raw.modes)))
+        # a short span is labelled by its abbreviation (same colour), by one rule, instead of cut by the viewer
+        # …short against the window the lane shows: the log's bulk, not its stray first and last messages
+        a, b = bulk_span(out) if out.streams else out.span
+        lane = max(b - a, 1e-9)
+        names = [style.abbreviate_mode(m.mode) if (m.end - m.start) < style.SHORT_SPAN * lane else m.mode
+                 for m in raw.modes]
+        colors.update({style.abbreviate_mode(m): c for m, c in list(colors.items())})
         out.modes = _lane(rec, f"{prefix}/mode", raw, origin, [m.start for m in raw.modes],
-                          [m.end for m in raw.modes], [m.mode for m in raw.modes], colors)
+                          [m.end for m in raw.modes], names, colors)
     if raw.armed_known:
         # disarmed from the log's start: the lane says so rather than staying blank until the first arming
         starts = [raw.t_start, *(a for a, _ in raw.armed)] if raw.armed else [raw.t_start]
@@ -192,25 +198,45 @@ def log_raw(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", origin
         dropped = [s for s in segments if s[2] != "kept"]
         if dropped:
             send_columns(rec, f"{prefix}/segments/why", _index(raw, np.array([s[0] for s in dropped]), origin),
-                         rr.TextLog.columns(text=[f"dropped {s[1] - s[0]:.1f} s: {s[3]}" for s in dropped],
+                         rr.TextLog.columns(text=[f"{_clock(s[0] - origin)}  dropped {s[1] - s[0]:.1f} s: {s[3]}"
+                                                  for s in dropped],
                                             level=["WARN"] * len(dropped)))
     if len(raw.text):
+        # the time in the text: the viewer's time column is as wide as its first rows' "+0s" and cut every later
+        # stamp to "+1…" (seen with rrd-look); the view hides that column and the entity path (raw_views)
         out.messages = send_columns(rec, f"{prefix}/messages", _index(raw, raw.text.t, origin),
-                                    rr.TextLog.columns(text=[f"{src}: {x}" for src, x in
-                                                             zip(raw.text.sources, raw.text.texts, strict=True)],
+                                    rr.TextLog.columns(text=[f"{_clock(t - origin)}  {src}: {x}" for t, src, x in
+                                                             zip(raw.text.t, raw.text.sources, raw.text.texts,
+                                                                 strict=True)],
                                                        level=list(raw.text.levels)))
     if raw.track is not None:
         tr = raw.track
         latlon = np.column_stack([tr.lat, tr.lon])
         rec.log(f"{prefix}/gps/track", rr.GeoLineStrings(lat_lon=[latlon], radii=rr.Radius.ui_points(2.0),
-                                                         colors=[(31, 119, 180)]), static=True)
+                                                         colors=[palette.STRATEGY_COLORS[0]]), static=True)
         rec.log(f"{prefix}/gps/vehicle", rr.GeoPoints.from_fields(radii=rr.Radius.ui_points(6.0),
-                                                                  colors=[(214, 39, 40)]), static=True)
+                                                                  colors=[style.RECORDED_COLOR]), static=True)
         out.gps = send_columns(rec, f"{prefix}/gps/vehicle", _index(raw, tr.t, origin),
                                rr.GeoPoints.columns(positions=latlon))
         out.zoom = map_zoom(raw)
     out.pilot = log_pilot(rec, raw, prefix=prefix, origin=origin)
     return out
+
+
+def _clock(seconds: float) -> str:
+    """``"+1:02.5"`` (minutes:seconds), ``"+12.5 s"`` under a minute, ``"−3.0 s"`` before the origin."""
+    sign = "−" if seconds < 0 else "+"
+    a = abs(seconds)
+    return f"{sign}{a:.1f} s" if a < 60 else f"{sign}{int(a // 60)}:{a % 60:04.1f}"
+
+
+#: A message view's columns: its level and its text (which starts with its time); the entity path and the time
+#: columns hidden (the time column was cut to "+1…")
+_MESSAGE_COLUMNS = rrb.archetypes.TextLogColumns(
+    timeline_columns=[rrb.encodings.TimelineColumn("time", visible=False),
+                      rrb.encodings.TimelineColumn("log_clock", visible=False)],
+    text_log_columns=[rrb.encodings.TextLogColumn("LogLevel"), rrb.encodings.TextLogColumn("Body"),
+                      rrb.encodings.TextLogColumn("EntityPath", visible=False)])
 
 
 def _whole_log(span: tuple[float, float]) -> rrb.TimeAxis:
@@ -256,7 +282,8 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
                                           + (" · segments" if s.segments else ""), time_view=_whole_log(bulk_span(s)))
     messages = None
     if s.messages or s.segments:
-        messages = rrb.TextLogView(origin=p, contents=[f"+ {p}/messages", f"+ {p}/segments/why"], name="messages")
+        messages = rrb.TextLogView(origin=p, contents=[f"+ {p}/messages", f"+ {p}/segments/why"], name="messages",
+                                   columns=_MESSAGE_COLUMNS)
     plots = [rrb.TimeSeriesView(origin=f"{p}/streams/{entity_part(n)}", name=n,
                                 plot_legend=rrb.PlotLegend(s.corners.get(n, "LeftTop"), visible=True),
                                 axis_x=_whole_log(s.spans.get(n, s.span)))  # the stream's own span
@@ -268,7 +295,7 @@ def raw_views(s: LoggedRaw) -> list[rrb.Container | rrb.View]:
         if lane_view is not None:
             # about 40 px a lane under its header: a third lane (segments) was cut at 1/6 of the height
             main = rrb.Vertical(main, lane_view, row_shares=[5, 1] if len(lanes) <= 2 else [3.5, 1])
-        tabs.append(rrb.Horizontal(main, messages, column_shares=[5, 2], name="raw streams") if messages
+        tabs.append(rrb.Horizontal(main, messages, column_shares=[3, 2], name="raw streams") if messages
                     else rrb.Vertical(main, name="raw streams"))
     elif lane_view is not None or messages is not None:
         tabs.append(rrb.Vertical(*(v for v in (lane_view, messages) if v is not None), name="raw streams"))
@@ -346,7 +373,7 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
     """
     origin = raw.t_start if origin is None else float(origin)
     by_name = {s.name: s for s in raw.streams}
-    found: dict[str, Any] = {"angles": [], "sticks": False, "span": None, "prefix": prefix}
+    found: dict[str, Any] = {"angles": [], "sticks": False, "span": None, "prefix": prefix, "ranges": {}}
     spans = []
     for (name, fields, unit), setpoint in ATTITUDE_SOURCES:
         s = by_name.get(name)
@@ -365,12 +392,18 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
         sp = by_name.get(setpoint[0]) if setpoint else None
         for k, angle in enumerate(("roll", "pitch", "yaw")):
             path = f"{prefix}/pilot/{angle}"
-            rec.log(f"{path}/actual", rr.SeriesLines(names=[f"{angle} [°]"], colors=[(230, 230, 230)],
+            rec.log(f"{path}/actual", rr.SeriesLines(names=[f"{angle} [°]"], colors=[style.RECORDED_COLOR],
                                                      widths=[1.2]), static=True)
             t_sent, v_sent = with_breaks(s.t, angles[:, k])
             send_columns(rec, f"{path}/actual", _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent))
+            # the plot's range from the data (the setpoint's too), wide enough for three labelled ticks: a .bin's
+            # roll got one, "0"; a ULog's pitch setpoint ran off the plot
+            in_range = [angles[:, k]]
             if sp is not None and setpoint is not None and (col := _field(sp, setpoint[1][k])) is not None:
-                rec.log(f"{path}/setpoint", rr.SeriesLines(names=[f"{angle} setpoint [°]"], colors=[(255, 127, 14)],
+                in_range.append(_to_deg(col, setpoint[2]))
+            found["ranges"][angle] = style.data_range(*in_range, min_span=style.min_span("deg"))
+            if sp is not None and setpoint is not None and (col := _field(sp, setpoint[1][k])) is not None:
+                rec.log(f"{path}/setpoint", rr.SeriesLines(names=[f"{angle} setpoint [°]"], colors=[palette.SETPOINT],
                                                            widths=[1.2]), static=True)
                 t_sp, v_sp = with_breaks(sp.t, _to_deg(col, setpoint[2]))
                 send_columns(rec, f"{path}/setpoint", _index(raw, t_sp, origin), rr.Scalars.columns(scalars=v_sp))
@@ -397,7 +430,7 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
                     units.add(_pwm(s.units[s.fields.index(pattern.format(n=n))]))
             if sticks:
                 break
-    colors = {"roll": (31, 119, 180), "pitch": (44, 160, 44), "throttle": (214, 39, 40), "yaw": (148, 103, 189)}
+    colors = palette.STICK_COLORS
     for stick, (t, v) in sticks.items():
         path = f"{prefix}/pilot/sticks/{stick}"
         rec.log(path, rr.SeriesLines(names=[stick], colors=[colors[stick]], widths=[1.0]), static=True)
@@ -405,6 +438,8 @@ def log_pilot(rec: rr.RecordingStream, raw: RawLog, *, prefix: str = "log", orig
         send_columns(rec, path, _index(raw, t_sent, origin), rr.Scalars.columns(scalars=v_sent))
         spans.append((float(t[0]), float(t[-1])))
     found["sticks"] = bool(sticks)
+    if sticks:  # the range from the sticks' values, wide enough for three labelled ticks (a ULog's showed 0 and 1)
+        found["ranges"]["sticks"] = style.data_range(*(v for _, v in sticks.values()))
     found["stick_unit"] = units.pop() if len(units) == 1 else ""  # the format's unit (FMTU, MAVLink's units)
     if spans:
         found["span"] = (min(a for a, _ in spans) - origin, max(b for _, b in spans) - origin)
@@ -437,21 +472,37 @@ def pilot_views(found: dict, logged: LoggedRaw, zoom: float) -> list[Any]:
     """The first tab of a raw log: one plot per angle (degrees, its setpoint beside it), the sticks, the map."""
     p = f"/{found['prefix']}/pilot"
     window = found["span"] or bulk_span(logged)
-    plots = [rrb.TimeSeriesView(origin=f"{p}/{a}", name=f"{a} [°] (setpoint orange)", axis_x=_whole_log(window),
+    ranges = found.get("ranges", {})
+    plots = [rrb.TimeSeriesView(origin=f"{p}/{a}", name=f"{a} [°] (setpoint light orange)", axis_x=_whole_log(window),
+                                axis_y=rrb.ScalarAxis(range=list(ranges[a])) if a in ranges else None,
                                 plot_legend=rrb.PlotLegend(visible=False)) for a in found["angles"]]
     if found["sticks"]:
         unit = found.get("stick_unit", "")
         plots.append(rrb.TimeSeriesView(origin=f"{p}/sticks", name="sticks: roll, pitch, throttle, yaw"
                                         + (f" [{unit}]" if unit and unit != "normalized" else
                                            " (normalized)" if unit else ""),
-                                        axis_x=_whole_log(window), plot_legend=rrb.PlotLegend("LeftTop")))
+                                        axis_x=_whole_log(window), plot_legend=rrb.PlotLegend("LeftTop"),
+                                        axis_y=rrb.ScalarAxis(range=list(ranges["sticks"])) if "sticks" in ranges
+                                        else None))
+    lane = None
     if logged.modes:
-        plots.append(rrb.StateTimelineView(origin="/", contents=[f"+ /{found['prefix']}/mode"], name="flight mode",
-                                           time_view=_whole_log(window)))
-    if not plots:
+        lane = rrb.StateTimelineView(origin="/", contents=[f"+ /{found['prefix']}/mode"], name="flight mode",
+                                     time_view=_whole_log(window))
+    if not plots and lane is None:
         return []
-    column = rrb.Vertical(*plots)
+    # the angles in a column of their own, each tall enough for three labelled ticks (five plots in one column
+    # were ~120 px each: roll had the labels 0 and −100 only, seen with rrd-look); the sticks, the mode lane (a
+    # lane's height, not a fifth of the screen) and the track beside them
+    angles, sticks = plots[:len(found["angles"])], plots[len(found["angles"]):]
+    right: list[Any] = [*sticks]
+    shares: list[float] = [3.0] * len(sticks)
+    if lane is not None:
+        right.append(lane)
+        shares.append(1.0)
     if logged.gps:
-        return [rrb.Horizontal(column, rrb.MapView(origin=f"/{found['prefix']}/gps", name="track", zoom=zoom),
-                               column_shares=[3, 2], name="pilot")]
-    return [rrb.Vertical(*plots, name="pilot")]
+        right.append(rrb.MapView(origin=f"/{found['prefix']}/gps", name="track", zoom=zoom))
+        shares.append(3.0)
+    columns = [rrb.Vertical(*angles)] if angles else []
+    if right:
+        columns.append(rrb.Vertical(*right, row_shares=shares))
+    return [rrb.Horizontal(*columns, column_shares=[3, 2][:len(columns)], name="pilot")]

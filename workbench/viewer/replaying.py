@@ -192,7 +192,7 @@ def _log_styles(rec, demo, series: tuple[list[str], ...], sbase, state_names, pl
         label = "K̂x + μ(x)"
         rec.log(f"{p}/mean", rr.SeriesLines(names=[label], colors=[_COLOR_PRED], widths=[1.5],
                                             interpolation_mode="StepAfter"), static=True)
-        if HAS_MEASUREMENTS:  # fills only, in the neutral band tint: the mean is the green line above
+        if HAS_MEASUREMENTS:  # fills only, in the neutral band tint: the mean is the proposed model's line above
             rec.log(f"{p}/gmr", rr.Measurements.from_fields(names=[f"{label} ± 1σ", f"{label} ± 3σ"],
                                                             colors=[_COLOR_BAND, _COLOR_BAND], widths=[0.0, 0.0],
                                                             interpolation_mode="StepAfter"), static=True)
@@ -250,11 +250,15 @@ def replay_blueprint(
     ids = [entity_part(i) for i in demo_ids]
     inputs = online_plots(
         ids, input_names, "inputs",
-        [f"{unit(n)}: recorded gray, online K̂x + μ(x) green ± 1σ/3σ band, outside 3σ red ×" for n in input_names],
+        # short: a title longer than its plot is cut ("outside 3σ m…", seen with rrd-look)
+        [f"{unit(n)} · recorded {style.color_name(_COLOR_REC)} · K̂x+μ {style.color_name(_COLOR_PRED)} "
+         f"· {style.color_name(_COLOR_OUT)} × outside 3σ" for n in input_names],
         [y_range([d.u[:, j] for d in shown], n) for j, n in enumerate(input_names)],
     )
     states = online_plots(
-        ids, state_names, "states", [f"{unit(n)}: recorded gray, rollout end green" for n in state_names],
+        ids, state_names, "states",
+        [f"{unit(n)}: recorded {style.color_name(_COLOR_REC)}, rollout end {style.color_name(_COLOR_PRED)}"
+         for n in state_names],
         [y_range([d.x[:, j] for d in shown], n) for j, n in enumerate(state_names)],
     )
     plane = plane_of(roles, state_names)
@@ -265,7 +269,7 @@ def replay_blueprint(
             x_range, y_range = plane.bounds([*(plane.view(d.x) for d in demos), *targets])
             bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
         title = (f"plane of flight: {unit(state_names[plane.across])} → / {unit(state_names[plane.up])} ↑ — "
-                 "online rollout green")
+                 f"online rollout {style.color_name(_COLOR_PRED)}")
         live = rrb.Horizontal(rrb.Spatial2DView(origin="/scene", name=title, visual_bounds=bounds),
                               rrb.Vertical(*inputs), column_shares=[3, 2], name="replay")
     else:

@@ -17,6 +17,7 @@ import rerun.blueprint as rrb
 
 from workbench.atomic import atomic_path
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.plant_groups import by_plant_group, describe_groups, plant_groups
 from workbench.errors import DataError
 from workbench.study.pipeline import StudyResult
 from workbench.viewer import entities as paths
@@ -26,12 +27,9 @@ from workbench.viewer.entities import LoggedSession
 from workbench.viewer.entities import model_for as _model_for
 from workbench.viewer.objective import (
     Heatmap,
-    colors,
     heatmaps,
     model_summary,
     shared_scales,
-    text_colors,
-    value_text,
 )
 from workbench.viewer.output import has_display, open_output
 from workbench.viewer.scene import Plane, envelope, label_spots, plane_of, scale_bar
@@ -149,7 +147,7 @@ class SessionLogger:
     """
 
     def __init__(self, rec: rr.RecordingStream, demos: DemonstrationSet, *, clock: str = "trial",
-                 origins: Mapping[str, float] | None = None) -> None:
+                 origins: Mapping[str, float] | None = None, color_by: str = "label") -> None:
         self.rec = rec
         self.demos = demos
         s = self.session = LoggedSession(tuple(demos.state_names), tuple(demos.input_names))
@@ -161,10 +159,21 @@ class SessionLogger:
             s.plane_names = (s.state_names[self.plane.across], s.state_names[self.plane.up])
         s.units = {n: roles.unit(n) for n in (*s.state_names, *s.input_names)} if roles else {}
         ids = [d.id for d in demos]
-        self.colors = style.trial_colors(ids, [d.label for d in demos], s.labels)
+        self.color_by = color_by
+        if color_by != "label":
+            # subjects, sessions (any meta key) laid over each other on the trials' clock, one colour each
+            groups = [None if d.meta.get(color_by) is None else str(d.meta.get(color_by)) for d in demos]
+            known = list(dict.fromkeys(g for g in groups if g is not None))
+            if not known:
+                raise DataError(f"no trial records {color_by!r}; --color-by takes a key every trial's metadata has "
+                                "(subject, session, label, …)")
+            self.colors = style.trial_colors(ids, groups, known)
+            s.label_colors = {g: style.label_color(g, known) for g in known}
+        else:
+            self.colors = style.trial_colors(ids, [d.label for d in demos], s.labels)
+            if s.labels:
+                s.label_colors = {d.label: self.colors[d.id] for d in demos if d.label}
         s.colors = dict(self.colors)
-        if s.labels:
-            s.label_colors = {d.label: self.colors[d.id] for d in demos if d.label}
         self.offsets = {d.id: _log_time(d, origins) if s.clock == "log" else 0.0 for d in demos}
         self._extent: dict[str, list[float]] = {}
         self.label_ids: set[str] | None = None  # the start labels that do not collide (set by log_scene)
@@ -381,6 +390,8 @@ class SessionLogger:
         Returns the logged arrays (``w``, ``mu``, ``sigma``, ``outside``) for the caller's summary.
         """
         s = self.session
+        if not model.has_residuals and not model.has_gain:
+            return {}  # a model of the inputs alone (GMR-only) has no ŵ = u − K̂x to draw
         w = model.residuals(demo) if model.has_residuals else demo.u - demo.x @ np.asarray(model.K_).T
         out: dict[str, np.ndarray] = {"w": w}
         if model.has_variability:
@@ -392,7 +403,7 @@ class SessionLogger:
         index = _time_index(t)  # one pair of time columns serves every series of the trial
         for j, name in enumerate(s.input_names):
             p = paths.series_path(demo.id, "variability", name)
-            self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[style.W_COLOR], widths=[1.75],
+            self._style(f"{p}/w", rr.SeriesLines(names=["ŵ"], colors=[self.colors[demo.id]], widths=[1.75],
                                                  interpolation_mode="StepAfter"))
             self._send(f"{p}/w", index, rr.Scalars.columns(scalars=w[:, j]))
             if not model.has_variability:
@@ -441,8 +452,8 @@ class SessionLogger:
 
         Time series under ``demos/<id>/predictions/from_<start>/<method>/<state>``, predicted paths as line
         strips under ``scene/predictions/<id>/from_<start>/<method>``; the proposed model's Monte Carlo
-        percentile band (``samples > 0``) under ``…/<method>_band/<state>`` (a filled band in the method's light
-        color) and as a sweep of boxes in the scene. Returns the predictions by method.
+        percentile band (``samples > 0``) under ``…/<method>_band/<state>`` (a filled band in the one band gray) and
+        as a sweep of boxes in the scene (a dark tint of the same gray). Returns the predictions by method.
         """
         s = self.session
         if not 0 <= start < len(demo):
@@ -504,7 +515,8 @@ class SessionLogger:
                 points.setdefault(name, []).extend([(tp, lo[:, j]), (tp, hi[:, j])])
             if self.plane is not None:
                 self._static(paths.scene_prediction_path(demo.id, start, method, band=True), envelope(
-                    self.plane.view(lo), self.plane.view(hi), style.dimmed(color, 0.55), f"{title} MC {level}"))
+                    self.plane.view(lo), self.plane.view(hi), style.dimmed(style.BAND_COLOR, 0.55),
+                    f"{title} MC {level}"))
         # the prediction plots are zoomed to the predictions; their y-range is set by what is visible there
         lo_t, hi_t = s.windows.get(demo.id, (t0, t_end))
         s.windows[demo.id] = (min(lo_t, t0), max(hi_t, t_end))
@@ -555,9 +567,12 @@ class SessionLogger:
         """The tab's key as a small text (``key``): what each trial color, method color and band means."""
         s = self.session
         by_color: dict[tuple[int, int, int], list[str]] = {}
+        by = self.color_by
         for d in self.demos:
-            by_color.setdefault(self.colors[d.id], []).append(d.label if s.labels and d.label else d.id)
-        what = "strategy" if s.labels else "segment" if s.clock == "log" else "trial"
+            name = (str(d.meta.get(by)) if by != "label" and d.meta.get(by) is not None
+                    else d.label if s.labels and d.label else d.id)
+            by_color.setdefault(self.colors[d.id], []).append(name)
+        what = (by if by != "label" else "strategy" if s.labels else "segment" if s.clock == "log" else "trial")
         lines = [f"**{what} colors**", ""]
         shown = list(by_color.items())[:12]
         for color, names in shown:
@@ -565,10 +580,13 @@ class SessionLogger:
             lines.append(f"- {style.color_name(color)}: {', '.join(uniq[:3])}{' …' if len(uniq) > 3 else ''}")
         if len(by_color) > len(shown):
             lines.append(f"- … {len(by_color) - len(shown)} more")
+        if any(plant_groups(self.demos)):  # what the sticks command in the segments' modes: each group its own plant
+            lines += ["", "**plant groups** (each its own plant and model)", ""]
+            lines += [f"- {describe_groups(part)}" for part in by_plant_group(self.demos).values()]
         if s.variability:  # the bands and ŵ only where a model drew them: a key names what is on screen
             lines += ["", "gray band: GMR μ ± 1σ (darker) and ± 3σ" + ("; Monte Carlo band of a prediction"
                                                                       if s.bands else ""),
-                      "", "red ×: ŵ outside 3σ; blue: ŵ",
+                      "", f"{style.color_name(style.OUTLIER_COLOR)} ×: ŵ outside 3σ; ŵ in its trial's {what} color",
                       "", f"ŵ titles: share of the inputs inside 3σ and 1σ (nominal {100 * verdict.NOMINAL_3SIGMA:.1f}"
                       f" % and {100 * verdict.NOMINAL_1SIGMA:.0f} %), inputs at a limit left out, and the verdict "
                       "against the spread sampling allows: fits, too narrow, too wide, does not fit (as in the "
@@ -601,7 +619,7 @@ class SessionLogger:
             if not any("states are" in m or "inputs are" in m for m in v.mismatches):
                 for (trial, inp), words in verdict.trial_band_titles(model, mine).items():
                     s.fit_titles[paths.series_path(trial, "variability", inp)] = words
-            head = f"{name} {'fits these data' if v.fits else 'DOES NOT FIT these data'}"
+            head = f"{name}: {v.head()}"
             if v.all_in_sample:
                 head = f"{name} is shown on its own training trials (in-sample)"
             # no heading: the view above the summary is a few lines tall, its title already says fits / does not
@@ -626,32 +644,10 @@ class SessionLogger:
         log_scores(self, scores, note, units)
 
     def _log_heatmap(self, path: str, h: Heatmap, vmax: float) -> None:
-        """Cell (i, j) covers [j, j+1] × [i, i+1] of the 2-D view; values centred in the cells at the block's
-        precision in a color that contrasts with the cell, names outside, a color bar to the right."""
-        rows, cols = h.values.shape
-        self._static(f"{path}/cells", rr.Image(colors(h.values, vmax), magnification_filter="Nearest", draw_order=0.0))
-        ii, jj = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
-        centres = np.column_stack([jj.ravel() + 0.5, ii.ravel() + 0.5])
-        texts = [value_text(v, vmax) for v in h.values.ravel()]
-        self._static(f"{path}/values", rr.Points2D(centres, radii=UI(0.1), colors=text_colors(h.values, vmax),
-                                                   labels=texts, show_labels=True, draw_order=5.0))
-        row_pts = np.column_stack([np.full(rows, -0.7), np.arange(rows) + 0.5])
-        col_pts = np.column_stack([np.arange(cols) + 0.5, np.full(cols, -0.3)])
-        self._static(f"{path}/rows", rr.Points2D(row_pts, radii=UI(0.1), colors=[(230, 230, 230)],
-                                                 labels=list(h.rows), show_labels=True, draw_order=5.0))
-        self._static(f"{path}/cols", rr.Points2D(col_pts, radii=UI(0.1), colors=[(230, 230, 230)],
-                                                 labels=list(h.cols), show_labels=True, draw_order=5.0))
-        # the color bar: +vmax at the top, −vmax at the bottom, as tall as the block, a third of a cell wide
-        steps = np.linspace(vmax, -vmax, 21)[:, None]
-        x0, height = cols + 0.35, float(max(rows, 1))
-        self._static(f"{path}/colorbar", rr.Transform3D(translation=[x0, 0.0, 0.0],
-                                                        scale=[0.35, height / len(steps), 1.0]))
-        self._static(f"{path}/colorbar/image", rr.Image(colors(steps, vmax), magnification_filter="Nearest",
-                                                        draw_order=0.0))
-        ticks = np.array([[x0 + 0.9, 0.15], [x0 + 0.9, height / 2], [x0 + 0.9, height - 0.15]])
-        self._static(f"{path}/colorbar_ticks", rr.Points2D(
-            ticks, radii=UI(0.1), colors=[(230, 230, 230)], show_labels=True, draw_order=5.0,
-            labels=[f"+{vmax:.2g}", "0", f"−{vmax:.2g}"]))
+        """One block as a labelled heatmap (:func:`workbench.viewer.objective.log_heatmap`)."""
+        from workbench.viewer.objective import log_heatmap
+
+        log_heatmap(self._static, path, h, vmax)
 
 
 def _prediction_band(pred: Any) -> tuple[np.ndarray, np.ndarray, str] | None:
@@ -684,7 +680,8 @@ def log_session(
     clock: str = "auto",
     origins: Mapping[str, float] | None = None,
     source_dt: float | None = None,
-    scores: tuple[Any, str] | None = None,
+    scores: tuple[Any, str | Mapping[str, str]] | None = None,
+    color_by: str = "label",
 ) -> LoggedSession:
     """Log a whole session and return what was logged (for :func:`default_blueprint`).
 
@@ -710,8 +707,11 @@ def log_session(
         A study's comparison table (:func:`workbench.study.evaluate.compare` rows of its test trials) and where it
         comes from; by default the models are scored here on the trials they were not fitted on
         (:func:`heldout_table`), and the note says how many those are, or that there are none.
+    color_by : str
+        The trials' colours: one per strategy label (default), or per value of another metadata key — ``subject``
+        or ``session`` lays subjects or sessions over each other on the trials' clock.
     """
-    logger = SessionLogger(rec, demos, clock=clock, origins=origins)
+    logger = SessionLogger(rec, demos, clock=clock, origins=origins, color_by=color_by)
     by_id = {d.id: d for d in demos}
     if models is not None:
         if focus is None:
@@ -777,7 +777,7 @@ def record_study(
     result: StudyResult, path: str | os.PathLike, *, progress: Callable[[], Any] | None = None
 ) -> Path:
     """One ``.rrd`` with every trial, both models' variability on the test trials and every method's predictions."""
-    from workbench.viewer.heldout import study_note
+    from workbench.viewer.heldout import study_notes
 
     focus = [te[0].id for te in result.test.values() if len(te)]
     bar = progress() if progress is not None else nullcontext()
@@ -787,6 +787,6 @@ def record_study(
         out, _ = record_session(
             path, result.demos, application_id=APPLICATION_IDS["study"], models=result.models,
             baselines=result.baselines, focus=focus, n_steps=result.n_steps, samples=result.samples,
-            seed=result.seed, clock="trial", scores=(result.table, study_note(result)),
+            seed=result.seed, clock="trial", scores=(result.table, study_notes(result)),
         )
     return out

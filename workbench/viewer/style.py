@@ -1,14 +1,14 @@
 """Colors and display names of the viewer: one color per method, per strategy label or flight segment, per mode.
 
-The viewer's background is dark, so "recorded" is a light gray (the report, on white paper, draws it dark).
-Method colors agree with the report's (tab10).
+Every colour comes from :mod:`workbench.palette` (one meaning per colour, colour-blind safe), shared with the
+report. The viewer's background is dark, so "recorded" is a light gray (the report, on white paper, draws it black).
 
-Bands (Monte Carlo, GMR ±1σ/±3σ, online ±σ) share one neutral tint, :data:`BAND_COLOR`, in every recording:
-rerun 0.41 draws a time-series band's translucent fill after every line of its plot whatever the entity order
-(measured with ``rrd-look``: a green fill turned the IOC-only red (214, 39, 40) into (194, 83, 41)), so a
-colored fill would change the hue of every line under it; a neutral one only lightens them. Nested bands (±1σ
-inside ±3σ) read by the fill doubling. In the 2-D scene, where draw order is honored, the Monte Carlo envelope
-is an opaque dark tint of its method's color under every line (:data:`SCENE_ORDER`).
+Bands (Monte Carlo, GMR ±1σ/±3σ, online ±σ) share one neutral tint, :data:`BAND_COLOR`, in every recording and
+in the scene: rerun 0.41 draws a time-series band's translucent fill after every line of its plot whatever the
+entity order (measured with ``rrd-look``: a green fill turned the IOC-only red (214, 39, 40) into (194, 83, 41)),
+so a colored fill would change the hue of every line under it; a neutral one only lightens them. Nested bands (±1σ
+inside ±3σ) read by the fill doubling. In the 2-D scene, where draw order is honored, the Monte Carlo envelope is
+an opaque dark tint of the same gray under every line (:data:`SCENE_ORDER`).
 """
 
 from __future__ import annotations
@@ -18,13 +18,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from workbench import palette
 from workbench.models.registry import REGISTRY
 
 __all__ = [
     "METHOD_COLORS",
     "METHOD_TITLES",
     "RECORDED_COLOR",
-    "W_COLOR",
     "OUTLIER_COLOR",
     "NO_TRIAL_STATE",
     "NO_TRIAL_COLOR",
@@ -34,6 +34,8 @@ __all__ = [
     "dimmed",
     "min_span",
     "data_range",
+    "readable",
+    "abbreviate_mode",
     "quiet_corner",
     "label_color",
     "light",
@@ -45,19 +47,14 @@ __all__ = [
     "with_unit",
 ]
 
-# tab10, so the report's matplotlib figures and the viewer agree on colors
-PALETTE: tuple[tuple[int, int, int], ...] = (
-    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
-)
-RECORDED_COLOR = (225, 225, 225)
+PALETTE: tuple[tuple[int, int, int], ...] = palette.STRATEGY_COLORS  # strategies, segments, overlaid logs
+RECORDED_COLOR = palette.RECORDED_SCREEN
 # each method's colour and title are its registry entry's (workbench.models.registry), as in the report
 METHOD_COLORS: dict[str, tuple[int, int, int]] = {"recorded": RECORDED_COLOR, **{m.name: m.colour for m in REGISTRY}}
 METHOD_TITLES = {**{m.name: m.title for m in REGISTRY}, "recorded": "recorded"}
 # methods nobody named above get one of the colors no named method uses, the same one on every run
-_SPARE = ((227, 119, 194), (188, 189, 34), (23, 190, 207), (255, 127, 14), (31, 119, 180))
-W_COLOR = (110, 190, 255)  # ŵ: bright enough to read on top of its σ bands
-BAND_COLOR = (190, 190, 190)  # every band's fill, see the module docstring
+_SPARE = palette.SPARE_METHOD_COLORS
+BAND_COLOR = palette.BAND  # every band's fill, see the module docstring
 SIGMA1_COLOR = BAND_COLOR
 SIGMA3_COLOR = BAND_COLOR
 BACKGROUND = (18, 18, 18)  # the viewer's plot background, for dimmed and envelope tints
@@ -67,15 +64,15 @@ SCENE_ORDER = {"band": 1.0, "ground": 1.5, "pad": 2.0, "dimmed": 2.5, "track": 3
 # the smallest y-span a plot of a quantity in this unit shows: quantization noise (a stick moving by 3 PWM
 # counts, a roll of a milliradian) must not fill a plot and read as bang-bang input or oscillation
 MIN_SPAN = {"m": 1.0, "m/s": 0.5, "rad": 0.1, "rad/s": 0.2, "deg": 5.0, "deg/s": 10.0, "stick": 0.2, "": 0.0}
-COLOR_NAMES = {(31, 119, 180): "blue", (255, 127, 14): "orange", (44, 160, 44): "green", (214, 39, 40): "red",
-               (148, 103, 189): "purple", (140, 86, 75): "brown", (227, 119, 194): "pink", (127, 127, 127): "gray",
-               (188, 189, 34): "olive", (23, 190, 207): "cyan"}
-OUTLIER_COLOR = (255, 60, 60)
+COLOR_NAMES = {**{c: n for n, c in palette.OKABE_ITO.items()}, (153, 204, 102): "lime", (255, 170, 187): "pink",
+               (166, 118, 29): "brown", (170, 136, 204): "mauve", (238, 221, 136): "light yellow",
+               palette.RECORDED_SCREEN: "light gray", palette.BAND: "gray",
+               palette.OUTLIER: "magenta"}
+OUTLIER_COLOR = palette.OUTLIER
 # a mode lane's state where no trial is flown (between a flight's segments, after an overlaid trial's end)
 NO_TRIAL_STATE = "no trial"
-NO_TRIAL_COLOR = (55, 55, 55)
-_MODE_PALETTE = ((76, 175, 80), (66, 165, 245), (255, 167, 38), (171, 71, 188), (239, 83, 80), (38, 198, 218),
-                 (212, 225, 87), (141, 110, 99))
+NO_TRIAL_COLOR = palette.LANE_STATES["no trial"]
+_MODE_PALETTE = palette.MODE_COLORS
 
 
 def packed(*colors: Sequence[int]) -> np.ndarray:
@@ -103,9 +100,9 @@ def method_title(method: str) -> str:
 
 
 def label_color(label: str | None, labels: Sequence[str]) -> tuple[int, int, int]:
-    """A stable color per strategy label (the order of ``labels``), gray for an unlabeled trial."""
+    """A stable color per strategy label (the order of ``labels``), the recording's for an unlabeled trial."""
     if label is None or label not in labels:
-        return (127, 127, 127)
+        return RECORDED_COLOR
     return PALETTE[list(labels).index(label) % len(PALETTE)]
 
 
@@ -119,6 +116,23 @@ def trial_colors(ids: Sequence[str], labels: Sequence[str | None], known: Sequen
 def mode_colors(modes: Sequence[str]) -> dict[str, tuple[int, int, int]]:
     """One color per flight mode, in the order the modes are given."""
     return {m: _MODE_PALETTE[k % len(_MODE_PALETTE)] for k, m in enumerate(modes)}
+
+
+#: A mode span shorter than this share of its lane is labelled by its abbreviation (:func:`abbreviate_mode`):
+#: rerun cuts a state's name at its span's end ("STAI" for STABILIZE), which reads as another word
+SHORT_SPAN = 0.06
+
+
+def abbreviate_mode(name: str) -> str:
+    """A flight mode's short name, by one rule: names of up to five letters stay; a one-word name keeps its first
+    four letters (STABILIZE → STAB, LOITER → LOIT); a name of several words keeps the first word's first three
+    letters and each other word's first (ALT_HOLD → ALTH, AUTO_RTL → AUTR); the abbreviation ends with "." so it is
+    not read as a word of its own."""
+    words = [w for w in name.replace("-", "_").replace(" ", "_").split("_") if w]
+    if len(name) <= 5 or not words:
+        return name
+    short = words[0][:4] if len(words) == 1 else words[0][:3] + "".join(w[0] for w in words[1:])
+    return short + "."
 
 
 def dimmed(color: Sequence[int], amount: float = 0.6) -> tuple[int, int, int]:
@@ -159,7 +173,38 @@ def data_range(*arrays: object, margin: float = 0.08, min_span: float = 0.0) -> 
     if hi - lo < min_span:
         mid = (lo + hi) / 2
         lo, hi = mid - min_span / 2, mid + min_span / 2
-    return float(lo), float(hi)
+    return readable(float(lo), float(hi))
+
+
+#: The most labels rerun's plot puts on an axis: it labels multiples of one power of ten, at least ~25 px apart
+#: (measured with rrd-look: 0.1 m steps labelled 31 px apart, not 17 px apart), so a plot ~250 px tall — the
+#: workbench's layouts give every plot that much — shows at most about ten
+MAX_LABELS = 10
+MIN_LABELS = 3
+
+
+def readable(lo: float, hi: float, min_labels: int = MIN_LABELS) -> tuple[float, float]:
+    """``(lo, hi)`` widened, where needed, to hold ``min_labels`` multiples of the power of ten rerun labels.
+
+    rerun's plots (egui_plot) label only multiples of a power of ten, the smallest whose labels do not crowd: a
+    y-range of 0.8–2.7 m got the labels 1 and 2, a range of −0.6–0.3 m the label 0 alone (seen with rrd-look). The
+    step is estimated for a plot ~250 px tall (:data:`MAX_LABELS`); a taller one labels more, never fewer.
+    """
+    span = hi - lo
+    if not (np.isfinite(span) and span > 0):
+        return lo, hi
+    step = 10.0 ** np.ceil(np.log10(span / MAX_LABELS))
+    k0, k1 = int(np.ceil(lo / step - 1e-9)), int(np.floor(hi / step + 1e-9))
+    while k1 - k0 + 1 < min_labels:
+        # widen on the side with more room to the next multiple, so the data stay centred
+        if (lo - (k0 - 1) * step) <= ((k1 + 1) * step - hi):
+            k0 -= 1
+        else:
+            k1 += 1
+    lo, hi = min(lo, k0 * step), max(hi, k1 * step)
+    # a label on the very edge of a plot is cut in half: a little room beyond the outer multiples
+    edge = 0.04 * (hi - lo)
+    return float(lo - edge if np.isclose(lo, k0 * step) else lo), float(hi + edge if np.isclose(hi, k1 * step) else hi)
 
 
 def quiet_corner(series: Sequence[tuple[np.ndarray, np.ndarray]], t_range: tuple[float, float],

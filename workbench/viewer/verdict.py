@@ -58,6 +58,7 @@ class Verdict:
     in_sample: tuple[str, ...] = ()
     training_known: bool = True
     notes: tuple[str, ...] = field(default_factory=tuple)
+    n_judged: int = 0  # the trials the band is judged on: the held-out ones where any are shown, else all
 
     @property
     def does_not_fit(self) -> tuple[str, ...]:
@@ -75,6 +76,27 @@ class Verdict:
     def all_in_sample(self) -> bool:
         return self.n_trials > 0 and len(self.in_sample) == self.n_trials
 
+    def miscalibrated(self) -> list[str]:
+        """``["u1 too narrow at 3σ", …]``: every reading of the band that is not "fits" (a "does not fit" too)."""
+        c = self.calibration
+        if c is None or not len(c):
+            return []
+        bad = c[c["verdict"] != FITS]
+        return [f"{r.input} {r.verdict} at {float(r.n_sigma):g}σ" for r in bad.itertuples()]
+
+    def head(self, short: bool = False) -> str:
+        """The verdict in words that follow from its own readings: "fits these data" only where no reading says
+        otherwise; "DOES NOT FIT these data" for a mismatch or a band that does not fit; else what the band misses
+        ("band too narrow: u1 at 3σ, …"). ``short``: a title's few words."""
+        if not self.fits:
+            return "DOES NOT FIT" if short else "DOES NOT FIT these data"
+        bad = self.miscalibrated()
+        if not bad:
+            return "fits" if short else "fits these data"
+        if short:
+            return "band miscalibrated"
+        return "states fit; its input band is miscalibrated: " + ", ".join(bad)
+
     def band_text(self) -> str:
         """``"u1: 3σ 98.2 % too narrow, 1σ 74 % too wide; u2: …"`` over the trials shown, or "no band"."""
         c = self.calibration
@@ -90,7 +112,8 @@ class Verdict:
         if n_in == self.n_trials:
             return f"all {n_in} trial(s) IN-SAMPLE: it was fitted on them, so this says nothing about new data"
         if n_in:
-            return f"{self.n_trials - n_in} held-out and {n_in} in-sample trial(s)"
+            return (f"the {self.n_trials - n_in} held-out trial(s) ({n_in} in-sample trial(s) shown are not "
+                    "counted)")
         return f"{self.n_trials} held-out trial(s)"
 
     def warning(self) -> str | None:
@@ -119,10 +142,10 @@ def mismatches(model: Any, state_names: Sequence[str], input_names: Sequence[str
     out = []
     names = tuple(getattr(system, "state_names", ()) or ())
     if names and tuple(state_names) != names:
-        out.append(f"its states are {list(names)}, these data's {list(state_names)}")
+        out.append(f"its states are {', '.join(names)}, these data's {', '.join(state_names)}")
     inputs = tuple(getattr(system, "input_names", ()) or ())
     if inputs and tuple(input_names) != inputs:
-        out.append(f"its inputs are {list(inputs)}, these data's {list(input_names)}")
+        out.append(f"its inputs are {', '.join(inputs)}, these data's {', '.join(input_names)}")
     mine = _roles_json(getattr(system, "roles", None))
     if mine is not None and roles is not None and mine != _roles_json(roles):
         out.append("its vehicle roles differ from these data's (another mapping or vehicle)")
@@ -157,9 +180,13 @@ def verdict(name: str, model: Any, demos: Any, *, source_dt: float | None = None
     found = mismatches(model, demos.state_names, demos.input_names, getattr(demos, "roles", None), X,
                        source_dt=source_dt)
     check = None
+    inside = tuple(in_sample(model, demos))
+    # the band is judged on the trials the model has not seen where there are any: the study's test trials, the
+    # report's coverage; in-sample trials say how well it fits what it learned, not how well it predicts
+    judged = [d for d in demos if d.id not in set(inside)] or list(demos)
     if _calibrated(model) and len(demos) and not any("states are" in m or "inputs are" in m for m in found):
-        check = calibration_check(calibration_counts(model, list(demos), LEVELS))
-    return Verdict(name, tuple(found), check, len(demos), tuple(in_sample(model, demos)), training_known(model))
+        check = calibration_check(calibration_counts(model, judged, LEVELS))
+    return Verdict(name, tuple(found), check, len(demos), inside, training_known(model), n_judged=len(judged))
 
 
 def trial_band_titles(model: Any, demos: Sequence[Any]) -> dict[tuple[str, str], str]:

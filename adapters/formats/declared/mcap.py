@@ -26,6 +26,12 @@ class Mcap(Format):
 
         return mcap.read(path, topics)
 
+    def text_messages(self, streams):
+        """ROS 2 ``/rosout`` and every text-only topic (``std_msgs/String``)."""
+        from adapters.textlog import mcap_rows
+
+        return mcap_rows(streams)
+
     def write(self, path, streams, **options):
         from adapters.formats import mcap
 

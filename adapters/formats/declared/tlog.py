@@ -48,6 +48,12 @@ class Tlog(Format):
         return Streams(os.fspath(path), self.name, dict(result.columns), counts=dict(r.counts),
                        skipped={k: v for k, v in skipped.items() if v}, info=info)
 
+    def text_messages(self, streams):
+        """``STATUSTEXT``'s text at its MAVLink severity."""
+        from adapters.textlog import stream_rows
+
+        return stream_rows(streams, "STATUSTEXT", "text", "severity")
+
     def write(self, path, streams, **options):
         """Columns of integer MAVLink fields are rounded first (a stick 0.1234 × 1000 is sent as 123)."""
         import numpy as np

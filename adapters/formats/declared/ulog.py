@@ -24,6 +24,14 @@ class Ulog(Format):
 
         return ulog.read(path, topics)
 
+    def text_messages(self, streams):
+        """The logged messages (``L`` and tagged ``C``) at their syslog level."""
+        from adapters.events import shown
+        from adapters.textlog import level_name
+
+        return [(float(t), level_name(level), shown(text), "logged message")
+                for t, level, text in streams.info.get("logged_messages", []) or []]
+
     def write(self, path, streams, **options):
         from adapters.formats import ulog
 

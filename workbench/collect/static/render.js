@@ -52,10 +52,15 @@ export class View {
     ctx.strokeStyle = "#8796ab"; ctx.setLineDash([6, 4]);
     ctx.strokeRect(this.sx(x0), this.sy(y1), (x1 - x0) * this.scale, y1 * this.scale);
     ctx.setLineDash([]);
-    // the start box
-    ctx.fillStyle = "rgba(90, 120, 200, 0.08)";
-    ctx.fillRect(this.sx(s.start.x[0]), this.sy(s.start.y[1]), (s.start.x[1] - s.start.x[0]) * this.scale,
-                 (s.start.y[1] - s.start.y[0]) * this.scale);
+    // the start box, labelled: where every trial starts
+    const bx = this.sx(s.start.x[0]), by = this.sy(s.start.y[1]);
+    const bw = (s.start.x[1] - s.start.x[0]) * this.scale, bh = (s.start.y[1] - s.start.y[0]) * this.scale;
+    ctx.fillStyle = "rgba(90, 120, 200, 0.10)"; ctx.fillRect(bx, by, bw, bh);
+    ctx.strokeStyle = "rgba(90, 120, 200, 0.45)"; ctx.setLineDash([3, 3]); ctx.strokeRect(bx, by, bw, bh);
+    ctx.setLineDash([]);
+    // labelled outside the box, on its left (no start is there, so the vehicle never covers the label)
+    ctx.fillStyle = "#4a5f99"; ctx.textAlign = "right"; ctx.font = "12px system-ui, sans-serif";
+    ctx.fillText("start box", bx - 6, by + bh / 2 + 4);
     // ground and pad
     ctx.fillStyle = "#6b7d5a"; ctx.fillRect(0, this.sy(0), w, h - this.sy(0));
     ctx.fillStyle = "#2e9e57";

@@ -41,6 +41,33 @@ export function outcome(spec, x, k) {
   return null;
 }
 
+// Why a trial ended as it did, with the numbers against the rules: the words of workbench.collect.task.reason.
+export function reason(spec, x, end) {
+  const i = spec.index, L = spec.landing;
+  const speed = Math.hypot(x[i.vx], x[i.vy]);
+  const tilt = (Math.abs(x[i.attitude]) * 180) / Math.PI, limitTilt = (L.attitude * 180) / Math.PI;
+  const off = Math.abs(x[i.x] - spec.pad.x);
+  if (end === "landed") {
+    return `landed: ${speed.toFixed(2)} m/s < ${L.speed} m/s, ${tilt.toFixed(1)}° < ${limitTilt.toFixed(0)}°, ` +
+      `${off.toFixed(2)} m from the pad's centre`;
+  }
+  if (end === "crashed") {
+    const why = [];
+    if (off > spec.pad.half_width) why.push(`${off.toFixed(2)} m from the pad's centre > ${spec.pad.half_width} m`);
+    if (speed >= L.speed) why.push(`${speed.toFixed(3)} m/s ≥ ${L.speed} m/s`);
+    if (tilt >= limitTilt) why.push(`${tilt.toFixed(2)}° ≥ ${limitTilt.toFixed(0)}°`);
+    return `crashed: ${why.join(", ")}`;
+  }
+  if (end === "left the domain") {
+    const [lo, hi] = spec.domain.x, top = spec.domain.y[1], px = x[i.x];
+    const side = px < lo ? `x = ${px.toFixed(2)} m < ${lo} m` : px > hi ? `x = ${px.toFixed(2)} m > ${hi} m`
+      : `height ${x[i.y].toFixed(2)} m > ${top} m`;
+    return `left the area: ${side}`;
+  }
+  if (end === "time limit") return `out of time: ${spec.time_limit_s} s`;
+  return String(end);
+}
+
 // One trial on a fixed physics step, independent of the display rate: advance(now) runs as many steps as the
 // time since the last call holds (an accumulator), each one sampling the sticks, recording (x[k], u[k]),
 // checking the end and stepping. Steps the display could not keep up with are run late and counted as

@@ -1,0 +1,334 @@
+"""The pilot's sticks by their role, through the vehicle's own RC map, and the check that each moves with what it
+commands.
+
+Which RC channel carries the roll stick is the vehicle's setting, not the mapping's: ArduPilot's ``RCMAP_ROLL``
+(``RCMAP_PITCH``, ``RCMAP_THROTTLE``, ``RCMAP_YAW``), PX4's ``RC_MAP_ROLL`` … Every 2014 – early-2015 Erle PXF log
+has ``RCMAP_ROLL = 2, RCMAP_PITCH = 1``: a mapping that read ``RCIN.C1`` as the roll stick modelled the pitch stick
+against the roll-plane states. So a mapping names a stick by its role, ``RCIN.C{roll}``, and says whose map it is
+(``rc_map = "ardupilot"``, a key of :data:`RC_MAPS`); :func:`resolve` reads the log's parameters (DataFlash
+``PARM``, tlog ``PARAM_VALUE``, ULog parameters) and puts the channel number in, the firmware's default where the
+log does not hold the parameter, and says which (:func:`describe`).
+
+A map can be stale (the parameter changed after the log's parameter dump) or missing, so the sticks are also
+checked against the log itself where the mapping declares, in ``[setpoints]``, what each input commands (ArduPilot
+``ATT.DesRoll``, PX4 ``vehicle_attitude_setpoint``): :func:`check` correlates every channel of the stick's stream
+with that setpoint over the kept segments and stops, naming the channel that does move with it, where the mapped
+one does not (:data:`STRONG`, :data:`SHARE`).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from workbench.errors import DataError, MappingError
+
+if TYPE_CHECKING:
+    from adapters.mapping import Channel, ChannelMapping
+    from adapters.streams import Streams
+
+__all__ = ["RcMap", "RC_MAPS", "ROLES", "Stick", "log_parameters", "placeholders", "resolve", "with_defaults",
+           "describe", "check", "STRONG", "SHARE"]
+
+#: The sticks a mapping may name by role.
+ROLES = ("roll", "pitch", "throttle", "yaw")
+_PLACEHOLDER = re.compile(r"\{([a-z]+)\}")
+#: RC channels a role may name (ArduPilot has 16, MAVLink's RC_CHANNELS 18, PX4 18)
+MAX_CHANNELS = 32
+#: A setpoint is driven by the sticks where some channel's correlation with it reaches this: Cohen's "large"
+#: correlation. Below it no channel explains the setpoint (a mode in which the autopilot moves it, a stick held
+#: still) and no verdict is given.
+STRONG = 0.5
+#: The mapped stick moves with its setpoint when it explains at least this share of the setpoint's variance that
+#: the best channel explains (r² against r²): a channel that explains less than half of it is not the stick.
+SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class RcMap:
+    """A firmware's RC map: the parameter naming each role's channel, and its default where a log lacks it."""
+
+    firmware: str
+    parameters: Mapping[str, str]
+    defaults: Mapping[str, int]
+    #: a value meaning "on no channel" (PX4: 0); ``None``: every value names a channel
+    unassigned: int | None = None
+
+
+RC_MAPS: dict[str, RcMap] = {
+    "ardupilot": RcMap("ArduPilot", {r: f"RCMAP_{r.upper()}" for r in ROLES},
+                       {"roll": 1, "pitch": 2, "throttle": 3, "yaw": 4}),
+    # PX4's own default is 0 (unassigned until the radio is calibrated); calibration assigns mode 2's 1, 2, 3, 4
+    "px4": RcMap("PX4", {r: f"RC_MAP_{r.upper()}" for r in ROLES}, {"roll": 1, "pitch": 2, "throttle": 3, "yaw": 4},
+                 unassigned=0),
+}
+
+#: Streams holding a log's parameters that a reader gives only when asked (DataFlash's and ULog's come in ``info``)
+PARAMETER_STREAMS = ("PARAM_VALUE",)
+
+
+@dataclass(frozen=True)
+class Stick:
+    """An input read by role: ``input`` (``"u1"``) is the ``role`` stick, RC channel ``number``, given by the log's
+    ``parameter`` (``logged``) or the firmware's default; ``patterns`` are the input's sources before resolution."""
+
+    input: str
+    role: str
+    number: int
+    parameter: str
+    logged: bool
+    patterns: tuple[str, ...]
+
+    def why(self, firmware: str) -> str:
+        if self.logged:
+            return f"{self.parameter} = {self.number}"
+        return f"{self.parameter} not in the log: {firmware}'s default {self.number}"
+
+
+def placeholders(source: str) -> list[str]:
+    """The roles a source names (``"RCIN.C{roll}"`` → ``["roll"]``)."""
+    return _PLACEHOLDER.findall(source)
+
+
+def _fill(source: str, numbers: Mapping[str, int]) -> str:
+    return _PLACEHOLDER.sub(lambda m: str(numbers[m.group(1)]), source)
+
+
+def log_parameters(streams: Streams) -> dict[str, float | str]:
+    """A log's parameters, the last value of each (the one in force): MAVLink ``PARAM_VALUE``, DataFlash ``PARM``,
+    ULog parameters (``Streams.info``)."""
+    params: dict[str, float | str] = {}
+    for name, key, value in (("PARAM_VALUE", "param_id", "param_value"), ("PARM", "Name", "Value")):
+        if name in streams:
+            cols = streams.columns(name)
+            if key in cols and value in cols:
+                for k, v in zip(cols[key].tolist(), np.asarray(cols[value], dtype=np.float64).tolist(), strict=True):
+                    params[str(k).strip("\x00")] = float(v)
+    for key in ("params", "parameters"):  # DataFlash (PARM, whether read or not), ULog
+        for k, v in (streams.info.get(key) or {}).items():
+            params.setdefault(str(k), v if isinstance(v, int | float | str) else str(v))
+    return params
+
+
+def _stick_roles(m: ChannelMapping) -> list[tuple[Channel, str, tuple[str, ...]]]:
+    """The inputs read by role: (channel, role, every source of it before resolution)."""
+    out = []
+    for ch in m.channels:
+        sources = tuple(s for v in ch.variants for s in v.selector.sources)
+        roles = {r for s in sources for r in placeholders(s)}
+        if roles:
+            out.append((ch, roles.pop(), sources))
+    return out
+
+
+def _substitute(m: ChannelMapping, numbers: Mapping[str, int], sticks: tuple[Stick, ...]) -> ChannelMapping:
+    def fill(ch: Channel) -> Channel:
+        sel = ch.selector
+        sel = replace(sel, source=_fill(sel.source, numbers), alternatives=tuple(_fill(a, numbers)
+                                                                                  for a in sel.alternatives))
+        return replace(ch, selector=sel, alternatives=tuple(fill(a) for a in ch.alternatives))
+
+    return replace(m, channels=tuple(fill(c) for c in m.channels), sticks=sticks)
+
+
+def _number(value: Any) -> int | None:
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return None
+    return int(f) if f.is_integer() else None
+
+
+def resolve(m: ChannelMapping, streams: Streams) -> ChannelMapping:
+    """``m`` with every stick named by role put on the channel the log's RC map gives it (the firmware's default
+    where the log lacks the parameter); ``m`` itself when it names none.
+
+    Raises
+    ------
+    DataError
+        The log's parameter is not a channel number (PX4's 0: the stick is on no RC channel).
+    """
+    roles = _stick_roles(m)
+    if not roles or m.rc_map is None:
+        return m
+    rc = RC_MAPS[m.rc_map]
+    params = log_parameters(streams)
+    numbers: dict[str, int] = {}
+    sticks = []
+    for ch, role, sources in roles:
+        name = rc.parameters[role]
+        logged = name in params
+        number = _number(params[name]) if logged else rc.defaults[role]
+        if number is None or not (1 <= number <= MAX_CHANNELS) or number == rc.unassigned:
+            what = "on no RC channel (unassigned)" if number is not None and number == rc.unassigned else \
+                f"not an RC channel number (1 … {MAX_CHANNELS})"
+            raise DataError(f"{streams.path}: mapping {m.name!r}: {ch.name} is the {role} stick, but the log's "
+                            f"{name} = {params[name]!r} is {what}: a mapping that names the stick's channel itself "
+                            f"(e.g. {_fill(sources[0], {role: rc.defaults[role]})}) reads this log")
+        numbers[role] = number
+        sticks.append(Stick(ch.name, role, number, name, logged, sources))
+    return _substitute(m, numbers, tuple(sticks))
+
+
+def with_defaults(m: ChannelMapping) -> ChannelMapping:
+    """``m`` with its sticks on the firmware's default channels (where no log says otherwise: writers, a live
+    link before any parameter arrives)."""
+    roles = _stick_roles(m)
+    if not roles or m.rc_map is None:
+        return m
+    rc = RC_MAPS[m.rc_map]
+    sticks = tuple(Stick(ch.name, role, rc.defaults[role], rc.parameters[role], False, sources)
+                   for ch, role, sources in roles)
+    return _substitute(m, {s.role: s.number for s in sticks}, sticks)
+
+
+def describe(m: ChannelMapping, streams: Streams) -> str:
+    """``"sticks by the log's RC map: u1 (roll) = RCIN.C2 (RCMAP_ROLL = 2); …"``; ``""`` without sticks by role."""
+    if not m.sticks or m.rc_map is None:
+        return ""
+    from adapters.selection import resolve_channel
+
+    rc = RC_MAPS[m.rc_map]
+    parts = [f"{s.input} ({s.role}) = {resolve_channel(m.channel(s.input), streams).selector.source} "
+             f"({s.why(rc.firmware)})" for s in m.sticks]
+    return f"sticks by the log's RC map: {'; '.join(parts)}"
+
+
+# ------------------------------------------------------------------------------------------------- the check
+
+
+@dataclass(frozen=True)
+class _Series:
+    label: str
+    t: np.ndarray
+    v: np.ndarray
+
+
+def _series(m: ChannelMapping, streams: Streams, ch: Channel, label: str | None = None) -> _Series | None:
+    from adapters.clock import stream_times
+    from adapters.selection import channel_values, select
+    from adapters.transforms import TRANSFORMS
+
+    try:
+        sel = select(ch.selector, streams, "", m.name, n_columns=TRANSFORMS[ch.transform].n_columns)
+    except MappingError:
+        return None
+    t = stream_times(m.clock, sel.frame)[sel.rows]
+    with np.errstate(invalid="ignore"):
+        v = np.asarray(channel_values(ch, sel), dtype=np.float64)
+    ok = np.isfinite(t) & np.isfinite(v)
+    order = np.argsort(t[ok], kind="stable")
+    return _Series(label or sel.stream + "." + ",".join(sel.columns), t[ok][order], v[ok][order])
+
+
+_NOT_STICKS = re.compile(r"time|stamp|^sysid$|^compid$|^chancount$|^rssi$|^port$|valid|source|buttons", re.I)
+
+
+def _candidates(m: ChannelMapping, streams: Streams, ch: Channel, stick: Stick | None) -> list[_Series]:
+    """Every channel the stick could be on: its source with each channel number (a stick by role), else every
+    other numeric field of its stream."""
+    from adapters.selection import select
+
+    source = ch.selector.source
+    out = []
+    pattern = None
+    if stick is not None:
+        pattern = next((p for p in stick.patterns if placeholders(p) and _fill(p, {stick.role: stick.number}) ==
+                        source), None)
+    if pattern is not None:
+        sources = [_fill(pattern, {stick.role: k}) for k in range(1, MAX_CHANNELS + 1)]
+    else:
+        try:
+            sel = select(ch.selector, streams, "", m.name, n_columns=1)
+        except MappingError:
+            return []
+        fields = [str(c) for c in sel.frame.columns if c != "t" and sel.frame[c].dtype.kind in "biuf"
+                  and not _NOT_STICKS.search(str(c))]
+        sources = [f"{sel.stream}:{f}" for f in fields]
+    for src in sources:
+        one = replace(ch, selector=replace(ch.selector, source=src, alternatives=()), transform="identity", params=(),
+                      scale=1.0, offset=0.0, sign=1.0)
+        s = _series(m, streams, one, label=src.replace(":", "."))
+        if s is not None:
+            out.append(s)
+    return out
+
+
+def _correlation(stick: _Series, target_t: np.ndarray, target_v: np.ndarray) -> float:
+    """Pearson's r of a stick held (zero-order) at the setpoint's times, against the setpoint; NaN where either
+    does not move."""
+    at = np.searchsorted(stick.t, target_t, side="right") - 1
+    ok = at >= 0
+    if ok.sum() < 3:
+        return float("nan")
+    x, y = stick.v[at[ok]], target_v[ok]
+    if np.ptp(x) == 0 or np.ptp(y) == 0:
+        return float("nan")
+    return float(np.corrcoef(x, y)[0, 1])
+
+
+def commands_setpoint(mode: str | None) -> bool:
+    """Whether in ``mode`` the sticks command the attitude setpoint themselves: not where the autopilot holds the
+    position (LOITER, POSHOLD, QLOITER, PX4's POSCTL: the stick asks for a velocity, and the position controller's
+    lean follows the vehicle's heading and drift; erlerobot/logs 22-12-2014/37.BIN's LOITER DesRoll correlates
+    −0.83 with the yaw stick). A segment of no known mode is checked."""
+    from adapters.modes import AUTOPILOT_HOLDS
+
+    return "position" not in AUTOPILOT_HOLDS.get(mode or "", "")
+
+
+def check(m: ChannelMapping, streams: Streams,
+          windows: Sequence[tuple[float, float] | tuple[float, float, str | None]]) -> tuple[str, str]:
+    """Whether each input with a setpoint (``[setpoints]``) moves with it over ``windows`` (the kept segments, each
+    with its flight mode where known; those of a mode in which the stick does not command the setpoint are left
+    out, :func:`commands_setpoint`): ``(cause, note)``, the cause one line (``""`` where every checked stick moves
+    with its setpoint), the note what was checked.
+
+    A setpoint is explained by the sticks where some channel of the input's stream correlates with it at least
+    :data:`STRONG`; the input then moves with it unless it explains less than :data:`SHARE` of what the best channel
+    explains (r²), and the cause names that channel.
+    """
+    from adapters.selection import resolve_channel
+
+    windows = [(w[0], w[1]) for w in windows if len(w) < 3 or commands_setpoint(w[2])]  # type: ignore[misc]
+    if not m.setpoints or not windows:
+        return "", ""
+    by_input = {s.input: s for s in m.sticks}
+    notes, causes = [], []
+    for sp in m.setpoints:
+        ch = resolve_channel(m.channel(sp.name), streams)
+        target = _series(m, streams, resolve_channel(sp, streams))
+        mapped = _series(m, streams, replace(ch, transform="identity", params=(), scale=1.0, offset=0.0, sign=1.0))
+        if target is None or mapped is None:
+            continue
+        inside = np.zeros(target.t.size, dtype=bool)
+        for a, b in windows:
+            inside |= (target.t >= a) & (target.t <= b)
+        tt, tv = target.t[inside], target.v[inside]
+        others = [c for c in _candidates(m, streams, ch, by_input.get(sp.name)) if c.label != mapped.label]
+        r_mapped = _correlation(mapped, tt, tv)
+        scored = [(c.label, _correlation(c, tt, tv)) for c in others]
+        scored = [(label, r) for label, r in scored if np.isfinite(r)]
+        best = max(scored, key=lambda x: abs(x[1]), default=None)
+        r2 = r_mapped ** 2 if np.isfinite(r_mapped) else 0.0
+        if best is not None and abs(best[1]) >= STRONG and r2 < SHARE * best[1] ** 2:
+            stick = by_input.get(sp.name)
+            by_role = stick is not None and m.rc_map is not None and any(
+                placeholders(p) and _fill(p, {stick.role: stick.number}) == ch.selector.source for p in stick.patterns)
+            how = f" (the {stick.role} stick by {stick.why(RC_MAPS[m.rc_map].firmware)})" if by_role else ""
+            moved = f"correlation {r_mapped:+.2f}" if np.isfinite(r_mapped) else "it does not move there"
+            causes.append(
+                f"{sp.name} reads {mapped.label}{how}, which does not move with {target.label}, what it commands: "
+                f"{moved} over the {tt.size} samples of the kept segments, where {best[0]} correlates "
+                f"{best[1]:+.2f} — the stick is on {best[0]}; a mapping whose {sp.name} reads it imports this log")
+        elif np.isfinite(r_mapped) and abs(r_mapped) >= STRONG:
+            notes.append(f"{sp.name} moves with {target.label} (r = {r_mapped:+.2f})")
+        else:
+            r = f"r = {r_mapped:+.2f}" if np.isfinite(r_mapped) else "the stick does not move"
+            notes.append(f"{sp.name}: no stick moves {target.label} in the kept segments ({r}): not checked")
+    cause = f"{streams.path}: mapping {m.name!r}: {'; '.join(causes)}" if causes else ""
+    return cause, "; ".join(notes)
