@@ -163,13 +163,22 @@ def main() -> None:
     p.add_argument("--splits", type=int, default=12)
     p.add_argument("--file", type=Path, default=RESULTS)
     p.add_argument("--summary", action="store_true", help="print the table from the file and stop")
+    p.add_argument("--markdown", type=Path, help="also write the summary under this Markdown file's header")
     a = p.parse_args()
     if not a.summary:
         from workbench.threads import limit_threads
 
         with limit_threads():
             compute(a.families, a.runs, a.truth_sets, a.pool, a.splits, a.file)
-    print(summary(a.file))
+    text = summary(a.file)
+    print(text)
+    if a.markdown:
+        rec = _records(a.file)
+        seconds = [r["seconds"] for r in rec if r["kind"] == "run"]
+        head = a.markdown.read_text().split("<!-- summary -->")[0] if a.markdown.exists() else ""
+        a.markdown.write_text(head + "<!-- summary -->\n\n" + text + f"\n\n{len(seconds)} runs, median "
+                              f"{np.median(seconds):.0f} s of wall time each on the shared machine; every number "
+                              f"above is recomputed from `{a.file.name}` by `--summary`.\n")
 
 
 if __name__ == "__main__":

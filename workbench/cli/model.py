@@ -169,7 +169,8 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, pow
     for f in ratios.fits:
         ctx.say(f"  {f.describe()}")
     if curve is not None:
-        ctx.say(f"power curve (simulated from the model; interval span by n, median over {power} set(s) per size):")
+        ctx.say("power curve (simulated from the model; the median interval span of the simulated sets of each "
+                "size, and the number needed with its interval over resampled sets):")
         for line in curve.describe():
             ctx.say(f"  {line}")
     elif power <= 0 and any(not r.identifiable and r.explained for r in ratios.intervals):
@@ -199,9 +200,10 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
         ctx.say(f"GMM components: {model.n_components_}")
     auto = model.auto_ if model.chooses_settings else None
     if auto is not None:
-        ctx.say(f"chose G = {auto.n_components}, reg_covar = {auto.reg_covar:g} by {auto.folds}-fold cross-validation "
-                f"over the trials ({auto.criterion}); held-out 3 s RMSE per candidate: " + ", ".join(
-                    f"G{r['n_components']}/{r['reg_covar']:g} {r['heldout_rmse']:.3g}" for r in auto.scores))
+        # what was chosen and whether the model fell back to K̂x (said, never silent), then every candidate's score
+        ctx.say(f"the default model: {auto.describe()}")
+        ctx.say(f"held-out {model.noise_horizon_s:g} s RMSE per candidate: " + ", ".join(
+            f"G{r['n_components']}/{r['reg_covar']:g} {r['heldout_rmse']:.3g}" for r in auto.scores))
 
 
 def cmd_predict(ctx: Context) -> int:

@@ -324,9 +324,9 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations, "
                "scored like the tables above (every window of every test trial, a trial's windows and the random "
                "training subsets drawn at that size averaged, then the mean over trials); error bars: ± one "
-               "standard error of that mean over the test trials; the proposed model at the settings its "
-               "cross-validation chose on all training trials, its fallback to K̂x included, so the last size — the "
-               "whole training set — is the model of the tables).*", ""]
+               "standard error of that mean over the test trials; the smaller sizes refit the proposed model at "
+               "the settings its cross-validation chose on all training trials, its fallback to K̂x included, and the "
+               "last size — the whole training set — is the tables' own rows).*", ""]
     elif inputs.empty.get("efficiency"):
         md += ["## Data efficiency", "", f"*None: {inputs.empty['efficiency']}.*", ""]
     md += ["## Statistics of the comparison", ""]

@@ -26,9 +26,12 @@ import pandas as pd
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning
 from workbench.study.method_level import SplitPlan, _refit, corrected_t, method_differences, split_scores, split_tasks
 
-__all__ = ["CoverageRun", "simulated_run", "true_difference", "run_interval", "METRIC", "N_STEPS", "STRIDE"]
+__all__ = ["CoverageRun", "simulated_run", "true_difference", "run_interval", "METRIC", "N_STEPS", "STRIDE",
+           "BASELINE"]
 
 METRIC = "rmse_position"
+#: The baseline of the question: the task objective alone, the method a fallen-back proposed model predicts as.
+BASELINE = "ioc_only"
 N_STEPS, STRIDE = 60, 20  # 3 s predictions from every second of each test trial, as evaluate scores them
 
 
@@ -71,13 +74,13 @@ def _pool_means(fitted: dict, pool) -> dict[str, float]:
 def true_difference(sim, seed: int, n_train: int, pool, plant, n_components: int | str = "cv") -> tuple[float, bool]:
     """One training set's difference on the pool: the method run on ``sim(n_train, seed)`` as a split runs it;
     returns the change and whether the proposed model fell back."""
-    plan = SplitPlan(plant=plant, n_components=n_components, seed=0, methods=("proposed", "ioc_only"))
+    plan = SplitPlan(plant=plant, n_components=n_components, seed=0, methods=("proposed", BASELINE))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.simplefilter("ignore", DegenerateFitWarning)
         fitted, fell_back = _refit(plan, sim(n_train, seed))
     means = _pool_means(fitted, pool)
-    return 1.0 - means["proposed"] / means["ioc_only"], fell_back
+    return 1.0 - means["proposed"] / means[BASELINE], fell_back
 
 
 def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, test_size: float = 0.2,
@@ -87,12 +90,12 @@ def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, tes
     ``self_comparison`` each split's training part is also halved at random and the proposed method trained on each
     half, both scored on the split's test part."""
     ds = sim(n_trials, seed)
-    plan = SplitPlan(plant=plant, n_components=n_components, seed=0, methods=("proposed", "ioc_only"))
+    plan = SplitPlan(plant=plant, n_components=n_components, seed=0, methods=("proposed", BASELINE))
     tasks, sizes, _ = split_tasks({family: ds}, plan, METRIC, N_STEPS, STRIDE, test_size, splits, seed=seed)
     parts = [split_scores(task) for task in tasks]
     scores = pd.concat(parts, ignore_index=True)
     per = scores.groupby(["split", "method"])["value"].mean().unstack("method")
-    changes = tuple(float(1.0 - per.loc[j, "proposed"] / per.loc[j, "ioc_only"]) if j in per.index else float("nan")
+    changes = tuple(float(1.0 - per.loc[j, "proposed"] / per.loc[j, BASELINE]) if j in per.index else float("nan")
                     for j in range(len(tasks)))
     fell = tuple(bool(p["fell_back"].any()) if len(p) else False for p in parts)
     selfs: list[float] = []
@@ -133,6 +136,6 @@ def method_rows(run: CoverageRun, J: int | None = None) -> Sequence:
     ``evaluate`` would print): for checking that no row has an interval of zero width."""
     k = len(run.changes) if J is None else J
     rows = [(run.family, j, f"t{j}", m, v, run.fell_back[j])
-            for j in range(k) for m, v in (("proposed", 1.0 - run.changes[j]), ("ioc_only", 1.0))]
+            for j in range(k) for m, v in (("proposed", 1.0 - run.changes[j]), (BASELINE, 1.0))]
     scores = pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value", "fell_back"])
-    return method_differences(scores, {run.family: (run.n_train, run.n_test)}, METRIC, "proposed", ["ioc_only"])
+    return method_differences(scores, {run.family: (run.n_train, run.n_test)}, METRIC, "proposed", [BASELINE])

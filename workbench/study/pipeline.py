@@ -27,7 +27,7 @@ from workbench.defaults import DEFAULT_N_COMPONENTS, PAPER_SETTINGS
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.registry import METHOD_TITLES, METHODS
 from workbench.models.selection import select_components
-from workbench.study.method_level import FLOOR_METHODS, SPLITS, SplitPlan
+from workbench.study.method_level import FLOOR_METHODS, SPLITS, SplitJobs, SplitPlan
 from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
 __all__ = [
@@ -264,7 +264,7 @@ def run_study(
     by_label = parallel and len(splits) > 1
     jobs = None
     if method_splits > 0 and test_ids is None:
-        jobs = _SplitJobs.make(splits, SplitPlan(plant=plant_spec, n_components=n_components, seed=seed), system,
+        jobs = SplitJobs.make(splits, SplitPlan(plant=plant_spec, n_components=n_components, seed=seed), system,
                                n_steps, stride, test_size, int(method_splits), seed,
                                executor if parallel else None)
     parts: list[_LabelPart] = []
@@ -691,87 +691,6 @@ def _study_task(task: tuple) -> Any:
     out = split_scores(payload)
     out.attrs["seconds"] = time.perf_counter() - t0
     return out
-
-
-@dataclass(frozen=True)
-class _SplitJobs:
-    """The method-level splits of a study (:mod:`workbench.study.method_level`): every method rerun
-    (:class:`~workbench.study.method_level.SplitPlan`: the proposed model and the baselines the verdicts judge it
-    against) on random splits of each label's trials, scored on the headline metric.
-
-    With a fixed plant the study's own random split is each label's first split: its fits are exactly that split's
-    refits (the same settings, trials and seeds), so its scores are the study's (``reuse``) and only the other
-    splits are tasks (``todo``)."""
-
-    tasks: tuple
-    sizes: dict
-    units: dict
-    metric: str
-    methods: tuple[str, ...]
-    reuse: frozenset[int]
-
-    @classmethod
-    def make(cls, splits: dict[str, tuple], plan: SplitPlan, system: Any, n_steps: int, stride: int | None,
-             test_size: float, n_splits: int, seed: int, executor: Any) -> _SplitJobs:
-        from workbench.study.evaluate import primary_metric
-        from workbench.study.method_level import split_tasks
-
-        metric = primary_metric(system)
-        by_label = {lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()}
-        first = {} if callable(plan.plant) else {
-            lb: [i for i, d in enumerate(by_label[lb]) if d.id in {t.id for t in te}] for lb, (_, te) in splits.items()}
-        tasks, sizes, units = split_tasks(by_label, plan, metric, n_steps, stride, test_size, n_splits, seed,
-                                          share=None if executor is None else executor.share, first=first)
-        reuse = frozenset(i for i, t in enumerate(tasks) if t[1] == 0 and t[0] in first and units[t[0]] == "trials")
-        return cls(tuple(tasks), sizes, units, metric, plan.methods, reuse)
-
-    @property
-    def todo(self) -> list[tuple]:
-        return [t for i, t in enumerate(self.tasks) if i not in self.reuse]
-
-    def run(self, executor: Any, progress: Callable[[], Any] | None) -> list[pd.DataFrame]:
-        """The splits' scores, refitted on ``executor`` (in the order of :attr:`todo`)."""
-        from workbench.study.executor import serial
-        from workbench.study.method_level import split_scores
-
-        ex = executor if executor is not None else serial
-        todo = self.todo
-        if not todo:
-            return []
-        bar = progress() if progress is not None else nullcontext()
-        with bar as p:
-            task = p.add_task(f"refitting on {len(todo)} splits", total=len(todo)) if p is not None else None
-            return list(ex.map(split_scores, todo, progress=None if p is None else
-                               lambda d, t: p.update(task, completed=d)))
-
-    def rows(self, done: list[pd.DataFrame], parts: dict[str, _LabelPart]) -> Any:
-        """:class:`~workbench.study.method_level.MethodDifference` rows of the labels whose proposed model the study
-        fitted, from the refitted splits' scores (``done``, in the order of :attr:`todo`) and the study's own."""
-        from workbench.study.method_level import method_differences
-
-        refits = iter(done)
-        scores = []
-        for i, t in enumerate(self.tasks):
-            label = t[0]
-            part = next(refits) if i not in self.reuse else None
-            if "proposed" not in parts[label].fitted:
-                continue
-            scores.append(_own_scores(parts[label], label, self.metric, self.methods) if part is None else part)
-        scores = [s for s in scores if len(s)]
-        if not scores:
-            return None
-        return tuple(method_differences(pd.concat(scores, ignore_index=True), self.sizes, self.metric, "proposed",
-                                        units=self.units)) or None
-
-
-def _own_scores(part: _LabelPart, label: str, metric: str, methods: Sequence[str]) -> pd.DataFrame:
-    """The study's own split as a method-level split's rows (:func:`~workbench.study.method_level.split_scores`):
-    each method's per-trial mean of ``metric``, and whether the proposed model fell back."""
-    model = part.fitted.get("proposed")
-    fell = bool(model is not None and model.chooses_settings and model.auto_ is not None and model.auto_.fallback)
-    rows = part.table[(part.table["metric"] == metric) & part.table["method"].isin(list(methods))]
-    per = rows.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
-    return per.assign(label=label, split=0, fell_back=fell)[["label", "split", "trial", "method", "value", "fell_back"]]
 
 
 def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -> pd.DataFrame:

@@ -100,12 +100,14 @@ class RatioInterval:
         return f"{NOT_IDENTIFIABLE}: {needed_words(self.needed, self.simulated)}"
 
     def describe(self) -> str:
+        """One line; a part's mismatch is its part's to say (:meth:`PartFit.describe`), once, not on every ratio."""
         shown = format_interval(self.estimate, self.lo, self.hi)
+        note = f"{NOT_EXPLAINED} (its part's mismatch below)" if not self.explained else self.note
         if shown.startswith(NOT_IDENTIFIABLE):  # words, no estimate: the note adds only what would help
-            note = self.note.removeprefix(f"{NOT_IDENTIFIABLE}: ")
+            note = note.removeprefix(f"{NOT_IDENTIFIABLE}: ")
             return f"{self.name} {shown}" + (f"; {note}" if note else "")
         text = f"{self.name} = {shown}"
-        return f"{text}: {self.note}" if self.note else text
+        return f"{text}: {note}" if note else text
 
 
 def needed_words(needed: float | None, simulated: int | None = None) -> str:
