@@ -90,6 +90,7 @@ from adapters.reference import REFERENCE_FORMS, ReferenceRule
 from adapters.sticks import PARAMETER_STREAMS, RC_MAPS, ROLES, placeholders
 from adapters.streams import candidate_streams, nearest
 from adapters.transforms import TRANSFORMS
+from workbench.data.pilot_task import task_table
 from workbench.data.roles import Roles
 from workbench.errors import DataError, MappingError
 
@@ -113,7 +114,7 @@ FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per decl
 DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", "reference",
-    "rc_map", "setpoints", *FORMAT_NAMES
+    "rc_map", "setpoints", "task", *FORMAT_NAMES
 }
 _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
@@ -259,6 +260,9 @@ class ChannelMapping:
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False)
     roles: Roles = field(default_factory=Roles)
     reference: ReferenceRule | None = None
+    #: The pilot's task (``[task]``: regulate, relative_to, reference): overrides what a fit decides from the data;
+    #: written into every demonstration's ``meta["task"]`` (:mod:`workbench.data.pilot_task`). Empty: the data decide.
+    task: Mapping[str, Any] = field(default_factory=dict)
     #: whose RC map gives a stick named by role its channel (a key of adapters.sticks.RC_MAPS)
     rc_map: str | None = None
     #: per input, what it commands (its ``name`` is the input's): the stick must move with it (adapters.sticks)
@@ -627,7 +631,8 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
     try:
         roles = Roles.from_json(raw.get("roles"), f"{at}: [roles]")
         roles.check(states, f"{at}: [roles]")
-    except DataError as exc:
+        task = task_table(raw.get("task"), f"{at}: task")
+    except (DataError, ValueError) as exc:
         raise MappingError(str(exc)) from None
     return ChannelMapping(
         name=str(raw.get("name", Path(path).stem)),
@@ -645,6 +650,7 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
         reference=_reference(raw.get("reference"), at),
         rc_map=rc_map,
         setpoints=setpoints,
+        task=task,
     )
 
 

@@ -459,6 +459,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 meta["sticks"] = sticks
             if flips:
                 meta["flipped"] = "; ".join(flips)
+            if m.task:  # the mapping's [task]: what a fit of these trials regulates, relative to what
+                meta["task"] = dict(m.task)
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
                 # what the sticks command in this mode: segments of different groups are different plants

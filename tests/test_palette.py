@@ -74,6 +74,14 @@ def test_strategies_stay_apart():
     assert _closest_pair(palette.STRATEGY_COLORS) >= DISTINCT
 
 
+@pytest.mark.parametrize("deficiency", [None, *DEFICIENCIES])
+def test_the_testbeds_outcomes_stay_apart_under_colour_blindness(deficiency):
+    from workbench.collect.task import OUTCOMES
+
+    assert set(palette.OUTCOME_COLORS) == set(OUTCOMES)
+    assert _closest_pair(palette.OUTCOME_COLORS.values(), deficiency) >= DISTINCT
+
+
 # -- every figure draws a method in its registry style -------------------------------------------------------------
 class _Pred:
     def __init__(self, x):

@@ -12,7 +12,9 @@ Each role has its own colours and no colour serves two roles (``tests/test_palet
 * **bands** (Monte Carlo, GMR ±1σ/±3σ, online) — one neutral gray everywhere, so a band's fill changes no line's hue;
 * **outliers** (ŵ outside its 3σ band) — a magenta no other role uses;
 * **flight modes** — a third set (Paul Tol's muted scheme), **stick channels and setpoints** a fourth, lanes of
-  what a mapping kept (and armed spans) in grays with their names written on them.
+  what a mapping kept (and armed spans) in grays with their names written on them;
+* **a trial's outcome** in the testbed's experimenter's view (landed, crashed, left the domain, time limit) — a
+  fifth set, far from every method colour and apart from each other under the colour-blindness simulations.
 
 This module is data only (floor 0): the report turns the triples into hex strings, the viewer packs them.
 """
@@ -21,7 +23,8 @@ from __future__ import annotations
 
 __all__ = [
     "RGB", "OKABE_ITO", "METHOD_COLORS", "SPARE_METHOD_COLORS", "RECORDED_PAPER", "RECORDED_SCREEN",
-    "STRATEGY_COLORS", "BAND", "OUTLIER", "MODE_COLORS", "STICK_COLORS", "SETPOINT", "LANE_STATES", "ROLES",
+    "STRATEGY_COLORS", "BAND", "OUTLIER", "MODE_COLORS", "STICK_COLORS", "SETPOINT", "LANE_STATES", "OUTCOME_COLORS",
+    "ROLES",
     "hex_color", "strategy_color", "CVD_MATRICES", "simulate", "lab", "delta_e",
 ]
 
@@ -60,11 +63,16 @@ LANE_STATES: dict[str, RGB] = {
     "no trial": (55, 55, 55),
 }  # fmt: skip
 
+#: a collected trial's outcome (the testbed's experimenter's view): a green, a red, an ochre, a purple
+OUTCOME_COLORS: dict[str, RGB] = {"landed": (102, 170, 85), "crashed": (220, 50, 32),
+                                  "left the domain": (204, 187, 68), "time limit": (170, 51, 119)}
+
 #: every role and its colours, for the test that no two roles share one
 ROLES: dict[str, tuple[RGB, ...]] = {
     "method": METHOD_COLORS + SPARE_METHOD_COLORS, "recorded": (RECORDED_PAPER, RECORDED_SCREEN),
     "strategy": STRATEGY_COLORS, "band": (BAND,), "outlier": (OUTLIER,), "mode": MODE_COLORS,
     "stick": tuple(STICK_COLORS.values()) + (SETPOINT,), "lane": tuple(dict.fromkeys(LANE_STATES.values())),
+    "outcome": tuple(OUTCOME_COLORS.values()),
 }
 
 

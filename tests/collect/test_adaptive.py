@@ -27,10 +27,11 @@ REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.slow
 
 
-def _serve(out: Path, protocol: Path) -> tuple[subprocess.Popen, str]:
+def _serve(out: Path, protocol: Path | str, *extra: str) -> tuple[subprocess.Popen, str]:
     """``workbench collect`` in its own process group (killed whole, workers too, as by a power cut)."""
     proc = subprocess.Popen([sys.executable, "-m", "workbench", "collect", "--protocol", str(protocol), "--out",
-                             str(out), "--port", "0", "--no-browser"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             str(out), "--port", "0", "--no-browser", *extra], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE,
                             text=True, cwd=REPO, env={**os.environ, "COLUMNS": "200"}, start_new_session=True)
     line = proc.stdout.readline()
     assert line.startswith("serving http://127.0.0.1:"), line + proc.stderr.read()

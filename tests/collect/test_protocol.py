@@ -31,6 +31,12 @@ def test_paper_single_subject_is_the_papers_design():
     assert [t.slot for t in trials] == list(range(len(trials)))
 
 
+def test_paper_single_subject_declares_the_instructed_references():
+    # the instructions are references a fit regulates the deviation from (issue 41 §1): CS1 level first, CS2 a line
+    p = load_protocol("paper_single_subject")
+    assert {(b.label, b.reference) for b in p.blocks} == {("CS1", "horizontal-first"), ("CS2", "line")}
+
+
 def test_paper_multi_subject_holds_one_trial_out_at_random():
     p = load_protocol("paper_multi_subject")
     assert p.practice_s == 600 and not p.practice_recorded
@@ -80,6 +86,8 @@ def test_shortened_cuts_trials_and_pauses():
      "breaks.between_blocks_s"),
     ('consent = "x"\ncolour = 1\n[[blocks]]\nlabel = "A"\ninstructions = "a"\ntrials = 1\n', "colour: unknown key"),
     ('consent = "x"\n[[blocks]]\nlabel = "A/B"\ninstructions = "a"\ntrials = 1\n', "blocks[0].label"),
+    ('consent = "x"\n[[blocks]]\nlabel = "A"\ninstructions = "a"\ntrials = 1\nreference = "spiral"\n',
+     "blocks[0].reference: 'spiral' is not one of line, horizontal-first"),
     ("consent = \n", "not valid TOML"),
     ("consent = " + "[" * 100_000 + "]" * 100_000 + "\n", "nested too deeply"),
 ])

@@ -342,3 +342,29 @@ def test_no_500_in_a_sample_of_the_hostile_input_suite(web, capfd):
 def test_no_500_in_a_hostile_input_suite(web, capfd):
     """At least 300 requests (750 today): every answer a 4xx or 507 of one line, no error logged."""
     assert _hostile_suite(web, capfd) >= 300
+
+
+@pytest.mark.slow
+def test_a_browser_with_the_tokened_link_runs_the_page_and_one_without_it_does_not(browser, tmp_path):
+    """The token travels as the link's query once, then as a same-site cookie the page's modules and API calls
+    carry."""
+    from .conftest import new_page
+
+    session = Session(tmp_path / "out", _protocol(tmp_path))
+    server = Server(make_app(session, token="secret-token"), port=0).start()
+    try:
+        context, page = new_page(browser, gamepad=False)
+        try:
+            page.goto(f"{server.url}?token=secret-token&subject=s01")
+            page.wait_for_selector("#screen-consent:not([hidden])")
+            assert page.inner_text("#error") == "" and page.input_value("#subject-id") == "s01"
+        finally:
+            context.close()
+        context, page = new_page(browser, gamepad=False)
+        try:
+            response = page.goto(server.url)
+            assert response.status == 403 and "token" in page.content()
+        finally:
+            context.close()
+    finally:
+        server.stop()

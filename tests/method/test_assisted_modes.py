@@ -42,13 +42,13 @@ def test_import_tags_the_segments_whose_autopilot_holds_states(tmp_path, mode):
     assert all(d.meta.get("autopilot_holds") == AUTOPILOT_HOLDS.get(mode) for d in ds)
 
 
-def test_a_gain_that_does_not_bring_the_position_back_names_the_assisted_mode():
-    # a double integrator whose "pilot" pushes the position away (positive feedback): not stabilizing
+def _unstable_demos(modes, seed, states=("x", "xdot")):
+    """A double integrator whose "pilot" pushes the position away (positive feedback): not stabilizing, the slow
+    mode on the position and its velocity."""
     A, B = np.array([[1.0, 0.1], [0.0, 1.0]]), np.array([[0.0], [0.1]])
-    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",))
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(seed)
     demos = []
-    for j, mode in enumerate(["LOITER", "LOITER", "STABILIZE"]):
+    for j, mode in enumerate(modes):
         x, u = np.empty((30, 2)), np.empty((30, 1))
         x[0] = rng.normal(size=2)
         for k in range(30):
@@ -59,33 +59,49 @@ def test_a_gain_that_does_not_bring_the_position_back_names_the_assisted_mode():
         if mode in AUTOPILOT_HOLDS:
             meta["autopilot_holds"] = AUTOPILOT_HOLDS[mode]
         demos.append(Demonstration(np.arange(30) * 0.1, x, u, meta=meta))
-    ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1)
-    with pytest.raises(ModelError, match=r"not stabilizing.*2 of 3 demonstrations were flown in a mode where the "
-                                         r"autopilot, not the pilot, holds states — LOITER \(the position"):
+    return A, B, demos
+
+
+@pytest.mark.parametrize(("vertical", "mode", "named"), [
+    (None, "LOITER", True),      # LOITER holds the horizontal position: the slow mode lies on it
+    ("x", "ALT_HOLD", True),     # the state is the altitude, which ALT_HOLD holds
+    (None, "ALT_HOLD", False),   # ALT_HOLD holds the altitude, not this horizontal position: not the cause
+])
+def test_an_assisted_mode_is_named_only_where_it_holds_the_states_of_the_slow_mode(vertical, mode, named):
+    from workbench.data.roles import Roles
+
+    A, B, demos = _unstable_demos([mode, mode, "STABILIZE"], seed=0)
+    roles = Roles(position=("x",), velocity=("xdot",), vertical=vertical)
+    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",), roles=roles)
+    ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1, roles=roles)
+    with pytest.raises(ModelError, match="not stabilizing") as exc:
         estimate_gain(ds, system)
-    plain = ds.with_demos([Demonstration(d.t, d.x, d.u, {"id": d.meta["id"]}) for d in ds])
-    with pytest.raises(ModelError) as exc:
-        estimate_gain(plain, system)
+    message = str(exc.value)
+    assert ("Likely cause: 2 of 3 demonstrations were flown in a mode whose autopilot" in message) == named
+    assert (mode in message) == named
+
+
+def test_without_roles_no_mode_is_named():
+    # which states a mode holds is known from the plant's roles; without them the mode explains nothing
+    A, B, demos = _unstable_demos(["LOITER", "LOITER", "STABILIZE"], seed=0)
+    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",))
+    ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1)
+    with pytest.raises(ModelError, match="not stabilizing") as exc:
+        estimate_gain(ds, system)
     assert "autopilot" not in str(exc.value)
 
 
-def test_a_model_fitted_on_assisted_segments_names_the_mode_too():
-    # the models fit the gain on goal-relative copies of the demonstrations: the flight mode must come along
+@pytest.mark.parametrize(("vertical", "named"), [("x", True), (None, False)])
+def test_a_model_fitted_on_assisted_segments_names_the_mode_by_the_same_rule(vertical, named):
+    # the models fit the gain on the pilot's view of the demonstrations: the flight mode must come along, and the
+    # refusal (judged with its interval) names ALT_HOLD only where the slow mode lies on the altitude
+    from workbench.data.roles import Roles
     from workbench.models import IOCOnlyModel
 
-    A, B = np.array([[1.0, 0.1], [0.0, 1.0]]), np.array([[0.0], [0.1]])
-    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",))
-    rng = np.random.default_rng(1)
-    demos = []
-    for j in range(3):
-        x, u = np.empty((30, 2)), np.empty((30, 1))
-        x[0] = rng.normal(size=2)
-        for k in range(30):
-            u[k] = np.array([0.5, 0.5]) @ x[k] + 0.1 * rng.normal()
-            if k + 1 < 30:
-                x[k + 1] = A @ x[k] + B @ u[k]
-        demos.append(Demonstration(np.arange(30) * 0.1, x, u,
-                                   meta={"id": f"d{j}", "mode": "ALT_HOLD", "autopilot_holds": "the altitude"}))
-    ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1)
-    with pytest.raises(ModelError, match=r"3 of 3 demonstrations were flown in a mode where the autopilot"):
-        IOCOnlyModel(system, gain_method="direct").fit(ds)
+    A, B, demos = _unstable_demos(["ALT_HOLD"] * 3, seed=1)
+    roles = Roles(position=("x",), velocity=("xdot",), vertical=vertical)
+    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",), roles=roles)
+    ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1, roles=roles)
+    with pytest.raises(ModelError, match=r"not stabilizing.*interval \[1\.") as exc:
+        IOCOnlyModel(system, gain_method="direct", task="zero@x,xdot").fit(ds)
+    assert ("3 of 3 demonstrations were flown in a mode whose autopilot" in str(exc.value)) == named

@@ -64,7 +64,7 @@ def test_the_curve_simulates_more_sets_until_it_is_monotone_and_states_its_uncer
         return {"r": script[n][calls.count(n) - 1]}
 
     monkeypatch.setattr(power, "_log_spans", spans)
-    model = type("M", (), {"system": None})()
+    model = type("M", (), {"system": None, "plant_regulated": None})()
     curve = power.power_curve(model, list(range(10)), sizes=(10, 20, 40), repeats=1, seed=0)
     per_size = curve.spans.groupby("n").size()
     assert per_size.min() >= power.MIN_SETS

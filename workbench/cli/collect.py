@@ -161,10 +161,12 @@ def cmd_collect(ctx: Context) -> int:
         shown_host = a.host if a.host not in ("0.0.0.0", "::") else _machine_name()
         url = server.url_for(shown_host, "" if token is None else f"token={token}")
         n_trials = sum(b.trials for b in protocol.blocks)
-        print(f"serving {url} (protocol {protocol.name}: {len(protocol.steps)} steps, {n_trials} trials per subject; "
-              f"session {a.out}); Ctrl-C stops", flush=True)
-        print(f"the experimenter's page (keep it to yourself): {server.url_for(shown_host, f'key={key}')}"
-              .replace("/?key", "/experimenter?key"), flush=True)
+        # each link alone on its line, so that it can be copied whole from any terminal
+        print(f"serving {url}", flush=True)
+        ctx.say(f"the subject's page above: protocol {protocol.name}, {len(protocol.steps)} steps, {n_trials} trials "
+                f"per subject; session {a.out}; Ctrl-C stops")
+        ctx.say("the experimenter's page (keep the link to yourself):")
+        print(server.url_for(shown_host, f"key={key}").replace("/?key", "/experimenter?key"), flush=True)
         if not local:
             print(f"warning: listening on {a.host}: other machines can reach the page; it needs the token in the link "
                   "above", file=sys.stderr)
@@ -175,7 +177,8 @@ def cmd_collect(ctx: Context) -> int:
         server.run()
         session.fits.wait(5.0)
     if saved is not None:
-        ctx.say(f"wrote the experimenter's recording to {saved} (open it with: rerun {saved})")
+        ctx.say(f"wrote the experimenter's recording to {saved}")
+        ctx.say(f"open it with: rerun {saved}")
     if not session.subjects():
         ctx.say(f"no subject has started; {a.out} holds no trials")
     for subject in session.subjects():

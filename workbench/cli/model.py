@@ -81,15 +81,18 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
 
         try:
             model = make_model(a.method, system, n_components=components, random_state=a.seed,
-                               gain_method=a.gain).fit(ds)
+                               gain_method=a.gain, task=a.task).fit(ds)
         except ModelError as exc:
             raise ModelError(_physics_first(system, exc)) from None
     model.save(output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
+    if getattr(model, "task_", None) is not None:
+        ctx.say(model.task_.describe(system.state_names))
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
         try:
-            _print_bootstrap(ctx, _as_fitted(ds, model), system, a.bootstrap, a.seed, model.gain_method_)
+            _print_bootstrap(ctx, _as_fitted(ds, model), model.plant_regulated, a.bootstrap, a.seed,
+                             model.gain_method_)
             _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
         except (DataError, ModelError) as exc:  # the model is written: intervals that cannot be had do not unmake it
             print(f"warning: intervals not computed: {exc}", file=sys.stderr)
@@ -120,23 +123,21 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
     ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
             f"{result.ci:g} % percentile intervals):")
-    for names, lo, hi, what in ((ds.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
-                                (ds.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
+    for names, lo, hi, what in ((system.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
+                                (system.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
         ctx.say(f"  diag {what}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(names, lo, hi, strict=True)))
-    for i, u in enumerate(ds.input_names):
+    for i, u in enumerate(system.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
-            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(ds.state_names, result.K_lo[i], result.K_hi[i], strict=True)))
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, result.K_lo[i], result.K_hi[i],
+                                                         strict=True)))
 
 
 def _as_fitted(ds: Any, model: Any) -> Any:
-    """The trials as a goal-relative model fitted them (states minus their targets), so the bootstrap's point
-    estimate is the model's own gain and objective; unchanged for a model of ``u = K̂x``."""
-    from workbench.data.demonstrations import Demonstration
-
-    if not (model.has_gain and model.goal_relative_):
-        return ds
-    return ds.with_demos([Demonstration(d.t, d.x - d.target, d.u, d.meta) for d in ds])
+    """The trials as the model's regulator saw them (the regulated states relative to the goal or the reference,
+    the input net of its feedforward: :meth:`~workbench.models.behavior.BehaviorModel.pilot_view`), so the
+    bootstrap's point estimate is the model's own gain and objective."""
+    return model.pilot_view(ds)
 
 
 def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, power: int = 0) -> None:
@@ -186,15 +187,18 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
         ctx.say_table(["K̂ (u = K̂ x)", *ds.state_names],
                       [[name, *(f"{v:.3g}" for v in row)] for name, row in zip(ds.input_names, K, strict=True)])
         ctx.say(str(model.gain_choice_))
+        if getattr(model, "stability_", None) is not None:
+            ctx.say(model.stability_.describe())
         o = model.objective_
     if o is None and model.has_gain and model.objective_error_:
         ctx.say(f"task objective: not found ({model.objective_error_}); the model predicts without it")
     if o is not None:
-        n = ds.n_states
+        names = model.plant_regulated.state_names  # the objective weighs the regulated states
+        n = len(names)
         q = np.diag(np.asarray(o.M_normalized)[:n, :n])
         r = np.diag(np.asarray(o.M_normalized)[n:, n:])
         ctx.say(f"α* = {o.alpha:.4g}, forward-gain error {o.forward_gain_error:.1e}")
-        ctx.say("diag Q/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.state_names, q, strict=True)))
+        ctx.say("diag Q/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(names, q, strict=True)))
         ctx.say("diag R/λmax: " + ", ".join(f"{s} {v:.3g}" for s, v in zip(ds.input_names, r, strict=True)))
     if model.has_components:
         ctx.say(f"GMM components: {model.n_components_}")
@@ -245,7 +249,7 @@ def cmd_predict(ctx: Context) -> int:
     dt = model.system.dt  # the model steps at its own dt, whatever the demonstrations' sampling
     n_steps = steps_of(a.horizon_s, dt)
     # from inside a trial, the task's start frame stays at the trial's first state
-    kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0}
+    kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0, "task_step": int(start)}
     if a.samples:
         kwargs.update(samples=a.samples, seed=a.seed)
     pred = model.predict(x0, n_steps, **kwargs)

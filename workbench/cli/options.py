@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 
 __all__ = ["SAMPLE_LOGS", "DEFAULT_MAPPING", "SPEED_RANGE", "n_components_arg", "fit_n_components_arg",
-           "positive_float", "speed_arg", "int_list", "steps_of"]
+           "positive_float", "speed_arg", "int_list", "steps_of", "task_arg"]
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
 DEFAULT_MAPPING = "planar_quadrotor"
@@ -68,3 +68,16 @@ def int_list(value: str) -> list[int]:
 
 def steps_of(seconds: float, dt: float) -> int:
     return max(1, int(round(seconds / dt)))
+
+
+def task_arg(value: str) -> str:
+    """``--task``: what the pilot regulates and relative to what (``goal``, ``zero``, ``reference:line``,
+    ``reference:horizontal-first``, each optionally ``@state,state,…`` or ``@inner``; or ``@states`` alone),
+    checked here so a typo is a usage error; the fit reads it with :func:`workbench.data.pilot_task.parse_task`."""
+    from workbench.data.pilot_task import parse_task
+
+    try:
+        parse_task(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return value

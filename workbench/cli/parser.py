@@ -18,6 +18,7 @@ from workbench.cli.options import (
     int_list,
     positive_float,
     speed_arg,
+    task_arg,
 )
 from workbench.cli.stdio import input_formats, output_formats
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
@@ -229,6 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"resample the trials N times (default {OBJECTIVE_RESAMPLES}; 0: no intervals) and print 95 "
                         "%% intervals of K̂, the normalized Q, R diagonals and the weight ratios inside coupled parts "
                         "(the paper gives none)")
+    _task_option(p)
     _power_option(p, 0)
     _system_option(p)
     _plant_group_option(p, "a model of each written beside -o as MODEL.GROUP.npz")
@@ -366,6 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
     _bootstrap_option(p)
     _power_option(p, 1)
     _study_options(p)
+    _task_option(p)
     _plant_group_option(p, "a report of each in DIR/GROUP/")
     _mapping_option(p)
     _executor_options(p)
@@ -381,6 +384,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_collect(add)
     return parser
+
+
+def _task_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--task", type=task_arg, metavar="REL[@STATES]",
+                   help="what the pilot regulates, relative to what: goal, zero or reference:line / "
+                        "reference:horizontal-first, optionally @state,state,… (or @inner: all but the positions); "
+                        "default: decided from the trials (their goals, a reference they declare, the plant's "
+                        "positions: a free flight regulates its inner loops) and printed")
 
 
 def _power_option(p: argparse.ArgumentParser, default: int) -> None:

@@ -144,13 +144,14 @@ def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0)
                 ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
                 n_components=a.n_components,
                 samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s,
+                task=getattr(a, "task", None),
             )
         else:
             result = study.run_study(
                 ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
                 n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats,
                 seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s, bootstrap=bootstrap,
-                power=power, test_ids=recorded,
+                power=power, test_ids=recorded, task=getattr(a, "task", None),
             )
     return result, loso
 
@@ -181,7 +182,8 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
         task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
         res = evaluate.per_subject(
             # each subject's plant from its training trials only, never from the held-out ones
-            lambda train: make_models(plant(train), n_components=components, random_state=seed), source,
+            lambda train: make_models(plant(train), n_components=components, random_state=seed,
+                                      task=getattr(a, "task", None)), source,
             n_test=a.n_test,
             n_steps=steps_of(a.horizon_s, ds.dt), seed=a.seed,
             progress=lambda done, total: progress.update(task, completed=done), executor=ex, test_ids=recorded,

@@ -4,11 +4,11 @@ While a subject flies, the page sends the server its states every few physics st
 when this view is on; nothing of it is stored: the trial is written when it ends); they are drawn in the scene
 ``live/<subject>`` with, where a model of the block's label is known (``--model CS1=cs1.npz``, or the subject's own
 from a fit step), that model's mean prediction from the trial's start state beside the live track. Each finished
-trial adds its track to ``trials/<subject>/<id>`` in its outcome's colour (:data:`OUTCOME_COLORS`, one per outcome,
-safe for colour-blind readers, with a legend drawn in the scene), a line to the ``outcomes`` log; only the newest
-trial's track is labelled, so labels never pile up. The ``summary`` document holds the whole outcome table (per
-subject, label and role: every outcome's count), each fit step's model with its held-out error, and where the
-session and this recording are written.
+trial adds its track to ``trials/<subject>/<id>`` in its outcome's colour (one per outcome,
+:data:`workbench.palette.OUTCOME_COLORS`, apart for colour-blind readers, with a legend drawn in the scene) and a
+line to the ``outcomes`` log; only the newest trial's track is labelled, so labels never pile up. The ``summary``
+document holds the whole outcome table (per subject, label and role: every outcome's count), each fit step's model
+with its held-out error, the exclusions, and where the session and this recording are written.
 
 Time lines: ``session`` (seconds since the server started) for everything, ``step`` (the trial's physics step) for
 the live track.
@@ -26,15 +26,12 @@ import numpy as np
 
 from workbench.collect.task import OUTCOMES
 from workbench.defaults import HORIZON_S
+from workbench.palette import METHOD_COLORS, OUTCOME_COLORS, RECORDED_SCREEN
 
 __all__ = ["ExperimenterView", "OUTCOME_COLORS"]
 
-#: One colour per outcome (Okabe & Ito's colour-blind-safe set): landed bluish green, crashed vermillion, left the
-#: domain orange, time limit reddish purple.
-OUTCOME_COLORS = {"landed": (0, 158, 115), "crashed": (213, 94, 0), "left the domain": (230, 159, 0),
-                  "time limit": (204, 121, 167)}
-LIVE_COLOR = (31, 45, 74)
-PREDICTION_COLOR = (0, 114, 178)
+LIVE_COLOR = RECORDED_SCREEN  # the trial in flight: what is recorded
+PREDICTION_COLOR = METHOD_COLORS[0]  # a model's prediction: the proposed model's colour
 
 
 class ExperimenterView:
@@ -67,8 +64,8 @@ class ExperimenterView:
         # rerun's 2-D views point y down: heights are negated so that up is drawn up (as the viewer's scenes do)
         ground = [[[x_lo, 0.0], [x_hi, 0.0]], [[pad["x"] - pad["half_width"], 0.0],
                                                 [pad["x"] + pad["half_width"], 0.0]]]
-        rec.log("scene/ground", rr.LineStrips2D(ground, colors=[(107, 125, 90), (0, 158, 115)], radii=[0.02, 0.05]),
-                static=True)
+        rec.log("scene/ground", rr.LineStrips2D(ground, colors=[(107, 125, 90), (170, 190, 140)],
+                                                radii=[0.02, 0.05]), static=True)
         rec.log("scene/pad", rr.Points2D([[pad["x"], 0.25]], radii=[0.0], labels=["pad"], colors=[(60, 60, 60)]),
                 static=True)
         rec.log("scene/domain", rr.LineStrips2D([[[x_lo, 0], [x_lo, -y_hi], [x_hi, -y_hi], [x_hi, 0]]],

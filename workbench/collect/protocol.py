@@ -50,6 +50,8 @@ by registration order or, better, by the experimenter's declared subject IDs::
     held_out = 0                    # of the trials, this many (drawn per subject) are test trials instead
     assist = "none"                 # none | show (the model's predicted path) | blend (see below)
     blend = 0.3                     # with assist = "blend": the model's share α of the input
+    reference = "horizontal-first"  # optional: the path the instruction asks for (line | horizontal-first); a fit
+                                    # then regulates the deviation from it, with its feedforward
     stop = { landed = 10 }          # optional: the block ends once this many of its trials landed, or
                                     # once a contrast of the objective is identified (checked in a worker after
                                     # each landed trial from min_trials on; the weight ratios' bootstrap):
@@ -84,6 +86,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.data.pilot_task import REFERENCES
 from workbench.errors import DataError
 
 __all__ = ["Field", "Block", "Message", "FitStep", "InputSettings", "Protocol", "load_protocol", "parse_protocol",
@@ -145,6 +148,10 @@ class Block:
     stop_identified: str = ""  # a weight ratio ("Q_phi / R_u1"): the block ends once its interval identifies it
     stop_min_trials: int = 0  # landed trials before the identification is first checked
     kind: str = "trials"
+    #: The reference the instruction asks the pilot to follow (:data:`workbench.data.pilot_task.REFERENCES`), written
+    #: into each trial's ``meta["reference"]``; a fit of the trials then regulates the deviation from it. None: the
+    #: goal (the pad), as the paper's fits.
+    reference: str | None = None
 
 
 @dataclass(frozen=True)
@@ -392,7 +399,7 @@ def _input(r: _Reader, doc: dict) -> InputSettings:
 
 
 def _block(r: _Reader, b: dict, where: str) -> Block:
-    r.known(b, {"label", "instructions", "trials", "role", "held_out", "assist", "blend", "stop"}, where)
+    r.known(b, {"label", "instructions", "trials", "role", "held_out", "assist", "blend", "stop", "reference"}, where)
     label = r.label(r.get(b, "label", str, where), where + "label")
     trials = r.integer(b, "trials", where, ..., 1, LIMITS["trials_per_block"])
     role = r.get(b, "role", str, where, "train")
@@ -419,8 +426,11 @@ def _block(r: _Reader, b: dict, where: str) -> Block:
     least = r.integer(stop, "min_trials", where + "stop.", 5, 3, trials) if identified else 0
     if "min_trials" in stop and not identified:
         raise r.fail(where + "stop.min_trials", "goes with stop.identified")
+    reference = r.get(b, "reference", str, where, None)
+    if reference is not None and reference not in REFERENCES:
+        raise r.fail(where + "reference", f"{_short(reference)} is not one of {', '.join(REFERENCES)}")
     return Block(label, r.text(b, "instructions", where), trials, role, held, assist, alpha, landed, identified,
-                 least)
+                 least, reference=reference)
 
 
 def _step(r: _Reader, b: Any, j: int) -> Step:

@@ -131,20 +131,33 @@ def write_trials_csv(out: Path) -> Path:
     return atomic_write_text(out / HIDDEN / "trials.csv", buf.getvalue())
 
 
-def write_data_dictionary(out: Path, protocol: Any, spec: dict[str, Any]) -> Path:
+def _state_words(name: str, roles: Any) -> str:
+    """What a state is, by the plant's roles, with its unit (never by its name)."""
+    if name in roles.position:
+        what = "position, height above the pad" if name == roles.vertical else "position, across"
+    elif name in roles.velocity:
+        what = "velocity, " + ("vertical" if roles.position[roles.velocity.index(name)] == roles.vertical
+                               else "across")
+    elif name == roles.heading:
+        what = "attitude"
+    else:
+        what = "state"
+    unit = roles.unit(name)
+    return f"{what} ({unit})" if unit else what
+
+
+def write_data_dictionary(out: Path, protocol: Any, spec: dict[str, Any], roles: Any) -> Path:
     """``DIR/_collect/data_dictionary.md``: the partitions' columns, the trials' metadata keys, ``trials.csv``'s
-    columns and the subject fields, with units."""
+    columns and the subject fields, with units (from the plant's ``roles``)."""
     lines = [f"# Data dictionary: session of protocol {protocol.name}", "",
              f"Protocol fingerprint (SHA-256): `{protocol.fingerprint}`; its text is in `_collect/session.json`.",
              "", "## Trial partitions: `subject=<ID>/<trial id>.parquet` (one row per physics step)", "",
              "| column | meaning |", "|---|---|",
              "| `demo` | the trial's ID |", f"| `t` | time since the trial's start, s (steps of {spec['dt']:g} s) |"]
-    units = {"x": "m", "y": "m (height above the pad)", "phi": "rad (attitude)", "vx": "m/s", "vy": "m/s",
-             "phidot": "rad/s"}
-    for s in spec["state_names"]:
-        lines.append(f"| `{s}` | state: {units.get(s, '')} |")
-    for u in spec["input_names"]:
-        lines.append(f"| `{u}` | input the plant received, in [−1, 1] (after blending in an assisted trial) |")
+    for name in spec["state_names"]:
+        lines.append(f"| `{name}` | state: {_state_words(name, roles)} |")
+    for name in spec["input_names"]:
+        lines.append(f"| `{name}` | input the plant received, in [−1, 1] (after blending in an assisted trial) |")
     lines += ["", "## Trial metadata (each partition's `workbench` Parquet metadata; `Demonstration.meta`)", "",
               "| key | meaning |", "|---|---|", *(f"| `{k}` | {v} |" for k, v in META_KEYS),
               "", "## `_collect/trials.csv` (one line per finished trial)", "", "| column | meaning |", "|---|---|",

@@ -100,7 +100,7 @@ class Session:
         self.jobs = Jobs(on_done=self._job_done, runner=runner)
         self.fits = FitJobs(self.out, self.seed, self.jobs)
         self.stops = StopChecks(self.out, self.seed, self.jobs)
-        records.write_data_dictionary(self.out, protocol, self.spec)
+        records.write_data_dictionary(self.out, protocol, self.spec, self.system.roles)
 
     # -- the folder --------------------------------------------------------------------------------------
     @property
@@ -142,8 +142,9 @@ class Session:
         elif doc.get("protocol_fingerprint") != self.protocol.fingerprint:
             change = first_difference(doc.get("protocol_content") or {},
                                       json.loads(json.dumps(self.protocol.content())))
-            return (f"a session of another protocol ({name!r}, fingerprint {str(doc.get('protocol_fingerprint'))[:12]}"
-                    f"; this one {self.protocol.fingerprint[:12]}: {change})")
+            then = str(doc.get("protocol_fingerprint"))[:12]
+            return (f"a session of another protocol: {name!r} (fingerprint {then}), not this {self.protocol.name!r} "
+                    f"({self.protocol.fingerprint[:12]}; first difference {change})")
         if seed_then != self.seed:
             return f"a session of --seed {seed_then}, not {self.seed} (the start positions depend on it)"
         return ""
@@ -514,6 +515,9 @@ class Session:
             "attempts": max(1, len(starts)), "interruptions": lost + demo["interruptions"],
             "excluded": False, "exclusion_note": "",
         }
+        reference = getattr(self.protocol.steps[item.block], "reference", None)
+        if reference is not None:  # the path the block's instruction asks for: a fit regulates the deviation from it
+            demo_meta["reference"] = reference
         if help_ is not None:
             demo_meta["assist"] = {k: help_[k] for k in ("kind", "alpha", "K", "law", "model")}
             demo_meta["pilot_u"] = demo["pilot"].tolist()  # the pilot's own input; ``u`` is what the plant got

@@ -377,7 +377,7 @@ class OnlinePredictor:
         start = time.perf_counter()
         model, target = self.model, st.target
         X = st.x[None, :]
-        u_mean, u_cov = model.input_distribution(X, x0=st.x0, target=target)
+        u_mean, u_cov = model.input_distribution(X, x0=st.x0, target=target, steps=[st.k])
         w = w_mean = w_cov = None
         if self._has_w:
             mu, sigma = model.variability(X, x0=st.x0, target=target)
@@ -385,7 +385,7 @@ class OnlinePredictor:
             w = st.u - (u_mean[0] - w_mean)  # ŵ = u − K̂(x − r), eq. (20): û = K̂(x − r) + μ̂
         rollout_x = rollout_u = None
         if self.rollout_steps:
-            pred = model.predict(st.x, self.rollout_steps, target=target, task_x0=st.x0)
+            pred = model.predict(st.x, self.rollout_steps, target=target, task_x0=st.x0, task_step=int(st.k))
             rollout_x, rollout_u = np.asarray(pred.x), np.asarray(pred.u)
         p = LivePrediction(
             demo_id=st.demo_id, segment=st.segment, k=st.k, t=st.t, t_rel=st.t_rel, x=readonly(st.x), u=readonly(st.u),

@@ -10,7 +10,6 @@ variability.
 from __future__ import annotations
 
 import math
-from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -171,12 +170,16 @@ def gain_from_arrays(
     method: GainMethod = "direct",
     lengths: Sequence[int] | None = None,
     state_names: Sequence[str] | None = None,
-    assisted: str = "",
+    assisted: str | Any = "",
+    check: bool = True,
 ) -> np.ndarray:
     """Estimate the gain ``K̂`` of ``u = K x`` from stacked data (step 1 of Algorithm 1).
 
     ``state_names`` name, in the error for a gain that is not stabilizing, the states its slowest mode lies on;
-    ``assisted`` (:func:`assisted_note`) the flight modes whose autopilot held some of them.
+    ``assisted`` the flight modes whose autopilot held some of them: a sentence, or a callable of the slow mode's
+    states that returns one (:func:`workbench.method.stability.likely_cause`: a mode is named only where it holds
+    a state the slow mode lies on). ``check=False`` returns the estimate without judging it (the models judge it
+    with its interval, :mod:`workbench.method.stability`).
 
     Parameters
     ----------
@@ -241,27 +244,21 @@ def gain_from_arrays(
             )
         A_tilde = np.linalg.lstsq(X.T, X_next.T, rcond=None)[0].T  # eq. (12)
         K = np.linalg.lstsq(B, A_tilde - A, rcond=None)[0]  # eq. (14)
+    if not check:
+        return K
     try:
         check_stabilizing(A, B, K)
     except ModelError as exc:
+        cause = assisted(_slow_states(A, B, K, state_names)) if callable(assisted) else assisted
         raise ModelError(f"estimated gain ({method}, cond(X) = {cond_X:.3g}): {exc}"
-                         f"{_unstable_mode(A, B, K, state_names)}{assisted}") from None
+                         f"{_unstable_mode(A, B, K, state_names)}{cause}") from None
     return K
 
 
-def assisted_note(demos: Sequence[Any]) -> str:
-    """Which demonstrations were flown in a mode where the autopilot holds states (``meta["autopilot_holds"]``,
-    set by the adapters), as the likely cause of a gain that does not bring them back; ``""`` where none was."""
-    held = Counter((str(d.meta.get("mode", "")), str(d.meta["autopilot_holds"])) for d in demos
-                   if getattr(d, "meta", None) and d.meta.get("autopilot_holds"))
-    if not held:
-        return ""
-    n = sum(held.values())
-    modes = ", ".join(f"{mode} ({what})" for (mode, what), _ in held.most_common())
-    return (f". Likely cause: {n} of {len(demos)} demonstrations were flown in a mode where the autopilot, not the "
-            f"pilot, holds states — {modes}: there the sticks command rates and the autopilot brings the held "
-            "states back, so the pilot's own gain need not; model the segments of a mode the pilot flies alone "
-            "(STABILIZE, ACRO, MANUAL: a mapping that keeps only those)")
+def _slow_states(A: np.ndarray, B: np.ndarray, K: np.ndarray, names: Sequence[str] | None) -> tuple[str, ...]:
+    from workbench.method.slow_mode import slow_mode
+
+    return slow_mode(A + B @ K, list(names or ()))[1] if names and len(names) == A.shape[0] else ()
 
 
 def _unstable_mode(A: np.ndarray, B: np.ndarray, K: np.ndarray, names: Sequence[str] | None) -> str:
@@ -277,7 +274,7 @@ def _unstable_mode(A: np.ndarray, B: np.ndarray, K: np.ndarray, names: Sequence[
             "wander holds no position for a cost to explain); fit the states the pilot holds")
 
 
-def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direct") -> np.ndarray:
+def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direct", check: bool = True) -> np.ndarray:
     """Estimate ``K̂`` of ``u = K x`` from demonstrations (Algorithm 1, step 1; eqs. (12)-(14)).
 
     Parameters
@@ -288,11 +285,13 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
         Anything with ``.A`` (n, n) and ``.B`` (n, m).
     method : {"direct", "dmd", "iv"}
         See :func:`gain_from_arrays`; ``"iv"`` for closed-loop data with autocorrelated variability.
+    check : bool
+        Refuse a gain that is not stabilizing (Assumption 3); False leaves the judgement to the caller.
 
     Returns
     -------
     ndarray, shape (m, n)
-        The gain, checked to be stabilizing (Assumption 3 of the method paper).
+        The gain, checked to be stabilizing (Assumption 3 of the method paper) unless ``check`` is false.
     """
     A, B = system_matrices(system.A, system.B)
     blocks = demo_blocks(demos, *B.shape)
@@ -300,9 +299,16 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
         raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
     X, U, X_next = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))
     names = getattr(system, "state_names", None)
+    names = tuple(names) if names is not None else None
+    demos = list(demos)
+
+    def cause(slow: tuple[str, ...]) -> str:
+        from workbench.method.slow_mode import likely_cause
+
+        return likely_cause(demos, slow, getattr(system, "roles", None), names or ())
+
     return gain_from_arrays(X, U, X_next, A, B, method, lengths=[b[0].shape[1] for b in blocks],
-                            state_names=tuple(names) if names is not None else None,
-                            assisted=assisted_note(list(demos)))
+                            state_names=names, assisted=cause, check=check)
 
 
 @dataclass(frozen=True)
@@ -327,13 +333,15 @@ class GainChoice:
         return f"gain {self.method} ({self.reason})"
 
 
-def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT) -> tuple[np.ndarray, GainChoice]:
+def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT,
+                check: bool = True) -> tuple[np.ndarray, GainChoice]:
     """K̂ by ``method``, or for :data:`IV_OR_DIRECT` by the rule: instrumental variables where the instruments
     are relevant and the gain they give is stabilizing, least squares otherwise.
 
     Least squares is biased in closed loop with autocorrelated variability (the state was made by the operator's
     own earlier inputs) however many demonstrations there are; "iv" is consistent but needs demonstrations that
-    start in varied states. The fallback keeps a model for data where "iv" cannot work, and says so.
+    start in varied states. The fallback keeps a model for data where "iv" cannot work, and says so. ``check=False``
+    returns the chosen estimate without refusing it where it is not stabilizing (the caller judges it).
 
     Returns
     -------
@@ -344,7 +352,7 @@ def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT) -
         raise DataError(f"gain method must be one of {GAIN_METHODS}, got {method!r}")
     demos = list(demos)
     if method != IV_OR_DIRECT:
-        return estimate_gain(demos, system, method), GainChoice(method, method, "as requested")
+        return estimate_gain(demos, system, method, check), GainChoice(method, method, "as requested")
     A, B = system_matrices(system.A, system.B)
     blocks = demo_blocks(demos, *B.shape)
     relevance = float("nan")
@@ -361,6 +369,7 @@ def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT) -
         check_stabilizing(A, B, K)
     except (ModelError, np.linalg.LinAlgError) as exc:
         why = " ".join(str(exc).split()) or type(exc).__name__
-        return estimate_gain(demos, system, "direct"), GainChoice(method, "direct", f"fallback from iv: {why}")
+        return (estimate_gain(demos, system, "direct", check),
+                GainChoice(method, "direct", f"fallback from iv: {why}"))
     return K, GainChoice(method, "iv", f"instruments relevant: smallest squared canonical correlation "
                                        f"{relevance:.2g} ≥ {IV_MIN_RELEVANCE:g}")

@@ -45,6 +45,7 @@ import numpy as np
 
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
 from workbench.models.fitting import shared_gains
+from workbench.models.regulator import settle_task
 
 __all__ = ["AutoSettings", "choose_settings", "COMPONENT_GRID", "REG_COVAR_GRID", "CRITERIA",
            "DEFAULT_COMPONENT_GRID", "DEFAULT_REG_COVAR_GRID", "NoCandidateFitted", "FALLBACK_SE"]
@@ -175,7 +176,8 @@ def _rollout_rmse(model, demos, n_steps: int, idx: Sequence[int], spread: np.nda
             continue
         starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CV_STARTS] or [0]
         goal = model._goal_for(d)
-        preds = model.predict_many(d.x[starts], H, [goal] * len(starts), task_x0s=[d.x[0]] * len(starts))
+        preds = model.predict_many(d.x[starts], H, [goal] * len(starts), task_x0s=[d.x[0]] * len(starts),
+                                   task_steps=starts)
         mine = []
         for s, p in zip(starts, preds, strict=True):
             diff = (p.x[1:, idx] - d.x[s + 1 : s + H + 1, idx]) / spread
@@ -269,11 +271,23 @@ def _fold(model, demos, fold, test_idx, Gs, regs, settings, idx, H, fallback, ta
         xs = np.concatenate([d.x for d in train])[:, idx]
         spread = xs.std(axis=0)  # of a constant state: rounding (1e-16), not 0, hence the relative tolerance
         spread = np.where(spread > 1e-12 * np.maximum(1.0, np.abs(xs).max(axis=0)), spread, 1.0)
+    # the fold's task (a reference's speed fitted on its training trials) is settled once for its candidates
+    try:
+        fold_task = settle_task(model, train)
+    except ModelError as exc:
+        tally.causes.setdefault(str(exc), (fold + 1, len(train)))
+        for key in tally.rmse:  # no candidate of this fold is scored
+            tally.rmse[key].append(math.nan)
+            tally.loglik[key].append(math.nan)
+        if fallback:
+            tally.ioc.append(math.nan)
+        return
     for G in Gs:
         if G * _SAMPLES_PER_COMPONENT > n_train:
             continue
         for r in regs:
-            candidate = type(model)(system, **{**settings, "n_components": int(G), "reg_covar": float(r)})
+            candidate = type(model)(system, **{**settings, "n_components": int(G), "reg_covar": float(r),
+                                               "task": fold_task})
             fitted = False
             try:
                 with warnings.catch_warnings():

@@ -16,13 +16,15 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.pilot_task import PilotTask
 from workbench.defaults import N_COMPONENTS, REG_COVAR
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
 from workbench.models.files import ModelFile
-from workbench.models.fitting import as_vector, demo_list, fit_gain, fit_objective_or_reason, references
+from workbench.models.fitting import as_vector, demo_list
 from workbench.models.prediction import Policy
+from workbench.models.regulator import fit_regulator, settle_task
 from workbench.models.storage import (
     gain_choice_restore,
     gain_choice_state,
@@ -48,7 +50,8 @@ class GMROnlyModel(TaskGMRModel):
 
     @classmethod
     def for_method(cls, system: LinearSystem, settings: MethodSettings) -> GMROnlyModel:
-        return cls(system, n_components=settings.n_components, random_state=settings.random_state)
+        return cls(system, n_components=settings.n_components, random_state=settings.random_state,
+                   task=settings.task)
 
     def __init__(
         self,
@@ -67,8 +70,10 @@ class GMROnlyModel(TaskGMRModel):
         noise_window: float = 2.0,
         noise_folds: int = 3,
         noise_horizon_s: float = 3.0,
+        task: PilotTask | str | dict | None = None,
     ) -> None:
         super().__init__(system)
+        self.task = task
         self.n_components = n_components
         self.frames = frames
         self.reg_covar = reg_covar
@@ -88,6 +93,9 @@ class GMROnlyModel(TaskGMRModel):
         """EM on ``[x; u]`` of every demonstration in its own frames (eqs. (28)-(29), (36)-(37))."""
         self._check_settings()
         ds = demo_list(demos, self.system, "GMROnlyModel.fit")
+        # the same regulated states as the proposed model's (its task decided the same way); no gain, no reference
+        self.task_ = settle_task(self, ds)
+        self.regulated_ = self.task_.regulated_indices(self.system.state_names)
         U = [d.u for d in ds]
         self._fit_common(ds, getattr(demos, "labels", []))
         self._fit_gmr(ds, U)
@@ -96,11 +104,12 @@ class GMROnlyModel(TaskGMRModel):
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
         cond = self._conditional(x0, target)
+        idx = list(self.regulated_idx)
 
         def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            return cond.predict(X)
+            return cond.predict(X[:, idx])
 
-        policy.mean = cond.predict_mean
+        policy.mean = lambda X: cond.predict_mean(X[:, idx])
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -134,7 +143,7 @@ class IOCOnlyModel(BehaviorModel):
 
     @classmethod
     def for_method(cls, system: LinearSystem, settings: MethodSettings) -> IOCOnlyModel:
-        return cls(system, gain_method=settings.gain_method)
+        return cls(system, gain_method=settings.gain_method, task=settings.task)
 
     def __init__(
         self,
@@ -146,8 +155,10 @@ class IOCOnlyModel(BehaviorModel):
         noise_window: float = 2.0,
         noise_folds: int = 3,
         noise_horizon_s: float = 3.0,
+        task: PilotTask | str | dict | None = None,
     ) -> None:
         super().__init__(system)
+        self.task = task
         self.gain_method = gain_method
         self.structure = structure
         self.fit_objective = fit_objective
@@ -163,11 +174,10 @@ class IOCOnlyModel(BehaviorModel):
         """K̂ by eqs. (12)-(14) and, optionally, the objective by eqs. (15)-(19); the residual second moment."""
         self._check_noise()
         ds = demo_list(demos, self.system, "IOCOnlyModel.fit")
-        refs, self.goal_relative_ = references(ds, self.system.n)
-        K, self.gain_choice_ = fit_gain(ds, refs, self.system, self.gain_method)
-        self.gain_method_ = self.gain_choice_.method
-        self.objective_, self.objective_error_ = fit_objective_or_reason(self, K)
-        W = [d.u - (d.x - r) @ K.T for d, r in zip(ds, refs, strict=True)]
+        fit_regulator(self, ds)
+        K = self.K_
+        W = [d.u - self._linear(d.x[0], d.target if d.target is not None else d.x[-1])(d.x, np.arange(len(d.x)))
+             for d in ds]
         Wall = np.concatenate(W)
         m = self.system.m
         # a tiny floor keeps the factor defined for an input that never deviates from K̂x
@@ -190,12 +200,14 @@ class IOCOnlyModel(BehaviorModel):
         return x0, self.default_target(x0) if target is None else as_vector(target, n, "target")
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
-        KT, cov, m = self.K_.T, self.residual_cov_, self.system.m
-        offset = self._reference(target) @ KT
+        cov, m = self.residual_cov_, self.system.m
+        linear = self._linear(x0, target)
 
-        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            return X @ KT - offset, np.broadcast_to(cov, (X.shape[0], m, m))
+        def policy(X: np.ndarray, k: Any = None) -> tuple[np.ndarray, np.ndarray]:
+            return linear(X, k), np.broadcast_to(cov, (X.shape[0], m, m))
 
+        policy.mean = linear
+        policy.timed = linear.timed
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

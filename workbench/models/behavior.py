@@ -30,6 +30,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.digest import set_digest, trial_digest
+from workbench.data.pilot_task import PilotTask
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError, WorkbenchError
 from workbench.models.files import ModelFile
 from workbench.models.fitting import as_vector, envelope_exit, goal_of, json_seed, state_envelope
@@ -42,6 +43,7 @@ from workbench.models.prediction import (
     rollout_mean,
     rollout_samples,
 )
+from workbench.models.regulator import LinearTerm, legacy_task, linear_term, pilot_view, regulator_plant
 from workbench.plant.system import LinearSystem
 
 __all__ = ["BehaviorModel", "MethodSettings"]
@@ -70,6 +72,9 @@ class MethodSettings:
     gain_method: str
     fit_objective: bool
     cv_grid: dict[str, tuple] | None = None
+    #: The pilot's task: None (decided from the demonstrations) or an override (:func:`~workbench.data.pilot_task.
+    #: parse_task`), the same for every method of a comparison
+    task: Any = None
 
 
 class BehaviorModel(abc.ABC):
@@ -193,6 +198,34 @@ class BehaviorModel(abc.ABC):
         """The state the linear term regulates to for a task: its target if fitted goal-relative, else 0."""
         return target if getattr(self, "goal_relative_", False) else np.zeros(self.system.n)
 
+    @property
+    def pilot_task(self) -> PilotTask:
+        """The task the model was fitted for (``task_``; for a file written before it was recorded, the task its
+        linear term implies: every state, relative to the goal or to zero)."""
+        task = getattr(self, "task_", None)
+        return task if task is not None else legacy_task(bool(getattr(self, "goal_relative_", False)))
+
+    @property
+    def regulated_idx(self) -> tuple[int, ...]:
+        """The regulated states' indices (every state for a model that predates the task)."""
+        return tuple(getattr(self, "regulated_", None) or range(self.system.n))
+
+    def _linear(self, x0: np.ndarray, target: np.ndarray) -> LinearTerm:
+        """The linear part ``K̂ (x − x_ref[k]) + u_ff[k]`` of the input for the task (``x0``, ``target``)."""
+        return linear_term(self.system, self.pilot_task, self.K_, x0, target)
+
+    def pilot_view(self, demos: DemonstrationSet | Sequence[Demonstration]) -> list:
+        """The demonstrations as the model's regulator saw them (:func:`workbench.models.regulator.pilot_view`):
+        the regulated states' deviation from what the pilot drives them to, ``delay_s`` earlier than the input
+        net of its feedforward. What the gain, its bootstrap and the weight ratios are fitted on."""
+        self._check_fitted("pilot_view")
+        return pilot_view(self.system, self.pilot_task, list(demos))
+
+    @property
+    def plant_regulated(self) -> LinearSystem:
+        """The plant of the regulated states (``regulator_plant_``; the whole plant for an older model file)."""
+        return getattr(self, "regulator_plant_", None) or regulator_plant(self.system, self.regulated_idx)
+
     def _states(self, X: Any, where: str) -> np.ndarray:
         n = self.system.n
         try:
@@ -234,8 +267,10 @@ class BehaviorModel(abc.ABC):
 
     def _fold_settings(self) -> dict[str, Any]:
         """Settings of the cross-fitting fold models of :meth:`_fit_noise`, over this model's: the raw GMR noise
-        (the folds only whiten residuals), and whatever else residuals do not need."""
-        return {"noise": "gmr"}
+        (the folds only whiten residuals), the task as this fit settled it (a reference's speed is not refitted),
+        and whatever else residuals do not need."""
+        task = getattr(self, "task_", None)
+        return {"noise": "gmr", **({"task": task} if task is not None and "task" in self._param_names() else {})}
 
     #: Monte Carlo noise per whitened input axis (:mod:`workbench.models.prediction`): scale and AR(1) coefficient.
     noise_scale_: np.ndarray
@@ -279,7 +314,8 @@ class BehaviorModel(abc.ABC):
         m = self.system.m
         out = []
         for d in demos:
-            mean, Sigma = self._policy(d.x[0], self._goal_for(d) if unseen else goal_of(d))(d.x)
+            policy = self._policy(d.x[0], self._goal_for(d) if unseen else goal_of(d))
+            mean, Sigma = policy(d.x, np.arange(len(d.x))) if getattr(policy, "timed", False) else policy(d.x)
             L = psd_sqrt(Sigma + 1e-12 * np.eye(m))
             out.append(np.linalg.solve(L, (d.u - mean)[..., None])[..., 0])
         return out
@@ -335,7 +371,7 @@ class BehaviorModel(abc.ABC):
                 starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CALIBRATION_STARTS]
                 if starts:
                     X_true = np.stack([d.x[s : s + H + 1] for s in starts])
-                    cases.append((sub._policy(d.x[0], sub._goal_for(d)), d.x[starts], X_true))
+                    cases.append((sub._policy(d.x[0], sub._goal_for(d)), d.x[starts], X_true, np.array(starts)))
         self.noise_scale_, self.noise_rho_ = scale, rho
         if cases:
             idx = self.system.r.position or tuple(range(self.system.n))
@@ -343,15 +379,22 @@ class BehaviorModel(abc.ABC):
             self.noise_scale_ = scale * factor
             self.noise_band_factor_, self.noise_band_coverage_ = factor, cov
 
-    def input_distribution(self, X: Any, x0: Any, target: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    def input_distribution(self, X: Any, x0: Any, target: Any = None,
+                           steps: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """The model's Gaussian over the operator's input at states ``X`` for the task (``x0``, ``target``).
 
         Returns the mean (N, m) and covariance (N, m, m). For the proposed model this is
         ``K̂x + μ̂(x)`` and ``Σ̂(x)`` (eqs. (20), (24)-(27)); ``target`` defaults to the training target.
+        ``steps``: each row's step since the task began (a model of a pilot who follows a reference reads it;
+        default: the rows are consecutive steps from the task's start).
         """
         self._check_fitted("input_distribution")
         X = self._states(X, f"{type(self).__name__}.input_distribution")
-        return self._policy(*self._task(x0, target))(X)
+        policy = self._policy(*self._task(x0, target))
+        if getattr(policy, "timed", False):
+            k = np.arange(len(X)) if steps is None else np.broadcast_to(np.asarray(steps, dtype=int), (len(X),))
+            return policy(X, k)
+        return policy(X)
 
     def predict(
         self,
@@ -365,6 +408,7 @@ class BehaviorModel(abc.ABC):
         percentiles: Sequence[float] = (5, 50, 95),
         return_samples: bool = False,
         task_x0: Any = None,
+        task_step: int = 0,
     ) -> Prediction:
         """Predict ``horizon`` steps from ``x0`` (the section "Trajectory Prediction" of the method paper).
 
@@ -389,6 +433,9 @@ class BehaviorModel(abc.ABC):
         task_x0 : (n,) array, optional
             The start state of the task (the start frame, eq. (33)); default ``x0``. When predicting from
             the middle of a trial, pass the trial's first state.
+        task_step : int
+            The step of ``x0`` since the task began (with ``task_x0``, the sample ``x0`` is in its trial): where
+            the pilot follows a reference that moves, the prediction picks it up there.
         """
         self._check_fitted("predict")
         x0 = as_vector(x0, self.system.n, f"{type(self).__name__}.predict: start state x0")
@@ -402,6 +449,7 @@ class BehaviorModel(abc.ABC):
             percentiles=percentiles,
             return_samples=return_samples,
             task_x0s=None if task_x0 is None else [task_x0],
+            task_steps=[int(task_step)],
         )[0]
 
     def predict_many(
@@ -416,11 +464,13 @@ class BehaviorModel(abc.ABC):
         percentiles: Sequence[float] = (5, 50, 95),
         return_samples: bool = False,
         task_x0s: Any = None,
+        task_steps: Any = None,
     ) -> list[Prediction]:
         """:meth:`predict` from every row of ``x0s`` (B, n); starts sharing a task roll out as one batch.
 
         ``targets`` is one (n,) target for all, a (B, n) array, or None (training target); ``task_x0s``
-        likewise gives each start's task start state (default the start itself).
+        likewise gives each start's task start state (default the start itself), and ``task_steps`` each start's
+        step since its task began (one for all or one per start; default 0).
         """
         self._check_fitted("predict")
         if not self.draws_samples:  # a band of zero width would claim certainty
@@ -450,6 +500,10 @@ class BehaviorModel(abc.ABC):
                 raise ModelError(f"{where}: task_x0s must be ({Bn}, {n}), got {np.shape(task_x0s)}")
         if targets is None:
             T = np.array([self.default_target(t0) for t0 in T0])
+        try:
+            K0 = np.broadcast_to(np.asarray(0 if task_steps is None else task_steps, dtype=int), (Bn,))
+        except ValueError:
+            raise ModelError(f"{where}: task_steps must be one step or {Bn}, got {np.shape(task_steps)}") from None
         sys_ = self.system
         A, B = self._dynamics()
         clip_fn = sys_.clip if clip else None
@@ -461,13 +515,13 @@ class BehaviorModel(abc.ABC):
         method = type(self).__name__
         for idx in groups.values():
             policy = self._policy(T0[idx[0]], T[idx[0]])
-            Xm, Um, Sm = rollout_mean(A, B, policy, X0[idx], int(n_steps), clip_fn)
+            Xm, Um, Sm = rollout_mean(A, B, policy, X0[idx], int(n_steps), clip_fn, steps0=K0[idx])
             for j, b in enumerate(idx):
                 extra: dict[str, Any] = {}
                 if samples:
                     Xs, Us = rollout_samples(
                         A, B, policy, X0[b], int(n_steps), int(samples), rng, self.noise_rho_, clip_fn,
-                        self.noise_scale_,
+                        self.noise_scale_, step0=int(K0[b]),
                     )
                     extra = {
                         "percentiles": pct,

@@ -44,6 +44,7 @@ def default_model(
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
+    task: Any = None,
 ) -> BehaviorModel:
     """The one default model: the proposed model as ``workbench fit``, ``evaluate``, ``report``, ``demo``, the
     method-level comparison's splits and :func:`~workbench.study.pipeline.run_study` build it.
@@ -63,9 +64,12 @@ def default_model(
     gain_method : {"iv-or-direct", "direct", "dmd", "iv"}
     fit_objective : bool
         Also solve for the task objective (inverse LQR); predictions never need it.
+    task : PilotTask, str, dict or None
+        What the pilot regulates and relative to what (:mod:`workbench.data.pilot_task`): None decides it from the
+        demonstrations; otherwise an override (the command line's ``--task``, a mapping's ``[task]``).
     """
     return make_model("proposed", plant, n_components=DEFAULT_N_COMPONENTS, random_state=random_state,
-                      gain_method=gain_method, fit_objective=fit_objective)
+                      gain_method=gain_method, fit_objective=fit_objective, task=task)
 
 
 def make_model(
@@ -77,6 +81,7 @@ def make_model(
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
     cv_grid: dict[str, tuple] | None = None,
+    task: Any = None,
 ) -> BehaviorModel:
     """An unfitted model of ``method`` (one of :data:`METHODS`; ``ioc-only`` spellings are accepted).
 
@@ -94,13 +99,16 @@ def make_model(
         Whether the proposed model also solves for its task objective (predictions never need it).
     cv_grid : dict, optional
         ``cv_components`` / ``cv_reg_covars`` of a "cv" proposed model (default the default model's grids).
+    task : PilotTask, str, dict or None
+        What the pilot regulates and relative to what (:mod:`workbench.data.pilot_task`): None decides it from the
+        demonstrations; otherwise an override (the command line's ``--task``, a mapping's ``[task]``).
     """
     kind = method.replace("-", "_")
     if kind not in METHODS:
         raise DataError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
     cls = registered(kind).load_class()
     G = resolve_components(n_components, cls.chooses_settings)
-    return cls.for_method(system, MethodSettings(G, random_state, gain_method, fit_objective, cv_grid))
+    return cls.for_method(system, MethodSettings(G, random_state, gain_method, fit_objective, cv_grid, task))
 
 
 def make_models(
@@ -111,6 +119,7 @@ def make_models(
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = False,
+    task: Any = None,
 ) -> dict[str, BehaviorModel]:
     """Unfitted ``{method: model}`` for a comparison: the default model (:func:`default_model`, or the settings
     ``n_components`` names) and its baselines (GMR-only at the paper's G unless a number is given).
@@ -118,4 +127,4 @@ def make_models(
     The proposed model skips its objective by default here: a comparison scores predictions, which never need it.
     """
     return {m: make_model(m, system, n_components=n_components, random_state=random_state, gain_method=gain_method,
-                          fit_objective=fit_objective) for m in methods}
+                          fit_objective=fit_objective, task=task) for m in methods}

@@ -31,6 +31,7 @@ __all__ = [
     "references",
     "fit_gain",
     "shared_gains",
+    "shared_gain_memo",
     "fit_objective_or_reason",
     "state_envelope",
     "envelope_exit",
@@ -107,14 +108,20 @@ _GAINS: ContextVar[dict | None] = ContextVar("workbench_shared_gains", default=N
 
 @contextmanager
 def shared_gains() -> Iterator[None]:
-    """Inside this block, :func:`fit_gain` on the same trial objects (with the same references, plant and method)
-    estimates K̂ once: the candidates of one cross-validation fold all fit the same gain. The trials must stay alive
+    """Inside this block, :func:`fit_gain` and :func:`workbench.models.regulator.fit_regulator` on the same trial
+    objects (with the same task or references, plant and method) estimate K̂ (and its stability) once: the
+    candidates of one cross-validation fold all fit the same gain. The trials must stay alive
     (and unchanged) for the block, as they do for the folds of one cross-validation."""
     token = _GAINS.set({})
     try:
         yield
     finally:
         _GAINS.reset(token)
+
+
+def shared_gain_memo() -> dict | None:
+    """The memo of the enclosing :func:`shared_gains` block (None outside one)."""
+    return _GAINS.get()
 
 
 def fit_gain(
@@ -139,8 +146,11 @@ def fit_gain(
     return K, choice
 
 
-def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | None, str | None]:
-    """The task objective of ``K`` by inverse LQR (eqs. (15)-(19)) when ``model.fit_objective``, or why none.
+def fit_objective_or_reason(model: Any, K: np.ndarray, plant: LinearSystem | None = None
+                            ) -> tuple[TaskObjective | None, str | None]:
+    """The task objective of ``K`` by inverse LQR (eqs. (15)-(19)) when ``model.fit_objective``, or why none;
+    ``plant``: the plant ``K`` acts on (default the model's; the regulated states' for a model that regulates
+    some of them, :func:`workbench.models.regulator.regulator_plant`).
 
     The objective explains the gain; predictions never use it. So a solve that fails (no cost passes the
     post-checks, the solver stops) is recorded, ``(None, reason)``, instead of taking the model with it: the
@@ -148,8 +158,9 @@ def fit_objective_or_reason(model: Any, K: np.ndarray) -> tuple[TaskObjective | 
     """
     if not getattr(model, "fit_objective", False):
         return None, None
+    plant = model.system if plant is None else plant
     try:
-        return inverse_lqr(model.system.A, model.system.B, K, structure=model.structure), None
+        return inverse_lqr(plant.A, plant.B, K, structure=model.structure), None
     except ModelError as exc:
         return None, " ".join(str(exc).split())
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -47,8 +48,22 @@ RHO_MAX = 0.99
 
 #: ``policy(X (B, n)) -> (mean (B, m), covariance (B, m, m))``: the input distribution at a batch of states.
 #: ``policy(X) -> (mean (N, m), covariance (N, m, m))`` of the input at states X; a policy may also carry a
-#: ``policy.mean(X) -> (N, m)`` attribute, the mean alone, which the mean rollout then uses step by step.
-Policy = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+#: ``policy.mean(X) -> (N, m)`` attribute, the mean alone, which the mean rollout then uses step by step. A policy
+#: whose input depends on the time since its task began (a pilot following a reference that moves) says so with
+#: ``policy.timed = True``: it is then called as ``policy(X, k)`` (and ``policy.mean(X, k)``) with ``k`` (N,) the step
+#: of each row since the task's start.
+Policy = Callable[..., tuple[np.ndarray, np.ndarray]]
+
+
+def _timed(policy: Policy) -> bool:
+    return bool(getattr(policy, "timed", False))
+
+
+def _steps(steps0: Any, count: int) -> np.ndarray:
+    """Steps since the task's start of ``count`` rows (``steps0``: one int for all, or one per row; None: 0)."""
+    if steps0 is None:
+        return np.zeros(count, dtype=int)
+    return np.broadcast_to(np.asarray(steps0, dtype=int), (count,)).copy()
 
 
 @dataclass(frozen=True, eq=False)
@@ -181,9 +196,11 @@ def rollout_mean(
     x0: np.ndarray,
     n_steps: int,
     clip: Callable[[np.ndarray], np.ndarray] | None = None,
+    steps0: Any = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mean rollout from a batch of starts: ``û = m(x̂)``, ``x̂⁺ = A x̂ + B û``.
 
+    ``steps0``: each start's step since its task began (one for all or one per start; a timed policy reads it).
     Returns states (Bt, H+1, n), inputs (Bt, H, m) and the one-step input covariances (Bt, H, m, m).
     """
     n, m = B.shape
@@ -196,15 +213,18 @@ def rollout_mean(
     AT, BT = A.T, B.T
     # The covariance does not steer the mean rollout: step with the mean alone (half a GMR query where the
     # policy offers ``policy.mean``), then get every step's covariance in one batched query (Remark 3).
-    mean_only = getattr(policy, "mean", None) or (lambda X: policy(X)[0])
+    timed = _timed(policy)
+    mean_only = getattr(policy, "mean", None) or (lambda X, *k: policy(X, *k)[0])
+    k0 = _steps(steps0, Bt)
     for k in range(n_steps):
-        mean = mean_only(x)
+        mean = mean_only(x, k0 + k) if timed else mean_only(x)
         u = clip(mean) if clip is not None else mean
         U[:, k] = u
         x = x @ AT + u @ BT
         X[:, k + 1] = x
     if n_steps:
-        _, cov = policy(X[:, :n_steps].reshape(Bt * n_steps, n))
+        flat = X[:, :n_steps].reshape(Bt * n_steps, n)
+        _, cov = policy(flat, (k0[:, None] + np.arange(n_steps)[None, :]).reshape(-1)) if timed else policy(flat)
         S[:] = np.asarray(cov).reshape(Bt, n_steps, m, m)
     return X, U, S
 
@@ -220,12 +240,13 @@ def rollout_samples(
     rho: Sequence[float] | np.ndarray | float = 0.0,
     clip: Callable[[np.ndarray], np.ndarray] | None = None,
     scale: Sequence[float] | np.ndarray | float = 1.0,
+    step0: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Monte Carlo rollout of ``n_samples`` trajectories from one start, vectorized over the samples.
 
     At every step each trajectory draws its input through the AR(1) copula of the module docstring
-    (correlation ``rho`` and scale ``scale`` per whitened input axis). Returns states (S, H+1, n) and inputs
-    (S, H, m).
+    (correlation ``rho`` and scale ``scale`` per whitened input axis). ``step0``: the start's step since its task
+    began (a timed policy reads it). Returns states (S, H+1, n) and inputs (S, H, m).
     """
     n, m = B.shape
     x0 = _check_start(x0, n)
@@ -244,10 +265,11 @@ def rollout_samples(
     X[:, 0] = x
     z = rng.standard_normal((n_samples, m))
     AT, BT = A.T, B.T
+    timed = _timed(policy)
     for k in range(n_steps):
         if k:
             z = rho * z + innov * rng.standard_normal((n_samples, m))
-        mean, cov = policy(x)
+        mean, cov = policy(x, np.full(n_samples, int(step0) + k)) if timed else policy(x)
         u = mean + np.einsum("sij,sj->si", psd_sqrt(cov), scale * z)
         if clip is not None:
             u = clip(u)
@@ -319,9 +341,9 @@ def calibrate_band_scale(
 
     Parameters
     ----------
-    cases : sequence of (policy, starts (B, n), records (B, H+1, n))
+    cases : sequence of (policy, starts (B, n), records (B, H+1, n)[, steps (B,)])
         Held-out trials: the policy of a model fitted without them (for their task), start states and the
-        recorded states from each start.
+        recorded states from each start (and each start's step since the task began, for a timed policy).
     idx : sequence of int
         The states whose per-axis coverage is calibrated (e.g. the planar position).
 
@@ -337,24 +359,27 @@ def calibrate_band_scale(
     AT, BT = A.T, B.T
     prepared = []
     rng = np.random.default_rng(seed)
-    for policy, X0, X_true in cases:
+    for case in cases:
+        policy, X0, X_true = case[:3]
         Bn, H = X0.shape[0], X_true.shape[1] - 1
         eps = rng.standard_normal((H, Bn * n_samples, m))
-        prepared.append((policy, np.repeat(X0, n_samples, axis=0), X_true, eps))
+        k0 = np.repeat(_steps(case[3] if len(case) > 3 else None, Bn), n_samples)
+        prepared.append((policy, np.repeat(X0, n_samples, axis=0), X_true, eps, k0))
     rho = np.asarray(rho, dtype=float)
     innov = np.sqrt(1.0 - rho**2)
 
     def coverage(c: float) -> float:
         hits = total = 0
-        for policy, x, X_true, eps in prepared:
+        for policy, x, X_true, eps, k0 in prepared:
             Bn, H1, n = X_true.shape
             xs = np.empty((H1, x.shape[0], n))
             xs[0] = x
             z = eps[0]
+            timed = _timed(policy)
             for k in range(H1 - 1):
                 if k:
                     z = rho * z + innov * eps[k]
-                mean, cov = policy(x)
+                mean, cov = policy(x, k0 + k) if timed else policy(x)
                 x = x @ AT + (mean + np.einsum("sij,sj->si", psd_sqrt(cov), c * scale * z)) @ BT
                 xs[k + 1] = x
             sims = xs[1:, :, idx].reshape(H1 - 1, Bn, -1, idx.size)

@@ -30,14 +30,16 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.data.pilot_task import PilotTask
 from workbench.defaults import N_COMPONENTS, REG_COVAR
 from workbench.errors import DegenerateFitWarning
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import MethodSettings
 from workbench.models.files import ModelFile, ModelFileError
-from workbench.models.fitting import demo_list, fit_gain, fit_objective_or_reason, goal_of, references
+from workbench.models.fitting import demo_list, goal_of
 from workbench.models.prediction import Policy
+from workbench.models.regulator import fit_regulator
 from workbench.models.storage import (
     gain_choice_restore,
     gain_choice_state,
@@ -107,6 +109,11 @@ class HumanBehaviorModel(TaskGMRModel):
     noise_horizon : float
         Seconds of the held-out Monte Carlo rollouts on which the band is calibrated to 90 % coverage (and of
         the held-out rollouts that score the "cv" candidates).
+    task : PilotTask, str, dict or None
+        What the pilot regulates and relative to what (:class:`~workbench.data.pilot_task.PilotTask`); None decides
+        it from the demonstrations (:func:`~workbench.data.pilot_task.decide_task`: their goals, a reference they
+        declare, the plant's position roles); a string or a mapping's ``[task]`` table overrides it
+        (:func:`~workbench.data.pilot_task.parse_task`), a :class:`PilotTask` is taken as settled.
     auto_criterion : {"prediction", "likelihood"}
         How "cv" settings are scored on held-out demonstrations: rollout RMSE or TP-GMM log-likelihood.
     cv_components, cv_reg_covars : tuple or None
@@ -141,7 +148,15 @@ class HumanBehaviorModel(TaskGMRModel):
     noise_band_factor_, noise_band_coverage_ : float
         The band calibration's factor on the scale and the held-out coverage it reached (NaN: not calibrated).
     goal_relative_ : bool
-        Whether the linear term is ``K̂(x − x_target)`` (every training target known) or ``K̂x``.
+        Whether the linear term regulates to the task's goal or a reference (``task_.relative_to``) or to zero.
+    task_ : PilotTask
+        The pilot's task as fitted: the regulated states, relative to what, the reference's speed, the timing.
+    regulated_ : tuple of int
+        The regulated states' indices; ``K_`` is zero on the others, and the GMR conditions on these alone.
+    regulator_plant_ : LinearSystem
+        The plant of the regulated states, on which the gain's stability is judged and inverse LQR solved.
+    stability_ : Stability
+        ``ρ(A + BK̂)`` on the regulated states with its interval and verdict (:mod:`workbench.method.stability`).
     n_features_in_, n_outputs_, n_components_, n_demos_, n_samples_ : int
     reg_covar_ : float
         The regularizer used (``reg_covar``, or the one "cv" chose).
@@ -189,8 +204,10 @@ class HumanBehaviorModel(TaskGMRModel):
         cv_components: tuple[int, ...] | None = None,
         cv_reg_covars: tuple[float, ...] | None = None,
         variability_mean: bool = True,
+        task: PilotTask | str | dict | None = None,
     ) -> None:
         super().__init__(system)
+        self.task = task
         self.n_components = n_components
         self.frames = frames
         self.gain_method = gain_method
@@ -218,7 +235,7 @@ class HumanBehaviorModel(TaskGMRModel):
         s = settings
         return cls(system, n_components=s.n_components, reg_covar="cv" if s.n_components == "cv" else REG_COVAR,
                    random_state=s.random_state, gain_method=s.gain_method, fit_objective=s.fit_objective,
-                   **(s.cv_grid or {}))
+                   task=s.task, **(s.cv_grid or {}))
 
     def _fold_settings(self) -> dict[str, Any]:
         return {**super()._fold_settings(), "fit_objective": False}
@@ -232,11 +249,7 @@ class HumanBehaviorModel(TaskGMRModel):
         self.variability_mean_ = bool(self.variability_mean)
         self.reg_covar_ = float(self.reg_covar)
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
-        refs, self.goal_relative_ = references(ds, self.system.n)
-        K, self.gain_choice_ = fit_gain(ds, refs, self.system, self.gain_method)
-        self.gain_method_ = self.gain_choice_.method
-        self.K_ = K
-        self.objective_, self.objective_error_ = fit_objective_or_reason(self, K)
+        fit_regulator(self, ds)
         self._fit_common(ds, getattr(demos, "labels", []))
         self._fit_gmr(ds, [self._residual(d) for d in ds])
         self._fit_noise(ds)
@@ -288,14 +301,15 @@ class HumanBehaviorModel(TaskGMRModel):
         return self
 
     def residuals(self, demo: Demonstration) -> np.ndarray:
-        """``ŵ = u − K̂(x − r)`` of a demonstration, eq. (20), shape (N, m) (``r``: see ``goal_relative_``)."""
+        """``ŵ = u − K̂(x − x_ref) − u_ff`` of a demonstration, eq. (20), shape (N, m) (``x_ref``, ``u_ff``: what the
+        pilot drives the regulated states to, ``task_``)."""
         self._check_fitted("residuals")
         return self._residual(demo)
 
     def _residual(self, demo: Demonstration) -> np.ndarray:
         # the one computation of eq. (20) that fitting and scoring share
         target = self.target_ if demo.target is None else demo.target
-        return demo.u - (demo.x - self._reference(target)) @ self.K_.T
+        return demo.u - self._linear(demo.x[0], target)(demo.x, np.arange(len(demo.x)))
 
     def score_samples(self, demos: DemonstrationSet | Iterable[Demonstration]) -> np.ndarray:
         """Log-likelihood of every sample's ``[x; ŵ]`` under the TP-GMM, each demonstration in its own frames.
@@ -305,8 +319,9 @@ class HumanBehaviorModel(TaskGMRModel):
         """
         self._check_fitted("score_samples")
         ds = [demos] if isinstance(demos, Demonstration) else list(demos)
+        idx = list(self.regulated_idx)
         return self.variability_.score_samples(
-            [d.x for d in ds], [self._residual(d) for d in ds], [goal_of(d) for d in ds]
+            [d.x[:, idx] for d in ds], [self._residual(d) for d in ds], [goal_of(d)[idx] for d in ds]
         )
 
     def bic(self, demos: DemonstrationSet | Iterable[Demonstration]) -> float:
@@ -327,21 +342,22 @@ class HumanBehaviorModel(TaskGMRModel):
         """
         self._check_fitted("variability")
         X = self._states(X, "HumanBehaviorModel.variability")
-        return self._conditional(*self._task(x0, target)).predict(X)
+        return self._conditional(*self._task(x0, target)).predict(X[:, list(self.regulated_idx)])
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
         cond = self._conditional(x0, target)
-        KT = self.K_.T
-        offset = self._reference(target) @ KT
+        linear = self._linear(x0, target)
+        idx = list(self.regulated_idx)
         # False where cross-validation found that the variability's mean does not lower the held-out error
         with_mean = getattr(self, "variability_mean_", True)
 
-        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            mu, Sigma = cond.predict(X)
-            return X @ KT - offset + (mu if with_mean else 0.0), Sigma
+        def policy(X: np.ndarray, k: Any = None) -> tuple[np.ndarray, np.ndarray]:
+            mu, Sigma = cond.predict(X[:, idx])
+            return linear(X, k) + (mu if with_mean else 0.0), Sigma
 
-        policy.mean = ((lambda X: X @ KT - offset + cond.predict_mean(X)) if with_mean else
-                       (lambda X: X @ KT - offset))
+        policy.mean = ((lambda X, k=None: linear(X, k) + cond.predict_mean(X[:, idx])) if with_mean else
+                       (lambda X, k=None: linear(X, k)))
+        policy.timed = linear.timed
         return policy
 
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

@@ -45,6 +45,9 @@ class Method:
         than hue, for colour-blind readers and grayscale prints.
     marker : str
         Its marker in every figure (matplotlib's ``"o"``, ``"s"``, …).
+    in_paper : bool
+        One of the methods the method paper compared (the groups of its multi-subject one-way ANOVA, which
+        ``evaluate --per-subject`` runs beside its own analysis).
     """
 
     name: str
@@ -55,6 +58,7 @@ class Method:
     floor: bool = False
     dash: str = "-"
     marker: str = "o"
+    in_paper: bool = False
 
     @property
     def cli_name(self) -> str:
@@ -72,10 +76,12 @@ class Method:
 
 # in table order: the proposed model first, persistence (the floor every model must beat) last
 REGISTRY: tuple[Method, ...] = (
-    Method("proposed", "proposed", _COLORS[0], "workbench.models.proposed:HumanBehaviorModel", dash="-", marker="o"),
+    Method("proposed", "proposed", _COLORS[0], "workbench.models.proposed:HumanBehaviorModel", dash="-", marker="o",
+           in_paper=True),
     Method("ioc_only", "IOC-only", _COLORS[1], "workbench.models.baselines:IOCOnlyModel", floor=True, dash="--",
-           marker="s"),
-    Method("gmr_only", "GMR-only", _COLORS[2], "workbench.models.baselines:GMROnlyModel", dash="-.", marker="^"),
+           marker="s", in_paper=True),
+    Method("gmr_only", "GMR-only", _COLORS[2], "workbench.models.baselines:GMROnlyModel", dash="-.", marker="^",
+           in_paper=True),
     Method("persistence", "persistence", _COLORS[3], "workbench.models.baselines:PersistenceModel",
            fit_command=False, floor=True, dash=":", marker="D"),
 )

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from workbench.data.pilot_task import PilotTask
 from workbench.data.roles import Roles
 from workbench.errors import DataError, ModelError
 from workbench.method.frames import FrameSpec
@@ -83,6 +84,10 @@ def save_model(model: BehaviorModel, path: str | os.PathLike) -> Path:
                               else list(model.train_digests_)),
             "data_digest": getattr(model, "data_digest_", None),
             "goal_relative": bool(getattr(model, "goal_relative_", False)),
+            # the pilot's task (regulated states, relative to what, reference speed, timing) and the gain's
+            # stability judgement; absent from files written before them
+            "task": None if getattr(model, "task_", None) is None else model.task_.to_dict(),
+            "stability": None if getattr(model, "stability_", None) is None else model.stability_.to_dict(),
             "noise_band_factor": float(model.noise_band_factor_),
             "noise_band_coverage": None if math.isnan(model.noise_band_coverage_) else model.noise_band_coverage_,
         },
@@ -103,6 +108,8 @@ def settings_json(model: BehaviorModel) -> dict[str, Any]:
             v = list(v)
         elif isinstance(v, np.generic):
             v = v.item()
+        elif isinstance(v, PilotTask):  # a settled task (a fold's): kept whole, marked as such
+            v = {"pilot_task": v.to_dict()}
         out[k] = v
     return out
 
@@ -188,7 +195,7 @@ def gmr_state(model: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
 
 def gmr_restore(model: Any, mf: ModelFile, d_out: int) -> None:
     """A TP-GMM model's mixture from its file, checked against the plant and the settings."""
-    n = model.system.n
+    n = len(getattr(model, "regulated_", None) or range(model.system.n))  # the GMR's states: the regulated ones
     D = n + d_out
     fr = mf.header.get("frames")
     try:
@@ -227,6 +234,26 @@ def gmr_restore(model: Any, mf: ModelFile, d_out: int) -> None:
 
 
 _RENAMED_SETTINGS = {"noise_horizon": "noise_horizon_s"}
+
+
+def _restore_task(model: Any, fit: dict[str, Any], mf: ModelFile) -> None:
+    """``task_``, ``regulated_``, ``regulator_plant_`` and ``stability_`` from a file; a file written before the task
+    was recorded gets the task its linear term implies (every state; the goal or zero)."""
+    from workbench.method.stability import Stability
+    from workbench.models.regulator import legacy_task, regulator_plant
+
+    rec = fit.get("task")
+    try:
+        task = (PilotTask.from_dict(rec) if isinstance(rec, dict)
+                else legacy_task(bool(fit.get("goal_relative", False))))
+        model.task_ = task
+        model.regulated_ = task.regulated_indices(model.system.state_names)
+        stab = fit.get("stability")
+        model.stability_ = Stability.from_dict(stab) if isinstance(stab, dict) else None
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelFileError(f"{mf.path}: damaged model file: the pilot's task ({exc})") from None
+    if model.has_gain:
+        model.regulator_plant_ = regulator_plant(model.system, model.regulated_)
 
 
 def _text_or_none(value: Any, where: str) -> str | None:
@@ -288,6 +315,11 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]] | No
     for key in ("n_components", "reg_covar"):  # files written before the rename said "auto" for "cv"
         if settings.get(key) == "auto":
             settings[key] = "cv"
+    if isinstance(settings.get("task"), dict) and "pilot_task" in settings["task"]:
+        try:
+            settings["task"] = PilotTask.from_dict(settings["task"]["pilot_task"])
+        except (TypeError, ValueError) as exc:
+            raise ModelFileError(f"{mf.path}: damaged model file: task setting ({exc})") from None
     model = cls(system, **settings)
     n, m = system.n, system.m
     try:
@@ -312,6 +344,7 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]] | No
         model.noise_band_coverage_ = float("nan") if cov is None else float(cov)
         if model.has_gain:  # the linear term's reference; a model without a gain has none
             model.goal_relative_ = bool(fit.get("goal_relative", False))
+        _restore_task(model, fit, mf)
         model._restore(mf)
     except ModelFileError:
         raise

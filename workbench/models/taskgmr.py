@@ -31,9 +31,18 @@ class TaskGMRModel(BehaviorModel):
         return {**super()._fold_settings(), "max_iter": min(int(self.max_iter), _FOLD_MAX_ITER)}
 
     def _make_gmr(self) -> TaskGMR:
-        self.frame_spec_ = resolve_frame_spec(
-            self.frames, self.system.state_names, self.angle_index, self.position_idx, self.system.r
-        )
+        # the frames act on the regulated states (a free flight's positions are not among them): the plant's roles
+        # and a user's position indices are read in the regulated states' own numbering
+        idx = self.regulated_idx
+        names = tuple(self.system.state_names[i] for i in idx)
+        roles = self.system.roles.restricted(names).resolve(names)
+        pos = self.position_idx
+        angle = self.angle_index
+        if len(idx) != self.system.n:
+            pos = None if pos is None or not set(pos) <= set(idx) else tuple(idx.index(i) for i in pos)
+            angle = angle if not isinstance(angle, int | np.integer) else (idx.index(angle) if angle in idx
+                                                                            else None)
+        self.frame_spec_ = resolve_frame_spec(self.frames, names, angle, pos, roles)
         return TaskGMR(
             self.frame_spec_,
             n_components=self.n_components,
@@ -57,16 +66,22 @@ class TaskGMRModel(BehaviorModel):
         gmr = self._make_gmr()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
-            gmr.fit([d.x for d in demos], Y_list, [goal_of(d) for d in demos])
+            idx = list(self.regulated_idx)
+            gmr.fit([d.x[:, idx] for d in demos], Y_list, [goal_of(d)[idx] for d in demos])
         for w in caught:
             warnings.warn(f"{type(self).__name__}.fit: {w.message}", ConvergenceWarning, stacklevel=3)
         self.variability_ = gmr
         self.n_components_ = int(self.n_components)
 
     def _conditional(self, x0: np.ndarray, target: np.ndarray) -> TaskConditional:
-        return self.variability_.conditional(x0, target)
+        """``p(y | x)`` for the task, on the regulated states (the caller passes ``X[:, regulated_idx]``)."""
+        idx = list(self.regulated_idx)
+        return self.variability_.conditional(np.asarray(x0)[idx], np.asarray(target)[idx])
 
     def task_gmm(self, x0: Any, target: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The global GMM of the task (eq. (30)) in the user's units: weights (G,), means (G, D), covs."""
+        """The global GMM of the task (eq. (30)) in the user's units: weights (G,), means (G, D), covs; D counts
+        the regulated states (``regulated_idx``) and the outputs."""
         self._check_fitted("task_gmm")
-        return self.variability_.product(*self._task(x0, target))
+        idx = list(self.regulated_idx)
+        x0, target = self._task(x0, target)
+        return self.variability_.product(x0[idx], target[idx])

@@ -157,16 +157,21 @@ def fig_objective(models: Mapping[str, Any], state_names: Sequence[str], input_n
     separate scales: R usually dominates M, and on one scale the structure of Q would vanish.
     """
     labels = [k for k, m in models.items() if m.has_gain and m.objective_ is not None]
-    n, m = len(state_names), len(input_names)
+    # the objective weighs the states each model regulates (a free flight's positions are not among them)
+    regulated = {lab: tuple(models[lab].plant_regulated.state_names) for lab in labels}
+    n, m = max([len(v) for v in regulated.values()] or [len(state_names)]), len(input_names)
     fig = Figure(figsize=(DOUBLE_WIDTH, 2.8 * max(1, len(labels))), layout="constrained")
     axs = fig.subplots(max(1, len(labels)), 2, squeeze=False, width_ratios=[n, m + 1.5])
-    blocks = {k: [np.asarray(models[lab].objective_.M_normalized)[sl, sl] for lab in labels]
-              for k, sl in (("Q", slice(0, n)), ("R", slice(n, n + m)))}
+    blocks = {"Q": [np.asarray(models[lab].objective_.M_normalized)[: len(regulated[lab]), : len(regulated[lab])]
+                    for lab in labels],
+              "R": [np.asarray(models[lab].objective_.M_normalized)[len(regulated[lab]):, len(regulated[lab]):]
+                    for lab in labels]}
     vmaxes = {k: max([float(np.abs(b).max()) for b in v] + [1e-12]) for k, v in blocks.items()}
     for row, label in zip(axs, labels, strict=True):
         Mn = np.asarray(models[label].objective_.M_normalized)
+        n = len(regulated[label])
         for ax, block, names, title, vmax in (
-            (row[0], Mn[:n, :n], state_names, r"$Q\,/\,\lambda_{max}(M)$", vmaxes["Q"]),
+            (row[0], Mn[:n, :n], regulated[label], r"$Q\,/\,\lambda_{max}(M)$", vmaxes["Q"]),
             (row[1], Mn[n:, n:], input_names, r"$R\,/\,\lambda_{max}(M)$", vmaxes["R"]),
         ):
             image = ax.imshow(block, cmap="RdBu_r", vmin=-vmax, vmax=vmax)

@@ -207,6 +207,11 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
 
     # objective
     md += ["## Task objective (inverse LQR)", ""]
+    # what each strategy's pilot regulates, relative to what, and its loop's stability with its interval
+    tasks = [f"- {lb}: {m.task_.describe(state_names)}"
+             + (f"; {m.stability_.describe()}" if getattr(m, "stability_", None) is not None else "")
+             for lb in labels if getattr(m := inputs.models.get(lb), "task_", None) is not None]
+    md += [*tasks, ""] if tasks else []
     obj_rows = []
     for label in labels:
         model = inputs.models[label]
@@ -216,7 +221,8 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
             if reason:
                 obj_rows.append({"strategy": label, "α*": f"not found: {reason}"})
             continue
-        n = len(state_names)
+        names = model.plant_regulated.state_names  # the objective weighs the regulated states
+        n = len(names)
         Mn = np.asarray(o.M_normalized)
         oi = inputs.objectives.get(label)
         choice = model.gain_choice_
@@ -224,12 +230,12 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                "forward-gain error": float(o.forward_gain_error)}
         q, r = np.diag(Mn[:n, :n]), np.diag(Mn[n:, n:])
         if oi is None:
-            row.update({f"Q {s}": float(v) for s, v in zip(state_names, q, strict=True)})
+            row.update({f"Q {s}": float(v) for s, v in zip(names, q, strict=True)})
             row.update({f"R {s}": float(v) for s, v in zip(input_names, r, strict=True)})
         else:
             b = oi.boot
             row.update({f"Q {s}": f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
-                        for s, v, lo, hi in zip(state_names, q, b.Q_diag_lo, b.Q_diag_hi, strict=True)})
+                        for s, v, lo, hi in zip(names, q, b.Q_diag_lo, b.Q_diag_hi, strict=True)})
             row.update({f"R {s}": f"{v:.3g} [{lo:.3g}, {hi:.3g}]"
                         for s, v, lo, hi in zip(input_names, r, b.R_diag_lo, b.R_diag_hi, strict=True)})
         obj_rows.append(row)

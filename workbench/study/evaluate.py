@@ -40,6 +40,7 @@ from workbench.data.dataset import read_manifest
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DataError, WorkbenchError
 from workbench.models.factory import make_models as make_models_for_plant
+from workbench.models.registry import REGISTRY
 from workbench.study.executor import serial, task_seed
 from workbench.study.stats import (
     OneWayAnovaResult,
@@ -74,8 +75,8 @@ __all__ = [
     "TTestResult",
 ]
 
-#: The methods the method paper's multi-subject study compared (its one-way ANOVA's three groups).
-PAPER_METHODS = ("proposed", "ioc_only", "gmr_only")
+#: The methods the method paper's multi-subject study compared (its one-way ANOVA's groups): the registry says.
+PAPER_METHODS = tuple(m.name for m in REGISTRY if m.in_paper)
 
 #: The overall block of a plant without position roles (every state), and the prefix of its per-state blocks.
 STATE_BLOCK = "state"
@@ -291,7 +292,7 @@ def compare(
         st = _starts(N, n_steps, starts)
         for method, model in models.items():
             preds = model.predict_many(
-                d.x[st], int(n_steps), d.target, task_x0s=d.x[0], samples=int(samples), seed=rng,
+                d.x[st], int(n_steps), d.target, task_x0s=d.x[0], task_steps=st, samples=int(samples), seed=rng,
                 percentiles=(lo_q, hi_q), clip=clip,
             )
             for s, p in zip(st, preds, strict=True):

@@ -209,12 +209,15 @@ class SplitPlan:
     seed : int
     methods : tuple of str
         The methods refitted: the proposed one first, then the baselines the verdicts judge it against.
+    task : PilotTask, str, dict or None
+        The study's task override (None: each split's models decide it from the split's training trials).
     """
 
     plant: Any
     n_components: int | str
     seed: int = 0
     methods: tuple[str, ...] = ("proposed", *FLOOR_METHODS)
+    task: Any = None
 
 
 def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bool]:
@@ -229,7 +232,8 @@ def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bo
 
         G = select_components(train, plant, seed=plan.seed)
     fitted: dict[str, Any] = {}
-    for name, model in make_models(plant, plan.methods, n_components=G, random_state=plan.seed).items():
+    for name, model in make_models(plant, plan.methods, n_components=G, random_state=plan.seed,
+                                           task=plan.task).items():
         params = model.get_params()
         # what a mean prediction does not use: the objective, the Monte Carlo noise and its calibration
         updates = {k: v for k, v in (("fit_objective", False), ("noise_folds", 0), ("noise", "gmr")) if k in params}

@@ -152,7 +152,7 @@ def _split(ds: DemonstrationSet, test_size: float, seed: int) -> tuple[Demonstra
 
 
 def _fit_each(
-    system: Any, train: DemonstrationSet, components: int | str, seed: int
+    system: Any, train: DemonstrationSet, components: int | str, seed: int, task: Any = None
 ) -> tuple[dict[str, Any], dict[str, str]]:
     """Every method that can be fitted, and why the others cannot (a ModelError's message).
 
@@ -164,7 +164,8 @@ def _fit_each(
     from workbench.models.factory import make_models
 
     fitted, failures = {}, {}
-    for name, model in make_models(system, n_components=components, random_state=seed, fit_objective=True).items():
+    for name, model in make_models(system, n_components=components, random_state=seed, fit_objective=True,
+                                   task=task).items():
         try:
             fitted[name] = model.fit(train)
         except ModelError as exc:
@@ -204,6 +205,7 @@ def run_study(
     stride_s: float | None = 1.0,
     power: int = 0,
     method_splits: int = SPLITS,
+    task: Any = None,
 ) -> StudyResult:
     """Fit and compare the methods (the proposed model, its two baselines and persistence) per strategy label.
 
@@ -227,6 +229,9 @@ def run_study(
     ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
     cannot be fitted is left out of the comparison and named in ``failures`` and :meth:`StudyResult.verdicts`.
+
+    ``task``: what the pilot regulates and relative to what, for every method (:mod:`workbench.data.pilot_task`;
+    None: each model decides it from its training trials, the same way).
 
     ``executor`` (:mod:`workbench.study.executor`): a parallel one runs each strategy as one task (its fits,
     scores, data-efficiency curve and objective intervals); otherwise the strategies run here in turn and the
@@ -257,15 +262,15 @@ def run_study(
     system = plant_for(system, demos.with_demos(all_train))
     settings = _LabelSettings(n_components=n_components, seed=seed, n_steps=n_steps, samples=samples, stride=stride,
                               efficiency=tuple(efficiency or ()), repeats=repeats, bootstrap=int(bootstrap),
-                              power=int(power))
+                              power=int(power), task=task)
     # the strategies are independent: with a parallel executor each is one task (fit, compare, data efficiency,
     # objective intervals), else they run here in turn and the data-efficiency points go to the executor
     parallel = bool(getattr(executor, "parallel", False))
     by_label = parallel and len(splits) > 1
     jobs = None
     if method_splits > 0 and test_ids is None:
-        jobs = SplitJobs.make(splits, SplitPlan(plant=plant_spec, n_components=n_components, seed=seed), system,
-                               n_steps, stride, test_size, int(method_splits), seed,
+        plan = SplitPlan(plant=plant_spec, n_components=n_components, seed=seed, task=task)
+        jobs = SplitJobs.make(splits, plan, system, n_steps, stride, test_size, int(method_splits), seed,
                                executor if parallel else None)
     parts: list[_LabelPart] = []
     split_parts: list[pd.DataFrame] | None = None
@@ -276,11 +281,11 @@ def run_study(
             # its strategy early refits splits while the other still computes (a power curve, say)
             todo = jobs.todo if jobs is not None else []
             what = f"fitting, comparing, {int(method_splits)} splits" if todo else "fitting and comparing"
-            task = p.add_task(what, total=len(splits) + len(todo)) if p is not None else None
+            bar_task = p.add_task(what, total=len(splits) + len(todo)) if p is not None else None
             tasks = [("label", (label, i, executor.share(tr), executor.share(te), system, settings))
                      for i, (label, (tr, te)) in enumerate(splits.items())] + [("split", t) for t in todo]
             out = executor.map(_study_task, tasks,
-                               progress=None if p is None else lambda d, t: p.update(task, completed=d))
+                               progress=None if p is None else lambda d, t: p.update(bar_task, completed=d))
             parts = [o for o, (kind, _) in zip(out, tasks, strict=True) if kind == "label"]
             split_parts = [o for o, (kind, _) in zip(out, tasks, strict=True) if kind == "split"]
             if todo:  # process time on the workers, as the strategies' phases are
@@ -288,11 +293,11 @@ def run_study(
         else:
             # short: on an 80-column terminal the bar leaves the description ~25 characters (the strategies' count
             # is the bar's total)
-            task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
+            bar_task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
             for i, (label, (tr, te)) in enumerate(splits.items()):
                 parts.append(_study_label((label, i, tr, te, system, settings), executor=executor, progress=p))
                 if p is not None:
-                    p.advance(task)
+                    p.advance(bar_task)
     train, test, models, baselines = {}, {}, {}, {}
     objectives: dict[str, Any] = {}
     for (label, (tr, te)), part in zip(splits.items(), parts, strict=True):
@@ -353,6 +358,7 @@ class _LabelSettings:
     repeats: int
     bootstrap: int
     power: int
+    task: Any = None
 
 
 @dataclass(frozen=True)
@@ -384,7 +390,7 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
     t0 = time.perf_counter()
     G: int | str = (select_components(tr, system, seed=s.seed) if s.n_components == "bic" else
                     s.n_components if s.n_components in ("cv", PAPER_SETTINGS) else int(s.n_components))
-    fitted, failed = _fit_each(system, tr, G, s.seed)
+    fitted, failed = _fit_each(system, tr, G, s.seed, s.task)
     timings["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     table = ev.compare(fitted, te, n_steps=s.n_steps, samples=s.samples, seed=s.seed,
@@ -564,6 +570,7 @@ def run_loso(
     progress: Callable[[], Any] | None = None,
     executor: Any = None,
     stride_s: float | None = 1.0,
+    task: Any = None,
 ) -> StudyResult:
     """Leave-one-segment-out: every trial is the test set once, the others train (:func:`run_study` per fold).
 
@@ -582,13 +589,14 @@ def run_loso(
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
         what = f"fitting and comparing, leave-one-segment-out ({len(demos)} folds)"
-        task = p.add_task(what, total=len(demos)) if p is not None else None
+        bar = p.add_task(what, total=len(demos)) if p is not None else None
         for d in demos:
             res = run_study(demos, system, n_steps=n_steps, n_components=n_components, samples=samples,
-                            efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s)
+                            efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s,
+                            task=task)
             folds.append((d.id, res))
             if p is not None:
-                p.advance(task)
+                p.advance(bar)
     failures: dict[str, dict[str, str]] = {}
     for trial, res in folds:
         for label, by_method in res.failures.items():

@@ -41,7 +41,8 @@ import pandas as pd
 from workbench.errors import DataError, ModelError
 from workbench.method import ratio_profile
 
-__all__ = ["PowerCurve", "simulate_like", "power_curve", "as_fitted", "LAW", "MIN_SETS", "MAX_SETS"]
+__all__ = ["PowerCurve", "simulate_like", "power_curve", "as_fitted", "regulated_plant", "LAW", "MIN_SETS",
+           "MAX_SETS"]
 
 #: Simulated sets per size at least (a median of fewer is one set's accident), and at most while the curve is not yet
 #: monotone; resamples of the sets behind the 90 % interval of the number needed.
@@ -161,14 +162,15 @@ def simulate_like(model, demos, n_trials: int, seed: int = 0):
 
 
 def as_fitted(model, demos) -> list:
-    """The demonstrations as the model saw them: states relative to their targets when it is goal-relative."""
-    from types import SimpleNamespace
+    """The demonstrations as the model saw them: its pilot's view (:meth:`~workbench.models.behavior.BehaviorModel.
+    pilot_view`: the regulated states relative to the goal or the reference, the input net of its feedforward), on
+    the plant of those states (:func:`regulated_plant`)."""
+    return model.pilot_view(list(demos))
 
-    from workbench.models.fitting import references
 
-    ds = list(demos)
-    refs, _ = references(ds, model.system.n)
-    return [SimpleNamespace(x=d.x - r, u=d.u, id=d.id) for d, r in zip(ds, refs, strict=True)]
+def regulated_plant(model):
+    """The plant the model's gain acts on: the regulated states' (the whole plant where it regulates them all)."""
+    return model.plant_regulated
 
 
 def _log_spans(gains, system, ci: float, ratios: Sequence[str] | None = None) -> dict[str, float]:
@@ -247,9 +249,10 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
         sim = simulate_like(model, demos, n, seed=int(rng.integers(2**31)))
         try:
             # no jackknife: n refits per simulated set (up to 2n trials) for a span the law extrapolates
-            gains = bootstrap_gain(as_fitted(model, sim), model.system, n_boot=n_boot, method=gain,
+            plant = regulated_plant(model)
+            gains = bootstrap_gain(as_fitted(model, sim), plant, n_boot=n_boot, method=gain,
                                    seed=int(rng.integers(2**31)), jackknife=False)
-            spans = _log_spans(gains, model.system, ci, ratios)
+            spans = _log_spans(gains, plant, ci, ratios)
         except ModelError:
             return
         rows.extend({"ratio": r, "n": n, "repeat": rep, "span": float(np.exp(v)) if np.isfinite(v) else np.inf}

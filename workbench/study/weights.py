@@ -492,14 +492,15 @@ def ratio_bootstrap(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: int =
     covariance comes from ``n_boot`` resamples of whole trials.
     """
     from workbench.method.resampling import bootstrap_gain
-    from workbench.study.power import as_fitted
+    from workbench.study.power import as_fitted, regulated_plant
 
     shifted = as_fitted(model, demos)
+    plant = regulated_plant(model)
     note = ""
     for gain in dict.fromkeys((ratio_gain, _used_gain(model))):
         try:
-            gains = bootstrap_gain(shifted, model.system, n_boot=n_boot, method=gain, seed=seed, progress=progress)
-            return weight_ratios(gains, model.system, ci), gain, note.strip()
+            gains = bootstrap_gain(shifted, plant, n_boot=n_boot, method=gain, seed=seed, progress=progress)
+            return weight_ratios(gains, plant, ci), gain, note.strip()
         except ModelError as exc:
             note += f"weight ratios with gain {gain!r} failed: {exc}. "
     return None, ratio_gain, note.strip()
@@ -516,11 +517,11 @@ def objective_intervals(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: i
     than ×:data:`TARGET_SPAN`, so that a ratio the data do not identify says how many demonstrations would.
     """
     from workbench.method.resampling import bootstrap
-    from workbench.study.power import as_fitted
+    from workbench.study.power import as_fitted, regulated_plant
 
     method = _used_gain(model)
     structure = model.structure
-    boot = bootstrap(as_fitted(model, demos), model.system, n_boot=n_boot, method=method, structure=structure,
+    boot = bootstrap(as_fitted(model, demos), regulated_plant(model), n_boot=n_boot, method=method, structure=structure,
                      seed=seed)
     ratios, gain, note = ratio_bootstrap(model, demos, n_boot, seed, ratio_gain, boot.ci)
     curve = None

@@ -40,6 +40,7 @@ def heatmaps(model: Any, state_names: Sequence[str], input_names: Sequence[str])
     out.append(Heatmap("K", "K̂ (u = K̂x)", np.asarray(model.K_, dtype=float), inputs, states))
     objective = model.objective_
     if objective is not None:
+        states = tuple(model.plant_regulated.state_names)  # the objective weighs the regulated states
         n = len(states)
         Mn = np.asarray(objective.M_normalized, dtype=float)
         out += [
@@ -100,11 +101,16 @@ def _fmt_matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
 def model_summary(name: str, model: Any, state_names: Sequence[str], input_names: Sequence[str]) -> str:
     """A Markdown summary of a fitted model: gain, task objective (α, diagonal of normalized Q and R), GMM fit."""
     lines = [f"# Model {name}", "", f"`{type(model).__name__}`", ""]
+    task, stability = getattr(model, "task_", None), getattr(model, "stability_", None)
+    if task is not None:  # what the pilot regulates, relative to what: the line fit prints, and the loop's judgement
+        lines += ["## Pilot task", "", task.describe(model.system.state_names), ""]
+        lines += [stability.describe(), ""] if stability is not None else []
     objective = None
     if model.has_gain:
         lines += ["## Gain K̂ (u = K̂ x)", "", _fmt_matrix(np.asarray(model.K_), input_names, state_names), ""]
         objective = model.objective_
     if objective is not None:
+        state_names = model.plant_regulated.state_names  # the objective weighs the regulated states
         n = len(state_names)
         Mn = np.asarray(objective.M_normalized)
         lines += [

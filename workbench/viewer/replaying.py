@@ -132,7 +132,7 @@ def replay(
         for j, path in enumerate(inputs):
             rec.log(path, rr.Scalars(u[j]))
         # the model's one-step input Gaussian: K̂(x − r) + μ̂(x) and Σ̂(x), r the goal where the model is goal-relative
-        u_mean, Sigma = model.input_distribution(x[None, :], x0=x_start, target=target)
+        u_mean, Sigma = model.input_distribution(x[None, :], x0=x_start, target=target, steps=[k])
         u_hat = u_mean[0]
         sigma = np.sqrt(np.clip(np.diagonal(Sigma[0]), 0.0, None))
         err[k] = u - u_hat
@@ -153,7 +153,7 @@ def replay(
             rec.log(f"{sbase}/vehicle",
                     rr.Transform3D(translation=[px, py, 0.0], quaternion=[0.0, 0.0, np.sin(phi / 2), np.cos(phi / 2)]))
         if n_steps > 0 and k % rollout_every == 0:
-            pred = model.predict(x, n_steps, target=target, task_x0=x_start)
+            pred = model.predict(x, n_steps, target=target, task_x0=x_start, task_step=int(k))
             xp = np.asarray(pred.x)
             # stamped with the time it forecasts, so the plot compares x(t) with its forecast from t − H·dt
             rec.set_time("time", duration=float(t_rel[k] + n_steps * dt))

@@ -470,7 +470,7 @@ class SessionLogger:
                 s.methods.append(method)
             mc = samples if method == "proposed" else 0
             # the task's start frame stays at the trial's first state when predicting from later on
-            kwargs: dict[str, Any] = {"target": demo.target, "task_x0": demo.x[0]}
+            kwargs: dict[str, Any] = {"target": demo.target, "task_x0": demo.x[0], "task_step": int(start)}
             if mc:
                 kwargs.update(samples=mc, seed=seed)
             pred = model.predict(x0, n_steps, **kwargs)

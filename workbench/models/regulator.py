@@ -1,0 +1,302 @@
+"""The model's side of the pilot's task (:class:`~workbench.data.pilot_task.PilotTask`): the regulator it implies.
+
+A fitted model decides its task once (:func:`settle_task`) and keeps it as ``task_``; everything that reads
+demonstrations for the gain — the gain itself, its stability judgement, the bootstrap, the weight ratios, the
+power curve — reads them through :func:`pilot_view`: each trial as the pilot's regulator sees it,
+
+- the regulated states only (``task_.regulated``; a free flight's absolute positions are not among them),
+- relative to what the pilot drives them to: the goal, the reference ``x_ref`` (with its feedforward ``u_ff``
+  subtracted from the input), or zero,
+- the state ``delay_s`` seconds earlier than the input it explains (the pilot's reaction delay).
+
+So ``u − u_ff = K (x − x_ref) + w`` on those states is a regulator of the plant restricted to them
+(:func:`regulator_plant`), whose stability is judged with its interval (:mod:`workbench.method.stability`) and whose
+cost inverse LQR finds. Prediction, GMR, the viewer and the report use the same regulated states through the model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from workbench.data.pilot_task import PilotTask, decide_task
+from workbench.errors import DataError, ModelError
+from workbench.method.reference import ReferenceGenerator, fit_speed
+from workbench.plant.system import LinearSystem
+
+__all__ = ["settle_task", "regulator_plant", "references_of", "pilot_view", "delay_steps", "regulated_gain",
+           "full_gain"]
+
+
+class _Named(list):
+    """Demonstrations with the plant's state names and roles, as :func:`decide_task` reads a set."""
+
+    def __init__(self, demos: Sequence[Any], system: LinearSystem) -> None:
+        super().__init__(demos)
+        self.state_names = system.state_names
+        self.input_names = system.input_names
+        self.roles = system.roles
+
+
+def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
+    """The model's task for these training demonstrations, decided once: from the data, or the model's ``task``
+    setting (an override: a :class:`PilotTask`, a mapping's ``[task]`` table, or the command line's text), with
+    a reference's speed fitted to the trials where it is not given.
+
+    Raises
+    ------
+    ModelError
+        An override or data that cannot make a task (the message says which).
+    """
+    spec = getattr(model, "task", None)
+    system = model.system
+    try:
+        task = decide_task(_Named(demos, system), spec)
+    except ValueError as exc:
+        raise ModelError(f"{type(model).__name__}: the pilot's task: {exc}") from None
+    if isinstance(spec, PilotTask):  # a settled task handed on (a fold of this model): keep what it learned
+        task = task.with_(reference_speed_mps=spec.reference_speed_mps, delay_s=spec.delay_s, lag_s=spec.lag_s,
+                          plant_group=spec.plant_group, decided_by=spec.decided_by or task.decided_by,
+                          extra=dict(spec.extra))
+    group = getattr(system, "plant_group", None)  # what the sticks command, where the plant knows it
+    if group is not None and task.plant_group is None:
+        task = task.with_(plant_group=str(group))
+    if task.relative_to == "reference" and not task.reference_speed_mps > 0:
+        gen = _generator(system)
+        speed = fit_speed(gen, [(d.x, d.target) for d in demos], task.reference,
+                          cost=_pace(system, task, demos))
+        task = task.with_(reference_speed_mps=speed)
+    return task
+
+
+def _pace(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> Any:
+    """The criterion a reference's pace is fitted by: how well the regulator ``u − u_ff = K (x − x_ref)`` explains the
+    inputs through the instruments of the ``iv`` gain (the 2SLS fit's projected residual, a GMM criterion: consistent
+    where least squares is not, the pilot's own drift having made its states). The positions alone prefer a reference
+    slower than the one the pilot follows: a soft position loop leaves it behind for long."""
+    from workbench.method.gain import iv_instruments
+
+    idx = list(task.regulated_indices(system.state_names))
+    lag = delay_steps(task, system.dt)
+
+    def misfit(refs: list[tuple[np.ndarray, np.ndarray]]) -> float:
+        E, U, Z = [], [], []
+        for d, (x_ref, u_ff) in zip(demos, refs, strict=True):
+            e, u = (d.x - x_ref)[:, idx], d.u - u_ff
+            if lag:
+                e, u = e[:-lag], u[lag:]
+            E.append(e)
+            U.append(u)
+            Z.append(iv_instruments(e.T, [len(e)]).T)
+        E, U, Z = np.concatenate(E), np.concatenate(U), np.concatenate(Z)
+        Q, _ = np.linalg.qr(Z)  # P_Z = Q Qᵀ
+        PE, PU = Q.T @ E, Q.T @ U
+        K = np.linalg.lstsq(PE, PU, rcond=None)[0]
+        return float(np.sum((PU - PE @ K) ** 2))
+
+    return misfit
+
+
+def regulator_plant(system: LinearSystem, idx: Sequence[int]) -> LinearSystem:
+    """The plant restricted to the regulated states ``idx`` (the whole plant when they are all of them).
+
+    The regulated states' rows of ``A`` may depend on unregulated ones (a position, say); that coupling is
+    outside the pilot's regulator, so it is left out here (the prediction steps the whole plant).
+
+    Raises
+    ------
+    ModelError
+        The inputs do not reach the regulated states independently (rank ``B`` on them below m), or they form no
+        plant an input can stabilize.
+    """
+    idx = list(idx)
+    if len(idx) == system.n:
+        return system
+    names = tuple(system.state_names[i] for i in idx)
+    try:
+        return LinearSystem(system.A[np.ix_(idx, idx)], system.B[idx], system.dt, names, system.input_names,
+                            u_min=system.u_min, u_max=system.u_max, roles=system.roles.restricted(names),
+                            plant_group=getattr(system, "plant_group", None))
+    except ModelError as exc:
+        raise ModelError(f"the regulated states ({', '.join(names)}) do not make a plant the pilot's inputs can "
+                         f"regulate: {exc}; regulate more states (--task …@states)") from None
+
+
+_GENERATORS: dict[int, tuple[LinearSystem, ReferenceGenerator]] = {}
+
+
+def _generator(system: LinearSystem) -> ReferenceGenerator:
+    hit = _GENERATORS.get(id(system))
+    if hit is not None and hit[0] is system:
+        return hit[1]
+    if not system.r.position:
+        raise ModelError("a reference path needs the plant's position states (a mapping's [roles] position)")
+    gen = ReferenceGenerator.for_plant(system)
+    _GENERATORS[id(system)] = (system, gen)
+    return gen
+
+
+def references_of(system: LinearSystem, task: PilotTask, x0s: np.ndarray, goals: np.ndarray,
+                  n_steps: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(x_ref (N_j, n), u_ff (N_j, m))`` per task (start ``x0s[j]``, goal ``goals[j]``): the goal held (goal-
+    relative), zero (free flight), or the reference the strategy follows with its feedforward."""
+    n, m = system.n, system.m
+    goals = np.atleast_2d(np.asarray(goals, dtype=float))
+    if task.relative_to == "reference":
+        return _generator(system).trajectories(np.atleast_2d(x0s), goals, task.reference,
+                                               task.reference_speed_mps, list(n_steps))
+    out = []
+    for j, N in enumerate(n_steps):
+        held = goals[j] if task.relative_to == "goal" else np.zeros(n)
+        out.append((np.broadcast_to(held, (int(N), n)), np.zeros((int(N), m))))
+    return out
+
+
+def delay_steps(task: PilotTask, dt: float) -> int:
+    """The pilot's reaction delay in whole steps."""
+    return max(0, int(round(task.delay_s / dt)))
+
+
+def pilot_view(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> list[SimpleNamespace]:
+    """Each demonstration as the pilot's regulator sees it (see the module docstring): ``x`` the regulated states'
+    deviation from what they are driven to, ``delay_s`` earlier than ``u``, the input net of the feedforward;
+    ``id`` and ``meta`` (the flight mode) come along.
+
+    Raises
+    ------
+    DataError
+        A goal- or reference-relative task and a trial without its goal.
+    """
+    ds = list(demos)
+    idx = list(task.regulated_indices(system.state_names))
+    if task.relative_to != "zero":
+        missing = [d.id for d in ds if getattr(d, "target", None) is None]
+        if missing:
+            raise DataError(f"the pilot's task is relative to {task.relative_to} but trial(s) {missing[:3]} have no "
+                            "goal (meta['target'])")
+    goals = np.array([d.target if task.relative_to != "zero" else np.zeros(system.n) for d in ds])
+    refs = references_of(system, task, np.array([d.x[0] for d in ds]), goals, [len(d.x) for d in ds])
+    lag = delay_steps(task, system.dt)
+    out = []
+    for d, (x_ref, u_ff) in zip(ds, refs, strict=True):
+        e = (d.x - x_ref)[:, idx]
+        u = d.u - u_ff
+        if lag:
+            if len(e) <= lag + 1:
+                continue  # shorter than the delay: no pair of a state and the input it caused
+            e, u = e[:-lag], u[lag:]
+        out.append(SimpleNamespace(x=e, u=u, id=d.id, meta=getattr(d, "meta", {})))
+    if not out:
+        raise DataError(f"every trial is shorter than the pilot's delay ({task.delay_s:g} s)")
+    return out
+
+
+def regulated_gain(K: np.ndarray, idx: Sequence[int]) -> np.ndarray:
+    """The columns of a full gain on the regulated states."""
+    return np.ascontiguousarray(np.asarray(K)[:, list(idx)])
+
+
+def full_gain(K_r: np.ndarray, idx: Sequence[int], n: int) -> np.ndarray:
+    """A gain on the regulated states as a gain on every state (zero on the others: the pilot ignores them)."""
+    K = np.zeros((K_r.shape[0], n))
+    K[:, list(idx)] = K_r
+    return K
+
+
+class LinearTerm:
+    """The linear part of a fitted model's input for one task: ``K (x − x_ref[k]) + u_ff[k]``.
+
+    Constant (an offset) for a goal or zero; for a reference, indexed by the step ``k`` since the task began
+    (past the reference's span, its last row: the goal held). Call as ``term(X)`` or ``term(X, k)``.
+    """
+
+    def __init__(self, K: np.ndarray, x_ref: np.ndarray, u_ff: np.ndarray) -> None:
+        self.KT = np.asarray(K, dtype=float).T
+        self.x_ref = np.atleast_2d(x_ref)
+        self.u_ff = np.atleast_2d(u_ff)
+        self.timed = len(self.x_ref) > 1
+        self.offset = self.u_ff[0] - self.x_ref[0] @ self.KT
+
+    def __call__(self, X: np.ndarray, k: Any = None) -> np.ndarray:
+        if not self.timed or k is None:
+            return X @ self.KT + self.offset
+        kk = np.clip(np.asarray(k, dtype=int), 0, len(self.x_ref) - 1)
+        return (X - self.x_ref[kk]) @ self.KT + self.u_ff[kk]
+
+
+def linear_term(system: LinearSystem, task: PilotTask, K: np.ndarray, x0: np.ndarray,
+                target: np.ndarray) -> LinearTerm:
+    """:class:`LinearTerm` of a model with gain ``K`` (on every state) for the task (``x0``, ``target``)."""
+    if task.relative_to == "reference":
+        gen = _generator(system)
+        N = gen.steps_for(x0, target, task.reference, task.reference_speed_mps)
+        x_ref, u_ff = references_of(system, task, np.asarray(x0)[None], np.asarray(target)[None], [N])[0]
+        return LinearTerm(K, x_ref, u_ff)
+    held = np.asarray(target, dtype=float) if task.relative_to == "goal" else np.zeros(system.n)
+    return LinearTerm(K, held[None], np.zeros((1, system.m)))
+
+
+def legacy_task(goal_relative: bool) -> PilotTask:
+    """The task of a model file written before the task was recorded: every state, relative to the goal where the
+    model was goal-relative, else to zero (``u = K̂x``)."""
+    return PilotTask(relative_to="goal" if goal_relative else "zero",
+                     decided_by="a model file written before the pilot's task was recorded")
+
+
+def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
+    """The regulator part of a model's fit: its task, the regulated states and their plant, the gain from the
+    pilot's view of the trials, the gain's stability judged with its interval, the task objective.
+
+    Sets ``task_``, ``regulated_``, ``regulator_plant_``, ``K_`` (on every state, zero on the unregulated ones),
+    ``gain_choice_``, ``gain_method_``, ``stability_``, ``goal_relative_``, ``objective_``, ``objective_error_``;
+    returns the views.
+
+    Raises
+    ------
+    ModelError
+        No task can be made, or the loop is clearly unstable (ρ's interval outside the unit circle): the message
+        names the states of the slow mode and, only where an assisted mode's autopilot holds them, that mode.
+    """
+    from workbench.method.gain import choose_gain
+    from workbench.method.stability import judge_stability, refusal
+    from workbench.models.fitting import fit_objective_or_reason, json_seed, shared_gain_memo
+
+    system = model.system
+    task = settle_task(model, demos)
+    seed = json_seed(getattr(model, "random_state", None)) or 0
+    # the candidates of one cross-validation fold fit the same trials with the same task: their gain and its
+    # stability are computed once (workbench.models.fitting.shared_gains)
+    memo = shared_gain_memo()
+    key = (tuple(id(d) for d in demos), repr(task), id(system), model.gain_method, seed)
+    if memo is not None and key in memo:
+        idx, plant, views, K_r, choice, stability = memo[key]
+        K_r = K_r.copy()
+    else:
+        idx = task.regulated_indices(system.state_names)
+        plant = regulator_plant(system, idx)
+        try:
+            views = pilot_view(system, task, demos)
+        except DataError as exc:
+            raise ModelError(str(exc)) from None
+        K_r, choice = choose_gain(views, plant, model.gain_method, check=False)
+        stability = judge_stability(plant.A, plant.B, K_r, views, choice.method, plant.dt, plant.state_names,
+                                    seed=seed)
+        if memo is not None:
+            memo[key] = (idx, plant, views, K_r.copy(), choice, stability)
+    if stability.refused:
+        raise refusal(stability, demos, system.roles, choice.method)
+    model.task_, model.regulated_, model.regulator_plant_ = task, tuple(idx), plant
+    model.K_ = full_gain(K_r, idx, system.n)
+    model.gain_choice_, model.gain_method_ = choice, choice.method
+    model.stability_ = stability
+    model.goal_relative_ = task.relative_to != "zero"
+    if stability.rho >= 1.0:
+        model.objective_ = None
+        model.objective_error_ = (f"{stability.describe()}: no quadratic cost has a gain with ρ ≥ 1 (Assumption 3)"
+                                  if getattr(model, "fit_objective", False) else None)
+    else:
+        model.objective_, model.objective_error_ = fit_objective_or_reason(model, K_r, plant)
+    return views
