@@ -24,8 +24,10 @@ GROUP_BLOCK = re.compile(r"plant identification \(plant group ([^,]+),")
 CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?ratio (-?[\d.e+-]+), (NOT )?within")
 STICK = re.compile(r"stick: (\w+) → (\w+): (.*?) per full stick \(time constant ([\d.e+-]+) s\)"
                    r"|stick: (\w+) → (\w+): the (.*?) loop does not settle")
-METHODS = ("proposed", "ioc_only", "gmr_only", "persistence")
-TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence"}
+METHODS = ("proposed", "ioc_only", "gmr_only", "persistence", "no_pilot_held", "no_pilot_zero")
+TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence",
+          "no_pilot_held": "input held", "no_pilot_zero": "input 0"}
+INPUT_METRICS = {"input_step": "one step", "input_horizon": "over the horizon"}
 
 
 def _run(args: list[str], timeout: float) -> tuple[int, str, str]:
@@ -94,11 +96,11 @@ def fit_cell(code: int, out: str, err: str) -> str:
 
 
 def _means(table: Path) -> dict[str, dict[str, float]]:
-    """Per method, the mean over test trials (each trial's windows averaged first) of each RMSE metric."""
+    """Per method, the mean over test trials (each trial's windows averaged first) of each RMSE and input metric."""
     import pandas as pd
 
     t = pd.read_parquet(table)
-    t = t[(t.get("table", "comparison") == "comparison") & t["metric"].str.startswith("rmse_")]
+    t = t[(t.get("table", "comparison") == "comparison") & t["metric"].str.match(r"(rmse|input)_")]
     per_trial = t.groupby(["method", "metric", "trial"])["value"].mean().groupby(["method", "metric"]).mean()
     out: dict[str, dict[str, float]] = {}
     for (method, metric), v in per_trial.items():
@@ -124,10 +126,10 @@ def evaluate_cells(code: int, out: str, err: str, tables: list[Path]) -> tuple[s
         pos.append(head + ", ".join(f"{TITLES[m]} {means[m]['rmse_position']:.3g}" for m in METHODS
                                     if 'rmse_position' in means.get(m, {}))
                    + (f" (proposed left out: {left[0]})" if left else ""))
-        inputs = sorted({k for v in means.values() for k in v if "input" in k or k.startswith("rmse_u")})
-        inp.append(head + ("; ".join(f"{k}: " + ", ".join(f"{TITLES[m]} {means[m][k]:.3g}" for m in METHODS
-                                                           if k in means.get(m, {})) for k in inputs)
-                           or "— (no input score in this evaluate)"))
+        scores = ["{}: {}".format(INPUT_METRICS[k], ", ".join(f"{TITLES[m]} {means[m][k]:.3g}" for m in METHODS
+                                                              if k in means.get(m, {})))
+                  for k in INPUT_METRICS if any(k in v for v in means.values())]
+        inp.append(head + ("; ".join(scores) or "— (no input score in this evaluate)"))
     pos += [f"{g} not evaluated: {c}" for g, c in failed.items()]
     return " / ".join(pos) or "compared", " / ".join(inp) or "—"
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 __all__ = [
     "DEFAULT_N_COMPONENTS", "DT_PAPER_S", "HORIZON_S", "N_COMPONENTS", "N_STEPS", "OBJECTIVE_RESAMPLES",
-    "ONLINE_HORIZON_S", "PAPER_SETTINGS", "REG_COVAR",
+    "ONLINE_HORIZON_S", "PAPER_SETTINGS", "REG_COVAR", "TIMING",
 ]
 
 N_COMPONENTS = 5  # G, Gaussian components of the TP-GMM / GMR (the paper's)
@@ -29,3 +29,6 @@ OBJECTIVE_RESAMPLES = 100
 
 # the name of the default before issue 40, when only the studies used it
 STUDY_N_COMPONENTS = DEFAULT_N_COMPONENTS
+# the pilot's reaction delay and lag (workbench.method.timing): identified per pilot and used by the gain, the
+# objective and prediction ("identify"), or none, the paper's u = K x ("none"); `timing=` of a model, `--timing`
+TIMING = "identify"

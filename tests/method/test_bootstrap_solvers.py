@@ -75,3 +75,26 @@ def test_a_long_cause_is_printed_whole_not_cut_mid_word():
     failures = [f"resample {k}: {cause}" for k in range(3)]
     assert failure_note(failures).endswith("more varied start states")
     assert stop_note(10, 2, failures).endswith("more varied start states")
+
+
+def test_resamples_on_the_serial_executor_share_one_compiled_problem(monkeypatch):
+    # issue 41 §5: the CLI's bootstrap runs one resample per task on the serial executor, and each task compiled the
+    # SDP afresh (~0.1 s of cvxpy canonicalization per resample, a second of a default fit on a real log)
+    from workbench.method import inverse_lqr_sdp
+    from workbench.study.executor import SerialExecutor
+
+    ds, system = _demos(seed=11)
+    inverse_lqr_sdp._CACHE.clear()
+    built = []
+    original = InverseLQR.__init__
+
+    def counting(self, *args, **kwargs):
+        built.append(kwargs.get("solvers"))
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(InverseLQR, "__init__", counting)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = bootstrap(ds, system, n_boot=12, seed=0, executor=SerialExecutor())
+    assert result.n_boot - result.n_failed > 0
+    assert len(built) <= 2, built  # the point estimate's problem and the resamples' one

@@ -25,12 +25,13 @@ def test_input_scores_are_the_rms_error_of_the_recorded_input(scored):
     models, test, table = scored
     d = test[0]
     rows = table[(table["trial"] == d.id)]
-    # one step ahead: the model's mean input at every recorded state from the second on
-    mean, _ = models["ioc_only"].input_distribution(d.x, d.x[0], d.target)
+    # one step ahead: the model's mean input at every recorded step from the second on, given the trial before it
+    mean, _ = models["ioc_only"].input_distribution_along(d)
     step = rows[(rows["method"] == "ioc_only") & (rows["metric"] == "input_step")]["value"].item()
     assert step == pytest.approx(np.sqrt(np.mean(np.sum((mean[1:] - d.u[1:]) ** 2, axis=1))))
     # over the horizon: the inputs of the model's own mean rollout from the window's start
-    pred = models["ioc_only"].predict(d.x[10], 20, d.target, task_x0=d.x[0])
+    pasts = models["ioc_only"].pasts(d, [10])  # with the pilot's timing: the trial before the window
+    pred = models["ioc_only"].predict(d.x[10], 20, d.target, task_x0=d.x[0], past=None if pasts is None else pasts[0])
     horizon = rows[(rows["method"] == "ioc_only") & (rows["metric"] == "input_horizon") & (rows["start"] == 10)]
     assert horizon["value"].item() == pytest.approx(np.sqrt(np.mean(np.sum((pred.u[:20] - d.u[10:30]) ** 2, 1))))
     # no pilot: the input held at its last recorded value (before the window), or zero

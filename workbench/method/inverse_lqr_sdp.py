@@ -360,11 +360,14 @@ _CACHE: OrderedDict[tuple, InverseLQR] = OrderedDict()
 _CACHE_SIZE = 8
 
 
-def cached_problem(A: np.ndarray, B: np.ndarray, structure: Structure, second_stage: bool) -> InverseLQR:
-    key = (A.shape, B.shape, A.tobytes(), B.tobytes(), structure, bool(second_stage))
+def cached_problem(A: np.ndarray, B: np.ndarray, structure: Structure, second_stage: bool,
+                   solvers: tuple[str, ...] | None = None) -> InverseLQR:
+    """The compiled problem of (A, B, structure, second stage, solver chain), compiled once per process: a bootstrap's
+    resamples (one task each on the serial executor) then re-solve it instead of compiling it ~100 times."""
+    key = (A.shape, B.shape, A.tobytes(), B.tobytes(), structure, bool(second_stage), solvers)
     problem = _CACHE.get(key)
     if problem is None:
-        problem = InverseLQR(A, B, structure=structure, second_stage=second_stage)
+        problem = InverseLQR(A, B, structure=structure, second_stage=second_stage, solvers=solvers)
         _CACHE[key] = problem
         while len(_CACHE) > _CACHE_SIZE:
             _CACHE.popitem(last=False)

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from workbench.defaults import DEFAULT_N_COMPONENTS, N_COMPONENTS, PAPER_SETTINGS
+from workbench.defaults import DEFAULT_N_COMPONENTS, N_COMPONENTS, PAPER_SETTINGS, TIMING
 from workbench.errors import DataError
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
@@ -44,6 +44,7 @@ def default_model(
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
+    timing: Any = TIMING,
     task: Any = None,
 ) -> BehaviorModel:
     """The one default model: the proposed model as ``workbench fit``, ``evaluate``, ``report``, ``demo``, the
@@ -64,12 +65,14 @@ def default_model(
     gain_method : {"iv-or-direct", "direct", "dmd", "iv"}
     fit_objective : bool
         Also solve for the task objective (inverse LQR); predictions never need it.
+    timing : "identify", "none" or (delay_s, lag_s)
+        The pilot's timing (:mod:`workbench.method.timing`).
     task : PilotTask, str, dict or None
         What the pilot regulates and relative to what (:mod:`workbench.data.pilot_task`): None decides it from the
         demonstrations; otherwise an override (the command line's ``--task``, a mapping's ``[task]``).
     """
     return make_model("proposed", plant, n_components=DEFAULT_N_COMPONENTS, random_state=random_state,
-                      gain_method=gain_method, fit_objective=fit_objective, task=task)
+                      gain_method=gain_method, fit_objective=fit_objective, timing=timing, task=task)
 
 
 def make_model(
@@ -81,6 +84,7 @@ def make_model(
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
     cv_grid: dict[str, tuple] | None = None,
+    timing: Any = TIMING,
     task: Any = None,
 ) -> BehaviorModel:
     """An unfitted model of ``method`` (one of :data:`METHODS`; ``ioc-only`` spellings are accepted).
@@ -99,6 +103,8 @@ def make_model(
         Whether the proposed model also solves for its task objective (predictions never need it).
     cv_grid : dict, optional
         ``cv_components`` / ``cv_reg_covars`` of a "cv" proposed model (default the default model's grids).
+    timing : "identify", "none" or (delay_s, lag_s)
+        The pilot's timing of the proposed and IOC-only models (:mod:`workbench.method.timing`).
     task : PilotTask, str, dict or None
         What the pilot regulates and relative to what (:mod:`workbench.data.pilot_task`): None decides it from the
         demonstrations; otherwise an override (the command line's ``--task``, a mapping's ``[task]``).
@@ -108,7 +114,8 @@ def make_model(
         raise DataError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
     cls = registered(kind).load_class()
     G = resolve_components(n_components, cls.chooses_settings)
-    return cls.for_method(system, MethodSettings(G, random_state, gain_method, fit_objective, cv_grid, task))
+    return cls.for_method(system, MethodSettings(G, random_state, gain_method, fit_objective, cv_grid,
+                                                 timing=timing, task=task))
 
 
 def make_models(

@@ -55,7 +55,7 @@ def model_rows(model: Any, d: Any, label: str, method: str, starts: list[int], p
     rollouts from ``starts``); none for a model that predicts no input."""
     if not model.models_inputs or len(d) < 2:
         return []
-    mean, _ = model.input_distribution(d.x, d.x[0], d.target)
+    mean, _ = model.input_distribution_along(d)  # with the pilot's timing: given the trial before each input
     rows = [(d.id, label, 0, method, "input_step", input_rmse(mean[1:], d.u[1:]))]
     N = len(d)
     for s, p in zip(starts, preds, strict=True):

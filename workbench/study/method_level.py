@@ -224,6 +224,7 @@ def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bo
     """Every method of ``plan`` fitted on ``train`` with every choice made again on it; whether the proposed model
     fell back to ``K̂x``. A method that cannot be fitted is left out."""
     from workbench.models.factory import make_models
+    from workbench.models.fitting import shared_gains
 
     plant = plan.plant(train) if callable(plan.plant) else plan.plant
     G = plan.n_components
@@ -232,17 +233,19 @@ def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bo
 
         G = select_components(train, plant, seed=plan.seed)
     fitted: dict[str, Any] = {}
-    for name, model in make_models(plant, plan.methods, n_components=G, random_state=plan.seed,
-                                           task=plan.task).items():
-        params = model.get_params()
-        # what a mean prediction does not use: the objective, the Monte Carlo noise and its calibration
-        updates = {k: v for k, v in (("fit_objective", False), ("noise_folds", 0), ("noise", "gmr")) if k in params}
-        if "max_iter" in params:
-            updates["max_iter"] = min(int(params["max_iter"]), _SPLIT_MAX_ITER)
-        try:
-            fitted[name] = type(model)(plant, **{**params, **updates}).fit(train)
-        except ModelError:
-            continue
+    models = make_models(plant, plan.methods, n_components=G, random_state=plan.seed, task=plan.task)
+    with shared_gains():  # the methods' gains (and the pilot's timing) on the same trials: estimated once
+        for name, model in models.items():
+            params = model.get_params()
+            # what a mean prediction does not use: the objective, the Monte Carlo noise and its calibration
+            updates = {k: v for k, v in (("fit_objective", False), ("noise_folds", 0), ("noise", "gmr"))
+                       if k in params}
+            if "max_iter" in params:
+                updates["max_iter"] = min(int(params["max_iter"]), _SPLIT_MAX_ITER)
+            try:
+                fitted[name] = type(model)(plant, **{**params, **updates}).fit(train)
+            except ModelError:
+                continue
     proposed = fitted.get(plan.methods[0])
     auto = getattr(proposed, "auto_", None) if proposed is not None and proposed.chooses_settings else None
     return fitted, bool(auto is not None and auto.fallback)

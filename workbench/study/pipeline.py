@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -88,6 +88,11 @@ class StudyResult:
     #: The paired differences, tests and mixed model of the headline metric
     #: (:class:`workbench.study.findings.StudyStatistics`); ``stats_text`` is its text.
     statistics: Any = None
+    #: Which trials were held out and why, in words (the report's "held out" line; :func:`holdout_text`).
+    holdout: str = ""
+    #: Which trials the study was given and what choosing them left out (``workbench.data.selection``), in words;
+    #: empty where nothing was chosen.
+    trials: str = ""
 
     @property
     def rmse(self) -> pd.DataFrame:
@@ -144,6 +149,13 @@ class StudyResult:
         return atomic_write_table(pd.concat(parts, ignore_index=True), path)
 
 
+def holdout_text(test: Mapping[str, DemonstrationSet], how: str, shown: int = 8) -> str:
+    """The held-out trials in words: how many, ``how`` they were chosen, and their ids (the first ``shown``)."""
+    ids = [d.id for te in test.values() for d in te]
+    listed = ", ".join(ids[:shown]) + (f" and {len(ids) - shown} more" if len(ids) > shown else "")
+    return f"{len(ids)} test trial(s), {how}: {listed}; the models never saw them"
+
+
 def _split(ds: DemonstrationSet, test_size: float, seed: int) -> tuple[DemonstrationSet, DemonstrationSet]:
     if len(ds) < 3:
         raise DataError(f"strategy {ds[0].label!r} has {len(ds)} trial(s); at least 3 are needed to train and test")
@@ -162,14 +174,16 @@ def _fit_each(
     LQR cannot find does not take the proposed model with it (``objective_error_``): it still predicts.
     """
     from workbench.models.factory import make_models
+    from workbench.models.fitting import shared_gains
 
     fitted, failures = {}, {}
-    for name, model in make_models(system, n_components=components, random_state=seed, fit_objective=True,
-                                   task=task).items():
-        try:
-            fitted[name] = model.fit(train)
-        except ModelError as exc:
-            failures[name] = " ".join(str(exc).split())
+    models = make_models(system, n_components=components, random_state=seed, fit_objective=True, task=task)
+    with shared_gains():  # the methods' gains (and the pilot's timing) on the same trials: estimated once
+        for name, model in models.items():
+            try:
+                fitted[name] = model.fit(train)
+            except ModelError as exc:
+                failures[name] = " ".join(str(exc).split())
     return fitted, failures
 
 
@@ -342,6 +356,8 @@ def run_study(
         stride_steps=stride,
         statistics=statistics, calibration_check=_check(check_parts),
         calibration_counts=pd.concat(check_parts, ignore_index=True) if check_parts else None,
+        holdout=holdout_text(test, "given as the test trials" if test_ids is not None else
+                             f"drawn at random from each strategy's trials (seed {seed})"),
     )
 
 
