@@ -7,14 +7,18 @@ every signature named in :data:`USED_BY` has them and lists the ones not yet con
 from __future__ import annotations
 
 __all__ = [
-    "DT_PAPER_S", "HORIZON_S", "N_COMPONENTS", "N_STEPS", "OBJECTIVE_RESAMPLES", "ONLINE_HORIZON_S", "REG_COVAR",
-    "STUDY_N_COMPONENTS", "TIMING",
+    "DEFAULT_N_COMPONENTS", "DT_PAPER_S", "HORIZON_S", "N_COMPONENTS", "N_STEPS", "OBJECTIVE_RESAMPLES",
+    "ONLINE_HORIZON_S", "PAPER_SETTINGS", "REG_COVAR", "TIMING",
 ]
 
 N_COMPONENTS = 5  # G, Gaussian components of the TP-GMM / GMR (the paper's)
 REG_COVAR = 0.5  # the variability model's covariance regularizer, in standardized units
-# evaluate / report / demo choose G (1, 2 or 5) and the regularizer by cross-validation, and may fall back to K̂x
-STUDY_N_COMPONENTS = "cv"
+# The one default model (workbench.models.default_model): `fit`, `evaluate`, `report`, `demo` and the Python API
+# (make_model, make_models, run_study) choose G (1, 2 or 5) and the regularizer by cross-validation, and fall back
+# to K̂x where the variability model does not lower the held-out error
+DEFAULT_N_COMPONENTS = "cv"
+# the paper's settings by name (--n-components paper): G = N_COMPONENTS, reg_covar = REG_COVAR, no cross-validation
+PAPER_SETTINGS = "paper"
 DT_PAPER_S = 0.05  # the planar quadrotor's sampling step in seconds (the paper's)
 HORIZON_S = 3.0  # prediction horizon in seconds (the command line's --horizon; the paper's)
 N_STEPS = round(HORIZON_S / DT_PAPER_S)  # the same horizon in grid steps at the paper's step: 60
@@ -22,6 +26,9 @@ ONLINE_HORIZON_S = 1.0  # the rollout at every step of `live` and `replay`, in s
 # resamples of the training trials for the intervals of the task objective and its weight ratios (fit, report,
 # demo: --bootstrap)
 OBJECTIVE_RESAMPLES = 100
+
+# the name of the default before issue 40, when only the studies used it
+STUDY_N_COMPONENTS = DEFAULT_N_COMPONENTS
 # the pilot's reaction delay and lag (workbench.method.timing): identified per pilot and used by the gain, the
 # objective and prediction ("identify"), or none, the paper's u = K x ("none"); `timing=` of a model, `--timing`
 TIMING = "identify"

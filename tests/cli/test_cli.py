@@ -149,7 +149,12 @@ def test_evaluate_prints_the_comparison(work):
     # the metric by its name (the raw key "rmse_position" went with the means table its percentages misread)
     assert "position RMSE" in r.stdout and "IOC-only" in r.stdout and "persistence" in r.stdout
     df = pd.read_csv(out)
-    assert set(df["method"]) == {"proposed", "ioc_only", "gmr_only", "persistence"}
+    from workbench.study.input_prediction import INPUT_METRICS, NO_PILOT
+
+    methods = {"proposed", "ioc_only", "gmr_only", "persistence"}
+    assert set(df.loc[~df["metric"].isin(INPUT_METRICS), "method"]) == methods
+    # the pilot's own input: every model that predicts one, beside the plant with no pilot (issue 40 §4)
+    assert set(df.loc[df["metric"].isin(INPUT_METRICS), "method"]) == (methods - {"persistence"}) | set(NO_PILOT)
     assert set(df["label"]) == {"CS2"}
 
 

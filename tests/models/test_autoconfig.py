@@ -51,8 +51,8 @@ def test_choice_is_the_best_cross_validated_candidate(quad, small):
 
 
 def test_auto_model_records_its_choice_and_survives_a_round_trip(quad, small, tmp_path, monkeypatch):
-    monkeypatch.setattr(ac, "COMPONENT_GRID", (1, 2))
-    monkeypatch.setattr(ac, "REG_COVAR_GRID", (1.0,))
+    monkeypatch.setattr(ac, "DEFAULT_COMPONENT_GRID", (1, 2))
+    monkeypatch.setattr(ac, "DEFAULT_REG_COVAR_GRID", (1.0,))
     model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0,
                                fit_objective=False).fit(small)
     assert model.n_components == "cv" and model.reg_covar == "cv"  # settings stay as given
@@ -122,17 +122,19 @@ def test_auto_configured_model_holds_on_other_erratic_operators(quad, variant, s
 
 
 def test_fallback_to_the_task_objective_is_chosen_by_held_out_error_and_kept(quad, small, tmp_path, monkeypatch):
-    """Cross-validation scores ``K̂x`` alone on the same held-out rollouts; it falls back to it exactly where that
-    is no worse than the best candidate, and the fallen-back model predicts IOC-only's mean rollout (same gain)."""
+    """Cross-validation scores ``K̂x`` alone on the same held-out rollouts; it falls back to it exactly where the best
+    candidate does not beat it by more than one standard error of the paired per-trial difference, and the
+    fallen-back model predicts IOC-only's mean rollout (same gain)."""
     model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0)
     auto = ac.choose_settings(model, small, components=(1, 2), reg_covars=(0.3,), folds=2)
     best = next(r for r in auto.scores if r["chosen"])
-    assert math.isfinite(auto.ioc_only_rmse)
-    assert auto.fallback == (auto.ioc_only_rmse <= best["heldout_rmse"])
+    assert math.isfinite(auto.ioc_only_rmse) and math.isfinite(auto.gain) and auto.gain_se > 0
+    beaten = auto.ioc_only_rmse > best["heldout_rmse"] and auto.gain > ac.FALLBACK_SE * auto.gain_se
+    assert auto.fallback == (not beaten)
     # force each outcome through the fit: a candidate grid that cannot beat K̂x, and the flag in predictions
     monkeypatch.setattr(ac, "choose_settings", lambda *a, **k: ac.AutoSettings(
         1, 0.3, "prediction", 2, ({"n_components": 1, "reg_covar": 0.3, "heldout_rmse": 2.0, "chosen": True},),
-        1.0, True))
+        1.0, True, -0.5, 0.1))
     fell = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0).fit(small)
     ioc = IOCOnlyModel(quad).fit(small)
     assert fell.variability_mean_ is False and "K̂x alone" in fell.auto_.describe()
@@ -181,3 +183,26 @@ def test_folds_nothing_fits_on_fall_back_to_the_defaults_and_say_why(quad, small
     n_samples = sum(len(d) for d in small)
     assert model.n_components_ == max(1, min(N_COMPONENTS, n_samples // ac._SAMPLES_PER_COMPONENT))
     assert model.reg_covar_ == REG_COVAR and model.auto_ is None
+
+
+def test_a_candidate_must_beat_the_task_objective_by_more_than_its_standard_error():
+    """The one-standard-error rule, on the scores themselves: a candidate whose per-trial gain over K̂x is within its
+    standard error is not used for the mean (the plain comparison, lower mean error, would use it)."""
+    rng = np.random.default_rng(0)
+    ioc = 1.0 + 0.2 * rng.standard_normal(12)
+
+    def decide(gain_per_trial: np.ndarray) -> ac.AutoSettings:
+        cand = ioc - gain_per_trial
+        tally = ac._Tally({(2, 0.3): [float(cand[:6].mean()), float(cand[6:].mean())]},
+                          {(2, 0.3): [0.0, 0.0]}, {(2, 0.3): cand}, [float(ioc[:6].mean()), float(ioc[6:].mean())],
+                          ioc, {})
+        return ac._decide([2], [0.3], 2, tally, "prediction", True)
+
+    noisy = 0.01 + 0.1 * rng.standard_normal(12)
+    noisy -= noisy.mean() - 0.01  # lower on average, by much less than its spread
+    auto = decide(noisy)
+    assert auto.gain == pytest.approx(0.01) and auto.gain < auto.gain_se and auto.fallback
+    assert "by more than its standard error" in auto.describe()
+    clear = 0.1 + 0.01 * rng.standard_normal(12)
+    auto = decide(clear)
+    assert auto.gain > 3 * auto.gain_se and not auto.fallback

@@ -90,7 +90,12 @@ def test_compare_table_is_tidy_and_matches_direct_predictions(small):
     train, test, models = small
     df = ev.compare(models, test, n_steps=30, starts=10, samples=20, seed=0, one_step=True)
     assert list(df.columns) == ["trial", "label", "start", "method", "metric", "value"]
-    assert set(df.method) == {"proposed", "ioc_only"}
+    # beside the models, the no-pilot references of the pilot's own input, with input rows only
+    from workbench.study.input_prediction import INPUT_METRICS, NO_PILOT
+
+    assert set(df.method) == {"proposed", "ioc_only", *NO_PILOT}
+    assert set(df[df["method"].isin(list(NO_PILOT))]["metric"]) == set(INPUT_METRICS)
+    df = df[~df["method"].isin(list(NO_PILOT))]
     metrics = set(df.metric)
     assert {"rmse_position", "rmse_velocity", "band_position", "band_position_x", "band_position_y"} <= metrics
     assert "coverage_3sigma_u2" in metrics

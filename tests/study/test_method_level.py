@@ -123,21 +123,88 @@ def test_paired_rows_say_which_question_they_answer():
     assert "holds the fitted models fixed" in stats.text()
 
 
-def test_a_split_refits_the_fitted_models_settings_and_fallback():
-    """The refits take the settings cross-validation chose and its fallback to K̂x: a fallen-back proposed model
-    scores exactly as IOC-only on every split, so the method-level difference is 0, never a made-up gain."""
-    from workbench.models.factory import make_models
+def test_every_split_reruns_every_choice_on_its_own_training_part(monkeypatch):
+    """Each split reruns the default model's cross-validation (and so its fallback) and identifies its own plant on its
+    training part: neither ever sees a trial that split scores (the previous main held the study's choice fixed)."""
+    import workbench.models.autoconfig as ac
     from workbench.plant.system import planar_quadrotor
     from workbench.sim.operators import lqr_operator_demos
-    from workbench.study.method_level import split_scores, split_tasks
+    from workbench.study.method_level import SplitPlan, split_scores, split_tasks
 
-    system = planar_quadrotor()
     ds = lqr_operator_demos(n_trials=6, seed=11)
-    models = make_models(system, ["proposed", "ioc_only"], n_components=1)
-    models = {k: m.fit(ds) for k, m in models.items()}
-    models["proposed"].variability_mean_ = False
-    tasks, sizes, units = split_tasks({"LQR": ds}, {"LQR": models}, "rmse_position", 20, 10, 0.34, 3, seed=0)
+    seen: dict[str, list[set[str]]] = {"cv": [], "plant": []}
+
+    def choose(model, demos, **kwargs):
+        seen["cv"].append({d.id for d in demos})
+        return ac.AutoSettings(1, 1.0, "prediction", 2, ({"n_components": 1, "reg_covar": 1.0, "heldout_rmse": 1.0,
+                                                          "chosen": True},), 1.0, True, 0.0, 0.1)
+
+    def plant(train):
+        seen["plant"].append({d.id for d in train})
+        return planar_quadrotor()
+
+    monkeypatch.setattr(ac, "choose_settings", choose)
+    plan = SplitPlan(plant=plant, n_components="cv", seed=0)
+    tasks, sizes, units = split_tasks({"LQR": ds}, plan, "rmse_position", 20, 10, 0.34, 3, seed=0)
     assert sizes == {"LQR": (4, 2)} and units == {"LQR": "trials"} and len(tasks) == 3
-    scores = pd.concat([split_scores(t) for t in tasks], ignore_index=True)
+    parts = [split_scores(t) for t in tasks]
+    for task, part, cv, made in zip(tasks, parts, seen["cv"], seen["plant"], strict=True):
+        test_ids = {ds[int(i)].id for i in task[3]}
+        assert cv and made and not (cv | made) & test_ids  # only the split's training trials
+        assert set(part["trial"]) == test_ids and part["fell_back"].all()
+    scores = pd.concat(parts, ignore_index=True)
     (d,) = method_differences(scores, sizes, "rmse_position", "proposed", ["ioc_only"])
-    assert d.changes == pytest.approx((0.0, 0.0, 0.0), abs=1e-12) and not d.shown
+    # fallen back in every split: the same predictions as IOC-only, said in words, no interval (never [0, 0])
+    assert d.n_fallback == 3 and d.identical and not d.shown
+    assert d.changes == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    assert d.sentence().startswith("the same predictions") and "fell back to K̂x in all 3 splits" in d.sentence()
+    assert "%" not in d.sentence() and d.lo != d.lo
+
+
+def test_no_interval_of_zero_width():
+    """Splits that all give the same change have no spread: no interval, said in words (the previous main printed
+    "[+0 %, +0 %]")."""
+    mean, lo, hi, p, se, df = corrected_t([0.05, 0.05, 0.05, 0.05], n_train=24, n_test=6)
+    assert mean == pytest.approx(0.05) and np.isnan(lo) and np.isnan(hi) and np.isnan(p) and se == 0
+    from workbench.study.paired import difference_sentence
+
+    words = difference_sentence(mean, lo, hi)
+    assert words.startswith("no interval") and "%" not in words
+
+
+def test_a_simulated_run_keeps_every_splits_change_and_fallback():
+    """The coverage study's run (cheap form: fixed G, 2 splits): one change and one fallback flag per split, the
+    self-comparison on each split's halves, and intervals from the first J splits."""
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.families import family
+    from workbench.study.coverage import run_interval, simulated_run
+
+    run = simulated_run(family("LQR"), "LQR", 5, planar_quadrotor(), n_trials=6, test_size=0.34, splits=2,
+                        n_components=1)
+    assert (run.n_train, run.n_test) == (4, 2) and len(run.changes) == len(run.fell_back) == 2
+    assert len(run.self_changes) == 2 and not any(run.fell_back)  # a fixed G never falls back
+    mean, lo, hi = run_interval(run, 2)
+    assert mean == pytest.approx(np.mean(run.changes[:2])) and lo < mean < hi
+
+
+def test_the_studys_own_split_is_its_first_method_level_split_and_a_refit_gives_its_scores():
+    """With a fixed plant the study's own random split is the first of its method-level splits, its fits reused:
+    refitting that split as every other split is refitted gives the same change (so nothing but time is saved)."""
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.operators import lqr_operator_demos
+    from workbench.study.method_level import SplitPlan, split_scores, split_tasks
+    from workbench.study.pipeline import run_study
+
+    ds = lqr_operator_demos(n_trials=8, seed=13)
+    plant = planar_quadrotor()
+    res = run_study(ds, plant, n_components=1, samples=0, efficiency=None, n_steps=20, method_splits=3,
+                    test_size=0.25)
+    (row,) = [d for d in res.statistics.method_level if d.baseline == "ioc_only"]
+    test_ids = {d.id for d in res.test["LQR"]}
+    whole = res.train["LQR"].with_demos([*res.train["LQR"], *res.test["LQR"]])
+    first = {"LQR": [i for i, d in enumerate(whole) if d.id in test_ids]}
+    tasks, _, _ = split_tasks({"LQR": whole}, SplitPlan(plant, 1, 0), "rmse_position", 20, 20, 0.25, 3, seed=0,
+                              first=first)
+    assert {whole[int(i)].id for i in tasks[0][3]} == test_ids
+    fresh = split_scores(tasks[0]).groupby("method")["value"].mean()
+    assert row.changes[0] == pytest.approx(1 - fresh["proposed"] / fresh["ioc_only"], rel=1e-9)

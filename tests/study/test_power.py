@@ -44,3 +44,45 @@ def test_unbounded_spans_say_more_than_simulated_or_set_a_floor():
     curve = _curve({30: [np.inf], 60: [np.exp(0.3)], 120: [np.exp(0.2)]})
     assert curve.needed["r"] == 60
     assert "more than 60 demonstrations" in _curve({30: [2.0], 60: [np.inf]}).describe()[0]
+
+
+def test_the_curve_simulates_more_sets_until_it_is_monotone_and_states_its_uncertainty(monkeypatch):
+    """One set's accident (×3.8e9 at the middle size, issue 40) no longer decides the number: each size starts with
+    MIN_SETS sets and gets more while the median span grows with n; the number carries its interval."""
+    import workbench.method.resampling as resampling
+    import workbench.study.power as power
+
+    calls: list[int] = []
+    # per size, the log spans of its successive sets: the middle size's first two sets are accidents
+    script = {10: [1.5, 1.6, 1.4, 1.5, 1.5, 1.5], 20: [22.0, 21.0, 0.9, 1.0, 0.95, 1.0], 40: [0.6, 0.7, 0.65, 0.6, 0.7]}
+    monkeypatch.setattr(power, "simulate_like", lambda model, demos, n, seed=0: n)
+    monkeypatch.setattr(power, "as_fitted", lambda model, sim: sim)
+    monkeypatch.setattr(resampling, "bootstrap_gain", lambda sim, system, **kw: sim)
+
+    def spans(n, system, ci, ratios):
+        calls.append(n)
+        return {"r": script[n][calls.count(n) - 1]}
+
+    monkeypatch.setattr(power, "_log_spans", spans)
+    model = type("M", (), {"system": None, "plant_regulated": None})()
+    curve = power.power_curve(model, list(range(10)), sizes=(10, 20, 40), repeats=1, seed=0)
+    per_size = curve.spans.groupby("n").size()
+    assert per_size.min() >= power.MIN_SETS
+    # with three or four sets the middle size's median is still an accident's (×e^21, ×e^11): a fifth made it monotone
+    assert (per_size == 5).all()
+    med = np.log(curve.spans.groupby("n")["span"].median())
+    assert np.all(np.diff(med.to_numpy()) <= 0)
+    assert np.isfinite(curve.needed["r"]) and curve.needed_lo["r"] <= curve.needed["r"] <= curve.needed_hi["r"]
+    line = curve.describe()[0]
+    assert "median of 5 simulated sets each" in line and "90 % over resampled sets" in line
+
+
+def test_a_curve_never_monotone_gives_no_number():
+    rows = {10: [np.exp(1.0)] * 3, 20: [np.exp(3.0)] * 3, 40: [np.exp(0.5)] * 3}
+    table = pd.DataFrame([{"ratio": "r", "n": n, "repeat": k, "span": v} for n, vs in rows.items()
+                          for k, v in enumerate(vs)])
+    curve = PowerCurve(spans=table, needed={"r": float("nan")}, target=2.0, n_trials=10)
+    assert "no number" in curve.describe()[0]
+    from workbench.study.power import _all_monotone
+
+    assert not _all_monotone(table)

@@ -251,7 +251,8 @@ def test_a_gain_no_diagonal_cost_reaches_is_flagged_without_a_test():
     half = np.sqrt(ratio_profile.critical_value(95, n) * n / (n - 1)) * sigma  # one entry: no Bonferroni
     assert closest.mismatch_hi[0] == pytest.approx(-15.0 - nearest + half, rel=1e-3)
     assert not fit.of_form and not iv.explained and iv.note.startswith(NOT_EXPLAINED + ": mismatch u on p ")
-    assert "stiffer" in iv.note  # |−15| > |−10|
+    assert "stiffer than" in iv.note and "%" not in iv.note  # |−15| > |−10|, on the entry's own scale
+    assert f"-15 [{closest.k_closest[0] + closest.mismatch_lo[0]:.3g}," in iv.note
     # inside the reachable range the same spread is an exact fit: of the form, with a profile interval
     inside = weight_ratios(gains(plant, scalar_gain(plant, 2.0), sigma, n), plant)
     assert inside.fits[0].of_form and inside.fits[0].closest is None and inside.fits[0].distance < 1e-12
@@ -383,8 +384,15 @@ def test_identifiability_of_an_interval():
     assert not RatioInterval("r", 1e-13, 1e-13, 2e-13, 95).identifiable
     assert not RatioInterval("r", 1e13, 1e13, 1e13, 95).identifiable  # ... or at its top (infinite)
     # the ends of the searched range are no numbers the data gave
-    assert format_interval(0.5, np.exp(-ratio_profile.LOG_BOUND), np.exp(ratio_profile.LOG_BOUND)) == "0.5 [0, ∞]"
+    edge_lo, edge_hi = np.exp(-ratio_profile.LOG_BOUND), np.exp(ratio_profile.LOG_BOUND)
     assert format_interval(0.5, 0.25, 1.0) == "0.5 [0.25, 1]"
+    # nothing identified: said in words, without an estimate and without 0 or ∞ as numbers (issue 40)
+    for est, lo, hi in ((0.5, edge_lo, edge_hi), (7.84e7, edge_lo, edge_hi), (edge_hi, edge_lo, edge_hi),
+                        (edge_lo, edge_lo, edge_lo), (edge_hi, edge_hi, edge_hi), (2.0, edge_lo, 5.0),
+                        (2.0, 0.5, edge_hi), (2.0, 0.1, 40.0)):
+        text = format_interval(est, lo, hi)
+        assert text.startswith(NOT_IDENTIFIABLE), text
+        assert "∞" not in text and "[0" not in text and f"{est:.3g}" not in text.replace(f"{hi:.3g}", ""), text
 
 
 def test_factor_needs_independent_resamples():

@@ -92,3 +92,59 @@ def test_the_viewer_and_the_report_word_a_band_with_one_function(monkeypatch):
     assert v.band_text().count("(sentinel)") == len(verdict.LEVELS) * len(demos.input_names)
     table = cal.check_table(cal.calibration_check(cal.calibration_counts(model, held)))
     assert table["calibration"].str.endswith("(sentinel)").all()
+
+
+def test_the_pilots_own_input_is_judged_in_evaluate_report_and_viewer(tmp_path):
+    """Each method's held-out error in predicting the pilot's input, one step ahead and over the horizon, beside the
+    models with no pilot: the same numbers in `evaluate`'s output, the report (and its table) and the viewer's
+    first view (issue 40 §4)."""
+    import io
+    from contextlib import redirect_stdout
+
+    from workbench.cli import main
+    from workbench.study.input_prediction import input_headlines, input_scores, title
+
+    paths = recordings.cli_recordings()
+    demo = recordings.workdir() / "demo"
+    table = pd.read_csv(demo / "results.csv")
+    table = table[table["table"] == "comparison"]
+    scores = input_scores(table)
+    assert set(scores["metric"]) == {"input_step", "input_horizon"}
+    assert {"proposed", "ioc_only", "no_pilot_held", "no_pilot_zero"} <= set(scores["method"])
+    # the report: its section, its table, the headline naming the no-pilot model
+    text = (demo / "report.md").read_text(encoding="utf-8")
+    assert "## Predicting the pilot's input" in text
+    reported = pd.read_csv(demo / "tables" / "input_scores.csv")
+    pd.testing.assert_frame_equal(reported, scores.reset_index(drop=True), check_dtype=False, rtol=1e-12)
+    for line in input_headlines(table):
+        assert line in text and "for the better model with no pilot, the plant with the input" in line
+    # the viewer's first view
+    shown = _text(read_rrd(paths["demo"]), "/scores")
+    for r in scores.itertuples(index=False):
+        assert fmt(r.value, r.lo, r.hi) in shown and title(r.method) in shown
+    # evaluate: its printed table and the rows of its results file
+    said = io.StringIO()
+    with redirect_stdout(said):
+        assert main(["evaluate", str(demo / "demos.parquet"), "--label", "CS1", "--n-components", "1", "--samples",
+                     "0", "--no-efficiency", "--horizon", "1", "-o", str(tmp_path / "e.csv")]) == 0
+    out = said.getvalue()
+    evaluated = input_scores(pd.read_csv(tmp_path / "e.csv"))
+    assert "held-out error in predicting the pilot's input" in out and "no pilot (input held)" in out
+    assert any(line.startswith("predicting the pilot's own input one step ahead") or "predicting the pilot's own input"
+               in line for line in out.splitlines())
+    for r in evaluated.itertuples(index=False):
+        assert fmt(r.value, r.lo, r.hi) in out
+
+
+def test_the_demos_report_and_output_print_no_number_where_nothing_is_identified():
+    """No interval of [0, 0], [0, ∞] or ∞ as a number, no zero-width difference, no "−0.0 %" — in the demo's
+    report and in what it printed (evaluate's printer) (issue 40 §3)."""
+    import re
+
+    recordings.cli_recordings()
+    demo = recordings.workdir() / "demo"
+    for text in ((demo / "report.md").read_text(encoding="utf-8"), (demo / "said.txt").read_text(encoding="utf-8")):
+        assert "∞" not in text and not re.search(r"\binf\b", text)
+        assert not re.search(r"\[\s*0(\.0+)?\s*,\s*0(\.0+)?\s*\]", text)  # [0, 0]
+        assert not re.search(r"\[[+−-]?0(\.0+)? %, [+−-]?0(\.0+)? %\]", text)  # [+0 %, +0 %]
+        assert not re.search(r"[−-]0\.0 %", text)

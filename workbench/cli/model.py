@@ -14,6 +14,7 @@ from workbench.cli.inputs import resolve
 from workbench.cli.options import rollout_budget, steps_of
 from workbench.cli.reading import demos_at_model_dt, per_group_path, plant_group_parts, system_for
 from workbench.cli.writing import print_plant
+from workbench.defaults import DEFAULT_N_COMPONENTS
 from workbench.errors import DataError, ModelError, UsageError
 
 __all__ = []
@@ -60,12 +61,13 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
         from workbench.models.registry import method
 
         kind = method(a.method).load_class()
-        components = a.n_components
-        if components == "cv" and not kind.chooses_settings:
-            raise UsageError("--n-components cv chooses the proposed model's settings; use a number or 'bic' with "
-                            f"--method {a.method}")
+        # not given: the default model's rule (its baselines take the paper's G)
+        components = DEFAULT_N_COMPONENTS if a.n_components is None else a.n_components
+        if a.n_components == "cv" and not kind.chooses_settings:
+            raise UsageError("--n-components cv chooses the proposed model's settings; use a number, 'bic' or "
+                             f"'paper' with --method {a.method}")
         if components == "bic" and kind.has_components:
-            from workbench.study.pipeline import select_components
+            from workbench.models.selection import select_components
 
             progress.add_task("choosing the number of components by BIC", total=None)
             components = select_components(ds, system, seed=a.seed)
@@ -235,7 +237,8 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, pow
     for f in ratios.fits:
         ctx.say(f"  {f.describe()}")
     if curve is not None:
-        ctx.say(f"power curve (simulated from the model; interval span by n, median over {power} set(s) per size):")
+        ctx.say("power curve (simulated from the model; the median interval span of the simulated sets of each "
+                "size, and the number needed with its interval over resampled sets):")
         for line in curve.describe():
             ctx.say(f"  {line}")
     elif power <= 0 and any(not r.identifiable and r.explained for r in ratios.intervals):
@@ -268,9 +271,10 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
         ctx.say(f"GMM components: {model.n_components_}")
     auto = model.auto_ if model.chooses_settings else None
     if auto is not None:
-        ctx.say(f"chose G = {auto.n_components}, reg_covar = {auto.reg_covar:g} by {auto.folds}-fold cross-validation "
-                f"over the trials ({auto.criterion}); held-out 3 s RMSE per candidate: " + ", ".join(
-                    f"G{r['n_components']}/{r['reg_covar']:g} {r['heldout_rmse']:.3g}" for r in auto.scores))
+        # what was chosen and whether the model fell back to K̂x (said, never silent), then every candidate's score
+        ctx.say(f"the default model: {auto.describe()}")
+        ctx.say(f"held-out {model.noise_horizon_s:g} s RMSE per candidate: " + ", ".join(
+            f"G{r['n_components']}/{r['reg_covar']:g} {r['heldout_rmse']:.3g}" for r in auto.scores))
 
 
 def cmd_predict(ctx: Context) -> int:

@@ -22,7 +22,7 @@ DEFAULT_MAPPING = "planar_quadrotor"
 
 
 def n_components_arg(value: str, rules: tuple[str, ...] = ("bic",)) -> int | str:
-    """``--n-components``: a positive integer, or the name of the rule that chooses it (``bic``, ``cv``)."""
+    """``--n-components``: a positive integer, or the name of the rule that chooses it (``bic``, ``cv``, ``paper``)."""
     if value in rules:
         return value
     try:
@@ -37,7 +37,8 @@ def n_components_arg(value: str, rules: tuple[str, ...] = ("bic",)) -> int | str
 
 
 def fit_n_components_arg(value: str) -> int | str:
-    return n_components_arg(value, ("bic", "cv"))
+    """``--n-components`` of the commands that build the default model: G, ``bic``, ``cv`` or ``paper``."""
+    return n_components_arg(value, ("bic", "cv", "paper"))
 
 
 def timing_arg(value: str) -> str | tuple[float, float]:

@@ -34,12 +34,12 @@ from workbench.cli.stdio import input_formats, output_formats
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
 from workbench.cli.view import VIEW_SAMPLES, cmd_live, cmd_replay, cmd_view
 from workbench.defaults import (
+    DEFAULT_N_COMPONENTS,
     HORIZON_S,
     N_COMPONENTS,
     N_STEPS,
     OBJECTIVE_RESAMPLES,
     ONLINE_HORIZON_S,
-    STUDY_N_COMPONENTS,
     TIMING,
 )
 from workbench.models.registry import REGISTRY
@@ -71,11 +71,13 @@ def _study_options(
                    help="fraction of each strategy's trials held out for testing (default 0.2)")
     p.add_argument("--horizon", dest="horizon_s", type=horizon_arg, default=HORIZON_S, metavar="SECONDS",
                    help=f"prediction horizon in seconds (default {HORIZON_S}, the paper's {N_STEPS} steps)")
-    p.add_argument("--n-components", type=fit_n_components_arg, default=STUDY_N_COMPONENTS, metavar="G|bic|cv",
-                   help="GMM components G, 'bic' to pick G by BIC, or 'cv' (default) to choose G (1, 2 or 5) and "
-                        "the regularizer by cross-validation on each strategy's training trials, falling back to the "
-                        "task objective's K̂x where the variability model does not lower the held-out error "
-                        "(said in the output); 5 is the paper's")
+    p.add_argument("--n-components", type=fit_n_components_arg, default=DEFAULT_N_COMPONENTS,
+                   metavar="G|bic|cv|paper",
+                   help="'cv' (default: the default model, as `workbench fit` builds it) chooses G (1, 2 or 5) and the "
+                        "regularizer by cross-validation on each strategy's training trials, falling back to the "
+                        "task objective's K̂x where the variability model does not lower the held-out error by more "
+                        "than its standard error (said in the output); 'paper': the paper's G = 5 without "
+                        "cross-validation; a number G; 'bic' to pick G by BIC")
     p.add_argument("--samples", type=count_arg, default=samples, metavar="N",
                    help=f"Monte Carlo rollouts for the prediction band; 0 turns it off (default {samples})")
     p.add_argument("--efficiency", type=int_list, default=int_list(efficiency) if efficiency else None,
@@ -211,15 +213,20 @@ def build_parser() -> argparse.ArgumentParser:
     _executor_options(p)
 
     p = add("fit", cmd_fit, "fit a human behavior model (task objective + variability) to demonstrations",
-            "workbench fit demos.parquet --label CS1 --n-components 5 -o cs1.npz")
+            "workbench fit demos.parquet --label CS1 -o cs1.npz")
     p.add_argument("demos", metavar="DEMOS", help="demonstrations (.parquet) or a raw log (with --mapping); - reads "
                    "standard input")
     p.add_argument("-o", "--output", required=True, metavar="MODEL.npz", help="the model file; - for standard output")
     _format_option(p)
     p.add_argument("--label", help="fit only the trials of this strategy label")
-    p.add_argument("--n-components", type=fit_n_components_arg, default=N_COMPONENTS, metavar="G|bic|cv",
-                   help=f"GMM components G (default {N_COMPONENTS}, the paper's); bic: G by BIC; cv: the proposed "
-                        "model chooses G and reg_covar by cross-validation over the trials (held-out 3 s predictions)")
+    p.add_argument("--n-components", type=fit_n_components_arg, default=None,
+                   metavar="G|bic|cv|paper",
+                   help="cv (default: the default model, the one evaluate and report judge): the proposed model "
+                        "chooses G (1, 2 or 5) and reg_covar by cross-validation over the trials (held-out 3 s "
+                        "predictions) and falls back to the task objective's K̂x where its variability model does not "
+                        "lower the held-out error by more than its standard error; paper: the paper's "
+                        f"G = {N_COMPONENTS} without cross-validation; a number G; bic: G by BIC. Baselines take the "
+                        "paper's G unless a number is given")
     p.add_argument("--method", choices=[m.cli_name for m in REGISTRY if m.fit_command], default="proposed",
                    help="the proposed model (default) or one of its baselines")
     p.add_argument("--keep-still", action="store_true",
@@ -430,8 +437,9 @@ def _task_option(p: argparse.ArgumentParser) -> None:
 
 def _power_option(p: argparse.ArgumentParser, default: int) -> None:
     p.add_argument("--power", type=count_arg, default=default, metavar="N",
-                   help="simulated demonstration sets per size (n, 2n, 4n) of the power curve that says how many "
-                        "demonstrations a weight ratio the data do not identify would need "
+                   help="the power curve that says how many demonstrations a weight ratio the data do not identify "
+                        "would need: simulated demonstration sets per size (n/2, n, 2n) to start with — at least 3, "
+                        "and more, up to 6, while the curve is not monotone; the number comes with its interval "
                         f"(default {default}; 0: none)")
 
 

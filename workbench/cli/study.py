@@ -257,6 +257,7 @@ def _print_study(ctx: Context, result: Any, report: Path | None = None) -> None:
     if rows:
         ctx.say_table(["label", "method", "position RMSE", "velocity RMSE", "MC band", "trials"], rows,
                       title="held-out prediction error (mean of trials [95 % interval])")
+    _print_inputs(ctx, result.table)
     # the methods' differences are the statistics' tables below, each saying which comparison it is: a percentage
     # here, beside two means it does not compare, read as their ratio (issue 38)
     if result.coverage is not None and len(result.coverage):
@@ -284,6 +285,26 @@ def _print_study(ctx: Context, result: Any, report: Path | None = None) -> None:
     _print_objective_comparison(ctx, result, report)
     for line in result.verdicts():
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
+
+
+def _print_inputs(ctx: Context, table: Any) -> None:
+    """Each method's held-out error in predicting the pilot's own input, against the models with no pilot, and the
+    headline sentences that name the no-pilot model they compare with."""
+    from workbench.study.input_prediction import input_headlines, input_scores, title
+    from workbench.study.scores import fmt
+
+    scores = input_scores(table)
+    if scores.empty:
+        return
+    rows = []
+    for (label, method), g in scores.groupby(["label", "method"], sort=False):
+        cell = {r.metric: fmt(r.value, r.lo, r.hi) for r in g.itertuples(index=False)}
+        rows.append([label, title(method), cell.get("input_step", "—"), cell.get("input_horizon", "—")])
+    ctx.say_table(["label", "method", "one step ahead", "over the horizon"], rows,
+                  title="held-out error in predicting the pilot's input (RMS over the inputs, mean of trials "
+                        "[95 % interval])")
+    for line in input_headlines(table):
+        ctx.say(line)
 
 
 def _leave_to_report(text: str, report: Path | None) -> str:
@@ -376,8 +397,8 @@ def _print_objective_comparison(ctx: Context, result: Any, report: Path | None =
     ctx.say("(estimates: the diagonal cost closest to the bias-corrected gain, profile intervals simultaneous per "
             "part; \"not of this form\": no diagonal cost within the gain's spread, the row gives the closest one "
             "with sandwich intervals, the part's mismatch above; \"not identifiable\": wider than ×10, with the "
-            "demonstrations a simulated power curve (n, 2n, 4n) says would make it narrower than ×2; the report "
-            "says how: " + LAW.split(",")[0] + ")")
+            "demonstrations a simulated power curve (n/2, n, 2n; at least 3 sets each, more until monotone) says "
+            "would make it narrower than ×2, with its 90 % interval; the report says how: " + LAW.split(",")[0] + ")")
 
 
 def cmd_report(ctx: Context) -> int:

@@ -299,7 +299,7 @@ class InverseLQR:
         try:
             status = self._run(problem, solver, stage)
         except _SOLVER_EXCEPTIONS as exc:
-            attempts.append(_Attempt(solver, stage, "error", note=f"{type(exc).__name__}: {exc}"[:200]))
+            attempts.append(_Attempt(solver, stage, "error", note=_brief(f"{type(exc).__name__}: {exc}")))
             return None
         if status not in _ACCEPTED_STATUS:
             attempts.append(_Attempt(solver, stage, status))
@@ -387,3 +387,16 @@ def inverse_lqr(A: Any, B: Any, K: Any, structure: Structure = "full", second_st
     if structure not in _STRUCTURES:
         raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
     return cached_problem(A, B, structure, second_stage).solve(K)
+
+
+def _brief(message: str, limit: int = 200) -> str:
+    """A solver's message short enough to join others: its first line, cut at the last sentence (or word) that fits,
+    with "…" where anything was cut — never mid-word (a cut at 200 characters printed "the problem is ;")."""
+    text = " ".join(message.strip().splitlines()[:1]) if message.strip() else ""
+    if len(text) <= limit:
+        return text
+    head = text[:limit]
+    end = max(head.rfind(". "), head.rfind("; "))
+    if end >= limit // 2:
+        return head[:end].rstrip(".") + " …"
+    return head[: head.rfind(" ")].rstrip(" ,;:") + " …" if " " in head else head + "…"

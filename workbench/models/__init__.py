@@ -39,6 +39,7 @@ _EXPORTS = {
     "METHODS": "registry",
     "METHOD_TITLES": "registry",
     "MODEL_CLASSES": "factory",
+    "default_model": "factory",
     "make_model": "factory",
     "make_models": "factory",
     "load_model": "storage",

@@ -1,7 +1,12 @@
-"""One factory for the workbench's models: by method name, with the paper's settings, and back from a file.
+"""One factory for the workbench's models: by method name, the one default model, and back from a file.
 
-The CLI, the evaluation and the study build their models here, so "the proposed model" means one thing in
-every table: :func:`make_model` for one, :func:`make_models` for the comparison, :func:`load_model` for a file.
+The CLI, the evaluation, the study and the testbed build their models here, so "the proposed model" means one
+thing in every table and every file: :func:`default_model` is the default proposed model (what ``workbench fit``,
+``evaluate``, ``report``, ``demo`` and :func:`~workbench.study.pipeline.run_study` build and what the comparisons
+judge: G and the regularizer chosen by cross-validation on the training trials, falling back to ``K̂x`` where the
+variability model does not lower the held-out error), :func:`make_model` for one method, :func:`make_models` for the
+comparison, :func:`load_model` for a file. The paper's settings (G = 5, no cross-validation) are
+``n_components="paper"`` (:data:`~workbench.defaults.PAPER_SETTINGS`).
 """
 
 from __future__ import annotations
@@ -9,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from workbench.defaults import TIMING
+from workbench.defaults import DEFAULT_N_COMPONENTS, N_COMPONENTS, PAPER_SETTINGS, TIMING
 from workbench.errors import DataError
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
@@ -17,18 +22,64 @@ from workbench.models.registry import METHOD_TITLES, METHODS, model_classes
 from workbench.models.registry import method as registered
 from workbench.models.storage import load_model
 
-__all__ = ["METHODS", "METHOD_TITLES", "MODEL_CLASSES", "make_model", "make_models", "load_model"]
+__all__ = ["METHODS", "METHOD_TITLES", "MODEL_CLASSES", "default_model", "make_model", "make_models", "load_model",
+           "resolve_components"]
 
 #: Every registered method's class by class name (what a model file records).
 MODEL_CLASSES: dict[str, type[BehaviorModel]] = model_classes()
-PAPER_N_COMPONENTS = 5  # G of the method paper's quadrotor study
+PAPER_N_COMPONENTS = N_COMPONENTS  # G of the method paper's quadrotor study
+
+
+def resolve_components(n_components: int | str, chooses_settings: bool) -> int | str:
+    """The ``n_components`` a model class is built with: ``"paper"`` is the paper's G; ``"cv"`` stays ``"cv"`` for
+    the proposed model (the only one that chooses its settings) and is the paper's G for every other method."""
+    if n_components == PAPER_SETTINGS or (n_components == "cv" and not chooses_settings):
+        return PAPER_N_COMPONENTS
+    return n_components
+
+
+def default_model(
+    plant: Any,
+    *,
+    random_state: int | None = 0,
+    gain_method: str = IV_OR_DIRECT,
+    fit_objective: bool = True,
+    timing: Any = TIMING,
+    task: Any = None,
+) -> BehaviorModel:
+    """The one default model: the proposed model as ``workbench fit``, ``evaluate``, ``report``, ``demo``, the
+    method-level comparison's splits and :func:`~workbench.study.pipeline.run_study` build it.
+
+    G (1, 2 or 5) and the TP-GMM's regularizer are chosen by 3-fold cross-validation over the training trials
+    (:func:`workbench.models.autoconfig.choose_settings`, the grids :data:`~workbench.models.autoconfig.
+    DEFAULT_COMPONENT_GRID` × :data:`~workbench.models.autoconfig.DEFAULT_REG_COVAR_GRID`), and the model predicts
+    with the task objective's ``K̂x`` alone where its variability model does not lower the held-out error by more
+    than its standard error (``auto_.fallback``, said wherever the model is described). Unfitted; call
+    ``fit(demos)``.
+
+    Parameters
+    ----------
+    plant : LinearSystem
+    random_state : int or None
+        Seed of the k-means initialization and of the cross-validation folds.
+    gain_method : {"iv-or-direct", "direct", "dmd", "iv"}
+    fit_objective : bool
+        Also solve for the task objective (inverse LQR); predictions never need it.
+    timing : "identify", "none" or (delay_s, lag_s)
+        The pilot's timing (:mod:`workbench.method.timing`).
+    task : PilotTask, str, dict or None
+        What the pilot regulates and relative to what (:mod:`workbench.data.pilot_task`): None decides it from the
+        demonstrations; otherwise an override (the command line's ``--task``, a mapping's ``[task]``).
+    """
+    return make_model("proposed", plant, n_components=DEFAULT_N_COMPONENTS, random_state=random_state,
+                      gain_method=gain_method, fit_objective=fit_objective, timing=timing, task=task)
 
 
 def make_model(
     method: str,
     system: Any,
     *,
-    n_components: int | str = PAPER_N_COMPONENTS,
+    n_components: int | str = DEFAULT_N_COMPONENTS,
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
@@ -40,16 +91,18 @@ def make_model(
 
     Parameters
     ----------
-    n_components : int or "cv"
-        G of the proposed and GMR-only models; ``"cv"`` lets the proposed model choose G and ``reg_covar`` by
-        cross-validation over the demonstrations (:func:`workbench.models.autoconfig.choose_settings`).
+    n_components : int, "cv" or "paper"
+        G of the proposed and GMR-only models. ``"cv"`` (the default, :data:`~workbench.defaults.
+        DEFAULT_N_COMPONENTS`): the proposed model is :func:`default_model` (G and ``reg_covar`` by
+        cross-validation over the demonstrations, with the fallback to ``K̂x``), every other method the paper's G.
+        ``"paper"``: the paper's G = 5 and regularizer, no cross-validation.
     gain_method : {"iv-or-direct", "direct", "dmd", "iv"}
         How K̂ is estimated (proposed and IOC-only); the default uses instrumental variables where their
         instruments are relevant, least squares otherwise (:func:`workbench.method.gain.choose_gain`).
     fit_objective : bool
         Whether the proposed model also solves for its task objective (predictions never need it).
     cv_grid : dict, optional
-        ``cv_components`` / ``cv_reg_covars`` of a "cv" proposed model (default the full grids).
+        ``cv_components`` / ``cv_reg_covars`` of a "cv" proposed model (default the default model's grids).
     timing : "identify", "none" or (delay_s, lag_s)
         The pilot's timing of the proposed and IOC-only models (:mod:`workbench.method.timing`).
     task : PilotTask, str, dict or None
@@ -60,9 +113,8 @@ def make_model(
     if kind not in METHODS:
         raise DataError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
     cls = registered(kind).load_class()
-    if n_components == "cv" and not cls.chooses_settings:
-        raise DataError(f"n_components='cv' chooses the proposed model's settings; {method} needs a number")
-    return cls.for_method(system, MethodSettings(n_components, random_state, gain_method, fit_objective, cv_grid,
+    G = resolve_components(n_components, cls.chooses_settings)
+    return cls.for_method(system, MethodSettings(G, random_state, gain_method, fit_objective, cv_grid,
                                                  timing=timing, task=task))
 
 
@@ -70,26 +122,16 @@ def make_models(
     system: Any,
     methods: Sequence[str] = METHODS,
     *,
-    n_components: int | str = PAPER_N_COMPONENTS,
+    n_components: int | str = DEFAULT_N_COMPONENTS,
     random_state: int | None = 0,
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = False,
     task: Any = None,
 ) -> dict[str, BehaviorModel]:
-    """Unfitted ``{method: model}`` for a comparison, with the paper's settings (G, start/goal frames).
+    """Unfitted ``{method: model}`` for a comparison: the default model (:func:`default_model`, or the settings
+    ``n_components`` names) and its baselines (GMR-only at the paper's G unless a number is given).
 
     The proposed model skips its objective by default here: a comparison scores predictions, which never need it.
-    ``n_components="cv"``: the proposed model chooses G and its regularizer by cross-validation on the small grid
-    of :data:`~workbench.models.autoconfig.DEFAULT_COMPONENT_GRID` (one component included) and falls back to
-    ``K̂x`` where that predicts the held-out trials better (``auto_.fallback``); GMR-only keeps the paper's G.
     """
-    from workbench.models.autoconfig import DEFAULT_COMPONENT_GRID, DEFAULT_REG_COVAR_GRID
-
-    grid = {"cv_components": DEFAULT_COMPONENT_GRID, "cv_reg_covars": DEFAULT_REG_COVAR_GRID}
-    out = {}
-    for m in methods:
-        cv = registered(m).load_class().chooses_settings
-        out[m] = make_model(m, system, n_components=n_components if cv or n_components != "cv" else PAPER_N_COMPONENTS,
-                            random_state=random_state, gain_method=gain_method, fit_objective=fit_objective,
-                            cv_grid=grid if cv else None, task=task)
-    return out
+    return {m: make_model(m, system, n_components=n_components, random_state=random_state, gain_method=gain_method,
+                          fit_objective=fit_objective, task=task) for m in methods}

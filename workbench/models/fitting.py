@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
@@ -29,6 +31,8 @@ __all__ = [
     "goal_of",
     "references",
     "fit_gain",
+    "shared_gains",
+    "shared_gain_memo",
     "TimedGain",
     "timed_gain",
     "check_timing",
@@ -103,15 +107,48 @@ def references(demos: Sequence[Demonstration], n: int) -> tuple[list[np.ndarray]
     return [np.zeros(n) for _ in demos], False
 
 
+# Gains already estimated inside a `shared_gains` block, by the trials (their identities), references, plant and method.
+_GAINS: ContextVar[dict | None] = ContextVar("workbench_shared_gains", default=None)
+
+
+@contextmanager
+def shared_gains() -> Iterator[None]:
+    """Inside this block, :func:`fit_gain` and :func:`workbench.models.regulator.fit_regulator` on the same trial
+    objects (with the same task or references, plant and method) estimate K̂ (and its stability) once: the
+    candidates of one cross-validation fold all fit the same gain. The trials must stay alive
+    (and unchanged) for the block, as they do for the folds of one cross-validation."""
+    token = _GAINS.set({})
+    try:
+        yield
+    finally:
+        _GAINS.reset(token)
+
+
+def shared_gain_memo() -> dict | None:
+    """The memo of the enclosing :func:`shared_gains` block (None outside one)."""
+    return _GAINS.get()
+
+
 def fit_gain(
     demos: Sequence[Demonstration], refs: Sequence[np.ndarray], system: LinearSystem, method: str
 ) -> tuple[np.ndarray, GainChoice]:
     """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.method.gain.choose_gain` on the shifted states, and which
     estimator made it (``method`` may be the rule ``"iv-or-direct"``)."""
+    memo = _GAINS.get()
+    key = None
+    if memo is not None:
+        key = (tuple(id(d) for d in demos), b"".join(np.asarray(r, dtype=float).tobytes() for r in refs), id(system),
+               method)
+        if key in memo:
+            K, choice = memo[key]
+            return K.copy(), choice
     shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id, meta=getattr(d, "meta", {}))  # meta: the flight mode
                 for d, r in zip(demos, refs, strict=True)]
     K, choice = choose_gain(shifted, system, method)
-    return np.ascontiguousarray(K), choice
+    K = np.ascontiguousarray(K)
+    if memo is not None:
+        memo[key] = (K.copy(), choice)
+    return K, choice
 
 
 def check_timing(timing: Any, where: str) -> str | tuple[float, float]:

@@ -129,10 +129,13 @@ class HumanBehaviorModel(TaskGMRModel):
     auto_criterion : {"prediction", "likelihood"}
         How "cv" settings are scored on held-out demonstrations: rollout RMSE or TP-GMM log-likelihood.
     cv_components, cv_reg_covars : tuple or None
-        The "cv" grids (None: :data:`~workbench.models.autoconfig.COMPONENT_GRID` / ``REG_COVAR_GRID``; a
-        study's default model uses the small ``DEFAULT_COMPONENT_GRID`` / ``DEFAULT_REG_COVAR_GRID``). The chosen
+        The "cv" grids (None: the default model's :data:`~workbench.models.autoconfig.DEFAULT_COMPONENT_GRID` /
+        ``DEFAULT_REG_COVAR_GRID``; the wider ``COMPONENT_GRID`` / ``REG_COVAR_GRID`` where asked for). The chosen
         candidate is fitted with EM capped as the candidates were, and where the task objective's ``K̂x`` alone
         beats every candidate on the held-out rollouts the model predicts with it (``variability_mean_``).
+    variability_mean : bool
+        Predict with ``K̂x + μ̂(x)`` (True) or with ``K̂x`` alone, the variability model kept for the input band only
+        (False: a cross-validation's fallback, fixed, as the data-efficiency curve refits the model it chose).
 
     Attributes
     ----------
@@ -220,6 +223,7 @@ class HumanBehaviorModel(TaskGMRModel):
         auto_criterion: str = "prediction",
         cv_components: tuple[int, ...] | None = None,
         cv_reg_covars: tuple[float, ...] | None = None,
+        variability_mean: bool = True,
         task: PilotTask | str | dict | None = None,
     ) -> None:
         super().__init__(system)
@@ -245,11 +249,12 @@ class HumanBehaviorModel(TaskGMRModel):
         self.auto_criterion = auto_criterion
         self.cv_components = cv_components
         self.cv_reg_covars = cv_reg_covars
+        self.variability_mean = variability_mean
 
     @classmethod
     def for_method(cls, system: LinearSystem, settings: MethodSettings) -> HumanBehaviorModel:
         s = settings
-        return cls(system, n_components=s.n_components, reg_covar="cv" if s.n_components == "cv" else 0.5,
+        return cls(system, n_components=s.n_components, reg_covar="cv" if s.n_components == "cv" else REG_COVAR,
                    random_state=s.random_state, gain_method=s.gain_method, fit_objective=s.fit_objective,
                    timing=s.timing, task=s.task, **(s.cv_grid or {}))
 
@@ -262,7 +267,7 @@ class HumanBehaviorModel(TaskGMRModel):
             return self._fit_auto(demos)
         self._check_settings()
         self.auto_ = None
-        self.variability_mean_ = True
+        self.variability_mean_ = bool(self.variability_mean)
         self.reg_covar_ = float(self.reg_covar)
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
         fit_regulator(self, ds)
@@ -293,7 +298,7 @@ class HumanBehaviorModel(TaskGMRModel):
 
     def _fit_auto(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Choose the "cv" settings by cross-validation, then fit with them (the settings stay "cv")."""
-        from workbench.models.autoconfig import _CV_MAX_ITER, NoCandidateFitted, choose_settings
+        from workbench.models.autoconfig import _CV_MAX_ITER, _CV_TOL, NoCandidateFitted, choose_settings
 
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
         if len(ds) < 2:
@@ -305,14 +310,15 @@ class HumanBehaviorModel(TaskGMRModel):
             # every fold too small to fit on (a flight of two or three segments): as with one demonstration, the
             # defaults on all of them, and the reason said, rather than no model
             return self._fit_uncrossed(demos, ds, because=str(exc))
-        # the chosen candidate is fitted as it was scored: EM capped as the candidates were
+        # the chosen candidate is fitted as it was scored: EM capped and stopped as the candidates' was
         chosen = type(self)(self.system, **{**self.get_params(), "n_components": auto.n_components,
                                             "reg_covar": auto.reg_covar,
-                                            "max_iter": min(int(self.max_iter), _CV_MAX_ITER)}).fit(demos)
+                                            "max_iter": min(int(self.max_iter), _CV_MAX_ITER),
+                                            "tol": max(float(self.tol), _CV_TOL)}).fit(demos)
         self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
         self.auto_ = auto
         # the variability model did not lower the held-out error: predict with K̂x alone (said by auto_.describe())
-        self.variability_mean_ = not auto.fallback
+        self.variability_mean_ = bool(self.variability_mean) and not auto.fallback
         return self
 
     def _fit_uncrossed(self, demos: Any, ds: Sequence[Demonstration], because: str = "") -> HumanBehaviorModel:
@@ -332,7 +338,7 @@ class HumanBehaviorModel(TaskGMRModel):
         chosen = type(self)(self.system, **{**self.get_params(), "n_components": G, "reg_covar": reg}).fit(demos)
         self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
         self.auto_ = None
-        self.variability_mean_ = True
+        self.variability_mean_ = bool(self.variability_mean)
         return self
 
     def residuals(self, demo: Demonstration) -> np.ndarray:

@@ -96,7 +96,7 @@ def _settle_timing(model: Any, task: PilotTask, demos: Sequence[Any]) -> Any:
     ``pilot_timing_`` and ``_settled_timing`` (transient: the gain on the seen state, which :func:`fit_regulator`
     takes, or why there is none) and returns the :class:`~workbench.models.fitting.TimedGain`; None for a model
     without timing (GMR-only, ``timing="none"``). The caller writes the delay and the lag into the task."""
-    from workbench.models.fitting import timed_gain
+    from workbench.models.fitting import shared_gain_memo, timed_gain
 
     model.timing_ = model.pilot_timing_ = model._settled_timing = None
     setting = getattr(model, "timing", None)
@@ -109,7 +109,17 @@ def _settle_timing(model: Any, task: PilotTask, demos: Sequence[Any]) -> Any:
         views = pilot_view(system, task.with_(delay_s=0.0, lag_s=0.0), demos)
     except DataError as exc:
         raise ModelError(str(exc)) from None
-    timed = timed_gain(views, plant, model.gain_method, setting)
+    # the candidates of one cross-validation fold identify the same timing on the same trials: once
+    # (workbench.models.fitting.shared_gains)
+    memo = shared_gain_memo()
+    key = ("timing", tuple(id(d) for d in demos), repr(task.with_(delay_s=0.0, lag_s=0.0)), id(system),
+           model.gain_method, repr(setting))
+    if memo is not None and key in memo:
+        timed = memo[key]
+    else:
+        timed = timed_gain(views, plant, model.gain_method, setting)
+        if memo is not None:
+            memo[key] = timed
     model._settled_timing = timed
     if timed is not None and timed.K is not None:
         model.timing_, model.pilot_timing_ = timed.timing, timed.pilot.to_dict()
@@ -306,7 +316,7 @@ def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
     """
     from workbench.method.gain import GainChoice, choose_gain
     from workbench.method.stability import judge_stability, refusal
-    from workbench.models.fitting import fit_objective_or_reason, json_seed
+    from workbench.models.fitting import fit_objective_or_reason, json_seed, shared_gain_memo
 
     system = model.system
     task = settle_task(model, demos)
@@ -319,18 +329,27 @@ def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
         views = pilot_view(system, task.with_(delay_s=0.0, lag_s=0.0) if with_timing else task, demos)
     except DataError as exc:
         raise ModelError(str(exc)) from None
+    seed = json_seed(getattr(model, "random_state", None)) or 0
     if with_timing:
         K_r, choice = timed.K, timed.choice
+        stability = _timed_stability(plant, K_r, task, len(views))
     else:
-        K_r, choice = choose_gain(views, plant, model.gain_method, check=False)
+        # the candidates of one cross-validation fold fit the same trials with the same task: their gain and its
+        # stability's interval are computed once (workbench.models.fitting.shared_gains)
+        memo = shared_gain_memo()
+        key = ("gain", tuple(id(d) for d in demos), repr(task), id(system), model.gain_method, seed)
+        if memo is not None and key in memo:
+            K_r, choice, stability = memo[key]
+            K_r = K_r.copy()
+        else:
+            K_r, choice = choose_gain(views, plant, model.gain_method, check=False)
+            stability = judge_stability(plant.A, plant.B, K_r, views, choice.method, plant.dt, plant.state_names,
+                                        seed=seed)
+            if memo is not None:
+                memo[key] = (K_r.copy(), choice, stability)
         if timed is not None:
             choice = GainChoice(choice.requested, choice.method,
                                 f"{choice.reason}; no timing: it could not be identified ({timed.why_none})")
-    if with_timing:
-        stability = _timed_stability(plant, K_r, task, len(views))
-    else:
-        stability = judge_stability(plant.A, plant.B, K_r, views, choice.method, plant.dt, plant.state_names,
-                                    seed=json_seed(getattr(model, "random_state", None)) or 0)
     if stability.refused:
         raise refusal(stability, demos, system.roles, choice.method)
     model.task_, model.regulated_, model.regulator_plant_ = task, tuple(idx), plant

@@ -6,6 +6,7 @@ all call :func:`choose_plant` (or :func:`plant_rule` for a study, whose plant mu
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 from workbench.data.demonstrations import DemonstrationSet
@@ -42,6 +43,7 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
 
 def plant_rule(choice: str = "auto", horizon_s: float = 3.0) -> Callable[[DemonstrationSet], LinearSystem]:
     """The plant of a study as a function of its training trials (:func:`choose_plant` on them), so that (A, B)
-    is never identified from a trial the study then scores."""
-    return lambda train: choose_plant(train, choice, horizon_s)
+    is never identified from a trial the study then scores. A partial, not a lambda: the method-level comparison
+    sends it to worker processes, where every split identifies its own plant."""
+    return functools.partial(choose_plant, choice=choice, horizon_s=horizon_s)
 

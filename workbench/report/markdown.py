@@ -121,6 +121,8 @@ class ReportInputs:
     scores: pd.DataFrame | None = None
     #: Why a section has nothing to show, by section ("efficiency", "statistics", …).
     empty: Mapping[str, str] = field(default_factory=dict)
+    #: The comparison's rows of the pilot's own input (:mod:`workbench.study.input_prediction`): its section.
+    inputs_table: pd.DataFrame | None = None
 
 
 def write_report(out_dir: str | os.PathLike, inputs: ReportInputs) -> Path:
@@ -174,6 +176,11 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
     tab_dir = out_dir / "tables"
     tab_dir.mkdir(parents=True, exist_ok=True)
     md += scores_section(inputs, system, tab_dir)
+    if inputs.inputs_table is not None and len(inputs.inputs_table):
+        from workbench.study.input_prediction import input_markdown, input_scores
+
+        save_table(input_scores(inputs.inputs_table), tab_dir / "input_scores.csv")
+        md += input_markdown(inputs.inputs_table)
 
     # data
     rows = []
@@ -323,8 +330,9 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                f"*Mean {_metric_words(what)} on the test trials against the number of training demonstrations, "
                "scored like the tables above (every window of every test trial, a trial's windows and the random "
                "training subsets drawn at that size averaged, then the mean over trials); error bars: ± one "
-               "standard error of that mean over the test trials (the last size is the whole training set, the "
-               "models of the tables).*", ""]
+               "standard error of that mean over the test trials; the smaller sizes refit the proposed model at "
+               "the settings its cross-validation chose on all training trials, its fallback to K̂x included, and the "
+               "last size — the whole training set — is the tables' own rows).*", ""]
     elif inputs.empty.get("efficiency"):
         md += ["## Data efficiency", "", f"*None: {inputs.empty['efficiency']}.*", ""]
     md += ["## Statistics of the comparison", ""]
@@ -469,6 +477,7 @@ def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, titl
         out_dir,
         ReportInputs(
             holdout=holdout, scores=heldout_scores(result.table), empty=empty,
+            inputs_table=result.table[result.table["metric"].str.startswith("input_")],
             train=result.train, test=result.test, models=result.models, baselines=result.baselines,
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
             stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,

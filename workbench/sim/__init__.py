@@ -13,6 +13,8 @@ _EXPORTS = {
     "lqr_operator_demos": "operators",
     "ErraticOperator": "operators",
     "erratic_operator_demos": "operators",
+    "DelayedPilot": "operators",
+    "delayed_pilot_demos": "operators",
 }
 __all__ = list(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

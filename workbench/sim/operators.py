@@ -17,6 +17,10 @@ case of the method's Remark 1, which the GMM should carry).
 :func:`erratic_operator_demos` flies a strongly non-LQR operator (reaction delay, bang-bang corrections,
 hesitations, a left/right detour choice around an obstacle) for checking that automatically chosen settings do
 not make the proposed model worse than its task-objective-only baseline.
+
+:func:`delayed_pilot_demos` flies an LQR pilot as people fly: it acts on what it saw a reaction delay ago, and its
+stick has a dead zone (a small deflection reads zero, a larger one is reduced by the dead zone's width). Neither is in
+the model ``u = K x + w``: a check that the method's numbers hold on a pilot the method does not describe.
 """
 
 from __future__ import annotations
@@ -32,7 +36,8 @@ from workbench.errors import DataError
 from workbench.method.objective import forward_gain
 from workbench.plant.system import LinearSystem, planar_quadrotor
 
-__all__ = ["LQROperator", "lqr_operator_demos", "ErraticOperator", "erratic_operator_demos", "SLOW_PILOT"]
+__all__ = ["LQROperator", "lqr_operator_demos", "ErraticOperator", "erratic_operator_demos", "DelayedPilot",
+           "delayed_pilot_demos", "SLOW_PILOT"]
 
 #: The cost of a pilot slow enough to fly with a reaction delay and a lag (``LQROperator(**SLOW_PILOT, delay_s=…)``):
 #: the default operator's lateral loop is unstable behind a 0.2 s delay and a 0.08 s lag, as a human's would be, so
@@ -313,6 +318,76 @@ def erratic_operator_demos(
             Demonstration(
                 sys_.dt * np.arange(k + 1), xs, us,
                 {"id": f"{label.lower()}-{j:03d}", "label": label, "source": "erratic operator", "target": [0.0] * n},
+            )
+        )
+    return DemonstrationSet(demos, sys_.state_names, sys_.input_names, sys_.dt, roles=sys_.roles)
+
+
+@dataclass(frozen=True)
+class DelayedPilot:
+    """An LQR pilot with a reaction delay and a stick dead zone: ``u[k] = dz(K x[k − d] + w[k])``, clipped.
+
+    ``d`` is ``delay`` seconds in steps; ``dz`` keeps the sign and takes ``dead_zone`` off the magnitude of every
+    input (zero inside it); ``w`` is the LQR operator's autocorrelated, state-dependent variability. The gain is that
+    of an :class:`LQROperator` with the same cost, so the pilot it would be without its timing and its stick is known.
+
+    Parameters
+    ----------
+    lqr : LQROperator
+        Cost, variability, start box and duration.
+    delay : float
+        Reaction delay in seconds (0.2 s: the middle of the 0.1–0.3 s of McRuer's crossover model).
+    dead_zone : sequence of float (m)
+        Half-width of each input's dead zone, in input units (about the median magnitude of the LQR operator's
+        inputs by default: half its small corrections vanish).
+    """
+
+    lqr: LQROperator = field(default_factory=LQROperator)
+    delay: float = 0.2
+    dead_zone: Sequence[float] = (0.01, 0.03)
+
+
+def delayed_pilot_demos(
+    pilot: DelayedPilot | None = None,
+    n_trials: int = 30,
+    seed: int = 0,
+    system: LinearSystem | None = None,
+    label: str = "delayed",
+) -> DemonstrationSet:
+    """Fly ``n_trials`` trials of a :class:`DelayedPilot` to the origin; deterministic for ``seed``."""
+    pilot = pilot or DelayedPilot()
+    op = pilot.lqr
+    sys_ = system or planar_quadrotor()
+    n, m = sys_.n, sys_.m
+    K = op.gain(sys_)
+    dz = np.asarray(pilot.dead_zone, dtype=float)
+    if dz.shape != (m,) or np.any(dz < 0):
+        raise DataError(f"dead_zone must be {m} non-negative numbers (one per input), got {pilot.dead_zone!r}")
+    lag = max(0, int(round(pilot.delay / sys_.dt)))
+    rng = np.random.default_rng(seed)
+    s_near, s_far = np.asarray(op.sigma_near, dtype=float), np.asarray(op.sigma_far, dtype=float)
+    plane = sys_.r.plane
+    steps = int(round(op.duration / sys_.dt))
+    demos = []
+    for j in range(n_trials):
+        x = _box(op.x0_low, op.x0_high, n, rng)
+        seen = [x.copy()] * (lag + 1)  # what the pilot saw, oldest first
+        e = np.zeros(m)
+        xs, us = np.empty((steps, n)), np.empty((steps, m))
+        for k in range(steps):
+            past = seen[0]
+            dist = float(np.hypot(*past[list(plane)])) if plane is not None else float(np.linalg.norm(past))
+            sigma = s_near + (s_far - s_near) * (1.0 - np.exp(-dist / op.length))
+            e = op.rho * e + np.sqrt(1.0 - op.rho**2) * rng.standard_normal(m)
+            v = K @ past + sigma * e
+            u = sys_.clip(np.sign(v) * np.maximum(np.abs(v) - dz, 0.0))
+            xs[k], us[k] = x, u
+            x = sys_.A @ x + sys_.B @ u
+            seen = [*seen[1:], x.copy()]
+        demos.append(
+            Demonstration(
+                sys_.dt * np.arange(steps), xs, us,
+                {"id": f"{label.lower()}-{j:03d}", "label": label, "source": "delayed pilot", "target": [0.0] * n},
             )
         )
     return DemonstrationSet(demos, sys_.state_names, sys_.input_names, sys_.dt, roles=sys_.roles)

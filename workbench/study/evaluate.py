@@ -226,6 +226,7 @@ def compare(
     one_step: bool = False,
     clip: bool = False,
     progress: Progress | None = None,
+    inputs: bool = True,
 ) -> pd.DataFrame:
     """Predict every test trial with every model and score the predictions.
 
@@ -256,13 +257,19 @@ def compare(
         Clip predicted inputs to the system's bounds.
     progress : callable(done, total), optional
         Called after each trial.
+    inputs : bool
+        Score the pilot's own input too (:mod:`workbench.study.input_prediction`): ``input_step`` and
+        ``input_horizon`` of every model that predicts an input, and of the models with no pilot
+        (``no_pilot_held``, ``no_pilot_zero``).
 
     Returns
     -------
     DataFrame with columns ``trial, label, start, method, metric, value``: metrics ``rmse_<block>``,
-    ``left_envelope`` (1 where the mean rollout left the model's training-state envelope), and with samples
-    ``band_<block>`` (joint) and ``band_<block>_<state>``.
+    ``left_envelope`` (1 where the mean rollout left the model's training-state envelope), with samples
+    ``band_<block>`` (joint) and ``band_<block>_<state>``, with ``inputs`` the input scores.
     """
+    from workbench.study.input_prediction import model_rows, no_pilot_rows
+
     demos = _demos(test)
     if not models:
         raise DataError("compare needs at least one model")
@@ -310,10 +317,14 @@ def compare(
                             if metric not in done:  # a one-state block repeats a per-axis row of another
                                 done.add(metric)
                                 rows.append((d.id, _label(d), s, method, metric, value))
+            if inputs:
+                rows += model_rows(model, d, _label(d), method, st, preds, n_steps)
             if one_step and model.models_inputs:  # persistence has no input distribution
                 cov = one_step_coverage(model, [d], method=method)
                 for r in cov.itertuples(index=False):
                     rows.append((d.id, _label(d), 0, method, f"coverage_{r.n_sigma:g}sigma_{r.input}", r.coverage))
+        if inputs and any(m.models_inputs for m in models.values()):
+            rows += no_pilot_rows(d, _label(d), st, n_steps)
         if progress is not None:
             progress(t_i + 1, len(demos))
     return pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
@@ -397,8 +408,8 @@ def _efficiency_point(task: tuple) -> tuple[list[pd.DataFrame], list[str]]:
             "n_train": [size], "repeat": [r], "trial": [None], "label": [None], "start": [0],
             "method": [name], "metric": [primary_metric(models[name].system)], "value": [np.nan],
         }))
-    if fitted:
-        table = compare(fitted, list(test_ref.load()), n_steps=n_steps, starts=starts)
+    if fitted:  # the curve is of the headline's state error: no input rows
+        table = compare(fitted, list(test_ref.load()), n_steps=n_steps, starts=starts, inputs=False)
         parts.append(table.assign(n_train=size, repeat=r))
     return parts, failures
 

@@ -86,9 +86,10 @@ class StudyStatistics:
             k = sum(family)
             splits = m0.splits_words("each strategy's")
             refits = ("Each fold's models are the study's own fits of that fold." if m0.loo else
-                      "Settings chosen by cross-validation on the study's training trials are held fixed in the "
-                      "refits, which skip the task objective and the band calibration (neither changes a mean "
-                      "prediction).")
+                      "Each split reruns the whole method on its own training part — the proposed model's "
+                      "cross-validated G and regularizer, its fallback to K̂x and, where the plant is identified from "
+                      "data, the plant — so the interval includes those choices' own variability; the refits skip "
+                      "the task objective and the Monte Carlo band (neither changes a mean prediction).")
             lines.append(
                 f"- *Does the proposed method predict this operator better than a baseline method?* (the headline "
                 f"and the verdicts) The methods, for this operator: the proposed model and each baseline of the table "
@@ -121,13 +122,15 @@ class StudyStatistics:
         if ml:
             which = ("refitted in every fold" if m0.loo else "refitted on every split; GMR-only, which no verdict "
                      "uses, only as fitted models below")
+            where = "folds" if m0.loo else "splits"
             lines += ["", f"Methods ({which}) — {self._ml_header()}", "",
-                      f"| strategy | proposed vs | splits (train / test {ml[0].units}) | difference "
-                      f"[{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|"]
+                      f"| strategy | proposed vs | {where} (train / test {ml[0].units}) | fell back to K̂x in | "
+                      f"difference [{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|---|"]
             for d in ml:
-                p = f"{d.p_holm:.3g}" if d.p_holm == d.p_holm else "— (not a verdict's row)"
+                p = (f"{d.p_holm:.3g}" if d.p_holm == d.p_holm else
+                     "— (not a verdict's row)" if d.shown or d.lo == d.lo else "— (no interval)")
                 lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.n_splits} "
-                             f"({d.n_train} / {d.n_test}) | {d.sentence()} | {p} |")
+                             f"({d.n_train} / {d.n_test}) | {d.fallback_words()} | {d.sentence()} | {p} |")
         if self.paired:
             tests = {(t.label, t.b): t for t in self.tests}
             show_p = any(t.reachable for t in self.tests if t.p_holm == t.p_holm)
@@ -176,7 +179,9 @@ class StudyStatistics:
             return (f"- *Is that difference more than chance on these trials?* No test can say so at 5 % here: with "
                     f"{n} test trials the exact sign-flip test of the per-trial differences cannot go below p = "
                     f"{pmin:.3g}" + (f" ({min(1.0, pmin * k):.3g} after Holm over the {k} rows the verdicts use)"
-                                     if k > 1 else "") + ", so no p-value is printed; read the interval.")
+                                     if k > 1 else "") + ", so the fitted models' table below has no p column; read "
+                    "its intervals" + (" (the p-values of the methods' table are the corrected t's, over splits)."
+                                       if self.method_level else "."))
         return ("- *Is that difference more than chance on these trials?* The exact sign-flip (permutation) test of "
                 f"the per-trial differences, Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts "
                 "use (the only rows given a p); \"cannot reach 5 %\" where its trials are too few for any p of that "

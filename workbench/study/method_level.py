@@ -13,19 +13,27 @@ variance of their mean; Nadeau & Bengio (2003, "Inference for the generalization
 correct it to ``(1/J + n_test/n_train) s²`` with a t reference on ``J − 1`` degrees of freedom — the corrected
 resampled t. Its estimand is the expected difference of methods trained on ``n_train`` trials of this operator.
 
-Cost: the refits are the cheap form of each model — no task objective (predictions do not need it), no
-Monte Carlo band calibration (the RMSE scores the mean rollout) and EM stopped at 200 iterations (as the
-cross-validation of :mod:`workbench.models.autoconfig` does) — with the settings of the study's own fits (a
-setting chosen by cross-validation on the study's training trials is held fixed, not chosen again per split: the
-selection's own variability is not in the interval). Splits are independent tasks of the executor. Only the
-methods the verdicts judge the proposed model against are refitted (IOC-only and persistence); GMR-only is compared
-as fitted models on the study's test trials only.
+Every choice inside (issue 40). Each split reruns the whole method as a user runs it, on that split's training part
+only: the default model's cross-validated G and regularizer and its fallback to ``K̂x``
+(:func:`workbench.models.factory.default_model`), G by BIC where that was asked for, and — where the study's plant is
+identified from data (``--system identify``) — the plant. Nothing a split's test trials shaped reaches its fits. The
+interval therefore includes the selection's own variability (the review found the intervals 23–40 % short when the
+split refits reused the settings chosen once on the study's training trials, which are mostly the splits' own test
+trials). A proposed method that fell back to ``K̂x`` in every split predicts as IOC-only on every one: that row says
+so in words (:meth:`MethodDifference.sentence`), and no interval of zero width is ever given (:func:`corrected_t`).
+
+Cost: the refits skip what a mean prediction does not use — the task objective, the Monte Carlo noise and its band
+calibration — and cap EM at 200 iterations (as the cross-validation's candidates do). Splits are independent tasks of
+the executor. Only the methods the verdicts judge the proposed model against are refitted (IOC-only and persistence);
+GMR-only is compared as fitted models on the study's test trials only. :data:`SPLITS` comes from a coverage study
+(``bench/coverage_method_level.py``, its numbers in ``bench/coverage_method_level.md``).
 """
 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,14 +47,17 @@ from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelErro
 from workbench.models.registry import REGISTRY
 from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
 
-__all__ = ["FLOOR_METHODS", "MethodDifference", "corrected_t", "split_scores", "split_tasks", "method_differences",
-           "fold_differences", "SPLITS", "LOO_FOLDS"]
+__all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "corrected_t", "split_scores", "split_tasks",
+           "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS"]
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
 FLOOR_METHODS = tuple(m.name for m in REGISTRY if m.floor)
-#: Random train/test splits per strategy (Nadeau & Bengio used 15; 8 keeps the demo within its 30 s).
-SPLITS = 8
+#: Random train/test splits per strategy, each rerunning the whole method: 6, from the coverage study
+#: (``bench/coverage_method_level.md``): with every choice inside the splits the intervals from the first 4, 6, 8
+#: and 10 splits of the same runs covered alike, and 6 splits cost a quarter less than 8 (each split reruns the
+#: default model's cross-validation) for intervals about 1.15x as wide (t on 5 df: the conservative side).
+SPLITS = 6
 #: The design of a leave-one-out study's method-level rows (:attr:`MethodDifference.design`).
 LOO_FOLDS = "leave-one-out folds"
 #: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).
@@ -98,6 +109,9 @@ class MethodDifference:
     p_holm: float = float("nan")
     ci: float = 95.0
     design: str = "random splits"
+    #: Splits in which the proposed method fell back to ``K̂x`` (its cross-validation found no gain in its variability
+    #: model); in a leave-one-out study, folds.
+    n_fallback: int = 0
 
     @property
     def loo(self) -> bool:
@@ -116,16 +130,38 @@ class MethodDifference:
         """Whether the interval excludes zero."""
         return self.lo > 0 or self.hi < 0
 
+    @property
+    def identical(self) -> bool:
+        """Whether both methods predicted alike in every split (the proposed method fell back to ``K̂x`` in each,
+        against IOC-only): there is no difference to estimate, and no interval."""
+        return bool(self.changes) and all(c == 0.0 for c in self.changes)
+
     def sentence(self) -> str:
-        """"lower by 12 % [4 %, 19 %]", "higher by …" or "no difference shown (…)", from the interval."""
-        return difference_sentence(self.change, self.lo, self.hi, self.ci)
+        """"lower by 12 % [4 %, 19 %]", "higher by …" or "no difference shown (…)", from the interval; in words
+        without a number where the proposed method fell back to ``K̂x`` in every split or nothing varied."""
+        where = "folds" if self.loo else "splits"
+        if self.identical:
+            why = (f"the proposed method fell back to K̂x in all {self.n_splits} {where}"
+                   if self.n_fallback >= self.n_splits else f"the two predicted alike in all {self.n_splits} {where}")
+            return f"the same predictions, no difference to estimate ({why})"
+        text = difference_sentence(self.change, self.lo, self.hi, self.ci)
+        if self.n_fallback >= self.n_splits:
+            text += f"; the proposed method fell back to K̂x in all {self.n_splits} {where}"
+        return text
+
+    def fallback_words(self) -> str:
+        """"3 of 8" splits in which the proposed method fell back to ``K̂x``, or "none"."""
+        return f"{self.n_fallback} of {self.n_splits}" if self.n_fallback else "none"
 
 
-def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0
-                ) -> tuple[float, float, float, float, float, float]:
+def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0,
+                overlap: float | None = None) -> tuple[float, float, float, float, float, float]:
     """Mean, interval, two-sided p, standard error and df of the corrected resampled t (Nadeau & Bengio 2003).
 
-    ``var = (1/J + n_test/n_train) · s²`` of the ``J`` per-split values; t reference on ``J − 1`` df.
+    ``var = (1/J + n_test/n_train) · s²`` of the ``J`` per-split values; t reference on ``J − 1`` df. Where every
+    split gave the same value there is no spread to make an interval from: the bounds and p are NaN (an interval of
+    zero width would claim a certainty the splits cannot give). ``overlap`` replaces ``n_test/n_train`` (for a
+    coverage study weighing other corrections).
     """
     c = np.asarray(changes, dtype=float)
     c = c[np.isfinite(c)]
@@ -133,10 +169,11 @@ def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float =
     if J < 2:
         return (float(c.mean()) if J else np.nan), np.nan, np.nan, np.nan, np.nan, float(max(J - 1, 0))
     mean = float(c.mean())
-    se = float(np.sqrt((1.0 / J + n_test / max(n_train, 1)) * c.var(ddof=1)))
+    rho = n_test / max(n_train, 1) if overlap is None else float(overlap)
+    se = float(np.sqrt((1.0 / J + rho) * c.var(ddof=1)))
     df = float(J - 1)
-    if se == 0.0:  # every split gave the same change: nothing varies, the interval is that value
-        return mean, mean, mean, (1.0 if mean == 0.0 else 0.0), 0.0, df
+    if se == 0.0:  # every split gave the same change: nothing varies, so no interval (never one of zero width)
+        return mean, np.nan, np.nan, np.nan, 0.0, df
     half = float(sps.t.ppf(0.5 + ci / 200.0, df)) * se
     p = float(2.0 * sps.t.sf(abs(mean) / se, df))
     return mean, mean - half, mean + half, p, se, df
@@ -157,52 +194,92 @@ def _split_indices(n_units: int, test_size: float, J: int, seed: int, key: int) 
     return [rng.permutation(n_units)[:n_test] for _ in range(J)]
 
 
-def _cheap(models: Mapping[str, Any]) -> dict[str, Any]:
-    """The models as a split refits them: no objective, no band calibration, EM capped (see the module)."""
-    out = {}
-    for name, m in models.items():
-        params = m.get_params()
-        updates = {k: v for k, v in (("fit_objective", False), ("noise_folds", 0)) if k in params}
-        if "max_iter" in params:
-            updates["max_iter"] = min(int(params["max_iter"]), _SPLIT_MAX_ITER)
-        # settings chosen by cross-validation on the study's training trials are held fixed (see the module)
-        for setting in ("n_components", "reg_covar"):
-            if params.get(setting) == "cv" and getattr(m, f"{setting}_", None) is not None:
-                updates[setting] = getattr(m, f"{setting}_")
-        out[name] = type(m)(m.system, **{**params, **updates})  # always a fresh one: a template is never refitted
-    return out
+@dataclass(frozen=True)
+class SplitPlan:
+    """What every split reruns on its training part: the study's method as a user runs it.
+
+    Attributes
+    ----------
+    plant : LinearSystem or callable
+        The plant, or a callable that makes it from a :class:`DemonstrationSet` (``--system identify``): then every
+        split identifies its own plant from its training trials.
+    n_components : int or str
+        The proposed model's rule: ``"cv"`` (the default model: cross-validation and the fallback inside each
+        split), ``"bic"`` (G by BIC inside each split), ``"paper"`` or a number.
+    seed : int
+    methods : tuple of str
+        The methods refitted: the proposed one first, then the baselines the verdicts judge it against.
+    task : PilotTask, str, dict or None
+        The study's task override (None: each split's models decide it from the split's training trials).
+    """
+
+    plant: Any
+    n_components: int | str
+    seed: int = 0
+    methods: tuple[str, ...] = ("proposed", *FLOOR_METHODS)
+    task: Any = None
+
+
+def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bool]:
+    """Every method of ``plan`` fitted on ``train`` with every choice made again on it; whether the proposed model
+    fell back to ``K̂x``. A method that cannot be fitted is left out."""
+    from workbench.models.factory import make_models
+    from workbench.models.fitting import shared_gains
+
+    plant = plan.plant(train) if callable(plan.plant) else plan.plant
+    G = plan.n_components
+    if G == "bic":
+        from workbench.models.selection import select_components
+
+        G = select_components(train, plant, seed=plan.seed)
+    fitted: dict[str, Any] = {}
+    models = make_models(plant, plan.methods, n_components=G, random_state=plan.seed, task=plan.task)
+    with shared_gains():  # the methods' gains (and the pilot's timing) on the same trials: estimated once
+        for name, model in models.items():
+            params = model.get_params()
+            # what a mean prediction does not use: the objective, the Monte Carlo noise and its calibration
+            updates = {k: v for k, v in (("fit_objective", False), ("noise_folds", 0), ("noise", "gmr"))
+                       if k in params}
+            if "max_iter" in params:
+                updates["max_iter"] = min(int(params["max_iter"]), _SPLIT_MAX_ITER)
+            try:
+                fitted[name] = type(model)(plant, **{**params, **updates}).fit(train)
+            except ModelError:
+                continue
+    proposed = fitted.get(plan.methods[0])
+    auto = getattr(proposed, "auto_", None) if proposed is not None and proposed.chooses_settings else None
+    return fitted, bool(auto is not None and auto.fallback)
 
 
 def split_scores(task: tuple) -> pd.DataFrame:
-    """One split (a task of the executor): refit ``models`` (unfitted templates) on the training trials, score
-    the test trials; rows ``label, split, trial, method, value`` (value: the trial's mean ``metric`` over its
-    windows) with ``n_train`` / ``n_test`` in ``attrs``. A method that cannot be fitted has no rows."""
+    """One split (a task of the executor): rerun the method of its :class:`SplitPlan` on the training trials, score
+    the test trials; rows ``label, split, trial, method, value, fell_back`` (value: the trial's mean ``metric`` over
+    its windows; fell_back: whether this split's proposed model fell back to ``K̂x``) with ``n_train`` / ``n_test``
+    in ``attrs``. A method that cannot be fitted has no rows."""
     from workbench.study import evaluate as ev
 
-    label, j, ds, test_idx, templates, metric, n_steps, stride = task
+    label, j, ds, test_idx, plan, metric, n_steps, stride = task
     ds = ds.load() if isinstance(ds, DataRef) else ds
     held = {int(i) for i in test_idx}
     train = ds.with_demos([d for i, d in enumerate(ds) if i not in held])
     test = ds.with_demos([d for i, d in enumerate(ds) if i in held])
-    fitted = {}
     with warnings.catch_warnings():
-        # a split's EM may stop at its cap or fit a degenerate component: the held-out score judges the result
+        # a split's EM may stop at its cap, fit a degenerate component, or its cross-validation fall back: the
+        # held-out score judges the result
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.simplefilter("ignore", DegenerateFitWarning)
-        for name, model in _cheap(templates).items():
-            try:
-                fitted[name] = model.fit(train)
-            except ModelError:
-                continue
-            if templates[name].chooses_settings and templates[name].variability_mean_ is False:
-                # the study's model fell back to K̂x by cross-validation: the refits predict as it does
-                fitted[name].variability_mean_ = False
+        try:
+            fitted, fell_back = _refit(plan, train)
+        except ModelError:  # the split's plant could not be identified from its training part
+            fitted, fell_back = {}, False
+    cols = ["label", "split", "trial", "method", "value", "fell_back"]
     if not fitted:
-        return pd.DataFrame(columns=["label", "split", "trial", "method", "value"])
-    table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride)
+        return pd.DataFrame(columns=cols)
+    table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride,
+                       inputs=False)
     table = table[table["metric"] == metric]
     per = table.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
-    out = per.assign(label=label, split=j)[["label", "split", "trial", "method", "value"]]
+    out = per.assign(label=label, split=j, fell_back=fell_back)[cols]
     out.attrs.update(n_train=len(train), n_test=len(test))
     return out
 
@@ -230,6 +307,8 @@ def method_differences(
     if scores.empty or method not in set(scores["method"]):
         return []
     means = scores.groupby(["label", "split", "method"], sort=False)["value"].agg(["sum", "count"])
+    fell = (scores.groupby(["label", "split"], sort=False)["fell_back"].any() if "fell_back" in scores
+            else pd.Series(dtype=bool))
     methods = list(dict.fromkeys(scores["method"]))
     baselines = [b for b in (baselines or methods) if b != method and b in methods]
     labels = list(dict.fromkeys(scores["label"]))
@@ -239,7 +318,7 @@ def method_differences(
         n_train = sum(sizes[lb][0] for lb in members)
         n_test = sum(sizes[lb][1] for lb in members)
         for base in baselines:
-            changes = []
+            changes, n_fallback = [], 0
             for j in sorted(set(scores["split"])):
                 try:
                     a = [means.loc[(lb, j, method)] for lb in members]
@@ -249,6 +328,8 @@ def method_differences(
                 ma = sum(r["sum"] for r in a) / sum(r["count"] for r in a)
                 mb = sum(r["sum"] for r in b) / sum(r["count"] for r in b)
                 changes.append(1.0 - ma / mb if mb > 0 else np.nan)
+                # the pooled row's split fell back where every strategy's did
+                n_fallback += bool(all(bool(fell.get((lb, j), False)) for lb in members))
             if len(changes) < 2:
                 continue
             mean, lo, hi, p, se, df = corrected_t(changes, n_train, n_test, ci)
@@ -256,12 +337,12 @@ def method_differences(
             out.append(MethodDifference(
                 method=method, baseline=base, metric=metric, label=scope, change=mean, lo=lo, hi=hi, p=p, se=se,
                 df=df, n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
-                units="subjects" if what == {"subjects"} else "trials", ci=ci, design=design))
+                units="subjects" if what == {"subjects"} else "trials", ci=ci, design=design, n_fallback=n_fallback))
     return out
 
 
-def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed", ci: float = 95.0
-                     ) -> list[MethodDifference]:
+def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed", ci: float = 95.0,
+                     fell_back: Mapping[str, bool] | None = None) -> list[MethodDifference]:
     """Method-level rows from a leave-one-out study's own folds (no refit beyond the folds'): each fold refitted
     every method on all trials of its label but one and scored that one, so fold ``j`` is a split with
     ``n_train = n − 1`` and ``n_test = 1``, and ``c_j = 1 − method / baseline`` on its trial.
@@ -277,6 +358,8 @@ def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed",
     table : DataFrame
         The study's comparison rows (``label, metric, method, trial, value``), every trial the test trial of its
         own fold.
+    fell_back : mapping trial → bool, optional
+        Whether the proposed model of the fold that left each trial out fell back to ``K̂x``.
     """
     rows = table[table["metric"] == metric]
     if rows.empty:
@@ -285,19 +368,25 @@ def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed",
     out: list[MethodDifference] = []
     for label, part in per.groupby("label", sort=False):
         n = int(part["trial"].nunique())
-        scores = part.assign(split=part["trial"])[["label", "split", "trial", "method", "value"]]
+        scores = part.assign(split=part["trial"], fell_back=part["trial"].map(
+            lambda t: bool((fell_back or {}).get(str(t), False))))[
+            ["label", "split", "trial", "method", "value", "fell_back"]]
         out += method_differences(scores, {label: (n - 1, 1)}, metric, method, ci=ci, design=LOO_FOLDS)
     return out
 
 
 def split_tasks(
-    by_label: Mapping[str, DemonstrationSet], templates: Mapping[str, Mapping[str, Any]], metric: str, n_steps: int,
+    by_label: Mapping[str, DemonstrationSet], plan: SplitPlan | Mapping[str, SplitPlan], metric: str, n_steps: int,
     stride: int | None, test_size: float, splits: int, seed: int, share: Any = None,
+    first: Mapping[str, Sequence[int]] | None = None,
 ) -> tuple[list[tuple], dict[str, tuple[int, int]], dict[str, str]]:
     """The split tasks of every label (for :func:`split_scores`), each label's (n_train, n_test) and units.
 
-    ``templates``: per label the unfitted models to refit (their settings those of the study's fits).
+    ``plan``: what every split reruns (:class:`SplitPlan`), one for all labels or one per label.
     ``share``: the executor's ``share`` (a worker then reads the label's trials from where they were staged).
+    ``first``: per label, the test trials' indices of its first split (a random split already made, e.g. the
+    study's own, whose scores the caller has); the other ``splits − 1`` are drawn here. Only where the label's
+    splits are of trials (not whole subjects).
     """
     tasks, sizes, units = [], {}, {}
     for key, (label, ds) in enumerate(by_label.items()):
@@ -306,10 +395,89 @@ def split_tasks(
             continue
         ref = share(ds) if share is not None else ds
         n_trials = []
-        for j, test_units in enumerate(_split_indices(len(groups), test_size, splits, seed, key)):
+        drawn = _split_indices(len(groups), test_size, splits, seed, key)
+        if first is not None and label in first and what == "trials":
+            drawn = [np.asarray(first[label], dtype=int), *drawn[: splits - 1]]
+        for j, test_units in enumerate(drawn):
             test_idx = np.array(sorted(i for u in test_units for i in groups[int(u)]))
             n_trials.append(len(test_idx))
-            tasks.append((label, j, ref, test_idx, dict(templates[label]), metric, n_steps, stride))
+            tasks.append((label, j, ref, test_idx, plan if isinstance(plan, SplitPlan) else plan[label], metric,
+                          n_steps, stride))
         n_test = int(round(float(np.mean(n_trials))))
         sizes[label], units[label] = (len(ds) - n_test, n_test), what
     return tasks, sizes, units
+
+
+@dataclass(frozen=True)
+class SplitJobs:
+    """The method-level splits of a study (:mod:`workbench.study.method_level`): every method rerun
+    (:class:`SplitPlan`: the proposed model and the baselines the verdicts judge it
+    against) on random splits of each label's trials, scored on the headline metric.
+
+    With a fixed plant the study's own random split is each label's first split: its fits are exactly that split's
+    refits (the same settings, trials and seeds), so its scores are the study's (``reuse``) and only the other
+    splits are tasks (``todo``)."""
+
+    tasks: tuple
+    sizes: dict
+    units: dict
+    metric: str
+    methods: tuple[str, ...]
+    reuse: frozenset[int]
+
+    @classmethod
+    def make(cls, splits: dict[str, tuple], plan: SplitPlan, system: Any, n_steps: int, stride: int | None,
+             test_size: float, n_splits: int, seed: int, executor: Any) -> SplitJobs:
+        from workbench.study.evaluate import primary_metric
+        metric = primary_metric(system)
+        by_label = {lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()}
+        first = {} if callable(plan.plant) else {
+            lb: [i for i, d in enumerate(by_label[lb]) if d.id in {t.id for t in te}] for lb, (_, te) in splits.items()}
+        tasks, sizes, units = split_tasks(by_label, plan, metric, n_steps, stride, test_size, n_splits, seed,
+                                          share=None if executor is None else executor.share, first=first)
+        reuse = frozenset(i for i, t in enumerate(tasks) if t[1] == 0 and t[0] in first and units[t[0]] == "trials")
+        return cls(tuple(tasks), sizes, units, metric, plan.methods, reuse)
+
+    @property
+    def todo(self) -> list[tuple]:
+        return [t for i, t in enumerate(self.tasks) if i not in self.reuse]
+
+    def run(self, executor: Any, progress: Callable[[], Any] | None) -> list[pd.DataFrame]:
+        """The splits' scores, refitted on ``executor`` (in the order of :attr:`todo`)."""
+        from workbench.study.executor import serial
+        ex = executor if executor is not None else serial
+        todo = self.todo
+        if not todo:
+            return []
+        bar = progress() if progress is not None else nullcontext()
+        with bar as p:
+            task = p.add_task(f"refitting on {len(todo)} splits", total=len(todo)) if p is not None else None
+            return list(ex.map(split_scores, todo, progress=None if p is None else
+                               lambda d, t: p.update(task, completed=d)))
+
+    def rows(self, done: list[pd.DataFrame], parts: Mapping[str, Any]) -> Any:
+        """:class:`MethodDifference` rows of the labels whose proposed model the study
+        fitted, from the refitted splits' scores (``done``, in the order of :attr:`todo`) and the study's own."""
+        refits = iter(done)
+        scores = []
+        for i, t in enumerate(self.tasks):
+            label = t[0]
+            part = next(refits) if i not in self.reuse else None
+            if "proposed" not in parts[label].fitted:
+                continue
+            scores.append(_own_scores(parts[label], label, self.metric, self.methods) if part is None else part)
+        scores = [s for s in scores if len(s)]
+        if not scores:
+            return None
+        return tuple(method_differences(pd.concat(scores, ignore_index=True), self.sizes, self.metric, "proposed",
+                                        units=self.units)) or None
+
+
+def _own_scores(part: Any, label: str, metric: str, methods: Sequence[str]) -> pd.DataFrame:
+    """The study's own split (``part``: its ``fitted`` models and comparison ``table``) as a split's rows
+    (:func:`split_scores`): each method's per-trial mean of ``metric``, and whether the proposed model fell back."""
+    model = part.fitted.get("proposed")
+    fell = bool(model is not None and model.chooses_settings and model.auto_ is not None and model.auto_.fallback)
+    rows = part.table[(part.table["metric"] == metric) & part.table["method"].isin(list(methods))]
+    per = rows.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
+    return per.assign(label=label, split=0, fell_back=fell)[["label", "split", "trial", "method", "value", "fell_back"]]

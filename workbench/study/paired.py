@@ -90,6 +90,9 @@ class PairedDifference:
 def difference_sentence(change: float, lo: float, hi: float, ci: float = 95.0) -> str:
     """A relative change (> 0: lower error) in words derived from its interval: "lower by 12 % [4 %, 19 %]",
     "higher by …", or "no difference shown (…)" where the interval contains 0 (or is unknown)."""
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        # no spread to make an interval from: say so, with no number standing in for one
+        return "no interval (nothing varied between the resamples)"
     if lo > 0:
         return f"lower by {_pct(change)} [{_pct(lo)}, {_pct(hi)}]"
     if hi < 0:
@@ -99,12 +102,19 @@ def difference_sentence(change: float, lo: float, hi: float, ci: float = 95.0) -
 
 
 def _pct(v: float, signed: bool = False) -> str:
-    """A percentage to whole per cent, but a nonzero value under 1 % to one decimal: a bound of 0.4 % printed as
-    "0 %" would state a difference next to an interval that seems to contain 0."""
+    """A percentage to whole per cent, but a nonzero value under 1 % to one decimal (one significant figure below
+    0.05 %): a bound of 0.4 % printed as "0 %" would state a difference next to an interval that seems to contain 0.
+    Zero is "0 %", never "−0.0 %"."""
     if not np.isfinite(v):
         return "n/a"
-    digits = 1 if 0 < abs(100 * v) < 0.95 else 0
-    return f"{100 * v:{'+' if signed else ''}.{digits}f} %"
+    x = 100.0 * float(v)
+    if x == 0.0:
+        return "0 %"
+    digits = 1 if abs(x) < 0.95 else 0
+    text = f"{x:{'+' if signed else ''}.{digits}f}"
+    if float(text) == 0.0:  # below the rounding: one significant figure, with its sign
+        text = f"{x:{'+' if signed else ''}.1g}"
+    return f"{text} %"
 
 
 def per_trial(table: pd.DataFrame, metric: str, subjects: Mapping[str, str] | None = None) -> pd.DataFrame:

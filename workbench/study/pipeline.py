@@ -23,10 +23,11 @@ import pandas as pd
 from workbench.atomic import atomic_write_table
 from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
-from workbench.defaults import N_COMPONENTS
+from workbench.defaults import DEFAULT_N_COMPONENTS, PAPER_SETTINGS
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.registry import METHOD_TITLES, METHODS
-from workbench.study.method_level import FLOOR_METHODS, SPLITS
+from workbench.models.selection import select_components
+from workbench.study.method_level import FLOOR_METHODS, SPLITS, SplitJobs, SplitPlan
 from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
 __all__ = [
@@ -162,31 +163,6 @@ def _split(ds: DemonstrationSet, test_size: float, seed: int) -> tuple[Demonstra
     return ds.split(n_test, seed=seed)
 
 
-def select_components(
-    train: DemonstrationSet, system: Any, candidates: Sequence[int] = range(2, 9), seed: int = 0
-) -> int:
-    """G by BIC (TP-GMM parameter count) of the proposed model's variability fit: ``n_components="bic"``.
-
-    Each candidate model scores its own training data through :meth:`HumanBehaviorModel.bic`, i.e. with the
-    residuals, frames and standardization it was fitted with (one path for fitting and scoring).
-    """
-    from workbench.models import HumanBehaviorModel
-
-    best: tuple[float, int] | None = None
-    for G in candidates:
-        if G * 20 > train.n_samples:  # far fewer samples than parameters: BIC is meaningless there
-            break
-        m = HumanBehaviorModel(
-            system, n_components=int(G), random_state=seed, fit_objective=False, noise_folds=0
-        ).fit(train)
-        bic = m.bic(train)
-        if best is None or bic < best[0]:
-            best = (bic, int(G))
-    if best is None:
-        raise DataError(f"too few samples ({train.n_samples}) to choose the number of components")
-    return best[1]
-
-
 def _fit_each(
     system: Any, train: DemonstrationSet, components: int | str, seed: int, task: Any = None
 ) -> tuple[dict[str, Any], dict[str, str]]:
@@ -198,14 +174,16 @@ def _fit_each(
     LQR cannot find does not take the proposed model with it (``objective_error_``): it still predicts.
     """
     from workbench.models.factory import make_models
+    from workbench.models.fitting import shared_gains
 
     fitted, failures = {}, {}
-    for name, model in make_models(system, n_components=components, random_state=seed, fit_objective=True,
-                                   task=task).items():
-        try:
-            fitted[name] = model.fit(train)
-        except ModelError as exc:
-            failures[name] = " ".join(str(exc).split())
+    models = make_models(system, n_components=components, random_state=seed, fit_objective=True, task=task)
+    with shared_gains():  # the methods' gains (and the pilot's timing) on the same trials: estimated once
+        for name, model in models.items():
+            try:
+                fitted[name] = model.fit(train)
+            except ModelError as exc:
+                failures[name] = " ".join(str(exc).split())
     return fitted, failures
 
 
@@ -229,7 +207,7 @@ def run_study(
     *,
     test_size: float = 0.2,
     n_steps: int = 60,
-    n_components: int | str = 5,
+    n_components: int | str = DEFAULT_N_COMPONENTS,
     samples: int = 100,
     efficiency: Sequence[int] | None = (2, 5, 10, 20),
     repeats: int = 2,
@@ -253,9 +231,14 @@ def run_study(
     and its weight ratios (``StudyResult.objectives``); 0 computes none. ``power``: simulated sets per size of the
     power curve of every ratio the data do not pin down (:mod:`workbench.study.power`); 0 computes none.
 
-    ``method_splits``: random train/test splits of each strategy's trials on which every method is refitted, for
-    the method-level comparison (:mod:`workbench.study.method_level`) that the headline and the verdicts use; 0
-    compares the fitted models on the one split only.
+    ``n_components``: the proposed model's settings: ``"cv"`` (the default: :func:`workbench.models.factory.
+    default_model`, the model ``workbench fit`` builds), ``"paper"`` (G = 5 without cross-validation), ``"bic"`` or
+    a number.
+
+    ``method_splits``: random train/test splits of each strategy's trials on which every method is refitted, every
+    choice it makes (cross-validated settings, the fallback, an identified plant) made again on each split's training
+    part, for the method-level comparison (:mod:`workbench.study.method_level`) that the headline and the verdicts
+    use; 0 compares the fitted models on the one split only.
 
     ``test_ids``: instead of a random split, these trials are the test set and every other one trains (labels
     without a test trial are left out); :func:`run_loso` leaves each trial out in turn this way. A method that
@@ -289,29 +272,46 @@ def run_study(
         raise DataError(f"no trial among {list(demos.ids)} has a test id of {list(test_ids or [])}")
     failures: dict[str, dict[str, str]] = {}
     all_train = [d for tr, _ in splits.values() for d in tr]
+    plant_spec = system  # the method-level splits make the plant again from each split's training part
     system = plant_for(system, demos.with_demos(all_train))
     settings = _LabelSettings(n_components=n_components, seed=seed, n_steps=n_steps, samples=samples, stride=stride,
                               efficiency=tuple(efficiency or ()), repeats=repeats, bootstrap=int(bootstrap),
                               power=int(power), task=task)
     # the strategies are independent: with a parallel executor each is one task (fit, compare, data efficiency,
     # objective intervals), else they run here in turn and the data-efficiency points go to the executor
-    by_label = bool(getattr(executor, "parallel", False)) and len(splits) > 1
+    parallel = bool(getattr(executor, "parallel", False))
+    by_label = parallel and len(splits) > 1
+    jobs = None
+    if method_splits > 0 and test_ids is None:
+        plan = SplitPlan(plant=plant_spec, n_components=n_components, seed=seed, task=task)
+        jobs = SplitJobs.make(splits, plan, system, n_steps, stride, test_size, int(method_splits), seed,
+                               executor if parallel else None)
     parts: list[_LabelPart] = []
+    split_parts: list[pd.DataFrame] | None = None
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
-        # short: on an 80-column terminal the bar leaves the description ~25 characters (the strategies' count is
-        # the bar's total)
-        task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
         if by_label:
-            tasks = [(label, i, executor.share(tr), executor.share(te), system, settings)
-                     for i, (label, (tr, te)) in enumerate(splits.items())]
-            parts = executor.map(_study_label, tasks,
-                                 progress=None if p is None else lambda d, t: p.update(task, completed=d))
+            # the method-level splits do not wait for the strategies: one map over both, so a worker that finishes
+            # its strategy early refits splits while the other still computes (a power curve, say)
+            todo = jobs.todo if jobs is not None else []
+            what = f"fitting, comparing, {int(method_splits)} splits" if todo else "fitting and comparing"
+            bar_task = p.add_task(what, total=len(splits) + len(todo)) if p is not None else None
+            tasks = [("label", (label, i, executor.share(tr), executor.share(te), system, settings))
+                     for i, (label, (tr, te)) in enumerate(splits.items())] + [("split", t) for t in todo]
+            out = executor.map(_study_task, tasks,
+                               progress=None if p is None else lambda d, t: p.update(bar_task, completed=d))
+            parts = [o for o, (kind, _) in zip(out, tasks, strict=True) if kind == "label"]
+            split_parts = [o for o, (kind, _) in zip(out, tasks, strict=True) if kind == "split"]
+            if todo:  # process time on the workers, as the strategies' phases are
+                timings["method-level splits"] = sum(o.attrs.get("seconds", 0.0) for o in split_parts)
         else:
+            # short: on an 80-column terminal the bar leaves the description ~25 characters (the strategies' count
+            # is the bar's total)
+            bar_task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
             for i, (label, (tr, te)) in enumerate(splits.items()):
                 parts.append(_study_label((label, i, tr, te, system, settings), executor=executor, progress=p))
                 if p is not None:
-                    p.advance(task)
+                    p.advance(bar_task)
     train, test, models, baselines = {}, {}, {}, {}
     objectives: dict[str, Any] = {}
     for (label, (tr, te)), part in zip(splits.items(), parts, strict=True):
@@ -334,12 +334,12 @@ def run_study(
     eff_parts = [part.efficiency for part in parts if part.efficiency is not None]
     table = pd.concat(rmse_parts, ignore_index=True)
     method_level = None
-    if method_splits > 0 and test_ids is None:
-        t0 = time.perf_counter()
-        method_level = _method_level({lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()},
-                                     {lb: part.fitted for lb, part in zip(splits, parts, strict=True)}, system,
-                                     n_steps, stride, test_size, int(method_splits), seed, executor, progress)
-        timings["method-level splits"] = time.perf_counter() - t0
+    if jobs is not None:
+        if split_parts is None:  # run here, after the strategies (serial, or one strategy on a parallel executor)
+            t0 = time.perf_counter()
+            split_parts = jobs.run(executor, progress)
+            timings["method-level splits"] = time.perf_counter() - t0
+        method_level = jobs.rows(split_parts, dict(zip(splits, parts, strict=True)))
     statistics = _statistics(table, demos, system, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
@@ -405,10 +405,8 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     G: int | str = (select_components(tr, system, seed=s.seed) if s.n_components == "bic" else
-                    "cv" if s.n_components == "cv" else int(s.n_components))
+                    s.n_components if s.n_components in ("cv", PAPER_SETTINGS) else int(s.n_components))
     fitted, failed = _fit_each(system, tr, G, s.seed, s.task)
-    if G == "cv":  # the data-efficiency fits take the G cross-validation chose on all training trials
-        G = int(fitted["proposed"].n_components_ if "proposed" in fitted else N_COMPONENTS)
     timings["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     table = ev.compare(fitted, te, n_steps=s.n_steps, samples=s.samples, seed=s.seed,
@@ -426,7 +424,7 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
         t0 = time.perf_counter()
         eff = full_size_rows(table, len(tr), ev.primary_metric(system), label)
         if sizes:
-            eff = pd.concat([_efficiency(label, system, tr, te, sizes, G, s, executor, progress), eff],
+            eff = pd.concat([_efficiency(label, system, tr, te, sizes, fitted, G, s, executor, progress), eff],
                             ignore_index=True)
         timings["efficiency"] = time.perf_counter() - t0
     objective = None
@@ -446,9 +444,51 @@ def full_size_rows(table: pd.DataFrame, n_train: int, metric: str, label: str) -
         ["n_train", "repeat", "trial", "label", "start", "method", "metric", "value"]].reset_index(drop=True)
 
 
-def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: DemonstrationSet, sizes: list[int], G: int,
-                s: _LabelSettings, executor: Any, p: Any) -> pd.DataFrame:
-    """One label's data-efficiency rows of the primary metric, its EM and fit warnings summarized in a line each."""
+@dataclass(frozen=True)
+class _AtChosenSettings:
+    """The data-efficiency curve's models for a training subset (a callable of it, :func:`~workbench.study.evaluate.
+    models_for`): the study's methods with the proposed model at the settings the study's fit used — those its
+    cross-validation chose on all training trials, its fallback to ``K̂x`` included — so the curve's last point (every
+    training trial) is the model of the tables, not another regularizer without the fallback. Mean predictions only:
+    no objective, no band calibration."""
+
+    system: Any
+    n_components: int | str
+    seed: int
+    proposed: dict[str, Any] | None
+
+    def __call__(self, train: DemonstrationSet) -> dict[str, Any]:
+        from workbench.models.factory import make_models
+        from workbench.models.proposed import HumanBehaviorModel
+
+        models = make_models(self.system, n_components=self.n_components, random_state=self.seed)
+        for model in models.values():
+            if "noise_folds" in model.get_params():
+                model.noise_folds = 0
+        if self.proposed is not None:
+            models["proposed"] = HumanBehaviorModel(self.system, **self.proposed)
+        return models
+
+
+def _chosen(model: Any) -> dict[str, Any] | None:
+    """The settings of a fitted proposed model as fixed ones (G, regularizer, EM cap, fallback), without the
+    objective and the band calibration; None without a model."""
+    if model is None:
+        return None
+    from workbench.models.autoconfig import _CV_MAX_ITER, _CV_TOL
+
+    params = {**model.get_params(), "n_components": int(model.n_components_), "reg_covar": float(model.reg_covar_),
+              "variability_mean": bool(model.variability_mean_), "fit_objective": False, "noise_folds": 0}
+    if model.auto_ is not None:  # the chosen candidate was fitted with EM capped and stopped as the candidates were
+        params["max_iter"] = min(int(params["max_iter"]), _CV_MAX_ITER)
+        params["tol"] = max(float(params["tol"]), _CV_TOL)
+    return params
+
+
+def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: DemonstrationSet, sizes: list[int],
+                fitted: dict[str, Any], G: int | str, s: _LabelSettings, executor: Any, p: Any) -> pd.DataFrame:
+    """One label's data-efficiency rows of the primary metric, its EM and fit warnings summarized in a line each;
+    the proposed model at the settings the tables' model used (:class:`_AtChosenSettings`)."""
     from workbench.study import evaluate as ev
 
     # small training subsets often stop EM at max_iter: one summary line, not one per fit
@@ -456,7 +496,8 @@ def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: Demonstration
         warnings.simplefilter("always", ConvergenceWarning)
         sub = p.add_task(f"{label}: data efficiency", total=None) if p is not None else None
         eff = ev.data_efficiency(
-            system, tr, te, sizes=sizes, n_steps=s.n_steps, repeats=s.repeats, seed=s.seed, n_components=G,
+            _AtChosenSettings(system, G, s.seed, _chosen(fitted.get("proposed"))), tr, te, sizes=sizes,
+            n_steps=s.n_steps, repeats=s.repeats, seed=s.seed,
             # scored like the comparison's tables: from every stride of each test trial, not its first state only
             starts="initial" if s.stride is None else s.stride,
             progress=None if p is None else lambda d, t: p.update(sub, completed=d, total=t), executor=executor,
@@ -539,7 +580,7 @@ def run_loso(
     system: Any,
     *,
     n_steps: int = 60,
-    n_components: int | str = 5,
+    n_components: int | str = DEFAULT_N_COMPONENTS,
     samples: int = 100,
     seed: int = 0,
     progress: Callable[[], Any] | None = None,
@@ -596,7 +637,10 @@ def run_loso(
     from workbench.study.evaluate import primary_metric
     from workbench.study.method_level import fold_differences
 
-    method_level = tuple(fold_differences(table, primary_metric(plant))) or None
+    # whether each fold's proposed model fell back to K̂x, by the trial the fold left out
+    fell_back = {trial: bool(m.chooses_settings and m.auto_ is not None and m.auto_.fallback)
+                 for trial, r in folds for m in r.models.values()}
+    method_level = tuple(fold_differences(table, primary_metric(plant), fell_back=fell_back)) or None
     statistics = _statistics(table, demos, plant, n_steps, stride, seed, method_level)
     # per label the models of its last fold (a fold holds only the label of the trial it leaves out)
     models = {lb: m for _, r in folds for lb, m in r.models.items()}
@@ -659,36 +703,18 @@ def _settings_text(models: dict[str, Any]) -> str:
             if lines else "")
 
 
-def _method_level(by_label: dict[str, DemonstrationSet], fitted: dict[str, dict[str, Any]], system: Any,
-                  n_steps: int, stride: int | None, test_size: float, splits: int, seed: int, executor: Any,
-                  progress: Callable[[], Any] | None) -> Any:
-    """Every method refitted on ``splits`` random splits of each label's trials, scored on the headline metric,
-    as :class:`~workbench.study.method_level.MethodDifference` rows (:mod:`workbench.study.method_level`)."""
-    from workbench.study.evaluate import primary_metric
-    from workbench.study.executor import serial
-    from workbench.study.method_level import method_differences, split_scores, split_tasks
+def _study_task(task: tuple) -> Any:
+    """One task of a study's executor: a strategy (:func:`_study_label`) or a method-level split
+    (:func:`~workbench.study.method_level.split_scores`, its seconds in ``attrs``)."""
+    kind, payload = task
+    if kind == "label":
+        return _study_label(payload)
+    from workbench.study.method_level import split_scores
 
-    ex = executor if executor is not None else serial
-    metric = primary_metric(system)
-    # the methods the verdicts judge against (refitting GMR-only too would cost the demo its time budget)
-    templates = {lb: {k: m for k, m in models.items() if k == "proposed" or k in FLOOR_METHODS}
-                 for lb, models in fitted.items() if "proposed" in models and lb in by_label}
-    if not templates:
-        return None
-    by_label = {lb: ds for lb, ds in by_label.items() if lb in templates}
-    tasks, sizes, units = split_tasks(by_label, templates, metric, n_steps, stride, test_size, splits, seed,
-                                      share=ex.share if getattr(ex, "parallel", False) else None)
-    if not tasks:
-        return None
-    bar = progress() if progress is not None else nullcontext()
-    with bar as p:
-        task = p.add_task(f"refitting on {splits} splits", total=len(tasks)) if p is not None else None
-        parts = ex.map(split_scores, tasks, progress=None if p is None else lambda d, t: p.update(task, completed=d))
-    sizes = {lb: sz for lb, sz in sizes.items()}
-    scores = pd.concat([pt for pt in parts if len(pt)], ignore_index=True) if any(len(pt) for pt in parts) else None
-    if scores is None:
-        return None
-    return tuple(method_differences(scores, sizes, metric, "proposed", units=units))
+    t0 = time.perf_counter()
+    out = split_scores(payload)
+    out.attrs["seconds"] = time.perf_counter() - t0
+    return out
 
 
 def improvement_table(rmse: pd.DataFrame, paired: Sequence[Any] | None = None) -> pd.DataFrame:

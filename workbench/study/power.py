@@ -21,12 +21,19 @@ constant fitted through all sizes (this module's first law, the median of ``log 
 predicts the demonstrations needed. ``tests/study/test_power_sim.py`` checks the law against sets simulated at a
 larger size than the curve's. A ratio whose simulated estimate stays at a zero or infinite weight at the largest
 size needs more than simulated (``inf``).
+
+Enough sets to be monotone, and the law's own uncertainty (issue 40). One set per size gave curves such as "n=24:
+×1.96, n=48: ×3.84e+09, n=96: ×1.27": a single set's accident decides the number. Each size now gets at least
+:data:`MIN_SETS` sets, and one more set per size is simulated, up to :data:`MAX_SETS`, until the median log spans no
+longer grow with n; a curve still not monotone then gives no number ("not monotone"). The number needed carries a
+90 % interval from resampling the simulated sets within each size (:data:`NEEDED_RESAMPLES` times), which says how
+much the simulation itself leaves open.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -34,8 +41,13 @@ import pandas as pd
 from workbench.errors import DataError, ModelError
 from workbench.method import ratio_profile
 
-__all__ = ["PowerCurve", "simulate_like", "power_curve", "as_fitted", "regulated_plant", "LAW"]
+__all__ = ["PowerCurve", "simulate_like", "power_curve", "as_fitted", "regulated_plant", "LAW", "MIN_SETS",
+           "MAX_SETS"]
 
+#: Simulated sets per size at least (a median of fewer is one set's accident), and at most while the curve is not yet
+#: monotone; resamples of the sets behind the 90 % interval of the number needed.
+MIN_SETS, MAX_SETS = 3, 6
+NEEDED_RESAMPLES = 200
 #: The law behind "demonstrations needed", as the report states it.
 LAW = ("the median simulated log span interpolated in log n between the simulated sizes, and shrinking as 1/√n "
        "from the largest simulated size beyond it")
@@ -50,16 +62,21 @@ class PowerCurve:
     spans : DataFrame
         ``ratio, n, repeat, span`` (inf where the simulated estimate is at a zero or infinite weight).
     needed : dict of str to float
-        Per ratio, the demonstrations for a span below ``target`` (:data:`LAW`; inf: more than simulated).
+        Per ratio, the demonstrations for a span below ``target`` (:data:`LAW`; inf: more than simulated; NaN: the
+        median spans still grew with n after :data:`MAX_SETS` sets per size, so the law gives no number).
     target : float
     n_trials : int
         The demonstrations the model was fitted on.
+    needed_lo, needed_hi : dict of str to float
+        Per ratio, the 90 % interval of ``needed`` over resamples of the simulated sets within each size.
     """
 
     spans: pd.DataFrame
     needed: dict[str, float]
     target: float
     n_trials: int
+    needed_lo: dict[str, float] = field(default_factory=dict)
+    needed_hi: dict[str, float] = field(default_factory=dict)
 
     def predicted_log_span(self, ratio: str, n: float) -> float:
         """The law's log span of ``ratio`` at ``n`` demonstrations (inf: unbounded at the largest simulated size;
@@ -80,16 +97,29 @@ class PowerCurve:
         return int(self.spans["n"].max()) if len(self.spans) else 0
 
     def describe(self) -> list[str]:
-        """One line per ratio: its median simulated span at each size and the demonstrations needed."""
+        """One line per ratio: its median simulated span at each size (with the sets behind it) and the
+        demonstrations needed with their interval."""
         lines = []
         med = self.spans.groupby(["ratio", "n"], sort=False)["span"].median()
+        sets = self.spans.groupby(["ratio", "n"], sort=False)["span"].size()
         for ratio in dict.fromkeys(self.spans["ratio"]):
             pts = ", ".join(f"n={n}: ×{v:.3g}" if np.isfinite(v) else f"n={n}: unbounded"
                             for n, v in med[ratio].items())
+            k = sorted(set(sets[ratio].tolist()))
+            per = f"{k[0]}" if len(k) == 1 else f"{k[0]}–{k[-1]}"
             need = self.needed.get(ratio, float("inf"))
-            lines.append(f"{ratio}: {pts}; span < ×{self.target:g} at " +
-                         (f"~{int(np.ceil(need))} demonstrations" if np.isfinite(need)
-                          else f"more than {self.largest} demonstrations"))
+            lo, hi = self.needed_lo.get(ratio, np.nan), self.needed_hi.get(ratio, np.nan)
+            if np.isnan(need):
+                tail = (f"no number: the median span still grows with n at some size after {per} sets per size "
+                        "(the simulation cannot say)")
+            elif not np.isfinite(need):
+                tail = f"span < ×{self.target:g} at more than {self.largest} demonstrations"
+            else:
+                band = (f" [90 % over resampled sets: {_count(lo)}–{_count(hi)}]" if np.isfinite(lo) and
+                        np.isfinite(hi) else " [90 % over resampled sets: up to more than simulated]"
+                        if np.isfinite(lo) else "")
+                tail = f"span < ×{self.target:g} at ~{_count(need)} demonstrations{band}"
+            lines.append(f"{ratio}: {pts} (median of {per} simulated sets each); {tail}")
         return lines
 
 
@@ -181,7 +211,7 @@ def _log_spans(gains, system, ci: float, ratios: Sequence[str] | None = None) ->
     return out
 
 
-def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int = 1, n_boot: int = 40,
+def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int = MIN_SETS, n_boot: int = 40,
                 seed: int = 0, ci: float = 95.0, target: float = 2.0, gain: str = "iv",
                 ratios: Sequence[str] | None = None) -> PowerCurve:
     """Simulated interval spans of the weight ratios of a fitted model at several numbers of demonstrations.
@@ -193,40 +223,93 @@ def power_curve(model, demos, sizes: Sequence[int] | None = None, repeats: int =
     demos : DemonstrationSet
         Its training demonstrations (the task: starts, lengths, targets).
     sizes : sequence of int, optional
-        Numbers of demonstrations to simulate; default ``n``, ``2n`` and ``4n`` for ``n`` training trials.
-    repeats : int
-        Simulated sets per size (default 1: coarse and affordable; more for a smoother curve).
+        Numbers of demonstrations to simulate; default ``n/2``, ``n`` and ``2n`` for ``n`` training trials.
     n_boot : int
         Resampled gains per simulated set for the gain's covariance.
     ratios : sequence of str, optional
         Only the parts holding these ratios are refitted (default all): the others cost time and say nothing new.
+    repeats : int
+        Simulated sets per size to start with (at least :data:`MIN_SETS`); one more per size is simulated, up to
+        :data:`MAX_SETS`, while some ratio's median span still grows with n.
     """
     from workbench.method.resampling import bootstrap_gain
 
     n0 = len(demos)
-    sizes = sorted({int(v) for v in (sizes if sizes is not None else (n0, 2 * n0, 4 * n0))})
+    # half, once and twice the trials at hand: the sizes tests/study/test_power_sim.py checks the law's
+    # extrapolation from (to 4n)
+    sizes = sorted({int(v) for v in (sizes if sizes is not None else (max(2, n0 // 2), n0, 2 * n0))})
     if not sizes or sizes[0] < 2:
         raise DataError(f"power_curve: sizes must be numbers of demonstrations ≥ 2, got {sizes}")
     if int(repeats) < 1:
         raise DataError(f"power_curve: repeats must be ≥ 1, got {repeats}")
     rng = np.random.default_rng(seed)
-    rows = []
-    gain_method = gain
-    for n in sizes:
-        for rep in range(int(repeats)):
-            sim = simulate_like(model, demos, n, seed=int(rng.integers(2**31)))
-            try:
-                # no jackknife: n refits per simulated set (up to 4n trials) for a span the law extrapolates
-                gains = bootstrap_gain(as_fitted(model, sim), regulated_plant(model), n_boot=n_boot, method=gain_method,
-                                       seed=int(rng.integers(2**31)), jackknife=False)
-                spans = _log_spans(gains, regulated_plant(model), ci, ratios)
-            except ModelError:
-                continue
-            rows += [{"ratio": r, "n": n, "repeat": rep, "span": float(np.exp(v)) if np.isfinite(v) else np.inf}
-                     for r, v in spans.items()]
+    rows: list[dict] = []
+
+    def one_set(n: int, rep: int) -> None:
+        sim = simulate_like(model, demos, n, seed=int(rng.integers(2**31)))
+        try:
+            # no jackknife: n refits per simulated set (up to 2n trials) for a span the law extrapolates
+            plant = regulated_plant(model)
+            gains = bootstrap_gain(as_fitted(model, sim), plant, n_boot=n_boot, method=gain,
+                                   seed=int(rng.integers(2**31)), jackknife=False)
+            spans = _log_spans(gains, plant, ci, ratios)
+        except ModelError:
+            return
+        rows.extend({"ratio": r, "n": n, "repeat": rep, "span": float(np.exp(v)) if np.isfinite(v) else np.inf}
+                    for r, v in spans.items())
+
+    reps = max(int(repeats), MIN_SETS)
+    for rep in range(reps):
+        for n in sizes:
+            one_set(n, rep)
+    while reps < MAX_SETS and not _all_monotone(pd.DataFrame(rows, columns=["ratio", "n", "repeat", "span"])):
+        for n in sizes:
+            one_set(n, reps)
+        reps += 1
     table = pd.DataFrame(rows, columns=["ratio", "n", "repeat", "span"])
-    needed = {ratio: _needed(_medians(g), float(np.log(target))) for ratio, g in table.groupby("ratio", sort=False)}
-    return PowerCurve(spans=table, needed=needed, target=float(target), n_trials=n0)
+    log_target = float(np.log(target))
+    needed, lo, hi = {}, {}, {}
+    boot = np.random.default_rng([seed, 40])
+    for ratio, g in table.groupby("ratio", sort=False):
+        med = _medians(g)
+        if med is not None and np.isfinite(med.iloc[-1]) and not _monotone(med):
+            needed[ratio] = float("nan")  # the simulation cannot say: no number
+            continue
+        needed[ratio] = _needed(med, log_target)
+        if np.isfinite(needed[ratio]):
+            draws = [_needed(_medians(_resample(g, boot)), log_target) for _ in range(NEEDED_RESAMPLES)]
+            draws = np.array([d for d in draws if not np.isnan(d)])
+            if draws.size:
+                lo[ratio], hi[ratio] = (float(v) for v in np.quantile(draws, [0.05, 0.95]))
+    return PowerCurve(spans=table, needed=needed, target=float(target), n_trials=n0, needed_lo=lo, needed_hi=hi)
+
+
+def _resample(g: pd.DataFrame, rng: np.random.Generator) -> pd.DataFrame:
+    """The simulated sets of one ratio resampled with replacement within each size."""
+    parts = [part.iloc[rng.integers(len(part), size=len(part))] for _, part in g.groupby("n", sort=True)]
+    return pd.concat(parts, ignore_index=True)
+
+
+def _monotone(med: pd.Series) -> bool:
+    """Whether the median log spans do not grow with n (an unbounded size counts as larger than any)."""
+    v = med.to_numpy(dtype=float)
+    return bool(np.all(np.diff(np.where(np.isfinite(v), v, np.inf)) <= 1e-12) or len(v) < 2)
+
+
+def _all_monotone(table: pd.DataFrame) -> bool:
+    """Whether every ratio's median curve is monotone (a curve unbounded at its largest size needs no more sets)."""
+    for _, g in table.groupby("ratio", sort=False):
+        med = _medians(g)
+        if med is not None and np.isfinite(med.iloc[-1]) and not _monotone(med):
+            return False
+    return True
+
+
+def _count(n: float) -> str:
+    """A number of demonstrations, rounded up to two significant figures (a simulated estimate claims no more)."""
+    n = max(1, int(np.ceil(n)))
+    step = 10 ** max(0, len(str(n)) - 2)
+    return str(int(np.ceil(n / step) * step))
 
 
 def _medians(g: pd.DataFrame) -> pd.Series | None:

@@ -73,7 +73,7 @@ def score_lines(scores: pd.DataFrame, label: str, units: dict[str, str] | None =
     position RMSE, velocity RMSE, MC band coverage), or with ``markdown=False`` one line per method
     (``"proposed: position 0.0696 [0.051, 0.088] m · velocity 0.054 [0.04, 0.07] m/s · MC band 96 % [90, 100]"``)."""
     units = units or {}
-    s = scores[scores["label"] == str(label)]
+    s = scores[(scores["label"] == str(label)) & scores["metric"].isin(SCORE_METRICS)]
     methods = list(dict.fromkeys(s["method"]))
     methods.sort(key=lambda m: (m != "proposed", m == "persistence"))
     metrics = [m for m in SCORE_METRICS if m in set(s["metric"])]

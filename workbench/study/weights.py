@@ -100,8 +100,14 @@ class RatioInterval:
         return f"{NOT_IDENTIFIABLE}: {needed_words(self.needed, self.simulated)}"
 
     def describe(self) -> str:
-        text = f"{self.name} = {format_interval(self.estimate, self.lo, self.hi)}"
-        return f"{text}: {self.note}" if self.note else text
+        """One line; a part's mismatch is its part's to say (:meth:`PartFit.describe`), once, not on every ratio."""
+        shown = format_interval(self.estimate, self.lo, self.hi)
+        note = f"{NOT_EXPLAINED} (its part's mismatch below)" if not self.explained else self.note
+        if shown.startswith(NOT_IDENTIFIABLE):  # words, no estimate: the note adds only what would help
+            note = note.removeprefix(f"{NOT_IDENTIFIABLE}: ")
+            return f"{self.name} {shown}" + (f"; {note}" if note else "")
+        text = f"{self.name} = {shown}"
+        return f"{text}: {note}" if note else text
 
 
 def needed_words(needed: float | None, simulated: int | None = None) -> str:
@@ -122,15 +128,24 @@ def _round_up(n: float) -> int:
 
 
 def format_interval(estimate: float, lo: float, hi: float) -> str:
-    """``estimate [lo, hi]`` to 3 digits; a bound at the end of the search reads 0 or ∞ (it is not a number the
-    data gave, only the edge of the searched range)."""
-
-    def bound(v: float) -> str:
-        if v <= ZERO_RATIO:
-            return "0"
-        return "∞" if v >= 1 / ZERO_RATIO else f"{v:.3g}"
-
-    return f"{bound(estimate)} [{bound(lo)}, {bound(hi)}]"
+    """``estimate [lo, hi]`` to 3 digits where the interval identifies the ratio (finite, within
+    ×:data:`IDENTIFIABLE_SPAN`); otherwise words without an estimate: a bound at an end of the searched range is no
+    number the data gave (never "0 [0, 0]", "[0, ∞]" or "∞"), and a finite interval wider than ×10 gives its ends
+    but no estimate."""
+    zero_lo, inf_hi = lo <= ZERO_RATIO, hi >= 1 / ZERO_RATIO
+    if not (np.isfinite(lo) and np.isfinite(hi)) and not (zero_lo or inf_hi):
+        return "no interval"
+    if zero_lo and inf_hi:
+        return f"{NOT_IDENTIFIABLE}: the data allow any value"
+    if zero_lo:
+        return (f"{NOT_IDENTIFIABLE}: a zero weight fits (the end of the search)" if hi <= ZERO_RATIO else
+                f"{NOT_IDENTIFIABLE}: at most {hi:.3g}, no lower bound")
+    if inf_hi:
+        return (f"{NOT_IDENTIFIABLE}: an infinite weight fits (the end of the search)" if lo >= 1 / ZERO_RATIO else
+                f"{NOT_IDENTIFIABLE}: at least {lo:.3g}, no upper bound")
+    if hi / lo > IDENTIFIABLE_SPAN:
+        return f"{NOT_IDENTIFIABLE}: between {lo:.3g} and {hi:.3g} (×{hi / lo:.3g})"
+    return f"{estimate:.3g} [{lo:.3g}, {hi:.3g}]"
 
 
 def _pct(v: float) -> str:
@@ -189,23 +204,24 @@ class PartFit:
         return self.closest is None or not bool(np.any(self.closest.shown))
 
     def mismatch_words(self) -> str:
-        """How the gain departs from the closest diagonal cost's, per entry the data show: e.g.
-        ``u1 on phi 17 % softer [11 %, 23 %]`` (softer: a smaller gain magnitude), or where the two have opposite
-        signs ``u1 on phidot -0.008 where it has 0.037``."""
+        """How the gain departs from the closest diagonal cost's, per entry the data show, on the entry's own scale:
+        the estimated gain entry with its interval against the closest diagonal cost's, e.g. ``u1 on phi −0.206
+        [−0.25, −0.16], stiffer than its −0.095`` (stiffer: a larger magnitude; "opposite sign" where the signs
+        differ). No percentage: relative to an entry near zero it would be a meaningless number."""
         c = self.closest
         if c is None:
             return ""
-        rel, lo, hi = c.relative()
         words = []
         for e in np.flatnonzero(c.shown):
             where = f"{self.inputs[e // len(self.states)]} on {self.states[e % len(self.states)]}"
-            if np.isfinite(rel[e]):
-                way = "stiffer" if rel[e] > 0 else "softer"
-                a, b = sorted((abs(lo[e]), abs(hi[e]))) if lo[e] * hi[e] > 0 else (0.0, max(abs(lo[e]), abs(hi[e])))
-                words.append(f"{where} {_pct(rel[e])} {way} [{_pct(a)}, {_pct(b)}]")
-            else:  # opposite signs: no relative change to state
-                words.append(f"{where} {c.k_hat[e]:.3g} where it has {c.k_closest[e]:.3g}")
-        return "; ".join(words) + " (against the closest diagonal LQR gain)" if words else ""
+            k, k0 = float(c.k_hat[e]), float(c.k_closest[e])
+            a, b = k0 + float(c.mismatch_lo[e]), k0 + float(c.mismatch_hi[e])  # k̂ = k* + δ
+            if np.sign(k) != np.sign(k0) and abs(k0) > 0:
+                way = "opposite in sign to"
+            else:
+                way = "stiffer than" if abs(k) > abs(k0) else "softer than"
+            words.append(f"{where} {k:.3g} [{a:.3g}, {b:.3g}], {way} its {k0:.3g}")
+        return "; ".join(words) + " (the estimated gain entry against the closest diagonal LQR gain's)" if words else ""
 
     def describe(self) -> str:
         where = f"part ({', '.join(self.states)}; {', '.join(self.inputs)})"

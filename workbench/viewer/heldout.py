@@ -20,9 +20,11 @@ __all__ = ["SCORE_STRIDE_S", "heldout_table", "log_scores", "score_units", "scor
 
 
 def scores_of(table: Any) -> Any:
-    from workbench.study.scores import heldout_scores
+    """The held-out scores of a comparison table: the states' and the pilot's own input's."""
+    from workbench.study.input_prediction import INPUT_METRICS
+    from workbench.study.scores import SCORE_METRICS, heldout_scores
 
-    return None if table is None or not len(table) else heldout_scores(table)
+    return None if table is None or not len(table) else heldout_scores(table, (*SCORE_METRICS, *INPUT_METRICS))
 
 
 def score_units(models: Any) -> dict[str, str]:
@@ -111,6 +113,7 @@ def log_scores(logger: Any, scores: Any, note: str | Mapping[str, str],
     from, or why there are none: one sentence, or one per label (:func:`study_notes`, key ``""`` the whole)."""
     import rerun as rr
 
+    from workbench.study.input_prediction import input_lines
     from workbench.study.scores import score_lines
 
     notes = {"": note} if isinstance(note, str) else dict(note)
@@ -118,9 +121,13 @@ def log_scores(logger: Any, scores: Any, note: str | Mapping[str, str],
     s = logger.session
     s.scores, s.score_note = scores, note
     labels = [] if scores is None else list(dict.fromkeys(scores["label"]))
-    lines = ["**held-out prediction error** (mean of trials [95 % interval]; MC band nominal 90 %) — " + note]
+    lines = ["**held-out prediction error** (mean of trials [95 % interval]; MC band nominal 90 %; the pilot's "
+             "input: RMS error one step ahead and over the horizon, against models with no pilot) — " + note]
     for label in labels:
+        # the states' scores, then the pilot's own input's (each method's and the no-pilot models')
         part = score_lines(scores, label, dict(units or {}))
+        inputs = input_lines(scores, label)
+        part = [*part, *([""] + inputs if inputs else [])]
         head = [f"**{label}**"] if len(labels) > 1 or label not in ("", "all") else []
         lines += ["", *head, *part]
         logger._static(label_scores_path(label), rr.TextDocument(

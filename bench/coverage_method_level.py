@@ -1,0 +1,185 @@
+"""The coverage study behind the method-level intervals (issue 40 §1): how many splits, and whether they cover.
+
+On the five simulated pilots of :mod:`workbench.sim.families`, with seeds of this study's own (from 9000; the
+acceptance test uses 7000 on): the truth of the default method's difference to IOC-only at 24 training trials
+(``--truth-sets`` fresh training sets scored on a ``--pool`` of fresh trials), then ``--runs`` samples of 30 trials,
+each split ``--splits`` times as ``evaluate`` splits it, every split rerunning the whole default method (its
+cross-validation and fallback included), and the self-comparison on the same splits. Every computed number is
+appended to a JSON-lines file as it is made, so the study resumes where it stopped and grows by ``--runs``.
+
+    nice -n 10 python bench/coverage_method_level.py --runs 8 --truth-sets 12 --pool 120    # compute (resumable)
+    python bench/coverage_method_level.py --summary                                     # the table, from the file
+
+The summary judges the interval from the first J splits of each run for several J (the runs keep every split's
+change), against the truth and its Monte Carlo standard error: coverage, zero-width rows, median width against an
+oracle's (the width the spread of the estimates over independent samples calls for), and the self-comparison's
+"difference shown". ``bench/coverage_method_level.md`` records the numbers that chose
+:data:`workbench.study.method_level.SPLITS`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+RESULTS = ROOT / "bench" / "coverage_method_level.jsonl"
+SEED0 = 9000  # this study's seeds; the acceptance test's start at 7000
+N_TRIALS, TEST_SIZE = 30, 0.2
+J_CHOICES = (4, 6, 8, 10, 12, 16)
+FACTORS = (1.0, 2.0, 4.0)  # multiples of Nadeau & Bengio's overlap term weighed beside it
+
+
+def _seed(family: str, k: int) -> int:
+    from workbench.sim.families import FAMILIES
+
+    return SEED0 + 100_000 * list(FAMILIES).index(family) + k
+
+
+def _records(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def _append(path: Path, record: dict) -> None:
+    with path.open("a") as f:
+        f.write(json.dumps(record) + "\n")
+
+
+def compute(families: list[str], runs: int, truth_sets: int, pool: int, splits: int, path: Path) -> None:
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.families import family
+    from workbench.study.coverage import simulated_run, true_difference
+
+    plant = planar_quadrotor()
+    done = _records(path)
+    n_train = N_TRIALS - max(1, min(N_TRIALS - 2, round(TEST_SIZE * N_TRIALS)))
+    for name in families:
+        sim = family(name)
+        have_truth = {r["set"] for r in done if r["kind"] == "truth" and r["family"] == name}
+        have_runs = {r["run"] for r in done
+                     if r["kind"] == "run" and r["family"] == name and len(r["changes"]) >= splits}
+        pool_set = None
+        for t in range(truth_sets):
+            if t in have_truth:
+                continue
+            pool_set = pool_set or sim(pool, _seed(name, 99_999))
+            t0 = time.perf_counter()
+            c, fell = true_difference(sim, _seed(name, 50_000 + t), n_train, pool_set, plant)
+            _append(path, {"kind": "truth", "family": name, "set": t, "n_train": n_train, "pool": pool, "change": c,
+                           "fell_back": fell, "seconds": time.perf_counter() - t0})
+            print(f"{name} truth set {t}: {100 * c:+.1f} %{' (fell back)' if fell else ''} "
+                  f"[{time.perf_counter() - t0:.0f} s]", flush=True)
+        for r in range(runs):
+            if r in have_runs:
+                continue
+            t0 = time.perf_counter()
+            run = simulated_run(sim, name, _seed(name, r), plant, n_trials=N_TRIALS, test_size=TEST_SIZE,
+                                splits=splits)
+            _append(path, {"kind": "run", "family": name, "run": r, "seed": run.seed, "n_train": run.n_train,
+                           "n_test": run.n_test, "changes": list(run.changes), "fell_back": list(run.fell_back),
+                           "self_changes": list(run.self_changes), "seconds": time.perf_counter() - t0})
+            print(f"{name} run {r}: mean change {100 * np.nanmean(run.changes):+.1f} %, fell back in "
+                  f"{sum(run.fell_back)}/{len(run.fell_back)} splits [{time.perf_counter() - t0:.0f} s]", flush=True)
+
+
+def summary(path: Path, ci: float = 95.0) -> str:
+    from scipy import stats as sps
+
+    from workbench.study.coverage import CoverageRun, run_interval
+
+    rec = _records(path)
+    lines = ["| pilot | truth [%] (± MC SE, sets; fell back) | runs | J | covers | words: fell back in every split | "
+             "zero-width | median width [points] | oracle width | self: difference shown |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for name in dict.fromkeys(r["family"] for r in rec):
+        truth = [r["change"] for r in rec if r["kind"] == "truth" and r["family"] == name]
+        fells = sum(r["fell_back"] for r in rec if r["kind"] == "truth" and r["family"] == name)
+        runs = [CoverageRun(name, r["seed"], r["n_train"], r["n_test"], tuple(r["changes"]), tuple(r["fell_back"]),
+                            tuple(r["self_changes"])) for r in rec if r["kind"] == "run" and r["family"] == name]
+        if not truth or not runs:
+            continue
+        mu, se = float(np.mean(truth)), float(np.std(truth, ddof=1) / math.sqrt(len(truth))) if len(truth) > 1 else 0
+        for J in (j for j in J_CHOICES if j <= min(len(r.changes) for r in runs)):
+            iv = [run_interval(r, J, ci) for r in runs]
+            # a run whose proposed method fell back in every split says so in words: right where the truth is 0
+            same = [all(c == 0.0 for c in r.changes[:J]) for r in runs]
+            means = np.array([m for m, _, _ in iv])
+            covers = sum((abs(mu) <= 2 * se) if s else bool(lo <= mu <= hi)
+                         for (_, lo, hi), s in zip(iv, same, strict=True))
+            zero = sum(bool(np.isfinite(lo) and lo == hi) for _, lo, hi in iv)
+            widths = [100 * (hi - lo) for _, lo, hi in iv if hi > lo]
+            # the oracle: the width the estimates' own spread over independent samples calls for
+            z = sps.norm.ppf(0.5 + ci / 200)
+            oracle = 2 * z * 100 * float(np.std(means, ddof=1)) if len(runs) > 2 else math.nan
+            selfs = [run_interval(r, J, ci, self_comparison=True) for r in runs if len(r.self_changes) >= J]
+            shown = sum(lo > 0 or hi < 0 for _, lo, hi in selfs)
+            lines.append(f"| {name} | {100 * mu:+.1f} (± {100 * se:.1f}, {len(truth)}; {fells}) | {len(runs)} | {J} | "
+                         f"{covers}/{len(runs)} | {sum(same)} | {zero} | "
+                         f"{np.median(widths) if widths else math.nan:.1f} | {oracle:.1f} | {shown}/{len(selfs)} |")
+    lines += ["", "Coverage with the overlap term n_test/n_train of the corrected resampled t multiplied by a factor "
+              "(1: Nadeau & Bengio's), and the median width [points]:", "",
+              "| pilot | J | " + " | ".join(f"×{f:g}" for f in FACTORS) + " |", "|---|---|" + "---|" * len(FACTORS)]
+    for name in dict.fromkeys(r["family"] for r in rec):
+        truth = [r["change"] for r in rec if r["kind"] == "truth" and r["family"] == name]
+        runs = [CoverageRun(name, r["seed"], r["n_train"], r["n_test"], tuple(r["changes"]), tuple(r["fell_back"]),
+                            tuple(r["self_changes"])) for r in rec if r["kind"] == "run" and r["family"] == name]
+        if len(truth) < 2 or not runs:
+            continue
+        mu, se = float(np.mean(truth)), float(np.std(truth, ddof=1) / math.sqrt(len(truth)))
+        for J in (j for j in J_CHOICES if j <= min(len(r.changes) for r in runs)):
+            cells = []
+            for f in FACTORS:
+                iv = [run_interval(r, J, ci, factor=f) for r in runs]
+                same = [all(c == 0.0 for c in r.changes[:J]) for r in runs]
+                k = sum((abs(mu) <= 2 * se) if s else bool(lo <= mu <= hi) for (_, lo, hi), s in zip(iv, same,
+                                                                                                    strict=True))
+                w = [100 * (hi - lo) for _, lo, hi in iv if hi > lo]
+                cells.append(f"{k}/{len(runs)} ({np.median(w) if w else math.nan:.1f})")
+            lines.append(f"| {name} | {J} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    from workbench.sim.families import FAMILIES
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--families", nargs="*", default=list(FAMILIES))
+    p.add_argument("--runs", type=int, default=8)
+    p.add_argument("--truth-sets", type=int, default=12)
+    p.add_argument("--pool", type=int, default=120)
+    p.add_argument("--splits", type=int, default=12)
+    p.add_argument("--file", type=Path, default=RESULTS)
+    p.add_argument("--summary", action="store_true", help="print the table from the file and stop")
+    p.add_argument("--markdown", type=Path, help="also write the summary under this Markdown file's header")
+    a = p.parse_args()
+    if not a.summary:
+        from workbench.threads import limit_threads
+
+        with limit_threads():
+            compute(a.families, a.runs, a.truth_sets, a.pool, a.splits, a.file)
+    text = summary(a.file)
+    print(text)
+    if a.markdown:
+        rec = _records(a.file)
+        seconds = [r["seconds"] for r in rec if r["kind"] == "run"]
+        head = a.markdown.read_text().split("<!-- summary -->")[0] if a.markdown.exists() else ""
+        a.markdown.write_text(head + "<!-- summary -->\n\n" + text + f"\n\n{len(seconds)} runs, median "
+                              f"{np.median(seconds):.0f} s of wall time each on the shared machine; every number "
+                              f"above is recomputed from `{a.file.name}` by `--summary`.\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,141 @@
+"""Coverage of the method-level intervals on simulated pilots whose truth can be simulated (issue 40 §1, §6).
+
+The question a method-level interval answers (:mod:`workbench.study.method_level`): how much better does the default
+proposed method predict this pilot than IOC-only, as methods trained on ``n_train`` of its trials? Its truth is the
+mean over fresh training sets of ``n_train`` trials of ``1 − mean(proposed) / mean(IOC-only)``, each method run
+exactly as a split runs it (:class:`~workbench.study.method_level.SplitPlan`: the default model's cross-validation and
+fallback included) and scored on one large pool of fresh trials (:func:`true_difference`). A run
+(:func:`simulated_run`) draws one sample of ``n_trials`` trials, splits it ``splits`` times as ``evaluate`` does, and
+keeps every split's change, so intervals from the first ``J`` splits can be judged for several ``J`` from one run
+(:func:`run_interval`). Beside it, the self-comparison: the proposed method against itself, each copy trained on its
+own half of every split's training part — the true difference is 0 by symmetry.
+
+``bench/coverage_method_level.py`` runs the study that chose :data:`~workbench.study.method_level.SPLITS`;
+``tests/study/test_method_level_sim.py`` judges the default method with other seeds.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from workbench.errors import ConvergenceWarning, DegenerateFitWarning
+from workbench.study.method_level import SplitPlan, _refit, corrected_t, method_differences, split_scores, split_tasks
+
+__all__ = ["CoverageRun", "simulated_run", "true_difference", "run_interval", "METRIC", "N_STEPS", "STRIDE",
+           "BASELINE"]
+
+METRIC = "rmse_position"
+#: The baseline of the question: the task objective alone, the method a fallen-back proposed model predicts as.
+BASELINE = "ioc_only"
+N_STEPS, STRIDE = 60, 20  # 3 s predictions from every second of each test trial, as evaluate scores them
+
+
+@dataclass(frozen=True)
+class CoverageRun:
+    """One simulated sample and its method-level comparison.
+
+    Attributes
+    ----------
+    family : str
+    seed : int
+    n_train, n_test : int
+        Trials per split.
+    changes : tuple of float
+        ``1 − mean(proposed) / mean(IOC-only)`` of each split, in split order.
+    fell_back : tuple of bool
+        Whether each split's proposed model fell back to ``K̂x``.
+    self_changes : tuple of float
+        The self-comparison's change of each split (empty without it).
+    """
+
+    family: str
+    seed: int
+    n_train: int
+    n_test: int
+    changes: tuple[float, ...]
+    fell_back: tuple[bool, ...]
+    self_changes: tuple[float, ...] = field(default=())
+
+
+def _pool_means(fitted: dict, pool) -> dict[str, float]:
+    """Per method, the mean over trials of each trial's mean error over its windows (as a split scores)."""
+    from workbench.study import evaluate as ev
+
+    table = ev.compare(fitted, pool, n_steps=N_STEPS, starts=STRIDE, inputs=False)
+    table = table[table["metric"] == METRIC]
+    return table.groupby(["method", "trial"])["value"].mean().groupby("method").mean().to_dict()
+
+
+def true_difference(sim, seed: int, n_train: int, pool, plant, n_components: int | str = "cv") -> tuple[float, bool]:
+    """One training set's difference on the pool: the method run on ``sim(n_train, seed)`` as a split runs it;
+    returns the change and whether the proposed model fell back."""
+    plan = SplitPlan(plant=plant, n_components=n_components, seed=0, methods=("proposed", BASELINE))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.simplefilter("ignore", DegenerateFitWarning)
+        fitted, fell_back = _refit(plan, sim(n_train, seed))
+    means = _pool_means(fitted, pool)
+    return 1.0 - means["proposed"] / means[BASELINE], fell_back
+
+
+def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, test_size: float = 0.2,
+                  splits: int = 12, n_components: int | str = "cv", self_comparison: bool = True) -> CoverageRun:
+    """One sample of ``n_trials`` trials of ``sim`` split ``splits`` times as ``evaluate`` splits it (its seed the
+    sample's), every split rerunning the method (:func:`~workbench.study.method_level.split_scores`); with
+    ``self_comparison`` each split's training part is also halved at random and the proposed method trained on each
+    half, both scored on the split's test part."""
+    ds = sim(n_trials, seed)
+    plan = SplitPlan(plant=plant, n_components=n_components, seed=0, methods=("proposed", BASELINE))
+    tasks, sizes, _ = split_tasks({family: ds}, plan, METRIC, N_STEPS, STRIDE, test_size, splits, seed=seed)
+    parts = [split_scores(task) for task in tasks]
+    scores = pd.concat(parts, ignore_index=True)
+    per = scores.groupby(["split", "method"])["value"].mean().unstack("method")
+    changes = tuple(float(1.0 - per.loc[j, "proposed"] / per.loc[j, BASELINE]) if j in per.index else float("nan")
+                    for j in range(len(tasks)))
+    fell = tuple(bool(p["fell_back"].any()) if len(p) else False for p in parts)
+    selfs: list[float] = []
+    if self_comparison:
+        rng = np.random.default_rng([seed, 40])
+        solo = SplitPlan(plant=plant, n_components=n_components, seed=0, methods=("proposed",))
+        for task in tasks:
+            held = {int(i) for i in task[3]}
+            order = rng.permutation([i for i in range(len(ds)) if i not in held])
+            halves = order[: len(order) // 2], order[len(order) // 2:]
+            test = ds.with_demos([ds[i] for i in sorted(held)])
+            means = []
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                warnings.simplefilter("ignore", DegenerateFitWarning)
+                for h in halves:
+                    fitted, _ = _refit(solo, ds.with_demos([ds[int(i)] for i in sorted(h)]))
+                    means.append(_pool_means(fitted, test)["proposed"])
+            selfs.append(1.0 - means[0] / means[1])
+    n_train, n_test = sizes[family]
+    return CoverageRun(family, seed, n_train, n_test, changes, fell, tuple(selfs))
+
+
+def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_comparison: bool = False,
+                 factor: float = 1.0) -> tuple[float, float, float]:
+    """The corrected resampled t interval of a run from its first ``J`` splits (all by default): (mean, lo, hi);
+    NaN bounds where the splits did not vary. ``self_comparison``: the self-comparison's interval (each copy trained
+    on half the split's training part). ``factor``: the overlap term ``n_test/n_train`` multiplied by it (1: Nadeau &
+    Bengio's), for a study that weighs other corrections."""
+    c = list(run.self_changes if self_comparison else run.changes)[: J or None]
+    n_train = run.n_train // 2 if self_comparison else run.n_train
+    mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1))
+    return mean, lo, hi
+
+
+def method_rows(run: CoverageRun, J: int | None = None) -> Sequence:
+    """The run's first ``J`` splits as :class:`~workbench.study.method_level.MethodDifference` rows (what
+    ``evaluate`` would print): for checking that no row has an interval of zero width."""
+    k = len(run.changes) if J is None else J
+    rows = [(run.family, j, f"t{j}", m, v, run.fell_back[j])
+            for j in range(k) for m, v in (("proposed", 1.0 - run.changes[j]), (BASELINE, 1.0))]
+    scores = pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value", "fell_back"])
+    return method_differences(scores, {run.family: (run.n_train, run.n_test)}, METRIC, "proposed", [BASELINE])
