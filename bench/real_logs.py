@@ -24,6 +24,8 @@ GROUP_BLOCK = re.compile(r"plant identification \(plant group ([^,]+),")
 CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?ratio (-?[\d.e+-]+), (NOT )?within")
 STICK = re.compile(r"stick: (\w+) → (\w+): (.*?) per full stick \(time constant ([\d.e+-]+) s\)"
                    r"|stick: (\w+) → (\w+): the (.*?) loop does not settle")
+RHO = re.compile(r"closed loop[^:]*: ρ\(A \+ BK̂\) = ([\d.e+-]+), (?:[\d.]+ % interval \[([\d.e+-]+), ([\d.e+-]+)\]"
+                 r"|(no interval))[^:]*: (stable|not distinguishable|unstable)")
 METHODS = ("proposed", "ioc_only", "gmr_only", "persistence", "no_pilot_held", "no_pilot_zero")
 TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence",
           "no_pilot_held": "input held", "no_pilot_zero": "input 0"}
@@ -83,16 +85,32 @@ def physics(out: str) -> str:
     return " / ".join(parts) or "—"
 
 
+def stability(out: str) -> dict[str, str]:
+    """Per plant group (\"\" for a one-group fit): ρ(A + BK̂) with its interval and the verdict fit printed."""
+    blocks = re.split(r"^plant group (\S+)$", out, flags=re.M)
+    pairs = zip(blocks[1::2], blocks[2::2], strict=True) if len(blocks) > 1 else [("", out)]
+    found = {}
+    for group, body in pairs:
+        if (m := RHO.search(" ".join(body.split()))) is not None:
+            interval = "no interval" if m.group(4) else f"[{float(m.group(2)):.4g}, {float(m.group(3)):.4g}]"
+            found[group] = (f"ρ {float(m.group(1)):.4g} {interval} {m.group(5)}"
+                            + ("; no objective" if "task objective: not found" in body else ""))
+    return found
+
+
 def fit_cell(code: int, out: str, err: str) -> str:
     if code != 0:
         return _outcome(code, out, err, "")
+    rho = stability(out)
     wrote = re.search(r"wrote (\d+) model\(s\), one per plant group: (.*?)(;|$)", out, re.M)
     failed = _not_fitted(err, "fitted")
     if wrote is None:
         group = re.search(r"^plant group (\S+):", out, re.M)
-        return f"fitted ({group.group(1)})" if group else "fitted"
+        said = f" ({rho['']})" if "" in rho else ""
+        return (f"fitted ({group.group(1)}){said}" if group else f"fitted{said}")
     groups = [Path(p.strip()).stem.split(".", 1)[-1] for p in wrote.group(2).split(",")]
-    return "fitted " + ", ".join(groups) + "".join(f"; {g} not fitted: {c}" for g, c in failed.items())
+    return ("fitted " + ", ".join(g + (f" ({rho[g]})" if g in rho else "") for g in groups)
+            + "".join(f"; {g} not fitted: {c}" for g, c in failed.items()))
 
 
 def _means(table: Path) -> dict[str, dict[str, float]]:
