@@ -42,24 +42,36 @@ def _run(args: list[str], timeout: float) -> tuple[int, str, str]:
 
 def _last(text: str) -> str:
     lines = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("error:")]
-    return (lines[-1] if lines else text.strip().splitlines()[-1] if text.strip() else "")[:220]
+    return lines[-1] if lines else text.strip().splitlines()[-1] if text.strip() else ""
 
 
-def _short(text: str) -> str:
+COMPACT = (  # a refusal for stability in a table cell: ρ with its interval, the slow mode and the mode blamed
+    (r"the gain \((\w+)\) is not stabilizing: ", r"not stabilizing (\1): "),
+    (r"closed loop on [^:]*: ρ\(A \+ BK̂\) = ([\d.e+-]+), [\d.]+ % interval \[([\d.e+-]+), ([\d.e+-]+)\] over [^:]*: ",
+     r"ρ \1 [\2, \3] "),
+    (r"; the slow mode lies on ", ", slow mode on "),
+    (r"\. In these demonstrations .*?\(--task …@states\)", ""),
+    (r"\. Likely cause: .*? — ([^:]+?) \(([^)]*)\): there the autopilot .*?regulated ones", r"; likely cause \1 (\2)"),
+)
+
+
+def _short(text: str, width: int = 160) -> str:
     """A cause without ``error:`` and the file's path (the row names the log)."""
     text = re.sub(r"^error: ", "", text.strip())
-    return re.sub(r"^\S+: (mapping '\S+': )?", "", text)[:160].replace("|", "/")
+    for pattern, into in COMPACT:
+        text = re.sub(pattern, into, text)
+    return re.sub(r"^\S+: (mapping '\S+': )?", "", text)[:width].replace("|", "/")
 
 
 def _outcome(code: int, out: str, err: str, ok: str) -> str:
-    return ok if code == 0 else f"stops: {_short(_last(err) or _last(out))}".replace("|", "/")
+    return ok if code == 0 else f"stops: {_short(_last(err) or _last(out), 320)}".replace("|", "/")
 
 
 def _not_fitted(err: str, what: str) -> dict[str, str]:
     """``warning: plant group G: not fitted: cause`` lines, per group."""
     found = {}
     for m in re.finditer(rf"warning: plant group (\S+): not {what}: (.*)", err):
-        found[m.group(1)] = _short(m.group(2))[:140]
+        found[m.group(1)] = _short(m.group(2), 200)
     return found
 
 
@@ -139,7 +151,7 @@ def evaluate_cells(code: int, out: str, err: str, tables: list[Path]) -> tuple[s
         group = table.stem.split(".", 1)[1] if "." in table.stem else ""
         means = _means(table)
         head = f"{group}: " if group else ""
-        left = [_short(ln.strip().split("could not be fitted and is left out of the comparison: ")[-1])[:120]
+        left = [_short(ln.strip().split("could not be fitted and is left out of the comparison: ")[-1], 160)
                 for ln in blocks.get(group, out).splitlines() if "proposed could not be fitted" in ln]
         pos.append(head + ", ".join(f"{TITLES[m]} {means[m]['rmse_position']:.3g}" for m in METHODS
                                     if 'rmse_position' in means.get(m, {}))
