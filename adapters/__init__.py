@@ -104,12 +104,10 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None, *, format
     return fmt.read(path, None if topics is None else list(topics))
 
 
-def read_streams(
-    path: str | os.PathLike, topics: Iterable[str] | None = None, *, types: Iterable[str] | None = None
-) -> dict[str, pd.DataFrame]:
+def read_streams(path: str | os.PathLike, topics: Iterable[str] | None = None) -> dict[str, pd.DataFrame]:
     """A log's streams: stream name (``"ATTITUDE"``, ``"/topic"``) -> DataFrame with a float64 ``t`` (seconds)
-    and one column per field. ``types`` is another name for ``topics`` (MAVLink message types)."""
-    return dict(read(path, topics if topics is not None else types).frames)
+    and one column per field; only ``topics`` where given (stream names: MAVLink message types, topics)."""
+    return dict(read(path, topics).frames)
 
 
 def load(

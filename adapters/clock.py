@@ -28,7 +28,7 @@ from adapters.streams import numeric
 if TYPE_CHECKING:
     import pandas as pd
 
-    from adapters.mapping import ClockSpec
+    from adapters.rules import ClockSpec
 
 __all__ = ["stream_times"]
 

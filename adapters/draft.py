@@ -38,8 +38,8 @@ from adapters.mapping import (
     shipped_mappings,
 )
 from adapters.modes import mode_name
+from adapters.rc_maps import fill, placeholders
 from adapters.selection import select
-from adapters.sticks import _fill, placeholders
 from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams
 from adapters.summary import log_modes, summarize
@@ -136,7 +136,7 @@ def _pick(ch: Channel, streams: Streams, fmt: str, numbers: dict[str, int]) -> C
             if any(r not in numbers for r in placeholders(source)):
                 continue
             one = replace(v, selector=replace(v.selector, source=source, alternatives=()))
-            filled = replace(one.selector, source=_fill(source, numbers))
+            filled = replace(one.selector, source=fill(source, numbers))
             if _has(filled, streams, TRANSFORMS[one.transform].n_columns):
                 return one
     return None
@@ -312,7 +312,7 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
 
 
 def _stream_of(ch: Channel, streams: Streams, numbers: dict[str, int]) -> str:
-    return select(replace(ch.selector, source=_fill(ch.selector.source, numbers)), streams, "", "").stream
+    return select(replace(ch.selector, source=fill(ch.selector.source, numbers)), streams, "", "").stream
 
 
 def _selector_table(sel: Selector) -> dict[str, object]:
@@ -359,14 +359,14 @@ def _verify(text: str, streams: Streams, description: str) -> None:
     from adapters.mapping import _parse
     from adapters.transforms import TRANSFORMS
 
-    where = f"{streams.path}: cannot draft a mapping"
+    cannot = f"{streams.path}: cannot draft a mapping"
     try:
         raw = tomllib.loads(text)
         m = resolve_sticks(_parse(raw, "<draft>"), streams)
     except (tomllib.TOMLDecodeError, MappingError) as exc:
-        raise DataError(f"{where}: the draft does not read back ({exc})") from None
+        raise DataError(f"{cannot}: the draft does not read back ({exc})") from None
     if raw.get("description") != description:
-        raise DataError(f"{where}: the draft's description does not read back as written")
+        raise DataError(f"{cannot}: the draft's description does not read back as written")
     checks = [(f"channel {c.name}", c.selector, TRANSFORMS[c.transform].n_columns) for c in (*m.channels,
                                                                                              *m.setpoints)]
     seg = m.segment
@@ -376,7 +376,7 @@ def _verify(text: str, streams: Streams, description: str) -> None:
         checks.append(("reference.estimate", m.reference.estimate, 2))
     for what, sel, n in checks:
         if not _has(sel, streams, n):
-            raise DataError(f"{where}: its {what} reads {sel.describe()}, which is not in this log")
+            raise DataError(f"{cannot}: its {what} reads {sel.describe()}, which is not in this log")
 
 
 def _reference_lines(template: ChannelMapping, streams: Streams, chosen: dict[str, Channel]) -> list[str]:

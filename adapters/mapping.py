@@ -14,7 +14,7 @@ Schema
     inputs = ["u1", "u2"]               # (required)
     clock = "log"                       # or { field = "time_boot_ms", scale = 0.001 }: see adapters.clock
     rc_map = "ardupilot"                # whose RC map gives a {roll}, {pitch}, {throttle}, {yaw} stick its channel:
-                                        # RCMAP_ROLL … (adapters.sticks.RC_MAPS: "ardupilot", "px4")
+                                        # RCMAP_ROLL … (adapters.rc_maps.RC_MAPS: "ardupilot", "px4")
 
     [channels]                          # one entry per state and input
     x = "LOCAL_POSITION_NED.y"          # a source: "STREAM.FIELD" or "STREAM:FIELD" (for topics with dots)
@@ -73,21 +73,28 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
-
-if TYPE_CHECKING:
-    pass
+from typing import Any
 
 from adapters.formats import FORMATS
 from adapters.modes import MODE_TABLES, mode_name, mode_number
+from adapters.rc_maps import PARAMETER_STREAMS, RC_MAPS, ROLES, placeholders
 from adapters.reference import REFERENCE_FORMS, ReferenceRule
-from adapters.sticks import PARAMETER_STREAMS, RC_MAPS, ROLES, placeholders
+from adapters.rules import (
+    DEFAULT_META_FIELDS,
+    Channel,
+    ClockSpec,
+    FlagRule,
+    LandingRule,
+    MetaRules,
+    ModeRule,
+    SegmentRules,
+    Selector,
+)
 from adapters.streams import candidate_streams, nearest
 from adapters.transforms import TRANSFORMS
 from workbench.data.pilot_task import task_table
@@ -111,7 +118,6 @@ __all__ = [
 
 MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
 FORMAT_NAMES = tuple(FORMATS)  # a mapping's [<format>.…] tables: one per declared format
-DEFAULT_META_FIELDS = ("id", "label", "subject", "target", "success", "outcome")
 _TOP_KEYS = {
     "name", "description", "dt", "states", "inputs", "clock", "channels", "segment", "meta", "roles", "reference",
     "rc_map", "setpoints", "task", *FORMAT_NAMES
@@ -120,123 +126,6 @@ _CHANNEL_KEYS = {"source", "transform", "scale", "offset", "sign", "where"}
 _SEGMENT_KEYS = {"gap", "min_duration", "demo", "mode", "armed", "landing"}
 _META_KEYS = {"source", "key", "text", "fields", "prefix"}
 _REFERENCE_KEYS = {"estimate", "gps", "form", "scale", "always_logged", "unknown", "fix", "accuracy"}
-
-
-@dataclass(frozen=True)
-class Selector:
-    """A field of a stream, optionally restricted to rows whose columns equal given values (``where``).
-
-    ``alternatives`` are further sources tried in order when ``source`` is not in a file (e.g. RC_CHANNELS,
-    else RC_CHANNELS_RAW); writers use ``source``.
-    """
-
-    source: str
-    where: tuple[tuple[str, Any], ...] = ()
-    alternatives: tuple[str, ...] = ()
-
-    @property
-    def sources(self) -> tuple[str, ...]:
-        return (self.source, *self.alternatives)
-
-    def describe(self) -> str:
-        cond = ", ".join(f"{k} = {v!r}" for k, v in self.where)
-        return " or ".join(self.sources) + (f" where {cond}" if cond else "")
-
-
-@dataclass(frozen=True)
-class Channel:
-    """One state or input: ``sign * scale * transform(source) + offset``."""
-
-    name: str
-    selector: Selector
-    transform: str = "identity"
-    scale: float = 1.0
-    offset: float = 0.0
-    sign: float = 1.0
-    params: tuple[tuple[str, Any], ...] = ()
-    #: further channels tried in order when this one's source is not in a file (another firmware's field names,
-    #: each with its own conversion); writers and the online path use the first
-    alternatives: tuple[Channel, ...] = ()
-
-    @property
-    def gain(self) -> float:
-        return self.sign * self.scale
-
-    @property
-    def variants(self) -> tuple[Channel, ...]:
-        """This channel (without its alternatives) and each alternative, in the order they are tried."""
-        return (replace(self, alternatives=()), *self.alternatives)
-
-
-@dataclass(frozen=True)
-class ModeRule:
-    selector: Selector
-    keep: tuple[int, ...]
-    names: str | None = None
-
-
-@dataclass(frozen=True)
-class FlagRule:
-    """A truthy stream: ``value & bitmask`` when a bitmask is given, ``value == equals``, else ``value != 0``; or
-    events (``on`` / ``off`` values, e.g. DataFlash ``EV`` ids ARMED 10 / DISARMED 11): rows of other values say
-    nothing, and the flag holds from one event to the next (:meth:`events`)."""
-
-    selector: Selector
-    bitmask: int | None = None
-    equals: float | None = None
-    on: tuple[float, ...] = ()
-    off: tuple[float, ...] = ()
-
-    def events(self, values: np.ndarray) -> np.ndarray:
-        """The rows that are events of an event rule (every row of a held flag)."""
-        v = np.asarray(values, dtype=np.float64)
-        return np.isin(v, self.on + self.off) if self.on else np.ones(v.shape, dtype=bool)
-
-    def truth(self, values: np.ndarray) -> np.ndarray:
-        if self.on:
-            return np.isin(np.asarray(values, dtype=np.float64), self.on)
-        v = np.nan_to_num(np.asarray(values, dtype=np.float64))
-        if self.bitmask is not None:
-            return (v.astype(np.int64) & self.bitmask) != 0
-        if self.equals is not None:
-            return v == self.equals
-        return v != 0
-
-
-@dataclass(frozen=True)
-class LandingRule:
-    """Touchdown: a state at or below ``below`` (``state``), or a truthy landed flag (``flag``)."""
-
-    state: str | None = None
-    below: float = 0.0
-    flag: FlagRule | None = None
-
-
-@dataclass(frozen=True)
-class SegmentRules:
-    gap: float
-    min_duration: float
-    demo: Selector | None = None
-    mode: ModeRule | None = None
-    armed: FlagRule | None = None
-    landing: LandingRule | None = None
-
-
-@dataclass(frozen=True)
-class MetaRules:
-    source: Selector | None = None
-    key: str = "demo"
-    text: Selector | None = None
-    fields: tuple[str, ...] = DEFAULT_META_FIELDS
-    prefix: str = "wb"
-
-
-@dataclass(frozen=True)
-class ClockSpec:
-    """``field=None``: the stream's own ``t``; else that field × ``scale``, anchored on ``t`` (adapters.clock)."""
-
-    field: str | None = None
-    scale: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -263,7 +152,7 @@ class ChannelMapping:
     #: The pilot's task (``[task]``: regulate, relative_to, reference): overrides what a fit decides from the data;
     #: written into every demonstration's ``meta["task"]`` (:mod:`workbench.data.pilot_task`). Empty: the data decide.
     task: Mapping[str, Any] = field(default_factory=dict)
-    #: whose RC map gives a stick named by role its channel (a key of adapters.sticks.RC_MAPS)
+    #: whose RC map gives a stick named by role its channel (a key of adapters.rc_maps.RC_MAPS)
     rc_map: str | None = None
     #: per input, what it commands (its ``name`` is the input's): the stick must move with it (adapters.sticks)
     setpoints: tuple[Channel, ...] = ()
@@ -281,7 +170,7 @@ class ChannelMapping:
                 merged[key] = {**merged[key], **value}
             else:
                 merged[key] = value
-        out = _parse(merged, self.path, where=f"[{fmt}]")
+        out = _parse(merged, self.path, section=f"[{fmt}]")
         return replace(out, format=fmt, raw=self.raw)
 
     def check_complete(self) -> None:
@@ -356,7 +245,8 @@ def load_mapping(mapping: str | os.PathLike | ChannelMapping) -> ChannelMapping:
                 f"mapping {text!r}: no such file and not a shipped mapping; shipped: {', '.join(shipped_mappings())}"
             )
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+        raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MappingError(f"{path}: not valid TOML ({exc})") from None
     except RecursionError:  # tomllib parses nested arrays and tables by recursion
@@ -365,12 +255,24 @@ def load_mapping(mapping: str | os.PathLike | ChannelMapping) -> ChannelMapping:
         raise MappingError(f"{path}: not a mapping: not UTF-8 text at byte {exc.start}") from None
     except OSError as exc:
         raise MappingError(f"{path}: cannot read mapping ({exc})") from None
+    except ValueError:  # Python's limit on an integer's digits (4300), in tomllib: named by its line, in our words
+        raise MappingError(f"{path}{_long_number_line(text)}: a number too long to read (more than "
+                           f"{sys.get_int_max_str_digits()} digits); a mapping's numbers are at most "
+                           f"{MAX_MAGNITUDE:g}") from None
     raw.setdefault("name", path.stem)
     return _parse(raw, str(path))
 
 
-def _fail(path: str, where: str, message: str) -> MappingError:
-    return MappingError(f"{path}: {where}: {message}")
+def _long_number_line(text: str) -> str:
+    """``, line N`` of the first run of digits longer than Python converts (empty where none is found)."""
+    import re
+
+    m = re.search(rf"\d{{{sys.get_int_max_str_digits() + 1},}}", text)
+    return "" if m is None else f", line {text.count(chr(10), 0, m.start()) + 1}"
+
+
+def _fail(path: str, key: str, message: str) -> MappingError:
+    return MappingError(f"{path}: {key}: {message}")
 
 
 #: The largest magnitude a mapping's number may have (scales, offsets, durations, transform parameters): beyond
@@ -378,17 +280,17 @@ def _fail(path: str, where: str, message: str) -> MappingError:
 MAX_MAGNITUDE = 1e12
 
 
-def _number(value: Any, path: str, where: str, *, positive: bool = False) -> float:
+def _number(value: Any, path: str, key: str, *, positive: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise _fail(path, where, f"must be a finite number, got {value!r}")
+        raise _fail(path, key, f"must be a finite number, got {value!r}")
     try:
         number = float(value)  # an integer beyond float64 (10**400) overflows here, not in the conversion
     except OverflowError:
         number = math.inf
     if not math.isfinite(number) or abs(number) > MAX_MAGNITUDE:
-        raise _fail(path, where, f"must be a finite number of magnitude at most {MAX_MAGNITUDE:g}, got {value!r}")
+        raise _fail(path, key, f"must be a finite number of magnitude at most {MAX_MAGNITUDE:g}, got {value!r}")
     if positive and number <= 0:
-        raise _fail(path, where, f"must be positive, got {value!r}")
+        raise _fail(path, key, f"must be positive, got {value!r}")
     return number
 
 
@@ -401,74 +303,74 @@ def _sources(value: Any) -> tuple[str, ...] | None:
     return None
 
 
-def _selector(value: Any, path: str, where: str, extra: Iterable[str] = ()) -> Selector:
+def _selector(value: Any, path: str, key: str, extra: Iterable[str] = ()) -> Selector:
     if _sources(value) is not None:
         first, *rest = _sources(value)
         return Selector(first, (), tuple(rest))
     if not isinstance(value, dict) or _sources(value.get("source")) is None:
-        raise _fail(path, where, f"must be a source (or list of them) or a table with a 'source', got {value!r}")
+        raise _fail(path, key, f"must be a source (or list of them) or a table with a 'source', got {value!r}")
     allowed = {"source", "where", *extra}
     if unknown := sorted(set(value) - allowed):
-        raise _fail(path, where, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+        raise _fail(path, key, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
     cond = value.get("where", {})
     if not isinstance(cond, dict) or not all(isinstance(v, str | int | float) for v in cond.values()):
-        raise _fail(path, f"{where}.where", f"must be a table of column = value, got {cond!r}")
+        raise _fail(path, f"{key}.where", f"must be a table of column = value, got {cond!r}")
     first, *rest = _sources(value["source"])
     return Selector(first, tuple(sorted(cond.items())), tuple(rest))
 
 
 def _channel(name: str, value: Any, path: str, table: str = "channels") -> Channel:
-    where = f"{table}.{name}"
+    key = f"{table}.{name}"
     if isinstance(value, list) and value and any(isinstance(v, dict) for v in value):
         # alternative channels: [table or source, …], the first whose stream and fields a file has wins
         first, *rest = (_channel(name, v, path, table) for v in value)
         return replace(first, alternatives=tuple(rest))
     if _sources(value) is not None:
-        return Channel(name, _selector(value, path, where))
+        return Channel(name, _selector(value, path, key))
     if not isinstance(value, dict):
-        raise _fail(path, where, f"must be a source string or a table, got {value!r}")
+        raise _fail(path, key, f"must be a source string or a table, got {value!r}")
     transform = value.get("transform", "identity")
     if not isinstance(transform, str) or transform not in TRANSFORMS:
-        raise _fail(path, f"{where}.transform", f"unknown transform {transform!r}; known: {sorted(TRANSFORMS)}")
+        raise _fail(path, f"{key}.transform", f"unknown transform {transform!r}; known: {sorted(TRANSFORMS)}")
     params = TRANSFORMS[transform].params
-    sel = _selector(value, path, where, extra=(_CHANNEL_KEYS | set(params)) - {"source", "where"})
-    sign = _number(value.get("sign", 1), path, f"{where}.sign")
+    sel = _selector(value, path, key, extra=(_CHANNEL_KEYS | set(params)) - {"source", "where"})
+    sign = _number(value.get("sign", 1), path, f"{key}.sign")
     if sign not in (1.0, -1.0):
-        raise _fail(path, f"{where}.sign", f"must be 1 or -1, got {sign!r}")
-    scale = _number(value.get("scale", 1.0), path, f"{where}.scale")
+        raise _fail(path, f"{key}.sign", f"must be 1 or -1, got {sign!r}")
+    scale = _number(value.get("scale", 1.0), path, f"{key}.scale")
     if abs(scale) < 1 / MAX_MAGNITUDE:
-        raise _fail(path, f"{where}.scale", f"must not be zero or below {1 / MAX_MAGNITUDE:g} in magnitude, "
+        raise _fail(path, f"{key}.scale", f"must not be zero or below {1 / MAX_MAGNITUDE:g} in magnitude, "
                     f"got {scale!r}")
     if transform == "pwm":
-        lo, hi = (_number(value.get(k, d), path, f"{where}.{k}") for k, d in (("pwm_min", 1000), ("pwm_max", 2000)))
+        lo, hi = (_number(value.get(k, d), path, f"{key}.{k}") for k, d in (("pwm_min", 1000), ("pwm_max", 2000)))
         if not lo < hi:
-            raise _fail(path, where, f"pwm_min ({lo:g}) must be below pwm_max ({hi:g}): the stick's range in µs")
+            raise _fail(path, key, f"pwm_min ({lo:g}) must be below pwm_max ({hi:g}): the stick's range in µs")
     return Channel(
         name,
         sel,
         transform=transform,
         scale=scale,
-        offset=_number(value.get("offset", 0.0), path, f"{where}.offset"),
+        offset=_number(value.get("offset", 0.0), path, f"{key}.offset"),
         sign=sign,
-        params=tuple((p, _number(value[p], path, f"{where}.{p}")) for p in params if p in value),
+        params=tuple((p, _number(value[p], path, f"{key}.{p}")) for p in params if p in value),
     )
 
 
-def _flag(value: Any, path: str, where: str) -> FlagRule:
-    sel = _selector(value, path, where, extra=("bitmask", "equals", "on", "off"))
+def _flag(value: Any, path: str, key: str) -> FlagRule:
+    sel = _selector(value, path, key, extra=("bitmask", "equals", "on", "off"))
     bitmask = value.get("bitmask") if isinstance(value, dict) else None
     equals = value.get("equals") if isinstance(value, dict) else None
     events = {k: value.get(k) for k in ("on", "off")} if isinstance(value, dict) else {}
     if any(v is not None for v in events.values()):
         if bitmask is not None or equals is not None or not all(isinstance(v, list) and v for v in events.values()):
-            raise _fail(path, where, "events need both on = [values] and off = [values], and neither bitmask nor "
+            raise _fail(path, key, "events need both on = [values] and off = [values], and neither bitmask nor "
                         "equals")
-        on, off = (tuple(_number(x, path, f"{where}.{k}") for x in events[k]) for k in ("on", "off"))
+        on, off = (tuple(_number(x, path, f"{key}.{k}") for x in events[k]) for k in ("on", "off"))
         return FlagRule(sel, on=on, off=off)
     if bitmask is not None and (isinstance(bitmask, bool) or not isinstance(bitmask, int) or not 0 < bitmask < 2**63):
-        raise _fail(path, f"{where}.bitmask", f"must be a positive integer below 2**63, got {bitmask!r}")
+        raise _fail(path, f"{key}.bitmask", f"must be a positive integer below 2**63, got {bitmask!r}")
     if equals is not None:
-        equals = _number(equals, path, f"{where}.equals")
+        equals = _number(equals, path, f"{key}.equals")
     return FlagRule(sel, bitmask, equals)
 
 
@@ -602,8 +504,8 @@ def _names(raw: Any, path: str, key: str) -> tuple[str, ...]:
     return tuple(raw)
 
 
-def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping:
-    at = f"{path}{' ' + where if where else ''}"
+def _parse(raw: Mapping[str, Any], path: str, section: str = "") -> ChannelMapping:
+    at = f"{path}{' ' + section if section else ''}"
     if unknown := sorted(set(raw) - _TOP_KEYS):
         raise _fail(at, "top level", f"unknown key(s) {unknown}; allowed: {sorted(_TOP_KEYS)}")
     if "dt" not in raw:
@@ -621,7 +523,7 @@ def _parse(raw: Mapping[str, Any], path: str, where: str = "") -> ChannelMapping
         raise _fail(at, "channels", f"must be a table, got {chans!r}")
     per_format = any(isinstance(raw.get(f), dict) and "channels" in raw[f] for f in FORMAT_NAMES)
     missing = [n for n in (*states, *inputs) if n not in chans]
-    if missing and not (per_format and not where):
+    if missing and not (per_format and not section):
         raise _fail(at, "channels", f"no source for {missing}")
     extra = sorted(set(chans) - set(states) - set(inputs))
     if extra:

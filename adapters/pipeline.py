@@ -409,8 +409,10 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
         )
 
     windows = [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts]
-    stick_cause, stick_note = check_sticks(m, streams, [(float(t[0]), float(t[-1]), span.meta.get("mode"))
-                                                        for span, ts, _ in found for t in ts])
+    table = m.segment.mode.names if m.segment.mode is not None else None
+    stick_cause, stick_note = check_sticks(m, streams, [
+        (float(t[0]), float(t[-1]), plant_group(table, span.meta["mode"]) if "mode" in span.meta else None)
+        for span, ts, _ in found for t in ts])
     if stick_cause and not still:
         if not allow_still:
             raise DataError(stick_cause)

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from adapters.mapping import Selector
+    from adapters.rules import Selector
 
 __all__ = ["ReferenceRule", "REFERENCE_FORMS"]
 

@@ -19,7 +19,7 @@ from workbench.errors import MappingError
 if TYPE_CHECKING:
     import pandas as pd
 
-    from adapters.mapping import Channel, Selector
+    from adapters.rules import Channel, Selector
 
 __all__ = ["Selected", "select", "resolve_channel", "channel_values", "channel_convert", "channel_inverse"]
 
@@ -158,10 +158,10 @@ def channel_convert(ch: Channel, raw: np.ndarray) -> np.ndarray:
     """``sign * scale * transform(raw) + offset`` of raw field columns (rows × columns), offline and online."""
     tr = TRANSFORMS[ch.transform]
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        return ch.gain * tr.forward(raw, dict(ch.params)) + ch.offset
+        return ch.factor * tr.forward(raw, dict(ch.params)) + ch.offset
 
 
 def channel_inverse(ch: Channel, values: np.ndarray) -> np.ndarray:
     """Field columns that :func:`channel_values` maps back onto ``values`` (for the writers)."""
     tr = TRANSFORMS[ch.transform]
-    return tr.inverse((np.asarray(values, dtype=np.float64) - ch.offset) / ch.gain, dict(ch.params))
+    return tr.inverse((np.asarray(values, dtype=np.float64) - ch.offset) / ch.factor, dict(ch.params))

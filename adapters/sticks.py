@@ -5,9 +5,9 @@ Which RC channel carries the roll stick is the vehicle's setting, not the mappin
 (``RCMAP_PITCH``, ``RCMAP_THROTTLE``, ``RCMAP_YAW``), PX4's ``RC_MAP_ROLL`` … Every 2014 – early-2015 Erle PXF log
 has ``RCMAP_ROLL = 2, RCMAP_PITCH = 1``: a mapping that read ``RCIN.C1`` as the roll stick modelled the pitch stick
 against the roll-plane states. So a mapping names a stick by its role, ``RCIN.C{roll}``, and says whose map it is
-(``rc_map = "ardupilot"``, a key of :data:`RC_MAPS`); :func:`resolve` reads the log's parameters (DataFlash
-``PARM``, tlog ``PARAM_VALUE``, ULog parameters) and puts the channel number in, the firmware's default where the
-log does not hold the parameter, and says which (:func:`describe`).
+(``rc_map = "ardupilot"``, a key of :data:`adapters.rc_maps.RC_MAPS`); :func:`resolve` reads the log's parameters
+(DataFlash ``PARM``, tlog ``PARAM_VALUE``, ULog parameters) and puts the channel number in, the firmware's default
+where the log does not hold the parameter, and says which (:func:`describe`).
 
 A map can be stale (the parameter changed after the log's parameter dump) or missing, so the sticks are also
 checked against the log itself where the mapping declares, in ``[setpoints]``, what each input commands (ArduPilot
@@ -25,20 +25,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from adapters.rc_maps import MAX_CHANNELS, RC_MAPS, fill, placeholders
 from workbench.errors import DataError, MappingError
 
 if TYPE_CHECKING:
-    from adapters.mapping import Channel, ChannelMapping
+    from adapters.mapping import ChannelMapping
+    from adapters.rules import Channel
     from adapters.streams import Streams
 
-__all__ = ["RcMap", "RC_MAPS", "ROLES", "Stick", "log_parameters", "placeholders", "resolve", "with_defaults",
-           "describe", "check", "STRONG", "SHARE"]
+__all__ = ["Stick", "log_parameters", "resolve", "with_defaults", "describe", "check", "STRONG", "SHARE"]
 
-#: The sticks a mapping may name by role.
-ROLES = ("roll", "pitch", "throttle", "yaw")
-_PLACEHOLDER = re.compile(r"\{([a-z]+)\}")
-#: RC channels a role may name (ArduPilot has 16, MAVLink's RC_CHANNELS 18, PX4 18)
-MAX_CHANNELS = 32
 #: A setpoint is driven by the sticks where some channel's correlation with it reaches this: Cohen's "large"
 #: correlation. Below it no channel explains the setpoint (a mode in which the autopilot moves it, a stick held
 #: still) and no verdict is given.
@@ -46,29 +42,6 @@ STRONG = 0.5
 #: The mapped stick moves with its setpoint when it explains at least this share of the setpoint's variance that
 #: the best channel explains (r² against r²): a channel that explains less than half of it is not the stick.
 SHARE = 0.5
-
-
-@dataclass(frozen=True)
-class RcMap:
-    """A firmware's RC map: the parameter naming each role's channel, and its default where a log lacks it."""
-
-    firmware: str
-    parameters: Mapping[str, str]
-    defaults: Mapping[str, int]
-    #: a value meaning "on no channel" (PX4: 0); ``None``: every value names a channel
-    unassigned: int | None = None
-
-
-RC_MAPS: dict[str, RcMap] = {
-    "ardupilot": RcMap("ArduPilot", {r: f"RCMAP_{r.upper()}" for r in ROLES},
-                       {"roll": 1, "pitch": 2, "throttle": 3, "yaw": 4}),
-    # PX4's own default is 0 (unassigned until the radio is calibrated); calibration assigns mode 2's 1, 2, 3, 4
-    "px4": RcMap("PX4", {r: f"RC_MAP_{r.upper()}" for r in ROLES}, {"roll": 1, "pitch": 2, "throttle": 3, "yaw": 4},
-                 unassigned=0),
-}
-
-#: Streams holding a log's parameters that a reader gives only when asked (DataFlash's and ULog's come in ``info``)
-PARAMETER_STREAMS = ("PARAM_VALUE",)
 
 
 @dataclass(frozen=True)
@@ -87,15 +60,6 @@ class Stick:
         if self.logged:
             return f"{self.parameter} = {self.number}"
         return f"{self.parameter} not in the log: {firmware}'s default {self.number}"
-
-
-def placeholders(source: str) -> list[str]:
-    """The roles a source names (``"RCIN.C{roll}"`` → ``["roll"]``)."""
-    return _PLACEHOLDER.findall(source)
-
-
-def _fill(source: str, numbers: Mapping[str, int]) -> str:
-    return _PLACEHOLDER.sub(lambda m: str(numbers[m.group(1)]), source)
 
 
 def log_parameters(streams: Streams) -> dict[str, float | str]:
@@ -126,13 +90,13 @@ def _stick_roles(m: ChannelMapping) -> list[tuple[Channel, str, tuple[str, ...]]
 
 
 def _substitute(m: ChannelMapping, numbers: Mapping[str, int], sticks: tuple[Stick, ...]) -> ChannelMapping:
-    def fill(ch: Channel) -> Channel:
+    def numbered(ch: Channel) -> Channel:
         sel = ch.selector
-        sel = replace(sel, source=_fill(sel.source, numbers), alternatives=tuple(_fill(a, numbers)
+        sel = replace(sel, source=fill(sel.source, numbers), alternatives=tuple(fill(a, numbers)
                                                                                   for a in sel.alternatives))
-        return replace(ch, selector=sel, alternatives=tuple(fill(a) for a in ch.alternatives))
+        return replace(ch, selector=sel, alternatives=tuple(numbered(a) for a in ch.alternatives))
 
-    return replace(m, channels=tuple(fill(c) for c in m.channels), sticks=sticks)
+    return replace(m, channels=tuple(numbered(c) for c in m.channels), sticks=sticks)
 
 
 def _number(value: Any) -> int | None:
@@ -168,7 +132,7 @@ def resolve(m: ChannelMapping, streams: Streams) -> ChannelMapping:
                 f"not an RC channel number (1 … {MAX_CHANNELS})"
             raise DataError(f"{streams.path}: mapping {m.name!r}: {ch.name} is the {role} stick, but the log's "
                             f"{name} = {params[name]!r} is {what}: a mapping that names the stick's channel itself "
-                            f"(e.g. {_fill(sources[0], {role: rc.defaults[role]})}) reads this log")
+                            f"(e.g. {fill(sources[0], {role: rc.defaults[role]})}) reads this log")
         numbers[role] = number
         sticks.append(Stick(ch.name, role, number, name, logged, sources))
     return _substitute(m, numbers, tuple(sticks))
@@ -237,10 +201,10 @@ def _candidates(m: ChannelMapping, streams: Streams, ch: Channel, stick: Stick |
     out = []
     pattern = None
     if stick is not None:
-        pattern = next((p for p in stick.patterns if placeholders(p) and _fill(p, {stick.role: stick.number}) ==
+        pattern = next((p for p in stick.patterns if placeholders(p) and fill(p, {stick.role: stick.number}) ==
                         source), None)
     if pattern is not None:
-        sources = [_fill(pattern, {stick.role: k}) for k in range(1, MAX_CHANNELS + 1)]
+        sources = [fill(pattern, {stick.role: k}) for k in range(1, MAX_CHANNELS + 1)]
     else:
         try:
             sel = select(ch.selector, streams, "", m.name, n_columns=1)
@@ -271,22 +235,26 @@ def _correlation(stick: _Series, target_t: np.ndarray, target_v: np.ndarray) -> 
     return float(np.corrcoef(x, y)[0, 1])
 
 
-def commands_setpoint(mode: str | None) -> bool:
-    """Whether in ``mode`` the sticks command the attitude setpoint themselves: not where the autopilot holds the
-    position (LOITER, POSHOLD, QLOITER, PX4's POSCTL: the stick asks for a velocity, and the position controller's
-    lean follows the vehicle's heading and drift; erlerobot/logs 22-12-2014/37.BIN's LOITER DesRoll correlates
-    −0.83 with the yaw stick). A segment of no known mode is checked."""
-    from adapters.modes import AUTOPILOT_HOLDS
+def commands_setpoint(group: str | None) -> bool:
+    """Whether in a segment of plant group ``group`` (:data:`workbench.data.plant_groups.PLANT_GROUPS`, the mode's
+    :func:`adapters.modes.plant_group`) the stick commands the attitude setpoint itself: a lean or bank angle. Not
+    where it asks for a velocity (LOITER, POSHOLD, QLOITER, POSCTL: the position controller's lean turns with the
+    heading; erlerobot/logs 22-12-2014/37.BIN's LOITER DesRoll correlated −0.83 with the yaw stick) or a rate (ACRO:
+    the setpoint integrates the stick), nor in a mode no table describes. A segment of no mode rule is checked."""
+    from workbench.data.plant_groups import PLANT_GROUPS
 
-    return "position" not in AUTOPILOT_HOLDS.get(mode or "", "")
+    if group is None:
+        return True
+    kind = PLANT_GROUPS.get(group)
+    return kind is not None and kind.lateral in ("angle", "bank")
 
 
 def check(m: ChannelMapping, streams: Streams,
           windows: Sequence[tuple[float, float] | tuple[float, float, str | None]]) -> tuple[str, str]:
     """Whether each input with a setpoint (``[setpoints]``) moves with it over ``windows`` (the kept segments, each
-    with its flight mode where known; those of a mode in which the stick does not command the setpoint are left
-    out, :func:`commands_setpoint`): ``(cause, note)``, the cause one line (``""`` where every checked stick moves
-    with its setpoint), the note what was checked.
+    with its plant group where the mapping has a mode rule; those in which the stick does not command the setpoint
+    are left out, :func:`commands_setpoint`): ``(cause, note)``, the cause one line (``""`` where every checked
+    stick moves with its setpoint), the note what was checked.
 
     A setpoint is explained by the sticks where some channel of the input's stream correlates with it at least
     :data:`STRONG`; the input then moves with it unless it explains less than :data:`SHARE` of what the best channel
@@ -318,12 +286,13 @@ def check(m: ChannelMapping, streams: Streams,
         if best is not None and abs(best[1]) >= STRONG and r2 < SHARE * best[1] ** 2:
             stick = by_input.get(sp.name)
             by_role = stick is not None and m.rc_map is not None and any(
-                placeholders(p) and _fill(p, {stick.role: stick.number}) == ch.selector.source for p in stick.patterns)
+                placeholders(p) and fill(p, {stick.role: stick.number}) == ch.selector.source for p in stick.patterns)
             how = f" (the {stick.role} stick by {stick.why(RC_MAPS[m.rc_map].firmware)})" if by_role else ""
             moved = f"correlation {r_mapped:+.2f}" if np.isfinite(r_mapped) else "it does not move there"
             causes.append(
                 f"{sp.name} reads {mapped.label}{how}, which does not move with {target.label}, what it commands: "
-                f"{moved} over the {tt.size} samples of the kept segments, where {best[0]} correlates "
+                f"{moved} over the {tt.size} samples of the kept segments in which the stick commands it, where "
+                f"{best[0]} correlates "
                 f"{best[1]:+.2f} — the stick is on {best[0]}; a mapping whose {sp.name} reads it imports this log")
         elif np.isfinite(r_mapped) and abs(r_mapped) >= STRONG:
             notes.append(f"{sp.name} moves with {target.label} (r = {r_mapped:+.2f})")

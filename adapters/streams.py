@@ -139,10 +139,6 @@ class Streams(Mapping[str, "pd.DataFrame"]):
         names.update(dict.fromkeys(self.frames))
         return list(names)
 
-    @property
-    def n_skipped(self) -> int:
-        return int(sum(self.skipped.values()))
-
 
 def split_source(source: str, known: Iterable[str]) -> tuple[str, str] | None:
     """Split ``"stream.field"`` or ``"stream:field"`` into (stream, field) against the streams ``known``.

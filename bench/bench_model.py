@@ -101,7 +101,7 @@ def _paper_figures(train_seed: int, test_seed: int) -> list[dict]:
                 train, test, sizes=(5,), repeats=5, seed=0,
             )
         table = ev.compare(models, test, n_steps=60, samples=200, seed=0)
-        s = ev.summarize(table)
+        s = ev.method_means(table)
         cov = ev.coverage_summary(ev.one_step_coverage(models["proposed"], test))
         cov3 = cov[cov.n_sigma == 3].set_index("input")["coverage"]
         band = table[(table.method == "proposed") & table.metric.isin(["band_position_x", "band_position_y"])]

@@ -269,7 +269,7 @@ def bench_tlog(tmp: Path) -> list[dict]:
                 rows.append(_target(_row("tlog", case, mode, first["ours"], first["peer"], "pymavlink recv_match"),
                                     10.0, "≥ 10×"))
         if path != small:
-            typed = interleaved({"ours": lambda p=path: read_streams(p, types=["ATTITUDE"]),
+            typed = interleaved({"ours": lambda p=path: read_streams(p, ["ATTITUDE"]),
                                  "peer": lambda p=path: _pymavlink(p, "ATTITUDE")}, reps, warmup=size == "small")
             row = _row("tlog", case, "typed read, warm: ATTITUDE only", typed["ours"], typed["peer"],
                        "pymavlink recv_match(type=)")

@@ -252,10 +252,10 @@ def test_no_public_name_shadows_a_submodule():
         assert not set(exports) & submodules, f"{package}: {sorted(set(exports) & submodules)}"
 
 
-#: Folders whose modules a registry finds (adapters.formats imports every declared format): the tree names the folder
-#: and the registry lists its members (adapters.formats.describe()); a list in the tree too would be one more place a
-#: new format must be added.
-REGISTRY_FOLDERS = ("adapters/formats/declared",)
+#: Folders whose modules a registry finds (adapters.formats imports every declared format, workbench.viewer.tabs every
+#: tab): the tree names the folder and the registry lists its members (adapters.formats.describe()); a list in the tree
+#: too would be one more place a new format or tab must be added.
+REGISTRY_FOLDERS = ("adapters/formats/declared", "workbench/viewer/tabs")
 
 
 def test_the_architecture_page_lists_every_module():

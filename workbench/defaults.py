@@ -8,7 +8,7 @@ from __future__ import annotations
 
 __all__ = [
     "DT_PAPER_S", "HORIZON_S", "N_COMPONENTS", "N_STEPS", "OBJECTIVE_RESAMPLES", "ONLINE_HORIZON_S", "REG_COVAR",
-    "STUDY_N_COMPONENTS",
+    "STUDY_N_COMPONENTS", "TIMING",
 ]
 
 N_COMPONENTS = 5  # G, Gaussian components of the TP-GMM / GMR (the paper's)
@@ -22,3 +22,6 @@ ONLINE_HORIZON_S = 1.0  # the rollout at every step of `live` and `replay`, in s
 # resamples of the training trials for the intervals of the task objective and its weight ratios (fit, report,
 # demo: --bootstrap)
 OBJECTIVE_RESAMPLES = 100
+# the pilot's reaction delay and lag (workbench.method.timing): identified per pilot and used by the gain, the
+# objective and prediction ("identify"), or none, the paper's u = K x ("none"); `timing=` of a model, `--timing`
+TIMING = "identify"

@@ -38,8 +38,10 @@ OKABE_ITO: dict[str, RGB] = {
 #: the methods' colours, in the registry's order (proposed, IOC-only, GMR-only, persistence)
 METHOD_COLORS: tuple[RGB, ...] = (OKABE_ITO["blue"], OKABE_ITO["vermillion"], OKABE_ITO["sky blue"],
                                   OKABE_ITO["bluish green"])
-#: a method no registry line names gets one of these, the same one on every run
-SPARE_METHOD_COLORS: tuple[RGB, ...] = ((170, 68, 153), (102, 102, 204))
+#: a method no declaration names gets one of these, the same one on every run; the first (an indigo) also stays apart
+#: from the four and the recorded trace under deuteranopia and protanopia, so a fifth declared method can take it
+#: (its declaration's colour 4: tests/test_extensions.py adds one)
+SPARE_METHOD_COLORS: tuple[RGB, ...] = ((51, 51, 204), (170, 68, 153))
 RECORDED_PAPER: RGB = (0, 0, 0)
 RECORDED_SCREEN: RGB = (225, 225, 225)
 #: strategies (CS1, CS2, …), the segments of a flight and the logs of an overlay, in order

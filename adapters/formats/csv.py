@@ -184,8 +184,15 @@ def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Stream
     except UnicodeDecodeError as exc:
         raise DataError(f"{where}, {lines.bad_utf8() or 'unknown line'}: not a readable CSV ({exc.reason})") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:  # pandas fails some shapes so
-        detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DataError(f"{where}, {lines.bad_row()}: not a readable CSV ({detail})") from None
+        # said in the format's words, never the parser's ("Error tokenizing data. C error: …" is pandas' text)
+        place = lines.bad_row()
+        if isinstance(exc, pd.errors.EmptyDataError):
+            why = "no columns"
+        elif place != "unknown line":
+            why = "rows and header differ in length"
+        else:
+            why = "a row the parser cannot split into the header's fields"
+        raise DataError(f"{where}, {place}: not a readable CSV ({why})") from None
     if not isinstance(table.index, pd.RangeIndex) or table.shape[1] != len(columns):
         # More fields than names in every row: pandas would take the first as an index; the format refuses.
         raise DataError(f"{where}, {lines.bad_row()}: not a readable CSV (rows and header differ in length)")

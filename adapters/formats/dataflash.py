@@ -61,7 +61,7 @@ or old ``Week``/``TimeMS`` with ``T``), ``info["utc_time_at_boot"]`` (Unix secon
 
 Instances: where FMTU marks a field as the instance (unit ``#``, e.g. ``IMU.I``, ``XKF1.C``), every instance
 value becomes its own stream named as DFReader indexes its messages: ``IMU[0]``, ``IMU[1]``, ``XKF1[0]``.
-``types=["IMU"]`` reads every instance, ``types=["IMU[1]"]`` one. ``info["instances"]`` lists them per type. A
+``topics=["IMU"]`` reads every instance, ``topics=["IMU[1]"]`` one. ``info["instances"]`` lists them per type. A
 type with more than 256 instance values (damage), or whose instance names would collide, stays one stream.
 
 Vehicle and modes: the firmware string is the first ``MSG`` naming a vehicle (``"ArduCopter V3.3-dev (…)"``,
@@ -558,8 +558,8 @@ def _units(log: _Log) -> None:
 
 
 # ------------------------------------------------------------------------------------------------ reading
-def read(path: str | os.PathLike, types: Iterable[str] | None = None) -> Streams:
-    """Read a DataFlash ``.bin`` log into streams (only ``types`` when given: names or ``NAME[instance]``)."""
+def read(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Streams:
+    """Read a DataFlash ``.bin`` log into streams (only ``topics`` when given: message names or ``NAME[instance]``)."""
     where = os.fspath(path)
     data = read_bytes(path)
     if not data:
@@ -575,7 +575,7 @@ def read(path: str | os.PathLike, types: Iterable[str] | None = None) -> Streams
                         f"({len(data)} bytes)")
     log = _Log(buf, chain)
     _units(log)
-    return _streams(where, log, None if types is None else list(types))
+    return _streams(where, log, None if topics is None else list(topics))
 
 
 def _stream_names(log: _Log) -> tuple[dict[int, str], dict[int, dict[str, np.ndarray]]]:

@@ -7,17 +7,31 @@ formats and parameters (see the reader's module docstring).
 from __future__ import annotations
 
 import datetime as _dt
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from typing import Any, Protocol
 
 import numpy as np
 from pymavlink import mavutil
 
 from adapters.modes import heartbeat_table
 
-if TYPE_CHECKING:
-    from adapters.formats.dataflash import _Log
+__all__ = ["ScannedLog", "log_info"]
 
-__all__ = ["log_info"]
+
+class ScannedLog(Protocol):
+    """What :func:`log_info` reads of a scanned log (the reader's ``_Log`` is one): an interface here, so that the
+    reader imports this module and this module never imports the reader."""
+
+    chain: Any  # the message chain: ``pos``, each message's offset
+    types: Mapping[int, Any]  # type id -> its FMT (columns, units, …)
+    index: Mapping[int, np.ndarray]  # type id -> its messages' positions in the chain
+    t: np.ndarray  # every message's time (s)
+
+    def id_of(self, name: str) -> int | None: ...
+
+    def column(self, t: int, name: str) -> np.ndarray | None: ...
+
+    def is_text(self, t: int, name: str) -> bool: ...
 
 # VER.BU build types (DFReader's), and the vehicles' names
 _BUILD_TYPES = {1: 10, 2: 2, 3: 1, 4: 5, 7: 12, 13: 4, 12: 7}
@@ -33,7 +47,7 @@ _LEAP = tuple((_dt.datetime(y, m, 1, tzinfo=_dt.UTC).timestamp(), s)
 _GPS_EPOCH = 315964800.0  # 1980-01-06 in Unix seconds
 
 
-def _vehicle(log: _Log) -> tuple[int | None, str]:
+def _vehicle(log: ScannedLog) -> tuple[int | None, str]:
     """DFReader's mav_type from the first MSG naming a vehicle (or VER's build type), and the firmware text."""
     msg = log.id_of("MSG")
     texts = log.column(msg, "Message") if msg is not None else None
@@ -57,7 +71,7 @@ def _whole(value: Any) -> bool:
     return isinstance(value, int) or (isinstance(value, float) and value.is_integer())
 
 
-def _flight_modes(log: _Log, mav_type: int | None, t_end: float) -> list[tuple[str, float, float]]:
+def _flight_modes(log: ScannedLog, mav_type: int | None, t_end: float) -> list[tuple[str, float, float]]:
     mode = log.id_of("MODE")
     if mode is None:
         return []
@@ -84,7 +98,7 @@ def _flight_modes(log: _Log, mav_type: int | None, t_end: float) -> list[tuple[s
     return [(n, float(a), float(b)) for n, a, b in spans]
 
 
-def _armed_spans(log: _Log, t_end: float) -> list[tuple[float, float]]:
+def _armed_spans(log: ScannedLog, t_end: float) -> list[tuple[float, float]]:
     arm = log.id_of("ARM")
     ev = log.id_of("EV")
     if arm is not None and log.column(arm, "ArmState") is not None:
@@ -113,7 +127,7 @@ def _armed_spans(log: _Log, t_end: float) -> list[tuple[float, float]]:
     return spans
 
 
-def _utc(log: _Log) -> float | None:
+def _utc(log: ScannedLog) -> float | None:
     """Unix time at boot (t = 0) from the first GPS message with GPS time, as DFReader finds its time base."""
     for name in ("GPS", "GPS2"):
         g = log.id_of(name)
@@ -140,7 +154,7 @@ def _utc(log: _Log) -> float | None:
     return None
 
 
-def log_info(log: _Log, names: dict[int, str], instances: dict[int, dict[str, np.ndarray]]) -> dict[str, Any]:
+def log_info(log: ScannedLog, names: dict[int, str], instances: dict[int, dict[str, np.ndarray]]) -> dict[str, Any]:
     t_all = log.t
     finite = t_all[np.isfinite(t_all)]
     t_end = float(finite.max()) if finite.size else float("nan")

@@ -131,10 +131,6 @@ def _spec_of_class(cls) -> list:
             list(cls.fieldnames), int(cls.unpacker.size)]
 
 
-def _layout_from_class(cls) -> MessageLayout:
-    return _layout_from_spec(_spec_of_class(cls))
-
-
 def _layout_from_spec(spec: list) -> MessageLayout:
     msgid, msgname, crc_extra, fmt, wire_names, fieldnames, unpacked_size = spec
     if fmt[:1] != "<":

@@ -220,15 +220,13 @@ def _records_follow(head: bytes) -> bool:
     return best + 1 >= _CHAINED_RECORDS
 
 
-def read_streams(
-    path: str | os.PathLike[str], message_types: Iterable[str] | None = None, *, types: Iterable[str] | None = None
-) -> dict[str, pd.DataFrame]:
-    """Read a tlog into one DataFrame per message type; see :func:`read_tlog` (``types``: ``message_types``).
+def read_streams(path: str | os.PathLike[str], message_types: Iterable[str] | None = None) -> dict[str, pd.DataFrame]:
+    """Read a tlog into one DataFrame per message type; see :func:`read_tlog`.
 
     The same values as ``read_tlog(path, message_types).streams``; with a type filter, faster: only the frames
     that decide the selected messages are checksummed (no report is made).
     """
-    return _read(path, message_types if message_types is not None else types, "ardupilotmega", False).streams
+    return _read(path, message_types, "ardupilotmega", False).streams
 
 
 def read_tlog(

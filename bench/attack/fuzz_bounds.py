@@ -1,5 +1,6 @@
-"""Attack round on bounds and losses (issue 29): hostile sizes, bad stamps, meaningless mapping values, copied
-and special files in datasets, replay waits, schedulers, nesting, large standard input.
+"""Attack round on bounds and losses (issue 29; issue 36: altered dataset copies, model files that expand, hostile
+numbers on the command line): hostile sizes, bad stamps, meaningless mapping values, copied and special files in
+datasets, replay waits, schedulers, nesting, large standard input.
 Not part of the test suite: run it for a bounded time and read the counts.
 
     PYTHONPATH=. nice .venv/bin/python bench/attack/fuzz_bounds.py --seconds 30   # per surface
@@ -26,7 +27,6 @@ import random
 import re
 import resource
 import shutil
-import signal
 import socket
 import struct
 import subprocess
@@ -34,7 +34,6 @@ import sys
 import tempfile
 import threading
 import time
-import traceback
 import zlib
 from collections import Counter
 from collections.abc import Callable
@@ -46,57 +45,14 @@ sys.path.insert(0, str(REPO))
 
 from workbench.errors import WorkbenchError  # noqa: E402
 
-HANG_S = 60.0
-FOREIGN_TEXT = re.compile(r"ZstdError|codec can't decode|cannot fit|Traceback|RecursionError|OverflowError|"
-                          r"need at least one array|WebSocketError|TypeError")
+sys.path.insert(0, str(Path(__file__).parent))
+from harness import HANG_S, _call_in_child, _mutate  # noqa: E402 - the shared harness
+
+#: Python's own words in a command's error line (an internal error's class name, a limit, a library's parser).
+PYTHON_TEXT = re.compile(r"Traceback|\w+Error:|Exceeds the limit|integer string conversion|cannot convert float|"
+                         r"C error|--debug for the traceback|magic bytes not found")
 TLOG = REPO / "sample_logs" / "landing_s00.tlog"
 MAX_INPUT = 10 << 20  # bytes: every generated input file is smaller
-
-
-def _call_in_child(call: Callable[[], str | None]) -> tuple[str, str | None, float, int]:
-    """Run ``call`` in a forked child: (kind, detail, seconds, peak RSS in bytes); kind is ``ok`` (detail: what
-    was wrong, if anything), ``clean``, ``foreign`` or ``hang``."""
-    r, w = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: the call, its verdict, its time; nothing of it returns but through the pipe
-        os.close(r)
-        code = 0
-        try:
-            start = time.monotonic()
-            try:
-                out = ["ok", call()]
-            except WorkbenchError as exc:
-                out = ["foreign" if FOREIGN_TEXT.search(str(exc)) else "clean", str(exc)[:300]]
-            except BaseException as exc:  # noqa: BLE001 - the point of the fuzzer: count what escapes
-                where = traceback.extract_tb(exc.__traceback__)[-1].filename if exc.__traceback__ else "?"
-                out = ["foreign", f"{type(exc).__name__}: {str(exc)[:200]} @ {where}"]
-            out.append(time.monotonic() - start)
-            out.append(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
-            os.write(w, json.dumps(out).encode()[:60_000])
-        except BaseException:  # noqa: BLE001
-            code = 1
-        finally:
-            os._exit(code)
-    os.close(w)
-    deadline = time.monotonic() + 2 * HANG_S
-    hung = False
-    while True:
-        done, _, usage = os.wait4(pid, os.WNOHANG)
-        if done:
-            break
-        if time.monotonic() > deadline:
-            os.kill(pid, signal.SIGKILL)
-            _, _, usage = os.wait4(pid, 0)
-            hung = True
-            break
-        time.sleep(0.01)
-    with os.fdopen(r, "rb") as f:
-        raw = f.read()
-    peak = usage.ru_maxrss * 1024
-    if hung or not raw:
-        return ("hang" if hung else "foreign"), ("killed" if hung else "child died"), 2 * HANG_S, peak
-    kind, detail, took, kids = json.loads(raw)
-    return kind, detail, took, max(peak, kids)
 
 
 class Tally:
@@ -126,9 +82,11 @@ class Tally:
             c["clean errors"] += 1
         elif kind == "foreign":
             c["foreign errors"] += 1
-            self.examples.setdefault(surface, []).append(str(detail))
+            self.examples.setdefault(surface, []).append(f"{detail}" + (f" ({call.what})" if hasattr(call, "what")
+                                                                           else ""))
         if kind == "hang" or took > HANG_S:
             c["hangs"] += 1
+            self.examples.setdefault(surface, []).append(f"hang: {getattr(call, 'what', detail)}")
         if kind == "ok" and detail:
             c["silent wrong results"] += 1
             self.examples.setdefault(surface, []).append(f"wrong: {detail}")
@@ -199,7 +157,6 @@ def _mcap_bomb(size: int) -> bytes:
     return data
 
 def attack_mcap_sizes(rng: random.Random, base: Path, sample: bytes) -> Prepared:
-    from fuzz_surfaces import _mutate  # noqa: PLC0415 - the same damage the last round used
 
     import adapters
 
@@ -354,9 +311,11 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
     root = base / f"ds{rng.randrange(10**9)}"
     write_dataset(study, root)
     victim = next(root.rglob("*.parquet"))
-    action = rng.choice(["copy", "copy_other_subject", "fifo", "self_link", "dangling_link", "device", "socket",
-                         "nothing"])
-    if action == "copy":
+    action = rng.choice(["copy", "copy_other_subject", "copy_shifted", "copy_ulp", "copy_shorter", "fifo",
+                         "self_link", "dangling_link", "device", "socket", "nothing"])
+    if action in ("copy_shifted", "copy_ulp", "copy_shorter"):  # a copy altered so neither bytes nor ids repeat
+        _altered_copy(victim, victim.with_name(f"{victim.stem} (copy).parquet"), action.removeprefix("copy_"))
+    elif action == "copy":
         shutil.copyfile(victim, victim.with_name(f"{victim.stem} (copy).parquet"))
     elif action == "copy_other_subject":
         other = root / "subject=zz"
@@ -385,6 +344,138 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
         return None
 
     return call, [*(q for q in root.rglob("*") if q.is_file() and not q.is_symlink()), root]
+
+
+def _altered_copy(src: Path, dst: Path, how: str) -> None:
+    """``src`` rewritten to ``dst`` with every trial shifted by one sample, 1 ulp off or one sample shorter and
+    renamed, keeping its dataset metadata (a partition of the same dataset to every reader)."""
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    from workbench.data.demonstrations import Demonstration, DemonstrationSet
+
+    ds = DemonstrationSet.load(src)
+    out = []
+    for d in ds:
+        t, x, u = d.t, d.x, d.u
+        if how == "shifted":
+            t, x, u = t[:-1], x[1:], u[1:]
+        elif how == "ulp":
+            x, u = np.nextafter(x, np.inf), np.nextafter(u, -np.inf)
+        else:
+            t, x, u = t[:-1], x[:-1], u[:-1]
+        out.append(Demonstration(t, x, u, {**d.meta, "id": f"{d.id}-{how}"}))
+    info = json.loads(pq.read_metadata(src).metadata[b"workbench"])["dataset"]
+    ds.with_demos(out).save(dst, dataset=info)
+
+
+# -- model files that expand --------------------------------------------------------------------------------------
+def attack_model_size(rng: random.Random, base: Path, model: Path, demos: Path) -> Prepared:
+    """A model file whose one array is ``size`` bytes of deflated zeros, declared as such (an honest archive: 2 GiB
+    deflate to about 2 MB), given to ``predict``."""
+    import io
+    import zipfile
+
+    import numpy as np
+
+    size = rng.choice([8 << 20, 64 << 20, 512 << 20, 2 << 30])
+    path = base / f"m{rng.randrange(10**9)}.npz"
+    n = size // 8
+    with zipfile.ZipFile(model) as zin, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zout:
+        header = json.loads(np.load(io.BytesIO(zin.read("__header__.npy"))).tobytes())
+        name = rng.choice([k for k in header["arrays"] if header["arrays"][k]["shape"]])
+        header["arrays"][name]["shape"] = [n]
+        for info in zin.infolist():
+            if info.filename == f"{name}.npy":
+                buf = io.BytesIO()
+                np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False, "shape": (n,)})
+                with zout.open(info.filename, "w", force_zip64=True) as f:
+                    f.write(buf.getvalue())
+                    for start in range(0, n * 8, 1 << 24):
+                        f.write(bytes(min(1 << 24, n * 8 - start)))
+            elif info.filename == "__header__.npy":
+                buf = io.BytesIO()
+                np.save(buf, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+                zout.writestr(info.filename, buf.getvalue())
+            else:
+                zout.writestr(info.filename, zin.read(info))
+    out = base / f"p{rng.randrange(10**9)}.csv"
+
+    def call() -> str | None:
+        from workbench.cli import main
+
+        return _cli(main, ["predict", "--model", str(path), str(demos), "-o", str(out), "-q"])
+
+    return call, [path, out]
+
+
+def _cli(main: Callable[[list[str]], int], argv: list[str]) -> str | None:
+    """A command run in this (forked) process, judged by its status and its one line: a clean error is raised as
+    one (its text checked for Python's), status 3 or Python text is foreign."""
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse's exit for bad arguments
+            code = exc.code
+    text = buf.getvalue().strip()
+    if code == 3 or PYTHON_TEXT.search(text):
+        raise RuntimeError(f"exit {code}: {text[-300:]}")
+    if code:
+        raise WorkbenchError(text.splitlines()[-1] if text else f"exit {code} without a word")
+    return None
+
+
+# -- numbers on the command line ----------------------------------------------------------------------------------
+def attack_numbers(rng: random.Random, base: Path, model: Path, demos: Path) -> Prepared:
+    """A hostile number in an option or a mapping: huge, negative, 5000 digits, inf, nan, -0, 1e308."""
+    words = ["-1", "0", "-0", "1e308", "inf", "-inf", "nan", "9" * 5000, str(2**64), "1e-300", "2.5", "x"]
+    value = rng.choice(words)
+    out = base / f"o{rng.randrange(10**9)}"
+    option = rng.choice(["--seed", "--horizon", "--samples", "--bootstrap", "--power", "--test-size", "--n-test",
+                         "--repeats", "--subjects", "--trials", "--workers", "--stride", "--start", "--n-components",
+                         "--speed", "--sysid", "--duration", "--silence", "mapping"])
+    inputs: list[Path] = []
+    if option == "mapping":
+        text = (REPO / "adapters" / "mappings" / "planar_quadrotor.toml").read_text(encoding="utf-8")
+        key = rng.choice(["gap = 0.25", "min_duration = 0.1", "dt = 0.05"])
+        mapping = base / f"m{rng.randrange(10**9)}.toml"
+        mapping.write_text(text.replace(key, f"{key.split('=')[0]}= {value}"), encoding="utf-8")
+        inputs.append(mapping)
+        argv = ["import", str(TLOG), "--mapping", str(mapping), "-o", f"{out}.parquet"]
+    elif option in ("--subjects", "--trials"):
+        argv = ["simulate", option, value, "--strategy", "CS1", "-o", f"{out}.parquet"]
+        if option == "--subjects" and value not in ("-1", "x", "inf", "nan", "-inf", "1e308", "2.5", "-0", "0"):
+            argv += ["--trials", "1"]
+    elif option == "--duration" and value in ("1e308", str(2**64), "9" * 5000):
+        # a finite duration is a request to listen that long (as no --duration is: until Ctrl-C), not a hang
+        argv = ["live", "udpin:127.0.0.1:1", "--model", str(model), "--duration", "0.1", "--silence", value,
+                "--save", f"{out}.rrd"]
+    elif option in ("--speed", "--sysid", "--duration", "--silence"):
+        argv = ["live", "udpin:127.0.0.1:1", "--model", str(model), option, value, "--duration", "0.1", "--save",
+                f"{out}.rrd"] if option != "--duration" else ["live", "udpin:127.0.0.1:1", "--model", str(model),
+                                                             option, value, "--save", f"{out}.rrd"]
+        if option == "--speed":
+            argv = ["replay", str(demos), "--model", str(model), "--speed", value, "--no-wait", "--save", f"{out}.rrd"]
+    elif option in ("--test-size", "--n-test", "--repeats", "--workers", "--stride", "--power"):
+        argv = ["evaluate", str(demos), option, value, "--samples", "0", "--no-efficiency", "--n-components", "1",
+                "--holdout", "split"]
+        if option == "--n-test":
+            argv += ["--per-subject"]
+    else:
+        argv = ["predict", "--model", str(model), str(demos), option, value, "-o", f"{out}.csv"]
+    inputs += [Path(f"{out}{s}") for s in (".parquet", ".csv", ".rrd")]
+
+    def call() -> str | None:
+        from workbench.cli import main
+
+        return _cli(main, argv)
+
+    call.what = " ".join(a if len(a) < 40 else f"{a[:12]}…({len(a)})" for a in argv)  # named where it hangs
+    return call, inputs
 
 
 # -- replay waits, link ports, speeds ------------------------------------------------------------------------------
@@ -536,6 +627,13 @@ def main() -> None:
     times = [t for t, _ in tlog_frames(TLOG)]
     honest = sum(min(max(b - a, 0.0), MAX_REPLAY_GAP) for a, b in zip(times, times[1:], strict=False))
     study = simulate_study(n_subjects=2, n_trials=2, strategy="CS1", seed=1)
+    fixtures = Path(tempfile.mkdtemp(prefix="wb-bounds-fixtures-"))
+    demos = simulate_study(n_subjects=2, n_trials=4, strategy="CS1", seed=2).save(fixtures / "demos.parquet")
+    model = fixtures / "model.npz"
+    from workbench.cli import main as cli_main
+
+    if cli_main(["fit", str(demos), "--method", "ioc-only", "--bootstrap", "0", "-q", "-o", str(model)]) != 0:
+        raise SystemExit("could not fit the model the model-file surfaces start from")
     sample_mcap = (REPO / "sample_logs" / "landing_s01.mcap").read_bytes()
     mcap_messages = _mcap_messages(REPO / "sample_logs" / "landing_s01.mcap")
     mcap_ref = adapters.load(REPO / "sample_logs" / "landing_s01.mcap")
@@ -558,6 +656,8 @@ def main() -> None:
         "replay waits / ports / speeds": lambda: attack_replay(rng, base, clean, offsets, honest),
         "schedulers (schemes, no workers)": lambda: attack_scheduler(rng, empty),
         "nested model header": lambda: attack_nesting(rng, base),
+        "model file sizes (deflated 8 MiB-2 GiB, predict)": lambda: attack_model_size(rng, base, model, demos),
+        "numbers (options and a mapping's)": lambda: attack_numbers(rng, base, model, demos),
         "stdin size (streamed, 64 MiB-1 GiB)": lambda: attack_stdin_size(rng),
     }
     if args.only:
@@ -573,6 +673,7 @@ def main() -> None:
         scheduler.kill()
         scheduler.wait()
         shutil.rmtree(base, ignore_errors=True)
+        shutil.rmtree(fixtures, ignore_errors=True)
     keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
     print(f"\nEach call forked from a process at {baseline:.0f} MiB (the workbench's imports, the sample logs).")
     print("| surface | " + " | ".join(keys) + " | peak MiB | longest call s | largest input MiB |")

@@ -36,11 +36,12 @@ sys.path.insert(0, str(REPO))
 
 from workbench.errors import WorkbenchError  # noqa: E402
 
-HANG_S = 60.0  # the acceptance's bound for a call on an input under 10 MB
+sys.path.insert(0, str(Path(__file__).parent))
+from harness import HANG_S, _call_in_child, _mutate  # noqa: E402 - the shared harness
 
 
 class Tally:
-    """Each call in a child forked from this process (:func:`fuzz_bounds._call_in_child`): its peak memory and its
+    """Each call in a child forked from this process (:func:`harness._call_in_child`): its peak memory and its
     time are its own. A call's random choices come from a generator seeded by this process's, drawn per call."""
 
     def __init__(self, rng: random.Random) -> None:
@@ -51,8 +52,6 @@ class Tally:
         self.slowest: dict[str, float] = {}
 
     def run(self, surface: str, fn, *args) -> None:
-        from fuzz_bounds import _call_in_child
-
         c = self.by_surface.setdefault(surface, Counter())
         c["calls"] += 1
         args = tuple(random.Random(self.rng.getrandbits(64)) if isinstance(a, random.Random) else a for a in args)
@@ -278,26 +277,6 @@ def attack_kill(rng: random.Random, base: Path) -> str | None:
 
 
 # -- standard input -----------------------------------------------------------------------------------------------
-def _mutate(rng: random.Random, data: bytes) -> bytes:
-    """A real log's bytes, damaged the ways transfers damage them: cut, flipped bytes, a block zeroed or repeated."""
-    b = bytearray(data)
-    how = rng.choice(["cut", "flip", "zero", "repeat", "prefix"])
-    if how == "cut":
-        return bytes(b[: rng.randrange(len(b))])
-    if how == "flip":
-        for _ in range(rng.randrange(1, 50)):
-            b[rng.randrange(len(b))] = rng.randrange(256)
-    elif how == "zero":
-        a = rng.randrange(len(b))
-        b[a : a + rng.randrange(1, 4096)] = bytes(min(len(b) - a, 4096))[: len(b[a : a + 4096])]
-    elif how == "repeat":
-        a = rng.randrange(len(b))
-        b[a:a] = b[a : a + rng.randrange(1, 2048)]
-    else:
-        b[:0] = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 64)))
-    return bytes(b)
-
-
 def attack_stdin(rng: random.Random, logs: dict[str, bytes]) -> str | None:
     """``workbench inspect -`` / ``import - --format F -o -`` on damaged log bytes: exit 0 or one line, never a
     traceback, a signal or a half-written file on stdout."""

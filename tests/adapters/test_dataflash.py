@@ -227,7 +227,7 @@ def test_types_select_streams_and_instances(logs):
     pd.testing.assert_frame_equal(one["IMU[1]"], every["IMU[1]"])
     assert dict(one.counts) == dict(every.counts)  # every stream of the file is counted, read or not
     assert one.info["flight_modes"] == every.info["flight_modes"]  # modes and arming come from the whole log
-    assert adapters.read_streams(path, types=["ATT"]).keys() == {"ATT"}
+    assert adapters.read_streams(path, ["ATT"]).keys() == {"ATT"}
 
 
 def test_detected_by_first_bytes_not_name(logs, tmp_path):

@@ -28,7 +28,7 @@ def _mapping(tmp_path: Path, dt: str) -> Path:
 
 @pytest.mark.parametrize("dt", ["1e-5", "1e-6", "1e-300"])
 def test_a_dt_far_below_the_logs_sample_intervals_is_refused(tmp_path, dt):
-    streams = adapters.read_streams(LOG, types=["LOCAL_POSITION_NED"])
+    streams = adapters.read_streams(LOG, ["LOCAL_POSITION_NED"])
     interval = float(np.median(np.diff(streams["LOCAL_POSITION_NED"]["t"].to_numpy())))
     with pytest.raises(DataError, match=r"finer than the log's finest channel") as err:
         adapters.load(LOG, mapping=str(_mapping(tmp_path, dt)))

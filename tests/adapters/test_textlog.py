@@ -114,3 +114,18 @@ def test_view_of_logs_with_odd_event_values_exits_0(tmp_path):
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "Traceback" not in out.stderr and "Error" not in out.stderr.replace("error:", "")
+
+
+def test_heartbeat_fields_that_are_no_numbers_break_no_summary(tmp_path):
+    # an MCAP (or any format) holding a HEARTBEAT stream whose fields are null or text: inspect and view read its
+    # modes; on the previous main: "TypeError: int() argument must be … not 'NoneType'", exit 3
+    n = 6
+    hb = pd.DataFrame({"t": 1.7e9 + np.arange(n), "type": np.array([2, None, "q", np.nan, 2, 2], dtype=object),
+                       "autopilot": [3] * n, "base_mode": [np.nan, 129, 129, None, 1, 1],
+                       "custom_mode": np.array(["x", 0, np.inf, 0, 0, None], dtype=object)})
+    path = FORMATS["mcap"].write(tmp_path / "hb.mcap", {"HEARTBEAT": hb})
+    summary = adapters.inspect(path)
+    assert [m.mode for m in summary.modes] == ["nan", "STABILIZE", "nan"]
+    # the vehicle's rows are those of a type it names (2): their base_mode is NaN, 1, 1 — never armed
+    assert summary.armed_text == "armed: never armed"
+    raw_log(adapters.read(path))

@@ -296,7 +296,8 @@ def test_dronekit_selected_types_and_columns():
 
 
 def test_typed_reads_equal_the_full_read_and_checksum_fewer_frames(monkeypatch):
-    """``read_streams(types=...)`` checksums only the frames its streams depend on, with the full read's values."""
+    """``read_streams(path, message_types)`` checksums only the frames its streams depend on, with the full
+    read's values."""
     import adapters.formats.tlog_frames as tlog_module
 
     path = _external(DRONEKIT)
@@ -312,14 +313,14 @@ def test_typed_reads_equal_the_full_read_and_checksum_fewer_frames(monkeypatch):
     full_streams = full.streams  # made on each access: once here, not once per type
     for name in full_streams:
         checked.clear()
-        alone = read_streams(path, types=[name])
+        alone = read_streams(path, [name])
         assert list(alone) == [name]
         pd.testing.assert_frame_equal(alone[name], full_streams[name])
         # The real flight has 1314 frames failing their checksum, so the typed walk meets invalid frames; still
         # far fewer frames are checksummed than the records the full read checks.
         assert sum(checked) < full.report.n_records / 2, (name, sum(checked))
     several = ["ATTITUDE", "STATUSTEXT", "GPS_RAW_INT"]
-    got = read_streams(path, types=several)
+    got = read_streams(path, several)
     assert list(got) == [n for n in full.streams if n in several]
 
 
@@ -344,9 +345,9 @@ def test_typed_read_resynchronises_inside_an_invalid_frame_like_the_full_read(tm
     full = read_tlog(path)
     expected = [1, 3] if container_valid else [1, 2, 3]
     assert full.streams["ATTITUDE"]["time_boot_ms"].tolist() == expected
-    typed = read_streams(path, types=["ATTITUDE"])
+    typed = read_streams(path, ["ATTITUDE"])
     pd.testing.assert_frame_equal(typed["ATTITUDE"], full.streams["ATTITUDE"])
-    assert ("STATUSTEXT" in read_streams(path, types=["STATUSTEXT"])) == container_valid
+    assert ("STATUSTEXT" in read_streams(path, ["STATUSTEXT"])) == container_valid
 
 
 @pytest.mark.parametrize("block", [997, 4096])
@@ -660,7 +661,7 @@ def read_mutated(data: bytes, folder: Path, originals: Counter):
     assert not rows - originals
     # A typed read (checksumming only what decides its streams) gives the full read's values.
     for name in ("ATTITUDE", "STATUSTEXT"):
-        typed = read_streams(path, types=[name])
+        typed = read_streams(path, [name])
         assert (name in typed) == (name in read.columns)
         if name in typed:
             pd.testing.assert_frame_equal(typed[name], read.streams[name])

@@ -310,11 +310,16 @@ def test_fit_bootstrap_prints_the_intervals_of_ioc_bootstrap(tmp_path):
     ok(wb("simulate", "--strategy", "CS1", "--trials", "8", "-o", str(tmp_path / "s.parquet")))
     r = ok(wb("fit", str(tmp_path / "s.parquet"), "--n-components", "2", "--bootstrap", "12",
               "-o", str(tmp_path / "m.npz")))
-    assert "resamples fitted, 95 % percentile intervals" in r.stdout
-    gain = load_model(tmp_path / "m.npz").gain_method_  # the estimator the fit chose (printed with its reason)
+    assert "resamples fitted, 95 % intervals: the objective's percentiles, K̂'s t over trials" in r.stdout
+    model = load_model(tmp_path / "m.npz")
+    gain = model.gain_method_  # the estimator the fit chose (printed with its reason)
     assert f"gain {gain} (" in r.stdout
+    # the resamples decide the default gain's rule again (the pilot's timing where it fits, else the paper's gain)
+    from workbench.models.fitting import timing_setting
+
     expected = bootstrap(DemonstrationSet.load(tmp_path / "s.parquet"), planar_quadrotor(), n_boot=12, seed=0,
-                         method=gain)
+                         method="iv" if gain == "liml" else gain, timing=timing_setting(model))
+    assert "pilot timing: " in r.stdout
     lines = {line.split(":")[0].strip(): line for line in r.stdout.splitlines() if ": " in line}
     names = ("x", "y", "phi", "xdot", "ydot", "phidot")
     for key, lo, hi in (("diag Q/λmax", expected.Q_diag_lo, expected.Q_diag_hi),

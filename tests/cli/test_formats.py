@@ -79,7 +79,7 @@ def _same_trials(got, demos, fmt) -> None:
     assert len(got) == len(demos)
     assert [len(d) for d in got] == [len(d) for d in demos]
     for j, name in enumerate(got.input_names):
-        scale = abs(m.channel(name).gain)
+        scale = abs(m.channel(name).factor)
         step = 0.5 * scale if scale != 1 else 1e-6
         for a, b in zip(got, demos, strict=True):
             np.testing.assert_allclose(a.u[:, j], b.u[:, j], atol=step, rtol=0, err_msg=f"{fmt.name}: {name}")

@@ -39,3 +39,20 @@ def test_a_subject_without_a_recorded_test_trial_is_named():
     only_s02 = [d.id for d in study if d.meta["subject"] == "s02"][:1]
     with pytest.raises(DataError, match=r"subject 's01': 0 of its 3 trials are recorded test trials"):
         per_subject(planar_quadrotor(), study, n_steps=10, test_ids=only_s02)
+
+
+def test_per_subject_fits_a_model_per_subject_and_strategy_and_says_so(tmp_path, capsys):
+    """Two strategies flown by each subject: each subject and strategy has its own models and held-out trial (the
+    previous main fitted one model per subject across CS1 and CS2, and held out one trial per subject)."""
+    cs1 = simulate_study(n_subjects=2, n_trials=3, strategy="CS1", seed=3)
+    cs2 = simulate_study(n_subjects=2, n_trials=3, strategy="CS2", seed=4)
+    (cs1 + cs2).save(tmp_path / "s.parquet")
+    out = tmp_path / "ps.csv"
+    assert main(["evaluate", str(tmp_path / "s.parquet"), "--per-subject", "--n-components", "1", "--horizon", "1",
+                 "--n-test", "1", "-o", str(out)]) == 0
+    table = pd.read_csv(out)
+    held = table.drop_duplicates("trial").groupby(["subject", "label"]).size()
+    assert held.to_dict() == {(s, lb): 1 for s in ("s01", "s02") for lb in ("CS1", "CS2")}
+    said = " ".join(capsys.readouterr().out.split())  # the table's title wraps
+    assert "a model per subject and strategy (CS1, CS2)" in said
+    assert "1 held-out trial(s) per subject and strategy" in said

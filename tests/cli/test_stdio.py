@@ -7,6 +7,7 @@ import io
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pandas as pd
@@ -186,3 +187,35 @@ def test_standard_input_is_streamed_to_its_file_not_held(monkeypatch, tmp_path):
         assert peak < total / 8  # the previous main held all of it (and a copy) in memory
     finally:
         stdio.cleanup()
+
+
+def test_a_killed_commands_spool_is_removed_when_the_next_command_starts(tmp_path, monkeypatch):
+    """SIGKILL runs no clean-up: the spool of standard input stays behind (287 MB in the attack, for good on the
+    previous main); the next command removes it, and leaves a running command's spool alone."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    run = subprocess.Popen([sys.executable, "-m", "workbench", "inspect", "-"], stdin=subprocess.PIPE,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=REPO)
+    try:
+        # over a block (1 MiB) of a log, and more to follow: the command spools it and waits for the end of its input
+        run.stdin.write(TLOG.read_bytes() * 4)
+        run.stdin.flush()
+        deadline = time.monotonic() + 60
+        while not list(tmp_path.glob("workbench-stdio-*/stdin.tlog")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        (spool,) = tmp_path.glob("workbench-stdio-*")
+        os.kill(run.pid, signal.SIGKILL)
+        run.wait(timeout=30)
+    finally:
+        run.kill()
+        run.stdin.close()
+    assert spool.is_dir()  # left behind by the killed command
+    running = tmp_path / f"workbench-stdio-{os.getpid()}-alive"  # a running command's (this test's process)
+    running.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # this process's temporary folder: the same one
+    assert main(["inspect", str(TLOG), "-q"]) == 0
+    assert not spool.exists() and running.is_dir()

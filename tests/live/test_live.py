@@ -73,13 +73,16 @@ def assert_equal_to_offline(model, demo, steps, *, rollout_at=()):
         assert steps[0].target is None
     else:
         np.testing.assert_array_equal(steps[0].target, demo.target)
-    mean, cov = model.input_distribution(demo.x[:n], x0=demo.x[0], target=demo.target)
+    # (with the pilot's timing: each input given the segment before it, as live carries it)
+    mean, cov = (a[:n] for a in model.input_distribution_along(demo))
     np.testing.assert_allclose(np.array([p.u_mean for p in steps]), mean, rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.array([p.u_cov for p in steps]), cov, rtol=0, atol=1e-12)
     w = model.residuals(demo)[:n]
     np.testing.assert_allclose(np.array([p.w for p in steps]), w, rtol=0, atol=1e-12)
     for k in rollout_at:
-        expected = model.predict(demo.x[k], HORIZON, target=demo.target, task_x0=demo.x[0]).x
+        past = model.pasts(demo, [k])
+        expected = model.predict(demo.x[k], HORIZON, target=demo.target, task_x0=demo.x[0],
+                                 past=None if past is None else past[0]).x
         np.testing.assert_allclose(steps[k].rollout_x, expected, rtol=0, atol=1e-12)
 
 
@@ -446,7 +449,7 @@ def test_live_cli_predictions_equal_the_offline_replay(fitted, live_run):
         steps = np.asarray(cols["step"], dtype=int)
         values = np.asarray(cols["Measurements:values"], dtype=float)[:, 0]
         variances = np.asarray(cols["Measurements:variances"], dtype=float)[:, 0]
-        mean, cov = model.input_distribution(d.x, x0=d.x[0], target=d.target)  # what `replay --model` streams
+        mean, cov = model.input_distribution_along(d)  # what `replay --model` streams (given the trial before)
         np.testing.assert_allclose(values, mean[steps, j], rtol=0, atol=1e-9)
         np.testing.assert_allclose(variances, cov[steps, j, j], rtol=1e-9, atol=1e-15)
         state = ents[f"/demos/{m.group(1)}/states/x"]

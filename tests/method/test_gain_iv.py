@@ -91,9 +91,11 @@ def test_iv_reaches_models_and_bootstrap(quad):
     op = LQROperator()
     ds = lqr_operator_demos(op, 30, seed=3, system=quad)
     K_iv = estimate_gain(ds, quad, "iv")
-    ioc = IOCOnlyModel(quad, gain_method="iv").fit(ds)
+    # the instantaneous gain (timing "none"; with the pilot's timing the models' gain is the timing's, test_timing)
+    ioc = IOCOnlyModel(quad, gain_method="iv", timing="none").fit(ds)
     np.testing.assert_allclose(ioc.K_, K_iv, atol=1e-10)
-    hbm = HumanBehaviorModel(quad, gain_method="iv", n_components=2, fit_objective=False, noise_folds=0).fit(ds)
+    hbm = HumanBehaviorModel(quad, gain_method="iv", timing="none", n_components=2, fit_objective=False,
+                             noise_folds=0).fit(ds)
     np.testing.assert_allclose(hbm.K_, K_iv, atol=1e-10)
     boot = bootstrap(ds, quad, n_boot=4, method="iv", structure="diagonal", seed=0)
     assert boot.method == "iv" and boot.n_ok >= 1
@@ -108,7 +110,7 @@ def test_cli_fit_takes_gain_iv(tmp_path, quad):
     env = {**os.environ, "COLUMNS": "160", "PYTHONWARNINGS": "ignore"}
     r = subprocess.run(
         [sys.executable, "-m", "workbench", "fit", str(demos), "--method", "ioc-only", "--gain", "iv",
-         "--bootstrap", "0", "-o", str(out)],
+         "--timing", "none", "--bootstrap", "0", "-o", str(out)],
         capture_output=True, text=True, timeout=300, cwd=REPO, env=env,
     )
     assert r.returncode == 0, r.stderr

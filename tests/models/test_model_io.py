@@ -179,3 +179,66 @@ def test_header_entries_of_the_wrong_kind_are_model_file_errors(ioc_model, tmp_p
     with pytest.raises(ModelFileError) as info:
         load_model(bad)
     assert str(bad) in str(info.value)
+
+
+def _inflated(src: Path, dst: Path, n_bytes: int) -> Path:
+    """``src`` with its ``scale`` array replaced by ``n_bytes`` of zeros, deflated (a few bytes per MB on disk) and
+    declared in the header as it is: an honest archive whose arrays expand far beyond any model's."""
+    import json
+
+    n = n_bytes // 8
+    with zipfile.ZipFile(src) as zin:
+        header = json.loads(np.load(io.BytesIO(zin.read("__header__.npy"))).tobytes())
+        header["arrays"]["scale"]["shape"] = [n]
+        with zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as zout:
+            for info in zin.infolist():
+                if info.filename == "scale.npy":
+                    with zout.open("scale.npy", "w", force_zip64=True) as f:
+                        f.write(_npy_header((n,)))
+                        for start in range(0, n * 8, 1 << 22):
+                            f.write(bytes(min(1 << 22, n * 8 - start)))
+                elif info.filename == "__header__.npy":
+                    buf = io.BytesIO()
+                    np.save(buf, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+                    zout.writestr(info.filename, buf.getvalue())
+                else:
+                    zout.writestr(info.filename, zin.read(info))
+    return dst
+
+
+def test_a_model_file_expanding_past_the_ceiling_is_refused_before_it_is_read(good, tmp_path, monkeypatch):
+    """Issue 36: a 2.0 MB model file (one deflated 2 GB array) took `predict` to 4.1 GB; now the archive's declared
+    size is held against MAX_DECOMPRESSED_BYTES before any member is decompressed (here lowered to 1 MiB, with an
+    8 MiB array, so the test is fast; the full-size file is the slow test below)."""
+    from workbench.models import files
+
+    monkeypatch.setattr(files, "MAX_DECOMPRESSED_BYTES", 1 << 20)
+    bomb = _inflated(good, tmp_path / "bomb.npz", 8 << 20)
+    assert bomb.stat().st_size < 64 << 10
+    tracemalloc.start()
+    with pytest.raises(ModelFileError, match=r"not read: its arrays expand to \d+ bytes, more than a model file holds "
+                                             r"\(at most 1048576 bytes: workbench.models.files.MAX_DECOMPRESSED_BYTES"):
+        read_model_file(bomb)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 1 << 20  # the previous main decompressed the 8 MiB (and copied it) before refusing its shape
+
+
+@pytest.mark.slow
+def test_predict_on_a_two_megabyte_model_bomb_stays_under_a_gigabyte(good, tmp_path):
+    """The attack's file itself: 2 GB of zeros deflated into about 2 MB, given to `predict` in a process of its own
+    whose peak resident memory is measured (the previous main: 4.1 GB, or a MemoryError under a 4 GB cap)."""
+    import resource
+    import subprocess
+    import sys
+
+    from workbench.sim.landing import simulate_landings
+
+    bomb = _inflated(good, tmp_path / "bomb.npz", 2_000_000_000)
+    assert bomb.stat().st_size < 10 << 20
+    demos = simulate_landings("CS1", 2, seed=0).save(tmp_path / "d.parquet")
+    run = subprocess.run([sys.executable, "-m", "workbench", "predict", "--model", str(bomb), str(demos), "-o",
+                          str(tmp_path / "p.csv")], capture_output=True, text=True, timeout=300)
+    peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    assert run.returncode == 1 and "more than a model file holds" in run.stderr
+    assert peak_mb < 1024, peak_mb

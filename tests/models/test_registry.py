@@ -62,7 +62,8 @@ def test_every_registered_method_reaches_every_consumer(entry, quadrotor):
 
 # Literals naming methods on purpose (a choice among the methods, not a list of them), with why.
 CHOSEN = {
-    ("workbench/viewer/blueprint.py", ("proposed", "persistence")): "the score title: the model against no operator",
+    ("workbench/viewer/tabs/predictions.py", ("proposed", "persistence")):
+        "the score title: the model against no operator",
 }
 
 
@@ -72,7 +73,13 @@ def copies(source: str, where: str) -> list[str]:
     names = set(METHODS) | {m.cli_name for m in REGISTRY}  # the command line's spellings too
     titles = {m.title for m in REGISTRY} - names
     found = []
-    for node in ast.walk(ast.parse(source)):
+    tree = ast.parse(source)
+    declared = {id(n) for node in ast.walk(tree) if isinstance(node, ast.Assign)
+                and any(isinstance(t, ast.Name) and t.id == "DECLARED_METHODS" for t in node.targets)
+                for n in ast.walk(node)}  # a method's declaration beside its class is the registry's own source
+    for node in ast.walk(tree):
+        if id(node) in declared:
+            continue
         if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in titles:
             found.append(f"{where}:{node.lineno}: {node.value!r}")
         items = (node.keys if isinstance(node, ast.Dict) else node.elts
@@ -95,3 +102,34 @@ def test_the_drift_check_finds_a_copied_table():
     """The check can fail: the viewer's colour table and a title as they were before the registry."""
     source = 'COLORS = {"proposed": (44, 160, 44), "ioc_only": (214, 39, 40)}\nTITLE = "IOC-only"\n'
     assert len(copies(source, "old.py")) == 2
+
+
+def test_methods_are_declared_beside_their_classes_and_read_without_importing_them():
+    """The registry reads each module's DECLARED_METHODS from its text: no model module (nor numpy) is imported, and
+    what it reads is what the module declares."""
+    import importlib
+    import subprocess
+    import sys
+
+    code = ("import sys, workbench.models.registry as r\n"
+            "print(len(r.REGISTRY), sorted(m for m in sys.modules if m.startswith(('workbench.models.', 'numpy'))"
+            " and m != 'workbench.models.registry'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
+    assert out.stdout.split(maxsplit=1) == [str(len(REGISTRY)), "[]\n"]
+    for m in REGISTRY:
+        module, _, cls = m.model_class.partition(":")
+        declared = importlib.import_module(module).DECLARED_METHODS
+        assert any(d["name"] == m.name and d["class"] == cls and d["title"] == m.title for d in declared)
+
+
+def test_a_declaration_that_is_not_a_full_table_is_refused_naming_its_place():
+    from workbench.models.registry import _entry
+    from workbench.palette import METHOD_COLORS, SPARE_METHOD_COLORS
+
+    with pytest.raises(TypeError, match="here.py:3: a declared method is a table"):
+        _entry({"name": "toy", "title": "toy"}, "workbench.models.toy", "here.py:3")
+    with pytest.raises(TypeError, match="colour is an index"):
+        _entry({"name": "toy", "title": "toy", "class": "Toy", "order": 50, "colour": 99}, "m", "here.py:3")
+    order, m = _entry({"name": "toy", "title": "toy", "class": "Toy", "order": 50, "colour": 4}, "pkg.mod", "x")
+    assert (order, m.model_class) == (50, "pkg.mod:Toy")
+    assert m.colour == SPARE_METHOD_COLORS[4 - len(METHOD_COLORS)]  # the colours after the four are the spare ones

@@ -11,6 +11,7 @@ from scipy import stats as sps
 
 from workbench.errors import DataError
 from workbench.models import HumanBehaviorModel, IOCOnlyModel
+from workbench.models.timed import commands
 from workbench.sim.landing import simulate_landings, simulate_study
 from workbench.study import evaluate as ev
 from workbench.study.stats import pairwise_ttests, repeated_measures_anova
@@ -68,7 +69,11 @@ def test_one_step_coverage_is_the_fraction_of_residuals_in_the_band(small):
     assert set(table.columns) == {"trial", "label", "method", "input", "n_sigma", "coverage", "n_samples"}
     d = test[0]
     w = model.residuals(d)
-    mu, Sigma = model.variability(d.x, x0=d.x[0], target=d.target)
+    # the band is the variability's at the state the pilot acted on: the recorded one, or with the pilot's timing
+    # the one it saw (the input's deviation and band are then the command's times the lag's share, 1 − a)
+    timing = model._timing()
+    seen = d.x if timing is None else commands(d.x, d.u, timing)[0]
+    mu, Sigma = model.variability(seen, x0=d.x[0], target=d.target)
     sigma = np.sqrt(np.diagonal(Sigma, axis1=1, axis2=2))
     for c in (1, 2, 3):
         expected = (np.abs(w - mu) <= c * sigma).mean(axis=0)
@@ -93,10 +98,11 @@ def test_compare_table_is_tidy_and_matches_direct_predictions(small):
     starts = sorted(df[(df.trial == d.id) & (df.metric == "rmse_position")].start.unique())
     assert starts[0] == 0 and all(s + 30 <= len(d) - 1 for s in starts[1:]) and len(starts) > 1
     s = starts[1]
-    p = models["proposed"].predict(d.x[s], 30, d.target, task_x0=d.x[0])
+    pasts = models["proposed"].pasts(d, [s])  # the states and stick before s, for a model with the pilot's timing
+    p = models["proposed"].predict(d.x[s], 30, d.target, task_x0=d.x[0], past=None if pasts is None else pasts[0])
     got = df[(df.trial == d.id) & (df.start == s) & (df.method == "proposed") & (df.metric == "rmse_position")]
     assert got.value.item() == pytest.approx(ev.horizon_rmse(p.x, d.x[s : s + 31], (0, 1)), rel=1e-12)
-    summary = ev.summarize(df)
+    summary = ev.method_means(df)
     assert summary.loc["rmse_position", "proposed"] == pytest.approx(
         df[(df.metric == "rmse_position") & (df.method == "proposed")].groupby("trial")["value"].mean().mean()
     )

@@ -55,7 +55,7 @@ class _Figures:
             "gmr_only": GMROnlyModel(self.system).fit(train),
         }
         table = ev.compare(models, test, n_steps=HORIZON, samples=SAMPLES, seed=0)
-        summary = ev.summarize(table)
+        summary = ev.method_means(table)
         coverage = ev.coverage_summary(ev.one_step_coverage(models["proposed"], test))
         small = ev.data_efficiency(
             lambda: {

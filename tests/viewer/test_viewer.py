@@ -28,6 +28,7 @@ from workbench.models import HumanBehaviorModel, IOCOnlyModel
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_landings
 from workbench.viewer import columns, objective, output, replay, replay_blueprint, session, style
+from workbench.viewer.tabs.objective import log_models
 
 _spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
 _loader = importlib.util.module_from_spec(_spec)
@@ -247,7 +248,7 @@ def test_replay_streams_online_predictions(tmp_path, setup):
     assert stats.n_steps == len(d)
     t, x = series(ents, f"/demos/{d.id}/states/x")
     np.testing.assert_array_equal(x[:, 0], d.x[:, 0])
-    mean, cov = model.input_distribution(d.x, x0=d.x[0], target=d.target)  # K̂x + μ(x), Σ(x)
+    mean, cov = model.input_distribution_along(d)  # K̂x + μ(x), Σ(x); with the pilot's timing, given the trial before
     for j, u in enumerate(demos.input_names):
         _, v = series(ents, f"/demos/{d.id}/online/{u}/gmr", "Measurements:values")
         _, var = series(ents, f"/demos/{d.id}/online/{u}/gmr", "Measurements:variances")
@@ -260,7 +261,9 @@ def test_replay_streams_online_predictions(tmp_path, setup):
     steps = np.sort(np.asarray(ents[f"/demos/{d.id}/online/rollout_end/y"]["step"]))
     np.testing.assert_array_equal(steps, np.arange(len(d)) + horizon)
     for k in (0, len(d) // 2, len(d) - 1):
-        expected = model.predict(d.x[k], horizon, target=d.target, task_x0=d.x[0]).x[-1, 1]
+        past = model.pasts(d, [k])
+        expected = model.predict(d.x[k], horizon, target=d.target, task_x0=d.x[0],
+                                 past=None if past is None else past[0]).x[-1, 1]
         assert ends[k, 0] == pytest.approx(expected, rel=1e-10, abs=1e-12)
     assert np.isfinite(stats.realtime_factor) and stats.realtime_factor > 0
 
@@ -449,7 +452,7 @@ def test_heatmaps_of_two_models_share_one_diverging_scale(tmp_path, setup):
     rec = viewer.new_recording()
     path = tmp_path / "objective.rrd"
     with viewer.open_output(rec, save=path):
-        viewer.SessionLogger(rec, demos).log_models({"CS1": model, "IOC": ioc})
+        log_models(viewer.SessionLogger(rec, demos), {"CS1": model, "IOC": ioc})
     ents = read_rrd(path)
     vmax = max(np.abs(model.K_).max(), np.abs(ioc.K_).max())
     for name, m in (("CS1", model), ("IOC", ioc)):

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.cli.context import Context
+from workbench.cli.options import horizon_arg, seed_arg
 from workbench.defaults import HORIZON_S
 
 __all__ = ["cmd_collect", "add_collect"]
@@ -36,7 +37,7 @@ def add_collect(add: Any) -> None:
                    help="address to listen on (default 127.0.0.1, this machine only; another address lets other "
                         "machines reach the page, through a link with a token that the command prints)")
     p.add_argument("--no-browser", action="store_true", help="do not open the page in a browser")
-    p.add_argument("--seed", type=int, default=0, help="seed of the trials' start positions (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the trials' start positions (default 0)")
     v = p.add_argument_group("the experimenter's view (rerun): the trials as they fly, outcomes, fits, a summary "
                              "per subject")
     x = v.add_mutually_exclusive_group()
@@ -46,7 +47,7 @@ def add_collect(add: Any) -> None:
     v.add_argument("--model", action="append", metavar="LABEL=MODEL.npz",
                    help="a fitted model of a block label (repeatable): it assists that label's assisted blocks that "
                         "have no fit step, and its prediction from each trial's start is drawn beside the live track")
-    v.add_argument("--horizon", dest="horizon_s", type=float, default=HORIZON_S, metavar="SECONDS",
+    v.add_argument("--horizon", dest="horizon_s", type=horizon_arg, default=HORIZON_S, metavar="SECONDS",
                    help="length of that prediction (default %(default)s s)")
     e = p.add_argument_group("exclusion (no server: marks a trial of DIR in its own metadata and in trials.csv)")
     e.add_argument("--exclude", metavar="TRIAL_ID", help="exclude this trial from the analysis (needs --note)")

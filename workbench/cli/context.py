@@ -1,15 +1,16 @@
 """The run's context every command gets: its parsed options, its consoles (what it says, where, how wide), its
-progress bars, its executor and its standard input and output (:mod:`workbench.cli.stdio`).
+progress bars, its executor, its standard input and output (:mod:`workbench.cli.stdio`), and reading what its
+resolved inputs name (:meth:`Context.read`: the reading itself is :mod:`workbench.cli.reading`, which never calls
+back here).
 
-The helpers the commands share live by job beside it: the option types in :mod:`workbench.cli.options`, reading
-logs, demonstrations and models in :mod:`workbench.cli.reading`, writing and printing in
-:mod:`workbench.cli.writing`; their names are still found here (``from workbench.cli.context import load_demos``).
+The helpers the commands share live by job beside it: the option types in :mod:`workbench.cli.options`, what a
+command reads in :mod:`workbench.cli.inputs` (resolved once) and :mod:`workbench.cli.reading`, writing and printing
+in :mod:`workbench.cli.writing`.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import re
 import sys
@@ -17,7 +18,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from workbench.cli.reading import existing_path
+from workbench.cli.inputs import Inputs
+from workbench.cli.reading import Read, read_demos, read_models
 from workbench.cli.stdio import Stdio, is_stdio
 from workbench.errors import UsageError
 
@@ -29,17 +31,6 @@ PIPE_WIDTH = 100
 EXIT_ERROR = 1
 EXIT_USAGE = 2  # argparse's status for bad arguments; a UsageError gets it too
 EXIT_INTERNAL = 3
-#: Where the helpers that lived here went (split by job in issue 30)
-_MOVED = ("workbench.cli.options", "workbench.cli.reading", "workbench.cli.writing")
-
-
-def __getattr__(name: str) -> Any:
-    """A helper by its old address (``workbench.cli.context.load_demos``): from the module that now holds it."""
-    for module in _MOVED:
-        found = importlib.import_module(module)
-        if name in getattr(found, "__all__", ()):
-            return getattr(found, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class Context:
@@ -59,9 +50,20 @@ class Context:
             self.out = Console(highlight=False, quiet=self.quiet, width=PIPE_WIDTH, stderr=data_out)
         self.err = Console(stderr=True, highlight=False)
 
-    def input_path(self, name: str | os.PathLike, what: str = "the input", suffix: str | None = None) -> Path:
-        """A file to read: ``name``, or standard input's bytes for ``-`` (:mod:`workbench.cli.stdio`)."""
-        return existing_path(self.stdio.input(name, what, suffix))
+    def read(self, inputs: Inputs, *, select: bool = True) -> Read:
+        """The demonstrations ``inputs`` name (:func:`workbench.cli.reading.read_demos`), with what resolving and
+        choosing them decided said first (the mapping chosen for each log) and after (the trials used)."""
+        for line in inputs.notes:
+            self.say(line)
+        with self.progress() as progress:
+            got = read_demos(inputs, progress, select=select)
+        for line in got.notes:
+            self.say(line)
+        return got
+
+    def models(self, inputs: Inputs) -> dict[str, Any]:
+        """The models ``inputs`` name, by label (``""`` for one given without ``LABEL=``)."""
+        return read_models(inputs)
 
     def output_path(self, name: str | os.PathLike, default_suffix: str, what: str = "the output") -> Path:
         """Where to write ``name``; for ``-`` a file copied to standard output once the command succeeds, in

@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 
 from workbench.cli.context import EXIT_ERROR, Context
-from workbench.cli.reading import is_demo_file, load_demos
+from workbench.cli.inputs import resolve
+from workbench.cli.options import MAX_SIMULATED_TRIALS
 from workbench.cli.stdio import is_stdio, refuse_stdio
 from workbench.cli.writing import write_demos
 from workbench.errors import UsageError
@@ -31,6 +32,9 @@ def cmd_simulate(ctx: Context) -> int:
                              "--sample-logs DIR")
     from workbench.sim.landing import simulate_landings
 
+    if len(a.strategy) * max(a.subjects, 1) * max(a.trials, 0) > MAX_SIMULATED_TRIALS:
+        raise UsageError(f"--trials {a.trials} × --subjects {a.subjects} × {len(a.strategy)} strategies: more than "
+                         f"{MAX_SIMULATED_TRIALS} trials in one call; simulate fewer, or several files into a dataset")
     subjects = [None] if a.subjects == 0 else [f"s{i + 1:02d}" for i in range(a.subjects)]
     sets = []
     with ctx.progress() as progress:
@@ -53,21 +57,17 @@ def _named(ctx: Context, out: Path) -> str:
     return "standard output" if ctx.stdio.writes_stdout else str(out)
 
 
-def _log_format(ctx: Context) -> str | None:
-    """``--format`` for a log (a file or standard input); ``parquet`` is not a log format."""
-    return None if ctx.stdio.format == "parquet" else ctx.stdio.format
-
-
 def cmd_inspect(ctx: Context) -> int:
     from rich.markup import escape
     from rich.table import Table
 
-    path = ctx.input_path(ctx.args.log, "the log")
-    if is_demo_file(path):
+    source = resolve(ctx.args, ctx.stdio, [ctx.args.log], mapping=False, what="the log").sources[0]
+    path = source.path
+    if source.demos:
         from workbench.data.dataset import load_demonstrations
 
         ds = load_demonstrations(path)
-        ctx.say(f"[bold]{escape(ctx.shown(path))}[/bold]: workbench demonstrations, {len(ds)} trials, "
+        ctx.say(f"[bold]{escape(source.shown)}[/bold]: workbench demonstrations, {len(ds)} trials, "
                 f"{ds.n_samples} samples, dt {ds.dt} s", markup=True)
         ctx.say(f"states {', '.join(ds.state_names)}; inputs {', '.join(ds.input_names)}")
         table = Table("id", "label", "subject", "samples", "duration [s]", "success", "source")
@@ -78,7 +78,7 @@ def cmd_inspect(ctx: Context) -> int:
         return 0
     import adapters
 
-    summary = adapters.inspect(path, format=_log_format(ctx))
+    summary = adapters.inspect(path, format=source.format)
     t0 = summary.t_start
     ctx.say(
         f"[bold]{escape(ctx.shown(summary.path))}[/bold]: {summary.format}, {summary.size_bytes} bytes, "
@@ -109,10 +109,10 @@ def cmd_map(ctx: Context) -> int:
     from workbench.atomic import atomic_path
 
     a = ctx.args
-    path = ctx.input_path(a.log, "the log")
+    source = resolve(a, ctx.stdio, [a.log], mapping=False, what="the log").sources[0]
     output = None if is_stdio(a.output) else a.output  # `-o -`: printed, as without -o
-    name = Path(output).stem if output else ("stdin" if is_stdio(a.log) else path.stem)
-    draft = draft_mapping(adapters.read(path, format=_log_format(ctx)), name=name)
+    name = Path(output).stem if output else ("stdin" if source.stdin else source.path.stem)
+    draft = draft_mapping(adapters.read(source.path, format=source.format), name=name)
     if output:
         with atomic_path(output) as tmp:
             Path(tmp).write_text(ctx.shown(draft.toml), encoding="utf-8")
@@ -169,7 +169,8 @@ def cmd_import(ctx: Context) -> int:
     out = ctx.output_path(a.output, ".parquet", "the demonstrations")  # before reading: refused on a terminal
     # `-` is standard input, not a file name a glob or folder could expand to
     names = [name for log in a.logs for name in (["-"] if is_stdio(log) else [str(f) for f in expand_logs([log])])]
-    ds = load_demos(ctx, names, a.mapping)
+    # an import writes what it reads: no trial is chosen among them (--label here sets the strategy label)
+    ds = ctx.read(resolve(a, ctx.stdio, names, labels=False), select=False).demos
     if a.label:
         ds = ds.with_demos(d.with_meta(label=a.label) for d in ds)  # keeps the mapping's roles
     write_demos(ds, out, a.mapping)

@@ -3,22 +3,16 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from typing import Any
 
 from workbench.atomic import atomic_write_table
 from workbench.cli.context import Context
-from workbench.cli.options import steps_of
-from workbench.cli.reading import (
-    demos_at_model_dt,
-    load_demos,
-    load_model_file,
-    per_group_path,
-    pilot_only,
-    plant_group_parts,
-    system_for,
-)
+from workbench.cli.inputs import resolve
+from workbench.cli.options import rollout_budget, steps_of
+from workbench.cli.reading import demos_at_model_dt, per_group_path, plant_group_parts, system_for
 from workbench.cli.writing import print_plant
 from workbench.errors import DataError, ModelError, UsageError
 
@@ -27,14 +21,14 @@ __all__ = []
 def cmd_fit(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".npz", "the model")  # before the work: `-o -` to a terminal is refused
-    ds = pilot_only(ctx, load_demos(ctx, [a.demos], a.mapping, [a.label] if a.label else None), a.keep_still)
-    parts, said = plant_group_parts(ds, a.plant_group)
-    if said:
-        ctx.say(said)
+    ds = ctx.read(resolve(a, ctx.stdio, [a.demos], purpose="fit")).demos
+    parts, line = plant_group_parts(ds, a.plant_group)
+    if line:
+        ctx.say(line)
     if len(parts) == 1:
         _fit_one(ctx, parts[0][1], output)
         ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
-        return 0
+        return 0  # the model is written: the fit succeeded, whatever its intervals could be computed from
     if ctx.stdio.writes_stdout:
         raise UsageError(f"-o - writes one model, but these demonstrations are {len(parts)} plant groups "
                          f"({', '.join(str(g) for g, _ in parts)}): name one with --plant-group")
@@ -81,7 +75,7 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
 
         try:
             model = make_model(a.method, system, n_components=components, random_state=a.seed,
-                               gain_method=a.gain, task=a.task).fit(ds)
+                               gain_method=a.gain, timing=a.timing, task=a.task).fit(ds)
         except ModelError as exc:
             raise ModelError(_physics_first(system, exc)) from None
     model.save(output)
@@ -90,14 +84,62 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
         ctx.say(model.task_.describe(system.state_names))
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
-        try:
-            _print_bootstrap(ctx, _as_fitted(ds, model), model.plant_regulated, a.bootstrap, a.seed,
-                             model.gain_method_)
-            _print_ratios(ctx, model, ds, a.bootstrap, a.seed, a.power)
-        except (DataError, ModelError) as exc:  # the model is written: intervals that cannot be had do not unmake it
-            print(f"warning: intervals not computed: {exc}", file=sys.stderr)
+        _print_intervals(ctx, model, ds, model.plant_regulated, a.bootstrap, a.seed, a.power, output)
     elif model.has_gain and model.objective_ is not None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
+
+
+def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int, seed: int, power: int,
+                     output: Any) -> None:
+    """The model's intervals, each part on its own: a part that cannot be computed (no task objective to resample,
+    every resample failing) is said to be not computed, with its reason, and the others are still printed; the
+    model, already written, stands either way (rewritten to ``output`` where the resamples gave the pilot's delay
+    and lag intervals, which its task carries)."""
+    from workbench.errors import WorkbenchError
+    from workbench.models.fitting import timing_setting
+
+    fitted = _as_fitted(ds, model)
+    timing = timing_setting(model)
+
+    def with_objective() -> None:
+        boot = _print_bootstrap(ctx, fitted, system, n_boot, seed, model.gain_method_, timing)
+        if _with_timing_intervals(model, boot):
+            model.save(output)
+    if model.objective_ is None and getattr(model, "objective_error_", None):
+        ctx.say("intervals of the task objective (Q, R): not computed, since inverse LQR found no objective for the "
+                "gain (above); the gain's own intervals follow")
+        parts = [("intervals of K̂", lambda: _print_gain_intervals(ctx, fitted, system, n_boot, seed,
+                                                                   model.gain_method_, timing))]
+    else:
+        parts = [("intervals of K̂, Q and R", with_objective)]
+    parts.append(("weight ratios", lambda: _print_ratios(ctx, model, ds, n_boot, seed, power)))
+    for what, run in parts:
+        try:
+            run()
+        except WorkbenchError as exc:
+            ctx.say(f"{what}: not computed ({' '.join(str(exc).split())})")
+
+
+def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str,
+                          timing: Any = "none") -> None:
+    """K̂'s intervals alone (:func:`~workbench.method.resampling.gain_interval`), over resamples of whole trials (no
+    inverse LQR per resample)."""
+    from workbench.method.resampling import GAIN_INTERVAL, bootstrap_gain
+
+    with ctx.executor() as ex, ctx.progress() as progress:
+        task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
+        result = bootstrap_gain(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex, jackknife=False,
+                                timing=timing,
+                                progress=lambda done, total: progress.update(task, completed=done, total=total))
+    if result.n_failed:
+        from workbench.method.resampling import failure_note
+
+        print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
+    lo, hi = result.interval(95.0)
+    ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % intervals, {GAIN_INTERVAL}):")
+    for i, u in enumerate(system.input_names):
+        ctx.say(f"  K̂ row {u}: " + ", ".join(
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, lo[i], hi[i], strict=True)))
 
 
 def _physics_first(system: Any, exc: Exception) -> str:
@@ -108,12 +150,14 @@ def _physics_first(system: Any, exc: Exception) -> str:
     return f"the identified plant is not physics: {failure}; so the fit failed: {exc}" if failure else str(exc)
 
 
-def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct") -> None:
-    from workbench.method.resampling import bootstrap
+def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct",
+                     timing: Any = "none") -> Any:
+    from workbench.method.resampling import GAIN_INTERVAL, bootstrap
 
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
-        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex,
+        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain if gain in ("direct", "dmd") else "iv",
+                           executor=ex, timing=timing,
                            progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.stopped:
         print(f"warning: bootstrap {result.stopped}", file=sys.stderr)
@@ -121,8 +165,10 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
         from workbench.method.resampling import failure_note
 
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
-    ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, "
-            f"{result.ci:g} % percentile intervals):")
+    ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, {result.ci:g} % "
+            f"intervals: the objective's percentiles, K̂'s {GAIN_INTERVAL}):")
+    if result.timing is not None:
+        ctx.say(f"  {result.timing.describe()}")
     for names, lo, hi, what in ((system.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
                                 (system.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
         ctx.say(f"  diag {what}: " + ", ".join(
@@ -131,6 +177,23 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
         ctx.say(f"  K̂ row {u}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, result.K_lo[i], result.K_hi[i],
                                                          strict=True)))
+    return result
+
+
+def _with_timing_intervals(model: Any, result: Any) -> bool:
+    """Write the bootstrap's intervals of the pilot's delay and lag into the model's task (``task_.extra``:
+    ``delay_s_interval``, ``lag_s_interval``); whether there were any."""
+    pt = getattr(result, "timing", None)
+    task = getattr(model, "task_", None)
+    if pt is None or task is None or getattr(model, "timing_", None) is None:
+        return False
+    bounds = {"delay_s_interval": (pt.delay_lo, pt.delay_hi), "lag_s_interval": (pt.lag_lo, pt.lag_hi)}
+    extra = {k: [float(lo), float(hi)] for k, (lo, hi) in bounds.items()
+             if lo is not None and hi is not None and math.isfinite(lo) and math.isfinite(hi)}
+    if not extra:
+        return False
+    model.task_ = task.with_(extra={**task.extra, **extra})
+    return True
 
 
 def _as_fitted(ds: Any, model: Any) -> Any:
@@ -214,7 +277,10 @@ def cmd_predict(ctx: Context) -> int:
 
     a = ctx.args
     output = ctx.output_path(a.output, ".parquet", "the prediction")
-    model = load_model_file(a.model, ctx)
+    if a.x0 is None and not a.demos:
+        raise UsageError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
+    inputs = resolve(a, ctx.stdio, [a.demos] if a.x0 is None else [], models=[a.model])
+    model = ctx.models(inputs)[""]
     if a.x0 is not None:
         try:
             x0 = np.array([float(v) for v in a.x0.split(",")])
@@ -223,17 +289,22 @@ def cmd_predict(ctx: Context) -> int:
         target, t0, demo_id, task_x0, start = None, 0.0, "x0", None, 0
         names, in_names = model.system.state_names, model.system.input_names
     else:
-        if not a.demos:
-            raise UsageError("predict needs DEMOS (with --demo ID and --start K) or --x0 x,y,…")
-        ds = load_demos(ctx, [a.demos], a.mapping)
+        got = ctx.read(inputs)
+        ds = got.demos
         ids = ds.ids
         if a.demo and a.demo not in ids:
+            why = got.selected.why_left_out(a.demo) if got.selected is not None else None
+            if why is not None:
+                raise DataError(f"{a.demos}: trial {a.demo!r} is left out ({why}); --role, --outcome and "
+                                "--include-excluded choose which trials count")
             raise DataError(f"{a.demos}: no demonstration {a.demo!r}; ids present: {ids[:10]}")
         demo = ds[ids.index(a.demo)] if a.demo else ds[0]
         if not 0 <= a.start < len(demo):
             raise DataError(f"{a.demos}: --start {a.start} outside trial {demo.id!r} (0…{len(demo) - 1})")
         t0 = float(demo.t[a.start])
-        at_dt = demos_at_model_dt(ctx, ds, [model], a.resample, a.demos)
+        at_dt, note = demos_at_model_dt(ds, [model], a.resample, a.demos)
+        if note:
+            ctx.say(note)
         if at_dt is not ds:
             # --start counts samples of the file; on the model's grid the start is the sample nearest its time
             demo = at_dt[ids.index(demo.id)]
@@ -246,6 +317,7 @@ def cmd_predict(ctx: Context) -> int:
         names, in_names = ds.state_names, ds.input_names
     dt = model.system.dt  # the model steps at its own dt, whatever the demonstrations' sampling
     n_steps = steps_of(a.horizon_s, dt)
+    rollout_budget(a.samples, n_steps)
     # from inside a trial, the task's start frame stays at the trial's first state
     kwargs: dict[str, Any] = {"target": target, "task_x0": task_x0, "task_step": int(start)}
     if a.samples:

@@ -13,12 +13,22 @@ from workbench.cli.data import cmd_import, cmd_inspect, cmd_map, cmd_simulate
 from workbench.cli.model import cmd_fit, cmd_predict
 from workbench.cli.options import (
     DEFAULT_MAPPING,
+    MAX_WORKERS,
     SAMPLE_LOGS,
+    count_arg,
     fit_n_components_arg,
+    fraction_arg,
+    horizon_arg,
     int_list,
+    int_range,
+    online_horizon_arg,
     positive_float,
+    positive_int,
+    seconds_arg,
+    seed_arg,
     speed_arg,
     task_arg,
+    timing_arg,
 )
 from workbench.cli.stdio import input_formats, output_formats
 from workbench.cli.study import cmd_demo, cmd_evaluate, cmd_report
@@ -30,6 +40,7 @@ from workbench.defaults import (
     OBJECTIVE_RESAMPLES,
     ONLINE_HORIZON_S,
     STUDY_N_COMPONENTS,
+    TIMING,
 )
 from workbench.models.registry import REGISTRY
 
@@ -56,24 +67,24 @@ def _common(p: argparse.ArgumentParser, *, top: bool = False) -> None:
 def _study_options(
     p: argparse.ArgumentParser, *, samples: int = 100, efficiency: str | None = "2,5,10,20", repeats: int = 2
 ) -> None:
-    p.add_argument("--test-size", type=float, default=0.2, metavar="F",
+    p.add_argument("--test-size", type=fraction_arg, default=0.2, metavar="F",
                    help="fraction of each strategy's trials held out for testing (default 0.2)")
-    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=HORIZON_S, metavar="SECONDS",
+    p.add_argument("--horizon", dest="horizon_s", type=horizon_arg, default=HORIZON_S, metavar="SECONDS",
                    help=f"prediction horizon in seconds (default {HORIZON_S}, the paper's {N_STEPS} steps)")
     p.add_argument("--n-components", type=fit_n_components_arg, default=STUDY_N_COMPONENTS, metavar="G|bic|cv",
                    help="GMM components G, 'bic' to pick G by BIC, or 'cv' (default) to choose G (1, 2 or 5) and "
                         "the regularizer by cross-validation on each strategy's training trials, falling back to the "
                         "task objective's K̂x where the variability model does not lower the held-out error "
                         "(said in the output); 5 is the paper's")
-    p.add_argument("--samples", type=int, default=samples, metavar="N",
+    p.add_argument("--samples", type=count_arg, default=samples, metavar="N",
                    help=f"Monte Carlo rollouts for the prediction band; 0 turns it off (default {samples})")
     p.add_argument("--efficiency", type=int_list, default=int_list(efficiency) if efficiency else None,
                    metavar="N,N,…", help=f"training-set sizes of the data-efficiency curve (default {efficiency})")
     p.add_argument("--no-efficiency", dest="efficiency", action="store_const", const=None,
                    help="skip the data-efficiency curve")
-    p.add_argument("--repeats", type=int, default=repeats, metavar="R",
+    p.add_argument("--repeats", type=positive_int, default=repeats, metavar="R",
                    help=f"random training subsets per size on the data-efficiency curve (default {repeats})")
-    p.add_argument("--stride", dest="stride_s", type=positive_float, default=1.0, metavar="SECONDS",
+    p.add_argument("--stride", dest="stride_s", type=seconds_arg, default=1.0, metavar="SECONDS",
                    help="score predictions from every SECONDS of each test trial whose record covers the horizon, "
                         "and from its first state (default 1.0)")
     p.add_argument("--first-state-only", dest="stride_s", action="store_const", const=None,
@@ -81,7 +92,7 @@ def _study_options(
     p.add_argument("--keep-still", action="store_true",
                    help="keep segments in which no input moves beyond its resolution (default: reported and left "
                         "out: no pilot was flying them)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the split, EM and Monte Carlo (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the split, EM and Monte Carlo (default 0)")
     _system_option(p)
 
 
@@ -110,7 +121,7 @@ def _output_options(p: argparse.ArgumentParser) -> None:
 def _executor_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("scaling out (Dask)")
     x = g.add_mutually_exclusive_group()
-    x.add_argument("--workers", type=int, metavar="N",
+    x.add_argument("--workers", type=int_range(1, MAX_WORKERS), metavar="N",
                    help="run independent tasks on a local Dask cluster of N worker processes (default: serial, "
                         "in this process)")
     x.add_argument("--scheduler", metavar="ADDRESS",
@@ -172,8 +183,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--strategy", nargs="+", default=["CS1", "CS2"], choices=["CS1", "CS2"],
                    help="control strategies: CS1 centre first, CS2 straight line (default both)")
     p.add_argument("--trials", type=int, default=30, help="trials per strategy and subject (default 30)")
-    p.add_argument("--subjects", type=int, default=0, help="number of synthetic subjects; 0 = the reference expert")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--subjects", type=count_arg, default=0,
+                   help="number of synthetic subjects; 0 = the reference expert")
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--sample-logs", metavar="DIR", help="instead: regenerate the sample logs into DIR")
 
     p = add("inspect", cmd_inspect, "show what a log contains: streams, rates, fields, time span",
@@ -218,8 +230,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "squares (iv-or-direct, default; the choice and its reason are printed), least squares "
                         "(direct), the paper's DMD, or instrumental variables only (iv: consistent when the "
                         "operator's variability is autocorrelated)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialization (default 0)")
-    p.add_argument("--bootstrap", type=int, default=OBJECTIVE_RESAMPLES, metavar="N",
+    p.add_argument("--timing", type=timing_arg, default=TIMING, metavar="identify|none|DELAY,LAG",
+                   help="the pilot's reaction delay and neuromuscular lag: identified and used by the gain, the "
+                        "objective and every prediction (identify, default; printed with intervals), none (the "
+                        "paper's u = K x), or given in seconds (e.g. 0.2,0.08)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the k-means initialization (default 0)")
+    p.add_argument("--bootstrap", type=count_arg, default=OBJECTIVE_RESAMPLES, metavar="N",
                    help=f"resample the trials N times (default {OBJECTIVE_RESAMPLES}; 0: no intervals) and print 95 "
                         "%% intervals of K̂, the normalized Q, R diagonals and the weight ratios inside coupled parts "
                         "(the paper gives none)")
@@ -228,6 +244,7 @@ def build_parser() -> argparse.ArgumentParser:
     _system_option(p)
     _plant_group_option(p, "a model of each written beside -o as MODEL.GROUP.npz")
     _mapping_option(p)
+    _selection_options(p, "fit")
     _executor_options(p)
 
     p = add("predict", cmd_predict, "predict a trajectory with a fitted model from a recorded or given state",
@@ -237,19 +254,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", required=True, metavar="MODEL.npz", help="a fitted model; - reads standard input")
     _format_option(p)
     p.add_argument("--demo", metavar="ID", help="trial to start from (default the first)")
-    p.add_argument("--start", type=int, default=0, metavar="K", help="sample of the trial to start from (default 0)")
+    p.add_argument("--start", type=count_arg, default=0, metavar="K",
+                   help="sample of the trial to start from (default 0)")
     p.add_argument("--x0", metavar="X,Y,…", help="instead of a trial: the start state, comma-separated")
     p.add_argument("--resample", action="store_true",
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
-    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=HORIZON_S, metavar="SECONDS",
+    p.add_argument("--horizon", dest="horizon_s", type=horizon_arg, default=HORIZON_S, metavar="SECONDS",
                    help=f"prediction horizon in seconds (default {HORIZON_S})")
-    p.add_argument("--samples", type=int, default=0, metavar="N",
+    p.add_argument("--samples", type=count_arg, default=0, metavar="N",
                    help="Monte Carlo rollouts: adds <state>_lower/_upper band columns (5–95 %%)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the Monte Carlo draws (default 0)")
     p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet; - for standard output")
     _output_format_option(p, _TABLE_OUTPUTS)
     _mapping_option(p)
+    _selection_options(p, "look")
 
     p = add("evaluate", cmd_evaluate,
             "compare the proposed model with IOC-only, GMR-only and persistence on held-out trials; data efficiency",
@@ -264,12 +283,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the paper's multi-subject design: a model per subject, --n-test held-out trials each "
                         "(a collected session's recorded test trials with --holdout auto), "
                         "ANOVA and paired t-tests across the methods (use --horizon 5 for the paper's)")
-    p.add_argument("--n-test", type=int, default=1, metavar="N",
+    p.add_argument("--n-test", type=positive_int, default=1, metavar="N",
                    help="held-out trials per subject with --per-subject (default 1)")
     _holdout_option(p)
     _study_options(p)
     _plant_group_option(p, "each evaluated on its own plant (with -o, a table per group: FILE.GROUP.parquet)")
     _mapping_option(p)
+    _selection_options(p, "study")
     _executor_options(p)
 
     p = add("map", cmd_map, "draft a mapping from a log: the vehicle, its firmware's field names, the streams "
@@ -287,13 +307,13 @@ def build_parser() -> argparse.ArgumentParser:
     _format_option(p)
     p.add_argument("--label", nargs="+", help="show only these strategy labels")
     p.add_argument("--focus", nargs="+", metavar="ID", help="trials to predict from (default the first per label)")
-    p.add_argument("--starts", nargs="+", type=int, metavar="K", help="samples to predict from (default 0)")
-    p.add_argument("--horizon", dest="horizon_s", type=positive_float, default=HORIZON_S, metavar="SECONDS",
+    p.add_argument("--starts", nargs="+", type=count_arg, metavar="K", help="samples to predict from (default 0)")
+    p.add_argument("--horizon", dest="horizon_s", type=horizon_arg, default=HORIZON_S, metavar="SECONDS",
                    help=f"prediction horizon in seconds (default {HORIZON_S})")
-    p.add_argument("--samples", type=int, default=VIEW_SAMPLES, metavar="N",
+    p.add_argument("--samples", type=count_arg, default=VIEW_SAMPLES, metavar="N",
                    help=f"Monte Carlo rollouts for the prediction band drawn with --model (default {VIEW_SAMPLES}, "
                         "enough for its 90 %% band and fast; 0 turns the band off)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo draws (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the Monte Carlo draws (default 0)")
     p.add_argument("--resample", action="store_true",
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
@@ -309,6 +329,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with several raw logs: where each log's 0 s is: arming, takeoff, start or seconds after its "
                         "start; one for all or one per log (default: arming where each log records one, else its "
                         "start)")
+    _selection_options(p, "look")
     _output_options(p)
 
     p = add("replay", cmd_replay, "stream a recorded session as if live, with the model's online predictions",
@@ -324,13 +345,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed", type=speed_arg, default=1.0, help="multiple of real time (default 1.0; 0.001 to "
                    "1e6)")
     p.add_argument("--no-wait", action="store_true", help="stream as fast as possible")
-    p.add_argument("--horizon", dest="horizon_s", type=float, default=ONLINE_HORIZON_S, metavar="SECONDS",
+    p.add_argument("--horizon", dest="horizon_s", type=online_horizon_arg, default=ONLINE_HORIZON_S, metavar="SECONDS",
                    help=f"rollout horizon of the online prediction (default {ONLINE_HORIZON_S} s; 0 turns rollouts "
                         "off)")
     p.add_argument("--resample", action="store_true",
                    help="resample demonstrations sampled at another dt than the model's to the model's dt "
                         "(default: refuse them)")
     _mapping_option(p)
+    _selection_options(p, "look")
     _output_options(p)
 
     p = add("live", cmd_live, "predict the pilot online from a vehicle's live MAVLink telemetry, into rerun",
@@ -339,9 +361,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a pymavlink connection: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device")
     p.add_argument("--model", required=True, metavar="MODEL.npz")
     p.add_argument("--duration", type=positive_float, metavar="SECONDS", help="stop after this long (default: Ctrl-C)")
-    p.add_argument("--horizon", dest="horizon_s", type=float, default=ONLINE_HORIZON_S, metavar="SECONDS",
+    p.add_argument("--horizon", dest="horizon_s", type=online_horizon_arg, default=ONLINE_HORIZON_S, metavar="SECONDS",
                    help=f"rollout horizon at every step (default {ONLINE_HORIZON_S} s; 0 turns rollouts off)")
-    p.add_argument("--sysid", type=int, metavar="N", help="follow this MAVLink system (default: the first vehicle)")
+    p.add_argument("--sysid", type=int_range(1, 255), metavar="N",
+                   help="follow this MAVLink system (default: the first vehicle)")
     p.add_argument("--clock", choices=["vehicle", "arrival"], default="vehicle",
                    help="time samples by the vehicle's time_boot_ms (default) or by their arrival")
     p.add_argument("--silence", type=positive_float, default=2.0, metavar="SECONDS",
@@ -364,6 +387,7 @@ def build_parser() -> argparse.ArgumentParser:
     _task_option(p)
     _plant_group_option(p, "a report of each in DIR/GROUP/")
     _mapping_option(p)
+    _selection_options(p, "study")
     _executor_options(p)
 
     p = add("demo", cmd_demo, "the whole pipeline on the sample logs: import, fit CS1 and CS2, compare, report, .rrd",
@@ -374,9 +398,26 @@ def build_parser() -> argparse.ArgumentParser:
     _bootstrap_option(p)
     _power_option(p, 1)
     _mapping_option(p)
+    _selection_options(p, "study")
 
     add_collect(add)
     return parser
+
+
+def _selection_options(p: argparse.ArgumentParser, purpose: str) -> None:
+    """``--role``, ``--outcome``, ``--include-excluded``: which of a collected session's trials count
+    (:mod:`workbench.data.selection`); the defaults are the purpose's."""
+    g = p.add_argument_group("which trials (of a session recorded by `workbench collect`)")
+    role = {"fit": "train", "study": "train,test (the test trials held out)", "look": "all"}[purpose]
+    outcome = "all" if purpose == "look" else "landed"
+    g.add_argument("--role", metavar="train|test|all",
+                   help=f"the trials of these recorded roles, comma-separated (default {role}; trials that record "
+                        "no role are kept)")
+    g.add_argument("--outcome", metavar="landed|crashed|…|all",
+                   help=f"the trials of these recorded outcomes, comma-separated: landed, crashed, left-the-domain, "
+                        f"time-limit (default {outcome} on a collected session)")
+    g.add_argument("--include-excluded", action="store_true",
+                   help="keep the trials the experimenter marked excluded (default: left out, and said so)")
 
 
 def _task_option(p: argparse.ArgumentParser) -> None:
@@ -388,7 +429,7 @@ def _task_option(p: argparse.ArgumentParser) -> None:
 
 
 def _power_option(p: argparse.ArgumentParser, default: int) -> None:
-    p.add_argument("--power", type=int, default=default, metavar="N",
+    p.add_argument("--power", type=count_arg, default=default, metavar="N",
                    help="simulated demonstration sets per size (n, 2n, 4n) of the power curve that says how many "
                         "demonstrations a weight ratio the data do not identify would need "
                         f"(default {default}; 0: none)")
@@ -404,6 +445,6 @@ def _holdout_option(p: argparse.ArgumentParser) -> None:
 
 
 def _bootstrap_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bootstrap", type=int, default=OBJECTIVE_RESAMPLES, metavar="N",
+    p.add_argument("--bootstrap", type=count_arg, default=OBJECTIVE_RESAMPLES, metavar="N",
                    help="resamples of each strategy's training trials for the intervals of its task objective and "
                         f"weight ratios (default {OBJECTIVE_RESAMPLES}; 0: point estimates only)")

@@ -1,128 +1,136 @@
-"""Reading what a command is given: its logs and demonstrations (standard input included), its model files, and
-the plant and the pilot's segments it works on.
+"""Reading what a command's :class:`~workbench.cli.inputs.Inputs` name: its logs and demonstrations, the trials a
+study means among them, its model files, and the plant and the pilot's segments it works on.
+
+Everything here follows the resolved inputs and returns values (and the lines a user should read); it never asks
+the options or the run's context again, so a command's walk of its inputs goes down: the command, its inputs,
+this module, the data.
 """
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from workbench.cli.inputs import Inputs, Source, input_stem, is_demo_file
 from workbench.cli.options import DEFAULT_MAPPING
-from workbench.cli.stdio import STDIN_NAME, is_stdio
-from workbench.errors import DataError, ModelError, UsageError, WorkbenchError
+from workbench.cli.stdio import STDIN_NAME
+from workbench.defaults import HORIZON_S
+from workbench.errors import DataError, ModelError, WorkbenchError
 
-if TYPE_CHECKING:
-    from workbench.cli.context import Context
-
-__all__ = ["input_stem", "existing_path", "is_demo_file", "load_one", "join_sets_named", "load_demos", "system_for",
-           "study_plant", "pilot_only", "require_proposed", "load_model_file", "demos_at_model_dt"]
-
-
-def input_stem(name: str) -> str:
-    """A default output name's stem from an input's name (``stdin`` for ``-``)."""
-    return "stdin" if is_stdio(name) else Path(name).stem
+__all__ = ["Read", "read_demos", "read_models", "load_one", "system_for", "study_plant", "pilot_only",
+           "require_proposed", "demos_at_model_dt", "input_stem", "is_demo_file", "plant_group_parts",
+           "per_group_path"]
 
 
-def existing_path(path: str | os.PathLike, what: str = "file") -> Path:
-    p = Path(path)
-    if not p.exists():
-        raise DataError(f"{p}: no such {what}")
-    return p
+@dataclass(frozen=True)
+class Read:
+    """The demonstrations a command works on, with what choosing them left out.
+
+    ``selected`` is :func:`workbench.data.selection.select_trials`'s record (None where nothing was chosen);
+    ``notes`` the lines to print (the trials used, segments without pilot input).
+    """
+
+    demos: Any
+    selected: Any = None
+    notes: tuple[str, ...] = ()
 
 
-def is_demo_file(path: Path) -> bool:
-    if path.suffix.lower() in (".parquet", ".pq"):
-        return True
-    if not path.is_dir():
-        return False  # a log: telling so must not import the dataset module, and pandas behind it (0.25 s)
-    from workbench.data.dataset import is_dataset
-
-    return is_dataset(path)
-
-
-def load_one(path: Path, mapping: str | None, format: str | None = None, allow_still: bool = False) -> Any:
+def load_one(source: Source, allow_still: bool = False) -> Any:
+    """One source's demonstrations: a demonstrations file or dataset as it is, a log through its mapping."""
     from workbench.data.dataset import load_demonstrations
 
-    if is_demo_file(path):
-        return load_demonstrations(path)
+    if source.demos:
+        return load_demonstrations(source.path)
     import adapters
 
-    return adapters.load(path, mapping=mapping or DEFAULT_MAPPING,
-                         format=None if format in (None, "parquet") else format, allow_still=allow_still)
+    return adapters.load(source.path, mapping=source.mapping or DEFAULT_MAPPING, format=source.format,
+                         allow_still=allow_still)
 
 
-def join_sets_named(sets: Sequence[Any], names: Sequence[str]) -> Any:
-    """One set from several files; a trial id seen twice is prefixed with its file's name."""
-    from workbench.data.dataset import join_sets
+def _warn_about(source: Source, ds: Any) -> None:
+    """What a log's import noticed and kept going with: a still position, flips, damaged or unmapped data."""
+    if not len(ds):
+        return
+    meta = ds[0].meta
+    if meta.get("still"):
+        print(f"warning: {meta['still']}", file=sys.stderr)
+    if meta.get("flipped"):  # the segments cut where the vehicle turned upside down
+        print(f"warning: {source.shown}: {meta['flipped']}", file=sys.stderr)
+    skipped = {k: v for k, v in dict(meta.get("skipped") or {}).items() if v}
+    if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
+        what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())
+        print(f"warning: {source.shown}: skipped {what}", file=sys.stderr)
 
-    return join_sets(sets, names)
 
+def read_demos(inputs: Inputs, progress: Any, *, select: bool = True) -> Read:
+    """The demonstrations of ``inputs``: every source read (``progress``: a rich ``Progress`` to advance), joined,
+    kept to ``inputs.labels``, and (``select``) to the trials ``inputs.selection`` means for ``inputs.purpose``;
+    then, for a fit or a study, the segments with pilot input (:func:`pilot_only`)."""
+    from workbench.data.dataset import join_sets, refuse_copies
 
-def load_demos(ctx: Context, paths: Sequence[str], mapping: str | None, labels: Sequence[str] | None = None,
-               allow_still: bool = False):
-    """The demonstrations of ``paths``; ``allow_still`` (a viewer) shows a log whose position never moves, with a
-    warning naming it, where the other commands stop with that cause."""
-    if sum(is_stdio(p) for p in paths) > 1:
-        raise UsageError("- (standard input) given twice: it can be read once")
-    files = [ctx.input_path(p, "the demonstrations") for p in paths]
     sets = []
-    with ctx.progress() as progress:
-        task = progress.add_task("reading logs", total=len(files))
-        for f in files:
-            stdin = f == ctx.stdio.stdin_path
-            chosen = mapping
-            if mapping is None and not is_demo_file(f):
-                import adapters
-
-                chosen, why = adapters.choose_mapping(f, format=None if ctx.stdio.format == "parquet"
-                                                      else ctx.stdio.format)
-                # above the bar while it is drawn (printed beside it, the line ran on from the bar's, past 80 columns)
-                say = progress.console.print if progress.live.is_started else ctx.say
-                say(f"{ctx.shown(f)}: mapping {chosen} ({why}; --mapping chooses another)")
-            ds = load_one(f, chosen, ctx.stdio.format, allow_still)
-            if len(ds) and ds[0].meta.get("sticks"):  # the channels the log's RC map gave the sticks, and the check
-                (progress.console.print if progress.live.is_started else ctx.say)(
-                    f"{ctx.shown(f)}: {ds[0].meta['sticks']}")
-            if len(ds) and ds[0].meta.get("still"):
-                print(f"warning: {ds[0].meta['still']}", file=sys.stderr)
-            if len(ds) and ds[0].meta.get("flipped"):  # the segments cut where the vehicle turned upside down
-                print(f"warning: {ctx.shown(f)}: {ds[0].meta['flipped']}", file=sys.stderr)
-            if stdin:  # the temporary file is gone once the command ends: the trials come from <stdin>
-                ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
-            skipped = {k: v for k, v in dict(ds[0].meta.get("skipped") or {}).items() if v} if len(ds) else {}
-            if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
-                what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())
-                print(f"warning: {ctx.shown(f)}: skipped {what}", file=sys.stderr)
-            sets.append(ds)
-            progress.advance(task)
-    ds = join_sets_named(sets, [ctx.shown(f) for f in files])
-    if labels:
-        parts = [ds.by_label(label) for label in labels]
+    notes: list[str] = []
+    task = progress.add_task("reading logs", total=len(inputs.sources))
+    for source in inputs.sources:
+        ds = load_one(source, inputs.allow_still)
+        if len(ds) and ds[0].meta.get("sticks"):  # the channels the log's RC map gave the sticks, and the check
+            notes.append(f"{source.shown}: {ds[0].meta['sticks']}")
+        _warn_about(source, ds)
+        if source.stdin:  # the spooled file is gone once the command ends: the trials come from <stdin>
+            ds = ds.with_demos([d.with_meta(source=STDIN_NAME) for d in ds])
+        sets.append(ds)
+        progress.advance(task)
+    names = [s.shown for s in inputs.sources]
+    if len(sets) > 1 or not (inputs.sources[0].demos and inputs.sources[0].path.is_dir()):  # a dataset checks itself
+        refuse_copies(sets, names, "")
+    ds = join_sets(sets, names)
+    if inputs.labels:
+        parts = [ds.by_label(label) for label in inputs.labels]
         ds = parts[0]
         for p in parts[1:]:
             ds = ds + p
     if not len(ds):
-        raise DataError(f"{', '.join(paths)}: no demonstrations")
-    return ds
+        raise DataError(f"{inputs.names}: no demonstrations")
+    selected = None
+    if select:
+        from workbench.data.selection import select_trials
+
+        selected = select_trials(ds, inputs.selection, inputs.purpose)
+        ds = selected.demos
+        if line := selected.describe():
+            notes.append(line)
+    if inputs.purpose != "look":
+        ds, lines = pilot_only(ds, inputs.keep_still)
+        notes += lines
+    return Read(ds, selected, tuple(notes))
 
 
-def plant_group_parts(ds: Any, name: str | None) -> tuple[list[tuple[str | None, Any]], str | None]:
-    """The demonstrations by plant group (:mod:`workbench.data.plant_groups`), each a plant and a model of its own:
-    the group ``name`` alone (``--plant-group``), else every group in the data; and the one line that says so
-    (``None`` for data without groups)."""
+def read_models(inputs: Inputs) -> dict[str, Any]:
+    """The models ``inputs`` name, by label (``""`` for one given without ``LABEL=``)."""
+    from workbench.models.factory import load_model
+
+    return {m.label: load_model(m.path) for m in inputs.models}
+
+
+def plant_group_parts(ds: Any, name: str | None) -> tuple[list[tuple[str | None, Any]], str]:
+    """The demonstrations by plant group (:mod:`workbench.data.plant_groups`), each a plant and a model of its own,
+    and the line that says so: the group ``name`` alone (``--plant-group``), else every group in the data."""
     from workbench.data.plant_groups import by_plant_group, describe_groups, select_plant_group
 
     if name:
         part = select_plant_group(ds, name)
         return [(name, part)], f"plant group {describe_groups(part)} (--plant-group)"
     parts = by_plant_group(ds)
+    line = ""
     if len(parts) > 1:
-        return list(parts.items()), (f"{len(parts)} plant groups, a plant and a model for each (--plant-group NAME "
-                                     f"takes one): {describe_groups(ds)}")
-    return list(parts.items()), (f"plant group {describe_groups(ds)}" if next(iter(parts)) is not None else None)
+        line = (f"{len(parts)} plant groups, a plant and a model for each (--plant-group NAME takes one): "
+                f"{describe_groups(ds)}")
+    elif next(iter(parts)) is not None:
+        line = f"plant group {describe_groups(ds)}"
+    return list(parts.items()), line
 
 
 def per_group_path(path: Path, group: str | None) -> Path:
@@ -132,30 +140,31 @@ def per_group_path(path: Path, group: str | None) -> Path:
     return path.with_name(f"{path.stem}.{group.replace(' ', '-')}{path.suffix}")
 
 
-def system_for(ds: Any, choice: str = "auto", horizon_s: float = 3.0):
+def system_for(ds: Any, choice: str = "auto", horizon_s: float = HORIZON_S):
     from workbench.plant.choice import choose_plant
 
     return choose_plant(ds, choice, horizon_s)
 
 
-def study_plant(choice: str, horizon_s: float = 3.0) -> Callable[[Any], Any]:
+def study_plant(choice: str, horizon_s: float = HORIZON_S) -> Callable[[Any], Any]:
     from workbench.plant.choice import plant_rule
 
     return plant_rule(choice, horizon_s)
 
 
-def pilot_only(ctx: Context, ds: Any, keep_still: bool) -> Any:
-    """The segments with pilot input (:mod:`workbench.data.excitation`); the others are named and left out
-    unless ``--keep-still``, and an input no segment moves is named too."""
+def pilot_only(ds: Any, keep_still: bool) -> tuple[Any, list[str]]:
+    """The segments with pilot input (:mod:`workbench.data.excitation`) and the line saying what was left out;
+    the others are left out unless ``keep_still``. An input no segment moves is named on stderr, as a warning."""
     from workbench.data.excitation import pilot_segments
 
     kept, report = pilot_segments(ds, keep_still=keep_still)
     for line in report.describe():
         print(f"warning: {line}", file=sys.stderr)
+    notes = []
     if report.still_segments:
-        ctx.say(f"{'kept (--keep-still)' if keep_still else 'left out of fitting'}: {len(report.still_segments)} "
-                f"segment(s) without pilot input")
-    return kept
+        notes.append(f"{'kept (--keep-still)' if keep_still else 'left out of fitting'}: "
+                     f"{len(report.still_segments)} segment(s) without pilot input")
+    return kept, notes
 
 
 def require_proposed(result: Any) -> None:
@@ -167,15 +176,10 @@ def require_proposed(result: Any) -> None:
                              "`workbench evaluate` compares the methods that can be")
 
 
-def load_model_file(path: str, ctx: Context | None = None):
-    from workbench.models.factory import load_model
-
-    return load_model(ctx.input_path(path, "the model", ".npz") if ctx is not None else existing_path(path))
-
-
-def demos_at_model_dt(ctx: Context, ds: Any, models: Sequence[Any], resample: bool, source: str) -> Any:
-    """``ds`` on the models' time step: refused when sampled at another (a model steps once per its own dt, so
-    its predictions would be drawn against the wrong times), resampled with ``--resample``."""
+def demos_at_model_dt(ds: Any, models: Sequence[Any], resample: bool, source: str) -> tuple[Any, str]:
+    """``ds`` on the models' time step, and the line saying it was resampled (empty if it was not): refused when
+    sampled at another (a model steps once per its own dt, so its predictions would be drawn against the wrong
+    times), resampled with ``--resample``."""
     import math
 
     dt = float(models[0].system.dt)
@@ -186,6 +190,11 @@ def demos_at_model_dt(ctx: Context, ds: Any, models: Sequence[Any], resample: bo
         at_dt = models[0].demos_at_model_dt(ds, resample=resample)
     except WorkbenchError as exc:
         raise type(exc)(f"{source}: {exc}") from None
-    if at_dt is not ds:
-        ctx.say(f"resampled {source} from dt = {ds.dt:g} s to the model's dt = {dt:g} s (states linear, inputs held)")
-    return at_dt
+    if at_dt is ds:
+        return ds, ""
+    return at_dt, f"resampled {source} from dt = {ds.dt:g} s to the model's dt = {dt:g} s (states linear, inputs held)"
+
+
+def default_output(name: str, suffix: str) -> Path:
+    """Where a recording goes without ``--save`` and without a display: under ``out/``, never beside the input."""
+    return Path("out") / (input_stem(name) + suffix)

@@ -7,7 +7,8 @@ extension keeps the rest of the pipeline as for any file. Errors and the demonst
 ``<stdin>``, never the temporary name. A single output file is written as usual (atomically, beside a temporary
 name) and copied to standard output only once it is complete, so a failed or interrupted command writes nothing
 there; binary output to a terminal is refused, as ``curl`` does. A folder (a report, a dataset) has no
-standard-output form and is refused.
+standard-output form and is refused. A spool's folder carries its process's id: a command that is killed (SIGKILL
+runs no clean-up) leaves it behind, and the next ``workbench`` command removes it when it starts (:func:`sweep`).
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ from pathlib import Path
 
 from workbench.errors import DataError, FormatError, UsageError, WorkbenchError
 
-__all__ = ["STDIO", "STDIN_NAME", "STDOUT_NAME", "Stdio", "is_stdio", "refuse_stdio", "input_formats",
-           "stdin_formats", "output_formats", "PARQUET_MAGIC"]
+__all__ = ["STDIO", "STDIN_NAME", "STDOUT_NAME", "SPOOL_PREFIX", "Stdio", "is_stdio", "refuse_stdio", "input_formats",
+           "stdin_formats", "output_formats", "PARQUET_MAGIC", "sweep"]
 
 STDIO = "-"
 STDIN_NAME = "<stdin>"
@@ -32,6 +33,40 @@ PARQUET_MAGIC = b"PAR1"
 #: Output formats that are text, safe to print to a terminal.
 TEXT_SUFFIXES = (".csv", ".toml", ".json", ".txt")
 _STDIN_BLOCK = 1 << 20
+
+
+#: The temporary folders of standard input's spool and standard output's file: ``workbench-stdio-<pid>-<random>``.
+SPOOL_PREFIX = "workbench-stdio-"
+
+
+def sweep(folder: str | os.PathLike | None = None) -> list[Path]:
+    """Remove the spools of commands that no longer run (a SIGKILL leaves its spool: nothing runs in a killed
+    process), from ``folder`` (default the temporary folder); those of running ones stay. Returns what went.
+
+    A spool of an earlier version, without a process id in its name, goes once older than
+    :data:`workbench.atomic.LEGACY_AGE`."""
+    import re
+    import time
+
+    from workbench.atomic import LEGACY_AGE, _alive
+
+    root = Path(folder or tempfile.gettempdir())
+    ours = re.compile(rf"^{re.escape(SPOOL_PREFIX)}(\d+)-")
+    removed = []
+    try:
+        entries = [e for e in root.iterdir() if e.name.startswith(SPOOL_PREFIX)]
+    except OSError:
+        return removed
+    for entry in entries:
+        m = ours.match(entry.name)
+        try:
+            stale = not _alive(int(m.group(1))) if m else time.time() - entry.lstat().st_mtime > LEGACY_AGE
+        except OSError:
+            continue
+        if stale and entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+            removed.append(entry)
+    return removed
 
 
 def is_stdio(name: object) -> bool:
@@ -93,6 +128,7 @@ class Stdio:
 
     def __init__(self, format: str | None = None) -> None:
         self.format = format
+        sweep()  # what a killed command's spool left behind goes when the next command starts
         self._folder: Path | None = None
         self._stdin: Path | None = None
         self._stdin_for: str | None = None
@@ -100,7 +136,7 @@ class Stdio:
 
     def _temp(self) -> Path:
         if self._folder is None:
-            self._folder = Path(tempfile.mkdtemp(prefix="workbench-stdio-"))
+            self._folder = Path(tempfile.mkdtemp(prefix=f"{SPOOL_PREFIX}{os.getpid()}-"))
         return self._folder
 
     # -- input ---------------------------------------------------------------------------------------------

@@ -16,20 +16,13 @@ from typing import Any
 
 from workbench.atomic import atomic_write_table, recover_swaps, swap_entries, temp_sibling
 from workbench.cli.context import Context
-from workbench.cli.options import SAMPLE_LOGS, steps_of
-from workbench.cli.reading import (
-    is_demo_file,
-    load_demos,
-    per_group_path,
-    pilot_only,
-    plant_group_parts,
-    require_proposed,
-    study_plant,
-    system_for,
-)
-from workbench.cli.stdio import is_stdio, refuse_stdio
+from workbench.cli.inputs import resolve
+from workbench.cli.options import SAMPLE_LOGS, rollout_budget, steps_of
+from workbench.cli.reading import per_group_path, plant_group_parts, require_proposed, study_plant, system_for
+from workbench.cli.stdio import refuse_stdio
 from workbench.cli.writing import print_plant, viewer_command
 from workbench.data.plant_groups import describe_groups
+from workbench.data.selection import recorded_test_ids, unrecorded_split
 from workbench.errors import DataError, ModelError, UsageError
 
 __all__ = []
@@ -38,15 +31,23 @@ def cmd_evaluate(ctx: Context) -> int:
 
     a = ctx.args
     output = ctx.output_path(a.output, ".parquet", "the results table") if a.output else None
-    ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
-    parts, said = plant_group_parts(ds, getattr(a, "plant_group", None))
-    if said:
-        ctx.say(said)
+    inputs = resolve(a, ctx.stdio, a.demos, purpose="study")
+    got = ctx.read(inputs)
+    ds = got.demos
+    parts, line = plant_group_parts(ds, getattr(a, "plant_group", None))
+    if line:
+        ctx.say(line)
     if len(parts) > 1 and output is not None and ctx.stdio.writes_stdout:
         raise UsageError(f"-o - writes one table, but these demonstrations are {len(parts)} plant groups "
                          f"({', '.join(str(g) for g, _ in parts)}): name one with --plant-group")
+    # --per-subject reads a dataset read whole where it lies, each subject's partition by its own task (only where
+    # every trial of it is used: nothing left out by the selection, for want of pilot input or by plant group)
+    whole = inputs.dataset if (inputs.dataset is not None and len(ds) == got.selected.total
+                               and len(parts) == 1) else None
+    trials = got.selected.describe()
     return for_each_group(ctx, parts, "evaluated", lambda group, part: _evaluate_group(
-        ctx, part, output if len(parts) == 1 or output is None else per_group_path(output, group)))
+        ctx, part, output if len(parts) == 1 or output is None else per_group_path(output, group),
+        source=part if whole is None else whole, trials=trials))
 
 
 def for_each_group(ctx: Context, parts: list[tuple[str | None, Any]], done: str, run: Callable[[Any, Any], Any]) -> int:
@@ -69,12 +70,12 @@ def for_each_group(ctx: Context, parts: list[tuple[str | None, Any]], done: str,
     return 0
 
 
-def _evaluate_group(ctx: Context, ds: Any, output: Path | None) -> None:
+def _evaluate_group(ctx: Context, ds: Any, output: Path | None, *, source: Any, trials: str) -> None:
     a = ctx.args
     if a.per_subject:
-        _evaluate_per_subject(ctx, ds, output)
+        _evaluate_per_subject(ctx, ds, source, output)
         return
-    result, loso = _holdout_study(ctx, ds)
+    result, loso = _holdout_study(ctx, ds, trials=trials)
     if loso and getattr(result.system, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
         # spread of the folds' plants, which the scores below used
@@ -91,36 +92,14 @@ def _evaluate_group(ctx: Context, ds: Any, output: Path | None) -> None:
         ctx.say(f"wrote {'standard output' if ctx.stdio.writes_stdout else output}")
 
 
-def recorded_test_ids(ds: Any) -> list[str] | None:
-    """The ids of the trials recorded as test trials (``meta["role"]``, written by ``workbench collect``), when
-    every trial has a role, train or test, and every label has both; else ``None`` (the study then chooses)."""
-    if not len(ds) or any(d.meta.get("role") not in ("train", "test") for d in ds):
-        return None
-    for label in ds.labels or [None]:
-        part = ds if label is None else ds.by_label(label)
-        if {d.meta["role"] for d in part} != {"train", "test"}:
-            return None
-    return [d.id for d in ds if d.meta["role"] == "test"]
-
-
-def _recorded_per_subject(ds: Any) -> list[str] | None:
-    """:func:`recorded_test_ids` where every subject also has both a test and a training trial, else ``None``."""
-    recorded = recorded_test_ids(ds)
-    if recorded is None:
-        return None
-    for subject in {d.meta.get("subject") for d in ds}:
-        roles = {d.meta["role"] for d in ds if d.meta.get("subject") == subject}
-        if roles != {"train", "test"}:
-            return None
-    return recorded
-
-
-def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0) -> tuple[Any, bool]:
+def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0, trials: str = "") -> tuple[Any, bool]:
     """The study of ``evaluate`` and ``report`` (one rule, so both print the same numbers for the same data):
     ``--holdout`` picks one random split or leave-one-segment-out; auto keeps the test trials a collected session
     recorded, else leaves one out where a label has fewer than :data:`~workbench.study.pipeline.LOSO_BELOW`
-    trials, and evaluates one manual segment by a time split inside it. Returns the result and whether it left one
-    out."""
+    trials, and evaluates one manual segment by a time split inside it. Returns the result (which says which
+    trials it held out and why, and ``trials``: which were used) and whether it left one out."""
+    from dataclasses import replace
+
     from workbench.study import pipeline as study
 
     a = ctx.args
@@ -130,6 +109,7 @@ def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0)
         ctx.say(f"one manual segment ({duration:.1f} s): evaluated by a time split inside it, {len(ds)} contiguous "
                 "pieces each scored by models and a plant fitted on the others (parts of one flight, not "
                 "independent trials)")
+    rollout_budget(a.samples, steps_of(a.horizon_s, ds.dt))
     smallest = min(len(ds.by_label(lbl)) for lbl in ds.labels) if ds.labels else len(ds)
     # a collected session declares its test trials (the protocol's test blocks, held-out trials): auto keeps them
     recorded = recorded_test_ids(ds) if a.holdout == "auto" else None
@@ -137,6 +117,10 @@ def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0)
     if recorded is not None:
         ctx.say(f"test trials as recorded: the {len(recorded)} with role test; the other {len(ds) - len(recorded)} "
                 "train")
+    elif a.holdout == "auto" and any(d.meta.get("role") is not None for d in ds):
+        # a session that recorded its test trials, but not for every strategy among the trials used: said, not hidden
+        ctx.say(f"the recorded test trials are not used: {unrecorded_split(ds)}; the test trials are chosen as "
+                "for data without a recording")
     # a split study's strategies are independent tasks (run side by side on local processes, as in report and demo)
     with ctx.executor(local_tasks=0 if loso else len(ds.labels)) as ex:
         if loso:
@@ -155,10 +139,14 @@ def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0)
                 seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s, bootstrap=bootstrap,
                 power=power, test_ids=recorded, task=getattr(a, "task", None),
             )
-    return result, loso
+    if recorded is not None:
+        result = replace(result, holdout=study.holdout_text(
+            result.test, "those the session recorded with role test (the protocol's test trials; the models were "
+            "trained on the trials recorded with role train)"))
+    return replace(result, trials=trials), loso
 
 
-def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
+def _evaluate_per_subject(ctx: Context, ds: Any, source: Any, output: Path | None) -> int:
     from rich.markup import escape
     from rich.table import Table
 
@@ -172,16 +160,21 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
     plant = study_plant(a.system)
     subjects = sorted({str(d.meta.get("subject")) for d in ds if d.meta.get("subject") is not None})
     seed = a.seed
-    # a dataset is read where it lies, each subject's partition by its own task: nothing to stage for workers
-    source = a.demos[0] if len(a.demos) == 1 and not a.label and not is_stdio(a.demos[0]) and is_demo_file(
-        Path(a.demos[0])) and Path(a.demos[0]).is_dir() else ds
     # a collected session declares its test trials: auto keeps them here too, as for the split study
-    recorded = _recorded_per_subject(ds) if a.holdout == "auto" else None
+    recorded = recorded_test_ids(ds, by="subject") if a.holdout == "auto" else None
     if recorded is not None:
         ctx.say(f"test trials as recorded: the {len(recorded)} with role test; the other {len(ds) - len(recorded)} "
                 "train")
+    elif a.holdout == "auto" and any(d.meta.get("role") is not None for d in ds):
+        # a session that recorded its test trials, but not for every subject among the trials used: said, not hidden
+        ctx.say(f"the recorded test trials are not used: {unrecorded_split(ds, by='subject')}; {a.n_test} held-out "
+                "trial(s) are drawn at random instead")
+    per = "subject and strategy" if len(ds.labels) > 1 else "subject"
+    if len(ds.labels) > 1:
+        ctx.say(f"a model per subject and strategy ({', '.join(ds.labels)}): each strategy's models are fitted and "
+                "tested on its own trials; a subject's score averages its strategies' held-out trials")
     with ctx.executor() as ex, ctx.progress() as progress:
-        task = progress.add_task(f"a model per subject ({len(subjects)} subjects)", total=len(subjects))
+        task = progress.add_task(f"a model per {per} ({len(subjects)} subjects)", total=len(subjects))
         res = evaluate.per_subject(
             # each subject's plant from its training trials only, never from the held-out ones
             lambda train: make_models(plant(train), n_components=components, random_state=seed,
@@ -194,7 +187,7 @@ def _evaluate_per_subject(ctx: Context, ds: Any, output: Path | None) -> int:
         print(f"warning: {failure}", file=sys.stderr)
     table = Table("subject", *[METHOD_TITLES.get(m, m) for m in res.groups],
                   title=f"per-subject {res.metric} ({'the recorded test trials' if recorded is not None else a.n_test}"
-                        f" held-out trial(s) each, {a.horizon_s:g} s horizon)")
+                        f" held-out trial(s) per {per}, {a.horizon_s:g} s horizon)")
     for i, subject in enumerate(res.subjects):
         table.add_row(subject, *[f"{g[i]:.4g}" for g in res.groups.values()])
     ctx.say(table)
@@ -390,23 +383,24 @@ def _print_objective_comparison(ctx: Context, result: Any, report: Path | None =
 def cmd_report(ctx: Context) -> int:
     a = ctx.args
     refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
-    ds = pilot_only(ctx, load_demos(ctx, a.demos, a.mapping, a.label), a.keep_still)
-    parts, said = plant_group_parts(ds, getattr(a, "plant_group", None))
-    if said:
-        ctx.say(said)
+    got = ctx.read(resolve(a, ctx.stdio, a.demos, purpose="study"))
+    parts, line = plant_group_parts(got.demos, getattr(a, "plant_group", None))
+    if line:
+        ctx.say(line)
+    trials = got.selected.describe()
     # one plant group: the report in -o; several: a report of each in -o/GROUP/, each titled with its group
     return for_each_group(ctx, parts, "reported", lambda group, part: _report_group(
         ctx, part, Path(a.output) if len(parts) == 1 else Path(a.output) / str(group).replace(" ", "-"),
-        a.title if group is None else f"{a.title} (plant group {group})"))
+        a.title if group is None else f"{a.title} (plant group {group})", trials))
 
 
-def _report_group(ctx: Context, ds: Any, folder: Path, title: str) -> None:
+def _report_group(ctx: Context, ds: Any, folder: Path, title: str, trials: str) -> None:
     from workbench.report.markdown import write_study_report
 
     a = ctx.args
     # evaluate's holdout rules, so both commands score a flight the same way (leave-one-segment-out on a few
     # segments) and print the same numbers
-    result, loso = _holdout_study(ctx, ds, bootstrap=a.bootstrap, power=a.power)
+    result, loso = _holdout_study(ctx, ds, bootstrap=a.bootstrap, power=a.power, trials=trials)
     print_plant(ctx, result.system, "(plants fitted without each left-out segment)" if loso
                 else "(plant from the training trials)")
     require_proposed(result)
@@ -470,8 +464,9 @@ def cmd_demo(ctx: Context) -> int:
     # the interpreter and the command's modules before this function: part of what a user waits for
     timings = {"startup": _seconds_since_process_start(t_start)}
     t0 = time.perf_counter()
-    ds = pilot_only(ctx, load_demos(ctx, [str(f) for f in files], a.mapping), a.keep_still)
+    ds = ctx.read(resolve(a, ctx.stdio, [str(f) for f in files], purpose="study")).demos
     timings["import"] = time.perf_counter() - t0
+    rollout_budget(a.samples, steps_of(a.horizon_s, ds.dt))
     by_format: dict[str, int] = {}
     for f in files:
         by_format[f.suffix.lstrip(".")] = by_format.get(f.suffix.lstrip("."), 0) + 1

@@ -9,8 +9,9 @@ from typing import Any
 
 from workbench import interrupts
 from workbench.cli.context import Context
-from workbench.cli.options import DEFAULT_MAPPING, steps_of
-from workbench.cli.reading import demos_at_model_dt, input_stem, load_demos, load_model_file
+from workbench.cli.inputs import Inputs, input_stem, resolve
+from workbench.cli.options import DEFAULT_MAPPING, rollout_budget, steps_of
+from workbench.cli.reading import default_output, demos_at_model_dt
 from workbench.cli.writing import announce, output_kwargs
 from workbench.errors import DataError, UsageError
 
@@ -21,34 +22,19 @@ __all__ = ["VIEW_SAMPLES"]
 VIEW_SAMPLES = 50
 
 
-def _log_origins(paths: list[str]) -> dict[str, float]:
+def _log_origins(inputs: Inputs) -> dict[str, float]:
     """Each raw log's start as ``workbench inspect`` reckons it (the first message of any stream), so a
     flight's segments are drawn where ``inspect`` places its flight modes; demonstration files have none."""
     import adapters
-    from workbench.cli.reading import is_demo_file
 
-    out = {}
-    for p in paths:
-        path = Path(p)
-        if p != "-" and path.is_file() and not is_demo_file(path):
-            out[str(path)] = float(adapters.inspect(path).t_start)
-    return out
+    return {str(s.path): float(adapters.inspect(s.path, format=s.format).t_start)
+            for s in inputs.sources if not s.demos and not s.stdin and s.path.is_file()}
 
 
 def _warn(ctx: Context, session: Any) -> None:
     """The recording's warnings (a model that does not fit its data), on stderr where a user looks for them."""
     for w in session.warnings:
         print(f"warning: {w}", file=sys.stderr)
-
-def _raw_streams(ctx: Context, path: str) -> Any:
-    """A raw log's every stream (for the raw view), or ``None`` for a demonstrations file."""
-    import adapters
-    from workbench.cli.reading import is_demo_file
-
-    p = ctx.input_path(path, "the demonstrations")
-    fmt = None if ctx.stdio.format == "parquet" else ctx.stdio.format
-    return None if is_demo_file(p) else adapters.read(p, format=fmt)
-
 
 def _view_raw(ctx: Context, streams: Any) -> int:
     """``workbench view LOG --raw`` (or a log no mapping makes demonstrations of): the log as it is
@@ -59,7 +45,7 @@ def _view_raw(ctx: Context, streams: Any) -> int:
 
     a = ctx.args
     raw = raw_log(streams)
-    out = output_kwargs(ctx, Path("out") / (input_stem(a.inputs[0]) + ".rrd"))
+    out = output_kwargs(ctx, default_output(a.inputs[0], ".rrd"))
     rec = viewer.new_recording(RAW_APPLICATION_ID)
     with ctx.progress() as progress:
         progress.add_task(f"logging {len(raw.streams)} streams", total=None)
@@ -73,24 +59,24 @@ def _view_raw(ctx: Context, streams: Any) -> int:
     return 0
 
 
-def _view_overlay(ctx: Context) -> int:
+def _view_overlay(ctx: Context, inputs: Inputs) -> int:
     """``workbench view A B … --raw``: the logs on one clock, one colour each (:mod:`workbench.viewer.overlay`)."""
+    import adapters
     from adapters.rawlog import raw_log
     from workbench import viewer
     from workbench.viewer.overlay import OVERLAY_APPLICATION_ID, log_overlay, overlay_blueprint
 
     a = ctx.args
     raws = []
-    for path in a.inputs:
-        streams = _raw_streams(ctx, path)
-        if streams is None:
-            raise UsageError(f"{path}: --raw overlays logs as they are, not demonstrations")
-        raws.append(raw_log(streams))
+    for source in inputs.sources:
+        if source.demos:
+            raise UsageError(f"{source.shown}: --raw overlays logs as they are, not demonstrations")
+        raws.append(raw_log(adapters.read(source.path, format=source.format)))
     align = list(a.align or [])
     if not align:  # arming where every log records one: the moment two flights most often share
         align = ["arming" if r.armed else "start" for r in raws]
     stem = "_".join(input_stem(p) for p in a.inputs[:3])
-    out = output_kwargs(ctx, Path("out") / f"{stem}.overlay.rrd")
+    out = output_kwargs(ctx, Path("out") / f"{stem}.overlay.rrd")  # under out/, never beside the inputs
     rec = viewer.new_recording(OVERLAY_APPLICATION_ID)
     with ctx.progress() as progress:
         progress.add_task(f"logging {len(raws)} logs on one clock", total=None)
@@ -104,67 +90,69 @@ def _view_overlay(ctx: Context) -> int:
 
 
 def cmd_view(ctx: Context) -> int:
+    import adapters
     from workbench import viewer
 
     a = ctx.args
     if a.align and not (a.raw and len(a.inputs) > 1):
         raise UsageError("--align puts several raw logs on one clock: give two or more logs with --raw")
-    if a.raw and len(a.inputs) > 1:
-        if a.mapping or a.model or a.label:
-            raise UsageError("--raw shows the logs as they are: leave out --mapping, --model and --label")
-        return _view_overlay(ctx)
-    raw_streams = _raw_streams(ctx, a.inputs[0]) if len(a.inputs) == 1 and not a.label else None
+    if a.raw and len(a.inputs) > 1 and (a.mapping or a.model or a.label):
+        raise UsageError("--raw shows the logs as they are: leave out --mapping, --model and --label")
+    if a.raw and (a.mapping or a.model):
+        raise UsageError("--raw shows the log as it is: leave out --mapping and --model")
+    inputs = resolve(a, ctx.stdio, a.inputs, models=a.model or [], labelled_models=True, allow_still=True,
+                     mapping=not a.raw, mapping_hint="--mapping chooses another, --raw shows the log alone")
+    if a.raw and len(inputs.sources) > 1:
+        return _view_overlay(ctx, inputs)
+    first = inputs.sources[0]
+    one_log = len(inputs.sources) == 1 and not a.label and not first.demos
+    raw_streams = adapters.read(first.path, format=first.format) if one_log else None
     if a.raw:
         if raw_streams is None:
             raise UsageError("--raw shows one raw log as it is: give one log (not demonstrations), no --label")
-        if a.mapping or a.model:
-            raise UsageError("--raw shows the log as it is: leave out --mapping and --model")
         return _view_raw(ctx, raw_streams)
-    mapping = a.mapping
-    if raw_streams is not None and not mapping:
-        # as import/fit/evaluate do: the vehicle's shipped mapping, so the first view shows its states; a log no
-        # mapping makes demonstrations of still opens, as it is, with the cause
-        mapping, ds = _default_mapped(ctx, a.inputs[0])
-        if ds is None:
+    try:
+        got = ctx.read(inputs)
+    except DataError as e:
+        if raw_streams is not None and not a.mapping:
+            # the mapping chosen for the log's vehicle makes no demonstrations of it: the log opens as it is, with
+            # the cause
+            print(f"warning: {e}; showing the raw log alone", file=sys.stderr)
             return _view_raw(ctx, raw_streams)
-    else:
-        try:
-            ds = load_demos(ctx, a.inputs, mapping, a.label, allow_still=True)
-        except DataError as exc:
-            if len(a.inputs) < 2 or " dt " not in f" {exc} ":
-                raise
-            # logs of several rates in one view: on one grid, or the way out named
-            ds = _several_on_one_grid(ctx, a.inputs, mapping, a.label, a.resample)
+        if len(inputs.sources) < 2 or " dt " not in f" {e} ":
+            raise
+        # logs of several rates in one view: on one grid, or the way out named
+        got = None
+    ds = got.demos if got is not None else _several_on_one_grid(ctx, inputs, a.resample)
+    mapping = first.mapping
     source_dt = float(ds.dt)
     models, named = None, None
-    by_label: dict[str, Any] = {}
-    for spec in a.model or ():
-        label, _, path = spec.rpartition("=")
-        by_label[label] = load_model_file(path, ctx)
+    by_label = ctx.models(inputs) if inputs.models else {}
     ds = _of_plant_group(ctx, ds, a.plant_group, by_label.values())
-    if a.model:
+    if by_label:
         if "" in by_label:
-            if len(by_label) > 1:
-                raise UsageError("give every --model a LABEL= (e.g. --model CS1=cs1.npz) or pass only one")
             models = by_label[""]
-            named = {Path(a.model[0]).stem: models}
+            named = {Path(inputs.models[0].given).stem: models}
         else:
             models = named = by_label
-        ds = demos_at_model_dt(ctx, ds, list(by_label.values()), a.resample, ", ".join(a.inputs))
+        ds, note = demos_at_model_dt(ds, list(by_label.values()), a.resample, inputs.names)
+        if note:
+            ctx.say(note)
     n_steps = steps_of(a.horizon_s, ds.dt)
-    default = Path("out") / (input_stem(a.inputs[0]) + ".rrd")  # under out/, never beside the input
-    out = output_kwargs(ctx, default)
+    if models is not None:
+        rollout_budget(a.samples, n_steps)
+    out = output_kwargs(ctx, default_output(a.inputs[0], ".rrd"))
     rec = viewer.new_recording(viewer.APPLICATION_IDS["session" if models is not None else "log"])
     with ctx.progress() as progress:
         progress.add_task(f"logging {len(ds)} demonstrations", total=None)
-        origins = _log_origins(a.inputs)
+        origins = _log_origins(inputs)
         with viewer.open_output(rec, **out) as sink:
             session = viewer.log_session(
                 rec, ds, models=models, named_models=named, focus=a.focus or None, n_steps=n_steps,
                 samples=a.samples, starts=a.starts or (0,), seed=a.seed, origins=origins, source_dt=source_dt,
                 color_by=a.color_by,
             )
-            extra = (_raw_beside(rec, raw_streams, mapping, ds, origins.get(str(Path(a.inputs[0]))))
+            extra = (_raw_beside(rec, raw_streams, mapping, ds, origins.get(str(first.path)))
                      if raw_streams is not None and mapping else [])
             sink.blueprint = viewer.default_blueprint(session, extra_tabs=extra)
     _warn(ctx, session)
@@ -190,15 +178,16 @@ def _of_plant_group(ctx: Context, ds: Any, name: str | None, models: Any) -> Any
     return kept
 
 
-def _several_on_one_grid(ctx: Context, paths: list[str], mapping: str | None, labels: Any, resample: bool) -> Any:
+def _several_on_one_grid(ctx: Context, inputs: Inputs, resample: bool) -> Any:
     """Several logs or demonstration files in one view: on one time grid, the finest of theirs, where
     ``--resample`` is given; without it, logs of different dt are one line naming both ways out."""
     import math
+    from dataclasses import replace
 
-    parts = [load_demos(ctx, [p], mapping, labels, allow_still=True) for p in paths]
+    parts = [ctx.read(replace(inputs, sources=(s,))).demos for s in inputs.sources]
     steps = sorted({float(d.dt) for d in parts})
     if len(steps) > 1 and not all(math.isclose(steps[0], s, rel_tol=1e-6) for s in steps):
-        shown = ", ".join(f"{p} dt {d.dt:g} s" for p, d in zip(paths, parts, strict=True))
+        shown = ", ".join(f"{s.shown} dt {d.dt:g} s" for s, d in zip(inputs.sources, parts, strict=True))
         if not resample:
             raise DataError(f"{shown}: sampled at different dt; --resample puts them on the finest grid "
                             f"({steps[0]:g} s, states linear, inputs held), --raw overlays the logs as recorded")
@@ -208,21 +197,6 @@ def _several_on_one_grid(ctx: Context, paths: list[str], mapping: str | None, la
     for d in parts[1:]:
         ds = ds + d
     return ds
-
-
-def _default_mapped(ctx: Context, path: str) -> tuple[str, Any]:
-    """The mapping chosen for the log's vehicle and the log's demonstrations under it, said on stdout; ``(name,
-    None)`` with the cause on stderr where that mapping makes none (the caller shows the raw log)."""
-    import adapters
-
-    p = ctx.input_path(path, "the demonstrations")
-    chosen, why = adapters.choose_mapping(p, format=None if ctx.stdio.format == "parquet" else ctx.stdio.format)
-    ctx.say(f"{ctx.shown(p)}: mapping {chosen} ({why}; --mapping chooses another, --raw shows the log alone)")
-    try:
-        return chosen, load_demos(ctx, [path], chosen, None, allow_still=True)
-    except DataError as e:
-        print(f"warning: {e}; showing the raw log alone", file=sys.stderr)
-        return chosen, None
 
 
 def _raw_beside(rec: Any, streams: Any, mapping: str, ds: Any, origin: float | None) -> list[Any]:
@@ -251,15 +225,22 @@ def cmd_replay(ctx: Context) -> int:
     a = ctx.args
     if not a.model:
         raise UsageError("replay needs --model MODEL.npz (predictions) or --to CONNECTION (send the log to a link)")
-    ds = load_demos(ctx, [a.log], a.mapping)
-    model = load_model_file(a.model, ctx)
-    ds = demos_at_model_dt(ctx, ds, [model], a.resample, a.log)
+    inputs = resolve(a, ctx.stdio, [a.log], models=[a.model])
+    got = ctx.read(inputs)
+    model = ctx.models(inputs)[""]
+    ds, note = demos_at_model_dt(got.demos, [model], a.resample, a.log)
+    if note:
+        ctx.say(note)
     ids = ds.ids
     chosen = a.demo or [ids[0]]
     missing = [i for i in chosen if i not in ids]
     if missing:
+        why = got.selected.why_left_out(missing[0]) if got.selected is not None else None
+        if why is not None:
+            raise DataError(f"{a.log}: trial {missing[0]!r} is left out ({why}); --role, --outcome and "
+                            "--include-excluded choose which trials count")
         raise DataError(f"{a.log}: no demonstration {missing[0]!r}; ids present: {ids[:10]}")
-    out = output_kwargs(ctx, Path("out") / (input_stem(a.log) + ".replay.rrd"))
+    out = output_kwargs(ctx, default_output(a.log, ".replay.rrd"))
     rec = viewer.new_recording(viewer.APPLICATION_IDS["replay"])
     stats = []
     with viewer.open_output(rec, **out) as sink:
@@ -289,7 +270,7 @@ def _replay_to(ctx: Context) -> int:
     from adapters.link.mavlink import send_tlog
 
     a = ctx.args
-    log = ctx.input_path(a.log, "the log")
+    log = resolve(a, ctx.stdio, [a.log], mapping=False, what="the log").sources[0].path
     ctx.say(f"sending {log} to {a.to} at {a.speed:g}× real time (Ctrl-C to stop)")
     with ctx.progress() as progress:
         task = progress.add_task(f"replaying {log.name} to {a.to}", total=None)
@@ -322,7 +303,7 @@ def cmd_live(ctx: Context) -> int:
     from workbench.viewer.scene import plane_of
 
     a = ctx.args
-    model = load_model_file(a.model, ctx)
+    model = ctx.models(resolve(a, ctx.stdio, models=[a.model]))[""]
     predictor = OnlinePredictor(model, a.mapping or DEFAULT_MAPPING, horizon_s=a.horizon_s, system=a.sysid,
                                 clock=a.clock, silence=a.silence)
     m = predictor.mapping

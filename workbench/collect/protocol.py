@@ -552,6 +552,8 @@ def load_protocol(spec: str | os.PathLike) -> Protocol:
         raise DataError(f"{path}: not valid TOML ({exc})") from None
     except RecursionError:  # tomllib recurses into nested arrays and inline tables
         raise DataError(f"{path}: not a protocol (values nested too deeply)") from None
+    except ValueError:  # Python's limit on an integer's digits (4300): a number no protocol holds
+        raise DataError(f"{path}: not a protocol (a number too long to read)") from None
     return parse_protocol(doc, str(path), path.stem, body)
 
 

@@ -20,6 +20,8 @@ _EXPORTS = {
     "DemonstrationSet": "demonstrations",
     "PilotTask": "pilot_task",
     "Roles": "roles",
+    "Selection": "selection",
+    "select_trials": "selection",
     "ResolvedRoles": "roles",
 }
 __all__ = list(_EXPORTS)

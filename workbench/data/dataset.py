@@ -63,6 +63,7 @@ __all__ = [
     "write_dataset",
     "write_partitions",
     "join_sets",
+    "refuse_copies",
     "load_demonstrations",
 ]
 
@@ -505,41 +506,43 @@ def load_dataset(path: str | os.PathLike, subjects: Iterable[str] | None = None)
                         + (f" ({len(manifest.failures)} source(s) failed to import)" if manifest.failures else ""))
     if manifest.foreign:
         return _load_foreign(root, manifest, wanted)
-    sets, names = [], []
-    seen: dict[bytes, tuple[str, str]] = {}
+    sets, names, files = [], [], []
     for p in parts:
         file = _inside(root, p.file, str(root))
         if not file.is_file():
             raise DataError(f"{file}: partition listed in {root / MANIFEST} is missing")
-        ds = DemonstrationSet.load(file)
-        _refuse_copies(ds, p.file, seen, root)
-        sets.append(ds)
+        sets.append(DemonstrationSet.load(file))
         names.append(Path(p.source).name if p.source else p.file)
+        files.append(p.file)
+    # ids are unique in the files of a dataset the workbench wrote (the import renames repeats): a repeat is a copy
+    refuse_copies(sets, files, str(root), by_id=not (root / MANIFEST).is_file())
     return join_sets(sets, names)
 
 
-def _fingerprint(d) -> bytes:
-    import hashlib
+def refuse_copies(sets: Sequence[DemonstrationSet], names: Sequence[str], where: str, by_id: bool = False) -> None:
+    """Refuse parts that hold one trial twice (:mod:`workbench.data.identity`: the same source log and segment, the
+    same id inside a dataset, or the same samples whatever their bytes — a copied file, a log imported twice, a copy
+    one sample shifted, 1 ulp off or one sample shorter): loaded as other trials, a copy would sit on both sides
+    of a train/test split.
 
-    h = hashlib.blake2b(digest_size=16)
-    for a in (d.t, d.x, d.u):
-        h.update(str(a.shape).encode())
-        h.update(a.tobytes())
-    return h.digest()
+    Raises
+    ------
+    DataError
+        Naming the parts, the first repeated trial and why, and how many of that part's trials repeat.
+    """
+    from workbench.data.identity import duplicates
 
-
-def _refuse_copies(ds: DemonstrationSet, rel: str, seen: dict[bytes, tuple[str, str]], root: Path) -> None:
-    """Refuse a partition repeating, sample for sample, a trial of an earlier one (a copied file, a log imported
-    twice): loaded as new ids, the copies would sit on both sides of a train/test split."""
-    for d in ds:
-        key = _fingerprint(d)
-        if key in seen:
-            first, first_id = seen[key]
-            n = sum(_fingerprint(e) in seen for e in ds)
-            where = f"{rel} and {first}" if first != rel else f"{rel} (twice)"
-            raise DataError(f"{root}: {where} hold the same trial sample for sample ({d.id!r} = {first_id!r}; "
-                            f"{n} of {len(ds)} trials of {rel} repeat earlier ones): a copy; remove one of them")
-        seen[key] = (rel, d.id)
+    owner = [k for k, ds in enumerate(sets) for _ in ds]
+    found = duplicates([d for ds in sets for d in ds], by_id=by_id)
+    if not found:
+        return
+    dup = found[0]
+    first, second = names[owner[dup.first]], names[owner[dup.second]]
+    part = owner[dup.second]
+    n = sum(owner[d.second] == part for d in found)
+    both = f"{second} and {first}" if first != second else f"{second} (twice)"
+    raise DataError(f"{where + ': ' if where else ''}{both} hold the same trial ({dup.describe()}; {n} of "
+                    f"{len(sets[part])} trials of {second} repeat others): a copy; remove one of them")
 
 
 @dataclass(frozen=True, eq=False)

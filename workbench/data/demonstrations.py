@@ -38,11 +38,29 @@ MIN_SAMPLES = 2
 DT_TOLERANCE = 1e-3  # relative deviation of a sampling interval from dt that is still "uniform"
 
 
+def _parquet_magic(path: Path) -> None:
+    """A file that does not begin and end with Parquet's magic bytes (``PAR1``) is not one: said in our words, before
+    pyarrow says it in its own ("Parquet magic bytes not found in footer. Either the file is corrupted or …")."""
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            head = f.read(4)
+            f.seek(max(size - 4, 0))
+            tail = f.read(4)
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if size < 12 or head != b"PAR1" or tail != b"PAR1":
+        raise FormatError(f"{path}: not a readable Parquet file (it does not begin and end with Parquet's magic bytes: "
+                          "another format, or a file cut short)")
+
+
 def metadata_fault(exc: BaseException) -> str:
     """Why stored metadata could not be read, in the workbench's words: bytes that are not UTF-8 text are named by
     their position (Python's codec text, "'utf-8' codec can't decode byte 0x9d", is the library's, not ours)."""
     if isinstance(exc, UnicodeDecodeError):
         return f"not UTF-8 text at byte {exc.start}"
+    if isinstance(exc, ValueError) and "integer string conversion" in str(exc):  # Python's limit on digits (4300)
+        return "a number too long to read"
     return " ".join(str(exc).split())
 
 
@@ -490,6 +508,7 @@ class DemonstrationSet(Sequence[Demonstration]):
                             "workbench.data.load_demonstrations (or `workbench` commands, which take either)")
         if not path.is_file():
             raise DataError(f"{path}: no such file")
+        _parquet_magic(path)
         try:
             table = pq.read_table(path, page_checksum_verification=True)
         except (pa.ArrowException, OSError) as exc:

@@ -248,6 +248,8 @@ class OnlinePredictor:
                                     component=component, clock=clock,
                                     clock_field=clock_field, clock_scale=clock_scale)
         self._has_w = model.has_variability
+        # the steps before the newest (segment, step, x, u): a model with the pilot's timing acts on them
+        self._history: deque[tuple[int, int, np.ndarray, np.ndarray]] = deque(maxlen=_RECENT)
         self._pending: deque[tuple[AlignedStep, float]] = deque()
         self._recent: deque[LivePrediction] = deque(maxlen=_RECENT)
         self._latest: tuple[AlignedStep, float] | None = None
@@ -293,6 +295,7 @@ class OnlinePredictor:
         if steps:
             share = (time.perf_counter() - start) / len(steps)
             for st in steps:
+                self._history.append((st.segment, st.k, np.asarray(st.x, dtype=float), np.asarray(st.u, dtype=float)))
                 if len(self._pending) >= _PENDING:
                     self._pending.popleft()
                     self.dropped_steps += 1
@@ -373,19 +376,44 @@ class OnlinePredictor:
                          quiet_since=self._last_message if heard else self._started, taken_at=float(self.now()),
                          heard=heard)
 
+    def _past(self, st: AlignedStep) -> Any:
+        """The step's past in its segment (the states and the stick before it), for a model with the pilot's
+        timing (:mod:`workbench.models.timed`); None for a model without."""
+        timing = self.model._timing()  # noqa: SLF001 - the model's own timing, read once per step
+        if timing is None:
+            return None
+        from workbench.method.timing import stick_of
+        from workbench.models.timed import Past
+
+        before = {k: (x, u) for seg, k, x, u in self._history if seg == st.segment and st.k - timing.reach <= k < st.k}
+        ks = sorted(before)
+        # only the contiguous run up to the step counts: a gap cuts what came earlier off
+        while ks and ks[0] != st.k - len(ks):
+            ks.pop(0)
+        xs = np.array([before[k][0] for k in ks]).reshape(len(ks), len(st.x))
+        stick = stick_of(before[ks[-1]][1], timing.dead_zone) if ks and ks[-1] == st.k - 1 else None
+        return Past(xs, stick if st.k > 0 else None, int(st.k)), timing
+
     def _predict(self, st: AlignedStep, align_seconds: float) -> LivePrediction:
         start = time.perf_counter()
         model, target = self.model, st.target
         X = st.x[None, :]
-        u_mean, u_cov = model.input_distribution(X, x0=st.x0, target=target, steps=[st.k])
+        timed = self._past(st)
+        past = None if timed is None else timed[0]
+        u_mean, u_cov = model.input_distribution(X, x0=st.x0, target=target, steps=[st.k],
+                                                 pasts=None if past is None else [past])
         w = w_mean = w_cov = None
         if self._has_w:
-            mu, sigma = model.variability(X, x0=st.x0, target=target)
-            w_mean, w_cov = mu[0], sigma[0]
-            w = st.u - (u_mean[0] - w_mean)  # ŵ = u − K̂(x − r), eq. (20): û = K̂(x − r) + μ̂
+            if timed is None:
+                mu, sigma = model.variability(X, x0=st.x0, target=target)
+                w_mean, w_cov = mu[0], sigma[0]
+                w = st.u - (u_mean[0] - w_mean)  # ŵ = u − K̂(x − r), eq. (20): û = K̂(x − r) + μ̂
+            else:
+                w, w_mean, w_cov = self._command_residual(st, past, timed[1], target)
         rollout_x = rollout_u = None
         if self.rollout_steps:
-            pred = model.predict(st.x, self.rollout_steps, target=target, task_x0=st.x0, task_step=int(st.k))
+            pred = model.predict(st.x, self.rollout_steps, target=target, task_x0=st.x0, task_step=int(st.k),
+                                 past=past)
             rollout_x, rollout_u = np.asarray(pred.x), np.asarray(pred.u)
         p = LivePrediction(
             demo_id=st.demo_id, segment=st.segment, k=st.k, t=st.t, t_rel=st.t_rel, x=readonly(st.x), u=readonly(st.u),
@@ -396,6 +424,23 @@ class OnlinePredictor:
         )
         self._recent.append(p)
         return p
+
+    def _command_residual(self, st: AlignedStep, past: Any, timing: Any, target: Any
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """ŵ of a model with the pilot's timing: the pilot's command (from the stick now and before) minus
+        ``K̂(x̃ − r)`` at the seen state ``x̃``, with the GMR mean and covariance there."""
+        from workbench.method.timing import stick_of
+        from workbench.models.timed import Stepper
+
+        model = self.model
+        stepper = Stepper(timing, st.x[None, :], [past], 0)
+        seen, _ = stepper.seen()
+        mu, sigma = model.variability(seen, x0=st.x0, target=target)
+        c_mean, _ = model.input_distribution(seen, x0=st.x0, target=target)  # K̂(x̃ − r) + μ̂(x̃), the command
+        stick = stick_of(np.asarray(st.u, dtype=float), timing.dead_zone)
+        prev = past.stick if past.stick is not None else (np.zeros_like(stick) if timing.start == "rest" else stick)
+        command = (stick - timing.a * prev) / (1.0 - timing.a)
+        return command - (c_mean[0] - mu[0]), mu[0], sigma[0]
 
 
 def listen(

@@ -2,7 +2,8 @@
 
 Gain estimation (:mod:`.gain`, eqs. (12)-(14)), the task objective by inverse LQR (:mod:`.objective`,
 :mod:`.inverse_lqr_sdp`, eqs. (15)-(19)), structured (diagonal) costs and their ratio intervals (:mod:`.structured`,
-:mod:`.ratio_profile`), the bootstrap over demonstrations (:mod:`.resampling`), task frames, TP-GMM and GMR
+:mod:`.ratio_profile`), the bootstrap over demonstrations (:mod:`.resampling`), the pilot's reaction delay and lag
+(:mod:`.timing`), task frames, TP-GMM and GMR
 (:mod:`.frames`, :mod:`.tpgmm`, :mod:`.gmr`, eqs. (24)-(30)) and the variability model built from them
 (:mod:`.variability`).
 """
@@ -53,6 +54,8 @@ _EXPORTS = {
     "interval": "ratio_profile",
     "factor_interval": "ratio_profile",
     "PseudoTrue": "pseudo_true",
+    "PilotTiming": "timing",
+    "identify_timing": "timing",
     "decoupled_parts": "structured",
     "memo_lqr": "structured",
     "gain_jacobian": "structured",

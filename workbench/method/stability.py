@@ -78,6 +78,9 @@ class Stability:
     n_units: int = 0
     n_resamples: int = 0
     level: float = LEVEL
+    #: the loop judged: the regulator's ``A + BK̂``, or the pilot's loop with its delay and lag
+    #: (:func:`workbench.method.timing.timed_spectral_radius`) for a gain on the state the pilot saw
+    loop: str = "A + BK̂"
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
     @property
@@ -95,6 +98,8 @@ class Stability:
 
     def interval_words(self) -> str:
         if not self.has_interval:
+            if self.loop != "A + BK̂":  # the pilot's loop with its timing: its uncertainty is the timing bootstrap's
+                return "no interval here (the pilot's timing and gain are resampled by fit's bootstrap)"
             return "no interval (too few units to resample)"
         return (f"{self.level:g} % interval [{self.lo:.5g}, {self.hi:.5g}] over {self.n_resamples} resamples of "
                 f"{self.n_units} {self.unit}")
@@ -102,7 +107,7 @@ class Stability:
     def describe(self) -> str:
         """One line: ρ with its interval, the verdict and the margin."""
         on = f" on {', '.join(self.states)}" if self.states else ""
-        head = f"closed loop{on}: ρ(A + BK̂) = {self.rho:.5g}, {self.interval_words()}"
+        head = f"closed loop{on}: ρ({self.loop}) = {self.rho:.5g}, {self.interval_words()}"
         if self.verdict == "stable":
             return f"{head}: stable, margin {self.margin:.3g}"
         if self.verdict == "not distinguishable":
@@ -113,7 +118,7 @@ class Stability:
     def to_dict(self) -> dict[str, Any]:
         return {"rho": self.rho, "lo": _json_float(self.lo), "hi": _json_float(self.hi), "verdict": self.verdict,
                 "slow_states": list(self.slow_states), "states": list(self.states), "unit": self.unit,
-                "n_units": self.n_units, "n_resamples": self.n_resamples, "level": self.level}
+                "n_units": self.n_units, "n_resamples": self.n_resamples, "level": self.level, "loop": self.loop}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Stability:
@@ -122,7 +127,8 @@ class Stability:
                    hi=nan if d.get("hi") is None else float(d["hi"]), verdict=d["verdict"],
                    slow_states=tuple(d.get("slow_states", ())), states=tuple(d.get("states", ())),
                    unit=str(d.get("unit", "demonstrations")), n_units=int(d.get("n_units", 0)),
-                   n_resamples=int(d.get("n_resamples", 0)), level=float(d.get("level", LEVEL)))
+                   n_resamples=int(d.get("n_resamples", 0)), level=float(d.get("level", LEVEL)),
+                   loop=str(d.get("loop", "A + BK̂")))
 
 
 def _json_float(v: float) -> float | None:

@@ -6,7 +6,7 @@ another operator, so :func:`choose_settings` picks them on the demonstrations at
 are split into folds (samples inside one trial are strongly correlated), every candidate is fitted on the
 other folds, and scored on the held-out ones by
 
-* ``"prediction"`` (default): the RMSE of mean rollouts of ``noise_horizon`` seconds from several starts of each
+* ``"prediction"`` (default): the RMSE of mean rollouts of ``noise_horizon_s`` seconds from several starts of each
   held-out trial, over the position states (all states, each divided by its training spread, on a plant
   without position roles) — the quantity the workbench's evaluations compare;
 * ``"likelihood"``: the mean held-out log-likelihood of ``[x; ŵ]`` under the TP-GMM (eq. (29)).
@@ -128,7 +128,7 @@ def _rollout_rmse(model, demos, n_steps: int, idx: Sequence[int], spread: np.nda
         starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CV_STARTS] or [0]
         goal = model._goal_for(d)
         preds = model.predict_many(d.x[starts], H, [goal] * len(starts), task_x0s=[d.x[0]] * len(starts),
-                                   task_steps=starts)
+                                   task_steps=starts, pasts=model.pasts(d, starts))
         for s, p in zip(starts, preds, strict=True):
             diff = (p.x[1:, idx] - d.x[s + 1 : s + H + 1, idx]) / spread
             errs.append(float(np.sqrt(np.mean(np.sum(diff**2, axis=1)))))

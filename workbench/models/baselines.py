@@ -17,7 +17,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.pilot_task import PilotTask
-from workbench.defaults import N_COMPONENTS, REG_COVAR
+from workbench.defaults import N_COMPONENTS, REG_COVAR, TIMING
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
@@ -34,9 +34,22 @@ from workbench.models.storage import (
     objective_state,
 )
 from workbench.models.taskgmr import TaskGMRModel
+from workbench.models.timed import commands, seen_steps
 from workbench.plant.system import LinearSystem
 
 __all__ = ["IOCOnlyModel", "GMROnlyModel", "PersistenceModel"]
+
+#: The methods this module's classes are (read by workbench.models.registry from this text, without importing it):
+#: persistence learns nothing worth a file (no ``fit --method``); IOC-only and persistence are the floors the
+#: proposed model must beat before a verdict calls it better; IOC-only and GMR-only are the paper's baselines.
+DECLARED_METHODS = (
+    {"name": "ioc_only", "title": "IOC-only", "class": "IOCOnlyModel", "order": 10, "colour": 1, "floor": True,
+     "in_paper": True, "dash": "--", "marker": "s"},
+    {"name": "gmr_only", "title": "GMR-only", "class": "GMROnlyModel", "order": 20, "colour": 2, "in_paper": True,
+     "dash": "-.", "marker": "^"},
+    {"name": "persistence", "title": "persistence", "class": "PersistenceModel", "order": 90, "colour": 3,
+     "fit_command": False, "floor": True, "dash": ":", "marker": "D"},
+)
 
 
 class GMROnlyModel(TaskGMRModel):
@@ -129,11 +142,12 @@ class IOCOnlyModel(BehaviorModel):
     Parameters
     ----------
     system : LinearSystem
-    gain_method, structure
-        As for :class:`HumanBehaviorModel`.
+    gain_method, timing, structure
+        As for :class:`HumanBehaviorModel` (with the pilot's timing, the residuals are of the pilot's command at the
+        seen state).
     fit_objective : bool
         Also solve the inverse LQR (``objective_``); off by default, the prediction does not use it.
-    noise, noise_window, noise_folds, noise_horizon
+    noise, noise_window, noise_folds, noise_horizon_s
         Monte Carlo noise, as for :class:`HumanBehaviorModel` (whitened by the constant residual Gaussian).
     """
 
@@ -143,12 +157,13 @@ class IOCOnlyModel(BehaviorModel):
 
     @classmethod
     def for_method(cls, system: LinearSystem, settings: MethodSettings) -> IOCOnlyModel:
-        return cls(system, gain_method=settings.gain_method, task=settings.task)
+        return cls(system, gain_method=settings.gain_method, timing=settings.timing, task=settings.task)
 
     def __init__(
         self,
         system: LinearSystem,
         gain_method: str = IV_OR_DIRECT,
+        timing: str | tuple[float, float] = TIMING,
         structure: str = "full",
         fit_objective: bool = False,
         noise: str = "calibrated",
@@ -160,6 +175,7 @@ class IOCOnlyModel(BehaviorModel):
         super().__init__(system)
         self.task = task
         self.gain_method = gain_method
+        self.timing = timing
         self.structure = structure
         self.fit_objective = fit_objective
         self.noise = noise
@@ -176,8 +192,15 @@ class IOCOnlyModel(BehaviorModel):
         ds = demo_list(demos, self.system, "IOCOnlyModel.fit")
         fit_regulator(self, ds)
         K = self.K_
-        W = [d.u - self._linear(d.x[0], d.target if d.target is not None else d.x[-1])(d.x, np.arange(len(d.x)))
-             for d in ds]
+        t = self._timing()
+        W = []
+        for d in ds:
+            linear = self._linear(d.x[0], d.target if d.target is not None else d.x[-1])
+            if t is None:
+                W.append(d.u - linear(d.x, np.arange(len(d.x))))
+            else:
+                seen, command, acted = commands(d.x, d.u, t)
+                W.append((command - linear(seen, seen_steps(len(seen), t)))[acted])
         Wall = np.concatenate(W)
         m = self.system.m
         # a tiny floor keeps the factor defined for an input that never deviates from K̂x

@@ -32,6 +32,7 @@ from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.digest import set_digest, trial_digest
 from workbench.data.pilot_task import PilotTask
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError, WorkbenchError
+from workbench.models import timed
 from workbench.models.files import ModelFile
 from workbench.models.fitting import as_vector, envelope_exit, goal_of, json_seed, state_envelope
 from workbench.models.prediction import (
@@ -75,6 +76,7 @@ class MethodSettings:
     #: The pilot's task: None (decided from the demonstrations) or an override (:func:`~workbench.data.pilot_task.
     #: parse_task`), the same for every method of a comparison
     task: Any = None
+    timing: Any = "identify"  # defaults.TIMING: the pilot's timing (workbench.method.timing)
 
 
 class BehaviorModel(abc.ABC):
@@ -194,6 +196,19 @@ class BehaviorModel(abc.ABC):
         """The (A, B) a rollout steps with: the plant's (the persistence baseline replaces it)."""
         return self.system.A, self.system.B
 
+    def _timing(self) -> timed.Timing | None:
+        """The pilot's timing the model applies between its policy and the plant (:mod:`workbench.models.timed`), or
+        None: the policy's input acts at once (the paper's ``u = K x``; every model fitted without timing)."""
+        t = getattr(self, "timing_", None)
+        return t if t is not None and t.active else None
+
+    def pasts(self, demo: Demonstration, starts: Sequence[int]) -> list[timed.Past] | None:
+        """What rollouts from samples ``starts`` of a recorded trial need from before them (the states and the stick
+        a delayed, lagged pilot still acts on), for :meth:`predict_many`'s ``pasts``; None for a model without
+        timing (it needs nothing)."""
+        t = self._timing()
+        return None if t is None else timed.pasts_from(demo.x, demo.u, starts, t)
+
     def _reference(self, target: np.ndarray) -> np.ndarray:
         """The state the linear term regulates to for a task: its target if fitted goal-relative, else 0."""
         return target if getattr(self, "goal_relative_", False) else np.zeros(self.system.n)
@@ -217,9 +232,14 @@ class BehaviorModel(abc.ABC):
     def pilot_view(self, demos: DemonstrationSet | Sequence[Demonstration]) -> list:
         """The demonstrations as the model's regulator saw them (:func:`workbench.models.regulator.pilot_view`):
         the regulated states' deviation from what the pilot drives them to, ``delay_s`` earlier than the input
-        net of its feedforward. What the gain, its bootstrap and the weight ratios are fitted on."""
+        net of its feedforward. What the gain, its bootstrap and the weight ratios are fitted on. A model with the
+        pilot's timing (``timing_``) keeps the view aligned: its delay and lag act through the timing model, which
+        whatever resamples the view identifies again (:func:`workbench.models.fitting.timing_setting`)."""
         self._check_fitted("pilot_view")
-        return pilot_view(self.system, self.pilot_task, list(demos))
+        task = self.pilot_task
+        if self._timing() is not None:
+            task = task.with_(delay_s=0.0, lag_s=0.0)
+        return pilot_view(self.system, task, list(demos))
 
     @property
     def plant_regulated(self) -> LinearSystem:
@@ -303,21 +323,27 @@ class BehaviorModel(abc.ABC):
             raise ModelError(f"{type(self).__name__}: noise_window must be a positive number of seconds, got {w!r}")
         h = self.noise_horizon_s
         if isinstance(h, bool) or not isinstance(h, int | float) or not (h > 0 and math.isfinite(h)):
-            raise ModelError(f"{type(self).__name__}: noise_horizon must be a positive number of seconds, got {h!r}")
+            raise ModelError(f"{type(self).__name__}: noise_horizon_s must be a positive number of seconds, got {h!r}")
         k = self.noise_folds
         if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 0:
             raise ModelError(f"{type(self).__name__}: noise_folds must be a non-negative integer, got {k!r}")
 
     def _whitened(self, demos: Sequence[Demonstration], unseen: bool = False) -> list[np.ndarray]:
         """``L(x)⁻¹(u − m(x))`` along every demonstration, in its own task frames (for ``unseen`` trials, the goal
-        a prediction would use: the known target, else :meth:`default_target`, never the recorded end)."""
+        a prediction would use: the known target, else :meth:`default_target`, never the recorded end). With the
+        pilot's timing, of the command at the seen state on the samples the pilot acted on."""
         m = self.system.m
+        t = self._timing()
         out = []
         for d in demos:
             policy = self._policy(d.x[0], self._goal_for(d) if unseen else goal_of(d))
-            mean, Sigma = policy(d.x, np.arange(len(d.x))) if getattr(policy, "timed", False) else policy(d.x)
+            X, U, k = d.x, d.u, np.arange(len(d.x))
+            if t is not None:
+                seen, command, acted = timed.commands(d.x, d.u, t)
+                X, U, k = seen[acted], command[acted], timed.seen_steps(len(d.x), t)[acted]
+            mean, Sigma = timed.ask(policy, X, k)
             L = psd_sqrt(Sigma + 1e-12 * np.eye(m))
-            out.append(np.linalg.solve(L, (d.u - mean)[..., None])[..., 0])
+            out.append(np.linalg.solve(L, (U - mean)[..., None])[..., 0])
         return out
 
     def _fit_noise(self, demos: list[Demonstration]) -> None:
@@ -327,7 +353,7 @@ class BehaviorModel(abc.ABC):
         models, each fitted without the trials it is scored on (in-sample residuals are smaller and would
         make the band too narrow): first the scale and AR(1) coefficient of the whitened residuals
         (:func:`~workbench.models.prediction.fit_noise`), then the factor on the scale for which 90 % Monte Carlo
-        bands over ``noise_horizon`` seconds cover the held-out trials' positions (the plant's position roles,
+        bands over ``noise_horizon_s`` seconds cover the held-out trials' positions (the plant's position roles,
         else every state) 90 % of the time (:func:`~workbench.models.prediction.calibrate_band_scale`). A held-out
         trial's goal frame sits where a prediction would put it (its target, else :meth:`default_target`), not at
         its recorded end, which a prediction cannot know. With too
@@ -371,7 +397,8 @@ class BehaviorModel(abc.ABC):
                 starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CALIBRATION_STARTS]
                 if starts:
                     X_true = np.stack([d.x[s : s + H + 1] for s in starts])
-                    cases.append((sub._policy(d.x[0], sub._goal_for(d)), d.x[starts], X_true, np.array(starts)))
+                    cases.append((sub._policy(d.x[0], sub._goal_for(d)), d.x[starts], X_true, np.array(starts),
+                                  sub.pasts(d, starts), sub._timing()))
         self.noise_scale_, self.noise_rho_ = scale, rho
         if cases:
             idx = self.system.r.position or tuple(range(self.system.n))
@@ -379,22 +406,54 @@ class BehaviorModel(abc.ABC):
             self.noise_scale_ = scale * factor
             self.noise_band_factor_, self.noise_band_coverage_ = factor, cov
 
-    def input_distribution(self, X: Any, x0: Any, target: Any = None,
-                           steps: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    def input_distribution_along(self, demo: Demonstration, target: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """The model's Gaussian over each recorded input of a trial, given the trial before it: mean (N, m) and
+        covariance (N, m, m), in the trial's task (its first state, ``target`` or its own target).
+
+        Without the pilot's timing this is :meth:`input_distribution` at the recorded states; with it, the input
+        the stick reaches from its previous reading toward the command for the state the pilot saw
+        (:func:`workbench.models.timed.one_step`).
+        """
+        self._check_fitted("input_distribution_along")
+        tgt = demo.target if target is None else target
+        policy = self._policy(*self._task(demo.x[0], tgt))
+        t = self._timing()
+        if t is None:
+            X = self._states(demo.x, f"{type(self).__name__}.input_distribution_along")
+            return timed.ask(policy, X, np.arange(len(X)))
+        return timed.one_step(policy, demo.x, demo.u, t)
+
+    def input_distribution(self, X: Any, x0: Any, target: Any = None, steps: Any = None, *,
+                           pasts: Sequence[timed.Past | None] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The model's Gaussian over the operator's input at states ``X`` for the task (``x0``, ``target``).
 
         Returns the mean (N, m) and covariance (N, m, m). For the proposed model this is
         ``K̂x + μ̂(x)`` and ``Σ̂(x)`` (eqs. (20), (24)-(27)); ``target`` defaults to the training target.
         ``steps``: each row's step since the task began (a model of a pilot who follows a reference reads it;
-        default: the rows are consecutive steps from the task's start).
+        default: the rows are consecutive steps from the task's start, or with ``pasts`` each past's). With the
+        pilot's timing and ``pasts`` (one per row, :meth:`pasts`), the input each row's stick reaches from the one
+        before toward the command for the state the pilot saw (as :meth:`input_distribution_along`); without
+        ``pasts``, the command's Gaussian at ``X`` itself.
         """
         self._check_fitted("input_distribution")
         X = self._states(X, f"{type(self).__name__}.input_distribution")
         policy = self._policy(*self._task(x0, target))
-        if getattr(policy, "timed", False):
-            k = np.arange(len(X)) if steps is None else np.broadcast_to(np.asarray(steps, dtype=int), (len(X),))
-            return policy(X, k)
-        return policy(X)
+        t = self._timing()
+        if t is None or pasts is None:
+            if getattr(policy, "timed", False):
+                k = np.arange(len(X)) if steps is None else np.broadcast_to(np.asarray(steps, dtype=int), (len(X),))
+                return policy(X, k)
+            return policy(X)
+        if len(pasts) != len(X):
+            raise ModelError(f"{type(self).__name__}.input_distribution: one past per state, got {len(pasts)} for "
+                             f"{len(X)}")
+        st = timed.Stepper(t, X, pasts, 0, steps)
+        seen, kind = st.seen()
+        mean, cov = timed.ask(policy, seen, st.steps())
+        share = np.where(kind == 1, 0.0, np.where(kind == 2, t.onset_weight, 1.0)) * (1.0 - t.a)
+        if t.start != "rest":  # a settled stick (no stick before: the trial's first sample) is the command itself
+            share = np.where([p is None or p.stick is None for p in pasts], 1.0, share)
+        return st.advance(mean, kind), cov * (share**2)[:, None, None]
 
     def predict(
         self,
@@ -408,7 +467,8 @@ class BehaviorModel(abc.ABC):
         percentiles: Sequence[float] = (5, 50, 95),
         return_samples: bool = False,
         task_x0: Any = None,
-        task_step: int = 0,
+        task_step: int | None = None,
+        past: timed.Past | None = None,
     ) -> Prediction:
         """Predict ``horizon`` steps from ``x0`` (the section "Trajectory Prediction" of the method paper).
 
@@ -433,9 +493,12 @@ class BehaviorModel(abc.ABC):
         task_x0 : (n,) array, optional
             The start state of the task (the start frame, eq. (33)); default ``x0``. When predicting from
             the middle of a trial, pass the trial's first state.
-        task_step : int
+        task_step : int, optional
             The step of ``x0`` since the task began (with ``task_x0``, the sample ``x0`` is in its trial): where
-            the pilot follows a reference that moves, the prediction picks it up there.
+            the pilot follows a reference that moves, the prediction picks it up there (default 0, or ``past``'s).
+        past : Past, optional
+            For a model with the pilot's timing: the states and the stick before ``x0`` (:meth:`pasts`); default a
+            trial's first sample (steady there, or at rest, as the model's trials started).
         """
         self._check_fitted("predict")
         x0 = as_vector(x0, self.system.n, f"{type(self).__name__}.predict: start state x0")
@@ -449,7 +512,8 @@ class BehaviorModel(abc.ABC):
             percentiles=percentiles,
             return_samples=return_samples,
             task_x0s=None if task_x0 is None else [task_x0],
-            task_steps=[int(task_step)],
+            task_steps=None if task_step is None else [int(task_step)],
+            pasts=None if past is None else [past],
         )[0]
 
     def predict_many(
@@ -465,12 +529,16 @@ class BehaviorModel(abc.ABC):
         return_samples: bool = False,
         task_x0s: Any = None,
         task_steps: Any = None,
+        pasts: Sequence[timed.Past | None] | None = None,
     ) -> list[Prediction]:
         """:meth:`predict` from every row of ``x0s`` (B, n); starts sharing a task roll out as one batch.
 
         ``targets`` is one (n,) target for all, a (B, n) array, or None (training target); ``task_x0s``
         likewise gives each start's task start state (default the start itself), and ``task_steps`` each start's
-        step since its task began (one for all or one per start; default 0).
+        step since its task began (one for all or one per start; default 0, or with ``pasts`` each past's sample in
+        its trial); ``pasts`` each start's :class:`~workbench.models.timed.Past` (:meth:`pasts`), which a model with
+        the pilot's timing rolls out from (the delayed states and the lagged stick carried in); a model without
+        timing ignores it.
         """
         self._check_fitted("predict")
         if not self.draws_samples:  # a band of zero width would claim certainty
@@ -504,6 +572,11 @@ class BehaviorModel(abc.ABC):
             K0 = np.broadcast_to(np.asarray(0 if task_steps is None else task_steps, dtype=int), (Bn,))
         except ValueError:
             raise ModelError(f"{where}: task_steps must be one step or {Bn}, got {np.shape(task_steps)}") from None
+        if pasts is not None and len(pasts) != Bn:
+            raise ModelError(f"{where}: pasts must give one past per start ({Bn}), got {len(pasts)}")
+        timing = self._timing()
+        # with pasts and no task_steps, each start's step is its past's sample in its trial
+        K0t = None if task_steps is None and pasts is not None else K0
         sys_ = self.system
         A, B = self._dynamics()
         clip_fn = sys_.clip if clip else None
@@ -515,14 +588,26 @@ class BehaviorModel(abc.ABC):
         method = type(self).__name__
         for idx in groups.values():
             policy = self._policy(T0[idx[0]], T[idx[0]])
-            Xm, Um, Sm = rollout_mean(A, B, policy, X0[idx], int(n_steps), clip_fn, steps0=K0[idx])
+            if timing is None:
+                Xm, Um, Sm = rollout_mean(A, B, policy, X0[idx], int(n_steps), clip_fn, steps0=K0[idx])
+            else:
+                Xm, Um, Sm = timed.rollout_mean(A, B, policy, X0[idx], int(n_steps), timing,
+                                                None if pasts is None else [pasts[b] for b in idx], clip_fn,
+                                                None if K0t is None else K0t[idx])
             for j, b in enumerate(idx):
                 extra: dict[str, Any] = {}
                 if samples:
-                    Xs, Us = rollout_samples(
-                        A, B, policy, X0[b], int(n_steps), int(samples), rng, self.noise_rho_, clip_fn,
-                        self.noise_scale_, step0=int(K0[b]),
-                    )
+                    if timing is None:
+                        Xs, Us = rollout_samples(
+                            A, B, policy, X0[b], int(n_steps), int(samples), rng, self.noise_rho_, clip_fn,
+                            self.noise_scale_, step0=int(K0[b]),
+                        )
+                    else:
+                        Xs, Us = timed.rollout_samples(
+                            A, B, policy, X0[b], int(n_steps), int(samples), rng, timing,
+                            None if pasts is None else pasts[b], self.noise_rho_, clip_fn, self.noise_scale_,
+                            None if K0t is None else int(K0t[b]),
+                        )
                     extra = {
                         "percentiles": pct,
                         "x_bands": np.percentile(Xs, pct, axis=0),

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from workbench.defaults import TIMING
 from workbench.errors import DataError
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
@@ -32,6 +33,7 @@ def make_model(
     gain_method: str = IV_OR_DIRECT,
     fit_objective: bool = True,
     cv_grid: dict[str, tuple] | None = None,
+    timing: Any = TIMING,
     task: Any = None,
 ) -> BehaviorModel:
     """An unfitted model of ``method`` (one of :data:`METHODS`; ``ioc-only`` spellings are accepted).
@@ -48,6 +50,8 @@ def make_model(
         Whether the proposed model also solves for its task objective (predictions never need it).
     cv_grid : dict, optional
         ``cv_components`` / ``cv_reg_covars`` of a "cv" proposed model (default the full grids).
+    timing : "identify", "none" or (delay_s, lag_s)
+        The pilot's timing of the proposed and IOC-only models (:mod:`workbench.method.timing`).
     task : PilotTask, str, dict or None
         What the pilot regulates and relative to what (:mod:`workbench.data.pilot_task`): None decides it from the
         demonstrations; otherwise an override (the command line's ``--task``, a mapping's ``[task]``).
@@ -59,7 +63,7 @@ def make_model(
     if n_components == "cv" and not cls.chooses_settings:
         raise DataError(f"n_components='cv' chooses the proposed model's settings; {method} needs a number")
     return cls.for_method(system, MethodSettings(n_components, random_state, gain_method, fit_objective, cv_grid,
-                                                 task))
+                                                 timing=timing, task=task))
 
 
 def make_models(

@@ -33,13 +33,18 @@ import numpy as np
 from workbench.atomic import atomic_path
 from workbench.errors import FormatError, ModelError
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "ModelFile", "ModelFileError", "write_model_file", "read_model_file"]
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "MAX_DECOMPRESSED_BYTES", "ModelFile", "ModelFileError", "write_model_file",
+           "read_model_file"]
 
 FORMAT_NAME = "workbench.model"
 FORMAT_VERSION = 1
 _HEADER = "__header__"
 _ALLOWED_KINDS = ("f", "i", "b")
 _MAX_DEFLATE_RATIO = 1032  # deflate cannot expand a byte to more than ~1032 bytes (zlib's technical details)
+#: The most a model file's arrays and header may hold once decompressed (64 MiB; a fitted model holds kilobytes).
+#: Raise it for a larger model: below it, reading a model costs at most about twice this in memory, whatever the
+#: file claims (a 2 MB file of one deflated 2 GB array took ``predict`` to 4.1 GB before this ceiling).
+MAX_DECOMPRESSED_BYTES = 64 << 20
 
 
 class ModelFileError(FormatError, ModelError):
@@ -172,6 +177,10 @@ def read_model_file(path: str | os.PathLike) -> ModelFile:
             if claimed > _MAX_DEFLATE_RATIO * size:  # members overlapping in a forged directory
                 raise ModelFileError(f"{path}: damaged model file: its members claim {claimed} bytes in all, more "
                                      f"than {size} bytes of archive can hold")
+            if claimed > MAX_DECOMPRESSED_BYTES:  # checked before any member is decompressed
+                raise ModelFileError(f"{path}: not read: its arrays expand to {claimed} bytes, more than a model "
+                                     f"file holds (at most {MAX_DECOMPRESSED_BYTES} bytes: "
+                                     "workbench.models.files.MAX_DECOMPRESSED_BYTES)")
             raw = _read_member(zf, members[_HEADER], path, size)
             arrays = {k: _read_member(zf, info, path, size) for k, info in members.items() if k != _HEADER}
     except ModelFileError:
@@ -189,6 +198,8 @@ def read_model_file(path: str | os.PathLike) -> ModelFile:
         raise ModelFileError(f"{path}: damaged model file: header is not UTF-8 text at byte {exc.start}") from None
     except json.JSONDecodeError as exc:
         raise ModelFileError(f"{path}: damaged model file: header is not JSON ({exc})") from None
+    except ValueError:  # Python's limit on an integer's digits (4300): a number no model writes
+        raise ModelFileError(f"{path}: damaged model file: header holds a number too long to read") from None
     except RecursionError:
         raise ModelFileError(f"{path}: damaged model file: header nested deeper than the JSON parser goes") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
@@ -16,7 +17,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.errors import DegenerateFitWarning, ModelError
-from workbench.method.gain import GainChoice, choose_gain
+from workbench.method.gain import IV_OR_DIRECT, GainChoice, _slow_states, _unstable_mode, choose_gain
 from workbench.method.inverse_lqr_sdp import inverse_lqr
 from workbench.method.objective import TaskObjective
 from workbench.plant.system import LinearSystem
@@ -28,6 +29,10 @@ __all__ = [
     "goal_of",
     "references",
     "fit_gain",
+    "TimedGain",
+    "timed_gain",
+    "check_timing",
+    "timing_setting",
     "fit_objective_or_reason",
     "state_envelope",
     "envelope_exit",
@@ -109,6 +114,99 @@ def fit_gain(
     return np.ascontiguousarray(K), choice
 
 
+def check_timing(timing: Any, where: str) -> str | tuple[float, float]:
+    """A model's ``timing`` setting: ``"identify"``, ``"none"`` or a given ``(delay_s, lag_s)`` pair."""
+    if timing in ("identify", "none"):
+        return timing
+    try:
+        delay, lag = (float(v) for v in timing)
+    except (TypeError, ValueError):
+        raise ModelError(f"{where}: timing must be 'identify', 'none' or (delay_s, lag_s), got {timing!r}") from None
+    if not (math.isfinite(delay) and math.isfinite(lag) and delay >= 0 and lag >= 0):
+        raise ModelError(f"{where}: a given timing must be two durations ≥ 0 s, got {timing!r}")
+    return delay, lag
+
+
+def timing_setting(model: Any) -> str | tuple[float, float]:
+    """The timing a resample of a fitted model's trials fits its gain with (``bootstrap(…, timing=…)``): the default
+    rule ("identify" with "iv-or-direct") decided again in every resample (``"identify-or-none"``, whichever way it
+    went on all trials), a given or required timing as it is, and ``"none"`` for a model fitted without."""
+    setting = check_timing(getattr(model, "timing", "none"), type(model).__name__)
+    if setting == "identify" and getattr(model, "gain_method", None) == IV_OR_DIRECT:
+        return "identify-or-none"
+    if getattr(model, "timing_", None) is None:
+        return "none"
+    return setting
+
+
+@dataclass(frozen=True)
+class TimedGain:
+    """The pilot's timing a fit settled and the gain on the state the pilot saw (:func:`timed_gain`).
+
+    ``K`` is None where the timing could not be identified (``why_none`` says why): the fit then takes the
+    paper's instantaneous gain."""
+
+    K: np.ndarray | None
+    choice: GainChoice | None
+    timing: Any  # workbench.models.timed.Timing, or None
+    pilot: Any  # workbench.method.timing.PilotTiming, or None
+    why_none: str = ""
+
+
+def timed_gain(views: Sequence[Any], plant: LinearSystem, method: str, timing: Any) -> TimedGain | None:
+    """K̂ of ``u = K̂ x̃`` with the pilot's timing (:mod:`workbench.method.timing`) on the pilot's view of the trials
+    (the regulated states' deviation, aligned with the inputs: :func:`workbench.models.regulator.pilot_view` at no
+    delay), and which estimator made it; None for ``timing="none"`` (the paper's instantaneous ``u = K x``).
+
+    The delay and the lag are identified (``"identify"``) or given (``(delay_s, lag_s)``) and K̂ is the gain on the
+    state the pilot saw: LIML on the trials' starts (``method`` ``"iv"`` or ``"iv-or-direct"``) or least squares
+    (``"direct"``); the DMD gain of eq. (14) has no timing. The gain on the seen state is checked in the loop the
+    pilot flew, with the delay and the lag (:func:`~workbench.method.timing.timed_spectral_radius`). Where LIML
+    refuses (the starts explain nothing beyond chance, or the gain at the best-fitting timing does not stabilize the
+    plant: a trial or two, or a pilot the timing model does not fit), ``timing="identify"`` returns
+    ``TimedGain(None, …, why_none)``: the caller fits the paper's instantaneous gain (and judges its stability with
+    its interval) and says why.
+
+    Raises
+    ------
+    ModelError
+        A given or required timing that does not fit (the message says why), or the DMD gain with timing.
+    """
+    from workbench.method.timing import identify_timing, timed_spectral_radius
+    from workbench.models.timed import Timing
+
+    timing = check_timing(timing, "fit")
+    if timing == "none":
+        return None
+    if method == "dmd":
+        raise ModelError("the DMD gain (eq. (14)) is the paper's instantaneous u = Kx: it has no timing; fit with "
+                         "timing='none', or another gain method")
+    given = {} if timing == "identify" else {"delay_s": timing[0], "lag_s": timing[1]}
+    how = "direct" if method == "direct" else "liml"
+    try:
+        pt = identify_timing(list(views), plant, method=how, n_boot=0, **given)
+        K = np.ascontiguousarray(pt.K)
+        rho = timed_spectral_radius(plant.A, plant.B, K, pt.delay_s, pt.lag_s, plant.dt)
+        if not rho < 1.0:  # the loop the pilot flew, with the delay and the lag (Assumption 3 with timing)
+            from workbench.method.slow_mode import likely_cause
+
+            names = getattr(plant, "state_names", None)
+            names = tuple(names) if names is not None else None
+            cause = likely_cause(list(views), _slow_states(plant.A, plant.B, K, names), getattr(plant, "roles", None),
+                                 names or ())
+            raise ModelError(f"estimated gain ({pt.method}, with the pilot's timing): the pilot's loop with the delay "
+                             f"and the lag is not stable (spectral radius {rho:.6g} ≥ 1)"
+                             f"{_unstable_mode(plant.A, plant.B, K, names)}{cause}")
+    except ModelError as exc:
+        if timing != "identify":
+            raise
+        # too little in the demonstrations to tell the pilot's timing (a trial or two, starts that move nothing), or
+        # a loop that does not close with it: the paper's instantaneous gain, judged with its interval by the caller
+        return TimedGain(None, None, None, None, " ".join(str(exc).split()))
+    choice = GainChoice(method, pt.method, f"{pt.reason}; {pt.describe()}")
+    return TimedGain(K, choice, Timing(pt.delay_s, pt.lag_s, plant.dt, pt.start, pt.dead_zone), pt)
+
+
 def fit_objective_or_reason(model: Any, K: np.ndarray, plant: LinearSystem | None = None
                             ) -> tuple[TaskObjective | None, str | None]:
     """The task objective of ``K`` by inverse LQR (eqs. (15)-(19)) when ``model.fit_objective``, or why none;
@@ -126,7 +224,6 @@ def fit_objective_or_reason(model: Any, K: np.ndarray, plant: LinearSystem | Non
         return inverse_lqr(plant.A, plant.B, K, structure=model.structure), None
     except ModelError as exc:
         return None, " ".join(str(exc).split())
-
 
 
 def state_envelope(demos: Sequence[Demonstration]) -> np.ndarray:

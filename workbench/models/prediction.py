@@ -341,9 +341,11 @@ def calibrate_band_scale(
 
     Parameters
     ----------
-    cases : sequence of (policy, starts (B, n), records (B, H+1, n)[, steps (B,)])
+    cases : sequence of (policy, starts (B, n), records (B, H+1, n)[, steps (B,)[, pasts, timing]])
         Held-out trials: the policy of a model fitted without them (for their task), start states and the
-        recorded states from each start (and each start's step since the task began, for a timed policy).
+        recorded states from each start (and each start's step since the task began, for a timed policy); for a
+        model with the pilot's timing (:mod:`workbench.models.timed`) also each start's
+        :class:`~workbench.models.timed.Past` and the model's timing, which the rollouts apply.
     idx : sequence of int
         The states whose per-axis coverage is calibrated (e.g. the planar position).
 
@@ -361,26 +363,36 @@ def calibrate_band_scale(
     rng = np.random.default_rng(seed)
     for case in cases:
         policy, X0, X_true = case[:3]
+        pasts, timing = (case[4], case[5]) if len(case) > 5 else (None, None)
         Bn, H = X0.shape[0], X_true.shape[1] - 1
         eps = rng.standard_normal((H, Bn * n_samples, m))
         k0 = np.repeat(_steps(case[3] if len(case) > 3 else None, Bn), n_samples)
-        prepared.append((policy, np.repeat(X0, n_samples, axis=0), X_true, eps, k0))
+        if timing is not None and pasts is not None:
+            pasts = [p for p in pasts for _ in range(n_samples)]
+        prepared.append((policy, np.repeat(X0, n_samples, axis=0), X_true, eps, k0, pasts, timing))
     rho = np.asarray(rho, dtype=float)
     innov = np.sqrt(1.0 - rho**2)
 
     def coverage(c: float) -> float:
         hits = total = 0
-        for policy, x, X_true, eps, k0 in prepared:
+        for policy, x, X_true, eps, k0, pasts, timing in prepared:
             Bn, H1, n = X_true.shape
             xs = np.empty((H1, x.shape[0], n))
             xs[0] = x
             z = eps[0]
             timed = _timed(policy)
+            st = None if timing is None else timing.stepper(x, pasts, H1 - 1, k0)
             for k in range(H1 - 1):
                 if k:
                     z = rho * z + innov * eps[k]
-                mean, cov = policy(x, k0 + k) if timed else policy(x)
-                x = x @ AT + (mean + np.einsum("sij,sj->si", psd_sqrt(cov), c * scale * z)) @ BT
+                if st is None:
+                    mean, cov = policy(x, k0 + k) if timed else policy(x)
+                    x = x @ AT + (mean + np.einsum("sij,sj->si", psd_sqrt(cov), c * scale * z)) @ BT
+                else:
+                    seen, kind = st.seen()
+                    mean, cov = policy(seen, st.steps()) if timed else policy(seen)
+                    x = x @ AT + st.advance(mean + np.einsum("sij,sj->si", psd_sqrt(cov), c * scale * z), kind) @ BT
+                    st.push(x)
                 xs[k + 1] = x
             sims = xs[1:, :, idx].reshape(H1 - 1, Bn, -1, idx.size)
             lo, hi = np.percentile(sims, [lo_q, hi_q], axis=2)

@@ -31,7 +31,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.pilot_task import PilotTask
-from workbench.defaults import N_COMPONENTS, REG_COVAR
+from workbench.defaults import N_COMPONENTS, REG_COVAR, TIMING
 from workbench.errors import DegenerateFitWarning
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
@@ -49,9 +49,16 @@ from workbench.models.storage import (
     objective_state,
 )
 from workbench.models.taskgmr import TaskGMRModel
+from workbench.models.timed import commands, seen_steps
 from workbench.plant.system import LinearSystem
 
 __all__ = ["HumanBehaviorModel"]
+
+#: The method this module's class is (read by workbench.models.registry from this text, without importing it).
+DECLARED_METHODS = (
+    {"name": "proposed", "title": "proposed", "class": "HumanBehaviorModel", "order": 0, "colour": 0, "in_paper": True,
+     "dash": "-", "marker": "o"},
+)
 
 
 class HumanBehaviorModel(TaskGMRModel):
@@ -70,7 +77,12 @@ class HumanBehaviorModel(TaskGMRModel):
         How K̂ is estimated (:func:`workbench.method.gain.choose_gain`); "iv" is consistent in closed loop with
         autocorrelated variability, where the least-squares "direct" and "dmd" stay biased. The default
         "iv-or-direct" uses "iv" where its instruments are relevant and falls back to "direct" otherwise
-        (``gain_choice_`` says which, and why).
+        (``gain_choice_`` says which, and why). With the pilot's timing, "iv" is LIML on the trials' starts
+        (:mod:`workbench.method.timing`); "dmd" has no timing.
+    timing : "identify", "none" or (delay_s, lag_s)
+        The pilot's reaction delay and neuromuscular lag (:mod:`workbench.method.timing`): identified from the
+        demonstrations and used by the gain, the objective and every prediction ("identify"); none, the paper's
+        ``u = K̂x`` ("none"); or given. ``timing_`` and ``pilot_timing_`` hold what was used.
     structure : {"full", "S=0", "diagonal"}
         Cost structure of the inverse LQR (:func:`workbench.method.inverse_lqr_sdp.inverse_lqr`).
     reg_covar : float or "cv"
@@ -106,7 +118,7 @@ class HumanBehaviorModel(TaskGMRModel):
         tried).
     noise_folds : int
         Cross-fitting folds for the calibration (0 or 1: in-sample residuals, no band calibration).
-    noise_horizon : float
+    noise_horizon_s : float
         Seconds of the held-out Monte Carlo rollouts on which the band is calibrated to 90 % coverage (and of
         the held-out rollouts that score the "cv" candidates).
     task : PilotTask, str, dict or None
@@ -134,6 +146,13 @@ class HumanBehaviorModel(TaskGMRModel):
         The estimator that made ``K_`` (``"iv"``, ``"direct"`` or ``"dmd"``).
     gain_choice_ : GainChoice
         ``gain_method_`` with the reason (the instruments' relevance, or the cause of the fallback).
+    timing_ : Timing or None
+        The pilot's timing the model applies between its policy and the plant (:mod:`workbench.models.timed`);
+        None where ``timing="none"``. ``K_`` is then the gain on the state the pilot saw ``delay_s`` late, the
+        variability model's states are those seen states and its ``ŵ`` the pilot's command minus ``K̂x̃``.
+    pilot_timing_ : dict or None
+        The identified delay and lag (:meth:`workbench.method.timing.PilotTiming.to_dict`; point estimates: the
+        intervals are ``workbench fit``'s bootstrap).
     variability_ : TaskGMR
         The TP-GMM on ``ξ = [x; ŵ]`` (``variability_.tpgmm_``) with its standardization.
     frame_spec_ : FrameSpec
@@ -183,6 +202,7 @@ class HumanBehaviorModel(TaskGMRModel):
         n_components: int | str = N_COMPONENTS,
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
         gain_method: str = IV_OR_DIRECT,
+        timing: str | tuple[float, float] = TIMING,
         structure: str = "full",
         reg_covar: float | str = REG_COVAR,
         standardize: bool = True,
@@ -207,6 +227,7 @@ class HumanBehaviorModel(TaskGMRModel):
         self.n_components = n_components
         self.frames = frames
         self.gain_method = gain_method
+        self.timing = timing
         self.structure = structure
         self.reg_covar = reg_covar
         self.standardize = standardize
@@ -230,7 +251,7 @@ class HumanBehaviorModel(TaskGMRModel):
         s = settings
         return cls(system, n_components=s.n_components, reg_covar="cv" if s.n_components == "cv" else 0.5,
                    random_state=s.random_state, gain_method=s.gain_method, fit_objective=s.fit_objective,
-                   task=s.task, **(s.cv_grid or {}))
+                   timing=s.timing, task=s.task, **(s.cv_grid or {}))
 
     def _fold_settings(self) -> dict[str, Any]:
         return {**super()._fold_settings(), "fit_objective": False}
@@ -246,9 +267,29 @@ class HumanBehaviorModel(TaskGMRModel):
         ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
         fit_regulator(self, ds)
         self._fit_common(ds, getattr(demos, "labels", []))
-        self._fit_gmr(ds, [self._residual(d) for d in ds])
+        self._fit_gmr(*self._gmr_data(ds))
         self._fit_noise(ds)
         return self
+
+    def _gmr_data(self, ds: Sequence[Demonstration]) -> tuple[list[Demonstration], list[np.ndarray]]:
+        """What the variability model is fitted on: the demonstrations and their ``ŵ`` (eq. (20)); with the pilot's
+        timing, the seen states and the command residuals on the samples the pilot acted on."""
+        t = self._timing()
+        if t is None:
+            return list(ds), [self._residual(d) for d in ds]
+        views, W = [], []
+        for d in ds:
+            seen, w, acted = self._timed_residual(d, t)
+            if acted.sum() >= 2:
+                views.append(Demonstration(d.t[acted], seen[acted], w[acted], d.meta))
+                W.append(w[acted])
+        return views, W
+
+    def _timed_residual(self, demo: Demonstration, t: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The seen states, ``ŵ = c − K̂(x̃ − r)`` of the pilot's commands, and the rows the pilot acted on."""
+        seen, command, acted = commands(demo.x, demo.u, t)
+        target = self.target_ if demo.target is None else demo.target
+        return seen, command - self._linear(demo.x[0], target)(seen, seen_steps(len(seen), t)), acted
 
     def _fit_auto(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Choose the "cv" settings by cross-validation, then fit with them (the settings stay "cv")."""
@@ -301,7 +342,12 @@ class HumanBehaviorModel(TaskGMRModel):
         return self._residual(demo)
 
     def _residual(self, demo: Demonstration) -> np.ndarray:
-        # the one computation of eq. (20) that fitting and scoring share
+        # the one computation of eq. (20) that fitting and scoring share; with the pilot's timing, of the command at
+        # the seen state (0 where the pilot had not acted yet: a rest start's stick before the reaction)
+        t = self._timing()
+        if t is not None:
+            _, w, acted = self._timed_residual(demo, t)
+            return np.where(acted[:, None], w, 0.0)
         target = self.target_ if demo.target is None else demo.target
         return demo.u - self._linear(demo.x[0], target)(demo.x, np.arange(len(demo.x)))
 
@@ -313,10 +359,9 @@ class HumanBehaviorModel(TaskGMRModel):
         """
         self._check_fitted("score_samples")
         ds = [demos] if isinstance(demos, Demonstration) else list(demos)
+        views, W = self._gmr_data(ds)
         idx = list(self.regulated_idx)
-        return self.variability_.score_samples(
-            [d.x[:, idx] for d in ds], [self._residual(d) for d in ds], [goal_of(d)[idx] for d in ds]
-        )
+        return self.variability_.score_samples([d.x[:, idx] for d in views], W, [goal_of(d)[idx] for d in views])
 
     def bic(self, demos: DemonstrationSet | Iterable[Demonstration]) -> float:
         """BIC ``−2 log L + k log N`` of the variability model on demonstrations (lower is better)."""

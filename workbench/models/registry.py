@@ -6,18 +6,26 @@ study's comparison and verdicts, ``workbench fit --method``'s choices, the viewe
 distribution, Monte Carlo samples, a gain, cross-validated settings…) is declared by its class
 (:class:`~workbench.models.behavior.BehaviorModel`'s capability flags), not here.
 
-Adding a baseline: its module (the class, with its :meth:`~workbench.models.behavior.BehaviorModel.for_method`)
-and one :class:`Method` line below. The class is named by ``"module:Class"`` and imported only when a model is
-built, so this table (and ``workbench fit --help``, which shows the choices) loads without numpy.
+A method is declared where its class is: a module of ``workbench/models/`` lists its methods in
+``DECLARED_METHODS``, a tuple of literal tables (name, title, class, order, colour, …; see :func:`_entry`), and
+:data:`REGISTRY` is every such table, in ``order``. The tables are read from the modules' text, never by importing
+them, so the registry (and ``workbench fit --help``, which shows the choices) loads without numpy; the class is
+imported only when a model is built. Adding a baseline is its module (the class, with its
+:meth:`~workbench.models.behavior.BehaviorModel.for_method`, and its ``DECLARED_METHODS``) and its test.
 """
 
 from __future__ import annotations
 
+import ast
 import importlib
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-from workbench.palette import METHOD_COLORS as _COLORS
+from workbench.palette import METHOD_COLORS, SPARE_METHOD_COLORS
+
+#: the colours a declaration's ``colour`` indexes: the registry's four, then the spare ones
+_COLORS = METHOD_COLORS + SPARE_METHOD_COLORS
 
 __all__ = ["Method", "REGISTRY", "METHODS", "METHOD_TITLES", "method", "model_classes"]
 
@@ -74,17 +82,49 @@ class Method:
         return getattr(importlib.import_module(module), cls)
 
 
-# in table order: the proposed model first, persistence (the floor every model must beat) last
-REGISTRY: tuple[Method, ...] = (
-    Method("proposed", "proposed", _COLORS[0], "workbench.models.proposed:HumanBehaviorModel", dash="-", marker="o",
-           in_paper=True),
-    Method("ioc_only", "IOC-only", _COLORS[1], "workbench.models.baselines:IOCOnlyModel", floor=True, dash="--",
-           marker="s", in_paper=True),
-    Method("gmr_only", "GMR-only", _COLORS[2], "workbench.models.baselines:GMROnlyModel", dash="-.", marker="^",
-           in_paper=True),
-    Method("persistence", "persistence", _COLORS[3], "workbench.models.baselines:PersistenceModel",
-           fit_command=False, floor=True, dash=":", marker="D"),
-)
+_MODELS = Path(__file__).resolve().parent
+_KEYS = {"name", "title", "class", "order", "colour", "fit_command", "floor", "in_paper", "dash", "marker"}
+
+
+def _entry(raw: Any, module: str, where: str) -> tuple[int, Method]:
+    """One declared method: ``{"name", "title", "class", "order", "colour"}`` (``colour`` an index into the
+    palette's method colours) and, optionally, ``fit_command``, ``floor``, ``in_paper``, ``dash`` and ``marker``."""
+    if not isinstance(raw, dict) or not {"name", "title", "class", "order", "colour"} <= set(raw) \
+            or set(raw) - _KEYS:
+        raise TypeError(f"{where}: a declared method is a table of {sorted(_KEYS)} (name, title, class, order and "
+                        f"colour required), got {raw!r}")
+    if not isinstance(raw["colour"], int) or not 0 <= raw["colour"] < len(_COLORS):
+        raise TypeError(f"{where}: colour is an index into the palette's {len(_COLORS)} method colours")
+    options = {k: raw[k] for k in ("fit_command", "floor", "in_paper", "dash", "marker") if k in raw}
+    return int(raw["order"]), Method(str(raw["name"]), str(raw["title"]), _COLORS[raw["colour"]],
+                                     f"{module}:{raw['class']}", **options)
+
+
+def _declared() -> tuple[Method, ...]:
+    """Every ``DECLARED_METHODS`` of a module of ``workbench/models/``, read from its text, in ``order``."""
+    found: list[tuple[int, Method]] = []
+    for path in sorted(_MODELS.glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if path.name == "registry.py" or "DECLARED_METHODS" not in text:
+            continue
+        for node in ast.parse(text).body:
+            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "DECLARED_METHODS"
+                                                    for t in node.targets):
+                where = f"workbench/models/{path.name}:{node.lineno}"
+                try:
+                    entries = ast.literal_eval(node.value)
+                except ValueError:
+                    raise TypeError(f"{where}: DECLARED_METHODS must be literal tables (read without importing)") \
+                        from None
+                found += [_entry(e, f"workbench.models.{path.stem}", where) for e in entries]
+    names = [m.name for _, m in found]
+    if len(set(names)) != len(names):
+        raise TypeError(f"two declared methods share a name: {sorted(names)}")
+    return tuple(m for _, m in sorted(found, key=lambda om: (om[0], om[1].name)))
+
+
+#: Every method, in table order (the proposed model first, persistence, the floor every model must beat, last).
+REGISTRY: tuple[Method, ...] = _declared()
 METHODS: tuple[str, ...] = tuple(m.name for m in REGISTRY)
 METHOD_TITLES: dict[str, str] = {m.name: m.title for m in REGISTRY}
 _BY_NAME = {m.name: m for m in REGISTRY}

@@ -64,12 +64,56 @@ def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
     group = getattr(system, "plant_group", None)  # what the sticks command, where the plant knows it
     if group is not None and task.plant_group is None:
         task = task.with_(plant_group=str(group))
-    if task.relative_to == "reference" and not task.reference_speed_mps > 0:
-        gen = _generator(system)
-        speed = fit_speed(gen, [(d.x, d.target) for d in demos], task.reference,
-                          cost=_pace(system, task, demos))
-        task = task.with_(reference_speed_mps=speed)
+    paced = task.relative_to == "reference" and not task.reference_speed_mps > 0
+    if paced:
+        task = _with_pace(system, task, demos)
+    timed = _settle_timing(model, task, demos)
+    if timed is not None:  # the timing the model identified (or none: then the paper's instantaneous u = K x)
+        identified = timed.K is not None
+        task = task.with_(delay_s=float(timed.pilot.delay_s) if identified else 0.0,
+                          lag_s=float(timed.pilot.lag_s) if identified else 0.0)
+        if paced and delay_steps(task, system.dt):
+            # the pace's criterion pairs each input with the state the pilot saw: the pace again with the delay,
+            # and the timing again on that reference
+            task = _with_pace(system, task.with_(reference_speed_mps=0.0), demos)
+            timed = _settle_timing(model, task, demos)
+            identified = timed.K is not None
+            task = task.with_(delay_s=float(timed.pilot.delay_s) if identified else 0.0,
+                              lag_s=float(timed.pilot.lag_s) if identified else 0.0)
     return task
+
+
+def _with_pace(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> PilotTask:
+    """The task with its reference's speed fitted to the trials (the pace the pilot follows)."""
+    speed = fit_speed(_generator(system), [(d.x, d.target) for d in demos], task.reference,
+                      cost=_pace(system, task, demos))
+    return task.with_(reference_speed_mps=speed)
+
+
+def _settle_timing(model: Any, task: PilotTask, demos: Sequence[Any]) -> Any:
+    """The pilot's timing for a model that has one (its ``timing`` setting; :func:`workbench.models.fitting.
+    timed_gain`), identified on the trials as its regulator sees them with no shift: sets ``timing_``,
+    ``pilot_timing_`` and ``_settled_timing`` (transient: the gain on the seen state, which :func:`fit_regulator`
+    takes, or why there is none) and returns the :class:`~workbench.models.fitting.TimedGain`; None for a model
+    without timing (GMR-only, ``timing="none"``). The caller writes the delay and the lag into the task."""
+    from workbench.models.fitting import timed_gain
+
+    model.timing_ = model.pilot_timing_ = model._settled_timing = None
+    setting = getattr(model, "timing", None)
+    if setting is None or getattr(model, "gain_method", None) is None:
+        return None
+    system = model.system
+    idx = list(task.regulated_indices(system.state_names))
+    plant = regulator_plant(system, idx)
+    try:
+        views = pilot_view(system, task.with_(delay_s=0.0, lag_s=0.0), demos)
+    except DataError as exc:
+        raise ModelError(str(exc)) from None
+    timed = timed_gain(views, plant, model.gain_method, setting)
+    model._settled_timing = timed
+    if timed is not None and timed.K is not None:
+        model.timing_, model.pilot_timing_ = timed.timing, timed.pilot.to_dict()
+    return timed
 
 
 def _pace(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> Any:
@@ -260,7 +304,7 @@ def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
         No task can be made, or the loop is clearly unstable (ρ's interval outside the unit circle): the message
         names the states of the slow mode and, only where an assisted mode's autopilot holds them, that mode.
     """
-    from workbench.method.gain import choose_gain
+    from workbench.method.gain import GainChoice, choose_gain
     from workbench.method.stability import judge_stability, refusal
     from workbench.models.fitting import fit_objective_or_reason, json_seed
 
@@ -268,13 +312,25 @@ def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
     task = settle_task(model, demos)
     idx = task.regulated_indices(system.state_names)
     plant = regulator_plant(system, idx)
-    try:
-        views = pilot_view(system, task, demos)
+    timed = getattr(model, "_settled_timing", None)
+    model._settled_timing = None
+    with_timing = timed is not None and timed.K is not None
+    try:  # with the pilot's timing the delay and the lag are the timing's (the view stays aligned)
+        views = pilot_view(system, task.with_(delay_s=0.0, lag_s=0.0) if with_timing else task, demos)
     except DataError as exc:
         raise ModelError(str(exc)) from None
-    K_r, choice = choose_gain(views, plant, model.gain_method, check=False)
-    stability = judge_stability(plant.A, plant.B, K_r, views, choice.method, plant.dt, plant.state_names,
-                                seed=json_seed(getattr(model, "random_state", None)) or 0)
+    if with_timing:
+        K_r, choice = timed.K, timed.choice
+    else:
+        K_r, choice = choose_gain(views, plant, model.gain_method, check=False)
+        if timed is not None:
+            choice = GainChoice(choice.requested, choice.method,
+                                f"{choice.reason}; no timing: it could not be identified ({timed.why_none})")
+    if with_timing:
+        stability = _timed_stability(plant, K_r, task, len(views))
+    else:
+        stability = judge_stability(plant.A, plant.B, K_r, views, choice.method, plant.dt, plant.state_names,
+                                    seed=json_seed(getattr(model, "random_state", None)) or 0)
     if stability.refused:
         raise refusal(stability, demos, system.roles, choice.method)
     model.task_, model.regulated_, model.regulator_plant_ = task, tuple(idx), plant
@@ -289,3 +345,18 @@ def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
     else:
         model.objective_, model.objective_error_ = fit_objective_or_reason(model, K_r, plant)
     return views
+
+
+def _timed_stability(plant: LinearSystem, K: np.ndarray, task: PilotTask, n_units: int) -> Any:
+    """The stability of a gain on the state the pilot saw: the spectral radius of the pilot's loop with its delay and
+    lag (:func:`workbench.method.timing.timed_spectral_radius`; ``A + BK̂`` without them is not the loop flown, and
+    a stiff pilot's is often outside the unit circle). :func:`workbench.models.fitting.timed_gain` already refused
+    the timing where this loop is not stable; its interval is the bootstrap's (``workbench fit --bootstrap``)."""
+    from workbench.method.stability import Stability
+    from workbench.method.timing import timed_spectral_radius
+
+    rho = float(timed_spectral_radius(plant.A, plant.B, K, task.delay_s, task.lag_s, plant.dt))
+    nan = float("nan")
+    return Stability(rho=rho, lo=nan, hi=nan, verdict="stable" if rho < 1.0 else "unstable",
+                     states=tuple(plant.state_names), n_units=n_units,
+                     loop=f"the pilot's loop with delay {task.delay_s:.3g} s and lag {task.lag_s:.3g} s")

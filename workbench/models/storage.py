@@ -14,7 +14,7 @@ import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -29,10 +29,8 @@ from workbench.models.files import ModelFile, ModelFileError, read_model_file, w
 from workbench.models.fitting import json_seed
 from workbench.models.prediction import RHO_MAX
 from workbench.models.registry import model_classes
+from workbench.models.timed import Timing
 from workbench.plant.system import LinearSystem
-
-if TYPE_CHECKING:
-    from workbench.models.behavior import BehaviorModel
 
 __all__ = [
     "save_model",
@@ -45,10 +43,42 @@ __all__ = [
     "gain_choice_restore",
     "gmr_state",
     "gmr_restore",
+    "StoredModel",
 ]
 
 
-def save_model(model: BehaviorModel, path: str | os.PathLike) -> Path:
+class StoredModel(Protocol):
+    """What this module reads and calls on a model: every :class:`~workbench.models.behavior.BehaviorModel` is one.
+
+    An interface, not the class: the base class's ``save`` calls :func:`save_model`, so this module must not import
+    it (no import circle). Its class's hooks: ``_state()`` (its part of the file), ``_restore(mf)`` (that part
+    back), ``_param_names()`` (the constructor's settings); learned attributes every model has are declared below,
+    the others (``gain_choice_``, ``variability_``, …) are read where a class has them.
+    """
+
+    system: LinearSystem
+    target_: np.ndarray
+    noise_rho_: np.ndarray
+    noise_scale_: np.ndarray
+    noise_band_factor_: float
+    noise_band_coverage_: float
+    n_demos_: int
+    n_samples_: int
+    labels_: tuple[str, ...]
+
+    def _check_fitted(self, where: str) -> None: ...
+
+    def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]: ...
+
+    def _restore(self, mf: ModelFile) -> None: ...
+
+    def get_params(self) -> dict[str, Any]: ...
+
+    @classmethod
+    def _param_names(cls) -> list[str]: ...
+
+
+def save_model(model: StoredModel, path: str | os.PathLike) -> Path:
     """Write the fitted ``model`` to one ``.npz`` file (see :mod:`workbench.models.files`), atomically:
     what every model shares (plant, target, noise, training record, settings) and its class's ``_state()``."""
     model._check_fitted("save")
@@ -90,13 +120,16 @@ def save_model(model: BehaviorModel, path: str | os.PathLike) -> Path:
             "stability": None if getattr(model, "stability_", None) is None else model.stability_.to_dict(),
             "noise_band_factor": float(model.noise_band_factor_),
             "noise_band_coverage": None if math.isnan(model.noise_band_coverage_) else model.noise_band_coverage_,
+            # the pilot's timing the model applies (None: none; files written before it existed have none)
+            "timing": None if getattr(model, "timing_", None) is None else model.timing_.as_json(),
+            "pilot_timing": getattr(model, "pilot_timing_", None),
         },
         **header,
     }
     return write_model_file(path, type(model).__name__, header, arrays)
 
 
-def settings_json(model: BehaviorModel) -> dict[str, Any]:
+def settings_json(model: StoredModel) -> dict[str, Any]:
     """The constructor's settings as JSON (a seed as an integer or None, frames by their kinds)."""
     out = {}
     for k, v in model.get_params().items():
@@ -265,7 +298,7 @@ def _text_or_none(value: Any, where: str) -> str | None:
     return value
 
 
-def load_model(path: str | os.PathLike) -> BehaviorModel:
+def load_model(path: str | os.PathLike) -> Any:
     """Read a model written by ``save`` (any registered method's class); never executes code from the file.
 
     The file names its class, not a module path, so files written before a module moved still load.
@@ -279,7 +312,7 @@ def load_model(path: str | os.PathLike) -> BehaviorModel:
     return restore_model(read_model_file(path))
 
 
-def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]] | None = None) -> BehaviorModel:
+def restore_model(mf: ModelFile, classes: Mapping[str, type[StoredModel]] | None = None) -> Any:
     """The model a read model file holds, of the class it names among ``classes`` (default: the registered
     methods' classes, :func:`workbench.models.registry.model_classes`)."""
     classes = model_classes() if classes is None else classes
@@ -299,8 +332,14 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]] | No
         )
     except ModelFileError:
         raise
-    except (KeyError, TypeError, ValueError, DataError, ModelError) as exc:
-        raise ModelFileError(f"{mf.path}: damaged model file: system ({type(exc).__name__}: {exc})") from None
+    except (DataError, ModelError) as exc:  # the plant's own checks, in its words
+        raise ModelFileError(f"{mf.path}: damaged model file: system: {exc}") from None
+    except KeyError as exc:
+        raise ModelFileError(f"{mf.path}: damaged model file: system: its header has no {exc.args[0]!r}") from None
+    except (TypeError, ValueError):  # numpy's broadcasting or a float() of text: said by the arrays' shapes
+        shapes = ", ".join(f"{k} {tuple(v.shape)}" for k, v in mf.arrays.items() if k.startswith("system/"))
+        raise ModelFileError(f"{mf.path}: damaged model file: system: its values do not fit together "
+                             f"({shapes})") from None
     settings = h.get("settings") or {}
     if not isinstance(settings, dict):
         raise ModelFileError(f"{mf.path}: damaged model file: settings are a {type(settings).__name__}, not a table")
@@ -309,7 +348,7 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]] | No
     unknown = sorted(set(settings) - set(cls._param_names()))
     if unknown:
         raise ModelFileError(f"{mf.path}: damaged model file: unknown {cls.__name__} settings {unknown}")
-    for key in ("frames", "position_idx", "cv_components", "cv_reg_covars"):
+    for key in ("frames", "position_idx", "cv_components", "cv_reg_covars", "timing"):
         if isinstance(settings.get(key), list):
             settings[key] = tuple(settings[key])
     for key in ("n_components", "reg_covar"):  # files written before the rename said "auto" for "cv"
@@ -344,6 +383,12 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[BehaviorModel]] | No
         model.noise_band_coverage_ = float("nan") if cov is None else float(cov)
         if model.has_gain:  # the linear term's reference; a model without a gain has none
             model.goal_relative_ = bool(fit.get("goal_relative", False))
+        timing = fit.get("timing")
+        try:
+            model.timing_ = None if timing is None else Timing.from_json(timing)
+        except ModelError as exc:
+            raise ModelFileError(f"{mf.path}: damaged model file: timing ({exc})") from None
+        model.pilot_timing_ = fit.get("pilot_timing")
         _restore_task(model, fit, mf)
         model._restore(mf)
     except ModelFileError:

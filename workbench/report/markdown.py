@@ -445,6 +445,8 @@ def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, titl
         f"prediction horizon {result.n_steps} steps ({result.n_steps * result.demos.dt:.2f} s); "
         f"{result.samples} Monte Carlo rollouts per band; seed {result.seed}",
     ]
+    if getattr(result, "trials", ""):  # which of a collected session's trials were used, and what was left out
+        notes.insert(0, result.trials)
     cov = None
     if result.coverage is not None:
         cov = result.coverage.copy()
@@ -456,8 +458,9 @@ def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, titl
     if result.plants:
         holdout = (f"leave-one-segment-out: each of {n_test} trials scored by models (and a plant) fitted on the "
                    "others")
-    else:
-        holdout = f"{n_test} test trial(s) chosen at random (seed {result.seed}); the models never saw them"
+    else:  # how the study chose them (recorded test trials, or drawn at random), with their ids
+        holdout = getattr(result, "holdout", "") or (f"{n_test} test trial(s) chosen at random (seed {result.seed}); "
+                                                     "the models never saw them")
     empty = {}
     if result.efficiency is None:
         empty["efficiency"] = ("leave-one-segment-out has no data-efficiency curve (each fold trains on all other "

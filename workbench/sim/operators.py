@@ -32,7 +32,13 @@ from workbench.errors import DataError
 from workbench.method.objective import forward_gain
 from workbench.plant.system import LinearSystem, planar_quadrotor
 
-__all__ = ["LQROperator", "lqr_operator_demos", "ErraticOperator", "erratic_operator_demos"]
+__all__ = ["LQROperator", "lqr_operator_demos", "ErraticOperator", "erratic_operator_demos", "SLOW_PILOT"]
+
+#: The cost of a pilot slow enough to fly with a reaction delay and a lag (``LQROperator(**SLOW_PILOT, delay_s=…)``):
+#: the default operator's lateral loop is unstable behind a 0.2 s delay and a 0.08 s lag, as a human's would be, so
+#: a slow pilot holds the attitude more gently (K[u1, φ] ≈ −0.81 against −1.55); its closed loop with a 0.25 s delay
+#: and a 0.1 s lag has a spectral radius of 0.978 (a pilot adapts the gain to the delay: McRuer's crossover model).
+SLOW_PILOT: dict = {"q": (0.1, 1.0, 1.0, 0.1, 0.3, 0.01), "r": (40.0, 10.0)}
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,24 @@ class LQROperator:
     #: per input, with ``p`` the first plane position — a saturating lean toward one side, which no linear gain
     #: reproduces. Zero (the default) is the plain LQR operator.
     mean_amplitude: Sequence[float] = (0.0, 0.0)
+    #: The pilot's timing (McRuer's crossover model carries both; the method's "Beyond the paper"): it acts on the
+    #: state it saw ``delay_s`` seconds ago (the recorded states, linearly interpolated between samples: a smooth
+    #: display), through a first-order neuromuscular lag of time constant ``lag_s`` on its stick, and the device
+    #: reads the stick through a dead zone of ``dead_zone`` (stick units, rescaled so that full deflection stays
+    #: ±1; recorded in ``meta["calibration"]["deadzone"]``, as the collect page records a gamepad's). All zero:
+    #: ``u = K x + w`` at every sample, with the draws of the plain operator.
+    delay_s: float = 0.0
+    lag_s: float = 0.0
+    dead_zone: float = 0.0
+    #: How a timed pilot's trial starts: ``"steady"`` — the vehicle waited at its first state and the stick had
+    #: settled on its command; ``"rest"`` — the stick rests at 0 until the pilot, ``delay_s`` after the start, sees
+    #: the vehicle (the collect page: a trial starts with the sticks let go).
+    start: str = "steady"
+
+    @property
+    def timed(self) -> bool:
+        """Whether the operator has a delay, a lag or a dead zone (flown by the sub-step simulation)."""
+        return bool(self.delay_s or self.lag_s or self.dead_zone)
 
     def gain(self, system: LinearSystem) -> np.ndarray:
         """The operator's true gain ``K`` of ``u = K x`` (the LQR gain of ``diag(q), diag(r)``)."""
@@ -103,9 +127,24 @@ def lqr_operator_demos(
         raise DataError(f"mean_amplitude must have {m} entries (one per input), got {lean.shape}")
     plane = sys_.r.plane  # None without two position roles (a plant always has roles, maybe empty)
     steps = int(round(op.duration / sys_.dt))
+    if op.delay_s < 0 or op.lag_s < 0 or not 0 <= op.dead_zone < 1:
+        raise DataError(f"delay_s and lag_s must be >= 0 and dead_zone in [0, 1), got {op.delay_s}, {op.lag_s}, "
+                        f"{op.dead_zone}")
+    if op.timed:
+        if op.start not in ("steady", "rest"):
+            raise DataError(f"start must be 'steady' or 'rest', got {op.start!r}")
+        X0 = np.array([_box(op.x0_low, op.x0_high, n, rng) for _ in range(n_trials)]).reshape(n_trials, n)
+        XS, US = _fly_timed(op, sys_, K, X0, steps, rng, s_near, s_far, lean, plane)
+        meta = {"source": "lqr operator", "target": [0.0] * n}
+        if op.dead_zone:
+            meta["calibration"] = {"kind": "simulated", "deadzone": float(op.dead_zone)}
+        demos = [Demonstration(sys_.dt * np.arange(steps), XS[j], US[j],
+                               {"id": f"{label.lower()}-{j:03d}", "label": label, **meta}) for j in range(n_trials)]
+        return DemonstrationSet(demos, sys_.state_names, sys_.input_names, sys_.dt, roles=sys_.roles)
     demos = []
     for j in range(n_trials):
         x = _box(op.x0_low, op.x0_high, n, rng)
+        meta = {"id": f"{label.lower()}-{j:03d}", "label": label, "source": "lqr operator", "target": [0.0] * n}
         e = np.zeros(m)
         xs, us = np.empty((steps, n)), np.empty((steps, m))
         for k in range(steps):
@@ -118,13 +157,79 @@ def lqr_operator_demos(
                 u = u + lean * np.tanh(p / op.length)
             xs[k], us[k] = x, u
             x = sys_.A @ x + sys_.B @ u
-        demos.append(
-            Demonstration(
-                sys_.dt * np.arange(steps), xs, us,
-                {"id": f"{label.lower()}-{j:03d}", "label": label, "source": "lqr operator", "target": [0.0] * n},
-            )
-        )
+        demos.append(Demonstration(sys_.dt * np.arange(steps), xs, us, meta))
     return DemonstrationSet(demos, sys_.state_names, sys_.input_names, sys_.dt, roles=sys_.roles)
+
+
+#: Sub-steps per sample of the timed operator's stick (its lag and its view of the delayed state).
+TIMED_SUBSTEPS = 10
+
+
+def _dead_zone(v: np.ndarray, width: float) -> np.ndarray:
+    """A device's dead zone around rest, rescaled so full deflection stays ±1 (``static/input.js``'s rule)."""
+    if not width:
+        return v
+    a = np.abs(v)
+    return np.where(a <= width, 0.0, np.sign(v) * (a - width) / (1.0 - width))
+
+
+def _fly_timed(op: LQROperator, sys_: LinearSystem, K: np.ndarray, X0: np.ndarray, steps: int,
+               rng: np.random.Generator, s_near: np.ndarray, s_far: np.ndarray, lean: np.ndarray,
+               plane: tuple[int, int] | None) -> tuple[np.ndarray, np.ndarray]:
+    """Trials (one per row of ``X0``, flown together) of a pilot with a reaction delay, a lag and a dead zone.
+
+    The stick moves continuously: within every sample it is integrated over :data:`TIMED_SUBSTEPS` sub-steps
+    (exactly, for a command held over each sub-step, evaluated at its middle) toward the command
+    ``K x(t − delay) + w``, where ``x(t − delay)`` is the recorded state interpolated linearly between samples
+    (before a steady start its first state, the stick settled on its command; before a rest start nothing, the stick
+    at rest until the pilot reacts, part-way through a sub-step). The device reads the stick once per sample,
+    through its dead zone, and the plant holds that reading for the sample. The noise ``w`` is the plain operator's,
+    one draw per sample. Returns states (J, steps, n) and inputs (J, steps, m).
+    """
+    J, n = X0.shape
+    m = sys_.m
+    dt = sys_.dt
+    h = dt / TIMED_SUBSTEPS
+    decay = math.exp(-h / op.lag_s) if op.lag_s > 0 else 0.0
+    rest = op.start == "rest"
+    AT, BT = sys_.A.T, sys_.B.T
+    xs, us = np.empty((steps + 1, J, n)), np.empty((steps, J, m))
+
+    def command(seen: np.ndarray, noise: np.ndarray) -> np.ndarray:
+        c = seen @ K.T + noise
+        if lean.any():
+            p = seen[:, plane[0]] if plane is not None else seen[:, 0]
+            c = c + lean * np.tanh(p / op.length)[:, None]
+        return c
+
+    # before a steady start the vehicle waited at its first state, and the pilot's stick had settled on its command
+    stick = np.zeros((J, m)) if rest else command(X0, 0.0)
+    e = np.zeros((J, m))
+    x = X0.copy()
+    for k in range(steps):
+        xs[k] = x
+        u = _dead_zone(stick, op.dead_zone)
+        us[k] = u
+        xs[k + 1] = x @ AT + u @ BT
+        dist = np.hypot(x[:, plane[0]], x[:, plane[1]]) if plane is not None else np.linalg.norm(x, axis=1)
+        sigma = s_near + (s_far - s_near) * (1.0 - np.exp(-dist / op.length))[:, None]
+        e = op.rho * e + np.sqrt(1.0 - op.rho**2) * rng.standard_normal((J, m))
+        for i in range(TIMED_SUBSTEPS):
+            # the command of a sub-step: at its middle under a lag; without one the stick is the command itself,
+            # read at the sub-step's end
+            t_end = k * dt + (i + 1) * h - op.delay_s  # the sub-step's end, seen late
+            span, step_decay = h, decay
+            if rest and t_end <= 0:  # not seen yet: the stick stays where it is
+                continue
+            if rest and t_end < h and decay:  # the pilot reacts inside this sub-step: the stick moves after it
+                span, step_decay = t_end, math.exp(-t_end / op.lag_s)
+            s_seen = (t_end - (0.5 * span if decay else 0.0)) / dt
+            j = min(int(math.floor(max(s_seen, 0.0))), k)
+            f = min(max(s_seen, 0.0) - j, 1.0)
+            seen = (1.0 - f) * xs[j] + f * xs[j + 1]
+            stick = step_decay * stick + (1.0 - step_decay) * command(seen, sigma * e)
+        x = xs[k + 1]
+    return np.swapaxes(xs[:steps], 0, 1), np.swapaxes(us, 0, 1)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ _EXPORTS = {
     "coverage_summary": "evaluate",
     "nominal_coverage": "evaluate",
     "compare": "evaluate",
-    "summarize": "evaluate",
+    "method_means": "evaluate",
     "improvement": "evaluate",
     "method_groups": "evaluate",
     "data_efficiency": "evaluate",

@@ -84,7 +84,7 @@ def calibration_counts(
     rows = []
     dev, sig = [], []
     for d in demos:
-        mean, Sigma = model.input_distribution(d.x, d.x[0], d.target)
+        mean, Sigma = model.input_distribution_along(d)  # with the pilot's timing: given the trial before each
         dev.append(np.abs(d.u - mean))
         sig.append(np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None)))
     groups = [(d.id, [i]) for i, d in enumerate(demos)] if by_trial else [(None, list(range(len(demos))))]

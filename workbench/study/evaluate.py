@@ -62,7 +62,7 @@ __all__ = [
     "coverage_summary",
     "nominal_coverage",
     "compare",
-    "summarize",
+    "method_means",
     "improvement",
     "method_groups",
     "data_efficiency",
@@ -180,7 +180,7 @@ def one_step_coverage(
     name = method or type(model).__name__
     input_names = list(model.system.input_names)
     for d in _demos(test):
-        mean, Sigma = model.input_distribution(d.x, d.x[0], d.target)
+        mean, Sigma = model.input_distribution_along(d)  # with the pilot's timing: given the trial before each
         sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
         dev = np.abs(d.u - mean)
         for c in n_sigmas:
@@ -286,7 +286,7 @@ def compare(
         for method, model in models.items():
             preds = model.predict_many(
                 d.x[st], int(n_steps), d.target, task_x0s=d.x[0], task_steps=st, samples=int(samples), seed=rng,
-                percentiles=(lo_q, hi_q), clip=clip,
+                percentiles=(lo_q, hi_q), clip=clip, pasts=model.pasts(d, st),
             )
             for s, p in zip(st, preds, strict=True):
                 h = min(int(n_steps), N - 1 - s)
@@ -319,7 +319,7 @@ def compare(
     return pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
 
 
-def summarize(table: pd.DataFrame) -> pd.DataFrame:
+def method_means(table: pd.DataFrame) -> pd.DataFrame:
     """Mean value per metric (rows) and method (columns) of a :func:`compare` table.
 
     Every trial weighs the same: values are first averaged over the starts within a trial.
@@ -330,7 +330,7 @@ def summarize(table: pd.DataFrame) -> pd.DataFrame:
 
 def improvement(table: pd.DataFrame, metric: str, method: str, baseline: str) -> float:
     """How much lower ``method``'s mean ``metric`` is than ``baseline``'s, in percent (the paper's figure)."""
-    s = summarize(table[table["metric"] == metric])
+    s = method_means(table[table["metric"] == metric])
     if metric not in s.index or method not in s.columns or baseline not in s.columns:
         raise DataError(f"table has no {metric!r} for both {method!r} and {baseline!r}")
     a, b = float(s.loc[metric, method]), float(s.loc[metric, baseline])
@@ -505,28 +505,36 @@ class SubjectStudy:
 
 
 def _subject_task(task: tuple) -> tuple[pd.DataFrame | None, list[str], str]:
-    """One subject of :func:`per_subject`: read its trials, hold ``n_test`` out (seeded by the subject's name) or
-    the recorded test trials among them, fit every method on the rest and score the held-out ones. Returns (table
-    or None, failures, the plant's primary metric)."""
+    """One subject of :func:`per_subject`: read its trials and, per strategy where they have several (a model per
+    subject and strategy), hold ``n_test`` out (seeded by the subject's name and the strategy) or the recorded test
+    trials among them, fit every method on the rest and score the held-out ones. Returns (table or None, failures,
+    the plant's primary metric)."""
     ref, subject, n_test, seed, make_models, n_components, n_steps, starts, recorded = task
     ds = ref.load(subject=subject)
-    if recorded is not None:
-        test_ids = {d.id for d in ds if d.id in recorded}
-        if not test_ids or len(test_ids) == len(ds):
-            raise DataError(f"subject {subject!r}: {len(test_ids)} of its {len(ds)} trials are recorded test trials; "
-                            "a held-out study needs at least one test and one training trial")
-    else:
-        if len(ds) <= n_test:
-            raise DataError(f"subject {subject!r} has {len(ds)} trials; needs more than n_test={n_test}")
-        rng = np.random.default_rng(task_seed(seed, "per_subject", subject))
-        test_ids = {ds[int(j)].id for j in rng.choice(len(ds), n_test, replace=False)}
-    train = ds.filter(lambda d: d.id not in test_ids)
-    test = ds.filter(lambda d: d.id in test_ids)
-    models = models_for(make_models, train, n_components)
-    failures: list[str] = []
-    fitted = _fit_each(models, train, f"subject {subject}", failures)
-    table = compare(fitted, test, n_steps=n_steps, starts=starts).assign(subject=subject) if fitted else None
-    return table, failures, primary_metric(next(iter(models.values())).system)
+    labels = ds.labels if len(ds.labels) > 1 else [None]
+    tables, failures, metric = [], [], ""
+    for label in labels:
+        part = ds if label is None else ds.by_label(label)
+        name = f"subject {subject!r}" + ("" if label is None else f", strategy {label!r}")
+        if recorded is not None:
+            test_ids = {d.id for d in part if d.id in recorded}
+            if not test_ids or len(test_ids) == len(part):
+                raise DataError(f"{name}: {len(test_ids)} of its {len(part)} trials are recorded test trials; a "
+                                "held-out study needs at least one test and one training trial")
+        else:
+            if len(part) <= n_test:
+                raise DataError(f"{name} has {len(part)} trials; needs more than n_test={n_test}")
+            key = ("per_subject", subject) if label is None else ("per_subject", subject, label)
+            rng = np.random.default_rng(task_seed(seed, *key))
+            test_ids = {part[int(j)].id for j in rng.choice(len(part), n_test, replace=False)}
+        train = part.with_demos(d for d in part if d.id not in test_ids)
+        test = part.with_demos(d for d in part if d.id in test_ids)
+        models = models_for(make_models, train, n_components)
+        fitted = _fit_each(models, train, f"subject {subject}" + ("" if label is None else f" {label}"), failures)
+        if fitted:
+            tables.append(compare(fitted, test, n_steps=n_steps, starts=starts).assign(subject=subject))
+        metric = primary_metric(next(iter(models.values())).system)
+    return (pd.concat(tables, ignore_index=True) if tables else None), failures, metric
 
 
 def per_subject(
@@ -545,6 +553,10 @@ def per_subject(
 ) -> SubjectStudy:
     """The multi-subject study of the paper: for every subject, fit each method on all but ``n_test`` of its
     trials (chosen at random, seeded), predict the held-out ones, then compare the methods within subjects.
+
+    Where a subject's trials have several strategy labels (CS1 and CS2), each subject and strategy gets its own
+    models, fitted and tested on that strategy's trials only (``n_test`` held out per strategy), and a subject's
+    score averages its strategies' held-out trials: the subjects stay the repeated measures.
 
     The paper's design is 10 training trials and 1 test trial per subject with a 5 s (100-step) horizon,
     reporting a one-way ANOVA of the position RMSE across the methods (F(2, 27) for 10 subjects) and pairwise

@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -87,6 +87,11 @@ class StudyResult:
     #: The paired differences, tests and mixed model of the headline metric
     #: (:class:`workbench.study.findings.StudyStatistics`); ``stats_text`` is its text.
     statistics: Any = None
+    #: Which trials were held out and why, in words (the report's "held out" line; :func:`holdout_text`).
+    holdout: str = ""
+    #: Which trials the study was given and what choosing them left out (``workbench.data.selection``), in words;
+    #: empty where nothing was chosen.
+    trials: str = ""
 
     @property
     def rmse(self) -> pd.DataFrame:
@@ -141,6 +146,13 @@ class StudyResult:
         if self.efficiency is not None:
             parts.append(self.efficiency.assign(table="data_efficiency"))
         return atomic_write_table(pd.concat(parts, ignore_index=True), path)
+
+
+def holdout_text(test: Mapping[str, DemonstrationSet], how: str, shown: int = 8) -> str:
+    """The held-out trials in words: how many, ``how`` they were chosen, and their ids (the first ``shown``)."""
+    ids = [d.id for te in test.values() for d in te]
+    listed = ", ".join(ids[:shown]) + (f" and {len(ids) - shown} more" if len(ids) > shown else "")
+    return f"{len(ids)} test trial(s), {how}: {listed}; the models never saw them"
 
 
 def _split(ds: DemonstrationSet, test_size: float, seed: int) -> tuple[DemonstrationSet, DemonstrationSet]:
@@ -344,6 +356,8 @@ def run_study(
         stride_steps=stride,
         statistics=statistics, calibration_check=_check(check_parts),
         calibration_counts=pd.concat(check_parts, ignore_index=True) if check_parts else None,
+        holdout=holdout_text(test, "given as the test trials" if test_ids is not None else
+                             f"drawn at random from each strategy's trials (seed {seed})"),
     )
 
 

@@ -462,8 +462,9 @@ class ObjectiveIntervals:
 
 
 def _used_gain(model) -> str:
-    """The estimator that made the model's K̂ (its ``gain_method`` may be the rule "iv-or-direct")."""
-    return model.gain_method_
+    """The estimator that made the model's K̂ (its ``gain_method`` may be the rule "iv-or-direct"); with the pilot's
+    timing LIML, which the resampling calls by the instruments' name, "iv"."""
+    return "iv" if model.gain_method_ == "liml" else model.gain_method_
 
 
 def ratio_bootstrap(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: int = 0, ratio_gain: str = "iv",
@@ -476,14 +477,17 @@ def ratio_bootstrap(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: int =
     covariance comes from ``n_boot`` resamples of whole trials.
     """
     from workbench.method.resampling import bootstrap_gain
+    from workbench.models.fitting import timing_setting
     from workbench.study.power import as_fitted, regulated_plant
 
     shifted = as_fitted(model, demos)
     plant = regulated_plant(model)
     note = ""
+    timing = timing_setting(model)  # the gain the model has: on the seen state where it has the pilot's timing
     for gain in dict.fromkeys((ratio_gain, _used_gain(model))):
         try:
-            gains = bootstrap_gain(shifted, plant, n_boot=n_boot, method=gain, seed=seed, progress=progress)
+            gains = bootstrap_gain(shifted, plant, n_boot=n_boot, method=gain, seed=seed, progress=progress,
+                                   timing=timing)
             return weight_ratios(gains, plant, ci), gain, note.strip()
         except ModelError as exc:
             note += f"weight ratios with gain {gain!r} failed: {exc}. "
@@ -501,12 +505,13 @@ def objective_intervals(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: i
     than ×:data:`TARGET_SPAN`, so that a ratio the data do not identify says how many demonstrations would.
     """
     from workbench.method.resampling import bootstrap
+    from workbench.models.fitting import timing_setting
     from workbench.study.power import as_fitted, regulated_plant
 
     method = _used_gain(model)
     structure = model.structure
     boot = bootstrap(as_fitted(model, demos), regulated_plant(model), n_boot=n_boot, method=method, structure=structure,
-                     seed=seed)
+                     seed=seed, timing=timing_setting(model))
     ratios, gain, note = ratio_bootstrap(model, demos, n_boot, seed, ratio_gain, boot.ci)
     curve = None
     if ratios is not None and power > 0:

@@ -120,8 +120,8 @@ class LoggedSession:
 
     ``focus`` are the trials with variability and predictions, the ones the detail tabs show. ``ranges`` are
     y-ranges of plots set by the data (key: the plot's entity base path), ``windows`` the time span of each focus
-    trial's predictions, ``bounds`` the scene's visual bounds, ``scales`` the shared color scale of each
-    objective block.
+    trial's predictions, ``bounds`` the scene's visual bounds. The fields are what several tabs read (the trials,
+    the predictions, the verdicts); a tab keeps what only it reads in ``tabs[its name]``.
     """
 
     state_names: tuple[str, ...]
@@ -131,7 +131,6 @@ class LoggedSession:
     focus: list[str] = field(default_factory=list)
     variability: list[str] = field(default_factory=list)
     predictions: dict[str, list[tuple[int, list[str]]]] = field(default_factory=dict)
-    models: list[str] = field(default_factory=list)
     modes: list[str] = field(default_factory=list)
     scene: bool = False
     entities: list[str] = field(default_factory=list)
@@ -141,12 +140,9 @@ class LoggedSession:
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
     windows: dict[str, tuple[float, float]] = field(default_factory=dict)
     bounds: tuple[list[float], list[float]] | None = None
-    heatmaps: dict[str, list[tuple[str, str]]] = field(default_factory=dict)
-    scales: dict[str, float] = field(default_factory=dict)
     clock: str = "trial"
     plane_names: tuple[str, str] | None = None
     span: tuple[float, float] | None = None
-    heatmap_shapes: dict[tuple[str, str], tuple[int, int]] = field(default_factory=dict)
     corners: dict[str, str] = field(default_factory=dict)
     trial_windows: dict[str, tuple[float, float]] = field(default_factory=dict)  # trial → its time span
     fit_titles: dict[str, str] = field(default_factory=dict)  # ŵ plot → its band coverage against nominal
@@ -158,6 +154,8 @@ class LoggedSession:
     scores: Any = None  # held-out scores (workbench.study.scores.heldout_scores rows), logged under /scores
     score_note: str = ""  # where the scores come from (the split, the horizon), or why there are none
     trial_labels: dict[str, str] = field(default_factory=dict)  # trial → its strategy label ("" without)
+    #: what a tab logged for its own views alone, by tab name (workbench.viewer.tabs: e.g. the objective's heatmaps)
+    tabs: dict[str, Any] = field(default_factory=dict)
 
     def title(self, name: str) -> str:
         """``name [unit]`` for a state or input."""

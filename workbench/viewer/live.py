@@ -35,11 +35,11 @@ from rerun.blueprint.components import LinkAxis
 
 from workbench.live.predictor import LinkStats, LiveEvent, LivePrediction
 from workbench.viewer import HAS_MEASUREMENTS, METHOD_COLORS, style
-from workbench.viewer.blueprint import online_plots, time_axis
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import entity_part, query, series_path  # the replay's paths: both read alike
 from workbench.viewer.scene import scale_bar
 from workbench.viewer.session import UI
+from workbench.viewer.views import online_plots, time_axis
 
 __all__ = ["LIVE_APPLICATION_ID", "LiveLogger", "link_state", "live_blueprint"]
 

@@ -27,9 +27,9 @@ from adapters.rawlog import RawLog
 from workbench import palette
 from workbench.errors import DataError
 from workbench.viewer import style
-from workbench.viewer.blueprint import time_axis
 from workbench.viewer.entities import entity_part
 from workbench.viewer.rawlog import STICKS, LoggedRaw, log_raw, raw_views
+from workbench.viewer.views import time_axis
 
 __all__ = ["ALIGNMENTS", "OVERLAY_APPLICATION_ID", "LoggedOverlay", "alignment_time", "log_overlay",
            "overlay_blueprint"]

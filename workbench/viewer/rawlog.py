@@ -33,9 +33,9 @@ import rerun.blueprint as rrb
 from adapters.rawlog import RawLog
 from workbench import palette
 from workbench.viewer import style
-from workbench.viewer.blueprint import time_axis
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import entity_part
+from workbench.viewer.views import time_axis
 
 __all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_pilot", "log_raw", "map_zoom", "pilot_views",
            "raw_blueprint", "raw_views", "with_breaks"]

@@ -31,10 +31,10 @@ import rerun.blueprint as rrb
 from workbench.data.demonstrations import Demonstration
 from workbench.errors import DataError
 from workbench.viewer import style
-from workbench.viewer.blueprint import online_plots, time_panel
 from workbench.viewer.entities import entity_part, series_path
 from workbench.viewer.scene import Plane, plane_of, scale_bar
 from workbench.viewer.session import HAS_MEASUREMENTS, UI
+from workbench.viewer.views import online_plots, time_panel
 
 __all__ = ["ReplayStats", "replay", "replay_blueprint"]
 
@@ -132,7 +132,9 @@ def replay(
         for j, path in enumerate(inputs):
             rec.log(path, rr.Scalars(u[j]))
         # the model's one-step input Gaussian: K̂(x − r) + μ̂(x) and Σ̂(x), r the goal where the model is goal-relative
-        u_mean, Sigma = model.input_distribution(x[None, :], x0=x_start, target=target, steps=[k])
+        # (a model with the pilot's timing: the stick from the one before toward the command for the state it saw)
+        past = model.pasts(demo, [k]) if hasattr(model, "pasts") else None
+        u_mean, Sigma = model.input_distribution(x[None, :], x0=x_start, target=target, steps=[k], pasts=past)
         u_hat = u_mean[0]
         sigma = np.sqrt(np.clip(np.diagonal(Sigma[0]), 0.0, None))
         err[k] = u - u_hat
@@ -153,7 +155,8 @@ def replay(
             rec.log(f"{sbase}/vehicle",
                     rr.Transform3D(translation=[px, py, 0.0], quaternion=[0.0, 0.0, np.sin(phi / 2), np.cos(phi / 2)]))
         if n_steps > 0 and k % rollout_every == 0:
-            pred = model.predict(x, n_steps, target=target, task_x0=x_start, task_step=int(k))
+            pred = model.predict(x, n_steps, target=target, task_x0=x_start, task_step=int(k),
+                                 past=None if past is None else past[0])
             xp = np.asarray(pred.x)
             # stamped with the time it forecasts, so the plot compares x(t) with its forecast from t − H·dt
             rec.set_time("time", duration=float(t_rel[k] + n_steps * dt))

@@ -25,15 +25,12 @@ from workbench.viewer import style, verdict
 from workbench.viewer.columns import send_columns
 from workbench.viewer.entities import LoggedSession
 from workbench.viewer.entities import model_for as _model_for
-from workbench.viewer.objective import (
-    Heatmap,
-    heatmaps,
-    model_summary,
-    shared_scales,
-)
+from workbench.viewer.objective import model_summary
 from workbench.viewer.output import has_display, open_output
 from workbench.viewer.scene import Plane, envelope, label_spots, plane_of, scale_bar
 from workbench.viewer.style import METHOD_COLORS, data_range, label_color, quiet_corner
+from workbench.viewer.tab import SessionRun
+from workbench.viewer.tabs import TABS
 
 __all__ = [
     "APPLICATION_ID",
@@ -441,14 +438,14 @@ class SessionLogger:
     def log_predictions(
         self,
         demo: Demonstration,
-        models: Mapping[str, Any],
+        methods: Mapping[str, Any],
         *,
         start: int = 0,
         n_steps: int = 60,
         samples: int = 0,
         seed: int | None = 0,
     ) -> dict[str, Any]:
-        """Predictions of every model in ``models`` (method name → model) from state ``start`` of ``demo``.
+        """Predictions of every method in ``methods`` (method name → its model) from state ``start`` of ``demo``.
 
         Time series under ``demos/<id>/predictions/from_<start>/<method>/<state>``, predicted paths as line
         strips under ``scene/predictions/<id>/from_<start>/<method>``; the proposed model's Monte Carlo
@@ -465,7 +462,7 @@ class SessionLogger:
         spans: dict[str, list[np.ndarray]] = {}
         points: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         t_end = t0
-        for method, model in models.items():
+        for method, model in methods.items():
             if method not in s.methods:
                 s.methods.append(method)
             mc = samples if method == "proposed" else 0
@@ -529,39 +526,10 @@ class SessionLogger:
                                         min_span=self._min_span(name))
             s.corners[key] = quiet_corner([(t_rel[seen], demo.x[seen, j]), *points.get(name, [])],
                                           s.windows[demo.id], s.ranges[key])
-        s.predictions.setdefault(demo.id, []).append((start, list(models)))
+        s.predictions.setdefault(demo.id, []).append((start, list(methods)))
         if demo.id not in s.focus:
             s.focus.append(demo.id)
         return results
-
-    # -- models --------------------------------------------------------------------------------------------
-    def log_models(self, models: Mapping[str, Any]) -> None:
-        """Every model's gain and objective blocks, as tensors and as heatmaps on one color scale per block."""
-        s = self.session
-        maps = {str(name): heatmaps(m, s.state_names, s.input_names) for name, m in models.items()}
-        scales = shared_scales(maps)
-        s.scales.update(scales)
-        for name, m in models.items():
-            self.log_model(str(name), m, scales=scales)
-
-    def log_model(self, name: str, model: Any, *, scales: Mapping[str, float] | None = None) -> None:
-        """K̂, the normalized Q, R, S as tensors and labelled heatmaps, and α with the fit diagnostics as text.
-
-        ``scales`` (block → largest |entry|) puts several models on one color scale; by default the model's own.
-        """
-        s = self.session
-        blocks = heatmaps(model, s.state_names, s.input_names)
-        scales = dict(scales) if scales is not None else shared_scales({name: blocks})
-        for h in blocks:
-            dims = ["input" if r in s.input_names else "state" for r in (h.rows[0], h.cols[0])]
-            self._static(paths.model_path(name, h.block), rr.Tensor(h.values, dim_names=dims))
-            self._log_heatmap(paths.model_path(name, f"heatmap/{h.block}"), h, scales.get(h.block, 1.0))
-            s.scales.setdefault(h.block, scales.get(h.block, 1.0))
-            s.heatmap_shapes[(name, h.block)] = h.values.shape
-        s.heatmaps[name] = [(h.block, h.title) for h in blocks]
-        summary = model_summary(name, model, s.state_names, s.input_names)
-        self._static(paths.model_path(name, "summary"), rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN))
-        s.models.append(name)
 
     def log_key(self) -> None:
         """The tab's key as a small text (``key``): what each trial color, method color and band means."""
@@ -643,12 +611,6 @@ class SessionLogger:
 
         log_scores(self, scores, note, units)
 
-    def _log_heatmap(self, path: str, h: Heatmap, vmax: float) -> None:
-        """One block as a labelled heatmap (:func:`workbench.viewer.objective.log_heatmap`)."""
-        from workbench.viewer.objective import log_heatmap
-
-        log_heatmap(self._static, path, h, vmax)
-
 
 def _prediction_band(pred: Any) -> tuple[np.ndarray, np.ndarray, str] | None:
     """The Monte Carlo trajectory band of a prediction as (lower, upper, level text), or None without samples."""
@@ -712,7 +674,7 @@ def log_session(
         or ``session`` lays subjects or sessions over each other on the trials' clock.
     """
     logger = SessionLogger(rec, demos, clock=clock, origins=origins, color_by=color_by)
-    by_id = {d.id: d for d in demos}
+    ids = set(demos.ids)
     if models is not None:
         if focus is None:
             # the first held-out trial of each label: a model's own training trials say nothing about new data
@@ -724,35 +686,22 @@ def log_session(
                 seen.setdefault(d.label, d.id)
             focus = [i for i in demos.ids if i in set(seen.values())]
         for fid in focus:
-            if fid not in by_id:
+            if fid not in ids:
                 raise DataError(f"no demonstration {fid!r} to predict from; ids present: {demos.ids[:10]}…")
         logger.set_focus(focus)
-    logger.log_scene()
-    for d in demos:
-        logger.log_demonstration(d, _model_for(models, d))
     if named_models is None and models is not None:
         named_models = models if isinstance(models, Mapping) else {"model": models}
-    logger.log_models({str(k): v for k, v in (named_models or {}).items()})
-    if named_models:
-        logger.log_verdicts({str(k): v for k, v in named_models.items()}, models, source_dt=source_dt)
-    if models is not None:
-        for fid in focus or ():
-            d = by_id[fid]
-            proposed = _model_for(models, d)
-            if proposed is None:
-                continue
-            methods = {"proposed": proposed}
-            extra = (baselines or {}).get(d.label) or (baselines or {}).get(None) or {}
-            methods.update(extra)
-            for k in starts:
-                if k < len(d):
-                    logger.log_predictions(d, methods, start=int(k), n_steps=n_steps, samples=samples, seed=seed)
-    if models is not None:
-        from workbench.viewer.heldout import heldout_table, score_units, scores_of
-
-        table, note = scores if scores is not None else heldout_table(demos, models, baselines, n_steps=n_steps,
-                                                                       samples=samples, seed=seed)
-        logger.log_scores(scores_of(table), note, score_units(models))
+    named = {str(k): v for k, v in (named_models or {}).items()}
+    run = SessionRun(demos, models, named, baselines or {}, tuple(focus or ()) if models is not None else (),
+                     n_steps, samples, tuple(int(k) for k in starts), seed, source_dt, scores)
+    # what every tab draws: the scene (before the tracks: the start labels that fit), the trials, the verdicts
+    logger.log_scene()
+    for d in demos:
+        logger.log_demonstration(d, run.model_for(d))
+    if named:
+        logger.log_verdicts(named, models, source_dt=source_dt)
+    for tab in TABS:  # then what each tab shows beyond them (predictions, scores, the models' blocks)
+        tab.log(logger, run)
     logger.log_key()  # last: it names only what was drawn (bands, ŵ)
     return logger.session
 

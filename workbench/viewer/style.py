@@ -67,7 +67,8 @@ MIN_SPAN = {"m": 1.0, "m/s": 0.5, "rad": 0.1, "rad/s": 0.2, "deg": 5.0, "deg/s":
 COLOR_NAMES = {**{c: n for n, c in palette.OKABE_ITO.items()}, (153, 204, 102): "lime", (255, 170, 187): "pink",
                (166, 118, 29): "brown", (170, 136, 204): "mauve", (238, 221, 136): "light yellow",
                palette.RECORDED_SCREEN: "light gray", palette.BAND: "gray",
-               palette.OUTLIER: "magenta"}
+               palette.OUTLIER: "magenta", palette.SPARE_METHOD_COLORS[0]: "indigo",
+               palette.SPARE_METHOD_COLORS[1]: "purple"}
 OUTLIER_COLOR = palette.OUTLIER
 # a mode lane's state where no trial is flown (between a flight's segments, after an overlaid trial's end)
 NO_TRIAL_STATE = "no trial"
