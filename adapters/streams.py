@@ -34,6 +34,7 @@ if TYPE_CHECKING:
 __all__ = ["Streams", "split_source", "candidate_streams", "nearest", "clean_series", "time_line"]
 
 _INDEX = re.compile(r"\[(\d+)\]$")
+_ARRAY_COLUMN = re.compile(r"^(.+)\[(\d+)\]$")
 
 
 #: A stream as a reader gives it: a DataFrame, or a dict of equal-length numpy columns (``t`` first).
@@ -179,6 +180,25 @@ def field_columns(frame: pd.DataFrame, name: str) -> list[str]:
         return [name]
     cols = [c for c in frame.columns if isinstance(c, str) and c.startswith(name + "[") and _INDEX.search(c)]
     return sorted(cols, key=lambda c: int(_INDEX.search(c).group(1)))
+
+
+def frame_fields(frame: pd.DataFrame) -> list[tuple[str, list[str]]]:
+    """A stream's fields in column order, each with its columns (what :func:`field_columns` finds, for every field
+    at once): a column is a field of its own, ``name[0]``, ``name[1]``, … are one array field; ``t`` is none."""
+    fields: list[tuple[str, list[str]]] = []
+    arrays: dict[str, list[str]] = {}
+    for column in map(str, frame.columns):
+        if column == "t":
+            continue
+        m = _ARRAY_COLUMN.match(column)
+        if m is None:
+            fields.append((column, [column]))
+        elif m.group(1) in arrays:
+            arrays[m.group(1)].append(column)
+        else:
+            arrays[m.group(1)] = [column]
+            fields.append((m.group(1), arrays[m.group(1)]))
+    return fields
 
 
 REPAIR_SHARE = 0.1

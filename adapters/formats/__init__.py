@@ -12,13 +12,12 @@ Binary magic wins over the extension (a renamed file is still read right); an un
 
 from __future__ import annotations
 
-import importlib
 import os
-import pkgutil
 from pathlib import Path
 
 from adapters.formats.base import Format
 from workbench.errors import DataError, FormatError
+from workbench.exports import declared_in
 
 __all__ = ["Format", "FORMATS", "detect_format", "get_format", "sniff", "format_for_suffix", "log_suffixes",
            "describe"]
@@ -28,18 +27,7 @@ _HEAD = 4096
 
 def _declared() -> dict[str, Format]:
     """Every module of :mod:`adapters.formats.declared`'s ``FORMAT``, by name, in detection order."""
-    from adapters.formats import declared
-
-    found: list[Format] = []
-    for info in sorted(pkgutil.iter_modules(declared.__path__), key=lambda i: i.name):
-        fmt = getattr(importlib.import_module(f"{declared.__name__}.{info.name}"), "FORMAT", None)
-        if not isinstance(fmt, Format):
-            raise TypeError(f"adapters/formats/declared/{info.name}.py declares no FORMAT (a Format instance)")
-        found.append(fmt)
-    names = [f.name for f in found]
-    if len(set(names)) != len(names):
-        raise TypeError(f"two declared formats share a name: {sorted(names)}")
-    return {f.name: f for f in sorted(found, key=lambda f: (f.order, f.name))}
+    return {f.name: f for f in declared_in("adapters.formats.declared", "FORMAT", Format, "declared formats")}
 
 
 #: The formats, by name, in the order detection tries them (binary magic first, text last).

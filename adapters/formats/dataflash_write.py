@@ -26,6 +26,7 @@ from adapters.formats.dataflash import (
     HEAD2,
     TEXT_CHARS,
 )
+from adapters.streams import frame_fields
 from workbench.atomic import atomic_path
 from workbench.errors import DataError
 
@@ -67,19 +68,7 @@ class _WType:
 
 def _fields_of(where: str, name: str, frame: pd.DataFrame, chars: str | None) -> list[tuple[str, str, list[str]]]:
     """(field, format char, columns) for a frame's columns: ``x[0]``…``x[31]`` make one ``a`` field."""
-    groups: list[tuple[str, list[str]]] = []
-    arrays: dict[str, list[str]] = {}
-    for c in frame.columns:
-        if c == "t":
-            continue
-        m = _ARRAY.match(str(c))
-        if m:
-            if m.group(1) not in arrays:
-                arrays[m.group(1)] = []
-                groups.append((m.group(1), arrays[m.group(1)]))
-            arrays[m.group(1)].append(str(c))
-        else:
-            groups.append((str(c), [str(c)]))
+    groups = frame_fields(frame)
     if chars is not None and len(chars) != len(groups):
         raise DataError(f"{where}: stream {name!r}: format {chars!r} has {len(chars)} characters for "
                         f"{len(groups)} fields {[g for g, _ in groups]}")

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from adapters.formats.files import read_bytes
-from adapters.streams import Streams
+from adapters.streams import Streams, frame_fields
 from workbench.atomic import atomic_path
 from workbench.errors import DataError, FormatError
 
@@ -385,21 +385,8 @@ def _logged_message(payload: bytes, tagged: bool) -> tuple[float, int, str]:
 
 def _fields(frame: pd.DataFrame) -> list[tuple[str, str, list[str]]]:
     """(ULog type, field name, columns) per field; ``name[i]`` columns become an array field."""
-    out: list[tuple[str, str, list[str]]] = []
-    arrays: dict[str, list[str]] = {}
-    for column in frame.columns:
-        if column == "t":
-            continue
-        m = _INDEXED.match(str(column))
-        if m:
-            if m.group(1) not in arrays:
-                arrays[m.group(1)] = []
-                out.append(("", m.group(1), arrays[m.group(1)]))
-            arrays[m.group(1)].append(str(column))
-        else:
-            out.append(("", str(column), [str(column)]))
     typed = []
-    for _, name, cols in out:
+    for name, cols in frame_fields(frame):
         dtype = np.result_type(*[frame[c].to_numpy().dtype for c in cols])
         key = f"{dtype.kind}{dtype.itemsize}"
         if key not in _ULOG_TYPES:

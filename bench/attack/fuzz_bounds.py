@@ -21,7 +21,6 @@ largest input file.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import random
 import re
@@ -35,7 +34,6 @@ import tempfile
 import threading
 import time
 import zlib
-from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -43,10 +41,12 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
+from tests import forgeries  # noqa: E402 - the inputs the tests forge too
 from workbench.errors import WorkbenchError  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from harness import HANG_S, _call_in_child, _mutate  # noqa: E402 - the shared harness
+import harness  # noqa: E402 - the shared harness
+from harness import HANG_S, _call_in_child, _mutate  # noqa: E402
 
 #: Python's own words in a command's error line (an internal error's class name, a limit, a library's parser).
 PYTHON_TEXT = re.compile(r"Traceback|\w+Error:|Exceeds the limit|integer string conversion|cannot convert float|"
@@ -55,41 +55,28 @@ TLOG = REPO / "sample_logs" / "landing_s00.tlog"
 MAX_INPUT = 10 << 20  # bytes: every generated input file is smaller
 
 
-class Tally:
+class Tally(harness.Tally):
+    """:class:`harness.Tally` with the largest input built per surface (every one under :data:`MAX_INPUT`)."""
+
     def __init__(self) -> None:
-        self.by_surface: dict[str, Counter] = {}
-        self.examples: dict[str, list[str]] = {}
-        self.peak: dict[str, float] = {}
-        self.slowest: dict[str, float] = {}
+        super().__init__()
         self.largest: dict[str, int] = {}
 
     def run(self, surface: str, prepare: Callable[[], tuple[Callable[[], str | None], list[Path]]]) -> None:
         call, inputs = prepare()  # built here, outside the call's time and memory
-        c = self.by_surface.setdefault(surface, Counter())
-        c["calls"] += 1
         size = max([q.stat().st_size for q in inputs if q.is_file()], default=0)
         self.largest[surface] = max(self.largest.get(surface, 0), size)
         try:
             if size >= MAX_INPUT:
                 raise RuntimeError(f"the harness built a {size >> 20} MiB input")
-            kind, detail, took, peak = _call_in_child(call)
+            outcome = _call_in_child(call)
         finally:
             for q in inputs:
                 shutil.rmtree(q, ignore_errors=True) if q.is_dir() else q.unlink(missing_ok=True)
-        self.slowest[surface] = max(self.slowest.get(surface, 0.0), took)
-        self.peak[surface] = max(self.peak.get(surface, 0.0), peak / 2**20)
-        if kind == "clean":
-            c["clean errors"] += 1
-        elif kind == "foreign":
-            c["foreign errors"] += 1
-            self.examples.setdefault(surface, []).append(f"{detail}" + (f" ({call.what})" if hasattr(call, "what")
-                                                                           else ""))
-        if kind == "hang" or took > HANG_S:
-            c["hangs"] += 1
-            self.examples.setdefault(surface, []).append(f"hang: {getattr(call, 'what', detail)}")
-        if kind == "ok" and detail:
-            c["silent wrong results"] += 1
-            self.examples.setdefault(surface, []).append(f"wrong: {detail}")
+        self.record(surface, outcome, getattr(call, "what", None))
+
+    def columns(self, surface: str) -> dict[str, str]:
+        return {**super().columns(surface), "largest input MiB": f"{self.largest[surface] / 2**20:.2f}"}
 
 
 Prepared = tuple[Callable[[], str | None], list[Path]]
@@ -185,8 +172,6 @@ def _tlog_offsets(data: bytes) -> list[int]:
 
 
 def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int], want) -> Prepared:
-    import adapters
-
     data = bytearray(clean)
     off = rng.choice(offsets)
     (stamp,) = struct.unpack(">Q", data[off : off + 8])
@@ -194,57 +179,32 @@ def attack_stamp(rng: random.Random, base: Path, clean: bytes, offsets: list[int
     data[off : off + 8] = struct.pack(">Q", max(0, stamp + shift))
     path = base / f"s{rng.randrange(10**9)}.tlog"
     path.write_bytes(bytes(data))
+    return _loads_whole(path, want, f"stamp +{shift} us at byte {off}"), [path]
+
+
+def _loads_whole(path: Path, want: tuple[int, int], what: str) -> Callable[[], str | None]:
+    """The call: ``path`` loads into ``want`` = (trials, samples). One bad stamp costs at most its sample: the grid
+    may lose a step where it sat, never a trial or a run."""
 
     def call() -> str | None:
+        import adapters
+
         got = adapters.load(path)
         n_demos, n_samples = want
-        # one stamp costs at most its sample: the grid may lose a step where it sat, never a trial or a run
         if len(got) != n_demos or got.n_samples < n_samples - 3:
-            return f"stamp +{shift} us at byte {off}: {len(got)} trials / {got.n_samples} samples, not " \
-                   f"{n_demos} / {n_samples}"
+            return f"{what}: {len(got)} trials / {got.n_samples} samples, not {n_demos} / {n_samples}"
         return None
 
-    return call, [path]
-
-
-def _mcap_messages(path: Path) -> tuple[Any, list]:
-    from mcap.reader import make_reader
-
-    with path.open("rb") as f:
-        reader = make_reader(f)
-        return reader.get_summary(), list(reader.iter_messages(log_time_order=False))
+    return call
 
 
 def attack_mcap_stamp(rng: random.Random, base: Path, source: tuple[Any, list], want) -> Prepared:
     """One message's log_time moved (the MCAP twin of the tlog stamp): the file rewritten by mcap's own writer."""
-    from mcap.writer import Writer
-
-    import adapters
-
     summary, messages = source
     k = rng.randrange(len(messages))
     shift = rng.choice([1, -1]) * 2 ** rng.randrange(20, 50)  # ns: 1 ms to 13 days
-    path = base / f"t{rng.randrange(10**9)}.mcap"
-    with path.open("wb") as f:
-        w = Writer(f)
-        w.start()
-        schemas = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
-        channels = {c.id: w.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0), c.metadata)
-                    for c in summary.channels.values()}
-        for i, (_, ch, m) in enumerate(messages):
-            w.add_message(channels[ch.id], max(0, m.log_time + (shift if i == k else 0)), m.data, m.publish_time,
-                          m.sequence)
-        w.finish()
-
-    def call() -> str | None:
-        got = adapters.load(path)
-        n_demos, n_samples = want
-        if len(got) != n_demos or got.n_samples < n_samples - 3:
-            return f"log_time {shift:+d} ns on message {k} ({messages[k][1].topic}): {len(got)} trials / " \
-                   f"{got.n_samples} samples, not {n_demos} / {n_samples}"
-        return None
-
-    return call, [path]
+    path = forgeries.write_mcap(base / f"t{rng.randrange(10**9)}.mcap", summary, messages, k, shift)
+    return _loads_whole(path, want, f"log_time {shift:+d} ns on message {k} ({messages[k][1].topic})"), [path]
 
 
 # -- mapping values ------------------------------------------------------------------------------------------------
@@ -314,7 +274,7 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
     action = rng.choice(["copy", "copy_other_subject", "copy_shifted", "copy_ulp", "copy_shorter", "fifo",
                          "self_link", "dangling_link", "device", "socket", "nothing"])
     if action in ("copy_shifted", "copy_ulp", "copy_shorter"):  # a copy altered so neither bytes nor ids repeat
-        _altered_copy(victim, victim.with_name(f"{victim.stem} (copy).parquet"), action.removeprefix("copy_"))
+        forgeries.altered_copy(victim, victim.with_name(f"{victim.stem} (copy).parquet"), action.removeprefix("copy_"))
     elif action == "copy":
         shutil.copyfile(victim, victim.with_name(f"{victim.stem} (copy).parquet"))
     elif action == "copy_other_subject":
@@ -346,59 +306,14 @@ def attack_dataset_files(rng: random.Random, base: Path, study) -> Prepared:
     return call, [*(q for q in root.rglob("*") if q.is_file() and not q.is_symlink()), root]
 
 
-def _altered_copy(src: Path, dst: Path, how: str) -> None:
-    """``src`` rewritten to ``dst`` with every trial shifted by one sample, 1 ulp off or one sample shorter and
-    renamed, keeping its dataset metadata (a partition of the same dataset to every reader)."""
-    import numpy as np
-    import pyarrow.parquet as pq
-
-    from workbench.data.demonstrations import Demonstration, DemonstrationSet
-
-    ds = DemonstrationSet.load(src)
-    out = []
-    for d in ds:
-        t, x, u = d.t, d.x, d.u
-        if how == "shifted":
-            t, x, u = t[:-1], x[1:], u[1:]
-        elif how == "ulp":
-            x, u = np.nextafter(x, np.inf), np.nextafter(u, -np.inf)
-        else:
-            t, x, u = t[:-1], x[:-1], u[:-1]
-        out.append(Demonstration(t, x, u, {**d.meta, "id": f"{d.id}-{how}"}))
-    info = json.loads(pq.read_metadata(src).metadata[b"workbench"])["dataset"]
-    ds.with_demos(out).save(dst, dataset=info)
-
-
 # -- model files that expand --------------------------------------------------------------------------------------
 def attack_model_size(rng: random.Random, base: Path, model: Path, demos: Path) -> Prepared:
     """A model file whose one array is ``size`` bytes of deflated zeros, declared as such (an honest archive: 2 GiB
     deflate to about 2 MB), given to ``predict``."""
-    import io
-    import zipfile
-
-    import numpy as np
-
     size = rng.choice([8 << 20, 64 << 20, 512 << 20, 2 << 30])
-    path = base / f"m{rng.randrange(10**9)}.npz"
-    n = size // 8
-    with zipfile.ZipFile(model) as zin, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zout:
-        header = json.loads(np.load(io.BytesIO(zin.read("__header__.npy"))).tobytes())
-        name = rng.choice([k for k in header["arrays"] if header["arrays"][k]["shape"]])
-        header["arrays"][name]["shape"] = [n]
-        for info in zin.infolist():
-            if info.filename == f"{name}.npy":
-                buf = io.BytesIO()
-                np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False, "shape": (n,)})
-                with zout.open(info.filename, "w", force_zip64=True) as f:
-                    f.write(buf.getvalue())
-                    for start in range(0, n * 8, 1 << 24):
-                        f.write(bytes(min(1 << 24, n * 8 - start)))
-            elif info.filename == "__header__.npy":
-                buf = io.BytesIO()
-                np.save(buf, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
-                zout.writestr(info.filename, buf.getvalue())
-            else:
-                zout.writestr(info.filename, zin.read(info))
+    arrays = forgeries.model_header(model)["arrays"]
+    name = rng.choice([k for k in arrays if arrays[k]["shape"]])
+    path = forgeries.inflated(model, base / f"m{rng.randrange(10**9)}.npz", name, size)
     out = base / f"p{rng.randrange(10**9)}.csv"
 
     def call() -> str | None:
@@ -635,7 +550,7 @@ def main() -> None:
     if cli_main(["fit", str(demos), "--method", "ioc-only", "--bootstrap", "0", "-q", "-o", str(model)]) != 0:
         raise SystemExit("could not fit the model the model-file surfaces start from")
     sample_mcap = (REPO / "sample_logs" / "landing_s01.mcap").read_bytes()
-    mcap_messages = _mcap_messages(REPO / "sample_logs" / "landing_s01.mcap")
+    mcap_messages = forgeries.mcap_messages(REPO / "sample_logs" / "landing_s01.mcap")
     mcap_ref = adapters.load(REPO / "sample_logs" / "landing_s01.mcap")
     for size in (8 << 20, 64 << 20, 512 << 20, 1 << 30):
         _mcap_bomb(size)  # compressed here, before any call is timed
@@ -674,16 +589,8 @@ def main() -> None:
         scheduler.wait()
         shutil.rmtree(base, ignore_errors=True)
         shutil.rmtree(fixtures, ignore_errors=True)
-    keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
     print(f"\nEach call forked from a process at {baseline:.0f} MiB (the workbench's imports, the sample logs).")
-    print("| surface | " + " | ".join(keys) + " | peak MiB | longest call s | largest input MiB |")
-    print("|---|" + "---|" * (len(keys) + 3))
-    for name, c in tally.by_surface.items():
-        print(f"| {name} | " + " | ".join(str(c.get(k, 0)) for k in keys)
-              + f" | {tally.peak[name]:.0f} | {tally.slowest[name]:.1f} | {tally.largest[name] / 2**20:.2f} |")
-    for name, ex in tally.examples.items():
-        for e in list(dict.fromkeys(ex))[:8]:
-            print(f"{name}: {e}")
+    tally.print_table(most_examples=8)
 
 
 if __name__ == "__main__":

@@ -21,53 +21,35 @@ import random
 import re
 import shutil
 import signal
-import socket
 import struct
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from collections import Counter
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
+from tests import forgeries  # noqa: E402 - the peers the tests fake too
 from workbench.errors import WorkbenchError  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from harness import HANG_S, _call_in_child, _mutate  # noqa: E402 - the shared harness
+import harness  # noqa: E402 - the shared harness
+from harness import HANG_S, _call_in_child, _mutate  # noqa: E402
 
 
-class Tally:
+class Tally(harness.Tally):
     """Each call in a child forked from this process (:func:`harness._call_in_child`): its peak memory and its
     time are its own. A call's random choices come from a generator seeded by this process's, drawn per call."""
 
     def __init__(self, rng: random.Random) -> None:
+        super().__init__()
         self.rng = rng
-        self.by_surface: dict[str, Counter] = {}
-        self.examples: dict[str, list[str]] = {}
-        self.peak: dict[str, float] = {}
-        self.slowest: dict[str, float] = {}
 
     def run(self, surface: str, fn, *args) -> None:
-        c = self.by_surface.setdefault(surface, Counter())
-        c["calls"] += 1
         args = tuple(random.Random(self.rng.getrandbits(64)) if isinstance(a, random.Random) else a for a in args)
-        kind, detail, took, peak = _call_in_child(lambda: fn(*args))
-        self.slowest[surface] = max(self.slowest.get(surface, 0.0), took)
-        self.peak[surface] = max(self.peak.get(surface, 0.0), peak / 2**20)
-        if kind == "clean":
-            c["clean errors"] += 1
-        elif kind == "foreign":
-            c["foreign errors"] += 1
-            self.examples.setdefault(surface, []).append(str(detail))
-        if kind == "hang" or took > HANG_S:
-            c["hangs"] += 1
-        if kind == "ok" and detail:
-            c["silent wrong results"] += 1
-            self.examples.setdefault(surface, []).append(f"wrong: {detail}")
+        self.record(surface, _call_in_child(lambda: fn(*args)))
 
 
 # -- datasets ----------------------------------------------------------------------------------------------------
@@ -212,27 +194,15 @@ def attack_scheduler(rng: random.Random) -> str | None:
         except OSError:
             pass
 
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen()
-    threading.Thread(target=lambda: _accept_once(srv, respond), daemon=True).start()
+    srv, address = forgeries.serve(respond)
     start = time.monotonic()
     try:
-        check_scheduler(f"tcp://127.0.0.1:{srv.getsockname()[1]}", timeout=2)
+        check_scheduler(address, timeout=2)
     finally:
         srv.close()
         if time.monotonic() - start > 5:
             raise RuntimeError(f"{kind}: {time.monotonic() - start:.1f} s")
     return f"{kind}: accepted as a Dask scheduler"
-
-
-def _accept_once(srv, respond):
-    try:
-        conn, _ = srv.accept()
-    except OSError:
-        return
-    with conn:
-        respond(conn)
 
 
 # -- interrupted writes ------------------------------------------------------------------------------------------
@@ -418,15 +388,7 @@ def main() -> None:
                 call()
     finally:
         shutil.rmtree(base, ignore_errors=True)
-    keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
-    print("| surface | " + " | ".join(keys) + " | peak MiB | longest call s |")
-    print("|---|" + "---|" * (len(keys) + 2))
-    for name, c in tally.by_surface.items():
-        print(f"| {name} | " + " | ".join(str(c.get(k, 0)) for k in keys)
-              + f" | {tally.peak[name]:.0f} | {tally.slowest[name]:.1f} |")
-    for name, ex in tally.examples.items():
-        for e in dict.fromkeys(ex):
-            print(f"{name}: {e}")
+    tally.print_table()
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
-"""What the attack scripts share: a call run in a forked child (its own peak memory and time) and the damage real
-transfers do to a log's bytes. Both scripts import this module; neither imports the other.
+"""What the attack scripts share: a call run in a forked child (its own peak memory and time), the tally of the
+calls' outcomes and the damage real transfers do to a log's bytes. Both scripts import this module; neither imports
+the other.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import signal
 import sys
 import time
 import traceback
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
@@ -24,6 +26,57 @@ from workbench.errors import WorkbenchError  # noqa: E402
 HANG_S = 60.0  # the acceptance's bound for a call on an input under 10 MB
 FOREIGN_TEXT = re.compile(r"ZstdError|codec can't decode|cannot fit|Traceback|RecursionError|OverflowError|"
                           r"need at least one array|WebSocketError|TypeError")
+
+
+class Tally:
+    """The calls' outcomes per surface (:func:`_call_in_child`'s kinds counted, examples of the bad ones) with the
+    slowest call and the highest peak memory; each script's ``run`` makes the call and hands its outcome here."""
+
+    def __init__(self) -> None:
+        self.by_surface: dict[str, Counter] = {}
+        self.examples: dict[str, list[str]] = {}
+        self.peak: dict[str, float] = {}
+        self.slowest: dict[str, float] = {}
+
+    def record(self, surface: str, outcome: tuple[str, str | None, float, int], what: str | None = None) -> None:
+        """Count one call's ``(kind, detail, seconds, peak bytes)``; ``what`` names its input in the examples."""
+        kind, detail, took, peak = outcome
+        c = self.by_surface.setdefault(surface, Counter())
+        c["calls"] += 1
+        self.slowest[surface] = max(self.slowest.get(surface, 0.0), took)
+        self.peak[surface] = max(self.peak.get(surface, 0.0), peak / 2**20)
+        def example(text: str) -> None:
+            self.examples.setdefault(surface, []).append(text)
+
+        if kind == "clean":
+            c["clean errors"] += 1
+        elif kind == "foreign":
+            c["foreign errors"] += 1
+            example(f"{detail}" + (f" ({what})" if what is not None else ""))
+        if kind == "hang" or took > HANG_S:
+            c["hangs"] += 1
+            example(f"hang: {what if what is not None else detail}")
+        if kind == "ok" and detail:
+            c["silent wrong results"] += 1
+            example(f"wrong: {detail}")
+
+    def columns(self, surface: str) -> dict[str, str]:
+        """The table's columns after the counts, for one surface."""
+        return {"peak MiB": f"{self.peak[surface]:.0f}", "longest call s": f"{self.slowest[surface]:.1f}"}
+
+    def print_table(self, most_examples: int | None = None) -> None:
+        """The Markdown table of RESULTS.md (a row per surface), then each surface's distinct examples."""
+        keys = ["calls", "clean errors", "foreign errors", "hangs", "silent wrong results"]
+        rows = {name: [str(c.get(k, 0)) for k in keys] + list(self.columns(name).values())
+                for name, c in self.by_surface.items()}
+        extra = list(self.columns(next(iter(rows)))) if rows else []
+        print("| surface | " + " | ".join(keys + extra) + " |")
+        print("|---|" + "---|" * (len(keys) + len(extra)))
+        for name, cells in rows.items():
+            print(f"| {name} | " + " | ".join(cells) + " |")
+        for name, ex in self.examples.items():
+            for e in list(dict.fromkeys(ex))[:most_examples]:
+                print(f"{name}: {e}")
 
 
 def _call_in_child(call: Callable[[], str | None]) -> tuple[str, str | None, float, int]:

@@ -169,22 +169,11 @@ def _check_streams(fmt: str, streams) -> str:
         return _outcome(path)
 
 
+@pytest.mark.parametrize("fmt", ["mcap", "csv", "ulog"])
 @CONTENT
 @given(data=st.data())
-def test_mcap_with_time_going_backwards_and_nan_fields(planar_streams, data):
-    _check_streams("mcap", data.draw(spoiled_streams(planar_streams["mcap"])))
-
-
-@CONTENT
-@given(data=st.data())
-def test_csv_with_time_going_backwards_and_nan_fields(planar_streams, data):
-    _check_streams("csv", data.draw(spoiled_streams(planar_streams["csv"])))
-
-
-@CONTENT
-@given(data=st.data())
-def test_ulog_with_time_going_backwards_and_nan_fields(planar_streams, data):
-    _check_streams("ulog", data.draw(spoiled_streams(planar_streams["ulog"])))
+def test_time_going_backwards_and_nan_fields(planar_streams, fmt, data):
+    _check_streams(fmt, data.draw(spoiled_streams(planar_streams[fmt])))
 
 
 @CONTENT

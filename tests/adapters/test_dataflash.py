@@ -271,7 +271,8 @@ def test_cli_inspect_of_a_bin_and_of_a_damaged_one(logs, tmp_path):
     assert "bad.BIN" in out[1].stderr and "byte 0" in out[1].stderr
 
 
-def test_load_with_a_mapping_of_dataflash_streams(logs, tmp_path):
+def _mode_mapping(tmp_path):
+    """A mapping of a copter's attitude and throttle stick, its trials cut at STABILIZE and ALT_HOLD spans."""
     mapping = tmp_path / "bin.toml"
     mapping.write_text(
         'name = "bin_test"\ndt = 0.1\nstates = ["roll", "pitch"]\ninputs = ["thr"]\n'
@@ -279,6 +280,11 @@ def test_load_with_a_mapping_of_dataflash_streams(logs, tmp_path):
         '[segment]\ngap = 1.0\nmin_duration = 1.0\n'
         'mode = { source = "MODE.ModeNum", names = "arducopter", keep = ["STABILIZE", "ALT_HOLD"] }\n'
     )
+    return mapping
+
+
+def test_load_with_a_mapping_of_dataflash_streams(logs, tmp_path):
+    mapping = _mode_mapping(tmp_path)
     ds = adapters.load(logs("new", "copter"), mapping)
     assert len(ds) >= 2 and {d.meta["mode"] for d in ds} == {"STABILIZE", "ALT_HOLD"}
     assert ds[0].meta["format"] == "dataflash"
@@ -493,13 +499,7 @@ def test_a_bad_stamp_on_a_mode_change_moves_no_span(logs, tmp_path):
     gets the channels' time-line repair and the import equals the clean one."""
     import struct
 
-    mapping = tmp_path / "bin.toml"
-    mapping.write_text(
-        'name = "bin_test"\ndt = 0.1\nstates = ["roll", "pitch"]\ninputs = ["thr"]\n'
-        '[channels]\nroll = "ATT.Roll"\npitch = "ATT.Pitch"\nthr = "RCIN.C3"\n'
-        '[segment]\ngap = 1.0\nmin_duration = 1.0\n'
-        'mode = { source = "MODE.ModeNum", names = "arducopter", keep = ["STABILIZE", "ALT_HOLD"] }\n'
-    )
+    mapping = _mode_mapping(tmp_path)
     clean = logs("new", "copter")
     data = bytearray(clean.read_bytes())
     mode_type = adapters.read(clean).info["formats"]["MODE"]["type"]

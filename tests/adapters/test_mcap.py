@@ -13,6 +13,8 @@ from mcap.writer import Writer
 from adapters.formats import mcap
 from workbench.errors import DataError, FormatError
 
+from ..forgeries import mcap_messages, write_mcap
+
 
 def _streams():
     t = np.arange(5) * 0.1 + 100.0
@@ -214,27 +216,14 @@ def test_one_bad_log_time_splits_no_trial(tmp_path, into):
     import adapters
 
     clean = Path(__file__).resolve().parents[2] / "sample_logs" / "landing_s01.mcap"
-    with clean.open("rb") as f:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        messages = list(reader.iter_messages(log_time_order=False))
+    summary, messages = mcap_messages(clean)
     state = [i for i, (_, ch, _) in enumerate(messages) if ch.topic == "/quadrotor/state"]
     k = state[len(state) // 2]
     want = adapters.load(clean)
     # into the middle of trial `into` (before or after the message's own, in the middle of the log)
     middle = want[into].meta["t0"] + 0.5 * float(want[into].t[-1])
     shift_ns = int(middle * 1e9) - messages[k][2].log_time
-    bad = tmp_path / clean.name
-    with bad.open("wb") as f:
-        w = Writer(f)
-        w.start()
-        schemas = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
-        channels = {c.id: w.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0), c.metadata)
-                    for c in summary.channels.values()}
-        for i, (_, ch, m) in enumerate(messages):
-            at = m.log_time + (shift_ns if i == k else 0)
-            w.add_message(channels[ch.id], at, m.data, m.publish_time, m.sequence)
-        w.finish()
+    bad = write_mcap(tmp_path / clean.name, summary, messages, k, shift_ns)
     got = adapters.load(bad)
     assert abs(shift_ns) > 5e9
     assert [(d.meta["id"], len(d.t)) for d in got] == [(d.meta["id"], len(d.t)) for d in want]

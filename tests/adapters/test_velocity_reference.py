@@ -175,22 +175,13 @@ def test_the_fit_names_a_plant_that_fails_its_physics_check_first(tmp_path):
 
 
 def test_the_viewer_shows_such_a_log_with_the_cause_beside_its_states(tmp_path):
-    from rerun.chunk import RrdReader
-
-    from workbench.viewer import entities, session
+    from ..rrd import key_texts
 
     path, _ = _copter_bin(tmp_path, "wandering.bin", _own_gps)
     ds = adapters.load(path, "ardupilot_manual", allow_still=True)
-    rec = session.new_recording()
-    rec.save(tmp_path / "v.rrd")
-    session.SessionLogger(rec, ds, clock="log").log_key()
-    rec.flush()
-    rec.disconnect()
-    texts = [row for chunk in RrdReader(tmp_path / "v.rrd").stream() if chunk.entity_path == f"/{entities.KEY}"
-             for name in chunk.to_record_batch().schema.names if name.endswith("text")
-             for row in chunk.to_record_batch().column(name).to_pylist()]
+    texts = key_texts(ds, tmp_path / "v.rrd")
     cause = ds[0].meta["still"].split(": mapping 'ardupilot_manual': ", 1)[1]
-    assert any(f"**not for fitting**: {cause}" in str(t) for t in texts), texts
+    assert any(f"**not for fitting**: {cause}" in t for t in texts), texts
 
 
 @pytest.mark.parametrize("follows", [True, False])

@@ -119,20 +119,25 @@ def test_the_exit_status_says_whether_the_output_was_written(files, tmp_path, na
         assert capsys.readouterr().err.startswith("error: ")
 
 
+def _fit_with_inverse_lqr_failing(monkeypatch, files, out, message: str, *options: str) -> int:
+    """``fit`` with every inverse-LQR solve raising ``message``."""
+    from workbench.method import inverse_lqr_sdp
+
+    def fails(self, K):
+        raise ModelError(message)
+
+    monkeypatch.setattr(inverse_lqr_sdp.InverseLQR, "solve", fails)
+    return main(["fit", str(files["demos"]), "--label", "CS1", *options, "--bootstrap", "4", "-o", str(out)])
+
+
 def test_a_fit_whose_objective_is_not_found_exits_0_and_says_which_intervals_are_missing(files, tmp_path, capsys,
                                                                                            monkeypatch):
     """Inverse LQR finds no objective: the model is written and the fit exits 0; the objective's intervals are said
     to be not computed and the gain's own are printed (the previous main's bootstrap re-solved the point estimate,
     failed, and the command exited 1 after writing the model)."""
-    from workbench.method import inverse_lqr_sdp
-
-    def no_objective(self, K):
-        raise ModelError("inverse LQR: no cost passes the checks (made to fail here)")
-
-    monkeypatch.setattr(inverse_lqr_sdp.InverseLQR, "solve", no_objective)
     out = tmp_path / "m.npz"
-    assert main(["fit", str(files["demos"]), "--label", "CS1", "--n-components", "1", "--bootstrap", "4", "-o",
-                 str(out)]) == 0
+    assert _fit_with_inverse_lqr_failing(monkeypatch, files, out, "inverse LQR: no cost passes the checks (made to "
+                                         "fail here)", "--n-components", "1") == 0
     said = capsys.readouterr().out
     assert load_model(out).objective_ is None
     assert "task objective: not found (inverse LQR: no cost passes the checks" in said
@@ -143,16 +148,12 @@ def test_a_fit_whose_objective_is_not_found_exits_0_and_says_which_intervals_are
 def test_an_interval_that_fails_is_said_and_the_fit_still_exits_0(files, tmp_path, capsys, monkeypatch):
     """IOC-only fits no objective of its own; its bootstrap solves one per resample, and where that fails the
     intervals are said to be not computed (the previous main: exit 1 after writing the model)."""
-    from workbench.method import inverse_lqr_sdp
-
-    def fails(self, K):
-        raise ModelError("all 4 bootstrap resamples failed; first failure: resample 0: singular")
-
-    monkeypatch.setattr(inverse_lqr_sdp.InverseLQR, "solve", fails)
     out = tmp_path / "m.npz"
-    assert main(["fit", str(files["demos"]), "--label", "CS1", "--method", "ioc-only", "--bootstrap", "4", "-o",
-                 str(out)]) == 0
-    assert "intervals of K̂, Q and R: not computed (all 4 bootstrap resamples failed" in capsys.readouterr().out
+    assert _fit_with_inverse_lqr_failing(monkeypatch, files, out, "all 4 bootstrap resamples failed; first failure: "
+                                         "resample 0: singular", "--method", "ioc-only") == 0
+    err = capsys.readouterr().err
+    assert "warning: intervals not computed: all 4 bootstrap resamples failed" in err
+    assert "(intervals of K̂, Q and R; the model is written)" in err
     assert out.is_file()
 
 

@@ -16,6 +16,8 @@ import pytest
 from workbench.cli import main
 from workbench.sim.landing import simulate_landings
 
+from ..forgeries import array_npy, header_json, rewrite_model_file
+
 REPO = Path(__file__).resolve().parents[2]
 TLOG = REPO / "sample_logs" / "landing_s00.tlog"
 MAPPING = REPO / "adapters" / "mappings" / "planar_quadrotor.toml"
@@ -51,46 +53,20 @@ def _big_int_in_metadata(files) -> list[str]:
 
 def _big_int_in_a_model(files) -> list[str]:
     """A model file whose header holds a 5000-digit integer."""
-    import io
-    import zipfile
-
-    import numpy as np
-
-    bad = files["dir"] / "digits.npz"
-    with zipfile.ZipFile(files["model"]) as zin, zipfile.ZipFile(bad, "w") as zout:
-        for info in zin.infolist():
-            data = zin.read(info)
-            if info.filename == "__header__.npy":
-                text = np.load(io.BytesIO(data)).tobytes().decode().replace('"version": 1', f'"version": {BIG}')
-                buf = io.BytesIO()
-                np.save(buf, np.frombuffer(text.encode(), dtype=np.uint8))
-                data = buf.getvalue()
-            zout.writestr(info.filename, data)
+    bad = rewrite_model_file(files["model"], files["dir"] / "digits.npz",
+                             header=lambda text: text.replace('"version": 1', f'"version": {BIG}'))
     return ["predict", "--model", str(bad), "--x0", "0,2,0,0,0,0", "-o", str(files["dir"] / "p.csv")]
 
 
 def _bounds_of_another_shape(files) -> list[str]:
     """A model file whose plant's input bounds have 100 entries for its 2 inputs (header and arrays agree)."""
-    import io
-    import zipfile
-
     import numpy as np
 
-    bad = files["dir"] / "bounds.npz"
-    with zipfile.ZipFile(files["model"]) as zin, zipfile.ZipFile(bad, "w") as zout:
-        for info in zin.infolist():
-            data = zin.read(info)
-            if info.filename == "__header__.npy":
-                header = json.loads(np.load(io.BytesIO(data)).tobytes())
-                header["arrays"]["system/u_min"]["shape"] = [100]
-                buf = io.BytesIO()
-                np.save(buf, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
-                data = buf.getvalue()
-            elif info.filename == "system/u_min.npy":
-                buf = io.BytesIO()
-                np.save(buf, np.zeros(100))
-                data = buf.getvalue()
-            zout.writestr(info.filename, data)
+    def declare(header: dict) -> None:
+        header["arrays"]["system/u_min"]["shape"] = [100]
+
+    bad = rewrite_model_file(files["model"], files["dir"] / "bounds.npz", header=header_json(declare),
+                             members={"system/u_min": array_npy(np.zeros(100))})
     return ["predict", "--model", str(bad), "--x0", "0,2,0,0,0,0", "-o", str(files["dir"] / "p.csv")]
 
 

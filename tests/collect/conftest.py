@@ -7,6 +7,7 @@ one. Without it the browser tests are skipped on a user's machine and fail in CI
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -156,6 +157,16 @@ def new_page(browser, gamepad: bool, viewport: tuple[int, int] = (1100, 760)):
     if gamepad:
         context.add_init_script(PAD_SCRIPT)
     return context, context.new_page()
+
+
+@contextlib.contextmanager
+def opened_page(browser, gamepad: bool, viewport: tuple[int, int] = (1100, 760)):
+    """:func:`new_page`'s page, its browser context closed on leaving (a new browser for each subject)."""
+    context, page = new_page(browser, gamepad, viewport)
+    try:
+        yield page
+    finally:
+        context.close()
 
 
 def consent(page, url: str, subject: str) -> None:

@@ -12,7 +12,7 @@ import pytest
 
 from workbench.collect.fitting import in_process
 
-from .conftest import calibrate, join, new_page, pilot_gain, pilot_js, write_protocol
+from .conftest import calibrate, join, opened_page, pilot_gain, pilot_js, write_protocol
 from .test_session import flown
 
 pytestmark = pytest.mark.slow
@@ -57,12 +57,22 @@ class Shots:
         self.names.append(name)
 
 
+def _to_the_task(page, on_instructions=None) -> None:
+    """Space past a message to the next block's instructions ("Block …"; ``on_instructions()`` there), and Space
+    again to its task screen."""
+    page.keyboard.press("Space")
+    page.wait_for_function("() => document.querySelector('#message-title').textContent.startsWith('Block')")
+    if on_instructions is not None:
+        on_instructions()
+    page.keyboard.press("Space")
+    page.wait_for_selector("#screen-task:not([hidden])")
+
+
 def test_every_page_at_two_sizes(browser, serve, tmp_path):
     shots = Shots(Path(os.environ.get("WORKBENCH_SCREENS") or tmp_path / "screens"))
     run = serve(_protocol(tmp_path), runner=in_process)
     s = run.session
-    context, page = new_page(browser, gamepad=True)
-    try:
+    with opened_page(browser, gamepad=True) as page:
         page.goto(f"{run.url}?subject=s01")
         page.wait_for_selector("#screen-consent:not([hidden])")
         shots(page, "01-consent")
@@ -92,11 +102,7 @@ def test_every_page_at_two_sizes(browser, serve, tmp_path):
         page.keyboard.press("Space")
         page.wait_for_function("() => document.querySelector('#message-title').textContent === 'Briefing'")
         shots(page, "06-briefing")
-        page.keyboard.press("Space")
-        page.wait_for_function("() => document.querySelector('#message-title').textContent.startsWith('Block')")
-        shots(page, "07-instructions")
-        page.keyboard.press("Space")
-        page.wait_for_selector("#screen-task:not([hidden])")
+        _to_the_task(page, lambda: shots(page, "07-instructions"))
         shots(page, "08-trial-before-start")
         page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(100.0), -0.05)}; }}")
         page.keyboard.press("Space")
@@ -108,12 +114,9 @@ def test_every_page_at_two_sizes(browser, serve, tmp_path):
         page.keyboard.press("Space")
         page.wait_for_function("() => window.collect.status.next.trial === 3", timeout=60_000)
         shots(page, "11-trial-after-crash")
-    finally:
-        context.close()
 
     # a repeated ID in a new browser, a declined consent, a subject without a gamepad
-    context, page = new_page(browser, gamepad=False)
-    try:
+    with opened_page(browser, gamepad=False) as page:
         page.goto(run.url)
         page.wait_for_selector("#screen-consent:not([hidden])")
         page.fill("#subject-id", "s01")
@@ -135,8 +138,6 @@ def test_every_page_at_two_sizes(browser, serve, tmp_path):
         page.click("#confirm-yes")
         page.wait_for_selector("#screen-calibration:not([hidden])")
         shots(page, "15-calibration-keyboard")
-    finally:
-        context.close()
 
     # a subject whose training trials are in: the fit break, the assisted trials, the end
     join(s, "s02", {"age": 28})
@@ -147,8 +148,7 @@ def test_every_page_at_two_sizes(browser, serve, tmp_path):
             s.advance("s02", item.key)
         if item.kind == "fit":
             break
-    context, page = new_page(browser, gamepad=True)
-    try:
+    with opened_page(browser, gamepad=True) as page:
         page.goto(f"{run.url}?subject=s02")
         calibrate(page)
         page.wait_for_function("() => document.querySelector('#message-status').textContent.includes('Preparing')")
@@ -156,10 +156,7 @@ def test_every_page_at_two_sizes(browser, serve, tmp_path):
         page.wait_for_function("() => document.querySelector('#message-keys').textContent.includes('Space')",
                                timeout=120_000)
         shots(page, "17-fit-break-ready")
-        page.keyboard.press("Space")
-        page.wait_for_function("() => document.querySelector('#message-title').textContent.startsWith('Block')")
-        page.keyboard.press("Space")
-        page.wait_for_selector("#screen-task:not([hidden])")
+        _to_the_task(page)
         shots(page, "18-assisted-show")
         page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(100.0), -0.05)}; }}")
         page.keyboard.press("Space")
@@ -167,19 +164,13 @@ def test_every_page_at_two_sizes(browser, serve, tmp_path):
                                timeout=60_000)
         shots(page, "19-break")
         page.wait_for_function("() => window.collect.onSpace !== null", timeout=10_000)
-        page.keyboard.press("Space")
-        page.wait_for_function("() => document.querySelector('#message-title').textContent.startsWith('Block')")
-        page.keyboard.press("Space")
-        page.wait_for_selector("#screen-task:not([hidden])")
+        _to_the_task(page)
         shots(page, "20-assisted-blend")
         page.keyboard.press("Space")
         page.wait_for_selector("#summary:not([hidden])", timeout=60_000)
         shots(page, "21-end")
-    finally:
-        context.close()
 
-    context, page = new_page(browser, gamepad=False)
-    try:
+    with opened_page(browser, gamepad=False) as page:
         page.goto(f"{run.url}experimenter?key={run.key}")
         page.wait_for_function("() => document.querySelectorAll('.subject').length >= 2")
         shots(page, "22-experimenter")
@@ -190,8 +181,6 @@ def test_every_page_at_two_sizes(browser, serve, tmp_path):
         row.locator("button").click()
         page.wait_for_selector("tr.excluded")
         shots(page, "23-experimenter-excluded")
-    finally:
-        context.close()
     from workbench.data.dataset import load_demonstrations
 
     excluded = {d.id: d.meta["exclusion_note"] for d in load_demonstrations(run.out) if d.meta["excluded"]}

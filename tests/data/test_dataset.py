@@ -7,7 +7,6 @@ import pickle
 
 import numpy as np
 import pandas as pd
-import pyarrow.parquet as pq
 import pytest
 
 from workbench.data.dataset import (
@@ -21,9 +20,10 @@ from workbench.data.dataset import (
     write_dataset,
     write_partitions,
 )
-from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError, FormatError
 from workbench.sim.landing import simulate_study
+
+from ..forgeries import altered_copy
 
 
 @pytest.fixture(scope="module")
@@ -227,26 +227,6 @@ def test_a_copied_partition_is_refused_naming_both_files(study, tmp_path):
     assert part.file in str(err.value) and copy.relative_to(path).as_posix() in str(err.value)
 
 
-def _altered(ds, how: str):
-    """A copy of ``ds`` as an attacker makes one: every trial shifted by one sample, 1 ulp off or one sample
-    shorter, under new ids (so neither its bytes nor its ids repeat the original's)."""
-    import numpy as np
-
-    from workbench.data.demonstrations import Demonstration
-
-    out = []
-    for d in ds:
-        t, x, u = d.t, d.x, d.u
-        if how == "shifted":
-            t, x, u = t[:-1], x[1:], u[1:]
-        elif how == "ulp":
-            x, u = np.nextafter(x, np.inf), np.nextafter(u, -np.inf)
-        else:
-            t, x, u = t[:-1], x[:-1], u[:-1]
-        out.append(Demonstration(t, x, u, {**d.meta, "id": f"{d.id}-copy"}))
-    return ds.with_demos(out)
-
-
 @pytest.mark.parametrize("how", ["shifted", "ulp", "shorter"])
 def test_a_copied_partition_altered_to_look_new_is_refused(study, tmp_path, how):
     """Issue 36: a copied partition shifted by one sample, 1 ulp off or one sample shorter loaded as new trials (80
@@ -254,9 +234,7 @@ def test_a_copied_partition_altered_to_look_new_is_refused(study, tmp_path, how)
     missed all three."""
     path = write_dataset(study, tmp_path / "ds")
     part = next(p for p in read_manifest(path).partitions if p.subject == "s02")
-    copy = _altered(DemonstrationSet.load(path / part.file), how)
-    copy.save(path / "subject=s02" / "copy.parquet", dataset=json.loads(
-        pq.read_metadata(path / part.file).metadata[b"workbench"])["dataset"])
+    altered_copy(path / part.file, path / "subject=s02" / "copy.parquet", how)
     with pytest.raises(DataError, match=r"subject=s02/\S+ and subject=s02/\S+ hold the same trial") as err:
         load_demonstrations(path)
     assert "copy.parquet" in str(err.value) and "the same samples within rounding" in str(err.value)

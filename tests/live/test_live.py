@@ -20,10 +20,8 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
-from rerun.chunk import RrdReader
 
 import adapters
 from adapters.link.mavlink import open_link, tlog_frames
@@ -31,6 +29,8 @@ from workbench.errors import ModelError, WorkbenchError
 from workbench.live.predictor import OnlinePredictor
 from workbench.models import HumanBehaviorModel
 from workbench.plant.system import planar_quadrotor
+
+from ..rrd import read_rrd
 
 REPO = Path(__file__).resolve().parents[2]
 TLOG = REPO / "sample_logs" / "landing_s00.tlog"
@@ -365,21 +365,6 @@ def test_live_prediction_runs_without_rerun():
 
 
 # -- end to end: the real CLI over UDP -------------------------------------------------------------------------
-def read_rrd(path: Path) -> dict[str, dict[str, list]]:
-    out: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
-    for chunk in RrdReader(path).stream():
-        if chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        for name in batch.schema.names:
-            col = batch.column(name)
-            if pa.types.is_duration(col.type):
-                out[chunk.entity_path][name].extend(col.cast(pa.int64()).to_numpy() / 1e9)
-            else:
-                out[chunk.entity_path][name].extend(col.to_pylist())
-    return out
-
-
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -438,7 +423,7 @@ def live_run(fitted, tmp_path_factory):
 def test_live_cli_predictions_equal_the_offline_replay(fitted, live_run):
     ds, model, _ = fitted
     assert live_run["code"] == 0, live_run["stderr"]
-    ents = read_rrd(live_run["rrd"])
+    ents = read_rrd(live_run["rrd"], static=False)
     by_id = {d.id: d for d in ds}
     checked = 0
     for path, cols in ents.items():
@@ -462,7 +447,7 @@ def test_live_cli_predictions_equal_the_offline_replay(fitted, live_run):
 
 def test_live_timing_lines_break_between_segments(live_run):
     # one NaN row just before each segment's first step after the first: no line drawn across the pause
-    ents = read_rrd(live_run["rrd"])
+    ents = read_rrd(live_run["rrd"], static=False)
     firsts = sorted(float(np.min(np.asarray(c["link_time"], dtype=float)))
                     for p, c in ents.items() if re.fullmatch(r"/demos/[^/]+/states/x", p))
     assert len(firsts) >= 2
@@ -477,14 +462,14 @@ def test_live_timing_lines_break_between_segments(live_run):
 def test_live_cli_predictions_equal_the_replay_commands_recording(fitted, live_run, tmp_path):
     """The same steps as ``workbench replay LOG --model M`` streams, read back from both recordings."""
     ds, _, model_path = fitted
-    live = read_rrd(live_run["rrd"])
+    live = read_rrd(live_run["rrd"], static=False)
     ids = [d.id for d in ds if f"/demos/{d.id}/online/u1/gmr" in live][:2]
     assert len(ids) == 2
     r = subprocess.run([*WB, "replay", str(TLOG), "--model", str(model_path), "--demo", *ids, "--no-wait",
                         "--horizon", "0", "--save", str(tmp_path / "replay.rrd")],
                        capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
-    offline = read_rrd(tmp_path / "replay.rrd")
+    offline = read_rrd(tmp_path / "replay.rrd", static=False)
     for demo_id in ids:
         for u in ds.input_names:
             path = f"/demos/{demo_id}/online/{u}/gmr"
@@ -536,7 +521,7 @@ def test_ctrl_c_ends_live_with_a_complete_recording(fitted, records, tmp_path):
     assert "interrupted" in stdout
     n_steps = int(re.search(r"(\d+) steps in", stdout).group(1))
     assert n_steps > 0
-    ents = read_rrd(tmp_path / "c.rrd")
+    ents = read_rrd(tmp_path / "c.rrd", static=False)
     logged = sum(len(c["step"]) for path, c in ents.items() if path.endswith("/states/x"))
     assert logged == n_steps  # every completed step is in the recording
 

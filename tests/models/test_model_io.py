@@ -6,7 +6,6 @@
 
 from __future__ import annotations
 
-import io
 import tracemalloc
 import zipfile
 from pathlib import Path
@@ -17,6 +16,8 @@ import pytest
 from workbench.cli import main
 from workbench.errors import ModelError
 from workbench.models.files import ModelFileError, read_model_file, write_model_file
+
+from ..forgeries import inflated, npy_header
 
 ARRAYS = {"K": np.arange(12.0).reshape(2, 6), "counts": np.arange(5), "scale": np.linspace(0.0, 1.0, 400)}
 
@@ -32,12 +33,6 @@ def _replace_member(src: Path, dst: Path, name: str, payload: bytes, compress: i
         for info in zin.infolist():
             zout.writestr(info.filename, payload if info.filename == name else zin.read(info))
     return dst
-
-
-def _npy_header(shape: tuple[int, ...], dtype: str = "<f8") -> bytes:
-    buf = io.BytesIO()
-    np.lib.format.write_array_header_1_0(buf, {"descr": dtype, "fortran_order": False, "shape": shape})
-    return buf.getvalue()
 
 
 def _garble_deflate_stream(src: Path, dst: Path, name: str) -> Path:
@@ -65,7 +60,7 @@ def test_good_file_reads_back_exactly(good):
 
 def test_huge_declared_shape_is_refused_before_allocating(good, tmp_path):
     """A header declaring 10⁶ × 10⁶ float64 (8 TB) over 96 bytes of data: an error, not an 8 TB allocation."""
-    payload = _npy_header((10**6, 10**6)) + ARRAYS["K"].tobytes()
+    payload = npy_header((10**6, 10**6)) + ARRAYS["K"].tobytes()
     for compress in (zipfile.ZIP_DEFLATED, zipfile.ZIP_STORED):
         bad = _replace_member(good, tmp_path / f"huge{compress}.npz", "K.npy", payload, compress)
         tracemalloc.start()
@@ -118,7 +113,7 @@ def test_bad_crc_and_object_dtype_are_model_file_errors(good, tmp_path):
     with pytest.raises(ModelFileError, match="CRC") as exc:
         read_model_file(crc)
     assert str(crc) in str(exc.value)
-    obj = _replace_member(good, tmp_path / "obj.npz", "counts.npy", _npy_header((1,), "|O") + b"\0" * 8)
+    obj = _replace_member(good, tmp_path / "obj.npz", "counts.npy", npy_header((1,), "|O") + b"\0" * 8)
     with pytest.raises(ModelFileError, match="non-numeric dtype"):
         read_model_file(obj)
 
@@ -128,7 +123,7 @@ def test_cli_prints_one_line_naming_the_file(good, tmp_path, capsys, damage):
     if damage == "zlib":
         bad = _garble_deflate_stream(good, tmp_path / "bad.npz", "__header__.npy")
     elif damage == "huge shape":
-        bad = _replace_member(good, tmp_path / "bad.npz", "scale.npy", _npy_header((2**40,)) + b"\0" * 64)
+        bad = _replace_member(good, tmp_path / "bad.npz", "scale.npy", npy_header((2**40,)) + b"\0" * 64)
     elif damage == "truncated":
         bad = tmp_path / "bad.npz"
         bad.write_bytes(good.read_bytes()[:-40])
@@ -181,31 +176,6 @@ def test_header_entries_of_the_wrong_kind_are_model_file_errors(ioc_model, tmp_p
     assert str(bad) in str(info.value)
 
 
-def _inflated(src: Path, dst: Path, n_bytes: int) -> Path:
-    """``src`` with its ``scale`` array replaced by ``n_bytes`` of zeros, deflated (a few bytes per MB on disk) and
-    declared in the header as it is: an honest archive whose arrays expand far beyond any model's."""
-    import json
-
-    n = n_bytes // 8
-    with zipfile.ZipFile(src) as zin:
-        header = json.loads(np.load(io.BytesIO(zin.read("__header__.npy"))).tobytes())
-        header["arrays"]["scale"]["shape"] = [n]
-        with zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as zout:
-            for info in zin.infolist():
-                if info.filename == "scale.npy":
-                    with zout.open("scale.npy", "w", force_zip64=True) as f:
-                        f.write(_npy_header((n,)))
-                        for start in range(0, n * 8, 1 << 22):
-                            f.write(bytes(min(1 << 22, n * 8 - start)))
-                elif info.filename == "__header__.npy":
-                    buf = io.BytesIO()
-                    np.save(buf, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
-                    zout.writestr(info.filename, buf.getvalue())
-                else:
-                    zout.writestr(info.filename, zin.read(info))
-    return dst
-
-
 def test_a_model_file_expanding_past_the_ceiling_is_refused_before_it_is_read(good, tmp_path, monkeypatch):
     """Issue 36: a 2.0 MB model file (one deflated 2 GB array) took `predict` to 4.1 GB; now the archive's declared
     size is held against MAX_DECOMPRESSED_BYTES before any member is decompressed (here lowered to 1 MiB, with an
@@ -213,7 +183,7 @@ def test_a_model_file_expanding_past_the_ceiling_is_refused_before_it_is_read(go
     from workbench.models import files
 
     monkeypatch.setattr(files, "MAX_DECOMPRESSED_BYTES", 1 << 20)
-    bomb = _inflated(good, tmp_path / "bomb.npz", 8 << 20)
+    bomb = inflated(good, tmp_path / "bomb.npz", "scale", 8 << 20)
     assert bomb.stat().st_size < 64 << 10
     tracemalloc.start()
     with pytest.raises(ModelFileError, match=r"not read: its arrays expand to \d+ bytes, more than a model file holds "
@@ -234,7 +204,7 @@ def test_predict_on_a_two_megabyte_model_bomb_stays_under_a_gigabyte(good, tmp_p
 
     from workbench.sim.landing import simulate_landings
 
-    bomb = _inflated(good, tmp_path / "bomb.npz", 2_000_000_000)
+    bomb = inflated(good, tmp_path / "bomb.npz", "scale", 2_000_000_000)
     assert bomb.stat().st_size < 10 << 20
     demos = simulate_landings("CS1", 2, seed=0).save(tmp_path / "d.parquet")
     run = subprocess.run([sys.executable, "-m", "workbench", "predict", "--model", str(bomb), str(demos), "-o",

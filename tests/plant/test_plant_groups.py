@@ -142,10 +142,9 @@ def test_selecting_a_group_names_the_groups_there_are(copter_bin):
 def test_view_shows_a_models_plant_group_and_keys_every_group(copter_bin, tmp_path):
     from types import SimpleNamespace
 
-    from rerun.chunk import RrdReader
-
     from workbench.cli.view import _of_plant_group
-    from workbench.viewer import entities, session
+
+    from ..rrd import key_texts
 
     ds = adapters.load(copter_bin, "ardupilot_manual")
     said: list[str] = []
@@ -158,14 +157,7 @@ def test_view_shows_a_models_plant_group_and_keys_every_group(copter_bin, tmp_pa
     assert len(_of_plant_group(ctx, ds, None, [])) == len(ds)  # no model: every segment
     assert len(_of_plant_group(ctx, ds, "velocity+climb", [angle])) == 2  # the group named wins
     # the key names every segment's group
-    rec = session.new_recording()
-    rec.save(tmp_path / "v.rrd")
-    session.SessionLogger(rec, ds, clock="log").log_key()
-    rec.flush()
-    rec.disconnect()
-    texts = [text for chunk in RrdReader(tmp_path / "v.rrd").stream() if chunk.entity_path == f"/{entities.KEY}"
-             for name in chunk.to_record_batch().schema.names if name.endswith("text")
-             for row in chunk.to_record_batch().column(name).to_pylist() for text in row]
+    texts = key_texts(ds, tmp_path / "v.rrd")
     assert any("**plant groups**" in t and "- angle: 2 segments (STABILIZE" in t
                and "- velocity+climb: 2 segments (LOITER" in t for t in texts)
 

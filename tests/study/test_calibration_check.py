@@ -22,8 +22,8 @@ class _Band:
         n = len(X)
         return np.zeros((n, 1)), np.full((n, 1, 1), self.sigma**2)
 
-    def input_distribution_along(self, demo):  # what calibration_counts asks since the pilot's timing (no timing)
-        return self.input_distribution(demo.x, demo.x[0], None)
+    def input_distribution_along(self, demo, target=None):  # each input given the trial before it (no timing here)
+        return self.input_distribution(demo.x, demo.x[0], target)
 
 
 def _demos(rng, scale, n_trials=20, n=200, rho=0.0, limit=None):

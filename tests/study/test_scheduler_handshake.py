@@ -16,24 +16,7 @@ import pytest
 from workbench.errors import WorkbenchError
 from workbench.study.handshake import check_scheduler
 
-
-def _serve(respond):
-    """A TCP server on 127.0.0.1 calling ``respond(conn)`` for each connection; returns its address."""
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen()
-
-    def loop():
-        while True:
-            try:
-                conn, _ = srv.accept()
-            except OSError:
-                return
-            with conn:
-                respond(conn)
-
-    threading.Thread(target=loop, daemon=True).start()
-    return srv, f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+from ..forgeries import serve
 
 
 def test_a_real_scheduler_passes():
@@ -44,13 +27,13 @@ def test_a_real_scheduler_passes():
 
 
 def test_random_bytes_are_not_a_scheduler():
-    srv, address = _serve(lambda conn: conn.sendall(os.urandom(4096)))
+    srv, address = serve(lambda conn: conn.sendall(os.urandom(4096)))
     with srv, pytest.raises(WorkbenchError, match="not a Dask scheduler"):
         check_scheduler(address, timeout=5)
 
 
 def test_a_plausible_length_then_garbage_is_not_a_scheduler():
-    srv, address = _serve(lambda conn: conn.sendall((100).to_bytes(8, "little") + os.urandom(100)))
+    srv, address = serve(lambda conn: conn.sendall((100).to_bytes(8, "little") + os.urandom(100)))
     with srv, pytest.raises(WorkbenchError, match="not a Dask handshake"):
         check_scheduler(address, timeout=5)
 

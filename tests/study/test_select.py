@@ -62,7 +62,8 @@ def moved_pad():
 def fitted(moved_pad):
     system = planar_quadrotor()
     return system, {
-        # the paper's u = K x (no timing): the independent computation's ŵ = u − K̂(x − target) has no delay
+        # the paper's residual, which the independent computation rebuilds (no pilot's timing: with one, ŵ is of
+        # the command at the seen state, workbench.models.timed)
         G: HumanBehaviorModel(system, n_components=G, fit_objective=False, noise_folds=0, timing="none").fit(moved_pad)
         for G in CANDIDATES
     }

@@ -8,7 +8,6 @@ crashes the rerun 0.41 viewer while ``rerun rrd verify`` passes.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
@@ -16,7 +15,6 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pytest
 import rerun as rr
 from rerun.blueprint.components import LinkAxis
@@ -30,33 +28,16 @@ from workbench.sim.landing import simulate_landings
 from workbench.viewer import columns, objective, output, replay, replay_blueprint, session, style
 from workbench.viewer.tabs.objective import log_models
 
-_spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
-_loader = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_loader)
-recordings = _loader.load()  # one shared instance, so test_viewer_real.py reuses the same recordings
+from ..rrd import blueprint_names, read_rrd
+from . import viewer_recordings
+
+recordings = viewer_recordings.load()  # one shared instance, so test_viewer_real.py reuses the same recordings
 
 HORIZON = 15
 SAMPLES = 40
 STARTS = (0, 25)
 
 rr.set_strict_mode(True)  # a bad call must fail the test, not log a warning
-
-
-def read_rrd(path: Path) -> dict[str, dict[str, list]]:
-    """Per entity path: every column of every recording chunk, static ones under key ``static:<column>``."""
-    out: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
-    for chunk in RrdReader(path).stream():
-        batch = chunk.to_record_batch()
-        for name in batch.schema.names:
-            if name == "rerun.controls.RowId":
-                continue
-            key = f"static:{name}" if chunk.is_static else name
-            col = batch.column(name)
-            if pa.types.is_duration(col.type):
-                out[chunk.entity_path][key].extend(col.cast(pa.int64()).to_numpy() / 1e9)
-            else:
-                out[chunk.entity_path][key].extend(col.to_pylist())
-    return out
 
 
 def series(entities, path: str, column: str = "Scalars:scalars") -> tuple[np.ndarray, np.ndarray]:
@@ -198,7 +179,7 @@ def test_model_tensors(setup):
 
 def test_blueprint_has_the_five_tabs(setup):
     assert RrdReader(setup["path"]).blueprints(), "the recording carries no default blueprint"
-    names = _blueprint_names(setup["path"])
+    names = blueprint_names(setup["path"])
     # the model was fitted on every CS1 trial: its tab says the focus trial is in-sample
     where = " (in-sample)" if setup["focus"] in setup["model"].train_ids_ else ""
     for tab in ("scene", "states", "inputs & variability", f"predictions · {setup['focus']}{where}", "objective"):
@@ -379,17 +360,6 @@ def test_each_kind_of_recording_has_its_own_application_id():
     assert len({found["demo"], found["view"], found["replay"]}) == 3
 
 
-def _blueprint_names(path: Path) -> list[str]:
-    reader = RrdReader(path)
-    names = []
-    for chunk in reader.stream(store=reader.blueprints()[0]):
-        batch = chunk.to_record_batch()
-        for col in batch.schema.names:
-            if col.endswith("display_name"):
-                names += [str(v[0] if isinstance(v, list) else v) for v in batch.column(col).to_pylist() if v]
-    return names
-
-
 def test_a_flight_is_drawn_on_its_own_clock_one_color_per_segment():
     from adapters import inspect, load
 
@@ -409,7 +379,7 @@ def test_a_flight_is_drawn_on_its_own_clock_one_color_per_segment():
     # no landing target declared: the scene is the flown tracks only, no pad
     assert "/scene/pad" not in ents and all(f"/scene/demos/{d.id}/path" in ents for d in ds)
     assert len(ents["/flight/mode"]["time"]) == 2 * len(ds)  # each segment's mode, then its end
-    names = _blueprint_names(path)
+    names = blueprint_names(path)
     assert "scene" in names and "states" in names and "objective" not in names
     assert not any(n.startswith("predictions") for n in names)
     # the plots span the log (its segments start minutes in): a time axis with a range is not globally linked,
@@ -442,7 +412,7 @@ def test_a_plant_without_roles_has_plots_but_no_scene(tmp_path, setup):
     d = demos[0]
     t, v = series(ents, f"/demos/{d.id}/states/x")
     np.testing.assert_array_equal(v[:, 0], d.x[:, 0])
-    names = _blueprint_names(path)
+    names = blueprint_names(path)
     assert "scene" not in names and any(n.startswith("predictions") for n in names)
 
 

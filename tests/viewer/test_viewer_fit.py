@@ -8,8 +8,6 @@ Expected values are computed here (from the models, ``adapters.inspect``, the st
 from __future__ import annotations
 
 import colorsys
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,15 +17,11 @@ from rerun.chunk import RrdReader
 from workbench.viewer import style, verdict
 from workbench.viewer.live import LiveLogger, live_blueprint
 
-_spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
-_loader = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_loader)
-recordings = _loader.load()
+from ..rrd import blueprint_names, read_rrd
+from . import viewer_recordings
 
-_spec = importlib.util.spec_from_file_location("_test_viewer", Path(__file__).with_name("test_viewer.py"))
-_tv = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_tv)
-read_rrd, blueprint_names = _tv.read_rrd, _tv._blueprint_names
+recordings = viewer_recordings.load()  # one instance per process: test_viewer.py's recordings
+
 
 PX4_LOG = recordings.REPO.parent / "shared" / "external" / "px4_sample_log_small.ulg"
 

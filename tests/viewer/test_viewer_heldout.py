@@ -8,23 +8,15 @@ Expected values are computed here from ``results.csv`` and the models' own recor
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pandas as pd
 
 from workbench.models import load_model
 from workbench.study.scores import fmt, heldout_scores
 
-_spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
-_loader = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_loader)
-recordings = _loader.load()
+from ..rrd import blueprint_names, read_rrd
+from . import viewer_recordings
 
-_spec = importlib.util.spec_from_file_location("_test_viewer", Path(__file__).with_name("test_viewer.py"))
-_tv = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_tv)
-read_rrd, blueprint_names = _tv.read_rrd, _tv._blueprint_names
+recordings = viewer_recordings.load()  # one instance per process: test_viewer.py's recordings
 
 
 def _text(ents: dict, path: str) -> str:

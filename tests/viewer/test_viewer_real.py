@@ -12,7 +12,6 @@ Skipped where the software Vulkan driver is missing; ``.ci/run`` installs it, lo
 from __future__ import annotations
 
 import glob
-import importlib.util
 import io
 import os
 import signal
@@ -26,10 +25,9 @@ import numpy as np
 import pytest
 import rerun as rr
 
-_spec = importlib.util.spec_from_file_location("_viewer_recordings", Path(__file__).with_name("viewer_recordings.py"))
-_loader = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_loader)
-recordings = _loader.load()  # the same recordings test_viewer.py reads, made once per session
+from . import viewer_recordings
+
+recordings = viewer_recordings.load()  # the same recordings test_viewer.py reads, made once per session
 
 RERUN = Path(sys.executable).with_name("rerun")
 LAVAPIPE = "/usr/share/vulkan/icd.d/lvp_icd*.json"

@@ -3,7 +3,7 @@
 Shared by ``test_viewer.py`` (every chunk has rows) and ``test_viewer_real.py`` (the real viewer opens them).
 Small on purpose: one sample log (20 trials), two GMM components, a 1.5 s horizon, ten Monte Carlo rollouts,
 12 resamples for the objective's intervals.
-Test modules load this file with :func:`load` (pytest's importlib mode puts no test folder on ``sys.path``).
+Test modules import it (``from . import viewer_recordings``) and use :func:`load`'s instance, one per process.
 Under pytest-xdist the workers share one set: the first worker to ask makes it under the run's common temporary
 folder (``tests/conftest.py`` names it in ``WORKBENCH_TEST_SHARED``) while holding a file lock, the others wait
 for the lock and read the list it left.

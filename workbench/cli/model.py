@@ -23,9 +23,9 @@ def cmd_fit(ctx: Context) -> int:
     a = ctx.args
     output = ctx.output_path(a.output, ".npz", "the model")  # before the work: `-o -` to a terminal is refused
     ds = ctx.read(resolve(a, ctx.stdio, [a.demos], purpose="fit")).demos
-    parts, line = plant_group_parts(ds, a.plant_group)
-    if line:
-        ctx.say(line)
+    parts, said = plant_group_parts(ds, a.plant_group)
+    if said:
+        ctx.say(said)
     if len(parts) == 1:
         _fit_one(ctx, parts[0][1], output)
         ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
@@ -119,7 +119,9 @@ def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int
         try:
             run()
         except WorkbenchError as exc:
-            ctx.say(f"{what}: not computed ({' '.join(str(exc).split())})")
+            # a warning where a user looks for what went wrong (stderr), naming the part; the model stands
+            print(f"warning: intervals not computed: {' '.join(str(exc).split())} ({what}; the model is written)",
+                  file=sys.stderr)
 
 
 def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str,

@@ -115,22 +115,20 @@ def read_models(inputs: Inputs) -> dict[str, Any]:
     return {m.label: load_model(m.path) for m in inputs.models}
 
 
-def plant_group_parts(ds: Any, name: str | None) -> tuple[list[tuple[str | None, Any]], str]:
-    """The demonstrations by plant group (:mod:`workbench.data.plant_groups`), each a plant and a model of its own,
-    and the line that says so: the group ``name`` alone (``--plant-group``), else every group in the data."""
+def plant_group_parts(ds: Any, name: str | None) -> tuple[list[tuple[str | None, Any]], str | None]:
+    """The demonstrations by plant group (:mod:`workbench.data.plant_groups`), each a plant and a model of its own:
+    the group ``name`` alone (``--plant-group``), else every group in the data; and the one line that says so
+    (``None`` for data without groups)."""
     from workbench.data.plant_groups import by_plant_group, describe_groups, select_plant_group
 
     if name:
         part = select_plant_group(ds, name)
         return [(name, part)], f"plant group {describe_groups(part)} (--plant-group)"
     parts = by_plant_group(ds)
-    line = ""
     if len(parts) > 1:
-        line = (f"{len(parts)} plant groups, a plant and a model for each (--plant-group NAME takes one): "
-                f"{describe_groups(ds)}")
-    elif next(iter(parts)) is not None:
-        line = f"plant group {describe_groups(ds)}"
-    return list(parts.items()), line
+        return list(parts.items()), (f"{len(parts)} plant groups, a plant and a model for each (--plant-group NAME "
+                                     f"takes one): {describe_groups(ds)}")
+    return list(parts.items()), (f"plant group {describe_groups(ds)}" if next(iter(parts)) is not None else None)
 
 
 def per_group_path(path: Path, group: str | None) -> Path:

@@ -34,9 +34,9 @@ def cmd_evaluate(ctx: Context) -> int:
     inputs = resolve(a, ctx.stdio, a.demos, purpose="study")
     got = ctx.read(inputs)
     ds = got.demos
-    parts, line = plant_group_parts(ds, getattr(a, "plant_group", None))
-    if line:
-        ctx.say(line)
+    parts, said = plant_group_parts(ds, getattr(a, "plant_group", None))
+    if said:
+        ctx.say(said)
     if len(parts) > 1 and output is not None and ctx.stdio.writes_stdout:
         raise UsageError(f"-o - writes one table, but these demonstrations are {len(parts)} plant groups "
                          f"({', '.join(str(g) for g, _ in parts)}): name one with --plant-group")
@@ -405,9 +405,9 @@ def cmd_report(ctx: Context) -> int:
     a = ctx.args
     refuse_stdio(a.output, "-o", "a report is a folder (report.md and its figures), not one file")
     got = ctx.read(resolve(a, ctx.stdio, a.demos, purpose="study"))
-    parts, line = plant_group_parts(got.demos, getattr(a, "plant_group", None))
-    if line:
-        ctx.say(line)
+    parts, said = plant_group_parts(got.demos, getattr(a, "plant_group", None))
+    if said:
+        ctx.say(said)
     trials = got.selected.describe()
     # one plant group: the report in -o; several: a report of each in -o/GROUP/, each titled with its group
     return for_each_group(ctx, parts, "reported", lambda group, part: _report_group(

@@ -20,11 +20,6 @@ import scipy.optimize
 import scipy.sparse.csgraph
 
 from workbench.errors import DataError, ModelError
-
-try:  # a dependency of scikit-learn, so normally present
-    from threadpoolctl import ThreadpoolController
-except ImportError:  # pragma: no cover
-    ThreadpoolController = None
 from workbench.method.closed_loop import as_matrix, check_stabilizing, system_matrices
 
 __all__ = ['GainMethod', 'stack_demonstrations', 'iv_instruments', 'iv_relevance', 'gain_from_arrays', 'estimate_gain',

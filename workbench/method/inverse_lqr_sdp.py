@@ -18,11 +18,6 @@ import numpy as np
 
 from workbench.errors import ConvergenceWarning, DataError, ModelError, SolverError
 from workbench.frozen import readonly
-
-try:  # a dependency of scikit-learn, so normally present
-    from threadpoolctl import ThreadpoolController
-except ImportError:  # pragma: no cover
-    ThreadpoolController = None
 from workbench.method.closed_loop import as_matrix, check_stabilizing, single_threaded_blas, system_matrices
 from workbench.method.objective import (
     _STRUCTURES,

@@ -14,11 +14,6 @@ import scipy.optimize
 import scipy.sparse.csgraph
 
 from workbench.errors import ModelError
-
-try:  # a dependency of scikit-learn, so normally present
-    from threadpoolctl import ThreadpoolController
-except ImportError:  # pragma: no cover
-    ThreadpoolController = None
 from workbench.method.closed_loop import as_matrix, system_matrices
 
 __all__ = ['Structure', 'forward_gain_tolerance', 'forward_gain', 'TaskObjective']

@@ -20,11 +20,6 @@ import numpy as np
 
 from workbench.errors import DataError, ModelError
 from workbench.frozen import readonly
-
-try:  # a dependency of scikit-learn, so normally present
-    from threadpoolctl import ThreadpoolController
-except ImportError:  # pragma: no cover
-    ThreadpoolController = None
 from workbench.method.closed_loop import single_threaded_blas, system_matrices
 from workbench.method.gain import GainMethod, demo_blocks, gain_from_arrays
 from workbench.method.inverse_lqr_sdp import _SOLVER_CHAIN, InverseLQR, cached_problem

@@ -6,7 +6,7 @@ fits find the closest one in gain, with the DARE's analytic Jacobian.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 import numpy as np
@@ -16,11 +16,6 @@ import scipy.sparse.csgraph
 
 from workbench.errors import DataError
 from workbench.frozen import readonly
-
-try:  # a dependency of scikit-learn, so normally present
-    from threadpoolctl import ThreadpoolController
-except ImportError:  # pragma: no cover
-    ThreadpoolController = None
 from workbench.method.closed_loop import (
     as_matrix,
     check_stabilizing,
@@ -164,45 +159,55 @@ def gain_jacobian(
     return np.stack(cols, axis=1)
 
 
+def _closest_gain_parameters(
+    A: np.ndarray, B: np.ndarray, K: np.ndarray, weights: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    directions: Callable[[np.ndarray], Iterable[tuple[np.ndarray, np.ndarray]]], p0: np.ndarray, **least_squares: Any,
+) -> np.ndarray:
+    """The parameters ``p`` whose LQR gain (of the cost ``weights(p) = (Q, R)``) is closest to K in Frobenius norm,
+    refined from ``p0`` by least squares through the DARE; ``p0`` itself where the refinement ends no closer.
+
+    ``directions(p)`` yields ``(dQ, dR)`` per parameter (the Jacobian's columns, :func:`gain_jacobian`); a point
+    where the DARE has no solution gets a large constant residual and a zero Jacobian.
+    """
+    big = 10.0 * (float(np.linalg.norm(K)) + 1.0)
+    lqr = memo_lqr(A, B, weights)
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        out = lqr(p)
+        return np.full(K.size, big) if out is None else (out[0] - K).ravel()
+
+    def jacobian(p: np.ndarray) -> np.ndarray:
+        out = lqr(p)
+        if out is None:
+            return np.zeros((K.size, p.size))
+        return gain_jacobian(A, B, *out, directions(p))
+
+    fit = scipy.optimize.least_squares(residual, p0, jac=jacobian, xtol=1e-10, ftol=1e-12, **least_squares)
+    return fit.x if fit.cost <= 0.5 * float(residual(p0) @ residual(p0)) else p0
+
+
 def _fit_diagonal_part(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Diagonal ``(q, r)`` whose LQR gain is closest to K in Frobenius norm; scaled so that max = 1."""
     n, m = B.shape
     theta0 = _diag_start(A, B, K)
-    big = 10.0 * (float(np.linalg.norm(K)) + 1.0)
 
     def weights(log_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         theta = np.exp(log_theta)
         return np.diag(theta[:n]), np.diag(theta[n:])
 
-    lqr = memo_lqr(A, B, weights)
-
-    def residual(log_theta: np.ndarray) -> np.ndarray:
-        out = lqr(log_theta)
-        return np.full(K.size, big) if out is None else (out[0] - K).ravel()
-
-    def jacobian(log_theta: np.ndarray) -> np.ndarray:
-        out = lqr(log_theta)
-        if out is None:
-            return np.zeros((K.size, n + m))
+    def directions(log_theta: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         theta = np.exp(log_theta)
-
-        def directions():  # one per log-weight: d(diag θ)/d log θ_i
-            for i in range(n + m):
-                dQ, dR = np.zeros((n, n)), np.zeros((m, m))
-                if i < n:
-                    dQ[i, i] = theta[i]
-                else:
-                    dR[i - n, i - n] = theta[i]
-                yield dQ, dR
-
-        return gain_jacobian(A, B, *out, directions())
+        for i in range(n + m):  # one per log-weight: d(diag θ)/d log θ_i
+            dQ, dR = np.zeros((n, n)), np.zeros((m, m))
+            if i < n:
+                dQ[i, i] = theta[i]
+            else:
+                dR[i - n, i - n] = theta[i]
+            yield dQ, dR
 
     x0 = np.log(theta0 / theta0.max())
     # log-weights within ±30 keep every DARE well posed; the common scale is free (the gain ignores it)
-    fit = scipy.optimize.least_squares(
-        residual, x0, jac=jacobian, bounds=(-30.0, 30.0), x_scale=1.0, xtol=1e-10, ftol=1e-12
-    )
-    theta = np.exp(fit.x if fit.cost <= 0.5 * float(residual(x0) @ residual(x0)) else x0)
+    theta = np.exp(_closest_gain_parameters(A, B, K, weights, directions, x0, bounds=(-30.0, 30.0), x_scale=1.0))
     return theta / theta.max()
 
 
@@ -211,7 +216,6 @@ def _fit_s0(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
     n, m = B.shape
     iq, ir = np.tril_indices(n), np.tril_indices(m)
     q0 = _diag_start(A, B, K)
-    big = 10.0 * (float(np.linalg.norm(K)) + 1.0)
 
     def factors(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Lq, Lr = np.zeros((n, n)), np.zeros((m, m))
@@ -223,38 +227,24 @@ def _fit_s0(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
         Lq, Lr = factors(p)
         return Lq @ Lq.T, Lr @ Lr.T + 1e-9 * np.eye(m)
 
-    lqr = memo_lqr(A, B, unpack)
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        out = lqr(p)
-        return np.full(K.size, big) if out is None else (out[0] - K).ravel()
-
-    def jacobian(p: np.ndarray) -> np.ndarray:
-        out = lqr(p)
-        if out is None:
-            return np.zeros((K.size, p.size))
+    def directions(p: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         Lq, Lr = factors(p)
-
-        def directions():  # one per Cholesky entry: d(L Lᵀ) = E Lᵀ + L Eᵀ
-            for j in range(p.size):
-                dQ, dR = np.zeros((n, n)), np.zeros((m, m))
-                if j < len(iq[0]):
-                    E = np.zeros((n, n))
-                    E[iq[0][j], iq[1][j]] = 1.0
-                    dQ = E @ Lq.T + Lq @ E.T
-                else:
-                    E = np.zeros((m, m))
-                    k = j - len(iq[0])
-                    E[ir[0][k], ir[1][k]] = 1.0
-                    dR = E @ Lr.T + Lr @ E.T
-                yield dQ, dR
-
-        return gain_jacobian(A, B, *out, directions())
+        for j in range(p.size):  # one per Cholesky entry: d(L Lᵀ) = E Lᵀ + L Eᵀ
+            dQ, dR = np.zeros((n, n)), np.zeros((m, m))
+            if j < len(iq[0]):
+                E = np.zeros((n, n))
+                E[iq[0][j], iq[1][j]] = 1.0
+                dQ = E @ Lq.T + Lq @ E.T
+            else:
+                E = np.zeros((m, m))
+                k = j - len(iq[0])
+                E[ir[0][k], ir[1][k]] = 1.0
+                dR = E @ Lr.T + Lr @ E.T
+            yield dQ, dR
 
     q0 = q0 / q0.max()
     p0 = np.r_[np.sqrt(np.diag(q0[:n]))[iq], np.sqrt(np.diag(q0[n:]))[ir]]
-    fit = scipy.optimize.least_squares(residual, p0, jac=jacobian, xtol=1e-10, ftol=1e-12)
-    Q, R = unpack(fit.x if fit.cost <= 0.5 * float(residual(p0) @ residual(p0)) else p0)
+    Q, R = unpack(_closest_gain_parameters(A, B, K, unpack, directions, p0))
     scale = float(np.linalg.eigvalsh(scipy.linalg.block_diag(Q, R))[-1])
     return Q / scale, R / scale
 

@@ -15,7 +15,7 @@ from workbench.viewer import entities as paths
 from workbench.viewer.entities import LoggedSession, query
 
 __all__ = ["MAX_FOCUS", "MAX_LEGEND", "MAX_OVERLAY", "focus_trials", "key_views", "online_plots", "overlaid",
-           "overlay", "plot", "prediction_paths", "time_axis", "time_panel"]
+           "overlay", "overlays", "plot", "prediction_paths", "time_axis", "time_panel"]
 
 MAX_LEGEND = 6  # series in a plot beyond which its legend would cover the data: off
 MAX_OVERLAY = 60  # trials drawn in one overlay plot
@@ -63,6 +63,13 @@ def overlay(s: LoggedSession, name: str, contents: list[str], key: str | None = 
     of the trials' colors is the tab's (:func:`key_views`): no legend over the data."""
     return plot(name, contents, window=s.span if s.clock == "log" else None, legend=rrb.PlotLegend(visible=False),
                 y_range=s.ranges.get(key) if key else None, linked=True)
+
+
+def overlays(s: LoggedSession, kind: str, names: Sequence[str]) -> list[rrb.TimeSeriesView]:
+    """One :func:`overlay` per name: that ``kind`` of series ("states", "inputs") of every overlaid trial."""
+    return [overlay(s, s.title(name), [query(paths.series_path(i, kind, name)) for i in overlaid(s)],
+                    key=paths.overlay_plot(kind, name))
+            for name in names]
 
 
 def key_views(s: LoggedSession) -> list[rrb.TextDocumentView]:

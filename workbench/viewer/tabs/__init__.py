@@ -5,9 +5,7 @@ blueprint iterate it, and ``python -c "import workbench.viewer.tabs as t; print(
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
-
+from workbench.exports import declared_in
 from workbench.viewer.tab import Tab
 
 __all__ = ["TABS", "describe", "tab"]
@@ -15,16 +13,7 @@ __all__ = ["TABS", "describe", "tab"]
 
 def _declared() -> tuple[Tab, ...]:
     """Every module of this folder's ``TAB``, in order."""
-    found: list[Tab] = []
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):
-        declared = getattr(importlib.import_module(f"{__name__}.{info.name}"), "TAB", None)
-        if not isinstance(declared, Tab):
-            raise TypeError(f"workbench/viewer/tabs/{info.name}.py declares no TAB (a Tab instance)")
-        found.append(declared)
-    names = [t.name for t in found]
-    if len(set(names)) != len(names):
-        raise TypeError(f"two tabs share a name: {sorted(names)}")
-    return tuple(sorted(found, key=lambda t: (t.order, t.name)))
+    return tuple(declared_in(__name__, "TAB", Tab, "tabs"))
 
 
 #: The session recording's tabs, in the order they are shown (and log).

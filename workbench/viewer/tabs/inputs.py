@@ -10,7 +10,7 @@ import rerun.blueprint as rrb
 from workbench.viewer import entities as paths
 from workbench.viewer.entities import LoggedSession, query
 from workbench.viewer.tab import Tab
-from workbench.viewer.views import focus_trials, key_views, overlaid, overlay, plot
+from workbench.viewer.views import focus_trials, key_views, overlays, plot
 
 __all__ = ["TAB"]
 
@@ -22,11 +22,7 @@ class Inputs(Tab):
 
     def views(self, session: LoggedSession) -> list[Any]:
         s = session
-        input_views: list[Any] = [
-            overlay(s, s.title(name), [query(paths.series_path(i, "inputs", name)) for i in overlaid(s)],
-                    key=paths.overlay_plot("inputs", name))
-            for name in s.input_names
-        ]
+        input_views: list[Any] = overlays(s, "inputs", s.input_names)
         w_rows: list[Any] = []
         for i in [f for f in focus_trials(s) if f in s.variability]:
             row = []

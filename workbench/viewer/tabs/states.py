@@ -10,7 +10,7 @@ import rerun.blueprint as rrb
 from workbench.viewer import entities as paths
 from workbench.viewer.entities import LoggedSession, query
 from workbench.viewer.tab import Tab
-from workbench.viewer.views import key_views, overlaid, overlay, time_axis
+from workbench.viewer.views import key_views, overlays, time_axis
 
 __all__ = ["TAB"]
 
@@ -22,11 +22,7 @@ class States(Tab):
 
     def views(self, session: LoggedSession) -> list[Any]:
         s = session
-        views: list[Any] = [
-            overlay(s, s.title(name), [query(paths.series_path(i, "states", name)) for i in overlaid(s)],
-                    key=paths.overlay_plot("states", name))
-            for name in s.state_names
-        ]
+        views: list[Any] = overlays(s, "states", s.state_names)
         if s.modes:
             lanes = [query(paths.FLIGHT_MODE)] if s.clock == "log" else [query(paths.mode_path(i)) for i in s.modes]
             views.append(rrb.StateTimelineView(origin="/", contents=lanes, name="flight mode",
