@@ -24,6 +24,8 @@ GROUP_BLOCK = re.compile(r"plant identification \(plant group ([^,]+),")
 CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?ratio (-?[\d.e+-]+), (NOT )?within")
 STICK = re.compile(r"stick: (\w+) → (\w+): (.*?) per full stick \(time constant ([\d.e+-]+) s\)"
                    r"|stick: (\w+) → (\w+): the (.*?) loop does not settle")
+RHO = re.compile(r"closed loop[^:]*: ρ\(A \+ BK̂\) = ([\d.e+-]+), (?:[\d.]+ % interval \[([\d.e+-]+), ([\d.e+-]+)\]"
+                 r"|(no interval))[^:]*: (stable|not distinguishable|unstable)")
 METHODS = ("proposed", "ioc_only", "gmr_only", "persistence", "no_pilot_held", "no_pilot_zero")
 TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence",
           "no_pilot_held": "input held", "no_pilot_zero": "input 0"}
@@ -40,24 +42,36 @@ def _run(args: list[str], timeout: float) -> tuple[int, str, str]:
 
 def _last(text: str) -> str:
     lines = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("error:")]
-    return (lines[-1] if lines else text.strip().splitlines()[-1] if text.strip() else "")[:220]
+    return lines[-1] if lines else text.strip().splitlines()[-1] if text.strip() else ""
 
 
-def _short(text: str) -> str:
+COMPACT = (  # a refusal for stability in a table cell: ρ with its interval, the slow mode and the mode blamed
+    (r"the gain \((\w+)\) is not stabilizing: ", r"not stabilizing (\1): "),
+    (r"closed loop on [^:]*: ρ\(A \+ BK̂\) = ([\d.e+-]+), [\d.]+ % interval \[([\d.e+-]+), ([\d.e+-]+)\] over [^:]*: ",
+     r"ρ \1 [\2, \3] "),
+    (r"; the slow mode lies on ", ", slow mode on "),
+    (r"\. In these demonstrations .*?\(--task …@states\)", ""),
+    (r"\. Likely cause: .*? — ([^:]+?) \(([^)]*)\): there the autopilot .*?regulated ones", r"; likely cause \1 (\2)"),
+)
+
+
+def _short(text: str, width: int = 160) -> str:
     """A cause without ``error:`` and the file's path (the row names the log)."""
     text = re.sub(r"^error: ", "", text.strip())
-    return re.sub(r"^\S+: (mapping '\S+': )?", "", text)[:160].replace("|", "/")
+    for pattern, into in COMPACT:
+        text = re.sub(pattern, into, text)
+    return re.sub(r"^\S+: (mapping '\S+': )?", "", text)[:width].replace("|", "/")
 
 
 def _outcome(code: int, out: str, err: str, ok: str) -> str:
-    return ok if code == 0 else f"stops: {_short(_last(err) or _last(out))}".replace("|", "/")
+    return ok if code == 0 else f"stops: {_short(_last(err) or _last(out), 320)}".replace("|", "/")
 
 
 def _not_fitted(err: str, what: str) -> dict[str, str]:
     """``warning: plant group G: not fitted: cause`` lines, per group."""
     found = {}
     for m in re.finditer(rf"warning: plant group (\S+): not {what}: (.*)", err):
-        found[m.group(1)] = _short(m.group(2))[:140]
+        found[m.group(1)] = _short(m.group(2), 200)
     return found
 
 
@@ -83,16 +97,32 @@ def physics(out: str) -> str:
     return " / ".join(parts) or "—"
 
 
+def stability(out: str) -> dict[str, str]:
+    """Per plant group (\"\" for a one-group fit): ρ(A + BK̂) with its interval and the verdict fit printed."""
+    blocks = re.split(r"^plant group (\S+)$", out, flags=re.M)
+    pairs = zip(blocks[1::2], blocks[2::2], strict=True) if len(blocks) > 1 else [("", out)]
+    found = {}
+    for group, body in pairs:
+        if (m := RHO.search(" ".join(body.split()))) is not None:
+            interval = "no interval" if m.group(4) else f"[{float(m.group(2)):.4g}, {float(m.group(3)):.4g}]"
+            found[group] = (f"ρ {float(m.group(1)):.4g} {interval} {m.group(5)}"
+                            + ("; no objective" if "task objective: not found" in body else ""))
+    return found
+
+
 def fit_cell(code: int, out: str, err: str) -> str:
     if code != 0:
         return _outcome(code, out, err, "")
+    rho = stability(out)
     wrote = re.search(r"wrote (\d+) model\(s\), one per plant group: (.*?)(;|$)", out, re.M)
     failed = _not_fitted(err, "fitted")
     if wrote is None:
         group = re.search(r"^plant group (\S+):", out, re.M)
-        return f"fitted ({group.group(1)})" if group else "fitted"
+        said = f" ({rho['']})" if "" in rho else ""
+        return (f"fitted ({group.group(1)}){said}" if group else f"fitted{said}")
     groups = [Path(p.strip()).stem.split(".", 1)[-1] for p in wrote.group(2).split(",")]
-    return "fitted " + ", ".join(groups) + "".join(f"; {g} not fitted: {c}" for g, c in failed.items())
+    return ("fitted " + ", ".join(g + (f" ({rho[g]})" if g in rho else "") for g in groups)
+            + "".join(f"; {g} not fitted: {c}" for g, c in failed.items()))
 
 
 def _means(table: Path) -> dict[str, dict[str, float]]:
@@ -121,7 +151,7 @@ def evaluate_cells(code: int, out: str, err: str, tables: list[Path]) -> tuple[s
         group = table.stem.split(".", 1)[1] if "." in table.stem else ""
         means = _means(table)
         head = f"{group}: " if group else ""
-        left = [_short(ln.strip().split("could not be fitted and is left out of the comparison: ")[-1])[:120]
+        left = [_short(ln.strip().split("could not be fitted and is left out of the comparison: ")[-1], 160)
                 for ln in blocks.get(group, out).splitlines() if "proposed could not be fitted" in ln]
         pos.append(head + ", ".join(f"{TITLES[m]} {means[m]['rmse_position']:.3g}" for m in METHODS
                                     if 'rmse_position' in means.get(m, {}))

@@ -98,3 +98,18 @@ def test_resamples_on_the_serial_executor_share_one_compiled_problem(monkeypatch
         result = bootstrap(ds, system, n_boot=12, seed=0, executor=SerialExecutor())
     assert result.n_boot - result.n_failed > 0
     assert len(built) <= 2, built  # the point estimate's problem and the resamples' one
+
+
+def test_one_demonstration_gives_no_interval_rather_than_a_zero_width_one():
+    # every resample of one trial is that trial: its 'intervals' had zero width (K̂[u1, φ] [1.35, 1.35] on
+    # dronekit-la log171's one LOITER segment) and were printed as 95 % intervals
+    import pytest
+
+    from workbench.errors import ModelError
+
+    ds, system = _demos(n_trials=1)
+    with pytest.raises(ModelError, match=r"^1 demonstration\(s\): resampling needs two or more"):
+        bootstrap(ds, system, n_boot=5, seed=1)
+    two, _ = _demos(n_trials=2)
+    res = bootstrap(two, system, n_boot=5, seed=1)
+    assert np.all(res.K_hi > res.K_lo)  # two trials resample into different sets: the interval has width

@@ -193,3 +193,27 @@ def test_evaluate_and_report_run_each_group_on_its_own_plant(copter_bin, tmp_pat
     assert main(["report", str(copter_bin), "-o", str(out), "--bootstrap", "0", "--power", "0", *fast]) == 0
     for group in ("angle", "velocity+climb"):
         assert f"(plant group {group})" in (out / group / "report.md").read_text().splitlines()[0]
+
+
+def test_a_group_whose_intervals_fail_stays_fitted_and_written(copter_bin, tmp_path, capsys, monkeypatch):
+    """The model is written before its intervals: a group whose bootstrap cannot be had keeps its model (fit says
+    which intervals were not computed and why), and is not counted among the groups not fitted."""
+    from workbench.method import resampling
+
+    real = resampling.bootstrap
+
+    def failing_for_velocity(ds, system, *args, **kwargs):
+        if system.plant_group == "velocity+climb":
+            raise ModelError("every resample failed: the gain is not stabilizing")
+        return real(ds, system, *args, **kwargs)
+
+    monkeypatch.setattr(resampling, "bootstrap", failing_for_velocity)
+    out = tmp_path / "m.npz"
+    assert main(["fit", str(copter_bin), "-o", str(out), "--method", "ioc-only", "--bootstrap", "2"]) == 0
+    said = capsys.readouterr()
+    warned = [ln for ln in said.err.splitlines() if "intervals not computed" in ln]
+    assert len(warned) == 1 and "every resample failed" in warned[0], said.err  # the velocity group's, said once
+    assert "not fitted" not in said.err + said.out
+    assert "wrote 2 model(s), one per plant group" in said.out
+    for group in ("angle", "velocity+climb"):
+        assert load_model(tmp_path / f"m.{group}.npz").system.plant_group == group

@@ -301,6 +301,9 @@ def _resampled(
     if int(n_boot) < 1:
         raise DataError(f"n_boot must be ≥ 1, got {n_boot}")
     n_boot = int(n_boot)
+    if len(demos) < 2:  # every resample of one trial is that trial: zero-width intervals that bound nothing
+        raise ModelError(f"{len(demos)} demonstration(s): resampling needs two or more to estimate how the gain "
+                         "and the objective vary, so no interval can be given")
     if not (isinstance(timing, str) and timing == "none"):
         return _timed_resampled(demos, system, n_boot, method, structure, seed, progress, timing)
     A, B = system_matrices(system.A, system.B)
