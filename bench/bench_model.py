@@ -41,22 +41,22 @@ def _row(case: str, value: float, unit: str, note: str = "") -> dict:
 
 
 def _timings() -> list[dict]:
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     demos = simulate_landings("CS1", 30, seed=0) + simulate_landings("CS2", 30, seed=0)
     rows = []
     note = f"{len(demos)} trials, {demos.n_samples} samples"
-    rows.append(_row("fit, gain K̂ (direct)", best_time(lambda: estimate_gain(demos, system)), "s", note))
-    K = estimate_gain(demos, system)
+    rows.append(_row("fit, gain K̂ (direct)", best_time(lambda: estimate_gain(demos, plant)), "s", note))
+    K = estimate_gain(demos, plant)
     rows.append(_row("fit, inverse LQR first solve (compile)",
-                     best_time(lambda: InverseLQR(system.A, system.B).solve(K), 1), "s"))
-    problem = InverseLQR(system.A, system.B)
+                     best_time(lambda: InverseLQR(plant.A, plant.B).solve(K), 1), "s"))
+    problem = InverseLQR(plant.A, plant.B)
     problem.solve(K)
     rows.append(_row("fit, inverse LQR re-solve (cached)", best_time(lambda: problem.solve(K)), "s"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        t_gmm = best_time(lambda: HumanBehaviorModel(system, fit_objective=False, noise="gmr").fit(demos))
-        t_all = best_time(lambda: HumanBehaviorModel(system).fit(demos), 2)
-        model = HumanBehaviorModel(system).fit(demos)
+        t_gmm = best_time(lambda: HumanBehaviorModel(plant, fit_objective=False, noise="gmr").fit(demos))
+        t_all = best_time(lambda: HumanBehaviorModel(plant).fit(demos), 2)
+        model = HumanBehaviorModel(plant).fit(demos)
     tp = model.variability_.tpgmm_
     rows.append(_row("fit, gain + TP-GMM EM (no objective, no noise calibration)", t_gmm, "s",
                      f"EM {tp.n_iter_} iterations, converged {tp.converged_}"))
@@ -84,7 +84,7 @@ def _timings() -> list[dict]:
 
 
 def _paper_figures(train_seed: int, test_seed: int) -> list[dict]:
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     rows = []
     for strategy in ("CS1", "CS2"):
         train = simulate_landings(strategy, 30, seed=train_seed)
@@ -92,12 +92,12 @@ def _paper_figures(train_seed: int, test_seed: int) -> list[dict]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             models = {
-                "proposed": HumanBehaviorModel(system).fit(train),
-                "ioc_only": IOCOnlyModel(system).fit(train),
-                "gmr_only": GMROnlyModel(system).fit(train),
+                "proposed": HumanBehaviorModel(plant).fit(train),
+                "ioc_only": IOCOnlyModel(plant).fit(train),
+                "gmr_only": GMROnlyModel(plant).fit(train),
             }
             small = ev.data_efficiency(
-                lambda: {"proposed": HumanBehaviorModel(system, fit_objective=False), "gmr_only": GMROnlyModel(system)},
+                lambda: {"proposed": HumanBehaviorModel(plant, fit_objective=False), "gmr_only": GMROnlyModel(plant)},
                 train, test, sizes=(5,), repeats=5, seed=0,
             )
         table = ev.compare(models, test, n_steps=60, samples=200, seed=0)

@@ -31,12 +31,12 @@ class MeanInputModel(BehaviorModel):
     models_inputs: ClassVar[bool] = False
     draws_samples: ClassVar[bool] = False
 
-    def __init__(self, system: LinearSystem) -> None:
-        super().__init__(system)
+    def __init__(self, plant: LinearSystem) -> None:
+        super().__init__(plant)
 
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> MeanInputModel:
-        ds = demo_list(demos, self.system, "MeanInputModel.fit")
-        m = self.system.m
+        ds = demo_list(demos, self.plant, "MeanInputModel.fit")
+        m = self.plant.m
         self._fit_common(ds, getattr(demos, "labels", []))
         self.noise_scale_, self.noise_rho_ = np.ones(m), np.zeros(m)
         self.noise_band_factor_, self.noise_band_coverage_ = 1.0, float("nan")
@@ -44,7 +44,7 @@ class MeanInputModel(BehaviorModel):
         return self
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
-        m, u = self.system.m, self.u_mean_
+        m, u = self.plant.m, self.u_mean_
 
         def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             return np.tile(u, (X.shape[0], 1)), np.zeros((X.shape[0], m, m))
@@ -56,7 +56,7 @@ class MeanInputModel(BehaviorModel):
         return {}, {"u_mean": self.u_mean_}
 
     def _restore(self, mf: ModelFile) -> None:
-        self.u_mean_ = np.array(mf.array("u_mean", (self.system.m,)))
+        self.u_mean_ = np.array(mf.array("u_mean", (self.plant.m,)))
 '''
 BASELINE_DECLARED = '''
     {"name": "mean_input", "title": "mean input", "class": "MeanInputModel", "order": 80, "colour": 4,

@@ -36,10 +36,10 @@ def _lqr_gain(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
 
 
-def _demos(system: LinearSystem, n_trials: int, n_steps: int, seed: int, labels=("A",)) -> DemonstrationSet:
+def _demos(plant: LinearSystem, n_trials: int, n_steps: int, seed: int, labels=("A",)) -> DemonstrationSet:
     """Closed-loop trials of ``u = K x + w`` with autocorrelated operator variability ``w`` and process noise."""
     rng = np.random.default_rng(seed)
-    A, B = system.A, system.B
+    A, B = plant.A, plant.B
     K = _lqr_gain(A, B)
     n, m = B.shape
     out = []
@@ -56,7 +56,7 @@ def _demos(system: LinearSystem, n_trials: int, n_steps: int, seed: int, labels=
         label = labels[j % len(labels)]
         out.append(Demonstration(DT * np.arange(n_steps), np.array(X), np.array(U),
                                  {"id": f"{label}-{j:02d}", "label": label}))
-    return DemonstrationSet(out, system.state_names, system.input_names, DT, roles=system.roles)
+    return DemonstrationSet(out, plant.state_names, plant.input_names, DT, roles=plant.roles)
 
 
 def roleless_plant() -> LinearSystem:
@@ -80,9 +80,9 @@ PLANTS = {"roleless": roleless_plant, "double_integrators": double_integrators}
 
 
 @pytest.fixture(scope="module", params=sorted(PLANTS))
-def plant(request):
-    system = PLANTS[request.param]()
-    return request.param, system, _demos(system, n_trials=12, n_steps=40, seed=1)
+def plant_case(request):
+    plant = PLANTS[request.param]()
+    return request.param, plant, _demos(plant, n_trials=12, n_steps=40, seed=1)
 
 
 def _cli(*argv: str) -> str:
@@ -94,15 +94,15 @@ def _cli(*argv: str) -> str:
 
 
 # -- the whole pipeline --------------------------------------------------------------------------------------
-def test_every_pipeline_step_runs_on_the_plant(plant, tmp_path, monkeypatch):
+def test_every_pipeline_step_runs_on_the_plant(plant_case, tmp_path, monkeypatch):
     from workbench.report import figure_files
 
-    name, system, ds = plant
+    name, plant, ds = plant_case
     demos = tmp_path / "demos.parquet"
     ds.save(demos)
     # the roles' path through each command, not the objective's resampling (tests/cli, tests/method) nor the
     # figures' vector copies (tests/report): those were four fifths of this test's time
-    common = ("--n-components", "2", "--system", "identify")
+    common = ("--n-components", "2", "--plant", "identify")
     no_resampling = ("--bootstrap", "0")
     monkeypatch.setattr(figure_files, "VECTOR_FORMATS", ())
 
@@ -110,7 +110,7 @@ def test_every_pipeline_step_runs_on_the_plant(plant, tmp_path, monkeypatch):
     model_file = tmp_path / "model.npz"
     _cli("fit", str(demos), "-o", str(model_file), *common, *no_resampling)
     model = load_model(model_file)
-    assert model.system.roles == ds.roles
+    assert model.plant.roles == ds.roles
 
     # predict: one row per step, every state named
     pred_file = tmp_path / "pred.csv"
@@ -126,12 +126,12 @@ def test_every_pipeline_step_runs_on_the_plant(plant, tmp_path, monkeypatch):
     assert set(table.loc[~table["metric"].isin(INPUT_METRICS), "method"]) == {"proposed", "ioc_only", "gmr_only",
                                                                              "persistence"}
     assert "persistence" in out
-    blocks = ev.metric_blocks(system)
+    blocks = ev.metric_blocks(plant)
     assert {f"rmse_{b}" for b in blocks} <= set(table["metric"])
-    if system.roles:
+    if plant.roles:
         assert set(blocks) == {"position", "velocity"}
     else:
-        assert set(blocks) == {"state"} | {f"state_{s}" for s in system.state_names}
+        assert set(blocks) == {"state"} | {f"state_{s}" for s in plant.state_names}
     assert not table[table["method"] == "persistence"]["metric"].str.startswith("band_").any()
 
     # view: a recording of the demonstrations with the model's predictions
@@ -147,25 +147,25 @@ def test_every_pipeline_step_runs_on_the_plant(plant, tmp_path, monkeypatch):
     assert "persistence" in text and "vs persistence" in text
 
 
-def test_persistence_is_constant_velocity_with_roles_and_holds_the_state_without(plant):
-    name, system, ds = plant
-    model = PersistenceModel(system).fit(ds)
+def test_persistence_is_constant_velocity_with_roles_and_holds_the_state_without(plant_case):
+    name, plant, ds = plant_case
+    model = PersistenceModel(plant).fit(ds)
     x0 = ds[0].x[5]
     H = 7
     p = model.predict(x0, H, samples=20)
     expected = np.tile(x0, (H + 1, 1))
-    for pos, vel in zip(system.r.position, system.r.velocity, strict=True):
+    for pos, vel in zip(plant.r.position, plant.r.velocity, strict=True):
         expected[:, pos] = x0[pos] + DT * np.arange(H + 1) * x0[vel]
     np.testing.assert_allclose(p.x, expected, atol=1e-12)
     assert p.x_bands is None  # no noise model: no band rather than a zero-width one
 
 
 def test_persistence_model_file_round_trip(tmp_path):
-    system = double_integrators()
-    ds = _demos(system, n_trials=3, n_steps=20, seed=10)
-    model = PersistenceModel(system).fit(ds)
+    plant = double_integrators()
+    ds = _demos(plant, n_trials=3, n_steps=20, seed=10)
+    model = PersistenceModel(plant).fit(ds)
     back = load_model(model.save(tmp_path / "p.npz"))
-    assert isinstance(back, PersistenceModel) and back.system.roles == system.roles
+    assert isinstance(back, PersistenceModel) and back.plant.roles == plant.roles
     x0 = ds[2].x[3]
     np.testing.assert_array_equal(back.predict(x0, 9).x, model.predict(x0, 9).x)
 
@@ -182,25 +182,25 @@ def test_a_goal_rotation_needs_the_plane_it_turns():
 
 
 def test_full_state_rmse_without_roles():
-    system = roleless_plant()
-    ds = _demos(system, n_trials=4, n_steps=30, seed=2)
-    model = PersistenceModel(system).fit(ds)
+    plant = roleless_plant()
+    ds = _demos(plant, n_trials=4, n_steps=30, seed=2)
+    model = PersistenceModel(plant).fit(ds)
     H = 10
     table = ev.compare({"persistence": model}, ds, n_steps=H)
     d = ds[1]
     err = np.tile(d.x[0], (H, 1)) - d.x[1 : H + 1]  # the held state against the record, steps 1..H
     got = table[(table["trial"] == d.id)].set_index("metric")["value"]
     assert got["rmse_state"] == pytest.approx(np.sqrt(np.mean(np.sum(err**2, axis=1))))
-    for j, s in enumerate(system.state_names):
+    for j, s in enumerate(plant.state_names):
         assert got[f"rmse_state_{s}"] == pytest.approx(np.sqrt(np.mean(err[:, j] ** 2)))
-    assert ev.primary_metric(system) == "rmse_state"
+    assert ev.primary_metric(plant) == "rmse_state"
     assert ev.primary_metric(double_integrators()) == "rmse_position"
 
 
 def test_model_without_roles_has_no_goal_rotation_and_roles_survive_the_file(tmp_path):
-    system = roleless_plant()
-    ds = _demos(system, n_trials=8, n_steps=30, seed=3)
-    m = HumanBehaviorModel(system, n_components=2, fit_objective=False, noise_folds=0).fit(ds)
+    plant = roleless_plant()
+    ds = _demos(plant, n_trials=8, n_steps=30, seed=3)
+    m = HumanBehaviorModel(plant, n_components=2, fit_objective=False, noise_folds=0).fit(ds)
     assert m.frame_spec_.angle_index is None
     quad = planar_quadrotor()
     from workbench.method.variability import resolve_frame_spec
@@ -210,20 +210,20 @@ def test_model_without_roles_has_no_goal_rotation_and_roles_survive_the_file(tmp
     di = double_integrators()
     m2 = HumanBehaviorModel(di, n_components=2, fit_objective=False, noise_folds=0).fit(_demos(di, 8, 30, 4))
     m2.save(tmp_path / "m.npz")
-    assert load_model(tmp_path / "m.npz").system.roles == di.roles
+    assert load_model(tmp_path / "m.npz").plant.roles == di.roles
 
 
 def test_unknown_target_moves_positions_with_the_start():
     """Trained on last states (no targets), a new task's goal positions are its start plus the mean travel."""
-    system = double_integrators()
-    ds = _demos(system, n_trials=8, n_steps=30, seed=5)
-    model = PersistenceModel(system).fit(ds)
+    plant = double_integrators()
+    ds = _demos(plant, n_trials=8, n_steps=30, seed=5)
+    model = PersistenceModel(plant).fit(ds)
     travel = np.mean([d.x[-1] - d.x[0] for d in ds], axis=0)
     x0 = np.array([10.0, -3.0, 0.5, 0.0])
     goal = model.default_target(x0)
-    pos = list(system.r.position)
+    pos = list(plant.r.position)
     np.testing.assert_allclose(goal[pos], x0[pos] + travel[pos])
-    others = [j for j in range(system.n) if j not in pos]
+    others = [j for j in range(plant.n) if j not in pos]
     np.testing.assert_allclose(goal[others], np.mean([d.x[-1] for d in ds], axis=0)[others])
     roleless = PersistenceModel(roleless_plant()).fit(_demos(roleless_plant(), 4, 20, 6))
     np.testing.assert_allclose(roleless.default_target(np.full(3, 9.0)), roleless.target_)
@@ -242,8 +242,8 @@ def _perturbed(ds: DemonstrationSet, trial_id: str) -> DemonstrationSet:
 
 
 def test_study_identifies_the_plant_from_training_trials_only():
-    system = double_integrators()
-    ds = _demos(system, n_trials=10, n_steps=30, seed=7)
+    plant = double_integrators()
+    ds = _demos(plant, n_trials=10, n_steps=30, seed=7)
     kwargs = dict(test_size=0.2, n_steps=5, n_components=2, samples=0, efficiency=(4,), repeats=1, seed=0)
     seen: list[set[str]] = []
 
@@ -259,11 +259,11 @@ def test_study_identifies_the_plant_from_training_trials_only():
     assert seen[0] == train_ids and not test_ids & train_ids
     assert len(seen) > 1 and all(len(ids) == len(train_ids) for ids in seen[1:]) and len(set(map(frozenset, seen))) > 1
     changed_test = run_study(_perturbed(ds, sorted(test_ids)[0]), identify, **kwargs)
-    np.testing.assert_array_equal(changed_test.system.A, base.system.A)
-    np.testing.assert_array_equal(changed_test.system.B, base.system.B)
+    np.testing.assert_array_equal(changed_test.plant.A, base.plant.A)
+    np.testing.assert_array_equal(changed_test.plant.B, base.plant.B)
     # the check can fail: a changed training trial does change the plant
     changed_train = run_study(_perturbed(ds, sorted(train_ids)[0]), identify, **kwargs)
-    assert not np.array_equal(changed_train.system.A, base.system.A)
+    assert not np.array_equal(changed_train.plant.A, base.plant.A)
     # persistence is in the comparison and in the data-efficiency curve
     assert "persistence" in set(base.table["method"]) and "persistence" in set(base.efficiency["method"])
     assert "persistence" in base.baselines["A"]
@@ -273,8 +273,8 @@ def test_cli_identifies_the_plant_from_training_trials_only(tmp_path, monkeypatc
     """``evaluate`` (split and per subject) hands the plant choice training trials only: no scored trial among them."""
     import workbench.plant.choice as choice
 
-    system = roleless_plant()
-    ds = _demos(system, n_trials=8, n_steps=30, seed=8)
+    plant = roleless_plant()
+    ds = _demos(plant, n_trials=8, n_steps=30, seed=8)
     ds = ds.with_demos(d.with_meta(subject=f"s{j % 2}") for j, d in enumerate(ds))
     path = tmp_path / "demos.parquet"
     ds.save(path)
@@ -286,7 +286,7 @@ def test_cli_identifies_the_plant_from_training_trials_only(tmp_path, monkeypatc
         return real(data, *args, **kwargs)
 
     monkeypatch.setattr(choice, "choose_plant", spy)
-    quick = ("--n-components", "2", "--system", "identify", "--samples", "0", "--no-efficiency", "--horizon", "1")
+    quick = ("--n-components", "2", "--plant", "identify", "--samples", "0", "--no-efficiency", "--horizon", "1")
     for extra in (("--holdout", "split"), ("--per-subject",)):
         seen.clear()
         out = tmp_path / f"results{len(extra)}.csv"
@@ -300,10 +300,10 @@ def test_cli_identifies_the_plant_from_training_trials_only(tmp_path, monkeypatc
 
 
 def test_per_subject_identifies_each_plant_without_the_held_out_trials():
-    system = double_integrators()
+    plant = double_integrators()
     parts = []
     for s in ("s1", "s2", "s3"):
-        sub = _demos(system, n_trials=4, n_steps=25, seed=int(s[1]))
+        sub = _demos(plant, n_trials=4, n_steps=25, seed=int(s[1]))
         parts.append(sub.with_demos(d.with_meta(id=f"{s}-{d.id}", subject=s) for d in sub))
     ds = parts[0] + parts[1] + parts[2]
     seen: list[set[str]] = []

@@ -7,8 +7,9 @@ every signature named in :data:`USED_BY` has them and lists the ones not yet con
 from __future__ import annotations
 
 __all__ = [
-    "DEFAULT_N_COMPONENTS", "DT_PAPER_S", "HORIZON_S", "N_COMPONENTS", "N_STEPS", "OBJECTIVE_RESAMPLES",
-    "ONLINE_HORIZON_S", "PAPER_SETTINGS", "REG_COVAR", "TIMING",
+    "DEFAULT_N_COMPONENTS", "DT_PAPER_S", "GAIN_RESAMPLES", "HORIZON_S", "NOISE_HORIZON_S", "N_COMPONENTS",
+    "N_STEPS", "OBJECTIVE_RESAMPLES", "ONLINE_HORIZON_S", "ONLINE_N_STEPS", "PAIRED_RESAMPLES", "PAPER_N_COMPONENTS",
+    "PAPER_SETTINGS", "REG_COVAR", "STUDY_SAMPLES", "TIMING",
 ]
 
 N_COMPONENTS = 5  # G, Gaussian components of the TP-GMM / GMR (the paper's)
@@ -32,3 +33,9 @@ STUDY_N_COMPONENTS = DEFAULT_N_COMPONENTS
 # the pilot's reaction delay and lag (workbench.method.timing): identified per pilot and used by the gain, the
 # objective and prediction ("identify"), or none, the paper's u = K x ("none"); `timing=` of a model, `--timing`
 TIMING = "identify"
+PAPER_N_COMPONENTS = N_COMPONENTS  # G of the method paper's quadrotor study (the default is the paper's)
+NOISE_HORIZON_S = HORIZON_S  # seconds over which a model's input noise is judged (its rollouts' horizon)
+ONLINE_N_STEPS = round(ONLINE_HORIZON_S / DT_PAPER_S)  # the online rollout in grid steps: 20
+STUDY_SAMPLES = 100  # Monte Carlo samples per predicted trial in a study's scores
+PAIRED_RESAMPLES = 4000  # bootstrap resamples of a paired method difference's interval
+GAIN_RESAMPLES = 200  # bootstrap resamples of the gain's interval

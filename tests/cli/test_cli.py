@@ -340,8 +340,8 @@ def test_evaluate_per_subject_prints_the_repeated_measures_statistics(tmp_path):
     ok(wb("simulate", "--strategy", "CS2", "--trials", "5", "--subjects", "3", "-o", str(tmp_path / "s.parquet")))
     r = ok(wb("evaluate", str(tmp_path / "s.parquet"), "--per-subject", "--n-components", "2", "--horizon", "2",
               "-o", str(tmp_path / "ps.csv")))
-    system = planar_quadrotor()
-    expected = evaluate.per_subject(lambda: make_models(system, n_components=2, random_state=0),
+    plant = planar_quadrotor()
+    expected = evaluate.per_subject(lambda: make_models(plant, n_components=2, random_state=0),
                                     DemonstrationSet.load(tmp_path / "s.parquet"), n_steps=40, seed=0)
     out = " ".join(r.stdout.split())  # a terminal wraps
     assert f"ours: {expected.rm_anova}" in out

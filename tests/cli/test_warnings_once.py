@@ -41,8 +41,8 @@ def test_an_attempt_names_only_the_checks_it_failed(monkeypatch):
     from workbench.method.objective import forward_gain
     from workbench.plant.system import planar_quadrotor
 
-    system = planar_quadrotor()
-    A, B = np.asarray(system.A), np.asarray(system.B)
+    plant = planar_quadrotor()
+    A, B = np.asarray(plant.A), np.asarray(plant.B)
     K, _ = forward_gain(A, B, np.eye(A.shape[0]), np.eye(B.shape[1]))
     monkeypatch.setattr(sdp, "forward_gain_tolerance", lambda alpha: 0.0)  # no error can meet it
     with pytest.raises(SolverError) as caught:
@@ -57,7 +57,7 @@ def test_an_attempt_names_only_the_checks_it_failed(monkeypatch):
 
 @pytest.mark.slow
 def test_the_readme_flights_identify_fit_warns_once_and_only_of_what_failed(external, tmp_path, capsys):
-    """`workbench fit --system identify` on the README's flight: each warning once, and every failure it lists a
+    """`workbench fit --plant identify` on the README's flight: each warning once, and every failure it lists a
     bound that was broken by the numbers it gives."""
     import re
 
@@ -65,7 +65,7 @@ def test_the_readme_flights_identify_fit_warns_once_and_only_of_what_failed(exte
     demos = tmp_path / "flight.parquet"
     assert cli_main.main(["import", str(flight), "--mapping", "ardupilot_manual", "-o", str(demos)]) == 0
     capsys.readouterr()
-    assert cli_main.main(["fit", str(demos), "--system", "identify", "-o", str(tmp_path / "flight.npz")]) == 0
+    assert cli_main.main(["fit", str(demos), "--plant", "identify", "-o", str(tmp_path / "flight.npz")]) == 0
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("warning:")]
     assert len(err) == len(set(err))
     assert not any("more of the warnings above" in ln for ln in err)

@@ -72,10 +72,10 @@ def test_an_assisted_mode_is_named_only_where_it_holds_the_states_of_the_slow_mo
 
     A, B, demos = _unstable_demos([mode, mode, "STABILIZE"], seed=0)
     roles = Roles(position=("x",), velocity=("xdot",), vertical=vertical)
-    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",), roles=roles)
+    plant = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",), roles=roles)
     ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1, roles=roles)
     with pytest.raises(ModelError, match="not stabilizing") as exc:
-        estimate_gain(ds, system)
+        estimate_gain(ds, plant)
     message = str(exc.value)
     assert ("Likely cause: 2 of 3 demonstrations were flown in a mode whose autopilot" in message) == named
     assert (mode in message) == named
@@ -84,10 +84,10 @@ def test_an_assisted_mode_is_named_only_where_it_holds_the_states_of_the_slow_mo
 def test_without_roles_no_mode_is_named():
     # which states a mode holds is known from the plant's roles; without them the mode explains nothing
     A, B, demos = _unstable_demos(["LOITER", "LOITER", "STABILIZE"], seed=0)
-    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",))
+    plant = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",))
     ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1)
     with pytest.raises(ModelError, match="not stabilizing") as exc:
-        estimate_gain(ds, system)
+        estimate_gain(ds, plant)
     assert "autopilot" not in str(exc.value)
 
 
@@ -100,8 +100,8 @@ def test_a_model_fitted_on_assisted_segments_names_the_mode_by_the_same_rule(ver
 
     A, B, demos = _unstable_demos(["ALT_HOLD"] * 3, seed=1)
     roles = Roles(position=("x",), velocity=("xdot",), vertical=vertical)
-    system = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",), roles=roles)
+    plant = LinearSystem(A, B, dt=0.1, state_names=("x", "xdot"), input_names=("u",), roles=roles)
     ds = DemonstrationSet(demos, ("x", "xdot"), ("u",), dt=0.1, roles=roles)
     with pytest.raises(ModelError, match=r"not stabilizing.*interval \[1\.") as exc:
-        IOCOnlyModel(system, gain_method="direct", task="zero@x,xdot").fit(ds)
+        IOCOnlyModel(plant, gain_method="direct", task="zero@x,xdot").fit(ds)
     assert ("3 of 3 demonstrations were flown in a mode whose autopilot" in str(exc.value)) == named

@@ -19,7 +19,7 @@ def _demos(seed: int = 5, n_trials: int = 5):
     rng = np.random.default_rng(seed)
     A = np.array([[1.0, 0.1], [0.0, 0.95]])
     B = np.array([[0.0], [0.1]])
-    system = LinearSystem(A, B, dt=0.1)
+    plant = LinearSystem(A, B, dt=0.1)
     K = forward_gain(A, B, np.eye(2), np.eye(1), np.zeros((2, 1)))[0]
     demos = []
     for j in range(n_trials):
@@ -30,13 +30,13 @@ def _demos(seed: int = 5, n_trials: int = 5):
             if k + 1 < 40:
                 x[k + 1] = A @ x[k] + B @ u[k]
         demos.append(Demonstration(np.arange(40) * 0.1, x, u, meta={"id": f"d{j}"}))
-    return DemonstrationSet(demos, system.state_names, system.input_names, dt=0.1), system
+    return DemonstrationSet(demos, plant.state_names, plant.input_names, dt=0.1), plant
 
 
 def test_resamples_do_not_fall_back_to_the_point_estimates_other_solvers(monkeypatch):
     # every second stage fails with the first solver (as on real flights' gains): the point estimate goes on to
     # SCS; each resample used to as well (one 20 s SCS solve per resample), and now stops at its stage 1
-    ds, system = _demos()
+    ds, plant = _demos()
     original = InverseLQR._run
     scs_calls = []
 
@@ -51,9 +51,9 @@ def test_resamples_do_not_fall_back_to_the_point_estimates_other_solvers(monkeyp
     monkeypatch.setattr(InverseLQR, "_run", run)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = bootstrap(ds, system, n_boot=12, seed=1)
-    point_fallbacks = len(InverseLQR(system.A, system.B).solvers) - 1  # the point estimate's stage 2 only
-    assert res.objective.solver == InverseLQR(system.A, system.B).solvers[0]
+        res = bootstrap(ds, plant, n_boot=12, seed=1)
+    point_fallbacks = len(InverseLQR(plant.A, plant.B).solvers) - 1  # the point estimate's stage 2 only
+    assert res.objective.solver == InverseLQR(plant.A, plant.B).solvers[0]
     assert res.n_ok == res.n_boot  # the resamples still fit: their stage-1 optimum
     assert len(scs_calls) == point_fallbacks
 
@@ -83,7 +83,7 @@ def test_resamples_on_the_serial_executor_share_one_compiled_problem(monkeypatch
     from workbench.method import inverse_lqr_sdp
     from workbench.study.executor import SerialExecutor
 
-    ds, system = _demos(seed=11)
+    ds, plant = _demos(seed=11)
     inverse_lqr_sdp._CACHE.clear()
     built = []
     original = InverseLQR.__init__
@@ -95,7 +95,7 @@ def test_resamples_on_the_serial_executor_share_one_compiled_problem(monkeypatch
     monkeypatch.setattr(InverseLQR, "__init__", counting)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        result = bootstrap(ds, system, n_boot=12, seed=0, executor=SerialExecutor())
+        result = bootstrap(ds, plant, n_boot=12, seed=0, executor=SerialExecutor())
     assert result.n_boot - result.n_failed > 0
     assert len(built) <= 2, built  # the point estimate's problem and the resamples' one
 
@@ -107,9 +107,9 @@ def test_one_demonstration_gives_no_interval_rather_than_a_zero_width_one():
 
     from workbench.errors import ModelError
 
-    ds, system = _demos(n_trials=1)
+    ds, plant = _demos(n_trials=1)
     with pytest.raises(ModelError, match=r"^1 demonstration\(s\): resampling needs two or more"):
-        bootstrap(ds, system, n_boot=5, seed=1)
+        bootstrap(ds, plant, n_boot=5, seed=1)
     two, _ = _demos(n_trials=2)
-    res = bootstrap(two, system, n_boot=5, seed=1)
+    res = bootstrap(two, plant, n_boot=5, seed=1)
     assert np.all(res.K_hi > res.K_lo)  # two trials resample into different sets: the interval has width

@@ -41,7 +41,7 @@ def test_iv_error_shrinks_with_demonstrations_while_least_squares_plateaus(quad)
     errors: dict[tuple[str, int], list[float]] = {}
     for seed in (11, 12):
         for n_demos in (30, 300):
-            ds = lqr_operator_demos(op, n_demos, seed=seed, system=quad)
+            ds = lqr_operator_demos(op, n_demos, seed=seed, plant=quad)
             for method in ("direct", "dmd", "iv"):
                 errors.setdefault((method, n_demos), []).append(rel_error(estimate_gain(ds, quad, method), K))
     mean = {k: float(np.mean(v)) for k, v in errors.items()}
@@ -58,7 +58,7 @@ def test_iv_error_shrinks_with_demonstrations_while_least_squares_plateaus(quad)
 
 def test_iv_is_exact_without_variability(quad):
     op = LQROperator(sigma_near=(0.0, 0.0), sigma_far=(0.0, 0.0))
-    ds = lqr_operator_demos(op, 5, seed=0, system=quad)
+    ds = lqr_operator_demos(op, 5, seed=0, plant=quad)
     assert rel_error(estimate_gain(ds, quad, "iv"), op.gain(quad)) < 1e-8
 
 
@@ -79,7 +79,7 @@ def test_instruments_are_the_first_state_times_decaying_exponentials():
 def test_iv_refuses_demonstrations_whose_starts_leave_a_state_unexcited(quad):
     # every trial starts on the pad's height: the variability moves y, but nothing the instruments see does
     op = LQROperator(x0_low=(-1.0, 0, 0, 0, 0, 0), x0_high=(1.0, 0, 0, 0, 0, 0))
-    ds = lqr_operator_demos(op, 6, seed=0, system=quad)
+    ds = lqr_operator_demos(op, 6, seed=0, plant=quad)
     with pytest.raises(ModelError, match="unexcited"):
         estimate_gain(ds, quad, "iv")
     X, U, X_next = stack_demonstrations(ds, quad.n, quad.m)
@@ -89,7 +89,7 @@ def test_iv_refuses_demonstrations_whose_starts_leave_a_state_unexcited(quad):
 
 def test_iv_reaches_models_and_bootstrap(quad):
     op = LQROperator()
-    ds = lqr_operator_demos(op, 30, seed=3, system=quad)
+    ds = lqr_operator_demos(op, 30, seed=3, plant=quad)
     K_iv = estimate_gain(ds, quad, "iv")
     # the instantaneous gain (timing "none"; with the pilot's timing the models' gain is the timing's, test_timing)
     ioc = IOCOnlyModel(quad, gain_method="iv", timing="none").fit(ds)
@@ -103,7 +103,7 @@ def test_iv_reaches_models_and_bootstrap(quad):
 
 
 def test_cli_fit_takes_gain_iv(tmp_path, quad):
-    ds = lqr_operator_demos(LQROperator(), 12, seed=4, system=quad)
+    ds = lqr_operator_demos(LQROperator(), 12, seed=4, plant=quad)
     demos = tmp_path / "lqr.parquet"
     ds.save(demos)
     out = tmp_path / "m.npz"
@@ -120,7 +120,7 @@ def test_cli_fit_takes_gain_iv(tmp_path, quad):
 
 
 def test_single_sample_demonstrations_are_skipped_by_iv(quad):
-    ds = lqr_operator_demos(LQROperator(), 8, seed=5, system=quad)
+    ds = lqr_operator_demos(LQROperator(), 8, seed=5, plant=quad)
     # a DemonstrationSet refuses one-sample trials; estimate_gain also takes any objects with x and u
     padded = [*ds, SimpleNamespace(x=ds[0].x[:1], u=ds[0].u[:1], id="one")]
     np.testing.assert_allclose(estimate_gain(padded, quad, "iv"), estimate_gain(ds, quad, "iv"))

@@ -31,7 +31,7 @@ from workbench.method import (
 from workbench.plant.system import LinearSystem
 
 
-def random_system(rng: np.random.Generator, n: int, m: int) -> LinearSystem:
+def random_plant(rng: np.random.Generator, n: int, m: int) -> LinearSystem:
     """A random (A, B); LinearSystem checks stabilizability and rank B = m (Assumptions 1-2)."""
     while True:
         A = rng.normal(size=(n, n)) / np.sqrt(n)
@@ -56,9 +56,9 @@ def normalized(M: np.ndarray) -> np.ndarray:
     return M / np.linalg.eigvalsh(M)[-1]
 
 
-def simulate(system: LinearSystem, K, rng, n_demos=4, N=40, excitation=0.3, noise=0.0) -> DemonstrationSet:
+def simulate(plant: LinearSystem, K, rng, n_demos=4, N=40, excitation=0.3, noise=0.0) -> DemonstrationSet:
     """Demonstrations of ``x[k+1] = A x + B u`` with ``u = K x + excitation`` (optionally process noise)."""
-    n, m = system.n, system.m
+    n, m = plant.n, plant.m
     demos = []
     for j in range(n_demos):
         x = np.zeros((N, n))
@@ -67,9 +67,9 @@ def simulate(system: LinearSystem, K, rng, n_demos=4, N=40, excitation=0.3, nois
         for k in range(N):
             u[k] = K @ x[k] + excitation * rng.normal(size=m)
             if k + 1 < N:
-                x[k + 1] = system.A @ x[k] + system.B @ u[k] + noise * rng.normal(size=n)
+                x[k + 1] = plant.A @ x[k] + plant.B @ u[k] + noise * rng.normal(size=n)
         demos.append(Demonstration(np.arange(N) * 0.1, x, u, meta={"id": f"d{j}"}))
-    return DemonstrationSet(demos, system.state_names, system.input_names, dt=0.1)
+    return DemonstrationSet(demos, plant.state_names, plant.input_names, dt=0.1)
 
 
 # ------------------------------------------------------------------------------------------- inverse LQR
@@ -79,7 +79,7 @@ def simulate(system: LinearSystem, K, rng, n_demos=4, N=40, excitation=0.3, nois
 def test_identity_cost_is_recovered(n, m):
     rng = np.random.default_rng(100 + n)
     for trial in range(2):
-        sys_ = random_system(rng, n, m)
+        sys_ = random_plant(rng, n, m)
         K = dare_gain(sys_.A, sys_.B, np.eye(n + m))
         obj = inverse_lqr(sys_.A, sys_.B, K)
         err = np.abs(obj.M_normalized - np.eye(n + m)).max()
@@ -96,7 +96,7 @@ def test_identity_cost_is_recovered(n, m):
 def test_random_cost_reproduces_gain(n, m):
     rng = np.random.default_rng(200 + n)
     for trial in range(3):
-        sys_ = random_system(rng, n, m)
+        sys_ = random_plant(rng, n, m)
         M = random_spd(rng, n + m)
         K = dare_gain(sys_.A, sys_.B, M)
         obj = inverse_lqr(sys_.A, sys_.B, K)
@@ -118,7 +118,7 @@ def test_random_cost_reproduces_gain(n, m):
 def test_diagonal_structure_recovers_a_diagonal_cost():
     rng = np.random.default_rng(3)
     for n, m in [(4, 1), (6, 2)]:
-        sys_ = random_system(rng, n, m)
+        sys_ = random_plant(rng, n, m)
         M_true = np.diag(rng.uniform(0.2, 5.0, n + m))
         K = dare_gain(sys_.A, sys_.B, M_true)
         obj = inverse_lqr(sys_.A, sys_.B, K, structure="diagonal")
@@ -139,7 +139,7 @@ def test_diagonal_structure_recovers_a_diagonal_cost():
 @pytest.mark.parametrize("c", [1e-3, 7.0, 1e3])
 def test_scaling_the_cost_changes_nothing_after_normalization(c):
     rng = np.random.default_rng(4)
-    sys_ = random_system(rng, 6, 2)
+    sys_ = random_plant(rng, 6, 2)
     M = random_spd(rng, 8)
     base = inverse_lqr(sys_.A, sys_.B, dare_gain(sys_.A, sys_.B, M))
     scaled = inverse_lqr(sys_.A, sys_.B, dare_gain(sys_.A, sys_.B, c * M))
@@ -154,7 +154,7 @@ def test_scaling_the_cost_changes_nothing_after_normalization(c):
 def test_normalized_structured_cost_is_scale_free(c, seed):
     """Property: a diagonal cost and its multiple c give the same normalized objective."""
     rng = np.random.default_rng(seed)
-    sys_ = random_system(rng, 4, 1)
+    sys_ = random_plant(rng, 4, 1)
     M_true = np.diag(rng.uniform(0.5, 3.0, 5))
     a = inverse_lqr(sys_.A, sys_.B, dare_gain(sys_.A, sys_.B, M_true), structure="diagonal")
     b = inverse_lqr(sys_.A, sys_.B, dare_gain(sys_.A, sys_.B, c * M_true), structure="diagonal")
@@ -166,7 +166,7 @@ def test_forty_random_stabilizing_gains_solve_with_clarabel():
     n, m = 6, 2
     alphas, errors, statuses = [], [], []
     for i in range(40):
-        sys_ = random_system(rng, n, m)
+        sys_ = random_plant(rng, n, m)
         if i % 2:
             K = dare_gain(sys_.A, sys_.B, random_spd(rng, n + m))
         else:
@@ -222,7 +222,7 @@ def test_infeasible_structure_is_a_model_error_for_the_exact_sdp():
 
 def test_non_stabilizing_gain_is_refused_before_any_solver(monkeypatch):
     rng = np.random.default_rng(6)
-    sys_ = random_system(rng, 4, 1)
+    sys_ = random_plant(rng, 4, 1)
     A = sys_.A * 1.5 / max(abs(np.linalg.eigvals(sys_.A)))  # open loop unstable, so K = 0 is not stabilizing
     K = np.zeros((1, 4))
     rho = max(abs(np.linalg.eigvals(A)))
@@ -241,7 +241,7 @@ def test_non_stabilizing_gain_is_refused_before_any_solver(monkeypatch):
 
 def test_non_stabilizing_estimate_is_refused():
     rng = np.random.default_rng(7)
-    sys_ = random_system(rng, 3, 1)
+    sys_ = random_plant(rng, 3, 1)
     A = sys_.A * 1.3 / max(abs(np.linalg.eigvals(sys_.A)))
     unstable = LinearSystem(A, sys_.B, dt=0.1)
     demos = simulate(unstable, np.zeros((1, 3)), rng, n_demos=3, N=20)
@@ -252,7 +252,7 @@ def test_non_stabilizing_estimate_is_refused():
 
 def test_rank_deficient_data_is_refused():
     rng = np.random.default_rng(8)
-    sys_ = random_system(rng, 4, 1)
+    sys_ = random_plant(rng, 4, 1)
     X = rng.normal(size=(4, 30))
     X[2] = 0.5 * X[0] - X[1]  # one state a combination of two others: rank 3
     U = rng.normal(size=(1, 30))
@@ -268,7 +268,7 @@ def test_rank_deficient_data_is_refused():
 def test_dmd_and_direct_agree_on_exact_dynamics():
     rng = np.random.default_rng(9)
     for n, m in [(4, 1), (6, 2)]:
-        sys_ = random_system(rng, n, m)
+        sys_ = random_plant(rng, n, m)
         K_true = dare_gain(sys_.A, sys_.B, np.eye(n + m))
         demos = simulate(sys_, K_true, rng)
         K_direct = estimate_gain(demos, sys_, method="direct")
@@ -285,7 +285,7 @@ def test_dmd_and_direct_agree_on_exact_dynamics():
 
 def test_direct_beats_dmd_under_process_noise():
     rng = np.random.default_rng(10)
-    sys_ = random_system(rng, 4, 1)
+    sys_ = random_plant(rng, 4, 1)
     K_true = dare_gain(sys_.A, sys_.B, np.eye(5))
     demos = simulate(sys_, K_true, rng, n_demos=6, N=60, excitation=0.0, noise=0.05)
     e_direct = np.linalg.norm(estimate_gain(demos, sys_, "direct") - K_true)
@@ -308,7 +308,7 @@ def test_bad_inputs_raise_workbench_errors():
 
 def test_solver_failure_reports_every_attempt(monkeypatch):
     rng = np.random.default_rng(11)
-    sys_ = random_system(rng, 4, 1)
+    sys_ = random_plant(rng, 4, 1)
     K = dare_gain(sys_.A, sys_.B, random_spd(rng, 5))
     monkeypatch.setitem(sdp._SOLVER_OPTIONS, "SCS", {"max_iters": 3})
     with pytest.raises(SolverError, match=r"Attempts: SCS stage 1: ") as info:
@@ -321,7 +321,7 @@ def test_solver_failure_reports_every_attempt(monkeypatch):
 
 def test_inverse_lqr_reuses_the_compiled_problem():
     rng = np.random.default_rng(12)
-    sys_ = random_system(rng, 6, 2)
+    sys_ = random_plant(rng, 6, 2)
     K1 = dare_gain(sys_.A, sys_.B, np.eye(8))
     K2 = dare_gain(sys_.A, sys_.B, random_spd(rng, 8))
     inverse_lqr(sys_.A, sys_.B, K1)

@@ -27,7 +27,7 @@ def quad():
 @pytest.fixture(scope="module")
 def estimated(quad):
     op = LQROperator(q=(1.0, 1.0, 20.0, 0.3, 0.3, 0.01))
-    ds = lqr_operator_demos(op, 30, seed=21, system=quad)
+    ds = lqr_operator_demos(op, 30, seed=21, plant=quad)
     return op, estimate_gain(ds, quad, "iv")
 
 

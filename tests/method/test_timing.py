@@ -47,12 +47,12 @@ def test_seen_weights_are_the_lag_integral_of_the_interpolated_state(delay, lag)
 def test_a_timed_pilot_without_noise_acts_on_the_state_it_saw(quad):
     # two samples of delay, no lag: every recorded input is the gain times the state two samples back
     op = LQROperator(delay_s=2 * quad.dt, sigma_near=(0, 0), sigma_far=(0, 0))
-    d = lqr_operator_demos(op, 2, seed=1, system=quad)[1]
+    d = lqr_operator_demos(op, 2, seed=1, plant=quad)[1]
     K = op.gain(quad)
     seen = np.concatenate([[d.x[0], d.x[0]], d.x[:-2]])
     np.testing.assert_allclose(d.u, seen @ K.T, atol=1e-12)
     # the timed operators record what the page records of a dead zone
-    dz = lqr_operator_demos(LQROperator(delay_s=0.1, dead_zone=0.05), 1, seed=1, system=quad)[0]
+    dz = lqr_operator_demos(LQROperator(delay_s=0.1, dead_zone=0.05), 1, seed=1, plant=quad)[0]
     assert dz.meta["calibration"]["deadzone"] == 0.05
 
 
@@ -60,7 +60,7 @@ def test_a_timed_pilot_without_noise_acts_on_the_state_it_saw(quad):
 def test_exact_timing_and_gain_without_noise(quad, start):
     # the estimator's model is the simulator's up to rounding: least squares recovers both without noise
     op = LQROperator(**SLOW_PILOT, delay_s=0.2127, lag_s=0.0908, start=start, sigma_near=(0, 0), sigma_far=(0, 0))
-    ds = lqr_operator_demos(op, 6, seed=3, system=quad)
+    ds = lqr_operator_demos(op, 6, seed=3, plant=quad)
     data = tm.TimingData(ds, quad.n, quad.m, quad.dt)
     assert data.start == start  # "auto": a rest start is every trial's first input exactly 0
     fit = tm.fit_timing(data, "direct")
@@ -74,7 +74,7 @@ def test_a_slow_pilot_is_no_longer_fitted_soft(quad):
     from workbench.method.gain import estimate_gain
 
     op = LQROperator(**SLOW_PILOT, delay_s=0.2, lag_s=0.08, start="rest")
-    ds = lqr_operator_demos(op, 20, seed=4, system=quad)
+    ds = lqr_operator_demos(op, 20, seed=4, plant=quad)
     K = op.gain(quad)
     timing = tm.identify_timing(ds, quad, n_boot=0)
     K_plain = estimate_gain(ds, quad, "direct")
@@ -87,7 +87,7 @@ def test_a_slow_pilot_is_no_longer_fitted_soft(quad):
 
 def test_the_paper_pilot_is_found_without_timing(quad):
     # a pilot without either: the delay and the lag come out near 0, the gain as the instantaneous instruments give
-    ds = lqr_operator_demos(LQROperator(), 20, seed=5, system=quad)
+    ds = lqr_operator_demos(LQROperator(), 20, seed=5, plant=quad)
     timing = tm.identify_timing(ds, quad, n_boot=0)
     assert timing.delay_s < 0.03 and timing.lag_s < 0.03
     assert rel_error(timing.K, LQROperator().gain(quad)) < 0.1
@@ -95,7 +95,7 @@ def test_the_paper_pilot_is_found_without_timing(quad):
 
 def test_intervals_fixed_values_and_bad_input(quad):
     ds = lqr_operator_demos(LQROperator(**SLOW_PILOT, delay_s=0.15, lag_s=0.05, start="rest"), 12, seed=6,
-                            system=quad)
+                            plant=quad)
     t = tm.identify_timing(ds, quad, n_boot=8, seed=1)
     assert t.delay_lo <= t.delay_s <= t.delay_hi and t.lag_lo <= t.lag_s <= t.lag_hi
     assert t.K_samples.shape == (8 - t.n_failed, 2, 6) and t.delay_samples.shape == (8 - t.n_failed,)
@@ -127,7 +127,7 @@ def test_a_refused_timing_falls_back_to_the_rule_in_every_resample(quad):
     from workbench.method.gain import choose_gain
     from workbench.method.resampling import bootstrap_gain
 
-    ds = lqr_operator_demos(LQROperator(), 3, seed=8, system=quad)
+    ds = lqr_operator_demos(LQROperator(), 3, seed=8, plant=quad)
     with pytest.raises(ModelError, match="no better than chance"):
         tm.identify_timing(ds, quad, n_boot=0)
     g = bootstrap_gain(ds, quad, n_boot=2, method="iv", seed=0, jackknife=False, timing="identify-or-none")

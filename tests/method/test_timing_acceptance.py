@@ -42,7 +42,7 @@ def runs():
         for k in range(seeds):
             op = make(k)
             seed = SEED0 + (0 if family == "timed" else 1000) + k
-            t = identify_timing(lqr_operator_demos(op, N_TRIALS, seed=seed, system=quad), quad, n_boot=N_BOOT, seed=k)
+            t = identify_timing(lqr_operator_demos(op, N_TRIALS, seed=seed, plant=quad), quad, n_boot=N_BOOT, seed=k)
             K = op.gain(quad)
             out[family].append({"delay": op.delay_s, "lag": op.lag_s, "t": t, "K": K,
                                 "rel": float(np.linalg.norm(t.K - K) / np.linalg.norm(K)),

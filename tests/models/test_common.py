@@ -20,15 +20,15 @@ def data():
     return planar_quadrotor(), simulate_landings("CS1", n_trials=6, seed=11)
 
 
-def _make(cls, system):
+def _make(cls, plant):
     names = set(cls._param_names())
-    return cls(system, **{k: v for k, v in FAST.items() if k in names})
+    return cls(plant, **{k: v for k, v in FAST.items() if k in names})
 
 
 @pytest.fixture(scope="module")
 def fitted(data):
-    system, ds = data
-    return {name: _make(cls, system).fit(ds) for name, cls in MODEL_CLASSES.items()}
+    plant, ds = data
+    return {name: _make(cls, plant).fit(ds) for name, cls in MODEL_CLASSES.items()}
 
 
 CLASSES = sorted(MODEL_CLASSES)
@@ -36,8 +36,8 @@ CLASSES = sorted(MODEL_CLASSES)
 
 @pytest.mark.parametrize("name", CLASSES)
 def test_fit_returns_self_and_learns_attributes_ending_in_underscore(name, data):
-    system, ds = data
-    model = _make(MODEL_CLASSES[name], system)
+    plant, ds = data
+    model = _make(MODEL_CLASSES[name], plant)
     before = {k for k in vars(model) if k.endswith("_") and not k.startswith("_")}
     assert model.fit(ds) is model
     learned = {k for k in vars(model) if k.endswith("_") and not k.startswith("_")} - before
@@ -46,20 +46,20 @@ def test_fit_returns_self_and_learns_attributes_ending_in_underscore(name, data)
 
 @pytest.mark.parametrize("name", CLASSES)
 def test_the_constructor_holds_settings_only_and_they_round_trip(name, data):
-    system, _ = data
-    model = _make(MODEL_CLASSES[name], system)
+    plant, _ = data
+    model = _make(MODEL_CLASSES[name], plant)
     params = model.get_params()
     assert set(params) == set(type(model)._param_names())
     assert not [k for k in vars(model) if k.endswith("_") and not k.startswith("_")], "learned state before fit"
-    again = type(model)(system, **params)
+    again = type(model)(plant, **params)
     assert again.get_params() == params
     assert model.clone().get_params() == params
 
 
 @pytest.mark.parametrize("name", CLASSES)
 def test_unfitted_use_is_refused_with_the_cause(name, data):
-    system, ds = data
-    model = _make(MODEL_CLASSES[name], system)
+    plant, ds = data
+    model = _make(MODEL_CLASSES[name], plant)
     with pytest.raises(ModelError, match="not fitted"):
         model.predict(ds[0].x[0], 5)
     with pytest.raises(ModelError, match="not fitted"):
@@ -68,9 +68,9 @@ def test_unfitted_use_is_refused_with_the_cause(name, data):
 
 @pytest.mark.parametrize("name", CLASSES)
 def test_predictions_have_the_documented_shapes_and_batch_like_one_by_one(name, data, fitted):
-    system, ds = data
+    plant, ds = data
     model = fitted[name]
-    n, m, n_steps = system.n, system.m, 7
+    n, m, n_steps = plant.n, plant.m, 7
     x0s = np.stack([d.x[0] for d in ds[:3]])
     targets = np.stack([np.zeros(n)] * 3)
     one = model.predict(x0s[0], n_steps, target=targets[0])
@@ -84,7 +84,7 @@ def test_predictions_have_the_documented_shapes_and_batch_like_one_by_one(name, 
 
 @pytest.mark.parametrize("name", CLASSES)
 def test_save_and_load_round_trip_predictions(name, data, fitted, tmp_path):
-    system, ds = data
+    plant, ds = data
     model = fitted[name]
     back = load_model(model.save(tmp_path / f"{name}.npz"))
     assert type(back) is type(model) and back.get_params().keys() == model.get_params().keys()

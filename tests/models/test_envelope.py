@@ -19,7 +19,7 @@ def quad():
 
 @pytest.fixture(scope="module")
 def train(quad):
-    return lqr_operator_demos(LQROperator(), 6, seed=91, system=quad)
+    return lqr_operator_demos(LQROperator(), 6, seed=91, plant=quad)
 
 
 def test_envelope_is_the_training_box_widened_by_a_tenth(quad, train):
@@ -50,8 +50,8 @@ def test_prediction_flags_the_first_step_outside(quad, train):
 def test_evaluations_count_the_rollouts_that_left(quad, train, tmp_path):
     model = IOCOnlyModel(quad, noise_folds=0).fit(train)
     far_op = LQROperator(x0_low=(8.0, 2.5, 0, 0, 0, 0), x0_high=(9.0, 3.0, 0, 0, 0, 0))
-    test = (lqr_operator_demos(far_op, 2, seed=92, system=quad, label="far")
-            + lqr_operator_demos(LQROperator(), 2, seed=93, system=quad, label="near"))
+    test = (lqr_operator_demos(far_op, 2, seed=92, plant=quad, label="far")
+            + lqr_operator_demos(LQROperator(), 2, seed=93, plant=quad, label="near"))
     table = ev.compare({"ioc_only": model}, test, n_steps=20)
     left = table[table.metric == "left_envelope"].set_index("trial")["value"]
     assert left.to_dict() == {d.id: float(model.predict(d.x[0], 20).left_envelope) for d in test}
@@ -65,8 +65,8 @@ def test_report_counts_the_predictions_that_left(quad, train, tmp_path):
     from workbench.study.pipeline import run_study
 
     far = lqr_operator_demos(LQROperator(x0_low=(8.0, 2.5, 0, 0, 0, 0), x0_high=(9.0, 3.0, 0, 0, 0, 0)), 2,
-                             seed=94, system=quad, label="A")
-    near = lqr_operator_demos(LQROperator(), 6, seed=95, system=quad, label="A")
+                             seed=94, plant=quad, label="A")
+    near = lqr_operator_demos(LQROperator(), 6, seed=95, plant=quad, label="A")
     far = far.with_demos([Demonstration(d.t, d.x, d.u, {**d.meta, "id": f"far-{d.id}"}) for d in far])
     result = run_study(near + far, quad, n_components=2, samples=0, efficiency=None, n_steps=20,
                        test_ids=[d.id for d in far])

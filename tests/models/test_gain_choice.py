@@ -22,11 +22,11 @@ def _cs1_attitude_row() -> np.ndarray:
 
 @pytest.mark.parametrize("seed", [11, 12])
 def test_default_gain_is_iv_and_removes_the_closed_loop_bias_on_cs1(seed):
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     ds = simulate_landings("CS1", 30, seed=seed)
     kw = {"fit_objective": False, "noise_folds": 0, "n_components": 2}
-    default = HumanBehaviorModel(system, **kw).fit(ds)
-    direct = HumanBehaviorModel(system, gain_method="direct", **kw).fit(ds)
+    default = HumanBehaviorModel(plant, **kw).fit(ds)
+    direct = HumanBehaviorModel(plant, gain_method="direct", **kw).fit(ds)
     assert default.gain_choice_.method == default.gain_method_ == "iv"
     assert "relevant" in default.gain_choice_.reason and direct.gain_choice_.method == "direct"
     truth = _cs1_attitude_row()
@@ -39,14 +39,14 @@ def test_default_gain_is_iv_and_removes_the_closed_loop_bias_on_cs1(seed):
 def test_the_fallback_to_direct_says_why(monkeypatch):
     import workbench.method.gain as gain
 
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     ds = simulate_landings("CS1", 8, seed=13)
-    _, chosen = choose_gain(ds, system)
+    _, chosen = choose_gain(ds, plant)
     assert chosen.method == "iv"
     relevance = float(chosen.reason.split("correlation ")[1].split(" ")[0])
     # instruments that must explain more than these starts move every state: "iv" refuses, "direct" steps in
     monkeypatch.setattr(gain, "IV_MIN_RELEVANCE", min(0.99, 2 * relevance))
-    K, choice = choose_gain(ds, system)
+    K, choice = choose_gain(ds, plant)
     assert choice.method == "direct" and choice.reason.startswith("fallback from iv")
     assert "leave a state direction unexcited" in choice.reason
-    np.testing.assert_array_equal(K, choose_gain(ds, system, "direct")[0])
+    np.testing.assert_array_equal(K, choose_gain(ds, plant, "direct")[0])

@@ -26,11 +26,11 @@ def failing_sdp(monkeypatch):
 
 
 def test_a_failed_inverse_lqr_leaves_a_model_that_predicts(failing_sdp, tmp_path):
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     ds = simulate_landings("CS1", 8, seed=21)
-    m = HumanBehaviorModel(system, n_components=2).fit(ds)
+    m = HumanBehaviorModel(plant, n_components=2).fit(ds)
     assert m.objective_ is None and REASON in m.objective_error_
-    ref = HumanBehaviorModel(system, n_components=2, fit_objective=False).fit(ds)
+    ref = HumanBehaviorModel(plant, n_components=2, fit_objective=False).fit(ds)
     assert ref.objective_error_ is None  # not asked for is not a failure
     np.testing.assert_array_equal(m.K_, ref.K_)
     p, q = m.predict(ds[0].x[0], 30, target=ds[0].target), ref.predict(ds[0].x[0], 30, target=ds[0].target)

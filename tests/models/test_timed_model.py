@@ -24,7 +24,7 @@ def test_a_rollout_carries_the_delayed_states_and_the_lagged_stick(quad, start):
     # a noise-free pilot with a delay and a lag: the model identifies both exactly, and a rollout from the middle of
     # a trial given what came before it (the states the pilot still acts on, the stick it moves from) is the trial
     op = LQROperator(**SLOW_PILOT, delay_s=0.17, lag_s=0.06, start=start, sigma_near=(0, 0), sigma_far=(0, 0))
-    ds = lqr_operator_demos(op, 6, seed=2, system=quad)
+    ds = lqr_operator_demos(op, 6, seed=2, plant=quad)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = IOCOnlyModel(quad, gain_method="direct", noise_folds=0).fit(ds)
@@ -46,7 +46,7 @@ def test_a_rollout_carries_the_delayed_states_and_the_lagged_stick(quad, start):
 
 def test_the_timed_model_predicts_a_slow_pilots_inputs_and_keeps_its_timing_in_the_file(quad, tmp_path):
     op = LQROperator(**SLOW_PILOT, delay_s=0.2, lag_s=0.08, start="rest")
-    train, test = lqr_operator_demos(op, 16, seed=5, system=quad), lqr_operator_demos(op, 3, seed=6, system=quad)
+    train, test = lqr_operator_demos(op, 16, seed=5, plant=quad), lqr_operator_demos(op, 3, seed=6, plant=quad)
     kw = {"n_components": 2, "fit_objective": False, "noise_folds": 0}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -114,13 +114,13 @@ def test_fit_writes_a_model_per_group_or_the_group_named(copter_bin, tmp_path, c
     assert "2 plant groups, a plant and a model for each" in said
     for group in ("angle", "velocity+climb"):
         model = load_model(tmp_path / f"m.{group}.npz")
-        assert model.system.plant_group == group  # the model file keeps its plant's group
+        assert model.plant.plant_group == group  # the model file keeps its plant's group
         assert f"plant identification (plant group {group}" in said
     assert not out.exists()
     one = tmp_path / "one.npz"
     assert main(["fit", str(copter_bin), "-o", str(one), "--method", "gmr-only", "--n-components", "1",
                  "--plant-group", "velocity+climb"]) == 0
-    assert load_model(one).system.plant_group == "velocity+climb"
+    assert load_model(one).plant.plant_group == "velocity+climb"
     assert main(["fit", str(copter_bin), "-o", str(one), "--plant-group", "rate"]) == 1
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert err.startswith("error: no demonstration in plant group 'rate'; the groups here: angle: 2 segments")
@@ -149,7 +149,7 @@ def test_view_shows_a_models_plant_group_and_keys_every_group(copter_bin, tmp_pa
     ds = adapters.load(copter_bin, "ardupilot_manual")
     said: list[str] = []
     ctx = SimpleNamespace(say=said.append)
-    angle = SimpleNamespace(system=SimpleNamespace(plant_group="angle"))
+    angle = SimpleNamespace(plant=SimpleNamespace(plant_group="angle"))
     shown = _of_plant_group(ctx, ds, None, [angle])  # a model predicts only where the stick commands what it did
     assert [d.id for d in shown] == [d.id for d in select_plant_group(ds, "angle")]
     assert said == ["showing plant group angle: 2 segments (STABILIZE, 50 s): the model's (--plant-group shows "
@@ -202,10 +202,10 @@ def test_a_group_whose_intervals_fail_stays_fitted_and_written(copter_bin, tmp_p
 
     real = resampling.bootstrap
 
-    def failing_for_velocity(ds, system, *args, **kwargs):
-        if system.plant_group == "velocity+climb":
+    def failing_for_velocity(ds, plant, *args, **kwargs):
+        if plant.plant_group == "velocity+climb":
             raise ModelError("every resample failed: the gain is not stabilizing")
-        return real(ds, system, *args, **kwargs)
+        return real(ds, plant, *args, **kwargs)
 
     monkeypatch.setattr(resampling, "bootstrap", failing_for_velocity)
     out = tmp_path / "m.npz"
@@ -216,4 +216,4 @@ def test_a_group_whose_intervals_fail_stays_fitted_and_written(copter_bin, tmp_p
     assert "not fitted" not in said.err + said.out
     assert "wrote 2 model(s), one per plant group" in said.out
     for group in ("angle", "velocity+climb"):
-        assert load_model(tmp_path / f"m.{group}.npz").system.plant_group == group
+        assert load_model(tmp_path / f"m.{group}.npz").plant.plant_group == group

@@ -57,7 +57,7 @@ def test_rank_and_shape_errors():
         LinearSystem(np.diag([0.5, np.nan, 0.5]), np.ones((3, 1)), 0.1)
 
 
-def test_identify_recovers_a_simulated_system():
+def test_identify_recovers_a_simulated_plant():
     rng = np.random.default_rng(0)
     true = planar_quadrotor()
     K = np.array([[-0.05, 0, -0.8, -0.08, 0, -0.005], [0, -0.4, 0, 0, -0.9, 0]])
@@ -92,19 +92,19 @@ def test_identify_refuses_unexcited_data():
 # ------------------------------------------------------------------------------ identification with physics
 
 
-def _closed_loop(system: LinearSystem, K: np.ndarray, n_demos: int = 5, n: int = 200, seed: int = 0, noise=0.3):
+def _closed_loop(plant: LinearSystem, K: np.ndarray, n_demos: int = 5, n: int = 200, seed: int = 0, noise=0.3):
     rng = np.random.default_rng(seed)
     demos = []
     for j in range(n_demos):
-        x = np.zeros((n, system.n))
-        u = np.zeros((n, system.m))
-        x[0] = rng.normal(size=system.n)
+        x = np.zeros((n, plant.n))
+        u = np.zeros((n, plant.m))
+        x[0] = rng.normal(size=plant.n)
         for k in range(n - 1):
-            u[k] = K @ x[k] + noise * rng.normal(size=system.m)  # excitation
-            x[k + 1] = system.A @ x[k] + system.B @ u[k]
+            u[k] = K @ x[k] + noise * rng.normal(size=plant.m)  # excitation
+            x[k + 1] = plant.A @ x[k] + plant.B @ u[k]
         u[-1] = K @ x[-1]
-        demos.append(Demonstration(system.dt * np.arange(n), x, u, {"id": f"e{j}"}))
-    return DemonstrationSet(demos, system.state_names, system.input_names, system.dt, roles=system.roles)
+        demos.append(Demonstration(plant.dt * np.arange(n), x, u, {"id": f"e{j}"}))
+    return DemonstrationSet(demos, plant.state_names, plant.input_names, plant.dt, roles=plant.roles)
 
 
 def test_kinematic_identification_fixes_the_position_rows_and_recovers_the_papers_plant():

@@ -22,7 +22,7 @@ HORIZON = 30
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     train, test, models, baselines, tables = {}, {}, {}, {}, []
     for label in ("CS1", "CS2"):
         ds = simulate_landings(label, 9, seed=5)
@@ -30,9 +30,9 @@ def report(tmp_path_factory):
         train[label], test[label] = tr, te
         # no cross-validated noise scale (noise_folds=0): the figures and tables are the point here (1.1 s a label)
         fitted = {
-            "proposed": HumanBehaviorModel(system, n_components=3, noise_folds=0).fit(tr),
-            "ioc_only": IOCOnlyModel(system).fit(tr),
-            "gmr_only": GMROnlyModel(system, n_components=3, noise_folds=0).fit(tr),
+            "proposed": HumanBehaviorModel(plant, n_components=3, noise_folds=0).fit(tr),
+            "ioc_only": IOCOnlyModel(plant).fit(tr),
+            "gmr_only": GMROnlyModel(plant, n_components=3, noise_folds=0).fit(tr),
         }
         models[label] = fitted["proposed"]
         baselines[label] = {k: v for k, v in fitted.items() if k != "proposed"}

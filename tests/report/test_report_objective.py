@@ -16,10 +16,10 @@ from workbench.study.weights import NOT_IDENTIFIABLE, compare_strategies, format
 
 @pytest.fixture(scope="module")
 def result():
-    system = planar_quadrotor()
-    a = lqr_operator_demos(LQROperator(q=(1, 1, 1, 0.3, 0.3, 0.01)), 10, seed=41, system=system, label="A")
-    b = lqr_operator_demos(LQROperator(q=(4, 2, 46, 0.3, 0.3, 0.01)), 10, seed=42, system=system, label="B")
-    return run_study(a + b, system, n_components=2, samples=0, efficiency=None, n_steps=20, bootstrap=12,
+    plant = planar_quadrotor()
+    a = lqr_operator_demos(LQROperator(q=(1, 1, 1, 0.3, 0.3, 0.01)), 10, seed=41, plant=plant, label="A")
+    b = lqr_operator_demos(LQROperator(q=(4, 2, 46, 0.3, 0.3, 0.01)), 10, seed=42, plant=plant, label="B")
+    return run_study(a + b, plant, n_components=2, samples=0, efficiency=None, n_steps=20, bootstrap=12,
                      power=1)
 
 
@@ -78,9 +78,9 @@ def test_every_ratio_says_what_the_data_carry(report_folder):
 
 
 def test_report_without_bootstrap_says_so(tmp_path):
-    system = planar_quadrotor()
-    a = lqr_operator_demos(LQROperator(), 6, seed=43, system=system, label="A")
-    res = run_study(a, system, n_components=2, samples=0, efficiency=None, n_steps=20)
+    plant = planar_quadrotor()
+    a = lqr_operator_demos(LQROperator(), 6, seed=43, plant=plant, label="A")
+    res = run_study(a, plant, n_components=2, samples=0, efficiency=None, n_steps=20)
     assert res.objectives == {}
     text = write_study_report(res, tmp_path / "r", vector=False).read_text()
     assert "No intervals" in text

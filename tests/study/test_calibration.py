@@ -15,9 +15,9 @@ from workbench.study.pipeline import CALIBRATION_LEVELS, run_study
 
 @pytest.fixture(scope="module")
 def result():
-    system = planar_quadrotor()
-    demos = lqr_operator_demos(LQROperator(), 8, seed=61, system=system, label="A")
-    return run_study(demos, system, n_components=2, samples=0, efficiency=None, n_steps=20)
+    plant = planar_quadrotor()
+    demos = lqr_operator_demos(LQROperator(), 8, seed=61, plant=plant, label="A")
+    return run_study(demos, plant, n_components=2, samples=0, efficiency=None, n_steps=20)
 
 
 def test_nominal_is_the_gaussian_mass_within_c_sigma():

@@ -16,7 +16,7 @@ class _Band:
 
     def __init__(self, sigma, u_min=None, u_max=None):
         self.sigma = sigma
-        self.system = SimpleNamespace(m=1, input_names=("u1",), u_min=u_min, u_max=u_max)
+        self.plant = SimpleNamespace(m=1, input_names=("u1",), u_min=u_min, u_max=u_max)
 
     def input_distribution(self, X, x0, target):
         n = len(X)
@@ -60,8 +60,8 @@ def test_inputs_at_their_limits_are_flagged_and_left_out_of_the_score():
     rng = np.random.default_rng(8)
     demos = _demos(rng, 1.0, n_trials=10, limit=1.2)
     at_limit = np.concatenate([np.abs(d.u) >= 1.2 for d in demos])
-    declared = saturated(demos, _Band(1.0, u_min=np.array([-1.2]), u_max=np.array([1.2])).system)
-    pinned = saturated(demos, _Band(1.0).system)  # no declared limits: the stick pinned at its travel's ends
+    declared = saturated(demos, _Band(1.0, u_min=np.array([-1.2]), u_max=np.array([1.2])).plant)
+    pinned = saturated(demos, _Band(1.0).plant)  # no declared limits: the stick pinned at its travel's ends
     np.testing.assert_array_equal(np.concatenate(declared), at_limit)
     np.testing.assert_array_equal(np.concatenate(pinned), at_limit)
     check = calibration_check(calibration_counts(_Band(1.0), demos)).set_index("n_sigma")

@@ -44,10 +44,10 @@ def study():
     return simulate_study(n_subjects=3, n_trials=4, strategy="CS2", seed=5)
 
 
-def _models(system, train=None):
+def _models(plant, train=None):
     # fast settings: no calibration folds, two components
-    return {"proposed": HumanBehaviorModel(system, n_components=2, fit_objective=False, noise_folds=0),
-            "ioc_only": IOCOnlyModel(system)}
+    return {"proposed": HumanBehaviorModel(plant, n_components=2, fit_objective=False, noise_folds=0),
+            "ioc_only": IOCOnlyModel(plant)}
 
 
 # Same trials, splits, seeds and rows; the values may differ in the last bits only, because SIMD reductions
@@ -226,7 +226,7 @@ def test_cli_workers_2_imports_around_a_corrupt_log_and_studies_the_dataset_as_s
     assert sorted(set(b["subject"])) == ["s00", "s01", "s02"]
 
 
-def _kill_once(marker: str, system, train=None):
+def _kill_once(marker: str, plant, train=None):
     """Models for a subject; the first call anywhere kills the worker process that makes it."""
     import os
     import signal
@@ -235,7 +235,7 @@ def _kill_once(marker: str, system, train=None):
     if not p.exists():
         p.write_text("killed")
         os.kill(os.getpid(), signal.SIGKILL)
-    return _models(system)
+    return _models(plant)
 
 
 def test_a_worker_killed_mid_study_is_replaced_and_the_study_completes(cluster, study, quadrotor, tmp_path):

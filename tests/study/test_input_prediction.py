@@ -15,9 +15,9 @@ from workbench.study.input_prediction import INPUT_METRICS, input_headlines, inp
 
 @pytest.fixture(scope="module")
 def scored():
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     train, test = lqr_operator_demos(n_trials=8, seed=41), lqr_operator_demos(n_trials=4, seed=42)
-    models = {k: m.fit(train) for k, m in make_models(system, ["ioc_only", "persistence"]).items()}
+    models = {k: m.fit(train) for k, m in make_models(plant, ["ioc_only", "persistence"]).items()}
     return models, test, compare(models, test, n_steps=20, starts=10)
 
 

@@ -37,8 +37,8 @@ pytestmark = pytest.mark.slow
 class _Figures:
     """Fits and scores each strategy once, on first use."""
 
-    def __init__(self, system):
-        self.system = system
+    def __init__(self, plant):
+        self.plant = plant
         self._cache: dict[str, dict] = {}
 
     def __getitem__(self, strategy: str) -> dict:
@@ -50,17 +50,17 @@ class _Figures:
         train = simulate_landings(strategy, N_TRAIN, seed=0)
         test = simulate_landings(strategy, N_TEST, seed=1)
         models = {
-            "proposed": HumanBehaviorModel(self.system).fit(train),
-            "ioc_only": IOCOnlyModel(self.system).fit(train),
-            "gmr_only": GMROnlyModel(self.system).fit(train),
+            "proposed": HumanBehaviorModel(self.plant).fit(train),
+            "ioc_only": IOCOnlyModel(self.plant).fit(train),
+            "gmr_only": GMROnlyModel(self.plant).fit(train),
         }
         table = ev.compare(models, test, n_steps=HORIZON, samples=SAMPLES, seed=0)
         summary = ev.method_means(table)
         coverage = ev.coverage_summary(ev.one_step_coverage(models["proposed"], test))
         small = ev.data_efficiency(
             lambda: {
-                "proposed": HumanBehaviorModel(self.system, fit_objective=False),
-                "gmr_only": GMROnlyModel(self.system),
+                "proposed": HumanBehaviorModel(self.plant, fit_objective=False),
+                "gmr_only": GMROnlyModel(self.plant),
             },
             train, test, sizes=(SMALL,), n_steps=HORIZON, repeats=SMALL_REPEATS, seed=0,
         )

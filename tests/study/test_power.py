@@ -57,9 +57,9 @@ def test_the_curve_simulates_more_sets_until_it_is_monotone_and_states_its_uncer
     script = {10: [1.5, 1.6, 1.4, 1.5, 1.5, 1.5], 20: [22.0, 21.0, 0.9, 1.0, 0.95, 1.0], 40: [0.6, 0.7, 0.65, 0.6, 0.7]}
     monkeypatch.setattr(power, "simulate_like", lambda model, demos, n, seed=0: n)
     monkeypatch.setattr(power, "as_fitted", lambda model, sim: sim)
-    monkeypatch.setattr(resampling, "bootstrap_gain", lambda sim, system, **kw: sim)
+    monkeypatch.setattr(resampling, "bootstrap_gain", lambda sim, plant, **kw: sim)
 
-    def spans(n, system, ci, ratios):
+    def spans(n, plant, ci, ratios):
         calls.append(n)
         return {"r": script[n][calls.count(n) - 1]}
 

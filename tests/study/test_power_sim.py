@@ -32,11 +32,11 @@ TOLERANCE = 1.5
 
 
 def test_the_power_law_predicts_the_spans_of_larger_simulated_samples():
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         demos = lqr_operator_demos(n_trials=N0, seed=SEED)
-        model = make_models(system, ["proposed"], n_components=2)["proposed"].fit(demos)
+        model = make_models(plant, ["proposed"], n_components=2)["proposed"].fit(demos)
         ratios, _, _ = ratio_bootstrap(model, demos, n_boot=100, seed=SEED + 1)
         wide = [iv.name for iv in ratios.intervals if iv.explained and iv.span > TARGET_SPAN]
         assert wide, "the fitted model has no wide ratio of the diagonal form to check"

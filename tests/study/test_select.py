@@ -19,12 +19,12 @@ from workbench.study.pipeline import select_components
 CANDIDATES = (2, 3, 4)
 
 
-def independent_bic(model: HumanBehaviorModel, demos, system) -> float:
+def independent_bic(model: HumanBehaviorModel, demos, plant) -> float:
     """BIC by hand: ŵ = u − K̂(x − target), frames at x₀ and the target, coordinates scaled by the std."""
     K = model.K_
     xi, b_list, T_list = [], [], []
-    across, up = system.r.plane
-    heading = system.r.heading
+    across, up = plant.r.plane
+    heading = plant.r.heading
     for d in demos:
         target = np.asarray(d.meta["target"], dtype=float)
         w = d.u - (d.x - target) @ K.T
@@ -60,19 +60,19 @@ def moved_pad():
 
 @pytest.fixture(scope="module")
 def fitted(moved_pad):
-    system = planar_quadrotor()
-    return system, {
+    plant = planar_quadrotor()
+    return plant, {
         # the paper's residual, which the independent computation rebuilds (no pilot's timing: with one, ŵ is of
         # the command at the seen state, workbench.models.timed)
-        G: HumanBehaviorModel(system, n_components=G, fit_objective=False, noise_folds=0, timing="none").fit(moved_pad)
+        G: HumanBehaviorModel(plant, n_components=G, fit_objective=False, noise_folds=0, timing="none").fit(moved_pad)
         for G in CANDIDATES
     }
 
 
 def test_bic_matches_an_independent_computation(moved_pad, fitted):
-    system, models = fitted
+    plant, models = fitted
     for G, model in models.items():
-        ours, ref = model.bic(moved_pad), independent_bic(model, moved_pad, system)
+        ours, ref = model.bic(moved_pad), independent_bic(model, moved_pad, plant)
         print(f"G={G}: BIC {ours:.6f}, independent {ref:.6f}")
         assert ours == pytest.approx(ref, rel=1e-9)
 
@@ -85,8 +85,8 @@ def test_scoring_the_training_data_reproduces_em_objective(moved_pad, fitted):
 
 
 def test_components_auto_picks_the_independent_bic_minimum(moved_pad, fitted):
-    system, models = fitted
-    independent = {G: independent_bic(m, moved_pad, system) for G, m in models.items()}
-    chosen = select_components(moved_pad, system, candidates=CANDIDATES)
+    plant, models = fitted
+    independent = {G: independent_bic(m, moved_pad, plant) for G, m in models.items()}
+    chosen = select_components(moved_pad, plant, candidates=CANDIDATES)
     print(f"independent BIC {independent}; chosen G = {chosen}")
     assert chosen == min(independent, key=independent.get)

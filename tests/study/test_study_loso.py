@@ -55,7 +55,7 @@ def test_a_method_that_cannot_be_fitted_is_named_and_the_rest_compared(few):
 def test_evaluate_with_identify_leaves_one_segment_out_and_prints_the_plant(few, tmp_path, capsys):
     path = tmp_path / "few.parquet"
     few.save(path)
-    code = main(["evaluate", str(path), "--system", "identify", "--horizon", "1", "--n-components", "2",
+    code = main(["evaluate", str(path), "--plant", "identify", "--horizon", "1", "--n-components", "2",
                  "--samples", "0", "-o", str(tmp_path / "results.csv")])
     out = capsys.readouterr().out
     assert code == 0

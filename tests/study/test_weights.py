@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from workbench.defaults import OBJECTIVE_RESAMPLES
 from workbench.errors import DataError, ModelError
 from workbench.method import ratio_profile
 from workbench.method.objective import forward_gain
@@ -41,19 +42,19 @@ OP_C = LQROperator(q=(2.0, 0.5, 5.0, 0.1, 0.6, 0.05), r=(5.0, 20.0), rho=0.85)
 OP_D = LQROperator(q=(0.5, 3.0, 0.5, 0.1, 0.6, 0.05), r=(5.0, 10.0), rho=0.85)
 
 
-def true_ratios(system, op: LQROperator) -> dict[str, float]:
+def true_ratios(plant, op: LQROperator) -> dict[str, float]:
     """Every ratio Q_ii / R_kk inside a part, from an operator's cost."""
     out = {}
-    for states, inputs in decoupled_parts(system.A, system.B):
+    for states, inputs in decoupled_parts(plant.A, plant.B):
         k = inputs[0]
         for i in states:
-            out[f"Q_{system.state_names[i]} / R_{system.input_names[k]}"] = op.q[i] / op.r[k]
+            out[f"Q_{plant.state_names[i]} / R_{plant.input_names[k]}"] = op.q[i] / op.r[k]
     return out
 
 
-def true_factors(system, a: LQROperator = OP_A, b: LQROperator = OP_B) -> dict[str, float]:
+def true_factors(plant, a: LQROperator = OP_A, b: LQROperator = OP_B) -> dict[str, float]:
     """Factor b/a of every ratio Q_ii / R_kk inside a part, from the operators' costs."""
-    ra, rb = true_ratios(system, a), true_ratios(system, b)
+    ra, rb = true_ratios(plant, a), true_ratios(plant, b)
     return {name: rb[name] / ra[name] for name in ra}
 
 
@@ -61,19 +62,19 @@ def coverage(seeds, n_boot: int, n_demos: int = 30, a: LQROperator = OP_A, b: LQ
              own: list | None = None) -> pd.DataFrame:
     """Per seed and ratio, whether the factor's interval covers the truth; with ``own`` a list, each operator's
     own ratio intervals are recorded there too (``finite``: an interval that reaches neither 0 nor ∞)."""
-    system = planar_quadrotor()
-    truth = true_factors(system, a, b)
+    plant = planar_quadrotor()
+    truth = true_factors(plant, a, b)
     rows = []
     for seed in seeds:
         ratios = {
-            "A": weight_ratios(bootstrap_gain(lqr_operator_demos(a, n_demos, seed=1000 + seed, system=system),
-                                              system, n_boot=n_boot, method="iv", seed=seed), system),
-            "B": weight_ratios(bootstrap_gain(lqr_operator_demos(b, n_demos, seed=2000 + seed, system=system),
-                                              system, n_boot=n_boot, method="iv", seed=50000 + seed), system),
+            "A": weight_ratios(bootstrap_gain(lqr_operator_demos(a, n_demos, seed=1000 + seed, plant=plant),
+                                              plant, n_boot=n_boot, method="iv", seed=seed), plant),
+            "B": weight_ratios(bootstrap_gain(lqr_operator_demos(b, n_demos, seed=2000 + seed, plant=plant),
+                                              plant, n_boot=n_boot, method="iv", seed=50000 + seed), plant),
         }
         if own is not None:
             for lb, op in (("A", a), ("B", b)):
-                t = true_ratios(system, op)
+                t = true_ratios(plant, op)
                 for iv in ratios[lb].intervals:
                     own.append({"seed": seed, "operator": lb, "ratio": iv.name, "covered": iv.lo <= t[iv.name] <= iv.hi,
                                 "finite": bool(np.isfinite(iv.span)), "of_form": iv.explained})
@@ -261,16 +262,16 @@ def test_a_gain_no_diagonal_cost_reaches_is_flagged_without_a_test():
 
 def test_structure_test_runs_only_with_restrictions():
     # the planar quadrotor's parts have as many free ratios as gain entries: never tested
-    system = planar_quadrotor()
-    demos = lqr_operator_demos(OP_A, 12, seed=901, system=system)
-    wr = weight_ratios(bootstrap_gain(demos, system, n_boot=30, method="iv", seed=1), system)
+    plant = planar_quadrotor()
+    demos = lqr_operator_demos(OP_A, 12, seed=901, plant=plant)
+    wr = weight_ratios(bootstrap_gain(demos, plant, n_boot=30, method="iv", seed=1), plant)
     assert [f.restrictions for f in wr.fits] == [0, 0]
     assert all(f.explained is None and not f.tested for f in wr.fits)
     # a part driven by two inputs has restrictions (6 gain entries, 3 + 2 − 1 ratios): tested
-    plant = two_input_plant()
-    gains = bootstrap_gain(lqr_operator_demos(TWO_INPUT_OP, 30, seed=902, system=plant), plant, n_boot=60,
+    two_inputs = two_input_plant()
+    gains = bootstrap_gain(lqr_operator_demos(TWO_INPUT_OP, 30, seed=902, plant=two_inputs), two_inputs, n_boot=60,
                            method="iv", seed=2)
-    (fit,) = weight_ratios(gains, plant).fits
+    (fit,) = weight_ratios(gains, two_inputs).fits
     assert fit.restrictions == 2 and fit.tested and fit.explained is not None
     # its reference: Hotelling's with the degrees of freedom of the jackknife covariance (the part is the plant)
     loo = gains.K_loo.reshape(30, -1)
@@ -294,12 +295,12 @@ TWO_INPUT_OP = LQROperator(q=(1.0, 0.3, 0.1), r=(10.0, 4.0), sigma_near=(0.01, 0
                            x0_low=(-2.0, -0.5, -0.5), x0_high=(2.0, 0.5, 0.5), duration=6.0)
 
 
-def structure_rejections(seeds, n_demos: int = 30, n_boot: int = 100,
+def structure_rejections(seeds, n_demos: int = 30, n_boot: int = OBJECTIVE_RESAMPLES,
                          operator: LQROperator = TWO_INPUT_OP) -> float:
     plant = two_input_plant()
     rejected = []
     for seed in seeds:
-        demos = lqr_operator_demos(operator, n_demos, seed=3000 + seed, system=plant)
+        demos = lqr_operator_demos(operator, n_demos, seed=3000 + seed, plant=plant)
         (fit,) = weight_ratios(bootstrap_gain(demos, plant, n_boot=n_boot, method="iv", seed=seed), plant).fits
         rejected.append(fit.explained is False)
     return float(np.mean(rejected))
@@ -323,10 +324,10 @@ class CrossCostOperator(LQROperator):
 
     rab: float = 0.0
 
-    def gain(self, system) -> np.ndarray:
+    def gain(self, plant) -> np.ndarray:
         R = np.diag(self.r)
         R[0, 1] = R[1, 0] = self.rab * np.sqrt(self.r[0] * self.r[1])
-        return forward_gain(system.A, system.B, np.diag(self.q), R)[0]
+        return forward_gain(plant.A, plant.B, np.diag(self.q), R)[0]
 
 
 def cross_cost_operator(rab: float) -> CrossCostOperator:
@@ -356,7 +357,7 @@ def test_a_ratio_fitted_at_a_zero_weight_is_one_restriction_more():
 
 def test_a_gain_of_no_diagonal_cost_is_rejected():
     plant = two_input_plant()
-    gains = bootstrap_gain(lqr_operator_demos(cross_cost_operator(0.8), 30, seed=903, system=plant), plant,
+    gains = bootstrap_gain(lqr_operator_demos(cross_cost_operator(0.8), 30, seed=903, plant=plant), plant,
                            n_boot=60, method="iv", seed=3)
     (fit,) = weight_ratios(gains, plant).fits
     assert fit.tested and fit.explained is False and fit.distance > fit.critical

@@ -27,12 +27,12 @@ def sessions():
     from workbench.plant.system import planar_quadrotor
     from workbench.sim.landing import simulate_landings
 
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     demos = simulate_landings("CS1", 4, seed=5) + simulate_landings("CS2", 2, seed=6)
     cs1 = demos.by_label("CS1")
     train = cs1.with_demos(list(cs1)[:3])
-    model = HumanBehaviorModel(system, n_components=2, noise_folds=0, fit_objective=False).fit(train)
-    ioc = IOCOnlyModel(system).fit(train)
+    model = HumanBehaviorModel(plant, n_components=2, noise_folds=0, fit_objective=False).fit(train)
+    ioc = IOCOnlyModel(plant).fit(train)
     full = log_session(new_recording(), demos, models={"CS1": model}, baselines={"CS1": {"ioc_only": ioc}},
                        n_steps=10, samples=4)
     bare = log_session(new_recording(), demos)

@@ -57,11 +57,11 @@ def rrd_verify(path: Path) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     demos = simulate_landings("CS1", 8, seed=3) + simulate_landings("CS2", 4, seed=3)
     cs1 = demos.by_label("CS1")
-    model = HumanBehaviorModel(system, n_components=3, noise_folds=0).fit(cs1)  # the noise scale's CV: not here
-    ioc = IOCOnlyModel(system).fit(cs1)
+    model = HumanBehaviorModel(plant, n_components=3, noise_folds=0).fit(cs1)  # the noise scale's CV: not here
+    ioc = IOCOnlyModel(plant).fit(cs1)
     focus = cs1[1].id
     path = tmp_path_factory.mktemp("viewer") / "session.rrd"
     _, session = viewer.record_session(
@@ -170,7 +170,7 @@ def test_model_tensors(setup):
     K = ents["/models/CS1/K"]["static:Tensor:data"][0][0]
     np.testing.assert_allclose(np.asarray(K["buffer"], dtype=float).reshape(model.K_.shape), model.K_)
     Q = ents["/models/CS1/Q"]["static:Tensor:data"][0][0]
-    n = model.system.n
+    n = model.plant.n
     np.testing.assert_allclose(np.asarray(Q["buffer"], dtype=float).reshape(n, n),
                                model.objective_.M_normalized[:n, :n])
     text = ents["/models/CS1/summary"]["static:TextDocument:text"][0][0]

@@ -55,7 +55,7 @@ def test_a_model_on_data_of_another_dt_is_warned_in_the_terminal_and_the_recordi
 
     demos, model_path = demo_files
     model = load_model(model_path)
-    coarse = load_demonstrations(demos).by_label("CS1").resample(2 * model.system.dt)
+    coarse = load_demonstrations(demos).by_label("CS1").resample(2 * model.plant.dt)
     coarse_path = tmp_path / "coarse.parquet"
     coarse.save(coarse_path)
     out = tmp_path / "wrong.rrd"
@@ -87,7 +87,7 @@ def test_a_model_on_data_of_other_roles_is_warned_in_the_terminal_and_the_record
     # the same names and dt, but another vehicle's roles: the heading is not declared (another mapping)
     other = DemonstrationSet(list(cs1), cs1.state_names, cs1.input_names, cs1.dt,
                              roles=replace(cs1.roles, heading=None))
-    assert other.roles != model.system.roles
+    assert other.roles != model.plant.roles
     path = tmp_path / "other_roles.parquet"
     other.save(path)
     out = tmp_path / "roles.rrd"

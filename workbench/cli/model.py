@@ -12,7 +12,7 @@ from workbench.atomic import atomic_write_table
 from workbench.cli.context import Context
 from workbench.cli.inputs import resolve
 from workbench.cli.options import rollout_budget, steps_of
-from workbench.cli.reading import demos_at_model_dt, per_group_path, plant_group_parts, system_for
+from workbench.cli.reading import chosen_plant, demos_at_model_dt, per_group_path, plant_group_parts
 from workbench.cli.writing import print_plant
 from workbench.defaults import DEFAULT_N_COMPONENTS
 from workbench.errors import DataError, ModelError, UsageError
@@ -54,8 +54,8 @@ def cmd_fit(ctx: Context) -> int:
 def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
     """Fit, save and describe one model of one plant group's demonstrations (its own plant)."""
     a = ctx.args
-    system = system_for(ds, a.system)
-    print_plant(ctx, system)
+    plant = chosen_plant(ds, a.plant)
+    print_plant(ctx, plant)
     t0 = time.perf_counter()
     with ctx.progress() as progress:
         from workbench.models.registry import method
@@ -70,20 +70,20 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
             from workbench.models.selection import select_components
 
             progress.add_task("choosing the number of components by BIC", total=None)
-            components = select_components(ds, system, seed=a.seed)
+            components = select_components(ds, plant, seed=a.seed)
             ctx.say(f"chose {components} components by BIC")
         progress.add_task(f"fitting {a.method} model on {len(ds)} demonstrations", total=None)
         from workbench.models.factory import make_model
 
         try:
-            model = make_model(a.method, system, n_components=components, random_state=a.seed,
+            model = make_model(a.method, plant, n_components=components, random_state=a.seed,
                                gain_method=a.gain, timing=a.timing, task=a.task).fit(ds)
         except ModelError as exc:
-            raise ModelError(_physics_first(system, exc)) from None
+            raise ModelError(_physics_first(plant, exc)) from None
     model.save(output)
     ctx.say(f"fitted {type(model).__name__} on {len(ds)} demonstrations in {time.perf_counter() - t0:.1f} s")
     if getattr(model, "task_", None) is not None:
-        ctx.say(model.task_.describe(system.state_names))
+        ctx.say(model.task_.describe(plant.state_names))
     _print_model(ctx, model, ds)
     if a.bootstrap > 0 and model.has_gain:
         _print_intervals(ctx, model, ds, model.plant_regulated, a.bootstrap, a.seed, a.power, output)
@@ -91,7 +91,7 @@ def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
         ctx.say("(no intervals: --bootstrap 0; the objective above is a point estimate)")
 
 
-def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int, seed: int, power: int,
+def _print_intervals(ctx: Context, model: Any, ds: Any, plant: Any, n_boot: int, seed: int, power: int,
                      output: Any) -> None:
     """The model's intervals, each part on its own: a part that cannot be computed (no task objective to resample,
     every resample failing) is said to be not computed, with its reason, and the others are still printed; the
@@ -104,13 +104,13 @@ def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int
     timing = timing_setting(model)
 
     def with_objective() -> None:
-        boot = _print_bootstrap(ctx, fitted, system, n_boot, seed, model.gain_method_, timing)
+        boot = _print_bootstrap(ctx, fitted, plant, n_boot, seed, model.gain_method_, timing)
         if _with_timing_intervals(model, boot):
             model.save(output)
     if model.objective_ is None and getattr(model, "objective_error_", None):
         ctx.say("intervals of the task objective (Q, R): not computed, since inverse LQR found no objective for the "
                 "gain (above); the gain's own intervals follow")
-        parts = [("intervals of K̂", lambda: _print_gain_intervals(ctx, fitted, system, n_boot, seed,
+        parts = [("intervals of K̂", lambda: _print_gain_intervals(ctx, fitted, plant, n_boot, seed,
                                                                    model.gain_method_, timing))]
     else:
         parts = [("intervals of K̂, Q and R", with_objective)]
@@ -124,7 +124,7 @@ def _print_intervals(ctx: Context, model: Any, ds: Any, system: Any, n_boot: int
                   file=sys.stderr)
 
 
-def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str,
+def _print_gain_intervals(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: int, gain: str,
                           timing: Any = "none") -> None:
     """K̂'s intervals alone (:func:`~workbench.method.resampling.gain_interval`), over resamples of whole trials (no
     inverse LQR per resample)."""
@@ -132,7 +132,7 @@ def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed:
 
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
-        result = bootstrap_gain(ds, system, n_boot=n_boot, seed=seed, method=gain, executor=ex, jackknife=False,
+        result = bootstrap_gain(ds, plant, n_boot=n_boot, seed=seed, method=gain, executor=ex, jackknife=False,
                                 timing=timing,
                                 progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.n_failed:
@@ -141,26 +141,26 @@ def _print_gain_intervals(ctx: Context, ds: Any, system: Any, n_boot: int, seed:
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
     lo, hi = result.interval(95.0)
     ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % intervals, {GAIN_INTERVAL}):")
-    for i, u in enumerate(system.input_names):
+    for i, u in enumerate(plant.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
-            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, lo[i], hi[i], strict=True)))
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(plant.state_names, lo[i], hi[i], strict=True)))
 
 
-def _physics_first(system: Any, exc: Exception) -> str:
+def _physics_first(plant: Any, exc: Exception) -> str:
     """A fit's failure on a plant that fails its physics check: the physics first (the real cause: no gain fitted
     on such a plant means anything), then what the fit said."""
-    report = getattr(system, "identification", None)
+    report = getattr(plant, "identification", None)
     failure = report.physics_failure if report is not None else ""
     return f"the identified plant is not physics: {failure}; so the fit failed: {exc}" if failure else str(exc)
 
 
-def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int, gain: str = "direct",
+def _print_bootstrap(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: int, gain: str = "direct",
                      timing: Any = "none") -> Any:
     from workbench.method.resampling import GAIN_INTERVAL, bootstrap
 
     with ctx.executor() as ex, ctx.progress() as progress:
         task = progress.add_task(f"bootstrap: {n_boot} resamples of {len(ds)} trials", total=n_boot)
-        result = bootstrap(ds, system, n_boot=n_boot, seed=seed, method=gain if gain in ("direct", "dmd") else "iv",
+        result = bootstrap(ds, plant, n_boot=n_boot, seed=seed, method=gain if gain in ("direct", "dmd") else "iv",
                            executor=ex, timing=timing,
                            progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.stopped:
@@ -173,13 +173,13 @@ def _print_bootstrap(ctx: Context, ds: Any, system: Any, n_boot: int, seed: int,
             f"intervals: the objective's percentiles, K̂'s {GAIN_INTERVAL}):")
     if result.timing is not None:
         ctx.say(f"  {result.timing.describe()}")
-    for names, lo, hi, what in ((system.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
-                                (system.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
+    for names, lo, hi, what in ((plant.state_names, result.Q_diag_lo, result.Q_diag_hi, "Q/λmax"),
+                                (plant.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
         ctx.say(f"  diag {what}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(names, lo, hi, strict=True)))
-    for i, u in enumerate(system.input_names):
+    for i, u in enumerate(plant.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
-            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(system.state_names, result.K_lo[i], result.K_hi[i],
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(plant.state_names, result.K_lo[i], result.K_hi[i],
                                                          strict=True)))
     return result
 
@@ -293,7 +293,7 @@ def cmd_predict(ctx: Context) -> int:
         except ValueError:
             raise UsageError(f"--x0 must be comma-separated numbers, got {a.x0!r}") from None
         target, t0, demo_id, task_x0, start = None, 0.0, "x0", None, 0
-        names, in_names = model.system.state_names, model.system.input_names
+        names, in_names = model.plant.state_names, model.plant.input_names
     else:
         got = ctx.read(inputs)
         ds = got.demos
@@ -321,7 +321,7 @@ def cmd_predict(ctx: Context) -> int:
             start = a.start
         x0, target, demo_id, task_x0 = demo.x[start], demo.target, demo.id, demo.x[0]
         names, in_names = ds.state_names, ds.input_names
-    dt = model.system.dt  # the model steps at its own dt, whatever the demonstrations' sampling
+    dt = model.plant.dt  # the model steps at its own dt, whatever the demonstrations' sampling
     n_steps = steps_of(a.horizon_s, dt)
     rollout_budget(a.samples, n_steps)
     # from inside a trial, the task's start frame stays at the trial's first state
@@ -341,7 +341,7 @@ def cmd_predict(ctx: Context) -> int:
         cols.update({f"{s}_upper": pred.x_upper[:, j] for j, s in enumerate(names)})
     out = atomic_write_table(pd.DataFrame(cols), output)
     # the end position where the plant declares positions, else the whole end state
-    shown = model.system.r.position or range(len(names))
+    shown = model.plant.r.position or range(len(names))
     ctx.say(
         f"predicted {n_steps} steps ({n_steps * dt:.2f} s) from {demo_id} step {start}: "
         "end " + ", ".join(f"{names[j]} = {x[-1, j]:.3f}" for j in shown)

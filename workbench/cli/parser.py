@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable
 
 from adapters.formats import FORMATS, log_suffixes
@@ -40,6 +41,7 @@ from workbench.defaults import (
     N_STEPS,
     OBJECTIVE_RESAMPLES,
     ONLINE_HORIZON_S,
+    STUDY_SAMPLES,
     TIMING,
 )
 from workbench.models.registry import REGISTRY
@@ -58,6 +60,17 @@ examples:
 """
 
 
+class _OldSpelling(argparse.Action):
+    """An option under its glossary word (its first string) that still takes its old spelling (the second) and
+    says so in one line on standard error when the old one is used."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if option_string is not None and option_string != self.option_strings[0]:
+            print(f"warning: {option_string} is the old spelling of {self.option_strings[0]} (still accepted)",
+                  file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
 def _common(p: argparse.ArgumentParser, *, top: bool = False) -> None:
     default = False if top else argparse.SUPPRESS
     p.add_argument("--debug", action="store_true", default=default, help="show the traceback of an error")
@@ -65,7 +78,7 @@ def _common(p: argparse.ArgumentParser, *, top: bool = False) -> None:
 
 
 def _study_options(
-    p: argparse.ArgumentParser, *, samples: int = 100, efficiency: str | None = "2,5,10,20", repeats: int = 2
+    p: argparse.ArgumentParser, *, samples: int = STUDY_SAMPLES, efficiency: str | None = "2,5,10,20", repeats: int = 2
 ) -> None:
     p.add_argument("--test-size", type=fraction_arg, default=0.2, metavar="F",
                    help="fraction of each strategy's trials held out for testing (default 0.2)")
@@ -95,11 +108,12 @@ def _study_options(
                    help="keep segments in which no input moves beyond its resolution (default: reported and left "
                         "out: no pilot was flying them)")
     p.add_argument("--seed", type=seed_arg, default=0, help="seed of the split, EM and Monte Carlo (default 0)")
-    _system_option(p)
+    _plant_option(p)
 
 
-def _system_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--system", choices=["auto", "paper", "identify"], default="auto",
+def _plant_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plant", "--system", dest="plant", action=_OldSpelling,
+                   choices=["auto", "paper", "identify"], default="auto",
                    help="plant (A, B): the paper's planar quadrotor, identified from the data by least squares, "
                    "or auto (the paper's for its state layout at dt 0.05 s, else identified)")
 
@@ -248,7 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(the paper gives none)")
     _task_option(p)
     _power_option(p, 0)
-    _system_option(p)
+    _plant_option(p)
     _plant_group_option(p, "a model of each written beside -o as MODEL.GROUP.npz")
     _mapping_option(p)
     _selection_options(p, "fit")

@@ -20,7 +20,7 @@ from workbench.cli.stdio import STDIN_NAME
 from workbench.defaults import HORIZON_S
 from workbench.errors import DataError, ModelError, WorkbenchError
 
-__all__ = ["Read", "read_demos", "read_models", "load_one", "system_for", "study_plant", "pilot_only",
+__all__ = ["Read", "read_demos", "read_models", "load_one", "chosen_plant", "study_plant", "pilot_only",
            "require_proposed", "demos_at_model_dt", "input_stem", "is_demo_file", "plant_group_parts",
            "per_group_path"]
 
@@ -138,7 +138,7 @@ def per_group_path(path: Path, group: str | None) -> Path:
     return path.with_name(f"{path.stem}.{group.replace(' ', '-')}{path.suffix}")
 
 
-def system_for(ds: Any, choice: str = "auto", horizon_s: float = HORIZON_S):
+def chosen_plant(ds: Any, choice: str = "auto", horizon_s: float = HORIZON_S):
     from workbench.plant.choice import choose_plant
 
     return choose_plant(ds, choice, horizon_s)
@@ -180,9 +180,9 @@ def demos_at_model_dt(ds: Any, models: Sequence[Any], resample: bool, source: st
     times), resampled with ``--resample``."""
     import math
 
-    dt = float(models[0].system.dt)
-    if any(not math.isclose(float(m.system.dt), dt, rel_tol=1e-6) for m in models[1:]):
-        steps = ", ".join(sorted({f"{float(m.system.dt):g}" for m in models}))
+    dt = float(models[0].plant.dt)
+    if any(not math.isclose(float(m.plant.dt), dt, rel_tol=1e-6) for m in models[1:]):
+        steps = ", ".join(sorted({f"{float(m.plant.dt):g}" for m in models}))
         raise ModelError(f"the models step at different dt ({steps} s); show them one at a time")
     try:
         at_dt = models[0].demos_at_model_dt(ds, resample=resample)

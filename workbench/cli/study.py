@@ -18,7 +18,7 @@ from workbench.atomic import atomic_write_table, recover_swaps, swap_entries, te
 from workbench.cli.context import Context
 from workbench.cli.inputs import resolve
 from workbench.cli.options import SAMPLE_LOGS, rollout_budget, steps_of
-from workbench.cli.reading import per_group_path, plant_group_parts, require_proposed, study_plant, system_for
+from workbench.cli.reading import chosen_plant, per_group_path, plant_group_parts, require_proposed, study_plant
 from workbench.cli.stdio import refuse_stdio
 from workbench.cli.writing import print_plant, viewer_command
 from workbench.data.plant_groups import describe_groups
@@ -76,16 +76,16 @@ def _evaluate_group(ctx: Context, ds: Any, output: Path | None, *, source: Any, 
         _evaluate_per_subject(ctx, ds, source, output)
         return
     result, loso = _holdout_study(ctx, ds, trials=trials)
-    if loso and getattr(result.system, "identification", None) is not None:
+    if loso and getattr(result.plant, "identification", None) is not None:
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
         # spread of the folds' plants, which the scores below used
         checks = [c for p in result.plants.values() for c in p.identification.checks]
         spread = (f"each fold's plant from its training segments: {checks[0].name} "
                   f"{min(c.value for c in checks):.4g}–{max(c.value for c in checks):.4g} over {len(checks)} folds"
                   if checks else "each fold's plant is identified from its training segments only")
-        print_plant(ctx, system_for(ds, a.system, a.horizon_s), f"(plant from all {len(ds)} segments; {spread})")
+        print_plant(ctx, chosen_plant(ds, a.plant, a.horizon_s), f"(plant from all {len(ds)} segments; {spread})")
     else:
-        print_plant(ctx, result.system, "(plant from the training trials)")
+        print_plant(ctx, result.plant, "(plant from the training trials)")
     _print_study(ctx, result)
     if output is not None:
         result.save_tables(output)
@@ -127,14 +127,14 @@ def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0,
             ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
                     "the others)")
             result = study.run_loso(
-                ds, study_plant(a.system, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
+                ds, study_plant(a.plant, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
                 n_components=a.n_components,
                 samples=a.samples, seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s,
                 task=getattr(a, "task", None),
             )
         else:
             result = study.run_study(
-                ds, study_plant(a.system, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
+                ds, study_plant(a.plant, a.horizon_s), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
                 n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats,
                 seed=a.seed, progress=ctx.progress, executor=ex, stride_s=a.stride_s, bootstrap=bootstrap,
                 power=power, test_ids=recorded, task=getattr(a, "task", None),
@@ -157,7 +157,7 @@ def _evaluate_per_subject(ctx: Context, ds: Any, source: Any, output: Path | Non
 
     a = ctx.args
     components = 5 if a.n_components == "bic" else a.n_components
-    plant = study_plant(a.system)
+    plant = study_plant(a.plant)
     subjects = sorted({str(d.meta.get("subject")) for d in ds if d.meta.get("subject") is not None})
     seed = a.seed
     # a collected session declares its test trials: auto keeps them here too, as for the split study
@@ -341,7 +341,7 @@ def _print_efficiency(ctx: Context, result: Any) -> None:
     means = efficiency_means(eff)
     methods = [c for c in means.columns if c not in ("label", "n_train")]
     metric = str(eff["metric"].iloc[0]) if "metric" in eff else "rmse_position"
-    plant = next((m.system for m in result.models.values() if getattr(m, "system", None) is not None), None)
+    plant = next((m.plant for m in result.models.values() if getattr(m, "plant", None) is not None), None)
     unit = metric_unit(plant, metric) if plant is not None else ""
     what = metric.removeprefix("rmse_").replace("_", " ")
     ctx.say_table(["label", "n", *[METHOD_TITLES.get(m, m) for m in methods]],
@@ -422,7 +422,7 @@ def _report_group(ctx: Context, ds: Any, folder: Path, title: str, trials: str) 
     # evaluate's holdout rules, so both commands score a flight the same way (leave-one-segment-out on a few
     # segments) and print the same numbers
     result, loso = _holdout_study(ctx, ds, bootstrap=a.bootstrap, power=a.power, trials=trials)
-    print_plant(ctx, result.system, "(plants fitted without each left-out segment)" if loso
+    print_plant(ctx, result.plant, "(plants fitted without each left-out segment)" if loso
                 else "(plant from the training trials)")
     require_proposed(result)
     path = write_study_report(result, folder, title=title)
@@ -520,7 +520,7 @@ def _demo_into(ctx: Context, ds: Any, out: Path, build: Path, timings: dict[str,
     with ctx.executor(local_tasks=len(ds.labels)) as ex:
         preload = _import_in_background(_AFTER_STUDY) if ex.parallel else None
         result = study.run_study(
-            ds, study_plant(a.system), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
+            ds, study_plant(a.plant), test_size=a.test_size, n_steps=steps_of(a.horizon_s, ds.dt),
             n_components=a.n_components, samples=a.samples, efficiency=a.efficiency, repeats=a.repeats, seed=a.seed,
             progress=ctx.progress, bootstrap=a.bootstrap, stride_s=a.stride_s, power=a.power, executor=ex,
         )

@@ -167,7 +167,7 @@ def _of_plant_group(ctx: Context, ds: Any, name: str | None, models: Any) -> Any
 
     if name:
         return select_plant_group(ds, name)
-    wanted = {getattr(m.system, "plant_group", None) for m in models}
+    wanted = {getattr(m.plant, "plant_group", None) for m in models}
     if None in wanted or not wanted or set(plant_groups(ds)) <= wanted:
         return ds
     kept = ds.with_demos([d for d in ds if d.meta.get("plant_group") in wanted])

@@ -32,10 +32,10 @@ def write_demos(ds: Any, out: Path, mapping: str | None = None) -> None:
     adapters.write(ds, out, mapping or DEFAULT_MAPPING)
 
 
-def print_plant(ctx: Context, system: Any, note: str = "") -> None:
+def print_plant(ctx: Context, plant: Any, note: str = "") -> None:
     """An identified plant's report (held-out errors vs persistence, ρ, conditioning, checks); its warning on
     stderr too, where a user looks for problems."""
-    report = getattr(system, "identification", None)
+    report = getattr(plant, "identification", None)
     if report is None:
         return
     ctx.say(str(report) + (f"\n  {note}" if note else ""))

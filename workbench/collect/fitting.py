@@ -33,12 +33,12 @@ __all__ = ["Jobs", "FitJobs", "fit_subject", "default_model", "model_paths", "fi
            "load_fitted"]
 
 
-def default_model(system: Any, seed: int = 0) -> Any:
+def default_model(plant: Any, seed: int = 0) -> Any:
     """The library's default model, unfitted: what ``workbench fit`` builds with its defaults."""
     from workbench.defaults import N_COMPONENTS
     from workbench.models.factory import make_model
 
-    return make_model("proposed", system, n_components=N_COMPONENTS, random_state=seed)
+    return make_model("proposed", plant, n_components=N_COMPONENTS, random_state=seed)
 
 
 def model_paths(out: Path, subject: str, label: str) -> tuple[Path, Path, Path]:
@@ -77,13 +77,13 @@ def fit_subject(task: tuple) -> dict[str, Any]:
     if len(train) < min_trials:
         raise DataError(f"subject {subject}: {len(train)} landed, not excluded {label} {source} trial(s); the fit "
                         f"step needs at least {min_trials}")
-    system = planar_quadrotor()
-    model = default_model(system, seed).fit(train)
+    plant = planar_quadrotor()
+    model = default_model(plant, seed).fit(train)
     path, record_path, _ = model_paths(Path(out), subject, label)
     model.save(path)
-    n_steps = max(1, round(HORIZON_S / system.dt))
+    n_steps = max(1, round(HORIZON_S / plant.dt))
     held: list[dict[str, Any]] = []
-    metric = primary_metric(system)
+    metric = primary_metric(plant)
     if len(test):
         table = compare({"proposed": model}, test, n_steps=n_steps)
         rows = table[(table["metric"] == metric) & (table["method"] == "proposed")]
@@ -93,7 +93,7 @@ def fit_subject(task: tuple) -> dict[str, Any]:
         "kind": "fit", "subject": subject, "label": label, "from": source, "model": path.name,
         "digest": file_digest(path), "data_digest": model.data_digest_, "train_ids": list(model.train_ids_),
         "n_train": len(train),
-        "metric": metric, "horizon_s": n_steps * system.dt, "held_out": held,
+        "metric": metric, "horizon_s": n_steps * plant.dt, "held_out": held,
         "held_out_error": (sum(errors) / len(errors)) if errors else None,
         "n_components": getattr(model, "n_components", None), "fitted": now(),
         "seconds": round(time.perf_counter() - t0, 2),

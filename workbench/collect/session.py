@@ -76,14 +76,14 @@ class Session:
         ``out`` exists and is neither empty nor a session of the same protocol.
     """
 
-    def __init__(self, out: str | Path, protocol: Protocol, *, system: LinearSystem | None = None, seed: int = 0,
+    def __init__(self, out: str | Path, protocol: Protocol, *, plant: LinearSystem | None = None, seed: int = 0,
                  models: dict[str, Any] | None = None, model_digests: dict[str, str] | None = None,
                  new_session: bool = False, on_event: Callable[[str, str], None] | None = None,
                  runner: Callable[[Callable, tuple], dict[str, Any]] | None = None) -> None:
         self.out = Path(out)
         self.protocol = protocol
-        self.system = system or planar_quadrotor()
-        self.spec = task_spec(self.system, protocol.time_limit_s)
+        self.plant = plant or planar_quadrotor()
+        self.spec = task_spec(self.plant, protocol.time_limit_s)
         self.models = dict(models or {})
         self.model_digests = dict(model_digests or {})
         self.seed = int(seed)
@@ -100,7 +100,7 @@ class Session:
         self.jobs = Jobs(on_done=self._job_done, runner=runner)
         self.fits = FitJobs(self.out, self.seed, self.jobs)
         self.stops = StopChecks(self.out, self.seed, self.jobs)
-        records.write_data_dictionary(self.out, protocol, self.spec, self.system.roles)
+        records.write_data_dictionary(self.out, protocol, self.spec, self.plant.roles)
 
     # -- the folder --------------------------------------------------------------------------------------
     @property
@@ -619,6 +619,6 @@ def _write_partition(session: Session, subject: str, trial_id: str, x: np.ndarra
 
     spec = session.spec
     d = Demonstration(spec["dt"] * np.arange(len(u)), x, u, meta)
-    roles = session.system.roles
+    roles = session.plant.roles
     write_partitions(DemonstrationSet([d], spec["state_names"], spec["input_names"], spec["dt"], roles=roles),
                      session.out, trial_id, source="workbench collect", order=order)

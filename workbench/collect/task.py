@@ -28,9 +28,9 @@ __all__ = ["task_spec", "step", "replay", "outcome", "reason", "draw_start", "bl
 OUTCOMES = ("landed", "crashed", "left the domain", "time limit")
 
 
-def task_spec(system: LinearSystem | None = None, time_limit_s: float = TIME_LIMIT) -> dict[str, Any]:
+def task_spec(plant: LinearSystem | None = None, time_limit_s: float = TIME_LIMIT) -> dict[str, Any]:
     """Everything the page needs to fly the task, as JSON-ready values (lists of floats, no numpy)."""
-    sys_ = system or planar_quadrotor()
+    sys_ = plant or planar_quadrotor()
     r = sys_.r
     up = 1 if r.vertical is None else r.vertical  # which position is height
     side = 1 - up

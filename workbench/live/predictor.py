@@ -225,15 +225,15 @@ class OnlinePredictor:
 
         if not isinstance(model, BehaviorModel):
             raise ModelError(f"live prediction needs a fitted behavior model; got {type(model).__name__}")
-        system_ = model.system
-        if tuple(system_.state_names) != tuple(m.state_names) or tuple(system_.input_names) != tuple(m.input_names):
+        plant_ = model.plant
+        if tuple(plant_.state_names) != tuple(m.state_names) or tuple(plant_.input_names) != tuple(m.input_names):
             raise ModelError(
-                f"the model's states {list(system_.state_names)} / inputs {list(system_.input_names)} are not "
+                f"the model's states {list(plant_.state_names)} / inputs {list(plant_.input_names)} are not "
                 f"mapping {m.name!r}'s {list(m.state_names)} / {list(m.input_names)}; fit the model on data "
                 "imported with this mapping"
             )
-        if abs(float(system_.dt) - float(m.dt)) > 1e-9 * float(m.dt):
-            raise ModelError(f"the model's step dt = {system_.dt} s is not mapping {m.name!r}'s dt = {m.dt} s")
+        if abs(float(plant_.dt) - float(m.dt)) > 1e-9 * float(m.dt):
+            raise ModelError(f"the model's step dt = {plant_.dt} s is not mapping {m.name!r}'s dt = {m.dt} s")
         if not (isinstance(horizon_s, int | float) and math.isfinite(horizon_s) and horizon_s >= 0):
             raise ModelError(f"horizon_s must be a non-negative number of seconds, got {horizon_s!r}")
         self.model = model

@@ -54,7 +54,7 @@ def as_matrix(a: Any, name: str, shape: tuple[int | None, int | None] | None = N
     return arr
 
 
-def system_matrices(A: Any, B: Any) -> tuple[np.ndarray, np.ndarray]:
+def plant_matrices(A: Any, B: Any) -> tuple[np.ndarray, np.ndarray]:
     A = as_matrix(A, "A")
     if A.shape[0] != A.shape[1]:
         raise DataError(f"A must be square, got shape {A.shape}")
@@ -88,7 +88,7 @@ def check_stabilizing(A: Any, B: Any, K: Any) -> float:
         If ``ρ(A + B K) ≥ 1``; the message names ρ. No SDP is solved for such a gain: the inverse LQR
         problem, eqs. (15)-(19), is feasible only for stabilizing gains.
     """
-    A, B = system_matrices(A, B)
+    A, B = plant_matrices(A, B)
     K = as_matrix(K, "K", (B.shape[1], A.shape[0]))
     rho = spectral_radius(A + B @ K)
     if not rho < 1.0:

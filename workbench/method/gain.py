@@ -20,7 +20,7 @@ import scipy.optimize
 import scipy.sparse.csgraph
 
 from workbench.errors import DataError, ModelError
-from workbench.method.closed_loop import as_matrix, check_stabilizing, system_matrices
+from workbench.method.closed_loop import as_matrix, check_stabilizing, plant_matrices
 
 __all__ = ['GainMethod', 'stack_demonstrations', 'iv_instruments', 'iv_relevance', 'gain_from_arrays', 'estimate_gain',
            'GainChoice', 'choose_gain', 'IV_OR_DIRECT', 'GAIN_METHODS']
@@ -205,7 +205,7 @@ def gain_from_arrays(
     """
     if method not in _METHODS:
         raise DataError(f"method must be one of {_METHODS}, got {method!r}")
-    A, B = system_matrices(A, B)
+    A, B = plant_matrices(A, B)
     n, m = B.shape
     X = as_matrix(X, "X", (n, None))
     T = X.shape[1]
@@ -269,14 +269,14 @@ def _unstable_mode(A: np.ndarray, B: np.ndarray, K: np.ndarray, names: Sequence[
             "wander holds no position for a cost to explain); fit the states the pilot holds")
 
 
-def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direct", check: bool = True) -> np.ndarray:
+def estimate_gain(demos: Iterable[Any], plant: Any, method: GainMethod = "direct", check: bool = True) -> np.ndarray:
     """Estimate ``K̂`` of ``u = K x`` from demonstrations (Algorithm 1, step 1; eqs. (12)-(14)).
 
     Parameters
     ----------
     demos : DemonstrationSet or iterable of Demonstration
         Each demonstration has ``.x`` (N, n) and ``.u`` (N, m).
-    system : LinearSystem
+    plant : LinearSystem
         Anything with ``.A`` (n, n) and ``.B`` (n, m).
     method : {"direct", "dmd", "iv"}
         See :func:`gain_from_arrays`; ``"iv"`` for closed-loop data with autocorrelated variability.
@@ -288,19 +288,19 @@ def estimate_gain(demos: Iterable[Any], system: Any, method: GainMethod = "direc
     ndarray, shape (m, n)
         The gain, checked to be stabilizing (Assumption 3 of the method paper) unless ``check`` is false.
     """
-    A, B = system_matrices(system.A, system.B)
+    A, B = plant_matrices(plant.A, plant.B)
     blocks = demo_blocks(demos, *B.shape)
     if not blocks:
         raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
     X, U, X_next = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(3))
-    names = getattr(system, "state_names", None)
+    names = getattr(plant, "state_names", None)
     names = tuple(names) if names is not None else None
     demos = list(demos)
 
     def cause(slow: tuple[str, ...]) -> str:
         from workbench.method.slow_mode import likely_cause
 
-        return likely_cause(demos, slow, getattr(system, "roles", None), names or ())
+        return likely_cause(demos, slow, getattr(plant, "roles", None), names or ())
 
     return gain_from_arrays(X, U, X_next, A, B, method, lengths=[b[0].shape[1] for b in blocks],
                             state_names=names, assisted=cause, check=check)
@@ -328,7 +328,7 @@ class GainChoice:
         return f"gain {self.method} ({self.reason})"
 
 
-def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT,
+def choose_gain(demos: Iterable[Any], plant: Any, method: str = IV_OR_DIRECT,
                 check: bool = True) -> tuple[np.ndarray, GainChoice]:
     """K̂ by ``method``, or for :data:`IV_OR_DIRECT` by the rule: instrumental variables where the instruments
     are relevant and the gain they give is stabilizing, least squares otherwise.
@@ -347,8 +347,8 @@ def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT,
         raise DataError(f"gain method must be one of {GAIN_METHODS}, got {method!r}")
     demos = list(demos)
     if method != IV_OR_DIRECT:
-        return estimate_gain(demos, system, method, check), GainChoice(method, method, "as requested")
-    A, B = system_matrices(system.A, system.B)
+        return estimate_gain(demos, plant, method, check), GainChoice(method, method, "as requested")
+    A, B = plant_matrices(plant.A, plant.B)
     blocks = demo_blocks(demos, *B.shape)
     relevance = float("nan")
     try:
@@ -364,7 +364,7 @@ def choose_gain(demos: Iterable[Any], system: Any, method: str = IV_OR_DIRECT,
         check_stabilizing(A, B, K)
     except (ModelError, np.linalg.LinAlgError) as exc:
         why = " ".join(str(exc).split()) or type(exc).__name__
-        return (estimate_gain(demos, system, "direct", check),
+        return (estimate_gain(demos, plant, "direct", check),
                 GainChoice(method, "direct", f"fallback from iv: {why}"))
     return K, GainChoice(method, "iv", f"instruments relevant: smallest squared canonical correlation "
                                        f"{relevance:.2g} ≥ {IV_MIN_RELEVANCE:g}")

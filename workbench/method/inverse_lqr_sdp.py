@@ -18,7 +18,7 @@ import numpy as np
 
 from workbench.errors import ConvergenceWarning, DataError, ModelError, SolverError
 from workbench.frozen import readonly
-from workbench.method.closed_loop import as_matrix, check_stabilizing, single_threaded_blas, system_matrices
+from workbench.method.closed_loop import as_matrix, check_stabilizing, plant_matrices, single_threaded_blas
 from workbench.method.objective import (
     _STRUCTURES,
     FORWARD_GAIN_TOL,
@@ -130,7 +130,7 @@ class InverseLQR:
     ) -> None:
         if structure not in _STRUCTURES:
             raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
-        self.A, self.B = system_matrices(A, B)
+        self.A, self.B = plant_matrices(A, B)
         self.structure = structure
         self.second_stage = bool(second_stage)
         self.closest = bool(closest)
@@ -383,7 +383,7 @@ def inverse_lqr(A: Any, B: Any, K: Any, structure: Structure = "full", second_st
     gain of such a cost; in general (every estimated gain) it is the structured cost whose LQR gain is
     closest to K (:func:`closest_structured_objective`), returned with its ``forward_gain_error``.
     """
-    A, B = system_matrices(A, B)
+    A, B = plant_matrices(A, B)
     if structure not in _STRUCTURES:
         raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
     return cached_problem(A, B, structure, second_stage).solve(K)

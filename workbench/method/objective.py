@@ -14,7 +14,7 @@ import scipy.optimize
 import scipy.sparse.csgraph
 
 from workbench.errors import ModelError
-from workbench.method.closed_loop import as_matrix, system_matrices
+from workbench.method.closed_loop import as_matrix, plant_matrices
 
 __all__ = ['Structure', 'forward_gain_tolerance', 'forward_gain', 'TaskObjective']
 
@@ -63,7 +63,7 @@ def forward_gain(A: Any, B: Any, Q: Any, R: Any, S: Any | None = None) -> tuple[
     ModelError
         If the DARE has no stabilizing solution for this cost.
     """
-    A, B = system_matrices(A, B)
+    A, B = plant_matrices(A, B)
     n, m = B.shape
     Q = as_matrix(Q, "Q", (n, n))
     R = as_matrix(R, "R", (m, m))

@@ -18,9 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from workbench.defaults import GAIN_RESAMPLES
 from workbench.errors import DataError, ModelError
 from workbench.frozen import readonly
-from workbench.method.closed_loop import single_threaded_blas, system_matrices
+from workbench.method.closed_loop import plant_matrices, single_threaded_blas
 from workbench.method.gain import GainMethod, demo_blocks, gain_from_arrays
 from workbench.method.inverse_lqr_sdp import _SOLVER_CHAIN, InverseLQR, cached_problem
 from workbench.method.objective import _STRUCTURES, Structure, TaskObjective
@@ -256,7 +257,7 @@ _TIMINGS: dict[bytes, Any] = {}
 _TIMINGS_KEPT = 8
 
 
-def _timing_key(demos: list, A: np.ndarray, B: np.ndarray, system: Any, how: str, given: dict, timing: Any,
+def _timing_key(demos: list, A: np.ndarray, B: np.ndarray, plant: Any, how: str, given: dict, timing: Any,
                 n_boot: int, seed: int) -> bytes:
     """A digest of everything :func:`_timed_resampled`'s :class:`PilotTiming` depends on: the trials' states,
     inputs and recorded dead zones, the plant, the estimator, the given timing, the rule, the resamples and the
@@ -266,8 +267,8 @@ def _timing_key(demos: list, A: np.ndarray, B: np.ndarray, system: Any, how: str
     from workbench.method.pilot_loop import recorded_dead_zone
 
     h = hashlib.blake2b(digest_size=32)
-    h.update(repr((how, sorted(given.items()), str(timing), int(n_boot), int(seed), float(system.dt),
-                   int(system.n), int(system.m), len(demos))).encode())
+    h.update(repr((how, sorted(given.items()), str(timing), int(n_boot), int(seed), float(plant.dt),
+                   int(plant.n), int(plant.m), len(demos))).encode())
     for M in (A, B):
         h.update(np.ascontiguousarray(M, dtype=float).tobytes())
     for d in demos:
@@ -279,7 +280,7 @@ def _timing_key(demos: list, A: np.ndarray, B: np.ndarray, system: Any, how: str
 
 
 def _timed_resampled(
-    demos: Any, system: Any, n_boot: int, method: GainMethod, structure: Structure | None, seed: int,
+    demos: Any, plant: Any, n_boot: int, method: GainMethod, structure: Structure | None, seed: int,
     progress: Callable[[int, int], None] | None, timing: Any,
 ) -> tuple[int, np.ndarray, TaskObjective | None, list[tuple], list[str], Any]:
     """:func:`_resampled` with the pilot's timing: every resample re-identifies the delay and the lag and fits the
@@ -287,7 +288,7 @@ def _timed_resampled(
     then the objective of each resampled gain. The last element is the :class:`PilotTiming`."""
     from workbench.method.timing import identify_timing
 
-    A, B = system_matrices(system.A, system.B)
+    A, B = plant_matrices(plant.A, plant.B)
     given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
     how = "direct" if method == "direct" else "liml"
     fallback = None
@@ -302,10 +303,10 @@ def _timed_resampled(
                 return _resample_fit(blocks, idx, A, B, "direct", None)[0]
 
     demos = list(demos)
-    key = _timing_key(demos, A, B, system, how, given, timing, n_boot, seed)
+    key = _timing_key(demos, A, B, plant, how, given, timing, n_boot, seed)
     pt = _TIMINGS.get(key)
     if pt is None:
-        pt = identify_timing(demos, system, method=how, n_boot=n_boot, seed=seed, progress=progress,
+        pt = identify_timing(demos, plant, method=how, n_boot=n_boot, seed=seed, progress=progress,
                              fallback=fallback, **given)
         _TIMINGS[key] = pt
         while len(_TIMINGS) > _TIMINGS_KEPT:
@@ -330,7 +331,7 @@ def _timed_resampled(
 
 
 def _resampled(
-    demos: Any, system: Any, n_boot: int, method: GainMethod, structure: Structure | None, seed: int,
+    demos: Any, plant: Any, n_boot: int, method: GainMethod, structure: Structure | None, seed: int,
     progress: Callable[[int, int], None] | None, executor: Any, timing: Any = "none",
 ) -> tuple[int, np.ndarray, TaskObjective | None, list[tuple], list[str]] | tuple:
     """The point fit on all trials and ``n_boot`` resampled fits: ``(n_trials, K, objective, fits, failures)``,
@@ -343,8 +344,8 @@ def _resampled(
         raise ModelError(f"{len(demos)} demonstration(s): resampling needs two or more to estimate how the gain "
                          "and the objective vary, so no interval can be given")
     if not (isinstance(timing, str) and timing == "none"):
-        return _timed_resampled(demos, system, n_boot, method, structure, seed, progress, timing)
-    A, B = system_matrices(system.A, system.B)
+        return _timed_resampled(demos, plant, n_boot, method, structure, seed, progress, timing)
+    A, B = plant_matrices(plant.A, plant.B)
     blocks = demo_blocks(list(demos), *B.shape)
     if not blocks:
         raise DataError("no demonstration has two or more samples: there is no transition to fit a gain to")
@@ -405,8 +406,8 @@ class GainBootstrap:
 
 def bootstrap_gain(
     demos: Any,
-    system: Any,
-    n_boot: int = 200,
+    plant: Any,
+    n_boot: int = GAIN_RESAMPLES,
     method: GainMethod = "direct",
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
@@ -429,12 +430,12 @@ def bootstrap_gain(
     ModelError
         If the point estimate on all demonstrations fails, or every resample fails.
     """
-    out = _resampled(demos, system, n_boot, method, None, seed, progress, executor, timing)
+    out = _resampled(demos, plant, n_boot, method, None, seed, progress, executor, timing)
     n_trials, K0, _, fits, failures = out[:5]
     timed = len(out) > 5
     loo = None
     if jackknife and n_trials >= 3:
-        loo = _timed_leave_one_out(demos, system, method, timing) if timed else _leave_one_out(demos, system, method)
+        loo = _timed_leave_one_out(demos, plant, method, timing) if timed else _leave_one_out(demos, plant, method)
     return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array([f[0] for f in fits])), n_trials=n_trials,
                          n_boot=len(fits) + len(failures), n_failed=len(failures), failures=tuple(failures),
                          method=method, seed=int(seed), K_loo=None if loo is None else readonly(loo),
@@ -442,20 +443,20 @@ def bootstrap_gain(
                          timing=out[5] if timed else None)
 
 
-def _timed_leave_one_out(demos: Any, system: Any, method: GainMethod, timing: Any) -> np.ndarray | None:
+def _timed_leave_one_out(demos: Any, plant: Any, method: GainMethod, timing: Any) -> np.ndarray | None:
     """:func:`_leave_one_out` of the gain with the pilot's timing (re-identified without each trial)."""
     from workbench.method.timing import TimingData, fit_timing, refusal
 
     given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
-    data = TimingData(list(demos), system.n, system.m, system.dt)
+    data = TimingData(list(demos), plant.n, plant.m, plant.dt)
     how = "direct" if method == "direct" else "liml"
-    A, B = system_matrices(system.A, system.B)
+    A, B = plant_matrices(plant.A, plant.B)
     blocks = demo_blocks(list(demos), *B.shape)
     out = []
     try:
         for j in range(data.n_trials):
             fit = fit_timing(data, how, counts=np.arange(data.n_trials) != j, **given)
-            if timing == IDENTIFY_OR_NONE and refusal(fit, system):  # the rule, decided without trial j too
+            if timing == IDENTIFY_OR_NONE and refusal(fit, plant):  # the rule, decided without trial j too
                 fit_K = _resample_fit(blocks, np.delete(np.arange(len(blocks)), j), A, B, "iv", None)[0]
             else:
                 fit_K = fit.K
@@ -465,10 +466,10 @@ def _timed_leave_one_out(demos: Any, system: Any, method: GainMethod, timing: An
         return None
 
 
-def _leave_one_out(demos: Any, system: Any, method: GainMethod) -> np.ndarray | None:
+def _leave_one_out(demos: Any, plant: Any, method: GainMethod) -> np.ndarray | None:
     """The gain of every set with one demonstration left out, shape (n, m, n_x); None if one fit fails (e.g. a
     non-stabilizing estimate): a jackknife with a hole in it estimates nothing."""
-    A, B = system_matrices(system.A, system.B)
+    A, B = plant_matrices(plant.A, plant.B)
     blocks = demo_blocks(list(demos), *B.shape)
     every = np.arange(len(blocks))
     try:
@@ -480,8 +481,8 @@ def _leave_one_out(demos: Any, system: Any, method: GainMethod) -> np.ndarray | 
 
 def bootstrap(
     demos: Any,
-    system: Any,
-    n_boot: int = 200,
+    plant: Any,
+    n_boot: int = GAIN_RESAMPLES,
     method: GainMethod = "direct",
     structure: Structure = "full",
     seed: int = 0,
@@ -501,7 +502,7 @@ def bootstrap(
     Parameters
     ----------
     demos : DemonstrationSet or sequence of Demonstration
-    system : LinearSystem (anything with ``.A`` and ``.B``)
+    plant : LinearSystem (anything with ``.A`` and ``.B``)
     n_boot : int
         Number of resamples.
     method, structure
@@ -530,7 +531,7 @@ def bootstrap(
         raise DataError(f"ci must be a percentage in (0, 100), got {ci}")
     if structure not in _STRUCTURES:
         raise DataError(f"structure must be one of {_STRUCTURES}, got {structure!r}")
-    out = _resampled(demos, system, n_boot, method, structure, seed, progress, executor, timing)
+    out = _resampled(demos, plant, n_boot, method, structure, seed, progress, executor, timing)
     n_trials, K0, obj0, fits, failures = out[:5]
     K_s, Q_s, R_s = (np.array([f[i] for f in fits]) for i in range(3))
     q = [(100 - ci) / 2, 100 - (100 - ci) / 2]

@@ -19,9 +19,9 @@ from workbench.frozen import readonly
 from workbench.method.closed_loop import (
     as_matrix,
     check_stabilizing,
+    plant_matrices,
     single_threaded_blas,
     spectral_radius,
-    system_matrices,
 )
 from workbench.method.objective import FORWARD_GAIN_TOL, Structure, TaskObjective, forward_gain
 
@@ -40,7 +40,7 @@ def decoupled_parts(A: Any, B: Any) -> tuple[tuple[tuple[int, ...], tuple[int, .
     tuple of (states, inputs)
         Sorted index tuples, one pair per part, ordered by their first state.
     """
-    A, B = system_matrices(A, B)
+    A, B = plant_matrices(A, B)
     n, m = B.shape
     tol_a = 1e-12 * max(1.0, float(np.abs(A).max(initial=0.0)))
     tol_b = 1e-12 * max(1.0, float(np.abs(B).max(initial=0.0)))
@@ -277,7 +277,7 @@ def closest_structured_objective(A: Any, B: Any, K: Any, structure: Structure = 
         ``M = M_normalized`` (scaled as above), ``alpha = cond(M)``, ``solver = "closest-gain"``, ``status``
         ``"exact"`` if the forward-gain error is ≤ 1e-6, else ``"approximate"``; ``parts`` the decoupled parts.
     """
-    A, B = system_matrices(A, B)
+    A, B = plant_matrices(A, B)
     n, m = B.shape
     K = as_matrix(K, "K", (m, n))
     if structure not in ("diagonal", "S=0"):

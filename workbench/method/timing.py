@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.defaults import OBJECTIVE_RESAMPLES
 from workbench.errors import DataError, ModelError
 from workbench.frozen import readonly
 from workbench.method.closed_loop import as_matrix, single_threaded_blas
@@ -623,7 +624,7 @@ def identify_timing(
     delay_s: float | None = None,
     lag_s: float | None = None,
     start: str = "auto",
-    n_boot: int = 100,
+    n_boot: int = OBJECTIVE_RESAMPLES,
     seed: int = 0,
     ci: float = 95.0,
     progress: Callable[[int, int], None] | None = None,

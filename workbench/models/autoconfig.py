@@ -230,9 +230,9 @@ def choose_settings(
     regs = list(reg_covars or (DEFAULT_REG_COVAR_GRID if model.reg_covar == "cv" else (float(model.reg_covar),)))
     k = max(2, min(int(folds), len(demos)))
     parts = _folds(len(demos), k, model.random_state if isinstance(model.random_state, int) else 0)
-    system = model.system
-    idx = list(system.r.position) if system.r.position else list(range(system.n))
-    H = max(1, int(round(model.noise_horizon_s / system.dt)))
+    plant = model.plant
+    idx = list(plant.r.position) if plant.r.position else list(range(plant.n))
+    H = max(1, int(round(model.noise_horizon_s / plant.dt)))
     # mean rollouts and likelihoods never use the Monte Carlo noise: "gmr" skips its calibration
     settings = {**model.get_params(), "fit_objective": False, "noise_folds": 0, "noise": "gmr",
                 "max_iter": min(int(model.max_iter), _CV_MAX_ITER), "tol": max(float(model.tol), _CV_TOL)}
@@ -260,12 +260,12 @@ class _Tally:
 
 def _fold(model, demos, fold, test_idx, Gs, regs, settings, idx, H, fallback, tally: _Tally) -> None:
     """Fit and score every candidate on one fold (its gain estimated once)."""
-    system = model.system
+    plant = model.plant
     held = set(test_idx.tolist())
     train = [demos[j] for j in range(len(demos)) if j not in held]
     test = [demos[j] for j in test_idx]
     n_train = sum(len(d) for d in train)
-    if system.r.position:
+    if plant.r.position:
         spread = np.ones(len(idx))
     else:
         xs = np.concatenate([d.x for d in train])[:, idx]
@@ -286,7 +286,7 @@ def _fold(model, demos, fold, test_idx, Gs, regs, settings, idx, H, fallback, ta
         if G * _SAMPLES_PER_COMPONENT > n_train:
             continue
         for r in regs:
-            candidate = type(model)(system, **{**settings, "n_components": int(G), "reg_covar": float(r),
+            candidate = type(model)(plant, **{**settings, "n_components": int(G), "reg_covar": float(r),
                                                "task": fold_task})
             fitted = False
             try:

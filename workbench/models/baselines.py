@@ -17,7 +17,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.pilot_task import PilotTask
-from workbench.defaults import N_COMPONENTS, REG_COVAR, TIMING
+from workbench.defaults import N_COMPONENTS, NOISE_HORIZON_S, REG_COVAR, TIMING
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
@@ -62,13 +62,13 @@ class GMROnlyModel(TaskGMRModel):
     _fitted_attr = "variability_"
 
     @classmethod
-    def for_method(cls, system: LinearSystem, settings: MethodSettings) -> GMROnlyModel:
-        return cls(system, n_components=settings.n_components, random_state=settings.random_state,
+    def for_method(cls, plant: LinearSystem, settings: MethodSettings) -> GMROnlyModel:
+        return cls(plant, n_components=settings.n_components, random_state=settings.random_state,
                    task=settings.task)
 
     def __init__(
         self,
-        system: LinearSystem,
+        plant: LinearSystem,
         n_components: int = N_COMPONENTS,
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
         reg_covar: float = REG_COVAR,
@@ -82,10 +82,10 @@ class GMROnlyModel(TaskGMRModel):
         noise: str = "calibrated",
         noise_window: float = 2.0,
         noise_folds: int = 3,
-        noise_horizon_s: float = 3.0,
+        noise_horizon_s: float = NOISE_HORIZON_S,
         task: PilotTask | str | dict | None = None,
     ) -> None:
-        super().__init__(system)
+        super().__init__(plant)
         self.task = task
         self.n_components = n_components
         self.frames = frames
@@ -105,10 +105,10 @@ class GMROnlyModel(TaskGMRModel):
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> GMROnlyModel:
         """EM on ``[x; u]`` of every demonstration in its own frames (eqs. (28)-(29), (36)-(37))."""
         self._check_settings()
-        ds = demo_list(demos, self.system, "GMROnlyModel.fit")
+        ds = demo_list(demos, self.plant, "GMROnlyModel.fit")
         # the same regulated states as the proposed model's (its task decided the same way); no gain, no reference
         self.task_ = settle_task(self, ds)
-        self.regulated_ = self.task_.regulated_indices(self.system.state_names)
+        self.regulated_ = self.task_.regulated_indices(self.plant.state_names)
         U = [d.u for d in ds]
         self._fit_common(ds, getattr(demos, "labels", []))
         self._fit_gmr(ds, U)
@@ -129,7 +129,7 @@ class GMROnlyModel(TaskGMRModel):
         return gmr_state(self)
 
     def _restore(self, mf: ModelFile) -> None:
-        gmr_restore(self, mf, self.system.m)
+        gmr_restore(self, mf, self.plant.m)
 
 
 class IOCOnlyModel(BehaviorModel):
@@ -141,7 +141,7 @@ class IOCOnlyModel(BehaviorModel):
 
     Parameters
     ----------
-    system : LinearSystem
+    plant : LinearSystem
     gain_method, timing, structure
         As for :class:`HumanBehaviorModel` (with the pilot's timing, the residuals are of the pilot's command at the
         seen state).
@@ -156,12 +156,12 @@ class IOCOnlyModel(BehaviorModel):
     has_variability: ClassVar[bool] = True
 
     @classmethod
-    def for_method(cls, system: LinearSystem, settings: MethodSettings) -> IOCOnlyModel:
-        return cls(system, gain_method=settings.gain_method, timing=settings.timing, task=settings.task)
+    def for_method(cls, plant: LinearSystem, settings: MethodSettings) -> IOCOnlyModel:
+        return cls(plant, gain_method=settings.gain_method, timing=settings.timing, task=settings.task)
 
     def __init__(
         self,
-        system: LinearSystem,
+        plant: LinearSystem,
         gain_method: str = IV_OR_DIRECT,
         timing: str | tuple[float, float] = TIMING,
         structure: str = "full",
@@ -169,10 +169,10 @@ class IOCOnlyModel(BehaviorModel):
         noise: str = "calibrated",
         noise_window: float = 2.0,
         noise_folds: int = 3,
-        noise_horizon_s: float = 3.0,
+        noise_horizon_s: float = NOISE_HORIZON_S,
         task: PilotTask | str | dict | None = None,
     ) -> None:
-        super().__init__(system)
+        super().__init__(plant)
         self.task = task
         self.gain_method = gain_method
         self.timing = timing
@@ -189,7 +189,7 @@ class IOCOnlyModel(BehaviorModel):
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> IOCOnlyModel:
         """K̂ by eqs. (12)-(14) and, optionally, the objective by eqs. (15)-(19); the residual second moment."""
         self._check_noise()
-        ds = demo_list(demos, self.system, "IOCOnlyModel.fit")
+        ds = demo_list(demos, self.plant, "IOCOnlyModel.fit")
         fit_regulator(self, ds)
         K = self.K_
         t = self._timing()
@@ -202,7 +202,7 @@ class IOCOnlyModel(BehaviorModel):
                 seen, command, acted = commands(d.x, d.u, t)
                 W.append((command - linear(seen, seen_steps(len(seen), t)))[acted])
         Wall = np.concatenate(W)
-        m = self.system.m
+        m = self.plant.m
         # a tiny floor keeps the factor defined for an input that never deviates from K̂x
         self.residual_cov_ = Wall.T @ Wall / len(Wall) + 1e-12 * np.eye(m)
         self._fit_common(ds, getattr(demos, "labels", []))
@@ -214,16 +214,16 @@ class IOCOnlyModel(BehaviorModel):
         """The constant residual Gaussian at every state: zero mean, covariance ``E[ŵŵᵀ]``."""
         self._check_fitted("variability")
         X = self._states(X, "IOCOnlyModel.variability")
-        N, m = X.shape[0], self.system.m
+        N, m = X.shape[0], self.plant.m
         return np.zeros((N, m)), np.broadcast_to(self.residual_cov_, (N, m, m)).copy()
 
     def _task(self, x0: Any, target: Any) -> tuple[np.ndarray, np.ndarray]:
-        n = self.system.n
+        n = self.plant.n
         x0 = np.zeros(n) if x0 is None else as_vector(x0, n, "start state x0")
         return x0, self.default_target(x0) if target is None else as_vector(target, n, "target")
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
-        cov, m = self.residual_cov_, self.system.m
+        cov, m = self.residual_cov_, self.plant.m
         linear = self._linear(x0, target)
 
         def policy(X: np.ndarray, k: Any = None) -> tuple[np.ndarray, np.ndarray]:
@@ -240,7 +240,7 @@ class IOCOnlyModel(BehaviorModel):
         return header, {"K": self.K_, "residual_cov": self.residual_cov_, **obj_arrays}
 
     def _restore(self, mf: ModelFile) -> None:
-        n, m = self.system.n, self.system.m
+        n, m = self.plant.n, self.plant.m
         self.K_ = np.array(mf.array("K", (m, n)))
         self.residual_cov_ = np.array(mf.array("residual_cov", (m, m)))
         self.objective_ = objective_restore(mf)
@@ -271,16 +271,16 @@ class PersistenceModel(BehaviorModel):
     models_inputs: ClassVar[bool] = False
     draws_samples: ClassVar[bool] = False
 
-    def __init__(self, system: LinearSystem) -> None:
-        super().__init__(system)
+    def __init__(self, plant: LinearSystem) -> None:
+        super().__init__(plant)
 
     def _transition(self) -> np.ndarray:
-        return self.system.r.constant_velocity(self.system.n, self.system.dt)
+        return self.plant.r.constant_velocity(self.plant.n, self.plant.dt)
 
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> PersistenceModel:
         """Nothing to learn but the shapes and the default target; checks the demonstrations like the others."""
-        ds = demo_list(demos, self.system, "PersistenceModel.fit")
-        m = self.system.m
+        ds = demo_list(demos, self.plant, "PersistenceModel.fit")
+        m = self.plant.m
         self._fit_common(ds, getattr(demos, "labels", []))
         self.noise_scale_, self.noise_rho_ = np.ones(m), np.zeros(m)
         self.noise_band_factor_, self.noise_band_coverage_ = 1.0, float("nan")
@@ -288,10 +288,10 @@ class PersistenceModel(BehaviorModel):
         return self
 
     def _dynamics(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.transition_, np.zeros_like(self.system.B)
+        return self.transition_, np.zeros_like(self.plant.B)
 
     def _policy(self, x0: np.ndarray, target: np.ndarray) -> Policy:
-        m = self.system.m
+        m = self.plant.m
 
         def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             return np.zeros((X.shape[0], m)), np.zeros((X.shape[0], m, m))
@@ -303,5 +303,5 @@ class PersistenceModel(BehaviorModel):
         return {}, {"transition": self.transition_}
 
     def _restore(self, mf: ModelFile) -> None:
-        n = self.system.n
+        n = self.plant.n
         self.transition_ = np.array(mf.array("transition", (n, n)))

@@ -106,27 +106,27 @@ class BehaviorModel(abc.ABC):
     #: ``n_components="cv"`` chooses its settings by cross-validation.
     chooses_settings: ClassVar[bool] = False
 
-    def __init__(self, system: LinearSystem) -> None:
-        self.system = system
+    def __init__(self, plant: LinearSystem) -> None:
+        self.plant = plant
 
     @classmethod
-    def for_method(cls, system: LinearSystem, settings: MethodSettings) -> BehaviorModel:
+    def for_method(cls, plant: LinearSystem, settings: MethodSettings) -> BehaviorModel:
         """An unfitted model for a comparison with ``settings`` (the ones this class has); default: none."""
-        return cls(system)
+        return cls(plant)
 
     # -- scikit-learn conventions ---------------------------------------------------------------------------
     @classmethod
     def _param_names(cls) -> list[str]:
         sig = inspect.signature(cls.__init__)
-        return [p for p in sig.parameters if p not in ("self", "system")]
+        return [p for p in sig.parameters if p not in ("self", "plant")]
 
     def get_params(self) -> dict[str, Any]:
-        """The constructor settings (without the system)."""
+        """The constructor settings (without the plant)."""
         return {p: getattr(self, p) for p in self._param_names()}
 
     def clone(self) -> BehaviorModel:
-        """An unfitted copy with the same system and settings."""
-        return type(self)(self.system, **self.get_params())
+        """An unfitted copy with the same plant and settings."""
+        return type(self)(self.plant, **self.get_params())
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
@@ -137,7 +137,7 @@ class BehaviorModel(abc.ABC):
             raise ModelError(f"{type(self).__name__}.{where}: the model is not fitted yet; call fit(demos) first")
 
     def _task(self, x0: Any, target: Any) -> tuple[np.ndarray, np.ndarray]:
-        n = self.system.n
+        n = self.plant.n
         x0 = as_vector(x0, n, "start state x0")
         target = self.default_target(x0) if target is None else as_vector(target, n, "target")
         return x0, target
@@ -152,18 +152,18 @@ class BehaviorModel(abc.ABC):
         """
         self._check_fitted("default_target")
         offset = getattr(self, "goal_offset_", None)
-        pos = list(self.system.r.position)
+        pos = list(self.plant.r.position)
         if offset is None or not pos:
             return self.target_
-        x0 = as_vector(x0, self.system.n, "start state x0")
+        x0 = as_vector(x0, self.plant.n, "start state x0")
         target = np.array(self.target_, dtype=float)
         target[pos] = x0[pos] + offset[pos]
         return target
 
     def demos_at_model_dt(self, demos: DemonstrationSet, *, resample: bool = False) -> DemonstrationSet:
-        """``demos`` checked against the model's sampling step ``system.dt``, resampled to it on request.
+        """``demos`` checked against the model's sampling step ``plant.dt``, resampled to it on request.
 
-        A model steps ``x̂⁺ = A x̂ + B û`` once per ``system.dt``: a start state from demonstrations at
+        A model steps ``x̂⁺ = A x̂ + B û`` once per ``plant.dt``: a start state from demonstrations at
         another step would be labelled with the wrong times and compared with the wrong samples.
 
         Raises
@@ -172,7 +172,7 @@ class BehaviorModel(abc.ABC):
             ``demos`` are sampled at another step and ``resample`` is false, or have other states / inputs.
         """
         self._check_fitted("demos_at_model_dt")
-        sys_ = self.system
+        sys_ = self.plant
         if (demos.n_states, demos.n_inputs) != (sys_.n, sys_.m):
             raise ModelError(
                 f"demonstrations {demos!r} have {demos.n_states} states and {demos.n_inputs} inputs; the model "
@@ -194,7 +194,7 @@ class BehaviorModel(abc.ABC):
 
     def _dynamics(self) -> tuple[np.ndarray, np.ndarray]:
         """The (A, B) a rollout steps with: the plant's (the persistence baseline replaces it)."""
-        return self.system.A, self.system.B
+        return self.plant.A, self.plant.B
 
     def _timing(self) -> timed.Timing | None:
         """The pilot's timing the model applies between its policy and the plant (:mod:`workbench.models.timed`), or
@@ -211,7 +211,7 @@ class BehaviorModel(abc.ABC):
 
     def _reference(self, target: np.ndarray) -> np.ndarray:
         """The state the linear term regulates to for a task: its target if fitted goal-relative, else 0."""
-        return target if getattr(self, "goal_relative_", False) else np.zeros(self.system.n)
+        return target if getattr(self, "goal_relative_", False) else np.zeros(self.plant.n)
 
     @property
     def pilot_task(self) -> PilotTask:
@@ -223,11 +223,11 @@ class BehaviorModel(abc.ABC):
     @property
     def regulated_idx(self) -> tuple[int, ...]:
         """The regulated states' indices (every state for a model that predates the task)."""
-        return tuple(getattr(self, "regulated_", None) or range(self.system.n))
+        return tuple(getattr(self, "regulated_", None) or range(self.plant.n))
 
     def _linear(self, x0: np.ndarray, target: np.ndarray) -> LinearTerm:
         """The linear part ``K̂ (x − x_ref[k]) + u_ff[k]`` of the input for the task (``x0``, ``target``)."""
-        return linear_term(self.system, self.pilot_task, self.K_, x0, target)
+        return linear_term(self.plant, self.pilot_task, self.K_, x0, target)
 
     def pilot_view(self, demos: DemonstrationSet | Sequence[Demonstration]) -> list:
         """The demonstrations as the model's regulator saw them (:func:`workbench.models.regulator.pilot_view`):
@@ -239,15 +239,15 @@ class BehaviorModel(abc.ABC):
         task = self.pilot_task
         if self._timing() is not None:
             task = task.with_(delay_s=0.0, lag_s=0.0)
-        return pilot_view(self.system, task, list(demos))
+        return pilot_view(self.plant, task, list(demos))
 
     @property
     def plant_regulated(self) -> LinearSystem:
         """The plant of the regulated states (``regulator_plant_``; the whole plant for an older model file)."""
-        return getattr(self, "regulator_plant_", None) or regulator_plant(self.system, self.regulated_idx)
+        return getattr(self, "regulator_plant_", None) or regulator_plant(self.plant, self.regulated_idx)
 
     def _states(self, X: Any, where: str) -> np.ndarray:
-        n = self.system.n
+        n = self.plant.n
         try:
             X = np.asarray(X, dtype=float)
         except (TypeError, ValueError):
@@ -305,8 +305,8 @@ class BehaviorModel(abc.ABC):
         known = all(d.target is not None for d in demos)
         self.goal_offset_ = None if known else (goals - np.array([d.x[0] for d in demos])).mean(axis=0)
         self.state_envelope_ = state_envelope(demos)
-        self.n_features_in_ = self.system.n
-        self.n_outputs_ = self.system.m
+        self.n_features_in_ = self.plant.n
+        self.n_outputs_ = self.plant.m
         self.n_demos_ = len(demos)
         self.n_samples_ = int(sum(len(d) for d in demos))
         self.labels_ = tuple(str(x) for x in labels)
@@ -332,7 +332,7 @@ class BehaviorModel(abc.ABC):
         """``L(x)⁻¹(u − m(x))`` along every demonstration, in its own task frames (for ``unseen`` trials, the goal
         a prediction would use: the known target, else :meth:`default_target`, never the recorded end). With the
         pilot's timing, of the command at the seen state on the samples the pilot acted on."""
-        m = self.system.m
+        m = self.plant.m
         t = self._timing()
         out = []
         for d in demos:
@@ -360,12 +360,12 @@ class BehaviorModel(abc.ABC):
         few demonstrations for the folds, or a fold that cannot be fitted, the in-sample residuals are used
         and the band is not calibrated (``noise_band_coverage_`` is NaN).
         """
-        m = self.system.m
+        m = self.plant.m
         self.noise_band_factor_, self.noise_band_coverage_ = 1.0, float("nan")
         if self.noise == "gmr":
             self.noise_scale_, self.noise_rho_ = np.ones(m), np.zeros(m)
             return
-        window = max(1, int(round(self.noise_window / self.system.dt)))
+        window = max(1, int(round(self.noise_window / self.plant.dt)))
         k = int(self.noise_folds)
         held_out: list[tuple[BehaviorModel, list[Demonstration]]] | None = None
         if k >= 2 and len(demos) >= 2 * k:
@@ -374,7 +374,7 @@ class BehaviorModel(abc.ABC):
             held_out = []
             for fold in folds:
                 held = set(fold.tolist())
-                sub = type(self)(self.system, **{**self.get_params(), **self._fold_settings()})
+                sub = type(self)(self.plant, **{**self.get_params(), **self._fold_settings()})
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore", ConvergenceWarning)
@@ -389,7 +389,7 @@ class BehaviorModel(abc.ABC):
             return
         E_list = [e for sub, ds in held_out for e in sub._whitened(ds, unseen=True)]
         scale, rho = fit_noise(E_list, window)
-        H = max(1, int(round(self.noise_horizon_s / self.system.dt)))
+        H = max(1, int(round(self.noise_horizon_s / self.plant.dt)))
         cases = []
         every = max(1, -(-len(demos) // _CALIBRATION_TRIALS))
         for sub, ds in held_out:
@@ -401,8 +401,8 @@ class BehaviorModel(abc.ABC):
                                   sub.pasts(d, starts), sub._timing()))
         self.noise_scale_, self.noise_rho_ = scale, rho
         if cases:
-            idx = self.system.r.position or tuple(range(self.system.n))
-            factor, cov = calibrate_band_scale(cases, self.system.A, self.system.B, scale, rho, idx)
+            idx = self.plant.r.position or tuple(range(self.plant.n))
+            factor, cov = calibrate_band_scale(cases, self.plant.A, self.plant.B, scale, rho, idx)
             self.noise_scale_ = scale * factor
             self.noise_band_factor_, self.noise_band_coverage_ = factor, cov
 
@@ -483,7 +483,7 @@ class BehaviorModel(abc.ABC):
         samples : int
             S > 0 adds a Monte Carlo rollout of S trajectories and its percentile bands.
         clip : bool
-            Clip every input (mean and sampled) to the system's bounds ``u_min``/``u_max``.
+            Clip every input (mean and sampled) to the plant's bounds ``u_min``/``u_max``.
         seed : int or Generator, optional
             Seed of the Monte Carlo draws.
         percentiles : sequence of float
@@ -501,7 +501,7 @@ class BehaviorModel(abc.ABC):
             trial's first sample (steady there, or at rest, as the model's trials started).
         """
         self._check_fitted("predict")
-        x0 = as_vector(x0, self.system.n, f"{type(self).__name__}.predict: start state x0")
+        x0 = as_vector(x0, self.plant.n, f"{type(self).__name__}.predict: start state x0")
         return self.predict_many(
             x0[None, :],
             n_steps,
@@ -577,7 +577,7 @@ class BehaviorModel(abc.ABC):
         timing = self._timing()
         # with pasts and no task_steps, each start's step is its past's sample in its trial
         K0t = None if task_steps is None and pasts is not None else K0
-        sys_ = self.system
+        sys_ = self.plant
         A, B = self._dynamics()
         clip_fn = sys_.clip if clip else None
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from workbench.defaults import DEFAULT_N_COMPONENTS, N_COMPONENTS, PAPER_SETTINGS, TIMING
+from workbench.defaults import DEFAULT_N_COMPONENTS, PAPER_N_COMPONENTS, PAPER_SETTINGS, TIMING
 from workbench.errors import DataError
 from workbench.method.gain import IV_OR_DIRECT
 from workbench.models.behavior import BehaviorModel, MethodSettings
@@ -27,7 +27,6 @@ __all__ = ["METHODS", "METHOD_TITLES", "MODEL_CLASSES", "default_model", "make_m
 
 #: Every registered method's class by class name (what a model file records).
 MODEL_CLASSES: dict[str, type[BehaviorModel]] = model_classes()
-PAPER_N_COMPONENTS = N_COMPONENTS  # G of the method paper's quadrotor study
 
 
 def resolve_components(n_components: int | str, chooses_settings: bool) -> int | str:
@@ -77,7 +76,7 @@ def default_model(
 
 def make_model(
     method: str,
-    system: Any,
+    plant: Any,
     *,
     n_components: int | str = DEFAULT_N_COMPONENTS,
     random_state: int | None = 0,
@@ -114,12 +113,12 @@ def make_model(
         raise DataError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
     cls = registered(kind).load_class()
     G = resolve_components(n_components, cls.chooses_settings)
-    return cls.for_method(system, MethodSettings(G, random_state, gain_method, fit_objective, cv_grid,
+    return cls.for_method(plant, MethodSettings(G, random_state, gain_method, fit_objective, cv_grid,
                                                  timing=timing, task=task))
 
 
 def make_models(
-    system: Any,
+    plant: Any,
     methods: Sequence[str] = METHODS,
     *,
     n_components: int | str = DEFAULT_N_COMPONENTS,
@@ -133,5 +132,5 @@ def make_models(
 
     The proposed model skips its objective by default here: a comparison scores predictions, which never need it.
     """
-    return {m: make_model(m, system, n_components=n_components, random_state=random_state, gain_method=gain_method,
+    return {m: make_model(m, plant, n_components=n_components, random_state=random_state, gain_method=gain_method,
                           fit_objective=fit_objective, task=task) for m in methods}

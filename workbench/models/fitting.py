@@ -50,8 +50,8 @@ ENVELOPE_MARGIN = 0.1
 MIN_DISTINCT_DEMOS = 3
 
 
-def demo_list(demos: DemonstrationSet | Iterable[Demonstration], system: LinearSystem, where: str) -> list:
-    """The demonstrations as a list, checked against the system (shapes, sampling step)."""
+def demo_list(demos: DemonstrationSet | Iterable[Demonstration], plant: LinearSystem, where: str) -> list:
+    """The demonstrations as a list, checked against the plant (shapes, sampling step)."""
     if isinstance(demos, Demonstration):
         demos = [demos]
     try:
@@ -62,7 +62,7 @@ def demo_list(demos: DemonstrationSet | Iterable[Demonstration], system: LinearS
         ) from None
     if not out:
         raise ModelError(f"{where}: no demonstrations to fit")
-    n, m = system.n, system.m
+    n, m = plant.n, plant.m
     for j, d in enumerate(out):
         if not isinstance(d, Demonstration):
             raise ModelError(f"{where}: item {j} is a {type(d).__name__}, not a Demonstration")
@@ -72,10 +72,10 @@ def demo_list(demos: DemonstrationSet | Iterable[Demonstration], system: LinearS
                 f"system has n={n}, m={m}"
             )
     dt = getattr(demos, "dt", None)
-    if dt is not None and not math.isclose(float(dt), system.dt, rel_tol=1e-6):
+    if dt is not None and not math.isclose(float(dt), plant.dt, rel_tol=1e-6):
         raise ModelError(
-            f"{where}: the demonstrations are sampled at dt={dt:g} s but the system is discretized at "
-            f"dt={system.dt:g} s; resample the demonstrations or rebuild the system"
+            f"{where}: the demonstrations are sampled at dt={dt:g} s but the plant is discretized at "
+            f"dt={plant.dt:g} s; resample the demonstrations or rebuild the plant"
         )
     # identical copies (a file loaded twice, one trial repeated) add samples but no information
     distinct = len({(d.x.tobytes(), d.u.tobytes()) for d in out})
@@ -130,21 +130,21 @@ def shared_gain_memo() -> dict | None:
 
 
 def fit_gain(
-    demos: Sequence[Demonstration], refs: Sequence[np.ndarray], system: LinearSystem, method: str
+    demos: Sequence[Demonstration], refs: Sequence[np.ndarray], plant: LinearSystem, method: str
 ) -> tuple[np.ndarray, GainChoice]:
     """K̂ of ``u = K̂(x − r)`` by :func:`~workbench.method.gain.choose_gain` on the shifted states, and which
     estimator made it (``method`` may be the rule ``"iv-or-direct"``)."""
     memo = _GAINS.get()
     key = None
     if memo is not None:
-        key = (tuple(id(d) for d in demos), b"".join(np.asarray(r, dtype=float).tobytes() for r in refs), id(system),
+        key = (tuple(id(d) for d in demos), b"".join(np.asarray(r, dtype=float).tobytes() for r in refs), id(plant),
                method)
         if key in memo:
             K, choice = memo[key]
             return K.copy(), choice
     shifted = [SimpleNamespace(x=d.x - r, u=d.u, id=d.id, meta=getattr(d, "meta", {}))  # meta: the flight mode
                 for d, r in zip(demos, refs, strict=True)]
-    K, choice = choose_gain(shifted, system, method)
+    K, choice = choose_gain(shifted, plant, method)
     K = np.ascontiguousarray(K)
     if memo is not None:
         memo[key] = (K.copy(), choice)
@@ -256,7 +256,7 @@ def fit_objective_or_reason(model: Any, K: np.ndarray, plant: LinearSystem | Non
     """
     if not getattr(model, "fit_objective", False):
         return None, None
-    plant = model.system if plant is None else plant
+    plant = model.plant if plant is None else plant
     try:
         return inverse_lqr(plant.A, plant.B, K, structure=model.structure), None
     except ModelError as exc:

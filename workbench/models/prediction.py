@@ -89,7 +89,7 @@ class Prediction:
     n_samples : int
         S (0 for a mean-only prediction).
     clipped : bool
-        Whether inputs were clipped to the system's bounds.
+        Whether inputs were clipped to the plant's bounds.
     method : str
         The model class that made the prediction.
     state_names, input_names : tuple of str

@@ -31,7 +31,7 @@ import numpy as np
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.pilot_task import PilotTask
-from workbench.defaults import N_COMPONENTS, REG_COVAR, TIMING
+from workbench.defaults import N_COMPONENTS, NOISE_HORIZON_S, REG_COVAR, TIMING
 from workbench.errors import DegenerateFitWarning
 from workbench.method.frames import FrameSpec
 from workbench.method.gain import IV_OR_DIRECT
@@ -66,7 +66,7 @@ class HumanBehaviorModel(TaskGMRModel):
 
     Parameters
     ----------
-    system : LinearSystem
+    plant : LinearSystem
         The known plant (A, B), Assumptions 1-2.
     n_components : int or "cv"
         Number of Gaussian components G (the paper uses 5); "cv" chooses it by cross-validation over the
@@ -201,7 +201,7 @@ class HumanBehaviorModel(TaskGMRModel):
 
     def __init__(
         self,
-        system: LinearSystem,
+        plant: LinearSystem,
         n_components: int | str = N_COMPONENTS,
         frames: Sequence[str] | FrameSpec = ("start", "goal"),
         gain_method: str = IV_OR_DIRECT,
@@ -219,14 +219,14 @@ class HumanBehaviorModel(TaskGMRModel):
         noise: str = "calibrated",
         noise_window: float = 2.0,
         noise_folds: int = 3,
-        noise_horizon_s: float = 3.0,
+        noise_horizon_s: float = NOISE_HORIZON_S,
         auto_criterion: str = "prediction",
         cv_components: tuple[int, ...] | None = None,
         cv_reg_covars: tuple[float, ...] | None = None,
         variability_mean: bool = True,
         task: PilotTask | str | dict | None = None,
     ) -> None:
-        super().__init__(system)
+        super().__init__(plant)
         self.task = task
         self.n_components = n_components
         self.frames = frames
@@ -252,9 +252,9 @@ class HumanBehaviorModel(TaskGMRModel):
         self.variability_mean = variability_mean
 
     @classmethod
-    def for_method(cls, system: LinearSystem, settings: MethodSettings) -> HumanBehaviorModel:
+    def for_method(cls, plant: LinearSystem, settings: MethodSettings) -> HumanBehaviorModel:
         s = settings
-        return cls(system, n_components=s.n_components, reg_covar="cv" if s.n_components == "cv" else REG_COVAR,
+        return cls(plant, n_components=s.n_components, reg_covar="cv" if s.n_components == "cv" else REG_COVAR,
                    random_state=s.random_state, gain_method=s.gain_method, fit_objective=s.fit_objective,
                    timing=s.timing, task=s.task, **(s.cv_grid or {}))
 
@@ -269,7 +269,7 @@ class HumanBehaviorModel(TaskGMRModel):
         self.auto_ = None
         self.variability_mean_ = bool(self.variability_mean)
         self.reg_covar_ = float(self.reg_covar)
-        ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
+        ds = demo_list(demos, self.plant, "HumanBehaviorModel.fit")
         fit_regulator(self, ds)
         self._fit_common(ds, getattr(demos, "labels", []))
         self._fit_gmr(*self._gmr_data(ds))
@@ -300,7 +300,7 @@ class HumanBehaviorModel(TaskGMRModel):
         """Choose the "cv" settings by cross-validation, then fit with them (the settings stay "cv")."""
         from workbench.models.autoconfig import _CV_MAX_ITER, _CV_TOL, NoCandidateFitted, choose_settings
 
-        ds = demo_list(demos, self.system, "HumanBehaviorModel.fit")
+        ds = demo_list(demos, self.plant, "HumanBehaviorModel.fit")
         if len(ds) < 2:
             return self._fit_uncrossed(demos, ds)
         try:
@@ -311,7 +311,7 @@ class HumanBehaviorModel(TaskGMRModel):
             # defaults on all of them, and the reason said, rather than no model
             return self._fit_uncrossed(demos, ds, because=str(exc))
         # the chosen candidate is fitted as it was scored: EM capped and stopped as the candidates' was
-        chosen = type(self)(self.system, **{**self.get_params(), "n_components": auto.n_components,
+        chosen = type(self)(self.plant, **{**self.get_params(), "n_components": auto.n_components,
                                             "reg_covar": auto.reg_covar,
                                             "max_iter": min(int(self.max_iter), _CV_MAX_ITER),
                                             "tol": max(float(self.tol), _CV_TOL)}).fit(demos)
@@ -335,7 +335,7 @@ class HumanBehaviorModel(TaskGMRModel):
         warnings.warn(f"HumanBehaviorModel.fit: {len(ds)} demonstration(s), nothing to cross-validate the 'cv' "
                       f"settings on{why}: fitted with G = {G}, reg_covar = {reg:g} (the defaults, G capped by the "
                       f"{n_samples} samples)", DegenerateFitWarning, stacklevel=3)
-        chosen = type(self)(self.system, **{**self.get_params(), "n_components": G, "reg_covar": reg}).fit(demos)
+        chosen = type(self)(self.plant, **{**self.get_params(), "n_components": G, "reg_covar": reg}).fit(demos)
         self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
         self.auto_ = None
         self.variability_mean_ = bool(self.variability_mean)
@@ -416,7 +416,7 @@ class HumanBehaviorModel(TaskGMRModel):
         return header, {"K": self.K_, **arrays, **obj_arrays}
 
     def _restore(self, mf: ModelFile) -> None:
-        n, m = self.system.n, self.system.m
+        n, m = self.plant.n, self.plant.m
         self.K_ = np.array(mf.array("K", (m, n)))
         self.objective_ = objective_restore(mf)
         err = mf.header.get("objective_error")

@@ -34,11 +34,11 @@ __all__ = ["settle_task", "regulator_plant", "references_of", "pilot_view", "del
 class _Named(list):
     """Demonstrations with the plant's state names and roles, as :func:`decide_task` reads a set."""
 
-    def __init__(self, demos: Sequence[Any], system: LinearSystem) -> None:
+    def __init__(self, demos: Sequence[Any], plant: LinearSystem) -> None:
         super().__init__(demos)
-        self.state_names = system.state_names
-        self.input_names = system.input_names
-        self.roles = system.roles
+        self.state_names = plant.state_names
+        self.input_names = plant.input_names
+        self.roles = plant.roles
 
 
 def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
@@ -52,30 +52,30 @@ def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
         An override or data that cannot make a task (the message says which).
     """
     spec = getattr(model, "task", None)
-    system = model.system
+    plant = model.plant
     try:
-        task = decide_task(_Named(demos, system), spec)
+        task = decide_task(_Named(demos, plant), spec)
     except ValueError as exc:
         raise ModelError(f"{type(model).__name__}: the pilot's task: {exc}") from None
     if isinstance(spec, PilotTask):  # a settled task handed on (a fold of this model): keep what it learned
         task = task.with_(reference_speed_mps=spec.reference_speed_mps, delay_s=spec.delay_s, lag_s=spec.lag_s,
                           plant_group=spec.plant_group, decided_by=spec.decided_by or task.decided_by,
                           extra=dict(spec.extra))
-    group = getattr(system, "plant_group", None)  # what the sticks command, where the plant knows it
+    group = getattr(plant, "plant_group", None)  # what the sticks command, where the plant knows it
     if group is not None and task.plant_group is None:
         task = task.with_(plant_group=str(group))
     paced = task.relative_to == "reference" and not task.reference_speed_mps > 0
     if paced:
-        task = _with_pace(system, task, demos)
+        task = _with_pace(plant, task, demos)
     timed = _settle_timing(model, task, demos)
     if timed is not None:  # the timing the model identified (or none: then the paper's instantaneous u = K x)
         identified = timed.K is not None
         task = task.with_(delay_s=float(timed.pilot.delay_s) if identified else 0.0,
                           lag_s=float(timed.pilot.lag_s) if identified else 0.0)
-        if paced and delay_steps(task, system.dt):
+        if paced and delay_steps(task, plant.dt):
             # the pace's criterion pairs each input with the state the pilot saw: the pace again with the delay,
             # and the timing again on that reference
-            task = _with_pace(system, task.with_(reference_speed_mps=0.0), demos)
+            task = _with_pace(plant, task.with_(reference_speed_mps=0.0), demos)
             timed = _settle_timing(model, task, demos)
             identified = timed.K is not None
             task = task.with_(delay_s=float(timed.pilot.delay_s) if identified else 0.0,
@@ -83,10 +83,10 @@ def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
     return task
 
 
-def _with_pace(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> PilotTask:
+def _with_pace(plant: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> PilotTask:
     """The task with its reference's speed fitted to the trials (the pace the pilot follows)."""
-    speed = fit_speed(_generator(system), [(d.x, d.target) for d in demos], task.reference,
-                      cost=_pace(system, task, demos))
+    speed = fit_speed(_generator(plant), [(d.x, d.target) for d in demos], task.reference,
+                      cost=_pace(plant, task, demos))
     return task.with_(reference_speed_mps=speed)
 
 
@@ -102,22 +102,22 @@ def _settle_timing(model: Any, task: PilotTask, demos: Sequence[Any]) -> Any:
     setting = getattr(model, "timing", None)
     if setting is None or getattr(model, "gain_method", None) is None:
         return None
-    system = model.system
-    idx = list(task.regulated_indices(system.state_names))
-    plant = regulator_plant(system, idx)
+    plant = model.plant
+    idx = list(task.regulated_indices(plant.state_names))
+    inner = regulator_plant(plant, idx)
     try:
-        views = pilot_view(system, task.with_(delay_s=0.0, lag_s=0.0), demos)
+        views = pilot_view(plant, task.with_(delay_s=0.0, lag_s=0.0), demos)
     except DataError as exc:
         raise ModelError(str(exc)) from None
     # the candidates of one cross-validation fold identify the same timing on the same trials: once
     # (workbench.models.fitting.shared_gains)
     memo = shared_gain_memo()
-    key = ("timing", tuple(id(d) for d in demos), repr(task.with_(delay_s=0.0, lag_s=0.0)), id(system),
+    key = ("timing", tuple(id(d) for d in demos), repr(task.with_(delay_s=0.0, lag_s=0.0)), id(plant),
            model.gain_method, repr(setting))
     if memo is not None and key in memo:
         timed = memo[key]
     else:
-        timed = timed_gain(views, plant, model.gain_method, setting)
+        timed = timed_gain(views, inner, model.gain_method, setting)
         if memo is not None:
             memo[key] = timed
     model._settled_timing = timed
@@ -126,15 +126,15 @@ def _settle_timing(model: Any, task: PilotTask, demos: Sequence[Any]) -> Any:
     return timed
 
 
-def _pace(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> Any:
+def _pace(plant: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> Any:
     """The criterion a reference's pace is fitted by: how well the regulator ``u − u_ff = K (x − x_ref)`` explains the
     inputs through the instruments of the ``iv`` gain (the 2SLS fit's projected residual, a GMM criterion: consistent
     where least squares is not, the pilot's own drift having made its states). The positions alone prefer a reference
     slower than the one the pilot follows: a soft position loop leaves it behind for long."""
     from workbench.method.gain import iv_instruments
 
-    idx = list(task.regulated_indices(system.state_names))
-    lag = delay_steps(task, system.dt)
+    idx = list(task.regulated_indices(plant.state_names))
+    lag = delay_steps(task, plant.dt)
 
     def misfit(refs: list[tuple[np.ndarray, np.ndarray]]) -> float:
         E, U, Z = [], [], []
@@ -154,7 +154,7 @@ def _pace(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> Any:
     return misfit
 
 
-def regulator_plant(system: LinearSystem, idx: Sequence[int]) -> LinearSystem:
+def regulator_plant(plant: LinearSystem, idx: Sequence[int]) -> LinearSystem:
     """The plant restricted to the regulated states ``idx`` (the whole plant when they are all of them).
 
     The regulated states' rows of ``A`` may depend on unregulated ones (a position, say); that coupling is
@@ -167,13 +167,13 @@ def regulator_plant(system: LinearSystem, idx: Sequence[int]) -> LinearSystem:
         plant an input can stabilize.
     """
     idx = list(idx)
-    if len(idx) == system.n:
-        return system
-    names = tuple(system.state_names[i] for i in idx)
+    if len(idx) == plant.n:
+        return plant
+    names = tuple(plant.state_names[i] for i in idx)
     try:
-        return LinearSystem(system.A[np.ix_(idx, idx)], system.B[idx], system.dt, names, system.input_names,
-                            u_min=system.u_min, u_max=system.u_max, roles=system.roles.restricted(names),
-                            plant_group=getattr(system, "plant_group", None))
+        return LinearSystem(plant.A[np.ix_(idx, idx)], plant.B[idx], plant.dt, names, plant.input_names,
+                            u_min=plant.u_min, u_max=plant.u_max, roles=plant.roles.restricted(names),
+                            plant_group=getattr(plant, "plant_group", None))
     except ModelError as exc:
         raise ModelError(f"the regulated states ({', '.join(names)}) do not make a plant the pilot's inputs can "
                          f"regulate: {exc}; regulate more states (--task …@states)") from None
@@ -182,25 +182,25 @@ def regulator_plant(system: LinearSystem, idx: Sequence[int]) -> LinearSystem:
 _GENERATORS: dict[int, tuple[LinearSystem, ReferenceGenerator]] = {}
 
 
-def _generator(system: LinearSystem) -> ReferenceGenerator:
-    hit = _GENERATORS.get(id(system))
-    if hit is not None and hit[0] is system:
+def _generator(plant: LinearSystem) -> ReferenceGenerator:
+    hit = _GENERATORS.get(id(plant))
+    if hit is not None and hit[0] is plant:
         return hit[1]
-    if not system.r.position:
+    if not plant.r.position:
         raise ModelError("a reference path needs the plant's position states (a mapping's [roles] position)")
-    gen = ReferenceGenerator.for_plant(system)
-    _GENERATORS[id(system)] = (system, gen)
+    gen = ReferenceGenerator.for_plant(plant)
+    _GENERATORS[id(plant)] = (plant, gen)
     return gen
 
 
-def references_of(system: LinearSystem, task: PilotTask, x0s: np.ndarray, goals: np.ndarray,
+def references_of(plant: LinearSystem, task: PilotTask, x0s: np.ndarray, goals: np.ndarray,
                   n_steps: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
     """``(x_ref (N_j, n), u_ff (N_j, m))`` per task (start ``x0s[j]``, goal ``goals[j]``): the goal held (goal-
     relative), zero (free flight), or the reference the strategy follows with its feedforward."""
-    n, m = system.n, system.m
+    n, m = plant.n, plant.m
     goals = np.atleast_2d(np.asarray(goals, dtype=float))
     if task.relative_to == "reference":
-        return _generator(system).trajectories(np.atleast_2d(x0s), goals, task.reference,
+        return _generator(plant).trajectories(np.atleast_2d(x0s), goals, task.reference,
                                                task.reference_speed_mps, list(n_steps))
     out = []
     for j, N in enumerate(n_steps):
@@ -214,7 +214,7 @@ def delay_steps(task: PilotTask, dt: float) -> int:
     return max(0, int(round(task.delay_s / dt)))
 
 
-def pilot_view(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> list[SimpleNamespace]:
+def pilot_view(plant: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> list[SimpleNamespace]:
     """Each demonstration as the pilot's regulator sees it (see the module docstring): ``x`` the regulated states'
     deviation from what they are driven to, ``delay_s`` earlier than ``u``, the input net of the feedforward;
     ``id`` and ``meta`` (the flight mode) come along.
@@ -225,15 +225,15 @@ def pilot_view(system: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> l
         A goal- or reference-relative task and a trial without its goal.
     """
     ds = list(demos)
-    idx = list(task.regulated_indices(system.state_names))
+    idx = list(task.regulated_indices(plant.state_names))
     if task.relative_to != "zero":
         missing = [d.id for d in ds if getattr(d, "target", None) is None]
         if missing:
             raise DataError(f"the pilot's task is relative to {task.relative_to} but trial(s) {missing[:3]} have no "
                             "goal (meta['target'])")
-    goals = np.array([d.target if task.relative_to != "zero" else np.zeros(system.n) for d in ds])
-    refs = references_of(system, task, np.array([d.x[0] for d in ds]), goals, [len(d.x) for d in ds])
-    lag = delay_steps(task, system.dt)
+    goals = np.array([d.target if task.relative_to != "zero" else np.zeros(plant.n) for d in ds])
+    refs = references_of(plant, task, np.array([d.x[0] for d in ds]), goals, [len(d.x) for d in ds])
+    lag = delay_steps(task, plant.dt)
     out = []
     for d, (x_ref, u_ff) in zip(ds, refs, strict=True):
         e = (d.x - x_ref)[:, idx]
@@ -281,16 +281,16 @@ class LinearTerm:
         return (X - self.x_ref[kk]) @ self.KT + self.u_ff[kk]
 
 
-def linear_term(system: LinearSystem, task: PilotTask, K: np.ndarray, x0: np.ndarray,
+def linear_term(plant: LinearSystem, task: PilotTask, K: np.ndarray, x0: np.ndarray,
                 target: np.ndarray) -> LinearTerm:
     """:class:`LinearTerm` of a model with gain ``K`` (on every state) for the task (``x0``, ``target``)."""
     if task.relative_to == "reference":
-        gen = _generator(system)
+        gen = _generator(plant)
         N = gen.steps_for(x0, target, task.reference, task.reference_speed_mps)
-        x_ref, u_ff = references_of(system, task, np.asarray(x0)[None], np.asarray(target)[None], [N])[0]
+        x_ref, u_ff = references_of(plant, task, np.asarray(x0)[None], np.asarray(target)[None], [N])[0]
         return LinearTerm(K, x_ref, u_ff)
-    held = np.asarray(target, dtype=float) if task.relative_to == "goal" else np.zeros(system.n)
-    return LinearTerm(K, held[None], np.zeros((1, system.m)))
+    held = np.asarray(target, dtype=float) if task.relative_to == "goal" else np.zeros(plant.n)
+    return LinearTerm(K, held[None], np.zeros((1, plant.m)))
 
 
 def legacy_task(goal_relative: bool) -> PilotTask:
@@ -318,32 +318,32 @@ def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
     from workbench.method.stability import judge_stability, refusal
     from workbench.models.fitting import fit_objective_or_reason, json_seed, shared_gain_memo
 
-    system = model.system
+    plant = model.plant
     task = settle_task(model, demos)
-    idx = task.regulated_indices(system.state_names)
-    plant = regulator_plant(system, idx)
+    idx = task.regulated_indices(plant.state_names)
+    inner = regulator_plant(plant, idx)
     timed = getattr(model, "_settled_timing", None)
     model._settled_timing = None
     with_timing = timed is not None and timed.K is not None
     try:  # with the pilot's timing the delay and the lag are the timing's (the view stays aligned)
-        views = pilot_view(system, task.with_(delay_s=0.0, lag_s=0.0) if with_timing else task, demos)
+        views = pilot_view(plant, task.with_(delay_s=0.0, lag_s=0.0) if with_timing else task, demos)
     except DataError as exc:
         raise ModelError(str(exc)) from None
     seed = json_seed(getattr(model, "random_state", None)) or 0
     if with_timing:
         K_r, choice = timed.K, timed.choice
-        stability = _timed_stability(plant, K_r, task, len(views))
+        stability = _timed_stability(inner, K_r, task, len(views))
     else:
         # the candidates of one cross-validation fold fit the same trials with the same task: their gain and its
         # stability's interval are computed once (workbench.models.fitting.shared_gains)
         memo = shared_gain_memo()
-        key = ("gain", tuple(id(d) for d in demos), repr(task), id(system), model.gain_method, seed)
+        key = ("gain", tuple(id(d) for d in demos), repr(task), id(plant), model.gain_method, seed)
         if memo is not None and key in memo:
             K_r, choice, stability = memo[key]
             K_r = K_r.copy()
         else:
-            K_r, choice = choose_gain(views, plant, model.gain_method, check=False)
-            stability = judge_stability(plant.A, plant.B, K_r, views, choice.method, plant.dt, plant.state_names,
+            K_r, choice = choose_gain(views, inner, model.gain_method, check=False)
+            stability = judge_stability(inner.A, inner.B, K_r, views, choice.method, inner.dt, inner.state_names,
                                         seed=seed)
             if memo is not None:
                 memo[key] = (K_r.copy(), choice, stability)
@@ -351,9 +351,9 @@ def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
             choice = GainChoice(choice.requested, choice.method,
                                 f"{choice.reason}; no timing: it could not be identified ({timed.why_none})")
     if stability.refused:
-        raise refusal(stability, demos, system.roles, choice.method)
-    model.task_, model.regulated_, model.regulator_plant_ = task, tuple(idx), plant
-    model.K_ = full_gain(K_r, idx, system.n)
+        raise refusal(stability, demos, plant.roles, choice.method)
+    model.task_, model.regulated_, model.regulator_plant_ = task, tuple(idx), inner
+    model.K_ = full_gain(K_r, idx, plant.n)
     model.gain_choice_, model.gain_method_ = choice, choice.method
     model.stability_ = stability
     model.goal_relative_ = task.relative_to != "zero"
@@ -362,7 +362,7 @@ def fit_regulator(model: Any, demos: Sequence[Any]) -> list[SimpleNamespace]:
         model.objective_error_ = (f"{stability.describe()}: no quadratic cost has a gain with ρ ≥ 1 (Assumption 3)"
                                   if getattr(model, "fit_objective", False) else None)
     else:
-        model.objective_, model.objective_error_ = fit_objective_or_reason(model, K_r, plant)
+        model.objective_, model.objective_error_ = fit_objective_or_reason(model, K_r, inner)
     return views
 
 

@@ -13,7 +13,7 @@ __all__ = ["select_components"]
 
 
 def select_components(
-    train: Any, system: Any, candidates: Sequence[int] = range(2, 9), seed: int = 0
+    train: Any, plant: Any, candidates: Sequence[int] = range(2, 9), seed: int = 0
 ) -> int:
     """G by BIC (TP-GMM parameter count) of the proposed model's variability fit: ``n_components="bic"`` (on a
     :class:`~workbench.data.demonstrations.DemonstrationSet`).
@@ -26,7 +26,7 @@ def select_components(
         if G * 20 > train.n_samples:  # far fewer samples than parameters: BIC is meaningless there
             break
         m = HumanBehaviorModel(
-            system, n_components=int(G), random_state=seed, fit_objective=False, noise_folds=0
+            plant, n_components=int(G), random_state=seed, fit_objective=False, noise_folds=0
         ).fit(train)
         bic = m.bic(train)
         if best is None or bic < best[0]:

@@ -56,7 +56,7 @@ class StoredModel(Protocol):
     the others (``gain_choice_``, ``variability_``, …) are read where a class has them.
     """
 
-    system: LinearSystem
+    plant: LinearSystem
     target_: np.ndarray
     noise_rho_: np.ndarray
     noise_scale_: np.ndarray
@@ -83,7 +83,7 @@ def save_model(model: StoredModel, path: str | os.PathLike) -> Path:
     what every model shares (plant, target, noise, training record, settings) and its class's ``_state()``."""
     model._check_fitted("save")
     header, arrays = model._state()
-    sys_ = model.system
+    sys_ = model.plant
     arrays = {"system/A": sys_.A, "system/B": sys_.B, "target": model.target_, "noise_rho": model.noise_rho_,
               "noise_scale": model.noise_scale_, **arrays}
     if getattr(model, "goal_offset_", None) is not None:
@@ -228,7 +228,7 @@ def gmr_state(model: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
 
 def gmr_restore(model: Any, mf: ModelFile, d_out: int) -> None:
     """A TP-GMM model's mixture from its file, checked against the plant and the settings."""
-    n = len(getattr(model, "regulated_", None) or range(model.system.n))  # the GMR's states: the regulated ones
+    n = len(getattr(model, "regulated_", None) or range(model.plant.n))  # the GMR's states: the regulated ones
     D = n + d_out
     fr = mf.header.get("frames")
     try:
@@ -280,13 +280,13 @@ def _restore_task(model: Any, fit: dict[str, Any], mf: ModelFile) -> None:
         task = (PilotTask.from_dict(rec) if isinstance(rec, dict)
                 else legacy_task(bool(fit.get("goal_relative", False))))
         model.task_ = task
-        model.regulated_ = task.regulated_indices(model.system.state_names)
+        model.regulated_ = task.regulated_indices(model.plant.state_names)
         stab = fit.get("stability")
         model.stability_ = Stability.from_dict(stab) if isinstance(stab, dict) else None
     except (KeyError, TypeError, ValueError) as exc:
         raise ModelFileError(f"{mf.path}: damaged model file: the pilot's task ({exc})") from None
     if model.has_gain:
-        model.regulator_plant_ = regulator_plant(model.system, model.regulated_)
+        model.regulator_plant_ = regulator_plant(model.plant, model.regulated_)
 
 
 def _text_or_none(value: Any, where: str) -> str | None:
@@ -324,7 +324,7 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[StoredModel]] | None
         s = h["system"]
         A = mf.array("system/A", (None, None))
         B = mf.array("system/B", (A.shape[0], None))
-        system = LinearSystem(
+        plant = LinearSystem(
             A, B, float(s["dt"]), tuple(s["state_names"]), tuple(s["input_names"]),
             u_min=mf.get("system/u_min"), u_max=mf.get("system/u_max"), fit_residual=s.get("fit_residual"),
             roles=Roles.from_json(s.get("roles"), f"{mf.path}: roles"),
@@ -359,8 +359,8 @@ def restore_model(mf: ModelFile, classes: Mapping[str, type[StoredModel]] | None
             settings["task"] = PilotTask.from_dict(settings["task"]["pilot_task"])
         except (TypeError, ValueError) as exc:
             raise ModelFileError(f"{mf.path}: damaged model file: task setting ({exc})") from None
-    model = cls(system, **settings)
-    n, m = system.n, system.m
+    model = cls(plant, **settings)
+    n, m = plant.n, plant.m
     try:
         model.target_ = np.array(mf.array("target", (n,)))
         model.goal_offset_ = np.array(mf.array("goal_offset", (n,))) if "goal_offset" in mf.arrays else None

@@ -34,11 +34,11 @@ class TaskGMRModel(BehaviorModel):
         # the frames act on the regulated states (a free flight's positions are not among them): the plant's roles
         # and a user's position indices are read in the regulated states' own numbering
         idx = self.regulated_idx
-        names = tuple(self.system.state_names[i] for i in idx)
-        roles = self.system.roles.restricted(names).resolve(names)
+        names = tuple(self.plant.state_names[i] for i in idx)
+        roles = self.plant.roles.restricted(names).resolve(names)
         pos = self.position_idx
         angle = self.angle_index
-        if len(idx) != self.system.n:
+        if len(idx) != self.plant.n:
             pos = None if pos is None or not set(pos) <= set(idx) else tuple(idx.index(i) for i in pos)
             angle = angle if not isinstance(angle, int | np.integer) else (idx.index(angle) if angle in idx
                                                                             else None)

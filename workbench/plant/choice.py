@@ -10,6 +10,7 @@ import functools
 from collections.abc import Callable
 
 from workbench.data.demonstrations import DemonstrationSet
+from workbench.defaults import HORIZON_S
 from workbench.errors import DataError
 from workbench.plant.system import LinearSystem, planar_quadrotor
 
@@ -18,7 +19,7 @@ __all__ = ["PLANT_CHOICES", "choose_plant", "plant_rule"]
 PLANT_CHOICES = ("auto", "paper", "identify")
 
 
-def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 3.0) -> LinearSystem:
+def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = HORIZON_S) -> LinearSystem:
     """The plant (A, B) for ``ds``: the paper's planar quadrotor, or identified from the data by least squares.
 
     ``auto`` takes the paper's model for data in its layout and at its step (the sample logs), and identifies
@@ -33,7 +34,7 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
     if choice == "paper" or (choice == "auto" and layout and abs(ds.dt - paper.dt) < 1e-9):
         if not layout:
             raise DataError(
-                f"--system paper needs states {list(paper.state_names)} and {paper.m} inputs; "
+                f"--plant paper needs states {list(paper.state_names)} and {paper.m} inputs; "
                 f"the data have {list(ds.state_names)} and {list(ds.input_names)}"
             )
         return planar_quadrotor(dt=ds.dt)
@@ -41,7 +42,7 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
                                  structure="auto", horizon_s=horizon_s)
 
 
-def plant_rule(choice: str = "auto", horizon_s: float = 3.0) -> Callable[[DemonstrationSet], LinearSystem]:
+def plant_rule(choice: str = "auto", horizon_s: float = HORIZON_S) -> Callable[[DemonstrationSet], LinearSystem]:
     """The plant of a study as a function of its training trials (:func:`choose_plant` on them), so that (A, B)
     is never identified from a trial the study then scores. A partial, not a lambda: the method-level comparison
     sends it to worker processes, where every split identifies its own plant."""

@@ -37,6 +37,7 @@ import numpy as np
 
 from workbench.data.plant_groups import describe_groups, plant_groups
 from workbench.data.roles import ResolvedRoles, Roles
+from workbench.defaults import HORIZON_S
 from workbench.errors import ModelError
 from workbench.frozen import readonly
 from workbench.plant.physics import GRAVITY, PhysicalCheck, StickResponse, group_checks, stick_responses
@@ -304,7 +305,7 @@ def _beyond_integrators(A: np.ndarray, n_int: int) -> float:
 
 
 def identify_plant(
-    demos: DemonstrationSet, structure: str = "auto", horizon_s: float = 3.0, translation_invariant: bool = False
+    demos: DemonstrationSet, structure: str = "auto", horizon_s: float = HORIZON_S, translation_invariant: bool = False
 ) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
     """(A, B), the RMS one-step residual of the fit on all data, and the report (see the module docstring).
 

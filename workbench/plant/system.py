@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from workbench.data.roles import ResolvedRoles, Roles
+from workbench.defaults import DT_PAPER_S, HORIZON_S
 from workbench.errors import DataError, ModelError
 
 if TYPE_CHECKING:
@@ -114,7 +115,7 @@ class LinearSystem:
         input_names = tuple(self.input_names) or tuple(f"u{i}" for i in range(m))
         if len(state_names) != n or len(input_names) != m:
             raise ModelError(
-                f"{len(state_names)} state names and {len(input_names)} input names for a system with n={n}, m={m}"
+                f"{len(state_names)} state names and {len(input_names)} input names for a plant with n={n}, m={m}"
             )
         bounds = []
         for b in (self.u_min, self.u_max):
@@ -158,7 +159,7 @@ class LinearSystem:
         return x @ self.A.T + u @ self.B.T
 
     def clip(self, u: np.ndarray) -> np.ndarray:
-        """Inputs clipped to the bounds, where the system has them."""
+        """Inputs clipped to the bounds, where the plant has them."""
         if self.u_min is None and self.u_max is None:
             return u
         return np.clip(u, self.u_min, self.u_max)
@@ -171,7 +172,7 @@ class LinearSystem:
         u_min: Sequence[float] | None = None,
         u_max: Sequence[float] | None = None,
         structure: str = "auto",
-        horizon_s: float = 3.0,
+        horizon_s: float = HORIZON_S,
         translation_invariant: bool = False,
     ) -> LinearSystem:
         """Least-squares estimate of (A, B) from consecutive samples of every demonstration, with a report.
@@ -225,7 +226,7 @@ PLANAR_QUADROTOR_ROLES = Roles(
 
 
 def planar_quadrotor(
-    dt: float = 0.05,
+    dt: float = DT_PAPER_S,
     g: float = 9.8,
     k: tuple[float, float, float] = (-0.1, -1.0, -30.0),
     mass: float = 0.25,

@@ -172,10 +172,10 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         md += [f"- held out: {inputs.holdout}"]
     md += [""]
     md += [f"**{line}**\n" for line in inputs.verdicts]
-    system = inputs.models[labels[0]].system
+    plant = inputs.models[labels[0]].plant
     tab_dir = out_dir / "tables"
     tab_dir.mkdir(parents=True, exist_ok=True)
-    md += scores_section(inputs, system, tab_dir)
+    md += scores_section(inputs, plant, tab_dir)
     if inputs.inputs_table is not None and len(inputs.inputs_table):
         from workbench.study.input_prediction import input_markdown, input_scores
 
@@ -296,7 +296,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
         md += ["![Predicted vs recorded trajectories](figures/predictions.png)", "",
                f"*{inputs.n_steps * dt:.1f} s predictions from the test trial's start{band}.*", ""]
     if inputs.rmse is not None and len(inputs.rmse):
-        metrics = [(m, metric_unit(system, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
+        metrics = [(m, metric_unit(plant, m)) for m in dict.fromkeys(inputs.rmse["metric"])]
         save_figure(fig_rmse(inputs.rmse, metrics), fig_dir / "rmse.png")
         improvement = improvement_table(inputs.rmse, inputs.paired)
         # a percentage says which comparison it is: the columns beside these means are the methods' differences
@@ -321,7 +321,7 @@ def _write_report(out_dir: Path, inputs: ReportInputs) -> Path:
                _md_table(b, ".1f"), ""]
     if inputs.efficiency is not None and len(inputs.efficiency):
         what = str(inputs.efficiency["metric"].iloc[0]) if "metric" in inputs.efficiency else "rmse_position"
-        save_figure(fig_data_efficiency(inputs.efficiency, metric_unit(system, what), _metric_words(what)),
+        save_figure(fig_data_efficiency(inputs.efficiency, metric_unit(plant, what), _metric_words(what)),
                     fig_dir / "data_efficiency.png")
         eff = efficiency_means(inputs.efficiency).rename(columns=METHOD_TITLES)
         save_table(eff, tab_dir / "data_efficiency.csv")

@@ -54,7 +54,7 @@ def why_no_statistics(inputs: Any) -> str:
     return "the study computed none for these trials"
 
 
-def scores_section(inputs: Any, system: Any, tab_dir: Path) -> list[str]:
+def scores_section(inputs: Any, plant: Any, tab_dir: Path) -> list[str]:
     """The first answer: each method's held-out error with its interval and the Monte Carlo band's coverage."""
     from workbench.study.scores import fmt, heldout_scores
 
@@ -70,7 +70,7 @@ def scores_section(inputs: Any, system: Any, tab_dir: Path) -> list[str]:
         row: dict[str, Any] = {"strategy": label, "method": METHOD_TITLES.get(method, method)}
         for r in g.itertuples(index=False):
             if r.metric.startswith("rmse_"):
-                unit = metric_unit(system, r.metric)
+                unit = metric_unit(plant, r.metric)
                 row[f"{r.metric.removeprefix('rmse_')} RMSE" + (f" [{unit}]" if unit else "")] = fmt(r.value, r.lo,
                                                                                                     r.hi)
             elif r.metric.startswith("band_"):

@@ -127,10 +127,10 @@ def _operator_command(
     return np.array([u1, u2])
 
 
-def _step(system: LinearSystem, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+def _step(plant: LinearSystem, x: np.ndarray, u: np.ndarray) -> np.ndarray:
     """``A x + B u`` without BLAS: sample logs must regenerate bit-identically on any CPU, and BLAS kernels
     (chosen per processor) may order the sums differently. Elementwise products summed along rows do not."""
-    return np.add.reduce(system.A * x, axis=1) + np.add.reduce(system.B * u, axis=1)
+    return np.add.reduce(plant.A * x, axis=1) + np.add.reduce(plant.B * u, axis=1)
 
 
 def simulate_trial(
@@ -138,7 +138,7 @@ def simulate_trial(
     rng: np.random.Generator,
     profile: OperatorProfile | None = None,
     *,
-    system: LinearSystem | None = None,
+    plant: LinearSystem | None = None,
     x0: Sequence[float] | None = None,
     target: Sequence[float] | None = None,
     time_limit: float = 30.0,
@@ -152,7 +152,7 @@ def simulate_trial(
     if strategy not in STRATEGIES:
         raise DataError(f"unknown control strategy {strategy!r}; choose one of {STRATEGIES}")
     p = profile or OperatorProfile()
-    sys_ = system or planar_quadrotor()
+    sys_ = plant or planar_quadrotor()
     target_vec = np.zeros(sys_.n) if target is None else np.asarray(target, dtype=np.float64)
     if x0 is None:
         x = np.zeros(sys_.n)
@@ -239,21 +239,21 @@ def simulate_landings(
     if n_trials < 1:
         raise DataError(f"n_trials must be at least 1, got {n_trials}")
     profile = subject if isinstance(subject, OperatorProfile) else operator_profile(subject)
-    system = planar_quadrotor()
+    plant = planar_quadrotor()
     rng = np.random.default_rng([seed, _seed_of(strategy, profile.subject)])
     demos = [
         simulate_trial(
             strategy,
             rng,
             profile,
-            system=system,
+            plant=plant,
             target=target,
             time_limit=time_limit,
             trial_id=f"{profile.subject}-{strategy.lower()}-{j:03d}",
         )
         for j in range(n_trials)
     ]
-    return DemonstrationSet(demos, system.state_names, system.input_names, system.dt, roles=system.roles)
+    return DemonstrationSet(demos, plant.state_names, plant.input_names, plant.dt, roles=plant.roles)
 
 
 def simulate_study(

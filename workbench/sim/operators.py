@@ -98,9 +98,9 @@ class LQROperator:
         """Whether the operator has a delay, a lag or a dead zone (flown by the sub-step simulation)."""
         return bool(self.delay_s or self.lag_s or self.dead_zone)
 
-    def gain(self, system: LinearSystem) -> np.ndarray:
+    def gain(self, plant: LinearSystem) -> np.ndarray:
         """The operator's true gain ``K`` of ``u = K x`` (the LQR gain of ``diag(q), diag(r)``)."""
-        return forward_gain(system.A, system.B, np.diag(self.q), np.diag(self.r))[0]
+        return forward_gain(plant.A, plant.B, np.diag(self.q), np.diag(self.r))[0]
 
 
 def _box(low: Sequence[float], high: Sequence[float], n: int, rng: np.random.Generator) -> np.ndarray:
@@ -114,15 +114,15 @@ def lqr_operator_demos(
     operator: LQROperator | None = None,
     n_trials: int = 30,
     seed: int = 0,
-    system: LinearSystem | None = None,
+    plant: LinearSystem | None = None,
     label: str = "LQR",
 ) -> DemonstrationSet:
     """Fly ``n_trials`` trials of an :class:`LQROperator` to the origin; deterministic for ``seed``.
 
-    The inputs are not clipped: the gain is then exactly ``operator.gain(system)``.
+    The inputs are not clipped: the gain is then exactly ``operator.gain(plant)``.
     """
     op = operator or LQROperator()
-    sys_ = system or planar_quadrotor()
+    sys_ = plant or planar_quadrotor()
     n, m = sys_.n, sys_.m
     K = op.gain(sys_)
     rng = np.random.default_rng(seed)
@@ -351,13 +351,13 @@ def delayed_pilot_demos(
     pilot: DelayedPilot | None = None,
     n_trials: int = 30,
     seed: int = 0,
-    system: LinearSystem | None = None,
+    plant: LinearSystem | None = None,
     label: str = "delayed",
 ) -> DemonstrationSet:
     """Fly ``n_trials`` trials of a :class:`DelayedPilot` to the origin; deterministic for ``seed``."""
     pilot = pilot or DelayedPilot()
     op = pilot.lqr
-    sys_ = system or planar_quadrotor()
+    sys_ = plant or planar_quadrotor()
     n, m = sys_.n, sys_.m
     K = op.gain(sys_)
     dz = np.asarray(pilot.dead_zone, dtype=float)

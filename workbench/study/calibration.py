@@ -32,19 +32,19 @@ __all__ = ["saturated", "calibration_counts", "calibration_check", "band_verdict
 PINNED_SHARE = 0.01
 
 
-def saturated(demos: Sequence[Demonstration], system: Any, pinned_share: float = PINNED_SHARE) -> list[np.ndarray]:
+def saturated(demos: Sequence[Demonstration], plant: Any, pinned_share: float = PINNED_SHARE) -> list[np.ndarray]:
     """Per demonstration, a (N, m) mask of the inputs at their limits.
 
     An input is at its limit where it equals the plant's ``u_min`` / ``u_max`` (within 1e-9 of its range), or —
     with or without declared limits — where it equals the smallest or largest value it takes over ``demos`` and
     at least ``pinned_share`` of the samples (and 3) sit exactly there: a stick held against its stop.
     """
-    U = np.concatenate([d.u for d in demos]) if demos else np.zeros((0, system.m))
-    lo_d, hi_d = (U.min(axis=0), U.max(axis=0)) if len(U) else (np.zeros(system.m), np.zeros(system.m))
+    U = np.concatenate([d.u for d in demos]) if demos else np.zeros((0, plant.m))
+    lo_d, hi_d = (U.min(axis=0), U.max(axis=0)) if len(U) else (np.zeros(plant.m), np.zeros(plant.m))
     pinned_lo = ((U == lo_d).sum(axis=0) >= max(3, pinned_share * len(U))) & (hi_d > lo_d)
     pinned_hi = ((U == hi_d).sum(axis=0) >= max(3, pinned_share * len(U))) & (hi_d > lo_d)
-    u_min = None if system.u_min is None else np.asarray(system.u_min, dtype=float)
-    u_max = None if system.u_max is None else np.asarray(system.u_max, dtype=float)
+    u_min = None if plant.u_min is None else np.asarray(plant.u_min, dtype=float)
+    u_max = None if plant.u_max is None else np.asarray(plant.u_max, dtype=float)
     tol = 1e-9 * np.maximum(1.0, np.abs(hi_d - lo_d))
     out = []
     for d in demos:
@@ -80,7 +80,7 @@ def calibration_counts(
     as for the pooled rows, so a view's per-trial verdicts and its model's pooled one come from the same masks.
     """
     demos = list(test)
-    masks = saturated(demos, model.system)
+    masks = saturated(demos, model.plant)
     rows = []
     dev, sig = [], []
     for d in demos:
@@ -89,7 +89,7 @@ def calibration_counts(
         sig.append(np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None)))
     groups = [(d.id, [i]) for i, d in enumerate(demos)] if by_trial else [(None, list(range(len(demos))))]
     for trial, members in groups:
-        for j, name in enumerate(model.system.input_names):
+        for j, name in enumerate(model.plant.input_names):
             for c in n_sigmas:
                 inside = [(dev[i][:, j] <= float(c) * sig[i][:, j]).astype(float) for i in members]
                 free = [z[~masks[i][:, j]] for z, i in zip(inside, members, strict=True)]

@@ -38,6 +38,7 @@ import scipy.special
 
 from workbench.data.dataset import read_manifest
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.defaults import N_COMPONENTS, N_STEPS
 from workbench.errors import DataError, WorkbenchError
 from workbench.models.factory import make_models as make_models_for_plant
 from workbench.models.registry import REGISTRY
@@ -84,27 +85,27 @@ STATE_BLOCK = "state"
 Progress = Callable[[int, int], Any]
 
 
-def metric_blocks(system: Any) -> dict[str, tuple[int, ...]]:
+def metric_blocks(plant: Any) -> dict[str, tuple[int, ...]]:
     """The state blocks a plant's predictions are scored on, from its roles (:mod:`workbench.data.roles`).
 
     With position roles: ``position`` and, where declared, ``velocity`` (the paper's two metrics). Without:
     every state at once (``state``) and each state alone (``state_<name>``), so a plant that declares nothing
     still gets full-state metrics.
     """
-    r = system.r
+    r = plant.r
     if r.has_position:
         blocks = {"position": tuple(r.position)}
         if r.has_velocity:
             blocks["velocity"] = tuple(r.velocity)
         return blocks
-    blocks = {STATE_BLOCK: tuple(range(system.n))}
-    blocks.update({f"{STATE_BLOCK}_{name}": (j,) for j, name in enumerate(system.state_names)})
+    blocks = {STATE_BLOCK: tuple(range(plant.n))}
+    blocks.update({f"{STATE_BLOCK}_{name}": (j,) for j, name in enumerate(plant.state_names)})
     return blocks
 
 
-def primary_metric(system: Any) -> str:
+def primary_metric(plant: Any) -> str:
     """The headline metric of a plant: ``rmse_position`` with position roles, else ``rmse_state``."""
-    return f"rmse_{next(iter(metric_blocks(system)))}"
+    return f"rmse_{next(iter(metric_blocks(plant)))}"
 
 
 def _idx(idx: Sequence[int] | None, n: int) -> np.ndarray:
@@ -178,7 +179,7 @@ def one_step_coverage(
     """
     rows = []
     name = method or type(model).__name__
-    input_names = list(model.system.input_names)
+    input_names = list(model.plant.input_names)
     for d in _demos(test):
         mean, Sigma = model.input_distribution_along(d)  # with the pilot's timing: given the trial before each
         sigma = np.sqrt(np.clip(np.diagonal(Sigma, axis1=1, axis2=2), 0.0, None))
@@ -217,7 +218,7 @@ def _starts(n_samples: int, n_steps: int, starts: str | int) -> list[int]:
 def compare(
     models: Mapping[str, Any],
     test: DemonstrationSet | Iterable[Demonstration] | Demonstration,
-    n_steps: int = 60,
+    n_steps: int = N_STEPS,
     starts: str | int = "initial",
     samples: int = 0,
     seed: int | None = 0,
@@ -254,7 +255,7 @@ def compare(
     one_step : bool
         Add the per-trial one-step coverage rows (``coverage_<c>sigma_<input>``, start 0).
     clip : bool
-        Clip predicted inputs to the system's bounds.
+        Clip predicted inputs to the plant's bounds.
     progress : callable(done, total), optional
         Called after each trial.
     inputs : bool
@@ -276,12 +277,12 @@ def compare(
     if isinstance(n_steps, bool) or not isinstance(n_steps, int | np.integer) or n_steps < 1:
         raise DataError(f"n_steps (the horizon) must be a positive number of steps, got {n_steps!r}")
     first = next(iter(models.values()))
-    blocks = dict(metric_blocks(first.system) if blocks is None else blocks)
+    blocks = dict(metric_blocks(first.plant) if blocks is None else blocks)
     lo_q, hi_q = (float(b) for b in band)
     if not 0 <= lo_q < hi_q <= 100:
         raise DataError(f"band must be two increasing percentiles in [0, 100], got {band!r}")
-    n = first.system.n
-    state_names = list(first.system.state_names)
+    n = first.plant.n
+    state_names = list(first.plant.state_names)
     blocks = {k: tuple(int(i) for i in _idx(v, n)) for k, v in blocks.items()}
     rng = np.random.default_rng(seed)
     rows: list[tuple] = []
@@ -357,7 +358,7 @@ def method_groups(table: pd.DataFrame, metric: str) -> dict[str, np.ndarray]:
     return {str(m): wide[m].to_numpy(dtype=float) for m in wide.columns}
 
 
-def models_for(make_models: Any, train: DemonstrationSet, n_components: int = 5) -> dict[str, Any]:
+def models_for(make_models: Any, train: DemonstrationSet, n_components: int = N_COMPONENTS) -> dict[str, Any]:
     """Unfitted models for one training set.
 
     ``make_models`` is a plant (:func:`workbench.models.factory.make_models` of it), a ``callable()`` returning the
@@ -406,7 +407,7 @@ def _efficiency_point(task: tuple) -> tuple[list[pd.DataFrame], list[str]]:
     for name in (n for n in models if n not in fitted):
         parts.append(pd.DataFrame({
             "n_train": [size], "repeat": [r], "trial": [None], "label": [None], "start": [0],
-            "method": [name], "metric": [primary_metric(models[name].system)], "value": [np.nan],
+            "method": [name], "metric": [primary_metric(models[name].plant)], "value": [np.nan],
         }))
     if fitted:  # the curve is of the headline's state error: no input rows
         table = compare(fitted, list(test_ref.load()), n_steps=n_steps, starts=starts, inputs=False)
@@ -419,11 +420,11 @@ def data_efficiency(
     train: DemonstrationSet,
     test: DemonstrationSet | Iterable[Demonstration],
     sizes: Sequence[int] = (2, 5, 10, 20, 30),
-    n_steps: int = 60,
+    n_steps: int = N_STEPS,
     repeats: int = 3,
     seed: int = 0,
     starts: str | int = "initial",
-    n_components: int = 5,
+    n_components: int = N_COMPONENTS,
     progress: Progress | None = None,
     *,
     executor: Any = None,
@@ -438,7 +439,7 @@ def data_efficiency(
     Parameters
     ----------
     make_models : callable() or callable(train) → mapping name → unfitted model, or a LinearSystem
-        Called afresh for every subset (:func:`models_for`); a system stands for
+        Called afresh for every subset (:func:`models_for`); a plant stands for
         :func:`workbench.models.factory.make_models` (with
         ``n_components``).
     executor : Executor, optional
@@ -544,7 +545,7 @@ def _subject_task(task: tuple) -> tuple[pd.DataFrame | None, list[str], str]:
         fitted = _fit_each(models, train, f"subject {subject}" + ("" if label is None else f" {label}"), failures)
         if fitted:
             tables.append(compare(fitted, test, n_steps=n_steps, starts=starts).assign(subject=subject))
-        metric = primary_metric(next(iter(models.values())).system)
+        metric = primary_metric(next(iter(models.values())).plant)
     return (pd.concat(tables, ignore_index=True) if tables else None), failures, metric
 
 
@@ -556,7 +557,7 @@ def per_subject(
     metric: str | None = None,
     seed: int = 0,
     starts: str | int = "initial",
-    n_components: int = 5,
+    n_components: int = N_COMPONENTS,
     progress: Progress | None = None,
     *,
     executor: Any = None,
@@ -578,7 +579,7 @@ def per_subject(
     ----------
     make_models : callable() or callable(train) → mapping name → unfitted model, or a LinearSystem
         Called afresh for every subject (:func:`models_for`), with the subject's training trials when it takes
-        them (identify the plant there, never on the held-out trials); a system stands for
+        them (identify the plant there, never on the held-out trials); a plant stands for
         :func:`workbench.models.factory.make_models` (with ``n_components``).
     metric : str, optional
         The compared metric; default :func:`primary_metric` of the plant (position RMSE with position roles).
@@ -651,10 +652,10 @@ def cross_validate(
     make_models: Callable[[], Mapping[str, Any]] | Any,
     demos: DemonstrationSet,
     n_folds: int = 5,
-    n_steps: int = 60,
+    n_steps: int = N_STEPS,
     seed: int = 0,
     starts: str | int = "initial",
-    n_components: int = 5,
+    n_components: int = N_COMPONENTS,
     progress: Progress | None = None,
     *,
     executor: Any = None,

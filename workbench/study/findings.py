@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 
 import pandas as pd
 
+from workbench.defaults import PAIRED_RESAMPLES
 from workbench.models.registry import METHOD_TITLES
 from workbench.study.method_level import FLOOR_METHODS, MethodDifference
 from workbench.study.paired import ALL_LABELS, PairedDifference, paired_differences, per_trial
@@ -230,7 +231,7 @@ def study_statistics(
     subjects: Mapping[str, str],
     windows: str,
     baselines: Sequence[str] | None = None,
-    n_boot: int = 4000,
+    n_boot: int = PAIRED_RESAMPLES,
     seed: int = 0,
     method_level: Sequence[MethodDifference] | None = None,
 ) -> StudyStatistics:

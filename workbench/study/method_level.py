@@ -16,7 +16,7 @@ resampled t. Its estimand is the expected difference of methods trained on ``n_t
 Every choice inside (issue 40). Each split reruns the whole method as a user runs it, on that split's training part
 only: the default model's cross-validated G and regularizer and its fallback to ``K̂x``
 (:func:`workbench.models.factory.default_model`), G by BIC where that was asked for, and — where the study's plant is
-identified from data (``--system identify``) — the plant. Nothing a split's test trials shaped reaches its fits. The
+identified from data (``--plant identify``) — the plant. Nothing a split's test trials shaped reaches its fits. The
 interval therefore includes the selection's own variability (the review found the intervals 23–40 % short when the
 split refits reused the settings chosen once on the study's training trials, which are mostly the splits' own test
 trials). A proposed method that fell back to ``K̂x`` in every split predicts as IOC-only on every one: that row says
@@ -201,7 +201,7 @@ class SplitPlan:
     Attributes
     ----------
     plant : LinearSystem or callable
-        The plant, or a callable that makes it from a :class:`DemonstrationSet` (``--system identify``): then every
+        The plant, or a callable that makes it from a :class:`DemonstrationSet` (``--plant identify``): then every
         split identifies its own plant from its training trials.
     n_components : int or str
         The proposed model's rule: ``"cv"`` (the default model: cross-validation and the fallback inside each
@@ -426,10 +426,10 @@ class SplitJobs:
     reuse: frozenset[int]
 
     @classmethod
-    def make(cls, splits: dict[str, tuple], plan: SplitPlan, system: Any, n_steps: int, stride: int | None,
+    def make(cls, splits: dict[str, tuple], plan: SplitPlan, plant: Any, n_steps: int, stride: int | None,
              test_size: float, n_splits: int, seed: int, executor: Any) -> SplitJobs:
         from workbench.study.evaluate import primary_metric
-        metric = primary_metric(system)
+        metric = primary_metric(plant)
         by_label = {lb: tr.with_demos([*tr, *te]) for lb, (tr, te) in splits.items()}
         first = {} if callable(plan.plant) else {
             lb: [i for i, d in enumerate(by_label[lb]) if d.id in {t.id for t in te}] for lb, (_, te) in splits.items()}

@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 
+from workbench.defaults import PAIRED_RESAMPLES
 from workbench.errors import DataError
 
 __all__ = ["PairedDifference", "difference_sentence", "MIN_SUBJECTS", "per_trial", "paired_difference",
@@ -187,7 +188,7 @@ def paired_difference(
     baseline: str,
     metric: str = "",
     label: str = "",
-    n_boot: int = 4000,
+    n_boot: int = PAIRED_RESAMPLES,
     ci: float = 95.0,
     seed: int = 0,
 ) -> PairedDifference:
@@ -233,7 +234,7 @@ def paired_differences(
     method: str = "proposed",
     baselines: Sequence[str] | None = None,
     subjects: Mapping[str, str] | None = None,
-    n_boot: int = 4000,
+    n_boot: int = PAIRED_RESAMPLES,
     ci: float = 95.0,
     seed: int = 0,
 ) -> list[PairedDifference]:

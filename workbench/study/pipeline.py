@@ -23,7 +23,7 @@ import pandas as pd
 from workbench.atomic import atomic_write_table
 from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
-from workbench.defaults import DEFAULT_N_COMPONENTS, PAPER_SETTINGS
+from workbench.defaults import DEFAULT_N_COMPONENTS, N_STEPS, PAPER_SETTINGS, STUDY_SAMPLES
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.registry import METHOD_TITLES, METHODS
 from workbench.models.selection import select_components
@@ -49,7 +49,7 @@ class StudyResult:
     """Everything a study computed, per strategy label."""
 
     demos: DemonstrationSet
-    system: Any
+    plant: Any
     train: dict[str, DemonstrationSet]
     test: dict[str, DemonstrationSet]
     models: dict[str, Any]
@@ -65,7 +65,7 @@ class StudyResult:
     #: Methods that could not be fitted, per label: ``{label: {method: reason}}`` (e.g. a gain that does not
     #: stabilize the identified plant, so no task objective exists); they are left out of the comparison.
     failures: dict[str, dict[str, str]] = field(default_factory=dict)
-    #: With :func:`run_loso`: the plant of each fold, by the trial it left out (``system`` is the last one).
+    #: With :func:`run_loso`: the plant of each fold, by the trial it left out (``plant`` is the last one).
     plants: dict[str, Any] = field(default_factory=dict)
     #: Pooled one-step coverage of the proposed model's input band at every level of ``CALIBRATION_LEVELS``
     #: against the Gaussian nominal (``label, method, input, n_sigma, coverage, nominal``): the calibration curve.
@@ -104,14 +104,14 @@ class StudyResult:
         """The headline metric (position RMSE with position roles, else full-state RMSE)."""
         from workbench.study.evaluate import primary_metric
 
-        return primary_metric(self.system)
+        return primary_metric(self.plant)
 
     @property
     def band(self) -> pd.DataFrame:
         """Monte Carlo band coverage rows (joint, per block of several states), when predictions had samples."""
         from workbench.study.evaluate import metric_blocks
 
-        blocks = metric_blocks(self.system)
+        blocks = metric_blocks(self.plant)
         joint = [f"band_{b}" for b, idx in blocks.items() if len(idx) > 1] or [f"band_{b}" for b in blocks]
         t = self.table
         return t[t["metric"].isin(joint)]
@@ -164,7 +164,7 @@ def _split(ds: DemonstrationSet, test_size: float, seed: int) -> tuple[Demonstra
 
 
 def _fit_each(
-    system: Any, train: DemonstrationSet, components: int | str, seed: int, task: Any = None
+    plant: Any, train: DemonstrationSet, components: int | str, seed: int, task: Any = None
 ) -> tuple[dict[str, Any], dict[str, str]]:
     """Every method that can be fitted, and why the others cannot (a ModelError's message).
 
@@ -177,7 +177,7 @@ def _fit_each(
     from workbench.models.fitting import shared_gains
 
     fitted, failures = {}, {}
-    models = make_models(system, n_components=components, random_state=seed, fit_objective=True, task=task)
+    models = make_models(plant, n_components=components, random_state=seed, fit_objective=True, task=task)
     with shared_gains():  # the methods' gains (and the pilot's timing) on the same trials: estimated once
         for name, model in models.items():
             try:
@@ -187,28 +187,28 @@ def _fit_each(
     return fitted, failures
 
 
-def plant_for(system: PlantSpec, train: DemonstrationSet) -> Any:
-    """The plant of a study from its training trials: ``system`` itself, or ``system(train)`` for a callable
+def plant_for(plant: PlantSpec, train: DemonstrationSet) -> Any:
+    """The plant of a study from its training trials: ``plant`` itself, or ``plant(train)`` for a callable
     (e.g. ``LinearSystem.identify``), so (A, B) never sees a trial the study scores."""
-    return system(train) if callable(system) else system
+    return plant(train) if callable(plant) else plant
 
 
-def metric_unit(system: Any, metric: str) -> str:
+def metric_unit(plant: Any, metric: str) -> str:
     """The unit of an RMSE metric, from the roles' units of its block's first state ("" where none is declared)."""
     from workbench.study.evaluate import metric_blocks
 
-    idx = metric_blocks(system).get(metric.removeprefix("rmse_"))
-    return system.roles.unit(system.state_names[idx[0]]) if idx else ""
+    idx = metric_blocks(plant).get(metric.removeprefix("rmse_"))
+    return plant.roles.unit(plant.state_names[idx[0]]) if idx else ""
 
 
 def run_study(
     demos: DemonstrationSet,
-    system: Any,
+    plant: Any,
     *,
     test_size: float = 0.2,
-    n_steps: int = 60,
+    n_steps: int = N_STEPS,
     n_components: int | str = DEFAULT_N_COMPONENTS,
-    samples: int = 100,
+    samples: int = STUDY_SAMPLES,
     efficiency: Sequence[int] | None = (2, 5, 10, 20),
     repeats: int = 2,
     seed: int = 0,
@@ -251,7 +251,7 @@ def run_study(
     scores, data-efficiency curve and objective intervals); otherwise the strategies run here in turn and the
     executor runs the points of their data-efficiency curves. The results are the same either way.
 
-    ``system`` is the plant, or a callable that makes it from a :class:`DemonstrationSet` (e.g.
+    ``plant`` is the plant, or a callable that makes it from a :class:`DemonstrationSet` (e.g.
     ``LinearSystem.identify``): it is then called once, on the training trials of every label together, so no
     test trial shapes (A, B). ``StudyResult.system`` is the plant used.
     """
@@ -272,8 +272,8 @@ def run_study(
         raise DataError(f"no trial among {list(demos.ids)} has a test id of {list(test_ids or [])}")
     failures: dict[str, dict[str, str]] = {}
     all_train = [d for tr, _ in splits.values() for d in tr]
-    plant_spec = system  # the method-level splits make the plant again from each split's training part
-    system = plant_for(system, demos.with_demos(all_train))
+    plant_spec = plant  # the method-level splits make the plant again from each split's training part
+    plant = plant_for(plant, demos.with_demos(all_train))
     settings = _LabelSettings(n_components=n_components, seed=seed, n_steps=n_steps, samples=samples, stride=stride,
                               efficiency=tuple(efficiency or ()), repeats=repeats, bootstrap=int(bootstrap),
                               power=int(power), task=task)
@@ -284,7 +284,7 @@ def run_study(
     jobs = None
     if method_splits > 0 and test_ids is None:
         plan = SplitPlan(plant=plant_spec, n_components=n_components, seed=seed, task=task)
-        jobs = SplitJobs.make(splits, plan, system, n_steps, stride, test_size, int(method_splits), seed,
+        jobs = SplitJobs.make(splits, plan, plant, n_steps, stride, test_size, int(method_splits), seed,
                                executor if parallel else None)
     parts: list[_LabelPart] = []
     split_parts: list[pd.DataFrame] | None = None
@@ -296,7 +296,7 @@ def run_study(
             todo = jobs.todo if jobs is not None else []
             what = f"fitting, comparing, {int(method_splits)} splits" if todo else "fitting and comparing"
             bar_task = p.add_task(what, total=len(splits) + len(todo)) if p is not None else None
-            tasks = [("label", (label, i, executor.share(tr), executor.share(te), system, settings))
+            tasks = [("label", (label, i, executor.share(tr), executor.share(te), plant, settings))
                      for i, (label, (tr, te)) in enumerate(splits.items())] + [("split", t) for t in todo]
             out = executor.map(_study_task, tasks,
                                progress=None if p is None else lambda d, t: p.update(bar_task, completed=d))
@@ -309,7 +309,7 @@ def run_study(
             # is the bar's total)
             bar_task = p.add_task("fitting and comparing", total=len(splits)) if p is not None else None
             for i, (label, (tr, te)) in enumerate(splits.items()):
-                parts.append(_study_label((label, i, tr, te, system, settings), executor=executor, progress=p))
+                parts.append(_study_label((label, i, tr, te, plant, settings), executor=executor, progress=p))
                 if p is not None:
                     p.advance(bar_task)
     train, test, models, baselines = {}, {}, {}, {}
@@ -340,14 +340,14 @@ def run_study(
             split_parts = jobs.run(executor, progress)
             timings["method-level splits"] = time.perf_counter() - t0
         method_level = jobs.rows(split_parts, dict(zip(splits, parts, strict=True)))
-    statistics = _statistics(table, demos, system, n_steps, stride, seed, method_level)
+    statistics = _statistics(table, demos, plant, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
     if ratio_comparison is not None:
         timings["ratio comparison"] = time.perf_counter() - t0
     calibration = pd.concat(cov_parts, ignore_index=True) if cov_parts else None
     return StudyResult(
-        demos=demos, system=system, train=train, test=test, models=models, baselines=baselines, table=table,
+        demos=demos, plant=plant, train=train, test=test, models=models, baselines=baselines, table=table,
         coverage=_coverage_table(calibration) if calibration is not None else None,
         calibration=calibration,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
@@ -399,14 +399,14 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
     from workbench.study import evaluate as ev
     from workbench.study.calibration import calibration_counts
 
-    label, i, tr, te, system, s = task
+    label, i, tr, te, plant, s = task
     tr = tr.load() if isinstance(tr, DataRef) else tr  # a worker reads what the executor shared
     te = te.load() if isinstance(te, DataRef) else te
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    G: int | str = (select_components(tr, system, seed=s.seed) if s.n_components == "bic" else
+    G: int | str = (select_components(tr, plant, seed=s.seed) if s.n_components == "bic" else
                     s.n_components if s.n_components in ("cv", PAPER_SETTINGS) else int(s.n_components))
-    fitted, failed = _fit_each(system, tr, G, s.seed, s.task)
+    fitted, failed = _fit_each(plant, tr, G, s.seed, s.task)
     timings["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     table = ev.compare(fitted, te, n_steps=s.n_steps, samples=s.samples, seed=s.seed,
@@ -422,9 +422,9 @@ def _study_label(task: tuple, executor: Any = None, progress: Any = None) -> _La
     sizes = sorted({n for n in s.efficiency if n < len(tr)})
     if s.efficiency:
         t0 = time.perf_counter()
-        eff = full_size_rows(table, len(tr), ev.primary_metric(system), label)
+        eff = full_size_rows(table, len(tr), ev.primary_metric(plant), label)
         if sizes:
-            eff = pd.concat([_efficiency(label, system, tr, te, sizes, fitted, G, s, executor, progress), eff],
+            eff = pd.concat([_efficiency(label, plant, tr, te, sizes, fitted, G, s, executor, progress), eff],
                             ignore_index=True)
         timings["efficiency"] = time.perf_counter() - t0
     objective = None
@@ -452,7 +452,7 @@ class _AtChosenSettings:
     training trial) is the model of the tables, not another regularizer without the fallback. Mean predictions only:
     no objective, no band calibration."""
 
-    system: Any
+    plant: Any
     n_components: int | str
     seed: int
     proposed: dict[str, Any] | None
@@ -461,12 +461,12 @@ class _AtChosenSettings:
         from workbench.models.factory import make_models
         from workbench.models.proposed import HumanBehaviorModel
 
-        models = make_models(self.system, n_components=self.n_components, random_state=self.seed)
+        models = make_models(self.plant, n_components=self.n_components, random_state=self.seed)
         for model in models.values():
             if "noise_folds" in model.get_params():
                 model.noise_folds = 0
         if self.proposed is not None:
-            models["proposed"] = HumanBehaviorModel(self.system, **self.proposed)
+            models["proposed"] = HumanBehaviorModel(self.plant, **self.proposed)
         return models
 
 
@@ -485,7 +485,7 @@ def _chosen(model: Any) -> dict[str, Any] | None:
     return params
 
 
-def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: DemonstrationSet, sizes: list[int],
+def _efficiency(label: str, plant: Any, tr: DemonstrationSet, te: DemonstrationSet, sizes: list[int],
                 fitted: dict[str, Any], G: int | str, s: _LabelSettings, executor: Any, p: Any) -> pd.DataFrame:
     """One label's data-efficiency rows of the primary metric, its EM and fit warnings summarized in a line each;
     the proposed model at the settings the tables' model used (:class:`_AtChosenSettings`)."""
@@ -496,7 +496,7 @@ def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: Demonstration
         warnings.simplefilter("always", ConvergenceWarning)
         sub = p.add_task(f"{label}: data efficiency", total=None) if p is not None else None
         eff = ev.data_efficiency(
-            _AtChosenSettings(system, G, s.seed, _chosen(fitted.get("proposed"))), tr, te, sizes=sizes,
+            _AtChosenSettings(plant, G, s.seed, _chosen(fitted.get("proposed"))), tr, te, sizes=sizes,
             n_steps=s.n_steps, repeats=s.repeats, seed=s.seed,
             # scored like the comparison's tables: from every stride of each test trial, not its first state only
             starts="initial" if s.stride is None else s.stride,
@@ -512,7 +512,7 @@ def _efficiency(label: str, system: Any, tr: DemonstrationSet, te: Demonstration
     if eff_failures:
         warnings.warn(f"{label} data efficiency: {len(eff_failures)} fits failed, e.g. {eff_failures[0]}",
                       stacklevel=2)
-    return eff[eff["metric"] == ev.primary_metric(system)].assign(label=label)
+    return eff[eff["metric"] == ev.primary_metric(plant)].assign(label=label)
 
 
 def _ratio_comparison(objectives: dict[str, Any]) -> pd.DataFrame | None:
@@ -577,11 +577,11 @@ def split_in_time(demos: DemonstrationSet, n_steps: int, pieces: int = TIME_SPLI
 
 def run_loso(
     demos: DemonstrationSet,
-    system: Any,
+    plant: Any,
     *,
-    n_steps: int = 60,
+    n_steps: int = N_STEPS,
     n_components: int | str = DEFAULT_N_COMPONENTS,
-    samples: int = 100,
+    samples: int = STUDY_SAMPLES,
     seed: int = 0,
     progress: Callable[[], Any] | None = None,
     executor: Any = None,
@@ -591,7 +591,7 @@ def run_loso(
     """Leave-one-segment-out: every trial is the test set once, the others train (:func:`run_study` per fold).
 
     For a log that gives a few segments (a real flight cut by its flight modes), where one random split would
-    score one or two trials. With a callable ``system`` every fold identifies its own plant from its training
+    score one or two trials. With a callable ``plant`` every fold identifies its own plant from its training
     trials (``plants`` holds them by the left-out trial), so no trial is scored by a plant that saw it. The
     comparison table holds every trial once; a method that could not be fitted in some fold is left out for
     its label altogether (a mean over other folds would not be comparable) and named in ``failures``. One-step
@@ -607,7 +607,7 @@ def run_loso(
         what = f"fitting and comparing, leave-one-segment-out ({len(demos)} folds)"
         bar = p.add_task(what, total=len(demos)) if p is not None else None
         for d in demos:
-            res = run_study(demos, system, n_steps=n_steps, n_components=n_components, samples=samples,
+            res = run_study(demos, plant, n_steps=n_steps, n_components=n_components, samples=samples,
                             efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s,
                             task=task)
             folds.append((d.id, res))
@@ -631,7 +631,7 @@ def run_loso(
     labels = list(dict.fromkeys(str(lbl) for _, r in folds for lbl in r.test))
     test = {lbl: demos.with_demos([d for _, r in folds for d in r.test.get(lbl, [])]) for lbl in labels}
     train = {lbl: test[lbl] for lbl in labels}
-    plant = last.system
+    last_plant = last.plant
     stride = _stride_steps(stride_s, demos.dt)
     # the folds refitted every method without their trial: they are the method-level comparison (no refit more)
     from workbench.study.evaluate import primary_metric
@@ -640,17 +640,17 @@ def run_loso(
     # whether each fold's proposed model fell back to K̂x, by the trial the fold left out
     fell_back = {trial: bool(m.chooses_settings and m.auto_ is not None and m.auto_.fallback)
                  for trial, r in folds for m in r.models.values()}
-    method_level = tuple(fold_differences(table, primary_metric(plant), fell_back=fell_back)) or None
-    statistics = _statistics(table, demos, plant, n_steps, stride, seed, method_level)
+    method_level = tuple(fold_differences(table, primary_metric(last_plant), fell_back=fell_back)) or None
+    statistics = _statistics(table, demos, last_plant, n_steps, stride, seed, method_level)
     # per label the models of its last fold (a fold holds only the label of the trial it leaves out)
     models = {lb: m for _, r in folds for lb, m in r.models.items()}
     baselines = {lb: b for _, r in folds for lb, b in r.baselines.items()}
     return StudyResult(
-        demos=demos, system=plant, train=train, test=test, models=models, baselines=baselines,
+        demos=demos, plant=last_plant, train=train, test=test, models=models, baselines=baselines,
         table=table, coverage=coverage, efficiency=None, calibration=calibration,
         stats_text=statistics.text(), n_steps=n_steps,
         samples=samples, seed=seed, timings={k: v for _, r in folds for k, v in r.timings.items()},
-        failures=failures, plants={trial: r.system for trial, r in folds}, stride_steps=stride,
+        failures=failures, plants={trial: r.plant for trial, r in folds}, stride_steps=stride,
         statistics=statistics, calibration_check=_check([r.calibration_counts for _, r in folds
                                                          if r.calibration_counts is not None]),
     )
@@ -682,16 +682,16 @@ def _stride_steps(stride_s: float | None, dt: float) -> int | None:
     return max(1, int(round(float(stride_s) / dt)))
 
 
-def _statistics(table: pd.DataFrame, demos: DemonstrationSet, system: Any, n_steps: int, stride: int | None,
+def _statistics(table: pd.DataFrame, demos: DemonstrationSet, plant: Any, n_steps: int, stride: int | None,
                 seed: int, method_level: Any = None) -> Any:
     """The paired differences, tests and mixed model of the headline metric (:mod:`workbench.study.findings`),
     with the method-level differences where they were computed."""
     from workbench.study.evaluate import primary_metric
     from workbench.study.findings import study_statistics, windows_sentence
 
-    metric = primary_metric(system)
+    metric = primary_metric(plant)
     subjects = {d.id: str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None}
-    return study_statistics(table, metric, metric_unit(system, metric), subjects,
+    return study_statistics(table, metric, metric_unit(plant, metric), subjects,
                             windows_sentence(table, n_steps, stride, demos.dt), seed=seed, method_level=method_level)
 
 

@@ -141,7 +141,7 @@ def simulate_like(model, demos, n_trials: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     starts = np.array([d.x[0] for d in ds])
     lo, hi = starts.min(axis=0), starts.max(axis=0)
-    A, B = np.asarray(model.system.A, dtype=float), np.asarray(model.system.B, dtype=float)
+    A, B = np.asarray(model.plant.A, dtype=float), np.asarray(model.plant.B, dtype=float)
     scale = np.asarray(model.noise_scale_, dtype=float) / float(model.noise_band_factor_)
     out = []
     for j in range(int(n_trials)):
@@ -152,13 +152,13 @@ def simulate_like(model, demos, n_trials: int, seed: int = 0):
         policy = model._policy(*model._task(x0, target))  # noqa: SLF001 - one conditional per trial, not per step
         X, U = rollout_samples(A, B, policy, x0, len(like) - 1, 1, rng, model.noise_rho_, None, scale)
         x, u = X[0, :-1], U[0]
-        t = model.system.dt * np.arange(len(x))
+        t = model.plant.dt * np.arange(len(x))
         meta = {"id": f"sim-{j:04d}", "label": like.label, "source": "simulated from the fitted model"}
         if like.target is not None:
             meta["target"] = [float(v) for v in like.target]
         out.append(Demonstration(t, x, u, meta))
-    return DemonstrationSet(out, model.system.state_names, model.system.input_names, model.system.dt,
-                            roles=model.system.roles)
+    return DemonstrationSet(out, model.plant.state_names, model.plant.input_names, model.plant.dt,
+                            roles=model.plant.roles)
 
 
 def as_fitted(model, demos) -> list:
@@ -173,19 +173,19 @@ def regulated_plant(model):
     return model.plant_regulated
 
 
-def _log_spans(gains, system, ci: float, ratios: Sequence[str] | None = None) -> dict[str, float]:
+def _log_spans(gains, plant, ci: float, ratios: Sequence[str] | None = None) -> dict[str, float]:
     """Per ratio, ``2 t se`` of its minimum-distance log estimate (inf at a zero or infinite weight); only the
     parts holding one of ``ratios`` (default all)."""
     from workbench.method.structured import closest_structured_objective, decoupled_parts
 
-    A, B = np.asarray(system.A, dtype=float), np.asarray(system.B, dtype=float)
+    A, B = np.asarray(plant.A, dtype=float), np.asarray(plant.B, dtype=float)
     K, K_s = np.asarray(gains.K, dtype=float), np.asarray(gains.K_samples, dtype=float)
     out = {}
     for states, inputs in decoupled_parts(A, B):
         if not inputs:
             continue
         s, c = list(states), list(inputs)
-        names = ratio_profile.ratio_names(s, c, system.state_names, system.input_names)
+        names = ratio_profile.ratio_names(s, c, plant.state_names, plant.input_names)
         if ratios is not None and not set(names) & set(ratios):
             continue
         try:

@@ -283,7 +283,7 @@ class WeightRatios:
                                              for iv in self.intervals))
 
 
-def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
+def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
     """Minimum-distance weight ratios and their profile intervals from a gain bootstrap (see
     :mod:`workbench.method.ratio_profile`); where a part is not of the diagonal form, the closest diagonal cost
     with sandwich intervals and its mismatch (:mod:`workbench.method.pseudo_true`).
@@ -302,7 +302,7 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
     ----------
     gains : GainBootstrap
         From :func:`workbench.method.resampling.bootstrap_gain` (or anything with ``K``, ``K_samples``, ``n_trials``).
-    system : LinearSystem
+    plant : LinearSystem
         The plant, with ``state_names`` and ``input_names``.
     ci : float
         Interval level in percent.
@@ -313,7 +313,7 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
 
     if not 0 < ci < 100:
         raise DataError(f"ci must be a percentage in (0, 100), got {ci}")
-    A, B = np.asarray(system.A, dtype=float), np.asarray(system.B, dtype=float)
+    A, B = np.asarray(plant.A, dtype=float), np.asarray(plant.B, dtype=float)
     n, m = B.shape
     K, K_s = np.asarray(gains.K, dtype=float), np.asarray(gains.K_samples, dtype=float)
     parts = decoupled_parts(A, B)
@@ -336,14 +336,14 @@ def weight_ratios(gains, system, ci: float = 95.0) -> WeightRatios:
         closest = None
         if test.explained is False or (test.explained is None and d_min > EXACT_DISTANCE):
             closest = pseudo_true(part, samples, theta0, ci)
-        fit = PartFit(tuple(system.state_names[i] for i in s), tuple(system.input_names[k] for k in c),
+        fit = PartFit(tuple(plant.state_names[i] for i in s), tuple(plant.input_names[k] for k in c),
                       float(d_min), part.restrictions, test.critical, test.explained, closest, part.nu, test.edges)
         fits.append(fit)
         shown = theta if fit.of_form else closest.theta
         Qp, Rp = part.weights(shown)
         scale = max(float(Qp.max()), float(Rp.max()))
         q[s], r[c] = np.diag(Qp) / scale, np.diag(Rp) / scale
-        names = ratio_profile.ratio_names(s, c, system.state_names, system.input_names)
+        names = ratio_profile.ratio_names(s, c, plant.state_names, plant.input_names)
         words = "" if fit.of_form else fit.mismatch_words()
         for j, name in enumerate(names):
             if fit.of_form:

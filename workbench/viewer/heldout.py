@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
+from workbench.defaults import N_STEPS
 from workbench.study.pipeline import StudyResult
 from workbench.viewer.entities import SCORES, label_scores_path
 from workbench.viewer.entities import model_for as _model_for
@@ -33,10 +34,10 @@ def score_units(models: Any) -> dict[str, str]:
     from workbench.study.pipeline import metric_unit
 
     first = next(iter(models.values()), None) if isinstance(models, Mapping) else models
-    system = getattr(first, "system", None)
-    if system is None:
+    plant = getattr(first, "plant", None)
+    if plant is None:
         return {}
-    return {f"rmse_{b}": metric_unit(system, f"rmse_{b}") for b in metric_blocks(system)}
+    return {f"rmse_{b}": metric_unit(plant, f"rmse_{b}") for b in metric_blocks(plant)}
 
 
 #: Windows of a view's held-out scores start every this many seconds of a trial (as ``evaluate``'s default).
@@ -44,7 +45,7 @@ SCORE_STRIDE_S = 1.0
 
 
 def heldout_table(demos: DemonstrationSet, models: Any, baselines: Mapping[str, Mapping[str, Any]] | None = None,
-                  *, n_steps: int = 60, samples: int = 0, seed: int | None = 0) -> tuple[Any, str]:
+                  *, n_steps: int = N_STEPS, samples: int = 0, seed: int | None = 0) -> tuple[Any, str]:
     """Score each model, its baselines and persistence on the trials it was not fitted on.
 
     Returns the :func:`workbench.study.evaluate.compare` table (None where no trial is held out) and a sentence
@@ -77,7 +78,7 @@ def heldout_table(demos: DemonstrationSet, models: Any, baselines: Mapping[str, 
         if "persistence" not in methods:
             with warnings.catch_warnings():  # it learns nothing from them: no "too few trials" warning
                 warnings.simplefilter("ignore")
-                methods["persistence"] = make_model("persistence", model.system).fit(held)
+                methods["persistence"] = make_model("persistence", model.plant).fit(held)
         parts.append(compare(methods, held, n_steps=n_steps, starts=stride, samples=samples, seed=seed))
     horizon = f"{n_steps * demos.dt:g} s horizon, windows every {SCORE_STRIDE_S:g} s"
     if not n_held:

@@ -103,7 +103,7 @@ def model_summary(name: str, model: Any, state_names: Sequence[str], input_names
     lines = [f"# Model {name}", "", f"`{type(model).__name__}`", ""]
     task, stability = getattr(model, "task_", None), getattr(model, "stability_", None)
     if task is not None:  # what the pilot regulates, relative to what: the line fit prints, and the loop's judgement
-        lines += ["## Pilot task", "", task.describe(model.system.state_names), ""]
+        lines += ["## Pilot task", "", task.describe(model.plant.state_names), ""]
         lines += [stability.describe(), ""] if stability is not None else []
     objective = None
     if model.has_gain:

@@ -29,6 +29,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from workbench.data.demonstrations import Demonstration
+from workbench.defaults import ONLINE_N_STEPS
 from workbench.errors import DataError
 from workbench.viewer import style
 from workbench.viewer.entities import entity_part, series_path
@@ -70,7 +71,7 @@ def replay(
     input_names: tuple[str, ...] | None = None,
     speed: float = 1.0,
     wait: bool = True,
-    n_steps: int = 20,
+    n_steps: int = ONLINE_N_STEPS,
     rollout_every: int = 1,
     clock: Callable[[], float] = time.perf_counter,
     sleep: Callable[[float], None] = time.sleep,
@@ -110,7 +111,7 @@ def replay(
     rollout_end = [series_path(demo.id, "online", "rollout_end", n) for n in state_names]
     x_start, target = demo.x[0], demo.target
     if roles is None:
-        roles = getattr(getattr(model, "system", None), "roles", None)
+        roles = getattr(getattr(model, "plant", None), "roles", None)
     plane = plane_of(roles, state_names)
     _log_styles(rec, demo, (states, inputs, online, rollout_end), sbase, state_names, plane, roles)
 

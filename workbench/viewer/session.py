@@ -18,6 +18,7 @@ import rerun.blueprint as rrb
 from workbench.atomic import atomic_path
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.plant_groups import by_plant_group, describe_groups, plant_groups
+from workbench.defaults import N_STEPS
 from workbench.errors import DataError
 from workbench.study.pipeline import StudyResult
 from workbench.viewer import entities as paths
@@ -441,7 +442,7 @@ class SessionLogger:
         methods: Mapping[str, Any],
         *,
         start: int = 0,
-        n_steps: int = 60,
+        n_steps: int = N_STEPS,
         samples: int = 0,
         seed: int | None = 0,
     ) -> dict[str, Any]:
@@ -635,7 +636,7 @@ def log_session(
     named_models: Mapping[str, Any] | None = None,
     baselines: Mapping[str, Mapping[str, Any]] | None = None,
     focus: Sequence[str] | None = None,
-    n_steps: int = 60,
+    n_steps: int = N_STEPS,
     samples: int = 0,
     starts: Sequence[int] = (0,),
     seed: int | None = 0,

@@ -136,20 +136,20 @@ def mismatches(model: Any, state_names: Sequence[str], input_names: Sequence[str
 
     ``X`` (N, n) are the states shown; ``source_dt`` the data's step before any resampling to the model's.
     """
-    system = getattr(model, "system", None)
-    if system is None:
+    plant = getattr(model, "plant", None)
+    if plant is None:
         return []
     out = []
-    names = tuple(getattr(system, "state_names", ()) or ())
+    names = tuple(getattr(plant, "state_names", ()) or ())
     if names and tuple(state_names) != names:
         out.append(f"its states are {', '.join(names)}, these data's {', '.join(state_names)}")
-    inputs = tuple(getattr(system, "input_names", ()) or ())
+    inputs = tuple(getattr(plant, "input_names", ()) or ())
     if inputs and tuple(input_names) != inputs:
         out.append(f"its inputs are {', '.join(inputs)}, these data's {', '.join(input_names)}")
-    mine = _roles_json(getattr(system, "roles", None))
+    mine = _roles_json(getattr(plant, "roles", None))
     if mine is not None and roles is not None and mine != _roles_json(roles):
         out.append("its vehicle roles differ from these data's (another mapping or vehicle)")
-    dt = float(getattr(system, "dt", np.nan))
+    dt = float(getattr(plant, "dt", np.nan))
     if source_dt is not None and np.isfinite(dt) and not np.isclose(source_dt, dt, rtol=1e-6):
         out.append(f"it was fitted at dt = {dt:g} s, these data are sampled at {source_dt:g} s (resampled)")
     box = getattr(model, "state_envelope_", None)
