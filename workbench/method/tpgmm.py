@@ -121,7 +121,7 @@ _BLOCK_VALUES = 1 << 20
 #: (:func:`_kmeans_key`): a cross-validation fold's candidates of the same G with another ``reg_covar`` start from
 #: the same clustering of the same data, which k-means with a fixed seed gives again; it is computed once.
 _KMEANS_LABELS: dict[bytes, np.ndarray] = {}
-_KMEANS_KEPT = 64
+_KMEANS_KEPT = 16  # one cross-validation fold's G values, and more; labels kept in the smallest integer type
 
 
 def _kmeans_key(data: np.ndarray, n_clusters: int, n_init: int, random_state: object) -> bytes | None:
@@ -354,7 +354,7 @@ class TPGMM:
             km = KMeans(n_clusters=self.n_components, n_init=self.n_init, random_state=self.random_state)
             labels = km.fit(data).labels_
             if key is not None:
-                _KMEANS_LABELS[key] = labels.copy()
+                _KMEANS_LABELS[key] = labels.astype(np.min_scalar_type(max(int(self.n_components) - 1, 0)))
                 while len(_KMEANS_LABELS) > _KMEANS_KEPT:
                     _KMEANS_LABELS.pop(next(iter(_KMEANS_LABELS)))
         resp = np.zeros((N, self.n_components))
