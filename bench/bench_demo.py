@@ -81,8 +81,8 @@ def against(other: str) -> list[dict]:
                                            for k in ("this", "other")),
         "runs_s (this; other)": "; ".join(", ".join(f"{r[0]:.1f}" for r in runs[k]) for k in ("this", "other")),
         "machine": f"{start} → {load()}",
-        "phases (this, median run)": runs["this"][[r[0] for r in runs["this"]].index(
-            sorted(r[0] for r in runs["this"])[len(runs["this"]) // 2])][2],
+        **{f"phases ({k}, median run)": runs[k][[r[0] for r in runs[k]].index(
+            sorted(r[0] for r in runs[k])[len(runs[k]) // 2])][2] for k in ("this", "other")},
     }]
 
 

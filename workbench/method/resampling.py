@@ -250,6 +250,35 @@ def _run_draws(
     return [r for block in executor.map(_bootstrap_block, tasks, progress=report) for r in block]
 
 
+#: The pilot's timings of resamplings already done in this process, by what decides them (:func:`_timing_key`):
+#: ``bootstrap`` and ``bootstrap_gain`` of the same trials, seed and resamples (a study's objective intervals and
+#: its weight ratios) re-identify the same delays and lags in the same draws; the second takes the first's.
+_TIMINGS: dict[bytes, Any] = {}
+_TIMINGS_KEPT = 8
+
+
+def _timing_key(demos: list, A: np.ndarray, B: np.ndarray, plant: Any, how: str, given: dict, timing: Any,
+                n_boot: int, seed: int) -> bytes:
+    """A digest of everything :func:`_timed_resampled`'s :class:`PilotTiming` depends on: the trials' states,
+    inputs and recorded dead zones, the plant, the estimator, the given timing, the rule, the resamples and the
+    seed."""
+    import hashlib
+
+    from workbench.method.pilot_loop import recorded_dead_zone
+
+    h = hashlib.blake2b(digest_size=32)
+    h.update(repr((how, sorted(given.items()), str(timing), int(n_boot), int(seed), float(plant.dt),
+                   int(plant.n), int(plant.m), len(demos))).encode())
+    for M in (A, B):
+        h.update(np.ascontiguousarray(M, dtype=float).tobytes())
+    for d in demos:
+        x, u = (np.ascontiguousarray(np.asarray(v, dtype=float)) for v in (d.x, d.u))
+        h.update(repr((x.shape, u.shape, recorded_dead_zone(d))).encode())
+        h.update(x.tobytes())
+        h.update(u.tobytes())
+    return h.digest()
+
+
 def _timed_resampled(
     demos: Any, plant: Any, n_boot: int, method: GainMethod, structure: Structure | None, seed: int,
     progress: Callable[[int, int], None] | None, timing: Any,
@@ -273,8 +302,17 @@ def _timed_resampled(
             except ModelError:
                 return _resample_fit(blocks, idx, A, B, "direct", None)[0]
 
-    pt = identify_timing(list(demos), plant, method=how, n_boot=n_boot, seed=seed, progress=progress,
-                         fallback=fallback, **given)
+    demos = list(demos)
+    key = _timing_key(demos, A, B, plant, how, given, timing, n_boot, seed)
+    pt = _TIMINGS.get(key)
+    if pt is None:
+        pt = identify_timing(demos, plant, method=how, n_boot=n_boot, seed=seed, progress=progress,
+                             fallback=fallback, **given)
+        _TIMINGS[key] = pt
+        while len(_TIMINGS) > _TIMINGS_KEPT:
+            _TIMINGS.pop(next(iter(_TIMINGS)))
+    elif progress is not None:
+        progress(n_boot, n_boot)
     solver = _solver(A, B, structure)
     obj0 = None if solver is None else solver.solve(np.asarray(pt.K))
     fits, failures = [], [f"resample: the timing fit failed ({pt.n_failed})"] * pt.n_failed

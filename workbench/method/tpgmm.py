@@ -117,6 +117,25 @@ def _stack_frames(xi_list, frames_list, where: str, D: int | None = None, P: int
 
 #: Values per block of the whitened points in the E-step (8 MB of float64).
 _BLOCK_VALUES = 1 << 20
+#: The k-means labels of initializations already done in this process, by their data and settings
+#: (:func:`_kmeans_key`): a cross-validation fold's candidates of the same G with another ``reg_covar`` start from
+#: the same clustering of the same data, which k-means with a fixed seed gives again; it is computed once.
+_KMEANS_LABELS: dict[bytes, np.ndarray] = {}
+_KMEANS_KEPT = 64
+
+
+def _kmeans_key(data: np.ndarray, n_clusters: int, n_init: int, random_state: object) -> bytes | None:
+    """A digest of a k-means problem (its standardized data, G, n_init and integer seed); None for a seed that is
+    not an integer (None or a Generator: another clustering each time, nothing to keep)."""
+    if isinstance(random_state, bool) or not isinstance(random_state, int | np.integer):
+        return None
+    import hashlib
+
+    data = np.ascontiguousarray(data, dtype=float)
+    h = hashlib.blake2b(repr((data.shape, int(n_clusters), int(n_init), int(random_state))).encode(),
+                        digest_size=32)
+    h.update(data.tobytes())
+    return h.digest()
 
 
 def _log_sum_exp(a: np.ndarray) -> np.ndarray:
@@ -326,10 +345,18 @@ class TPGMM:
         scale = flat.std(axis=0)
         # A coordinate constant in some frame has zero spread: leave it unscaled rather than divide by 0.
         scale = np.where(scale > 1e-12 * np.maximum(1.0, np.abs(center)), scale, 1.0)
-        from sklearn.cluster import KMeans  # scikit-learn loads only when a fit needs it
+        data = (flat - center) / scale
+        key = _kmeans_key(data, self.n_components, self.n_init, self.random_state)
+        labels = None if key is None else _KMEANS_LABELS.get(key)
+        if labels is None:
+            from sklearn.cluster import KMeans  # scikit-learn loads only when a fit needs it
 
-        km = KMeans(n_clusters=self.n_components, n_init=self.n_init, random_state=self.random_state)
-        labels = km.fit((flat - center) / scale).labels_
+            km = KMeans(n_clusters=self.n_components, n_init=self.n_init, random_state=self.random_state)
+            labels = km.fit(data).labels_
+            if key is not None:
+                _KMEANS_LABELS[key] = labels.copy()
+                while len(_KMEANS_LABELS) > _KMEANS_KEPT:
+                    _KMEANS_LABELS.pop(next(iter(_KMEANS_LABELS)))
         resp = np.zeros((N, self.n_components))
         resp[np.arange(N), labels] = 1.0
         return self._m_step(Z, resp)
