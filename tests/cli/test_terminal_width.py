@@ -4,6 +4,7 @@ in long form where they do not), and no raw Markdown reaches a terminal."""
 from __future__ import annotations
 
 import fcntl
+import io
 import os
 import pty
 import re
@@ -46,7 +47,9 @@ def test_evaluate_at_80_columns_has_no_line_over_80_and_no_raw_markdown():
                            "--n-components", "2", "--samples", "10", "--no-efficiency"], 80)
     # a progress bar redraws its line with carriage returns: each redraw is a line of its own
     lines = [line for line in ANSI.sub("", text).replace("\r\n", "\n").replace("\r", "\n").split("\n")]
-    too_long = [line for line in lines if len(line) > 80]
+    from rich.cells import cell_len
+
+    too_long = [line for line in lines if cell_len(line) > 80]  # columns on the screen ("K̂" is one)
     assert not too_long, too_long[:5]
     body = "\n".join(lines)
     assert "held-out prediction error" in body
@@ -91,3 +94,22 @@ def test_narrowing_steps_shorten_headers_and_digits():
     assert abbreviate("position RMSE") == "pos. RMSE"
     assert fewer_digits("0.1106 [0.072, 0.15]") == "0.11 [0.072, 0.15]"
     assert fewer_digits("8 (24 / 6)") == "8 (24 / 6)" and fewer_digits("u2") == "u2"
+
+
+def test_a_combining_accent_takes_no_column_of_its_own():
+    """"K̂" is two code points in one column: a table exactly as wide as the terminal with it in a header and a cell
+    still fits as a table (the previous main counted code points and printed the long form)."""
+    from rich.cells import cell_len
+
+    header = ["strategy", "fell back to K̂x in", "difference"]
+    rows = [["CS1", "2 of 6", "K̂x " + "x" * 40], ["CS2", "none", "lower by 23 % [3 %, 43 %]"]]
+    from rich.console import Console
+
+    from workbench.cli.context import narrowed_tables
+
+    console = Console(width=200, record=True, file=io.StringIO())
+    console.print(narrowed_tables(header, rows)[-1])  # the narrowest form, drawn where nothing constrains it
+    width = max(cell_len(line) for line in console.export_text().splitlines())
+    exact = _printed(header, rows, width)
+    assert "  fell back to K̂x in:" not in exact  # not the long form
+    assert all(cell_len(line) <= width for line in exact.splitlines())

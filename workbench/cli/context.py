@@ -252,13 +252,15 @@ def _tight(cell: str) -> str:
 def _fits(table: Any, width: int) -> int:
     """The number of lines rich draws ``table`` in within ``width`` columns with every cell whole on one line
     (headers and notes in words may wrap), or 0 where it cannot."""
+    from rich.cells import cell_len
     from rich.console import Console
 
     with open(os.devnull, "w") as sink:
         console = Console(width=width, record=True, file=sink)
         console.print(table)
         lines = console.export_text().splitlines()
-    if any(len(line) > width for line in lines):
+    # columns on the screen, not code points: "K̂" is two code points in one column
+    if any(cell_len(line) > width for line in lines):
         return 0
     prose = getattr(table, "prose", set())
     cells = [str(c) for j, col in enumerate(table.columns) if j not in prose for c in col._cells]

@@ -124,12 +124,16 @@ class StudyStatistics:
             which = ("refitted in every fold" if m0.loo else "refitted on every split; GMR-only, which no verdict "
                      "uses, only as fitted models below")
             where = "folds" if m0.loo else "splits"
-            lines += ["", f"Methods ({which}) — {self._ml_header()}", "",
+            pooled = any(d.p_holm != d.p_holm and (d.shown or d.lo == d.lo) for d in ml)
+            header = self._ml_header()
+            if pooled:  # the pooled rows' p cell is "—": say why once, not in every such cell
+                header = header.rstrip(":") + "; a row without a p (pooled) is no verdict's:"
+            lines += ["", f"Methods ({which}) — {header}", "",
                       f"| strategy | proposed vs | {where} (train / test {ml[0].units}) | fell back to K̂x in | "
                       f"difference [{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|---|"]
             for d in ml:
                 p = (f"{d.p_holm:.3g}" if d.p_holm == d.p_holm else
-                     "— (not a verdict's row)" if d.shown or d.lo == d.lo else "— (no interval)")
+                     "—" if d.shown or d.lo == d.lo else "— (no interval)")
                 lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.n_splits} "
                              f"({d.n_train} / {d.n_test}) | {d.fallback_words()} | {d.sentence()} | {p} |")
         if self.paired:
