@@ -21,7 +21,6 @@ from adapters.writer import demo_streams, layout
 from workbench.errors import DataError
 from workbench.sim.landing import simulate_landings
 
-EXTERNAL = "../shared/external/"
 PAUSE = 2.0
 
 
@@ -139,8 +138,8 @@ def test_no_stick_input_in_the_spans_is_named(flights, tmp_path):
         adapters.load(path, m)
 
 
-def test_raw_log_holds_every_numeric_field_and_the_texts_params_and_track():
-    streams = adapters.read(EXTERNAL + "dronekit_flight.tlog")
+def test_raw_log_holds_every_numeric_field_and_the_texts_params_and_track(external):
+    streams = adapters.read(str(external("dronekit_flight.tlog")))
     raw = raw_log(streams)
     by_name = {s.name: s for s in raw.streams}
     for name, frame in streams.frames.items():
@@ -161,10 +160,10 @@ def test_raw_log_holds_every_numeric_field_and_the_texts_params_and_track():
     assert raw.armed and raw.modes and raw.epoch_clock
 
 
-def test_ulog_parameters_and_logged_messages_equal_pyulogs():
+def test_ulog_parameters_and_logged_messages_equal_pyulogs(external):
     from pyulog import ULog
 
-    path = EXTERNAL + "px4_sample_log_small.ulg"
+    path = str(external("px4_sample_log_small.ulg"))
     ref = ULog(path)
     raw = raw_log(adapters.read(path))
     assert dict(raw.parameters) == ref.initial_parameters
@@ -172,8 +171,8 @@ def test_ulog_parameters_and_logged_messages_equal_pyulogs():
     assert raw.track is not None and not raw.epoch_clock
 
 
-def test_explain_keeps_exactly_what_the_import_keeps():
-    path = EXTERNAL + "dronekit_flight.tlog"
+def test_explain_keeps_exactly_what_the_import_keeps(external):
+    path = str(external("dronekit_flight.tlog"))
     m = load_mapping("ardupilot_manual").for_format("tlog")
     pieces = explain(adapters.read(path), m)
     kept = [p for p in pieces if p[2] == "kept"]
@@ -186,12 +185,12 @@ def test_explain_keeps_exactly_what_the_import_keeps():
 
 
 @pytest.mark.parametrize("log", ["dronekit_flight.tlog", "px4_sample_log_small.ulg", "erle_copter_83.BIN"])
-def test_map_on_the_real_logs_imports_without_edits(tmp_path, log):
-    draft = draft_mapping(adapters.read(EXTERNAL + log), name="drafted")
+def test_map_on_the_real_logs_imports_without_edits(tmp_path, log, external):
+    draft = draft_mapping(adapters.read(str(external(log))), name="drafted")
     path = tmp_path / "drafted.toml"
     path.write_text(draft.toml)
-    ds = adapters.load(EXTERNAL + log, path, allow_still=True)  # the PX4 log has no GPS position
-    assert len(ds) == len(adapters.load(EXTERNAL + log, draft.template, allow_still=True))
+    ds = adapters.load(str(external(log)), path, allow_still=True)  # the PX4 log has no GPS position
+    assert len(ds) == len(adapters.load(str(external(log)), draft.template, allow_still=True))
 
 
 @pytest.mark.parametrize("style", ["old", "new"])
