@@ -29,6 +29,20 @@ def test_repeated_warnings_print_once_with_a_count(capsys):
     warnings.resetwarnings()
 
 
+def test_warnings_of_one_cause_with_other_details_print_once(capsys):
+    """A solver warning lists each attempt's status after its cause; resamples differ there, not in the cause (the
+    demo opened with three 6-line copies of one inverse-LQR warning)."""
+    shown = cli_main._Warnings()
+    for status in ("infeasible", "user_limit", "solved (optimal_inaccurate) but failed M ⪰ I"):
+        shown.show(f"inverse LQR: stage 2 failed with every solver; returning stage 1. CLARABEL: {status}",
+                   UserWarning, __file__, 1)
+    shown.show("inverse LQR: no objective passed the checks; nothing returned", UserWarning, __file__, 1)
+    shown.close()
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].endswith("CLARABEL: infeasible") and err[1].startswith("warning: inverse LQR: no objective")
+    assert "2 more" in err[2] and len(err) == 3
+
+
 def test_an_attempt_names_only_the_checks_it_failed(monkeypatch):
     """A solution that meets M ⪰ I but misses the forward check is described by the forward check alone, with the
     bound it broke (the README flight's warning once listed a passing λmin(M)=1 among the failures)."""

@@ -27,14 +27,16 @@ _NUMBER = re.compile(r"[-+]?\d[\d.e+-]*")
 
 class _Warnings:
     """Each kind of warning once: a bootstrap repeats the same solver warning for many resamples, and a user
-    needs it once with a count, not a screenful (warnings that differ only in their numbers are one kind)."""
+    needs it once with a count, not a screenful. A kind is a warning's first clause (up to its first ``;`` or
+    sentence end) with its numbers left out: the solver attempts it then lists differ from resample to resample."""
 
     def __init__(self) -> None:
         self.seen: dict[str, int] = {}
 
     def show(self, message, category, filename, lineno, file=None, line=None) -> None:
         text = " ".join(str(message).split())
-        key = f"{category.__name__}:{_NUMBER.sub('#', text)}"
+        cause = re.split(r";\s|\.\s", text, maxsplit=1)[0]
+        key = f"{category.__name__}:{_NUMBER.sub('#', cause)}"
         self.seen[key] = self.seen.get(key, 0) + 1
         if self.seen[key] == 1:
             print(f"warning: {text}", file=sys.stderr)
@@ -42,7 +44,7 @@ class _Warnings:
     def close(self) -> None:
         repeats = sum(n - 1 for n in self.seen.values())
         if repeats:
-            print(f"warning: … and {repeats} more of the warnings above (the same cause, other numbers)",
+            print(f"warning: … and {repeats} more of the warnings above (the same cause, other details)",
                   file=sys.stderr)
 
 
