@@ -311,3 +311,26 @@ def test_stale_staging_folders_are_removed_and_live_ones_kept(tmp_path):
         (p / "share").mkdir(parents=True)
     assert remove_stale_staging(tmp_path) == [stale]
     assert not stale.exists() and live.exists()
+
+
+def test_a_connection_distributed_asserts_on_is_tried_again_once_then_said_in_one_line():
+    """distributed's own handshake once failed with a bare ``AssertionError`` in a loaded run (the suite's cluster
+    test): the connection is tried again, and a scheduler that keeps answering so is one WorkbenchError."""
+    from workbench.study.executor import _connect
+
+    calls = []
+
+    class Flaky:
+        def __init__(self, address, timeout):
+            calls.append(address)
+            if len(calls) < 2:
+                raise AssertionError
+
+    assert isinstance(_connect(Flaky, "tcp://127.0.0.1:1", 1.0), Flaky) and len(calls) == 2
+
+    class Broken:
+        def __init__(self, address, timeout):
+            raise AssertionError
+
+    with pytest.raises(WorkbenchError, match="cannot reach the Dask scheduler at tcp://127.0.0.1:1"):
+        _connect(Broken, "tcp://127.0.0.1:1", 1.0)

@@ -349,6 +349,22 @@ class _Workers:
         return self._run(fn, items, _keys(items, keys), progress, contain=True)
 
 
+def _connect(client_class: Any, scheduler: str, timeout: float, attempts: int = 2) -> Any:
+    """A client of the scheduler at ``scheduler``; a connection the client library itself finds malformed (an
+    ``AssertionError`` inside distributed's handshake, seen once in a loaded test run while another client of the
+    same cluster closed) is tried again once, then said in one line like any failure to reach it."""
+    for attempt in range(attempts):
+        try:
+            return client_class(scheduler, timeout=f"{timeout}s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: {_describe(exc)}") from None
+        except AssertionError:
+            if attempt + 1 == attempts:
+                raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: its answers to "
+                                     f"{attempts} connections were not a Dask scheduler's") from None
+    raise AssertionError("unreachable")
+
+
 class DaskExecutor(_Workers):
     """Tasks on ``dask.distributed``: a ``LocalCluster`` of ``workers`` processes, or the cluster at ``scheduler``.
 
@@ -398,10 +414,7 @@ class DaskExecutor(_Workers):
             from workbench.study.handshake import check_scheduler
 
             check_scheduler(scheduler, min(float(timeout), 10.0))  # a server that is not Dask: one line, not a hang
-            try:
-                self._client = Client(scheduler, timeout=f"{float(timeout)}s")
-            except (OSError, TimeoutError, ValueError) as exc:
-                raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: {_describe(exc)}") from None
+            self._client = _connect(Client, scheduler, float(timeout))
             self.address = str(scheduler)
             wait = WORKER_WAIT if worker_wait is None else float(worker_wait)
             try:
