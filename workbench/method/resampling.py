@@ -469,8 +469,8 @@ def bootstrap_gain(
         if timed and getattr(out[5], "method", "") == "none":  # the rule decided no timing: the paper's gain
             A, B = plant_matrices(plant.A, plant.B)
             loo = _leave_one_out(demos, plant, rule_gain_method(demo_blocks(list(demos), *B.shape), A, B))
-        elif timed:
-            loo = _timed_leave_one_out(demos, plant, method, timing)
+        elif timed:  # the estimator decided on all trials (LIML, or least squares where the starts are weak)
+            loo = _timed_leave_one_out(demos, plant, "direct" if out[5].method == "direct" else "iv", timing)
         else:
             loo = _leave_one_out(demos, plant, method)
     return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array([f[0] for f in fits])), n_trials=n_trials,
@@ -482,12 +482,13 @@ def bootstrap_gain(
 
 def _timed_leave_one_out(demos: Any, plant: Any, method: GainMethod, timing: Any) -> np.ndarray | None:
     """:func:`_leave_one_out` of the gain with the pilot's timing (re-identified without each trial; with
-    :data:`IDENTIFY_OR_NONE` the caller has decided on all trials that there is a timing, and every set follows)."""
+    :data:`IDENTIFY_OR_NONE` the caller has decided on all trials that there is a timing, and by which estimator
+    (``method`` "direct": least squares, else LIML), and every set follows)."""
     from workbench.method.timing import TimingData, fit_timing
 
     given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
     data = TimingData(list(demos), plant.n, plant.m, plant.dt)
-    how = "direct" if method == "direct" and timing != IDENTIFY_OR_NONE else "liml"
+    how = "direct" if method == "direct" else "liml"
     try:
         return np.array([fit_timing(data, how, counts=np.arange(data.n_trials) != j, **given).K
                          for j in range(data.n_trials)])
