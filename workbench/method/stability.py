@@ -9,7 +9,10 @@ The paper refuses a gain whose spectral radius ``ρ(A + B K̂)`` is ≥ 1 (Assum
 - the interval holds 1: **not distinguishable** from the unit circle — still a model (its predictions are fine over
   seconds); where ``ρ̂ ≥ 1`` no quadratic cost has the gain, so the task objective is not found, and said so;
 - the interval lies outside: **unstable**, a refusal that names the states the slow mode lies on and, where the
-  trials were flown in an assisted mode whose autopilot holds exactly those states, that mode as the likely cause.
+  trials were flown in an assisted mode whose autopilot holds exactly those states, that mode as the likely cause;
+- no interval (fewer than two units to resample): ρ̂ < 1 is stable, as the paper's Assumption 3 has it, and ρ̂ ≥ 1 is
+  not distinguishable — no refusal rests on a point estimate whose uncertainty is unknown (a rollout that then
+  diverges is said so by :mod:`workbench.study.divergence`).
 
 Resampling units are whole demonstrations when there are at least :data:`MIN_DEMOS` of them, else blocks of
 :data:`BLOCK_S` seconds inside them (a free flight is often one or two long segments). Each resample refits the
@@ -267,10 +270,11 @@ def _rho_interval(rho: float, rhos: np.ndarray, level: float) -> tuple[float, fl
 
 
 def _verdict(rho: float, lo: float, hi: float) -> Verdict:
-    """The interval judges; without one, the point estimate alone (the paper's Assumption 3)."""
+    """The interval judges. Without one the point estimate is accepted as the paper's Assumption 3 accepts it, but
+    a refusal needs its interval outside the unit circle, and there is none: ρ̂ ≥ 1 is not distinguishable."""
     if np.isfinite(lo) and np.isfinite(hi):
         return "stable" if hi < 1.0 else "unstable" if lo > 1.0 else "not distinguishable"
-    return "stable" if rho < 1.0 else "unstable"
+    return "stable" if rho < 1.0 else "not distinguishable"
 
 
 def with_timing_resamples(stability: Stability, A: np.ndarray, B: np.ndarray, dt: float, timing: Any,
