@@ -24,7 +24,9 @@ GROUP_BLOCK = re.compile(r"plant identification \(plant group ([^,]+),")
 CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?ratio (-?[\d.e+-]+), (NOT )?within")
 STICK = re.compile(r"stick: (\w+) → (\w+): (.*?) per full stick \(time constant ([\d.e+-]+) s\)"
                    r"|stick: (\w+) → (\w+): the (.*?) loop does not settle")
-RHO = re.compile(r"closed loop[^:]*: ρ\(A \+ BK̂\) = ([\d.e+-]+), (?:[\d.]+ % interval \[([\d.e+-]+), ([\d.e+-]+)\]"
+# the loop judged: the regulator's A + BK̂, or the pilot's loop with its delay and lag (a timed gain)
+LOOP = r"ρ\((?:A \+ BK̂|the pilot's loop[^)]*)\)"
+RHO = re.compile(r"closed loop[^:]*: " + LOOP + r" = ([\d.e+-]+), (?:[\d.]+ % interval \[([\d.e+-]+), ([\d.e+-]+)\]"
                  r"|(no interval))[^:]*: (stable|not distinguishable|unstable)")
 METHODS = ("proposed", "ioc_only", "gmr_only", "persistence", "no_pilot_held", "no_pilot_zero")
 TITLES = {"proposed": "proposed", "ioc_only": "IOC-only", "gmr_only": "GMR-only", "persistence": "persistence",
@@ -47,7 +49,7 @@ def _last(text: str) -> str:
 
 COMPACT = (  # a refusal for stability in a table cell: ρ with its interval, the slow mode and the mode blamed
     (r"the gain \((\w+)\) is not stabilizing: ", r"not stabilizing (\1): "),
-    (r"closed loop on [^:]*: ρ\(A \+ BK̂\) = ([\d.e+-]+), [\d.]+ % interval \[([\d.e+-]+), ([\d.e+-]+)\] over [^:]*: ",
+    (r"closed loop on [^:]*: " + LOOP + r" = ([\d.e+-]+), [\d.]+ % interval \[([\d.e+-]+), ([\d.e+-]+)\] over [^:]*: ",
      r"ρ \1 [\2, \3] "),
     (r"; the slow mode lies on ", ", slow mode on "),
     (r"\. In these demonstrations .*?\(--task …@states\)", ""),
