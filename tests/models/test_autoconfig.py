@@ -57,14 +57,50 @@ def test_auto_model_records_its_choice_and_survives_a_round_trip(quad, small, tm
                                fit_objective=False).fit(small)
     assert model.n_components == "cv" and model.reg_covar == "cv"  # settings stay as given
     assert model.n_components_ == model.auto_.n_components and model.reg_covar_ == model.auto_.reg_covar
+    # the fixed settings with the choice's fallback (K̂x where the variability model did not earn its place)
     fixed = HumanBehaviorModel(quad, n_components=model.n_components_, reg_covar=model.reg_covar_, noise_folds=0,
-                               fit_objective=False).fit(small)
+                               fit_objective=False, variability_mean=not model.auto_.fallback).fit(small)
     x0 = small[0].x[0]
     np.testing.assert_allclose(model.predict(x0, 20).x, fixed.predict(x0, 20).x)
     model.save(tmp_path / "auto.npz")
     back = load_model(tmp_path / "auto.npz")
     assert back.auto_ == model.auto_ and back.reg_covar_ == model.reg_covar_
     np.testing.assert_allclose(back.predict(x0, 20).x, model.predict(x0, 20).x)
+
+
+def test_the_cv_scores_each_held_out_trial_as_a_whole():
+    # the first four half-horizons scored only a trial's first seconds; the starts now reach its last full window
+    for length, H in ((245, 60), (300, 60), (62, 60), (10, 9)):
+        starts = ac._starts(length, H)
+        assert starts[0] == 0 and starts[-1] == max(length - H - 1, 0)
+        assert len(starts) == min(ac._CV_STARTS, length - H) and starts == sorted(set(starts))
+
+
+def test_a_choice_that_does_not_carry_over_to_the_fit_on_all_trials_falls_back(quad, small, monkeypatch):
+    # the chosen setting fitted on all trials predicts those very trials worse than K̂x: the model keeps K̂x (the
+    # erratic pilot's weakly identified gain: 310 against 0.49 on its own trials, a 593-fold error held out)
+    monkeypatch.setattr(ac, "DEFAULT_COMPONENT_GRID", (1,))
+    monkeypatch.setattr(ac, "DEFAULT_REG_COVAR_GRID", (1.0,))
+    monkeypatch.setattr(ac, "FALLBACK_SE", -math.inf)  # the cross-validation itself keeps the variability mean
+    fit = dict(n_components="cv", reg_covar="cv", noise_folds=0, fit_objective=False)
+    honest = HumanBehaviorModel(quad, **fit).fit(small)
+    checked = (honest.auto_.fitted_rmse, honest.auto_.fitted_ioc_rmse)
+    assert checked == pytest.approx(ac.fitted_check(honest, small))
+    assert honest.auto_.fallback == (checked[0] > checked[1])
+    calls, check = [], ac.fitted_check
+
+    def worse(model, demos):
+        calls.append(len(demos))
+        with_mean, alone = check(model, demos)
+        return alone * 2.0, alone
+
+    monkeypatch.setattr(ac, "fitted_check", worse)
+    model = HumanBehaviorModel(quad, **fit).fit(small)
+    assert calls == [len(small)]
+    assert model.auto_.fallback and not model.variability_mean_
+    assert "did not carry over" in model.auto_.describe()
+    back = ac.AutoSettings.from_json(model.auto_.as_json())
+    assert back == model.auto_
 
 
 def mean_position_rmse(models, test) -> dict[str, float]:
