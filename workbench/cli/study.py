@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import importlib
+import math
 import os
 import re
 import shutil
@@ -370,8 +371,17 @@ def _settings_rows(result: Any) -> list[list[str]]:
         rows.append([str(label), str(auto.n_components), f"{auto.reg_covar:g}",
                      f"{best['heldout_rmse']:.4g} vs {auto.ioc_only_rmse:.4g}" if scored else "—",
                      f"{auto.gain:.2g} ± {auto.gain_se:.2g}" if auto.gain == auto.gain else "—",
-                     "K̂x alone" if auto.fallback else "K̂x + GMR"])
+                     _predicts_with(auto)])
     return rows
+
+
+def _predicts_with(auto: Any) -> str:
+    """What the proposed model predicts with, and where it fell back to ``K̂x`` because its fit on all trials
+    predicted them worse than ``K̂x`` alone (:meth:`~workbench.models.autoconfig.AutoSettings.describe`), the two."""
+    if not auto.fallback:
+        return "K̂x + GMR"
+    fitted, alone = getattr(auto, "fitted_rmse", math.nan), getattr(auto, "fitted_ioc_rmse", math.nan)
+    return f"K̂x alone (fitted on all: {fitted:.4g} vs {alone:.4g})" if fitted > alone else "K̂x alone"
 
 
 def _print_settings(ctx: Context, result: Any) -> None:
