@@ -183,6 +183,23 @@ def test_fallback_to_the_task_objective_is_chosen_by_held_out_error_and_kept(qua
     np.testing.assert_allclose(back.predict(d.x[0], 30, d.target).x, fell.predict(d.x[0], 30, d.target).x)
 
 
+def test_a_candidate_not_fitted_on_every_fold_is_written_to_the_model_file(quad, small, tmp_path, monkeypatch):
+    """A candidate that failed on some fold scores NaN; the model file (strict JSON) holds it as null and reads it
+    back as NaN, rather than `fit` stopping with "Out of range float values are not JSON compliant" after the fit
+    (a real LOITER log, 10-11-2014/105.BIN, did)."""
+    rows = ({"n_components": 1, "reg_covar": 0.3, "heldout_rmse": 1.5, "heldout_loglik": -2.0, "chosen": True},
+            {"n_components": 2, "reg_covar": 0.3, "heldout_rmse": math.nan, "heldout_loglik": math.nan,
+             "chosen": False})
+    monkeypatch.setattr(ac, "choose_settings", lambda *a, **k: ac.AutoSettings(1, 0.3, "prediction", 2, rows))
+    model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0).fit(small)
+    model.save(tmp_path / "m.npz")
+    back = load_model(tmp_path / "m.npz").auto_.scores
+    assert back[0] == rows[0]
+    assert math.isnan(back[1]["heldout_rmse"]) and math.isnan(back[1]["heldout_loglik"])
+    assert {k: v for k, v in back[1].items() if "heldout" not in k} == {k: v for k, v in rows[1].items()
+                                                                        if "heldout" not in k}
+
+
 def test_no_candidate_on_every_fold_says_why_the_fits_failed(quad, small, monkeypatch):
     """Where every candidate fails on a fold for a reason the grid cannot change (the fold's gain, say), the error
     names that reason and the fold, not only that no candidate fitted (the real logs' "no candidate of G …")."""

@@ -128,7 +128,9 @@ class AutoSettings:
             return None if math.isnan(v) else v
 
         return {"n_components": self.n_components, "reg_covar": self.reg_covar, "criterion": self.criterion,
-                "folds": self.folds, "scores": [dict(r) for r in self.scores],
+                # a candidate not fitted on every fold scores NaN, which a model file (strict JSON) writes as null
+                "folds": self.folds, "scores": [{k: num(v) if isinstance(v, float) else v for k, v in r.items()}
+                                                for r in self.scores],
                 "ioc_only_rmse": num(self.ioc_only_rmse), "fallback": self.fallback, "gain": num(self.gain),
                 "gain_se": num(self.gain_se), "fitted_rmse": num(self.fitted_rmse),
                 "fitted_ioc_rmse": num(self.fitted_ioc_rmse)}
@@ -140,7 +142,8 @@ class AutoSettings:
             return math.nan if v is None else float(v)
 
         return cls(int(d["n_components"]), float(d["reg_covar"]), str(d["criterion"]), int(d["folds"]),
-                   tuple(dict(r) for r in d["scores"]), num("ioc_only_rmse"), bool(d.get("fallback", False)),
+                   tuple({k: math.nan if v is None else v for k, v in r.items()} for r in d["scores"]),
+                   num("ioc_only_rmse"), bool(d.get("fallback", False)),
                    num("gain"), num("gain_se"), num("fitted_rmse"), num("fitted_ioc_rmse"))
 
     def describe(self) -> str:

@@ -105,10 +105,12 @@ def input_differences(table: pd.DataFrame, method: str = "proposed", seed: int =
     """Per label and metric: ``(label, metric, reference, difference)`` — the method's input error against the
     better no-pilot model ``reference``, the paired difference of :func:`workbench.study.paired.paired_differences`
     (what :func:`input_headlines` says in words and the terminal prints as a table)."""
+    from workbench.study.divergence import scored
     from workbench.study.paired import paired_differences
 
     out = []
-    rows = table[table["metric"].isin(INPUT_METRICS)]
+    rows = scored(table)  # a rollout that diverged has no input score over the horizon to compare
+    rows = rows[rows["metric"].isin(INPUT_METRICS)]
     for label, part in rows.groupby("label", sort=False):
         for metric in INPUT_METRICS:
             ref = _reference(part, metric)
@@ -142,12 +144,12 @@ def _order(methods: list[str]) -> list[str]:
 def input_lines(scores: pd.DataFrame, label: str, *, markdown: bool = True) -> list[str]:
     """One label's input scores, one row per method and no-pilot model: a Markdown table (method, one step ahead,
     over the horizon) or, with ``markdown=False``, one line each."""
-    from workbench.study.scores import fmt
+    from workbench.study.scores import cell as score_cell
 
     s = scores[scores["label"] == str(label)]
     if s.empty:
         return []
-    cell = {(r.method, r.metric): fmt(r.value, r.lo, r.hi) for r in s.itertuples(index=False)}
+    cell = {(r.method, r.metric): score_cell(r) for r in s.itertuples(index=False)}
     methods = _order(list(dict.fromkeys(s["method"])))
     if markdown:
         out = ["| method | input error one step ahead | over the horizon |", "|---|---|---|"]
