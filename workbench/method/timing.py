@@ -137,7 +137,8 @@ def weak_starts(demos: Iterable[Any], n: int, m: int) -> str:
     if not blocks:
         return ""
     try:
-        rel = iv_relevance(np.concatenate([b[0] for b in blocks], axis=1), [b[0].shape[1] for b in blocks])
+        with single_threaded_blas():  # one small SVD: threads only contend on a shared machine (as the fits)
+            rel = iv_relevance(np.concatenate([b[0] for b in blocks], axis=1), [b[0].shape[1] for b in blocks])
     except np.linalg.LinAlgError:
         return "the trials' starts leave a state direction unexcited (their states are singular)"
     if rel >= IV_MIN_RELEVANCE:
