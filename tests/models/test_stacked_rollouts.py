@@ -8,20 +8,23 @@ import warnings
 import numpy as np
 import pytest
 
-from workbench.models import HumanBehaviorModel
+from workbench.models import GMROnlyModel, HumanBehaviorModel
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.operators import SLOW_PILOT, LQROperator, lqr_operator_demos
 
 
-@pytest.mark.parametrize("timing", [(0.15, 0.05), "none"])
+@pytest.mark.parametrize("timing", [(0.15, 0.05), "none", "gmr-only"])
 def test_stacked_mean_rollouts_are_the_task_by_task_ones(timing):
     quad = planar_quadrotor()
     op = LQROperator(**SLOW_PILOT, delay_s=0.15, lag_s=0.05)
     train, test = lqr_operator_demos(op, 6, seed=3, plant=quad), lqr_operator_demos(op, 3, seed=4, plant=quad)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = HumanBehaviorModel(quad, n_components=2, fit_objective=False, noise_folds=0, gain_method="direct",
-                                   timing=timing).fit(train)
+        if timing == "gmr-only":
+            model, timing = GMROnlyModel(quad, n_components=2, noise_folds=0).fit(train), "none"
+        else:
+            model = HumanBehaviorModel(quad, n_components=2, fit_objective=False, noise_folds=0,
+                                       gain_method="direct", timing=timing).fit(train)
     x0s, goals, task_x0s, steps, pasts = [], [], [], [], []
     for d in test:  # three tasks, one start alone in its task and two sharing one
         starts = [0, 7] if d is not test[1] else [5]
