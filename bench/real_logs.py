@@ -125,16 +125,21 @@ def fit_cell(code: int, out: str, err: str) -> str:
             + "".join(f"; {g} not fitted: {c}" for g, c in failed.items()))
 
 
-def _means(table: Path) -> dict[str, dict[str, float]]:
-    """Per method, the mean over test trials (each trial's windows averaged first) of each RMSE and input metric."""
+def _means(table: Path) -> dict[str, dict[str, str]]:
+    """Per method, the mean over test trials (each trial's windows averaged first) of each RMSE and input metric, as
+    printed (3 significant digits), or evaluate's word where the method's rollout diverged
+    (``workbench.study.divergence``: "diverges (ρ̂ …)", the same rule and words as the terminal's)."""
     import pandas as pd
 
+    from workbench.study.input_prediction import INPUT_METRICS
+    from workbench.study.scores import heldout_scores
+
     t = pd.read_parquet(table)
-    t = t[(t.get("table", "comparison") == "comparison") & t["metric"].str.match(r"(rmse|input)_")]
-    per_trial = t.groupby(["method", "metric", "trial"])["value"].mean().groupby(["method", "metric"]).mean()
-    out: dict[str, dict[str, float]] = {}
-    for (method, metric), v in per_trial.items():
-        out.setdefault(method, {})[metric] = float(v)
+    t = t[t.get("table", "comparison") == "comparison"]
+    metrics = sorted({m for m in t["metric"].unique() if str(m).startswith("rmse_")}) + list(INPUT_METRICS)
+    out: dict[str, dict[str, str]] = {}
+    for r in heldout_scores(t, metrics).itertuples(index=False):
+        out.setdefault(str(r.method), {})[str(r.metric)] = r.note or f"{r.value:.3g}"
     return out
 
 
@@ -153,10 +158,10 @@ def evaluate_cells(code: int, out: str, err: str, tables: list[Path]) -> tuple[s
         head = f"{group}: " if group else ""
         left = [_short(ln.strip().split("could not be fitted and is left out of the comparison: ")[-1], 160)
                 for ln in blocks.get(group, out).splitlines() if "proposed could not be fitted" in ln]
-        pos.append(head + ", ".join(f"{TITLES[m]} {means[m]['rmse_position']:.3g}" for m in METHODS
+        pos.append(head + ", ".join(f"{TITLES[m]} {means[m]['rmse_position']}" for m in METHODS
                                     if 'rmse_position' in means.get(m, {}))
                    + (f" (proposed left out: {left[0]})" if left else ""))
-        scores = ["{}: {}".format(INPUT_METRICS[k], ", ".join(f"{TITLES[m]} {means[m][k]:.3g}" for m in METHODS
+        scores = ["{}: {}".format(INPUT_METRICS[k], ", ".join(f"{TITLES[m]} {means[m][k]}" for m in METHODS
                                                               if k in means.get(m, {})))
                   for k in INPUT_METRICS if any(k in v for v in means.values())]
         inp.append(head + ("; ".join(scores) or "— (no input score in this evaluate)"))
@@ -185,7 +190,9 @@ def row(log: Path, timeout: float) -> tuple[list[str], dict[str, str]]:
         code, out, err = _run(["evaluate", str(log), "-o", f"{tmp}/r.parquet"], timeout)
         tables = sorted(Path(tmp).glob("r*.parquet"))
         evaluate, inputs = evaluate_cells(code, out, err, tables)
-        compared = code == 0 and any("proposed" in _means(t) for t in tables)
+        proposed = [_means(t).get("proposed", {}).get("rmse_position") for t in tables] if code == 0 else []
+        compared = any(v is not None and not v.startswith("diverges") for v in proposed)
+        diverges = any(v is not None and v.startswith("diverges") for v in proposed)
         if code == 0 and "time split" in out:
             evaluate = "time split: " + evaluate
         code, out, err = _run(["view", str(log), "--save", f"{tmp}/v.rrd"], timeout)
@@ -194,7 +201,7 @@ def row(log: Path, timeout: float) -> tuple[list[str], dict[str, str]]:
         view = _outcome(code, out, err, f"states ({shown.group(1)})" if shown and not raw
                         else "raw log" + (f" (the mapping: {_short(raw.group(1))})" if raw else ""))
     group_cell = (groups.group(1).replace(" (--plant-group NAME takes one)", "") if groups else "—").replace("|", "/")
-    status = {"imported": str(imported), "fitted": str(fitted), "compared": str(compared)}
+    status = {"imported": str(imported), "fitted": str(fitted), "compared": str(compared), "diverges": str(diverges)}
     stop = imp.split(": ", 1)[1] if not imported else None
     fit, evaluate, inputs = ("same stop" if stop is not None and c == stop else c for c in (fit, evaluate, inputs))
     if plants.replace("—", "").strip(": ") == "":
@@ -220,7 +227,9 @@ def main() -> int:
         print("| " + " | ".join(cells) + " |", flush=True)
         counts.update(k for k, v in status.items() if v == "True")
     print(f"\n{len(logs)} logs: {counts['imported']} imported, {counts['fitted']} fitted (a model for at least one "
-          f"plant group), {counts['compared']} compared with the proposed model in the held-out evaluation.")
+          f"plant group), {counts['compared']} compared with the proposed model in the held-out evaluation (its "
+          f"position RMSE a number in at least one plant group); in {counts['diverges']} the proposed model's rollout "
+          "diverges in at least one plant group (said in place of its horizon scores).")
     return 0
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 __all__ = [
     "DEFAULT_N_COMPONENTS", "DT_PAPER_S", "GAIN_RESAMPLES", "HORIZON_S", "NOISE_HORIZON_S", "N_COMPONENTS",
     "N_STEPS", "OBJECTIVE_RESAMPLES", "ONLINE_HORIZON_S", "ONLINE_N_STEPS", "PAIRED_RESAMPLES", "PAPER_N_COMPONENTS",
-    "PAPER_SETTINGS", "REG_COVAR", "STUDY_SAMPLES", "TIMING",
+    "PAPER_SETTINGS", "REG_COVAR", "STUDY_SAMPLES", "TIMING", "DIVERGED_FACTOR",
 ]
 
 N_COMPONENTS = 5  # G, Gaussian components of the TP-GMM / GMR (the paper's)
@@ -39,3 +39,7 @@ ONLINE_N_STEPS = round(ONLINE_HORIZON_S / DT_PAPER_S)  # the online rollout in g
 STUDY_SAMPLES = 100  # Monte Carlo samples per predicted trial in a study's scores
 PAIRED_RESAMPLES = 4000  # bootstrap resamples of a paired method difference's interval
 GAIN_RESAMPLES = 200  # bootstrap resamples of the gain's interval
+# a rollout diverges where its states lie farther from the centre of the recorded trial's states than this many
+# times the farthest recorded state (on the scored blocks): an order of magnitude beyond anything the pilot flew,
+# so its error measures the blow-up, not the model; evaluate prints "diverges" there instead of a number
+DIVERGED_FACTOR = 10.0

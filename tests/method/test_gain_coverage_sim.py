@@ -6,8 +6,10 @@ Operators: the four of :mod:`workbench.sim` (LQR, near-LQR, the landing simulato
 and a pilot with a reaction delay and a dead zone (``LQROperator(**SLOW_PILOT, delay_s, lag_s, dead_zone=0.05)``,
 the collect page's smallest dead zone). The truth is the operator's own gain where it has one (LQR, near-LQR, the
 delayed pilot) and the default estimator's value on 400 trials where it has none (CS1, erratic: what the interval
-is an interval of). Seeds start at 7000; the interval's construction was chosen on seeds 5000-5007
-(``bench/gain_coverage.py``), never on these.
+is an interval of). Seeds start at 7000; the interval's construction, the rule decided once per fit and the
+timing's least squares where the starts are weak (:func:`workbench.method.timing.weak_starts`) were chosen on seeds
+5000-5007 (``bench/gain_coverage.py``), never on these. Round 6's figures (near-LQR and the dead-zone pilot below
+0.9) are in ``bench/gain_coverage.md``.
 """
 
 from __future__ import annotations
@@ -65,14 +67,14 @@ def test_the_gains_intervals_cover_the_truth(name):
         ds = sim(N_TRIALS, seed)
         m = _default_gain(ds)
         timing = timing_setting(m)
-        timed += timing != "none"
         g = bootstrap_gain(ds, quad, n_boot=N_BOOT, method="direct" if m.gain_method_ == "direct" else "iv", seed=k,
                            jackknife=False, timing=timing)
+        timed += g.timing is not None and g.timing.method != "none"  # identified on all trials, not just tried
         lo, hi = g.interval(95.0)
         truth = pseudo if truth_of is None else truth_of(seed).gain(quad)
         hits.append((truth >= lo) & (truth <= hi))
     hits = np.array(hits)
     ci = stats.binomtest(int(hits.sum()), hits.size).proportion_ci(0.95)
     print(f"{name}: {hits.mean():.3f} of {hits.size} entries covered (95 % CI {ci.low:.2f}-{ci.high:.2f}), lateral row "
-          f"{hits[:, 0].mean():.3f}; {timed} of {SEEDS} fits with the pilot's timing")
+          f"{hits[:, 0].mean():.3f}; the pilot's timing identified in {timed} of {SEEDS} fits")
     assert hits.mean() >= 0.9

@@ -141,3 +141,56 @@ def test_the_judgement_round_trips_through_a_model_file(tmp_path):
     assert back.stability_ == model.stability_ and isinstance(back.stability_, Stability)
     x0 = ds[1].x[0]
     assert np.allclose(back.predict(x0, 30).x, model.predict(x0, 30).x)
+
+
+def test_without_an_interval_a_loop_outside_the_unit_circle_is_not_refused():
+    """One short demonstration is one 2 s block: nothing to resample, so no interval. ρ̂ ≥ 1 is then not
+    distinguishable from the unit circle — no refusal decided by a point estimate whose uncertainty is unknown (a
+    real log's 5 s time-split piece was refused at ρ̂ 1.2238, "no interval") — and ρ̂ < 1 stays stable."""
+    p = planar_quadrotor()
+    K_lqr = forward_gain(p.A, p.B, np.eye(6), np.eye(2))[0]
+    rng = np.random.default_rng(0)
+    view = Demonstration(p.dt * np.arange(15), rng.normal(size=(15, 6)), rng.normal(size=(15, 2)), {"id": "short"})
+    for K in (K_lqr, -0.3 * K_lqr):
+        rho = float(np.abs(np.linalg.eigvals(p.A + p.B @ K)).max())
+        s = judge_stability(p.A, p.B, K, [view], "direct", p.dt, p.state_names)
+        assert not s.has_interval and s.rho == pytest.approx(rho)
+        assert s.verdict == ("stable" if rho < 1.0 else "not distinguishable") and not s.refused
+    assert float(np.abs(np.linalg.eigvals(p.A + p.B @ (-0.3 * K_lqr))).max()) > 1.0  # the second gain is outside
+
+
+def test_the_pilots_timed_loop_gets_its_interval_from_the_timing_resamples():
+    # the fit judges the timed loop at its point alone; the bootstrap's resampled (K, delay, lag) give ρ's interval
+    # by the rule of the untimed loop (the union of the percentile and the basic interval), and the verdict follows
+    from types import SimpleNamespace
+
+    from workbench.method.stability import with_timing_resamples
+    from workbench.method.timing import timed_spectral_radius
+
+    quad = planar_quadrotor()
+    K = forward_gain(quad.A, quad.B, np.diag([0.1, 1.0, 1.0, 0.1, 0.3, 0.01]), np.diag([40.0, 10.0]))[0]
+    rho = timed_spectral_radius(quad.A, quad.B, K, 0.2, 0.08, quad.dt)
+    point = Stability(rho=rho, lo=np.nan, hi=np.nan, verdict="stable", loop="the pilot's loop", n_units=20)
+    assert "no interval here" in point.describe()
+    rng = np.random.default_rng(0)
+
+    def timing(spread: float) -> SimpleNamespace:
+        return SimpleNamespace(method="liml", n_trials=20, K_samples=K * (1 + spread * rng.normal(size=(40, 1, 1))),
+                               delay_samples=0.2 + 0.01 * rng.normal(size=40),
+                               lag_samples=np.abs(0.08 + 0.01 * rng.normal(size=40)))
+
+    t = timing(0.05)
+    judged = with_timing_resamples(point, quad.A, quad.B, quad.dt, t)
+    rhos = [timed_spectral_radius(quad.A, quad.B, k, d, g, quad.dt)
+            for k, d, g in zip(t.K_samples, t.delay_samples, t.lag_samples, strict=True)]
+    q_lo, q_hi = np.percentile(rhos, [2.5, 97.5])
+    assert judged.lo == pytest.approx(min(q_lo, 2 * rho - q_hi, rho))
+    assert judged.hi == pytest.approx(max(q_hi, 2 * rho - q_lo, rho))
+    assert judged.n_resamples == 40 and judged.unit == "trials"
+    assert "over 40 resamples of 20 trials" in judged.describe()
+    assert judged.verdict == ("stable" if judged.hi < 1 else "not distinguishable")
+    # resampled gains twice as stiff reach the unit circle: the verdict says so
+    wide = with_timing_resamples(point, quad.A, quad.B, quad.dt, timing(1.5))
+    assert wide.hi > 1 and wide.verdict == "not distinguishable"
+    # no timed resamples (a refused timing): the point's judgement as it was
+    assert with_timing_resamples(point, quad.A, quad.B, quad.dt, SimpleNamespace(method="none")) is point

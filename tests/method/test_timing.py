@@ -120,21 +120,69 @@ def test_the_landing_simulators_cascade_is_refused(quad):
         tm.identify_timing(simulate_landings("CS1", 30, seed=11), quad, n_boot=0)
 
 
-def test_a_refused_timing_falls_back_to_the_rule_in_every_resample(quad):
-    # three trials: the starts explain nothing beyond chance, so no timing on all trials; the default rule then
-    # gives the paper's gain there, and each resample decides again
-    from workbench.errors import ModelError
-    from workbench.method.gain import choose_gain
-    from workbench.method.resampling import bootstrap_gain
+def _counts(seed: int, n_trials: int, n_boot: int) -> list[np.ndarray]:
+    # each resample's multiplicities, drawn as identify_timing draws them
+    rng = np.random.default_rng(seed)
+    return [np.bincount(rng.integers(0, n_trials, size=n_trials), minlength=n_trials) for _ in range(n_boot)]
 
-    ds = lqr_operator_demos(LQROperator(), 3, seed=8, plant=quad)
+
+def test_a_refused_timing_falls_back_to_the_rule_in_every_resample(quad):
+    # four trials whose starts explain nothing beyond chance: no timing on all trials, so the default rule gives the
+    # paper's gain there, and every resample fits that same gain (two-stage least squares, no relevance pretest),
+    # even the resamples whose own trials would have identified a timing: they are counted, not mixed in
+    from workbench.errors import ModelError
+    from workbench.method.gain import choose_gain, demo_blocks
+    from workbench.method.resampling import _rule_fit, bootstrap_gain
+
+    ds = lqr_operator_demos(LQROperator(), 4, seed=20, plant=quad)
     with pytest.raises(ModelError, match="no better than chance"):
         tm.identify_timing(ds, quad, n_boot=0)
     g = bootstrap_gain(ds, quad, n_boot=2, method="iv", seed=0, jackknife=False, timing="identify-or-none")
-    K, _ = choose_gain(ds, quad)
+    K, choice = choose_gain(ds, quad)
     np.testing.assert_allclose(g.K, K, atol=1e-10)
     assert g.timing.method == "none" and "pilot timing: none" in g.timing.describe()
-    assert g.K_samples.shape == (2 - g.n_failed, 2, 6)
+    assert g.timing.n_timed == 0 and g.n_failed == 0 and g.timing.n_otherwise >= 1
+    assert f"{g.timing.n_otherwise} of them would have identified a timing" in g.timing.describe()
+    blocks = demo_blocks(list(ds), quad.n, quad.m)
+    rule = [_rule_fit(blocks, np.repeat(np.arange(4), c), quad.A, quad.B, choice.method) for c in _counts(0, 4, 2)]
+    np.testing.assert_allclose(g.K_samples, np.array(rule), atol=1e-9)
+
+
+def test_an_identified_timing_is_kept_in_every_resample(quad):
+    # four trials whose starts are relevant on all trials (the timing identified), though most resamples repeat a
+    # trial and alone would refuse it: every resample still fits the timed gain, the estimator printed (on the
+    # previous main those resamples took the paper's gain instead, and K̂'s interval mixed the two)
+    from workbench.method.resampling import bootstrap_gain
+
+    ds = lqr_operator_demos(LQROperator(), 4, seed=8, plant=quad)
+    g = bootstrap_gain(ds, quad, n_boot=6, method="iv", seed=0, jackknife=False, timing="identify-or-none")
+    assert g.timing.method == "liml" and g.timing.n_timed == 6 - g.n_failed and g.timing.n_otherwise >= 1
+    assert f"{g.timing.n_otherwise} of them would have refused the timing" in g.timing.describe()
+    data = tm.TimingData(ds, quad.n, quad.m, quad.dt)
+    timed = [tm.fit_timing(data, "liml", counts=c).K for c in _counts(0, 4, 6)]
+    np.testing.assert_allclose(g.K_samples, np.array(timed), atol=1e-9)
+
+
+def test_starts_too_weak_for_the_papers_instrumented_gain_time_the_gain_by_least_squares(quad):
+    # the erratic pilot's starts explain its states "beyond chance" (LIML's own check passes), but less than the
+    # paper's "iv" gain accepts of the same instruments: the timing is then fitted by least squares, the paper's
+    # rule inside the timed gain (on the previous main LIML, on instruments that barely move some states)
+    from workbench.method.gain import IV_MIN_RELEVANCE, demo_blocks, iv_relevance
+    from workbench.sim.operators import erratic_operator_demos
+
+    ds = list(erratic_operator_demos(n_trials=10, seed=4))
+    data = tm.TimingData(ds, quad.n, quad.m, quad.dt)
+    fit = tm.fit_timing(data, "liml")
+    assert fit.relevance > 0 and not tm.refusal(fit, quad)  # what LIML alone accepts
+    blocks = demo_blocks(ds, quad.n, quad.m)
+    rel = iv_relevance(np.concatenate([b[0] for b in blocks], axis=1), [b[0].shape[1] for b in blocks])
+    assert rel < IV_MIN_RELEVANCE
+    t = tm.identify_timing(ds, quad, n_boot=0)
+    direct = tm.fit_timing(data, "direct")
+    assert t.method == "direct" and "too weak an instrument" in t.reason and "least squares" in t.describe()
+    np.testing.assert_allclose(t.K, direct.K)
+    assert (t.delay_s, t.lag_s) == (direct.delay_s, direct.lag_s)
+    assert tm.weak_starts(lqr_operator_demos(LQROperator(), 6, seed=3, plant=quad), quad.n, quad.m) == ""
 
 
 def test_the_gains_interval_is_the_estimate_plus_minus_t_standard_deviations():

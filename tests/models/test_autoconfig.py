@@ -57,14 +57,50 @@ def test_auto_model_records_its_choice_and_survives_a_round_trip(quad, small, tm
                                fit_objective=False).fit(small)
     assert model.n_components == "cv" and model.reg_covar == "cv"  # settings stay as given
     assert model.n_components_ == model.auto_.n_components and model.reg_covar_ == model.auto_.reg_covar
+    # the fixed settings with the choice's fallback (K̂x where the variability model did not earn its place)
     fixed = HumanBehaviorModel(quad, n_components=model.n_components_, reg_covar=model.reg_covar_, noise_folds=0,
-                               fit_objective=False).fit(small)
+                               fit_objective=False, variability_mean=not model.auto_.fallback).fit(small)
     x0 = small[0].x[0]
     np.testing.assert_allclose(model.predict(x0, 20).x, fixed.predict(x0, 20).x)
     model.save(tmp_path / "auto.npz")
     back = load_model(tmp_path / "auto.npz")
     assert back.auto_ == model.auto_ and back.reg_covar_ == model.reg_covar_
     np.testing.assert_allclose(back.predict(x0, 20).x, model.predict(x0, 20).x)
+
+
+def test_the_cv_scores_each_held_out_trial_as_a_whole():
+    # the first four half-horizons scored only a trial's first seconds; the starts now reach its last full window
+    for length, H in ((245, 60), (300, 60), (62, 60), (10, 9)):
+        starts = ac._starts(length, H)
+        assert starts[0] == 0 and starts[-1] == max(length - H - 1, 0)
+        assert len(starts) == min(ac._CV_STARTS, length - H) and starts == sorted(set(starts))
+
+
+def test_a_choice_that_does_not_carry_over_to_the_fit_on_all_trials_falls_back(quad, small, monkeypatch):
+    # the chosen setting fitted on all trials predicts those very trials worse than K̂x: the model keeps K̂x (the
+    # erratic pilot's weakly identified gain: 310 against 0.49 on its own trials, a 593-fold error held out)
+    monkeypatch.setattr(ac, "DEFAULT_COMPONENT_GRID", (1,))
+    monkeypatch.setattr(ac, "DEFAULT_REG_COVAR_GRID", (1.0,))
+    monkeypatch.setattr(ac, "FALLBACK_SE", -math.inf)  # the cross-validation itself keeps the variability mean
+    fit = dict(n_components="cv", reg_covar="cv", noise_folds=0, fit_objective=False)
+    honest = HumanBehaviorModel(quad, **fit).fit(small)
+    checked = (honest.auto_.fitted_rmse, honest.auto_.fitted_ioc_rmse)
+    assert checked == pytest.approx(ac.fitted_check(honest, small))
+    assert honest.auto_.fallback == (checked[0] > checked[1])
+    calls, check = [], ac.fitted_check
+
+    def worse(model, demos):
+        calls.append(len(demos))
+        with_mean, alone = check(model, demos)
+        return alone * 2.0, alone
+
+    monkeypatch.setattr(ac, "fitted_check", worse)
+    model = HumanBehaviorModel(quad, **fit).fit(small)
+    assert calls == [len(small)]
+    assert model.auto_.fallback and not model.variability_mean_
+    assert "did not carry over" in model.auto_.describe()
+    back = ac.AutoSettings.from_json(model.auto_.as_json())
+    assert back == model.auto_
 
 
 def mean_position_rmse(models, test) -> dict[str, float]:
@@ -145,6 +181,23 @@ def test_fallback_to_the_task_objective_is_chosen_by_held_out_error_and_kept(qua
     back = load_model(tmp_path / "m.npz")
     assert back.variability_mean_ is False and back.auto_.fallback and back.auto_.ioc_only_rmse == 1.0
     np.testing.assert_allclose(back.predict(d.x[0], 30, d.target).x, fell.predict(d.x[0], 30, d.target).x)
+
+
+def test_a_candidate_not_fitted_on_every_fold_is_written_to_the_model_file(quad, small, tmp_path, monkeypatch):
+    """A candidate that failed on some fold scores NaN; the model file (strict JSON) holds it as null and reads it
+    back as NaN, rather than `fit` stopping with "Out of range float values are not JSON compliant" after the fit
+    (a real LOITER log, 10-11-2014/105.BIN, did)."""
+    rows = ({"n_components": 1, "reg_covar": 0.3, "heldout_rmse": 1.5, "heldout_loglik": -2.0, "chosen": True},
+            {"n_components": 2, "reg_covar": 0.3, "heldout_rmse": math.nan, "heldout_loglik": math.nan,
+             "chosen": False})
+    monkeypatch.setattr(ac, "choose_settings", lambda *a, **k: ac.AutoSettings(1, 0.3, "prediction", 2, rows))
+    model = HumanBehaviorModel(quad, n_components="cv", reg_covar="cv", noise_folds=0).fit(small)
+    model.save(tmp_path / "m.npz")
+    back = load_model(tmp_path / "m.npz").auto_.scores
+    assert back[0] == rows[0]
+    assert math.isnan(back[1]["heldout_rmse"]) and math.isnan(back[1]["heldout_loglik"])
+    assert {k: v for k, v in back[1].items() if "heldout" not in k} == {k: v for k, v in rows[1].items()
+                                                                        if "heldout" not in k}
 
 
 def test_no_candidate_on_every_fold_says_why_the_fits_failed(quad, small, monkeypatch):

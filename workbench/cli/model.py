@@ -103,15 +103,18 @@ def _print_intervals(ctx: Context, model: Any, ds: Any, plant: Any, n_boot: int,
     fitted = _as_fitted(ds, model)
     timing = timing_setting(model)
 
-    def with_objective() -> None:
-        boot = _print_bootstrap(ctx, fitted, plant, n_boot, seed, model.gain_method_, timing)
-        if _with_timing_intervals(model, boot):
+    def with_timing(boot: Any) -> None:
+        if _with_timed_stability(ctx, model, plant, boot) | _with_timing_intervals(model, boot):
             model.save(output)
+
+    def with_objective() -> None:
+        with_timing(_print_bootstrap(ctx, fitted, plant, n_boot, seed, model.gain_method_, timing))
+
     if model.objective_ is None and getattr(model, "objective_error_", None):
         ctx.say("intervals of the task objective (Q, R): not computed, since inverse LQR found no objective for the "
                 "gain (above); the gain's own intervals follow")
-        parts = [("intervals of K̂", lambda: _print_gain_intervals(ctx, fitted, plant, n_boot, seed,
-                                                                   model.gain_method_, timing))]
+        parts = [("intervals of K̂", lambda: with_timing(_print_gain_intervals(ctx, fitted, plant, n_boot, seed,
+                                                                              model.gain_method_, timing)))]
     else:
         parts = [("intervals of K̂, Q and R", with_objective)]
     parts.append(("weight ratios", lambda: _print_ratios(ctx, model, ds, n_boot, seed, power)))
@@ -125,7 +128,7 @@ def _print_intervals(ctx: Context, model: Any, ds: Any, plant: Any, n_boot: int,
 
 
 def _print_gain_intervals(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: int, gain: str,
-                          timing: Any = "none") -> None:
+                          timing: Any = "none") -> Any:
     """K̂'s intervals alone (:func:`~workbench.method.resampling.gain_interval`), over resamples of whole trials (no
     inverse LQR per resample)."""
     from workbench.method.resampling import GAIN_INTERVAL, bootstrap_gain
@@ -141,9 +144,12 @@ def _print_gain_intervals(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: 
         print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
     lo, hi = result.interval(95.0)
     ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % intervals, {GAIN_INTERVAL}):")
+    if result.timing is not None:
+        ctx.say(f"  {result.timing.describe()}")
     for i, u in enumerate(plant.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(plant.state_names, lo[i], hi[i], strict=True)))
+    return result
 
 
 def _physics_first(plant: Any, exc: Exception) -> str:
@@ -182,6 +188,24 @@ def _print_bootstrap(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: int, 
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(plant.state_names, result.K_lo[i], result.K_hi[i],
                                                          strict=True)))
     return result
+
+
+def _with_timed_stability(ctx: Context, model: Any, plant: Any, result: Any) -> bool:
+    """The stability of a gain on the state the pilot saw, with ρ's interval from the bootstrap's resampled delays,
+    lags and gains (:func:`~workbench.method.stability.with_timing_resamples`): printed, and kept in the model;
+    whether there was one."""
+    from workbench.method.stability import with_timing_resamples
+
+    stability = getattr(model, "stability_", None)
+    pt = getattr(result, "timing", None)
+    if stability is None or pt is None or getattr(model, "timing_", None) is None or stability.loop == "A + BK̂":
+        return False
+    judged = with_timing_resamples(stability, plant.A, plant.B, plant.dt, pt)
+    if judged is stability:
+        return False
+    model.stability_ = judged
+    ctx.say(f"  {judged.describe()}")
+    return True
 
 
 def _with_timing_intervals(model: Any, result: Any) -> bool:

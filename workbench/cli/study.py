@@ -244,14 +244,17 @@ def _print_study(ctx: Context, result: Any, report: Path | None = None) -> None:
     from rich.markup import escape
 
     from workbench.models.registry import METHOD_TITLES
-    from workbench.study.scores import fmt, heldout_scores
+    from workbench.study.scores import cell as score_cell
+    from workbench.study.scores import heldout_scores
 
-    # the first answer: each method's held-out error with its interval (the numbers the first view shows)
+    # the first answer: each method's held-out error with its interval (the numbers the first view shows; a
+    # rollout that diverged is said instead, workbench.study.divergence)
     scores = heldout_scores(result.table)
     rows = []
     for (label, method), g in scores.groupby(["label", "method"], sort=False):
-        by = {r.metric: r for r in g.itertuples(index=False)}
-        cell = {m: fmt(r.value, r.lo, r.hi, share=m.startswith("band_")) for m, r in by.items()}
+        cell = {r.metric: score_cell(r) for r in g.itertuples(index=False)}
+        if (g["note"] != "").any():  # a diverged rollout: its ρ̂ once, in the first column, the others say the word
+            cell = {m: "diverges" if c.startswith("diverges") and m != "rmse_position" else c for m, c in cell.items()}
         rows.append([label, METHOD_TITLES.get(method, method), cell.get("rmse_position", "—"),
                      cell.get("rmse_velocity", "—"), cell.get("band_position", "—"), str(int(g["n_trials"].max()))])
     if rows:
@@ -291,14 +294,14 @@ def _print_inputs(ctx: Context, table: Any) -> None:
     """Each method's held-out error in predicting the pilot's own input, against the models with no pilot, and the
     headline sentences that name the no-pilot model they compare with."""
     from workbench.study.input_prediction import input_headlines, input_scores, title
-    from workbench.study.scores import fmt
+    from workbench.study.scores import cell as score_cell
 
     scores = input_scores(table)
     if scores.empty:
         return
     rows = []
     for (label, method), g in scores.groupby(["label", "method"], sort=False):
-        cell = {r.metric: fmt(r.value, r.lo, r.hi) for r in g.itertuples(index=False)}
+        cell = {r.metric: score_cell(r) for r in g.itertuples(index=False)}
         rows.append([label, title(method), cell.get("input_step", "—"), cell.get("input_horizon", "—")])
     ctx.say_table(["label", "method", "one step ahead", "over the horizon"], rows,
                   title="held-out error in predicting the pilot's input (RMS over the inputs, mean of trials "

@@ -211,6 +211,7 @@ def decide_task(demos: Any, override: str | Mapping[str, Any] | PilotTask | None
     targets = bool(ds) and all(d.meta.get("target") is not None for d in ds)
     declared = {str(d.meta.get("reference")) for d in ds if d.meta.get("reference")}
     all_declared = bool(ds) and all(d.meta.get("reference") for d in ds) and len(declared) == 1
+    free = ""  # what a free flight leaves out, said once the regulated states are decided
     if changes.get("relative_to") or changes.get("reference"):
         rel = changes.get("relative_to", "reference")
         ref = changes.get("reference", next(iter(declared)) if rel == "reference" and all_declared else None)
@@ -224,9 +225,9 @@ def decide_task(demos: Any, override: str | Mapping[str, Any] | PilotTask | None
     else:
         rel, ref = "zero", None
         missing = sum(d.meta.get("target") is None for d in ds)
-        why = (f"{missing} of {len(ds)} trials have no goal: a free flight"
-               + ("; nobody steers back to an absolute position, so the positions are left out" if positions
-                  else "; the plant declares no positions, so every state is regulated"))
+        why = f"{missing} of {len(ds)} trials have no goal: a free flight"
+        free = ("; nobody steers back to an absolute position, so the positions are left out" if positions
+                else "; the plant declares no positions, so every state is regulated")
     if rel == "reference" and ref is None:
         raise ValueError(f"a task relative to a reference needs its name, one of {', '.join(REFERENCES)} "
                          "(the trials declare none)")
@@ -235,23 +236,24 @@ def decide_task(demos: Any, override: str | Mapping[str, Any] | PilotTask | None
                          "goal (meta['target'])")
     if rel == "goal" and not targets:
         raise ValueError("a task relative to its goal needs every trial's goal (meta['target']); some have none")
-    regulated = changes.get("regulated")
+    asked = changes.get("regulated")
     by = "the mapping's [task]" if mapped else "asked"
-    if regulated is None:
+    if asked is None:
         regulated = _inner(state_names, positions) if rel == "zero" and positions else ()
         n_inputs = len(getattr(demos, "input_names", ()) or ())
         if regulated and len(regulated) <= n_inputs:
             # as many inputs as inner states: any stabilizing gain is optimal for some cost, so inverse LQR could
             # tell no objective apart (Assumption 2 needs m < n); the positions stay in the regulator
-            why = why.replace("; nobody steers back to an absolute position, so the positions are left out", "")
-            why += (f"; the positions stay in, since {len(regulated)} inner states for {n_inputs} inputs leave no "
+            free = (f"; the positions stay in, since {len(regulated)} inner states for {n_inputs} inputs leave no "
                     "objective to identify (Assumption 2)")
             regulated = ()
-    elif regulated in (("inner",), ("all",)):
-        why += f"; {regulated[0]} states as {by}"
-        regulated = _inner(state_names, positions) if regulated == ("inner",) else ()
-    elif not why.startswith("as "):
-        why += f"; the regulated states as {by}"
+        why += free
+    elif asked in (("inner",), ("all",)):
+        why += f"{free}; {asked[0]} states as {by}"
+        regulated = _inner(state_names, positions) if asked == ("inner",) else ()
+    else:
+        regulated = asked
+        why += free + ("" if why.startswith("as ") else f"; the regulated states as {by}")
     if state_names:
         missing_states = [s for s in regulated if s not in state_names]
         if missing_states:

@@ -5,7 +5,10 @@ trials (:func:`gain_interval`), not the resamples' percentiles: on simulated pil
 percentile interval held the truth on 79-82 % of the entries of the LQR and near-LQR operators, the ``t`` interval
 on 93-94 %, and on ≥ 93 % of every other operator's (the coverage study ``bench/gain_coverage.py``, its numbers in
 ``bench/gain_coverage.md``). With the pilot's timing (:mod:`workbench.method.timing`) every resample re-identifies
-the delay and the lag, so the gain's interval carries the timing's uncertainty too.
+the delay and the lag, so the gain's interval carries the timing's uncertainty too. The default rule (the timing
+where the timing model fits, the paper's gain where it does not: :data:`IDENTIFY_OR_NONE`) is decided once, on all
+trials, and every resample follows it: the interval is the printed estimator's, not a mixture of it and the other
+one (why: :func:`workbench.method.timing.identify_timing`'s ``fallback``).
 """
 
 from __future__ import annotations
@@ -22,16 +25,17 @@ from workbench.defaults import GAIN_RESAMPLES
 from workbench.errors import DataError, ModelError
 from workbench.frozen import readonly
 from workbench.method.closed_loop import plant_matrices, single_threaded_blas
-from workbench.method.gain import GainMethod, demo_blocks, gain_from_arrays
+from workbench.method.gain import GainMethod, _first_stage, demo_blocks, gain_from_arrays
 from workbench.method.inverse_lqr_sdp import _SOLVER_CHAIN, InverseLQR, cached_problem
 from workbench.method.objective import _STRUCTURES, Structure, TaskObjective
 
 __all__ = ['BootstrapResult', 'GainBootstrap', 'bootstrap_gain', 'bootstrap', 'gain_interval', 'GAIN_INTERVAL',
            'IDENTIFY_OR_NONE']
 
-#: The default models' timing rule as a resampling's ``timing``: the pilot's timing where the timing model fits the
-#: resample, the paper's instantaneous gain (instruments, else least squares) where it does not (every choice of the
-#: default gain inside every resample).
+#: The default models' timing rule as a resampling's ``timing``: the pilot's timing where the timing model fits all
+#: trials, the paper's instantaneous gain (instruments, else least squares) where it does not; decided on all trials,
+#: and every resample (and every leave-one-out set) fits the gain so decided, so K̂'s interval is the interval of the
+#: gain printed (the resamples that would have decided otherwise are counted: ``PilotTiming.n_otherwise``).
 IDENTIFY_OR_NONE = "identify-or-none"
 
 #: How K̂'s intervals are made from its resamples (see the module docstring and :func:`gain_interval`).
@@ -290,17 +294,16 @@ def _timed_resampled(
 
     A, B = plant_matrices(plant.A, plant.B)
     given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
-    how = "direct" if method == "direct" else "liml"
+    how = "direct" if method == "direct" and timing != IDENTIFY_OR_NONE else "liml"
     fallback = None
-    if timing == IDENTIFY_OR_NONE:  # the model's rule, decided again in every resample
+    if timing == IDENTIFY_OR_NONE:  # the model's rule, decided on all trials; every resample follows
         blocks = demo_blocks(list(demos), *B.shape)
+        rule: dict[str, str] = {}
 
         def fallback(counts: np.ndarray) -> np.ndarray:
-            idx = np.repeat(np.arange(len(blocks)), counts)
-            try:
-                return _resample_fit(blocks, idx, A, B, "iv", None)[0]
-            except ModelError:
-                return _resample_fit(blocks, idx, A, B, "direct", None)[0]
+            if not rule:
+                rule["method"] = rule_gain_method(blocks, A, B)
+            return _rule_fit(blocks, np.repeat(np.arange(len(blocks)), counts), A, B, rule["method"])
 
     demos = list(demos)
     key = _timing_key(demos, A, B, plant, how, given, timing, n_boot, seed)
@@ -330,6 +333,32 @@ def _timed_resampled(
     if not fits:
         raise ModelError(f"all {n_boot} bootstrap resamples failed; first failure: {failures[0]}")
     return pt.n_trials, np.asarray(pt.K), obj0, fits, failures, pt
+
+
+def rule_gain_method(blocks: list, A: np.ndarray, B: np.ndarray) -> str:
+    """The paper's gain that the default rule takes where the timing is refused, decided on all trials as
+    :func:`workbench.method.gain.choose_gain` decides it: ``"iv"`` where the instruments are relevant and their
+    gain stabilizing, else ``"direct"``. Every resample then fits that one (:func:`_rule_fit`), rather than
+    choosing again."""
+    try:
+        _resample_fit(blocks, np.arange(len(blocks)), A, B, "iv", None)
+    except ModelError:
+        return "direct"
+    return "iv"
+
+
+def _rule_fit(blocks: list, idx: np.ndarray, A: np.ndarray, B: np.ndarray, method: str) -> np.ndarray:
+    """The gain ``method`` (decided on all trials by :func:`rule_gain_method`) of the trials ``idx``, as the model
+    fits it (:func:`~workbench.method.gain.choose_gain` with ``check=False``: its stability is judged with its
+    interval) and without the relevance pretest that decided it: the same estimator in every resample. Two-stage
+    least squares with these many instruments keeps its moments where the instruments are weak (it leans toward
+    least squares, Bound, Jaeger & Baker 1995, JASA 90), so a resample with weak ones widens the interval rather
+    than failing out of it."""
+    X, U, X_next = (np.concatenate([blocks[i][k] for i in idx], axis=1) for k in range(3))
+    if method == "iv":
+        X_hat, _ = _first_stage(X, [blocks[i][0].shape[1] for i in idx])
+        return np.linalg.lstsq(X_hat.T, U.T, rcond=None)[0].T
+    return gain_from_arrays(X, U, X_next, A, B, method, check=False)
 
 
 def _resampled(
@@ -425,7 +454,9 @@ def bootstrap_gain(
     With ``jackknife`` (default) also the ``n`` leave-one-demonstration-out gains (``K_loo``, Quenouille-Tukey
     jackknife over trials): what the ratio intervals take their bias correction and degrees of freedom from.
     ``timing`` (``"identify"`` or a given ``(delay_s, lag_s)``, as a model's): the gain on the seen state, every
-    resample re-identifying the timing (:mod:`workbench.method.timing`); ``"none"``: the instantaneous gain.
+    resample re-identifying the timing (:mod:`workbench.method.timing`); :data:`IDENTIFY_OR_NONE`: the default
+    model's rule, decided on all trials, every resample following it (``method`` is then the rule's: LIML, else
+    "iv" or "direct" as on all trials); ``"none"``: the instantaneous gain.
 
     Raises
     ------
@@ -437,7 +468,13 @@ def bootstrap_gain(
     timed = len(out) > 5
     loo = None
     if jackknife and n_trials >= 3:
-        loo = _timed_leave_one_out(demos, plant, method, timing) if timed else _leave_one_out(demos, plant, method)
+        if timed and getattr(out[5], "method", "") == "none":  # the rule decided no timing: the paper's gain
+            A, B = plant_matrices(plant.A, plant.B)
+            loo = _leave_one_out(demos, plant, rule_gain_method(demo_blocks(list(demos), *B.shape), A, B))
+        elif timed:  # the estimator decided on all trials (LIML, or least squares where the starts are weak)
+            loo = _timed_leave_one_out(demos, plant, "direct" if out[5].method == "direct" else "iv", timing)
+        else:
+            loo = _leave_one_out(demos, plant, method)
     return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array([f[0] for f in fits])), n_trials=n_trials,
                          n_boot=len(fits) + len(failures), n_failed=len(failures), failures=tuple(failures),
                          method=method, seed=int(seed), K_loo=None if loo is None else readonly(loo),
@@ -446,24 +483,17 @@ def bootstrap_gain(
 
 
 def _timed_leave_one_out(demos: Any, plant: Any, method: GainMethod, timing: Any) -> np.ndarray | None:
-    """:func:`_leave_one_out` of the gain with the pilot's timing (re-identified without each trial)."""
-    from workbench.method.timing import TimingData, fit_timing, refusal
+    """:func:`_leave_one_out` of the gain with the pilot's timing (re-identified without each trial; with
+    :data:`IDENTIFY_OR_NONE` the caller has decided on all trials that there is a timing, and by which estimator
+    (``method`` "direct": least squares, else LIML), and every set follows)."""
+    from workbench.method.timing import TimingData, fit_timing
 
     given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
     data = TimingData(list(demos), plant.n, plant.m, plant.dt)
     how = "direct" if method == "direct" else "liml"
-    A, B = plant_matrices(plant.A, plant.B)
-    blocks = demo_blocks(list(demos), *B.shape)
-    out = []
     try:
-        for j in range(data.n_trials):
-            fit = fit_timing(data, how, counts=np.arange(data.n_trials) != j, **given)
-            if timing == IDENTIFY_OR_NONE and refusal(fit, plant):  # the rule, decided without trial j too
-                fit_K = _resample_fit(blocks, np.delete(np.arange(len(blocks)), j), A, B, "iv", None)[0]
-            else:
-                fit_K = fit.K
-            out.append(fit_K)
-        return np.array(out)
+        return np.array([fit_timing(data, how, counts=np.arange(data.n_trials) != j, **given).K
+                         for j in range(data.n_trials)])
     except (ModelError, np.linalg.LinAlgError):
         return None
 
@@ -515,8 +545,9 @@ def bootstrap(
         Interval coverage in percent (K̂: :func:`gain_interval`; the objective: percentiles).
     progress : callable(i, n), optional
         Called after each resample with the count done and ``n_boot`` (after each block with workers).
-    timing : "none", "identify" or (delay_s, lag_s)
-        As a model's (:mod:`workbench.method.timing`): with the pilot's timing every resample re-identifies it and
+    timing : "none", "identify", "identify-or-none" or (delay_s, lag_s)
+        As a model's (:mod:`workbench.method.timing`; :data:`IDENTIFY_OR_NONE`, as in :func:`bootstrap_gain`):
+        with the pilot's timing every resample re-identifies it and
         fits the gain on the seen state (serially: ``executor`` is not used), and ``timing`` of the result holds
         the delay and the lag with their intervals.
     executor : Executor, optional

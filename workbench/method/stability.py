@@ -9,7 +9,10 @@ The paper refuses a gain whose spectral radius ``ρ(A + B K̂)`` is ≥ 1 (Assum
 - the interval holds 1: **not distinguishable** from the unit circle — still a model (its predictions are fine over
   seconds); where ``ρ̂ ≥ 1`` no quadratic cost has the gain, so the task objective is not found, and said so;
 - the interval lies outside: **unstable**, a refusal that names the states the slow mode lies on and, where the
-  trials were flown in an assisted mode whose autopilot holds exactly those states, that mode as the likely cause.
+  trials were flown in an assisted mode whose autopilot holds exactly those states, that mode as the likely cause;
+- no interval (fewer than two units to resample): ρ̂ < 1 is stable, as the paper's Assumption 3 has it, and ρ̂ ≥ 1 is
+  not distinguishable — no refusal rests on a point estimate whose uncertainty is unknown (a rollout that then
+  diverges is said so by :mod:`workbench.study.divergence`).
 
 Resampling units are whole demonstrations when there are at least :data:`MIN_DEMOS` of them, else blocks of
 :data:`BLOCK_S` seconds inside them (a free flight is often one or two long segments). Each resample refits the
@@ -22,7 +25,7 @@ estimate is biased and ``|λ|`` is not symmetric around it, and the union widens
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -31,8 +34,8 @@ from workbench.errors import ModelError
 from workbench.method.closed_loop import single_threaded_blas
 from workbench.method.slow_mode import held_states, likely_cause, slow_mode
 
-__all__ = ["Stability", "judge_stability", "refusal", "slow_mode", "held_states", "likely_cause", "MIN_DEMOS",
-           "BLOCK_S", "RESAMPLES", "LEVEL"]
+__all__ = ["Stability", "judge_stability", "with_timing_resamples", "refusal", "slow_mode", "held_states",
+           "likely_cause", "MIN_DEMOS", "BLOCK_S", "RESAMPLES", "LEVEL"]
 
 #: Whole demonstrations are resampled when there are at least this many; fewer are cut into blocks.
 MIN_DEMOS = 10
@@ -243,25 +246,61 @@ def judge_stability(A: np.ndarray, B: np.ndarray, K: np.ndarray, views: Sequence
             with np.errstate(all="ignore"), single_threaded_blas():
                 Ks = _resampled_gains(grams, counts.astype(float), method, A, B)
                 rhos = np.abs(np.linalg.eigvals(A[None] + B[None] @ Ks)).max(axis=1)
-            rhos = rhos[np.isfinite(rhos)]
-            n_ok = int(rhos.size)
-            if n_ok >= 2:
-                # the union of the percentile and the basic interval: a bias the resamples show (a root at 1, an
-                # integrator, is estimated with one, and |λ| is not symmetric around it) widens the interval
-                # instead of moving it past the truth
-                tail = (100.0 - level) / 2.0
-                q_lo, q_hi = (float(v) for v in np.percentile(rhos, [tail, 100.0 - tail]))
-                lo, hi = min(q_lo, 2.0 * rho - q_hi), max(q_hi, 2.0 * rho - q_lo)
+            n_ok = int(np.isfinite(rhos).sum())
+            lo, hi = _rho_interval(rho, rhos, level)
         except (np.linalg.LinAlgError, ValueError):
             lo = hi = nan
-    if np.isfinite(lo) and np.isfinite(hi):
-        # the interval judges; the point estimate stays inside it (a percentile interval may miss it by a hair)
-        lo, hi = min(lo, rho), max(hi, rho)
-        verdict: Verdict = "stable" if hi < 1.0 else "unstable" if lo > 1.0 else "not distinguishable"
-    else:  # nothing to resample: the point estimate alone, as the paper's Assumption 3
-        verdict = "stable" if rho < 1.0 else "unstable"
+    verdict = _verdict(rho, lo, hi)
     return Stability(rho=rho, lo=lo, hi=hi, verdict=verdict, slow_states=slow, states=tuple(state_names),
                      unit=unit, n_units=len(units), n_resamples=n_ok, level=float(level))
+
+
+def _rho_interval(rho: float, rhos: np.ndarray, level: float) -> tuple[float, float]:
+    """ρ's ``level`` % interval from resampled ρ's (NaN, NaN with fewer than two finite ones): the union of the
+    percentile and the basic interval — a bias the resamples show (a root at 1, an integrator, is estimated with
+    one, and |λ| is not symmetric around it) widens the interval instead of moving it past the truth — and the
+    point estimate kept inside it (a percentile interval may miss it by a hair)."""
+    rhos = np.asarray(rhos, dtype=float)
+    rhos = rhos[np.isfinite(rhos)]
+    if rhos.size < 2:
+        return float("nan"), float("nan")
+    tail = (100.0 - level) / 2.0
+    q_lo, q_hi = (float(v) for v in np.percentile(rhos, [tail, 100.0 - tail]))
+    return min(q_lo, 2.0 * rho - q_hi, rho), max(q_hi, 2.0 * rho - q_lo, rho)
+
+
+def _verdict(rho: float, lo: float, hi: float) -> Verdict:
+    """The interval judges. Without one (nothing to resample) the point estimate is accepted as the paper's
+    Assumption 3 accepts it, but a refusal needs its interval outside the unit circle, and there is none: ρ̂ ≥ 1 is
+    not distinguishable."""
+    if np.isfinite(lo) and np.isfinite(hi):
+        return "stable" if hi < 1.0 else "unstable" if lo > 1.0 else "not distinguishable"
+    return "stable" if rho < 1.0 else "not distinguishable"
+
+
+def with_timing_resamples(stability: Stability, A: np.ndarray, B: np.ndarray, dt: float, timing: Any,
+                          level: float = LEVEL) -> Stability:
+    """The stability of a gain on the state the pilot saw, with ρ's interval from the timing bootstrap's resamples.
+
+    ``stability`` judged the pilot's loop with its delay and lag at the point estimate alone (the fit does not
+    resample the timing). ``timing`` is the :class:`~workbench.method.timing.PilotTiming` of a bootstrap over
+    whole trials: every resample's ``(K̂_b, d̂_b, τ̂_b)`` gives ``ρ_b`` of the loop it implies
+    (:func:`workbench.method.timing.timed_spectral_radius`, eq. (T1) closed around the plant), and ρ's interval
+    is made from them as :func:`judge_stability` makes it from resampled gains (:func:`_rho_interval`), so both
+    loops are judged by one rule; the slow mode and the states stay the point's. Returned unchanged where the
+    timing has no timed resamples (a refused timing, given values, no resamples)."""
+    from workbench.method.pilot_loop import timed_spectral_radius
+
+    Ks, ds, ts = (np.asarray(getattr(timing, k, ()), dtype=float) for k in ("K_samples", "delay_samples",
+                                                                         "lag_samples"))
+    if getattr(timing, "method", "none") == "none" or len(Ks) != len(ds) or len(ds) != len(ts) or len(ds) < 2:
+        return stability
+    rhos = np.array([timed_spectral_radius(A, B, K, d, t, dt) for K, d, t in zip(Ks, ds, ts, strict=True)])
+    lo, hi = _rho_interval(stability.rho, rhos, level)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return stability
+    return replace(stability, lo=lo, hi=hi, verdict=_verdict(stability.rho, lo, hi), unit="trials",
+                   n_units=int(timing.n_trials), n_resamples=int(np.isfinite(rhos).sum()), level=float(level))
 
 
 def refusal(stability: Stability, demos: Sequence[Any], roles: Any, method: str) -> ModelError:

@@ -60,8 +60,8 @@ from workbench.method.pilot_loop import (
 )
 
 __all__ = ["TimingData", "TimingFit", "PilotTiming", "fit_timing", "identify_timing", "lag_decay", "seen_weights",
-           "seen_states", "refusal", "timed_spectral_radius", "recorded_dead_zone", "stick_of", "read_through",
-           "DELAY_MAX_S", "LAG_MAX_S", "STARTS"]
+           "seen_states", "refusal", "weak_starts", "timed_spectral_radius", "recorded_dead_zone", "stick_of",
+           "read_through", "DELAY_MAX_S", "LAG_MAX_S", "STARTS"]
 
 #: The longest reaction delay and lag searched (seconds): human delays are 0.1-0.3 s, lags 0.05-0.15 s (METHOD.md).
 DELAY_MAX_S = 0.5
@@ -103,6 +103,47 @@ def refusal(fit: TimingFit, plant: Any, delay_s: float | None = None, lag_s: flo
                     f"loop would not be stable (spectral radius {rho:.4g} with the delay and the lag), though the "
                     "demonstrations were flown: the timing model does not fit this pilot")
     return ""
+
+
+def weak_starts(demos: Iterable[Any], n: int, m: int) -> str:
+    """Why the trials' starts are too weak an instrument for LIML (``""``: they are not): the smallest squared
+    canonical correlation of the states with the starts (:func:`workbench.method.gain.iv_relevance`) below
+    :data:`~workbench.method.gain.IV_MIN_RELEVANCE`, the strength the paper's instrumented gain requires of the same
+    instruments (chosen there on the known-gain operators, before the timing existed). There the timing is
+    identified by least squares (:func:`identify_timing`): the paper's own rule ("iv-or-direct": instruments where
+    they are relevant, least squares otherwise) inside the timed gain.
+
+    Why one standard for both. LIML's own check (:meth:`_Metric.relevance` > 0, "beyond chance") asks only that the
+    starts explain more than chance. LIML has no finite moments (Mariano & Sawa 1972, JASA 67), and as the
+    instruments weaken its distribution's far tails carry more and more of it (the concentration parameter decides
+    how much, Stock & Yogo 2005): the entries the starts barely move come out anywhere. On the erratic pilot (raw
+    relevance 0.021-0.046 on seeds 5000-5005; on a split of seed 309001, 0.0046 beyond chance) a thrust-row entry
+    came out at −48.5 where least squares gives 0.07, and its 400-trial value, a coverage study's truth, is itself
+    such a draw. The paper's gain already refuses these starts for two-stage least squares, whose moments exist up
+    to the degree of over-identification; the workbench holds both instrumented estimators of the gain to one
+    standard. Against it, said plainly: tests based on LIML suffer less size distortion under weak instruments
+    than 2SLS's (Stock, Wright & Yogo 2002), so this standard is conservative for LIML, and the price shows where
+    LIML was right with a wide interval: a slow pilot behind a dead zone, whose starts are as weak (0.037-0.078)
+    and whose least-squares gain is biased. Least squares, not the paper's instantaneous gain, is what takes over:
+    a slow pilot's delay and lag still matter where its starts are weak, and the instantaneous least-squares gain
+    of such a pilot is the far-too-soft one the timing exists to fix. Chosen on seeds 5000-5007 (K̂'s interval
+    holding the truth, ``bench/gain_coverage.md``: erratic 0.635 -> 0.885, dead zone 0.802 -> 0.729, the other
+    pilots never below the standard). Relevance there and on seed 4 of the slow pilot
+    (0.076): the delayed pilots 0.10-0.16, with a 0.05 dead zone 0.037-0.078, the LQR operators 0.29-0.32, the
+    landing cascade 0.21."""
+    from workbench.method.gain import IV_MIN_RELEVANCE, demo_blocks, iv_relevance
+
+    blocks = demo_blocks(demos, n, m)
+    if not blocks:
+        return ""
+    try:
+        rel = iv_relevance(np.concatenate([b[0] for b in blocks], axis=1), [b[0].shape[1] for b in blocks])
+    except np.linalg.LinAlgError:
+        return "the trials' starts leave a state direction unexcited (their states are singular)"
+    if rel >= IV_MIN_RELEVANCE:
+        return ""
+    return (f"the trials' starts are too weak an instrument (smallest squared canonical correlation with the states "
+            f"{rel:.2g} < {IV_MIN_RELEVANCE:g}, what the paper's instrumented gain requires of them)")
 
 
 # ------------------------------------------------------------------------------------------------ the rows
@@ -566,7 +607,10 @@ class PilotTiming:
     seed: int
     reason: str = ""
     dead_zone: float = 0.0
-    n_timed: int = -1  # resamples fitted with timing (the rest, with a fallback rule, without); -1: all
+    n_timed: int = -1  # resamples fitted with timing (0 where all trials decided none: the rule's); -1: all
+    #: resamples whose own trials would have decided the rule (``fallback``) the other way; each followed the
+    #: decision on all trials all the same (:func:`identify_timing`), so this says how sure that decision is
+    n_otherwise: int = 0
 
     def describe(self) -> str:
         """One line for the terminal: the delay and the lag with their intervals, and how they were found."""
@@ -584,8 +628,10 @@ class PilotTiming:
             start += f"; the inputs read back through the devices' recorded dead zone {self.dead_zone:.3g}"
         boot = (f"{self.ci:g} % intervals over {self.n_boot - self.n_failed} resamples of {self.n_trials} trials"
                 if self.n_boot else "no intervals")
-        if 0 <= self.n_timed < self.n_boot - self.n_failed:
-            boot += f" ({self.n_timed} of them fitted with a timing, the rest without: the model's rule)"
+        if self.n_otherwise:
+            other = "identified a timing" if self.method == "none" else "refused the timing"
+            boot += (f"; each resample follows the decision on all trials, though {self.n_otherwise} of them would "
+                     f"have {other} on their own")
         if self.method == "none":
             return f"pilot timing: none ({self.reason.removeprefix('no timing: ')}); {boot}"
         return (f"pilot timing: {part('reaction delay', 'delay', self.delay_s, self.delay_lo, self.delay_hi)}, "
@@ -639,8 +685,9 @@ def identify_timing(
     plant : LinearSystem
         Anything with ``n``, ``m`` and ``dt``.
     method : {"liml", "direct"}
-        ``"liml"``: instrumental variables on the trials' starts, refused (``ModelError``, which says why) where
-        they explain the seen states no better than chance (relevance ≤ 0), where the best fit lies at the end of
+        ``"liml"``: instrumental variables on the trials' starts — least squares instead where they are weaker
+        than the paper's instrumented gain accepts (:func:`weak_starts`) — refused (``ModelError``, which says why)
+        where they explain the seen states no better than chance (relevance ≤ 0), where the best fit lies at the end of
         the range searched (:data:`DELAY_MAX_S`, :data:`LAG_MAX_S`: no interior optimum) or, for a plant with
         ``A`` and ``B``,
         where the pilot's own loop at the best-fitting timing would not be stable
@@ -658,11 +705,19 @@ def identify_timing(
         resamples, as K̂'s).
     progress : callable(done, total), optional
     fallback : callable(counts) -> K, optional
-        A fit the timing model does not fit (:func:`refusal`) takes this gain instead, of the same trials (their
-        multiplicities ``counts``), rather than being refused: the model's rule ("iv-or-direct": the paper's gain
-        where the timing is refused) decided again on all trials and in every resample (``method`` ``"none"``
-        where the point is without timing; a resample without timing is left out of the delay's and the lag's
-        intervals).
+        Where the timing model does not fit all trials (:func:`refusal`), this gain instead, of the same trials
+        (their multiplicities ``counts``), rather than a refusal: the model's rule ("iv-or-direct": the paper's
+        gain where the timing is refused), ``method`` ``"none"``. The rule is decided once, on all trials, and every
+        resample follows that decision: the fallback's gain in every resample where all trials refused the timing,
+        the timed gain in every resample where they did not. Deciding again per resample would mix two estimators
+        in the gain's resamples, the printed one and the other, and the interval would describe neither: a
+        pretest estimator's bootstrap is not consistent near the test's threshold (Andrews 2000, Econometrica 68;
+        Leeb & Pötscher 2005, Econometric Theory 21), and on a real flight whose starts explain the seen states no
+        better than chance (the dronekit log, relevance −0.02) the 10 resamples of 100 that identified a timing
+        were LIML fits on irrelevant instruments — an estimator without finite moments (Mariano & Sawa 1972,
+        JASA 67) — whose spread alone made K̂[u2, φ̇]'s interval [−20.3, 19.6] around the paper's gain −0.357. The
+        interval is therefore conditional on the decision (the gain actually printed); how sure the decision is
+        is said beside it: ``n_otherwise``, the resamples whose own trials would have decided the other way.
 
     Raises
     ------
@@ -676,9 +731,13 @@ def identify_timing(
         raise DataError(f"n_boot must be a non-negative integer, got {n_boot!r}")
     if method not in ("liml", "direct"):
         raise DataError(f"the timing is identified by 'liml' or 'direct', not {method!r}")
+    demos = list(demos)
     data = TimingData(demos, int(plant.n), int(plant.m), float(plant.dt), start)
+    weak = weak_starts(demos, int(plant.n), int(plant.m)) if method == "liml" else ""
+    if weak:  # the paper's rule inside the timed gain: least squares where the instruments are too weak
+        method = "direct"
     point = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s)
-    reason = "least squares, as requested"
+    reason = f"least squares, since {weak}" if weak else "least squares, as requested"
     K_point = point.K
     timed = True
     if method == "liml":
@@ -690,16 +749,19 @@ def identify_timing(
             K_point, timed, reason = np.asarray(fallback(np.ones(data.n_trials, dtype=int))), False, f"no timing: {why}"
     rng = np.random.default_rng(seed)
     J = data.n_trials
-    fits, failed, K_all = [], 0, []
+    fits, failed, K_all, otherwise = [], 0, [], 0
     for b in range(int(n_boot)):
         counts = np.bincount(rng.integers(0, J, size=J), minlength=J)
         try:
-            fit = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts)
-            if fallback is not None and refusal(fit, plant, delay_s, lag_s):
-                K_all.append(np.asarray(fallback(counts)))  # this resample's rule: no timing
-            else:
+            if timed:
+                fit = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts)
+                if fallback is not None:  # the decision on all trials stands; how often this resample disagrees
+                    otherwise += bool(refusal(fit, plant, delay_s, lag_s))
                 fits.append(fit)
                 K_all.append(fit.K)
+            else:  # the rule's gain, as on all trials (the fallback's own failure fails the resample)
+                K_all.append(np.asarray(fallback(counts)))
+                otherwise += _would_time(data, method, delay_s, lag_s, counts, plant)
         except (ModelError, np.linalg.LinAlgError):
             failed += 1
         if progress is not None:
@@ -715,4 +777,15 @@ def identify_timing(
         K_samples=readonly(np.array(K_all).reshape(len(K_all), data.m, data.n)),
         delay_samples=readonly(d_s), lag_samples=readonly(t_s), method=method if timed else "none", start=data.start,
         relevance=point.relevance, fixed=fixed, n_trials=J, n_boot=int(n_boot), n_failed=failed, ci=float(ci),
-        seed=int(seed), reason=reason, dead_zone=data.dead_zone, n_timed=len(fits))
+        seed=int(seed), reason=reason, dead_zone=data.dead_zone, n_timed=len(fits), n_otherwise=otherwise)
+
+
+def _would_time(data: TimingData, method: str, delay_s: float | None, lag_s: float | None, counts: np.ndarray,
+                plant: Any) -> bool:
+    """Whether a resample's own trials would have identified the timing that all trials refused (for
+    :attr:`PilotTiming.n_otherwise` only: the resample takes the rule's gain either way)."""
+    try:
+        return not refusal(fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts), plant, delay_s,
+                           lag_s)
+    except (ModelError, np.linalg.LinAlgError):
+        return False

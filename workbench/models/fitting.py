@@ -166,8 +166,9 @@ def check_timing(timing: Any, where: str) -> str | tuple[float, float]:
 
 def timing_setting(model: Any) -> str | tuple[float, float]:
     """The timing a resample of a fitted model's trials fits its gain with (``bootstrap(…, timing=…)``): the default
-    rule ("identify" with "iv-or-direct") decided again in every resample (``"identify-or-none"``, whichever way it
-    went on all trials), a given or required timing as it is, and ``"none"`` for a model fitted without."""
+    rule ("identify" with "iv-or-direct") as ``"identify-or-none"`` (decided on all trials as the fit decided it,
+    every resample following that decision: :data:`workbench.method.resampling.IDENTIFY_OR_NONE`), a given or
+    required timing as it is, and ``"none"`` for a model fitted without."""
     setting = check_timing(getattr(model, "timing", "none"), type(model).__name__)
     if setting == "identify" and getattr(model, "gain_method", None) == IV_OR_DIRECT:
         return "identify-or-none"

@@ -23,8 +23,10 @@ target)``, ``predict(x0, n_steps, target, samples=…)``, ``predict_many(…)``,
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -298,7 +300,13 @@ class HumanBehaviorModel(TaskGMRModel):
 
     def _fit_auto(self, demos: DemonstrationSet | Iterable[Demonstration]) -> HumanBehaviorModel:
         """Choose the "cv" settings by cross-validation, then fit with them (the settings stay "cv")."""
-        from workbench.models.autoconfig import _CV_MAX_ITER, _CV_TOL, NoCandidateFitted, choose_settings
+        from workbench.models.autoconfig import (
+            _CV_MAX_ITER,
+            _CV_TOL,
+            NoCandidateFitted,
+            choose_settings,
+            fitted_check,
+        )
 
         ds = demo_list(demos, self.plant, "HumanBehaviorModel.fit")
         if len(ds) < 2:
@@ -316,6 +324,10 @@ class HumanBehaviorModel(TaskGMRModel):
                                             "max_iter": min(int(self.max_iter), _CV_MAX_ITER),
                                             "tol": max(float(self.tol), _CV_TOL)}).fit(demos)
         self.__dict__.update({k: v for k, v in vars(chosen).items() if k.endswith("_") and not k.startswith("_")})
+        if not auto.fallback and math.isfinite(auto.ioc_only_rmse):
+            # the choice is checked on the fit it made: a mean that predicts its own trials worse than K̂x is dropped
+            fitted, alone = fitted_check(self, ds)
+            auto = replace(auto, fitted_rmse=fitted, fitted_ioc_rmse=alone, fallback=not fitted <= alone)
         self.auto_ = auto
         # the variability model did not lower the held-out error: predict with K̂x alone (said by auto_.describe())
         self.variability_mean_ = bool(self.variability_mean) and not auto.fallback

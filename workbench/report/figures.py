@@ -24,6 +24,7 @@ from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.report.figure_files import DPI
 from workbench.report.palette import input_style
 from workbench.report.tables import efficiency_by_trial
+from workbench.study.divergence import diverged
 
 __all__ = [
     "COLUMN_WIDTH", "DOUBLE_WIDTH", "PAPER_RC", "METHOD_COLORS", "METHOD_STYLES", "BAND_COLOR", "W_MATH",
@@ -313,10 +314,14 @@ def fig_predictions(
             ax_path.plot(demo.x[:n_rec, ix], demo.x[:n_rec, iy], color=rec, lw=2.0, label="recorded")
         for ax, j in zip(ax_time, shown, strict=True):
             ax.plot(t[:n_rec], demo.x[:n_rec, j], color=rec, lw=2.0, label="recorded")
+        gone = False  # a rollout that left the recorded range ×DIVERGED_FACTOR (workbench.study.divergence)
         for method, pred in preds.items():
             x = np.asarray(pred.x)
             st = method_style(method)
             title = METHOD_TITLES.get(method, method)
+            if diverged(x, demo.x, shown):
+                gone = True
+                title = f"{title} (diverges, off the axes)"
             band = _band(pred)
             if band is not None:
                 lo, hi = band
@@ -339,6 +344,14 @@ def fig_predictions(
                          else f"{state_names[j]}(t)")
             ax.set_ylabel(_titled(state_names[j], roles))
             ax.set_xlabel("time since start [s]")
+        if gone:  # the axes keep the recorded trial in view (one span beyond its range), not the blow-up
+            lo, hi = np.nanmin(demo.x, axis=0), np.nanmax(demo.x, axis=0)
+            pad = np.maximum(hi - lo, 1e-9)
+            if ax_path is not None:
+                ax_path.set_xlim(lo[plane[0]] - pad[plane[0]], hi[plane[0]] + pad[plane[0]])
+                ax_path.set_ylim(lo[plane[1]] - pad[plane[1]], hi[plane[1]] + pad[plane[1]])
+            for ax, j in zip(ax_time, shown, strict=True):
+                ax.set_ylim(lo[j] - pad[j], hi[j] + pad[j])
         for ax in axs[r]:
             ax.grid(alpha=0.3)
     # one key for the figure, under its panels: a legend inside a panel covered the recorded track (seen)

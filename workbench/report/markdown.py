@@ -460,6 +460,7 @@ def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, titl
         cov = result.coverage.copy()
         front = [c for c in ("label",) if c in cov.columns]
         cov = cov[front + [c for c in cov.columns if c not in front]]
+    from workbench.study.divergence import MARKERS as DIVERGENCE_MARKERS
     from workbench.study.scores import heldout_scores
 
     n_test = sum(len(te) for te in result.test.values())
@@ -477,7 +478,9 @@ def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, titl
         out_dir,
         ReportInputs(
             holdout=holdout, scores=heldout_scores(result.table), empty=empty,
-            inputs_table=result.table[result.table["metric"].str.startswith("input_")],
+            # with the rows that say where a rollout diverged (workbench.study.divergence), read beside the scores
+            inputs_table=result.table[result.table["metric"].str.startswith("input_")
+                                      | result.table["metric"].isin(DIVERGENCE_MARKERS)],
             train=result.train, test=result.test, models=result.models, baselines=result.baselines,
             rmse=result.rmse, efficiency=result.efficiency, coverage=cov, band=result.band if result.samples else None,
             stats=result.stats_text, verdicts=result.verdicts(), objectives=result.objectives,

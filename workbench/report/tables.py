@@ -56,7 +56,7 @@ def why_no_statistics(inputs: Any) -> str:
 
 def scores_section(inputs: Any, plant: Any, tab_dir: Path) -> list[str]:
     """The first answer: each method's held-out error with its interval and the Monte Carlo band's coverage."""
-    from workbench.study.scores import fmt, heldout_scores
+    from workbench.study.scores import cell, heldout_scores
 
     sc = inputs.scores
     if sc is None and inputs.rmse is not None and len(inputs.rmse):  # the rows the caller passed, scored here
@@ -71,10 +71,9 @@ def scores_section(inputs: Any, plant: Any, tab_dir: Path) -> list[str]:
         for r in g.itertuples(index=False):
             if r.metric.startswith("rmse_"):
                 unit = metric_unit(plant, r.metric)
-                row[f"{r.metric.removeprefix('rmse_')} RMSE" + (f" [{unit}]" if unit else "")] = fmt(r.value, r.lo,
-                                                                                                    r.hi)
+                row[f"{r.metric.removeprefix('rmse_')} RMSE" + (f" [{unit}]" if unit else "")] = cell(r)
             elif r.metric.startswith("band_"):
-                row["MC band coverage"] = fmt(r.value, r.lo, r.hi, share=True)
+                row["MC band coverage"] = cell(r)
         row["trials"] = int(g["n_trials"].max())
         rows.append(row)
     table = pd.DataFrame(rows).fillna("—")

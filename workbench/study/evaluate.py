@@ -266,9 +266,12 @@ def compare(
     Returns
     -------
     DataFrame with columns ``trial, label, start, method, metric, value``: metrics ``rmse_<block>``,
-    ``left_envelope`` (1 where the mean rollout left the model's training-state envelope), with samples
+    ``left_envelope`` (1 where the mean rollout left the model's training-state envelope), ``diverged`` (1 where it
+    left the recorded states' range by :data:`~workbench.defaults.DIVERGED_FACTOR`; with ``loop_rho*``, the fitted
+    loop's ρ̂ and interval, read by :mod:`workbench.study.divergence`), with samples
     ``band_<block>`` (joint) and ``band_<block>_<state>``, with ``inputs`` the input scores.
     """
+    from workbench.study.divergence import DIVERGED, diverged, loop_rows
     from workbench.study.input_prediction import model_rows, no_pilot_rows
 
     demos = _demos(test)
@@ -284,6 +287,7 @@ def compare(
     n = first.plant.n
     state_names = list(first.plant.state_names)
     blocks = {k: tuple(int(i) for i in _idx(v, n)) for k, v in blocks.items()}
+    scored_states = sorted({i for idx in blocks.values() for i in idx})
     rng = np.random.default_rng(seed)
     rows: list[tuple] = []
     for t_i, d in enumerate(demos):
@@ -304,6 +308,9 @@ def compare(
                     rows.append((d.id, _label(d), s, method, f"rmse_{block}", horizon_rmse(x_pred, x_true, idx)))
                 # 1 where the mean rollout left the training-state envelope within the scored steps
                 rows.append((d.id, _label(d), s, method, "left_envelope", float(0 <= p.envelope_exit <= h)))
+                # 1 where it left the recorded states' range by far: its scores are then said, not printed
+                # (workbench.study.divergence)
+                rows.append((d.id, _label(d), s, method, DIVERGED, float(diverged(x_pred, d.x, scored_states))))
                 # a model without a Monte Carlo band (persistence) has no band rows rather than a zero-width band
                 if samples and p.x_bands is not None:
                     lo, hi = p.x_bands[0, : h + 1], p.x_bands[-1, : h + 1]
@@ -318,6 +325,7 @@ def compare(
                             if metric not in done:  # a one-state block repeats a per-axis row of another
                                 done.add(metric)
                                 rows.append((d.id, _label(d), s, method, metric, value))
+            rows += [(d.id, _label(d), 0, method, metric, value) for metric, value in loop_rows(model)]
             if inputs:
                 rows += model_rows(model, d, _label(d), method, st, preds, n_steps)
             if one_step and model.models_inputs:  # persistence has no input distribution

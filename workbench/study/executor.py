@@ -353,16 +353,23 @@ def _connect(client_class: Any, scheduler: str, timeout: float, attempts: int = 
     """A client of the scheduler at ``scheduler``; a connection the client library itself finds malformed (an
     ``AssertionError`` inside distributed's handshake, seen once in a loaded test run while another client of the
     same cluster closed) is tried again once, then said in one line like any failure to reach it."""
-    for attempt in range(attempts):
+    for _ in range(max(1, attempts) - 1):
         try:
-            return client_class(scheduler, timeout=f"{timeout}s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: {_describe(exc)}") from None
+            return _client(client_class, scheduler, timeout)
         except AssertionError:
-            if attempt + 1 == attempts:
-                raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: its answers to "
-                                     f"{attempts} connections were not a Dask scheduler's") from None
-    raise AssertionError("unreachable")
+            continue
+    try:
+        return _client(client_class, scheduler, timeout)
+    except AssertionError:
+        raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: its answers to {max(1, attempts)} "
+                             "connections were not a Dask scheduler's") from None
+
+
+def _client(client_class: Any, scheduler: str, timeout: float) -> Any:
+    try:
+        return client_class(scheduler, timeout=f"{timeout}s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise WorkbenchError(f"cannot reach the Dask scheduler at {scheduler}: {_describe(exc)}") from None
 
 
 class DaskExecutor(_Workers):

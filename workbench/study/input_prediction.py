@@ -104,11 +104,13 @@ def _reference(part: pd.DataFrame, metric: str) -> str | None:
 def input_headlines(table: pd.DataFrame, method: str = "proposed", seed: int = 0) -> list[str]:
     """Per label and metric: the method's input error against the better no-pilot model, named, with the paired
     difference's interval (:func:`workbench.study.paired.paired_differences`)."""
+    from workbench.study.divergence import scored
     from workbench.study.paired import paired_differences
     from workbench.study.scores import fmt
 
     out = []
-    rows = table[table["metric"].isin(INPUT_METRICS)]
+    rows = scored(table)  # a rollout that diverged has no input score over the horizon to compare
+    rows = rows[rows["metric"].isin(INPUT_METRICS)]
     for label, part in rows.groupby("label", sort=False):
         for metric in INPUT_METRICS:
             ref = _reference(part, metric)
@@ -132,12 +134,12 @@ def _order(methods: list[str]) -> list[str]:
 def input_lines(scores: pd.DataFrame, label: str, *, markdown: bool = True) -> list[str]:
     """One label's input scores, one row per method and no-pilot model: a Markdown table (method, one step ahead,
     over the horizon) or, with ``markdown=False``, one line each."""
-    from workbench.study.scores import fmt
+    from workbench.study.scores import cell as score_cell
 
     s = scores[scores["label"] == str(label)]
     if s.empty:
         return []
-    cell = {(r.method, r.metric): fmt(r.value, r.lo, r.hi) for r in s.itertuples(index=False)}
+    cell = {(r.method, r.metric): score_cell(r) for r in s.itertuples(index=False)}
     methods = _order(list(dict.fromkeys(s["method"])))
     if markdown:
         out = ["| method | input error one step ahead | over the horizon |", "|---|---|---|"]

@@ -45,6 +45,7 @@ from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
 from workbench.models.registry import REGISTRY
+from workbench.study.divergence import scored
 from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
 
 __all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "corrected_t", "split_scores", "split_tasks",
@@ -277,6 +278,7 @@ def split_scores(task: tuple) -> pd.DataFrame:
         return pd.DataFrame(columns=cols)
     table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride,
                        inputs=False)
+    table = scored(table)  # a method whose rollout diverged in this split is not compared on it
     table = table[table["metric"] == metric]
     per = table.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
     out = per.assign(label=label, split=j, fell_back=fell_back)[cols]
@@ -478,6 +480,7 @@ def _own_scores(part: Any, label: str, metric: str, methods: Sequence[str]) -> p
     (:func:`split_scores`): each method's per-trial mean of ``metric``, and whether the proposed model fell back."""
     model = part.fitted.get("proposed")
     fell = bool(model is not None and model.chooses_settings and model.auto_ is not None and model.auto_.fallback)
-    rows = part.table[(part.table["metric"] == metric) & part.table["method"].isin(list(methods))]
+    t = scored(part.table)
+    rows = t[(t["metric"] == metric) & t["method"].isin(list(methods))]
     per = rows.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
     return per.assign(label=label, split=0, fell_back=fell)[["label", "split", "trial", "method", "value", "fell_back"]]

@@ -27,6 +27,7 @@ from workbench.defaults import DEFAULT_N_COMPONENTS, N_STEPS, PAPER_SETTINGS, ST
 from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.registry import METHOD_TITLES, METHODS
 from workbench.models.selection import select_components
+from workbench.study.divergence import scored, verdict_lines
 from workbench.study.method_level import FLOOR_METHODS, SPLITS, SplitJobs, SplitPlan
 from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
@@ -96,8 +97,11 @@ class StudyResult:
 
     @property
     def rmse(self) -> pd.DataFrame:
-        """The RMSE rows of the comparison (``trial, label, start, method, metric, value``)."""
-        return self.table[self.table["metric"].str.startswith("rmse_")]
+        """The RMSE rows of the comparison (``trial, label, start, method, metric, value``) a summary may average:
+        without those of a method whose rollout diverged in the label (:func:`workbench.study.divergence.scored`;
+        ``table`` keeps them)."""
+        t = scored(self.table)
+        return t[t["metric"].str.startswith("rmse_")]
 
     @property
     def metric(self) -> str:
@@ -113,7 +117,7 @@ class StudyResult:
 
         blocks = metric_blocks(self.plant)
         joint = [f"band_{b}" for b, idx in blocks.items() if len(idx) > 1] or [f"band_{b}" for b in blocks]
-        t = self.table
+        t = scored(self.table)
         return t[t["metric"].isin(joint)]
 
     def summary(self) -> pd.DataFrame:
@@ -139,6 +143,7 @@ class StudyResult:
                   "-fold)."
                   for label, model in self.models.items()
                   if model.chooses_settings and (auto := model.auto_) is not None and auto.fallback]
+        lines += verdict_lines(self.table, METHOD_TITLES)
         paired = () if self.statistics is None else self.statistics.headline
         return lines + verdicts(paired, self.metric)
 
@@ -641,7 +646,7 @@ def run_loso(
     # whether each fold's proposed model fell back to K̂x, by the trial the fold left out
     fell_back = {trial: bool(m.chooses_settings and m.auto_ is not None and m.auto_.fallback)
                  for trial, r in folds for m in r.models.values()}
-    method_level = tuple(fold_differences(table, primary_metric(last_plant), fell_back=fell_back)) or None
+    method_level = tuple(fold_differences(scored(table), primary_metric(last_plant), fell_back=fell_back)) or None
     statistics = _statistics(table, demos, last_plant, n_steps, stride, seed, method_level)
     # per label the models of its last fold (a fold holds only the label of the trial it leaves out)
     models = {lb: m for _, r in folds for lb, m in r.models.items()}
@@ -692,7 +697,8 @@ def _statistics(table: pd.DataFrame, demos: DemonstrationSet, plant: Any, n_step
 
     metric = primary_metric(plant)
     subjects = {d.id: str(d.meta["subject"]) for d in demos if d.meta.get("subject") is not None}
-    return study_statistics(table, metric, metric_unit(plant, metric), subjects,
+    # a method whose rollout diverged in a label has no horizon scores there to compare (said in the verdicts)
+    return study_statistics(scored(table), metric, metric_unit(plant, metric), subjects,
                             windows_sentence(table, n_steps, stride, demos.dt), seed=seed, method_level=method_level)
 
 

@@ -31,11 +31,13 @@ def _score_title(s: LoggedSession, demo_id: str) -> str:
     if not len(sc):
         sc = s.scores[s.scores["label"] == s.scores["label"].iloc[0]]
     metric = "rmse_position" if (sc["metric"] == "rmse_position").any() else str(sc["metric"].iloc[0])
-    rows = sc[sc["metric"] == metric].set_index("method")["value"]
-    shown = [m for m in ("proposed", "persistence") if m in rows.index]
+    rows = {r.method: r for r in sc[sc["metric"] == metric].itertuples(index=False)}
+    shown = [m for m in ("proposed", "persistence") if m in rows]
     what = metric.removeprefix("rmse_")
-    return (f"held-out {what} RMSE: " + ", ".join(f"{METHOD_TITLES.get(m, m)} {rows[m]:.3g}" for m in shown)
-            + where)
+    # a rollout that diverged is said, not given a number (workbench.study.divergence)
+    return (f"held-out {what} RMSE: " + ", ".join(f"{METHOD_TITLES.get(m, m)} "
+                                                   f"{getattr(rows[m], 'note', '') or format(rows[m].value, '.3g')}"
+                                                   for m in shown) + where)
 
 
 class Predictions(Tab):
