@@ -121,7 +121,7 @@ def iv_instruments(X: np.ndarray, lengths: Sequence[int], n_basis: int = IV_BASI
     k = np.arange(T) - np.repeat(starts, lengths)
     basis = np.exp(-k[:, None] / taus[None, :])  # (T, n_basis)
     x0 = np.repeat(X[:, starts].T, lengths, axis=0)  # (T, n)
-    return np.ascontiguousarray((basis[:, :, None] * x0[:, None, :]).reshape(T, -1).T)
+    return (basis[:, :, None] * x0[:, None, :]).reshape(T, -1).T  # F-ordered, as the concatenation of the blocks was
 
 
 def _first_stage(X: np.ndarray, lengths: Sequence[int]) -> tuple[np.ndarray, float]:
