@@ -538,6 +538,9 @@ def _demo_into(ctx: Context, ds: Any, out: Path, build: Path, timings: dict[str,
             progress=ctx.progress, bootstrap=a.bootstrap, stride_s=a.stride_s, power=a.power, executor=ex,
         )
         workers = ex.workers if ex.parallel else 1
+    from workbench.study.executor import stop_local_workers
+
+    stop_local_workers()  # the workers' server, if the demo started one: no longer needed
     if preload is not None:
         preload.join()
     study_s = time.perf_counter() - t0

@@ -58,7 +58,7 @@ from workbench.errors import DataError, UsageError, WorkbenchError
 
 __all__ = [
     "Executor", "SerialExecutor", "ProcessExecutor", "DaskExecutor", "Outcome", "make_executor", "local_executor",
-    "available_cpus", "task_seed", "serial", "warm_local_workers",
+    "available_cpus", "task_seed", "serial", "warm_local_workers", "stop_local_workers",
 ]
 
 Progress = Callable[[int, int], Any]
@@ -706,6 +706,21 @@ def warm_local_workers(modules: Sequence[str]) -> bool:
         return False
     _START_METHOD = "forkserver"
     return True
+
+
+def stop_local_workers() -> None:
+    """Stop the server of :func:`warm_local_workers` and wait for it (later workers are spawned again): its memory is
+    freed, and the CPU time of the workers it forked counts in this process's children's, as a spawned worker's
+    does (``bench_demo``'s CPU column)."""
+    global _START_METHOD
+    if _START_METHOD != "forkserver":
+        return
+    from multiprocessing import forkserver
+
+    stop = getattr(getattr(forkserver, "_forkserver", None), "_stop", None)
+    if stop is not None:
+        stop()
+    _START_METHOD = "spawn"
 
 
 def local_executor(tasks: int) -> SerialExecutor | ProcessExecutor:
