@@ -113,3 +113,82 @@ def test_a_combining_accent_takes_no_column_of_its_own():
     exact = _printed(header, rows, width)
     assert "  fell back to K̂x in:" not in exact  # not the long form
     assert all(cell_len(line) <= width for line in exact.splitlines())
+
+
+def _screen_lines(argv: list[str], columns: int) -> list[str]:
+    """The lines ``argv`` leaves on a terminal of ``columns`` columns: a progress bar's redraws (carriage returns)
+    leave their last, and blank lines are not counted."""
+    text = ANSI.sub("", _on_a_terminal(argv, columns)).replace("\r\n", "\n")
+    return [line.split("\r")[-1] for line in text.split("\n") if line.split("\r")[-1].strip()]
+
+
+def _reads_at_80(argv_at) -> tuple[list[str], list[str]]:
+    """Issue 38's terminal acceptance: at 80 columns no line is wider than 80, and the output is at most 1.3 times
+    as many lines as at 200 (a table narrows itself, prose says each thing once, before anything wraps)."""
+    from rich.cells import cell_len
+
+    wide, narrow = _screen_lines(argv_at(), 200), _screen_lines(argv_at(), 80)
+    assert not [line for line in narrow if cell_len(line) > 80], [line for line in narrow if cell_len(line) > 80]
+    assert len(narrow) <= 1.3 * len(wide), (len(narrow), len(wide))
+    assert max(cell_len(line) for line in wide) > 80  # the wide terminal was used as wide: the check can fail
+    return wide, narrow
+
+
+@pytest.mark.slow
+def test_evaluate_reads_at_80_columns_within_1_3_times_its_200_column_length():
+    wide, narrow = _reads_at_80(lambda: [sys.executable, "-m", "workbench", "evaluate", "sample_logs/landing_s02.csv"])
+    for lines in (wide, narrow):  # the legend, a line per question, points at the full text
+        text = "\n".join(lines)
+        assert "Which number answers which question:" in text and "(at length: --explain)" in text
+        assert "Does the proposed method predict" not in text
+    explained = "\n".join(_screen_lines([sys.executable, "-m", "workbench", "evaluate", "sample_logs/landing_s02.csv",
+                                         "--explain"], 200))
+    assert "Does the proposed method predict this operator better than a baseline method?" in explained
+
+
+@pytest.mark.slow
+def test_demo_reads_at_80_columns_within_1_3_times_its_200_column_length(tmp_path):
+    runs = iter(range(2))
+    wide, narrow = _reads_at_80(lambda: [sys.executable, "-m", "workbench", "demo", "--out",
+                                         str(tmp_path / f"demo{next(runs)}")])
+    for lines in (wide, narrow):
+        text = "\n".join(lines)
+        assert text.count("mapping planar_quadrotor") == 1  # one line for the three sample logs
+        assert "\"Statistics of the comparison\")" in text  # the legend's pointer to the report's full text
+
+
+def test_logs_read_through_one_mapping_for_one_reason_are_said_once(tmp_path):
+    from workbench.cli.inputs import Inputs, Source
+
+    def source(name: str, mapping: str = "planar_quadrotor", note: str = "the workbench's own layout") -> Source:
+        return Source(name, tmp_path / name, name, False, None, mapping, note)
+
+    three = Inputs(sources=(source("a.tlog"), source("b.mcap"), source("c.csv")))
+    assert three.notes == ["all 3 logs: mapping planar_quadrotor (the workbench's own layout)"]
+    mixed = Inputs(sources=(source("a.tlog"), source("b.BIN", "ardupilot_manual", "made for ArduCopter"),
+                            source("c.csv")))
+    assert mixed.notes == ["a.tlog, c.csv: mapping planar_quadrotor (the workbench's own layout)",
+                           "b.BIN: mapping ardupilot_manual (made for ArduCopter)"]
+    assert Inputs(sources=(source("a.tlog"),)).notes == ["a.tlog: mapping planar_quadrotor (the workbench's own "
+                                                         "layout)"]
+
+
+def test_a_table_of_weight_ratios_keeps_a_line_per_row_at_80_columns():
+    """Unidentified weight ratios print their bound alone at 80 columns ("≥ 0.011"); at 200 in words. The demo's
+    ratio table took 47 lines at 80 columns for its 12 rows."""
+    from workbench.cli.context import shorter_words
+
+    header = ["ratio", "strategy", "estimate [95 % interval]", "× vs CS1", "note"]
+    rows = [["Q_x / R_u1", "CS1", "not identifiable: between 6.46e-05 and 168 (×2.6e+06)", "", "not of this form"],
+            ["Q_phi / R_u1", "CS1", "not identifiable: a zero weight fits (the end of the search)", "",
+             "not of this form"],
+            ["Q_ydot / R_u2", "CS1", "not identifiable: at most 0.014, no lower bound", "", "not identifiable [1]"],
+            ["Q_ydot / R_u2", "CS2", "0.116 [0.0956, 0.138]", "not identifiable: at least 8.16, no upper bound",
+             "not identifiable [1]"]]
+    narrow, wide = _printed(header, rows, 80), _printed(header, rows, 200)
+    assert len(narrow.splitlines()) <= len(wide.splitlines())  # a line a row
+    assert "≥ 8.16" in narrow and "≤ 0.014" in narrow and "6.46e-05 … 168 (×2.6e+06)" in narrow
+    assert "a zero weight fits" in narrow
+    assert "not identifiable: at least 8.16, no upper bound" in wide
+    assert shorter_words("no difference shown (reduction +26 %, 95 % interval [-10 %, +61 %] contains 0)") == (
+        "not shown (reduction +26 % [-10 %, +61 %])")

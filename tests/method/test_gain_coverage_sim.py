@@ -6,10 +6,9 @@ Operators: the four of :mod:`workbench.sim` (LQR, near-LQR, the landing simulato
 and a pilot with a reaction delay and a dead zone (``LQROperator(**SLOW_PILOT, delay_s, lag_s, dead_zone=0.05)``,
 the collect page's smallest dead zone). The truth is the operator's own gain where it has one (LQR, near-LQR, the
 delayed pilot) and the default estimator's value on 400 trials where it has none (CS1, erratic: what the interval
-is an interval of). Seeds start at 7000; the interval's construction, the rule decided once per fit and the
-timing's least squares where the starts are weak (:func:`workbench.method.timing.weak_starts`) were chosen on seeds
-5000-5007 (``bench/gain_coverage.py``), never on these. Round 6's figures (near-LQR and the dead-zone pilot below
-0.9) are in ``bench/gain_coverage.md``.
+is an interval of). Seeds start at 7000; the interval's construction was chosen on seeds 5000-5007
+(``bench/gain_coverage.py``), never on these; the rule decided once per fit (round 6) was not chosen by coverage.
+Round 6's figures (near-LQR and the erratic pilot below 0.9) are in ``bench/gain_coverage.md``.
 """
 
 from __future__ import annotations

@@ -143,22 +143,6 @@ def test_the_judgement_round_trips_through_a_model_file(tmp_path):
     assert np.allclose(back.predict(x0, 30).x, model.predict(x0, 30).x)
 
 
-def test_without_an_interval_a_loop_outside_the_unit_circle_is_not_refused():
-    """One short demonstration is one 2 s block: nothing to resample, so no interval. ρ̂ ≥ 1 is then not
-    distinguishable from the unit circle — no refusal decided by a point estimate whose uncertainty is unknown (a
-    real log's 5 s time-split piece was refused at ρ̂ 1.2238, "no interval") — and ρ̂ < 1 stays stable."""
-    p = planar_quadrotor()
-    K_lqr = forward_gain(p.A, p.B, np.eye(6), np.eye(2))[0]
-    rng = np.random.default_rng(0)
-    view = Demonstration(p.dt * np.arange(15), rng.normal(size=(15, 6)), rng.normal(size=(15, 2)), {"id": "short"})
-    for K in (K_lqr, -0.3 * K_lqr):
-        rho = float(np.abs(np.linalg.eigvals(p.A + p.B @ K)).max())
-        s = judge_stability(p.A, p.B, K, [view], "direct", p.dt, p.state_names)
-        assert not s.has_interval and s.rho == pytest.approx(rho)
-        assert s.verdict == ("stable" if rho < 1.0 else "not distinguishable") and not s.refused
-    assert float(np.abs(np.linalg.eigvals(p.A + p.B @ (-0.3 * K_lqr))).max()) > 1.0  # the second gain is outside
-
-
 def test_the_pilots_timed_loop_gets_its_interval_from_the_timing_resamples():
     # the fit judges the timed loop at its point alone; the bootstrap's resampled (K, delay, lag) give ρ's interval
     # by the rule of the untimed loop (the union of the percentile and the basic interval), and the verdict follows
@@ -194,3 +178,19 @@ def test_the_pilots_timed_loop_gets_its_interval_from_the_timing_resamples():
     assert wide.hi > 1 and wide.verdict == "not distinguishable"
     # no timed resamples (a refused timing): the point's judgement as it was
     assert with_timing_resamples(point, quad.A, quad.B, quad.dt, SimpleNamespace(method="none")) is point
+
+
+def test_without_an_interval_a_loop_outside_the_unit_circle_is_not_refused():
+    """One short demonstration is one 2 s block: nothing to resample, so no interval. ρ̂ ≥ 1 is then not
+    distinguishable from the unit circle — no refusal decided by a point estimate whose uncertainty is unknown (a
+    real log's 5 s time-split piece was refused at ρ̂ 1.2238, "no interval") — and ρ̂ < 1 stays stable."""
+    p = planar_quadrotor()
+    K_lqr = forward_gain(p.A, p.B, np.eye(6), np.eye(2))[0]
+    rng = np.random.default_rng(0)
+    view = Demonstration(p.dt * np.arange(15), rng.normal(size=(15, 6)), rng.normal(size=(15, 2)), {"id": "short"})
+    for K in (K_lqr, -0.3 * K_lqr):
+        rho = float(np.abs(np.linalg.eigvals(p.A + p.B @ K)).max())
+        s = judge_stability(p.A, p.B, K, [view], "direct", p.dt, p.state_names)
+        assert not s.has_interval and s.rho == pytest.approx(rho)
+        assert s.verdict == ("stable" if rho < 1.0 else "not distinguishable") and not s.refused
+    assert float(np.abs(np.linalg.eigvals(p.A + p.B @ (-0.3 * K_lqr))).max()) > 1.0  # the second gain is outside

@@ -163,28 +163,6 @@ def test_an_identified_timing_is_kept_in_every_resample(quad):
     np.testing.assert_allclose(g.K_samples, np.array(timed), atol=1e-9)
 
 
-def test_starts_too_weak_for_the_papers_instrumented_gain_time_the_gain_by_least_squares(quad):
-    # the erratic pilot's starts explain its states "beyond chance" (LIML's own check passes), but less than the
-    # paper's "iv" gain accepts of the same instruments: the timing is then fitted by least squares, the paper's
-    # rule inside the timed gain (on the previous main LIML, on instruments that barely move some states)
-    from workbench.method.gain import IV_MIN_RELEVANCE, demo_blocks, iv_relevance
-    from workbench.sim.operators import erratic_operator_demos
-
-    ds = list(erratic_operator_demos(n_trials=10, seed=4))
-    data = tm.TimingData(ds, quad.n, quad.m, quad.dt)
-    fit = tm.fit_timing(data, "liml")
-    assert fit.relevance > 0 and not tm.refusal(fit, quad)  # what LIML alone accepts
-    blocks = demo_blocks(ds, quad.n, quad.m)
-    rel = iv_relevance(np.concatenate([b[0] for b in blocks], axis=1), [b[0].shape[1] for b in blocks])
-    assert rel < IV_MIN_RELEVANCE
-    t = tm.identify_timing(ds, quad, n_boot=0)
-    direct = tm.fit_timing(data, "direct")
-    assert t.method == "direct" and "too weak an instrument" in t.reason and "least squares" in t.describe()
-    np.testing.assert_allclose(t.K, direct.K)
-    assert (t.delay_s, t.lag_s) == (direct.delay_s, direct.lag_s)
-    assert tm.weak_starts(lqr_operator_demos(LQROperator(), 6, seed=3, plant=quad), quad.n, quad.m) == ""
-
-
 def test_the_gains_interval_is_the_estimate_plus_minus_t_standard_deviations():
     from scipy import stats
 

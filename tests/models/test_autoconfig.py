@@ -99,6 +99,10 @@ def test_a_choice_that_does_not_carry_over_to_the_fit_on_all_trials_falls_back(q
     assert calls == [len(small)]
     assert model.auto_.fallback and not model.variability_mean_
     assert "did not carry over" in model.auto_.describe()
+    assert "predicted them worse than K̂x alone" in model.auto_.fallback_reason()
+    by_cv = ac.AutoSettings(1, 1.0, "prediction", 3, (), ioc_only_rmse=0.5, fallback=True)
+    assert "in cross-validation" in by_cv.fallback_reason() and "3-fold" in by_cv.fallback_reason()
+    assert ac.AutoSettings(1, 1.0, "prediction", 3, ()).fallback_reason() == ""
     back = ac.AutoSettings.from_json(model.auto_.as_json())
     assert back == model.auto_
 

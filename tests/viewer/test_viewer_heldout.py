@@ -102,7 +102,7 @@ def test_the_pilots_own_input_is_judged_in_evaluate_report_and_viewer(tmp_path):
     from contextlib import redirect_stdout
 
     from workbench.cli import main
-    from workbench.study.input_prediction import input_headlines, input_scores, title
+    from workbench.study.input_prediction import input_differences, input_headlines, input_scores, title
 
     paths = recordings.cli_recordings()
     demo = recordings.workdir() / "demo"
@@ -130,9 +130,13 @@ def test_the_pilots_own_input_is_judged_in_evaluate_report_and_viewer(tmp_path):
                      "0", "--no-efficiency", "--horizon", "1", "-o", str(tmp_path / "e.csv")]) == 0
     out = said.getvalue()
     evaluated = input_scores(pd.read_csv(tmp_path / "e.csv"))
-    assert "held-out error in predicting the pilot's input" in out and "no pilot (input held)" in out
-    assert any(line.startswith("predicting the pilot's own input one step ahead") or "predicting the pilot's own input"
-               in line for line in out.splitlines())
+    assert "held-out error predicting the pilot's input" in out and "no pilot (input held)" in out
+    # the headline as a table: a row per horizon naming the better no-pilot model, with the paired difference
+    diffs = input_differences(pd.read_csv(tmp_path / "e.csv"))
+    assert diffs
+    for _, metric, ref, d in diffs:
+        ahead = "one step" if metric == "input_step" else "horizon"
+        assert any(ahead in line and title(ref) in line and d.sentence() in line for line in out.splitlines())
     for r in evaluated.itertuples(index=False):
         assert fmt(r.value, r.lo, r.hi) in out
 

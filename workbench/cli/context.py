@@ -24,7 +24,7 @@ from workbench.cli.stdio import Stdio, is_stdio
 from workbench.errors import UsageError
 
 __all__ = ["Context", "PIPE_WIDTH", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL", "narrowed_tables", "abbreviate",
-           "fewer_digits"]
+           "fewer_digits", "shorter_words"]
 
 #: The width of output that goes to a pipe or a file (no terminal to ask; COLUMNS overrides it).
 PIPE_WIDTH = 100
@@ -187,7 +187,7 @@ class Context:
 #: Words a narrow terminal's table headers shorten, longest first (each stays readable on its own).
 ABBREVIATIONS = (
     ("difference [95 % interval]", "difference [95 %]"), ("estimate [95 % interval]", "estimate [95 %]"),
-    ("[95 % interval]", "[95 %]"), ("(mean of trials [95 % interval])", "(mean [95 %])"),
+    ("[95 % interval]", "[95 %]"), ("fell back to K̂x in", "fell back"), ("p (corrected t, Holm)", "p (Holm)"),
     ("position", "pos."), ("velocity", "vel."), ("strategy", "strat."), ("interval", "int."),
     ("trials", "tr."), ("windows", "win."), ("nominal", "nom."), ("calibration", "calib."), ("proposed", "prop."),
     ("persistence", "persist."), ("coverage", "cov."), ("corrected", "corr."), ("baseline", "base"),
@@ -209,39 +209,68 @@ def fewer_digits(cell: str, digits: int = 2) -> str:
 
 
 def narrowed_tables(header: Sequence[str], cells: Sequence[Sequence[str]], title: str = "") -> list[Any]:
-    """The same table, each narrower than the last: as it is (a heavy frame, headers whole); a light frame with
-    headers that may wrap at their spaces (a cell never breaks: each column is at least its widest cell); then
-    abbreviated headers (:func:`abbreviate`); then fewer significant digits (:func:`fewer_digits`); then one space
-    between columns and none inside a number's unit or an interval (``83% [31,100]``)."""
+    """The same table, each narrower than the last: as it is (a heavy frame); a light frame, each step first with
+    its headers whole and then with headers that may wrap at their spaces (a cell never breaks: each column is at
+    least its widest cell) — with the headers as given, then abbreviated (:func:`abbreviate`, and a verdict's
+    words shortened: :func:`shorter_words`), then with fewer significant digits (:func:`fewer_digits`), then with one
+    space between columns and none inside a number's unit or an interval (``83% [31,100]``)."""
     from rich import box
+    from rich.cells import cell_len
     from rich.table import Table
     from rich.text import Text
 
-    def make(head: Sequence[str], body: Sequence[Sequence[str]], light: bool, tight: bool = False) -> Any:
+    def make(head: Sequence[str], body: Sequence[Sequence[str]], light: bool, tight: bool = False,
+             whole: bool = False) -> Any:
         table = Table(title=Text(title) if title else None, box=box.SIMPLE_HEAD if light else box.HEAVY_HEAD,
                       pad_edge=not light, collapse_padding=light, show_edge=not light,
                       padding=(0, 0) if tight else (0, 1))
-        prose = {j for j in range(len(head)) if any(_is_prose(r[j]) for r in body)}
         table.prose = prose if light else set()  # type: ignore[attr-defined] - read by _fits
         for j, h in enumerate(head):
-            widest = max([len(r[j]) for r in body] or [0])
-            longest_word = max((len(w) for w in (h + " " + " ".join(r[j] for r in body)).split()), default=0)
+            widest = max([cell_len(r[j]) for r in body] or [0])
+            longest_word = max((cell_len(w) for w in (h + " " + " ".join(r[j] for r in body)).split()), default=0)
             if light and j in prose:
                 # a note in words wraps at its spaces inside its column (numbers never do): the table keeps its
                 # form where a sentence is wider than the terminal
                 table.add_column(Text(h), min_width=longest_word, ratio=1, no_wrap=False)
             else:
-                table.add_column(Text(h), width=max(widest, max((len(w) for w in h.split()), default=0))
-                                 if light else None, no_wrap=not light)
+                fit = cell_len(h) if whole else max((cell_len(w) for w in h.split()), default=0)
+                table.add_column(Text(h), width=max(widest, fit) if light else None, no_wrap=not light)
         for r in body:
             table.add_row(*(Text(c) for c in r))  # a cell's "[0.1, 0.2]" is text, not console markup
         return table
 
+    # a column of notes in words (judged on the cells as given: shortened, a verdict is still a note)
+    prose = {j for j in range(len(header)) if any(_is_prose(r[j]) for r in cells)}
     short = [abbreviate(h) for h in header]
-    digits = [[fewer_digits(c) for c in r] for r in cells]
+    worded = [[shorter_words(c) for c in r] for r in cells]
+    digits = [[fewer_digits(c) for c in r] for r in worded]
     tight = [[_tight(c) for c in r] for r in digits]
-    return [make(header, cells, False), make(header, cells, True), make(short, cells, True),
-            make(short, digits, True), make(short, tight, True, tight=True)]
+    forms = [make(header, cells, False)]
+    for head, body, is_tight in ((header, cells, False), (short, worded, False), (short, digits, False),
+                                 (short, tight, True)):
+        forms += [make(head, body, True, is_tight, whole=True), make(head, body, True, is_tight)]
+    return forms
+
+
+#: A verdict's words a narrow terminal's table shortens (the header says the interval's level):
+#: "no difference shown (reduction +26 %, 95 % interval [-10 %, +61 %] contains 0)" → "not shown (reduction +26 %
+#: [-10 %, +61 %])".
+#: A weight ratio's interval where the data do not identify it (workbench.study.weights.format_interval): its bound
+#: alone, "≥ 0.011" for "not identifiable: at least 0.011, no upper bound".
+_SHORTER = ((re.compile(r"no difference shown \(reduction ([^,]+), [\d.]+ % interval (\[[^\]]*\]) contains 0\)"),
+             r"not shown (reduction \1 \2)"),
+            (re.compile(r"not identifiable: at least (\S+), no upper bound"), r"≥ \1"),
+            (re.compile(r"not identifiable: at most (\S+), no lower bound"), r"≤ \1"),
+            (re.compile(r"not identifiable: between (\S+) and (\S+) (\(×\S+\))"), r"\1 … \2 \3"),
+            (re.compile(r"not identifiable: (an? (?:zero|infinite) weight fits) \(the end of the search\)"), r"\1"),
+            (re.compile(r"not identifiable: the data allow any value"), "any value"))
+
+
+def shorter_words(cell: str) -> str:
+    """A cell's verdict in fewer words (:data:`_SHORTER`); every number stays."""
+    for pattern, repl in _SHORTER:
+        cell = pattern.sub(repl, cell)
+    return cell
 
 
 def _tight(cell: str) -> str:

@@ -113,8 +113,17 @@ class Inputs:
 
     @property
     def notes(self) -> list[str]:
-        """What resolving decided that a user should read: the mapping chosen for each log."""
-        return [f"{s.shown}: mapping {s.mapping} ({s.mapping_note})" for s in self.sources if s.mapping_note]
+        """What resolving decided that a user should read: the mapping chosen for each log, one line for all the
+        logs it was chosen for by the same reason (the demo's three sample logs printed one identical line each)."""
+        chosen = [s for s in self.sources if s.mapping_note]
+        by: dict[tuple[str | None, str], list[Source]] = {}
+        for s in chosen:
+            by.setdefault((s.mapping, s.mapping_note), []).append(s)
+        if len(by) == 1 and len(chosen) > 1 and len(chosen) == len(self.sources):
+            (mapping, note), = by
+            return [f"all {len(chosen)} logs: mapping {mapping} ({note})"]
+        return [f"{', '.join(s.shown for s in group)}: mapping {mapping} ({note})"
+                for (mapping, note), group in by.items()]
 
     @property
     def names(self) -> str:

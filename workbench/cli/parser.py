@@ -108,6 +108,9 @@ def _study_options(
                    help="keep segments in which no input moves beyond its resolution (default: reported and left "
                         "out: no pilot was flying them)")
     p.add_argument("--seed", type=seed_arg, default=0, help="seed of the split, EM and Monte Carlo (default 0)")
+    p.add_argument("--explain", action="store_true",
+                   help="print at length which number answers which question (default: a legend of one line per "
+                        "question; a report holds the full text)")
     _plant_option(p)
 
 

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import importlib
+import math
 import os
 import re
 import shutil
@@ -235,9 +236,10 @@ def _print_anovas(ctx: Context, res: Any, titles: dict[str, str]) -> None:
             + "; where the two disagree, the within-subject test is the one this design supports")
 
 
-#: The statistics' long explanations a terminal leaves to the report where one was written (demo, report): each
-#: from its first line to the next blank line, replaced by a pointer to the report's section
-_REPORT_ONLY = ("Which number answers which question:",)
+#: The head lines of the statistics' blocks a terminal prints in its own form (:func:`_print_statistics`): what
+#: answers which question as a legend, the proposed model's settings as a table
+_LEGEND_HEAD = "Which number answers which question:"
+_SETTINGS_HEAD = "The proposed model's settings"
 
 
 def _print_study(ctx: Context, result: Any, report: Path | None = None) -> None:
@@ -284,7 +286,7 @@ def _print_study(ctx: Context, result: Any, report: Path | None = None) -> None:
                       title="one-step calibration (inputs at a limit left out)")
     _print_efficiency(ctx, result)
     if result.stats_text:
-        ctx.say_markdown(_leave_to_report(result.stats_text, report))
+        _print_statistics(ctx, result, report)
     _print_objective_comparison(ctx, result, report)
     for line in result.verdicts():
         ctx.say(f"[bold]{escape(line)}[/bold]", markup=True)
@@ -293,7 +295,7 @@ def _print_study(ctx: Context, result: Any, report: Path | None = None) -> None:
 def _print_inputs(ctx: Context, table: Any) -> None:
     """Each method's held-out error in predicting the pilot's own input, against the models with no pilot, and the
     headline sentences that name the no-pilot model they compare with."""
-    from workbench.study.input_prediction import input_headlines, input_scores, title
+    from workbench.study.input_prediction import input_differences, input_scores, title
     from workbench.study.scores import cell as score_cell
 
     scores = input_scores(table)
@@ -304,30 +306,95 @@ def _print_inputs(ctx: Context, table: Any) -> None:
         cell = {r.metric: score_cell(r) for r in g.itertuples(index=False)}
         rows.append([label, title(method), cell.get("input_step", "—"), cell.get("input_horizon", "—")])
     ctx.say_table(["label", "method", "one step ahead", "over the horizon"], rows,
-                  title="held-out error in predicting the pilot's input (RMS over the inputs, mean of trials "
-                        "[95 % interval])")
-    for line in input_headlines(table):
-        ctx.say(line)
+                  title="held-out error predicting the pilot's input (RMS over inputs, mean [95 %])")
+    # the headline sentences as a table: the two means are the rows above, the difference is the paired one
+    diffs = input_differences(table)
+    if diffs:
+        ctx.say_table(["label", "ahead", "proposed vs", "difference [95 % interval]"],
+                      [[label, "one step" if metric == "input_step" else "horizon", title(ref), d.sentence()]
+                       for label, metric, ref, d in diffs],
+                      title="proposed vs the better model with no pilot (paired)")
 
 
-def _leave_to_report(text: str, report: Path | None) -> str:
-    """``text`` with the blocks of :data:`_REPORT_ONLY` replaced by one line naming the report's section, where a
-    report was written (the terminal of ``demo`` and ``report``; ``evaluate`` prints them whole)."""
-    if report is None:
-        return text
-    lines, out, skipping = text.splitlines(), [], False
-    for line in lines:
-        if any(line.startswith(head) for head in _REPORT_ONLY):
-            out.append(f"{line.rstrip(':')} — the methods over refitted splits by the corrected resampled t, these "
-                       "fitted models by the bootstrap, chance by exact sign-flip tests, the strategies by a mixed "
-                       f"model — at length in {report}, under \"Statistics of the comparison\".")
-            skipping = True
+def _print_statistics(ctx: Context, result: Any, report: Path | None) -> None:
+    """The statistics' text (:meth:`workbench.study.findings.StudyStatistics.text`) with two blocks in a terminal's
+    form: which number answers which question as a legend of one line per question, its full text in the report
+    (``demo``, ``report``) or with ``--explain``; and the proposed model's settings as a table (one row per
+    strategy, where a bullet each took five lines at 80 columns)."""
+    stats = getattr(result, "statistics", None)
+    explain = bool(getattr(ctx.args, "explain", False))
+    block: list[str] = []
+    lines = result.stats_text.splitlines()
+    i = 0
+    while i < len(lines):
+        head = lines[i]
+        legend = head.startswith(_LEGEND_HEAD) and stats is not None and not explain
+        settings = head.startswith(_SETTINGS_HEAD) and _settings_rows(result)
+        if not (legend or settings):
+            block.append(head)
+            i += 1
             continue
-        if skipping and not line.strip():
-            skipping = False
-        if not skipping:
-            out.append(line)
-    return "\n".join(out)
+        if block:
+            ctx.say_markdown("\n".join(block))
+            block = []
+        i += 1
+        while i < len(lines) and lines[i].strip():  # the block runs to the next blank line
+            i += 1
+        if legend:
+            _print_legend(ctx, stats, report)
+        else:
+            _print_settings(ctx, result)
+    if block:
+        ctx.say_markdown("\n".join(block))
+
+
+def _print_legend(ctx: Context, stats: Any, report: Path | None) -> None:
+    """Which number answers which question, a line each (:meth:`~workbench.study.findings.StudyStatistics.legend`),
+    and where it is said at length."""
+    ctx.say(_LEGEND_HEAD)
+    pairs = stats.legend()
+    width = max((len(q) for q, _ in pairs), default=0)
+    for question, how in pairs:
+        ctx.say(f"  {question:<{width}}  {how}")
+    ctx.say("  A difference is stated only where its interval excludes 0.")
+    ctx.say(f"  (at length: {report}, \"Statistics of the comparison\")" if report is not None else
+            "  (at length: --explain)")
+
+
+def _settings_rows(result: Any) -> list[list[str]]:
+    """Per strategy, the proposed model's settings where cross-validation chose them (the rows of
+    :func:`_print_settings`)."""
+    rows = []
+    for label, model in result.models.items():
+        auto = model.auto_ if model.chooses_settings else None
+        if auto is None:
+            continue
+        best = next((r for r in auto.scores if r.get("chosen")), None)
+        scored = best is not None and auto.ioc_only_rmse == auto.ioc_only_rmse
+        rows.append([str(label), str(auto.n_components), f"{auto.reg_covar:g}",
+                     f"{best['heldout_rmse']:.4g} vs {auto.ioc_only_rmse:.4g}" if scored else "—",
+                     f"{auto.gain:.2g} ± {auto.gain_se:.2g}" if auto.gain == auto.gain else "—",
+                     _predicts_with(auto)])
+    return rows
+
+
+def _predicts_with(auto: Any) -> str:
+    """What the proposed model predicts with, and where it fell back to ``K̂x`` because its fit on all trials
+    predicted them worse than ``K̂x`` alone (:meth:`~workbench.models.autoconfig.AutoSettings.describe`), the two."""
+    if not auto.fallback:
+        return "K̂x + GMR"
+    fitted, alone = getattr(auto, "fitted_rmse", math.nan), getattr(auto, "fitted_ioc_rmse", math.nan)
+    return f"K̂x alone (fitted on all: {fitted:.4g} vs {alone:.4g})" if fitted > alone else "K̂x alone"
+
+
+def _print_settings(ctx: Context, result: Any) -> None:
+    """The proposed model's settings as a table: what cross-validation chose, its held-out rollout error against
+    IOC-only's, the per-trial margin with its standard error, and what the model predicts with (``K̂x`` alone where
+    the variability model did not earn its place; it then keeps it for the input band)."""
+    autos = [m.auto_ for m in result.models.values() if m.chooses_settings and m.auto_ is not None]
+    folds = {f"{a.folds}-fold CV ({a.criterion})" for a in autos}
+    ctx.say_table(["strategy", "G", "reg_covar", "rollout RMSE vs IOC-only", "below it ± SE", "predicts with"],
+                  _settings_rows(result), title=f"the proposed model's settings, by {', '.join(sorted(folds))}")
 
 
 def _print_efficiency(ctx: Context, result: Any) -> None:
@@ -391,9 +458,13 @@ def _print_objective_comparison(ctx: Context, result: Any, report: Path | None =
     ctx.say_table(head, rows, title="task-objective weight ratios inside coupled parts (diagonal cost, S = 0)")
     for why, k in footnotes.items():
         ctx.say(f"  [{k}] {why}")
+    # each part's structure check once, for every strategy it reads the same for
+    fits: dict[str, list[str]] = {}
     for lb, wr in ratios.items():
         for f in wr.fits:
-            ctx.say(f"  {lb}: {f.describe()}")
+            fits.setdefault(f.describe(), []).append(str(lb))
+    for said, labels in fits.items():
+        ctx.say(f"  {', '.join(labels)}: {said}")
     if report is not None:  # the report explains the estimates and notes at length
         ctx.say(f"(how the estimates, intervals and notes are made: {report}, \"Weight ratios inside coupled parts\")")
         return

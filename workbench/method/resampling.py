@@ -471,7 +471,7 @@ def bootstrap_gain(
         if timed and getattr(out[5], "method", "") == "none":  # the rule decided no timing: the paper's gain
             A, B = plant_matrices(plant.A, plant.B)
             loo = _leave_one_out(demos, plant, rule_gain_method(demo_blocks(list(demos), *B.shape), A, B))
-        elif timed:  # the estimator decided on all trials (LIML, or least squares where the starts are weak)
+        elif timed:  # the timing's estimator as decided on all trials (LIML, or least squares where asked for)
             loo = _timed_leave_one_out(demos, plant, "direct" if out[5].method == "direct" else "iv", timing)
         else:
             loo = _leave_one_out(demos, plant, method)

@@ -270,9 +270,8 @@ def _rho_interval(rho: float, rhos: np.ndarray, level: float) -> tuple[float, fl
 
 
 def _verdict(rho: float, lo: float, hi: float) -> Verdict:
-    """The interval judges. Without one (nothing to resample) the point estimate is accepted as the paper's
-    Assumption 3 accepts it, but a refusal needs its interval outside the unit circle, and there is none: ρ̂ ≥ 1 is
-    not distinguishable."""
+    """The interval judges. Without one the point estimate is accepted as the paper's Assumption 3 accepts it, but
+    a refusal needs its interval outside the unit circle, and there is none: ρ̂ ≥ 1 is not distinguishable."""
     if np.isfinite(lo) and np.isfinite(hi):
         return "stable" if hi < 1.0 else "unstable" if lo > 1.0 else "not distinguishable"
     return "stable" if rho < 1.0 else "not distinguishable"

@@ -60,7 +60,7 @@ from workbench.method.pilot_loop import (
 )
 
 __all__ = ["TimingData", "TimingFit", "PilotTiming", "fit_timing", "identify_timing", "lag_decay", "seen_weights",
-           "seen_states", "refusal", "weak_starts", "timed_spectral_radius", "recorded_dead_zone", "stick_of",
+           "seen_states", "refusal", "timed_spectral_radius", "recorded_dead_zone", "stick_of",
            "read_through", "DELAY_MAX_S", "LAG_MAX_S", "STARTS"]
 
 #: The longest reaction delay and lag searched (seconds): human delays are 0.1-0.3 s, lags 0.05-0.15 s (METHOD.md).
@@ -103,47 +103,6 @@ def refusal(fit: TimingFit, plant: Any, delay_s: float | None = None, lag_s: flo
                     f"loop would not be stable (spectral radius {rho:.4g} with the delay and the lag), though the "
                     "demonstrations were flown: the timing model does not fit this pilot")
     return ""
-
-
-def weak_starts(demos: Iterable[Any], n: int, m: int) -> str:
-    """Why the trials' starts are too weak an instrument for LIML (``""``: they are not): the smallest squared
-    canonical correlation of the states with the starts (:func:`workbench.method.gain.iv_relevance`) below
-    :data:`~workbench.method.gain.IV_MIN_RELEVANCE`, the strength the paper's instrumented gain requires of the same
-    instruments (chosen there on the known-gain operators, before the timing existed). There the timing is
-    identified by least squares (:func:`identify_timing`): the paper's own rule ("iv-or-direct": instruments where
-    they are relevant, least squares otherwise) inside the timed gain.
-
-    Why one standard for both. LIML's own check (:meth:`_Metric.relevance` > 0, "beyond chance") asks only that the
-    starts explain more than chance. LIML has no finite moments (Mariano & Sawa 1972, JASA 67), and as the
-    instruments weaken its distribution's far tails carry more and more of it (the concentration parameter decides
-    how much, Stock & Yogo 2005): the entries the starts barely move come out anywhere. On the erratic pilot (raw
-    relevance 0.021-0.046 on seeds 5000-5005; on a split of seed 309001, 0.0046 beyond chance) a thrust-row entry
-    came out at −48.5 where least squares gives 0.07, and its 400-trial value, a coverage study's truth, is itself
-    such a draw. The paper's gain already refuses these starts for two-stage least squares, whose moments exist up
-    to the degree of over-identification; the workbench holds both instrumented estimators of the gain to one
-    standard. Against it, said plainly: tests based on LIML suffer less size distortion under weak instruments
-    than 2SLS's (Stock, Wright & Yogo 2002), so this standard is conservative for LIML, and the price shows where
-    LIML was right with a wide interval: a slow pilot behind a dead zone, whose starts are as weak (0.037-0.078)
-    and whose least-squares gain is biased. Least squares, not the paper's instantaneous gain, is what takes over:
-    a slow pilot's delay and lag still matter where its starts are weak, and the instantaneous least-squares gain
-    of such a pilot is the far-too-soft one the timing exists to fix. Chosen on seeds 5000-5007 (K̂'s interval
-    holding the truth, ``bench/gain_coverage.md``: erratic 0.635 -> 0.885, dead zone 0.802 -> 0.729, the other
-    pilots never below the standard). Relevance there and on seed 4 of the slow pilot
-    (0.076): the delayed pilots 0.10-0.16, with a 0.05 dead zone 0.037-0.078, the LQR operators 0.29-0.32, the
-    landing cascade 0.21."""
-    from workbench.method.gain import IV_MIN_RELEVANCE, demo_blocks, iv_relevance
-
-    blocks = demo_blocks(demos, n, m)
-    if not blocks:
-        return ""
-    try:
-        rel = iv_relevance(np.concatenate([b[0] for b in blocks], axis=1), [b[0].shape[1] for b in blocks])
-    except np.linalg.LinAlgError:
-        return "the trials' starts leave a state direction unexcited (their states are singular)"
-    if rel >= IV_MIN_RELEVANCE:
-        return ""
-    return (f"the trials' starts are too weak an instrument (smallest squared canonical correlation with the states "
-            f"{rel:.2g} < {IV_MIN_RELEVANCE:g}, what the paper's instrumented gain requires of them)")
 
 
 # ------------------------------------------------------------------------------------------------ the rows
@@ -685,9 +644,8 @@ def identify_timing(
     plant : LinearSystem
         Anything with ``n``, ``m`` and ``dt``.
     method : {"liml", "direct"}
-        ``"liml"``: instrumental variables on the trials' starts — least squares instead where they are weaker
-        than the paper's instrumented gain accepts (:func:`weak_starts`) — refused (``ModelError``, which says why)
-        where they explain the seen states no better than chance (relevance ≤ 0), where the best fit lies at the end of
+        ``"liml"``: instrumental variables on the trials' starts, refused (``ModelError``, which says why) where
+        they explain the seen states no better than chance (relevance ≤ 0), where the best fit lies at the end of
         the range searched (:data:`DELAY_MAX_S`, :data:`LAG_MAX_S`: no interior optimum) or, for a plant with
         ``A`` and ``B``,
         where the pilot's own loop at the best-fitting timing would not be stable
@@ -733,11 +691,8 @@ def identify_timing(
         raise DataError(f"the timing is identified by 'liml' or 'direct', not {method!r}")
     demos = list(demos)
     data = TimingData(demos, int(plant.n), int(plant.m), float(plant.dt), start)
-    weak = weak_starts(demos, int(plant.n), int(plant.m)) if method == "liml" else ""
-    if weak:  # the paper's rule inside the timed gain: least squares where the instruments are too weak
-        method = "direct"
     point = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s)
-    reason = f"least squares, since {weak}" if weak else "least squares, as requested"
+    reason = "least squares, as requested"
     K_point = point.K
     timed = True
     if method == "liml":

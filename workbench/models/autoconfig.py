@@ -146,6 +146,16 @@ class AutoSettings:
                    num("ioc_only_rmse"), bool(d.get("fallback", False)),
                    num("gain"), num("gain_se"), num("fitted_rmse"), num("fitted_ioc_rmse"))
 
+    def fallback_reason(self) -> str:
+        """Why the model fell back to ``K̂x``, as a clause (``""`` where it did not)."""
+        if not self.fallback:
+            return ""
+        if self.fitted_rmse > self.fitted_ioc_rmse:
+            return (f"fitted on all trials, its variability model predicted them worse than K̂x alone "
+                    f"({self.fitted_rmse:.4g} against {self.fitted_ioc_rmse:.4g})")
+        return (f"in cross-validation its variability model did not lower the held-out error by more than its "
+                f"standard error ({self.folds}-fold)")
+
     def describe(self) -> str:
         """One line: what was chosen, from what, and — where it happened — the fallback to ``K̂x``."""
         best = next((r for r in self.scores if r.get("chosen")), None)

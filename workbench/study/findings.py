@@ -127,7 +127,7 @@ class StudyStatistics:
             pooled = any(d.p_holm != d.p_holm and (d.shown or d.lo == d.lo) for d in ml)
             header = self._ml_header()
             if pooled:  # the pooled rows' p cell is "—": say why once, not in every such cell
-                header = header.rstrip(":") + "; a row without a p (pooled) is no verdict's:"
+                header = header.rstrip(":") + "; the pooled rows (no p) are no verdict's:"
             lines += ["", f"Methods ({which}) — {header}", "",
                       f"| strategy | proposed vs | {where} (train / test {ml[0].units}) | fell back to K̂x in | "
                       f"difference [{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|---|"]
@@ -154,9 +154,8 @@ class StudyStatistics:
             m = self.mixed
             lines += ["", f"Mixed-effects model (statsmodels MixedLM, REML) of log {what} RMSE: {m.n_obs} "
                           f"observations, {m.n_groups} {m.groups}s{'' if m.converged else ', NOT converged'}"
-                          f"{'; ' + m.note if m.note else ''}. The strategies' factor on the error against the "
-                          "first strategy; interval and p from a t distribution with the between-within degrees "
-                          "of freedom (df), not the Wald z:", "",
+                          f"{'; ' + m.note if m.note else ''}. Factors against the first strategy; p from t with "
+                          "the between-within df (not the Wald z):", "",
                       "| term | factor [95 % interval] | p (t, df) |", "|---|---|---|"]
             for e in m.effects:
                 kind, level = e.term.split(" ", 1)
@@ -167,12 +166,36 @@ class StudyStatistics:
                              f"({e.df:.0f}) |")
         return "\n".join(lines)
 
+    def legend(self) -> list[tuple[str, str]]:
+        """Which number answers which question, as ``(question, how)`` pairs of a few words each: the terminal's
+        legend, where :meth:`text` (the report, ``--explain``) says it at length."""
+        out = []
+        ml = self.method_level
+        if ml:
+            m0 = ml[0]
+            k = sum(headline_rows(self.headline))
+            folds = f"{m0.n_splits} leave-one-out folds" if m0.loo else f"{m0.n_splits} refitted splits"
+            out.append(("method better?", f"{folds}, corrected resampled t; p Holm over {k}"))
+        if self.paired:
+            first = self.paired[0]
+            whole = ("subjects, then trials" if first.resampled.startswith("subjects") else "whole test trials")
+            out.append(("these fits differ?", f"{first.n_boot} bootstrap resamples of {whole}"))
+            head = [t for t in self.tests if t.p_holm == t.p_holm]
+            if head and not any(t.reachable for t in head):
+                n = max(t.n for t in head)
+                out.append(("beyond chance?", f"no sign-flip test can reach 5 % with {n} test trials"))
+            else:
+                out.append(("beyond chance?", f"exact sign-flip tests; p Holm over {len(head)}"))
+        if self.mixed is not None and any(e.term.startswith("strategy") for e in self.mixed.effects):
+            per = "subject and trial" if self.mixed.groups == "subject" else "trial"
+            out.append(("strategies differ?", f"mixed model of the log error, random per {per}"))
+        return out
+
     def _ml_header(self) -> str:
         m0 = self.method_level[0]
         if m0.loo:
             return f"{m0.splits_words()}, each training on all of its strategy's {m0.units} but the one it tests:"
-        return (f"{m0.n_splits} random splits, {m0.n_train} training and {m0.n_test} test {m0.units} each "
-                "(summed over strategies in the pooled row):")
+        return f"{m0.n_splits} random splits:"
 
     def _tests_sentence(self) -> str:
         """What the sign-flip column answers, or why there is none: with few trials no test can reach 5 %."""
@@ -221,11 +244,11 @@ def windows_sentence(table: pd.DataFrame, n_steps: int, stride_steps: int | None
     per_trial_windows = t.groupby("trial")["start"].nunique()
     n_w, n_t = int(per_trial_windows.sum()), len(per_trial_windows)
     stride = ("from each trial's first state only" if not stride_steps else
-              f"from every {stride_steps} steps ({stride_steps * dt:g} s) of each test trial whose record covers "
-              "the horizon, and from its first state")
-    return (f"Predictions over {n_steps} steps ({n_steps * dt:g} s) scored {stride}: {n_w} windows on {n_t} test "
-            f"trials ({per_trial_windows.min()}–{per_trial_windows.max()} per trial); a trial's windows are averaged, "
-            "so every trial weighs the same.")
+              f"from each trial's first state and every {stride_steps} steps ({stride_steps * dt:g} s) its record "
+              "covers")
+    return (f"Scored: {n_w} windows on {n_t} test trials ({per_trial_windows.min()}–{per_trial_windows.max()} per "
+            f"trial), {n_steps} steps ({n_steps * dt:g} s) ahead {stride}; a trial's windows are averaged, so every "
+            "trial weighs the same.")
 
 
 def study_statistics(

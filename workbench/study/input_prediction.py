@@ -28,7 +28,7 @@ import pandas as pd
 from workbench.models.registry import METHOD_TITLES
 
 __all__ = ["INPUT_METRICS", "NO_PILOT", "input_rmse", "model_rows", "no_pilot_rows", "input_scores",
-           "input_headlines", "input_lines", "input_markdown", "title"]
+           "input_differences", "input_headlines", "input_lines", "input_markdown", "title"]
 
 #: One step ahead and over the horizon.
 INPUT_METRICS = ("input_step", "input_horizon")
@@ -101,12 +101,12 @@ def _reference(part: pd.DataFrame, metric: str) -> str | None:
     return str(means.idxmin())
 
 
-def input_headlines(table: pd.DataFrame, method: str = "proposed", seed: int = 0) -> list[str]:
-    """Per label and metric: the method's input error against the better no-pilot model, named, with the paired
-    difference's interval (:func:`workbench.study.paired.paired_differences`)."""
+def input_differences(table: pd.DataFrame, method: str = "proposed", seed: int = 0) -> list[tuple[str, str, str, Any]]:
+    """Per label and metric: ``(label, metric, reference, difference)`` — the method's input error against the
+    better no-pilot model ``reference``, the paired difference of :func:`workbench.study.paired.paired_differences`
+    (what :func:`input_headlines` says in words and the terminal prints as a table)."""
     from workbench.study.divergence import scored
     from workbench.study.paired import paired_differences
-    from workbench.study.scores import fmt
 
     out = []
     rows = scored(table)  # a rollout that diverged has no input score over the horizon to compare
@@ -117,13 +117,23 @@ def input_headlines(table: pd.DataFrame, method: str = "proposed", seed: int = 0
             if ref is None or method not in set(part.loc[part["metric"] == metric, "method"]):
                 continue
             (d, *_) = paired_differences(part, metric, method, [ref], n_boot=2000, seed=seed) or [None]
-            if d is None:
-                continue
-            where = f"{label}: " if str(label) not in ("", "all") else ""
-            out.append(f"{where}predicting the pilot's own input {_WORDS[metric]}, {title(method)} "
-                       f"{fmt(d.mean_method)} against {fmt(d.mean_baseline)} for the better model with no pilot, "
-                       f"the plant with the input {'held' if ref == 'no_pilot_held' else 'at zero'}: "
-                       f"{d.sentence()} ({d.n_trials} test trials)")
+            if d is not None:
+                out.append((str(label), metric, ref, d))
+    return out
+
+
+def input_headlines(table: pd.DataFrame, method: str = "proposed", seed: int = 0) -> list[str]:
+    """Per label and metric: the method's input error against the better no-pilot model, named, with the paired
+    difference's interval (:func:`input_differences`)."""
+    from workbench.study.scores import fmt
+
+    out = []
+    for label, metric, ref, d in input_differences(table, method, seed):
+        where = f"{label}: " if label not in ("", "all") else ""
+        out.append(f"{where}predicting the pilot's own input {_WORDS[metric]}, {title(method)} "
+                   f"{fmt(d.mean_method)} against {fmt(d.mean_baseline)} for the better model with no pilot, "
+                   f"the plant with the input {'held' if ref == 'no_pilot_held' else 'at zero'}: "
+                   f"{d.sentence()} ({d.n_trials} test trials)")
     return out
 
 

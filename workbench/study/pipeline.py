@@ -138,9 +138,7 @@ class StudyResult:
                   for label, model in self.models.items()
                   if model.has_gain and (reason := model.objective_error_)]
         lines += [f"{'On ' + label + ', the' if label not in ('', 'None', UNLABELED) else 'The'} proposed model "
-                  "predicts with its task objective alone (K̂x, as IOC-only does): in cross-validation its "
-                  f"variability model did not lower the held-out error by more than its standard error ({auto.folds}"
-                  "-fold)."
+                  f"predicts with its task objective alone (K̂x, as IOC-only does): {auto.fallback_reason()}."
                   for label, model in self.models.items()
                   if model.chooses_settings and (auto := model.auto_) is not None and auto.fallback]
         lines += verdict_lines(self.table, METHOD_TITLES)
