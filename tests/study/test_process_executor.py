@@ -165,3 +165,67 @@ def test_a_command_killed_alone_takes_its_workers_and_its_staging_folder_with_it
         assert not list(tmp_path.glob("workbench-staging-*"))  # removed on the way out
     remove_stale_staging(tmp_path)  # what the next run does first
     assert not list(tmp_path.glob("workbench-staging-*"))
+
+
+_WARM_TASK = """
+import os, sys
+def task(i):
+    return os.getpid(), os.getppid(), 'json' in sys.modules, i * i
+"""
+_WARM = """
+if __name__ == "__main__":  # a forked worker imports this file again: nothing to do there
+    import os
+    from workbench.study.executor import ProcessExecutor, warm_local_workers
+    from warm_task import task
+    assert warm_local_workers(["json", "warm_task"])
+    with ProcessExecutor(2) as ex:
+        out = ex.map(task, range(4))
+    print(repr((os.getpid(), out)))
+"""
+
+
+@pytest.mark.slow  # three interpreters importing the executor's module: ~2 s on an idle machine
+@pytest.mark.skipif(sys.platform != "linux", reason="the forkserver start method")
+def test_workers_forked_from_a_warm_server_give_the_same_results(tmp_path):
+    # warm_local_workers (the demo, before it reads the logs): the workers are forked from a server that imported
+    # the modules once, not spawned; the tasks' results are the same, in task order
+    (tmp_path / "warm_task.py").write_text(_WARM_TASK)
+    (tmp_path / "warm.py").write_text(_WARM)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(tmp_path)])}
+    done = subprocess.run([sys.executable, "warm.py"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    me, out = eval(done.stdout.strip())  # noqa: S307 - our own script's repr
+    assert [v for *_, v in out] == [0, 1, 4, 9]
+    assert all(imported for *_, imported, _ in out)
+    parents = {parent for _, parent, *_ in out}
+    assert me not in {pid for pid, *_ in out} and me not in parents  # forked by the server, not by the command
+
+
+_DEMO = """
+import sys
+from workbench.cli import main
+sys.exit(main(["demo", "--out", sys.argv[1]]))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform != "linux" or available_cpus() < 2, reason="process groups, two CPUs")
+@pytest.mark.parametrize("delay", [0.0, 2.0])
+def test_ctrl_c_while_a_demos_warm_workers_start_or_study_ends_in_one_line_and_leaves_nothing(tmp_path, delay):
+    env = {**os.environ, "PYTHONPATH": str(REPO), "TMPDIR": str(tmp_path)}
+    proc = subprocess.Popen([sys.executable, "-c", _DEMO, str(tmp_path / "demo")], cwd=REPO, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while len(_group(proc.pid)) < 2 and time.monotonic() < deadline:  # the command and the workers' server
+        time.sleep(0.05)
+    time.sleep(delay)  # 0: the server imports; 2: the workers study
+    os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole foreground group
+    err = proc.communicate(timeout=120)[1].decode()
+    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err
+    assert "Traceback" not in err, err
+    for _ in range(50):
+        if not _group(proc.pid):
+            break
+        time.sleep(0.1)
+    assert not _group(proc.pid), "a worker or the server outlived the command"

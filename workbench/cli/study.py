@@ -507,6 +507,11 @@ def _report_group(ctx: Context, ds: Any, folder: Path, title: str, trials: str) 
 #: What the demo needs after its study (the report, the recording, the models its workers send back): imported by a
 #: thread while this process waits for the workers, instead of before it starts them.
 _AFTER_STUDY = ("workbench.models.factory", "workbench.report.markdown", "workbench.viewer", "workbench.study.findings")
+#: What the demo's worker processes import for their tasks (a strategy, a method-level split), imported once by the
+#: server they are forked from while the demo reads the logs (:func:`workbench.study.executor.warm_local_workers`).
+_WORKER_MODULES = ("workbench.study.pipeline", "workbench.study.method_level", "workbench.study.weights",
+                   "workbench.study.power", "workbench.models.factory", "workbench.method.inverse_lqr_sdp",
+                   "workbench.method.timing", "sklearn.cluster", "scipy.optimize")
 
 
 def _import_in_background(modules: Sequence[str]) -> threading.Thread:
@@ -540,6 +545,11 @@ def cmd_demo(ctx: Context) -> int:
     refuse_stdio(a.out, "--out", "the demo writes a folder (report, models, data, recording)")
     refuse_stdio(a.logs, "--logs", "the demo reads a folder of logs")
     t_start = time.perf_counter()
+    if getattr(a, "workers", None) is None and getattr(a, "scheduler", None) is None:
+        from workbench.study.executor import available_cpus, warm_local_workers
+
+        if available_cpus() >= 2:  # the study will run on local workers: their imports run beside the logs' import
+            warm_local_workers(_WORKER_MODULES)
     out = Path(a.out)
     if out.is_dir():
         recover_swaps(out, "demo")  # what a killed run left half done is undone before anything else
@@ -599,6 +609,9 @@ def _demo_into(ctx: Context, ds: Any, out: Path, build: Path, timings: dict[str,
             progress=ctx.progress, bootstrap=a.bootstrap, stride_s=a.stride_s, power=a.power, executor=ex,
         )
         workers = ex.workers if ex.parallel else 1
+    from workbench.study.executor import stop_local_workers
+
+    stop_local_workers()  # the workers' server, if the demo started one: no longer needed
     if preload is not None:
         preload.join()
     study_s = time.perf_counter() - t0

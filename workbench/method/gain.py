@@ -115,12 +115,13 @@ def iv_instruments(X: np.ndarray, lengths: Sequence[int], n_basis: int = IV_BASI
     if sum(lengths) != T or min(lengths, default=0) < 1:
         raise DataError(f"demonstration lengths {lengths[:5]}… do not add up to the {T} stacked transitions")
     taus = np.geomspace(2.0, max(4.0, max(lengths) / 2.0), n_basis)
-    blocks = []
-    for start, L in zip(np.cumsum([0, *lengths[:-1]]), lengths, strict=True):
-        basis = np.exp(-np.arange(L)[:, None] / taus[None, :])  # (L, n_basis)
-        x0 = X[:, start]
-        blocks.append((basis[:, :, None] * x0[None, None, :]).reshape(L, -1).T)
-    return np.concatenate(blocks, axis=1)
+    # every demonstration at once (a bootstrap calls this per resample): each column's step in its demonstration
+    # and its demonstration's first state, the same products as one demonstration at a time
+    starts = np.cumsum([0, *lengths[:-1]])
+    k = np.arange(T) - np.repeat(starts, lengths)
+    basis = np.exp(-k[:, None] / taus[None, :])  # (T, n_basis)
+    x0 = np.repeat(X[:, starts].T, lengths, axis=0)  # (T, n)
+    return (basis[:, :, None] * x0[:, None, :]).reshape(T, -1).T  # F-ordered, as the concatenation of the blocks was
 
 
 def _first_stage(X: np.ndarray, lengths: Sequence[int]) -> tuple[np.ndarray, float]:

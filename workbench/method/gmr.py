@@ -30,7 +30,8 @@ import numpy as np
 
 from workbench.errors import ModelError
 
-__all__ = ["GaussianMixture", "ConditionalGMM", "GMRModel", "GMRResult", "gmr", "inv_lower"]
+__all__ = ["GaussianMixture", "ConditionalGMM", "StackedConditionalGMM", "GMRModel", "GMRResult", "gmr",
+           "inv_lower"]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -341,6 +342,101 @@ class ConditionalGMM:
             f"ConditionalGMM(n_components={self.n_components}, n_inputs={self.n_inputs}, "
             f"n_outputs={self.n_outputs})"
         )
+
+
+
+class StackedConditionalGMM:
+    """Several :class:`ConditionalGMM` of one shape read in one batch: the rows of a query come in consecutive
+    blocks, block ``t`` read by member ``t``.
+
+    A rollout of many tasks at once (each its own conditional: its frames) costs one pass of element-wise work per
+    step instead of one per task; each row gets what its own member's :meth:`ConditionalGMM.predict` gives it (the
+    same operations on the same numbers: each member's matrix products on its own block, the rest column by
+    column).
+
+    Parameters
+    ----------
+    members : sequence of ConditionalGMM
+        Of one G, input and output size.
+    counts : sequence of int
+        Rows per member in a query of ``sum(counts)`` rows; a query ``c`` times as long holds each row's ``c``
+        consecutive rows (a rollout's every step of each start) in its place.
+    """
+
+    def __init__(self, members: Sequence[ConditionalGMM], counts: Sequence[int]) -> None:
+        members = list(members)
+        counts = [int(c) for c in counts]
+        if not members or len(members) != len(counts) or min(counts) < 1:
+            raise ModelError("StackedConditionalGMM: one positive row count per member is needed")
+        shape = {(c.n_components, c.n_inputs, c.n_outputs) for c in members}
+        if len(shape) != 1:
+            raise ModelError(f"StackedConditionalGMM: the members differ in shape {sorted(shape)}")
+        self.members = members
+        self.counts = np.asarray(counts)
+        self.n_components, self.n_inputs, self.n_outputs = shape.pop()
+        self._log_norm = np.concatenate([c._log_norm_col for c in members], axis=1)  # (G, T)
+        self._bounds: dict[int, tuple[list[tuple[int, int]], np.ndarray]] = {}
+
+    def _blocks(self, N: int) -> tuple[list[tuple[int, int]], np.ndarray]:
+        """The row range of every member in a query of N rows, and the (G, N) log normalizers of its rows."""
+        got = self._bounds.get(N)
+        if got is None:
+            total = int(self.counts.sum())
+            if N % total:
+                raise ModelError(f"StackedConditionalGMM: a query of {N} rows is not a multiple of {total}")
+            per = self.counts * (N // total)
+            ends = np.cumsum(per)
+            got = ([(int(e - c), int(e)) for e, c in zip(ends, per, strict=True)],
+                   np.repeat(self._log_norm, per, axis=1))
+            self._bounds[N] = got
+        return got
+
+    def _affine(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        N, d, G, m = x.shape[0], self.n_inputs, self.n_components, self.n_outputs
+        blocks, log_norm = self._blocks(N)
+        Y = np.empty((G * (d + m), N))
+        xT = x.T
+        for c, (a, b) in zip(self.members, blocks, strict=True):
+            Yb = c._W @ xT[:, a:b]
+            Yb += c._c
+            Y[:, a:b] = Yb
+        Y = Y.reshape(G, d + m, N)
+        z = Y[:, :d]
+        log_h = log_norm - 0.5 * np.einsum("gdn,gdn->gn", z, z)
+        top = log_h.max(axis=0)
+        if not np.isfinite(top).all():
+            raise ModelError(
+                "ConditionalGMM: a query is so far from every component that its distance overflows"
+            )
+        h = np.exp(log_h - top)
+        h /= h.sum(axis=0)
+        return h, Y[:, d:]
+
+    def predict_mean(self, x: np.ndarray) -> np.ndarray:
+        """Each row's merged GMR mean by its member, (N, m)."""
+        h, mu_i = self._affine(self.members[0]._queries(x))
+        return np.ascontiguousarray(np.einsum("gn,gmn->mn", h, mu_i).T)
+
+    def predict(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each row's merged GMR mean (N, m) and covariance (N, m, m) by its member."""
+        x = self.members[0]._queries(x)
+        h, mu_i = self._affine(x)
+        m, N = self.n_outputs, h.shape[1]
+        blocks, _ = self._blocks(N)
+        mu = np.einsum("gn,gmn->mn", h, mu_i)
+        diff = mu_i - mu
+        hd = h[:, None, :] * diff
+        flat = np.empty((m * m, N))
+        for c, (a, b) in zip(self.members, blocks, strict=True):
+            flat[:, a:b] = c._S_cond_flat_T @ h[:, a:b]
+        Sigma = flat.reshape(m, m, N)
+        for i in range(m):
+            for j in range(i, m):
+                v = np.einsum("gn,gn->n", hd[:, i], diff[:, j])
+                Sigma[i, j] += v
+                if j != i:
+                    Sigma[j, i] = Sigma[i, j]
+        return np.ascontiguousarray(mu.T), np.ascontiguousarray(np.transpose(Sigma, (2, 0, 1)))
 
 
 #: Alias: the precomputed GMR object.

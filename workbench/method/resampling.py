@@ -318,6 +318,8 @@ def _timed_resampled(
         progress(n_boot, n_boot)
     solver = _solver(A, B, structure)
     obj0 = None if solver is None else solver.solve(np.asarray(pt.K))
+    # the resamples try the point's solver alone, as without the timing (resample_solvers)
+    solver = _solver(A, B, structure, resample_solvers(obj0))
     fits, failures = [], [f"resample: the timing fit failed ({pt.n_failed})"] * pt.n_failed
     with single_threaded_blas():
         for b, K in enumerate(pt.K_samples):

@@ -31,10 +31,10 @@ from workbench.data.roles import ResolvedRoles
 from workbench.defaults import N_COMPONENTS, REG_COVAR
 from workbench.errors import ConvergenceWarning, ModelError
 from workbench.method.frames import Frame, FrameSpec, frames_for_demo, frames_for_task
-from workbench.method.gmr import ConditionalGMM
+from workbench.method.gmr import ConditionalGMM, StackedConditionalGMM
 from workbench.method.tpgmm import TPGMM
 
-__all__ = ["TaskGMR", "TaskConditional", "resolve_frame_spec"]
+__all__ = ["TaskGMR", "TaskConditional", "StackedTaskConditional", "resolve_frame_spec"]
 
 # A coordinate whose spread is below this (relative to its magnitude) is treated as constant: scale 1.
 _MIN_SCALE = 1e-12
@@ -100,6 +100,16 @@ class TaskConditional:
 
     def predict_mean(self, X: np.ndarray) -> np.ndarray:
         return self.gmr.predict_mean(np.asarray(X, dtype=float) * self._inv_in) * self._out
+
+
+class StackedTaskConditional(TaskConditional):
+    """The :class:`TaskConditional` of several tasks of one model read in one batch, the rows in consecutive blocks
+    (:class:`~workbench.method.gmr.StackedConditionalGMM`): each row gets what its own task's conditional gives it."""
+
+    def __init__(self, members: Sequence[TaskConditional], counts: Sequence[int]) -> None:
+        first = members[0]
+        super().__init__(StackedConditionalGMM([c.gmr for c in members], counts), 1.0 / first._inv_in, first._out)
+        self._inv_in = first._inv_in  # the members' own factors, not recomputed
 
 
 class TaskGMR:

@@ -238,18 +238,36 @@ def fitted_check(model, demos: Sequence) -> tuple[float, float]:
 def _rollout_rmse(model, demos, n_steps: int, idx: Sequence[int], spread: np.ndarray) -> tuple[float, np.ndarray]:
     """Mean over starts of the RMSE of a mean rollout of ``horizon`` steps on the states ``idx``, and the mean
     over each trial's own starts (NaN for a trial too short to score)."""
-    errs, per_trial = [], []
-    for d in demos:
+    # the trials of one horizon in one predict_many call: their tasks roll out as one batch (the same numbers)
+    plan: dict[int, list[tuple[int, list[int]]]] = {}
+    for j, d in enumerate(demos):
         H = min(n_steps, len(d) - 1)
-        if H < 1:
+        if H >= 1:
+            plan.setdefault(H, []).append((j, _starts(len(d), H)))
+    preds: dict[int, list] = {}
+    for H, trials in plan.items():
+        x0s, goals, task_x0s, steps, pasts = [], [], [], [], []
+        for j, starts in trials:
+            d = demos[j]
+            x0s += [d.x[s] for s in starts]
+            goals += [model._goal_for(d)] * len(starts)
+            task_x0s += [d.x[0]] * len(starts)
+            steps += starts
+            past = model.pasts(d, starts)
+            pasts = None if past is None else [*(pasts or []), *past]
+        out = model.predict_many(np.array(x0s), H, np.array(goals), task_x0s=np.array(task_x0s), task_steps=steps,
+                                 pasts=pasts)
+        for j, starts in trials:
+            preds[j], out = out[: len(starts)], out[len(starts) :]
+    errs, per_trial = [], []
+    for j, d in enumerate(demos):
+        if j not in preds:
             per_trial.append(math.nan)
             continue
-        starts = _starts(len(d), H)
-        goal = model._goal_for(d)
-        preds = model.predict_many(d.x[starts], H, [goal] * len(starts), task_x0s=[d.x[0]] * len(starts),
-                                   task_steps=starts, pasts=model.pasts(d, starts))
+        H = min(n_steps, len(d) - 1)
+        starts = next(st for jj, st in plan[H] if jj == j)
         mine = []
-        for s, p in zip(starts, preds, strict=True):
+        for s, p in zip(starts, preds[j], strict=True):
             diff = (p.x[1:, idx] - d.x[s + 1 : s + H + 1, idx]) / spread
             mine.append(float(np.sqrt(np.mean(np.sum(diff**2, axis=1)))))
         errs += mine

@@ -125,6 +125,20 @@ class GMROnlyModel(TaskGMRModel):
         policy.mean = lambda X: cond.predict_mean(X[:, idx])
         return policy
 
+    def _stacked_policy(self, tasks: Sequence[tuple[np.ndarray, np.ndarray]], counts: Sequence[int]) -> Policy:
+        """The policies of several tasks as one, for rows in consecutive blocks (see
+        :meth:`~workbench.models.proposed.HumanBehaviorModel._stacked_policy`): each row gets its own task's."""
+        from workbench.method.variability import StackedTaskConditional
+
+        cond = StackedTaskConditional([self._conditional(x0, target) for x0, target in tasks], counts)
+        idx = list(self.regulated_idx)
+
+        def policy(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return cond.predict(X[:, idx])
+
+        policy.mean = lambda X: cond.predict_mean(X[:, idx])
+        return policy
+
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         return gmr_state(self)
 

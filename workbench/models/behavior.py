@@ -390,19 +390,26 @@ class BehaviorModel(abc.ABC):
         E_list = [e for sub, ds in held_out for e in sub._whitened(ds, unseen=True)]
         scale, rho = fit_noise(E_list, window)
         H = max(1, int(round(self.noise_horizon_s / self.plant.dt)))
-        cases = []
+        cases, together = [], []
         every = max(1, -(-len(demos) // _CALIBRATION_TRIALS))
         for sub, ds in held_out:
+            tasks, members = [], []
             for d in ds[::every]:
                 starts = list(range(0, len(d) - H, max(1, H // 2)))[:_CALIBRATION_STARTS]
                 if starts:
                     X_true = np.stack([d.x[s : s + H + 1] for s in starts])
-                    cases.append((sub._policy(d.x[0], sub._goal_for(d)), d.x[starts], X_true, np.array(starts),
+                    tasks.append((d.x[0], sub._goal_for(d)))
+                    members.append(len(cases))
+                    cases.append((sub._policy(*tasks[-1]), d.x[starts], X_true, np.array(starts),
                                   sub.pasts(d, starts), sub._timing()))
+            stacked = getattr(sub, "_stacked_policy", None)
+            if stacked is not None and len(members) > 1:  # one fold model's cases rolled out as one
+                together.append((lambda rows, f=stacked, t=tasks: f(t, rows), members))
         self.noise_scale_, self.noise_rho_ = scale, rho
         if cases:
             idx = self.plant.r.position or tuple(range(self.plant.n))
-            factor, cov = calibrate_band_scale(cases, self.plant.A, self.plant.B, scale, rho, idx)
+            factor, cov = calibrate_band_scale(cases, self.plant.A, self.plant.B, scale, rho, idx,
+                                               together=together)
             self.noise_scale_ = scale * factor
             self.noise_band_factor_, self.noise_band_coverage_ = factor, cov
 
@@ -586,8 +593,16 @@ class BehaviorModel(abc.ABC):
             groups.setdefault(T0[b].tobytes() + T[b].tobytes(), []).append(b)
         out: list[Prediction | None] = [None] * Bn
         method = type(self).__name__
+        # mean rollouts of several tasks at once where the model can read them in one batch (the same numbers)
+        together = None
+        stacked = getattr(self, "_stacked_policy", None)
+        if not samples and stacked is not None and len(groups) > 1:
+            together = stacked([(T0[idx[0]], T[idx[0]]) for idx in groups.values()],
+                               [len(idx) for idx in groups.values()])
+            if together is not None:
+                groups = {b"": [b for idx in groups.values() for b in idx]}
         for idx in groups.values():
-            policy = self._policy(T0[idx[0]], T[idx[0]])
+            policy = together if together is not None else self._policy(T0[idx[0]], T[idx[0]])
             if timing is None:
                 Xm, Um, Sm = rollout_mean(A, B, policy, X0[idx], int(n_steps), clip_fn, steps0=K0[idx])
             else:

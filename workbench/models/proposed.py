@@ -417,6 +417,36 @@ class HumanBehaviorModel(TaskGMRModel):
         policy.timed = linear.timed
         return policy
 
+    def _stacked_policy(self, tasks: Sequence[tuple[np.ndarray, np.ndarray]], counts: Sequence[int]) -> Policy | None:
+        """The policies of several tasks as one, for rows in consecutive blocks (``counts[t]`` rows of task ``t``,
+        or each row's consecutive repeats): each row gets its own task's :meth:`_policy` answer, for one rollout of
+        them all (:meth:`~workbench.models.behavior.BehaviorModel.predict_many`). None where a task's linear part
+        follows a reference (indexed by the step): those roll out task by task."""
+        from workbench.method.variability import StackedTaskConditional
+
+        linears = [self._linear(x0, target) for x0, target in tasks]
+        if any(lin.timed for lin in linears):
+            return None
+        cond = StackedTaskConditional([self._conditional(x0, target) for x0, target in tasks], counts)
+        KT = linears[0].KT
+        offsets = np.stack([lin.offset for lin in linears])
+        rows = np.asarray(counts)
+        total = int(rows.sum())
+        idx = list(self.regulated_idx)
+        with_mean = getattr(self, "variability_mean_", True)
+
+        def offset(N: int) -> np.ndarray:
+            return np.repeat(offsets, rows * (N // total), axis=0)
+
+        def policy(X: np.ndarray, k: Any = None) -> tuple[np.ndarray, np.ndarray]:
+            mu, Sigma = cond.predict(X[:, idx])
+            return X @ KT + offset(len(X)) + (mu if with_mean else 0.0), Sigma
+
+        policy.mean = ((lambda X, k=None: X @ KT + offset(len(X)) + cond.predict_mean(X[:, idx])) if with_mean else
+                       (lambda X, k=None: X @ KT + offset(len(X))))
+        policy.timed = False
+        return policy
+
     def _state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         header, arrays = gmr_state(self)
         obj_header, obj_arrays = objective_state(self.objective_)

@@ -58,7 +58,7 @@ from workbench.errors import DataError, UsageError, WorkbenchError
 
 __all__ = [
     "Executor", "SerialExecutor", "ProcessExecutor", "DaskExecutor", "Outcome", "make_executor", "local_executor",
-    "available_cpus", "task_seed", "serial",
+    "available_cpus", "task_seed", "serial", "warm_local_workers", "stop_local_workers",
 ]
 
 Progress = Callable[[int, int], Any]
@@ -516,7 +516,8 @@ class ProcessExecutor(_Workers):
     Each worker imports what its first task needs (about 2 s, while this process works on), runs with one BLAS
     thread, and reads the sets :meth:`share` wrote to a temporary folder: for many machines use
     :class:`DaskExecutor`. ``spawn``, not ``fork``: a fork would copy this process's threads'
-    locks (the progress bar's, BLAS's) in whatever state they are.
+    locks (the progress bar's, BLAS's) in whatever state they are. After :func:`warm_local_workers` they are forked
+    from its server instead, a process without such threads that imported the study's modules once.
     """
 
     parallel = True
@@ -565,7 +566,7 @@ class ProcessExecutor(_Workers):
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context(_START_METHOD),
                                              initializer=_quiet_interrupts)
         with _spawning_without_interrupts():
             futures = [self._pool.submit(_run_task, fn, item) for item in items]
@@ -668,6 +669,58 @@ def available_cpus() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):
         return max(1, os.cpu_count() or 1)
+
+
+#: How local worker processes start: ``"spawn"``, a fresh interpreter that imports what its tasks need (~2 s of CPU
+#: each), or, once :func:`warm_local_workers` started its server, ``"forkserver"``: forked from a process that
+#: imported them once, while the command read its input.
+_START_METHOD = "spawn"
+
+
+def warm_local_workers(modules: Sequence[str]) -> bool:
+    """Start the server that local workers (:class:`ProcessExecutor`) are forked from, importing ``modules`` there
+    now: a command that will run a study on local workers calls this before it reads its input, so the imports
+    run beside that on another core, once instead of once per worker. False where it cannot (no ``forkserver``
+    start method): workers are then spawned as before.
+
+    The server starts with Ctrl-C blocked (:func:`_spawning_without_interrupts`) and its workers inherit that, so a
+    Ctrl-C during a worker's start-up still reaches it only in :func:`_quiet_interrupts`; the server ends with this
+    process, and its workers with it (:func:`_die_with_parent`).
+    """
+    global _START_METHOD
+    import multiprocessing
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return False
+    try:
+        from multiprocessing import forkserver, resource_tracker
+
+        # this module too: every worker runs its tasks through it (_run_task, _quiet_interrupts)
+        multiprocessing.get_context("forkserver").set_forkserver_preload([__name__, *modules])
+        # the resource tracker first: starting it unblocks Ctrl-C (SIG_UNBLOCK, not the mask it found), which would
+        # let a Ctrl-C kill the server in its interpreter's start-up ("Fatal Python error: init_import_site")
+        resource_tracker.ensure_running()
+        with _spawning_without_interrupts():
+            forkserver.ensure_running()
+    except (OSError, ValueError):
+        return False
+    _START_METHOD = "forkserver"
+    return True
+
+
+def stop_local_workers() -> None:
+    """Stop the server of :func:`warm_local_workers` and wait for it (later workers are spawned again): its memory is
+    freed, and the CPU time of the workers it forked counts in this process's children's, as a spawned worker's
+    does (``bench_demo``'s CPU column)."""
+    global _START_METHOD
+    if _START_METHOD != "forkserver":
+        return
+    from multiprocessing import forkserver
+
+    stop = getattr(getattr(forkserver, "_forkserver", None), "_stop", None)
+    if stop is not None:
+        stop()
+    _START_METHOD = "spawn"
 
 
 def local_executor(tasks: int) -> SerialExecutor | ProcessExecutor:

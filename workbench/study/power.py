@@ -143,14 +143,26 @@ def simulate_like(model, demos, n_trials: int, seed: int = 0):
     lo, hi = starts.min(axis=0), starts.max(axis=0)
     A, B = np.asarray(model.plant.A, dtype=float), np.asarray(model.plant.B, dtype=float)
     scale = np.asarray(model.noise_scale_, dtype=float) / float(model.noise_band_factor_)
-    out = []
-    for j in range(int(n_trials)):
+    m = B.shape[1]
+    trials = []
+    for _ in range(int(n_trials)):
         like = ds[int(rng.integers(len(ds)))]
         x0 = rng.uniform(lo, hi)
         target = like.target if like.target is not None else model.default_target(x0)
-        # the model's input distribution for this task, as its predictions use it
-        policy = model._policy(*model._task(x0, target))  # noqa: SLF001 - one conditional per trial, not per step
-        X, U = rollout_samples(A, B, policy, x0, len(like) - 1, 1, rng, model.noise_rho_, None, scale)
+        task = model._task(x0, target)  # noqa: SLF001 - one conditional per trial, not per step
+        # the draws rollout_samples makes for this trial (one (1, m) row per step), taken in the same order
+        trials.append((like, x0, task, rng.standard_normal((max(len(like) - 1, 1), m))))
+    # every trial rolled out at once where the model reads its tasks in one batch; else trial by trial
+    runs = _rollouts_together(model, A, B, trials, scale)
+    out = []
+    for j, (like, x0, task, draws) in enumerate(trials):
+        if runs is None:
+            # the model's input distribution for this task, as its predictions use it
+            policy = model._policy(*task)  # noqa: SLF001
+            X, U = rollout_samples(A, B, policy, x0, len(like) - 1, 1, _Replay(draws), model.noise_rho_, None,
+                                   scale)
+        else:
+            X, U = runs[j]
         x, u = X[0, :-1], U[0]
         t = model.plant.dt * np.arange(len(x))
         meta = {"id": f"sim-{j:04d}", "label": like.label, "source": "simulated from the fitted model"}
@@ -159,6 +171,72 @@ def simulate_like(model, demos, n_trials: int, seed: int = 0):
         out.append(Demonstration(t, x, u, meta))
     return DemonstrationSet(out, model.plant.state_names, model.plant.input_names, model.plant.dt,
                             roles=model.plant.roles)
+
+
+class _Replay:
+    """Stands in for the generator in :func:`~workbench.models.prediction.rollout_samples`: hands back one trial's
+    draws, taken beforehand in the order that function takes them."""
+
+    def __init__(self, draws: np.ndarray) -> None:
+        self._draws, self._k = draws, 0
+
+    def standard_normal(self, shape: tuple[int, int]) -> np.ndarray:
+        z = self._draws[self._k : self._k + 1].reshape(shape)
+        self._k += 1
+        return z
+
+
+def _rollouts_together(model, A: np.ndarray, B: np.ndarray, trials: list, scale: np.ndarray) -> list | None:
+    """One sample of every trial of :func:`simulate_like`, all rolled out in one batch, each row as
+    :func:`~workbench.models.prediction.rollout_samples` would roll it out alone (its own task's policy, its own
+    draws, its own Cholesky factor): per trial ``(X (1, H+1, n), U (1, H, m))``. None where the model cannot read
+    its tasks in one batch (``_stacked_policy``) or a task's policy follows a reference."""
+    from workbench.models.prediction import psd_sqrt
+
+    stacked = getattr(model, "_stacked_policy", None)
+    if stacked is None or len(trials) < 2:
+        return None
+    steps = np.array([len(like) - 1 for like, *_ in trials])
+    if steps.min() < 1:
+        return None
+    order = np.argsort(-steps, kind="stable")  # longest first: the trials still running are always a prefix
+    policies: dict[int, object] = {}
+    full = stacked([trials[j][2] for j in order], [1] * len(order))
+    if full is None:
+        return None
+    policies[len(order)] = full
+    rho = np.broadcast_to(np.asarray(model.noise_rho_, dtype=float), (B.shape[1],))
+    innov = np.sqrt(1.0 - rho**2)
+    n, m = B.shape
+    T, H = len(order), int(steps.max())
+    X = np.empty((T, H + 1, n))
+    U = np.empty((T, H, m))
+    x = np.array([trials[j][1] for j in order], dtype=float)
+    X[:, 0] = x
+    draws = [trials[j][3] for j in order]
+    z = np.array([d[0] for d in draws])
+    AT, BT = A.T, B.T
+    for k in range(H):
+        live = int((steps[order] > k).sum())
+        if live not in policies:
+            policies[live] = stacked([trials[j][2] for j in order[:live]], [1] * live)
+        policy = policies[live]
+        x, z = x[:live], z[:live]
+        if k:
+            z = rho * z + innov * np.array([d[k] for d in draws[:live]])
+        mean, cov = policy(x)
+        try:
+            root = np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:  # row by row, as each trial alone decides (Cholesky or its eigen-fallback)
+            root = np.concatenate([psd_sqrt(cov[i : i + 1]) for i in range(live)])
+        u = mean + np.einsum("sij,sj->si", root, scale * z)
+        U[:live, k] = u
+        x = x @ AT + u @ BT
+        X[:live, k + 1] = x
+    runs: list = [None] * T
+    for row, j in enumerate(order):
+        runs[j] = (X[row : row + 1, : steps[j] + 1], U[row : row + 1, : steps[j]])
+    return runs
 
 
 def as_fitted(model, demos) -> list:
