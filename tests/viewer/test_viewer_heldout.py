@@ -115,7 +115,8 @@ def test_the_pilots_own_input_is_judged_in_evaluate_report_and_viewer(tmp_path):
     text = (demo / "report.md").read_text(encoding="utf-8")
     assert "## Predicting the pilot's input" in text
     reported = pd.read_csv(demo / "tables" / "input_scores.csv")
-    reported["note"] = reported["note"].fillna("")  # a CSV reads back an empty note (no diverged rollout) as NaN
+    # a CSV reads back an empty note (no diverged rollout) as NaN, in a float column
+    reported["note"] = reported["note"].astype(object).where(reported["note"].notna(), "")
     pd.testing.assert_frame_equal(reported, scores.reset_index(drop=True), check_dtype=False, rtol=1e-12)
     for line in input_headlines(table):
         assert line in text and "for the better model with no pilot, the plant with the input" in line
