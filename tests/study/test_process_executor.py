@@ -100,18 +100,16 @@ def _group(pgid: int) -> list[str]:
     return [s for s in ps if not s.startswith("Z")]
 
 
-@pytest.mark.skipif(sys.platform != "linux", reason="process groups and ps as on Linux")
-@pytest.mark.parametrize("delay", [0.0, 1.0])
-def test_ctrl_c_while_workers_study_ends_in_one_line_and_leaves_nothing(tmp_path, delay):
-    demos = (simulate_landings("CS1", 5, seed=3) + simulate_landings("CS2", 5, seed=4)).save(tmp_path / "d.parquet")
-    env = {**os.environ, "PYTHONPATH": str(REPO), "TMPDIR": str(tmp_path)}  # its staging folders land here
-    proc = subprocess.Popen([sys.executable, "-c", _REPORT, str(demos), str(tmp_path / "report")], cwd=REPO,
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+def _interrupted(argv: list[str], env: dict, processes: int, delay: float, outlived: str) -> None:
+    """Run ``python -c argv…`` in its own session, wait for ``processes`` in its group, Ctrl-C the whole group
+    after ``delay`` s (as a terminal does), and check the one-line end and that nothing outlives it."""
+    proc = subprocess.Popen([sys.executable, "-c", *argv], cwd=REPO, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, start_new_session=True)
     deadline = time.monotonic() + 120
-    while len(_group(proc.pid)) < 3 and time.monotonic() < deadline:  # the command and its two workers
+    while len(_group(proc.pid)) < processes and time.monotonic() < deadline:
         time.sleep(0.05)
-    time.sleep(delay)  # 0: the workers still start their interpreters; 1: they study
-    os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole foreground group
+    time.sleep(delay)
+    os.killpg(proc.pid, signal.SIGINT)
     err = proc.communicate(timeout=120)[1].decode()
     assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err
     assert "Traceback" not in err, err
@@ -119,7 +117,16 @@ def test_ctrl_c_while_workers_study_ends_in_one_line_and_leaves_nothing(tmp_path
         if not _group(proc.pid):
             break
         time.sleep(0.1)
-    assert not _group(proc.pid), "a worker outlived the command"
+    assert not _group(proc.pid), outlived
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="process groups and ps as on Linux")
+@pytest.mark.parametrize("delay", [0.0, 1.0])
+def test_ctrl_c_while_workers_study_ends_in_one_line_and_leaves_nothing(tmp_path, delay):
+    demos = (simulate_landings("CS1", 5, seed=3) + simulate_landings("CS2", 5, seed=4)).save(tmp_path / "d.parquet")
+    env = {**os.environ, "PYTHONPATH": str(REPO), "TMPDIR": str(tmp_path)}  # its staging folders land here
+    # the command and its two workers; delay 0: the workers still start their interpreters, 1: they study
+    _interrupted([_REPORT, str(demos), str(tmp_path / "report")], env, 3, delay, "a worker outlived the command")
     assert not list(tmp_path.glob("workbench-staging-*"))
 
 
@@ -214,18 +221,5 @@ sys.exit(main(["demo", "--out", sys.argv[1]]))
 @pytest.mark.parametrize("delay", [0.0, 2.0])
 def test_ctrl_c_while_a_demos_warm_workers_start_or_study_ends_in_one_line_and_leaves_nothing(tmp_path, delay):
     env = {**os.environ, "PYTHONPATH": str(REPO), "TMPDIR": str(tmp_path)}
-    proc = subprocess.Popen([sys.executable, "-c", _DEMO, str(tmp_path / "demo")], cwd=REPO, env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
-    deadline = time.monotonic() + 120
-    while len(_group(proc.pid)) < 2 and time.monotonic() < deadline:  # the command and the workers' server
-        time.sleep(0.05)
-    time.sleep(delay)  # 0: the server imports; 2: the workers study
-    os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole foreground group
-    err = proc.communicate(timeout=120)[1].decode()
-    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted", err
-    assert "Traceback" not in err, err
-    for _ in range(50):
-        if not _group(proc.pid):
-            break
-        time.sleep(0.1)
-    assert not _group(proc.pid), "a worker or the server outlived the command"
+    # the command and the workers' server; delay 0: the server imports, 2: the workers study
+    _interrupted([_DEMO, str(tmp_path / "demo")], env, 2, delay, "a worker or the server outlived the command")

@@ -263,16 +263,7 @@ class ConditionalGMM:
         Y = self._W @ x.T
         Y += self._c
         Y = Y.reshape(G, d + self.n_outputs, N)
-        z = Y[:, :d]
-        log_h = self._log_norm_col - 0.5 * np.einsum("gdn,gdn->gn", z, z)
-        top = log_h.max(axis=0)
-        if not np.isfinite(top).all():
-            raise ModelError(
-                "ConditionalGMM: a query is so far from every component that its distance overflows"
-            )
-        h = np.exp(log_h - top)
-        h /= h.sum(axis=0)
-        return h, Y[:, d:]
+        return _weighed(Y, d, self._log_norm_col)
 
     def activations(self, x: np.ndarray) -> np.ndarray:
         """Activation weights ``h^i(x)``, eq. (25), shape (N, G); computed in log space."""
@@ -400,17 +391,7 @@ class StackedConditionalGMM:
             Yb = c._W @ xT[:, a:b]
             Yb += c._c
             Y[:, a:b] = Yb
-        Y = Y.reshape(G, d + m, N)
-        z = Y[:, :d]
-        log_h = log_norm - 0.5 * np.einsum("gdn,gdn->gn", z, z)
-        top = log_h.max(axis=0)
-        if not np.isfinite(top).all():
-            raise ModelError(
-                "ConditionalGMM: a query is so far from every component that its distance overflows"
-            )
-        h = np.exp(log_h - top)
-        h /= h.sum(axis=0)
-        return h, Y[:, d:]
+        return _weighed(Y.reshape(G, d + m, N), d, log_norm)
 
     def predict_mean(self, x: np.ndarray) -> np.ndarray:
         """Each row's merged GMR mean by its member, (N, m)."""
@@ -528,3 +509,16 @@ class GaussianMixture:
             lp += np.log(self.weights) - 0.5 * D * _LOG_2PI
         top = lp.max(axis=1, keepdims=True)
         return (top + np.log(np.exp(lp - top).sum(axis=1, keepdims=True)))[:, 0]
+
+
+def _weighed(Y: np.ndarray, d: int, log_norm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Activations (G, N), eq. (25), normalized in log space, and the component means (G, m, N) from the whitened
+    inputs ``Y[:, :d]`` and the means ``Y[:, d:]`` of each component (G, d + m, N)."""
+    z = Y[:, :d]
+    log_h = log_norm - 0.5 * np.einsum("gdn,gdn->gn", z, z)
+    top = log_h.max(axis=0)
+    if not np.isfinite(top).all():
+        raise ModelError("ConditionalGMM: a query is so far from every component that its distance overflows")
+    h = np.exp(log_h - top)
+    h /= h.sum(axis=0)
+    return h, Y[:, d:]
