@@ -44,7 +44,7 @@ test: $(STAMP)
 
 ## test-all: the suite including the slow tests (full fuzz runs, large studies)
 test-all: $(STAMP)
-	@$(call RUN_PYTEST,$(BIN)/python,-m '')
+	@HYPOTHESIS_PROFILE=explore; export HYPOTHESIS_PROFILE; $(call RUN_PYTEST,$(BIN)/python,-m '')
 
 ## test-latest: the fast suite in $(LATEST), installed without the lock: the newest releases pyproject.toml allows
 test-latest:

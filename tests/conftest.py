@@ -8,6 +8,7 @@ import signal
 from pathlib import Path
 
 import pytest
+from hypothesis import settings as hypothesis_settings
 
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_landings
@@ -25,6 +26,15 @@ def external_file(name: str) -> Path:
             pytest.fail(f"CI must have the external logs: {reason}")
         pytest.skip(reason)
     return path
+
+
+# The fast suite draws the same property-test examples on every run: a random draw that happens on a new
+# counterexample failed CI once and passed the next (tests/method/test_ioc.py's scale-free property met c = 2, seed
+# 5800: two DARE gains of one cost 1e-10 apart give normalized costs 1.9e-6 apart). `make test-all` explores new
+# draws (HYPOTHESIS_PROFILE=explore), where such a find is the point.
+hypothesis_settings.register_profile("fixed", derandomize=True)
+hypothesis_settings.register_profile("explore", derandomize=False)
+hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "fixed"))
 
 
 # A suite started in the background of a non-interactive shell (`make test &` in a script) inherits SIGINT ignored
