@@ -285,20 +285,7 @@ class ConditionalGMM:
         return np.ascontiguousarray(np.einsum("gn,gmn->mn", h, mu_i).T)
 
     def _merge(self, h: np.ndarray, mu_i: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        m, N = self.n_outputs, h.shape[1]
-        mu = np.einsum("gn,gmn->mn", h, mu_i)
-        diff = mu_i - mu
-        hd = h[:, None, :] * diff
-        # Centred law of total covariance, eq. (27): within-component (Sigma^i) plus between-component spread.
-        # Both terms are filled symmetrically, so Sigma is exactly symmetric.
-        Sigma = (self._S_cond_flat_T @ h).reshape(m, m, N)
-        for i in range(m):
-            for j in range(i, m):
-                v = np.einsum("gn,gn->n", hd[:, i], diff[:, j])
-                Sigma[i, j] += v
-                if j != i:
-                    Sigma[j, i] = Sigma[i, j]
-        return np.ascontiguousarray(mu.T), np.ascontiguousarray(np.transpose(Sigma, (2, 0, 1)))
+        return _merged(h, mu_i, self._S_cond_flat_T @ h)
 
     def predict(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Merged GMR mean and covariance, eqs. (24)-(27).
@@ -404,20 +391,10 @@ class StackedConditionalGMM:
         h, mu_i = self._affine(x)
         m, N = self.n_outputs, h.shape[1]
         blocks, _ = self._blocks(N)
-        mu = np.einsum("gn,gmn->mn", h, mu_i)
-        diff = mu_i - mu
-        hd = h[:, None, :] * diff
-        flat = np.empty((m * m, N))
+        within = np.empty((m * m, N))
         for c, (a, b) in zip(self.members, blocks, strict=True):
-            flat[:, a:b] = c._S_cond_flat_T @ h[:, a:b]
-        Sigma = flat.reshape(m, m, N)
-        for i in range(m):
-            for j in range(i, m):
-                v = np.einsum("gn,gn->n", hd[:, i], diff[:, j])
-                Sigma[i, j] += v
-                if j != i:
-                    Sigma[j, i] = Sigma[i, j]
-        return np.ascontiguousarray(mu.T), np.ascontiguousarray(np.transpose(Sigma, (2, 0, 1)))
+            within[:, a:b] = c._S_cond_flat_T @ h[:, a:b]
+        return _merged(h, mu_i, within)
 
 
 #: Alias: the precomputed GMR object.
@@ -522,3 +499,22 @@ def _weighed(Y: np.ndarray, d: int, log_norm: np.ndarray) -> tuple[np.ndarray, n
     h = np.exp(log_h - top)
     h /= h.sum(axis=0)
     return h, Y[:, d:]
+
+
+def _merged(h: np.ndarray, mu_i: np.ndarray, within: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merged GMR mean (N, m) and covariance (N, m, m), eq. (27), from the activations ``h`` (G, N), the component
+    means ``mu_i`` (G, m, N) and the within-component term ``Σ_i h^i Σ^i`` flattened (m·m, N).
+
+    Centred law of total covariance: the within-component term plus the between-component spread, both filled
+    symmetrically, so Sigma is exactly symmetric."""
+    m, N = mu_i.shape[1], h.shape[1]
+    mu = np.einsum("gn,gmn->mn", h, mu_i)
+    diff = mu_i - mu
+    hd = h[:, None, :] * diff
+    Sigma = within.reshape(m, m, N)
+    for i in range(m):
+        for j in range(i, m):
+            Sigma[i, j] += np.einsum("gn,gn->n", hd[:, i], diff[:, j])
+            if j != i:
+                Sigma[j, i] = Sigma[i, j]
+    return np.ascontiguousarray(mu.T), np.ascontiguousarray(np.transpose(Sigma, (2, 0, 1)))
