@@ -84,13 +84,7 @@ def _study_options(
                    help="fraction of each strategy's trials held out for testing (default 0.2)")
     p.add_argument("--horizon", dest="horizon_s", type=horizon_arg, default=HORIZON_S, metavar="SECONDS",
                    help=f"prediction horizon in seconds (default {HORIZON_S}, the paper's {N_STEPS} steps)")
-    p.add_argument("--n-components", type=fit_n_components_arg, default=DEFAULT_N_COMPONENTS,
-                   metavar="G|bic|cv|paper",
-                   help="'cv' (default: the default model, as `workbench fit` builds it) chooses G (1, 2 or 5) and the "
-                        "regularizer by cross-validation on each strategy's training trials, falling back to the "
-                        "task objective's K̂x where the variability model does not lower the held-out error by more "
-                        "than its standard error (said in the output); 'paper': the paper's G = 5 without "
-                        "cross-validation; a number G; 'bic' to pick G by BIC")
+    _n_components_option(p, DEFAULT_N_COMPONENTS, "as `workbench fit` builds it", "each strategy's training trials")
     p.add_argument("--samples", type=count_arg, default=samples, metavar="N",
                    help=f"Monte Carlo rollouts for the prediction band; 0 turns it off (default {samples})")
     p.add_argument("--efficiency", type=int_list, default=int_list(efficiency) if efficiency else None,
@@ -112,6 +106,19 @@ def _study_options(
                    help="print at length which number answers which question (default: a legend of one line per "
                         "question; a report holds the full text)")
     _plant_option(p)
+
+
+def _n_components_option(p: argparse.ArgumentParser, default: str | None, which: str, over: str,
+                         more: str = "") -> None:
+    """``--n-components`` of the commands that build the default model (``which``: who else builds or judges it;
+    ``over``: the trials it cross-validates on)."""
+    p.add_argument("--n-components", type=fit_n_components_arg, default=default, metavar="G|bic|cv|paper",
+                   help=f"cv (default: the default model, {which}) chooses G (1, 2 or 5) and the regularizer by "
+                        f"cross-validation on {over} (held-out 3 s predictions) and falls back to the task "
+                        "objective's K̂x where its variability model does not lower the held-out error by more than "
+                        "its standard error, or, fitted on all trials, predicts them worse than K̂x (said in the "
+                        f"output); paper: the paper's G = {N_COMPONENTS} without cross-validation; a number G; bic: G "
+                        f"by BIC.{more}")
 
 
 def _plant_option(p: argparse.ArgumentParser) -> None:
@@ -236,14 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="MODEL.npz", help="the model file; - for standard output")
     _format_option(p)
     p.add_argument("--label", help="fit only the trials of this strategy label")
-    p.add_argument("--n-components", type=fit_n_components_arg, default=None,
-                   metavar="G|bic|cv|paper",
-                   help="cv (default: the default model, the one evaluate and report judge): the proposed model "
-                        "chooses G (1, 2 or 5) and reg_covar by cross-validation over the trials (held-out 3 s "
-                        "predictions) and falls back to the task objective's K̂x where its variability model does not "
-                        "lower the held-out error by more than its standard error; paper: the paper's "
-                        f"G = {N_COMPONENTS} without cross-validation; a number G; bic: G by BIC. Baselines take the "
-                        "paper's G unless a number is given")
+    _n_components_option(p, None, "the one evaluate and report judge", "the trials",
+                         " Baselines take the paper's G unless a number is given.")
     p.add_argument("--method", choices=[m.cli_name for m in REGISTRY if m.fit_command], default="proposed",
                    help="the proposed model (default) or one of its baselines")
     p.add_argument("--keep-still", action="store_true",
