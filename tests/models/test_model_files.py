@@ -98,3 +98,28 @@ def test_a_model_file_records_its_training_trials_and_their_digest(tmp_path, qua
     d = test[0]
     moved = type(d)(d.t, d.x + 1e-6, d.u, {**d.meta, "id": "moved"})
     assert in_sample(back, [moved]) == []
+
+
+def test_a_header_integer_beyond_a_floats_range_is_a_model_file_error(tmp_path, quadrotor, cs1_demos):
+    # every reader float()s its header numbers: 10**400 in the auto settings ended load_model in OverflowError
+    import json
+
+    from tests.forgeries import rewrite_model_file
+    from workbench.models import HumanBehaviorModel
+    from workbench.models.files import ModelFileError
+
+    src = tmp_path / "m.npz"
+    HumanBehaviorModel(quadrotor, n_components=1, noise_folds=0, fit_objective=False).fit(cs1_demos).save(src)
+
+    def huge(text: str, value: int) -> str:
+        header = json.loads(text)
+        header["reg_covar_chosen"] = value
+        return json.dumps(header)
+
+    fits = tmp_path / "fits.npz"
+    rewrite_model_file(src, fits, lambda t: huge(t, 10**300))
+    assert load_model(fits).reg_covar_ == float(10**300)  # the largest a float holds still reads
+    bad = tmp_path / "huge.npz"
+    rewrite_model_file(src, bad, lambda t: huge(t, 10**400))
+    with pytest.raises(ModelFileError, match="number too long to read"):
+        load_model(bad)

@@ -46,6 +46,8 @@ _MAX_DEFLATE_RATIO = 1032  # deflate cannot expand a byte to more than ~1032 byt
 #: file claims (a 2 MB file of one deflated 2 GB array took ``predict`` to 4.1 GB before this ceiling).
 MAX_DECOMPRESSED_BYTES = 64 << 20
 
+_FLOAT_MAX_INT = int(np.finfo(np.float64).max)
+
 
 class ModelFileError(FormatError, ModelError):
     """A model file is unreadable, foreign, damaged or from a newer version (both a FormatError and a ModelError)."""
@@ -84,6 +86,15 @@ class ModelFile:
 
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _header_int(text: str) -> int:
+    """An integer of a model file's header. One beyond a float's range is no number a model writes, and every
+    reader's ``float()`` of it would overflow (an ``auto.gain`` of 10**400 ended ``load_model`` in OverflowError)."""
+    n = int(text)
+    if abs(n) > _FLOAT_MAX_INT:
+        raise ValueError("an integer beyond a float's range")
+    return n
 
 
 def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path, file_size: int) -> np.ndarray:
@@ -193,12 +204,12 @@ def read_model_file(path: str | os.PathLike) -> ModelFile:
     if raw.dtype != np.uint8 or raw.ndim != 1:
         raise ModelFileError(f"{path}: damaged model file: header has dtype {raw.dtype}, shape {raw.shape}")
     try:
-        header = json.loads(raw.tobytes().decode("utf-8"))
+        header = json.loads(raw.tobytes().decode("utf-8"), parse_int=_header_int)
     except UnicodeDecodeError as exc:  # named by its byte: Python's codec text is the library's, not ours
         raise ModelFileError(f"{path}: damaged model file: header is not UTF-8 text at byte {exc.start}") from None
     except json.JSONDecodeError as exc:
         raise ModelFileError(f"{path}: damaged model file: header is not JSON ({exc})") from None
-    except ValueError:  # Python's limit on an integer's digits (4300): a number no model writes
+    except ValueError:  # beyond a float's range, or Python's limit on an integer's digits (4300): no model writes it
         raise ModelFileError(f"{path}: damaged model file: header holds a number too long to read") from None
     except RecursionError:
         raise ModelFileError(f"{path}: damaged model file: header nested deeper than the JSON parser goes") from None
