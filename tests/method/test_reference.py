@@ -54,6 +54,18 @@ def test_the_pace_is_recovered_from_trials_that_follow_it(gen):
     assert fit_speed(gen, trials, "line") == pytest.approx(0.8, rel=0.03)
 
 
+def test_each_task_can_have_its_own_pace(gen):
+    # a pilot's pace differs from trial to trial: one batch, each task at its own speed, is each task alone
+    x0s = np.array([X0, [-1.5, 2.6, 0.0, 0.0, 0.0, 0.0]])
+    goals = np.array([GOAL, GOAL])
+    both = gen.trajectories(x0s, goals, "line", [0.6, 0.9], 600)  # 600 steps: one horizon, longer than either path
+    for j, speed in enumerate((0.6, 0.9)):
+        alone = gen.trajectory(x0s[j], GOAL, "line", speed, 600)
+        assert np.allclose(both[j][0], alone[0], atol=1e-9) and np.allclose(both[j][1], alone[1], atol=1e-9)
+    with pytest.raises(ModelError, match="positive"):
+        gen.trajectories(x0s, goals, "line", [0.6, 0.0], 100)
+
+
 def test_a_reference_needs_to_know_up(gen):
     from dataclasses import replace
 

@@ -188,24 +188,26 @@ class ReferenceGenerator:
         length = float(np.linalg.norm(np.diff(w, axis=0), axis=1).sum())
         return int(math.ceil((length / max(speed, 1e-9) + SETTLE_S) / self.dt)) + 1
 
-    def trajectories(self, x0s: np.ndarray, goals: np.ndarray, kind: str, speed: float,
+    def trajectories(self, x0s: np.ndarray, goals: np.ndarray, kind: str, speed: float | Sequence[float],
                      n_steps: int | Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
         """``(x_ref (N_j, n), u_ff (N_j, m))`` of every task (``x0s[j]``, ``goals[j]``), in one batched pass over a
-        horizon that covers the path and :data:`SETTLE_S` (past the path the goal is held: the reference settles)."""
+        horizon that covers the path and :data:`SETTLE_S` (past the path the goal is held: the reference settles).
+        ``speed``: one for every task, or one per task (a pilot's pace differs from trial to trial)."""
         x0s, goals = np.atleast_2d(np.asarray(x0s, dtype=float)), np.atleast_2d(np.asarray(goals, dtype=float))
         J, n = x0s.shape
         m = self.B.shape[1]
         lengths = [int(n_steps)] * J if np.ndim(n_steps) == 0 else [int(v) for v in n_steps]
-        if not speed > 0:
+        speeds = np.broadcast_to(np.asarray(speed, dtype=float), (J,))
+        if not np.all(speeds > 0):
             raise ModelError(f"a reference's speed must be positive, got {speed!r}")
-        span = max(self.steps_for(x0s[j], goals[j], kind, speed) for j in range(J))
+        span = max(self.steps_for(x0s[j], goals[j], kind, float(speeds[j])) for j in range(J))
         # one horizon for the batch, covering every trial's request and rounded up so that lengths share tables
         N = -(-max(span, *lengths, 2) // _ROUND) * _ROUND
         pos = list(self.position)
         Pd = np.empty((J, N, len(pos)))
         for j in range(J):
             w = path_waypoints(kind, x0s[j, pos], goals[j, pos], self.vertical)
-            Pd[j] = desired_positions(w, speed, self.dt, N)
+            Pd[j] = desired_positions(w, float(speeds[j]), self.dt, N)
         L, AclT, HiBT, P0 = _riccati(self._key()).tables(N)
         # backward pass of the linear term: s[k] = Cᵀ p_d[k] + Acl[k]ᵀ s[k+1], s[N] = Pf g
         s = _TERMINAL * goals  # (J, n)

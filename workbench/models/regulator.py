@@ -60,13 +60,15 @@ def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
     if isinstance(spec, PilotTask):  # a settled task handed on (a fold of this model): keep what it learned
         task = task.with_(reference_speed_mps=spec.reference_speed_mps, delay_s=spec.delay_s, lag_s=spec.lag_s,
                           plant_group=spec.plant_group, decided_by=spec.decided_by or task.decided_by,
-                          extra=dict(spec.extra))
+                          extra={k: v for k, v in spec.extra.items() if k != TRIAL_SPEEDS})
     group = getattr(plant, "plant_group", None)  # what the sticks command, where the plant knows it
     if group is not None and task.plant_group is None:
         task = task.with_(plant_group=str(group))
     paced = task.relative_to == "reference" and not task.reference_speed_mps > 0
     if paced:
         task = _with_pace(plant, task, demos)
+    elif task.relative_to == "reference":  # a pace given (or handed on): these trials' own paces around it
+        task = task.with_(extra={**task.extra, TRIAL_SPEEDS: _trial_paces(plant, task, demos)})
     timed = _settle_timing(model, task, demos)
     if timed is not None:  # the timing the model identified (or none: then the paper's instantaneous u = K x)
         identified = timed.K is not None
@@ -75,8 +77,12 @@ def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
         if paced and delay_steps(task, plant.dt):
             # the pace's criterion pairs each input with the state the pilot saw: the pace again with the delay,
             # and the timing again on that reference
+            first = task
             task = _with_pace(plant, task.with_(reference_speed_mps=0.0), demos)
             timed = _settle_timing(model, task, demos)
+            if timed.K is None:
+                # a refinement that loses the timing is not taken: the first pace with the timing it identified
+                task, timed = first.with_(delay_s=0.0, lag_s=0.0), _settle_timing(model, first, demos)
             identified = timed.K is not None
             task = task.with_(delay_s=float(timed.pilot.delay_s) if identified else 0.0,
                               lag_s=float(timed.pilot.lag_s) if identified else 0.0)
@@ -84,10 +90,69 @@ def settle_task(model: Any, demos: Sequence[Any]) -> PilotTask:
 
 
 def _with_pace(plant: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> PilotTask:
-    """The task with its reference's speed fitted to the trials (the pace the pilot follows)."""
+    """The task with its reference's speed fitted to the trials (the pace the pilot follows), and each training
+    trial's own pace (:func:`_trial_paces`) in ``extra["trial_speeds"]``."""
     speed = fit_speed(_generator(plant), [(d.x, d.target) for d in demos], task.reference,
                       cost=_pace(plant, task, demos))
-    return task.with_(reference_speed_mps=speed)
+    task = task.with_(reference_speed_mps=speed, extra={k: v for k, v in task.extra.items() if k != TRIAL_SPEEDS})
+    return task.with_(extra={**task.extra, TRIAL_SPEEDS: _trial_paces(plant, task, demos)})
+
+
+#: The key of ``PilotTask.extra`` holding each training trial's pace, by trial id (m/s).
+TRIAL_SPEEDS = "trial_speeds"
+# Each trial's pace is searched within ±_TRIAL_SPAN (log) of the common one: a grid of _TRIAL_GRID points (4 %
+# apart), then as many again around the best one (0.4 % apart): a person's pace varies by some percent from trial to
+# trial, and the paces recovered were 1.2 % off the flown ones (virtual subjects at a 5 % spread, seed 604).
+_TRIAL_SPAN = 0.2
+_TRIAL_GRID = 11
+
+
+def _trial_paces(plant: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> dict[str, float]:
+    """Each trial's own pace along the reference: the speed whose reference, with the pooled gain, leaves the
+    smallest residual ``‖(u − u_ff) − K (x − x_ref)‖²`` in that trial (the input paired with the state the pilot
+    saw, ``delay_s`` earlier). ``K`` is the pooled 2SLS gain of :func:`_pace`'s criterion at the common pace.
+
+    A person does not fly every trial at one pace: at 5 % from trial to trial the reference of one common pace
+    lags or leads each trial by a growing distance, and the pilot's timing fitted on those references ended at the
+    end of its range (lag 0.3 s for a pilot with a 0.2 s delay and none) where the same pilot at one pace gave its
+    delay. A trial's pace is a nuisance of its own trial (one number per 100-odd samples); a new trial is
+    predicted at the common pace. Before the timing is identified the pairing is at no delay: the paces came out
+    as close to the flown ones as at the true delay (1.2 % on seed 604)."""
+    from workbench.method.gain import iv_instruments
+
+    gen = _generator(plant)
+    idx = list(task.regulated_indices(plant.state_names))
+    lag = delay_steps(task, plant.dt)
+    keep = [d for d in demos if len(d.x) > lag + 1]
+    if not keep:
+        return {}
+    x0s, goals = np.array([d.x[0] for d in keep]), np.array([d.target for d in keep])
+    lengths = [len(d.x) for d in keep]
+
+    def pairs(refs: list[tuple[np.ndarray, np.ndarray]]) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        E, U = [], []
+        for d, (x_ref, u_ff) in zip(keep, refs, strict=True):
+            e, u = (d.x - x_ref)[:, idx], d.u - u_ff
+            E.append(e[:-lag] if lag else e)
+            U.append(u[lag:])
+        return E, U
+
+    def pooled_gain(speeds: np.ndarray) -> np.ndarray:
+        E, U = pairs(gen.trajectories(x0s, goals, task.reference, speeds, lengths))
+        Z = np.concatenate([iv_instruments(e.T, [len(e)]).T for e in E])
+        Q, _ = np.linalg.qr(Z)  # 2SLS: least squares of the projections (P_Z = Q Qᵀ)
+        return np.linalg.lstsq(Q.T @ np.concatenate(E), Q.T @ np.concatenate(U), rcond=None)[0]
+
+    KT = pooled_gain(np.full(len(keep), float(task.reference_speed_mps)))
+    center = np.full(len(keep), np.log(float(task.reference_speed_mps)))
+    for step in (2 * _TRIAL_SPAN / (_TRIAL_GRID - 1), 2 * _TRIAL_SPAN / (_TRIAL_GRID - 1) ** 2):
+        offsets = step * (np.arange(_TRIAL_GRID) - (_TRIAL_GRID - 1) // 2)
+        cost = np.empty((len(offsets), len(keep)))
+        for i, o in enumerate(offsets):  # every trial at once, each at its own pace
+            E, U = pairs(gen.trajectories(x0s, goals, task.reference, np.exp(center + o), lengths))
+            cost[i] = [float(np.sum((u - e @ KT) ** 2)) for e, u in zip(E, U, strict=True)]
+        center = center + offsets[np.argmin(cost, axis=0)]
+    return {str(d.id): float(v) for d, v in zip(keep, np.exp(center), strict=True)}
 
 
 def _settle_timing(model: Any, task: PilotTask, demos: Sequence[Any]) -> Any:
@@ -194,14 +259,19 @@ def _generator(plant: LinearSystem) -> ReferenceGenerator:
 
 
 def references_of(plant: LinearSystem, task: PilotTask, x0s: np.ndarray, goals: np.ndarray,
-                  n_steps: Sequence[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+                  n_steps: Sequence[int], ids: Sequence[Any] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """``(x_ref (N_j, n), u_ff (N_j, m))`` per task (start ``x0s[j]``, goal ``goals[j]``): the goal held (goal-
-    relative), zero (free flight), or the reference the strategy follows with its feedforward."""
+    relative), zero (free flight), or the reference the strategy follows with its feedforward — at the pace the
+    fit found for the trial ``ids[j]`` where it was a training trial (``extra["trial_speeds"]``), else at the
+    common pace."""
     n, m = plant.n, plant.m
     goals = np.atleast_2d(np.asarray(goals, dtype=float))
     if task.relative_to == "reference":
-        return _generator(plant).trajectories(np.atleast_2d(x0s), goals, task.reference,
-                                               task.reference_speed_mps, list(n_steps))
+        own = task.extra.get(TRIAL_SPEEDS) or {}
+        speed: Any = task.reference_speed_mps
+        if ids is not None and own:
+            speed = [float(own.get(str(i), task.reference_speed_mps)) for i in ids]
+        return _generator(plant).trajectories(np.atleast_2d(x0s), goals, task.reference, speed, list(n_steps))
     out = []
     for j, N in enumerate(n_steps):
         held = goals[j] if task.relative_to == "goal" else np.zeros(n)
@@ -232,7 +302,8 @@ def pilot_view(plant: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> li
             raise DataError(f"the pilot's task is relative to {task.relative_to} but trial(s) {missing[:3]} have no "
                             "goal (meta['target'])")
     goals = np.array([d.target if task.relative_to != "zero" else np.zeros(plant.n) for d in ds])
-    refs = references_of(plant, task, np.array([d.x[0] for d in ds]), goals, [len(d.x) for d in ds])
+    refs = references_of(plant, task, np.array([d.x[0] for d in ds]), goals, [len(d.x) for d in ds],
+                         [d.id for d in ds])
     lag = delay_steps(task, plant.dt)
     out = []
     for d, (x_ref, u_ff) in zip(ds, refs, strict=True):
