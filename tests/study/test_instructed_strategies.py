@@ -26,7 +26,7 @@ from workbench.collect.virtual import CS1_SUBJECT, CS2_SUBJECT, contrast_truth, 
 from workbench.defaults import OBJECTIVE_RESAMPLES
 from workbench.models import IOCOnlyModel
 from workbench.plant.system import planar_quadrotor
-from workbench.study.weights import compare_strategies, objective_intervals
+from workbench.study.weights import RatioInterval, compare_strategies, format_interval, objective_intervals
 
 SEEDS = range(500, 520)
 TRIALS = 30
@@ -55,11 +55,19 @@ def contrast(seed: int, reference: bool) -> tuple[float, float, float]:
 @pytest.mark.parametrize("reference", [True, False], ids=["instructed references", "pure-LQR control"])
 def test_the_cs2_cs1_attitude_contrast_has_the_right_direction_and_covers_the_truth(reference):
     truth = contrast_truth(CS1_SUBJECT, CS2_SUBJECT)
-    right = covered = 0
+    right = covered = stated = 0
+    spans = []
     for seed in SEEDS:
         factor, lo, hi = contrast(seed, reference)
         right += factor > 1.0
         covered += lo <= truth <= hi
+        # what the report prints (words where the interval does not identify the factor): its interval above 1
+        stated += bool(lo > 1.0)
+        spans.append(RatioInterval(RATIO, factor, lo, hi, 95.0).span if lo > 0 else np.inf)
+        print(f"seed {seed}: factor {factor:.4g} [{lo:.4g}, {hi:.4g}], truth {truth:g}; printed: "
+              f"{format_interval(factor, lo, hi)}")
+    print(f"right direction {right}/{len(SEEDS)}, covers {covered}/{len(SEEDS)}, interval above 1 {stated}/"
+          f"{len(SEEDS)}, median span ×{np.median(spans):.3g}")
     # ≥ 90 % of the seeds each
     assert right >= 0.9 * len(SEEDS), f"right direction on {right} of {len(SEEDS)} seeds"
     assert covered >= 0.9 * len(SEEDS), f"interval covers {truth:g} on {covered} of {len(SEEDS)} seeds"

@@ -517,3 +517,24 @@ def test_no_verdict_sentence_on_an_infinite_critical_value():
                   dof=2.0)
     text = fit.describe()
     assert "no verdict" in text and "explains" not in text and "critical value inf" not in text
+
+
+def test_the_gain_with_the_pilots_timing_keeps_its_estimate_with_the_jackknifes_covariance():
+    # the timed gain is LIML, whose leave-one-out gains each re-identify the timing on a grid: Quenouille's correction
+    # (n − 1)(mean k̂₍₋ⱼ₎ − k̂) moved the virtual subjects' gains away from the truth (ratio_profile's docstring)
+    plant = scalar_plant()
+    n = 30
+    rng = np.random.default_rng(13)
+    k_hat = scalar_gain(plant, 2.0)
+    loo = (k_hat + 0.002 + 0.004 * rng.standard_normal(n))[:, None, None]  # 0.002 above k̂ on average
+    samples = (k_hat + 0.02 * rng.standard_normal(200))[:, None, None]
+    common = dict(K=np.array([[k_hat]]), K_samples=samples, K_loo=loo, n_trials=n)
+    timed = weight_ratios(SimpleNamespace(**common, timing=object()), plant)
+    untimed = weight_ratios(SimpleNamespace(**common, timing=None), plant)
+    assert timed.intervals[0].estimate == pytest.approx(2.0, rel=1e-4)  # the estimate's own cost
+    corrected = n * k_hat - (n - 1) * loo.mean()
+    assert untimed._parts[0][0].k_hat[0] == pytest.approx(corrected)
+    assert abs(np.log(untimed.intervals[0].estimate / 2.0)) > 0.05  # … which the correction would have moved
+    # the covariance and its degrees of freedom are the jackknife's either way
+    assert timed._parts[0][0].W[0, 0] == pytest.approx(untimed._parts[0][0].W[0, 0])
+    assert timed._parts[0][0].nu == pytest.approx(untimed._parts[0][0].nu)

@@ -289,7 +289,8 @@ def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
     with sandwich intervals and its mismatch (:mod:`workbench.method.pseudo_true`).
 
     Where ``gains`` carries leave-one-trial-out gains (``K_loo``, the default of ``bootstrap_gain``), the part's
-    gain is the jackknife bias-corrected one, its covariance the jackknife's and the critical values use that
+    gain is the jackknife bias-corrected one (not where the gain has the pilot's timing, ``gains.timing``: LIML, see
+    :mod:`workbench.method.ratio_profile`), its covariance the jackknife's and the critical values use that
     covariance's effective degrees of freedom; the intervals hold simultaneously for a part's ratios
     (:mod:`workbench.method.ratio_profile`).
 
@@ -327,7 +328,8 @@ def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
         loo = getattr(gains, "K_loo", None)
         part = ratio_profile.PartDistance.from_samples(
             A[np.ix_(s, s)], B[np.ix_(s, c)], K[np.ix_(c, s)], samples, gains.n_trials,
-            None if loo is None else np.asarray(loo, dtype=float)[:, c][:, :, s])
+            None if loo is None else np.asarray(loo, dtype=float)[:, c][:, :, s],
+            bias_correct=getattr(gains, "timing", None) is None)  # not the timed LIML gain (ratio_profile)
         start = closest_structured_objective(part.A, part.B, _stabilizing(part, K[np.ix_(c, s)]), "diagonal")
         w0 = np.r_[np.diag(start.Q), np.diag(start.R)[1:]] / start.R[0, 0]
         theta0 = np.log(np.maximum(w0, 1e-300))
