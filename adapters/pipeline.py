@@ -30,7 +30,7 @@ from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
 from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
-from adapters.modes import AUTOPILOT_HOLDS, mode_name, plant_group
+from adapters.modes import FIXED_WING_STICKS, autopilot_holds, mode_name, plant_group
 from adapters.segment import (
     EVERYTHING,
     Span,
@@ -108,7 +108,7 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
     if seg.mode is not None:
         sel = select(seg.mode.selector, streams, "segment.mode", m.name, n_columns=1)
         t, modes = _rule_series(sel, m, skipped=skipped, what="segment.mode")
-        spans = intersect(spans, mode_spans(t, modes, seg.mode.keep, seg.mode.names))
+        spans = intersect(spans, _mark_fixed_wing(sel, m, mode_spans(t, modes, seg.mode.keep, seg.mode.names)))
     if seg.armed is not None:
         armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped)
         spans = intersect(spans, armed if armed is not None else EVERYTHING)
@@ -116,6 +116,36 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
         flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True)
         spans = intersect(spans, flying if flying is not None else EVERYTHING)
     return list(spans)
+
+
+#: Where a mode stream says the vehicle's type, the column and the values that mean a fixed-wing vehicle: PX4's
+#: ``vehicle_status.vehicle_type`` (VEHICLE_TYPE_FIXED_WING 2; a VTOL switches it at its transitions), its older
+#: ``is_rotary_wing`` (0), a HEARTBEAT's ``type`` (MAV_TYPE_FIXED_WING 1).
+_FIXED_WING_COLUMNS = (("vehicle_type", 2.0), ("is_rotary_wing", 0.0), ("type", 1.0))
+
+
+def _mark_fixed_wing(sel: Selected, m: ChannelMapping, spans: list[Span]) -> list[Span]:
+    """Mark the mode spans flown by a fixed-wing vehicle (``meta["fixed_wing"]``), where the mode table serves both
+    kinds (:data:`adapters.modes.FIXED_WING_STICKS`: PX4's) and the mode stream says the vehicle's type at the span's
+    start; the same mode name commands a lean angle on a multicopter and the control surfaces on a plane."""
+    if m.segment.mode is None or m.segment.mode.names not in FIXED_WING_STICKS:
+        return spans
+    col, value = next(((c, v) for c, v in _FIXED_WING_COLUMNS if c in sel.frame.columns), (None, 0.0))
+    if col is None:
+        return spans
+    t = stream_times(m.clock, sel.frame)[sel.rows]
+    kind = numeric(sel.frame, col)[sel.rows]
+    ok = np.isfinite(t) & np.isfinite(kind)
+    t, kind = t[ok], kind[ok]
+    if not t.size:
+        return spans
+    order = np.argsort(t, kind="stable")
+    t, kind = t[order], kind[order]
+    for span in spans:
+        at = int(np.clip(np.searchsorted(t, span.start, side="right") - 1, 0, t.size - 1))
+        if kind[at] == value:
+            span.meta["fixed_wing"] = True
+    return spans
 
 
 def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
@@ -460,7 +490,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     windows = [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts]
     table = m.segment.mode.names if m.segment.mode is not None else None
     stick_cause, stick_note = check_sticks(m, streams, [
-        (float(t[0]), float(t[-1]), plant_group(table, span.meta["mode"]) if "mode" in span.meta else None)
+        (float(t[0]), float(t[-1]),
+         plant_group(table, span.meta["mode"], bool(span.meta.get("fixed_wing"))) if "mode" in span.meta else None)
         for span, ts, _ in found for t in ts])
     if stick_cause and not still:
         if not allow_still:
@@ -515,9 +546,11 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
                 # what the sticks command in this mode: segments of different groups are different plants
-                meta[PLANT_GROUP_KEY] = plant_group(m.segment.mode.names if m.segment.mode else None, meta["mode"])
-                if span.meta["mode"] in AUTOPILOT_HOLDS:
-                    meta["autopilot_holds"] = AUTOPILOT_HOLDS[span.meta["mode"]]
+                table = m.segment.mode.names if m.segment.mode else None
+                fixed_wing = bool(span.meta.get("fixed_wing"))
+                meta[PLANT_GROUP_KEY] = plant_group(table, meta["mode"], fixed_wing)
+                if holds := autopilot_holds(table, meta["mode"], fixed_wing):
+                    meta["autopilot_holds"] = holds
             if key is not None:
                 meta["demo"] = key
             rows.append((meta["id"], t, v, meta))

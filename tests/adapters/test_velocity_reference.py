@@ -412,3 +412,28 @@ def test_a_ulog_flight_that_does_not_point_north_is_read_in_its_heading_frame(tm
         assert np.ptp(north[0].x[:, k]) > 0.1  # the flights move across
         for a, b in zip(turned, north, strict=True):
             np.testing.assert_allclose(a.x[:, k], b.x[:, k], atol=1e-4)
+
+
+@pytest.mark.parametrize(("vehicle_type", "groups"), [(1, {"MANUAL": "angle", "ALTCTL": "angle+climb"}),
+                                                      (2, {"MANUAL": "surface", "ALTCTL": "bank+climb"})])
+def test_a_px4_plane_s_manual_modes_are_a_plane_s_plants(tmp_path, vehicle_type, groups):
+    # one PX4 mode table serves multicopters and planes: vehicle_status.vehicle_type (2: fixed-wing) says which
+    # sticks a mode has (docs.px4.io: a plane's MANUAL moves the surfaces, its ALTCTL holds the altitude)
+    from adapters.formats import ulog
+    from adapters.mapping import load_mapping
+    from adapters.writer import demo_streams, layout
+    from workbench.sim.landing import simulate_landings
+
+    flights = simulate_landings("CS1", 2, seed=6)
+    spans = layout(flights, 0.0, 2.0)
+    t = np.arange(0.0, spans[-1][1] + 1.0, 0.5)
+    nav = np.full(t.size, 5, np.uint8)  # AUTO_RTL between the flights
+    for (a, b), mode in zip(spans, (0, 1), strict=True):  # the first flown in MANUAL, the second in ALTCTL
+        nav[(t >= a) & (t <= b)] = mode
+    streams = demo_streams(flights, load_mapping("px4_manual").for_format("ulog"), epoch=0.0, pause=2.0)
+    streams["vehicle_status"] = pd.DataFrame({"t": t, "nav_state": nav, "arming_state": np.uint8(2),
+                                              "vehicle_type": np.uint8(vehicle_type)})
+    path = ulog.write(tmp_path / "f.ulg", streams, info={"sys_name": "PX4", "ver_sw_release": "v1.14.0"})
+    ds = adapters.load(path, "px4_manual")
+    assert {d.meta["mode"]: d.meta["plant_group"] for d in ds} == groups
+    assert {d.meta["mode"]: d.meta.get("autopilot_holds", "") for d in ds} == {"MANUAL": "", "ALTCTL": "the altitude"}
