@@ -72,6 +72,17 @@ def test_every_mode_of_the_stick_table_is_a_mode_of_its_autopilot_and_a_known_gr
     assert plant_group("arducopter", "RTL") == "mode RTL"  # a mode the table does not know: a plant of its own
 
 
+def test_poshold_s_stick_commands_a_lean_angle_and_its_autopilot_holds_the_position():
+    # ArduCopter's PosHold / FlowHold: "the pilot stick inputs directly control the vehicle's lean angle", the throttle
+    # as in AltHold, and the autopilot brakes and holds the position once the sticks are centred
+    for mode in ("POSHOLD", "FLOWHOLD"):
+        group = PLANT_GROUPS[plant_group("arducopter", mode)]
+        assert (group.lateral, group.throttle) == ("angle", "climb"), mode
+        assert "position" in AUTOPILOT_HOLDS[mode] and "altitude" in AUTOPILOT_HOLDS[mode], mode
+    assert plant_group("arducopter", "POSHOLD") == plant_group("arducopter", "ALT_HOLD")
+    assert plant_group("arducopter", "POSHOLD") != plant_group("arducopter", "LOITER")  # a velocity stick
+
+
 def test_a_log_flown_in_two_modes_gives_a_plant_per_group_with_what_each_stick_commands(copter_bin):
     ds = adapters.load(copter_bin, "ardupilot_manual")
     assert [(d.meta["mode"], d.meta["plant_group"]) for d in ds] == [("STABILIZE", "angle")] * 2 + [
