@@ -71,6 +71,7 @@ def test_each_trial_is_fitted_at_its_own_pace(monkeypatch):
     flown = np.array(flown)
     model = IOCOnlyModel(planar_quadrotor(), noise_folds=0).fit(demos)
     own = model.task_.extra["trial_speeds"]
+    assert "each training trial at its own" in model.task_.describe()  # the line fit prints says so
     fitted = np.array([own[d.id] for d in demos])
     spread = np.std(np.log(flown))
     assert spread > 0.02  # the trials were flown at different paces

@@ -30,12 +30,14 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
-__all__ = ["PilotTask", "RELATIVE_TO", "REFERENCES", "decide_task", "parse_task", "task_table"]
+__all__ = ["PilotTask", "RELATIVE_TO", "REFERENCES", "TRIAL_SPEEDS", "decide_task", "parse_task", "task_table"]
 
 #: What the regulated states are driven to (see the module docstring).
 RELATIVE_TO: tuple[str, ...] = ("goal", "reference", "zero")
 #: The references a strategy may follow, by name (paths in the task frames: start and goal).
 REFERENCES: tuple[str, ...] = ("line", "horizontal-first")
+#: The key of ``PilotTask.extra`` holding each training trial's own pace along the reference, by trial id (m/s).
+TRIAL_SPEEDS = "trial_speeds"
 
 
 @dataclass(frozen=True)
@@ -86,9 +88,11 @@ class PilotTask:
         """The one line ``fit`` prints: which states, relative to what, and why."""
         names = self.regulated_names(state_names) if state_names is not None else self.regulated
         what = ", ".join(names) if names else "every state"
+        own = list((self.extra.get(TRIAL_SPEEDS) or {}).values())
+        paces = f"; each training trial at its own, {min(own):.3g}–{max(own):.3g} m/s" if own else ""
         rel = {"goal": "relative to the task's goal",
                "reference": f"relative to the reference '{self.reference}' (with its feedforward"
-                            + (f", {self.reference_speed_mps:.3g} m/s along it)" if self.reference_speed_mps
+                            + (f", {self.reference_speed_mps:.3g} m/s along it{paces})" if self.reference_speed_mps
                                else ")"),
                "zero": "relative to zero (no goal: the inner loops)"}[self.relative_to]
         timing = [f"{k} {v:.3g} s" for k, v in (("delay", self.delay_s), ("lag", self.lag_s)) if v]

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from workbench.data.pilot_task import PilotTask, decide_task
+from workbench.data.pilot_task import TRIAL_SPEEDS, PilotTask, decide_task
 from workbench.errors import DataError, ModelError
 from workbench.method.reference import ReferenceGenerator, fit_speed
 from workbench.plant.system import LinearSystem
@@ -98,8 +98,6 @@ def _with_pace(plant: LinearSystem, task: PilotTask, demos: Sequence[Any]) -> Pi
     return task.with_(extra={**task.extra, TRIAL_SPEEDS: _trial_paces(plant, task, demos)})
 
 
-#: The key of ``PilotTask.extra`` holding each training trial's pace, by trial id (m/s).
-TRIAL_SPEEDS = "trial_speeds"
 # Each trial's pace is searched within ±_TRIAL_SPAN (log) of the common one: a grid of _TRIAL_GRID points (4 %
 # apart), then as many again around the best one (0.4 % apart): a person's pace varies by some percent from trial to
 # trial, and the paces recovered were 1.2 % off the flown ones (virtual subjects at a 5 % spread, seed 604).
