@@ -61,7 +61,7 @@ FLOOR_METHODS = tuple(m.name for m in REGISTRY if m.floor)
 SPLITS = 6
 #: Fewest scored splits (or folds) a method-level row is made from: the corrected resampled t has ``J − 1`` degrees
 #: of freedom, so one split gives no spread and no interval (:func:`corrected_t`); with fewer there is no row, and a
-#: leave-one-out study says so in words (:class:`workbench.study.pipeline.LeftOutFold`).
+#: leave-one-out study says so in words (:class:`workbench.study.folds.LeftOutFold`).
 MIN_SPLITS = 2
 #: The design of a leave-one-out study's method-level rows (:attr:`MethodDifference.design`).
 LOO_FOLDS = "leave-one-out folds"
