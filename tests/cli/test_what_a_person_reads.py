@@ -5,8 +5,11 @@ no interval whose ends print as one value, two gain values each said for what it
 from __future__ import annotations
 
 import io
+import re
 from types import SimpleNamespace
 
+import pandas as pd
+import pytest
 from rich.console import Console
 
 from workbench.cli.context import Context
@@ -56,3 +59,32 @@ def test_a_warning_to_a_pipe_stays_one_line(capsys):
     text = "x " * 60
     ctx.warn(text)
     assert capsys.readouterr().err == f"warning: {text}\n"
+
+
+def test_one_trial_prints_no_round_off_as_a_relevance(tmp_path, capsys):
+    # one trial: the timing's relevance came out as -7.6e-15 (-5.8e-16 on another), round-off printed as a number
+    from workbench.cli.app import main
+
+    table = pd.read_csv(REPO_SAMPLE)
+    one = tmp_path / "one.csv"
+    table[table["demo"] == table["demo"].iloc[0]].to_csv(one, index=False)
+    assert main(["fit", str(one), "-o", str(tmp_path / "m.npz"), "--bootstrap", "0"]) == 0
+    text = capsys.readouterr().out
+    shown = re.findall(r"relevance (\S+?)\)", text)
+    assert shown, text
+    for value in shown:
+        assert value == "0" or abs(float(value)) >= 1e-9, shown
+
+
+def test_relevance_text_says_zero_only_at_round_off():
+    from workbench.method.gain import RELEVANCE_ROUND_OFF, relevance_text
+
+    assert relevance_text(-RELEVANCE_ROUND_OFF / 10) == "0"
+    assert relevance_text(-0.015) == f"{-0.015:.2g}"  # below chance, a measurement: its sign stays
+
+
+@pytest.mark.parametrize("value", [0.0, 1e-12])
+def test_relevance_round_off_both_signs(value):
+    from workbench.method.gain import relevance_text
+
+    assert relevance_text(value) == relevance_text(-value) == "0"
