@@ -83,6 +83,33 @@ def test_relevance_text_says_zero_only_at_round_off():
     assert relevance_text(-0.015) == f"{-0.015:.2g}"  # below chance, a measurement: its sign stays
 
 
+def _paired(change_lo: float, change_hi: float, n_trials: int):
+    from workbench.study.paired import PairedDifference
+
+    mid = 0.5 * (change_lo + change_hi)
+    return PairedDifference("proposed", "persistence", "rmse_position", "CS2", mid, change_lo, change_hi, 0.04,
+                            0.32, n_trials, 13, 1, "trials", 4000)
+
+
+def test_a_mixed_model_that_did_not_converge_gives_no_factor_and_no_p():
+    # landing_s02: "NOT converged" followed by "strategy CS2 ×0.393 [0.242, 0.64] (lower) 0.0144 (2)"
+    from workbench.study.findings import StudyStatistics
+    from workbench.study.stats import MixedEffect, MixedModelResult
+
+    effect = MixedEffect("strategy CS2", 0.393, 0.242, 0.64, 0.0144, 2.0)
+    mixed = MixedModelResult("proposed", (effect,), "trial", 16, 4, converged=False,
+                             note="Maximum Likelihood optimization failed to converge")
+    stats = StudyStatistics("rmse_position", "m", "Scored: …", (_paired(0.6, 0.7, 4),), (), mixed)
+    text = stats.text()
+    assert "did not converge" in text and "no factor or p-value" in text
+    assert f"×{effect.factor:.3g}" not in text and f"{effect.p:.3g}" not in text
+    legend = dict(stats.legend())
+    assert "did not converge" in legend["strategies differ?"]
+    converged = StudyStatistics("rmse_position", "m", "Scored: …", (_paired(0.6, 0.7, 4),), (),
+                                MixedModelResult("proposed", (effect,), "trial", 16, 4, converged=True))
+    assert f"×{effect.factor:.3g}" in converged.text()  # the check can fail: a converged fit's factor is shown
+
+
 @pytest.mark.parametrize("value", [0.0, 1e-12])
 def test_relevance_round_off_both_signs(value):
     from workbench.method.gain import relevance_text
