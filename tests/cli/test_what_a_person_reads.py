@@ -8,6 +8,7 @@ import io
 import re
 from types import SimpleNamespace
 
+import numpy as np
 import pandas as pd
 import pytest
 from rich.console import Console
@@ -108,6 +109,21 @@ def test_a_mixed_model_that_did_not_converge_gives_no_factor_and_no_p():
     converged = StudyStatistics("rmse_position", "m", "Scored: …", (_paired(0.6, 0.7, 4),), (),
                                 MixedModelResult("proposed", (effect,), "trial", 16, 4, converged=True))
     assert f"×{effect.factor:.3g}" in converged.text()  # the check can fail: a converged fit's factor is shown
+
+
+def test_an_interval_whose_ends_print_alike_is_said_in_words():
+    # landing_s02, 2 test trials: "lower by 88 % [88 %, 88 %]"
+    from workbench.study.paired import paired_difference
+
+    baseline = np.array([0.30, 0.34])
+    wide = pd.DataFrame({"proposed": baseline * np.array([0.1200, 0.1201]), "persistence": baseline,
+                         "n_windows": [6, 7], "subject": [None, None]}, index=["t1", "t2"])
+    d = paired_difference(wide, "proposed", "persistence", "rmse_position", "CS2")
+    assert d.hi > d.lo  # an interval of some width, whose ends round to one printed value
+    words = d.sentence()
+    assert "[" not in words and "too few test trials" in words and str(d.n_trials) in words, words
+    wider = paired_difference(wide.assign(proposed=baseline * np.array([0.10, 0.15])), "proposed", "persistence")
+    assert "[" in wider.sentence()  # the check can fail: a real spread is printed as an interval
 
 
 @pytest.mark.parametrize("value", [0.0, 1e-12])
