@@ -126,6 +126,35 @@ def test_an_interval_whose_ends_print_alike_is_said_in_words():
     assert "[" in wider.sentence()  # the check can fail: a real spread is printed as an interval
 
 
+def test_the_weight_ratios_say_their_gain_entry_is_bias_corrected():
+    # landing_s02: K̂[u1, phi] printed -0.447, then "u1 on phi -0.469 […]" also called "the estimated gain entry"
+    from workbench.study.weights import PartFit
+
+    closest = SimpleNamespace(shown=np.array([True, False]), k_hat=np.array([-0.469, 0.1]),
+                              k_closest=np.array([-0.554, 0.1]), mismatch_lo=np.array([0.049, 0.0]),
+                              mismatch_hi=np.array([0.121, 0.0]))
+    fit = PartFit(("phi", "xdot"), ("u1",), 3.0, 0, float("nan"), None, closest, 19.0, 0, bias_corrected=True)
+    words = fit.mismatch_words()
+    assert "bias-corrected by the jackknife" in words and "K̂ as printed is the uncorrected estimate" in words
+    plain = PartFit(("phi", "xdot"), ("u1",), 3.0, 0, float("nan"), None, closest, 19.0, 0)
+    assert "the estimated gain entry" in plain.mismatch_words()
+
+
+def test_the_weight_ratios_bias_correct_where_they_have_leave_one_out_gains():
+    # the flag follows the computation: PartDistance corrects (and has a dof) only with leave-one-out gains
+    from workbench.method.ratio_profile import PartDistance
+
+    rng = np.random.default_rng(0)
+    A, B = np.array([[1.0, 0.05], [0.0, 1.0]]), np.array([[0.0], [0.05]])
+    K = np.array([[-0.5, -0.8]])
+    samples = K + 0.05 * rng.standard_normal((40, 1, 2))
+    loo = K + 0.01 * rng.standard_normal((10, 1, 2))
+    corrected = PartDistance.from_samples(A, B, K, samples, 10, loo)
+    plain = PartDistance.from_samples(A, B, K, samples, 10)
+    assert corrected.dof is not None and plain.dof is None
+    assert not np.allclose(corrected.k_hat, K.ravel()) and np.allclose(plain.k_hat, K.ravel())
+
+
 @pytest.mark.parametrize("value", [0.0, 1e-12])
 def test_relevance_round_off_both_signs(value):
     from workbench.method.gain import relevance_text
