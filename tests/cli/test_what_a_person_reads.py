@@ -155,6 +155,27 @@ def test_the_weight_ratios_bias_correct_where_they_have_leave_one_out_gains():
     assert not np.allclose(corrected.k_hat, K.ravel()) and np.allclose(plain.k_hat, K.ravel())
 
 
+def test_an_identified_plants_warning_is_printed_once(capsys):
+    # yuneec_position.ulg: "identified plant: worse than persistence …" in the report and again on stderr
+    from workbench.cli.writing import print_plant
+    from workbench.plant.identification import IdentificationReport
+
+    states = ("x", "xdot")
+    r = np.array([0.01, 0.2])
+    report = IdentificationReport(
+        structure="kinematic", validation="leave-one-out", n_segments=3, n_pairs=500, dt=0.05, n_steps=60,
+        state_names=states, one_step_rmse=r, one_step_rmse_persistence=r / 2, horizon_rmse=r,
+        horizon_rmse_persistence=r, one_step_score=0.216, one_step_score_persistence=0.193, horizon_score=1.7,
+        horizon_score_persistence=1.85, spectral_radius=1.0, spectral_radius_beyond_integrators=0.97,
+        n_integrators=1, condition_number=6.0, warnings=("worse than persistence on held-out segments",))
+    ctx, out, err = _context(200)
+    print_plant(ctx, SimpleNamespace(identification=report))
+    seen = out.getvalue() + err.getvalue() + "".join(capsys.readouterr())
+    assert seen.count(report.warning) == 1, seen
+    assert f"warning: {report.warning}" in err.getvalue()
+    assert report.warning in str(report)  # the report alone (the Python API) keeps its warning line
+
+
 @pytest.mark.parametrize("value", [0.0, 1e-12])
 def test_relevance_round_off_both_signs(value):
     from workbench.method.gain import relevance_text
