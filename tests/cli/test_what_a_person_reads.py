@@ -135,7 +135,7 @@ def test_the_weight_ratios_say_their_gain_entry_is_bias_corrected():
                               mismatch_hi=np.array([0.121, 0.0]))
     fit = PartFit(("phi", "xdot"), ("u1",), 3.0, 0, float("nan"), None, closest, 19.0, 0, bias_corrected=True)
     words = fit.mismatch_words()
-    assert "bias-corrected by the jackknife" in words and "K̂ as printed is the uncorrected estimate" in words
+    assert "after the jackknife's bias correction" in words and "K̂ as printed above is uncorrected" in words
     plain = PartFit(("phi", "xdot"), ("u1",), 3.0, 0, float("nan"), None, closest, 19.0, 0)
     assert "the estimated gain entry" in plain.mismatch_words()
 

@@ -227,9 +227,12 @@ class PartFit:
             else:
                 way = "stiffer than" if abs(k) > abs(k0) else "softer than"
             words.append(f"{where} {k:.3g} [{a:.3g}, {b:.3g}], {way} its {k0:.3g}")
-        which = ("the gain entry bias-corrected by the jackknife over trials (K̂ as printed is the uncorrected "
-                 "estimate)" if self.bias_corrected else "the estimated gain entry")
-        return "; ".join(words) + f" ({which} against the closest diagonal LQR gain's)" if words else ""
+        if not words:
+            return ""
+        if self.bias_corrected:
+            return ("; ".join(words) + " (each the gain entry after the jackknife's bias correction over trials, "
+                    "against the closest diagonal LQR gain's; K̂ as printed above is uncorrected)")
+        return "; ".join(words) + " (the estimated gain entry against the closest diagonal LQR gain's)"
 
     def describe(self) -> str:
         where = f"part ({', '.join(self.states)}; {', '.join(self.inputs)})"
