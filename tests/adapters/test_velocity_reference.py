@@ -376,10 +376,12 @@ def test_a_stop_for_the_velocity_after_flips_says_how_many_segments_were_cut(tmp
         f"view` shows where)")
 
 
-def test_a_ulog_flight_that_does_not_point_north_is_read_in_its_heading_frame(tmp_path):
+@pytest.mark.parametrize("field", ["heading", "yaw"])
+def test_a_ulog_flight_that_does_not_point_north_is_read_in_its_heading_frame(tmp_path, field):
     # px4_manual's x and xdot are along the vehicle's right (vehicle_local_position.heading, rad), the frame its body
     # roll accelerates; before, they were east, which the roll accelerates only while the vehicle points north
-    # (luk8426/flugdrohne's PX4 v1.14 flights: A[xdot, phi] -0.32 × g·dt)
+    # (luk8426/flugdrohne's PX4 v1.14 flights: A[xdot, phi] -0.32 × g·dt). Older firmware logs the heading as
+    # vehicle_local_position.yaw (PX4 v1.9.0: YUNEEC/pyulgresample's position.ulg), which was read as east.
     from adapters.formats import ulog
     from adapters.mapping import load_mapping
     from adapters.writer import demo_streams, layout
@@ -402,7 +404,9 @@ def test_a_ulog_flight_that_does_not_point_north_is_read_in_its_heading_frame(tm
             right = local[across].to_numpy(dtype=np.float64)  # written along the right at heading 0: east
             local[north] = (-np.sin(heading) * right).astype(local[across].dtype)
             local[east] = (np.cos(heading) * right).astype(local[across].dtype)
-        local["heading"] = np.float32(heading)  # no GPS topic: the simulated landings are too slow for its checks
+        local = local.drop(columns=[c for c in ("heading", "yaw") if c in local])
+        local[field] = np.float32(heading)  # no GPS topic: the simulated landings are too slow for its checks
+        streams["vehicle_local_position"] = local
         path = ulog.write(tmp_path / name, streams, info={"sys_name": "PX4", "ver_sw_release": "v1.14.0"})
         return adapters.load(path, "px4_manual")
 

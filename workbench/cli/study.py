@@ -8,7 +8,6 @@ import math
 import os
 import re
 import shutil
-import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -64,7 +63,7 @@ def for_each_group(ctx: Context, parts: list[tuple[str | None, Any]], done: str,
         try:
             run(group, part)
         except (DataError, ModelError) as exc:
-            print(f"warning: plant group {group}: not {done}: {exc}", file=sys.stderr)
+            ctx.warn(f"plant group {group}: not {done}: {exc}")
             failed.append(f"{group}: {exc}")
     if len(failed) == len(parts):
         raise ModelError(f"no plant group could be {done}: {'; '.join(failed)}")
@@ -81,9 +80,12 @@ def _evaluate_group(ctx: Context, ds: Any, output: Path | None, *, source: Any, 
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
         # spread of the folds' plants, which the scores below used
         checks = [c for p in result.plants.values() for c in p.identification.checks]
+        left = len(result.folds_left_out)  # folds whose training segments gave no plant: named with the verdicts
         spread = (f"each fold's plant from its training segments: {checks[0].name} "
                   f"{min(c.value for c in checks):.4g}–{max(c.value for c in checks):.4g} over {len(checks)} folds"
-                  if checks else "each fold's plant is identified from its training segments only")
+                  if checks else "each fold's plant is identified from its training segments only") + (
+                  f"; {left} fold{'s' if left > 1 else ''} left out, no plant from {'their' if left > 1 else 'its'} "
+                  "training segments (below)" if left else "")
         print_plant(ctx, chosen_plant(ds, a.plant, a.horizon_s), f"(plant from all {len(ds)} segments; {spread})")
     else:
         print_plant(ctx, result.plant, "(plant from the training trials)")
@@ -185,7 +187,7 @@ def _evaluate_per_subject(ctx: Context, ds: Any, source: Any, output: Path | Non
             progress=lambda done, total: progress.update(task, completed=done), executor=ex, test_ids=recorded,
         )
     for failure in res.failures:
-        print(f"warning: {failure}", file=sys.stderr)
+        ctx.warn(f"{failure}")
     table = Table("subject", *[METHOD_TITLES.get(m, m) for m in res.groups],
                   title=f"per-subject {res.metric} ({'the recorded test trials' if recorded is not None else a.n_test}"
                         f" held-out trial(s) per {per}, {a.horizon_s:g} s horizon)")
