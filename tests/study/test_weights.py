@@ -538,3 +538,5 @@ def test_the_gain_with_the_pilots_timing_keeps_its_estimate_with_the_jackknifes_
     # the covariance and its degrees of freedom are the jackknife's either way
     assert timed._parts[0][0].W[0, 0] == pytest.approx(untimed._parts[0][0].W[0, 0])
     assert timed._parts[0][0].nu == pytest.approx(untimed._parts[0][0].nu)
+    # and the words about its gain entries say corrected only where they are
+    assert not timed.fits[0].bias_corrected and untimed.fits[0].bias_corrected

@@ -337,10 +337,10 @@ def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
         s, c = list(states), list(inputs)
         samples = K_s[:, c][:, :, s]
         loo = getattr(gains, "K_loo", None)
+        correct = getattr(gains, "timing", None) is None  # not the timed LIML gain (ratio_profile)
         part = ratio_profile.PartDistance.from_samples(
             A[np.ix_(s, s)], B[np.ix_(s, c)], K[np.ix_(c, s)], samples, gains.n_trials,
-            None if loo is None else np.asarray(loo, dtype=float)[:, c][:, :, s],
-            bias_correct=getattr(gains, "timing", None) is None)  # not the timed LIML gain (ratio_profile)
+            None if loo is None else np.asarray(loo, dtype=float)[:, c][:, :, s], bias_correct=correct)
         start = closest_structured_objective(part.A, part.B, _stabilizing(part, K[np.ix_(c, s)]), "diagonal")
         w0 = np.r_[np.diag(start.Q), np.diag(start.R)[1:]] / start.R[0, 0]
         theta0 = np.log(np.maximum(w0, 1e-300))
@@ -351,7 +351,7 @@ def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
             closest = pseudo_true(part, samples, theta0, ci)
         fit = PartFit(tuple(plant.state_names[i] for i in s), tuple(plant.input_names[k] for k in c),
                       float(d_min), part.restrictions, test.critical, test.explained, closest, part.nu, test.edges,
-                      bias_corrected=part.dof is not None)
+                      bias_corrected=correct and part.dof is not None)
         fits.append(fit)
         shown = theta if fit.of_form else closest.theta
         Qp, Rp = part.weights(shown)
