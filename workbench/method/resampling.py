@@ -9,6 +9,15 @@ the delay and the lag, so the gain's interval carries the timing's uncertainty t
 where the timing model fits, the paper's gain where it does not: :data:`IDENTIFY_OR_NONE`) is decided once, on all
 trials, and every resample follows it: the interval is the printed estimator's, not a mixture of it and the other
 one (why: :func:`workbench.method.timing.identify_timing`'s ``fallback``).
+
+What the interval is an interval of: the printed estimator's own target, conditional on the rule's decision — on an
+operator whose variability has a state-dependent mean, its dominant behaviour (METHOD.md, Remark 1: the gain plus
+the estimator's linear projection of the mean, :func:`workbench.sim.operators.dominant_gain`), not the gain of the
+cost it optimizes; on a pilot with no gain of its own, that estimator's value on many trials. Judged so, on seeds
+that chose nothing, it held 92-100 % of the entries of each of five simulated operators (``bench/gain_coverage.md``,
+round 7; the dead-zone pilot 80 % on the choosing seeds, where least squares stood in for the timing); where the
+instruments barely move a state (the erratic pilot's thrust row under the timed LIML) the many-trial value itself
+is not reproducible, and the interval is wide rather than unbounded.
 """
 
 from __future__ import annotations

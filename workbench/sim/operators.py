@@ -37,7 +37,7 @@ from workbench.method.objective import forward_gain
 from workbench.plant.system import LinearSystem, planar_quadrotor
 
 __all__ = ["LQROperator", "lqr_operator_demos", "ErraticOperator", "erratic_operator_demos", "DelayedPilot",
-           "delayed_pilot_demos", "SLOW_PILOT"]
+           "delayed_pilot_demos", "SLOW_PILOT", "dominant_gain"]
 
 #: The cost of a pilot slow enough to fly with a reaction delay and a lag (``LQROperator(**SLOW_PILOT, delay_s=…)``):
 #: the default operator's lateral loop is unstable behind a 0.2 s delay and a 0.08 s lag, as a human's would be, so
@@ -101,6 +101,35 @@ class LQROperator:
     def gain(self, plant: LinearSystem) -> np.ndarray:
         """The operator's true gain ``K`` of ``u = K x`` (the LQR gain of ``diag(q), diag(r)``)."""
         return forward_gain(plant.A, plant.B, np.diag(self.q), np.diag(self.r))[0]
+
+
+def dominant_gain(operator: LQROperator, demos: DemonstrationSet, plant: LinearSystem | None = None) -> np.ndarray:
+    """The gain ``K̂`` estimates on an operator whose variability has a state-dependent mean: its dominant behaviour.
+
+    METHOD.md ("Variability with a state-dependent mean biases K̂ toward the best linear predictor; that is what the
+    paper calls the dominant behavior (its Remark 1), and the GMM then carries the rest"): on a near-LQR operator,
+    ``u = K x + a·tanh(p / ℓ) + w``, the linear part of the lean is indistinguishable from gain, so what the
+    default estimator converges to is ``K + Π(lean)``, ``Π`` the estimator's own linear projection — LIML of eq.
+    (T1) at no delay and no lag on the trials' starts (:func:`workbench.method.timing.fit_timing`) — of the lean
+    alone, evaluated on the states of ``demos`` (a large pool of the operator's own trials). That is neither the
+    LQR gain ``K`` nor the lean's slope at the goal (``a / ℓ``): the starts, where ``tanh`` saturates, carry the
+    instruments. Rows without a lean are ``K``'s. An operator without a lean returns ``K`` itself.
+    """
+    from workbench.method.timing import TimingData, fit_timing
+
+    sys_ = plant or planar_quadrotor()
+    K = np.array(operator.gain(sys_), dtype=float)
+    lean = np.asarray(operator.mean_amplitude, dtype=float)
+    if operator.timed:
+        raise DataError("dominant_gain is defined for an operator without a delay, a lag or a dead zone")
+    plane = sys_.r.plane
+    for i in np.flatnonzero(lean):
+        # the lean alone as the "input": what the instruments attribute of it to the state (eq. (T1), d = τ = 0)
+        one = [Demonstration(d.t, d.x, (lean[i] * np.tanh((d.x[:, plane[0]] if plane is not None else d.x[:, 0])
+                                                          / operator.length))[:, None], {"id": f"lean-{j}"})
+               for j, d in enumerate(demos)]
+        K[i] += fit_timing(TimingData(one, sys_.n, 1, sys_.dt, "steady"), "liml", delay_s=0.0, lag_s=0.0).K[0]
+    return K
 
 
 def _box(low: Sequence[float], high: Sequence[float], n: int, rng: np.random.Generator) -> np.ndarray:
