@@ -215,6 +215,8 @@ def _flag_toml(rule: FlagRule) -> dict[str, object]:
         out["equals"] = rule.equals
     if rule.on:
         out.update(on=list(rule.on), off=list(rule.off))
+    if rule.held is not None:
+        out["held"] = _flag_toml(rule.held)
     return out
 
 

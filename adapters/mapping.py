@@ -194,7 +194,8 @@ class ChannelMapping:
         """Every stream field this mapping reads: channels, segmentation rules, metadata."""
         out = [v.selector for c in self.channels for v in c.variants]
         seg = self.segment
-        out += [s for s in (seg.demo, seg.mode and seg.mode.selector, seg.armed and seg.armed.selector) if s]
+        out += [s for s in (seg.demo, seg.mode and seg.mode.selector, seg.armed and seg.armed.selector,
+                            seg.armed and seg.armed.held and seg.armed.held.selector) if s]
         if seg.landing is not None and seg.landing.flag is not None:
             out.append(seg.landing.flag.selector)
         out += [s for s in (self.meta.source, self.meta.text) if s]
@@ -357,16 +358,26 @@ def _channel(name: str, value: Any, path: str, table: str = "channels") -> Chann
 
 
 def _flag(value: Any, path: str, key: str) -> FlagRule:
-    sel = _selector(value, path, key, extra=("bitmask", "equals", "on", "off"))
+    sel = _selector(value, path, key, extra=("bitmask", "equals", "on", "off", "held"))
     bitmask = value.get("bitmask") if isinstance(value, dict) else None
     equals = value.get("equals") if isinstance(value, dict) else None
     events = {k: value.get(k) for k in ("on", "off")} if isinstance(value, dict) else {}
+    held_raw = value.get("held") if isinstance(value, dict) else None
     if any(v is not None for v in events.values()):
         if bitmask is not None or equals is not None or not all(isinstance(v, list) and v for v in events.values()):
             raise _fail(path, key, "events need both on = [values] and off = [values], and neither bitmask nor "
                         "equals")
         on, off = (tuple(_number(x, path, f"{key}.{k}") for x in events[k]) for k in ("on", "off"))
-        return FlagRule(sel, on=on, off=off)
+        held = None
+        if held_raw is not None:
+            held = _flag(held_raw, path, f"{key}.held")
+            if held.on or held.held is not None:
+                raise _fail(path, f"{key}.held", "must be a held flag (a source with bitmask, equals or neither), "
+                            "not events")
+        return FlagRule(sel, on=on, off=off, held=held)
+    if held_raw is not None:
+        raise _fail(path, f"{key}.held", "a held flag is the fallback of an event rule (on = [...], off = [...]); "
+                    "this rule is a held flag already")
     if bitmask is not None and (isinstance(bitmask, bool) or not isinstance(bitmask, int) or not 0 < bitmask < 2**63):
         raise _fail(path, f"{key}.bitmask", f"must be a positive integer below 2**63, got {bitmask!r}")
     if equals is not None:

@@ -16,8 +16,8 @@ from pymavlink import mavutil
 
 from workbench.data.plant_groups import PLANT_GROUPS
 
-__all__ = ["AUTOPILOT_HOLDS", "MODE_TABLES", "STICKS", "plant_group", "mode_name", "mode_number", "heartbeat_table",
-           "vehicle_kind"]
+__all__ = ["AUTOPILOT_HOLDS", "FIXED_WING_STICKS", "MODE_TABLES", "STICKS", "autopilot_holds", "plant_group",
+           "mode_name", "mode_number", "heartbeat_table", "vehicle_kind"]
 
 _ML = mavutil.mavlink
 
@@ -32,15 +32,19 @@ PX4_NAV_STATE = {
 
 #: What the pilot's sticks command in each pilot-flown mode, per mode table: the mode's plant group
 #: (:mod:`workbench.data.plant_groups`). ArduCopter's, ArduPlane's (with the QuadPlane's Q modes) and PX4's flight-mode
-#: documentation: the roll stick commands a lean angle in STABILIZE, ALT_HOLD, QSTABILIZE, QHOVER and PX4's
-#: multicopter MANUAL / STABILIZED / ALTCTL; a roll rate in ACRO (SPORT with a climb rate); a velocity in LOITER,
-#: POSHOLD, FLOWHOLD, QLOITER and POSCTL; a plane's MANUAL, STABILIZE and TRAINING move its control surfaces, its FBWA
-#: a bank angle (FBWB and CRUISE with a climb rate). The throttle commands a climb rate wherever the autopilot holds
-#: the altitude. PX4's MANUAL is the multicopter's (an attitude); a PX4 plane's MANUAL would be "surface". A kept mode
-#: not listed here gets a plant of its own, named after the mode (:func:`plant_group`).
+#: documentation: the roll stick commands a lean angle in STABILIZE, ALT_HOLD, QSTABILIZE, QHOVER and PX4's multicopter
+#: MANUAL / STABILIZED / ALTCTL, and in ArduCopter's POSHOLD and FLOWHOLD ("the pilot stick inputs directly control the
+#: vehicle's lean angle", ardupilot.org/copter/docs/poshold-mode.html and flowhold-mode.html; their throttle as in
+#: ALT_HOLD, but centred sticks brake and hold the position, so a group of their own, ``angle+climb+brake``, not
+#: ALT_HOLD's); a roll rate in ACRO (SPORT with a climb rate); a velocity in LOITER, QLOITER and POSCTL; a plane's
+#: MANUAL, STABILIZE and TRAINING move its control surfaces, its FBWA a bank angle (FBWB and CRUISE with a climb rate;
+#: ardupilot.org/plane/docs/flight-modes.html). The throttle commands a climb rate wherever the autopilot holds the
+#: altitude. PX4's modes here are the multicopter's; a PX4 plane's are :data:`FIXED_WING_STICKS`. A kept mode not listed
+#: here gets a plant of its own, named after the mode (:func:`plant_group`).
 STICKS: dict[str, dict[str, str]] = {
     "arducopter": {"STABILIZE": "angle", "ALT_HOLD": "angle+climb", "LOITER": "velocity+climb",
-                   "POSHOLD": "velocity+climb", "FLOWHOLD": "velocity+climb", "ACRO": "rate", "SPORT": "rate+climb"},
+                   "POSHOLD": "angle+climb+brake",
+                   "FLOWHOLD": "angle+climb+brake", "ACRO": "rate", "SPORT": "rate+climb"},
     "arduplane": {"MANUAL": "surface", "STABILIZE": "surface", "TRAINING": "surface", "FBWA": "bank",
                   "FBWB": "bank+climb", "CRUISE": "bank+climb", "QSTABILIZE": "angle", "QHOVER": "angle+climb",
                   "QLOITER": "velocity+climb", "QACRO": "rate"},
@@ -51,10 +55,33 @@ STICKS: dict[str, dict[str, str]] = {
 }
 
 
-def plant_group(table: str | None, mode: str) -> str:
-    """The plant group of ``mode`` in mode table ``table`` (:data:`STICKS`); a mode the table does not list gets a
-    group of its own, ``"mode NAME"``, so that it is never pooled with a mode whose sticks command another thing."""
+#: PX4's modes on a fixed-wing vehicle, where one mode table serves multicopters and planes: MANUAL passes the sticks
+#: to the control surfaces, STABILIZED's roll stick commands a bank angle (the throttle the motor), ALTCTL and POSCTL
+#: hold the altitude (the pitch stick a climb rate, the throttle the airspeed; POSCTL the course too) — docs.px4.io
+#: "Flight Modes (Fixed-Wing)", as ArduPlane's MANUAL, FBWA and FBWB. The log's vehicle type says which table holds
+#: (:func:`plant_group`); a fixed-wing mode not listed (ACRO: a roll rate on a plane) gets a group of its own.
+FIXED_WING_STICKS: dict[str, dict[str, str]] = {
+    "px4": {"MANUAL": "surface", "STABILIZED": "bank", "ALTCTL": "bank+climb", "POSCTL": "bank+climb"},
+    "px4_nav_state": {"MANUAL": "surface", "STAB": "bank", "ALTCTL": "bank+climb", "POSCTL": "bank+climb"},
+}
+
+
+def plant_group(table: str | None, mode: str, fixed_wing: bool = False) -> str:
+    """The plant group of ``mode`` in mode table ``table`` (:data:`STICKS`, or :data:`FIXED_WING_STICKS` for a
+    ``fixed_wing`` vehicle of a table that serves both); a mode the table does not list gets a group of its own,
+    ``"mode NAME"``, so that it is never pooled with a mode whose sticks command another thing."""
+    if fixed_wing and table in FIXED_WING_STICKS:
+        return FIXED_WING_STICKS[table].get(mode) or f"mode {mode} (fixed-wing)"
     return STICKS.get(table or "", {}).get(mode) or f"mode {mode}"
+
+
+def autopilot_holds(table: str | None, mode: str, fixed_wing: bool = False) -> str:
+    """What the autopilot holds in ``mode`` while the sticks are centred (:data:`AUTOPILOT_HOLDS`; a fixed-wing
+    vehicle's from its plant group), ``""`` for nothing."""
+    if fixed_wing and table in FIXED_WING_STICKS:
+        group = PLANT_GROUPS.get(plant_group(table, mode, fixed_wing))
+        return group.holds if group is not None else ""
+    return AUTOPILOT_HOLDS.get(mode, "")
 
 
 #: Pilot-flown modes in which the autopilot, not the pilot, closes a loop: what it holds while the sticks are

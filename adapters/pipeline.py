@@ -28,9 +28,9 @@ import numpy as np
 
 from adapters.align import Series, align, check_grid
 from adapters.clock import stream_times
-from adapters.mapping import ChannelMapping, FlagRule, Selector
+from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
-from adapters.modes import AUTOPILOT_HOLDS, mode_name, plant_group
+from adapters.modes import FIXED_WING_STICKS, autopilot_holds, mode_name, plant_group
 from adapters.segment import (
     EVERYTHING,
     Span,
@@ -108,7 +108,7 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
     if seg.mode is not None:
         sel = select(seg.mode.selector, streams, "segment.mode", m.name, n_columns=1)
         t, modes = _rule_series(sel, m, skipped=skipped, what="segment.mode")
-        spans = intersect(spans, mode_spans(t, modes, seg.mode.keep, seg.mode.names))
+        spans = intersect(spans, _mark_fixed_wing(sel, m, mode_spans(t, modes, seg.mode.keep, seg.mode.names)))
     if seg.armed is not None:
         armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped)
         spans = intersect(spans, armed if armed is not None else EVERYTHING)
@@ -118,11 +118,44 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
     return list(spans)
 
 
+#: Where a mode stream says the vehicle's type, the column and the values that mean a fixed-wing vehicle: PX4's
+#: ``vehicle_status.vehicle_type`` (VEHICLE_TYPE_FIXED_WING 2; a VTOL switches it at its transitions), its older
+#: ``is_rotary_wing`` (0), a HEARTBEAT's ``type`` (MAV_TYPE_FIXED_WING 1).
+_FIXED_WING_COLUMNS = (("vehicle_type", 2.0), ("is_rotary_wing", 0.0), ("type", 1.0))
+
+
+def _mark_fixed_wing(sel: Selected, m: ChannelMapping, spans: list[Span]) -> list[Span]:
+    """Mark the mode spans flown by a fixed-wing vehicle (``meta["fixed_wing"]``), where the mode table serves both
+    kinds (:data:`adapters.modes.FIXED_WING_STICKS`: PX4's) and the mode stream says the vehicle's type at the span's
+    start; the same mode name commands a lean angle on a multicopter and the control surfaces on a plane."""
+    if m.segment.mode is None or m.segment.mode.names not in FIXED_WING_STICKS:
+        return spans
+    col, value = next(((c, v) for c, v in _FIXED_WING_COLUMNS if c in sel.frame.columns), (None, 0.0))
+    if col is None:
+        return spans
+    t = stream_times(m.clock, sel.frame)[sel.rows]
+    kind = numeric(sel.frame, col)[sel.rows]
+    ok = np.isfinite(t) & np.isfinite(kind)
+    t, kind = t[ok], kind[ok]
+    if not t.size:
+        return spans
+    order = np.argsort(t, kind="stable")
+    t, kind = t[order], kind[order]
+    for span in spans:
+        at = int(np.clip(np.searchsorted(t, span.start, side="right") - 1, 0, t.size - 1))
+        if kind[at] == value:
+            span.meta["fixed_wing"] = True
+    return spans
+
+
 def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
                 invert: bool = False) -> list[Span] | None:
     """The spans a flag rule holds in (``invert``: does not hold); ``None`` where an event rule's stream is not in
     the log at all (the firmware records no such events: old ArduPlane logs declare no ``EV``), so the rule says
-    nothing. A stream the log declares but never wrote holds no event: no span."""
+    nothing. A stream the log declares but never wrote holds no event: no span. An event rule with a held flag
+    that the log holds (``FlagRule.held``) is decided by that flag where the log holds none of its events
+    (:func:`_deciding_rule`)."""
+    rule = _deciding_rule(streams, m, rule, what)
     if rule.on and not _declared(streams, rule.selector):
         return None
     if rule.on and not any(h in streams for h in _heads(rule.selector)):
@@ -135,6 +168,24 @@ def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, 
         return event_spans(t[events], ~truth if invert else truth)
     truth = rule.truth(flags)
     return flag_spans(t, ~truth if invert else truth)
+
+
+def _deciding_rule(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str) -> FlagRule:
+    """The rule that says whether the flag holds: an event rule itself, unless the log holds none of its events
+    and does hold rows of its held flag (``FlagRule.held``), which then decides.
+
+    An ArduPlane 4.x log starts on arming, after its ``EV`` ARMED was written, yet ``STAT.Armed`` says armed in
+    every message: the missing event is not evidence of a vehicle that never armed.
+    """
+    if not rule.on or rule.held is None:
+        return rule
+    if not any(h in streams and streams.n_rows(h) for h in _heads(rule.held.selector)):
+        return rule  # no held flag in this log: the events (or their absence) say what there is
+    if any(h in streams for h in _heads(rule.selector)):
+        sel = select(rule.selector, streams, what, m.name, n_columns=1)
+        if rule.events(numeric(sel.frame, sel.columns[0])[sel.rows]).any():
+            return rule
+    return rule.held
 
 
 def _heads(sel: Selector) -> list[str]:
@@ -165,6 +216,7 @@ def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Ser
     series = []
     clocked: list[bool] = []
     inputs = set(m.input_names)
+    _check_present(streams, m)
     for ch in (resolve_channel(c, streams) for c in m.channels):
         what = f"channel {ch.name!r}"
         sel = select(ch.selector, streams, what, m.name, n_columns=TRANSFORMS[ch.transform].n_columns)
@@ -186,6 +238,33 @@ def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Ser
         raise MappingError(f"{streams.path}: mapping {m.name!r}: clock field {m.clock.field!r} is in none of the "
                            f"channels' streams; check its spelling, or use clock = \"log\"")
     return series
+
+
+def _check_present(streams: Streams, m: ChannelMapping) -> None:
+    """Raise one MappingError naming every channel the log lacks, the pilot's inputs first.
+
+    A log whose logging left out the sticks (a DataFlash ``LOG_BITMASK`` without RC input) lacks more than one
+    channel; naming only the first in the mapping's order (a state's rate) would hide that the pilot is not in
+    the log at all, which is why no model can be made of it.
+    """
+    missing: list[tuple[bool, Channel, MappingError]] = []
+    inputs = set(m.input_names)
+    for ch in (resolve_channel(c, streams) for c in m.channels):
+        try:
+            select(ch.selector, streams, f"channel {ch.name!r}", m.name,
+                   n_columns=TRANSFORMS[ch.transform].n_columns)
+        except MappingError as exc:
+            missing.append((ch.name not in inputs, ch, exc))
+    if len(missing) < 2:
+        return  # none, or one: the loop raises that channel's own error
+    missing.sort(key=lambda x: x[0])  # stable: the inputs first, each group in the mapping's order
+    lacking = [ch.name for is_state, ch, _ in missing if not is_state]
+    lead = (f"the pilot's input{'s' if len(lacking) > 1 else ''} {', '.join(lacking)} "
+            f"{'are' if len(lacking) > 1 else 'is'} not in this log, so there is no pilot to model: "
+            if lacking else "")
+    first = str(missing[0][2]).removeprefix(f"mapping {m.name!r}: ")
+    rest = ", ".join(f"{ch.name} ({ch.selector.describe()})" for _, ch, _ in missing[1:])
+    raise MappingError(f"mapping {m.name!r}: {lead}{first}; also not in it: {rest}")
 
 
 def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
@@ -411,7 +490,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     windows = [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts]
     table = m.segment.mode.names if m.segment.mode is not None else None
     stick_cause, stick_note = check_sticks(m, streams, [
-        (float(t[0]), float(t[-1]), plant_group(table, span.meta["mode"]) if "mode" in span.meta else None)
+        (float(t[0]), float(t[-1]),
+         plant_group(table, span.meta["mode"], bool(span.meta.get("fixed_wing"))) if "mode" in span.meta else None)
         for span, ts, _ in found for t in ts])
     if stick_cause and not still:
         if not allow_still:
@@ -466,9 +546,11 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             if "mode" in span.meta:
                 meta["mode"] = span.meta["mode"]
                 # what the sticks command in this mode: segments of different groups are different plants
-                meta[PLANT_GROUP_KEY] = plant_group(m.segment.mode.names if m.segment.mode else None, meta["mode"])
-                if span.meta["mode"] in AUTOPILOT_HOLDS:
-                    meta["autopilot_holds"] = AUTOPILOT_HOLDS[span.meta["mode"]]
+                table = m.segment.mode.names if m.segment.mode else None
+                fixed_wing = bool(span.meta.get("fixed_wing"))
+                meta[PLANT_GROUP_KEY] = plant_group(table, meta["mode"], fixed_wing)
+                if holds := autopilot_holds(table, meta["mode"], fixed_wing):
+                    meta["autopilot_holds"] = holds
             if key is not None:
                 meta["demo"] = key
             rows.append((meta["id"], t, v, meta))
@@ -536,23 +618,24 @@ def check_rules(streams: Streams, m: ChannelMapping) -> None:
     """
     seg = m.segment
     _check_vehicle(streams, m)
-    if seg.armed is not None and seg.armed.on:
-        armed = _flag_spans(streams, m, seg.armed, "segment.armed")
+    armed_rule = _deciding_rule(streams, m, seg.armed, "segment.armed") if seg.armed is not None else None
+    if armed_rule is not None and armed_rule.on:
+        armed = _flag_spans(streams, m, armed_rule, "segment.armed")
         if armed is not None and not armed:
-            heads = [h for h in _heads(seg.armed.selector) if h in streams or h in streams.counts]
+            heads = [h for h in _heads(armed_rule.selector) if h in streams or h in streams.counts]
             n = sum(int(streams.counts.get(h, 0)) for h in heads)
-            on = " or ".join(f"{v:g}" for v in seg.armed.on)
+            on = " or ".join(f"{v:g}" for v in armed_rule.on)
             raise DataError(
-                f"{streams.path}: never armed: the log records arming as events ({seg.armed.selector.describe()} = "
+                f"{streams.path}: never armed: the log records arming as events ({armed_rule.selector.describe()} = "
                 f"{on} on arming) and holds none among its {n} {'/'.join(heads)} message(s), so mapping {m.name!r} "
                 f"has no flight to import"
             )
-    elif seg.armed is not None:
-        sel = select(seg.armed.selector, streams, "segment.armed", m.name, n_columns=1)
+    elif armed_rule is not None:
+        sel = select(armed_rule.selector, streams, "segment.armed", m.name, n_columns=1)
         _, flags = _rule_series(sel, m)
-        if flags.size and not seg.armed.truth(flags).any():
+        if flags.size and not armed_rule.truth(flags).any():
             raise DataError(
-                f"{streams.path}: never armed: {sel.stream} ({seg.armed.selector.describe()}) says the vehicle was "
+                f"{streams.path}: never armed: {sel.stream} ({armed_rule.selector.describe()}) says the vehicle was "
                 f"disarmed in all {flags.size} message(s), so mapping {m.name!r} has no flight to import"
             )
     if seg.mode is not None:

@@ -77,13 +77,18 @@ class ModeRule:
 class FlagRule:
     """A truthy stream: ``value & bitmask`` when a bitmask is given, ``value == equals``, else ``value != 0``; or
     events (``on`` / ``off`` values, e.g. DataFlash ``EV`` ids ARMED 10 / DISARMED 11): rows of other values say
-    nothing, and the flag holds from one event to the next (:meth:`events`)."""
+    nothing, and the flag holds from one event to the next (:meth:`events`).
+
+    ``held``: an event rule's held flag (e.g. ArduPlane's ``STAT.Armed``), which decides where the log holds none
+    of the rule's events: a log that begins after the event (ArduPlane 4.x starts its log on arming and its ``EV``
+    ARMED is not in it) says by the flag what the events do not."""
 
     selector: Selector
     bitmask: int | None = None
     equals: float | None = None
     on: tuple[float, ...] = ()
     off: tuple[float, ...] = ()
+    held: FlagRule | None = None
 
     def events(self, values: np.ndarray) -> np.ndarray:
         """The rows that are events of an event rule (every row of a held flag)."""

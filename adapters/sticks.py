@@ -238,7 +238,7 @@ def _correlation(stick: _Series, target_t: np.ndarray, target_v: np.ndarray) -> 
 def commands_setpoint(group: str | None) -> bool:
     """Whether in a segment of plant group ``group`` (:data:`workbench.data.plant_groups.PLANT_GROUPS`, the mode's
     :func:`adapters.modes.plant_group`) the stick commands the attitude setpoint itself: a lean or bank angle. Not
-    where it asks for a velocity (LOITER, POSHOLD, QLOITER, POSCTL: the position controller's lean turns with the
+    where it asks for a velocity (LOITER, QLOITER, POSCTL: the position controller's lean turns with the
     heading; erlerobot/logs 22-12-2014/37.BIN's LOITER DesRoll correlated −0.83 with the yaw stick) or a rate (ACRO:
     the setpoint integrates the stick), nor in a mode no table describes. A segment of no mode rule is checked."""
     from workbench.data.plant_groups import PLANT_GROUPS

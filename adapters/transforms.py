@@ -22,9 +22,10 @@ name                      columns    channel
                                      (rad, positive toward north): what accelerates a multirotor north
 ``euler_deg_tilt_east``   3          ``euler_tilt_east`` of angles in degrees (DataFlash ``ATT`` / ``EKF1``
                                      ``Roll, Pitch, Yaw``)
-``heading_right``         3          ``yaw_deg, north, east`` → the vector's component along the vehicle's
-                                     right (its heading frame's lateral axis): what its roll accelerates
-``heading_forward``       3          ``yaw_deg, north, east`` → the component along its heading: what its
+``heading_right``         3          ``yaw, north, east`` → the vector's component along the vehicle's
+                                     right (its heading frame's lateral axis): what its roll accelerates;
+                                     the yaw in degrees, or ``yaw_scale`` radians per unit (1: radians)
+``heading_forward``       3          ``yaw, north, east`` → the component along its heading: what its
                                      pitch accelerates (forward is nose-down pitch, negative)
 ``euler_tilt_east_rate``  5          ``roll, pitch, yaw, rollspeed, pitchspeed`` (rad, rad/s body rates) → the
                                      rate of ``euler_tilt_east`` (rad/s); yaw rate does not move the axis
@@ -130,13 +131,19 @@ def _tilt_deg_inv(angle: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
     return np.rad2deg(_tilt_inv(angle, p))
 
 
+def _yaw_rad(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    """The heading column in radians: ``yaw_scale`` radians per logged unit (default a degree, as ArduPilot's
+    ``EKF1.Yaw`` logs it; 1 for PX4's ``vehicle_local_position.heading``, logged in radians)."""
+    return v[:, 0] * float(p.get("yaw_scale", np.pi / 180.0))
+
+
 def _heading_right(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
-    yaw = np.deg2rad(v[:, 0])
+    yaw = _yaw_rad(v, p)
     return -np.sin(yaw) * v[:, 1] + np.cos(yaw) * v[:, 2]
 
 
 def _heading_forward(v: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
-    yaw = np.deg2rad(v[:, 0])
+    yaw = _yaw_rad(v, p)
     return np.cos(yaw) * v[:, 1] + np.sin(yaw) * v[:, 2]
 
 
@@ -182,8 +189,8 @@ TRANSFORMS: dict[str, Transform] = {
         Transform("euler_tilt_east_rate", 5, _tilt_east_rate, _tilt_rate_inv),
         Transform("euler_deg_tilt_east", 3, _tilt_east_deg, _tilt_deg_inv),
         Transform("euler_tilt_north", 3, _tilt_north, _tilt_north_inv),
-        Transform("heading_right", 3, _heading_right, _heading_right_inv),
-        Transform("heading_forward", 3, _heading_forward, _heading_forward_inv),
+        Transform("heading_right", 3, _heading_right, _heading_right_inv, ("yaw_scale",)),
+        Transform("heading_forward", 3, _heading_forward, _heading_forward_inv, ("yaw_scale",)),
     )
 }
 

@@ -160,9 +160,17 @@ def evaluate_cells(code: int, out: str, err: str, tables: list[Path]) -> tuple[s
         head = f"{group}: " if group else ""
         left = [_short(ln.strip().split("could not be fitted and is left out of the comparison: ")[-1], 160)
                 for ln in blocks.get(group, out).splitlines() if "proposed could not be fitted" in ln]
+        body = blocks.get(group, out).splitlines()
+        # leave-one-out folds whose training segments could not be fitted, and the words where too few remain
+        folds = [re.sub(r"^Fold (\d+ of \d+) \(testing \S+\) left out: its training trials could not be fitted — ",
+                        r"fold \1 left out: ", ln.strip()) for ln in body if re.match(r"\s*Fold \d+ of \d+ ", ln)]
+        few = [ln.strip().split(": the methods", 1)[0] for ln in body
+               if re.search(r"folds? was scored: the methods are not compared", ln)]
         pos.append(head + ", ".join(f"{TITLES[m]} {means[m]['rmse_position']}" for m in METHODS
                                     if 'rmse_position' in means.get(m, {}))
-                   + (f" (proposed left out: {left[0]})" if left else ""))
+                   + (f" (proposed left out: {left[0]})" if left else "")
+                   + "".join(f" ({_short(f, 200)})" for f in folds)
+                   + (f" ({few[0][0].lower() + few[0][1:]}: methods not compared, no interval)" if few else ""))
         scores = ["{}: {}".format(INPUT_METRICS[k], ", ".join(f"{TITLES[m]} {means[m][k]}" for m in METHODS
                                                               if k in means.get(m, {})))
                   for k in INPUT_METRICS if any(k in v for v in means.values())]

@@ -99,21 +99,31 @@ def _flight_modes(log: ScannedLog, mav_type: int | None, t_end: float) -> list[t
 
 
 def _armed_spans(log: ScannedLog, t_end: float) -> list[tuple[float, float]]:
+    """Armed spans from ``ARM.ArmState``, else ``EV`` ARMED / DISARMED, else ArduPlane's held ``STAT.Armed`` (a
+    4.x plane log starts on arming, after its ``EV`` ARMED: the flag in every ``STAT`` says what no event does)."""
     arm = log.id_of("ARM")
     ev = log.id_of("EV")
+    stat = log.id_of("STAT")
+    ids = np.asarray(log.column(ev, "Id"), dtype=np.float64) if ev is not None and log.column(ev, "Id") is not None \
+        else None  # an FMT may declare Id a float: NaN stays NaN
+    arming = (ids == 10) | (ids == 11) if ids is not None else None  # ArduPilot LogEvent ARMED / DISARMED
+    held = False  # STAT: a flag held in every message (its first value says the start), not events
     if arm is not None and log.column(arm, "ArmState") is not None:
         t = log.t[log.index[arm]]
         state = np.asarray(log.column(arm, "ArmState"), dtype=np.float64) != 0  # a float field may hold NaN
-    elif ev is not None and log.column(ev, "Id") is not None:
-        ids = np.asarray(log.column(ev, "Id"), dtype=np.float64)  # an FMT may declare Id a float: NaN stays NaN
-        keep = (ids == 10) | (ids == 11)  # ArduPilot LogEvent ARMED / DISARMED
-        t = log.t[log.index[ev]][keep]
-        state = ids[keep] == 10
+    elif ids is not None and arming is not None and (arming.any() or stat is None
+                                                       or log.column(stat, "Armed") is None):
+        t = log.t[log.index[ev]][arming]
+        state = ids[arming] == 10
+    elif stat is not None and log.column(stat, "Armed") is not None:
+        t = log.t[log.index[stat]]
+        state = np.asarray(log.column(stat, "Armed"), dtype=np.float64) == 1
+        held = True
     else:
         return []
     spans: list[tuple[float, float]] = []
     start = None
-    if state.size and not state[0]:  # disarmed first: the log began armed (adapters.segment.event_spans)
+    if state.size and not state[0] and not held:  # disarmed first: the log began armed (segment.event_spans)
         finite = log.t[np.isfinite(log.t)]
         start = float(finite.min()) if finite.size else None
     for ti, s in zip(t.tolist(), state.tolist(), strict=True):

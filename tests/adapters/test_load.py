@@ -152,7 +152,7 @@ def test_dronekit_mode_spans_come_from_the_vehicle_not_the_ground_station(extern
 
 def test_px4_sample_log_yields_demonstrations(external):
     # the vehicle flew without GPS: its east position is 0.0 throughout, which import names before any fit
-    with pytest.raises(DataError, match=r"x \(vehicle_local_position\.y\) constant 0 in all \d+ samples — no "
+    with pytest.raises(DataError, match=r"x \(vehicle_local_position\.heading,x,y\) constant 0 in all \d+ samples — no "
                                         "position source"):
         adapters.load(external("px4_sample_log_small.ulg"), "px4_manual")
     ds = adapters.load(external("px4_sample_log_small.ulg"), "px4_manual", allow_still=True)

@@ -374,3 +374,70 @@ def test_a_stop_for_the_velocity_after_flips_says_how_many_segments_were_cut(tmp
     assert "\n" not in message and message.endswith(
         f"({n} segment{'s' if n > 1 else ''} cut or dropped at the vehicle's flips before this check: `workbench "
         f"view` shows where)")
+
+
+@pytest.mark.parametrize("field", ["heading", "yaw"])
+def test_a_ulog_flight_that_does_not_point_north_is_read_in_its_heading_frame(tmp_path, field):
+    # px4_manual's x and xdot are along the vehicle's right (vehicle_local_position.heading, rad), the frame its body
+    # roll accelerates; before, they were east, which the roll accelerates only while the vehicle points north
+    # (luk8426/flugdrohne's PX4 v1.14 flights: A[xdot, phi] -0.32 × g·dt). Older firmware logs the heading as
+    # vehicle_local_position.yaw (PX4 v1.9.0: YUNEEC/pyulgresample's position.ulg), which was read as east.
+    from adapters.formats import ulog
+    from adapters.mapping import load_mapping
+    from adapters.writer import demo_streams, layout
+    from workbench.sim.landing import simulate_landings
+
+    flights = simulate_landings("CS1", 2, seed=4)
+    spans = layout(flights, 0.0, 2.0)
+    t = np.arange(0.0, spans[-1][1] + 1.0, 0.5)
+    in_flight = np.zeros(t.size, dtype=bool)
+    for a, b in spans:
+        in_flight |= (t >= a) & (t <= b)
+
+    def flown(name, heading):
+        """The flights written pointing north, then turned to ``heading`` (rad) with their lateral plane."""
+        streams = demo_streams(flights, load_mapping("px4_manual").for_format("ulog"), epoch=0.0, pause=2.0)
+        streams["vehicle_status"] = pd.DataFrame({
+            "t": t, "nav_state": np.where(in_flight, 15, 5).astype(np.uint8), "arming_state": np.uint8(2)})
+        local = streams["vehicle_local_position"]
+        for across, north, east in (("y", "x", "y"), ("vy", "vx", "vy")):
+            right = local[across].to_numpy(dtype=np.float64)  # written along the right at heading 0: east
+            local[north] = (-np.sin(heading) * right).astype(local[across].dtype)
+            local[east] = (np.cos(heading) * right).astype(local[across].dtype)
+        local = local.drop(columns=[c for c in ("heading", "yaw") if c in local])
+        local[field] = np.float32(heading)  # no GPS topic: the simulated landings are too slow for its checks
+        streams["vehicle_local_position"] = local
+        path = ulog.write(tmp_path / name, streams, info={"sys_name": "PX4", "ver_sw_release": "v1.14.0"})
+        return adapters.load(path, "px4_manual")
+
+    north, turned = flown("north.ulg", 0.0), flown("turned.ulg", np.deg2rad(-127.0))
+    assert len(turned) == len(north) == len(flights)
+    for k in (turned.state_names.index("x"), turned.state_names.index("xdot")):
+        assert np.ptp(north[0].x[:, k]) > 0.1  # the flights move across
+        for a, b in zip(turned, north, strict=True):
+            np.testing.assert_allclose(a.x[:, k], b.x[:, k], atol=1e-4)
+
+
+@pytest.mark.parametrize(("vehicle_type", "groups"), [(1, {"MANUAL": "angle", "ALTCTL": "angle+climb"}),
+                                                      (2, {"MANUAL": "surface", "ALTCTL": "bank+climb"})])
+def test_a_px4_plane_s_manual_modes_are_a_plane_s_plants(tmp_path, vehicle_type, groups):
+    # one PX4 mode table serves multicopters and planes: vehicle_status.vehicle_type (2: fixed-wing) says which
+    # sticks a mode has (docs.px4.io: a plane's MANUAL moves the surfaces, its ALTCTL holds the altitude)
+    from adapters.formats import ulog
+    from adapters.mapping import load_mapping
+    from adapters.writer import demo_streams, layout
+    from workbench.sim.landing import simulate_landings
+
+    flights = simulate_landings("CS1", 2, seed=6)
+    spans = layout(flights, 0.0, 2.0)
+    t = np.arange(0.0, spans[-1][1] + 1.0, 0.5)
+    nav = np.full(t.size, 5, np.uint8)  # AUTO_RTL between the flights
+    for (a, b), mode in zip(spans, (0, 1), strict=True):  # the first flown in MANUAL, the second in ALTCTL
+        nav[(t >= a) & (t <= b)] = mode
+    streams = demo_streams(flights, load_mapping("px4_manual").for_format("ulog"), epoch=0.0, pause=2.0)
+    streams["vehicle_status"] = pd.DataFrame({"t": t, "nav_state": nav, "arming_state": np.uint8(2),
+                                              "vehicle_type": np.uint8(vehicle_type)})
+    path = ulog.write(tmp_path / "f.ulg", streams, info={"sys_name": "PX4", "ver_sw_release": "v1.14.0"})
+    ds = adapters.load(path, "px4_manual")
+    assert {d.meta["mode"]: d.meta["plant_group"] for d in ds} == groups
+    assert {d.meta["mode"]: d.meta.get("autopilot_holds", "") for d in ds} == {"MANUAL": "", "ALTCTL": "the altitude"}

@@ -72,6 +72,41 @@ def test_every_mode_of_the_stick_table_is_a_mode_of_its_autopilot_and_a_known_gr
     assert plant_group("arducopter", "RTL") == "mode RTL"  # a mode the table does not know: a plant of its own
 
 
+def test_poshold_s_stick_commands_a_lean_angle_and_its_autopilot_holds_the_position():
+    # ArduCopter's PosHold / FlowHold: "the pilot stick inputs directly control the vehicle's lean angle", the throttle
+    # as in AltHold, and the autopilot brakes and holds the position once the sticks are centred: the stick's kind is
+    # ALT_HOLD's, the plant (vehicle and autopilot) is not, so neither is pooled with ALT_HOLD nor with LOITER
+    for mode in ("POSHOLD", "FLOWHOLD"):
+        group = PLANT_GROUPS[plant_group("arducopter", mode)]
+        assert (group.lateral, group.throttle) == ("angle", "climb"), mode
+        assert group.holds == AUTOPILOT_HOLDS[mode], mode  # read off the group, as every other mode's
+        assert "position" in group.holds and "altitude" in group.holds, mode
+    assert "position" not in PLANT_GROUPS[plant_group("arducopter", "ALT_HOLD")].holds
+    assert plant_group("arducopter", "POSHOLD") != plant_group("arducopter", "ALT_HOLD")
+    assert plant_group("arducopter", "POSHOLD") != plant_group("arducopter", "LOITER")  # a velocity stick
+
+
+def test_the_readme_and_the_glossary_name_every_plant_group_and_both_mode_tables():
+    # a group a mode table gives (FBWB's and a PX4 plane's ALTCTL `bank+climb`, SPORT's `rate+climb`) is a name
+    # `fit -o` writes into a file name and `--plant-group` takes: the README and the glossary list each, and both
+    # tables (the README said "one table, adapters.modes.STICKS" after FIXED_WING_STICKS was added)
+    from pathlib import Path
+
+    from adapters.modes import FIXED_WING_STICKS
+
+    repo = Path(__file__).resolve().parents[2]
+    readme = (repo / "README.md").read_text(encoding="utf-8")
+    glossary = next(line for line in (repo / "docs" / "architecture.md").read_text(encoding="utf-8").splitlines()
+                    if line.startswith("| plant group |"))
+    used = {g for table in (*STICKS.values(), *FIXED_WING_STICKS.values()) for g in table.values()}
+    assert used <= set(PLANT_GROUPS)
+    for name in PLANT_GROUPS:
+        assert f"`{name}`" in readme, name
+        assert f"`{name}`" in glossary, name
+    for table in ("adapters.modes.STICKS", "adapters.modes.FIXED_WING_STICKS"):
+        assert table in readme and table in glossary, table
+
+
 def test_a_log_flown_in_two_modes_gives_a_plant_per_group_with_what_each_stick_commands(copter_bin):
     ds = adapters.load(copter_bin, "ardupilot_manual")
     assert [(d.meta["mode"], d.meta["plant_group"]) for d in ds] == [("STABILIZE", "angle")] * 2 + [

@@ -101,3 +101,16 @@ def test_a_loop_slightly_outside_whose_rollout_stays_in_range_keeps_its_number(f
     scores = heldout_scores(table)
     assert np.isfinite(scores["value"]).all() and (scores["note"] == "").all()
     assert scored(table) is table
+
+
+def test_a_rollout_that_diverges_beside_a_loop_judged_stable_says_both(fitted):
+    # log_86 (a PX4 POSCTL flight) printed "diverges (ρ̂ 0.9864 [0.981, 0.992])": a reader sees a stable loop called
+    # diverging. The rule is the rollout's range, so both stand; the note says so instead of leaving a contradiction.
+    model, test = fitted
+    bad, rho = _with_loop(model, -0.3)
+    bad.stability_ = Stability(rho=0.5 * rho, lo=0.4 * rho, hi=0.6 * rho, verdict="stable")
+    assert bad.stability_.hi < 1.0
+    table = ev.compare({"proposed": bad, "ioc_only": model}, test, n_steps=150, starts=20)
+    note = notes(table)[(str(test[0].label), "proposed")]
+    s = bad.stability_
+    assert note == f"diverges though its loop is stable (ρ̂ {s.rho:.4g} [{s.lo:.3g}, {s.hi:.3g}])"

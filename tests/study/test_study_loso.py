@@ -7,6 +7,7 @@ import pytest
 
 from workbench import LinearSystem
 from workbench.cli import main
+from workbench.errors import ModelError
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_landings
 from workbench.study.pipeline import run_loso
@@ -87,3 +88,95 @@ def test_the_folds_are_the_method_level_comparison_of_the_headline(few):
     text = res.stats_text
     assert f"the {n} leave-one-out folds of each strategy's trials" in text
     assert all("leave-one-out folds" in line for line in res.verdicts() if "as a method" in line)
+
+
+def _u1_only_in_first(ds, n):
+    """The first ``n`` trials of ``ds`` with the first input at 0 throughout in all but the first: the fold that
+    tests the first trial trains on trials whose u1 never moves, so its plant cannot be identified."""
+    demos = list(ds)[:n]
+    still = [type(d)(d.t, d.x, np.column_stack([np.zeros(len(d.t)), d.u[:, 1:]]), d.meta) for d in demos[1:]]
+    return ds.with_demos([demos[0], *still])
+
+
+@pytest.fixture(scope="module")
+def one_left_out(few):
+    """The four landings with u1 moving in the first only, left one out at a time with an identified plant."""
+    ds = _u1_only_in_first(few, len(few))
+    return ds, run_loso(ds, LinearSystem.identify, **FAST)
+
+
+def test_a_fold_whose_training_trials_cannot_be_fitted_is_left_out_and_the_others_scored(one_left_out):
+    """One fold's identification refuses (u1 never moves without its test trial): that fold is named with its
+    cause and the other folds are scored and compared, the method-level rows on the folds that were scored."""
+    ds, res = one_left_out
+    [fold] = res.folds_left_out
+    assert (fold.index, fold.total, fold.trial) == (1, len(ds), ds.ids[0])
+    assert f"{ds.input_names[0]} never moves" in fold.reason
+    with pytest.raises(Exception, match="never moves"):  # the cause is identify's own refusal on those trials
+        LinearSystem.identify(ds.with_demos(list(ds)[1:]))
+    assert set(res.rmse["trial"]) == set(ds.ids[1:]) and set(res.plants) == set(ds.ids[1:])
+    assert res.verdicts()[0] == fold.sentence()
+    assert fold.sentence().startswith(f"Fold 1 of {len(ds)} (testing {ds.ids[0]}) left out")
+    d = res.statistics.method_difference("CS1", "persistence")
+    # the scored folds are the splits; each trained on all trials but one, the left-out fold's trial among them
+    assert (d.n_splits, d.n_train, d.n_test) == (len(ds) - 1, len(ds) - 1, 1) and d.lo == d.lo
+    assert f"the {len(ds) - 1} of {len(ds)} leave-one-out folds" in d.splits_words()
+
+
+def test_the_report_names_the_fold_left_out(one_left_out, tmp_path):
+    from workbench.report.markdown import write_study_report
+
+    ds, res = one_left_out
+    text = " ".join(write_study_report(res, tmp_path / "r", vector=False).read_text().split())
+    assert f"1 of {len(ds)} folds left out, their training trials could not be fitted (fold 1, testing {ds.ids[0]})" \
+        in text
+    assert res.folds_left_out[0].sentence() in text
+
+
+def test_one_scored_fold_compares_the_methods_in_words_not_numbers(few):
+    """Two trials, one fold left out: one fold remains, too few for an interval (the corrected t's J − 1 df), so
+    the methods are not compared and the verdicts say so in words, with no difference anywhere."""
+    from workbench.study.method_level import MIN_SPLITS
+
+    ds = _u1_only_in_first(few, 2)
+    res = run_loso(ds, LinearSystem.identify, **FAST)
+    assert [f.index for f in res.folds_left_out] == [1]
+    assert res.statistics.method_level == () and res.statistics.headline == ()
+    lines = res.verdicts()
+    assert lines[0] == res.folds_left_out[0].sentence()
+    assert lines[1].startswith("On CS1, only 1 of the 2 folds was scored: the methods are not compared")
+    assert f"at least {MIN_SPLITS} scored folds" in lines[1]
+    assert not any("%" in line for line in lines)  # no difference, no interval stated
+
+
+def test_no_fold_fitted_stops_naming_each_fold(few):
+    ds = few.with_demos([type(d)(d.t, d.x, np.column_stack([np.zeros(len(d.t)), d.u[:, 1:]]), d.meta)
+                         for d in list(few)[:3]])
+    with pytest.raises(ModelError, match=r"no fold of the 3 could be fitted: fold 1 .*fold 3 .*u1 never moves"):
+        run_loso(ds, LinearSystem.identify, **FAST)
+
+
+def test_a_bug_inside_a_fold_is_not_taken_for_a_refusal(few):
+    """Only the workbench's refusals (DataError, ModelError) leave a fold out; anything else is a bug and stops."""
+    first = few.ids[0]
+
+    def plant(train):
+        if first not in train.ids:
+            raise RuntimeError("a bug")
+        return planar_quadrotor()
+
+    with pytest.raises(RuntimeError, match="a bug"):
+        run_loso(few, plant, **FAST)
+
+
+def test_evaluate_scores_the_folds_that_can_be_fitted_and_names_the_one_left_out(few, tmp_path, capsys):
+    path = tmp_path / "two.parquet"
+    ds = _u1_only_in_first(few, 2)
+    ds.save(path)
+    code = main(["evaluate", str(path), "--plant", "identify", "--horizon", "1", "--n-components", "2",
+                 "--samples", "0"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert code == 0
+    assert f"Fold 1 of 2 (testing {ds.ids[0]}) left out: its training trials could not be fitted" in out
+    assert "On CS1, only 1 of the 2 folds was scored: the methods are not compared" in out
+    assert "over 1 folds; 1 fold left out, no plant from its training segments (below)" in out

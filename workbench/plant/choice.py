@@ -10,6 +10,7 @@ import functools
 from collections.abc import Callable
 
 from workbench.data.demonstrations import DemonstrationSet
+from workbench.data.plant_groups import plant_groups
 from workbench.defaults import HORIZON_S
 from workbench.errors import DataError
 from workbench.plant.system import LinearSystem, planar_quadrotor
@@ -22,16 +23,22 @@ PLANT_CHOICES = ("auto", "paper", "identify")
 def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = HORIZON_S) -> LinearSystem:
     """The plant (A, B) for ``ds``: the paper's planar quadrotor, or identified from the data by least squares.
 
-    ``auto`` takes the paper's model for data in its layout and at its step (the sample logs), and identifies
-    (A, B) otherwise — a real vehicle is not the paper's linearized 0.25 kg quadrotor. Identification is
-    kinematic (position rows fixed, :mod:`workbench.plant.identification`) whenever the data's roles pair positions
-    with velocities, and its report checks ``horizon_s`` seconds ahead.
+    ``auto`` takes the paper's model for data in its layout and at its step (the sample logs, simulated and
+    collected trials), and identifies (A, B) otherwise — a real vehicle is not the paper's linearized 0.25 kg
+    quadrotor, and trials flown in a vehicle's flight mode (each with a plant group) are a real vehicle's.
+    Identification is kinematic (position rows fixed, :mod:`workbench.plant.identification`) whenever the data's
+    roles pair positions with velocities, and its report checks ``horizon_s`` seconds ahead.
     """
     if choice not in PLANT_CHOICES:
         raise DataError(f"unknown plant choice {choice!r}; known: {', '.join(PLANT_CHOICES)}")
     paper = planar_quadrotor()
     layout = tuple(ds.state_names) == paper.state_names and len(ds.input_names) == paper.m
-    if choice == "paper" or (choice == "auto" and layout and abs(ds.dt - paper.dt) < 1e-9):
+    # A trial flown in a vehicle's flight mode (a plant group: what a real autopilot's stick commands) comes from a
+    # real vehicle, whatever its layout and step: a PX4 ULog through px4_manual is in the paper's layout at its
+    # 0.05 s, and got the paper's 0.25 kg quadrotor, whose inputs are thrusts, not sticks (luk8426/flugdrohne's
+    # flights: ρ(A + BK̂) 1.18-1.38 on it, about 1 on their own identified plant).
+    flown = any(group is not None for group in plant_groups(ds))
+    if choice == "paper" or (choice == "auto" and layout and abs(ds.dt - paper.dt) < 1e-9 and not flown):
         if not layout:
             raise DataError(
                 f"--plant paper needs states {list(paper.state_names)} and {paper.m} inputs; "

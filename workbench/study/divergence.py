@@ -89,27 +89,30 @@ def _labelled(table: pd.DataFrame) -> pd.DataFrame:
     return table.assign(label=label)
 
 
-def _rho_words(table: pd.DataFrame, label: str, method: str, trials: set) -> str:
-    """ρ̂ [lo, hi] of the loop behind the largest ρ̂ among ``trials`` (each fold's own model), or ""."""
+def _rho_words(table: pd.DataFrame, label: str, method: str, trials: set) -> tuple[str, bool]:
+    """ρ̂ [lo, hi] of the loop behind the largest ρ̂ among ``trials`` (each fold's own model), or "", and whether
+    that loop's whole interval lies inside the unit circle."""
     t = table[(table["label"] == label) & (table["method"] == method) & table["metric"].isin(LOOP_RHO)
               & table["trial"].isin(list(trials))]
     if t.empty:
-        return ""
+        return "", False
     per = t.groupby(["trial", "metric"], sort=False)["value"].first().unstack("metric")
     if LOOP_RHO[0] not in per.columns:
-        return ""
+        return "", False
     top = per.sort_values(LOOP_RHO[0], ascending=False).iloc[0]
     rho, lo, hi = (float(top.get(m, np.nan)) for m in LOOP_RHO)
     if np.isfinite(lo) and np.isfinite(hi):
-        return f"ρ̂ {rho:.4g} [{lo:.3g}, {hi:.3g}]"
-    return f"ρ̂ {rho:.4g}, no interval"
+        return f"ρ̂ {rho:.4g} [{lo:.3g}, {hi:.3g}]", hi < 1.0
+    return f"ρ̂ {rho:.4g}, no interval", False
 
 
 def notes(table: pd.DataFrame) -> dict[tuple[str, str], str]:
     """Per ``(label, method)`` whose mean rollout diverged in any window: the words shown in place of each of its
     horizon scores, e.g. ``"diverges (ρ̂ 1.052 [0.999, 1.1])"`` where it diverged on every test trial, ``"diverges
     on 1 of 2 trials (ρ̂ 1.052 [0.999, 1.1])"`` where not (the loop of the fold with the largest ρ̂ among the
-    trials that diverged; no ρ̂ for a model without a judged loop). Empty for a table without ``diverged`` rows."""
+    trials that diverged; no ρ̂ for a model without a judged loop), ``"diverges though its loop is stable (ρ̂ 0.986
+    [0.981, 0.992])"`` where that loop's whole interval lies inside the unit circle. Empty for a table without
+    ``diverged`` rows."""
     if table is None or not len(table) or DIVERGED not in set(table["metric"]):
         return {}
     t = _labelled(table)
@@ -120,9 +123,12 @@ def notes(table: pd.DataFrame) -> dict[tuple[str, str], str]:
         bad = v[v > 0]
         if bad.empty:
             continue
-        rho = _rho_words(t, str(label), str(method), set(bad.index.get_level_values("trial")))
+        rho, stable = _rho_words(t, str(label), str(method), set(bad.index.get_level_values("trial")))
         where = "" if len(bad) == len(v) else f" on {len(bad)} of {len(v)} trials"
-        out[(str(label), str(method))] = f"diverges{where}" + (f" ({rho})" if rho else "")
+        # a loop inside the unit circle beside "diverges" reads as a contradiction unless it is named: the rule is
+        # the rollout's range, and what carries a stable loop's mean off is not its gain
+        though = " though its loop is stable" if stable else ""
+        out[(str(label), str(method))] = f"diverges{where}{though}" + (f" ({rho})" if rho else "")
     return out
 
 

@@ -49,7 +49,7 @@ from workbench.study.divergence import scored
 from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
 
 __all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "corrected_t", "split_scores", "split_tasks",
-           "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS"]
+           "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS"]
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
@@ -59,6 +59,10 @@ FLOOR_METHODS = tuple(m.name for m in REGISTRY if m.floor)
 #: and 10 splits of the same runs covered alike, and 6 splits cost a quarter less than 8 (each split reruns the
 #: default model's cross-validation) for intervals about 1.15x as wide (t on 5 df: the conservative side).
 SPLITS = 6
+#: Fewest scored splits (or folds) a method-level row is made from: the corrected resampled t has ``J − 1`` degrees
+#: of freedom, so one split gives no spread and no interval (:func:`corrected_t`); with fewer there is no row, and a
+#: leave-one-out study says so in words (:class:`workbench.study.folds.LeftOutFold`).
+MIN_SPLITS = 2
 #: The design of a leave-one-out study's method-level rows (:attr:`MethodDifference.design`).
 LOO_FOLDS = "leave-one-out folds"
 #: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).
@@ -123,6 +127,10 @@ class MethodDifference:
         """"8 random splits of the trials" or "the 5 leave-one-out folds of the trials, each left out once";
         ``whose`` instead of "the" before the units."""
         if self.loo:
+            folds = self.n_train + self.n_test  # one per trial; a fold whose training part failed is not scored
+            if self.n_splits < folds:
+                return (f"the {self.n_splits} of {folds} leave-one-out folds of {whose} {self.units} that could be "
+                        "fitted, each testing one")
             return f"the {self.n_splits} leave-one-out folds of {whose} {self.units}, each left out once"
         return f"{self.n_splits} random splits of {whose} {self.units}"
 
@@ -167,7 +175,7 @@ def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float =
     c = np.asarray(changes, dtype=float)
     c = c[np.isfinite(c)]
     J = c.size
-    if J < 2:
+    if J < MIN_SPLITS:
         return (float(c.mean()) if J else np.nan), np.nan, np.nan, np.nan, np.nan, float(max(J - 1, 0))
     mean = float(c.mean())
     rho = n_test / max(n_train, 1) if overlap is None else float(overlap)
@@ -332,7 +340,7 @@ def method_differences(
                 changes.append(1.0 - ma / mb if mb > 0 else np.nan)
                 # the pooled row's split fell back where every strategy's did
                 n_fallback += bool(all(bool(fell.get((lb, j), False)) for lb in members))
-            if len(changes) < 2:
+            if len(changes) < MIN_SPLITS:
                 continue
             mean, lo, hi, p, se, df = corrected_t(changes, n_train, n_test, ci)
             what = {(units or {}).get(lb, "trials") for lb in members}
@@ -344,7 +352,8 @@ def method_differences(
 
 
 def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed", ci: float = 95.0,
-                     fell_back: Mapping[str, bool] | None = None) -> list[MethodDifference]:
+                     fell_back: Mapping[str, bool] | None = None,
+                     n_train: Mapping[str, int] | None = None) -> list[MethodDifference]:
     """Method-level rows from a leave-one-out study's own folds (no refit beyond the folds'): each fold refitted
     every method on all trials of its label but one and scored that one, so fold ``j`` is a split with
     ``n_train = n − 1`` and ``n_test = 1``, and ``c_j = 1 − method / baseline`` on its trial.
@@ -362,6 +371,9 @@ def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed",
         own fold.
     fell_back : mapping trial → bool, optional
         Whether the proposed model of the fold that left each trial out fell back to ``K̂x``.
+    n_train : mapping label → int, optional
+        Training trials per fold of each label; by default one fewer than its scored trials (every fold scored).
+        Where a fold was left out (:func:`workbench.study.pipeline.run_loso`) its trial still trained the others.
     """
     rows = table[table["metric"] == metric]
     if rows.empty:
@@ -373,7 +385,8 @@ def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed",
         scores = part.assign(split=part["trial"], fell_back=part["trial"].map(
             lambda t: bool((fell_back or {}).get(str(t), False))))[
             ["label", "split", "trial", "method", "value", "fell_back"]]
-        out += method_differences(scores, {label: (n - 1, 1)}, metric, method, ci=ci, design=LOO_FOLDS)
+        size = (int(n_train[str(label)]) if n_train is not None and str(label) in n_train else n - 1, 1)
+        out += method_differences(scores, {label: size}, metric, method, ci=ci, design=LOO_FOLDS)
     return out
 
 

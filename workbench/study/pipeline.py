@@ -28,12 +28,13 @@ from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.registry import METHOD_TITLES, METHODS
 from workbench.models.selection import select_components
 from workbench.study.divergence import scored, verdict_lines
+from workbench.study.folds import TIME_SPLIT_PIECES, LeftOutFold, split_in_time, too_few_folds
 from workbench.study.method_level import FLOOR_METHODS, SPLITS, SplitJobs, SplitPlan
 from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
 __all__ = [
     "StudyResult", "run_study", "run_loso", "LOSO_BELOW", "split_in_time", "improvement_table", "verdicts",
-    "metric_unit", "plant_for",
+    "metric_unit", "plant_for", "LeftOutFold", "TIME_SPLIT_PIECES",
     "FLOOR_METHODS",
 ]
 
@@ -94,6 +95,10 @@ class StudyResult:
     #: Which trials the study was given and what choosing them left out (``workbench.data.selection``), in words;
     #: empty where nothing was chosen.
     trials: str = ""
+    #: With :func:`run_loso`: the folds whose training part could not be fitted, each with its cause; the others
+    #: are scored (:meth:`verdicts` says which were left out and, below :data:`~workbench.study.method_level.
+    #: MIN_SPLITS` scored folds of a strategy, that its methods are not compared).
+    folds_left_out: tuple[LeftOutFold, ...] = ()
 
     @property
     def rmse(self) -> pd.DataFrame:
@@ -128,7 +133,9 @@ class StudyResult:
     def verdicts(self) -> list[str]:
         """One plain sentence per label where the proposed model is not shown to beat IOC-only or persistence
         (by the interval of its paired difference), or a method could not be fitted at all."""
-        lines = [
+        lines = [fold.sentence() for fold in self.folds_left_out]
+        lines += too_few_folds(self.folds_left_out, self.test)
+        lines += [
             f"{'On ' + label + ', ' if label not in ('', 'None') else ''}{METHOD_TITLES.get(m, m)} could not be "
             f"fitted and is left out of the comparison: {reason}"
             for label, by_method in self.failures.items() for m, reason in by_method.items()
@@ -543,42 +550,6 @@ def _objective_interval(label: str, model: Any, train: DemonstrationSet, n_boot:
 
 #: Below this many trials in a label, ``evaluate`` leaves one trial out at a time instead of one random split.
 LOSO_BELOW = 10
-#: Contiguous pieces one long segment is cut into when it is all a log gives (:func:`split_in_time`).
-TIME_SPLIT_PIECES = 3
-
-
-def split_in_time(demos: DemonstrationSet, n_steps: int, pieces: int = TIME_SPLIT_PIECES) -> DemonstrationSet:
-    """One segment cut into up to ``pieces`` contiguous pieces, each longer than the ``n_steps`` horizon, so that
-    leave-one-segment-out has something to train on when a log holds a single manual segment. The pieces are
-    parts of one flight, not independent trials: a score over them says how the models do later in the same
-    flight.
-
-    Raises
-    ------
-    DataError
-        More than one segment, or one too short for two pieces longer than the horizon.
-    """
-    if len(demos) != 1:
-        raise DataError(f"a time split is for a single segment; these demonstrations have {len(demos)}")
-    d = demos[0]
-    n = len(d.t)
-    k = min(int(pieces), n // (n_steps + 2))
-    if k < 2:
-        raise DataError(
-            f"one manual segment of {d.t[-1] - d.t[0]:.1f} s ({n} samples): too short to split into two pieces "
-            f"longer than the {n_steps * demos.dt:g} s horizon, so no held-out evaluation is possible; fly longer or "
-            "shorten --horizon"
-        )
-    bounds = np.linspace(0, n, k + 1).round().astype(int)
-    t0 = float(d.meta.get("t0", 0.0))
-    parts = [
-        type(d)(d.t[a:b] - d.t[a], d.x[a:b], d.u[a:b],
-                {**d.meta, "id": f"{d.id}.t{i + 1}", "t0": t0 + float(d.t[a] - d.t[0]), "time_split": f"{i + 1}/{k}"})
-        for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True))
-    ]
-    return demos.with_demos(parts)
-
-
 def run_loso(
     demos: DemonstrationSet,
     plant: Any,
@@ -603,20 +574,44 @@ def run_loso(
     comparison of the headline and the verdicts (:func:`~workbench.study.method_level.fold_differences`: every
     method refitted without each trial). ``models`` and ``baselines`` are,
     per label, those of its last fold; ``train`` is every trial of a label (each trains in all folds but its own).
+
+    A fold whose training part cannot be fitted (a :class:`~workbench.errors.DataError` or
+    :class:`~workbench.errors.ModelError` there: e.g. the plant's identification refuses because an input never
+    moves in the other trials) is left out with its cause (``folds_left_out``, said first in
+    :meth:`StudyResult.verdicts`) and the other folds are scored; below
+    :data:`~workbench.study.method_level.MIN_SPLITS` scored folds a strategy's methods are not compared, in words.
+    Any other exception is a bug and propagates.
+
+    Raises
+    ------
+    ModelError
+        No fold could be fitted (each fold's cause named).
     """
 
     folds: list[tuple[str, StudyResult]] = []
+    left_out: list[LeftOutFold] = []
     bar = progress() if progress is not None else nullcontext()
     with bar as p:
         what = f"fitting and comparing, leave-one-segment-out ({len(demos)} folds)"
         bar = p.add_task(what, total=len(demos)) if p is not None else None
-        for d in demos:
-            res = run_study(demos, plant, n_steps=n_steps, n_components=n_components, samples=samples,
-                            efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s,
-                            task=task)
-            folds.append((d.id, res))
+        for i, d in enumerate(demos):
+            try:
+                res = run_study(demos, plant, n_steps=n_steps, n_components=n_components, samples=samples,
+                                efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s,
+                                task=task)
+            except (DataError, ModelError) as exc:
+                # a refusal of this fold's training part (a plant the other trials do not identify: an input that
+                # never moves without this trial, say) is this fold's, not the study's: the other folds are scored
+                # and the fold is named with its cause; anything else is a bug and stays loud
+                left_out.append(LeftOutFold(i + 1, len(demos), d.id,
+                                            UNLABELED if d.label is None else str(d.label), " ".join(str(exc).split())))
+            else:
+                folds.append((d.id, res))
             if p is not None:
                 p.advance(bar)
+    if not folds:
+        raise ModelError(f"no fold of the {len(demos)} could be fitted: "
+                         + "; ".join(f"fold {f.index} (testing {f.trial}): {f.reason}" for f in left_out))
     failures: dict[str, dict[str, str]] = {}
     for trial, res in folds:
         for label, by_method in res.failures.items():
@@ -644,7 +639,11 @@ def run_loso(
     # whether each fold's proposed model fell back to K̂x, by the trial the fold left out
     fell_back = {trial: bool(m.chooses_settings and m.auto_ is not None and m.auto_.fallback)
                  for trial, r in folds for m in r.models.values()}
-    method_level = tuple(fold_differences(scored(table), primary_metric(last_plant), fell_back=fell_back)) or None
+    # every fold trains on all of its label's trials but one, also where another fold was left out
+    n_train = {UNLABELED if lb is None else str(lb): len(demos if lb is None else demos.by_label(lb)) - 1
+               for lb in (demos.labels or [None])}
+    method_level = tuple(fold_differences(scored(table), primary_metric(last_plant), fell_back=fell_back,
+                                          n_train=n_train)) or None
     statistics = _statistics(table, demos, last_plant, n_steps, stride, seed, method_level)
     # per label the models of its last fold (a fold holds only the label of the trial it leaves out)
     models = {lb: m for _, r in folds for lb, m in r.models.items()}
@@ -657,6 +656,7 @@ def run_loso(
         failures=failures, plants={trial: r.plant for trial, r in folds}, stride_steps=stride,
         statistics=statistics, calibration_check=_check([r.calibration_counts for _, r in folds
                                                          if r.calibration_counts is not None]),
+        folds_left_out=tuple(left_out),
     )
 
 
