@@ -49,10 +49,12 @@ __all__ = ["Draft", "draft_mapping", "BIN_CHANNELS"]
 
 _DEG = math.pi / 180.0
 #: DataFlash (.bin) names of the planar channels, newest EKF first (XKF1: EKF3, NKF1: EKF2, EKF1: the old EKF).
-#: Positions and velocities in the heading frame (x across the vehicle), which the body roll ATT.Roll (degrees)
-#: accelerates whatever the heading.
+#: Velocities in the heading frame (x across the vehicle), which the body roll ATT.Roll (degrees) accelerates
+#: whatever the heading, and the position across as their running integral.
 BIN_CHANNELS: dict[str, list[Channel]] = {
-    "x": [Channel("x", Selector(f"{s}.Yaw,PN,PE"), transform="heading_right") for s in ("XKF1", "NKF1", "EKF1")],
+    # x: the running integral of xdot (the rotated position's rate is not xdot on a vehicle that turns)
+    "x": [Channel("x", Selector(f"{s}.Yaw,VN,VE"), transform="heading_right", integrates="xdot")
+          for s in ("XKF1", "NKF1", "EKF1")],
     "y": [Channel("x", Selector(f"{s}.PD"), transform="ned_up") for s in ("XKF1", "NKF1", "EKF1")],
     "phi": [Channel("phi", Selector("ATT.Roll"), scale=_DEG)],
     "xdot": [Channel("xdot", Selector(f"{s}.Yaw,VN,VE"), transform="heading_right") for s in ("XKF1", "NKF1", "EKF1")],
@@ -184,6 +186,8 @@ def _toml_value(v: object) -> str:
 
 
 def _channel_toml(ch: Channel) -> str:
+    if ch.integrates is not None:  # its sources are its state's, which that state's line names
+        return _toml_value({"integrate": ch.integrates})
     table: dict[str, object] = {"source": ch.selector.source}
     if ch.selector.where:
         table["where"] = dict(ch.selector.where)

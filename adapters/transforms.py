@@ -34,6 +34,12 @@ name                      columns    channel
 A vehicle that turns while it flies (the real ArduCopter flight in ``../shared/external`` yaws through several
 full turns) leans east with its roll only when it points north: a planar east–up model needs the tilt, not
 the body roll, or the east velocity's response to the angle comes out a fraction of g·dt.
+
+``heading_right`` and ``heading_forward`` are for velocities. A position rotated into the heading frame moves
+with the turn as well as with the flight (its rate is ``v_right − ψ̇·p_forward``, not ``v_right``), which no
+plant's kinematic row ``p[k+1] = p[k] + dt·v[k]`` holds: a mapping declares that position as its velocity's
+running integral instead, ``x = { integrate = "xdot" }`` (:mod:`adapters.mapping`; a transform sees one sample at
+a time and no segment, so the integral is the pipeline's, :func:`adapters.pipeline.integrate`).
 """
 
 from __future__ import annotations

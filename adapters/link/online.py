@@ -336,6 +336,9 @@ class OnlineAligner:
         inputs = set(m.input_names)
         order = {name: i for i, name in enumerate((*m.state_names, *m.input_names))}
         self._channels = [_Buffer(c.name, c.name in inputs) for c in sorted(m.channels, key=lambda c: order[c.name])]
+        #: (integrated state, its rate) indices and the running integrals (adapters.pipeline.integrate)
+        self._integrals = [(order[c.name], order[c.integrates]) for c in m.channels if c.integrates is not None]
+        self._running = np.zeros(len(self._integrals))
         for ch, buf in zip(sorted(m.channels, key=lambda c: order[c.name]), self._channels, strict=True):
             self._listen(ch.selector, streams, f"channel {ch.name!r}", TRANSFORMS[ch.transform].n_columns,
                          self._channel_handler(ch, buf))
@@ -582,6 +585,7 @@ class OnlineAligner:
     def _emit(self, t: float) -> AlignedStep | None:
         values = np.array([buf.value(t, self.tol) for buf in self._channels])
         x, u = values[: self.n], values[self.n :]
+        start = False
         if self._landing_index is not None:  # adapters.segment.split_at_landing, one step at a time
             landed = bool(x[self._landing_index] <= self.mapping.segment.landing.below)
             if not self._in_flight:
@@ -589,10 +593,16 @@ class OnlineAligner:
                     self.skipped["samples on the ground"] += 1
                     return None
                 self._in_flight = True
-                self._new_flight(t, x)
+                start = True
             elif landed:
                 self._in_flight = False  # touchdown: included, the flight's last step
         elif self._x0 is None:
+            start = True
+        if start:
+            self._running = np.zeros(len(self._integrals))
+        for k, (i, j) in enumerate(self._integrals):  # adapters.pipeline.integrate, one step at a time
+            x[i], self._running[k] = self._running[k], self._running[k] + self.dt * x[j]
+        if start:
             self._new_flight(t, x)
         step = AlignedStep(self._id, self.n_segments - 1, self._step, t, self._t0, x, u, self._x0,
                            dict(self._meta), self._arrival)
