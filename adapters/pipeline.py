@@ -397,19 +397,21 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
             f"be identified from it")
 
 
-def integrate(m: ChannelMapping, t: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """``values`` (a kept piece on the grid ``t``, channels in state-then-input order) with each integrated channel
-    (:attr:`~adapters.rules.Channel.integrates`) the running integral of its state, from 0 at the piece's start:
-    ``c[0] = 0``, ``c[k+1] = c[k] + (t[k+1] − t[k])·v[k]``, the plant's kinematic row ``p[k+1] = p[k] + dt·v[k]``
-    (:mod:`workbench.plant.identification`) to the last bit. The origin is arbitrary, as a free flight's absolute
-    position is (nobody regulates it: :mod:`workbench.data.pilot_task`)."""
+def integrate(m: ChannelMapping, values: np.ndarray) -> np.ndarray:
+    """``values`` (a kept piece on the mapping's ``dt`` grid, channels in state-then-input order) with each integrated
+    channel (:attr:`~adapters.rules.Channel.integrates`) the running integral of its state, from 0 at the piece's
+    start: ``c[0] = 0``, ``c[k+1] = c[k] + dt·v[k]``, the plant's kinematic row ``p[k+1] = p[k] + dt·v[k]``
+    (:mod:`workbench.plant.identification`) to the last bit, and what the live path sums step by step
+    (:class:`adapters.link.online.OnlineAligner`; the grid's own differences would carry the log clock's rounding,
+    1e-7 s at an epoch clock). The origin is arbitrary, as a free flight's absolute position is (nobody regulates it:
+    :mod:`workbench.data.pilot_task`)."""
     names = (*m.state_names, *m.input_names)
     pairs = [(names.index(c.name), names.index(c.integrates)) for c in m.channels if c.integrates is not None]
     if not pairs:
         return values
     out = values.copy()
     for k, j in pairs:
-        out[:, k] = np.concatenate([[0.0], np.cumsum(np.diff(t) * values[:-1, j])])
+        out[:, k] = np.concatenate([[0.0], np.cumsum(m.dt * values[:-1, j])])
     return out
 
 
@@ -482,7 +484,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                     skipped["pieces shorter than min_duration"] += 1
                     continue
                 kept_t.append(t)
-                kept_v.append(integrate(m, t, piece.values[i:j]))
+                kept_v.append(integrate(m, piece.values[i:j]))
         if kept_t:
             found.append((span, kept_t, kept_v))
     if not found and flips:

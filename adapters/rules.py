@@ -55,8 +55,8 @@ class Channel:
     #: each with its own conversion); writers and the online path use the first
     alternatives: tuple[Channel, ...] = ()
     #: the state this channel is the running integral of (a mapping's ``integrate = "xdot"``), from 0 at each
-    #: demonstration's start, ``c[0] = 0``, ``c[k+1] = c[k] + dt·v[k]`` (the plant's kinematic row); its selector and
-    #: conversion are that state's. ``None``: the converted source itself.
+    #: demonstration's start: ``c[0] = 0``, ``c[k+1] = c[k] + dt·v[k]`` with the mapping's dt (the plant's kinematic
+    #: row); its selector and conversion are that state's. ``None``: the converted source itself.
     integrates: str | None = None
 
     @property

@@ -434,11 +434,13 @@ class OnlineAligner:
         self._by_key = by_key
         if len(loose) > self._n_loose:  # a marker without a demo key: the segment in progress, else the next
             for _, meta in loose[self._n_loose:]:
+                if self._integrals:  # a goal in the log's frame, not the integrated state's (adapters.pipeline)
+                    meta = {k: v for k, v in meta.items() if k != "target"}
                 (self._meta if self._meta is not None else self._pending_loose).update(meta)
         self._n_loose = len(loose)
         if self._meta is not None and self._meta.get("demo") in by_key:  # e.g. a target sent after the start
             extra = {k: v for k, v in by_key[self._meta["demo"]].items() if k != "id"}
-            if "target" in extra and not _valid_target(extra["target"], self.n):
+            if "target" in extra and (self._integrals or not _valid_target(extra["target"], self.n)):
                 extra.pop("target")
             self._meta.update(extra)
 
@@ -649,4 +651,7 @@ class OnlineAligner:
         if target is not None and not _valid_target(target, self.n):
             meta.pop("target")
             self.skipped["invalid targets"] += 1
+        elif target is not None and self._integrals:  # as offline (adapters.pipeline.build): no made-up goal
+            meta.pop("target")
+            self.skipped["targets (a position is integrated from 0 per demonstration)"] += 1
         return meta
