@@ -32,17 +32,19 @@ PX4_NAV_STATE = {
 
 #: What the pilot's sticks command in each pilot-flown mode, per mode table: the mode's plant group
 #: (:mod:`workbench.data.plant_groups`). ArduCopter's, ArduPlane's (with the QuadPlane's Q modes) and PX4's flight-mode
-#: documentation: the roll stick commands a lean angle in STABILIZE, ALT_HOLD, QSTABILIZE, QHOVER and PX4's
-#: multicopter MANUAL / STABILIZED / ALTCTL, and in ArduCopter's POSHOLD and FLOWHOLD ("the pilot stick inputs
-#: directly control the vehicle's lean angle", ardupilot.org/copter/docs/poshold-mode.html and flowhold-mode.html;
-#: their throttle as in ALT_HOLD); a roll rate in ACRO (SPORT with a climb rate); a velocity in LOITER, QLOITER and
-#: POSCTL; a plane's MANUAL, STABILIZE and TRAINING move its control surfaces, its FBWA a bank angle (FBWB and CRUISE
-#: with a climb rate; ardupilot.org/plane/docs/flight-modes.html). The throttle commands a climb rate wherever the
-#: autopilot holds the altitude. PX4's modes here are the multicopter's; a PX4 plane's are :data:`FIXED_WING_STICKS`.
-#: A kept mode not listed here gets a plant of its own, named after the mode (:func:`plant_group`).
+#: documentation: the roll stick commands a lean angle in STABILIZE, ALT_HOLD, QSTABILIZE, QHOVER and PX4's multicopter
+#: MANUAL / STABILIZED / ALTCTL, and in ArduCopter's POSHOLD and FLOWHOLD ("the pilot stick inputs directly control the
+#: vehicle's lean angle", ardupilot.org/copter/docs/poshold-mode.html and flowhold-mode.html; their throttle as in
+#: ALT_HOLD, but centred sticks brake and hold the position, so a group of their own, ``angle+climb+brake``, not
+#: ALT_HOLD's); a roll rate in ACRO (SPORT with a climb rate); a velocity in LOITER, QLOITER and POSCTL; a plane's
+#: MANUAL, STABILIZE and TRAINING move its control surfaces, its FBWA a bank angle (FBWB and CRUISE with a climb rate;
+#: ardupilot.org/plane/docs/flight-modes.html). The throttle commands a climb rate wherever the autopilot holds the
+#: altitude. PX4's modes here are the multicopter's; a PX4 plane's are :data:`FIXED_WING_STICKS`. A kept mode not listed
+#: here gets a plant of its own, named after the mode (:func:`plant_group`).
 STICKS: dict[str, dict[str, str]] = {
     "arducopter": {"STABILIZE": "angle", "ALT_HOLD": "angle+climb", "LOITER": "velocity+climb",
-                   "POSHOLD": "angle+climb", "FLOWHOLD": "angle+climb", "ACRO": "rate", "SPORT": "rate+climb"},
+                   "POSHOLD": "angle+climb+brake",
+                   "FLOWHOLD": "angle+climb+brake", "ACRO": "rate", "SPORT": "rate+climb"},
     "arduplane": {"MANUAL": "surface", "STABILIZE": "surface", "TRAINING": "surface", "FBWA": "bank",
                   "FBWB": "bank+climb", "CRUISE": "bank+climb", "QSTABILIZE": "angle", "QHOVER": "angle+climb",
                   "QLOITER": "velocity+climb", "QACRO": "rate"},
@@ -88,9 +90,6 @@ def autopilot_holds(table: str | None, mode: str, fixed_wing: bool = False) -> s
 #: states back is explained by the mode.
 AUTOPILOT_HOLDS = {mode: PLANT_GROUPS[group].holds for groups in STICKS.values() for mode, group in groups.items()
                    if PLANT_GROUPS[group].holds}
-# POSHOLD and FLOWHOLD: a lean-angle stick, yet once it is centred the autopilot brakes and holds the position (from
-# the GPS, or the optical flow) as LOITER does, and the altitude as ALT_HOLD does
-AUTOPILOT_HOLDS.update(POSHOLD="the position and the altitude", FLOWHOLD="the position and the altitude")
 
 
 def _px4_custom_modes() -> dict[int, str]:

@@ -279,13 +279,33 @@ def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
     if not still:
         return ""
     channels = {c.name: c for c in m.channels}
-    parts = [f"{s.name} ({resolve_channel(channels[s.name], streams).selector.describe()}) constant "
-             f"{float(s.v[0]):g} in all {s.t.size} samples" for s in still]
+    parts = [_still_words(s, resolve_channel(channels[s.name], streams), streams) for s in still]
     if {s.name for s in still} & set(m.roles.velocity):
         cause = "the estimator reports no motion at all in this log (not running, or never aligned)"
     else:
         cause = "no position source in this log (no GPS position: the estimator holds its position at its origin)"
     return f"{streams.path}: mapping {m.name!r}: {'; '.join(parts)} — {cause}, so there is nothing to fit"
+
+
+def _still_words(s: Series, ch: Channel, streams: Streams) -> str:
+    """``"x constant 0 in all 636 samples: its fields vehicle_local_position.x, y never change (heading does)"``.
+
+    A channel computed from several fields (a position turned into the heading's frame) names the fields that
+    hold still, so "x (…heading,x,y) constant" does not read as if the heading were constant."""
+    head = f"{s.name} constant {float(s.v[0]):g} in all {s.t.size} samples"
+    try:
+        sel = select(ch.selector, streams, f"channel {ch.name!r}", "", n_columns=TRANSFORMS[ch.transform].n_columns)
+    except MappingError:
+        return f"{head} ({ch.selector.describe()})"
+    if len(sel.columns) < 2:
+        return f"{head} ({sel.stream}.{sel.columns[0]})" if sel.columns else f"{head} ({ch.selector.describe()})"
+    still = [c for c in sel.columns if np.ptp(numeric(sel.frame, c)[sel.rows]) == 0.0]
+    moving = [c for c in sel.columns if c not in still]
+    if not still:  # the fields move, their combination does not
+        return f"{head} (from {sel.stream}.{', '.join(sel.columns)}, each of which changes)"
+    text = (f"{head}: its field{'s' if len(still) > 1 else ''} {sel.stream}.{', '.join(still)} "
+            f"never change{'' if len(still) > 1 else 's'}")
+    return text + (f" ({', '.join(moving)} {'does' if len(moving) == 1 else 'do'})" if moving else "")
 
 
 #: A flight's GPS speed must pass this many times the receiver's velocity accuracy somewhere in its kept segments for

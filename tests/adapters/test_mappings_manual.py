@@ -278,9 +278,9 @@ def _copter_bin(tmp_path, name, edit):
 
 def test_a_position_that_never_moves_is_named_at_import(tmp_path):
     # An ArduCopter flown without GPS logs EKF1.PN/PE as 0.0 throughout (erlerobot/logs pxf/copter/6-3-2014/5.BIN);
-    # the fit used to stop at "the data excite only 7 of 8 directions" instead of saying so.
-    # Its x is the integral of its velocity (issue 41), so the position is checked where the mapping reads one: the
-    # tlog's LOCAL_POSITION_NED.y, east.
+    # the fit used to stop at "the data excite only 7 of 8 directions" instead of saying so. The shipped mapping's x
+    # is the integral of its velocity (issue 41), so the position is checked where a mapping reads one: here the
+    # EKF's east position.
     def no_gps(streams, options):
         streams["EKF1"]["PN"] = 0.0
         streams["EKF1"]["PE"] = 0.0
@@ -291,7 +291,7 @@ def test_a_position_that_never_moves_is_named_at_import(tmp_path):
     mapping = tmp_path / "east.toml"  # the DataFlash channels with the EKF's east position for x
     with open(m.path, encoding="utf-8") as f:
         mapping.write_text(f.read().replace('x = { integrate = "xdot" }', 'x = "EKF1.PE"'))
-    with pytest.raises(DataError, match=r"x \(EKF1\.PE\) constant 0 in all \d+ samples — no position source"):
+    with pytest.raises(DataError, match=r"x constant 0 in all \d+ samples \(EKF1\.PE\) — no position source"):
         adapters.load(path, str(mapping))
     looked = adapters.load(path, str(mapping), allow_still=True)  # the viewer still shows it
     assert len(looked) and "no GPS position" in looked[0].meta["still"]

@@ -74,12 +74,15 @@ def test_every_mode_of_the_stick_table_is_a_mode_of_its_autopilot_and_a_known_gr
 
 def test_poshold_s_stick_commands_a_lean_angle_and_its_autopilot_holds_the_position():
     # ArduCopter's PosHold / FlowHold: "the pilot stick inputs directly control the vehicle's lean angle", the throttle
-    # as in AltHold, and the autopilot brakes and holds the position once the sticks are centred
+    # as in AltHold, and the autopilot brakes and holds the position once the sticks are centred: the stick's kind is
+    # ALT_HOLD's, the plant (vehicle and autopilot) is not, so neither is pooled with ALT_HOLD nor with LOITER
     for mode in ("POSHOLD", "FLOWHOLD"):
         group = PLANT_GROUPS[plant_group("arducopter", mode)]
         assert (group.lateral, group.throttle) == ("angle", "climb"), mode
-        assert "position" in AUTOPILOT_HOLDS[mode] and "altitude" in AUTOPILOT_HOLDS[mode], mode
-    assert plant_group("arducopter", "POSHOLD") == plant_group("arducopter", "ALT_HOLD")
+        assert group.holds == AUTOPILOT_HOLDS[mode], mode  # read off the group, as every other mode's
+        assert "position" in group.holds and "altitude" in group.holds, mode
+    assert "position" not in PLANT_GROUPS[plant_group("arducopter", "ALT_HOLD")].holds
+    assert plant_group("arducopter", "POSHOLD") != plant_group("arducopter", "ALT_HOLD")
     assert plant_group("arducopter", "POSHOLD") != plant_group("arducopter", "LOITER")  # a velocity stick
 
 

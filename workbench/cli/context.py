@@ -93,6 +93,16 @@ class Context:
         else:  # a renderable (rendered Markdown) wraps itself at the width; soft wrapping would crop its lines
             self.out.print(*parts, markup=markup)
 
+    def warn(self, text: str) -> None:
+        """A warning on standard error, where a user looks for what went wrong: on a terminal wrapped at its words
+        like :meth:`say` (the terminal's own wrapping breaks a word across lines), to a pipe or a file one line
+        that a search for ``warning:`` finds whole."""
+        line = f"warning: {text}"
+        if self.err.is_terminal:
+            self.err.print(line, markup=False, emoji=False, highlight=False, overflow="fold")
+        else:
+            print(line, file=sys.stderr)
+
     def say_table(self, header: Sequence[str], rows: Sequence[Sequence[Any]], title: str = "") -> None:
         """A table that fits the terminal, narrowed step by step before it changes form (:func:`narrowed_tables`):
         as it is; with a light frame and headers wrapped at their spaces (a cell is never broken); with

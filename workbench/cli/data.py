@@ -148,7 +148,7 @@ def _import_dataset(ctx: Context) -> int:
     for log in report.imported:
         if log.skipped:  # a damaged or partly unmapped file still gave data: say what was left out
             what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in log.skipped)
-            print(f"warning: {log.source}: skipped {what}", file=sys.stderr)
+            ctx.warn(f"{log.source}: skipped {what}")
     for source, cause in report.failures:
         print(f"error: {source}: not imported: {cause}", file=sys.stderr)
     subjects = {p.subject for log in report.imported for p in log.partitions if p.subject is not None}
@@ -162,8 +162,8 @@ def cmd_import(ctx: Context) -> int:
     if _is_dataset_output(a.output):
         return _import_dataset(ctx)
     if a.workers or a.scheduler:
-        print(f"warning: --workers and --scheduler import in parallel into a dataset (-o DIR/); {a.output} is one "
-              "file, so the logs are read here, one after another", file=sys.stderr)
+        ctx.warn(f"--workers and --scheduler import in parallel into a dataset (-o DIR/); {a.output} is one file, so "
+                 "the logs are read here, one after another")
     from adapters.batch import expand_logs
 
     out = ctx.output_path(a.output, ".parquet", "the demonstrations")  # before reading: refused on a terminal

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-import sys
 import time
 from typing import Any
 
@@ -40,7 +39,7 @@ def cmd_fit(ctx: Context) -> int:
         try:
             _fit_one(ctx, part, path)
         except (DataError, ModelError) as exc:  # one group's failure is that group's: the others still fit
-            print(f"warning: plant group {group}: not fitted: {exc}", file=sys.stderr)
+            ctx.warn(f"plant group {group}: not fitted: {exc}")
             failed.append(f"{group}: {exc}")
             continue
         written.append(path)
@@ -123,8 +122,7 @@ def _print_intervals(ctx: Context, model: Any, ds: Any, plant: Any, n_boot: int,
             run()
         except WorkbenchError as exc:
             # a warning where a user looks for what went wrong (stderr), naming the part; the model stands
-            print(f"warning: intervals not computed: {' '.join(str(exc).split())} ({what}; the model is written)",
-                  file=sys.stderr)
+            ctx.warn(f"intervals not computed: {' '.join(str(exc).split())} ({what}; the model is written)")
 
 
 def _print_gain_intervals(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: int, gain: str,
@@ -141,7 +139,7 @@ def _print_gain_intervals(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: 
     if result.n_failed:
         from workbench.method.resampling import failure_note
 
-        print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
+        ctx.warn(f"bootstrap: {failure_note(result.failures)}")
     lo, hi = result.interval(95.0)
     ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % intervals, {GAIN_INTERVAL}):")
     if result.timing is not None:
@@ -170,11 +168,11 @@ def _print_bootstrap(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: int, 
                            executor=ex, timing=timing,
                            progress=lambda done, total: progress.update(task, completed=done, total=total))
     if result.stopped:
-        print(f"warning: bootstrap {result.stopped}", file=sys.stderr)
+        ctx.warn(f"bootstrap {result.stopped}")
     elif result.n_failed:
         from workbench.method.resampling import failure_note
 
-        print(f"warning: bootstrap: {failure_note(result.failures)}", file=sys.stderr)
+        ctx.warn(f"bootstrap: {failure_note(result.failures)}")
     ctx.say(f"bootstrap ({result.n_boot - result.n_failed} of {result.n_boot} resamples fitted, {result.ci:g} % "
             f"intervals: the objective's percentiles, K̂'s {GAIN_INTERVAL}):")
     if result.timing is not None:
@@ -252,7 +250,7 @@ def _print_ratios(ctx: Context, model: Any, ds: Any, n_boot: int, seed: int, pow
             ratios, curve = with_power(model, ds, ratios, power, seed)
     g = ratios.gains
     if getattr(g, "stopped", ""):
-        print(f"warning: weight ratios' bootstrap {g.stopped}", file=sys.stderr)
+        ctx.warn(f"weight ratios' bootstrap {g.stopped}")
     ctx.say(f"weight ratios inside coupled parts (S = 0, diagonal cost closest to the {gain} gain in the metric of "
             f"its covariance over {g.n_ok} of {g.n_boot} resamples; {ratios.ci:g} % profile intervals; "
             f"forward-gain error {ratios.forward_gain_error:.2g}):")

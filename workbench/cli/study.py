@@ -8,7 +8,6 @@ import math
 import os
 import re
 import shutil
-import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -64,7 +63,7 @@ def for_each_group(ctx: Context, parts: list[tuple[str | None, Any]], done: str,
         try:
             run(group, part)
         except (DataError, ModelError) as exc:
-            print(f"warning: plant group {group}: not {done}: {exc}", file=sys.stderr)
+            ctx.warn(f"plant group {group}: not {done}: {exc}")
             failed.append(f"{group}: {exc}")
     if len(failed) == len(parts):
         raise ModelError(f"no plant group could be {done}: {'; '.join(failed)}")
@@ -188,7 +187,7 @@ def _evaluate_per_subject(ctx: Context, ds: Any, source: Any, output: Path | Non
             progress=lambda done, total: progress.update(task, completed=done), executor=ex, test_ids=recorded,
         )
     for failure in res.failures:
-        print(f"warning: {failure}", file=sys.stderr)
+        ctx.warn(f"{failure}")
     table = Table("subject", *[METHOD_TITLES.get(m, m) for m in res.groups],
                   title=f"per-subject {res.metric} ({'the recorded test trials' if recorded is not None else a.n_test}"
                         f" held-out trial(s) per {per}, {a.horizon_s:g} s horizon)")

@@ -34,7 +34,7 @@ def _log_origins(inputs: Inputs) -> dict[str, float]:
 def _warn(ctx: Context, session: Any) -> None:
     """The recording's warnings (a model that does not fit its data), on stderr where a user looks for them."""
     for w in session.warnings:
-        print(f"warning: {w}", file=sys.stderr)
+        ctx.warn(f"{w}")
 
 def _view_raw(ctx: Context, streams: Any) -> int:
     """``workbench view LOG --raw`` (or a log no mapping makes demonstrations of): the log as it is
@@ -117,7 +117,7 @@ def cmd_view(ctx: Context) -> int:
         if raw_streams is not None and not a.mapping:
             # the mapping chosen for the log's vehicle makes no demonstrations of it: the log opens as it is, with
             # the cause
-            print(f"warning: {e}; showing the raw log alone", file=sys.stderr)
+            ctx.warn(f"{e}; showing the raw log alone")
             return _view_raw(ctx, raw_streams)
         if len(inputs.sources) < 2 or " dt " not in f" {e} ":
             raise

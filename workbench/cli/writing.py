@@ -5,7 +5,6 @@ where a recording went and how to open it, and an error as one line.
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,14 +32,14 @@ def write_demos(ds: Any, out: Path, mapping: str | None = None) -> None:
 
 
 def print_plant(ctx: Context, plant: Any, note: str = "") -> None:
-    """An identified plant's report (held-out errors vs persistence, ρ, conditioning, checks); its warning on
-    stderr too, where a user looks for problems."""
+    """An identified plant's report (held-out errors vs persistence, ρ, conditioning, checks); its warning once,
+    on stderr, where a user looks for problems (on a terminal the report's own warning line would repeat it)."""
     report = getattr(plant, "identification", None)
     if report is None:
         return
-    ctx.say(str(report) + (f"\n  {note}" if note else ""))
+    ctx.say(report.describe(warning=False) + (f"\n  {note}" if note else ""))
     if report.warning:
-        print(f"warning: {report.warning}", file=sys.stderr)
+        ctx.warn(report.warning)
 
 
 def viewer_command(path: str | os.PathLike) -> str:

@@ -39,7 +39,9 @@ class PlantGroup:
     ``"thrust"``, ``"climb"`` (a climb rate) or ``"airspeed"`` (a plane whose autopilot holds the altitude: its pitch
     stick commands the climb rate, the throttle the airspeed — ArduPlane's FBWB, a PX4 plane's ALTCTL and POSCTL —
     so the throttle moves no state of the lateral plane). ``tilts``: a multirotor, which a lean accelerates sideways
-    (the g·dt physics check applies); a plane banks and turns instead.
+    (the g·dt physics check applies); a plane banks and turns instead. ``brakes``: a lean-angle stick whose autopilot
+    brakes and holds the position once it is centred (ArduCopter's POSHOLD): the vehicle and its autopilot are
+    another plant than ALT_HOLD's though the stick commands the same thing while it is moved.
     """
 
     name: str
@@ -47,11 +49,12 @@ class PlantGroup:
     throttle: str
     tilts: bool
     text: str
+    brakes: bool = False
 
     @property
     def holds(self) -> str:
         """What the autopilot, not the pilot, brings back while the sticks are centred ("" for nothing)."""
-        held = (["the position"] if self.lateral == "velocity" else []) + (
+        held = (["the position"] if self.lateral == "velocity" or self.brakes else []) + (
             ["the altitude"] if self.throttle in ("climb", "airspeed") else [])
         return " and ".join(held)
 
@@ -59,6 +62,9 @@ class PlantGroup:
 PLANT_GROUPS: Mapping[str, PlantGroup] = {g.name: g for g in (
     PlantGroup("angle", "angle", "thrust", True, "the stick commands a lean angle, the throttle thrust"),
     PlantGroup("angle+climb", "angle", "climb", True, "the stick commands a lean angle, the throttle a climb rate"),
+    PlantGroup("angle+climb+brake", "angle", "climb", True,
+               "the stick commands a lean angle, the throttle a climb rate; centred, the autopilot brakes and holds "
+               "the position", brakes=True),
     PlantGroup("velocity+climb", "velocity", "climb", True,
                "the stick commands a velocity, the throttle a climb rate"),
     PlantGroup("rate", "rate", "thrust", True, "the stick commands a roll rate, the throttle thrust"),

@@ -23,7 +23,7 @@ from workbench.errors import DataError, ModelError
 from workbench.method.closed_loop import as_matrix, check_stabilizing, plant_matrices
 
 __all__ = ['GainMethod', 'stack_demonstrations', 'iv_instruments', 'iv_relevance', 'gain_from_arrays', 'estimate_gain',
-           'GainChoice', 'choose_gain', 'IV_OR_DIRECT', 'GAIN_METHODS']
+           'GainChoice', 'choose_gain', 'IV_OR_DIRECT', 'GAIN_METHODS', 'relevance_text']
 
 GainMethod = Literal["direct", "dmd", "iv"]
 _METHODS = ("direct", "dmd", "iv")
@@ -39,6 +39,16 @@ IV_BASIS = 8
 
 # Smallest squared canonical correlation between states and instruments accepted by "iv" (see `_iv_gain`).
 IV_MIN_RELEVANCE = 0.05
+#: A relevance (a squared canonical correlation, or the timing's relevance beyond chance) within this of zero is
+#: round-off of a difference of unit-sized moments, not a measurement: printed as 0 (one trial gives −5.8e-16).
+RELEVANCE_ROUND_OFF = 1e-9
+
+
+def relevance_text(relevance: float, digits: int = 2) -> str:
+    """A relevance as printed: ``digits`` significant digits, but ``"0"`` within :data:`RELEVANCE_ROUND_OFF` of zero,
+    so no round-off is printed as though the data gave it a value or a sign (issue 40: nothing printed where
+    nothing is identified)."""
+    return "0" if abs(relevance) < RELEVANCE_ROUND_OFF else f"{relevance:.{digits}g}"
 
 
 def _demo_name(d: Any, j: int) -> str:
@@ -150,8 +160,8 @@ def _iv_gain(X: np.ndarray, U: np.ndarray, lengths: Sequence[int]) -> np.ndarray
     if relevance < IV_MIN_RELEVANCE:
         raise ModelError(
             f"the instruments of the 'iv' gain (initial states × time) leave a state direction unexcited: its "
-            f"squared canonical correlation with them is {relevance:.3g} < {IV_MIN_RELEVANCE:g}, so the starts "
-            "of the demonstrations do not move every state (e.g. all start at the same height). Use "
+            f"squared canonical correlation with them is {relevance_text(relevance, 3)} < {IV_MIN_RELEVANCE:g}, so the "
+            "starts of the demonstrations do not move every state (e.g. all start at the same height). Use "
             "demonstrations from more varied start states, or method='direct'"
         )
     return np.linalg.lstsq(X_hat.T, U.T, rcond=None)[0].T
@@ -360,7 +370,8 @@ def choose_gain(demos: Iterable[Any], plant: Any, method: str = IV_OR_DIRECT,
         X_hat, relevance = _first_stage(X, [b[0].shape[1] for b in blocks])
         if relevance < IV_MIN_RELEVANCE:
             raise ModelError(f"the instruments (initial states × time) leave a state direction unexcited: its "
-                             f"squared canonical correlation with them is {relevance:.3g} < {IV_MIN_RELEVANCE:g}")
+                             f"squared canonical correlation with them is {relevance_text(relevance, 3)} < "
+                             f"{IV_MIN_RELEVANCE:g}")
         K = np.linalg.lstsq(X_hat.T, U.T, rcond=None)[0].T
         check_stabilizing(A, B, K)
     except (ModelError, np.linalg.LinAlgError) as exc:
@@ -368,4 +379,4 @@ def choose_gain(demos: Iterable[Any], plant: Any, method: str = IV_OR_DIRECT,
         return (estimate_gain(demos, plant, "direct", check),
                 GainChoice(method, "direct", f"fallback from iv: {why}"))
     return K, GainChoice(method, "iv", f"instruments relevant: smallest squared canonical correlation "
-                                       f"{relevance:.2g} ≥ {IV_MIN_RELEVANCE:g}")
+                                       f"{relevance_text(relevance)} ≥ {IV_MIN_RELEVANCE:g}")

@@ -48,6 +48,7 @@ from workbench.defaults import OBJECTIVE_RESAMPLES
 from workbench.errors import DataError, ModelError
 from workbench.frozen import readonly
 from workbench.method.closed_loop import as_matrix, single_threaded_blas
+from workbench.method.gain import relevance_text
 from workbench.method.pilot_loop import (
     lag_decay,
     onset_weight,
@@ -88,8 +89,8 @@ def refusal(fit: TimingFit, plant: Any, delay_s: float | None = None, lag_s: flo
     if fit.method != "liml":
         return ""
     if not fit.relevance > 0:
-        return (f"the trials' starts explain the seen states no better than chance (relevance {fit.relevance:.2g}): "
-                "they do not move every state")
+        return ("the trials' starts explain the seen states no better than chance (relevance "
+                f"{relevance_text(fit.relevance)}): they do not move every state")
     ends = [f"{name} {v:.3g} s" for name, v, top, given in (("delay", fit.delay_s, DELAY_MAX_S, delay_s),
                                                             ("lag", fit.lag_s, LAG_MAX_S, lag_s))
             if given is None and v >= top - 1e-6]
@@ -696,7 +697,7 @@ def identify_timing(
     K_point = point.K
     timed = True
     if method == "liml":
-        reason = f"instruments relevant: {point.relevance:.2g} beyond chance"
+        reason = f"instruments relevant: {relevance_text(point.relevance)} beyond chance"
         why = refusal(point, plant, delay_s, lag_s)
         if why and fallback is None:
             raise ModelError(why)

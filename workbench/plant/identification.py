@@ -120,6 +120,11 @@ class IdentificationReport:
         return self.n_steps * self.dt
 
     def __str__(self) -> str:
+        return self.describe()
+
+    def describe(self, warning: bool = True) -> str:
+        """The report as lines of text; ``warning=False`` leaves out its warning line, for a caller that gives the
+        warning where warnings go (the command line's standard error) and would otherwise print it twice."""
         group = f"plant group {self.plant_group}, " if self.plant_group else ""
         lines = [
             f"plant identification ({group}{self.structure}, dt {self.dt:g} s, {self.n_pairs} sample pairs, "
@@ -149,7 +154,7 @@ class IdentificationReport:
         )
         lines += [f"  check: {c}" for c in self.checks]
         lines += [f"  stick: {r}" for r in self.responses]
-        if self.warning:
+        if warning and self.warning:
             lines.append(f"  warning: {self.warning}")
         return "\n".join(lines)
 

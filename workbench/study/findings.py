@@ -152,8 +152,16 @@ class StudyStatistics:
                 lines.append(row)
         if self.mixed is not None and any(e.term.startswith("strategy") for e in self.mixed.effects):
             m = self.mixed
+            if not m.converged:  # its estimates are where the optimizer stopped, not a fit: no factor, no p
+                # the optimizer's own "failed to converge" would repeat the sentence; a boundary variance says why
+                why = "; ".join(part for part in m.note.split("; ") if part and "converge" not in part)
+                lines += ["", f"Mixed-effects model (statsmodels MixedLM, REML) of log {what} RMSE: {m.n_obs} "
+                              f"observations, {m.n_groups} {m.groups}s: it did not converge"
+                              f"{' (' + why + ')' if why else ''}, so whether the strategies differ is not "
+                              "answered and no factor or p-value is given."]
+                return "\n".join(lines)
             lines += ["", f"Mixed-effects model (statsmodels MixedLM, REML) of log {what} RMSE: {m.n_obs} "
-                          f"observations, {m.n_groups} {m.groups}s{'' if m.converged else ', NOT converged'}"
+                          f"observations, {m.n_groups} {m.groups}s"
                           f"{'; ' + m.note if m.note else ''}. Factors against the first strategy; p from t with "
                           "the between-within df (not the Wald z):", "",
                       "| term | factor [95 % interval] | p (t, df) |", "|---|---|---|"]
@@ -188,7 +196,8 @@ class StudyStatistics:
                 out.append(("beyond chance?", f"exact sign-flip tests; p Holm over {len(head)}"))
         if self.mixed is not None and any(e.term.startswith("strategy") for e in self.mixed.effects):
             per = "subject and trial" if self.mixed.groups == "subject" else "trial"
-            out.append(("strategies differ?", f"mixed model of the log error, random per {per}"))
+            out.append(("strategies differ?", f"mixed model of the log error, random per {per}" if self.mixed.converged
+                        else "not answered: the mixed model did not converge"))
         return out
 
     def _ml_header(self) -> str:

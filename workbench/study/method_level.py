@@ -153,7 +153,8 @@ class MethodDifference:
             why = (f"the proposed method fell back to K̂x in all {self.n_splits} {where}"
                    if self.n_fallback >= self.n_splits else f"the two predicted alike in all {self.n_splits} {where}")
             return f"the same predictions, no difference to estimate ({why})"
-        text = difference_sentence(self.change, self.lo, self.hi, self.ci)
+        text = difference_sentence(self.change, self.lo, self.hi, self.ci,
+                                   f"too little spread between the {self.n_splits} {where}")
         if self.n_fallback >= self.n_splits:
             text += f"; the proposed method fell back to K̂x in all {self.n_splits} {where}"
         return text

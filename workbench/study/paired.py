@@ -84,16 +84,25 @@ class PairedDifference:
 
     def sentence(self) -> str:
         """The comparison in words, derived from the interval: "lower by 12 % [4 %, 19 %]", "higher by …", or
-        "no difference shown (…)"."""
-        return difference_sentence(self.change, self.lo, self.hi, self.ci)
+        "no difference shown (…)"; where the interval's ends print as one value, "no interval" with the number of
+        test trials that was too few (issue 40: a zero-width interval is never printed)."""
+        return difference_sentence(self.change, self.lo, self.hi, self.ci,
+                                   f"too few test trials for an interval: {self.n_trials}")
 
 
-def difference_sentence(change: float, lo: float, hi: float, ci: float = 95.0) -> str:
+def difference_sentence(change: float, lo: float, hi: float, ci: float = 95.0,
+                        too_narrow: str = "too little spread between the resamples") -> str:
     """A relative change (> 0: lower error) in words derived from its interval: "lower by 12 % [4 %, 19 %]",
-    "higher by …", or "no difference shown (…)" where the interval contains 0 (or is unknown)."""
+    "higher by …", or "no difference shown (…)" where the interval contains 0 (or is unknown).
+
+    An interval whose two ends print as one value ("[88 %, 88 %]") claims a certainty that a resample of a few
+    trials cannot give (with two trials a bootstrap has three distinct resamples): it is said in words,
+    ``"no interval (<too_narrow>)"``, without an estimate, like an interval of no spread at all."""
     if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
         # no spread to make an interval from: say so, with no number standing in for one
         return "no interval (nothing varied between the resamples)"
+    if _pct(lo) == _pct(hi):
+        return f"no interval ({too_narrow})"
     if lo > 0:
         return f"lower by {_pct(change)} [{_pct(lo)}, {_pct(hi)}]"
     if hi < 0:

@@ -179,6 +179,9 @@ class PartFit:
     edges : int
         Ratios of the closest diagonal cost at a zero or infinite weight (:func:`ratio_profile.at_edge`): no free
         parameters there, so each is one more restriction of the test.
+    bias_corrected : bool
+        Whether the part's gain entries are the jackknife's bias-corrected estimate
+        (:meth:`ratio_profile.PartDistance.from_samples`), which differs from the K̂ ``fit`` prints first.
     """
 
     states: tuple[str, ...]
@@ -190,6 +193,7 @@ class PartFit:
     closest: object = None
     dof: float = float("nan")
     edges: int = 0
+    bias_corrected: bool = False
 
     @property
     def tested(self) -> bool:
@@ -207,7 +211,9 @@ class PartFit:
         """How the gain departs from the closest diagonal cost's, per entry the data show, on the entry's own scale:
         the estimated gain entry with its interval against the closest diagonal cost's, e.g. ``u1 on phi −0.206
         [−0.25, −0.16], stiffer than its −0.095`` (stiffer: a larger magnitude; "opposite sign" where the signs
-        differ). No percentage: relative to an entry near zero it would be a meaningless number."""
+        differ). No percentage: relative to an entry near zero it would be a meaningless number. Where the entries
+        are bias-corrected (:attr:`bias_corrected`), the words say so: the K̂ printed first is the uncorrected
+        estimate, and two values each called "the estimated gain entry" read as a contradiction."""
         c = self.closest
         if c is None:
             return ""
@@ -221,7 +227,12 @@ class PartFit:
             else:
                 way = "stiffer than" if abs(k) > abs(k0) else "softer than"
             words.append(f"{where} {k:.3g} [{a:.3g}, {b:.3g}], {way} its {k0:.3g}")
-        return "; ".join(words) + " (the estimated gain entry against the closest diagonal LQR gain's)" if words else ""
+        if not words:
+            return ""
+        if self.bias_corrected:
+            return ("; ".join(words) + " (each the gain entry after the jackknife's bias correction over trials, "
+                    "against the closest diagonal LQR gain's; K̂ as printed above is uncorrected)")
+        return "; ".join(words) + " (the estimated gain entry against the closest diagonal LQR gain's)"
 
     def describe(self) -> str:
         where = f"part ({', '.join(self.states)}; {', '.join(self.inputs)})"
@@ -337,7 +348,8 @@ def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
         if test.explained is False or (test.explained is None and d_min > EXACT_DISTANCE):
             closest = pseudo_true(part, samples, theta0, ci)
         fit = PartFit(tuple(plant.state_names[i] for i in s), tuple(plant.input_names[k] for k in c),
-                      float(d_min), part.restrictions, test.critical, test.explained, closest, part.nu, test.edges)
+                      float(d_min), part.restrictions, test.critical, test.explained, closest, part.nu, test.edges,
+                      bias_corrected=part.dof is not None)
         fits.append(fit)
         shown = theta if fit.of_form else closest.theta
         Qp, Rp = part.weights(shown)
