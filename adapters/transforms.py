@@ -24,9 +24,10 @@ name                      columns    channel
                                      ``Roll, Pitch, Yaw``)
 ``heading_right``         3          ``yaw, north, east`` → the vector's component along the vehicle's
                                      right (its heading frame's lateral axis): what its roll accelerates;
-                                     the yaw in degrees, or ``yaw_scale`` radians per unit (1: radians)
+                                     the yaw in degrees, or ``yaw_scale`` radians per unit (1: radians);
+                                     for a velocity (its position: ``integrate``, below)
 ``heading_forward``       3          ``yaw, north, east`` → the component along its heading: what its
-                                     pitch accelerates (forward is nose-down pitch, negative)
+                                     pitch accelerates (forward is nose-down pitch, negative); likewise
 ``euler_tilt_east_rate``  5          ``roll, pitch, yaw, rollspeed, pitchspeed`` (rad, rad/s body rates) → the
                                      rate of ``euler_tilt_east`` (rad/s); yaw rate does not move the axis
 ========================  =========  ======================================================================
