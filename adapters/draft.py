@@ -285,7 +285,9 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
     for ch in template.channels:
         c = chosen[ch.name]
         others = [v.selector.source for v in ch.variants if v.selector.source != c.selector.source]
-        note = f"  # chosen over {', '.join(others)}" if others else ""
+        note = f"  # chosen over {', '.join(others)}" if others and c.integrates is None else ""
+        if c.integrates is not None:  # its sources are its state's, chosen on that state's line
+            note = f"  # the running integral of {c.integrates}, from 0 at each demonstration's start"
         lines.append(f"{ch.name} = {_channel_toml(c)}{note}")
     lines += _setpoint_lines(resolved, streams)
     lines += ["", "[segment]", f"gap = {gap!r}", f"min_duration = {min_duration!r}"]

@@ -150,3 +150,18 @@ def test_an_integrated_position_drops_the_log_frames_goal(tmp_path):
     assert "target" not in with_goal[0].meta
     assert with_goal[0].meta["skipped"]["targets (a position is integrated from 0 per demonstration)"] == 1
     del m
+
+
+def test_the_draft_of_a_dataflash_log_integrates_its_heading_frame_velocity(tmp_path):
+    # `workbench map` drafts from the shipped template: its x is the integral line, not the velocity's sources
+    from adapters.draft import draft_mapping
+    from adapters.formats.dataflash_write import write_example
+
+    path = write_example(tmp_path / "copter.bin", "new", "copter", seconds=30.0, seed=2)
+    draft = draft_mapping(adapters.read(path))
+    lines = draft.toml.splitlines()
+    (x,) = [ln for ln in lines if ln.startswith("x = ")]
+    assert x.startswith('x = { integrate = "xdot" }') and "chosen over" not in x
+    mapping = tmp_path / "draft.toml"
+    mapping.write_text(draft.toml)
+    assert load_mapping(mapping).for_format("dataflash").channel("x").integrates == "xdot"
