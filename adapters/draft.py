@@ -49,10 +49,12 @@ __all__ = ["Draft", "draft_mapping", "BIN_CHANNELS"]
 
 _DEG = math.pi / 180.0
 #: DataFlash (.bin) names of the planar channels, newest EKF first (XKF1: EKF3, NKF1: EKF2, EKF1: the old EKF).
-#: Positions and velocities in the heading frame (x across the vehicle), which the body roll ATT.Roll (degrees)
-#: accelerates whatever the heading.
+#: Velocities in the heading frame (x across the vehicle), which the body roll ATT.Roll (degrees) accelerates
+#: whatever the heading, and the position across as their running integral.
 BIN_CHANNELS: dict[str, list[Channel]] = {
-    "x": [Channel("x", Selector(f"{s}.Yaw,PN,PE"), transform="heading_right") for s in ("XKF1", "NKF1", "EKF1")],
+    # x: the running integral of xdot (the rotated position's rate is not xdot on a vehicle that turns)
+    "x": [Channel("x", Selector(f"{s}.Yaw,VN,VE"), transform="heading_right", integrates="xdot")
+          for s in ("XKF1", "NKF1", "EKF1")],
     "y": [Channel("x", Selector(f"{s}.PD"), transform="ned_up") for s in ("XKF1", "NKF1", "EKF1")],
     "phi": [Channel("phi", Selector("ATT.Roll"), scale=_DEG)],
     "xdot": [Channel("xdot", Selector(f"{s}.Yaw,VN,VE"), transform="heading_right") for s in ("XKF1", "NKF1", "EKF1")],
@@ -184,6 +186,8 @@ def _toml_value(v: object) -> str:
 
 
 def _channel_toml(ch: Channel) -> str:
+    if ch.integrates is not None:  # its sources are its state's, which that state's line names
+        return _toml_value({"integrate": ch.integrates})
     table: dict[str, object] = {"source": ch.selector.source}
     if ch.selector.where:
         table["where"] = dict(ch.selector.where)
@@ -281,7 +285,9 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
     for ch in template.channels:
         c = chosen[ch.name]
         others = [v.selector.source for v in ch.variants if v.selector.source != c.selector.source]
-        note = f"  # chosen over {', '.join(others)}" if others else ""
+        note = f"  # chosen over {', '.join(others)}" if others and c.integrates is None else ""
+        if c.integrates is not None:  # its sources are its state's, chosen on that state's line
+            note = f"  # the running integral of {c.integrates}, from 0 at each demonstration's start"
         lines.append(f"{ch.name} = {_channel_toml(c)}{note}")
     lines += _setpoint_lines(resolved, streams)
     lines += ["", "[segment]", f"gap = {gap!r}", f"min_duration = {min_duration!r}"]

@@ -29,6 +29,10 @@ Schema
                                         # it (needs rc_map; adapters.sticks)
     u2 = [{ source = "manual_control_setpoint.z", scale = 2.0, offset = -1.0 },   # alternative channels, each
           { source = "manual_control_setpoint.throttle" }]                        # with its own conversion
+    x = { integrate = "xdot" }          # the running integral of another state, from 0 at each demonstration's
+                                        # start: x[k+1] = x[k] + dt·xdot[k], the plant's kinematic row. For a
+                                        # position in a frame that turns with the vehicle (heading_right): the
+                                        # rotated position's rate is not the rotated velocity on a turning flight
 
     [segment]                           # every rule given must hold (their spans are intersected)
     gap = 0.5                           # s; a mapped channel silent for longer splits (never interpolated)
@@ -357,6 +361,38 @@ def _channel(name: str, value: Any, path: str, table: str = "channels") -> Chann
     )
 
 
+def _channel_table(chans: Mapping[str, Any], states: tuple[str, ...], inputs: tuple[str, ...],
+                   path: str) -> tuple[Channel, ...]:
+    """The ``[channels]`` table's channels in state-then-input order; an ``integrate = "<state>"`` entry is that
+    state's channel (same sources and conversion) marked as its running integral (:attr:`Channel.integrates`)."""
+    parsed: dict[str, Channel] = {}
+    integrals: dict[str, str] = {}
+    for n in (*states, *inputs):
+        if n not in chans:
+            continue
+        value = chans[n]
+        if isinstance(value, dict) and "integrate" in value:
+            key = f"channels.{n}"
+            if set(value) != {"integrate"}:
+                raise _fail(path, key, f"integrate stands alone (the channel is the integral of another state, with "
+                            f"that state's sources and conversion); drop {sorted(set(value) - {'integrate'})}")
+            of = value["integrate"]
+            if n not in states:
+                raise _fail(path, key, "only a state can be the integral of another state, not an input")
+            if not isinstance(of, str) or of not in states or of == n:
+                raise _fail(path, f"{key}.integrate", f"must name another state of {list(states)}, got {of!r}")
+            integrals[n] = of
+        else:
+            parsed[n] = _channel(n, value, path)
+    for n, of in integrals.items():
+        if of not in parsed:
+            why = "is itself an integral" if of in integrals else "has no source"
+            raise _fail(path, f"channels.{n}.integrate", f"{of!r} {why}: name a state read from the log")
+        parsed[n] = replace(parsed[of], name=n, integrates=of,
+                            alternatives=tuple(replace(a, name=n, integrates=of) for a in parsed[of].alternatives))
+    return tuple(parsed[n] for n in (*states, *inputs) if n in parsed)
+
+
 def _flag(value: Any, path: str, key: str) -> FlagRule:
     sel = _selector(value, path, key, extra=("bitmask", "equals", "on", "off", "held"))
     bitmask = value.get("bitmask") if isinstance(value, dict) else None
@@ -539,7 +575,7 @@ def _parse(raw: Mapping[str, Any], path: str, section: str = "") -> ChannelMappi
     extra = sorted(set(chans) - set(states) - set(inputs))
     if extra:
         raise _fail(at, "channels", f"{extra} are neither states nor inputs")
-    channels = tuple(_channel(n, chans[n], at) for n in (*states, *inputs) if n in chans)
+    channels = _channel_table(chans, states, inputs, at)
     rc_map, setpoints = _sticks(raw, at, channels, inputs)
     try:
         roles = Roles.from_json(raw.get("roles"), f"{at}: [roles]")

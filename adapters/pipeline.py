@@ -417,6 +417,24 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
             f"be identified from it")
 
 
+def integrate(m: ChannelMapping, values: np.ndarray) -> np.ndarray:
+    """``values`` (a kept piece on the mapping's ``dt`` grid, channels in state-then-input order) with each integrated
+    channel (:attr:`~adapters.rules.Channel.integrates`) the running integral of its state, from 0 at the piece's
+    start: ``c[0] = 0``, ``c[k+1] = c[k] + dt·v[k]``, the plant's kinematic row ``p[k+1] = p[k] + dt·v[k]``
+    (:mod:`workbench.plant.identification`) to the last bit, and what the live path sums step by step
+    (:class:`adapters.link.online.OnlineAligner`; the grid's own differences would carry the log clock's rounding,
+    1e-7 s at an epoch clock). The origin is arbitrary, as a free flight's absolute position is (nobody regulates it:
+    :mod:`workbench.data.pilot_task`)."""
+    names = (*m.state_names, *m.input_names)
+    pairs = [(names.index(c.name), names.index(c.integrates)) for c in m.channels if c.integrates is not None]
+    if not pairs:
+        return values
+    out = values.copy()
+    for k, j in pairs:
+        out[:, k] = np.concatenate([[0.0], np.cumsum(m.dt * values[:-1, j])])
+    return out
+
+
 def _unique(ids: list[str]) -> list[str]:
     seen: Counter = Counter(ids)
     count: Counter = Counter()
@@ -486,7 +504,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                     skipped["pieces shorter than min_duration"] += 1
                     continue
                 kept_t.append(t)
-                kept_v.append(piece.values[i:j])
+                kept_v.append(integrate(m, piece.values[i:j]))
         if kept_t:
             found.append((span, kept_t, kept_v))
     if not found and flips:
@@ -583,6 +601,12 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             # a damaged or foreign target must not cost the demonstration; it is dropped and reported
             meta.pop("target")
             meta["skipped"] = {**meta["skipped"], "invalid targets": meta["skipped"].get("invalid targets", 0) + 1}
+        elif target is not None and any(c.integrates is not None for c in m.channels):
+            # a goal is a position in the log's frame; an integrated state starts at 0 in each piece, so the goal
+            # relative to it would be a made-up number: dropped, and the trial is a free flight
+            meta.pop("target")
+            key = "targets (a position is integrated from 0 per demonstration)"
+            meta["skipped"] = {**meta["skipped"], key: meta["skipped"].get(key, 0) + 1}
         rel = m.dt * np.arange(len(t))
         if not math.isclose(float(t[-1] - t[0]), float(rel[-1]), rel_tol=1e-6, abs_tol=1e-6):
             rel = t - t[0]

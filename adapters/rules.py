@@ -54,6 +54,10 @@ class Channel:
     #: further channels tried in order when this one's source is not in a file (another firmware's field names,
     #: each with its own conversion); writers and the online path use the first
     alternatives: tuple[Channel, ...] = ()
+    #: the state this channel is the running integral of (a mapping's ``integrate = "xdot"``), from 0 at each
+    #: demonstration's start: ``c[0] = 0``, ``c[k+1] = c[k] + dt·v[k]`` with the mapping's dt (the plant's kinematic
+    #: row); its selector and conversion are that state's. ``None``: the converted source itself.
+    integrates: str | None = None
 
     @property
     def factor(self) -> float:

@@ -24,9 +24,10 @@ name                      columns    channel
                                      ``Roll, Pitch, Yaw``)
 ``heading_right``         3          ``yaw, north, east`` → the vector's component along the vehicle's
                                      right (its heading frame's lateral axis): what its roll accelerates;
-                                     the yaw in degrees, or ``yaw_scale`` radians per unit (1: radians)
+                                     the yaw in degrees, or ``yaw_scale`` radians per unit (1: radians);
+                                     for a velocity (its position: ``integrate``, below)
 ``heading_forward``       3          ``yaw, north, east`` → the component along its heading: what its
-                                     pitch accelerates (forward is nose-down pitch, negative)
+                                     pitch accelerates (forward is nose-down pitch, negative); likewise
 ``euler_tilt_east_rate``  5          ``roll, pitch, yaw, rollspeed, pitchspeed`` (rad, rad/s body rates) → the
                                      rate of ``euler_tilt_east`` (rad/s); yaw rate does not move the axis
 ========================  =========  ======================================================================
@@ -34,6 +35,12 @@ name                      columns    channel
 A vehicle that turns while it flies (the real ArduCopter flight in ``../shared/external`` yaws through several
 full turns) leans east with its roll only when it points north: a planar east–up model needs the tilt, not
 the body roll, or the east velocity's response to the angle comes out a fraction of g·dt.
+
+``heading_right`` and ``heading_forward`` are for velocities. A position rotated into the heading frame moves
+with the turn as well as with the flight (its rate is ``v_right − ψ̇·p_forward``, not ``v_right``), which no
+plant's kinematic row ``p[k+1] = p[k] + dt·v[k]`` holds: a mapping declares that position as its velocity's
+running integral instead, ``x = { integrate = "xdot" }`` (:mod:`adapters.mapping`; a transform sees one sample at
+a time and no segment, so the integral is the pipeline's, :func:`adapters.pipeline.integrate`).
 """
 
 from __future__ import annotations

@@ -11,6 +11,8 @@ Demonstrations are laid end to end on the log clock from ``epoch`` (seconds), ``
 a CSV keeps each demonstration's own ``t``. Sources must name their stream unambiguously for writing:
 ``STREAM:FIELD``, or ``STREAM.FIELD`` with a stream name free of dots. Where two channels read one field
 (``ATTITUDE.roll,pitch,yaw`` for a tilt and ``…,rollspeed,pitchspeed`` for its rate), the first one writes it.
+A state the mapping integrates (``integrate = "xdot"``) writes nothing: its state's channel writes the fields, and
+the read-back state is that state's running integral from 0 at each demonstration's start.
 """
 
 from __future__ import annotations
@@ -111,6 +113,8 @@ def demo_streams(
         cols: dict[str, dict[str, Any]] = defaultdict(dict)
         values = np.hstack([d.x, d.u])
         for k, ch in enumerate(m.channels):
+            if ch.integrates is not None:  # read from its state's fields, which that state's channel writes
+                continue
             stream, fld = _split(ch.selector)
             fields = channel_inverse(ch, values[:, k])
             if fields.shape[1] == 1:

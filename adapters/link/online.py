@@ -336,6 +336,9 @@ class OnlineAligner:
         inputs = set(m.input_names)
         order = {name: i for i, name in enumerate((*m.state_names, *m.input_names))}
         self._channels = [_Buffer(c.name, c.name in inputs) for c in sorted(m.channels, key=lambda c: order[c.name])]
+        #: (integrated state, its rate) indices and the running integrals (adapters.pipeline.integrate)
+        self._integrals = [(order[c.name], order[c.integrates]) for c in m.channels if c.integrates is not None]
+        self._running = np.zeros(len(self._integrals))
         for ch, buf in zip(sorted(m.channels, key=lambda c: order[c.name]), self._channels, strict=True):
             self._listen(ch.selector, streams, f"channel {ch.name!r}", TRANSFORMS[ch.transform].n_columns,
                          self._channel_handler(ch, buf))
@@ -431,11 +434,13 @@ class OnlineAligner:
         self._by_key = by_key
         if len(loose) > self._n_loose:  # a marker without a demo key: the segment in progress, else the next
             for _, meta in loose[self._n_loose:]:
+                if self._integrals:  # a goal in the log's frame, not the integrated state's (adapters.pipeline)
+                    meta = {k: v for k, v in meta.items() if k != "target"}
                 (self._meta if self._meta is not None else self._pending_loose).update(meta)
         self._n_loose = len(loose)
         if self._meta is not None and self._meta.get("demo") in by_key:  # e.g. a target sent after the start
             extra = {k: v for k, v in by_key[self._meta["demo"]].items() if k != "id"}
-            if "target" in extra and not _valid_target(extra["target"], self.n):
+            if "target" in extra and (self._integrals or not _valid_target(extra["target"], self.n)):
                 extra.pop("target")
             self._meta.update(extra)
 
@@ -582,6 +587,7 @@ class OnlineAligner:
     def _emit(self, t: float) -> AlignedStep | None:
         values = np.array([buf.value(t, self.tol) for buf in self._channels])
         x, u = values[: self.n], values[self.n :]
+        start = False
         if self._landing_index is not None:  # adapters.segment.split_at_landing, one step at a time
             landed = bool(x[self._landing_index] <= self.mapping.segment.landing.below)
             if not self._in_flight:
@@ -589,10 +595,16 @@ class OnlineAligner:
                     self.skipped["samples on the ground"] += 1
                     return None
                 self._in_flight = True
-                self._new_flight(t, x)
+                start = True
             elif landed:
                 self._in_flight = False  # touchdown: included, the flight's last step
         elif self._x0 is None:
+            start = True
+        if start:
+            self._running = np.zeros(len(self._integrals))
+        for k, (i, j) in enumerate(self._integrals):  # adapters.pipeline.integrate, one step at a time
+            x[i], self._running[k] = self._running[k], self._running[k] + self.dt * x[j]
+        if start:
             self._new_flight(t, x)
         step = AlignedStep(self._id, self.n_segments - 1, self._step, t, self._t0, x, u, self._x0,
                            dict(self._meta), self._arrival)
@@ -639,4 +651,7 @@ class OnlineAligner:
         if target is not None and not _valid_target(target, self.n):
             meta.pop("target")
             self.skipped["invalid targets"] += 1
+        elif target is not None and self._integrals:  # as offline (adapters.pipeline.build): no made-up goal
+            meta.pop("target")
+            self.skipped["targets (a position is integrated from 0 per demonstration)"] += 1
         return meta

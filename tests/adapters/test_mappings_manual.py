@@ -278,17 +278,22 @@ def _copter_bin(tmp_path, name, edit):
 
 def test_a_position_that_never_moves_is_named_at_import(tmp_path):
     # An ArduCopter flown without GPS logs EKF1.PN/PE as 0.0 throughout (erlerobot/logs pxf/copter/6-3-2014/5.BIN);
-    # the fit used to stop at "the data excite only 7 of 8 directions" instead of saying so. The fields that hold
-    # still are named, not the channel's sources ("x (EKF1.Yaw,PN,PE) constant" read as if the yaw were constant).
+    # the fit used to stop at "the data excite only 7 of 8 directions" instead of saying so. The shipped mapping's x
+    # is the integral of its velocity (issue 41), so the position is checked where a mapping reads one: here the
+    # EKF's east position.
     def no_gps(streams, options):
         streams["EKF1"]["PN"] = 0.0
         streams["EKF1"]["PE"] = 0.0
 
     path = _copter_bin(tmp_path, "no_gps.bin", no_gps)
-    with pytest.raises(DataError, match=r"x constant 0 in all \d+ samples: its fields EKF1\.PN, PE never "
-                                        r"change \(Yaw does\) — no position source"):
-        adapters.load(path, "ardupilot_manual")
-    looked = adapters.load(path, "ardupilot_manual", allow_still=True)  # the viewer still shows it
+    m = load_mapping("ardupilot_manual")
+    assert m.for_format("dataflash").channel("x").integrates == "xdot"
+    mapping = tmp_path / "east.toml"  # the DataFlash channels with the EKF's east position for x
+    with open(m.path, encoding="utf-8") as f:
+        mapping.write_text(f.read().replace('x = { integrate = "xdot" }', 'x = "EKF1.PE"'))
+    with pytest.raises(DataError, match=r"x constant 0 in all \d+ samples \(EKF1\.PE\) — no position source"):
+        adapters.load(path, str(mapping))
+    looked = adapters.load(path, str(mapping), allow_still=True)  # the viewer still shows it
     assert len(looked) and "no GPS position" in looked[0].meta["still"]
 
 

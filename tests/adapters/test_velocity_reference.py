@@ -400,7 +400,8 @@ def test_a_ulog_flight_that_does_not_point_north_is_read_in_its_heading_frame(tm
         streams["vehicle_status"] = pd.DataFrame({
             "t": t, "nav_state": np.where(in_flight, 15, 5).astype(np.uint8), "arming_state": np.uint8(2)})
         local = streams["vehicle_local_position"]
-        for across, north, east in (("y", "x", "y"), ("vy", "vx", "vy")):
+        # only the velocity: x is its integral (issue 41), and the writer writes no position for it
+        for across, north, east in (("vy", "vx", "vy"),):
             right = local[across].to_numpy(dtype=np.float64)  # written along the right at heading 0: east
             local[north] = (-np.sin(heading) * right).astype(local[across].dtype)
             local[east] = (np.cos(heading) * right).astype(local[across].dtype)

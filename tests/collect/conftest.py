@@ -60,8 +60,8 @@ def pilot_gain(r_thrust: float = 100.0) -> np.ndarray:
 
 
 def pilot_js(K: np.ndarray, y_ref: float, wobble: float = 0.1) -> str:
-    """The scripted pilot as a page function ``(x, k) -> axes``: ``u = clip(K (x - ref) + wobble)``, put on a
-    standard pad's axes (angular acceleration on axis 2, thrust on axis 1, up negative)."""
+    """The scripted pilot as a page function ``(x, k) -> axes``: :func:`pilot_u` put on a standard pad's axes
+    (angular acceleration on axis 2, thrust on axis 1, up negative)."""
     return f"""(x, k) => {{
       const K = {json.dumps(K.tolist())}, ref = [0, {y_ref}, 0, 0, 0, 0];
       const u = K.map((row, i) => row.reduce((s, a, j) => s + a * (x[j] - ref[j]), 0)
@@ -69,6 +69,19 @@ def pilot_js(K: np.ndarray, y_ref: float, wobble: float = 0.1) -> str:
       const c = u.map((v) => Math.max(-1, Math.min(1, v)));
       return [0, -c[1], c[0], 0];
     }}"""
+
+
+def pilot_u(K: np.ndarray, y_ref: float, x: np.ndarray, k: int, wobble: float = 0.1) -> np.ndarray:
+    """What :func:`pilot_js` asks for at step ``k`` in state ``x``: ``u = clip(K (x − ref) + wobble sin(ω k))``,
+    ``ref`` the state ``y_ref`` high (ω = 0.3, 0.5 per step: the inputs vary, as a person's do)."""
+    ref = np.array([0.0, y_ref, 0.0, 0.0, 0.0, 0.0])
+    return np.clip(K @ (np.asarray(x) - ref) + wobble * np.sin(np.array([0.3, 0.5]) * k), -1.0, 1.0)
+
+
+# A pilot that lands (touches down slower than the task's landing speed, flat, on the pad): it aims 5 cm below the
+# ground with a small wobble. Aiming lower or wobbling more touches down faster than the landing speed (aiming
+# 0.3 m below, the pilot crashed at 0.16-0.20 m/s every time); test_task checks this one lands from the start box.
+LANDING_PILOT = {"y_ref": -0.05, "wobble": 0.02}
 
 
 def calibrated(raw: np.ndarray, cal: dict) -> np.ndarray:

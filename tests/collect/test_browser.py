@@ -16,7 +16,17 @@ import pytest
 from workbench.collect.session import HIDDEN
 from workbench.data.dataset import is_dataset, load_demonstrations
 
-from .conftest import calibrate, calibrated, new_page, pilot_gain, pilot_js, register, rerun_entities, write_protocol
+from .conftest import (
+    LANDING_PILOT,
+    calibrate,
+    calibrated,
+    new_page,
+    pilot_gain,
+    pilot_js,
+    register,
+    rerun_entities,
+    write_protocol,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -197,7 +207,7 @@ def test_a_scripted_paper_single_subject_session_fits_evaluates_and_opens_in_rer
     context, page = new_page(browser, gamepad=True)
     try:
         register(page, url, "s01")
-        page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(), -0.3)}; }}")
+        page.evaluate(f"() => {{ window.__pilot = {pilot_js(pilot_gain(), **LANDING_PILOT)}; }}")
         while True:
             page.wait_for_selector("#screen-message:not([hidden]), #screen-task:not([hidden])")
             if page.is_visible("#summary"):
@@ -217,6 +227,8 @@ def test_a_scripted_paper_single_subject_session_fits_evaluates_and_opens_in_rer
     for d in ds:
         count[(d.meta["label"], d.meta["role"])] = count.get((d.meta["label"], d.meta["role"]), 0) + 1
     assert count == {("CS1", "train"): 2, ("CS2", "train"): 2, ("CS1", "test"): 2, ("CS2", "test"): 2}
+    # fit and evaluate take a session's landed trials: a pilot that crashed would leave them none
+    assert {d.meta["outcome"] for d in ds} == {"landed"}, [d.meta["outcome_reason"] for d in ds]
     assert main(["fit", str(out), "--label", "CS1", "--n-components", "1", "--bootstrap", "0",
                  "-o", str(tmp_path / "cs1.npz")]) == 0
     table = tmp_path / "results.csv"

@@ -6,6 +6,7 @@ real fit."""
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 
 import pytest
@@ -70,7 +71,17 @@ def _to_the_task(page, on_instructions=None) -> None:
 
 def test_every_page_at_two_sizes(browser, serve, tmp_path):
     shots = Shots(Path(os.environ.get("WORKBENCH_SCREENS") or tmp_path / "screens"))
-    run = serve(_protocol(tmp_path), runner=in_process)
+    preparing_shown = threading.Event()
+
+    def held_fit(fn, task):
+        """The fit step's fit, run once the page has shown it preparing. The server starts the fit when s02's last
+        training trial is written, before their page is open; unheld, the fit ended before the page came in a
+        process that had fitted before (2 trials in about a second), "Preparing" never showed and its wait timed
+        out."""
+        preparing_shown.wait(timeout=180)
+        return in_process(fn, task)
+
+    run = serve(_protocol(tmp_path), runner=held_fit)
     s = run.session
     with opened_page(browser, gamepad=True) as page:
         page.goto(f"{run.url}?subject=s01")
@@ -153,6 +164,7 @@ def test_every_page_at_two_sizes(browser, serve, tmp_path):
         calibrate(page)
         page.wait_for_function("() => document.querySelector('#message-status').textContent.includes('Preparing')")
         shots(page, "16-fit-break-preparing")
+        preparing_shown.set()
         page.wait_for_function("() => document.querySelector('#message-keys').textContent.includes('Space')",
                                timeout=120_000)
         shots(page, "17-fit-break-ready")

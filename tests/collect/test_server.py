@@ -26,6 +26,29 @@ def url(tmp_path):
     server.stop()
 
 
+def test_a_client_that_connects_before_the_server_runs_waits_and_is_served(tmp_path):
+    """`workbench collect` prints the URL (and opens a browser on it) before it runs the server: a connection made
+    then is queued and answered once it runs, not refused (it was refused: bound, not listening)."""
+    import socket
+    import threading
+
+    server = Server(make_app(Session(tmp_path / "out", _protocol(tmp_path))), port=0)
+    runner = threading.Thread(target=server.run, daemon=True)
+    try:
+        early = socket.create_connection((server.host, server.port), timeout=10)  # refused before the fix
+        early.sendall(f"GET /api/config HTTP/1.1\r\nHost: {server.host}:{server.port}\r\n"
+                      "Connection: close\r\n\r\n".encode())
+        runner.start()
+        with early.makefile("rb") as reply:
+            assert reply.readline().split()[1] == b"200"
+        early.close()
+    finally:
+        server.server.should_exit = True  # uvicorn's own end, then the socket closed
+        if runner.is_alive():
+            runner.join(timeout=10)
+        server.stop()
+
+
 def _post(url: str, body: bytes) -> tuple[int, dict]:
     request = urllib.request.Request(url, data=body, method="POST", headers={"Content-Type": "application/json"})
     try:

@@ -11,6 +11,8 @@ from workbench.collect.task import OUTCOMES, outcome, reason, replay, step, task
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_trial
 
+from .conftest import LANDING_PILOT, pilot_gain, pilot_u
+
 
 def test_task_spec_is_the_plant():
     s = planar_quadrotor()
@@ -36,6 +38,27 @@ def test_replay_ends_where_the_simulator_ends():
         xs, end, k = replay(spec, d.x[0], d.u)
         assert end == d.meta["outcome"] and k == len(d) - 1
         assert np.allclose(xs, d.x, atol=1e-9)
+
+
+@pytest.mark.parametrize("held", [1, 5])
+def test_the_scripted_landing_pilot_lands_from_anywhere_in_the_start_box(held):
+    """The browser tests' landing pilot (conftest.LANDING_PILOT) lands: from a grid over the start box, its reads
+    held ``held`` steps (a slow display: a frame runs up to 5 physics steps on one read, static/sim.js). A pilot
+    that crashes leaves a fit step and ``workbench fit`` no trial (they take landed training trials)."""
+    spec, K = task_spec(), pilot_gain()
+    i = spec["index"]
+    ends = []
+    for sx in np.linspace(*spec["start"]["x"], 9):
+        for sy in np.linspace(*spec["start"]["y"], 3):
+            x, k, u = [0.0] * len(spec["state_names"]), 0, None
+            x[i["x"]], x[i["y"]] = float(sx), float(sy)
+            while (end := outcome(spec, x, k)) is None:
+                if k % held == 0:
+                    u = pilot_u(K, LANDING_PILOT["y_ref"], np.array(x), k, LANDING_PILOT["wobble"]).tolist()
+                x = step(spec["A"], spec["B"], x, u)
+                k += 1
+            ends.append((end, reason(spec, x, end)))
+    assert all(end == "landed" for end, _ in ends), [why for end, why in ends if end != "landed"]
 
 
 @pytest.fixture(scope="module")

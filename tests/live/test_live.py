@@ -532,3 +532,24 @@ def test_replay_needs_a_model_or_a_link(tmp_path):
     r = subprocess.run([*WB, "replay", str(REPO / "sample_logs" / "landing_s01.mcap"), "--to", "udpout:127.0.0.1:9"],
                        capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 1 and "not a MAVLink telemetry log" in r.stderr
+
+
+def test_an_integrated_state_restarts_at_each_segment_as_offline(fitted, records, tmp_path):
+    # a mapping's `x = { integrate = "xdot" }` (issue 41): live sums the velocity step by step from 0 at each
+    # segment's start, as the offline import does per piece; the gap splits the flight in two
+    ds, model, _ = fitted
+    shipped = REPO / "adapters" / "mappings" / "planar_quadrotor.toml"
+    text = shipped.read_text(encoding="utf-8")
+    assert text.count('x = "LOCAL_POSITION_NED.y"') == 1
+    mapping = tmp_path / "integrated.toml"
+    mapping.write_text(text.replace('x = "LOCAL_POSITION_NED.y"', 'x = { integrate = "xdot" }'))
+    part = first_demos(ds, records, 1)
+    t0 = part[0][0]
+    cut = [(t, f) for t, f in part if not (t0 + 3.0 < t < t0 + 3.5)]
+    offline = adapters.load(write_tlog(tmp_path / "gap.tlog", cut), mapping=str(mapping))
+    assert len(offline) == 2
+    _, preds = online(model, cut, mapping=str(mapping))
+    got = by_demo(preds)
+    for live_id, d in zip(got, offline, strict=True):
+        assert d.x[0, 0] == 0.0 and np.ptp(d.x[:, 0]) > 0  # the integral, from 0 in each segment
+        assert_equal_to_offline(model, d, got[live_id])

@@ -252,3 +252,19 @@ def test_a_group_whose_intervals_fail_stays_fitted_and_written(copter_bin, tmp_p
     assert "wrote 2 model(s), one per plant group" in said.out
     for group in ("angle", "velocity+climb"):
         assert load_model(tmp_path / f"m.{group}.npz").plant.plant_group == group
+
+
+def test_a_plane_holding_its_altitude_gets_no_throttle_climb_rate():
+    # On a plane in FBWB or a PX4 plane's ALTCTL / POSCTL the pitch stick commands the climb and the throttle the
+    # airspeed (FIXED_WING_STICKS): the plant report printed "u2 → ydot climb rate" as for a copter's ALT_HOLD
+    from workbench.plant.system import planar_quadrotor
+
+    plant = planar_quadrotor()
+    args = (plant.A, plant.B, plant.r, plant.roles, plant.state_names, plant.input_names, plant.dt)
+    copter = stick_responses(*args, "angle+climb")
+    plane = stick_responses(*args, "bank+climb")
+    assert [r.what for r in copter] == ["lean angle", "climb rate"]  # the same plant: the copter's throttle climbs
+    assert [r.what for r in plane] == ["bank angle"]
+    group = PLANT_GROUPS["bank+climb"]
+    assert "airspeed" in group.text and "pitch stick a climb rate" in group.text
+    assert "altitude" in AUTOPILOT_HOLDS["FBWB"]  # the autopilot still holds the altitude

@@ -4,7 +4,10 @@ When a subject reaches a ``fit = { label = "CS1", from = "train" }`` step, :clas
 :func:`fit_subject` in a worker process (the study's :class:`~workbench.study.executor.ProcessExecutor`, the one
 place that maps work to workers), so the server keeps answering while the model is fitted. The task reads the
 subject's partitions from the session folder, keeps their trials of the label with role ``from``, landed and not
-excluded, and fits the library's default model (:func:`default_model`, the model ``workbench fit`` builds). It then
+excluded, and fits the library's one default model (:func:`workbench.models.factory.default_model`: the model
+``workbench fit`` builds and ``evaluate`` judges, G and the regularizer by cross-validation over the trials, with the
+fallback to ``K̂x``; issue 40 §5). The paper's G = 5 is a model by name, fitted outside the session
+(``workbench fit --n-components paper``) and given to the assisted blocks with ``--model``. It then
 checks the model on the subject's held-out trials of the label (role test, not excluded): the position error of its
 prediction from each one's start over :data:`~workbench.defaults.HORIZON_S`, the study's own score
 (:func:`workbench.study.evaluate.compare`).
@@ -29,16 +32,7 @@ from workbench.collect.subjects import now, read_json, write_json
 from workbench.defaults import HORIZON_S
 from workbench.errors import DataError, WorkbenchError
 
-__all__ = ["Jobs", "FitJobs", "fit_subject", "default_model", "model_paths", "file_digest", "in_process",
-           "load_fitted"]
-
-
-def default_model(plant: Any, seed: int = 0) -> Any:
-    """The library's default model, unfitted: what ``workbench fit`` builds with its defaults."""
-    from workbench.defaults import N_COMPONENTS
-    from workbench.models.factory import make_model
-
-    return make_model("proposed", plant, n_components=N_COMPONENTS, random_state=seed)
+__all__ = ["Jobs", "FitJobs", "fit_subject", "model_paths", "file_digest", "in_process", "load_fitted"]
 
 
 def model_paths(out: Path, subject: str, label: str) -> tuple[Path, Path, Path]:
@@ -65,6 +59,7 @@ def fit_subject(task: tuple) -> dict[str, Any]:
         Fewer than ``min_trials`` landed, not excluded trials of the label and role to fit on.
     """
     from workbench.data.dataset import load_dataset
+    from workbench.models.factory import default_model
     from workbench.plant.system import planar_quadrotor
     from workbench.study.evaluate import compare, primary_metric
 
@@ -78,7 +73,7 @@ def fit_subject(task: tuple) -> dict[str, Any]:
         raise DataError(f"subject {subject}: {len(train)} landed, not excluded {label} {source} trial(s); the fit "
                         f"step needs at least {min_trials}")
     plant = planar_quadrotor()
-    model = default_model(plant, seed).fit(train)
+    model = default_model(plant, random_state=seed).fit(train)
     path, record_path, _ = model_paths(Path(out), subject, label)
     model.save(path)
     n_steps = max(1, round(HORIZON_S / plant.dt))
@@ -95,11 +90,21 @@ def fit_subject(task: tuple) -> dict[str, Any]:
         "n_train": len(train),
         "metric": metric, "horizon_s": n_steps * plant.dt, "held_out": held,
         "held_out_error": (sum(errors) / len(errors)) if errors else None,
-        "n_components": getattr(model, "n_components", None), "fitted": now(),
+        **_settings(model), "fitted": now(),
         "seconds": round(time.perf_counter() - t0, 2),
     }
     write_json(record_path, record)
     return record
+
+
+def _settings(model: Any) -> dict[str, Any]:
+    """What the default model chose, for the fit's record: the G it fitted, and what cross-validation chose and
+    whether it fell back to ``K̂x`` (``settings``: its one line; ``None`` where too few trials left nothing to
+    cross-validate, the model's warning then says which defaults it took)."""
+    auto = model.auto_ if model.chooses_settings else None
+    return {"n_components": int(model.n_components_), "reg_covar": float(model.reg_covar_),
+            "settings": None if auto is None else auto.describe(),
+            "fallback": None if auto is None else bool(auto.fallback)}
 
 
 class Jobs:

@@ -54,8 +54,9 @@ def make_app(session: Session, *, on_trial: Callable[[dict[str, Any], dict[str, 
 class Server:
     """uvicorn serving an application on ``host:port`` (``port`` 0: a free one), in this thread or another.
 
-    The socket is bound here, before the server runs, so :attr:`url` is known (and a taken port is an error)
-    at once. Connections that are slow to send their headers are closed (:data:`~.guard.HEADER_TIMEOUT_S`), at most
+    The socket is bound and listening here, before the server runs, so :attr:`url` is known (and a taken port is an
+    error) at once, and a client that connects before :meth:`run` waits for it instead of being refused.
+    Connections that are slow to send their headers are closed (:data:`~.guard.HEADER_TIMEOUT_S`), at most
     :data:`~.guard.MAX_CONNECTIONS` are served at once, idle keep-alive connections close after 5 s.
     """
 
@@ -70,6 +71,9 @@ class Server:
         except OSError as exc:
             self.sock.close()
             raise UsageError(f"cannot listen on {host}:{port} ({exc.strerror}); choose another --port") from None
+        # listening from here, not from when uvicorn starts: the URL is printed (and a browser opened on it) before
+        # run(), and a bound socket that does not listen refuses a connection; a listening one queues it until served
+        self.sock.listen()
         self.host, self.port = host, self.sock.getsockname()[1]
 
         class _Uvicorn(uvicorn.Server):

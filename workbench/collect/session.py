@@ -456,7 +456,8 @@ class Session:
         if result.get("state") == "ready":
             err = result.get("held_out_error")
             text = (f"{result['subject']}: model of {result['label']} fitted on {result['n_train']} landed trials in "
-                    f"{result['seconds']:.1f} s (digest {result['digest'][:12]}); held-out {result['metric']} "
+                    f"{result['seconds']:.1f} s (digest {result['digest'][:12]}); {_chosen(result)}; "
+                    f"held-out {result['metric']} "
                     + (f"{err:.3g} over {len(result['held_out'])} trial(s)" if err is not None else "not checked: "
                        "no held-out trials"))
         else:
@@ -597,6 +598,16 @@ class Session:
                              "fits": fits})
         return {"protocol": self.protocol.name, "fingerprint": self.protocol.fingerprint, "out": str(self.out),
                 "subjects": subjects}
+
+
+def _chosen(record: dict[str, Any]) -> str:
+    """What a fit step's default model chose, in a few words (its record's ``settings`` has the whole line)."""
+    G, reg = record.get("n_components"), record.get("reg_covar")
+    if record.get("settings") is None:  # too few trials to cross-validate: the defaults, capped by the samples
+        return f"G = {G}, reg_covar = {reg:g} (too few trials to cross-validate)"
+    return f"G = {G}, reg_covar = {reg:g} by cross-validation" + (
+        ", predicting with K̂x alone (its variability model did not lower the held-out error)"
+        if record.get("fallback") else "")
 
 
 def _sha256(text: str) -> str:

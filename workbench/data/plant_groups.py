@@ -36,8 +36,10 @@ class PlantGroup:
 
     ``lateral``: ``"angle"`` (a lean angle), ``"rate"`` (a roll rate), ``"velocity"`` (a ground velocity),
     ``"surface"`` (a plane's ailerons: a roll acceleration), ``"bank"`` (a plane's bank angle); ``throttle``:
-    ``"thrust"`` or ``"climb"`` (a climb rate). ``tilts``: a multirotor, which a lean accelerates sideways (the
-    g·dt physics check applies); a plane banks and turns instead. ``brakes``: a lean-angle stick whose autopilot
+    ``"thrust"``, ``"climb"`` (a climb rate) or ``"airspeed"`` (a plane whose autopilot holds the altitude: its pitch
+    stick commands the climb rate, the throttle the airspeed — ArduPlane's FBWB, a PX4 plane's ALTCTL and POSCTL —
+    so the throttle moves no state of the lateral plane). ``tilts``: a multirotor, which a lean accelerates sideways
+    (the g·dt physics check applies); a plane banks and turns instead. ``brakes``: a lean-angle stick whose autopilot
     brakes and holds the position once it is centred (ArduCopter's POSHOLD): the vehicle and its autopilot are
     another plant than ALT_HOLD's though the stick commands the same thing while it is moved.
     """
@@ -53,7 +55,7 @@ class PlantGroup:
     def holds(self) -> str:
         """What the autopilot, not the pilot, brings back while the sticks are centred ("" for nothing)."""
         held = (["the position"] if self.lateral == "velocity" or self.brakes else []) + (
-            ["the altitude"] if self.throttle == "climb" else [])
+            ["the altitude"] if self.throttle in ("climb", "airspeed") else [])
         return " and ".join(held)
 
 
@@ -70,8 +72,8 @@ PLANT_GROUPS: Mapping[str, PlantGroup] = {g.name: g for g in (
     PlantGroup("surface", "surface", "thrust", False,
                "a plane's stick moves its control surfaces (a roll acceleration), the throttle its motor"),
     PlantGroup("bank", "bank", "thrust", False, "a plane's stick commands a bank angle, the throttle its motor"),
-    PlantGroup("bank+climb", "bank", "climb", False,
-               "a plane's stick commands a bank angle, the throttle a climb rate"),
+    PlantGroup("bank+climb", "bank", "airspeed", False,
+               "a plane's stick commands a bank angle, its pitch stick a climb rate, the throttle the airspeed"),
 )}
 
 
