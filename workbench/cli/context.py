@@ -96,9 +96,8 @@ class Context:
     def warn(self, text: str) -> None:
         """A warning on standard error, where a user looks for what went wrong: on a terminal wrapped at its words
         like :meth:`say` (the terminal's own wrapping breaks a word across lines), to a pipe or a file one line
-        that a search for ``warning:`` finds whole. Nothing under ``--quiet`` ("print nothing but errors")."""
-        if self.quiet:
-            return
+        that a search for ``warning:`` finds whole. ``--quiet`` keeps them: a model that does not fit its data, or a
+        bootstrap that lost resamples, is what a quiet run must still say."""
         line = f"warning: {text}"
         if self.err.is_terminal:
             self.err.print(line, markup=False, emoji=False, highlight=False, overflow="fold")

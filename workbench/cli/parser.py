@@ -74,7 +74,7 @@ class _OldSpelling(argparse.Action):
 def _common(p: argparse.ArgumentParser, *, top: bool = False) -> None:
     default = False if top else argparse.SUPPRESS
     p.add_argument("--debug", action="store_true", default=default, help="show the traceback of an error")
-    p.add_argument("-q", "--quiet", action="store_true", default=default, help="print nothing but errors")
+    p.add_argument("-q", "--quiet", action="store_true", default=default, help="print nothing but warnings and errors")
 
 
 def _study_options(
