@@ -181,7 +181,9 @@ def log_info(log: ScannedLog, names: dict[int, str], instances: dict[int, dict[s
     info["flight_modes"] = _flight_modes(log, mav_type, t_end)
     info["armed_spans"] = _armed_spans(log, t_end)
     boot = _utc(log)
-    if boot is not None and finite.size and abs(boot) < 1e11:
+    # the clock at boot and the first timestamp both plausible: a damaged timestamp is no date (and one beyond
+    # datetime's range ended the read in a ValueError)
+    if boot is not None and finite.size and abs(boot) < 1e11 and abs(boot + float(finite[0])) < 1e11:
         info["utc_time_at_boot"] = boot
         start = _dt.datetime.fromtimestamp(boot + float(finite[0]), tz=_dt.UTC)
         info["utc_start"] = start.isoformat(timespec="milliseconds")

@@ -517,3 +517,19 @@ def test_a_bad_stamp_on_a_mode_change_moves_no_span(logs, tmp_path):
     want, got = adapters.load(clean, mapping), adapters.load(bad, mapping)
     assert [(d.meta["mode"], len(d.t)) for d in got] == [(d.meta["mode"], len(d.t)) for d in want]
     assert "ALT_HOLD" in [d.meta["mode"] for d in want]
+
+
+
+def test_a_start_beyond_any_plausible_date_is_not_given(logs, monkeypatch):
+    # a byte-flipped ArduCopter log (beastayyg 0039, 200 random bytes) ended the read in "ValueError: year 226516
+    # is out of range": the clock at boot was checked against 1e11 s, the log's first timestamp added to it was not.
+    # Here the boot clock sits just inside that bound, so any first timestamp carries the start beyond it.
+    from adapters.formats import dataflash_info
+
+    path = logs("new", "copter")
+    intact = adapters.read(path)
+    assert "utc_start" in intact.info  # the check can fail: an intact log has its date
+    monkeypatch.setattr(dataflash_info, "_utc", lambda log: 1e11 - 1e-3)
+    got = adapters.read(path)
+    assert "utc_start" not in got.info and "utc_time_at_boot" not in got.info
+    assert got.info["flight_modes"] == intact.info["flight_modes"]
