@@ -24,7 +24,15 @@ import numpy as np
 import pandas as pd
 
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning
-from workbench.study.method_level import SplitPlan, _refit, corrected_t, method_differences, split_scores, split_tasks
+from workbench.study.method_level import (
+    SplitPlan,
+    _refit,
+    corrected_t,
+    decision_variance,
+    method_differences,
+    split_scores,
+    split_tasks,
+)
 
 __all__ = ["CoverageRun", "simulated_run", "true_difference", "run_interval", "METRIC", "N_STEPS", "STRIDE",
            "BASELINE"]
@@ -51,6 +59,10 @@ class CoverageRun:
         Whether each split's proposed model fell back to ``K̂x``.
     self_changes : tuple of float
         The self-comparison's change of each split (empty without it).
+    margins : tuple of float
+        Each split's fallback margin, its cross-validation's ``gain / gain_se``
+        (:func:`~workbench.study.method_level.decision_variance`; NaN where it did not choose; empty in records made
+        before round 8).
     """
 
     family: str
@@ -60,6 +72,7 @@ class CoverageRun:
     changes: tuple[float, ...]
     fell_back: tuple[bool, ...]
     self_changes: tuple[float, ...] = field(default=())
+    margins: tuple[float, ...] = field(default=())
 
 
 def _pool_means(fitted: dict, pool) -> dict[str, float]:
@@ -98,6 +111,7 @@ def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, tes
     changes = tuple(float(1.0 - per.loc[j, "proposed"] / per.loc[j, BASELINE]) if j in per.index else float("nan")
                     for j in range(len(tasks)))
     fell = tuple(bool(p["fell_back"].any()) if len(p) else False for p in parts)
+    margins = tuple(float(p["margin"].iloc[0]) if len(p) else float("nan") for p in parts)
     selfs: list[float] = []
     if self_comparison:
         rng = np.random.default_rng([seed, 40])
@@ -116,18 +130,25 @@ def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, tes
                     means.append(_pool_means(fitted, test)["proposed"])
             selfs.append(1.0 - means[0] / means[1])
     n_train, n_test = sizes[family]
-    return CoverageRun(family, seed, n_train, n_test, changes, fell, tuple(selfs))
+    return CoverageRun(family, seed, n_train, n_test, changes, fell, tuple(selfs), margins)
 
 
 def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_comparison: bool = False,
-                 factor: float = 1.0) -> tuple[float, float, float]:
-    """The corrected resampled t interval of a run from its first ``J`` splits (all by default): (mean, lo, hi);
-    NaN bounds where the splits did not vary. ``self_comparison``: the self-comparison's interval (each copy trained
-    on half the split's training part). ``factor``: the overlap term ``n_test/n_train`` multiplied by it (1: Nadeau &
-    Bengio's), for a study that weighs other corrections."""
+                 factor: float = 1.0, decision: bool = True) -> tuple[float, float, float]:
+    """The interval of a run from its first ``J`` splits (all by default), as ``evaluate`` gives it: (mean, lo, hi);
+    NaN bounds where the splits did not vary. The corrected resampled t with the fallback's decision term
+    (:func:`~workbench.study.method_level.decision_variance`; ``decision=False``: Nadeau & Bengio's alone).
+    ``self_comparison``: the self-comparison's interval (each copy trained on half the split's training part; no
+    decision term: both copies decide alike in law). ``factor``: the overlap term ``n_test/n_train`` multiplied by it
+    (1: Nadeau & Bengio's), for a study that weighs other corrections."""
     c = list(run.self_changes if self_comparison else run.changes)[: J or None]
     n_train = run.n_train // 2 if self_comparison else run.n_train
-    mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1))
+    extra = 0.0
+    if decision and not self_comparison and run.margins:
+        # against IOC-only a split's change is what keeping the variability model changed
+        extra = decision_variance(c, run.fell_back[: len(c)], run.margins[: len(c)])[1]
+    mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1),
+                                   extra_var=extra)
     return mean, lo, hi
 
 
@@ -135,7 +156,8 @@ def method_rows(run: CoverageRun, J: int | None = None) -> Sequence:
     """The run's first ``J`` splits as :class:`~workbench.study.method_level.MethodDifference` rows (what
     ``evaluate`` would print): for checking that no row has an interval of zero width."""
     k = len(run.changes) if J is None else J
-    rows = [(run.family, j, f"t{j}", m, v, run.fell_back[j])
+    margins = run.margins or (float("nan"),) * len(run.changes)
+    rows = [(run.family, j, f"t{j}", m, v, run.fell_back[j], margins[j])
             for j in range(k) for m, v in (("proposed", 1.0 - run.changes[j]), (BASELINE, 1.0))]
-    scores = pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value", "fell_back"])
+    scores = pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value", "fell_back", "margin"])
     return method_differences(scores, {run.family: (run.n_train, run.n_test)}, METRIC, "proposed", [BASELINE])
