@@ -67,7 +67,7 @@ def _append(path: Path, record: dict) -> None:
 
 
 def compute(families: list[str], runs: int, truth_sets: int, pool: int, splits: int, path: Path,
-            seed0: int = SEED0) -> None:
+            seed0: int = SEED0, self_comparison: bool = True, first_run: int = 0) -> None:
     from workbench.plant.system import planar_quadrotor
     from workbench.sim.families import family
     from workbench.study.coverage import simulated_run, true_difference
@@ -94,12 +94,12 @@ def compute(families: list[str], runs: int, truth_sets: int, pool: int, splits: 
                            "fell_back": fell, "seconds": time.perf_counter() - t0})
             print(f"{name} truth set {t}: {100 * c:+.1f} %{' (fell back)' if fell else ''} "
                   f"[{time.perf_counter() - t0:.0f} s]", flush=True)
-        for r in range(runs):
+        for r in range(first_run, runs):
             if r in have_runs:
                 continue
             t0 = time.perf_counter()
             run = simulated_run(sim, name, _seed(name, r, seed0), plant, n_trials=N_TRIALS, test_size=TEST_SIZE,
-                                splits=splits)
+                                splits=splits, self_comparison=self_comparison)
             _append(path, {"kind": "run", "family": name, "run": r, "seed": run.seed, "n_train": run.n_train,
                            "n_test": run.n_test, "changes": list(run.changes), "fell_back": list(run.fell_back),
                            "self_changes": list(run.self_changes), "margins": list(run.margins),
@@ -180,6 +180,10 @@ def main() -> None:
     p.add_argument("--file", type=Path, default=RESULTS)
     p.add_argument("--seed0", type=int, default=SEED0, help="first seed (9000: this study's; 11000: the round-8 "
                    "study that chose the interval's construction)")
+    p.add_argument("--first-run", type=int, default=0, help="start at this run (a second process on the same file "
+                   "takes the later runs; records are appended line by line)")
+    p.add_argument("--no-self", action="store_true", help="without the self-comparison (half the cost; its "
+                   "interval is Nadeau & Bengio's, which the decision term leaves alone)")
     p.add_argument("--summary", action="store_true", help="print the table from the file and stop")
     p.add_argument("--markdown", type=Path, help="also write the summary under this Markdown file's header")
     a = p.parse_args()
@@ -187,7 +191,7 @@ def main() -> None:
         from workbench.threads import limit_threads
 
         with limit_threads():
-            compute(a.families, a.runs, a.truth_sets, a.pool, a.splits, a.file, a.seed0)
+            compute(a.families, a.runs, a.truth_sets, a.pool, a.splits, a.file, a.seed0, not a.no_self, a.first_run)
     text = summary(a.file)
     print(text)
     if a.markdown:
