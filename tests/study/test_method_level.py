@@ -152,6 +152,7 @@ def test_every_split_reruns_every_choice_on_its_own_training_part(monkeypatch):
         test_ids = {ds[int(i)].id for i in task[3]}
         assert cv and made and not (cv | made) & test_ids  # only the split's training trials
         assert set(part["trial"]) == test_ids and part["fell_back"].all()
+        assert (part["margin"] == 0.0 / 0.1).all()  # the split's own cross-validation margin, gain / gain_se
     scores = pd.concat(parts, ignore_index=True)
     (d,) = method_differences(scores, sizes, "rmse_position", "proposed", ["ioc_only"])
     # fallen back in every split: the same predictions as IOC-only, said in words, no interval (never [0, 0])
@@ -285,3 +286,26 @@ def test_the_decision_term_covers_a_procedure_whose_fallback_flips_where_nadeau_
     nb, dec = float(np.mean(hits["nb"])), float(np.mean(hits["decision"]))
     assert len(hits["nb"]) > 100
     assert nb < 0.85 and dec >= 0.92, (nb, dec, truth)
+
+
+def test_the_pooled_row_adds_each_strategys_decision_term_by_its_share_squared_and_the_text_says_so():
+    """Two strategies, one near its fallback threshold: the pooled change is Σ w_l c_l (w_l the strategy's share of
+    the baseline's error), so its decision variance is Σ w_l² Var_l; the study's text names the term with its
+    largest chance of another decision."""
+    from workbench.study.method_level import decision_variance
+
+    rng = np.random.default_rng(5)
+    scores = _scores(rng, labels=("A", "B")).replace({"baseline": "ioc_only"})
+    scores["fell_back"] = False
+    scores["margin"] = np.where(scores["label"] == "A", 1.2, 30.0)
+    rows = method_differences(scores, {"A": (24, 4), "B": (24, 4)}, "rmse_position", "proposed", ["ioc_only"])
+    a, b, pooled = rows
+    assert b.decision_var == pytest.approx(0.0, abs=1e-12) and a.decision_var > 0
+    assert a.decision_var == pytest.approx(decision_variance(a.changes, [False] * 6, [1.2] * 6)[1])
+    sums = scores[scores["method"] == "ioc_only"].groupby(["split", "label"])["value"].sum().unstack()
+    w_a = float((sums["A"] / sums.sum(axis=1)).mean())
+    assert pooled.decision_var == pytest.approx(w_a**2 * a.decision_var, rel=1e-9)
+    table = _trials(rng, 6, labels=("A", "B"))
+    text = study_statistics(table, "rmse_position", "m", {}, windows_sentence(table, 60, None, 0.05), n_boot=300,
+                            method_level=rows).text()
+    assert f"decides it otherwise (up to {100 * a.p_flip:.0f} %" in text
