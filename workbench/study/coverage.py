@@ -7,8 +7,9 @@ exactly as a split runs it (:class:`~workbench.study.method_level.SplitPlan`: th
 fallback included) and scored on one large pool of fresh trials (:func:`true_difference`). A run
 (:func:`simulated_run`) draws one sample of ``n_trials`` trials, splits it ``splits`` times as ``evaluate`` does, and
 keeps every split's change, so intervals from the first ``J`` splits can be judged for several ``J`` from one run
-(:func:`run_interval`). Beside it, the self-comparison: the proposed method against itself, each copy trained on its
-own half of every split's training part — the true difference is 0 by symmetry.
+(:func:`run_interval`, as ``evaluate`` makes it: the corrected resampled t with the fallback's decision term, each
+split's cross-validation margin kept for it). Beside it, the self-comparison: the proposed method against itself,
+each copy trained on its own half of every split's training part — the true difference is 0 by symmetry.
 
 ``bench/coverage_method_level.py`` runs the study that chose :data:`~workbench.study.method_level.SPLITS`;
 ``tests/study/test_method_level_sim.py`` judges the default method with other seeds.
