@@ -543,13 +543,13 @@ def test_the_gain_with_the_pilots_timing_keeps_its_estimate_with_the_jackknifes_
     assert not timed.fits[0].bias_corrected and untimed.fits[0].bias_corrected
 
 
-def _fieller_ends(ka: float, sa: float, kb: float, sb: float, n: int) -> tuple[float, float]:
-    """Independently: the θ where the pivot ``(k̂_b − θ k̂_a) / √(s_b² + θ² s_a²)`` reaches ``±t_{n−1}``, by root
-    finding on either side of ``k̂_b / k̂_a``."""
+def _fieller_ends(ka: float, sa: float, kb: float, sb: float, nu: float) -> tuple[float, float]:
+    """Independently: the θ where the pivot ``(k̂_b − θ k̂_a) / √(s_b² + θ² s_a²)`` reaches ``±t_ν``, by root finding
+    on either side of ``k̂_b / k̂_a``."""
     import scipy.optimize
     import scipy.stats
 
-    t = scipy.stats.t.ppf(0.975, n - 1)
+    t = scipy.stats.t.ppf(0.975, nu)
     pivot = lambda th: (kb - th * ka) ** 2 - t**2 * (sb**2 + th**2 * sa**2)  # noqa: E731
     est = kb / ka
     return (scipy.optimize.brentq(pivot, est - 50 * abs(est), est),
@@ -574,7 +574,11 @@ def test_the_gain_entry_factor_is_fiellers_interval_and_the_report_prints_it_bes
     table = compare_strategies({"a": wa, "b": wb})
     row = table.query("strategy == 'b'").iloc[0]
     assert row.gain == "K[u, p]" and row.gain_factor == pytest.approx(kb / ka)
-    lo, hi = _fieller_ends(ka, sa, kb, sb, n)
+    # no leave-one-out gains: each standard error the resampled gains' times √(n / (n − 1)), n − 1 degrees of freedom
+    # each, Welch–Satterthwaite's for the pivot's variance at the estimate
+    c, th = np.sqrt(n / (n - 1)), kb / ka
+    var = (c * sb) ** 2 + (th * c * sa) ** 2
+    lo, hi = _fieller_ends(ka, c * sa, kb, c * sb, var**2 / (((c * sb) ** 4 + (th * c * sa) ** 4) / (n - 1)))
     assert (row.gain_factor_lo, row.gain_factor_hi) == pytest.approx((lo, hi), rel=1e-9)
     assert 1.0 < lo < kb / ka < hi and row.gain_factor_identifiable
     shown = format_gain_factor(row.gain_factor, row.gain_factor_lo, row.gain_factor_hi)
@@ -607,9 +611,28 @@ def test_a_gain_entry_factor_whose_first_entry_is_not_distinguishable_from_zero_
     # report prints words and no estimate; a bounded set that includes 0 says the signs may differ
     from workbench.study.weights import format_gain_factor, gain_factor
 
-    lo, hi = gain_factor(0.01, 0.03, -0.5, 0.03, 30)
+    lo, hi = gain_factor(0.01, 0.03, 29, -0.5, 0.03, 29)
     assert (lo, hi) == (-np.inf, np.inf)
     words = format_gain_factor(-50.0, lo, hi)
     assert NOT_IDENTIFIABLE in words and "not distinguishable from 0" in words and "-50" not in words
-    lo, hi = gain_factor(-0.5, 0.03, 0.02, 0.03, 30)
+    lo, hi = gain_factor(-0.5, 0.03, 29, 0.02, 0.03, 29)
     assert lo < 0 < hi and "signs may differ" in format_gain_factor(-0.04, lo, hi)
+
+
+def test_a_gain_entrys_standard_error_is_the_jackknifes_where_every_leave_one_out_gain_is_there():
+    # the covariance the weight ratios beside it use (ratio_profile.PartDistance.from_samples): CV3 with its
+    # effective degrees of freedom, not the resamples' spread
+    from workbench.method.ratio_profile import effective_dof
+    from workbench.study.weights import entry_error
+
+    n = 30
+    rng = np.random.default_rng(3)
+    loo = -0.8 + 0.004 * rng.standard_normal((n, 1, 2)) * np.linspace(0.2, 3, n)[:, None, None]
+    g = SimpleNamespace(K=np.array([[-0.8, 0.1]]), K_samples=-0.8 + 0.05 * rng.standard_normal((200, 1, 2)),
+                        K_loo=loo, n_trials=n)
+    se, nu = entry_error(g, 0, 0)
+    dev = loo[:, 0, 0] - loo[:, 0, 0].mean()
+    assert se == pytest.approx(np.sqrt((n - 1) / n * np.sum(dev**2)))
+    assert nu == pytest.approx(effective_dof(dev[:, None])) and nu < n - 1  # unequal trials: fewer than n − 1
+    se, nu = entry_error(SimpleNamespace(**{**vars(g), "K_loo": None}), 0, 0)
+    assert se == pytest.approx(g.K_samples[:, 0, 0].std(ddof=1) * np.sqrt(n / (n - 1))) and nu == n - 1

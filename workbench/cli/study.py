@@ -470,7 +470,7 @@ def _print_objective_comparison(ctx: Context, result: Any, report: Path | None =
     if contrasts:  # the gains compare where a weight that barely moves them does not
         ctx.say_table(list(contrasts[0]), [list(c.values()) for c in contrasts],
                       title="gain entries K̂[u, s] compared between strategies, beside Q_s / R_u "
-                            f"(Fieller {ratios[first].ci:g} % intervals over trial resamples)")
+                            f"(Fieller {ratios[first].ci:g} % intervals over whole trials)")
     # each part's structure check once, for every strategy it reads the same for
     fits: dict[str, list[str]] = {}
     for lb, wr in ratios.items():

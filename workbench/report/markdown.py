@@ -398,9 +398,10 @@ def _objective_interval_notes(
     if contrasts:
         md += ["### Gain entries compared between strategies", "",
                f"Beside each weight ratio Q_s / R_u, the factor between two strategies' gain entry K̂[u, s] (how hard "
-               f"the pilot pushes input u on state s), with Fieller's {first.ci:g} % interval from each gain's "
-               "standard error over its trial resamples (the t interval of K̂ carried to the ratio; words where "
-               "the first strategy's entry is not distinguishable from 0 or the interval includes 0). The gains are "
+               f"the pilot pushes input u on state s), with Fieller's {first.ci:g} % interval from each entry's "
+               "standard error over whole trials (the delete-one-trial jackknife's, as the weight ratios' covariance; "
+               "words where the first strategy's entry is not distinguishable from 0 or the interval includes 0). "
+               "The gains are "
                "what a fit estimates directly: where a weight barely moves its gain, the ratio's interval has no "
                "upper end while the gains still compare.", "",
                _md_table(pd.DataFrame(contrasts)), ""]
