@@ -617,6 +617,11 @@ def test_a_gain_entry_factor_whose_first_entry_is_not_distinguishable_from_zero_
     assert NOT_IDENTIFIABLE in words and "not distinguishable from 0" in words and "-50" not in words
     lo, hi = gain_factor(-0.5, 0.03, 29, 0.02, 0.03, 29)
     assert lo < 0 < hi and "signs may differ" in format_gain_factor(-0.04, lo, hi)
+    # a narrow terminal's table shortens both verdicts and keeps every number
+    from workbench.cli.context import shorter_words
+
+    assert shorter_words(words) == "any (first ≈ 0)"
+    assert shorter_words(format_gain_factor(-0.04, lo, hi)) == f"{lo:.3g} … {hi:.3g} (sign?)"
 
 
 def test_a_gain_entrys_standard_error_is_the_jackknifes_where_every_leave_one_out_gain_is_there():

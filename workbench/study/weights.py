@@ -587,6 +587,13 @@ def _gain_factor(first: WeightRatios, other: WeightRatios, k: int) -> dict:
             "gain_factor_identifiable": f.identifiable}
 
 
+def _no_factor(note: str) -> str:
+    """``"no factor (not of this form)"``: the verdict of a weight ratio's missing factor, its reason (the part's
+    mismatch) printed once with the part."""
+    word = str(note or "").split(":")[0].strip()
+    return f"no factor ({word})" if word else "no factor"
+
+
 def gain_contrasts(table: pd.DataFrame) -> list[dict[str, str]]:
     """The rows the report and the terminal print for the gain entries compared between strategies: per strategy
     after the first and per weight ratio with a gain entry, the entry, the strategies, the gain factor with its
@@ -600,7 +607,7 @@ def gain_contrasts(table: pd.DataFrame) -> list[dict[str, str]]:
         ratio = "" if r.factor != r.factor else format_interval(r.factor, r.factor_lo, r.factor_hi)
         rows.append({"gain entry": r.gain, "strategies": f"{r.strategy} / {first}",
                      "gain factor [interval]": format_gain_factor(r.gain_factor, r.gain_factor_lo, r.gain_factor_hi),
-                     "weight ratio": r.ratio, "its factor": ratio or (r.factor_note or "no factor")})
+                     "weight ratio": r.ratio, "its factor": ratio or _no_factor(r.factor_note)})
     return rows
 
 
