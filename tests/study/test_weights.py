@@ -601,7 +601,7 @@ def test_the_gain_entry_factor_is_fiellers_interval_and_the_report_prints_it_bes
     ctx = Context(argparse.Namespace(quiet=False, format=None))
     _print_objective_comparison(ctx, SimpleNamespace(objectives=objectives, ratio_comparison=table))
     out = capsys.readouterr().out
-    printed = out.split("gain entries K̂[u, s] compared between strategies")[1]
+    printed = out.split("gain K̂[u, s] between strategies beside Q_s / R_u")[1]
     cells = r"\s*[│|]?\s*".join(re.escape(c) for c in want.values())
     assert re.search(cells, printed), printed
 

@@ -469,8 +469,8 @@ def _print_objective_comparison(ctx: Context, result: Any, report: Path | None =
     contrasts = gain_contrasts(table)
     if contrasts:  # the gains compare where a weight that barely moves them does not
         ctx.say_table(list(contrasts[0]), [list(c.values()) for c in contrasts],
-                      title="gain entries K̂[u, s] compared between strategies, beside Q_s / R_u "
-                            f"(Fieller {ratios[first].ci:g} % intervals over whole trials)")
+                      title=f"gain K̂[u, s] between strategies beside Q_s / R_u (Fieller {ratios[first].ci:g} %, "
+                            "over trials)")
     # each part's structure check once, for every strategy it reads the same for
     fits: dict[str, list[str]] = {}
     for lb, wr in ratios.items():

@@ -588,10 +588,9 @@ def _gain_factor(first: WeightRatios, other: WeightRatios, k: int) -> dict:
 
 
 def _no_factor(note: str) -> str:
-    """``"no factor (not of this form)"``: the verdict of a weight ratio's missing factor, its reason (the part's
-    mismatch) printed once with the part."""
-    word = str(note or "").split(":")[0].strip()
-    return f"no factor ({word})" if word else "no factor"
+    """The verdict of a weight ratio's missing factor (``"not of this form"``), its reason (the part's mismatch)
+    printed once with the part."""
+    return str(note or "").split(":")[0].strip() or "no factor"
 
 
 def gain_contrasts(table: pd.DataFrame) -> list[dict[str, str]]:
