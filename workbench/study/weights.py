@@ -11,6 +11,11 @@ of three readings: a finite estimate with its interval; "not identifiable" where
 ×:data:`IDENTIFIABLE_SPAN`, with the demonstrations a power curve says it would need (:mod:`workbench.study.power`);
 or "not of this form" where the part's gain is no diagonal cost's, with the closest one and the mismatch per gain
 entry (:mod:`workbench.method.pseudo_true`).
+
+Beside each factor of ``Q_s / R_u`` between strategies stands the factor of the gain entry ``K̂[u, s]`` itself
+(:func:`gain_factor`, Fieller's interval). A weight that barely moves the gain leaves its ratio's factor without
+an upper end (the instructed CS1's attitude weight, 1/30 of CS2's, moves its attitude gain 3 %), while the gain
+entries, which the fit estimates directly, still compare between the strategies.
 """
 
 from __future__ import annotations
