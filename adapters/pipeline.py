@@ -346,7 +346,9 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
     The rule is the coefficient of determination of the GPS velocity by the estimate, ``1 − Σ|v − v_gps|² /
     Σ|v_gps − mean v_gps|²`` over the GPS samples in the segments (north and east together): below 0 the estimate
     explains less of the GPS velocity than a constant would, so it is not the vehicle's velocity and no plant
-    identified from it can be physics. Before it, the flight must move: a GPS speed that never passes
+    identified from it can be physics. A GPS velocity that holds one value throughout has no spread to explain: the
+    estimate must then stay within the receiver's accuracy of it (RMS), or the flight is refused naming both. Before
+    it, the flight must move: a GPS speed that never passes
     :data:`MOTION_OVER_ACCURACY` times the receiver's accuracy (a hover, a vehicle standing) is too little motion to
     judge the estimate or identify the plant by, and says so (its own cause, not the estimator's). A log without the
     GPS stream, where the mapping says such a log flew without GPS, dead-reckons. ``""`` where the velocity
@@ -399,15 +401,24 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
                 f"velocities are the receiver's noise, and neither the estimator nor the plant's physics can be judged "
                 f"from them")
     v = np.column_stack([np.interp(tg, te, e[:, k]) for k in range(2)])
+    rms = float(np.sqrt(((v - g) ** 2).sum(axis=1).mean()))
+    if not np.ptp(g, axis=0).any():
+        # one value throughout: no spread for the estimate to explain (the share explained would divide by the
+        # mean's round-off, ~1e-30), so the estimate is judged by its distance from it, against the receiver's accuracy
+        if rms <= ref.accuracy:
+            return ""
+        return (f"{head}: the GPS velocity ({gps.stream} {', '.join(gps.columns)}) holds one value (north "
+                f"{g[0, 0]:.3g} m/s, east {g[0, 1]:.3g} m/s) in all {len(g)} GPS samples in the kept segments, so "
+                f"there is no spread for {est.stream}'s velocity to follow; it differs from that value by {rms:.2g} "
+                f"m/s RMS, more than the receiver's {ref.accuracy:g} m/s accuracy — a receiver repeating one value, "
+                f"or an estimator that does not follow it; the plant's physics cannot be identified from a velocity "
+                f"nothing confirms")
     spread = float(((g - g.mean(axis=0)) ** 2).sum())
-    if spread == 0.0:
-        return ""
     explained = 1.0 - float(((v - g) ** 2).sum()) / spread
     if explained >= 0.0:
         return ""
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = [float(np.corrcoef(v[:, k], g[:, k])[0, 1]) for k in range(2)]
-    rms = float(np.sqrt(((v - g) ** 2).sum(axis=1).mean()))
     sd = float(np.sqrt(spread / len(g)))
     return (f"{head}: {est.stream} velocity does not follow the GPS velocity ({gps.stream} "
             f"{', '.join(gps.columns)}): over the {len(g)} GPS samples in the kept segments it explains "
