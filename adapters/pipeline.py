@@ -49,7 +49,7 @@ from adapters.streams import Streams, clean_series, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
-from workbench.errors import DataError, MappingError
+from workbench.errors import AbsentSource, DataError, MappingError
 
 __all__ = ["build", "check_rules", "explain"]
 
@@ -241,7 +241,9 @@ def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Ser
 
 
 def _check_present(streams: Streams, m: ChannelMapping) -> None:
-    """Raise one MappingError naming every channel the log lacks, the pilot's inputs first.
+    """Raise one MappingError naming every channel the log lacks, the pilot's inputs first; an entry the log holds
+    but the mapping reads wrongly (:class:`~workbench.errors.MappingError` that is not
+    :class:`~workbench.errors.AbsentSource`) is named alone, with the mapping's file, the entry and the cause.
 
     A log whose logging left out the sticks (a DataFlash ``LOG_BITMASK`` without RC input) lacks more than one
     channel; naming only the first in the mapping's order (a state's rate) would hide that the pilot is not in
@@ -250,11 +252,20 @@ def _check_present(streams: Streams, m: ChannelMapping) -> None:
     missing: list[tuple[bool, Channel, MappingError]] = []
     inputs = set(m.input_names)
     for ch in (resolve_channel(c, streams) for c in m.channels):
+        what = f"channel {ch.name!r}"
         try:
-            select(ch.selector, streams, f"channel {ch.name!r}", m.name,
-                   n_columns=TRANSFORMS[ch.transform].n_columns)
-        except MappingError as exc:
+            select(ch.selector, streams, what, m.name, n_columns=TRANSFORMS[ch.transform].n_columns)
+        except AbsentSource as exc:
             missing.append((ch.name not in inputs, ch, exc))
+        except MappingError as exc:
+            # the log holds what the entry reads, the entry reads it wrongly (a column count, a stream without its
+            # field): the mapping's matter, never "not in this log"
+            cause = str(exc).removeprefix(f"mapping {m.name!r}: ").removeprefix(what).lstrip(": ")
+            own = m.raw.get(m.format or "")
+            in_own = isinstance(own, dict) and ch.name in own.get("channels", {})
+            table = f"{m.format}.channels" if in_own else "channels"
+            raise MappingError(f"{m.path}: mapping {m.name!r}, entry [{table}] {ch.name} = "
+                               f"{ch.selector.describe()!r}: {cause} (reading {streams.path})") from None
     if len(missing) < 2:
         return  # none, or one: the loop raises that channel's own error
     missing.sort(key=lambda x: x[0])  # stable: the inputs first, each group in the mapping's order
