@@ -257,14 +257,9 @@ def _check_present(streams: Streams, m: ChannelMapping) -> None:
             select(ch.selector, streams, what, m.name, n_columns=TRANSFORMS[ch.transform].n_columns)
         except AbsentSource as exc:
             missing.append((ch.name not in inputs, ch, exc))
-        except MappingError as exc:
-            # the log holds what the entry reads, the entry reads it wrongly (a column count, a stream without its
-            # field): the mapping's matter, never "not in this log"
+        except MappingError as exc:  # the log holds what the entry reads, the entry reads it wrongly
             cause = str(exc).removeprefix(f"mapping {m.name!r}: ").removeprefix(what).lstrip(": ")
-            own = m.raw.get(m.format or "")
-            in_own = isinstance(own, dict) and ch.name in own.get("channels", {})
-            table = f"{m.format}.channels" if in_own else "channels"
-            raise MappingError(f"{m.path}: mapping {m.name!r}, entry [{table}] {ch.name} = "
+            raise MappingError(f"{m.path}: mapping {m.name!r}, entry {m.entry(ch.name)} = "
                                f"{ch.selector.describe()!r}: {cause} (reading {streams.path})") from None
     if len(missing) < 2:
         return  # none, or one: the loop raises that channel's own error
@@ -413,17 +408,13 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
                 f"from them")
     v = np.column_stack([np.interp(tg, te, e[:, k]) for k in range(2)])
     rms = float(np.sqrt(((v - g) ** 2).sum(axis=1).mean()))
-    if not np.ptp(g, axis=0).any():
-        # one value throughout: no spread for the estimate to explain (the share explained would divide by the
-        # mean's round-off, ~1e-30), so the estimate is judged by its distance from it, against the receiver's accuracy
-        if rms <= ref.accuracy:
-            return ""
-        return (f"{head}: the GPS velocity ({gps.stream} {', '.join(gps.columns)}) holds one value (north "
-                f"{g[0, 0]:.3g} m/s, east {g[0, 1]:.3g} m/s) in all {len(g)} GPS samples in the kept segments, so "
-                f"there is no spread for {est.stream}'s velocity to follow; it differs from that value by {rms:.2g} "
-                f"m/s RMS, more than the receiver's {ref.accuracy:g} m/s accuracy — a receiver repeating one value, "
-                f"or an estimator that does not follow it; the plant's physics cannot be identified from a velocity "
-                f"nothing confirms")
+    if not np.ptp(g, axis=0).any():  # no spread: the share explained would divide by the mean's round-off (~1e-30)
+        return "" if rms <= ref.accuracy else (
+            f"{head}: the GPS velocity ({gps.stream} {', '.join(gps.columns)}) holds one value (north {g[0, 0]:.3g} "
+            f"m/s, east {g[0, 1]:.3g} m/s) in all {len(g)} GPS samples in the kept segments, so there is no spread for "
+            f"{est.stream}'s velocity to follow; it differs from that value by {rms:.2g} m/s RMS, more than the "
+            f"receiver's {ref.accuracy:g} m/s accuracy — a receiver repeating one value, or an estimator that does "
+            f"not follow it; the plant's physics cannot be identified from a velocity nothing confirms")
     spread = float(((g - g.mean(axis=0)) ** 2).sum())
     explained = 1.0 - float(((v - g) ** 2).sum()) / spread
     if explained >= 0.0:
