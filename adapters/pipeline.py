@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from adapters.align import Series, align, check_grid
+from adapters.align import Series, align, check_grid, silence
 from adapters.clock import stream_times
 from adapters.gps import follows_gps
 from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
@@ -46,7 +46,7 @@ from adapters.selection import Selected, channel_values, resolve_channel, select
 from adapters.sticks import check as check_sticks
 from adapters.sticks import describe as describe_sticks
 from adapters.sticks import resolve as resolve_sticks
-from adapters.streams import Streams, clean_series, numeric, time_line
+from adapters.streams import Streams, clean_series, damage_words, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
@@ -274,6 +274,36 @@ def _check_present(streams: Streams, m: ChannelMapping) -> None:
     raise MappingError(f"mapping {m.name!r}: {lead}{first}; also not in it: {rest}")
 
 
+#: Cuts a damage note lists before "and k more".
+_CUTS_SHOWN = 4
+
+
+def _damage_note(streams: Streams, m: ChannelMapping, found: list[tuple[Span, list[np.ndarray], list[np.ndarray]]],
+                 series: list[Series], skipped: Counter, log_start: float) -> str:
+    """Where a damaged file's demonstrations part though their segment goes on, in one line; ``""`` for an intact
+    file (:func:`~adapters.streams.damage_words`) or one whose demonstrations each start a trial or mode of their own.
+
+    A piece that follows one of the same trial marker and mode was cut from it: by a silence of the channels longer
+    than ``segment.gap`` (data the reader skipped) or by the segmentation's field reading other values between
+    them (garbled bytes) — in an intact log the same flight would have been one demonstration.
+    """
+    kept = [(i, span, t) for i, (span, ts, _) in enumerate(found) for t in ts]
+    cuts = []
+    for (i, a, ta), (j, b, tb) in zip(kept[:-1], kept[1:], strict=True):
+        if (a.meta.get("demo"), a.meta.get("mode")) != (b.meta.get("demo"), b.meta.get("mode")):
+            continue  # a trial or mode of its own: a boundary the log states
+        lo, hi = float(ta[-1]), float(tb[0])
+        rule = "trial marker" if "demo" in a.meta else "flight mode" if "mode" in a.meta else "arming"
+        why = silence(series, lo, hi, m.segment.gap) if i == j else ""
+        cuts.append(f"{lo - log_start:.1f} s ({why or f'its {rule} reads otherwise until {hi - log_start:.1f} s'})")
+    damage = damage_words(streams, skipped) if cuts else ""
+    if not damage:
+        return ""
+    more = f" and {len(cuts) - _CUTS_SHOWN} more" if len(cuts) > _CUTS_SHOWN else ""
+    return (f"{streams.path}: damaged file, {damage}; the flight is cut where it goes on, {len(kept)} demonstrations "
+            f"in all: at {', '.join(cuts[:_CUTS_SHOWN])}{more} — data lost to the damage, not pauses in the flight")
+
+
 def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
     """A position or velocity that holds one value through the whole log is a missing source, not a flight.
 
@@ -471,6 +501,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                    f"before this check: `workbench view` shows where)") if flips else ""
             raise DataError(still + cut)
     report = {**{k: int(v) for k, v in streams.skipped.items() if v}, **{k: int(v) for k, v in skipped.items() if v}}
+    damaged = _damage_note(streams, m, found, series, skipped, log_start)
     # a marker without a demo key belongs to the demonstration containing it, else to the next one
     by_span: dict[int, dict[str, Any]] = {}
     ends = [span.end for span, _, _ in found]
@@ -506,6 +537,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 meta["sticks"] = sticks
             if flips:
                 meta["flipped"] = "; ".join(flips)
+            if damaged:
+                meta["damaged"] = damaged
             if m.task:  # the mapping's [task]: what a fit of these trials regulates, relative to what
                 meta["task"] = dict(m.task)
             if "mode" in span.meta:
