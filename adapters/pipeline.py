@@ -392,15 +392,20 @@ def integrate(m: ChannelMapping, values: np.ndarray) -> np.ndarray:
 
 
 def _unique(ids: list[str]) -> list[str]:
+    """The ids made unique: a repeated one numbered ``.1``, ``.2``, … in order (a segment's pieces, and the segments
+    of one trial marker), skipping a number another id already is (two segments of one trial marker, one of them cut,
+    gave ``x-0.1`` twice)."""
     seen: Counter = Counter(ids)
     count: Counter = Counter()
-    out = []
+    out: list[str] = []
+    used: set[str] = set()
     for i in ids:
-        if seen[i] > 1:
+        new = i
+        while seen[i] > 1 and (new == i or new in seen or new in used):
             count[i] += 1
-            out.append(f"{i}.{count[i]}")
-        else:
-            out.append(i)
+            new = f"{i}.{count[i]}"
+        out.append(new)
+        used.add(new)
     return out
 
 
@@ -520,10 +525,10 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
         else:  # a text demo field (a CSV's demo column) is the id itself; a number is an index into the file
             default_id = f"{stem}-{key}" if key.lstrip("-").isdigit() else key
         demo_id = str(base.pop("id", default_id))
-        for p, (t, v) in enumerate(zip(ts, vs, strict=True)):
+        for t, v in zip(ts, vs, strict=True):
             meta = {
                 **base,
-                "id": demo_id if len(ts) == 1 else f"{demo_id}.{p + 1}",
+                "id": demo_id,  # a segment's pieces, and segments of one trial marker, numbered in order below
                 "source": streams.path,
                 "format": streams.format,
                 "mapping": m.name,

@@ -55,3 +55,12 @@ def test_a_damaged_flight_cut_into_pieces_names_the_file_and_every_cut(tmp_path,
     ends = [d.meta["t_start"] + d.t[-1] for d in ds[:-1]]
     listed = [float(x) for x in re.findall(r"(?:at |\), )(\d+\.\d) s \(", note)]
     assert listed == pytest.approx(ends, abs=0.05 + 1e-9)  # printed to 0.1 s
+
+
+def test_two_segments_of_one_trial_marker_one_of_them_cut_get_distinct_ids(tmp_path):
+    # seed 5: the trial marker reads otherwise for a while, so marker 0 makes two segments, the second cut in two;
+    # the ids were x-0.1 (a segment repeated) and x-0.1 (a piece numbered), and import stopped at "id is not unique"
+    ds = adapters.load(_damaged(_flight(tmp_path), 5), "planar_quadrotor")
+    assert len(set(ds.ids)) == len(ds) > 2
+    assert list(ds.ids) == [f"damaged_5-0.{k + 1}" for k in range(len(ds))]  # numbered in time order
+    assert [d.meta["t0"] for d in ds] == sorted(d.meta["t0"] for d in ds)
