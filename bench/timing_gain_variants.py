@@ -145,6 +145,7 @@ def main() -> None:
     quad = planar_quadrotor()
     first, count = args.seeds
     results: dict[str, list[tuple[float, float]]] = {}
+    relevance, worst = [], []
     for k in range(count):
         op = pilot(first + k, args.plain)
         demos = list(lqr_operator_demos(op, args.trials, seed=first + k, plant=quad))
@@ -152,6 +153,8 @@ def main() -> None:
         gains, rel, D = variants(demos, quad, args.boot, k)
         E = gains["liml"] - K
         i, j = np.unravel_index(int(np.argmax(np.abs(E))), E.shape)
+        relevance.append(rel)
+        worst.append(f"K[u{i + 1}, {NAMES[j]}]")
         parts = []
         for name, Kh in gains.items():
             r = float(np.linalg.norm(Kh - K) / np.linalg.norm(K))
@@ -164,6 +167,21 @@ def main() -> None:
             + f"LIML's largest error K[u{i + 1}, {NAMES[j]}] {E[i, j]:+.3f} "
             f"(its share of ‖K̂ − K‖² {E[i, j] ** 2 / float((E**2).sum()):.2f}); " + ", ".join(parts),
             flush=True,
+        )
+    err = np.array([r for r, _ in results["liml"]])
+    rel_a, fail = np.array(relevance), err > 0.2
+    rho = scipy.stats.spearmanr(rel_a, err)
+    counts = {w: sum(1 for f, x in zip(fail, worst, strict=True) if f and x == w) for w in sorted(set(worst))}
+    print(
+        f"LIML above 0.2 on {int(fail.sum())} seeds, its largest error there: "
+        + ", ".join(f"{w} {c}" for w, c in counts.items() if c)
+    )
+    if 0 < fail.sum() < len(fail):
+        mw = scipy.stats.mannwhitneyu(rel_a[fail], rel_a[~fail])
+        print(
+            f"relevance: mean {rel_a[fail].mean():.3f} where LIML is above 0.2, {rel_a[~fail].mean():.3f} elsewhere "
+            f"(Mann-Whitney p {mw.pvalue:.3f}); Spearman's rho of relevance and error {rho.statistic:.2f} "
+            f"(p {rho.pvalue:.3f})"
         )
     print("variant: ‖K̂ − K‖/‖K‖ ≤ 0.2 on (95 % CI); median; K̂[u1, φ] within 20 % on")
     for name, rs in results.items():
