@@ -118,12 +118,16 @@ def test_an_interval_whose_ends_print_alike_is_said_in_words():
     baseline = np.array([0.30, 0.34])
     wide = pd.DataFrame({"proposed": baseline * np.array([0.1200, 0.1201]), "persistence": baseline,
                          "n_windows": [6, 7], "subject": [None, None]}, index=["t1", "t2"])
+    from workbench.study.paired import difference_sentence
+
     d = paired_difference(wide, "proposed", "persistence", "rmse_position", "CS2")
-    assert d.hi > d.lo  # an interval of some width, whose ends round to one printed value
     words = d.sentence()
     assert "[" not in words and "too few test trials" in words and str(d.n_trials) in words, words
+    # two trials are too few for any interval (min_units), whatever their spread; ends that print alike from enough
+    # trials are words too, and an interval of some width is printed
     wider = paired_difference(wide.assign(proposed=baseline * np.array([0.10, 0.15])), "proposed", "persistence")
-    assert "[" in wider.sentence()  # the check can fail: a real spread is printed as an interval
+    assert wider.lo is None and "[" not in wider.sentence()
+    assert "[" not in difference_sentence(0.88, 0.8801, 0.8804) and "[" in difference_sentence(0.88, 0.85, 0.9)
 
 
 def test_the_weight_ratios_say_their_gain_entry_is_bias_corrected():

@@ -124,7 +124,7 @@ class StudyStatistics:
             which = ("refitted in every fold" if m0.loo else "refitted on every split; GMR-only, which no verdict "
                      "uses, only as fitted models below")
             where = "folds" if m0.loo else "splits"
-            pooled = any(d.p_holm != d.p_holm and (d.shown or d.lo == d.lo) for d in ml)
+            pooled = any(d.p_holm != d.p_holm and d.has_interval for d in ml)
             header = self._ml_header()
             if pooled:  # the pooled rows' p cell is "—": say why once, not in every such cell
                 header = header.rstrip(":") + "; the pooled rows (no p) are no verdict's:"
@@ -133,7 +133,7 @@ class StudyStatistics:
                       f"difference [{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|---|"]
             for d in ml:
                 p = (f"{d.p_holm:.3g}" if d.p_holm == d.p_holm else
-                     "—" if d.shown or d.lo == d.lo else "— (no interval)")
+                     "—" if d.has_interval else "— (no interval)")
                 lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.n_splits} "
                              f"({d.n_train} / {d.n_test}) | {d.fallback_words()} | {d.sentence()} | {p} |")
         if self.paired:
