@@ -185,3 +185,29 @@ def test_relevance_round_off_both_signs(value):
     from workbench.method.gain import relevance_text
 
     assert relevance_text(value) == relevance_text(-value) == "0"
+
+
+def test_evaluate_prints_no_interval_from_too_few_test_trials(tmp_path, capsys, monkeypatch):
+    """evaluate on 4 test trials (fewer than min_units): the fitted models' table and the input-prediction table say
+    "no interval" with the count in every difference cell (the previous main printed "[…]" intervals from these 4
+    trials); the method-level rows, of 6 splits, keep theirs."""
+    from workbench.cli.app import main
+    from workbench.study.paired import min_units
+
+    monkeypatch.setenv("COLUMNS", "200")  # one table row per line
+    data = tmp_path / "s.parquet"
+    assert main(["simulate", "--strategy", "CS1", "--trials", "12", "-o", str(data)]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(data), "--n-components", "2", "--samples", "0", "--no-efficiency", "--horizon", "1",
+                 "--test-size", "0.34", "-o", str(tmp_path / "r.csv")]) == 0
+    out = capsys.readouterr().out
+    n = pd.read_csv(tmp_path / "r.csv")["trial"].nunique()
+    assert n < min_units()
+    words = f"no interval (too few test trials for a 95 % interval: {n} (it needs {min_units()}))"
+    fitted = out.split("These fitted models on these test trials")[1].splitlines()
+    rows = [line for line in fitted if line.startswith("CS1 ")]
+    assert len(rows) == 3 and all(words in r and " %]" not in r for r in rows), rows
+    inputs = out.split("proposed vs the better model with no pilot (paired)")[1].splitlines()
+    rows = [line for line in inputs if line.startswith("CS1 ")][:2]
+    assert len(rows) == 2 and all(words in r for r in rows), rows
+    assert " %]" in out.split("Methods (refitted on every split")[1].split("These fitted models")[0]
