@@ -246,7 +246,8 @@ def test_the_statistics_tables_say_no_interval_for_too_few_test_trials():
     text = study_statistics(few, "rmse_position", "m", {}, windows_sentence(few, 60, None, 0.05), n_boot=300).text()
     rows = [line for line in text.splitlines() if line.startswith("| CS1 |")]
     assert len(rows) == 2 and all("no interval (too few test trials" in r and " %]" not in r for r in rows)
+    assert "nor has it intervals (too few test trials for either)" in text and "read its intervals" not in text
     many = _worse(min_units())
     text = study_statistics(many, "rmse_position", "m", {}, windows_sentence(many, 60, None, 0.05),
                             n_boot=300).text()
-    assert all(" %]" in r for r in text.splitlines() if r.startswith("| CS1 |"))
+    assert all(" %]" in r for r in text.splitlines() if r.startswith("| CS1 |")) and "read its intervals" in text

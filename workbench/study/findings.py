@@ -216,9 +216,12 @@ class StudyStatistics:
             return (f"- *Is that difference more than chance on these trials?* No test can say so at 5 % here: with "
                     f"{n} test trials the exact sign-flip test of the per-trial differences cannot go below p = "
                     f"{pmin:.3g}" + (f" ({min(1.0, pmin * k):.3g} after Holm over the {k} rows the verdicts use)"
-                                     if k > 1 else "") + ", so the fitted models' table below has no p column; read "
-                    "its intervals" + (" (the p-values of the methods' table are the corrected t's, over splits)."
-                                       if self.method_level else "."))
+                                     if k > 1 else "") + ", so the fitted models' table below has no p column; "
+                    + ("read its intervals" if any(d.has_interval for d in self.paired) else
+                       # the sign test's bound that leaves no p below 5 % leaves no interval either (min_units)
+                       "nor has it intervals (too few test trials for either)")
+                    + (" (the p-values of the methods' table are the corrected t's, over splits)."
+                       if self.method_level else "."))
         return ("- *Is that difference more than chance on these trials?* The exact sign-flip (permutation) test of "
                 f"the per-trial differences, Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts "
                 "use (the only rows given a p); \"cannot reach 5 %\" where its trials are too few for any p of that "
