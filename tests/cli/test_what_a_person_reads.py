@@ -118,11 +118,11 @@ def test_an_interval_whose_ends_print_alike_is_said_in_words():
     baseline = np.array([0.30, 0.34])
     wide = pd.DataFrame({"proposed": baseline * np.array([0.1200, 0.1201]), "persistence": baseline,
                          "n_windows": [6, 7], "subject": [None, None]}, index=["t1", "t2"])
-    from workbench.study.paired import difference_sentence
+    from workbench.study.paired import difference_sentence, min_units
 
     d = paired_difference(wide, "proposed", "persistence", "rmse_position", "CS2")
     words = d.sentence()
-    assert "[" not in words and "too few test trials" in words and str(d.n_trials) in words, words
+    assert "[" not in words and words == f"no interval ({d.n_trials} test trials; {min_units()} needed)", words
     # two trials are too few for any interval (min_units), whatever their spread; ends that print alike from enough
     # trials are words too, and an interval of some width is printed
     wider = paired_difference(wide.assign(proposed=baseline * np.array([0.10, 0.15])), "proposed", "persistence")
@@ -203,7 +203,7 @@ def test_evaluate_prints_no_interval_from_too_few_test_trials(tmp_path, capsys, 
     out = capsys.readouterr().out
     n = pd.read_csv(tmp_path / "r.csv")["trial"].nunique()
     assert n < min_units()
-    words = f"no interval (too few test trials for a 95 % interval: {n} (it needs {min_units()}))"
+    words = f"no interval ({n} test trials; {min_units()} needed)"
     fitted = out.split("These fitted models on these test trials")[1].splitlines()
     rows = [line for line in fitted if line.startswith("CS1 ")]
     assert len(rows) == 3 and all(words in r and " %]" not in r for r in rows), rows

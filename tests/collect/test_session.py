@@ -549,8 +549,7 @@ def test_a_check_on_fewer_trials_than_min_units_identifies_nothing(tmp_path, mon
     record = check_identified((str(tmp_path), "s01", "g", ids, "Q_phi / R_u1", 0))
     if few:
         assert record["identified"] is False and record["lo"] is None and record["hi"] is None
-        assert record["interval"] == (f"Q_phi / R_u1: no interval (too few trials for a 95 % interval: {n} (it needs "
-                                      f"{min_units()}))")
+        assert record["interval"] == f"Q_phi / R_u1: no interval ({n} trials; {min_units()} needed)"
     else:
         assert record["identified"] is True and record["interval"] == narrow.describe()
     assert json.loads((tmp_path / HIDDEN / "stops" / "s01" / f"g-{n}.json").read_text())["identified"] == (not few)
@@ -577,10 +576,10 @@ def test_the_identification_check_is_the_weight_ratios_bootstrap(tmp_path):
     ratios, _, _ = ratio_bootstrap(make_model("ioc_only", s.plant, random_state=s.seed).fit(trials), trials,
                                    n_boot=OBJECTIVE_RESAMPLES, seed=s.seed)
     (iv,) = [iv for iv in ratios.intervals if iv.name == "Q_phi / R_u1"]
-    from workbench.study.paired import min_units, too_few_words
+    from workbench.study.paired import min_units
 
     # 3 trials are fewer than min_units: no interval and not identified, whatever the bootstrap's words
     assert record["n"] == 3 < min_units() and record["identified"] is False and record["lo"] is None
-    assert record["interval"] == f"{iv.name}: no interval ({too_few_words(3, 'trials', iv.ci)})"
+    assert record["interval"] == f"{iv.name}: no interval (3 trials; {min_units(iv.ci)} needed)"
     with pytest.raises(DataError, match="'Q_nope / R_u1' is not a weight ratio of this plant"):
         check_identified((str(tmp_path / "out"), "s01", "g", record["ids"], "Q_nope / R_u1", 0))

@@ -185,7 +185,7 @@ def test_the_report_gives_no_interval_from_too_few_test_trials(report, tmp_path)
     n = rmse[rmse["label"] == "CS1"]["trial"].nunique()
     assert n < min_units() <= rmse["trial"].nunique()
     paired = paired_differences(rmse, "rmse_position", n_boot=500)
-    words = f"no interval (too few test trials for a 95 % interval: {n} (it needs {min_units()}))"
+    words = f"no interval ({n} test trials; {min_units()} needed)"
     path = write_report(tmp_path, ReportInputs(
         train=report["train"], test=report["test"], models=models, baselines=report["baselines"], rmse=rmse,
         n_steps=HORIZON, samples=0, paired=paired,

@@ -63,7 +63,7 @@ def test_the_headline_names_the_no_pilot_model_it_compares_with(scored):
     _, test, table = scored
     assert len(test) < min_units()
     for line in _headlines_name_their_no_pilot_model(table):
-        assert f"no interval (too few test trials for a 95 % interval: {len(test)}" in line and "[" not in line
+        assert f"no interval ({len(test)} test trials; {min_units()} needed)" in line and "[" not in line
     table_lines = input_lines(input_scores(table), "LQR")
     assert table_lines[0].startswith("| method | input error one step ahead")
     assert any(r.startswith("| no pilot (input held) |") for r in table_lines)

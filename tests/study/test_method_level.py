@@ -62,13 +62,16 @@ def test_fewer_splits_than_min_units_give_no_interval_and_no_p():
     mean, lo, hi, p, *_ = corrected_t(d.changes, 12, 4, least=2)
     assert lo < hi and d.change == pytest.approx(mean)  # the t would give an interval of some width
     assert d.lo is None and d.hi is None and np.isnan(d.p) and not d.shown and not d.has_interval
-    assert d.sentence() == f"no interval (too few splits for a 95 % interval: {few} (it needs {min_units()}))"
+    assert d.sentence() == f"no interval ({few} splits; {min_units()} needed)"
     stats = study_statistics(_trials(rng, 6, labels=("A",)), "rmse_position", "m", {}, "", n_boot=100,
                              method_level=[d])
     row = next(line for line in stats.text().splitlines() if line.startswith("| A | "))
     assert "no interval" in row and "— (no interval)" in row and " %]" not in row
     (enough,) = method_differences(_scores(rng, labels=("A",), J=min_units()), {"A": (12, 4)}, "rmse_position")
     assert enough.has_interval and enough.sentence().startswith("lower by") and " %]" in enough.sentence()
+    from workbench.study.method_level import SPLITS
+
+    assert SPLITS >= min_units()  # the default design's rows have intervals where every split is scored
 
 
 def _trials(rng, n_trials, labels=("CS1", "CS2")):

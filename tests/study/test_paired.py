@@ -217,7 +217,7 @@ def test_too_few_test_trials_give_no_interval_however_narrow(n):
     assert _pct(c.min()) != _pct(c.max())  # a resample of these trials has ends that print apart
     d = paired_difference(per, "proposed", "ioc_only", n_boot=500)
     assert d.lo is None and d.hi is None and not d.has_interval and not d.shown
-    assert d.sentence() == f"no interval (too few test trials for a 95 % interval: {n} (it needs {min_units()}))"
+    assert d.sentence() == f"no interval ({n} test trials; {min_units()} needed)"
     enough = paired_difference(per_trial(_worse(min_units(), seed=n), "rmse_position"), "proposed", "ioc_only",
                                n_boot=500)
     assert enough.has_interval and enough.hi < 0 and enough.sentence().startswith("higher by") and " %]" in \
@@ -233,8 +233,7 @@ def test_a_verdict_from_too_few_test_trials_says_no_interval_not_worse_by_a_numb
     few = 4
     lines = verdicts(paired_differences(_worse(few), "rmse_position", n_boot=500), "rmse_position")
     assert len(lines) == 1 and "worse than" not in lines[0] and " %]" not in lines[0]
-    assert (f"not shown to be better than IOC-only (no interval (too few test trials for a 95 % interval: {few} "
-            f"(it needs {min_units()})))") in lines[0]
+    assert f"not shown to be better than IOC-only (no interval ({few} test trials; {min_units()} needed))" in lines[0]
     (line,) = verdicts(paired_differences(_worse(min_units()), "rmse_position", n_boot=500), "rmse_position")
     assert "worse than IOC-only by" in line and " %]" in line  # the check can fail
 
@@ -245,9 +244,11 @@ def test_the_statistics_tables_say_no_interval_for_too_few_test_trials():
     few = _worse(4)
     text = study_statistics(few, "rmse_position", "m", {}, windows_sentence(few, 60, None, 0.05), n_boot=300).text()
     rows = [line for line in text.splitlines() if line.startswith("| CS1 |")]
-    assert len(rows) == 2 and all("no interval (too few test trials" in r and " %]" not in r for r in rows)
+    assert len(rows) == 2 and all("no interval (4 test trials;" in r and " %]" not in r for r in rows)
     assert "nor has it intervals (too few test trials for either)" in text and "read its intervals" not in text
+    assert f"No interval is given from fewer than {min_units()} test trials" in text
     many = _worse(min_units())
     text = study_statistics(many, "rmse_position", "m", {}, windows_sentence(many, 60, None, 0.05),
                             n_boot=300).text()
     assert all(" %]" in r for r in text.splitlines() if r.startswith("| CS1 |")) and "read its intervals" in text
+    assert "No interval is given from fewer" not in text

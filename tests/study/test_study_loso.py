@@ -89,8 +89,7 @@ def test_the_folds_are_the_method_level_comparison_of_the_headline(few):
         mean, lo, hi, *_ = corrected_t(c, n - 1, 1, least=2)
         assert d.change == pytest.approx(c.mean()) == pytest.approx(mean) and lo == pytest.approx(c.mean() - half)
         assert hi == pytest.approx(c.mean() + half) and n < min_units() and d.lo is None and d.hi is None
-        assert d.sentence() == (f"no interval (too few leave-one-out folds for a 95 % interval: {n} (it needs "
-                                f"{min_units()}))") and np.isnan(d.p)
+        assert d.sentence() == f"no interval ({n} leave-one-out folds; {min_units()} needed)" and np.isnan(d.p)
     text = res.stats_text
     assert f"the {n} leave-one-out folds of each strategy's trials" in text
     assert all("leave-one-out folds" in line for line in res.verdicts() if "as a method" in line)

@@ -21,7 +21,7 @@ import pandas as pd
 from workbench.defaults import PAIRED_RESAMPLES
 from workbench.models.registry import METHOD_TITLES
 from workbench.study.method_level import FLOOR_METHODS, MethodDifference
-from workbench.study.paired import ALL_LABELS, PairedDifference, paired_differences, per_trial
+from workbench.study.paired import ALL_LABELS, PairedDifference, min_units, paired_differences, per_trial
 from workbench.study.stats import MixedModelResult, SignFlipTest, holm, mixed_effects, sign_flip_tests
 
 __all__ = ["StudyStatistics", "study_statistics", "windows_sentence", "headline_rows"]
@@ -112,7 +112,7 @@ class StudyStatistics:
                 "expanded percentile interval). It holds the fitted models fixed, so it says nothing about "
                 "training on another sample of the same operator" + (" (the question above)." if ml else "."))
             lines.append(self._tests_sentence())
-        lines.append("A difference is stated only where its interval excludes 0.")
+        lines.append("A difference is stated only where its interval excludes 0." + self._too_few_sentence())
         if self.mixed is not None and any(e.term.startswith("strategy") for e in self.mixed.effects):
             per = ("subject (a random intercept) and trial within subject (a variance component)"
                    if self.mixed.groups == "subject" else "trial (a random intercept: every method scored on it)")
@@ -199,6 +199,16 @@ class StudyStatistics:
             out.append(("strategies differ?", f"mixed model of the log error, random per {per}" if self.mixed.converged
                         else "not answered: the mixed model did not converge"))
         return out
+
+    def _too_few_sentence(self) -> str:
+        """Where a row has no interval for want of units, why (once): the sign test's bound (:func:`min_units`)."""
+        rows = [d for d in (*self.method_level, *self.paired) if not d.has_interval and "needed" in d.no_interval]
+        if not rows:
+            return ""
+        ci = rows[0].ci
+        return (f" No interval is given from fewer than {min_units(ci)} test trials, splits or folds: the range of n "
+                f"of them holds their median with probability 1 − 2^(1−n), below {ci:g} % for fewer, and no "
+                "interval resampled from them reaches beyond about that range.")
 
     def _ml_header(self) -> str:
         m0 = self.method_level[0]

@@ -60,8 +60,9 @@ def min_units(ci: float = 95.0) -> int:
 
 
 def too_few_words(n: int, what: str, ci: float) -> str:
-    """Why there is no interval from ``n`` units: ``"too few test trials for a 95 % interval: 3 (it needs 6)"``."""
-    return f"too few {what} for a {ci:g} % interval: {n} (it needs {min_units(ci)})"
+    """Why there is no interval from ``n`` units, short enough for a table's cell at 80 columns:
+    ``"3 test trials; 6 needed"`` (the level is the table's or the sentence's; :func:`min_units`)."""
+    return f"{n} {what}; {min_units(ci)} needed"
 
 
 @dataclass(frozen=True)
