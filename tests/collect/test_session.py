@@ -583,3 +583,20 @@ def test_the_identification_check_is_the_weight_ratios_bootstrap(tmp_path):
     assert record["interval"] == f"{iv.name}: no interval (3 trials; {min_units(iv.ci)} needed)"
     with pytest.raises(DataError, match="'Q_nope / R_u1' is not a weight ratio of this plant"):
         check_identified((str(tmp_path / "out"), "s01", "g", record["ids"], "Q_nope / R_u1", 0))
+
+
+def test_a_fit_step_not_started_says_which_block_it_waits_for_and_how_far_it_is(tmp_path):
+    """The experimenter's page showed "A: not reached yet" beside two flown A trials: the fit step now says what it
+    waits for — its block's trials, so many of them flown."""
+    n_trials = 3
+    path = write_protocol(tmp_path / "p.toml", [{"label": "A", "instructions": "a", "trials": n_trials}])
+    path.write_text(path.read_text() + '[[blocks]]\nfit = { label = "A" }\n')
+    s = Session(tmp_path / "out", load_protocol(path), runner=lambda fn, task: {})
+    join(s, "s01")
+    s.advance("s01", "instructions0")
+    for slot in range(n_trials - 1):
+        done = s.write_trial(flown(s, "s01", slot))["trials_done"]
+    (subject,) = s.overview()["subjects"]
+    assert subject["fits"]["A"] == {"state": "waiting",
+                                    "waiting_for": f"after block A ({done} of {n_trials} trials flown)"}
+    assert done == n_trials - 1

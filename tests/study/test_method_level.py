@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 from scipy import stats as sps
 
+from workbench.errors import ModelError
 from workbench.study.findings import headline_rows, study_statistics, windows_sentence
 from workbench.study.method_level import corrected_t, method_differences
 from workbench.study.paired import min_units, paired_differences
@@ -231,3 +232,57 @@ def test_the_studys_own_split_is_its_first_method_level_split_and_a_refit_gives_
     assert {whole[int(i)].id for i in tasks[0][3]} == test_ids
     fresh = split_scores(tasks[0]).groupby("method")["value"].mean()
     assert row.changes[0] == pytest.approx(1 - fresh["proposed"] / fresh["ioc_only"], rel=1e-9)
+
+
+@pytest.mark.parametrize("held", [3, 0])  # seed 1: trial 0 is a test trial of the study's own split, 3 is not
+def test_a_split_whose_refit_is_refused_is_named_with_its_cause_and_counted(monkeypatch, held):
+    """A split whose IOC-only refit raised ModelError left the comparison with only the split count to show it
+    ("2 random splits"): each such split is now named in one line with its cause, and the rows say "2 of 3"."""
+    from workbench.models.registry import method
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.operators import lqr_operator_demos
+    from workbench.study.pipeline import run_study
+
+    ds = lqr_operator_demos(n_trials=8, seed=13)
+    cls = method("ioc_only").load_class()
+    fit = cls.fit
+    cause = "u1 never moves in these trials"
+    lost: list[frozenset[str]] = []
+    depth = [0]
+
+    def refusing(self, demos, *args, **kwargs):
+        ids = frozenset(d.id for d in demos)
+        # refused on the training part of every split that holds trial ``held`` out (the study's own fit alike,
+        # its split being the first); the fit's own inner fits (its noise folds) are not a split's
+        if depth[0] == 0 and ds[held].id not in ids:
+            lost.append(ids)
+            raise ModelError(cause)
+        depth[0] += 1
+        try:
+            return fit(self, demos, *args, **kwargs)
+        finally:
+            depth[0] -= 1
+
+    monkeypatch.setattr(cls, "fit", refusing)
+    splits = 3
+    res = run_study(ds, planar_quadrotor(), n_components=1, samples=0, efficiency=None, n_steps=20,
+                    method_splits=splits, test_size=0.25, seed=1)
+    n_lost = len(set(lost))
+    assert n_lost >= 1
+    assert (ds[held].id in {d.id for d in res.test["LQR"]}) == (held == 0)  # both ways a split is scored
+    (row,) = [d for d in res.statistics.method_level if d.baseline == "ioc_only"]
+    assert row.n_splits == splits - n_lost and row.n_drawn == splits
+    assert row.splits_count() == f"{splits - n_lost} of {splits}"
+    assert f"{splits - n_lost} of {splits} random splits" in row.splits_words()
+    named = [line for line in res.verdicts() if "of the methods' comparison" in line]
+    assert len(named) == n_lost == len(res.splits_left_out)
+    for line in named:
+        assert "\n" not in line
+        assert line.endswith(f"is left out of the comparison with IOC-only: IOC-only could not be fitted on its "
+                             f"training trials — {cause}")
+    # the terminal's legend counts the splits behind every row: persistence's lost none, IOC-only's n_lost
+    (other,) = [d for d in res.statistics.method_level if d.baseline == "persistence"]
+    assert other.n_splits == splits
+    legend = dict(res.statistics.legend())["method better?"]
+    assert legend.startswith(f"{row.n_splits}–{other.n_splits} of {splits} refitted splits")
+    assert f"| {row.splits_count()} ({row.n_train} / {row.n_test}) |" in res.statistics.text()

@@ -357,7 +357,9 @@ def _which_comparison(paired: Sequence[Any]) -> str:
     if n is None:
         return "(these fitted models, on these test trials)"
     design = getattr(first, "design", "random splits")
-    return f"(as methods, over {n} {'leave-one-out folds' if 'leave' in str(design) else 'refits'})"
+    if "leave" in str(design):
+        return f"(as methods, over {n} leave-one-out folds)"
+    return f"(as methods, over {first.splits_count()} refits)"
 
 
 def _envelope_line(envelope: pd.DataFrame | None) -> list[str]:

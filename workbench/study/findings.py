@@ -86,6 +86,10 @@ class StudyStatistics:
             m0 = ml[0]
             k = sum(family)
             splits = m0.splits_words("each strategy's")
+            if not m0.loo and len({d.n_splits for d in ml}) > 1:  # rows lost different splits: none speaks for all
+                splits = (f"{_splits_counted(ml)} random splits of each strategy's {m0.units} (a split where a "
+                          "method could not be fitted or diverged is left out of that method's rows, each named "
+                          "with its cause)")
             refits = ("Each fold's models are the study's own fits of that fold." if m0.loo else
                       "Each split reruns the whole method on its own training part — the proposed model's "
                       "cross-validated G and regularizer, its fallback to K̂x and, where the plant is identified from "
@@ -134,7 +138,7 @@ class StudyStatistics:
             for d in ml:
                 p = (f"{d.p_holm:.3g}" if d.p_holm == d.p_holm else
                      "—" if d.has_interval else "— (no interval)")
-                lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.n_splits} "
+                lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.splits_count()} "
                              f"({d.n_train} / {d.n_test}) | {d.fallback_words()} | {d.sentence()} | {p} |")
         if self.paired:
             tests = {(t.label, t.b): t for t in self.tests}
@@ -182,7 +186,7 @@ class StudyStatistics:
         if ml:
             m0 = ml[0]
             k = sum(headline_rows(self.headline))
-            folds = f"{m0.n_splits} leave-one-out folds" if m0.loo else f"{m0.n_splits} refitted splits"
+            folds = f"{m0.n_splits} leave-one-out folds" if m0.loo else f"{_splits_counted(ml)} refitted splits"
             out.append(("method better?", f"{folds}, corrected resampled t; p Holm over {k}"))
         if self.paired:
             first = self.paired[0]
@@ -214,7 +218,7 @@ class StudyStatistics:
         m0 = self.method_level[0]
         if m0.loo:
             return f"{m0.splits_words()}, each training on all of its strategy's {m0.units} but the one it tests:"
-        return f"{m0.n_splits} random splits:"
+        return f"{_splits_counted(self.method_level)} random splits:"
 
     def _tests_sentence(self) -> str:
         """What the sign-flip column answers, or why there is none: with few trials no test can reach 5 %."""
@@ -236,6 +240,16 @@ class StudyStatistics:
                 f"the per-trial differences, Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts "
                 "use (the only rows given a p); \"cannot reach 5 %\" where its trials are too few for any p of that "
                 "family to be below 0.05.")
+
+
+def _splits_counted(rows: Sequence[MethodDifference]) -> str:
+    """How many random splits the method-level rows were made from: "6", "5 of 6" (a split left out of every row)
+    or "4–5 of 6" (rows that lost different splits)."""
+    drawn = max(max(d.n_drawn, d.n_splits) for d in rows)
+    scored = sorted({d.n_splits for d in rows})
+    if scored == [drawn]:
+        return str(drawn)
+    return f"{scored[0]} of {drawn}" if len(scored) == 1 else f"{scored[0]}–{scored[-1]} of {drawn}"
 
 
 def _p_cell(t: SignFlipTest | None) -> str:

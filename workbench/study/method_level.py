@@ -34,6 +34,7 @@ GMR-only is compared as fitted models on the study's test trials only. :data:`SP
 from __future__ import annotations
 
 import warnings
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -46,12 +47,12 @@ from scipy import stats as sps
 from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
-from workbench.models.registry import REGISTRY
+from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.study.divergence import scored
 from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence, min_units, too_few_words
 
-__all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "corrected_t", "split_scores", "split_tasks",
-           "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS"]
+__all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "LeftOutSplit", "corrected_t", "split_scores",
+           "split_tasks", "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS"]
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
@@ -68,6 +69,8 @@ SPLITS = 6
 MIN_SPLITS = 2
 #: The design of a leave-one-out study's method-level rows (:attr:`MethodDifference.design`).
 LOO_FOLDS = "leave-one-out folds"
+#: What a split says of a method whose rollout diverged on its test part (:class:`LeftOutSplit`).
+_DIVERGED = "diverged on its test trials (its horizon errors are not numbers to compare)"
 #: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).
 _SPLIT_MAX_ITER = 200
 
@@ -122,6 +125,9 @@ class MethodDifference:
     #: Splits in which the proposed method fell back to ``K̂x`` (its cross-validation found no gain in its variability
     #: model); in a leave-one-out study, folds.
     n_fallback: int = 0
+    #: Random splits drawn (0: as many as scored); where more than ``n_splits``, the others were left out because a
+    #: method of this row could not be fitted on their training part or its rollout diverged (:class:`LeftOutSplit`).
+    n_drawn: int = 0
     #: Why there is no interval ("" where there is one).
     no_interval: str = ""
 
@@ -139,7 +145,15 @@ class MethodDifference:
                 return (f"the {self.n_splits} of {folds} leave-one-out folds of {whose} {self.units} that could be "
                         "fitted, each testing one")
             return f"the {self.n_splits} leave-one-out folds of {whose} {self.units}, each left out once"
+        if self.n_drawn > self.n_splits:
+            lost = self.n_drawn - self.n_splits
+            return (f"{self.n_splits} of {self.n_drawn} random splits of {whose} {self.units} (the other {lost} left "
+                    "out, each named with its cause)")
         return f"{self.n_splits} random splits of {whose} {self.units}"
+
+    def splits_count(self) -> str:
+        """"6", or "5 of 6" where drawn splits were left out (:class:`LeftOutSplit`)."""
+        return f"{self.n_splits} of {self.n_drawn}" if self.n_drawn > self.n_splits else str(self.n_splits)
 
     @property
     def has_interval(self) -> bool:
@@ -175,6 +189,44 @@ class MethodDifference:
     def fallback_words(self) -> str:
         """"3 of 8" splits in which the proposed method fell back to ``K̂x``, or "none"."""
         return f"{self.n_fallback} of {self.n_splits}" if self.n_fallback else "none"
+
+
+@dataclass(frozen=True)
+class LeftOutSplit:
+    """A random split of the method-level comparison (:func:`split_scores`) that a row leaves out: a method could not
+    be fitted on its training part (its :class:`~workbench.errors.ModelError`), or its rollout diverged on its test
+    part. Said in one line with its cause, as a leave-one-out study's :class:`workbench.study.folds.LeftOutFold`.
+
+    Attributes
+    ----------
+    label : str
+        The strategy whose split it is.
+    index, total : int
+        The split's place among the strategy's splits (1-based) and how many were drawn.
+    method : str
+        The method not scored on it (``"plant"``: the plant itself could not be identified from its training part,
+        so no method was).
+    reason : str
+        What happened to it, one line ("could not be fitted on its training trials — …", "diverged on …").
+    """
+
+    label: str
+    index: int
+    total: int
+    method: str
+    reason: str
+
+    def sentence(self) -> str:
+        """"On CS1, split 3 of 6 of the methods' comparison is left out of the comparison with IOC-only: IOC-only
+        could not be fitted on its training trials — …"."""
+        where = f"On {self.label}, split" if self.label not in ("", "None", ALL_LABELS) else "Split"
+        head = f"{where} {self.index} of {self.total} of the methods' comparison (refitted on random splits)"
+        if self.method == "plant":
+            return f"{head} is left out: the plant could not be identified from its training trials — {self.reason}"
+        proposed = self.method == "proposed"
+        name = "the proposed model" if proposed else METHOD_TITLES.get(self.method, self.method)
+        scope = "every comparison" if proposed else f"the comparison with {name}"
+        return f"{head} is left out of {scope}: {name} {self.reason}"
 
 
 def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0,
@@ -248,9 +300,10 @@ class SplitPlan:
     task: Any = None
 
 
-def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bool]:
+def _refit(plan: SplitPlan, train: DemonstrationSet,
+           refused: dict[str, str] | None = None) -> tuple[dict[str, Any], bool]:
     """Every method of ``plan`` fitted on ``train`` with every choice made again on it; whether the proposed model
-    fell back to ``K̂x``. A method that cannot be fitted is left out."""
+    fell back to ``K̂x``. A method that cannot be fitted is left out, its ModelError's message in ``refused``."""
     from workbench.models.factory import make_models
     from workbench.models.fitting import shared_gains
 
@@ -272,8 +325,9 @@ def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bo
                 updates["max_iter"] = min(int(params["max_iter"]), _SPLIT_MAX_ITER)
             try:
                 fitted[name] = type(model)(plant, **{**params, **updates}).fit(train)
-            except ModelError:
-                continue
+            except ModelError as exc:
+                if refused is not None:
+                    refused[name] = " ".join(str(exc).split())
     proposed = fitted.get(plan.methods[0])
     auto = getattr(proposed, "auto_", None) if proposed is not None and proposed.chooses_settings else None
     return fitted, bool(auto is not None and auto.fallback)
@@ -283,7 +337,8 @@ def split_scores(task: tuple) -> pd.DataFrame:
     """One split (a task of the executor): rerun the method of its :class:`SplitPlan` on the training trials, score
     the test trials; rows ``label, split, trial, method, value, fell_back`` (value: the trial's mean ``metric`` over
     its windows; fell_back: whether this split's proposed model fell back to ``K̂x``) with ``n_train`` / ``n_test``
-    in ``attrs``. A method that cannot be fitted has no rows."""
+    in ``attrs``. A method that cannot be fitted, or whose rollout diverged on the test trials, has no rows; its
+    cause is in ``attrs["refused"]`` (method → one line; ``"plant"`` where the plant could not be identified)."""
     from workbench.study import evaluate as ev
 
     label, j, ds, test_idx, plan, metric, n_steps, stride = task
@@ -296,21 +351,29 @@ def split_scores(task: tuple) -> pd.DataFrame:
         # held-out score judges the result
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.simplefilter("ignore", DegenerateFitWarning)
+        refused: dict[str, str] = {}
         try:
-            fitted, fell_back = _refit(plan, train)
-        except ModelError:  # the split's plant could not be identified from its training part
-            fitted, fell_back = {}, False
+            fitted, fell_back = _refit(plan, train, refused)
+            refused = {k: f"could not be fitted on its training trials — {v}" for k, v in refused.items()}
+        except ModelError as exc:  # the split's plant could not be identified from its training part
+            fitted, fell_back, refused = {}, False, {"plant": " ".join(str(exc).split())}
     cols = ["label", "split", "trial", "method", "value", "fell_back"]
     if not fitted:
-        return pd.DataFrame(columns=cols)
+        out = pd.DataFrame(columns=cols)
+        out.attrs.update(n_train=len(train), n_test=len(test), refused=refused)
+        return out
     table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride,
                        inputs=False)
-    table = scored(table)  # a method whose rollout diverged in this split is not compared on it
-    table = table[table["metric"] == metric]
+    kept = scored(table)  # a method whose rollout diverged in this split is not compared on it
+    for name in dict.fromkeys(table.loc[table["metric"] == metric, "method"].astype(str)):
+        if not (kept["metric"].eq(metric) & kept["method"].astype(str).eq(name)).any():
+            refused[name] = _DIVERGED
+    table = kept[kept["metric"] == metric]
     per = table.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
     out = per.assign(label=label, split=j, fell_back=fell_back)[cols]
-    out.attrs.update(n_train=len(train), n_test=len(test))
+    out.attrs.update(n_train=len(train), n_test=len(test), refused=refused)
     return out
+
 
 
 def method_differences(
@@ -322,6 +385,7 @@ def method_differences(
     units: Mapping[str, str] | None = None,
     ci: float = 95.0,
     design: str = "random splits",
+    drawn: Mapping[str, int] | None = None,
 ) -> list[MethodDifference]:
     """The corrected resampled t of ``method`` against each baseline, per label and (several labels) pooled.
 
@@ -332,6 +396,9 @@ def method_differences(
     sizes : mapping label → (n_train, n_test)
         Trials per split of each label.
     units : mapping label → "trials" | "subjects"
+    drawn : mapping label → int, optional
+        Splits drawn per label (:attr:`MethodDifference.n_drawn`): a split without a row for a method (not fitted,
+        or diverged) is left out of that method's comparison, and the rows say how many of the drawn were scored.
     """
     if scores.empty or method not in set(scores["method"]):
         return []
@@ -372,7 +439,7 @@ def method_differences(
                 lo=float(lo) if not why else None, hi=float(hi) if not why else None, p=p, se=se, df=df,
                 n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
                 units="subjects" if what == {"subjects"} else "trials", ci=ci, design=design, n_fallback=n_fallback,
-                no_interval=why))
+                n_drawn=max((int((drawn or {}).get(lb, 0)) for lb in members), default=0), no_interval=why))
     return out
 
 
@@ -509,8 +576,35 @@ class SplitJobs:
         scores = [s for s in scores if len(s)]
         if not scores:
             return None
+        drawn = Counter(str(t[0]) for t in self.tasks)
         return tuple(method_differences(pd.concat(scores, ignore_index=True), self.sizes, self.metric, "proposed",
-                                        units=self.units)) or None
+                                        units=self.units, drawn=drawn)) or None
+
+    def left_out(self, done: list[pd.DataFrame], parts: Mapping[str, Any]) -> tuple[LeftOutSplit, ...]:
+        """The splits that lost a method, each with its cause (:class:`LeftOutSplit`), of the labels whose proposed
+        model the study fitted (:meth:`rows`): from the refitted splits' ``attrs["refused"]`` and, for the study's
+        own split, the study's own failures."""
+        refits = iter(done)
+        drawn = Counter(str(t[0]) for t in self.tasks)
+        out = []
+        for i, t in enumerate(self.tasks):
+            label, j = t[0], int(t[1])
+            part = next(refits) if i not in self.reuse else None
+            if "proposed" not in parts[label].fitted:
+                continue
+            if part is not None:
+                refused = dict(part.attrs.get("refused", {}))
+            else:  # the study's own fits: its failures and divergences (its verdicts say them at length)
+                refused = {m: f"could not be fitted on its training trials — {why}"
+                           for m, why in parts[label].failures.items() if m in self.methods}
+                table = parts[label].table
+                kept = scored(table)
+                for m in dict.fromkeys(table.loc[table["metric"] == self.metric, "method"].astype(str)):
+                    if m in self.methods and not (kept["metric"].eq(self.metric)
+                                                  & kept["method"].astype(str).eq(m)).any():
+                        refused[m] = _DIVERGED
+            out += [LeftOutSplit(str(label), j + 1, drawn[str(label)], m, why) for m, why in refused.items()]
+        return tuple(out)
 
 
 def _own_scores(part: Any, label: str, metric: str, methods: Sequence[str]) -> pd.DataFrame:
