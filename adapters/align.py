@@ -27,7 +27,7 @@ import numpy as np
 
 from workbench.errors import DataError
 
-__all__ = ["MAX_ROWS", "MAX_UPSAMPLING", "check_grid", "Series", "Piece", "align", "sample"]
+__all__ = ["MAX_ROWS", "MAX_UPSAMPLING", "check_grid", "Series", "Piece", "align", "sample", "silence"]
 
 #: Fraction of ``dt`` within which a sample time counts as equal to a grid time.
 GRID_TOLERANCE = 1e-3
@@ -149,3 +149,18 @@ def sample(s: Series, grid: np.ndarray, tol: float) -> np.ndarray:
     exact = np.abs(s.t[idx] - grid) <= tol
     values[exact] = s.v[idx[exact]]
     return values
+
+
+
+def silence(series: list[Series], lo: float, hi: float, gap: float) -> str:
+    """Which channels are silent for longer than ``gap`` across ``(lo, hi)`` (where :func:`align` cut), and the
+    longest such silence: "0.8 s without any channel", "1.1 s without u1, u2"; ``""`` where none is."""
+    silent = {}
+    for s in series:  # each channel's interval between its samples either side of the middle
+        k = int(np.searchsorted(s.t, 0.5 * (lo + hi)))
+        if 0 < k < s.t.size and s.t[k] - s.t[k - 1] > gap:
+            silent[s.name] = float(s.t[k] - s.t[k - 1])
+    if not silent:
+        return ""
+    which = "any channel" if len(silent) == len(series) else ", ".join(silent)
+    return f"{max(silent.values()):.2g} s without {which}"

@@ -188,6 +188,12 @@ class ChannelMapping:
                 + (f"; this mapping has channels for: {', '.join(formats)}" if formats else "")
             )
 
+    def entry(self, name: str) -> str:
+        """Where channel ``name`` is written in the mapping's file: ``[px4.channels] u1`` or ``[channels] u1``."""
+        own = self.raw.get(self.format or "")
+        table = f"{self.format}.channels" if isinstance(own, dict) and name in own.get("channels", {}) else "channels"
+        return f"[{table}] {name}"
+
     def channel(self, name: str) -> Channel:
         for c in self.channels:
             if c.name == name:

@@ -26,8 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from adapters.align import Series, align, check_grid
+from adapters.align import Series, align, check_grid, silence
 from adapters.clock import stream_times
+from adapters.gps import follows_gps
 from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
 from adapters.modes import FIXED_WING_STICKS, autopilot_holds, mode_name, plant_group
@@ -45,11 +46,11 @@ from adapters.selection import Selected, channel_values, resolve_channel, select
 from adapters.sticks import check as check_sticks
 from adapters.sticks import describe as describe_sticks
 from adapters.sticks import resolve as resolve_sticks
-from adapters.streams import Streams, clean_series, numeric, time_line
+from adapters.streams import Streams, clean_series, damage_words, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
-from workbench.errors import DataError, MappingError
+from workbench.errors import AbsentSource, DataError, MappingError
 
 __all__ = ["build", "check_rules", "explain"]
 
@@ -241,7 +242,9 @@ def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Ser
 
 
 def _check_present(streams: Streams, m: ChannelMapping) -> None:
-    """Raise one MappingError naming every channel the log lacks, the pilot's inputs first.
+    """Raise one MappingError naming every channel the log lacks, the pilot's inputs first; an entry the log holds
+    but the mapping reads wrongly (:class:`~workbench.errors.MappingError` that is not
+    :class:`~workbench.errors.AbsentSource`) is named alone, with the mapping's file, the entry and the cause.
 
     A log whose logging left out the sticks (a DataFlash ``LOG_BITMASK`` without RC input) lacks more than one
     channel; naming only the first in the mapping's order (a state's rate) would hide that the pilot is not in
@@ -250,11 +253,15 @@ def _check_present(streams: Streams, m: ChannelMapping) -> None:
     missing: list[tuple[bool, Channel, MappingError]] = []
     inputs = set(m.input_names)
     for ch in (resolve_channel(c, streams) for c in m.channels):
+        what = f"channel {ch.name!r}"
         try:
-            select(ch.selector, streams, f"channel {ch.name!r}", m.name,
-                   n_columns=TRANSFORMS[ch.transform].n_columns)
-        except MappingError as exc:
+            select(ch.selector, streams, what, m.name, n_columns=TRANSFORMS[ch.transform].n_columns)
+        except AbsentSource as exc:
             missing.append((ch.name not in inputs, ch, exc))
+        except MappingError as exc:  # the log holds what the entry reads, the entry reads it wrongly
+            cause = str(exc).removeprefix(f"mapping {m.name!r}: ").removeprefix(what).lstrip(": ")
+            raise MappingError(f"{m.path}: mapping {m.name!r}, entry {m.entry(ch.name)} = "
+                               f"{ch.selector.describe()!r}: {cause} (reading {streams.path})") from None
     if len(missing) < 2:
         return  # none, or one: the loop raises that channel's own error
     missing.sort(key=lambda x: x[0])  # stable: the inputs first, each group in the mapping's order
@@ -265,6 +272,36 @@ def _check_present(streams: Streams, m: ChannelMapping) -> None:
     first = str(missing[0][2]).removeprefix(f"mapping {m.name!r}: ")
     rest = ", ".join(f"{ch.name} ({ch.selector.describe()})" for _, ch, _ in missing[1:])
     raise MappingError(f"mapping {m.name!r}: {lead}{first}; also not in it: {rest}")
+
+
+#: Cuts a damage note lists before "and k more".
+_CUTS_SHOWN = 4
+
+
+def _damage_note(streams: Streams, m: ChannelMapping, found: list[tuple[Span, list[np.ndarray], list[np.ndarray]]],
+                 series: list[Series], skipped: Counter, log_start: float) -> str:
+    """Where a damaged file's demonstrations part though their segment goes on, in one line; ``""`` for an intact
+    file (:func:`~adapters.streams.damage_words`) or one whose demonstrations each start a trial or mode of their own.
+
+    A piece that follows one of the same trial marker and mode was cut from it: by a silence of the channels longer
+    than ``segment.gap`` (data the reader skipped) or by the segmentation's field reading other values between
+    them (garbled bytes) — in an intact log the same flight would have been one demonstration.
+    """
+    kept = [(i, span, t) for i, (span, ts, _) in enumerate(found) for t in ts]
+    cuts = []
+    for (i, a, ta), (j, b, tb) in zip(kept[:-1], kept[1:], strict=True):
+        if (a.meta.get("demo"), a.meta.get("mode")) != (b.meta.get("demo"), b.meta.get("mode")):
+            continue  # a trial or mode of its own: a boundary the log states
+        lo, hi = float(ta[-1]), float(tb[0])
+        rule = "trial marker" if "demo" in a.meta else "flight mode" if "mode" in a.meta else "arming"
+        why = silence(series, lo, hi, m.segment.gap) if i == j else ""
+        cuts.append(f"{lo - log_start:.1f} s ({why or f'its {rule} reads otherwise until {hi - log_start:.1f} s'})")
+    damage = damage_words(streams, skipped) if cuts else ""
+    if not damage:
+        return ""
+    more = f" and {len(cuts) - _CUTS_SHOWN} more" if len(cuts) > _CUTS_SHOWN else ""
+    return (f"{streams.path}: damaged file, {damage}; the flight is cut where it goes on, {len(kept)} demonstrations "
+            f"in all: at {', '.join(cuts[:_CUTS_SHOWN])}{more} — data lost to the damage, not pauses in the flight")
 
 
 def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
@@ -308,10 +345,6 @@ def _still_words(s: Series, ch: Channel, streams: Streams) -> str:
     return text + (f" ({', '.join(moving)} {'does' if len(moving) == 1 else 'do'})" if moving else "")
 
 
-#: A flight's GPS speed must pass this many times the receiver's velocity accuracy somewhere in its kept segments for
-#: the velocity to be judged or the plant identified: below it the velocity is the receiver's noise (a hover).
-MOTION_OVER_ACCURACY = 10.0
-
 #: Beyond this tilt the thrust points below the horizon: the vehicle is upside down (a flip), whatever its frame.
 FLIP = math.pi / 2
 
@@ -340,83 +373,6 @@ def _flip_note(streams: Streams, m: ChannelMapping, mode: str, start: float, cut
             f"pilot flying)")
 
 
-def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, float]]) -> str:
-    """Whether the mapped velocity's estimator follows the log's own GPS velocity inside the kept segments.
-
-    The rule is the coefficient of determination of the GPS velocity by the estimate, ``1 − Σ|v − v_gps|² /
-    Σ|v_gps − mean v_gps|²`` over the GPS samples in the segments (north and east together): below 0 the estimate
-    explains less of the GPS velocity than a constant would, so it is not the vehicle's velocity and no plant
-    identified from it can be physics. Before it, the flight must move: a GPS speed that never passes
-    :data:`MOTION_OVER_ACCURACY` times the receiver's accuracy (a hover, a vehicle standing) is too little motion to
-    judge the estimate or identify the plant by, and says so (its own cause, not the estimator's). A log without the
-    GPS stream, where the mapping says such a log flew without GPS, dead-reckons. ``""`` where the velocity
-    follows, or where there is nothing to compare.
-    """
-    ref = m.reference
-    if ref is None or not windows:
-        return ""
-    head = f"{streams.path}: mapping {m.name!r}"
-    try:
-        gps = select(ref.gps, streams, "reference.gps", m.name, n_columns=2)
-    except MappingError:
-        heads = {src.split(".")[0] for src in ref.gps.sources}
-        if not ref.always_logged or any(len(streams.frames.get(h, ())) for h in heads):
-            return ""  # the stream is there with other fields (a mapping's matter), or its absence proves nothing
-        moving = ", ".join((*m.roles.position, *m.roles.velocity))
-        return (f"{head}: the log has no GPS stream ({ref.gps.describe()}), yet {moving} move: the estimator "
-                f"dead-reckons from the IMU alone, its position and velocity drift; the plant's physics cannot be "
-                f"identified from them")
-    try:
-        est = select(ref.estimate, streams, "reference.estimate", m.name, n_columns=2)
-    except MappingError:
-        return ""
-    tg = stream_times(m.clock, gps.frame)[gps.rows]
-    g = ref.north_east(np.column_stack([numeric(gps.frame, c)[gps.rows] for c in gps.columns]))
-    if ref.fix is not None and ref.fix[0] in gps.frame.columns:  # without a fix the receiver has no velocity
-        g[~(numeric(gps.frame, ref.fix[0])[gps.rows] >= ref.fix[1])] = np.nan
-    te = stream_times(m.clock, est.frame)[est.rows]
-    e = np.column_stack([numeric(est.frame, c)[est.rows] for c in est.columns])
-    ok_e = np.isfinite(te) & np.isfinite(e).all(axis=1)
-    te, e = te[ok_e], e[ok_e]
-    order = np.argsort(te, kind="stable")
-    te, e = te[order], e[order]
-    if te.size < 2:
-        return ""
-    inside = np.zeros(tg.size, dtype=bool)
-    for a, b in windows:
-        inside |= (tg >= a) & (tg <= b)
-    inside &= np.isfinite(tg) & np.isfinite(g).all(axis=1) & (tg >= te[0]) & (tg <= te[-1])
-    # fewer samples than the two components' means and one more each leave no spread to judge the estimate by
-    if inside.sum() < 3:
-        return ""
-    tg, g = tg[inside], g[inside]
-    speed = float(np.hypot(g[:, 0], g[:, 1]).max())
-    motion = MOTION_OVER_ACCURACY * ref.accuracy
-    if speed < motion:
-        return (f"{head}: too little motion to identify the plant: the GPS speed ({gps.stream} "
-                f"{', '.join(gps.columns)}) never passes {motion:g} m/s in the kept segments (ten times the receiver's "
-                f"{ref.accuracy:g} m/s velocity accuracy): at most {speed:.2g} m/s over {len(g)} GPS samples — the "
-                f"velocities are the receiver's noise, and neither the estimator nor the plant's physics can be judged "
-                f"from them")
-    v = np.column_stack([np.interp(tg, te, e[:, k]) for k in range(2)])
-    spread = float(((g - g.mean(axis=0)) ** 2).sum())
-    if spread == 0.0:
-        return ""
-    explained = 1.0 - float(((v - g) ** 2).sum()) / spread
-    if explained >= 0.0:
-        return ""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = [float(np.corrcoef(v[:, k], g[:, k])[0, 1]) for k in range(2)]
-    rms = float(np.sqrt(((v - g) ** 2).sum(axis=1).mean()))
-    sd = float(np.sqrt(spread / len(g)))
-    return (f"{head}: {est.stream} velocity does not follow the GPS velocity ({gps.stream} "
-            f"{', '.join(gps.columns)}): over the {len(g)} GPS samples in the kept segments it explains "
-            f"{explained:.2f} of the GPS velocity's variance (below 0: a constant does better; correlation north "
-            f"{corr[0]:.2f}, east {corr[1]:.2f}; RMS difference {rms:.2g} m/s against the GPS velocity's spread "
-            f"{sd:.2g} m/s) — the estimator is not converged or not the one that flew; the plant's physics cannot "
-            f"be identified from it")
-
-
 def integrate(m: ChannelMapping, values: np.ndarray) -> np.ndarray:
     """``values`` (a kept piece on the mapping's ``dt`` grid, channels in state-then-input order) with each integrated
     channel (:attr:`~adapters.rules.Channel.integrates`) the running integral of its state, from 0 at the piece's
@@ -436,15 +392,20 @@ def integrate(m: ChannelMapping, values: np.ndarray) -> np.ndarray:
 
 
 def _unique(ids: list[str]) -> list[str]:
+    """The ids made unique: a repeated one numbered ``.1``, ``.2``, … in order (a segment's pieces, and the segments
+    of one trial marker), skipping a number another id already is (two segments of one trial marker, one of them cut,
+    gave ``x-0.1`` twice)."""
     seen: Counter = Counter(ids)
     count: Counter = Counter()
-    out = []
+    out: list[str] = []
+    used: set[str] = set()
     for i in ids:
-        if seen[i] > 1:
+        new = i
+        while seen[i] > 1 and (new == i or new in seen or new in used):
             count[i] += 1
-            out.append(f"{i}.{count[i]}")
-        else:
-            out.append(i)
+            new = f"{i}.{count[i]}"
+        out.append(new)
+        used.add(new)
     return out
 
 
@@ -459,7 +420,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
         No demonstration found (saying how many spans and pieces the rules gave), a channel without any
         usable sample, or (unless ``allow_still``: a viewer shows such a log, with the cause in every
         demonstration's ``meta["still"]``) a position or velocity that never moves in the whole log, a velocity that
-        does not follow the GPS's (:func:`follows_gps`), or no GPS stream where the mapping says there is always one;
+        does not follow the GPS's (:func:`adapters.gps.follows_gps`), or no GPS stream where the mapping says
+        there is always one;
         nothing left once the segments are cut at the vehicle's flips (``meta["flipped"]`` names each cut).
     """
     m = mapping
@@ -544,6 +506,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                    f"before this check: `workbench view` shows where)") if flips else ""
             raise DataError(still + cut)
     report = {**{k: int(v) for k, v in streams.skipped.items() if v}, **{k: int(v) for k, v in skipped.items() if v}}
+    damaged = _damage_note(streams, m, found, series, skipped, log_start)
     # a marker without a demo key belongs to the demonstration containing it, else to the next one
     by_span: dict[int, dict[str, Any]] = {}
     ends = [span.end for span, _, _ in found]
@@ -562,10 +525,10 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
         else:  # a text demo field (a CSV's demo column) is the id itself; a number is an index into the file
             default_id = f"{stem}-{key}" if key.lstrip("-").isdigit() else key
         demo_id = str(base.pop("id", default_id))
-        for p, (t, v) in enumerate(zip(ts, vs, strict=True)):
+        for t, v in zip(ts, vs, strict=True):
             meta = {
                 **base,
-                "id": demo_id if len(ts) == 1 else f"{demo_id}.{p + 1}",
+                "id": demo_id,  # a segment's pieces, and segments of one trial marker, numbered in order below
                 "source": streams.path,
                 "format": streams.format,
                 "mapping": m.name,
@@ -579,6 +542,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 meta["sticks"] = sticks
             if flips:
                 meta["flipped"] = "; ".join(flips)
+            if damaged:
+                meta["damaged"] = damaged
             if m.task:  # the mapping's [task]: what a fit of these trials regulates, relative to what
                 meta["task"] = dict(m.task)
             if "mode" in span.meta:

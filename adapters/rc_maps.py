@@ -27,6 +27,11 @@ class RcMap:
     defaults: Mapping[str, int]
     #: a value meaning "on no channel" (PX4: 0); ``None``: every value names a channel
     unassigned: int | None = None
+    #: the parameters of channel ``{n}``'s dead zone and its trim (the centre the zone is around), in the channel's
+    #: raw unit: a stick inside ``trim ± dead zone`` commands nothing (ArduPilot ``RCn_DZ``, ``RCn_TRIM``; PX4 the
+    #: same names); ``None``: the firmware has none
+    dead_zone: str | None = "RC{n}_DZ"
+    trim: str | None = "RC{n}_TRIM"
 
 
 RC_MAPS: dict[str, RcMap] = {

@@ -3,7 +3,7 @@
 A plant identified from an estimated velocity that does not follow the vehicle's motion cannot be physics (on
 erle_copter_83.BIN the EKF1 velocity correlates 0.2 / 0.6 with the GPS's, and the tilt's response came out a fifth
 of g·dt). The vehicle knowledge (which estimator, which GPS stream and its units) is the mapping's; the rule is
-:func:`adapters.pipeline.follows_gps`.
+:func:`adapters.gps.follows_gps`.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ import numpy as np
 
 from adapters.streams import Streams, candidate_streams, field_columns, nearest, numeric, split_source
 from adapters.transforms import TRANSFORMS
-from workbench.errors import MappingError
+from workbench.errors import AbsentSource, MappingError
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -25,7 +25,7 @@ __all__ = ["Selected", "select", "resolve_channel", "channel_values", "channel_c
 
 
 
-def _missing_stream(sel: Selector, streams: Streams, what: str, mapping: str) -> MappingError:
+def _missing_stream(sel: Selector, streams: Streams, what: str, mapping: str) -> AbsentSource:
     head = sel.source.split(":")[0] if ":" in sel.source else sel.source.split(".")[0]
     names = streams.names
     near = nearest(head, names)
@@ -35,28 +35,29 @@ def _missing_stream(sel: Selector, streams: Streams, what: str, mapping: str) ->
     lost = [s for s in heads if streams.counts.get(s) and s not in streams]
     if lost and streams.skipped:  # counted by the file's index, but every message of it was in damaged data
         damage = ", ".join(f"{k} {v}" for k, v in streams.skipped.items())
-        return MappingError(
+        return AbsentSource(
             f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but every message of "
             f"{', '.join(map(repr, lost))} in {streams.path} ({streams.format}) is in damaged data the reader "
             f"skipped ({damage}): the file is corrupt there"
         )
     if empty:  # declared by the file but never written: the stream exists, its data do not
-        return MappingError(
+        return AbsentSource(
             f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but {streams.path} "
             f"({streams.format}) holds no message of {', '.join(map(repr, empty))} (the file declares the stream "
             f"but the vehicle never wrote it)"
         )
-    return MappingError(
+    return AbsentSource(
         f"mapping {mapping!r}: {what} reads {' or '.join(map(repr, sel.sources))}, but {streams.path} "
         f"({streams.format}) has no such stream{'; nearest: ' + ', '.join(near) if near else ''}; "
         f"it has: {listing or 'no streams'}"
     )
 
 
-def _missing_field(name: str, stream: str, frame: pd.DataFrame, streams: Streams, what: str, mapping: str):
+def _missing_field(name: str, stream: str, frame: pd.DataFrame, streams: Streams, what: str,
+                   mapping: str) -> AbsentSource:
     fields = [c for c in frame.columns if c != "t"]
     near = nearest(name, fields)
-    return MappingError(
+    return AbsentSource(
         f"mapping {mapping!r}: {what}: stream {stream!r} of {streams.path} has no field {name!r}"
         f"{'; nearest: ' + ', '.join(near) if near else ''}; its fields: {', '.join(map(str, fields))}"
     )
@@ -74,18 +75,23 @@ class Selected:
 
 
 def select(sel: Selector, streams: Streams, what: str, mapping: str, *, n_columns: int | None = None) -> Selected:
-    """Find a selector's stream, rows and field columns in ``streams``; a MappingError names what is missing.
+    """Find a selector's stream, rows and field columns in ``streams``; an :class:`~workbench.errors.AbsentSource`
+    names what the log lacks, any other MappingError what is wrong with the entry (among alternatives, that one
+    first: the log holds what it reads).
 
     Where a MAVLink stream carries several (sysid, compid) sources and ``where`` picks none, the most frequent
     source is kept, so two vehicles (or a ground station) are never mixed into one channel.
     """
-    first_error: MappingError | None = None
+    absent: AbsentSource | None = None
+    wrong: MappingError | None = None
     for source in sel.sources:
         try:
             return _select_one(sel, source, streams, what, mapping, n_columns)
-        except MappingError as exc:  # another firmware's names: try the next alternative
-            first_error = first_error or exc
-    raise first_error if first_error is not None else _missing_stream(sel, streams, what, mapping)
+        except AbsentSource as exc:  # another firmware's names: try the next alternative
+            absent = absent or exc
+        except MappingError as exc:  # the log has it, the entry reads it wrongly: that is what to say
+            wrong = wrong or exc
+    raise wrong or absent or _missing_stream(sel, streams, what, mapping)
 
 
 def resolve_channel(ch: Channel, streams: Streams) -> Channel:

@@ -170,6 +170,8 @@ class _Series:
     label: str
     t: np.ndarray
     v: np.ndarray
+    #: the RC channel it is (a stick by role), for its dead zone; ``None`` for any other field
+    number: int | None = None
 
 
 def _series(m: ChannelMapping, streams: Streams, ch: Channel, label: str | None = None) -> _Series | None:
@@ -213,13 +215,35 @@ def _candidates(m: ChannelMapping, streams: Streams, ch: Channel, stick: Stick |
         fields = [str(c) for c in sel.frame.columns if c != "t" and sel.frame[c].dtype.kind in "biuf"
                   and not _NOT_STICKS.search(str(c))]
         sources = [f"{sel.stream}:{f}" for f in fields]
-    for src in sources:
+    for k, src in enumerate(sources, start=1):
         one = replace(ch, selector=replace(ch.selector, source=src, alternatives=()), transform="identity", params=(),
                       scale=1.0, offset=0.0, sign=1.0)
         s = _series(m, streams, one, label=src.replace(":", "."))
         if s is not None:
-            out.append(s)
+            out.append(replace(s, number=k) if pattern is not None else s)
     return out
+
+
+def _dead_zone(series: _Series, at_t: np.ndarray, m: ChannelMapping,
+               params: Mapping[str, float | str]) -> str | None:
+    """Where an RC channel stays inside its dead zone at the times ``at_t`` (every held value within
+    ``trim ± dead zone``, the firmware's parameters as the log holds them): the zone, e.g. ``"RC4_DZ = 20 around
+    RC4_TRIM = 1500"``; else ``None`` (it leaves the zone, or the log or the firmware gives no zone). The autopilot
+    reads such a stick as centred, so it commands nothing whatever its correlation: beastayyg's ``sample.bin``
+    (ArduCopter 3.6.4) held its roll stick at 1511 µs in both kept STABILIZE spans and its yaw stick at 1508–1511
+    µs (``RC4_DZ`` 20), whose 3 µs correlated −0.80 with ``ATT.DesRoll`` across the two spans' different leans."""
+    rc = RC_MAPS.get(m.rc_map) if m.rc_map is not None else None
+    if series.number is None or rc is None or rc.dead_zone is None or rc.trim is None:
+        return None
+    dz_name, trim_name = (p.replace("{n}", str(series.number)) for p in (rc.dead_zone, rc.trim))
+    dz, trim = params.get(dz_name), params.get(trim_name)
+    if not isinstance(dz, int | float) or not isinstance(trim, int | float) or dz <= 0:
+        return None
+    at = np.searchsorted(series.t, at_t, side="right") - 1
+    held = series.v[at[at >= 0]]
+    if held.size == 0 or np.max(np.abs(held - float(trim))) > float(dz):
+        return None
+    return f"{dz_name} = {float(dz):g} around {trim_name} = {float(trim):g}"
 
 
 def _correlation(stick: _Series, target_t: np.ndarray, target_v: np.ndarray) -> float:
@@ -266,6 +290,7 @@ def check(m: ChannelMapping, streams: Streams,
     if not m.setpoints or not windows:
         return "", ""
     by_input = {s.input: s for s in m.sticks}
+    params = log_parameters(streams)
     notes, causes = [], []
     for sp in m.setpoints:
         ch = resolve_channel(m.channel(sp.name), streams)
@@ -277,9 +302,13 @@ def check(m: ChannelMapping, streams: Streams,
         for a, b in windows:
             inside |= (target.t >= a) & (target.t <= b)
         tt, tv = target.t[inside], target.v[inside]
-        others = [c for c in _candidates(m, streams, ch, by_input.get(sp.name)) if c.label != mapped.label]
-        r_mapped = _correlation(mapped, tt, tv)
-        scored = [(c.label, _correlation(c, tt, tv)) for c in others]
+        candidates = _candidates(m, streams, ch, by_input.get(sp.name))
+        mapped = next((c for c in candidates if c.label == mapped.label), mapped)
+        others = [c for c in candidates if c.label != mapped.label]
+        # a channel inside its dead zone commands nothing: its correlation is no evidence either way
+        still = _dead_zone(mapped, tt, m, params)
+        r_mapped = float("nan") if still else _correlation(mapped, tt, tv)
+        scored = [(c.label, _correlation(c, tt, tv)) for c in others if _dead_zone(c, tt, m, params) is None]
         scored = [(label, r) for label, r in scored if np.isfinite(r)]
         best = max(scored, key=lambda x: abs(x[1]), default=None)
         r2 = r_mapped ** 2 if np.isfinite(r_mapped) else 0.0
@@ -297,7 +326,8 @@ def check(m: ChannelMapping, streams: Streams,
         elif np.isfinite(r_mapped) and abs(r_mapped) >= STRONG:
             notes.append(f"{sp.name} moves with {target.label} (r = {r_mapped:+.2f})")
         else:
-            r = f"r = {r_mapped:+.2f}" if np.isfinite(r_mapped) else "the stick does not move"
+            r = (f"r = {r_mapped:+.2f}" if np.isfinite(r_mapped) else
+                 f"{mapped.label} stays inside its dead zone, {still}" if still else "the stick does not move")
             notes.append(f"{sp.name}: no stick moves {target.label} in the kept segments ({r}): not checked")
     cause = f"{streams.path}: mapping {m.name!r}: {'; '.join(causes)}" if causes else ""
     return cause, "; ".join(notes)

@@ -374,3 +374,25 @@ def numeric(frame: pd.DataFrame, column: str) -> np.ndarray:
         return col.to_numpy(dtype=np.float64, na_value=np.nan)
     return pd.to_numeric(col, errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
 
+
+
+#: What :func:`time_line` counts for stamps off a stream's time line (its other counts are benign).
+TIME_DAMAGE = ("non-increasing time", "time outliers repaired", "time outliers at the ends")
+
+
+def damage_words(streams: Streams, channels: Mapping[str, int]) -> str:
+    """What says a file is damaged, in words: its reader's skipped data (``streams.skipped``) and the mapped
+    channels whose stamps left their time line (``channels``: counts keyed ``"<channel>: <cause>"``, as an import
+    counts them); ``""`` where neither did."""
+    parts = []
+    if reader := ", ".join(f"{k}: {v}" for k, v in streams.skipped.items() if v):
+        parts.append(f"the {streams.format} reader skipped damaged data ({reader})")
+    off: dict[str, int] = {}
+    for key, n in channels.items():
+        name, _, cause = key.partition(": ")
+        if cause in TIME_DAMAGE and n:
+            off[name] = off.get(name, 0) + int(n)
+    if off:
+        parts.append("timestamps that do not increase or lie far off in "
+                     + ", ".join(f"{k} ({v})" for k, v in off.items()))
+    return "; ".join(parts)

@@ -12,6 +12,7 @@ __all__ = [
     "DataError",
     "FormatError",
     "MappingError",
+    "AbsentSource",
     "RequestError",
     "ModelError",
     "SolverError",
@@ -36,6 +37,11 @@ class FormatError(DataError):
 
 class MappingError(DataError):
     """A channel mapping names something the log does not contain, or is malformed."""
+
+
+class AbsentSource(MappingError):
+    """A mapping's source names a stream or field this log does not hold (or holds only in damaged data, or declares
+    and never wrote): the log lacks it, the mapping may be right. Every other MappingError is the mapping's own."""
 
 
 class ModelError(WorkbenchError, ValueError):

@@ -150,6 +150,41 @@ def test_a_stick_that_never_moves_its_setpoint_gives_no_verdict(tmp_path):
     assert "u1: no stick moves ATT.DesRoll in the kept segments (r = " in ds[0].meta["sticks"]  # r ≈ 0: no stop
 
 
+def _still_roll_bin(tmp_path, name: str, dead_zones: bool):
+    """beastayyg's sample.bin in small: the roll and pitch sticks held at 1511 and 1514 µs, the yaw stick within
+    3 µs of 1509 but moving with ATT.DesRoll; ``dead_zones``: the log holds RC1/RC4 _DZ 20 around _TRIM 1500."""
+    path, streams = _copter_bin(tmp_path, name, {"RCMAP_ROLL": 1, "RCMAP_PITCH": 2}, roll_on=1)
+    rc, att = streams["RCIN"], streams["ATT"]
+    held = np.searchsorted(rc["t"].to_numpy(), att["t"].to_numpy(), side="right") - 1
+    lean = (rc["C1"].to_numpy(np.float64) - 1500.0) / 400.0
+    rc["C4"] = np.rint(1509 + 1.5 * lean).astype(np.int16)  # -1 … +1 of the stick: 1508 … 1510 µs
+    att.loc[held >= 0, "DesRoll"] = np.round(30 * lean[held[held >= 0]], 2)
+    rc["C1"], rc["C2"] = np.int16(1511), np.int16(1514)  # the sample's roll and pitch sticks: never moved
+    if dead_zones:
+        parm = streams["PARM"]
+        names = ["RC1_DZ", "RC1_TRIM", "RC4_DZ", "RC4_TRIM"]
+        extra = pd.DataFrame({"t": parm["t"].iloc[0], "Name": names, "Value": np.float32([20, 1500, 20, 1500])})
+        streams["PARM"] = pd.concat([parm, extra], ignore_index=True)
+    options = dataflash_write.example_streams("old", "copter", seconds=40.0, seed=3)[1]
+    return dataflash_write.write(tmp_path / name, streams, **options)
+
+
+def test_a_channel_inside_its_dead_zone_is_not_named_as_the_stick(tmp_path):
+    # beastayyg/ardupilot-log-diagnosis sample.bin stopped with "the stick is on RCIN.C4": a yaw stick 3 µs off
+    # centre, inside its 20 µs dead zone, correlated -0.80 with DesRoll while the roll stick never moved
+    without = _still_roll_bin(tmp_path, "no_dz.bin", dead_zones=False)
+    with pytest.raises(DataError, match=r"the stick is on RCIN\.C4"):  # without the log's zones: as before
+        adapters.load(without, "ardupilot_manual")
+    path = _still_roll_bin(tmp_path, "dz.bin", dead_zones=True)
+    try:
+        note = adapters.load(path, "ardupilot_manual")[0].meta["sticks"]
+    except DataError as e:  # a later check may stop it; not the stick check
+        assert "the stick is on" not in str(e)
+        note = adapters.load(path, "ardupilot_manual", allow_still=True)[0].meta["sticks"]
+    assert "u1: no stick moves ATT.DesRoll in the kept segments (RCIN.C1 stays inside its dead zone, RC1_DZ = 20 " \
+           "around RC1_TRIM = 1500)" in note
+
+
 # -------------------------------------------------------------------------------------------------- tlog
 
 

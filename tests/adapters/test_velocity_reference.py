@@ -442,3 +442,40 @@ def test_a_px4_plane_s_manual_modes_are_a_plane_s_plants(tmp_path, vehicle_type,
     ds = adapters.load(path, "px4_manual")
     assert {d.meta["mode"]: d.meta["plant_group"] for d in ds} == groups
     assert {d.meta["mode"]: d.meta.get("autopilot_holds", "") for d in ds} == {"MANUAL": "", "ALTCTL": "the altitude"}
+
+
+@pytest.mark.parametrize("estimate_holds_it", [False, True])
+def test_a_gps_velocity_that_holds_one_value_is_judged_in_words_not_by_round_off(tmp_path, estimate_holds_it):
+    # a GPS velocity exactly constant in the kept segments: its variance is the mean's round-off (~1e-30), and the
+    # share explained came out about -1e30 and refused even an EKF flying that very velocity
+    speed, course = 3.7, 33.3
+
+    def constant(streams, options):
+        streams["GPS"]["Spd"], streams["GPS"]["GCrs"] = speed, course
+        if estimate_holds_it:  # the EKF flies that velocity too, within a hundredth of the receiver's accuracy
+            ekf = streams["EKF1"]
+            wobble = 1e-3 * np.sin(np.arange(len(ekf)))
+            ekf["VN"] = speed * math.cos(math.radians(course)) + wobble
+            ekf["VE"] = speed * math.sin(math.radians(course)) + wobble
+
+    path, streams = _copter_bin(tmp_path, "constant.bin", constant)
+    north_east = np.full((len(streams["GPS"]), 2), [speed * math.cos(math.radians(course)),
+                                                    speed * math.sin(math.radians(course))])
+    assert ((north_east - north_east.mean(axis=0)) ** 2).sum() > 0  # the round-off the old check divided by
+    if estimate_holds_it:
+        ds = adapters.load(path, "ardupilot_manual")
+        assert len(ds) and not ds[0].meta.get("still")
+        return
+    with pytest.raises(DataError, match=r"the GPS velocity \(GPS Spd, GCrs\) holds one value") as info:
+        adapters.load(path, "ardupilot_manual")
+    message = str(info.value)
+    assert "explains" not in message and "\n" not in message
+    looked = adapters.load(path, "ardupilot_manual", allow_still=True)
+    gps, ekf = streams["GPS"], streams["EKF1"]
+    inside = np.zeros(len(gps), dtype=bool)
+    for d in looked:
+        inside |= (gps["t"] >= d.meta["t0"]) & (gps["t"] <= d.meta["t0"] + d.t[-1])
+    tg = gps["t"].to_numpy()[inside]
+    v = np.column_stack([np.interp(tg, ekf["t"], ekf[k]) for k in ("VN", "VE")])
+    rms = float(np.sqrt(((v - north_east[inside]) ** 2).sum(axis=1).mean()))
+    assert f"in all {int(inside.sum())} GPS samples" in message and f"by {rms:.2g} m/s RMS" in message

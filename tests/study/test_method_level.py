@@ -7,9 +7,10 @@ import pandas as pd
 import pytest
 from scipy import stats as sps
 
+from workbench.errors import ModelError
 from workbench.study.findings import headline_rows, study_statistics, windows_sentence
 from workbench.study.method_level import corrected_t, method_differences
-from workbench.study.paired import paired_differences
+from workbench.study.paired import min_units, paired_differences
 from workbench.study.stats import sign_flip_tests
 
 
@@ -49,6 +50,29 @@ def test_method_differences_per_label_and_pooled_from_the_splits_means():
     assert rows[2].change == pytest.approx((1 - pooled["proposed"] / pooled["baseline"]).mean())
     assert rows[2].n_train == 24 and rows[2].n_test == 8
     assert all(d.shown and d.sentence().startswith("lower by") for d in rows)
+
+
+def test_fewer_splits_than_min_units_give_no_interval_and_no_p():
+    """Splits that vary but are fewer than min_units: the row keeps its mean, has no interval and no p, and says so
+    with the count (the previous main printed a corrected-t interval from 5 splits, and from a leave-one-out study
+    of 4 trials); from min_units splits it has both."""
+    rng = np.random.default_rng(1)
+    few = min_units() - 1
+    scores = _scores(rng, labels=("A",), J=few)
+    (d,) = method_differences(scores, {"A": (12, 4)}, "rmse_position")
+    mean, lo, hi, p, *_ = corrected_t(d.changes, 12, 4, least=2)
+    assert lo < hi and d.change == pytest.approx(mean)  # the t would give an interval of some width
+    assert d.lo is None and d.hi is None and np.isnan(d.p) and not d.shown and not d.has_interval
+    assert d.sentence() == f"no interval ({few} splits; {min_units()} needed)"
+    stats = study_statistics(_trials(rng, 6, labels=("A",)), "rmse_position", "m", {}, "", n_boot=100,
+                             method_level=[d])
+    row = next(line for line in stats.text().splitlines() if line.startswith("| A | "))
+    assert "no interval" in row and "— (no interval)" in row and " %]" not in row
+    (enough,) = method_differences(_scores(rng, labels=("A",), J=min_units()), {"A": (12, 4)}, "rmse_position")
+    assert enough.has_interval and enough.sentence().startswith("lower by") and " %]" in enough.sentence()
+    from workbench.study.method_level import SPLITS
+
+    assert SPLITS >= min_units()  # the default design's rows have intervals where every split is scored
 
 
 def _trials(rng, n_trials, labels=("CS1", "CS2")):
@@ -159,13 +183,13 @@ def test_every_split_reruns_every_choice_on_its_own_training_part(monkeypatch):
     assert d.n_fallback == 3 and d.identical and not d.shown
     assert d.changes == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
     assert d.sentence().startswith("the same predictions") and "fell back to K̂x in all 3 splits" in d.sentence()
-    assert "%" not in d.sentence() and d.lo != d.lo
+    assert "%" not in d.sentence() and d.lo is None
 
 
 def test_no_interval_of_zero_width():
     """Splits that all give the same change have no spread: no interval, said in words (the previous main printed
     "[+0 %, +0 %]")."""
-    mean, lo, hi, p, se, df = corrected_t([0.05, 0.05, 0.05, 0.05], n_train=24, n_test=6)
+    mean, lo, hi, p, se, df = corrected_t([0.05] * min_units(), n_train=24, n_test=6)
     assert mean == pytest.approx(0.05) and np.isnan(lo) and np.isnan(hi) and np.isnan(p) and se == 0
     from workbench.study.paired import difference_sentence
 
@@ -309,3 +333,57 @@ def test_the_pooled_row_adds_each_strategys_decision_term_by_its_share_squared_a
     text = study_statistics(table, "rmse_position", "m", {}, windows_sentence(table, 60, None, 0.05), n_boot=300,
                             method_level=rows).text()
     assert f"decides it otherwise (up to {100 * a.p_flip:.0f} %" in text
+
+
+@pytest.mark.parametrize("held", [3, 0])  # seed 1: trial 0 is a test trial of the study's own split, 3 is not
+def test_a_split_whose_refit_is_refused_is_named_with_its_cause_and_counted(monkeypatch, held):
+    """A split whose IOC-only refit raised ModelError left the comparison with only the split count to show it
+    ("2 random splits"): each such split is now named in one line with its cause, and the rows say "2 of 3"."""
+    from workbench.models.registry import method
+    from workbench.plant.system import planar_quadrotor
+    from workbench.sim.operators import lqr_operator_demos
+    from workbench.study.pipeline import run_study
+
+    ds = lqr_operator_demos(n_trials=8, seed=13)
+    cls = method("ioc_only").load_class()
+    fit = cls.fit
+    cause = "u1 never moves in these trials"
+    lost: list[frozenset[str]] = []
+    depth = [0]
+
+    def refusing(self, demos, *args, **kwargs):
+        ids = frozenset(d.id for d in demos)
+        # refused on the training part of every split that holds trial ``held`` out (the study's own fit alike,
+        # its split being the first); the fit's own inner fits (its noise folds) are not a split's
+        if depth[0] == 0 and ds[held].id not in ids:
+            lost.append(ids)
+            raise ModelError(cause)
+        depth[0] += 1
+        try:
+            return fit(self, demos, *args, **kwargs)
+        finally:
+            depth[0] -= 1
+
+    monkeypatch.setattr(cls, "fit", refusing)
+    splits = 3
+    res = run_study(ds, planar_quadrotor(), n_components=1, samples=0, efficiency=None, n_steps=20,
+                    method_splits=splits, test_size=0.25, seed=1)
+    n_lost = len(set(lost))
+    assert n_lost >= 1
+    assert (ds[held].id in {d.id for d in res.test["LQR"]}) == (held == 0)  # both ways a split is scored
+    (row,) = [d for d in res.statistics.method_level if d.baseline == "ioc_only"]
+    assert row.n_splits == splits - n_lost and row.n_drawn == splits
+    assert row.splits_count() == f"{splits - n_lost} of {splits}"
+    assert f"{splits - n_lost} of {splits} random splits" in row.splits_words()
+    named = [line for line in res.verdicts() if "of the methods' comparison" in line]
+    assert len(named) == n_lost == len(res.splits_left_out)
+    for line in named:
+        assert "\n" not in line
+        assert line.endswith(f"is left out of the comparison with IOC-only: IOC-only could not be fitted on its "
+                             f"training trials — {cause}")
+    # the terminal's legend counts the splits behind every row: persistence's lost none, IOC-only's n_lost
+    (other,) = [d for d in res.statistics.method_level if d.baseline == "persistence"]
+    assert other.n_splits == splits
+    legend = dict(res.statistics.legend())["method better?"]
+    assert legend.startswith(f"{row.n_splits}–{other.n_splits} of {splits} refitted splits")
+    assert f"| {row.splits_count()} ({row.n_train} / {row.n_test}) |" in res.statistics.text()

@@ -59,6 +59,8 @@ def _warn_about(source: Source, ds: Any) -> None:
         print(f"warning: {meta['still']}", file=sys.stderr)
     if meta.get("flipped"):  # the segments cut where the vehicle turned upside down
         print(f"warning: {source.shown}: {meta['flipped']}", file=sys.stderr)
+    if meta.get("damaged"):  # the segments a damaged file's lost data cut into pieces
+        print(f"warning: {meta['damaged']}", file=sys.stderr)
     skipped = {k: v for k, v in dict(meta.get("skipped") or {}).items() if v}
     if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
         what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())

@@ -583,6 +583,15 @@ class Session:
                                                     else "included again"))
         return row
 
+    def _fit_waits_for(self, subject: str, label: str) -> str:
+        """A waiting fit step of ``label`` in words: the trials of its label before it in this subject's plan, how
+        many of them are flown (a block with a stopping rule may end early: "up to")."""
+        items, _, done_slots, skipped, _ = self._progress(subject)
+        at = next((j for j, i in enumerate(items) if i.kind == "fit" and i.label == label), len(items))
+        before = [i for i in items[:at] if i.kind == "trial" and i.label == label and i.slot not in skipped]
+        variable = any((i.stop_landed or i.stop_identified) and i.slot not in done_slots for i in before)
+        return _waiting_words(label, sum(i.slot in done_slots for i in before), len(before), variable)
+
     def overview(self) -> dict[str, Any]:
         """The whole session for the experimenter's page: every subject's progress, trials and fits."""
         subjects = []
@@ -590,6 +599,9 @@ class Session:
             doc = self.subject_doc(s)
             st = self.status(s)
             fits = {f.label: self.fits.state(s, f.label) for f in self.protocol.fits}
+            for label, state in fits.items():
+                if state["state"] == "waiting":
+                    state["waiting_for"] = self._fit_waits_for(s, label)
             subjects.append({"subject": s, "index": doc["index"], "order": doc.get("order"),
                              "consent": doc.get("consent"), "warnings": doc.get("warnings", []),
                              "trials_done": st["trials_done"], "trials_total": st["trials_total"],
@@ -598,6 +610,14 @@ class Session:
                              "fits": fits})
         return {"protocol": self.protocol.name, "fingerprint": self.protocol.fingerprint, "out": str(self.out),
                 "subjects": subjects}
+
+
+def _waiting_words(label: str, flown: int, total: int, variable: bool) -> str:
+    """What a fit step that has not started waits for, in words: "after block CS1 (2 of 10 trials flown)"."""
+    of = f"up to {total}" if variable else str(total)
+    if flown < total:
+        return f"after block {label} ({flown} of {of} trials flown)"
+    return f"after block {label} (all {flown} trials flown): starts when the subject reaches the fit step"
 
 
 def _chosen(record: dict[str, Any]) -> str:

@@ -99,6 +99,8 @@ class IdentificationReport:
     position_pull: float = 0.0  # max |A[i, p]| over positions p and the other rows i (0 when translation invariant)
     plant_group: str | None = None  # what the sticks command in these segments' modes (workbench.data.plant_groups)
     responses: tuple[StickResponse, ...] = ()  # what each stick commands in this plant (workbench.plant.physics)
+    #: why ``--plant auto`` identified data in the paper's layout and step (workbench.plant.choice.paper_reproduces)
+    why: str = ""
 
     def __post_init__(self) -> None:
         for name in ("one_step_rmse", "one_step_rmse_persistence", "horizon_rmse", "horizon_rmse_persistence"):
@@ -131,6 +133,7 @@ class IdentificationReport:
             f"{self.n_segments} segments; held out: {self.validation})",
         ]
         lines += [f"  fixed: {f}" for f in self.fixed]
+        lines += [f"  not the paper's plant: {self.why}"] if self.why else []
         lines.append(
             f"  normalized held-out RMSE, one step: plant {self.one_step_score:.3g}, persistence "
             f"{self.one_step_score_persistence:.3g}; {self.horizon_s:g} s ({self.n_steps} steps): plant "

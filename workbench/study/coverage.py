@@ -26,6 +26,7 @@ import pandas as pd
 
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning
 from workbench.study.method_level import (
+    MIN_SPLITS,
     SplitPlan,
     _refit,
     corrected_t,
@@ -148,8 +149,9 @@ def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_
     if decision and not self_comparison and run.margins:
         # against IOC-only a split's change is what keeping the variability model changed
         extra = decision_variance(c, run.fell_back[: len(c)], run.margins[: len(c)])[1]
+    # the coverage study reads the statistic itself at every J it weighs, below min_units too
     mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1),
-                                   extra_var=extra)
+                                   least=MIN_SPLITS, extra_var=extra)
     return mean, lo, hi
 
 

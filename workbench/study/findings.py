@@ -21,7 +21,7 @@ import pandas as pd
 from workbench.defaults import PAIRED_RESAMPLES
 from workbench.models.registry import METHOD_TITLES
 from workbench.study.method_level import FLOOR_METHODS, MethodDifference
-from workbench.study.paired import ALL_LABELS, PairedDifference, paired_differences, per_trial
+from workbench.study.paired import ALL_LABELS, PairedDifference, min_units, paired_differences, per_trial
 from workbench.study.stats import MixedModelResult, SignFlipTest, holm, mixed_effects, sign_flip_tests
 
 __all__ = ["StudyStatistics", "study_statistics", "windows_sentence", "headline_rows"]
@@ -86,6 +86,10 @@ class StudyStatistics:
             m0 = ml[0]
             k = sum(family)
             splits = m0.splits_words("each strategy's")
+            if not m0.loo and len({d.n_splits for d in ml}) > 1:  # rows lost different splits: none speaks for all
+                splits = (f"{_splits_counted(ml)} random splits of each strategy's {m0.units} (a split where a "
+                          "method could not be fitted or diverged is left out of that method's rows, each named "
+                          "with its cause)")
             refits = ("Each fold's models are the study's own fits of that fold." if m0.loo else
                       "Each split reruns the whole method on its own training part — the proposed model's "
                       "cross-validated G and regularizer, its fallback to K̂x and, where the plant is identified from "
@@ -112,7 +116,7 @@ class StudyStatistics:
                 "expanded percentile interval). It holds the fitted models fixed, so it says nothing about "
                 "training on another sample of the same operator" + (" (the question above)." if ml else "."))
             lines.append(self._tests_sentence())
-        lines.append("A difference is stated only where its interval excludes 0.")
+        lines.append("A difference is stated only where its interval excludes 0." + self._too_few_sentence())
         if self.mixed is not None and any(e.term.startswith("strategy") for e in self.mixed.effects):
             per = ("subject (a random intercept) and trial within subject (a variance component)"
                    if self.mixed.groups == "subject" else "trial (a random intercept: every method scored on it)")
@@ -124,7 +128,7 @@ class StudyStatistics:
             which = ("refitted in every fold" if m0.loo else "refitted on every split; GMR-only, which no verdict "
                      "uses, only as fitted models below")
             where = "folds" if m0.loo else "splits"
-            pooled = any(d.p_holm != d.p_holm and (d.shown or d.lo == d.lo) for d in ml)
+            pooled = any(d.p_holm != d.p_holm and d.has_interval for d in ml)
             header = self._ml_header()
             if pooled:  # the pooled rows' p cell is "—": say why once, not in every such cell
                 header = header.rstrip(":") + "; the pooled rows (no p) are no verdict's:"
@@ -133,8 +137,8 @@ class StudyStatistics:
                       f"difference [{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|---|"]
             for d in ml:
                 p = (f"{d.p_holm:.3g}" if d.p_holm == d.p_holm else
-                     "—" if d.shown or d.lo == d.lo else "— (no interval)")
-                lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.n_splits} "
+                     "—" if d.has_interval else "— (no interval)")
+                lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.splits_count()} "
                              f"({d.n_train} / {d.n_test}) | {d.fallback_words()} | {d.sentence()} | {p} |")
         if self.paired:
             tests = {(t.label, t.b): t for t in self.tests}
@@ -182,7 +186,7 @@ class StudyStatistics:
         if ml:
             m0 = ml[0]
             k = sum(headline_rows(self.headline))
-            folds = f"{m0.n_splits} leave-one-out folds" if m0.loo else f"{m0.n_splits} refitted splits"
+            folds = f"{m0.n_splits} leave-one-out folds" if m0.loo else f"{_splits_counted(ml)} refitted splits"
             out.append(("method better?", f"{folds}, corrected resampled t; p Holm over {k}"))
         if self.paired:
             first = self.paired[0]
@@ -212,11 +216,21 @@ class StudyStatistics:
                 f"{'fold' if ml[0].loo else 'split'}'s cross-validation margin) times the difference that decision "
                 "makes, squared")
 
+    def _too_few_sentence(self) -> str:
+        """Where a row has no interval for want of units, why (once): the sign test's bound (:func:`min_units`)."""
+        rows = [d for d in (*self.method_level, *self.paired) if not d.has_interval and "needed" in d.no_interval]
+        if not rows:
+            return ""
+        ci = rows[0].ci
+        return (f" No interval is given from fewer than {min_units(ci)} test trials, splits or folds: the range of n "
+                f"of them holds their median with probability 1 − 2^(1−n), below {ci:g} % for fewer, and no "
+                "interval resampled from them reaches beyond about that range.")
+
     def _ml_header(self) -> str:
         m0 = self.method_level[0]
         if m0.loo:
             return f"{m0.splits_words()}, each training on all of its strategy's {m0.units} but the one it tests:"
-        return f"{m0.n_splits} random splits:"
+        return f"{_splits_counted(self.method_level)} random splits:"
 
     def _tests_sentence(self) -> str:
         """What the sign-flip column answers, or why there is none: with few trials no test can reach 5 %."""
@@ -228,13 +242,26 @@ class StudyStatistics:
             return (f"- *Is that difference more than chance on these trials?* No test can say so at 5 % here: with "
                     f"{n} test trials the exact sign-flip test of the per-trial differences cannot go below p = "
                     f"{pmin:.3g}" + (f" ({min(1.0, pmin * k):.3g} after Holm over the {k} rows the verdicts use)"
-                                     if k > 1 else "") + ", so the fitted models' table below has no p column; read "
-                    "its intervals" + (" (the p-values of the methods' table are the corrected t's, over splits)."
-                                       if self.method_level else "."))
+                                     if k > 1 else "") + ", so the fitted models' table below has no p column; "
+                    + ("read its intervals" if any(d.has_interval for d in self.paired) else
+                       # the sign test's bound that leaves no p below 5 % leaves no interval either (min_units)
+                       "nor has it intervals (too few test trials for either)")
+                    + (" (the p-values of the methods' table are the corrected t's, over splits)."
+                       if self.method_level else "."))
         return ("- *Is that difference more than chance on these trials?* The exact sign-flip (permutation) test of "
                 f"the per-trial differences, Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts "
                 "use (the only rows given a p); \"cannot reach 5 %\" where its trials are too few for any p of that "
                 "family to be below 0.05.")
+
+
+def _splits_counted(rows: Sequence[MethodDifference]) -> str:
+    """How many random splits the method-level rows were made from: "6", "5 of 6" (a split left out of every row)
+    or "4–5 of 6" (rows that lost different splits)."""
+    drawn = max(max(d.n_drawn, d.n_splits) for d in rows)
+    scored = sorted({d.n_splits for d in rows})
+    if scored == [drawn]:
+        return str(drawn)
+    return f"{scored[0]} of {drawn}" if len(scored) == 1 else f"{scored[0]}–{scored[-1]} of {drawn}"
 
 
 def _p_cell(t: SignFlipTest | None) -> str:

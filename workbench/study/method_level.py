@@ -20,7 +20,9 @@ identified from data (``--plant identify``) — the plant. Nothing a split's tes
 interval therefore includes the selection's own variability (the review found the intervals 23–40 % short when the
 split refits reused the settings chosen once on the study's training trials, which are mostly the splits' own test
 trials). A proposed method that fell back to ``K̂x`` in every split predicts as IOC-only on every one: that row says
-so in words (:meth:`MethodDifference.sentence`), and no interval of zero width is ever given (:func:`corrected_t`).
+so in words (:meth:`MethodDifference.sentence`), and no interval of zero width is ever given (:func:`corrected_t`);
+nor any from fewer splits or folds than :func:`~workbench.study.paired.min_units` (6 at 95 %): the row then says
+"no interval" with the count, and gives no p.
 
 The fallback's own flip (issue 40, round 8). Nadeau & Bengio's ``n_test/n_train`` is the correlation of split
 estimates that share test trials; it does not see a decision that every split takes from nearly the same training
@@ -39,6 +41,7 @@ GMR-only is compared as fitted models on the study's test trials only. :data:`SP
 from __future__ import annotations
 
 import warnings
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -51,13 +54,13 @@ from scipy import stats as sps
 from workbench.data.dataset import DataRef
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
-from workbench.models.registry import REGISTRY
+from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.study.divergence import scored
-from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
+from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence, min_units, too_few_words
 
-__all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "corrected_t", "decision_variance",
-           "split_scores", "split_tasks", "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS",
-           "FALLBACK_METHOD"]
+__all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "LeftOutSplit", "corrected_t",
+           "decision_variance", "split_scores", "split_tasks", "method_differences", "fold_differences", "SPLITS",
+           "LOO_FOLDS", "MIN_SPLITS", "FALLBACK_METHOD"]
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
@@ -69,12 +72,15 @@ FLOOR_METHODS = tuple(m.name for m in REGISTRY if m.floor)
 SPLITS = 6
 #: Fewest scored splits (or folds) a method-level row is made from: the corrected resampled t has ``J − 1`` degrees
 #: of freedom, so one split gives no spread and no interval (:func:`corrected_t`); with fewer there is no row, and a
-#: leave-one-out study says so in words (:class:`workbench.study.folds.LeftOutFold`).
+#: leave-one-out study says so in words (:class:`workbench.study.folds.LeftOutFold`). A row of fewer splits than
+#: :func:`~workbench.study.paired.min_units` has its mean but no interval.
 MIN_SPLITS = 2
 #: The design of a leave-one-out study's method-level rows (:attr:`MethodDifference.design`).
 LOO_FOLDS = "leave-one-out folds"
 #: The method a fallen-back proposed model predicts as (``K̂x``, the task objective alone).
 FALLBACK_METHOD = "ioc_only"
+#: What a split says of a method whose rollout diverged on its test part (:class:`LeftOutSplit`).
+_DIVERGED = "diverged on its test trials (its horizon errors are not numbers to compare)"
 #: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).
 _SPLIT_MAX_ITER = 200
 
@@ -85,11 +91,13 @@ class MethodDifference:
 
     Attributes
     ----------
-    change, lo, hi : float
-        The mean relative change over splits (> 0: the method's error is lower) and its corrected resampled t
-        interval at ``ci`` (fractions).
+    change : float
+        The mean relative change over splits (> 0: the method's error is lower), a fraction.
+    lo, hi : float or None
+        Its corrected resampled t interval at ``ci``; None where there is none (fewer splits than
+        :func:`~workbench.study.paired.min_units`, or none varied): ``no_interval`` says why.
     p : float
-        Two-sided p of the corrected resampled t (against no difference).
+        Two-sided p of the corrected resampled t (against no difference); NaN where there is no interval.
     p_holm : float
         ``p`` Holm-corrected over the rows the headline uses (NaN: not one of them).
     se, df : float
@@ -111,8 +119,8 @@ class MethodDifference:
     metric: str
     label: str
     change: float
-    lo: float
-    hi: float
+    lo: float | None
+    hi: float | None
     p: float
     se: float
     df: float
@@ -127,6 +135,11 @@ class MethodDifference:
     #: Splits in which the proposed method fell back to ``K̂x`` (its cross-validation found no gain in its variability
     #: model); in a leave-one-out study, folds.
     n_fallback: int = 0
+    #: Random splits drawn (0: as many as scored); where more than ``n_splits``, the others were left out because a
+    #: method of this row could not be fitted on their training part or its rollout diverged (:class:`LeftOutSplit`).
+    n_drawn: int = 0
+    #: Why there is no interval ("" where there is one).
+    no_interval: str = ""
     #: The chance that the default model's fallback decides otherwise on another sample of the pilot, and the
     #: variance that adds to the interval's (:func:`decision_variance`); NaN and 0 where no split chose by
     #: cross-validation.
@@ -147,12 +160,25 @@ class MethodDifference:
                 return (f"the {self.n_splits} of {folds} leave-one-out folds of {whose} {self.units} that could be "
                         "fitted, each testing one")
             return f"the {self.n_splits} leave-one-out folds of {whose} {self.units}, each left out once"
+        if self.n_drawn > self.n_splits:
+            lost = self.n_drawn - self.n_splits
+            return (f"{self.n_splits} of {self.n_drawn} random splits of {whose} {self.units} (the other {lost} left "
+                    "out, each named with its cause)")
         return f"{self.n_splits} random splits of {whose} {self.units}"
+
+    def splits_count(self) -> str:
+        """"6", or "5 of 6" where drawn splits were left out (:class:`LeftOutSplit`)."""
+        return f"{self.n_splits} of {self.n_drawn}" if self.n_drawn > self.n_splits else str(self.n_splits)
+
+    @property
+    def has_interval(self) -> bool:
+        """Whether the splits gave an interval (else ``no_interval`` says why)."""
+        return self.lo is not None and self.hi is not None
 
     @property
     def shown(self) -> bool:
-        """Whether the interval excludes zero."""
-        return self.lo > 0 or self.hi < 0
+        """Whether there is an interval and it excludes zero."""
+        return self.has_interval and (self.lo > 0 or self.hi < 0)
 
     @property
     def identical(self) -> bool:
@@ -168,8 +194,9 @@ class MethodDifference:
             why = (f"the proposed method fell back to K̂x in all {self.n_splits} {where}"
                    if self.n_fallback >= self.n_splits else f"the two predicted alike in all {self.n_splits} {where}")
             return f"the same predictions, no difference to estimate ({why})"
-        text = difference_sentence(self.change, self.lo, self.hi, self.ci,
-                                   f"too little spread between the {self.n_splits} {where}")
+        text = (difference_sentence(self.change, self.lo, self.hi, self.ci,
+                                    f"too little spread between the {self.n_splits} {where}")
+                if self.has_interval else f"no interval ({self.no_interval})")
         if self.n_fallback >= self.n_splits:
             text += f"; the proposed method fell back to K̂x in all {self.n_splits} {where}"
         return text
@@ -179,27 +206,70 @@ class MethodDifference:
         return f"{self.n_fallback} of {self.n_splits}" if self.n_fallback else "none"
 
 
+@dataclass(frozen=True)
+class LeftOutSplit:
+    """A random split of the method-level comparison (:func:`split_scores`) that a row leaves out: a method could not
+    be fitted on its training part (its :class:`~workbench.errors.ModelError`), or its rollout diverged on its test
+    part. Said in one line with its cause, as a leave-one-out study's :class:`workbench.study.folds.LeftOutFold`.
+
+    Attributes
+    ----------
+    label : str
+        The strategy whose split it is.
+    index, total : int
+        The split's place among the strategy's splits (1-based) and how many were drawn.
+    method : str
+        The method not scored on it (``"plant"``: the plant itself could not be identified from its training part,
+        so no method was).
+    reason : str
+        What happened to it, one line ("could not be fitted on its training trials — …", "diverged on …").
+    """
+
+    label: str
+    index: int
+    total: int
+    method: str
+    reason: str
+
+    def sentence(self) -> str:
+        """"On CS1, split 3 of 6 of the methods' comparison is left out of the comparison with IOC-only: IOC-only
+        could not be fitted on its training trials — …"."""
+        where = f"On {self.label}, split" if self.label not in ("", "None", ALL_LABELS) else "Split"
+        head = f"{where} {self.index} of {self.total} of the methods' comparison (refitted on random splits)"
+        if self.method == "plant":
+            return f"{head} is left out: the plant could not be identified from its training trials — {self.reason}"
+        proposed = self.method == "proposed"
+        name = "the proposed model" if proposed else METHOD_TITLES.get(self.method, self.method)
+        scope = "every comparison" if proposed else f"the comparison with {name}"
+        return f"{head} is left out of {scope}: {name} {self.reason}"
+
+
 def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0,
-                overlap: float | None = None,
-                extra_var: float = 0.0) -> tuple[float, float, float, float, float, float]:
+                overlap: float | None = None, least: int | None = None, extra_var: float = 0.0
+                ) -> tuple[float, float, float, float, float, float]:
     """Mean, interval, two-sided p, standard error and df of the corrected resampled t (Nadeau & Bengio 2003).
 
     ``var = (1/J + n_test/n_train) · s² + extra_var`` of the ``J`` per-split values; t reference on ``J − 1`` df.
     ``extra_var``: a variance between samples that the splits of one sample cannot show (the fallback decision's,
     :func:`decision_variance`; 0: Nadeau & Bengio's). Where every split gave the same value there is no spread to
     make an interval from: the bounds and p are NaN (an interval of zero width would claim a certainty the splits
-    cannot give). ``overlap`` replaces ``n_test/n_train`` (for a coverage study weighing other corrections).
+    cannot give); so too with fewer than ``least`` splits (default :func:`~workbench.study.paired.min_units` of
+    ``ci``: 6 at 95 %, where the range of the splits' values holds their median with probability ``1 − 2^(1−J)``
+    ≥ 95 %). ``overlap`` replaces ``n_test/n_train`` and ``least`` the fewest splits (for a coverage study weighing
+    other corrections, or fewer splits).
     """
     c = np.asarray(changes, dtype=float)
     c = c[np.isfinite(c)]
     J = c.size
-    if J < MIN_SPLITS:
+    if J < max(MIN_SPLITS, min_units(ci) if least is None else int(least)):
         return (float(c.mean()) if J else np.nan), np.nan, np.nan, np.nan, np.nan, float(max(J - 1, 0))
     mean = float(c.mean())
     rho = n_test / max(n_train, 1) if overlap is None else float(overlap)
     s2 = float(c.var(ddof=1))
     df = float(J - 1)
-    if s2 == 0.0:  # every split gave the same change: nothing varies, so no interval (never one of zero width)
+    # every split gave the same change: nothing varies, so no interval (never one of zero width); read off the values,
+    # not s², which the mean's round-off leaves at 1e-35 rather than 0 for six equal values
+    if s2 == 0.0 or np.ptp(c) == 0.0:
         return mean, np.nan, np.nan, np.nan, 0.0, df
     se = float(np.sqrt((1.0 / J + rho) * s2 + max(float(extra_var), 0.0)))
     half = float(sps.t.ppf(0.5 + ci / 200.0, df)) * se
@@ -302,10 +372,11 @@ class SplitPlan:
     task: Any = None
 
 
-def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bool]:
+def _refit(plan: SplitPlan, train: DemonstrationSet,
+           refused: dict[str, str] | None = None) -> tuple[dict[str, Any], bool]:
     """Every method of ``plan`` fitted on ``train`` with every choice made again on it; whether the proposed model
     fell back to ``K̂x`` (its cross-validation's margin: :func:`_margin`). A method that cannot be fitted is left
-    out."""
+    out, its ModelError's message in ``refused``."""
     from workbench.models.factory import make_models
     from workbench.models.fitting import shared_gains
 
@@ -327,8 +398,9 @@ def _refit(plan: SplitPlan, train: DemonstrationSet) -> tuple[dict[str, Any], bo
                 updates["max_iter"] = min(int(params["max_iter"]), _SPLIT_MAX_ITER)
             try:
                 fitted[name] = type(model)(plant, **{**params, **updates}).fit(train)
-            except ModelError:
-                continue
+            except ModelError as exc:
+                if refused is not None:
+                    refused[name] = " ".join(str(exc).split())
     proposed = fitted.get(plan.methods[0])
     auto = getattr(proposed, "auto_", None) if proposed is not None and proposed.chooses_settings else None
     return fitted, bool(auto is not None and auto.fallback)
@@ -347,8 +419,9 @@ def split_scores(task: tuple) -> pd.DataFrame:
     """One split (a task of the executor): rerun the method of its :class:`SplitPlan` on the training trials, score
     the test trials; rows ``label, split, trial, method, value, fell_back`` (value: the trial's mean ``metric`` over
     its windows; fell_back: whether this split's proposed model fell back to ``K̂x``; margin: its cross-validation's
-    margin, :func:`_margin`) with ``n_train`` / ``n_test`` in ``attrs``. A method that cannot be fitted has no
-    rows."""
+    margin, :func:`_margin`) with ``n_train`` / ``n_test`` in ``attrs``. A method that cannot be fitted, or whose
+    rollout diverged on the test trials, has no rows; its cause is in ``attrs["refused"]`` (method → one line;
+    ``"plant"`` where the plant could not be identified)."""
     from workbench.study import evaluate as ev
 
     label, j, ds, test_idx, plan, metric, n_steps, stride = task
@@ -361,22 +434,30 @@ def split_scores(task: tuple) -> pd.DataFrame:
         # held-out score judges the result
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.simplefilter("ignore", DegenerateFitWarning)
+        refused: dict[str, str] = {}
         try:
-            fitted, fell_back = _refit(plan, train)
-        except ModelError:  # the split's plant could not be identified from its training part
-            fitted, fell_back = {}, False
+            fitted, fell_back = _refit(plan, train, refused)
+            refused = {k: f"could not be fitted on its training trials — {v}" for k, v in refused.items()}
+        except ModelError as exc:  # the split's plant could not be identified from its training part
+            fitted, fell_back, refused = {}, False, {"plant": " ".join(str(exc).split())}
     cols = ["label", "split", "trial", "method", "value", "fell_back", "margin"]
     if not fitted:
-        return pd.DataFrame(columns=cols)
+        out = pd.DataFrame(columns=cols)
+        out.attrs.update(n_train=len(train), n_test=len(test), refused=refused)
+        return out
     margin = _margin(fitted.get(plan.methods[0]))
     table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride,
                        inputs=False)
-    table = scored(table)  # a method whose rollout diverged in this split is not compared on it
-    table = table[table["metric"] == metric]
+    kept = scored(table)  # a method whose rollout diverged in this split is not compared on it
+    for name in dict.fromkeys(table.loc[table["metric"] == metric, "method"].astype(str)):
+        if not (kept["metric"].eq(metric) & kept["method"].astype(str).eq(name)).any():
+            refused[name] = _DIVERGED
+    table = kept[kept["metric"] == metric]
     per = table.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
     out = per.assign(label=label, split=j, fell_back=fell_back, margin=margin)[cols]
-    out.attrs.update(n_train=len(train), n_test=len(test))
+    out.attrs.update(n_train=len(train), n_test=len(test), refused=refused)
     return out
+
 
 
 def method_differences(
@@ -388,6 +469,7 @@ def method_differences(
     units: Mapping[str, str] | None = None,
     ci: float = 95.0,
     design: str = "random splits",
+    drawn: Mapping[str, int] | None = None,
 ) -> list[MethodDifference]:
     """The corrected resampled t of ``method`` against each baseline, per label and (several labels) pooled.
 
@@ -398,6 +480,9 @@ def method_differences(
     sizes : mapping label → (n_train, n_test)
         Trials per split of each label.
     units : mapping label → "trials" | "subjects"
+    drawn : mapping label → int, optional
+        Splits drawn per label (:attr:`MethodDifference.n_drawn`): a split without a row for a method (not fitted,
+        or diverged) is left out of that method's comparison, and the rows say how many of the drawn were scored.
     """
     if scores.empty or method not in set(scores["method"]):
         return []
@@ -456,10 +541,16 @@ def method_differences(
             pis = [pi for pi, _ in flips.values() if pi == pi]
             mean, lo, hi, p, se, df = corrected_t(changes, n_train, n_test, ci, extra_var=extra)
             what = {(units or {}).get(lb, "trials") for lb in members}
+            where = "leave-one-out folds" if design == LOO_FOLDS else "splits"
+            J = int(np.isfinite(changes).sum())
+            why = ("" if np.isfinite(lo) and np.isfinite(hi) else too_few_words(J, where, ci)
+                   if J < min_units(ci) else f"nothing varied between the {J} {where}")
             out.append(MethodDifference(
-                method=method, baseline=base, metric=metric, label=scope, change=mean, lo=lo, hi=hi, p=p, se=se,
-                df=df, n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
+                method=method, baseline=base, metric=metric, label=scope, change=mean,
+                lo=float(lo) if not why else None, hi=float(hi) if not why else None, p=p, se=se, df=df,
+                n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
                 units="subjects" if what == {"subjects"} else "trials", ci=ci, design=design, n_fallback=n_fallback,
+                n_drawn=max((int((drawn or {}).get(lb, 0)) for lb in members), default=0), no_interval=why,
                 p_flip=float(np.mean(pis)) if pis else float("nan"), decision_var=extra))
     return out
 
@@ -602,8 +693,35 @@ class SplitJobs:
         scores = [s for s in scores if len(s)]
         if not scores:
             return None
+        drawn = Counter(str(t[0]) for t in self.tasks)
         return tuple(method_differences(pd.concat(scores, ignore_index=True), self.sizes, self.metric, "proposed",
-                                        units=self.units)) or None
+                                        units=self.units, drawn=drawn)) or None
+
+    def left_out(self, done: list[pd.DataFrame], parts: Mapping[str, Any]) -> tuple[LeftOutSplit, ...]:
+        """The splits that lost a method, each with its cause (:class:`LeftOutSplit`), of the labels whose proposed
+        model the study fitted (:meth:`rows`): from the refitted splits' ``attrs["refused"]`` and, for the study's
+        own split, the study's own failures."""
+        refits = iter(done)
+        drawn = Counter(str(t[0]) for t in self.tasks)
+        out = []
+        for i, t in enumerate(self.tasks):
+            label, j = t[0], int(t[1])
+            part = next(refits) if i not in self.reuse else None
+            if "proposed" not in parts[label].fitted:
+                continue
+            if part is not None:
+                refused = dict(part.attrs.get("refused", {}))
+            else:  # the study's own fits: its failures and divergences (its verdicts say them at length)
+                refused = {m: f"could not be fitted on its training trials — {why}"
+                           for m, why in parts[label].failures.items() if m in self.methods}
+                table = parts[label].table
+                kept = scored(table)
+                for m in dict.fromkeys(table.loc[table["metric"] == self.metric, "method"].astype(str)):
+                    if m in self.methods and not (kept["metric"].eq(self.metric)
+                                                  & kept["method"].astype(str).eq(m)).any():
+                        refused[m] = _DIVERGED
+            out += [LeftOutSplit(str(label), j + 1, drawn[str(label)], m, why) for m, why in refused.items()]
+        return tuple(out)
 
 
 def _own_scores(part: Any, label: str, metric: str, methods: Sequence[str]) -> pd.DataFrame:

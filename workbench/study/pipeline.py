@@ -29,7 +29,7 @@ from workbench.models.registry import METHOD_TITLES, METHODS
 from workbench.models.selection import select_components
 from workbench.study.divergence import scored, verdict_lines
 from workbench.study.folds import TIME_SPLIT_PIECES, LeftOutFold, split_in_time, too_few_folds
-from workbench.study.method_level import FLOOR_METHODS, SPLITS, SplitJobs, SplitPlan
+from workbench.study.method_level import FLOOR_METHODS, SPLITS, LeftOutSplit, SplitJobs, SplitPlan
 from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
 __all__ = [
@@ -99,6 +99,9 @@ class StudyResult:
     #: are scored (:meth:`verdicts` says which were left out and, below :data:`~workbench.study.method_level.
     #: MIN_SPLITS` scored folds of a strategy, that its methods are not compared).
     folds_left_out: tuple[LeftOutFold, ...] = ()
+    #: The method-level random splits that lost a method (not fitted on its training part, or diverged on its test
+    #: part), with its cause (:class:`~workbench.study.method_level.LeftOutSplit`): :meth:`verdicts` names each.
+    splits_left_out: tuple[LeftOutSplit, ...] = ()
 
     @property
     def rmse(self) -> pd.DataFrame:
@@ -134,7 +137,7 @@ class StudyResult:
         """One plain sentence per label where the proposed model is not shown to beat IOC-only or persistence
         (by the interval of its paired difference), or a method could not be fitted at all."""
         lines = [fold.sentence() for fold in self.folds_left_out]
-        lines += too_few_folds(self.folds_left_out, self.test)
+        lines += too_few_folds(self.folds_left_out, self.test) + [s.sentence() for s in self.splits_left_out]
         lines += [
             f"{'On ' + label + ', ' if label not in ('', 'None') else ''}{METHOD_TITLES.get(m, m)} could not be "
             f"fitted and is left out of the comparison: {reason}"
@@ -344,13 +347,14 @@ def run_study(
                    if part.check is not None]
     eff_parts = [part.efficiency for part in parts if part.efficiency is not None]
     table = pd.concat(rmse_parts, ignore_index=True)
-    method_level = None
+    method_level, splits_left_out = None, ()
     if jobs is not None:
         if split_parts is None:  # run here, after the strategies (serial, or one strategy on a parallel executor)
             t0 = time.perf_counter()
             split_parts = jobs.run(executor, progress)
             timings["method-level splits"] = time.perf_counter() - t0
-        method_level = jobs.rows(split_parts, dict(zip(splits, parts, strict=True)))
+        by_label = dict(zip(splits, parts, strict=True))
+        method_level, splits_left_out = jobs.rows(split_parts, by_label), jobs.left_out(split_parts, by_label)
     statistics = _statistics(table, demos, plant, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
@@ -364,7 +368,7 @@ def run_study(
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
         stats_text=statistics.text() + _settings_text(models), n_steps=n_steps, samples=samples, seed=seed,
         timings=timings, failures=failures, objectives=objectives, ratio_comparison=ratio_comparison,
-        stride_steps=stride,
+        stride_steps=stride, splits_left_out=splits_left_out,
         statistics=statistics, calibration_check=_check(check_parts),
         calibration_counts=pd.concat(check_parts, ignore_index=True) if check_parts else None,
         holdout=holdout_text(test, "given as the test trials" if test_ids is not None else
@@ -767,14 +771,16 @@ def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
     labels = list(dict.fromkeys(d.label for d in paired if d.metric == metric))
     labels = [lb for lb in labels if lb != ALL_LABELS] or labels
     for label in labels:
+        # a row with no interval (too few test trials or splits) shows nothing either way: it is "not shown", in
+        # its own words (its sentence), never "worse by" a number
         rows = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
-                and not d.lo > 0]
+                and not (d.has_interval and d.lo > 0)]
         if not rows:
             continue
         where = f"On {label}, the" if label not in ("", UNLABELED) else "The"
         scope = _scope(rows[0])
-        worse = [d for d in rows if d.hi < 0]
-        unclear = [d for d in rows if not d.hi < 0]
+        worse = [d for d in rows if d.has_interval and d.hi < 0]
+        unclear = [d for d in rows if d not in worse]
         if worse:
             parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} by {_pct(-d.change)} [{_pct(-d.hi)}, "
                      f"{_pct(-d.lo)}]" for d in worse]

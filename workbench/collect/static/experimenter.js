@@ -26,7 +26,8 @@ async function api(path, body) {
 }
 
 function fitCell(label, f) {
-  if (!f || f.state === "waiting") return el("span", { class: "muted" }, `${label}: not reached yet`);
+  // the server says what a fit that has not started waits for: its block's trials, flown so far
+  if (!f || f.state === "waiting") return el("span", { class: "muted" }, `${label} fit: ${f?.waiting_for || "not started"}`);
   if (f.state === "fitting") return el("span", {}, `${label}: fitting…`);
   if (f.state === "failed") {
     return el("span", { class: "notok" }, `${label}: not fitted (${f.reason}) `,
