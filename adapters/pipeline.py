@@ -114,7 +114,9 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
         armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped)
         spans = intersect(spans, armed if armed is not None else EVERYTHING)
     if seg.landing is not None and seg.landing.flag is not None:
-        flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True)
+        # no landed event is no evidence of ground time (a firmware that logs none, a log begun in the air)
+        flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True,
+                             no_events_say_nothing=True)
         spans = intersect(spans, flying if flying is not None else EVERYTHING)
     return list(spans)
 
@@ -150,21 +152,24 @@ def _mark_fixed_wing(sel: Selected, m: ChannelMapping, spans: list[Span]) -> lis
 
 
 def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
-                invert: bool = False) -> list[Span] | None:
+                invert: bool = False, no_events_say_nothing: bool = False) -> list[Span] | None:
     """The spans a flag rule holds in (``invert``: does not hold); ``None`` where an event rule's stream is not in
     the log at all (the firmware records no such events: old ArduPlane logs declare no ``EV``), so the rule says
-    nothing. A stream the log declares but never wrote holds no event: no span. An event rule with a held flag
-    that the log holds (``FlagRule.held``) is decided by that flag where the log holds none of its events
-    (:func:`_deciding_rule`)."""
+    nothing. A stream the log declares but never wrote holds no event: no span — or, with
+    ``no_events_say_nothing`` (a landed rule: a flight that never lands logs no landing), ``None``, as where the
+    log holds the stream but none of the rule's events. An event rule with a held flag that the log holds
+    (``FlagRule.held``) is decided by that flag where the log holds none of its events (:func:`_deciding_rule`)."""
     rule = _deciding_rule(streams, m, rule, what)
     if rule.on and not _declared(streams, rule.selector):
         return None
     if rule.on and not any(h in streams for h in _heads(rule.selector)):
-        return []  # declared, never written
+        return None if no_events_say_nothing else []  # declared, never written
     sel = select(rule.selector, streams, what, m.name, n_columns=1)
     t, flags = _rule_series(sel, m, skipped=skipped, what=what)
     if rule.on:
         events = rule.events(flags)
+        if no_events_say_nothing and not events.any():
+            return None
         truth = rule.truth(flags[events])
         return event_spans(t[events], ~truth if invert else truth)
     truth = rule.truth(flags)
