@@ -216,6 +216,31 @@ def test_ground_time_is_cut_before_the_stick_check_and_the_fit(tmp_path):
     assert any(a < at[17] < b for a, b in zip(starts, ends, strict=True))  # no cut at LAND_COMPLETE_MAYBE
 
 
+def test_manual_modes_flown_only_on_the_ground_are_named(tmp_path):
+    # beastayyg sample.bin, peterbarker_3: armed in STABILIZE on the ground, the take-off in AUTO (here RTL); once
+    # the ground time is cut nothing is left, and the line says so (it said "no stick input in these spans: u1, u2")
+    path, streams = _copter_bin(tmp_path, "ground_only.bin", {"RCMAP_ROLL": 1, "RCMAP_PITCH": 2}, roll_on=1)
+    ev = streams["EV"]
+    modes = streams["MODE"]
+    rtl = float(modes["t"][modes["ModeNum"] == mode_number("arducopter", "RTL")].iloc[0])
+    extra = pd.DataFrame({"t": [rtl + 0.5], "Id": np.array([28], np.uint8)})  # NOT_LANDED: the take-off, in RTL
+    streams["EV"] = pd.concat([ev, extra], ignore_index=True).sort_values("t", kind="stable").reset_index(drop=True)
+    options = dataflash_write.example_streams("old", "copter", seconds=40.0, seed=3)[1]
+    path = dataflash_write.write(tmp_path / "ground_only.bin", streams, **options)
+    with pytest.raises(DataError) as info:
+        adapters.load(path, "ardupilot_manual")
+    message = str(info.value)
+    assert "\n" not in message and "no stick input" not in message
+    found = re.search(r"on the ground through ([\d.]+) of the ([\d.]+) s armed in", message)
+    ground, total = float(found.group(1)), float(found.group(2))
+    # in the air in a kept mode only from the last STABILIZE to the last DISARMED, on the reader's clock
+    read = adapters.read(path).frames
+    air = float(read["EV"]["t"][read["EV"]["Id"] == 11].iloc[-1]) - float(read["MODE"]["t"].iloc[-1])
+    assert total - ground == pytest.approx(air, abs=0.15) and 0 < air < 5
+    assert "(EV.Id = 18 LAND_COMPLETE on landing, 28 NOT_LANDED on take-off); its " in message
+    assert "s in the air there leave no piece of min_duration = 5 s" in message
+
+
 def test_a_log_without_landed_events_keeps_its_spans(tmp_path):
     # a firmware that logs no landed events, or a flight that never lands in its log, says nothing about the ground
     path, streams = _copter_bin(tmp_path, "air.bin", {"RCMAP_ROLL": 1, "RCMAP_PITCH": 2}, roll_on=1)
