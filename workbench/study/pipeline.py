@@ -28,7 +28,7 @@ from workbench.errors import ConvergenceWarning, DataError, ModelError
 from workbench.models.registry import METHOD_TITLES, METHODS
 from workbench.models.selection import select_components
 from workbench.study.divergence import scored, verdict_lines
-from workbench.study.folds import TIME_SPLIT_PIECES, LeftOutFold, split_in_time, too_few_folds
+from workbench.study.folds import TIME_SPLIT_PIECES, LeftOutFold, split_in_time, still_test_trial, too_few_folds
 from workbench.study.method_level import FLOOR_METHODS, SPLITS, LeftOutSplit, SplitJobs, SplitPlan
 from workbench.study.paired import _pct  # one rounding rule for every stated difference
 
@@ -584,7 +584,9 @@ def run_loso(
     moves in the other trials) is left out with its cause (``folds_left_out``, said first in
     :meth:`StudyResult.verdicts`) and the other folds are scored; below
     :data:`~workbench.study.method_level.MIN_SPLITS` scored folds a strategy's methods are not compared, in words.
-    Any other exception is a bug and propagates.
+    Any other exception is a bug and propagates. A fold whose test trial never moves
+    (:func:`~workbench.study.folds.still_test_trial`: position and velocity constant, or no stick moving) is left
+    out the same way, before any fit: scored, persistence's 0 there would be a comparison of nothing.
 
     Raises
     ------
@@ -599,6 +601,13 @@ def run_loso(
         what = f"fitting and comparing, leave-one-segment-out ({len(demos)} folds)"
         bar = p.add_task(what, total=len(demos)) if p is not None else None
         for i, d in enumerate(demos):
+            label = UNLABELED if d.label is None else str(d.label)
+            if still := still_test_trial(demos, i):
+                # scored, such a fold would put a comparison of nothing (persistence's 0) among the pilot's
+                left_out.append(LeftOutFold(i + 1, len(demos), d.id, label, still, part="test"))
+                if p is not None:
+                    p.advance(bar)
+                continue
             try:
                 res = run_study(demos, plant, n_steps=n_steps, n_components=n_components, samples=samples,
                                 efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s,
@@ -607,8 +616,7 @@ def run_loso(
                 # a refusal of this fold's training part (a plant the other trials do not identify: an input that
                 # never moves without this trial, say) is this fold's, not the study's: the other folds are scored
                 # and the fold is named with its cause; anything else is a bug and stays loud
-                left_out.append(LeftOutFold(i + 1, len(demos), d.id,
-                                            UNLABELED if d.label is None else str(d.label), " ".join(str(exc).split())))
+                left_out.append(LeftOutFold(i + 1, len(demos), d.id, label, " ".join(str(exc).split())))
             else:
                 folds.append((d.id, res))
             if p is not None:
