@@ -320,12 +320,12 @@ def test_per_subject_identifies_each_plant_without_the_held_out_trials():
 
 # -- honest verdicts -----------------------------------------------------------------------------------------
 def test_verdict_says_plainly_when_the_proposed_model_is_not_better():
-    from workbench.study.paired import paired_differences
+    from workbench.study.paired import min_units, paired_differences
 
     rng = np.random.default_rng(0)
     rows = []
     for method, scale in (("proposed", 1.0), ("ioc_only", 0.9), ("gmr_only", 1.5), ("persistence", 2.0)):
-        for t in range(5):
+        for t in range(min_units() + 2):  # enough test trials for an interval (fewer: tests/study/test_paired.py)
             rows.append((f"tr{t}", "L", 0, method, "rmse_position", scale * (1 + 0.01 * rng.random())))
     table = pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
     paired = paired_differences(table, "rmse_position", n_boot=500)

@@ -351,3 +351,13 @@ def test_evaluate_per_subject_prints_the_repeated_measures_statistics(tmp_path):
     assert "pairwise two-sample Student t-tests" in out and out.count("(Student)") == 3
     assert "the difference: the paper's ANOVA treats each method's 3 subjects as 3 independent groups" in out
     assert set(pd.read_csv(tmp_path / "ps.csv")["subject"]) == set(expected.subjects)
+    # 3 held-out trials, one per subject: fewer than min_units, so no paired interval and no verdict by a number
+    from workbench.models.registry import METHOD_TITLES
+    from workbench.study.paired import min_units
+
+    n = len(expected.subjects)
+    assert n < min_units()
+    for base in ("ioc_only", "gmr_only", "persistence"):
+        said = f"proposed vs {METHOD_TITLES[base]}: no interval ({n} test trials; {min_units()} needed) ({n} held-out"
+        assert said in out
+    assert "worse than" not in out and "lower by" not in out and "higher by" not in out

@@ -118,12 +118,16 @@ def test_an_interval_whose_ends_print_alike_is_said_in_words():
     baseline = np.array([0.30, 0.34])
     wide = pd.DataFrame({"proposed": baseline * np.array([0.1200, 0.1201]), "persistence": baseline,
                          "n_windows": [6, 7], "subject": [None, None]}, index=["t1", "t2"])
+    from workbench.study.paired import difference_sentence, min_units
+
     d = paired_difference(wide, "proposed", "persistence", "rmse_position", "CS2")
-    assert d.hi > d.lo  # an interval of some width, whose ends round to one printed value
     words = d.sentence()
-    assert "[" not in words and "too few test trials" in words and str(d.n_trials) in words, words
+    assert "[" not in words and words == f"no interval ({d.n_trials} test trials; {min_units()} needed)", words
+    # two trials are too few for any interval (min_units), whatever their spread; ends that print alike from enough
+    # trials are words too, and an interval of some width is printed
     wider = paired_difference(wide.assign(proposed=baseline * np.array([0.10, 0.15])), "proposed", "persistence")
-    assert "[" in wider.sentence()  # the check can fail: a real spread is printed as an interval
+    assert wider.lo is None and "[" not in wider.sentence()
+    assert "[" not in difference_sentence(0.88, 0.8801, 0.8804) and "[" in difference_sentence(0.88, 0.85, 0.9)
 
 
 def test_the_weight_ratios_say_their_gain_entry_is_bias_corrected():
@@ -181,3 +185,29 @@ def test_relevance_round_off_both_signs(value):
     from workbench.method.gain import relevance_text
 
     assert relevance_text(value) == relevance_text(-value) == "0"
+
+
+def test_evaluate_prints_no_interval_from_too_few_test_trials(tmp_path, capsys, monkeypatch):
+    """evaluate on 4 test trials (fewer than min_units): the fitted models' table and the input-prediction table say
+    "no interval" with the count in every difference cell (the previous main printed "[…]" intervals from these 4
+    trials); the method-level rows, of 6 splits, keep theirs."""
+    from workbench.cli.app import main
+    from workbench.study.paired import min_units
+
+    monkeypatch.setenv("COLUMNS", "200")  # one table row per line
+    data = tmp_path / "s.parquet"
+    assert main(["simulate", "--strategy", "CS1", "--trials", "12", "-o", str(data)]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(data), "--n-components", "2", "--samples", "0", "--no-efficiency", "--horizon", "1",
+                 "--test-size", "0.34", "-o", str(tmp_path / "r.csv")]) == 0
+    out = capsys.readouterr().out
+    n = pd.read_csv(tmp_path / "r.csv")["trial"].nunique()
+    assert n < min_units()
+    words = f"no interval ({n} test trials; {min_units()} needed)"
+    fitted = out.split("These fitted models on these test trials")[1].splitlines()
+    rows = [line for line in fitted if line.startswith("CS1 ")]
+    assert len(rows) == 3 and all(words in r and " %]" not in r for r in rows), rows
+    inputs = out.split("proposed vs the better model with no pilot (paired)")[1].splitlines()
+    rows = [line for line in inputs if line.startswith("CS1 ")][:2]
+    assert len(rows) == 2 and all(words in r for r in rows), rows
+    assert " %]" in out.split("Methods (refitted on every split")[1].split("These fitted models")[0]

@@ -523,6 +523,38 @@ def test_a_block_ends_once_its_contrast_is_identified(tmp_path):
     assert status["trials_skipped"] == 2 and status["trials_done"] == 4
 
 
+@pytest.mark.parametrize("few", [True, False])
+def test_a_check_on_fewer_trials_than_min_units_identifies_nothing(tmp_path, monkeypatch, few):
+    """The stopping check's record (check_identified), whatever its bootstrap says: from fewer trials than
+    min_units it has no interval and is not identified, in words with the count (the previous main stopped a block
+    on 4 trials whose ratio interval was narrow); from min_units trials the bootstrap's verdict stands. The trials,
+    fit and bootstrap are stand-ins here: the decision on their count is the point (the bootstrap is the slow
+    test's)."""
+    from types import SimpleNamespace
+
+    import workbench.data.dataset as dataset
+    import workbench.models.factory as factory
+    import workbench.study.weights as weights
+    from workbench.collect.stopping import check_identified
+    from workbench.study.paired import min_units
+
+    n = min_units() - 2 if few else min_units()
+    ids = [f"t{i}" for i in range(n)]
+    trials = type("Trials", (), {"ids": ids, "__len__": lambda self: n, "filter": lambda self, keep: self})()
+    monkeypatch.setattr(dataset, "load_dataset", lambda out, subjects: trials)
+    monkeypatch.setattr(factory, "make_model", lambda *a, **k: SimpleNamespace(fit=lambda ds: None))
+    narrow = weights.RatioInterval("Q_phi / R_u1", 2.0, 1.5, 2.5, 95.0)
+    assert narrow.identifiable  # within ×10, of the diagonal form: identified by its interval alone
+    monkeypatch.setattr(weights, "ratio_bootstrap", lambda *a, **k: (SimpleNamespace(intervals=[narrow]), "iv", ""))
+    record = check_identified((str(tmp_path), "s01", "g", ids, "Q_phi / R_u1", 0))
+    if few:
+        assert record["identified"] is False and record["lo"] is None and record["hi"] is None
+        assert record["interval"] == f"Q_phi / R_u1: no interval ({n} trials; {min_units()} needed)"
+    else:
+        assert record["identified"] is True and record["interval"] == narrow.describe()
+    assert json.loads((tmp_path / HIDDEN / "stops" / "s01" / f"g-{n}.json").read_text())["identified"] == (not few)
+
+
 @pytest.mark.slow
 def test_the_identification_check_is_the_weight_ratios_bootstrap(tmp_path):
     from workbench.collect.fitting import in_process
@@ -544,7 +576,11 @@ def test_the_identification_check_is_the_weight_ratios_bootstrap(tmp_path):
     ratios, _, _ = ratio_bootstrap(make_model("ioc_only", s.plant, random_state=s.seed).fit(trials), trials,
                                    n_boot=OBJECTIVE_RESAMPLES, seed=s.seed)
     (iv,) = [iv for iv in ratios.intervals if iv.name == "Q_phi / R_u1"]
-    assert record["n"] == 3 and record["interval"] == iv.describe() and record["identified"] == iv.identifiable
+    from workbench.study.paired import min_units
+
+    # 3 trials are fewer than min_units: no interval and not identified, whatever the bootstrap's words
+    assert record["n"] == 3 < min_units() and record["identified"] is False and record["lo"] is None
+    assert record["interval"] == f"{iv.name}: no interval (3 trials; {min_units(iv.ci)} needed)"
     with pytest.raises(DataError, match="'Q_nope / R_u1' is not a weight ratio of this plant"):
         check_identified((str(tmp_path / "out"), "s01", "g", record["ids"], "Q_nope / R_u1", 0))
 

@@ -56,7 +56,8 @@ def report(tmp_path_factory):
                      band=table[table["metric"] == "band_position"], n_steps=HORIZON, samples=20,
                      stats="| pair | t |\n|---|---|\n| a vs b | 1 |", notes=["a note"]),
     )
-    return {"path": path, "dir": out, "rmse": rmse, "models": models}
+    return {"path": path, "dir": out, "rmse": rmse, "models": models, "train": train, "test": test,
+            "baselines": baselines}
 
 
 def test_report_links_every_figure(report):
@@ -171,3 +172,32 @@ def test_saving_a_figure_leaves_its_layout_engine_as_it_was(tmp_path):
     fig.subplots().plot([0, 1], [0, 1])
     save_figure(fig, tmp_path / "f.png")
     assert fig.get_constrained_layout() and (tmp_path / "f.svg").is_file() and (tmp_path / "f.pdf").is_file()
+
+
+def test_the_report_gives_no_interval_from_too_few_test_trials(report, tmp_path):
+    """3 test trials per strategy (fewer than min_units), 6 pooled: the comparison's cells, the verdicts and the
+    paired differences' CSV have no interval for each strategy, with the count in words (the previous main printed
+    intervals from 3 trials), and the pooled rows of 6 trials theirs (in the CSV)."""
+    from workbench.study.paired import min_units, paired_differences
+    from workbench.study.pipeline import verdicts
+
+    rmse, models = report["rmse"], report["models"]
+    n = rmse[rmse["label"] == "CS1"]["trial"].nunique()
+    assert n < min_units() <= rmse["trial"].nunique()
+    paired = paired_differences(rmse, "rmse_position", n_boot=500)
+    words = f"no interval ({n} test trials; {min_units()} needed)"
+    path = write_report(tmp_path, ReportInputs(
+        train=report["train"], test=report["test"], models=models, baselines=report["baselines"], rmse=rmse,
+        n_steps=HORIZON, samples=0, paired=paired,
+        verdicts=verdicts(paired, "rmse_position")))
+    text = path.read_text(encoding="utf-8")
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines()
+            if line.startswith("| ") and "rmse_position" in line}
+    for label in ("CS1", "CS2"):
+        assert words in rows[label] and " %]" not in rows[label]
+    assert all(words in line for line in text.splitlines() if "not shown to be better" in line)
+    csv = pd.read_csv(tmp_path / "tables" / "paired_differences.csv")
+    few = csv[csv["label"] != "all"]
+    assert few["lo"].isna().all() and few["hi"].isna().all() and (few["no_interval"] == words.removeprefix(
+        "no interval (").removesuffix(")")).all()
+    assert csv.loc[csv["label"] == "all", "lo"].notna().all()  # the check can fail: 6 pooled trials give theirs

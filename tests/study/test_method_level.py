@@ -10,7 +10,7 @@ from scipy import stats as sps
 from workbench.errors import ModelError
 from workbench.study.findings import headline_rows, study_statistics, windows_sentence
 from workbench.study.method_level import corrected_t, method_differences
-from workbench.study.paired import paired_differences
+from workbench.study.paired import min_units, paired_differences
 from workbench.study.stats import sign_flip_tests
 
 
@@ -50,6 +50,29 @@ def test_method_differences_per_label_and_pooled_from_the_splits_means():
     assert rows[2].change == pytest.approx((1 - pooled["proposed"] / pooled["baseline"]).mean())
     assert rows[2].n_train == 24 and rows[2].n_test == 8
     assert all(d.shown and d.sentence().startswith("lower by") for d in rows)
+
+
+def test_fewer_splits_than_min_units_give_no_interval_and_no_p():
+    """Splits that vary but are fewer than min_units: the row keeps its mean, has no interval and no p, and says so
+    with the count (the previous main printed a corrected-t interval from 5 splits, and from a leave-one-out study
+    of 4 trials); from min_units splits it has both."""
+    rng = np.random.default_rng(1)
+    few = min_units() - 1
+    scores = _scores(rng, labels=("A",), J=few)
+    (d,) = method_differences(scores, {"A": (12, 4)}, "rmse_position")
+    mean, lo, hi, p, *_ = corrected_t(d.changes, 12, 4, least=2)
+    assert lo < hi and d.change == pytest.approx(mean)  # the t would give an interval of some width
+    assert d.lo is None and d.hi is None and np.isnan(d.p) and not d.shown and not d.has_interval
+    assert d.sentence() == f"no interval ({few} splits; {min_units()} needed)"
+    stats = study_statistics(_trials(rng, 6, labels=("A",)), "rmse_position", "m", {}, "", n_boot=100,
+                             method_level=[d])
+    row = next(line for line in stats.text().splitlines() if line.startswith("| A | "))
+    assert "no interval" in row and "— (no interval)" in row and " %]" not in row
+    (enough,) = method_differences(_scores(rng, labels=("A",), J=min_units()), {"A": (12, 4)}, "rmse_position")
+    assert enough.has_interval and enough.sentence().startswith("lower by") and " %]" in enough.sentence()
+    from workbench.study.method_level import SPLITS
+
+    assert SPLITS >= min_units()  # the default design's rows have intervals where every split is scored
 
 
 def _trials(rng, n_trials, labels=("CS1", "CS2")):
@@ -159,13 +182,13 @@ def test_every_split_reruns_every_choice_on_its_own_training_part(monkeypatch):
     assert d.n_fallback == 3 and d.identical and not d.shown
     assert d.changes == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
     assert d.sentence().startswith("the same predictions") and "fell back to K̂x in all 3 splits" in d.sentence()
-    assert "%" not in d.sentence() and d.lo != d.lo
+    assert "%" not in d.sentence() and d.lo is None
 
 
 def test_no_interval_of_zero_width():
     """Splits that all give the same change have no spread: no interval, said in words (the previous main printed
     "[+0 %, +0 %]")."""
-    mean, lo, hi, p, se, df = corrected_t([0.05, 0.05, 0.05, 0.05], n_train=24, n_test=6)
+    mean, lo, hi, p, se, df = corrected_t([0.05] * min_units(), n_train=24, n_test=6)
     assert mean == pytest.approx(0.05) and np.isnan(lo) and np.isnan(hi) and np.isnan(p) and se == 0
     from workbench.study.paired import difference_sentence
 

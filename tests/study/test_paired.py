@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from workbench.study.findings import study_statistics, windows_sentence
-from workbench.study.paired import MIN_SUBJECTS, paired_difference, paired_differences, per_trial
+from workbench.study.paired import MIN_SUBJECTS, min_units, paired_difference, paired_differences, per_trial
 
 
 def _table(rng, n_trials, windows, ratio, noise, subjects=None):
@@ -69,13 +69,19 @@ def test_interval_narrows_with_more_trials_and_covers_the_truth():
 
 
 def test_subjects_are_resampled_only_where_there_are_enough():
+    """Whole subjects are resampled where they are at least MIN_SUBJECTS and enough units for an interval of their
+    own (min_units); with one fewer, the trials are, and the interval is still given (the trials are enough)."""
     rng = np.random.default_rng(5)
+    enough = max(MIN_SUBJECTS, min_units())
     few, subj_few = _table(rng, 12, 2, 0.8, 0.1, subjects=3)
-    many, subj_many = _table(rng, 20, 2, 0.8, 0.1, subjects=MIN_SUBJECTS)
+    many, subj_many = _table(rng, 20, 2, 0.8, 0.1, subjects=enough)
+    short, subj_short = _table(rng, 20, 2, 0.8, 0.1, subjects=enough - 1)
     d_few = paired_differences(few, "rmse_position", "proposed", subjects=subj_few, n_boot=300)[0]
     d_many = paired_differences(many, "rmse_position", "proposed", subjects=subj_many, n_boot=300)[0]
+    d_short = paired_differences(short, "rmse_position", "proposed", subjects=subj_short, n_boot=300)[0]
     assert d_few.resampled.startswith("trials (only 3 subjects") and d_few.n_subjects == 3
-    assert d_many.resampled == "subjects, then trials within each" and d_many.n_subjects == MIN_SUBJECTS
+    assert d_many.resampled == "subjects, then trials within each" and d_many.n_subjects == enough
+    assert d_short.resampled.startswith(f"trials (only {enough - 1} subjects") and d_short.has_interval
 
 
 def test_study_statistics_text_states_only_what_its_intervals_show(assert_claims_shown):
@@ -168,3 +174,81 @@ def test_strategy_degrees_of_freedom_where_each_subject_flies_one_strategy():
         by_kind = {e.term.split()[0]: e.df for e in m.effects}
         assert by_kind["strategy"] == subjects - 2, (per_subject, subjects, by_kind)
         assert by_kind["method"] == subjects * per_subject - 1
+
+
+# -- no interval from too few units (issue 40 §3) ---------------------------------------------------------------
+@pytest.mark.parametrize("ci", [50.0, 80.0, 90.0, 95.0, 99.0])
+def test_min_units_is_the_fewest_draws_whose_range_holds_their_median_at_the_level(ci):
+    """The range of n i.i.d. draws holds their median with probability 1 − 2^(1−n) (the sign test's bound): exactly
+    so for a skewed distribution in 40 000 simulated samples, and min_units is the least n where that reaches ci."""
+    n = min_units(ci)
+    holds = lambda k: 1.0 - 2.0 ** (1 - k)  # noqa: E731
+    assert holds(n) >= ci / 100.0 > holds(n - 1)
+    rng = np.random.default_rng(int(ci))
+    for k in (n - 1, n):
+        x = rng.lognormal(0.0, 1.0, (40_000, k))  # median 1
+        p = float(np.mean((x.min(axis=1) <= 1.0) & (1.0 <= x.max(axis=1))))
+        assert abs(p - holds(k)) < 4 * np.sqrt(holds(k) * (1 - holds(k)) / 40_000) + 1e-12
+
+
+def _worse(n, seed=0, ratio=1.11, spread=0.01):
+    """``n`` test trials on which the proposed model is ``ratio`` times IOC-only's error, give or take ``spread``
+    per trial (an interval narrow but of some width: "[10 %, 11 %]"), and far better than persistence."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        base = rng.lognormal(0.0, 0.3)
+        for method, r in (("proposed", ratio * (1 + spread * rng.standard_normal())), ("ioc_only", 1.0),
+                          ("persistence", 3.0 * (1 + 10 * spread * rng.standard_normal()))):
+            rows.append((f"t{i}", "CS1", 0, method, "rmse_position", base * r))
+    return pd.DataFrame(rows, columns=["trial", "label", "start", "method", "metric", "value"])
+
+
+@pytest.mark.parametrize("n", range(3, min_units()))
+def test_too_few_test_trials_give_no_interval_however_narrow(n):
+    """From 3–5 test trials the per-trial changes spread over whole per cents (the previous main printed them as
+    "higher by 11 % [10 %, 11 %]"): no interval, in words with the count, no bracket; from min_units trials the
+    same data give one."""
+    from workbench.study.paired import _pct
+
+    table = _worse(n, seed=n)
+    per = per_trial(table, "rmse_position")
+    c = 1.0 - per["proposed"] / per["ioc_only"]
+    assert _pct(c.min()) != _pct(c.max())  # a resample of these trials has ends that print apart
+    d = paired_difference(per, "proposed", "ioc_only", n_boot=500)
+    assert d.lo is None and d.hi is None and not d.has_interval and not d.shown
+    assert d.sentence() == f"no interval ({n} test trials; {min_units()} needed)"
+    enough = paired_difference(per_trial(_worse(min_units(), seed=n), "rmse_position"), "proposed", "ioc_only",
+                               n_boot=500)
+    assert enough.has_interval and enough.hi < 0 and enough.sentence().startswith("higher by") and " %]" in \
+        enough.sentence()
+
+
+def test_a_verdict_from_too_few_test_trials_says_no_interval_not_worse_by_a_number():
+    """The study's verdict (workbench.study.pipeline.verdicts, what evaluate and the report print in bold): from 4
+    test trials the proposed model is "not shown to be better than IOC-only (no interval (…))", never "worse than
+    IOC-only by 11 % [10 %, 11 %]" (the previous main's line); from min_units trials it is worse by its interval."""
+    from workbench.study.pipeline import verdicts
+
+    few = 4
+    lines = verdicts(paired_differences(_worse(few), "rmse_position", n_boot=500), "rmse_position")
+    assert len(lines) == 1 and "worse than" not in lines[0] and " %]" not in lines[0]
+    assert f"not shown to be better than IOC-only (no interval ({few} test trials; {min_units()} needed))" in lines[0]
+    (line,) = verdicts(paired_differences(_worse(min_units()), "rmse_position", n_boot=500), "rmse_position")
+    assert "worse than IOC-only by" in line and " %]" in line  # the check can fail
+
+
+def test_the_statistics_tables_say_no_interval_for_too_few_test_trials():
+    """The fitted models' table of the statistics' text (the report's section, evaluate --explain): a row of 4 test
+    trials says "no interval", none prints a bracketed percentage; 6 trials print theirs."""
+    few = _worse(4)
+    text = study_statistics(few, "rmse_position", "m", {}, windows_sentence(few, 60, None, 0.05), n_boot=300).text()
+    rows = [line for line in text.splitlines() if line.startswith("| CS1 |")]
+    assert len(rows) == 2 and all("no interval (4 test trials;" in r and " %]" not in r for r in rows)
+    assert "nor has it intervals (too few test trials for either)" in text and "read its intervals" not in text
+    assert f"No interval is given from fewer than {min_units()} test trials" in text
+    many = _worse(min_units())
+    text = study_statistics(many, "rmse_position", "m", {}, windows_sentence(many, 60, None, 0.05),
+                            n_boot=300).text()
+    assert all(" %]" in r for r in text.splitlines() if r.startswith("| CS1 |")) and "read its intervals" in text
+    assert "No interval is given from fewer" not in text

@@ -10,6 +10,8 @@ from workbench.cli import main
 from workbench.errors import ModelError
 from workbench.plant.system import planar_quadrotor
 from workbench.sim.landing import simulate_landings
+from workbench.study.method_level import corrected_t
+from workbench.study.paired import min_units
 from workbench.study.pipeline import run_loso
 
 FAST = {"n_steps": 20, "n_components": 2, "samples": 0}
@@ -83,8 +85,11 @@ def test_the_folds_are_the_method_level_comparison_of_the_headline(few):
         c = 1.0 - per["proposed"] / per[base]
         se = np.sqrt((1 / n + 1 / (n - 1)) * c.var(ddof=1))
         half = sps.t.ppf(0.975, n - 1) * se
-        assert d.change == pytest.approx(c.mean()) and d.lo == pytest.approx(c.mean() - half)
-        assert d.hi == pytest.approx(c.mean() + half) and d.p_holm == d.p_holm  # a verdict's row: Holm p
+        # the statistic, had it enough folds for an interval; these 4 are fewer than min_units: the row has none
+        mean, lo, hi, *_ = corrected_t(c, n - 1, 1, least=2)
+        assert d.change == pytest.approx(c.mean()) == pytest.approx(mean) and lo == pytest.approx(c.mean() - half)
+        assert hi == pytest.approx(c.mean() + half) and n < min_units() and d.lo is None and d.hi is None
+        assert d.sentence() == f"no interval ({n} leave-one-out folds; {min_units()} needed)" and np.isnan(d.p)
     text = res.stats_text
     assert f"the {n} leave-one-out folds of each strategy's trials" in text
     assert all("leave-one-out folds" in line for line in res.verdicts() if "as a method" in line)
@@ -119,7 +124,7 @@ def test_a_fold_whose_training_trials_cannot_be_fitted_is_left_out_and_the_other
     assert fold.sentence().startswith(f"Fold 1 of {len(ds)} (testing {ds.ids[0]}) left out")
     d = res.statistics.method_difference("CS1", "persistence")
     # the scored folds are the splits; each trained on all trials but one, the left-out fold's trial among them
-    assert (d.n_splits, d.n_train, d.n_test) == (len(ds) - 1, len(ds) - 1, 1) and d.lo == d.lo
+    assert (d.n_splits, d.n_train, d.n_test) == (len(ds) - 1, len(ds) - 1, 1) and d.lo is None
     assert f"the {len(ds) - 1} of {len(ds)} leave-one-out folds" in d.splits_words()
 
 

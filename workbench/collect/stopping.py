@@ -7,9 +7,11 @@ subject flies on. It estimates the gain from the block's landed, not excluded tr
 ratios need only K̂) and the weight ratios' bootstrap over whole trials (:func:`workbench.study.weights.
 ratio_bootstrap`, the machinery ``workbench fit`` prints its ratios and power with); the ratio is identified when
 its interval is of the diagonal form and spans at most ×10 (:attr:`~workbench.study.weights.RatioInterval.
-identifiable`). Each check's record is ``DIR/_collect/stops/<subject>/<block key>-<n>.json`` (n the trials it
-used); once one says identified, the block's remaining trials are skipped. Trials flown while a check ran are
-kept: the record says on how many trials the decision was made. ``stop.landed`` still caps the block.
+identifiable`) and rests on at least :func:`~workbench.study.paired.min_units` trials (6 at 95 %: from fewer, no
+bootstrap of them holds the ratio at its level, so the record has no interval and says why). Each check's record
+is ``DIR/_collect/stops/<subject>/<block key>-<n>.json`` (n the trials it used); once one says identified, the
+block's remaining trials are skipped. Trials flown while a check ran are kept: the record says on how many trials
+the decision was made. ``stop.landed`` still caps the block.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ def check_identified(task: tuple) -> dict[str, Any]:
     from workbench.data.dataset import load_dataset
     from workbench.models.factory import make_model
     from workbench.plant.system import planar_quadrotor
+    from workbench.study.paired import min_units, too_few_words
     from workbench.study.weights import ratio_bootstrap
 
     out, subject, group, ids, ratio, seed = task
@@ -52,6 +55,9 @@ def check_identified(task: tuple) -> dict[str, Any]:
     record = {"kind": "stop", "subject": subject, "group": group, "n": len(ds), "ids": ds.ids, "ratio": ratio,
               "identified": iv.identifiable, "interval": iv.describe(), "estimate": iv.estimate, "lo": iv.lo,
               "hi": iv.hi, "gain": gain, "at": now()}
+    if len(ds) < min_units(iv.ci):  # too few trials for any interval: none, and not identified, however narrow
+        record.update(identified=False, estimate=None, lo=None, hi=None,
+                      interval=f"{ratio}: no interval ({too_few_words(len(ds), 'trials', iv.ci)})")
     write_json(_folder(Path(out), subject) / f"{group}-{len(ds)}.json", record)
     return record
 

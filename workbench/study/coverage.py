@@ -24,7 +24,15 @@ import numpy as np
 import pandas as pd
 
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning
-from workbench.study.method_level import SplitPlan, _refit, corrected_t, method_differences, split_scores, split_tasks
+from workbench.study.method_level import (
+    MIN_SPLITS,
+    SplitPlan,
+    _refit,
+    corrected_t,
+    method_differences,
+    split_scores,
+    split_tasks,
+)
 
 __all__ = ["CoverageRun", "simulated_run", "true_difference", "run_interval", "METRIC", "N_STEPS", "STRIDE",
            "BASELINE"]
@@ -127,7 +135,9 @@ def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_
     Bengio's), for a study that weighs other corrections."""
     c = list(run.self_changes if self_comparison else run.changes)[: J or None]
     n_train = run.n_train // 2 if self_comparison else run.n_train
-    mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1))
+    # the coverage study reads the statistic itself at every J it weighs, below min_units too
+    mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1),
+                                   least=MIN_SPLITS)
     return mean, lo, hi
 
 

@@ -21,7 +21,7 @@ import pandas as pd
 from workbench.defaults import PAIRED_RESAMPLES
 from workbench.models.registry import METHOD_TITLES
 from workbench.study.method_level import FLOOR_METHODS, MethodDifference
-from workbench.study.paired import ALL_LABELS, PairedDifference, paired_differences, per_trial
+from workbench.study.paired import ALL_LABELS, PairedDifference, min_units, paired_differences, per_trial
 from workbench.study.stats import MixedModelResult, SignFlipTest, holm, mixed_effects, sign_flip_tests
 
 __all__ = ["StudyStatistics", "study_statistics", "windows_sentence", "headline_rows"]
@@ -116,7 +116,7 @@ class StudyStatistics:
                 "expanded percentile interval). It holds the fitted models fixed, so it says nothing about "
                 "training on another sample of the same operator" + (" (the question above)." if ml else "."))
             lines.append(self._tests_sentence())
-        lines.append("A difference is stated only where its interval excludes 0.")
+        lines.append("A difference is stated only where its interval excludes 0." + self._too_few_sentence())
         if self.mixed is not None and any(e.term.startswith("strategy") for e in self.mixed.effects):
             per = ("subject (a random intercept) and trial within subject (a variance component)"
                    if self.mixed.groups == "subject" else "trial (a random intercept: every method scored on it)")
@@ -128,7 +128,7 @@ class StudyStatistics:
             which = ("refitted in every fold" if m0.loo else "refitted on every split; GMR-only, which no verdict "
                      "uses, only as fitted models below")
             where = "folds" if m0.loo else "splits"
-            pooled = any(d.p_holm != d.p_holm and (d.shown or d.lo == d.lo) for d in ml)
+            pooled = any(d.p_holm != d.p_holm and d.has_interval for d in ml)
             header = self._ml_header()
             if pooled:  # the pooled rows' p cell is "—": say why once, not in every such cell
                 header = header.rstrip(":") + "; the pooled rows (no p) are no verdict's:"
@@ -137,7 +137,7 @@ class StudyStatistics:
                       f"difference [{ml[0].ci:g} % interval] | p (corrected t, Holm) |", "|---|---|---|---|---|---|"]
             for d in ml:
                 p = (f"{d.p_holm:.3g}" if d.p_holm == d.p_holm else
-                     "—" if d.shown or d.lo == d.lo else "— (no interval)")
+                     "—" if d.has_interval else "— (no interval)")
                 lines.append(f"| {d.label} | {METHOD_TITLES.get(d.baseline, d.baseline)} | {d.splits_count()} "
                              f"({d.n_train} / {d.n_test}) | {d.fallback_words()} | {d.sentence()} | {p} |")
         if self.paired:
@@ -204,6 +204,16 @@ class StudyStatistics:
                         else "not answered: the mixed model did not converge"))
         return out
 
+    def _too_few_sentence(self) -> str:
+        """Where a row has no interval for want of units, why (once): the sign test's bound (:func:`min_units`)."""
+        rows = [d for d in (*self.method_level, *self.paired) if not d.has_interval and "needed" in d.no_interval]
+        if not rows:
+            return ""
+        ci = rows[0].ci
+        return (f" No interval is given from fewer than {min_units(ci)} test trials, splits or folds: the range of n "
+                f"of them holds their median with probability 1 − 2^(1−n), below {ci:g} % for fewer, and no "
+                "interval resampled from them reaches beyond about that range.")
+
     def _ml_header(self) -> str:
         m0 = self.method_level[0]
         if m0.loo:
@@ -220,9 +230,12 @@ class StudyStatistics:
             return (f"- *Is that difference more than chance on these trials?* No test can say so at 5 % here: with "
                     f"{n} test trials the exact sign-flip test of the per-trial differences cannot go below p = "
                     f"{pmin:.3g}" + (f" ({min(1.0, pmin * k):.3g} after Holm over the {k} rows the verdicts use)"
-                                     if k > 1 else "") + ", so the fitted models' table below has no p column; read "
-                    "its intervals" + (" (the p-values of the methods' table are the corrected t's, over splits)."
-                                       if self.method_level else "."))
+                                     if k > 1 else "") + ", so the fitted models' table below has no p column; "
+                    + ("read its intervals" if any(d.has_interval for d in self.paired) else
+                       # the sign test's bound that leaves no p below 5 % leaves no interval either (min_units)
+                       "nor has it intervals (too few test trials for either)")
+                    + (" (the p-values of the methods' table are the corrected t's, over splits)."
+                       if self.method_level else "."))
         return ("- *Is that difference more than chance on these trials?* The exact sign-flip (permutation) test of "
                 f"the per-trial differences, Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts "
                 "use (the only rows given a p); \"cannot reach 5 %\" where its trials are too few for any p of that "

@@ -20,7 +20,9 @@ identified from data (``--plant identify``) — the plant. Nothing a split's tes
 interval therefore includes the selection's own variability (the review found the intervals 23–40 % short when the
 split refits reused the settings chosen once on the study's training trials, which are mostly the splits' own test
 trials). A proposed method that fell back to ``K̂x`` in every split predicts as IOC-only on every one: that row says
-so in words (:meth:`MethodDifference.sentence`), and no interval of zero width is ever given (:func:`corrected_t`).
+so in words (:meth:`MethodDifference.sentence`), and no interval of zero width is ever given (:func:`corrected_t`);
+nor any from fewer splits or folds than :func:`~workbench.study.paired.min_units` (6 at 95 %): the row then says
+"no interval" with the count, and gives no p.
 
 Cost: the refits skip what a mean prediction does not use — the task objective, the Monte Carlo noise and its band
 calibration — and cap EM at 200 iterations (as the cross-validation's candidates do). Splits are independent tasks of
@@ -47,7 +49,7 @@ from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
 from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.study.divergence import scored
-from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence
+from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence, min_units, too_few_words
 
 __all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "LeftOutSplit", "corrected_t", "split_scores",
            "split_tasks", "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS"]
@@ -62,7 +64,8 @@ FLOOR_METHODS = tuple(m.name for m in REGISTRY if m.floor)
 SPLITS = 6
 #: Fewest scored splits (or folds) a method-level row is made from: the corrected resampled t has ``J − 1`` degrees
 #: of freedom, so one split gives no spread and no interval (:func:`corrected_t`); with fewer there is no row, and a
-#: leave-one-out study says so in words (:class:`workbench.study.folds.LeftOutFold`).
+#: leave-one-out study says so in words (:class:`workbench.study.folds.LeftOutFold`). A row of fewer splits than
+#: :func:`~workbench.study.paired.min_units` has its mean but no interval.
 MIN_SPLITS = 2
 #: The design of a leave-one-out study's method-level rows (:attr:`MethodDifference.design`).
 LOO_FOLDS = "leave-one-out folds"
@@ -78,11 +81,13 @@ class MethodDifference:
 
     Attributes
     ----------
-    change, lo, hi : float
-        The mean relative change over splits (> 0: the method's error is lower) and its corrected resampled t
-        interval at ``ci`` (fractions).
+    change : float
+        The mean relative change over splits (> 0: the method's error is lower), a fraction.
+    lo, hi : float or None
+        Its corrected resampled t interval at ``ci``; None where there is none (fewer splits than
+        :func:`~workbench.study.paired.min_units`, or none varied): ``no_interval`` says why.
     p : float
-        Two-sided p of the corrected resampled t (against no difference).
+        Two-sided p of the corrected resampled t (against no difference); NaN where there is no interval.
     p_holm : float
         ``p`` Holm-corrected over the rows the headline uses (NaN: not one of them).
     se, df : float
@@ -104,8 +109,8 @@ class MethodDifference:
     metric: str
     label: str
     change: float
-    lo: float
-    hi: float
+    lo: float | None
+    hi: float | None
     p: float
     se: float
     df: float
@@ -123,6 +128,8 @@ class MethodDifference:
     #: Random splits drawn (0: as many as scored); where more than ``n_splits``, the others were left out because a
     #: method of this row could not be fitted on their training part or its rollout diverged (:class:`LeftOutSplit`).
     n_drawn: int = 0
+    #: Why there is no interval ("" where there is one).
+    no_interval: str = ""
 
     @property
     def loo(self) -> bool:
@@ -149,9 +156,14 @@ class MethodDifference:
         return f"{self.n_splits} of {self.n_drawn}" if self.n_drawn > self.n_splits else str(self.n_splits)
 
     @property
+    def has_interval(self) -> bool:
+        """Whether the splits gave an interval (else ``no_interval`` says why)."""
+        return self.lo is not None and self.hi is not None
+
+    @property
     def shown(self) -> bool:
-        """Whether the interval excludes zero."""
-        return self.lo > 0 or self.hi < 0
+        """Whether there is an interval and it excludes zero."""
+        return self.has_interval and (self.lo > 0 or self.hi < 0)
 
     @property
     def identical(self) -> bool:
@@ -167,8 +179,9 @@ class MethodDifference:
             why = (f"the proposed method fell back to K̂x in all {self.n_splits} {where}"
                    if self.n_fallback >= self.n_splits else f"the two predicted alike in all {self.n_splits} {where}")
             return f"the same predictions, no difference to estimate ({why})"
-        text = difference_sentence(self.change, self.lo, self.hi, self.ci,
-                                   f"too little spread between the {self.n_splits} {where}")
+        text = (difference_sentence(self.change, self.lo, self.hi, self.ci,
+                                    f"too little spread between the {self.n_splits} {where}")
+                if self.has_interval else f"no interval ({self.no_interval})")
         if self.n_fallback >= self.n_splits:
             text += f"; the proposed method fell back to K̂x in all {self.n_splits} {where}"
         return text
@@ -217,24 +230,29 @@ class LeftOutSplit:
 
 
 def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0,
-                overlap: float | None = None) -> tuple[float, float, float, float, float, float]:
+                overlap: float | None = None, least: int | None = None
+                ) -> tuple[float, float, float, float, float, float]:
     """Mean, interval, two-sided p, standard error and df of the corrected resampled t (Nadeau & Bengio 2003).
 
     ``var = (1/J + n_test/n_train) · s²`` of the ``J`` per-split values; t reference on ``J − 1`` df. Where every
     split gave the same value there is no spread to make an interval from: the bounds and p are NaN (an interval of
-    zero width would claim a certainty the splits cannot give). ``overlap`` replaces ``n_test/n_train`` (for a
-    coverage study weighing other corrections).
+    zero width would claim a certainty the splits cannot give); so too with fewer than ``least`` splits (default
+    :func:`~workbench.study.paired.min_units` of ``ci``: 6 at 95 %, where the range of the splits' values holds their
+    median with probability ``1 − 2^(1−J)`` ≥ 95 %). ``overlap`` replaces ``n_test/n_train`` and ``least`` the
+    fewest splits (for a coverage study weighing other corrections, or fewer splits).
     """
     c = np.asarray(changes, dtype=float)
     c = c[np.isfinite(c)]
     J = c.size
-    if J < MIN_SPLITS:
+    if J < max(MIN_SPLITS, min_units(ci) if least is None else int(least)):
         return (float(c.mean()) if J else np.nan), np.nan, np.nan, np.nan, np.nan, float(max(J - 1, 0))
     mean = float(c.mean())
     rho = n_test / max(n_train, 1) if overlap is None else float(overlap)
     se = float(np.sqrt((1.0 / J + rho) * c.var(ddof=1)))
     df = float(J - 1)
-    if se == 0.0:  # every split gave the same change: nothing varies, so no interval (never one of zero width)
+    # every split gave the same change: nothing varies, so no interval (never one of zero width); read off the values,
+    # not s², which the mean's round-off leaves at 1e-35 rather than 0 for six equal values
+    if se == 0.0 or np.ptp(c) == 0.0:
         return mean, np.nan, np.nan, np.nan, 0.0, df
     half = float(sps.t.ppf(0.5 + ci / 200.0, df)) * se
     p = float(2.0 * sps.t.sf(abs(mean) / se, df))
@@ -412,11 +430,16 @@ def method_differences(
                 continue
             mean, lo, hi, p, se, df = corrected_t(changes, n_train, n_test, ci)
             what = {(units or {}).get(lb, "trials") for lb in members}
+            where = "leave-one-out folds" if design == LOO_FOLDS else "splits"
+            J = int(np.isfinite(changes).sum())
+            why = ("" if np.isfinite(lo) and np.isfinite(hi) else too_few_words(J, where, ci)
+                   if J < min_units(ci) else f"nothing varied between the {J} {where}")
             out.append(MethodDifference(
-                method=method, baseline=base, metric=metric, label=scope, change=mean, lo=lo, hi=hi, p=p, se=se,
-                df=df, n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
+                method=method, baseline=base, metric=metric, label=scope, change=mean,
+                lo=float(lo) if not why else None, hi=float(hi) if not why else None, p=p, se=se, df=df,
+                n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
                 units="subjects" if what == {"subjects"} else "trials", ci=ci, design=design, n_fallback=n_fallback,
-                n_drawn=max((int((drawn or {}).get(lb, 0)) for lb in members), default=0)))
+                n_drawn=max((int((drawn or {}).get(lb, 0)) for lb in members), default=0), no_interval=why))
     return out
 
 

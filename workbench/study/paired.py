@@ -15,7 +15,9 @@ resampled regardless of their subjects; the result says which was done.
 
 The sentence of a comparison is derived from its interval and nothing else: "lower by 12 % [4 %, 19 %]" where
 the whole interval is above zero, "higher by …" where it is below, "no difference shown (…)" where it contains
-zero.
+zero. From fewer units than :func:`min_units` (6 at 95 %) there is no interval at all: the difference's ``lo`` and
+``hi`` are None and ``no_interval`` says why, and every reader says that in words (issue 40: nothing printed where
+nothing is identified).
 """
 
 from __future__ import annotations
@@ -30,8 +32,8 @@ import scipy.stats
 from workbench.defaults import PAIRED_RESAMPLES
 from workbench.errors import DataError
 
-__all__ = ["PairedDifference", "difference_sentence", "MIN_SUBJECTS", "per_trial", "paired_difference",
-           "paired_differences", "ALL_LABELS"]
+__all__ = ["PairedDifference", "difference_sentence", "MIN_SUBJECTS", "min_units", "too_few_words", "per_trial",
+           "paired_difference", "paired_differences", "ALL_LABELS"]
 
 #: Fewest subjects whose resampling (a two-stage cluster bootstrap) gives usable intervals; with fewer, the
 #: trials are resampled within each subject.
@@ -40,15 +42,41 @@ MIN_SUBJECTS = 5
 ALL_LABELS = "all"
 
 
+def min_units(ci: float = 95.0) -> int:
+    """Fewest independent units (test trials, subjects, splits or folds) an interval at ``ci`` percent is made
+    from: ``⌈1 + log2(1 / (1 − ci/100))⌉`` — 6 at 95 %, 5 at 90 %, 8 at 99 %.
+
+    Of ``n`` i.i.d. draws, the range ``[min, max]`` holds their median with probability ``1 − 2^(1−n)`` (the sign
+    test's bound: all ``n`` fall on one side of the median with probability ``2 · 2^−n``), and an interval
+    resampled from the ``n`` units (a bootstrap of them) lies within about that range. Where ``1 − 2^(1−n)`` is
+    below ``ci`` no such interval can hold what it estimates at its stated level, however narrow it prints — with
+    3 test trials at most 75 % — so none is given. Solving ``1 − 2^(1−n) ≥ ci/100`` for ``n`` gives the bound.
+    """
+    alpha = 1.0 - float(ci) / 100.0
+    if not 0.0 < alpha < 1.0:
+        raise ValueError(f"an interval's level must lie strictly between 0 and 100 %, not {ci:g}")
+    # rounded first: at a level of exactly 1 − 2^−k the logarithm's last bit must not add a unit
+    return int(np.ceil(round(1.0 + float(np.log2(1.0 / alpha)), 9)))
+
+
+def too_few_words(n: int, what: str, ci: float) -> str:
+    """Why there is no interval from ``n`` units, short enough for a table's cell at 80 columns:
+    ``"3 test trials; 6 needed"`` (the level is the table's or the sentence's; :func:`min_units`)."""
+    return f"{n} {what}; {min_units(ci)} needed"
+
+
 @dataclass(frozen=True)
 class PairedDifference:
     """``method`` against ``baseline`` on the same trials: the relative change of the mean per-trial ``metric``.
 
     Attributes
     ----------
-    change, lo, hi : float
-        ``1 − mean(method) / mean(baseline)`` over trials (each trial the mean over its windows) and its
-        bootstrap interval (expanded percentile), as fractions (0.12 = 12 % lower).
+    change : float
+        ``1 − mean(method) / mean(baseline)`` over trials (each trial the mean over its windows), as a fraction
+        (0.12 = 12 % lower).
+    lo, hi : float or None
+        Its bootstrap interval (expanded percentile); None where there is none (fewer units than
+        :func:`min_units`, or nothing varied between the resamples): ``no_interval`` says why.
     mean_method, mean_baseline : float
         The two means over trials.
     n_trials, n_windows, n_subjects : int
@@ -59,6 +87,8 @@ class PairedDifference:
     n_boot : int
     ci : float
         Interval level in percent.
+    no_interval : str
+        Why there is no interval ("" where there is one).
     """
 
     method: str
@@ -66,8 +96,8 @@ class PairedDifference:
     metric: str
     label: str
     change: float
-    lo: float
-    hi: float
+    lo: float | None
+    hi: float | None
     mean_method: float
     mean_baseline: float
     n_trials: int
@@ -76,29 +106,39 @@ class PairedDifference:
     resampled: str
     n_boot: int
     ci: float = 95.0
+    no_interval: str = ""
+
+    @property
+    def has_interval(self) -> bool:
+        """Whether the data gave an interval (else ``no_interval`` says why)."""
+        return self.lo is not None and self.hi is not None
 
     @property
     def shown(self) -> bool:
-        """Whether the interval excludes zero, i.e. the data show a difference."""
-        return self.lo > 0 or self.hi < 0
+        """Whether there is an interval and it excludes zero, i.e. the data show a difference."""
+        return self.has_interval and (self.lo > 0 or self.hi < 0)
 
     def sentence(self) -> str:
         """The comparison in words, derived from the interval: "lower by 12 % [4 %, 19 %]", "higher by …", or
-        "no difference shown (…)"; where the interval's ends print as one value, "no interval" with the number of
-        test trials that was too few (issue 40: a zero-width interval is never printed)."""
+        "no difference shown (…)"; "no interval (…)" with its cause and no estimate where there is none (too few
+        test trials: :func:`min_units`) or its ends print as one value (issue 40: a zero-width interval is never
+        printed)."""
+        if not self.has_interval:
+            return f"no interval ({self.no_interval})"
         return difference_sentence(self.change, self.lo, self.hi, self.ci,
-                                   f"too few test trials for an interval: {self.n_trials}")
+                                   f"too little spread between the resamples of {self.n_trials} test trials")
 
 
-def difference_sentence(change: float, lo: float, hi: float, ci: float = 95.0,
+def difference_sentence(change: float, lo: float | None, hi: float | None, ci: float = 95.0,
                         too_narrow: str = "too little spread between the resamples") -> str:
     """A relative change (> 0: lower error) in words derived from its interval: "lower by 12 % [4 %, 19 %]",
-    "higher by …", or "no difference shown (…)" where the interval contains 0 (or is unknown).
+    "higher by …", or "no difference shown (…)" where the interval contains 0; "no interval (…)" where there is
+    none (None or NaN ends).
 
     An interval whose two ends print as one value ("[88 %, 88 %]") claims a certainty that a resample of a few
     trials cannot give (with two trials a bootstrap has three distinct resamples): it is said in words,
     ``"no interval (<too_narrow>)"``, without an estimate, like an interval of no spread at all."""
-    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+    if lo is None or hi is None or not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
         # no spread to make an interval from: say so, with no number standing in for one
         return "no interval (nothing varied between the resamples)"
     if _pct(lo) == _pct(hi):
@@ -204,7 +244,9 @@ def paired_difference(
     """``method`` against ``baseline`` on the rows of a :func:`per_trial` table (trials where both were scored).
 
     The bootstrap draws whole trials (see the module's text for subjects); expanded percentile interval at
-    ``ci`` (:func:`_expanded_tail`: the plain percentile interval under-covers with few units).
+    ``ci`` (:func:`_expanded_tail`: the plain percentile interval under-covers with few units). From fewer units
+    than :func:`min_units` (test trials, or subjects where they are resampled) there is no interval: ``lo`` and
+    ``hi`` are None and ``no_interval`` says why; so too where the resamples did not vary.
     """
     if method not in wide.columns or baseline not in wide.columns:
         raise DataError(f"no scores of {method!r} and {baseline!r} on the same trials")
@@ -216,24 +258,36 @@ def paired_difference(
     a, b = both[method].to_numpy(float), both[baseline].to_numpy(float)
     subj = both["subject"].to_numpy(object)
     named = sorted({str(s) for s in subj if s is not None})
-    if len(named) >= MIN_SUBJECTS and all(s is not None for s in subj):
+    need = min_units(ci)
+    # subjects are resampled only where they are enough units for an interval of their own
+    if len(named) >= max(MIN_SUBJECTS, need) and all(s is not None for s in subj):
         groups = [np.flatnonzero(subj == s) for s in named]
         two_stage, resampled = True, "subjects, then trials within each"
     else:
         groups, two_stage = [np.arange(n)], False
         resampled = f"trials (only {len(named)} subjects: too few to resample)" if len(named) >= 2 else "trials"
-    rng = np.random.default_rng(seed)
-    W = _count_weights(groups, n, int(n_boot), two_stage, rng)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        boot = 1.0 - (W @ a) / (W @ b)
-    boot = boot[np.isfinite(boot)]
-    tail = _expanded_tail(ci, len(groups) if two_stage else n)
-    lo, hi = (np.percentile(boot, [tail, 100.0 - tail]) if boot.size else (np.nan, np.nan))
+    lo: float | None = None
+    hi: float | None = None
+    why = ""
+    if n < need:  # the bound of min_units: no resampling of these trials holds the difference at ci
+        why = too_few_words(n, "test trials", ci)
+    else:
+        rng = np.random.default_rng(seed)
+        W = _count_weights(groups, n, int(n_boot), two_stage, rng)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            boot = 1.0 - (W @ a) / (W @ b)
+        boot = boot[np.isfinite(boot)]
+        tail = _expanded_tail(ci, len(groups) if two_stage else n)
+        ends = np.percentile(boot, [tail, 100.0 - tail]) if boot.size else np.array([np.nan, np.nan])
+        if np.all(np.isfinite(ends)) and ends[1] > ends[0]:
+            lo, hi = float(ends[0]), float(ends[1])
+        else:
+            why = "nothing varied between the resamples"
     return PairedDifference(
         method=method, baseline=baseline, metric=metric, label=label, change=float(1.0 - a.mean() / b.mean()),
-        lo=float(lo), hi=float(hi), mean_method=float(a.mean()), mean_baseline=float(b.mean()), n_trials=n,
+        lo=lo, hi=hi, mean_method=float(a.mean()), mean_baseline=float(b.mean()), n_trials=n,
         n_windows=int(both["n_windows"].sum()), n_subjects=len(named), resampled=resampled, n_boot=int(n_boot),
-        ci=float(ci),
+        ci=float(ci), no_interval=why,
     )
 
 

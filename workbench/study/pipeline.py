@@ -777,14 +777,16 @@ def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
     labels = list(dict.fromkeys(d.label for d in paired if d.metric == metric))
     labels = [lb for lb in labels if lb != ALL_LABELS] or labels
     for label in labels:
+        # a row with no interval (too few test trials or splits) shows nothing either way: it is "not shown", in
+        # its own words (its sentence), never "worse by" a number
         rows = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
-                and not d.lo > 0]
+                and not (d.has_interval and d.lo > 0)]
         if not rows:
             continue
         where = f"On {label}, the" if label not in ("", UNLABELED) else "The"
         scope = _scope(rows[0])
-        worse = [d for d in rows if d.hi < 0]
-        unclear = [d for d in rows if not d.hi < 0]
+        worse = [d for d in rows if d.has_interval and d.hi < 0]
+        unclear = [d for d in rows if d not in worse]
         if worse:
             parts = [f"{METHOD_TITLES.get(d.baseline, d.baseline)} by {_pct(-d.change)} [{_pct(-d.hi)}, "
                      f"{_pct(-d.lo)}]" for d in worse]
