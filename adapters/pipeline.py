@@ -624,8 +624,10 @@ def _ground_note(streams: Streams, m: ChannelMapping, series: list[Series]) -> s
     where = f"armed in {', '.join(modes)}" if modes else "kept"
     rest = (f"; its {air:.1f} s in the air there leave no piece of min_duration = {seg.min_duration:g} s" if air > 0
             else "; it leaves the ground only in other modes, if at all")
+    # on the viewer's flight clock (seconds since the first mapped sample), as the flip and damage notes
+    shown = [Span(sp.start - lo, sp.end - lo, sp.meta) for sp in kept]
     return (f"{streams.path}: mapping {m.name!r}: no flight to import: the vehicle is on the ground through "
-            f"{total - air:.1f} of the {total:.1f} s {where} ({_span_text(kept)}), by its landed events "
+            f"{total - air:.1f} of the {total:.1f} s {where} ({_span_text(shown)}), by its landed events "
             f"({rule.selector.describe()} = {values(rule.on)} on landing, {values(rule.off)} on take-off){rest}")
 
 
