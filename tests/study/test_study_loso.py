@@ -177,6 +177,9 @@ def test_a_fold_whose_test_trial_never_moves_is_left_out_with_its_cause(few):
                                        "nothing about the pilot — ")
     assert set(res.rmse["trial"]) == {ds.ids[0], ds.ids[3]}
     assert res.verdicts()[:2] == [still.sentence(), quiet.sentence()]
+    # every fold left out: the stop says which could not be scored, and why
+    with pytest.raises(ModelError, match=r"no fold of the 2 could be scored: fold 1 \(testing .*\): its x, y, xdot"):
+        run_loso(ds.with_demos(demos[1:3]), planar_quadrotor(), **FAST)
 
 
 def test_no_fold_fitted_stops_naming_each_fold(few):

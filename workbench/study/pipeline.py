@@ -622,7 +622,8 @@ def run_loso(
             if p is not None:
                 p.advance(bar)
     if not folds:
-        raise ModelError(f"no fold of the {len(demos)} could be fitted: "
+        what = "fitted" if all(f.part == "training" for f in left_out) else "scored"  # a still test is not fitted
+        raise ModelError(f"no fold of the {len(demos)} could be {what}: "
                          + "; ".join(f"fold {f.index} (testing {f.trial}): {f.reason}" for f in left_out))
     failures: dict[str, dict[str, str]] = {}
     for trial, res in folds:
