@@ -9,6 +9,7 @@ resampling each operator's trials with its own seed, and each ratio's factor B/A
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass
 from types import SimpleNamespace
 
@@ -540,3 +541,103 @@ def test_the_gain_with_the_pilots_timing_keeps_its_estimate_with_the_jackknifes_
     assert timed._parts[0][0].nu == pytest.approx(untimed._parts[0][0].nu)
     # and the words about its gain entries say corrected only where they are
     assert not timed.fits[0].bias_corrected and untimed.fits[0].bias_corrected
+
+
+def _fieller_ends(ka: float, sa: float, kb: float, sb: float, nu: float) -> tuple[float, float]:
+    """Independently: the θ where the pivot ``(k̂_b − θ k̂_a) / √(s_b² + θ² s_a²)`` reaches ``±t_ν``, by root finding
+    on either side of ``k̂_b / k̂_a``."""
+    import scipy.optimize
+    import scipy.stats
+
+    t = scipy.stats.t.ppf(0.975, nu)
+    pivot = lambda th: (kb - th * ka) ** 2 - t**2 * (sb**2 + th**2 * sa**2)  # noqa: E731
+    est = kb / ka
+    return (scipy.optimize.brentq(pivot, est - 50 * abs(est), est),
+            scipy.optimize.brentq(pivot, est, est + 50 * abs(est)))
+
+
+def test_the_gain_entry_factor_is_fiellers_interval_and_the_report_prints_it_beside_the_ratio(capsys, monkeypatch):
+    """Two strategies on a scalar plant whose weights differ 3× while their gains differ less: the gain entry's
+    factor (second over first) with Fieller's interval from each gain's resampled standard deviation, rendered by the
+    report's task-objective section and by the terminal's comparison, beside the weight ratio's factor."""
+    import argparse
+
+    from workbench.cli.context import Context
+    from workbench.cli.study import _print_objective_comparison
+    from workbench.report.markdown import _objective_interval_notes
+    from workbench.study.weights import format_gain_factor, gain_contrasts
+
+    plant = scalar_plant()
+    ka, kb, sa, sb, n = scalar_gain(plant, 1.0), scalar_gain(plant, 3.0), 0.03, 0.05, 30
+    wa = weight_ratios(gains(plant, ka, sa, n, seed=1), plant)
+    wb = weight_ratios(gains(plant, kb, sb, n, seed=2), plant)
+    table = compare_strategies({"a": wa, "b": wb})
+    row = table.query("strategy == 'b'").iloc[0]
+    assert row.gain == "K[u, p]" and row.gain_factor == pytest.approx(kb / ka)
+    # no leave-one-out gains: each standard error the resampled gains' times √(n / (n − 1)), n − 1 degrees of freedom
+    # each, Welch–Satterthwaite's for the pivot's variance at the estimate
+    c, th = np.sqrt(n / (n - 1)), kb / ka
+    var = (c * sb) ** 2 + (th * c * sa) ** 2
+    lo, hi = _fieller_ends(ka, c * sa, kb, c * sb, var**2 / (((c * sb) ** 4 + (th * c * sa) ** 4) / (n - 1)))
+    assert (row.gain_factor_lo, row.gain_factor_hi) == pytest.approx((lo, hi), rel=1e-9)
+    assert 1.0 < lo < kb / ka < hi and row.gain_factor_identifiable
+    shown = format_gain_factor(row.gain_factor, row.gain_factor_lo, row.gain_factor_hi)
+    assert shown == f"{kb / ka:.3g} [{lo:.3g}, {hi:.3g}]"
+    beside = format_interval(row.factor, row.factor_lo, row.factor_hi)
+    want = {"gain entry": "K[u, p]", "strategies": "b / a", "gain factor [interval]": shown,
+            "weight ratio": "Q_p / R_u", "its factor": beside}
+    assert gain_contrasts(table) == [want]
+
+    # the report: a table of its own, after what the data identify, the same cells; listed among what is identified
+    boot = SimpleNamespace(ci=95.0, n_boot=len(wa.gains.K_samples))
+    objectives = {lb: SimpleNamespace(boot=boot, ratios=w, ratio_gain="iv", power=None)
+                  for lb, w in (("a", wa), ("b", wb))}
+    md = "\n".join(_objective_interval_notes(objectives, ["a", "b"], plant.state_names, plant.input_names, table))
+    section = md.split("### Gain entries compared between strategies")[1].split("\n### ")[0]
+    assert f"| K[u, p] | b / a | {shown} | Q_p / R_u | {beside} |" in section
+    assert f"- K[u, p] (beside Q_p / R_u): b / a = {shown}" in md.split("### Gain entries")[0]
+    # the terminal (evaluate, report): the same row in its own table
+    monkeypatch.setenv("COLUMNS", "200")
+    ctx = Context(argparse.Namespace(quiet=False, format=None))
+    _print_objective_comparison(ctx, SimpleNamespace(objectives=objectives, ratio_comparison=table))
+    out = capsys.readouterr().out
+    printed = out.split("gain K̂[u, s] between strategies beside Q_s / R_u")[1]
+    cells = r"\s*[│|]?\s*".join(re.escape(c) for c in want.values())
+    assert re.search(cells, printed), printed
+
+
+def test_a_gain_entry_factor_whose_first_entry_is_not_distinguishable_from_zero_is_words():
+    # the first strategy's gain within t·s of zero: every factor fits in size (Fieller's set is unbounded), so the
+    # report prints words and no estimate; a bounded set that includes 0 says the signs may differ
+    from workbench.study.weights import format_gain_factor, gain_factor
+
+    lo, hi = gain_factor(0.01, 0.03, 29, -0.5, 0.03, 29)
+    assert (lo, hi) == (-np.inf, np.inf)
+    words = format_gain_factor(-50.0, lo, hi)
+    assert NOT_IDENTIFIABLE in words and "not distinguishable from 0" in words and "-50" not in words
+    lo, hi = gain_factor(-0.5, 0.03, 29, 0.02, 0.03, 29)
+    assert lo < 0 < hi and "signs may differ" in format_gain_factor(-0.04, lo, hi)
+    # a narrow terminal's table shortens both verdicts and keeps every number
+    from workbench.cli.context import shorter_words
+
+    assert shorter_words(words) == "any (first ≈ 0)"
+    assert shorter_words(format_gain_factor(-0.04, lo, hi)) == f"{lo:.3g} … {hi:.3g} (sign?)"
+
+
+def test_a_gain_entrys_standard_error_is_the_jackknifes_where_every_leave_one_out_gain_is_there():
+    # the covariance the weight ratios beside it use (ratio_profile.PartDistance.from_samples): CV3 with its
+    # effective degrees of freedom, not the resamples' spread
+    from workbench.method.ratio_profile import effective_dof
+    from workbench.study.weights import entry_error
+
+    n = 30
+    rng = np.random.default_rng(3)
+    loo = -0.8 + 0.004 * rng.standard_normal((n, 1, 2)) * np.linspace(0.2, 3, n)[:, None, None]
+    g = SimpleNamespace(K=np.array([[-0.8, 0.1]]), K_samples=-0.8 + 0.05 * rng.standard_normal((200, 1, 2)),
+                        K_loo=loo, n_trials=n)
+    se, nu = entry_error(g, 0, 0)
+    dev = loo[:, 0, 0] - loo[:, 0, 0].mean()
+    assert se == pytest.approx(np.sqrt((n - 1) / n * np.sum(dev**2)))
+    assert nu == pytest.approx(effective_dof(dev[:, None])) and nu < n - 1  # unequal trials: fewer than n − 1
+    se, nu = entry_error(SimpleNamespace(**{**vars(g), "K_loo": None}), 0, 0)
+    assert se == pytest.approx(g.K_samples[:, 0, 0].std(ddof=1) * np.sqrt(n / (n - 1))) and nu == n - 1

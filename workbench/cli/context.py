@@ -267,14 +267,20 @@ def narrowed_tables(header: Sequence[str], cells: Sequence[Sequence[str]], title
 #: "no difference shown (reduction +26 %, 95 % interval [-10 %, +61 %] contains 0)" → "not shown (reduction +26 %
 #: [-10 %, +61 %])".
 #: A weight ratio's interval where the data do not identify it (workbench.study.weights.format_interval): its bound
-#: alone, "≥ 0.011" for "not identifiable: at least 0.011, no upper bound".
+#: alone, "≥ 0.011" for "not identifiable: at least 0.011, no upper bound"; a gain entry's factor whose first entry
+#: is not distinguishable from 0, "any (first ≈ 0)".
 _SHORTER = ((re.compile(r"no difference shown \(reduction ([^,]+), [\d.]+ % interval (\[[^\]]*\]) contains 0\)"),
              r"not shown (reduction \1 \2)"),
             (re.compile(r"not identifiable: at least (\S+), no upper bound"), r"≥ \1"),
             (re.compile(r"not identifiable: at most (\S+), no lower bound"), r"≤ \1"),
             (re.compile(r"not identifiable: between (\S+) and (\S+) (\(×\S+\))"), r"\1 … \2 \3"),
             (re.compile(r"not identifiable: (an? (?:zero|infinite) weight fits) \(the end of the search\)"), r"\1"),
-            (re.compile(r"not identifiable: the data allow any value"), "any value"))
+            (re.compile(r"not identifiable: the data allow any value"), "any value"),
+            # a gain entry's factor (workbench.study.weights.format_gain_factor)
+            (re.compile(r"not identifiable: the first strategy's entry is not distinguishable from 0"),
+             "any (first ≈ 0)"),
+            (re.compile(r"not identifiable: between (\S+) and (\S+) \(the entries' signs may differ\)"),
+             r"\1 … \2 (sign?)"))
 
 
 def shorter_words(cell: str) -> str:

@@ -428,7 +428,13 @@ def _print_objective_comparison(ctx: Context, result: Any, report: Path | None =
     weight ratio per strategy with its interval or why it has none, and each part's structure check."""
 
     from workbench.study.power import LAW
-    from workbench.study.weights import NOT_EXPLAINED, compare_strategies, format_interval, identified_first
+    from workbench.study.weights import (
+        NOT_EXPLAINED,
+        compare_strategies,
+        format_interval,
+        gain_contrasts,
+        identified_first,
+    )
 
     objectives = getattr(result, "objectives", {})
     ratios = {lb: oi.ratios for lb, oi in objectives.items() if oi.ratios is not None}
@@ -461,6 +467,11 @@ def _print_objective_comparison(ctx: Context, result: Any, report: Path | None =
     ctx.say_table(head, rows, title="task-objective weight ratios inside coupled parts (diagonal cost, S = 0)")
     for why, k in footnotes.items():
         ctx.say(f"  [{k}] {why}")
+    contrasts = gain_contrasts(table)
+    if contrasts:  # the gains compare where a weight that barely moves them does not
+        ctx.say_table(list(contrasts[0]), [list(c.values()) for c in contrasts],
+                      title=f"gain K̂[u, s] between strategies beside Q_s / R_u (Fieller {ratios[first].ci:g} %, "
+                            "over trials)")
     # each part's structure check once, for every strategy it reads the same for
     fits: dict[str, list[str]] = {}
     for lb, wr in ratios.items():

@@ -377,7 +377,7 @@ def _objective_interval_notes(
     table: pd.DataFrame | None = None,
 ) -> list[str]:
     """What the intervals are, and the weight ratios inside coupled parts compared between strategies."""
-    from workbench.study.weights import compare_strategies, format_interval, identified_first
+    from workbench.study.weights import compare_strategies, format_interval, gain_contrasts, identified_first
 
     if not objectives:
         return ["*No intervals: the study ran without bootstrap resamples (`--bootstrap 0`); the values above "
@@ -396,6 +396,17 @@ def _objective_interval_notes(
            *([f"- {line}" for line in found] or ["- no weight ratio and no factor between strategies: every interval "
                                                 "below spans more than ×10 or its part is not of the diagonal form"]),
            ""]
+    contrasts = gain_contrasts(table)
+    if contrasts:
+        md += ["### Gain entries compared between strategies", "",
+               f"Beside each weight ratio Q_s / R_u, the factor between two strategies' gain entry K̂[u, s] (how hard "
+               f"the pilot pushes input u on state s), with Fieller's {first.ci:g} % interval from each entry's "
+               "standard error over whole trials (the delete-one-trial jackknife's, as the weight ratios' covariance; "
+               "words where the first strategy's entry is not distinguishable from 0 or the interval includes 0). "
+               "The gains are "
+               "what a fit estimates directly: where a weight barely moves its gain, the ratio's interval has no "
+               "upper end while the gains still compare.", "",
+               _md_table(pd.DataFrame(contrasts)), ""]
     rows = []
     for r in table.itertuples():
         row = {"ratio": r.ratio, "strategy": r.strategy, "estimate [interval]": format_interval(r.estimate, r.lo, r.hi),

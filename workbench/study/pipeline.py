@@ -353,8 +353,8 @@ def run_study(
             t0 = time.perf_counter()
             split_parts = jobs.run(executor, progress)
             timings["method-level splits"] = time.perf_counter() - t0
-        by_label = dict(zip(splits, parts, strict=True))
-        method_level, splits_left_out = jobs.rows(split_parts, by_label), jobs.left_out(split_parts, by_label)
+        method_level, splits_left_out = (f(split_parts, dict(zip(splits, parts, strict=True)))
+                                          for f in (jobs.rows, jobs.left_out))
     statistics = _statistics(table, demos, plant, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
@@ -363,8 +363,7 @@ def run_study(
     calibration = pd.concat(cov_parts, ignore_index=True) if cov_parts else None
     return StudyResult(
         demos=demos, plant=plant, train=train, test=test, models=models, baselines=baselines, table=table,
-        coverage=_coverage_table(calibration) if calibration is not None else None,
-        calibration=calibration,
+        coverage=_coverage_table(calibration) if calibration is not None else None, calibration=calibration,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
         stats_text=statistics.text() + _settings_text(models), n_steps=n_steps, samples=samples, seed=seed,
         timings=timings, failures=failures, objectives=objectives, ratio_comparison=ratio_comparison,
@@ -778,8 +777,7 @@ def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
     labels = list(dict.fromkeys(d.label for d in paired if d.metric == metric))
     labels = [lb for lb in labels if lb != ALL_LABELS] or labels
     for label in labels:
-        # a row with no interval (too few test trials or splits) shows nothing either way: it is "not shown", in
-        # its own words (its sentence), never "worse by" a number
+        # a row without an interval (too few test trials or splits) is "not shown" in its own words, never a number
         rows = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
                 and not (d.has_interval and d.lo > 0)]
         if not rows:

@@ -11,6 +11,11 @@ of three readings: a finite estimate with its interval; "not identifiable" where
 ×:data:`IDENTIFIABLE_SPAN`, with the demonstrations a power curve says it would need (:mod:`workbench.study.power`);
 or "not of this form" where the part's gain is no diagonal cost's, with the closest one and the mismatch per gain
 entry (:mod:`workbench.method.pseudo_true`).
+
+Beside each factor of ``Q_s / R_u`` between strategies stands the factor of the gain entry ``K̂[u, s]`` itself
+(:func:`gain_factor`, Fieller's interval). A weight that barely moves the gain leaves its ratio's factor without
+an upper end (the instructed CS1's attitude weight, 1/30 of CS2's, moves its attitude gain 3 %), while the gain
+entries, which the fit estimates directly, still compare between the strategies.
 """
 
 from __future__ import annotations
@@ -40,6 +45,11 @@ __all__ = [
     "with_power",
     "needed_words",
     "TARGET_SPAN",
+    "GainFactor",
+    "gain_factor",
+    "format_gain_factor",
+    "gain_contrasts",
+    "entry_error",
 ]
 
 IDENTIFIABLE_SPAN = 10.0
@@ -281,6 +291,8 @@ class WeightRatios:
     fits: tuple[PartFit, ...]
     _parts: tuple  # (PartDistance, θ̂, D(θ̂)) per part with an input
     _index: tuple  # (part, j) per interval
+    #: per interval, the gain entry ``(input, state, "K[u1, phi]")`` of its ``Q_s / R_u`` (None for ``R_j / R_k``)
+    _entries: tuple = ()
 
     @property
     def names(self) -> list[str]:
@@ -330,7 +342,7 @@ def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
     K, K_s = np.asarray(gains.K, dtype=float), np.asarray(gains.K_samples, dtype=float)
     parts = decoupled_parts(A, B)
     q, r = np.ones(n), np.ones(m)
-    fitted, index, intervals, fits = [], [], [], []
+    fitted, index, intervals, fits, entries = [], [], [], [], []
     for states, inputs in parts:
         if not inputs:
             continue  # a part no input reaches: its weights do not affect the gain
@@ -368,11 +380,14 @@ def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
             intervals.append(RatioInterval(name, float(np.exp(est)), float(np.exp(lo)), float(np.exp(hi)), ci,
                                            fit.of_form, words))
             index.append((len(fitted), j))
+            entries.append(None if j >= len(s) else
+                           (c[0], s[j], f"K[{plant.input_names[c[0]]}, {plant.state_names[s[j]]}]"))
         fitted.append((part, shown, d_min))
     K_fwd, _ = forward_gain(A, B, np.diag(q), np.diag(r))
     err = float(np.linalg.norm(K_fwd - K) / max(float(np.linalg.norm(K)), 1e-300))
     return WeightRatios(intervals=tuple(intervals), Q_diag=q, R_diag=r, forward_gain_error=err, gains=gains,
-                        ci=float(ci), fits=tuple(fits), _parts=tuple(fitted), _index=tuple(index))
+                        ci=float(ci), fits=tuple(fits), _parts=tuple(fitted), _index=tuple(index),
+                        _entries=tuple(entries))
 
 
 def _stabilizing(part, K_part: np.ndarray) -> np.ndarray:
@@ -388,14 +403,19 @@ def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
 
     A factor's interval is the profile interval of the difference of one log ratio between two strategies
     (:func:`workbench.method.ratio_profile.factor_interval`), each strategy with its own gain and covariance; where
-    either strategy's part is not of the diagonal form there is no factor (NaN) and its note says why.
+    either strategy's part is not of the diagonal form there is no factor (NaN) and its note says why. Beside each
+    ``Q_s / R_u``, the factor of the gain entry ``K̂[u, s]`` itself (:func:`gain_factor`): the gains are identified
+    where a weight that barely moves them is not.
 
     Returns
     -------
     DataFrame
         One row per ratio and strategy: ``ratio``, ``strategy``, ``estimate``, ``lo``, ``hi``, ``identifiable``,
-        ``explained``, ``note`` (:attr:`RatioInterval.note`), and for the second strategy on: ``factor`` (its
-        ratio over the first's), ``factor_lo``, ``factor_hi``, ``factor_identifiable``, ``factor_note``.
+        ``explained``, ``note`` (:attr:`RatioInterval.note`), ``gain`` (the entry ``K[u, s]`` of ``Q_s / R_u``, ""
+        for ``R_j / R_k``), and for the second strategy on: ``factor`` (its ratio over the first's), ``factor_lo``,
+        ``factor_hi``, ``factor_identifiable``, ``factor_note``, and the factor of the gain entry with its interval
+        (:func:`gain_factor`): ``gain_factor``, ``gain_factor_lo``, ``gain_factor_hi``,
+        ``gain_factor_identifiable``.
 
     Raises
     ------
@@ -423,10 +443,13 @@ def compare_strategies(ratios: dict[str, WeightRatios]) -> pd.DataFrame:
     for lb in labels:
         wr = ratios[lb]
         for k, iv in enumerate(wr.intervals):
+            entry = wr._entries[k] if k < len(wr._entries) else None
             row = {"ratio": iv.name, "strategy": lb, "estimate": iv.estimate, "lo": iv.lo, "hi": iv.hi,
-                   "identifiable": iv.identifiable, "explained": iv.explained, "note": iv.note}
+                   "identifiable": iv.identifiable, "explained": iv.explained, "note": iv.note,
+                   "gain": "" if entry is None else entry[2]}
             if lb != labels[0]:
                 row.update(_factor(first, wr, k))
+                row.update(_gain_factor(first, wr, k))
             rows.append(row)
     return pd.DataFrame(rows)
 
@@ -452,10 +475,154 @@ def _factor(first: WeightRatios, other: WeightRatios, k: int) -> dict:
             "factor_note": f.note}
 
 
+@dataclass(frozen=True)
+class GainFactor:
+    """The factor between two strategies' gain entry ``K̂[u, s]`` (second over first), with its interval.
+
+    It stands beside the weight ratio ``Q_s / R_u``: the ratio says how the cost weights the state, the entry how
+    hard the pilot pushes on it. Where a weight barely moves the gain (CS1's attitude weight, 1/30 of CS2's, moves
+    its attitude gain 3 %), the ratio's interval has no upper end while the gain entries, which a fit estimates
+    directly, still compare (:func:`gain_factor`).
+    """
+
+    entry: str
+    ratio: str
+    estimate: float
+    lo: float
+    hi: float
+    ci: float
+
+    @property
+    def identifiable(self) -> bool:
+        """Bounded, of one sign, and within ×:data:`IDENTIFIABLE_SPAN` (as a weight ratio's)."""
+        lo, hi = abs(self.lo), abs(self.hi)
+        return bool(np.isfinite(lo) and np.isfinite(hi) and np.sign(self.lo) == np.sign(self.hi) != 0
+                    and max(lo, hi) / min(lo, hi) <= IDENTIFIABLE_SPAN)
+
+    def shown(self) -> str:
+        return format_gain_factor(self.estimate, self.lo, self.hi)
+
+
+def gain_factor(k_a: float, s_a: float, nu_a: float, k_b: float, s_b: float, nu_b: float, ci: float = 95.0
+                ) -> tuple[float, float]:
+    """Fieller's ``ci`` % interval of ``k_b / k_a`` for two independent gain estimates with standard errors ``s_a``,
+    ``s_b`` of ``nu_a``, ``nu_b`` degrees of freedom: every θ with ``(k̂_b − θ k̂_a)² ≤ t² (s_b² + θ² s_a²)``, ``t``
+    the ``t_ν`` quantile, ``ν`` the Welch–Satterthwaite degrees of freedom of ``s_b² + θ̂² s_a²`` at
+    ``θ̂ = k̂_b / k̂_a``.
+
+    The ratio is not linearized: where ``k̂_a`` is within ``t s_a`` of zero the set is unbounded (``(-inf, inf)``:
+    no factor is excluded in size), otherwise a bounded interval that may include 0 or negative values (the entries'
+    signs may differ).
+
+    Returns
+    -------
+    (lo, hi) : tuple of float
+        ``(-inf, inf)`` where unbounded, ``(nan, nan)`` where an estimate or a standard error is not finite.
+    """
+    import scipy.stats
+
+    if not np.all(np.isfinite([k_a, s_a, nu_a, k_b, s_b, nu_b])) or k_a == 0:
+        return float("nan"), float("nan")
+    theta = k_b / k_a
+    var = s_b**2 + theta**2 * s_a**2
+    nu = var**2 / (s_b**4 / nu_b + theta**4 * s_a**4 / nu_a) if var > 0 else min(nu_a, nu_b)
+    t = float(scipy.stats.t.ppf(0.5 + ci / 200.0, max(float(nu), 1.0)))
+    a = k_a * k_a - t * t * s_a * s_a  # the quadratic a θ² − 2 k_a k_b θ + c ≤ 0
+    c = k_b * k_b - t * t * s_b * s_b
+    if a <= 0:
+        return float("-inf"), float("inf")
+    root = float(np.sqrt(max(k_a * k_a * k_b * k_b - a * c, 0.0)))
+    return float((k_a * k_b - root) / a), float((k_a * k_b + root) / a)
+
+
+def entry_error(gains, u: int, x: int) -> tuple[float, float]:
+    """The standard error of the gain entry ``K̂[u, x]`` and its degrees of freedom, as the weight ratios beside it
+    take the gain's covariance (:meth:`workbench.method.ratio_profile.PartDistance.from_samples`): the
+    delete-one-trial jackknife's (CV3) with its effective degrees of freedom
+    (:func:`~workbench.method.ratio_profile.effective_dof`) where ``gains`` has every leave-one-out gain, else the
+    resampled gains' standard deviation times ``√(n / (n − 1))`` with ``n − 1``.
+
+    On the virtual subjects (:mod:`workbench.collect.virtual`, choosing seeds 600 on, never the judging ones) the
+    resampled gains' spread understated the error of the pure-LQR CS2 subject's attitude gain; the jackknife's
+    covered the true factor more often (``bench/results.md``, "gain entries").
+    """
+    n = int(gains.n_trials)
+    loo = getattr(gains, "K_loo", None)
+    if loo is not None and len(loo) == n and np.isfinite(np.asarray(loo, dtype=float)).all():
+        dev = np.asarray(loo, dtype=float)[:, u, x]
+        dev = dev - dev.mean()
+        if float(dev @ dev) > 0:
+            return float(np.sqrt((n - 1) / n * float(dev @ dev))), ratio_profile.effective_dof(dev[:, None])
+    S = np.asarray(gains.K_samples, dtype=float)
+    if len(S) < 2 or n < 2:
+        return float("nan"), float("nan")
+    return float(S[:, u, x].std(ddof=1) * np.sqrt(n / (n - 1))), float(n - 1)
+
+
+def format_gain_factor(estimate: float, lo: float, hi: float) -> str:
+    """``estimate [lo, hi]`` where the interval bounds the factor to one sign and within ×:data:`IDENTIFIABLE_SPAN`
+    (as :func:`format_interval`), else words without an estimate."""
+    if np.isnan(lo) or np.isnan(hi):
+        return "no interval"
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return f"{NOT_IDENTIFIABLE}: the first strategy's entry is not distinguishable from 0"
+    if lo <= 0 <= hi:
+        return f"{NOT_IDENTIFIABLE}: between {lo:.3g} and {hi:.3g} (the entries' signs may differ)"
+    if hi < 0:
+        if lo / hi > IDENTIFIABLE_SPAN:
+            return f"{NOT_IDENTIFIABLE}: between {lo:.3g} and {hi:.3g}, opposite signs"
+        return f"{estimate:.3g} [{lo:.3g}, {hi:.3g}] (opposite signs)"
+    return format_interval(estimate, lo, hi)
+
+
+def _gain_factor(first: WeightRatios, other: WeightRatios, k: int) -> dict:
+    """The factor of interval ``k``'s gain entry between two strategies (:func:`gain_factor`): ``K̂`` as fitted (the
+    K̂ ``fit`` prints), its standard error over whole trials (:func:`entry_error`)."""
+    entry = other._entries[k] if k < len(other._entries) else None
+    none = {"gain_factor": float("nan"), "gain_factor_lo": float("nan"), "gain_factor_hi": float("nan"),
+            "gain_factor_identifiable": False}
+    if entry is None:
+        return none
+    u, x, _ = entry
+    ga, gb = first.gains, other.gains
+    ka, kb = float(np.asarray(ga.K)[u, x]), float(np.asarray(gb.K)[u, x])
+    lo, hi = gain_factor(ka, *entry_error(ga, u, x), kb, *entry_error(gb, u, x), other.ci)
+    f = GainFactor(entry[2], other.intervals[k].name, kb / ka if ka else float("nan"), lo, hi, other.ci)
+    return {"gain_factor": f.estimate, "gain_factor_lo": f.lo, "gain_factor_hi": f.hi,
+            "gain_factor_identifiable": f.identifiable}
+
+
+def _no_factor(note: str) -> str:
+    """The verdict of a weight ratio's missing factor (``"not of this form"``), its reason (the part's mismatch)
+    printed once with the part."""
+    return str(note or "").split(":")[0].strip() or "no factor"
+
+
+def gain_contrasts(table: pd.DataFrame) -> list[dict[str, str]]:
+    """The rows the report and the terminal print for the gain entries compared between strategies: per strategy
+    after the first and per weight ratio with a gain entry, the entry, the strategies, the gain factor with its
+    interval (:func:`format_gain_factor`) and, beside it, the weight ratio and its factor (:func:`format_interval`).
+    """
+    if "gain_factor_lo" not in table or not len(table):
+        return []
+    first = str(table["strategy"].iloc[0])
+    rows = []
+    for r in table[(table["strategy"] != first) & (table["gain"] != "")].itertuples():
+        ratio = "" if r.factor != r.factor else format_interval(r.factor, r.factor_lo, r.factor_hi)
+        rows.append({"gain entry": r.gain, "strategies": f"{r.strategy} / {first}",
+                     "gain factor [interval]": format_gain_factor(r.gain_factor, r.gain_factor_lo, r.gain_factor_hi),
+                     "weight ratio": r.ratio, "its factor": ratio or _no_factor(r.factor_note)})
+    return rows
+
+
 def identified_first(table: pd.DataFrame) -> list[str]:
-    """Sentences for what the data identify, contrasts first: each factor between strategies whose interval is
-    finite and within ×10, then each ratio that is."""
+    """Sentences for what the data identify, contrasts first: each factor of a gain entry between strategies whose
+    interval is finite, of one sign and within ×10, each such factor of a weight ratio, then each ratio that is."""
     out = []
+    if "gain_factor_identifiable" in table:
+        for r in table[table["gain_factor_identifiable"] == True].itertuples():  # noqa: E712 - NaN in the first's
+            out.append(f"{r.gain} (beside {r.ratio}): {r.strategy} / {table['strategy'].iloc[0]} = "
+                       f"{format_gain_factor(r.gain_factor, r.gain_factor_lo, r.gain_factor_hi)}")
     if "factor" in table:
         for r in table[table["factor_identifiable"] == True].itertuples():  # noqa: E712 - NaN in the first's rows
             out.append(f"{r.ratio}: {r.strategy} / {table['strategy'].iloc[0]} = "
