@@ -117,6 +117,23 @@ class LeftOutFold:
                else "its training trials could not be fitted")
         return f"Fold {self.index} of {self.total} (testing {self.trial}) left out: {why} — {self.reason}"
 
+    @classmethod
+    def still(cls, demos: DemonstrationSet, index: int, unlabeled: str) -> LeftOutFold | None:
+        """Trial ``index``'s fold left out before any fit where its test trial never moves
+        (:func:`still_test_trial`), with ``unlabeled`` as the label of a trial that has none; else ``None``."""
+        reason = still_test_trial(demos, index)
+        d = demos[index]
+        label = unlabeled if d.label is None else str(d.label)
+        return cls(index + 1, len(demos), d.id, label, reason, part="test") if reason else None
+
+    @staticmethod
+    def none_scored(left_out: Sequence[LeftOutFold]) -> str:
+        """Why a leave-one-out study has no fold to score, each fold named with its cause, in one line: "could be
+        fitted" where every training part was refused, "could be scored" where a still test trial was left out."""
+        what = "fitted" if all(f.part == "training" for f in left_out) else "scored"  # a still test is never fitted
+        return (f"no fold of the {len(left_out)} could be {what}: "
+                + "; ".join(f"fold {f.index} (testing {f.trial}): {f.reason}" for f in left_out))
+
 
 def too_few_folds(left_out: Sequence[LeftOutFold], test: Mapping[str, DemonstrationSet]) -> list[str]:
     """Per strategy that lost folds, where fewer than :data:`~workbench.study.method_level.MIN_SPLITS` remain
