@@ -16,7 +16,9 @@ __all__ = ["MOTION_OVER_ACCURACY", "follows_gps"]
 
 
 #: A flight's GPS speed must pass this many times the receiver's velocity accuracy somewhere in its kept segments for
-#: the velocity to be judged or the plant identified: below it the velocity is the receiver's noise (a hover).
+#: the velocity to be judged or the plant identified: below it the motion is too small against the receiver's error
+#: for a tilt's effect on the velocity to be told from it (a hover, a vehicle standing). A threshold, not a test that
+#: the slower velocities are noise: 0.5 m/s is five times the accuracy and real motion, only too little of it.
 MOTION_OVER_ACCURACY = 10.0
 
 
@@ -76,10 +78,10 @@ def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, 
     motion = MOTION_OVER_ACCURACY * ref.accuracy
     if speed < motion:
         return (f"{head}: too little motion to identify the plant: the GPS speed ({gps.stream} "
-                f"{', '.join(gps.columns)}) never passes {motion:g} m/s in the kept segments (ten times the receiver's "
-                f"{ref.accuracy:g} m/s velocity accuracy): at most {speed:.2g} m/s over {len(g)} GPS samples — the "
-                f"velocities are the receiver's noise, and neither the estimator nor the plant's physics can be judged "
-                f"from them")
+                f"{', '.join(gps.columns)}) never passes {motion:g} m/s in the kept segments (the threshold: "
+                f"{MOTION_OVER_ACCURACY:g} times the receiver's {ref.accuracy:g} m/s velocity accuracy): at most "
+                f"{speed:.2g} m/s over {len(g)} GPS samples — below the threshold neither the estimator nor the "
+                f"plant's physics is judged (a hover or ground time; fly the vehicle across more than {motion:g} m/s)")
     v = np.column_stack([np.interp(tg, te, e[:, k]) for k in range(2)])
     rms = float(np.sqrt(((v - g) ** 2).sum(axis=1).mean()))
     if not np.ptp(g, axis=0).any():  # no spread: the share explained would divide by the mean's round-off (~1e-30)

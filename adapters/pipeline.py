@@ -28,6 +28,7 @@ import numpy as np
 
 from adapters.align import Series, align, check_grid, silence
 from adapters.clock import stream_times
+from adapters.events import event_name
 from adapters.gps import follows_gps
 from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
@@ -114,7 +115,9 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
         armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped)
         spans = intersect(spans, armed if armed is not None else EVERYTHING)
     if seg.landing is not None and seg.landing.flag is not None:
-        flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True)
+        # no landed event is no evidence of ground time (a firmware that logs none, a log begun in the air)
+        flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True,
+                             no_events_say_nothing=True)
         spans = intersect(spans, flying if flying is not None else EVERYTHING)
     return list(spans)
 
@@ -150,21 +153,24 @@ def _mark_fixed_wing(sel: Selected, m: ChannelMapping, spans: list[Span]) -> lis
 
 
 def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
-                invert: bool = False) -> list[Span] | None:
+                invert: bool = False, no_events_say_nothing: bool = False) -> list[Span] | None:
     """The spans a flag rule holds in (``invert``: does not hold); ``None`` where an event rule's stream is not in
     the log at all (the firmware records no such events: old ArduPlane logs declare no ``EV``), so the rule says
-    nothing. A stream the log declares but never wrote holds no event: no span. An event rule with a held flag
-    that the log holds (``FlagRule.held``) is decided by that flag where the log holds none of its events
-    (:func:`_deciding_rule`)."""
+    nothing. A stream the log declares but never wrote holds no event: no span — or, with
+    ``no_events_say_nothing`` (a landed rule: a flight that never lands logs no landing), ``None``, as where the
+    log holds the stream but none of the rule's events. An event rule with a held flag that the log holds
+    (``FlagRule.held``) is decided by that flag where the log holds none of its events (:func:`_deciding_rule`)."""
     rule = _deciding_rule(streams, m, rule, what)
     if rule.on and not _declared(streams, rule.selector):
         return None
     if rule.on and not any(h in streams for h in _heads(rule.selector)):
-        return []  # declared, never written
+        return None if no_events_say_nothing else []  # declared, never written
     sel = select(rule.selector, streams, what, m.name, n_columns=1)
     t, flags = _rule_series(sel, m, skipped=skipped, what=what)
     if rule.on:
         events = rule.events(flags)
+        if no_events_say_nothing and not events.any():
+            return None
         truth = rule.truth(flags[events])
         return event_spans(t[events], ~truth if invert else truth)
     truth = rule.truth(flags)
@@ -472,6 +478,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     if not found and flips:
         raise DataError(f"{streams.path}: mapping {m.name!r}: no demonstration left once cut at the vehicle's flips "
                         f"(pieces under min_duration = {m.segment.min_duration:g} s dropped): {'; '.join(flips)}")
+    if not found and (ground := _ground_note(streams, m, series)):
+        raise DataError(ground)
     if not found:
         no_input = _silent_channels(series, spans, set(m.input_names))
         if no_input:
@@ -583,6 +591,44 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
         return DemonstrationSet(demos, m.state_names, m.input_names, m.dt, roles=m.roles)
     except DataError as exc:
         raise DataError(f"{streams.path}: {exc}") from None
+
+
+def _ground_note(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
+    """Where a landed rule (``segment.landing`` as a flag) left no demonstration: how much of the spans the other
+    rules keep the vehicle spent on the ground, in one line; ``""`` where the landed rule cut nothing.
+
+    An ArduCopter armed in STABILIZE that takes off in AUTO, or whose STABILIZE spans are its take-off and landing
+    around a mission, has only ground time in its manual modes: that is the cause, not missing sticks.
+    """
+    seg = m.segment
+    if seg.landing is None or seg.landing.flag is None:
+        return ""
+    flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", invert=True, no_events_say_nothing=True)
+    if flying is None:
+        return ""
+    lo, hi = min(float(x.t[0]) for x in series), max(float(x.t[-1]) for x in series)
+    kept = [Span(max(sp.start, lo), min(sp.end, hi), sp.meta)
+            for sp in _spans(streams, replace(m, segment=replace(seg, landing=None)), Counter())
+            if min(sp.end, hi) > max(sp.start, lo)]
+    total = sum(sp.end - sp.start for sp in kept)
+    if not total:
+        return ""
+    air = sum(sp.end - sp.start for sp in intersect(kept, flying))
+    rule = seg.landing.flag
+    named = rule.selector.source.startswith("EV.")  # DataFlash events: say their ArduPilot names
+
+    def values(vs: tuple[float, ...]) -> str:
+        return " or ".join(f"{v:g}" + (f" {event_name(v)}" if named else "") for v in vs)
+
+    modes = sorted({str(sp.meta["mode"]) for sp in kept if "mode" in sp.meta})
+    where = f"armed in {', '.join(modes)}" if modes else "kept"
+    rest = (f"; its {air:.1f} s in the air there leave no piece of min_duration = {seg.min_duration:g} s" if air > 0
+            else "; it leaves the ground only in other modes, if at all")
+    # on the viewer's flight clock (seconds since the first mapped sample), as the flip and damage notes
+    shown = [Span(sp.start - lo, sp.end - lo, sp.meta) for sp in kept]
+    return (f"{streams.path}: mapping {m.name!r}: no flight to import: the vehicle is on the ground through "
+            f"{total - air:.1f} of the {total:.1f} s {where} ({_span_text(shown)}), by its landed events "
+            f"({rule.selector.describe()} = {values(rule.on)} on landing, {values(rule.off)} on take-off){rest}")
 
 
 def _span_text(spans: list[Span], n: int = 4) -> str:

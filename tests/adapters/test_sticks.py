@@ -185,6 +185,70 @@ def test_a_channel_inside_its_dead_zone_is_not_named_as_the_stick(tmp_path):
            "around RC1_TRIM = 1500)" in note
 
 
+def test_ground_time_is_cut_before_the_stick_check_and_the_fit(tmp_path):
+    # beastayyg log_0038 (ArduCopter 3.4.6) stopped with "the stick is on RCIN.C3": 16 of its 29 kept STABILIZE s
+    # are on the ground, where the attitude target follows the measured attitude, not the stick. EV NOT_LANDED (28)
+    # says when it took off and LAND_COMPLETE (18) when it was down again; LAND_COMPLETE_MAYBE (17) is no landing
+    # (ArduCopter clears it without an event when the vehicle climbs away)
+    path, streams = _copter_bin(tmp_path, "ground.bin", {"RCMAP_ROLL": 1, "RCMAP_PITCH": 2}, roll_on=1)
+    rc, att, ev = streams["RCIN"], streams["ATT"], streams["EV"]
+    armed = float(ev["t"].iloc[0])  # ARMED, in the first STABILIZE span
+    took_off, maybe, landed = armed + 6.0, armed + 11.0, armed + 17.0
+    ta = att["t"].to_numpy()
+    held = np.searchsorted(rc["t"].to_numpy(), ta, side="right") - 1
+    throttle = np.sin(rc["t"].to_numpy() / 0.7)
+    rc["C3"] = _pwm(throttle)
+    for a, b in ((armed, took_off), (landed, np.inf)):  # on the ground DesRoll moves with anything but the roll stick
+        ground = (ta >= a) & (ta < b) & (held >= 0)
+        att.loc[ground, "DesRoll"] = np.round(-90 * throttle[held[ground]], 2)
+    extra = pd.DataFrame({"t": [took_off, maybe, landed], "Id": np.array([28, 17, 18], np.uint8)})
+    streams["EV"] = pd.concat([ev, extra], ignore_index=True).sort_values("t", kind="stable").reset_index(drop=True)
+    options = dataflash_write.example_streams("old", "copter", seconds=40.0, seed=3)[1]
+    path = dataflash_write.write(tmp_path / "ground.bin", streams, **options)
+    ds = adapters.load(path, "ardupilot_manual")  # it stopped with "the stick is on RCIN.C3"
+    r = float(re.search(r"u1 moves with ATT\.DesRoll \(r = ([+-][\d.]+)\)", ds[0].meta["sticks"]).group(1))
+    assert r > 0.9
+    # only the air is kept, on the log's clock as the reader puts the events on it
+    events = adapters.read(path).frames["EV"]
+    at = dict(zip(events["Id"].astype(int), events["t"].astype(float), strict=False))
+    starts, ends = [d.meta["t0"] for d in ds], [d.meta["t0"] + d.t[-1] for d in ds]
+    assert min(starts) >= at[28] and max(ends) <= at[18]
+    assert any(a < at[17] < b for a, b in zip(starts, ends, strict=True))  # no cut at LAND_COMPLETE_MAYBE
+
+
+def test_manual_modes_flown_only_on_the_ground_are_named(tmp_path):
+    # beastayyg sample.bin, peterbarker_3: armed in STABILIZE on the ground, the take-off in AUTO (here RTL); once
+    # the ground time is cut nothing is left, and the line says so (it said "no stick input in these spans: u1, u2")
+    path, streams = _copter_bin(tmp_path, "ground_only.bin", {"RCMAP_ROLL": 1, "RCMAP_PITCH": 2}, roll_on=1)
+    ev = streams["EV"]
+    modes = streams["MODE"]
+    rtl = float(modes["t"][modes["ModeNum"] == mode_number("arducopter", "RTL")].iloc[0])
+    extra = pd.DataFrame({"t": [rtl + 0.5], "Id": np.array([28], np.uint8)})  # NOT_LANDED: the take-off, in RTL
+    streams["EV"] = pd.concat([ev, extra], ignore_index=True).sort_values("t", kind="stable").reset_index(drop=True)
+    options = dataflash_write.example_streams("old", "copter", seconds=40.0, seed=3)[1]
+    path = dataflash_write.write(tmp_path / "ground_only.bin", streams, **options)
+    with pytest.raises(DataError) as info:
+        adapters.load(path, "ardupilot_manual")
+    message = str(info.value)
+    assert "\n" not in message and "no stick input" not in message
+    found = re.search(r"on the ground through ([\d.]+) of the ([\d.]+) s armed in", message)
+    ground, total = float(found.group(1)), float(found.group(2))
+    # in the air in a kept mode only from the last STABILIZE to the last DISARMED, on the reader's clock
+    read = adapters.read(path).frames
+    air = float(read["EV"]["t"][read["EV"]["Id"] == 11].iloc[-1]) - float(read["MODE"]["t"].iloc[-1])
+    assert total - ground == pytest.approx(air, abs=0.15) and 0 < air < 5
+    assert "(EV.Id = 18 LAND_COMPLETE on landing, 28 NOT_LANDED on take-off); its " in message
+    assert "s in the air there leave no piece of min_duration = 5 s" in message
+
+
+def test_a_log_without_landed_events_keeps_its_spans(tmp_path):
+    # a firmware that logs no landed events, or a flight that never lands in its log, says nothing about the ground
+    path, streams = _copter_bin(tmp_path, "air.bin", {"RCMAP_ROLL": 1, "RCMAP_PITCH": 2}, roll_on=1)
+    assert not streams["EV"]["Id"].isin([17, 18, 28]).any()
+    ds = adapters.load(path, "ardupilot_manual")
+    assert min(d.meta["t0"] for d in ds) < float(streams["EV"]["t"].iloc[0]) + 1.0  # from arming, as before
+
+
 # -------------------------------------------------------------------------------------------------- tlog
 
 

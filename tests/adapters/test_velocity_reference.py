@@ -16,6 +16,8 @@ import pytest
 
 import adapters
 from adapters.formats import dataflash_write
+from adapters.gps import MOTION_OVER_ACCURACY
+from adapters.mapping import load_mapping
 from workbench.errors import DataError, ModelError
 
 
@@ -72,8 +74,9 @@ def test_an_ekf_velocity_that_does_not_follow_the_gps_is_named_at_import(tmp_pat
 
 @pytest.mark.parametrize("top", [0.01, 0.8])
 def test_too_little_motion_is_its_own_cause(tmp_path, top):
-    # a vehicle standing (0.01 m/s) and a 28 s hover whose GPS speed never passes 0.8 m/s: the velocities are the
-    # receiver's noise; the hover was called "the estimator is not converged or not the one that flew"
+    # a vehicle standing (0.01 m/s) and a 28 s hover whose GPS speed never passes 0.8 m/s; the hover was called "the
+    # estimator is not converged or not the one that flew". The line states the threshold and the measured maximum,
+    # and calls nothing noise: 0.8 m/s is eight times the receiver's accuracy (it said "the receiver's noise")
     rng = np.random.default_rng(4)
 
     def hover(streams, options):
@@ -94,6 +97,10 @@ def test_too_little_motion_is_its_own_cause(tmp_path, top):
         inside |= (gps["t"] >= d.meta["t0"]) & (gps["t"] <= d.meta["t0"] + d.t[-1])
     fastest = float(gps["Spd"][inside].max())
     assert f"at most {fastest:.2g} m/s over {int(inside.sum())} GPS samples" in message
+    accuracy = load_mapping("ardupilot_manual").for_format("dataflash").reference.accuracy
+    assert (f"(the threshold: {MOTION_OVER_ACCURACY:g} times the receiver's {accuracy:g} m/s velocity accuracy)"
+            in message)
+    assert "noise" not in message
 
 
 def test_a_log_without_any_gps_stream_is_named_dead_reckoning(tmp_path):

@@ -211,3 +211,20 @@ def test_evaluate_prints_no_interval_from_too_few_test_trials(tmp_path, capsys, 
     rows = [line for line in inputs if line.startswith("CS1 ")][:2]
     assert len(rows) == 2 and all(words in r for r in rows), rows
     assert " %]" in out.split("Methods (refitted on every split")[1].split("These fitted models")[0]
+
+
+def test_a_mismatch_in_a_late_digit_prints_its_entry_apart_from_the_closest_costs():
+    # the demo's CS1: "u1 on x -0.0947 [-0.0947, -0.0947], softer than its -0.0947" -- four equal numbers read as a
+    # contradiction where the entry departs from the closest diagonal cost's in its fourth digit
+    import re
+
+    from workbench.study.weights import PartFit
+
+    k0 = -0.094712
+    closest = SimpleNamespace(shown=np.array([True]), k_hat=np.array([k0 + 2.1e-5]), k_closest=np.array([k0]),
+                              mismatch_lo=np.array([1.2e-5]), mismatch_hi=np.array([3.0e-5]))
+    words = PartFit(("x",), ("u1",), 3.0, 0, float("nan"), None, closest, 19.0, 0).mismatch_words()
+    entry, lo, hi, its = (float(v) for v in re.search(
+        r"u1 on x (\S+) \[(\S+), (\S+)\], softer than its (\S+)", words).groups())
+    assert entry != its and lo != hi, words
+    assert lo <= entry <= hi and abs(its - k0) < abs(entry - k0), words

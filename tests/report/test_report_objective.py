@@ -94,15 +94,19 @@ def test_the_objective_figure_draws_only_the_identified_contrasts(result, report
     table = compare_strategies({lb: oi.ratios for lb, oi in result.objectives.items()})
     factors, ratios = identified_rows(table)
     want_f = table[table["factor_identifiable"] == True]  # noqa: E712
+    want_g = table[table["gain_factor_identifiable"] == True]  # noqa: E712 - the gain entries' factors, too
     want_r = table[table["identifiable"] == True]  # noqa: E712
-    assert len(factors) == len(want_f) and len(ratios) == len(want_r) and len(factors) + len(ratios) > 0
+    assert len(want_g) > 0, "the demo's gains compare between its strategies"
+    assert len(factors) == len(want_f) + len(want_g) and len(ratios) == len(want_r) and len(factors) + len(ratios)
     np.testing.assert_allclose(ratios["lo"], want_r["lo"].to_numpy(float))
-    np.testing.assert_allclose(factors["hi"], want_f["factor_hi"].to_numpy(float))
+    np.testing.assert_allclose(factors["hi"], [*want_f["factor_hi"], *want_g["gain_factor_hi"]])
+    assert set(factors["label"]) >= {f"{g} ({s} / {table['strategy'].iloc[0]})"
+                                     for g, s in zip(want_g["gain"], want_g["strategy"], strict=True)}
     fig = fig_contrasts(factors, ratios, {"A": "#1f77b4", "B": "#ff7f0e"})
     ticks = [t.get_text() for ax in fig.axes for t in ax.get_yticklabels()]
     # the weights in mathtext ($Q_{y}$ / $R_{u2}$), the rest of each label as the table writes it
     assert sorted(ticks) == sorted(math_label(v) for v in [*factors["label"], *ratios["label"]])
-    assert all("$Q_{" in t or "$R_{" in t for t in ticks)
+    assert all("$Q_{" in t or "$R_{" in t or t.startswith("K[") for t in ticks)
     assert not any(t.startswith(("Q ", "R ")) or "λmax" in t for t in ticks)
     text = (report_folder / "report.md").read_text()
     assert "](figures/objective.png)" in text and (report_folder / "figures" / "objective.svg").is_file()

@@ -154,6 +154,34 @@ def test_one_scored_fold_compares_the_methods_in_words_not_numbers(few):
     assert not any("%" in line for line in lines)  # no difference, no interval stated
 
 
+def test_a_fold_whose_test_trial_never_moves_is_left_out_with_its_cause(few):
+    """erlerobot 218 ALT_HOLD and 7-9-2014/11: a test segment whose x, y, xdot, ydot are 0 throughout (the estimator
+    had no position yet) was scored, persistence 0 against the proposed model's 0.4-0.6 m; a trial with no stick
+    moving shows no pilot. Each such fold is left out, named with its cause; the others are scored."""
+    demos = list(few)
+    pos = [few.state_names.index(n) for n in (*few.roles.position, *few.roles.velocity)]
+    assert pos  # the landings say which states are the position and the velocity
+    x = demos[1].x.copy()
+    x[:, pos] = 0.0
+    demos[1] = type(demos[1])(demos[1].t, x, demos[1].u, demos[1].meta)
+    demos[2] = type(demos[2])(demos[2].t, demos[2].x, np.full_like(demos[2].u, 0.25), demos[2].meta)
+    ds = few.with_demos(demos)
+    res = run_loso(ds, planar_quadrotor(), **FAST)
+    still, quiet = res.folds_left_out
+    assert (still.index, still.trial, still.part) == (2, ds.ids[1], "test")
+    assert (quiet.index, quiet.trial, quiet.part) == (3, ds.ids[2], "test")
+    names = ", ".join(ds.state_names[i] for i in pos)
+    assert f"its {names} stay at 0 in all {len(ds[1].t)} samples" in still.reason
+    assert f"none of its inputs {', '.join(ds.input_names)} moves" in quiet.reason
+    assert still.sentence().startswith(f"Fold 2 of {len(ds)} (testing {ds.ids[1]}) left out: its test trial says "
+                                       "nothing about the pilot — ")
+    assert set(res.rmse["trial"]) == {ds.ids[0], ds.ids[3]}
+    assert res.verdicts()[:2] == [still.sentence(), quiet.sentence()]
+    # every fold left out: the stop says which could not be scored, and why
+    with pytest.raises(ModelError, match=r"no fold of the 2 could be scored: fold 1 \(testing .*\): its x, y, xdot"):
+        run_loso(ds.with_demos(demos[1:3]), planar_quadrotor(), **FAST)
+
+
 def test_no_fold_fitted_stops_naming_each_fold(few):
     ds = few.with_demos([type(d)(d.t, d.x, np.column_stack([np.zeros(len(d.t)), d.u[:, 1:]]), d.meta)
                          for d in list(few)[:3]])

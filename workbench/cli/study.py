@@ -80,7 +80,8 @@ def _evaluate_group(ctx: Context, ds: Any, output: Path | None, *, source: Any, 
         # the plant a user would fit on all segments (its report is itself leave-one-segment-out) and the
         # spread of the folds' plants, which the scores below used
         checks = [c for p in result.plants.values() for c in p.identification.checks]
-        left = len(result.folds_left_out)  # folds whose training segments gave no plant: named with the verdicts
+        # folds whose training segments gave no plant: named with the verdicts (as are those whose test never moves)
+        left = sum(f.part == "training" for f in result.folds_left_out)
         spread = (f"each fold's plant from its training segments: {checks[0].name} "
                   f"{min(c.value for c in checks):.4g}–{max(c.value for c in checks):.4g} over {len(checks)} folds"
                   if checks else "each fold's plant is identified from its training segments only") + (

@@ -32,11 +32,16 @@ def identified_rows(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     factors = pd.DataFrame(columns=cols)
     if "factor" in table and len(table):
         first = str(table["strategy"].iloc[0])
-        f = table[table["factor_identifiable"] == True]  # noqa: E712 - NaN in the first strategy's rows
-        factors = pd.DataFrame({"label": [f"{r} ({s} / {first})" for r, s in zip(f["ratio"], f["strategy"],
-                                                                                  strict=True)],
-                                "strategy": f["strategy"].to_numpy(), "estimate": f["factor"].to_numpy(float),
-                                "lo": f["factor_lo"].to_numpy(float), "hi": f["factor_hi"].to_numpy(float)})
+        kinds = [("ratio", "factor")] + ([("gain", "gain_factor")] if "gain_factor" in table else [])
+        # the gain entry's factor beside its weight ratio's: where a weight barely moves the gain, only the gain's
+        # factor is identified (CS1's attitude), and the figure must show what the tables list
+        factors = pd.concat([pd.DataFrame({
+            "label": [f"{r} ({s} / {first})" for r, s in zip(f[name], f["strategy"], strict=True)],
+            "strategy": f["strategy"].to_numpy(), "estimate": f[col].to_numpy(float),
+            "lo": f[f"{col}_lo"].to_numpy(float), "hi": f[f"{col}_hi"].to_numpy(float)})
+            for name, col in kinds
+            for f in [table[table[f"{col}_identifiable"] == True]]  # noqa: E712 - NaN in the first strategy's rows
+        ], ignore_index=True)
     r = table[table["identifiable"] == True] if len(table) else table  # noqa: E712
     ratios = pd.DataFrame({"label": [f"{a} of {s}" for a, s in zip(r["ratio"], r["strategy"], strict=True)],
                            "strategy": r["strategy"].to_numpy(), "estimate": r["estimate"].to_numpy(float),
@@ -108,7 +113,8 @@ def objective_figure(objectives: Mapping[str, Any], labels: Sequence[str], table
                 "interval spans more than ×10).*", ""]
     save(fig_contrasts(factors, identified, colors, column_width), os.fspath(path))
     parts = [what for rows, what in (
-        (factors, "the factor between two strategies' ratios (dashed: ×1, no difference)"),
+        (factors, "the factor between two strategies' ratios and gain entries K[u, s] (dashed: ×1, no "
+                  "difference)"),
         (identified, "the weight ratios inside a coupled part, in each strategy's colour")) if len(rows)]
     return [f"![Identified contrasts of the task objective](figures/{os.path.basename(path)})", "",
             "*The contrasts of the task objective the data identify (listed under \"What the data identify\"): "

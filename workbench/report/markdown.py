@@ -481,9 +481,12 @@ def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, titl
         holdout = (f"leave-one-segment-out: each of {n_test} trials scored by models (and a plant) fitted on the "
                    "others")
         left = getattr(result, "folds_left_out", ())
-        if left:  # the verdicts name each with its cause
-            holdout += (f"; {len(left)} of {n_test + len(left)} folds left out, their training trials could not be "
-                        "fitted (" + ", ".join(f"fold {f.index}, testing {f.trial}" for f in left) + ")")
+        for part, why in (("training", "their training trials could not be fitted"),
+                          ("test", "their test trials never move")):  # the verdicts name each with its cause
+            these = [f for f in left if getattr(f, "part", "training") == part]
+            if these:
+                holdout += (f"; {len(these)} of {n_test + len(left)} folds left out, {why} ("
+                            + ", ".join(f"fold {f.index}, testing {f.trial}" for f in these) + ")")
     else:  # how the study chose them (recorded test trials, or drawn at random), with their ids
         holdout = getattr(result, "holdout", "") or (f"{n_test} test trial(s) chosen at random (seed {result.seed}); "
                                                      "the models never saw them")

@@ -3,8 +3,9 @@
 :func:`split_in_time` cuts a log's one manual segment into contiguous pieces, so that leave-one-segment-out
 (:func:`workbench.study.pipeline.run_loso`) has something to train on. A fold whose training part cannot be fitted
 (the plant's identification refuses, say, because an input never moves in the other trials) is a
-:class:`LeftOutFold`: named with its cause, while the other folds are scored; :func:`too_few_folds` says in words
-where too few folds remain for the methods' comparison to have an interval.
+:class:`LeftOutFold`: named with its cause, while the other folds are scored; so is a fold whose test trial never
+moves (:func:`still_test_trial`), whose scores would compare nothing. :func:`too_few_folds` says in words where too
+few folds remain for the methods' comparison to have an interval.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from workbench.errors import DataError
 from workbench.study.method_level import MIN_SPLITS
 from workbench.study.paired import ALL_LABELS
 
-__all__ = ["TIME_SPLIT_PIECES", "split_in_time", "LeftOutFold", "too_few_folds"]
+__all__ = ["TIME_SPLIT_PIECES", "split_in_time", "LeftOutFold", "still_test_trial", "too_few_folds"]
 
 #: Contiguous pieces one long segment is cut into when it is all a log gives (:func:`split_in_time`).
 TIME_SPLIT_PIECES = 3
@@ -57,9 +58,33 @@ def split_in_time(demos: DemonstrationSet, n_steps: int, pieces: int = TIME_SPLI
     return demos.with_demos(parts)
 
 
+def still_test_trial(demos: DemonstrationSet, index: int) -> str:
+    """Why trial ``index`` says nothing as a fold's test trial, in words; ``""`` where it can be scored.
+
+    A trial whose position and velocity states (the set's roles) each hold one value throughout did not move as
+    far as the log tells (an estimator without a position yet reports 0): persistence predicts it exactly (a
+    position RMSE of 0) and any model is scored against a flight that did not happen. A trial none of whose sticks
+    moves shows no pilot acting. Exact constancy is the rule, so no threshold decides which flights count.
+    """
+    d = demos[index]
+    moving = [*demos.roles.position, *demos.roles.velocity]
+    idx = [demos.state_names.index(n) for n in moving if n in demos.state_names]
+    if idx and not np.ptp(d.x[:, idx], axis=0).any():
+        values = sorted({float(v) for v in d.x[0, idx]})
+        held = f"at {values[0]:g}" if len(values) == 1 else "each at one value"
+        return (f"its {', '.join(demos.state_names[i] for i in idx)} stay {held} in all {len(d.t)} samples: the log "
+                "shows no motion there (an estimator without a position reports 0), so persistence scores 0 and no "
+                "comparison of models is made on it")
+    if d.u.size and not np.ptp(d.u, axis=0).any():
+        return (f"none of its inputs {', '.join(demos.input_names)} moves in its {len(d.t)} samples: no pilot acts "
+                "there to be predicted")
+    return ""
+
+
 @dataclass(frozen=True)
 class LeftOutFold:
-    """A fold of :func:`workbench.study.pipeline.run_loso` that was not scored: its training part could not be fitted.
+    """A fold of :func:`workbench.study.pipeline.run_loso` that was not scored: its training part could not be fitted
+    (``part`` ``"training"``), or its test trial never moves (``"test"``, :func:`still_test_trial`).
 
     Attributes
     ----------
@@ -72,7 +97,10 @@ class LeftOutFold:
         none).
     reason : str
         The refusal of its training part, one line (a :class:`~workbench.errors.DataError` or
-        :class:`~workbench.errors.ModelError`: e.g. an input that never moves in the other trials).
+        :class:`~workbench.errors.ModelError`: e.g. an input that never moves in the other trials), or what its test
+        trial does not do.
+    part : str
+        ``"training"`` or ``"test"``: the part of the fold that left it out.
     """
 
     index: int
@@ -80,11 +108,31 @@ class LeftOutFold:
     trial: str
     label: str
     reason: str
+    part: str = "training"
 
     def sentence(self) -> str:
-        """"Fold 2 of 5 (testing seg3) left out: …" — which fold, and why its training trials could not be fitted."""
-        return (f"Fold {self.index} of {self.total} (testing {self.trial}) left out: its training trials could not "
-                f"be fitted — {self.reason}")
+        """"Fold 2 of 5 (testing seg3) left out: …" — which fold, and why: its training trials could not be fitted,
+        or its test trial says nothing."""
+        why = ("its test trial says nothing about the pilot" if self.part == "test"
+               else "its training trials could not be fitted")
+        return f"Fold {self.index} of {self.total} (testing {self.trial}) left out: {why} — {self.reason}"
+
+    @classmethod
+    def still(cls, demos: DemonstrationSet, index: int, unlabeled: str) -> LeftOutFold | None:
+        """Trial ``index``'s fold left out before any fit where its test trial never moves
+        (:func:`still_test_trial`), with ``unlabeled`` as the label of a trial that has none; else ``None``."""
+        reason = still_test_trial(demos, index)
+        d = demos[index]
+        label = unlabeled if d.label is None else str(d.label)
+        return cls(index + 1, len(demos), d.id, label, reason, part="test") if reason else None
+
+    @staticmethod
+    def none_scored(left_out: Sequence[LeftOutFold]) -> str:
+        """Why a leave-one-out study has no fold to score, each fold named with its cause, in one line: "could be
+        fitted" where every training part was refused, "could be scored" where a still test trial was left out."""
+        what = "fitted" if all(f.part == "training" for f in left_out) else "scored"  # a still test is never fitted
+        return (f"no fold of the {len(left_out)} could be {what}: "
+                + "; ".join(f"fold {f.index} (testing {f.trial}): {f.reason}" for f in left_out))
 
 
 def too_few_folds(left_out: Sequence[LeftOutFold], test: Mapping[str, DemonstrationSet]) -> list[str]:

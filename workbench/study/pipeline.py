@@ -353,8 +353,8 @@ def run_study(
             t0 = time.perf_counter()
             split_parts = jobs.run(executor, progress)
             timings["method-level splits"] = time.perf_counter() - t0
-        by_label = dict(zip(splits, parts, strict=True))
-        method_level, splits_left_out = jobs.rows(split_parts, by_label), jobs.left_out(split_parts, by_label)
+        method_level, splits_left_out = (f(split_parts, dict(zip(splits, parts, strict=True)))
+                                          for f in (jobs.rows, jobs.left_out))
     statistics = _statistics(table, demos, plant, n_steps, stride, seed, method_level)
     t0 = time.perf_counter()
     ratio_comparison = _ratio_comparison(objectives)
@@ -363,8 +363,7 @@ def run_study(
     calibration = pd.concat(cov_parts, ignore_index=True) if cov_parts else None
     return StudyResult(
         demos=demos, plant=plant, train=train, test=test, models=models, baselines=baselines, table=table,
-        coverage=_coverage_table(calibration) if calibration is not None else None,
-        calibration=calibration,
+        coverage=_coverage_table(calibration) if calibration is not None else None, calibration=calibration,
         efficiency=pd.concat(eff_parts, ignore_index=True) if eff_parts else None,
         stats_text=statistics.text() + _settings_text(models), n_steps=n_steps, samples=samples, seed=seed,
         timings=timings, failures=failures, objectives=objectives, ratio_comparison=ratio_comparison,
@@ -576,15 +575,15 @@ def run_loso(
     its label altogether (a mean over other folds would not be comparable) and named in ``failures``. One-step
     coverage is the mean over the folds; there is no data-efficiency curve. The folds are the method-level
     comparison of the headline and the verdicts (:func:`~workbench.study.method_level.fold_differences`: every
-    method refitted without each trial). ``models`` and ``baselines`` are,
-    per label, those of its last fold; ``train`` is every trial of a label (each trains in all folds but its own).
+    method refitted without each trial). ``models`` and ``baselines`` are, per label, those of its last fold;
+    ``train`` is every trial of a label (each trains in all folds but its own).
 
     A fold whose training part cannot be fitted (a :class:`~workbench.errors.DataError` or
     :class:`~workbench.errors.ModelError` there: e.g. the plant's identification refuses because an input never
     moves in the other trials) is left out with its cause (``folds_left_out``, said first in
     :meth:`StudyResult.verdicts`) and the other folds are scored; below
     :data:`~workbench.study.method_level.MIN_SPLITS` scored folds a strategy's methods are not compared, in words.
-    Any other exception is a bug and propagates.
+    Any other exception is a bug and propagates. A test trial that never moves leaves its fold out too, unfitted.
 
     Raises
     ------
@@ -599,23 +598,23 @@ def run_loso(
         what = f"fitting and comparing, leave-one-segment-out ({len(demos)} folds)"
         bar = p.add_task(what, total=len(demos)) if p is not None else None
         for i, d in enumerate(demos):
-            try:
-                res = run_study(demos, plant, n_steps=n_steps, n_components=n_components, samples=samples,
-                                efficiency=None, seed=seed, executor=executor, test_ids=[d.id], stride_s=stride_s,
-                                task=task)
-            except (DataError, ModelError) as exc:
-                # a refusal of this fold's training part (a plant the other trials do not identify: an input that
-                # never moves without this trial, say) is this fold's, not the study's: the other folds are scored
-                # and the fold is named with its cause; anything else is a bug and stays loud
-                left_out.append(LeftOutFold(i + 1, len(demos), d.id,
-                                            UNLABELED if d.label is None else str(d.label), " ".join(str(exc).split())))
+            if (still := LeftOutFold.still(demos, i, UNLABELED)) is not None:  # its scores would compare nothing
+                left_out.append(still)
             else:
-                folds.append((d.id, res))
+                try:
+                    res = run_study(demos, plant, n_steps=n_steps, n_components=n_components, samples=samples,
+                                    efficiency=None, seed=seed, executor=executor, test_ids=[d.id],
+                                    stride_s=stride_s, task=task)
+                except (DataError, ModelError) as exc:
+                    # this fold's training part refused (e.g. no plant): the others are scored; any other error: a bug
+                    left_out.append(LeftOutFold(i + 1, len(demos), d.id, UNLABELED if d.label is None
+                                                else str(d.label), " ".join(str(exc).split())))
+                else:
+                    folds.append((d.id, res))
             if p is not None:
                 p.advance(bar)
     if not folds:
-        raise ModelError(f"no fold of the {len(demos)} could be fitted: "
-                         + "; ".join(f"fold {f.index} (testing {f.trial}): {f.reason}" for f in left_out))
+        raise ModelError(LeftOutFold.none_scored(left_out))
     failures: dict[str, dict[str, str]] = {}
     for trial, res in folds:
         for label, by_method in res.failures.items():
@@ -771,8 +770,7 @@ def verdicts(paired: Sequence[Any], metric: str) -> list[str]:
     labels = list(dict.fromkeys(d.label for d in paired if d.metric == metric))
     labels = [lb for lb in labels if lb != ALL_LABELS] or labels
     for label in labels:
-        # a row with no interval (too few test trials or splits) shows nothing either way: it is "not shown", in
-        # its own words (its sentence), never "worse by" a number
+        # a row without an interval (too few test trials or splits) is "not shown" in its own words, never a number
         rows = [d for d in paired if d.label == label and d.metric == metric and d.baseline in FLOOR_METHODS
                 and not (d.has_interval and d.lo > 0)]
         if not rows:

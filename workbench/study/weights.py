@@ -236,7 +236,8 @@ class PartFit:
                 way = "opposite in sign to"
             else:
                 way = "stiffer than" if abs(k) > abs(k0) else "softer than"
-            words.append(f"{where} {k:.3g} [{a:.3g}, {b:.3g}], {way} its {k0:.3g}")
+            d = _distinct_digits((k, k0), (a, b))
+            words.append(f"{where} {k:.{d}g} [{a:.{d}g}, {b:.{d}g}], {way} its {k0:.{d}g}")
         if not words:
             return ""
         if self.bias_corrected:
@@ -388,6 +389,16 @@ def weight_ratios(gains, plant, ci: float = 95.0) -> WeightRatios:
     return WeightRatios(intervals=tuple(intervals), Q_diag=q, R_diag=r, forward_gain_error=err, gains=gains,
                         ci=float(ci), fits=tuple(fits), _parts=tuple(fitted), _index=tuple(index),
                         _entries=tuple(entries))
+
+
+def _distinct_digits(*pairs: tuple[float, float], least: int = 3, most: int = 8) -> int:
+    """The fewest significant digits (at least ``least``) at which each pair prints as two different numbers: a
+    mismatch shown at 3 digits as "−0.0947 [−0.0947, −0.0947], softer than its −0.0947" reads as a contradiction,
+    where the entry differs from the closest cost's in its fourth digit."""
+    for d in range(least, most + 1):
+        if all(f"{x:.{d}g}" != f"{y:.{d}g}" for x, y in pairs if x != y):
+            return d
+    return most
 
 
 def _stabilizing(part, K_part: np.ndarray) -> np.ndarray:
