@@ -36,15 +36,23 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 RESULTS = ROOT / "bench" / "coverage_method_level.jsonl"
 SEED0 = 9000  # this study's seeds; the acceptance test's start at 7000
+# the study that chose the interval's construction (round 8) used --seed0 11000: neither this study's nor the test's
 N_TRIALS, TEST_SIZE = 30, 0.2
 J_CHOICES = (4, 6, 8, 10, 12, 16)
 FACTORS = (1.0, 2.0, 4.0)  # multiples of Nadeau & Bengio's overlap term weighed beside it
 
 
-def _seed(family: str, k: int) -> int:
+def _run(name: str, r: dict):
+    from workbench.study.coverage import CoverageRun
+
+    return CoverageRun(name, r["seed"], r["n_train"], r["n_test"], tuple(r["changes"]), tuple(r["fell_back"]),
+                       tuple(r["self_changes"]), tuple(r.get("margins", ())))
+
+
+def _seed(family: str, k: int, seed0: int = SEED0) -> int:
     from workbench.sim.families import FAMILIES
 
-    return SEED0 + 100_000 * list(FAMILIES).index(family) + k
+    return seed0 + 100_000 * list(FAMILIES).index(family) + k
 
 
 def _records(path: Path) -> list[dict]:
@@ -58,7 +66,8 @@ def _append(path: Path, record: dict) -> None:
         f.write(json.dumps(record) + "\n")
 
 
-def compute(families: list[str], runs: int, truth_sets: int, pool: int, splits: int, path: Path) -> None:
+def compute(families: list[str], runs: int, truth_sets: int, pool: int, splits: int, path: Path,
+            seed0: int = SEED0, self_comparison: bool = True, first_run: int = 0) -> None:
     from workbench.plant.system import planar_quadrotor
     from workbench.sim.families import family
     from workbench.study.coverage import simulated_run, true_difference
@@ -71,26 +80,30 @@ def compute(families: list[str], runs: int, truth_sets: int, pool: int, splits: 
         have_truth = {r["set"] for r in done if r["kind"] == "truth" and r["family"] == name}
         have_runs = {r["run"] for r in done
                      if r["kind"] == "run" and r["family"] == name and len(r["changes"]) >= splits}
+        if any(r["seed"] != _seed(name, r["run"], seed0) for r in done if r["kind"] == "run" and r["family"] == name):
+            raise SystemExit(f"{path}: its {name} runs were made with other seeds than --seed0 {seed0}: use a file "
+                             "of their own")
         pool_set = None
         for t in range(truth_sets):
             if t in have_truth:
                 continue
-            pool_set = pool_set or sim(pool, _seed(name, 99_999))
+            pool_set = pool_set or sim(pool, _seed(name, 99_999, seed0))
             t0 = time.perf_counter()
-            c, fell = true_difference(sim, _seed(name, 50_000 + t), n_train, pool_set, plant)
+            c, fell = true_difference(sim, _seed(name, 50_000 + t, seed0), n_train, pool_set, plant)
             _append(path, {"kind": "truth", "family": name, "set": t, "n_train": n_train, "pool": pool, "change": c,
                            "fell_back": fell, "seconds": time.perf_counter() - t0})
             print(f"{name} truth set {t}: {100 * c:+.1f} %{' (fell back)' if fell else ''} "
                   f"[{time.perf_counter() - t0:.0f} s]", flush=True)
-        for r in range(runs):
+        for r in range(first_run, runs):
             if r in have_runs:
                 continue
             t0 = time.perf_counter()
-            run = simulated_run(sim, name, _seed(name, r), plant, n_trials=N_TRIALS, test_size=TEST_SIZE,
-                                splits=splits)
+            run = simulated_run(sim, name, _seed(name, r, seed0), plant, n_trials=N_TRIALS, test_size=TEST_SIZE,
+                                splits=splits, self_comparison=self_comparison)
             _append(path, {"kind": "run", "family": name, "run": r, "seed": run.seed, "n_train": run.n_train,
                            "n_test": run.n_test, "changes": list(run.changes), "fell_back": list(run.fell_back),
-                           "self_changes": list(run.self_changes), "seconds": time.perf_counter() - t0})
+                           "self_changes": list(run.self_changes), "margins": list(run.margins),
+                           "seconds": time.perf_counter() - t0})
             print(f"{name} run {r}: mean change {100 * np.nanmean(run.changes):+.1f} %, fell back in "
                   f"{sum(run.fell_back)}/{len(run.fell_back)} splits [{time.perf_counter() - t0:.0f} s]", flush=True)
 
@@ -98,7 +111,7 @@ def compute(families: list[str], runs: int, truth_sets: int, pool: int, splits: 
 def summary(path: Path, ci: float = 95.0) -> str:
     from scipy import stats as sps
 
-    from workbench.study.coverage import CoverageRun, run_interval
+    from workbench.study.coverage import run_interval
 
     rec = _records(path)
     lines = ["| pilot | truth [%] (± MC SE, sets; fell back) | runs | J | covers | words: fell back in every split | "
@@ -107,8 +120,7 @@ def summary(path: Path, ci: float = 95.0) -> str:
     for name in dict.fromkeys(r["family"] for r in rec):
         truth = [r["change"] for r in rec if r["kind"] == "truth" and r["family"] == name]
         fells = sum(r["fell_back"] for r in rec if r["kind"] == "truth" and r["family"] == name)
-        runs = [CoverageRun(name, r["seed"], r["n_train"], r["n_test"], tuple(r["changes"]), tuple(r["fell_back"]),
-                            tuple(r["self_changes"])) for r in rec if r["kind"] == "run" and r["family"] == name]
+        runs = [_run(name, r) for r in rec if r["kind"] == "run" and r["family"] == name]
         if not truth or not runs:
             continue
         mu, se = float(np.mean(truth)), float(np.std(truth, ddof=1) / math.sqrt(len(truth))) if len(truth) > 1 else 0
@@ -126,23 +138,27 @@ def summary(path: Path, ci: float = 95.0) -> str:
             oracle = 2 * z * 100 * float(np.std(means, ddof=1)) if len(runs) > 2 else math.nan
             selfs = [run_interval(r, J, ci, self_comparison=True) for r in runs if len(r.self_changes) >= J]
             shown = sum(lo > 0 or hi < 0 for _, lo, hi in selfs)
+            band = sps.binomtest(covers, len(runs)).proportion_ci()
             lines.append(f"| {name} | {100 * mu:+.1f} (± {100 * se:.1f}, {len(truth)}; {fells}) | {len(runs)} | {J} | "
-                         f"{covers}/{len(runs)} | {sum(same)} | {zero} | "
+                         f"{covers}/{len(runs)} ({band.low:.2f}-{band.high:.2f}) | {sum(same)} | {zero} | "
                          f"{np.median(widths) if widths else math.nan:.1f} | {oracle:.1f} | {shown}/{len(selfs)} |")
-    lines += ["", "Coverage with the overlap term n_test/n_train of the corrected resampled t multiplied by a factor "
-              "(1: Nadeau & Bengio's), and the median width [points]:", "",
-              "| pilot | J | " + " | ".join(f"×{f:g}" for f in FACTORS) + " |", "|---|---|" + "---|" * len(FACTORS)]
+    # the constructions weighed: Nadeau & Bengio's alone (×1), with the fallback's decision term (the default), and
+    # their overlap term multiplied by a factor
+    kinds = [("N&B", 1.0, False), ("N&B + decision", 1.0, True), *((f"×{f:g}", f, False) for f in FACTORS[1:])]
+    lines += ["", "Coverage of each construction (N&B: Nadeau & Bengio's corrected resampled t alone; + decision: with "
+              "the fallback's decision term, `decision_variance`; ×f: N&B's overlap term n_test/n_train multiplied by "
+              "f), and the median width [points]:", "",
+              "| pilot | J | " + " | ".join(k for k, _, _ in kinds) + " |", "|---|---|" + "---|" * len(kinds)]
     for name in dict.fromkeys(r["family"] for r in rec):
         truth = [r["change"] for r in rec if r["kind"] == "truth" and r["family"] == name]
-        runs = [CoverageRun(name, r["seed"], r["n_train"], r["n_test"], tuple(r["changes"]), tuple(r["fell_back"]),
-                            tuple(r["self_changes"])) for r in rec if r["kind"] == "run" and r["family"] == name]
+        runs = [_run(name, r) for r in rec if r["kind"] == "run" and r["family"] == name]
         if len(truth) < 2 or not runs:
             continue
         mu, se = float(np.mean(truth)), float(np.std(truth, ddof=1) / math.sqrt(len(truth)))
         for J in (j for j in J_CHOICES if j <= min(len(r.changes) for r in runs)):
             cells = []
-            for f in FACTORS:
-                iv = [run_interval(r, J, ci, factor=f) for r in runs]
+            for _, f, decision in kinds:
+                iv = [run_interval(r, J, ci, factor=f, decision=decision) for r in runs]
                 same = [all(c == 0.0 for c in r.changes[:J]) for r in runs]
                 k = sum((abs(mu) <= 2 * se) if s else bool(lo <= mu <= hi) for (_, lo, hi), s in zip(iv, same,
                                                                                                     strict=True))
@@ -162,6 +178,12 @@ def main() -> None:
     p.add_argument("--pool", type=int, default=120)
     p.add_argument("--splits", type=int, default=12)
     p.add_argument("--file", type=Path, default=RESULTS)
+    p.add_argument("--seed0", type=int, default=SEED0, help="first seed (9000: this study's; 11000: the round-8 "
+                   "study that chose the interval's construction)")
+    p.add_argument("--first-run", type=int, default=0, help="start at this run (a second process on the same file "
+                   "takes the later runs; records are appended line by line)")
+    p.add_argument("--no-self", action="store_true", help="without the self-comparison (half the cost; its "
+                   "interval is Nadeau & Bengio's, which the decision term leaves alone)")
     p.add_argument("--summary", action="store_true", help="print the table from the file and stop")
     p.add_argument("--markdown", type=Path, help="also write the summary under this Markdown file's header")
     a = p.parse_args()
@@ -169,7 +191,7 @@ def main() -> None:
         from workbench.threads import limit_threads
 
         with limit_threads():
-            compute(a.families, a.runs, a.truth_sets, a.pool, a.splits, a.file)
+            compute(a.families, a.runs, a.truth_sets, a.pool, a.splits, a.file, a.seed0, not a.no_self, a.first_run)
     text = summary(a.file)
     print(text)
     if a.markdown:

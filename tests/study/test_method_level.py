@@ -176,6 +176,7 @@ def test_every_split_reruns_every_choice_on_its_own_training_part(monkeypatch):
         test_ids = {ds[int(i)].id for i in task[3]}
         assert cv and made and not (cv | made) & test_ids  # only the split's training trials
         assert set(part["trial"]) == test_ids and part["fell_back"].all()
+        assert (part["margin"] == 0.0 / 0.1).all()  # the split's own cross-validation margin, gain / gain_se
     scores = pd.concat(parts, ignore_index=True)
     (d,) = method_differences(scores, sizes, "rmse_position", "proposed", ["ioc_only"])
     # fallen back in every split: the same predictions as IOC-only, said in words, no interval (never [0, 0])
@@ -232,6 +233,106 @@ def test_the_studys_own_split_is_its_first_method_level_split_and_a_refit_gives_
     assert {whole[int(i)].id for i in tasks[0][3]} == test_ids
     fresh = split_scores(tasks[0]).groupby("method")["value"].mean()
     assert row.changes[0] == pytest.approx(1 - fresh["proposed"] / fresh["ioc_only"], rel=1e-9)
+
+
+def test_the_decision_term_is_the_fallbacks_flip_chance_times_its_gap():
+    """:func:`decision_variance`: π_j = Φ((FALLBACK_SE − z_j) / √2) averaged over the splits (1/2 where the fitted
+    check overruled a margin above the threshold), times (1 − π̂) and the kept splits' mean gap squared."""
+    from workbench.models.autoconfig import FALLBACK_SE
+    from workbench.study.method_level import decision_variance
+
+    gaps = [0.06, np.nan, 0.03, 0.05]
+    fell = [False, True, False, True]
+    z = [1.8, 0.2, 2.5, 1.6]  # the last fell back by the fitted check though its margin cleared the threshold
+    p_flip, var = decision_variance(gaps, fell, z)
+    pis = [sps.norm.cdf((FALLBACK_SE - 1.8) / np.sqrt(2)), sps.norm.cdf((FALLBACK_SE - 0.2) / np.sqrt(2)),
+           sps.norm.cdf((FALLBACK_SE - 2.5) / np.sqrt(2)), 0.5]
+    assert p_flip == pytest.approx(np.mean(pis))
+    assert var == pytest.approx(np.mean(pis) * (1 - np.mean(pis)) * np.mean([0.06, 0.03]) ** 2)
+    # no margin (a fixed G): Nadeau & Bengio's variance alone; far from the threshold: almost nothing added
+    assert decision_variance(gaps, fell, [np.nan] * 4)[1] == 0.0
+    assert decision_variance([0.4] * 4, [False] * 4, [12.0] * 4)[1] < 1e-6 * 0.4**2
+
+
+def test_a_sample_near_the_fallback_threshold_gets_the_decisions_spread_in_its_interval():
+    """A sample whose splits all kept the variability model, by margins just above the threshold: another sample
+    falls back about as often as not, so the interval must reach toward IOC-only's 0; Nadeau & Bengio's alone (the
+    previous main's) does not see the decision."""
+    from workbench.study.method_level import decision_variance
+
+    changes = np.array([0.082, 0.054, 0.048, 0.115, 0.043, 0.068])
+    rows = [("D", j, f"t{j}{t}", m, v, False, 1.3)
+            for j, c in enumerate(changes) for t in range(6) for m, v in (("proposed", 1.0 - c), ("ioc_only", 1.0))]
+    scores = pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value", "fell_back", "margin"])
+    (d,) = method_differences(scores, {"D": (24, 6)}, "rmse_position", "proposed", ["ioc_only"])
+    p_flip, extra = decision_variance(changes, [False] * 6, [1.3] * 6)
+    _, lo0, hi0, _, se0, _ = corrected_t(changes, 24, 6)
+    assert d.p_flip == pytest.approx(p_flip) and d.decision_var == pytest.approx(extra) and extra > 0
+    assert d.se == pytest.approx(np.sqrt(se0**2 + extra))
+    assert d.lo < lo0 and d.hi > hi0 and d.hi - d.lo > 1.5 * (hi0 - lo0)
+    # as far from the threshold, the decision's spread is nothing: the same interval as Nadeau & Bengio's
+    (far,) = method_differences(scores.assign(margin=40.0), {"D": (24, 6)}, "rmse_position", "proposed",
+                                ["ioc_only"])
+    assert far.lo == pytest.approx(lo0) and far.hi == pytest.approx(hi0)
+
+
+def _toy_sample(rng, m_z: float, delta: float, J: int = 6) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A procedure whose fallback flips between samples: the sample's margin z ~ N(m_z, 1), its splits' margins
+    that plus a little (80 % of their training trials shared); a split keeps the variability model where its margin
+    clears the threshold, then changes by ``delta`` plus the sample's and the split's noise, else by 0."""
+    from workbench.models.autoconfig import FALLBACK_SE
+
+    z = rng.normal(m_z, 1.0) + 0.3 * rng.standard_normal(J)
+    kept = z > FALLBACK_SE
+    change = np.where(kept, delta + 0.015 * rng.standard_normal() + 0.015 * rng.standard_normal(J), 0.0)
+    return change, ~kept, z
+
+
+def test_the_decision_term_covers_a_procedure_whose_fallback_flips_where_nadeau_bengio_does_not():
+    """The delayed pilot's failure in miniature (every number computed here): the truth is the mean change over
+    many samples; the samples that kept the variability model in every split miss it under Nadeau & Bengio's
+    variance, and the decision term brings coverage to the nominal level. The words rows (every split fell back)
+    are left out, as the study counts them apart."""
+    from workbench.study.method_level import decision_variance
+
+    rng = np.random.default_rng(40)
+    m_z, delta = 0.6, 0.05
+    truth = float(np.mean([_toy_sample(rng, m_z, delta)[0].mean() for _ in range(20000)]))
+    hits = {"nb": [], "decision": []}
+    for _ in range(400):
+        c, fell, z = _toy_sample(rng, m_z, delta)
+        if fell.all():
+            continue
+        for kind in hits:
+            extra = decision_variance(c, fell, z)[1] if kind == "decision" else 0.0
+            _, lo, hi, *_ = corrected_t(c, 24, 6, extra_var=extra)
+            hits[kind].append(lo <= truth <= hi)
+    nb, dec = float(np.mean(hits["nb"])), float(np.mean(hits["decision"]))
+    assert len(hits["nb"]) > 100
+    assert nb < 0.85 and dec >= 0.92, (nb, dec, truth)
+
+
+def test_the_pooled_row_adds_each_strategys_decision_term_by_its_share_squared_and_the_text_says_so():
+    """Two strategies, one near its fallback threshold: the pooled change is Σ w_l c_l (w_l the strategy's share of
+    the baseline's error), so its decision variance is Σ w_l² Var_l; the study's text names the term with its
+    largest chance of another decision."""
+    from workbench.study.method_level import decision_variance
+
+    rng = np.random.default_rng(5)
+    scores = _scores(rng, labels=("A", "B")).replace({"baseline": "ioc_only"})
+    scores["fell_back"] = False
+    scores["margin"] = np.where(scores["label"] == "A", 1.2, 30.0)
+    rows = method_differences(scores, {"A": (24, 4), "B": (24, 4)}, "rmse_position", "proposed", ["ioc_only"])
+    a, b, pooled = rows
+    assert b.decision_var == pytest.approx(0.0, abs=1e-12) and a.decision_var > 0
+    assert a.decision_var == pytest.approx(decision_variance(a.changes, [False] * 6, [1.2] * 6)[1])
+    sums = scores[scores["method"] == "ioc_only"].groupby(["split", "label"])["value"].sum().unstack()
+    w_a = float((sums["A"] / sums.sum(axis=1)).mean())
+    assert pooled.decision_var == pytest.approx(w_a**2 * a.decision_var, rel=1e-9)
+    table = _trials(rng, 6, labels=("A", "B"))
+    text = study_statistics(table, "rmse_position", "m", {}, windows_sentence(table, 60, None, 0.05), n_boot=300,
+                            method_level=rows).text()
+    assert f"decides it otherwise (up to {100 * a.p_flip:.0f} %" in text
 
 
 @pytest.mark.parametrize("held", [3, 0])  # seed 1: trial 0 is a test trial of the study's own split, 3 is not

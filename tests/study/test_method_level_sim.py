@@ -9,7 +9,9 @@ seed that chose a default judges it.
 What is checked, each a question of its own:
 
 * *Do the 95 % intervals cover?* The default method — cross-validated G and regularizer, the fallback to K̂x, all
-  rerun inside every split (:class:`~workbench.study.method_level.SplitPlan`) — against IOC-only. The truth is the
+  rerun inside every split (:class:`~workbench.study.method_level.SplitPlan`) — against IOC-only, with the interval
+  ``evaluate`` gives: the corrected resampled t and the fallback's decision term
+  (:func:`~workbench.study.method_level.decision_variance`, chosen on seeds 11000 on). The truth is the
   mean over ``TRUTH_SETS`` fresh training sets of 24 trials of the same method's difference, scored on a pool of
   ``POOL`` fresh trials (:func:`workbench.study.coverage.true_difference`), with its Monte Carlo standard error. A
   run whose proposed method fell back in every split says "the same predictions" in words; it covers where the

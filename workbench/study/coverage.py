@@ -7,8 +7,9 @@ exactly as a split runs it (:class:`~workbench.study.method_level.SplitPlan`: th
 fallback included) and scored on one large pool of fresh trials (:func:`true_difference`). A run
 (:func:`simulated_run`) draws one sample of ``n_trials`` trials, splits it ``splits`` times as ``evaluate`` does, and
 keeps every split's change, so intervals from the first ``J`` splits can be judged for several ``J`` from one run
-(:func:`run_interval`). Beside it, the self-comparison: the proposed method against itself, each copy trained on its
-own half of every split's training part — the true difference is 0 by symmetry.
+(:func:`run_interval`, as ``evaluate`` makes it: the corrected resampled t with the fallback's decision term, each
+split's cross-validation margin kept for it). Beside it, the self-comparison: the proposed method against itself,
+each copy trained on its own half of every split's training part — the true difference is 0 by symmetry.
 
 ``bench/coverage_method_level.py`` runs the study that chose :data:`~workbench.study.method_level.SPLITS`;
 ``tests/study/test_method_level_sim.py`` judges the default method with other seeds.
@@ -29,6 +30,7 @@ from workbench.study.method_level import (
     SplitPlan,
     _refit,
     corrected_t,
+    decision_variance,
     method_differences,
     split_scores,
     split_tasks,
@@ -59,6 +61,10 @@ class CoverageRun:
         Whether each split's proposed model fell back to ``K̂x``.
     self_changes : tuple of float
         The self-comparison's change of each split (empty without it).
+    margins : tuple of float
+        Each split's fallback margin, its cross-validation's ``gain / gain_se``
+        (:func:`~workbench.study.method_level.decision_variance`; NaN where it did not choose; empty in records made
+        before round 8).
     """
 
     family: str
@@ -68,6 +74,7 @@ class CoverageRun:
     changes: tuple[float, ...]
     fell_back: tuple[bool, ...]
     self_changes: tuple[float, ...] = field(default=())
+    margins: tuple[float, ...] = field(default=())
 
 
 def _pool_means(fitted: dict, pool) -> dict[str, float]:
@@ -106,6 +113,7 @@ def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, tes
     changes = tuple(float(1.0 - per.loc[j, "proposed"] / per.loc[j, BASELINE]) if j in per.index else float("nan")
                     for j in range(len(tasks)))
     fell = tuple(bool(p["fell_back"].any()) if len(p) else False for p in parts)
+    margins = tuple(float(p["margin"].iloc[0]) if len(p) else float("nan") for p in parts)
     selfs: list[float] = []
     if self_comparison:
         rng = np.random.default_rng([seed, 40])
@@ -124,20 +132,26 @@ def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, tes
                     means.append(_pool_means(fitted, test)["proposed"])
             selfs.append(1.0 - means[0] / means[1])
     n_train, n_test = sizes[family]
-    return CoverageRun(family, seed, n_train, n_test, changes, fell, tuple(selfs))
+    return CoverageRun(family, seed, n_train, n_test, changes, fell, tuple(selfs), margins)
 
 
 def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_comparison: bool = False,
-                 factor: float = 1.0) -> tuple[float, float, float]:
-    """The corrected resampled t interval of a run from its first ``J`` splits (all by default): (mean, lo, hi);
-    NaN bounds where the splits did not vary. ``self_comparison``: the self-comparison's interval (each copy trained
-    on half the split's training part). ``factor``: the overlap term ``n_test/n_train`` multiplied by it (1: Nadeau &
-    Bengio's), for a study that weighs other corrections."""
+                 factor: float = 1.0, decision: bool = True) -> tuple[float, float, float]:
+    """The interval of a run from its first ``J`` splits (all by default), as ``evaluate`` gives it: (mean, lo, hi);
+    NaN bounds where the splits did not vary. The corrected resampled t with the fallback's decision term
+    (:func:`~workbench.study.method_level.decision_variance`; ``decision=False``: Nadeau & Bengio's alone).
+    ``self_comparison``: the self-comparison's interval (each copy trained on half the split's training part; no
+    decision term: both copies decide alike in law). ``factor``: the overlap term ``n_test/n_train`` multiplied by it
+    (1: Nadeau & Bengio's), for a study that weighs other corrections."""
     c = list(run.self_changes if self_comparison else run.changes)[: J or None]
     n_train = run.n_train // 2 if self_comparison else run.n_train
+    extra = 0.0
+    if decision and not self_comparison and run.margins:
+        # against IOC-only a split's change is what keeping the variability model changed
+        extra = decision_variance(c, run.fell_back[: len(c)], run.margins[: len(c)])[1]
     # the coverage study reads the statistic itself at every J it weighs, below min_units too
     mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1),
-                                   least=MIN_SPLITS)
+                                   least=MIN_SPLITS, extra_var=extra)
     return mean, lo, hi
 
 
@@ -145,7 +159,8 @@ def method_rows(run: CoverageRun, J: int | None = None) -> Sequence:
     """The run's first ``J`` splits as :class:`~workbench.study.method_level.MethodDifference` rows (what
     ``evaluate`` would print): for checking that no row has an interval of zero width."""
     k = len(run.changes) if J is None else J
-    rows = [(run.family, j, f"t{j}", m, v, run.fell_back[j])
+    margins = run.margins or (float("nan"),) * len(run.changes)
+    rows = [(run.family, j, f"t{j}", m, v, run.fell_back[j], margins[j])
             for j in range(k) for m, v in (("proposed", 1.0 - run.changes[j]), (BASELINE, 1.0))]
-    scores = pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value", "fell_back"])
+    scores = pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value", "fell_back", "margin"])
     return method_differences(scores, {run.family: (run.n_train, run.n_test)}, METRIC, "proposed", [BASELINE])

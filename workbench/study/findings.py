@@ -103,7 +103,7 @@ class StudyStatistics:
                 "from the corrected resampled t (Nadeau & Bengio 2003: the spread of the splits inflated by "
                 "n_test / n_train for their overlapping training sets, t on splits − 1 df"
                 + ("; for leave-one-out folds a heuristic, as Bouckaert & Frank 2004 use it for k-fold "
-                   "cross-validation" if m0.loo else "") + "); p from the same t, "
+                   "cross-validation" if m0.loo else "") + ")" + self._decision_clause(ml) + "; p from the same t, "
                 f"Holm-corrected over the {k} row{'s' if k != 1 else ''} the verdicts use. {refits}")
         if self.paired:
             first = self.paired[0]
@@ -203,6 +203,18 @@ class StudyStatistics:
             out.append(("strategies differ?", f"mixed model of the log error, random per {per}" if self.mixed.converged
                         else "not answered: the mixed model did not converge"))
         return out
+
+    @staticmethod
+    def _decision_clause(ml: Sequence[MethodDifference]) -> str:
+        """Where a row's variance holds the fallback's decision term (:func:`workbench.study.method_level.
+        decision_variance`): what it adds, with the largest chance of another decision among those rows."""
+        flips = [d.p_flip for d in ml if d.decision_var > 0 and d.p_flip == d.p_flip]
+        if not flips:
+            return ""
+        return (", and where the proposed model's fallback to K̂x was near its threshold, the chance that another "
+                f"sample of the operator decides it otherwise (up to {100 * max(flips):.0f} %, from each "
+                f"{'fold' if ml[0].loo else 'split'}'s cross-validation margin) times the difference that decision "
+                "makes, squared")
 
     def _too_few_sentence(self) -> str:
         """Where a row has no interval for want of units, why (once): the sign test's bound (:func:`min_units`)."""

@@ -24,6 +24,13 @@ so in words (:meth:`MethodDifference.sentence`), and no interval of zero width i
 nor any from fewer splits or folds than :func:`~workbench.study.paired.min_units` (6 at 95 %): the row then says
 "no interval" with the count, and gives no p.
 
+The fallback's own flip (issue 40, round 8). Nadeau & Bengio's ``n_test/n_train`` is the correlation of split
+estimates that share test trials; it does not see a decision that every split takes from nearly the same training
+trials. Where the default model's fallback is close to its threshold, another sample of the pilot decides otherwise,
+and one sample's splits — 80 % of their training trials shared, so mostly deciding alike — understate the spread
+between samples (the coverage study's delayed, dead-zone pilot: 33 of 40 at Nadeau & Bengio's variance). The
+decision term of :func:`decision_variance` adds that spread from the cross-validation's own margin in every split.
+
 Cost: the refits skip what a mean prediction does not use — the task objective, the Monte Carlo noise and its band
 calibration — and cap EM at 200 iterations (as the cross-validation's candidates do). Splits are independent tasks of
 the executor. Only the methods the verdicts judge the proposed model against are refitted (IOC-only and persistence);
@@ -51,8 +58,9 @@ from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.study.divergence import scored
 from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence, min_units, too_few_words
 
-__all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "LeftOutSplit", "corrected_t", "split_scores",
-           "split_tasks", "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS"]
+__all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "LeftOutSplit", "corrected_t",
+           "decision_variance", "split_scores", "split_tasks", "method_differences", "fold_differences", "SPLITS",
+           "LOO_FOLDS", "MIN_SPLITS", "FALLBACK_METHOD"]
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
@@ -69,6 +77,8 @@ SPLITS = 6
 MIN_SPLITS = 2
 #: The design of a leave-one-out study's method-level rows (:attr:`MethodDifference.design`).
 LOO_FOLDS = "leave-one-out folds"
+#: The method a fallen-back proposed model predicts as (``K̂x``, the task objective alone).
+FALLBACK_METHOD = "ioc_only"
 #: What a split says of a method whose rollout diverged on its test part (:class:`LeftOutSplit`).
 _DIVERGED = "diverged on its test trials (its horizon errors are not numbers to compare)"
 #: EM iterations of a split's refits (the likelihood has long flattened out; autoconfig's candidates use the same).
@@ -130,6 +140,11 @@ class MethodDifference:
     n_drawn: int = 0
     #: Why there is no interval ("" where there is one).
     no_interval: str = ""
+    #: The chance that the default model's fallback decides otherwise on another sample of the pilot, and the
+    #: variance that adds to the interval's (:func:`decision_variance`); NaN and 0 where no split chose by
+    #: cross-validation.
+    p_flip: float = float("nan")
+    decision_var: float = 0.0
 
     @property
     def loo(self) -> bool:
@@ -230,16 +245,18 @@ class LeftOutSplit:
 
 
 def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float = 95.0,
-                overlap: float | None = None, least: int | None = None
+                overlap: float | None = None, least: int | None = None, extra_var: float = 0.0
                 ) -> tuple[float, float, float, float, float, float]:
     """Mean, interval, two-sided p, standard error and df of the corrected resampled t (Nadeau & Bengio 2003).
 
-    ``var = (1/J + n_test/n_train) · s²`` of the ``J`` per-split values; t reference on ``J − 1`` df. Where every
-    split gave the same value there is no spread to make an interval from: the bounds and p are NaN (an interval of
-    zero width would claim a certainty the splits cannot give); so too with fewer than ``least`` splits (default
-    :func:`~workbench.study.paired.min_units` of ``ci``: 6 at 95 %, where the range of the splits' values holds their
-    median with probability ``1 − 2^(1−J)`` ≥ 95 %). ``overlap`` replaces ``n_test/n_train`` and ``least`` the
-    fewest splits (for a coverage study weighing other corrections, or fewer splits).
+    ``var = (1/J + n_test/n_train) · s² + extra_var`` of the ``J`` per-split values; t reference on ``J − 1`` df.
+    ``extra_var``: a variance between samples that the splits of one sample cannot show (the fallback decision's,
+    :func:`decision_variance`; 0: Nadeau & Bengio's). Where every split gave the same value there is no spread to
+    make an interval from: the bounds and p are NaN (an interval of zero width would claim a certainty the splits
+    cannot give); so too with fewer than ``least`` splits (default :func:`~workbench.study.paired.min_units` of
+    ``ci``: 6 at 95 %, where the range of the splits' values holds their median with probability ``1 − 2^(1−J)``
+    ≥ 95 %). ``overlap`` replaces ``n_test/n_train`` and ``least`` the fewest splits (for a coverage study weighing
+    other corrections, or fewer splits).
     """
     c = np.asarray(changes, dtype=float)
     c = c[np.isfinite(c)]
@@ -248,15 +265,70 @@ def corrected_t(changes: Sequence[float], n_train: int, n_test: int, ci: float =
         return (float(c.mean()) if J else np.nan), np.nan, np.nan, np.nan, np.nan, float(max(J - 1, 0))
     mean = float(c.mean())
     rho = n_test / max(n_train, 1) if overlap is None else float(overlap)
-    se = float(np.sqrt((1.0 / J + rho) * c.var(ddof=1)))
+    s2 = float(c.var(ddof=1))
     df = float(J - 1)
     # every split gave the same change: nothing varies, so no interval (never one of zero width); read off the values,
     # not s², which the mean's round-off leaves at 1e-35 rather than 0 for six equal values
-    if se == 0.0 or np.ptp(c) == 0.0:
+    if s2 == 0.0 or np.ptp(c) == 0.0:
         return mean, np.nan, np.nan, np.nan, 0.0, df
+    se = float(np.sqrt((1.0 / J + rho) * s2 + max(float(extra_var), 0.0)))
     half = float(sps.t.ppf(0.5 + ci / 200.0, df)) * se
     p = float(2.0 * sps.t.sf(abs(mean) / se, df))
     return mean, mean - half, mean + half, p, se, df
+
+
+def decision_variance(gaps: Sequence[float], fell_back: Sequence[bool],
+                      margins: Sequence[float]) -> tuple[float, float]:
+    """The chance that another sample's default model decides its fallback otherwise, and the variance between
+    samples that adds to the mean change over one sample's splits.
+
+    The default model keeps its variability model only where it beats ``K̂x`` on the held-out trials by more than
+    ``FALLBACK_SE`` standard errors (:mod:`workbench.models.autoconfig`): split ``j``'s margin is
+    ``z_j = gain_j / se_j``, an estimate with about unit spread between samples. Another sample's margin is then
+    predicted as ``z' ~ N(z_j, 2)`` (its own unit spread and ``z_j``'s), so it falls back with chance
+
+        π_j = Φ((FALLBACK_SE − z_j) / √2),
+
+    and ``π̂`` is their mean over the splits. A split that fell back with ``z_j`` above the threshold was decided by
+    the fitted check, whose margin is not measured: its ``π_j`` is 1/2. A sample's change is ``c_fb + (1 − P) Δ``
+    with ``P`` its share of fallen-back splits, ``c_fb`` the change of ``K̂x`` (0 against IOC-only) and ``Δ`` what
+    keeping the variability model changes; the splits of one sample share most of their training trials and so
+    mostly decide alike, and ``Var(P) ≤ π (1 − π)`` (equal when they all do), so the decision adds at most
+
+        Var_decision = π̂ (1 − π̂) Δ̂²,
+
+    ``Δ̂`` the mean gap of the splits that kept the variability model — the law of total variance over the
+    decision, at its bound. 0 where no split chose by cross-validation (margin NaN: a fixed G) or none kept the
+    variability model (against IOC-only every change is then 0: no interval).
+
+    Parameters
+    ----------
+    gaps, fell_back, margins : sequence
+        Per split: what keeping the variability model changed, ``(mean(K̂x) − mean(proposed)) / mean(baseline)``
+        (against IOC-only the split's change; NaN where not known), whether the proposed model fell back, and its
+        cross-validation's ``gain / gain_se`` (NaN where it did not choose).
+
+    Returns
+    -------
+    p_flip, var : float
+        ``π̂`` (NaN where no margin was measured) and ``Var_decision``.
+    """
+    from workbench.models.autoconfig import FALLBACK_SE
+
+    c = np.asarray(gaps, dtype=float)
+    fb = np.asarray(fell_back, dtype=bool)
+    z = np.asarray(margins, dtype=float)
+    ok = np.isfinite(z)
+    if not ok.any():
+        return float("nan"), 0.0
+    pi = sps.norm.cdf((FALLBACK_SE - z[ok]) / np.sqrt(2.0))
+    # fell back although the margin cleared the threshold: the fitted check decided, its margin unmeasured
+    pi = np.where(fb[ok] & (z[ok] > FALLBACK_SE), 0.5, pi)
+    p_flip = float(pi.mean())
+    kept = c[ok & ~fb & np.isfinite(c)]
+    if kept.size == 0:
+        return p_flip, 0.0
+    return p_flip, float(p_flip * (1.0 - p_flip) * kept.mean() ** 2)
 
 
 def _units(ds: DemonstrationSet) -> tuple[list[list[int]], str]:
@@ -303,7 +375,8 @@ class SplitPlan:
 def _refit(plan: SplitPlan, train: DemonstrationSet,
            refused: dict[str, str] | None = None) -> tuple[dict[str, Any], bool]:
     """Every method of ``plan`` fitted on ``train`` with every choice made again on it; whether the proposed model
-    fell back to ``K̂x``. A method that cannot be fitted is left out, its ModelError's message in ``refused``."""
+    fell back to ``K̂x`` (its cross-validation's margin: :func:`_margin`). A method that cannot be fitted is left
+    out, its ModelError's message in ``refused``."""
     from workbench.models.factory import make_models
     from workbench.models.fitting import shared_gains
 
@@ -333,12 +406,22 @@ def _refit(plan: SplitPlan, train: DemonstrationSet,
     return fitted, bool(auto is not None and auto.fallback)
 
 
+def _margin(model: Any) -> float:
+    """The fallback decision's margin of a fitted proposed model: its cross-validation's ``gain / gain_se``
+    (:func:`decision_variance`); NaN where it did not choose its settings or the margin was not scored."""
+    auto = getattr(model, "auto_", None) if model is not None and getattr(model, "chooses_settings", False) else None
+    if auto is None or not (np.isfinite(auto.gain) and np.isfinite(auto.gain_se)) or auto.gain_se <= 0:
+        return float("nan")
+    return float(auto.gain / auto.gain_se)
+
+
 def split_scores(task: tuple) -> pd.DataFrame:
     """One split (a task of the executor): rerun the method of its :class:`SplitPlan` on the training trials, score
     the test trials; rows ``label, split, trial, method, value, fell_back`` (value: the trial's mean ``metric`` over
-    its windows; fell_back: whether this split's proposed model fell back to ``K̂x``) with ``n_train`` / ``n_test``
-    in ``attrs``. A method that cannot be fitted, or whose rollout diverged on the test trials, has no rows; its
-    cause is in ``attrs["refused"]`` (method → one line; ``"plant"`` where the plant could not be identified)."""
+    its windows; fell_back: whether this split's proposed model fell back to ``K̂x``; margin: its cross-validation's
+    margin, :func:`_margin`) with ``n_train`` / ``n_test`` in ``attrs``. A method that cannot be fitted, or whose
+    rollout diverged on the test trials, has no rows; its cause is in ``attrs["refused"]`` (method → one line;
+    ``"plant"`` where the plant could not be identified)."""
     from workbench.study import evaluate as ev
 
     label, j, ds, test_idx, plan, metric, n_steps, stride = task
@@ -357,11 +440,12 @@ def split_scores(task: tuple) -> pd.DataFrame:
             refused = {k: f"could not be fitted on its training trials — {v}" for k, v in refused.items()}
         except ModelError as exc:  # the split's plant could not be identified from its training part
             fitted, fell_back, refused = {}, False, {"plant": " ".join(str(exc).split())}
-    cols = ["label", "split", "trial", "method", "value", "fell_back"]
+    cols = ["label", "split", "trial", "method", "value", "fell_back", "margin"]
     if not fitted:
         out = pd.DataFrame(columns=cols)
         out.attrs.update(n_train=len(train), n_test=len(test), refused=refused)
         return out
+    margin = _margin(fitted.get(plan.methods[0]))
     table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride,
                        inputs=False)
     kept = scored(table)  # a method whose rollout diverged in this split is not compared on it
@@ -370,7 +454,7 @@ def split_scores(task: tuple) -> pd.DataFrame:
             refused[name] = _DIVERGED
     table = kept[kept["metric"] == metric]
     per = table.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
-    out = per.assign(label=label, split=j, fell_back=fell_back)[cols]
+    out = per.assign(label=label, split=j, fell_back=fell_back, margin=margin)[cols]
     out.attrs.update(n_train=len(train), n_test=len(test), refused=refused)
     return out
 
@@ -405,16 +489,29 @@ def method_differences(
     means = scores.groupby(["label", "split", "method"], sort=False)["value"].agg(["sum", "count"])
     fell = (scores.groupby(["label", "split"], sort=False)["fell_back"].any() if "fell_back" in scores
             else pd.Series(dtype=bool))
+    margin = (scores.groupby(["label", "split"], sort=False)["margin"].first() if "margin" in scores
+              else pd.Series(dtype=float))
     methods = list(dict.fromkeys(scores["method"]))
     baselines = [b for b in (baselines or methods) if b != method and b in methods]
     labels = list(dict.fromkeys(scores["label"]))
     scopes = [(lb, [lb]) for lb in labels] + ([(ALL_LABELS, labels)] if len(labels) > 1 else [])
+
+    def mean_of(lb: str, j: int, m: str) -> float:
+        r = means.loc[(lb, j, m)]
+        return float(r["sum"] / r["count"])
+
     out = []
     for scope, members in scopes:
         n_train = sum(sizes[lb][0] for lb in members)
         n_test = sum(sizes[lb][1] for lb in members)
         for base in baselines:
             changes, n_fallback = [], 0
+            # per member label and split: its share of the baseline's error, what keeping the variability model
+            # changed (against the fallback's K̂x, scored as IOC-only), the fallback and its margin
+            weight: dict[str, list[float]] = {lb: [] for lb in members}
+            gaps: dict[str, list[float]] = {lb: [] for lb in members}
+            fells: dict[str, list[bool]] = {lb: [] for lb in members}
+            margins: dict[str, list[float]] = {lb: [] for lb in members}
             for j in sorted(set(scores["split"])):
                 try:
                     a = [means.loc[(lb, j, method)] for lb in members]
@@ -426,9 +523,23 @@ def method_differences(
                 changes.append(1.0 - ma / mb if mb > 0 else np.nan)
                 # the pooled row's split fell back where every strategy's did
                 n_fallback += bool(all(bool(fell.get((lb, j), False)) for lb in members))
+                total = sum(float(r["sum"]) for r in b)
+                for lb, rb in zip(members, b, strict=True):
+                    mbl = float(rb["sum"] / rb["count"])
+                    weight[lb].append(float(rb["sum"]) / total if total > 0 else np.nan)
+                    fb = bool(fell.get((lb, j), False))
+                    ioc = mean_of(lb, j, FALLBACK_METHOD) if (lb, j, FALLBACK_METHOD) in means.index else np.nan
+                    gaps[lb].append((ioc - mean_of(lb, j, method)) / mbl if mbl > 0 and not fb else np.nan)
+                    fells[lb].append(fb)
+                    margins[lb].append(float(margin.get((lb, j), np.nan)))
             if len(changes) < MIN_SPLITS:
                 continue
-            mean, lo, hi, p, se, df = corrected_t(changes, n_train, n_test, ci)
+            # the pooled change is Σ w_l c_l (w_l: the label's share of the baseline's error), the labels' samples
+            # independent: their decision variances add with weights w_l²
+            flips = {lb: decision_variance(gaps[lb], fells[lb], margins[lb]) for lb in members}
+            extra = float(sum(np.nanmean(weight[lb]) ** 2 * v for lb, (_, v) in flips.items()))
+            pis = [pi for pi, _ in flips.values() if pi == pi]
+            mean, lo, hi, p, se, df = corrected_t(changes, n_train, n_test, ci, extra_var=extra)
             what = {(units or {}).get(lb, "trials") for lb in members}
             where = "leave-one-out folds" if design == LOO_FOLDS else "splits"
             J = int(np.isfinite(changes).sum())
@@ -439,13 +550,15 @@ def method_differences(
                 lo=float(lo) if not why else None, hi=float(hi) if not why else None, p=p, se=se, df=df,
                 n_splits=len(changes), n_train=n_train, n_test=n_test, changes=tuple(float(c) for c in changes),
                 units="subjects" if what == {"subjects"} else "trials", ci=ci, design=design, n_fallback=n_fallback,
-                n_drawn=max((int((drawn or {}).get(lb, 0)) for lb in members), default=0), no_interval=why))
+                n_drawn=max((int((drawn or {}).get(lb, 0)) for lb in members), default=0), no_interval=why,
+                p_flip=float(np.mean(pis)) if pis else float("nan"), decision_var=extra))
     return out
 
 
 def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed", ci: float = 95.0,
                      fell_back: Mapping[str, bool] | None = None,
-                     n_train: Mapping[str, int] | None = None) -> list[MethodDifference]:
+                     n_train: Mapping[str, int] | None = None,
+                     margins: Mapping[str, float] | None = None) -> list[MethodDifference]:
     """Method-level rows from a leave-one-out study's own folds (no refit beyond the folds'): each fold refitted
     every method on all trials of its label but one and scored that one, so fold ``j`` is a split with
     ``n_train = n − 1`` and ``n_test = 1``, and ``c_j = 1 − method / baseline`` on its trial.
@@ -466,6 +579,9 @@ def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed",
     n_train : mapping label → int, optional
         Training trials per fold of each label; by default one fewer than its scored trials (every fold scored).
         Where a fold was left out (:func:`workbench.study.pipeline.run_loso`) its trial still trained the others.
+    margins : mapping trial → float, optional
+        The cross-validation's margin of the proposed model of the fold that left each trial out (:func:`_margin`;
+        the decision term of :func:`decision_variance`).
     """
     rows = table[table["metric"] == metric]
     if rows.empty:
@@ -475,8 +591,9 @@ def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed",
     for label, part in per.groupby("label", sort=False):
         n = int(part["trial"].nunique())
         scores = part.assign(split=part["trial"], fell_back=part["trial"].map(
-            lambda t: bool((fell_back or {}).get(str(t), False))))[
-            ["label", "split", "trial", "method", "value", "fell_back"]]
+            lambda t: bool((fell_back or {}).get(str(t), False))), margin=part["trial"].map(
+            lambda t: float((margins or {}).get(str(t), np.nan))))[
+            ["label", "split", "trial", "method", "value", "fell_back", "margin"]]
         size = (int(n_train[str(label)]) if n_train is not None and str(label) in n_train else n - 1, 1)
         out += method_differences(scores, {label: size}, metric, method, ci=ci, design=LOO_FOLDS)
     return out
@@ -609,10 +726,12 @@ class SplitJobs:
 
 def _own_scores(part: Any, label: str, metric: str, methods: Sequence[str]) -> pd.DataFrame:
     """The study's own split (``part``: its ``fitted`` models and comparison ``table``) as a split's rows
-    (:func:`split_scores`): each method's per-trial mean of ``metric``, and whether the proposed model fell back."""
+    (:func:`split_scores`): each method's per-trial mean of ``metric``, whether the proposed model fell back, and
+    its margin."""
     model = part.fitted.get("proposed")
     fell = bool(model is not None and model.chooses_settings and model.auto_ is not None and model.auto_.fallback)
     t = scored(part.table)
     rows = t[(t["metric"] == metric) & t["method"].isin(list(methods))]
     per = rows.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
-    return per.assign(label=label, split=0, fell_back=fell)[["label", "split", "trial", "method", "value", "fell_back"]]
+    return per.assign(label=label, split=0, fell_back=fell, margin=_margin(model))[
+        ["label", "split", "trial", "method", "value", "fell_back", "margin"]]

@@ -637,16 +637,18 @@ def run_loso(
     stride = _stride_steps(stride_s, demos.dt)
     # the folds refitted every method without their trial: they are the method-level comparison (no refit more)
     from workbench.study.evaluate import primary_metric
-    from workbench.study.method_level import fold_differences
+    from workbench.study.method_level import _margin, fold_differences
 
-    # whether each fold's proposed model fell back to K̂x, by the trial the fold left out
+    # whether each fold's proposed model fell back to K̂x, and its cross-validation's margin, by the trial the fold
+    # left out
     fell_back = {trial: bool(m.chooses_settings and m.auto_ is not None and m.auto_.fallback)
                  for trial, r in folds for m in r.models.values()}
+    margins = {trial: _margin(m) for trial, r in folds for m in r.models.values()}
     # every fold trains on all of its label's trials but one, also where another fold was left out
     n_train = {UNLABELED if lb is None else str(lb): len(demos if lb is None else demos.by_label(lb)) - 1
                for lb in (demos.labels or [None])}
     method_level = tuple(fold_differences(scored(table), primary_metric(last_plant), fell_back=fell_back,
-                                          n_train=n_train)) or None
+                                          n_train=n_train, margins=margins)) or None
     statistics = _statistics(table, demos, last_plant, n_steps, stride, seed, method_level)
     # per label the models of its last fold (a fold holds only the label of the trial it leaves out)
     models = {lb: m for _, r in folds for lb, m in r.models.items()}
