@@ -635,12 +635,10 @@ def run_loso(
     train = {lbl: test[lbl] for lbl in labels}
     last_plant = last.plant
     stride = _stride_steps(stride_s, demos.dt)
-    # the folds refitted every method without their trial: they are the method-level comparison (no refit more)
-    from workbench.study.evaluate import primary_metric
+    from workbench.study.evaluate import primary_metric  # the folds are the method-level comparison: no refit more
     from workbench.study.method_level import _margin, fold_differences
 
-    # whether each fold's proposed model fell back to K̂x, and its cross-validation's margin, by the trial the fold
-    # left out
+    # per trial a fold left out: whether its proposed model fell back to K̂x, and its cross-validation's margin
     fell_back = {trial: bool(m.chooses_settings and m.auto_ is not None and m.auto_.fallback)
                  for trial, r in folds for m in r.models.values()}
     margins = {trial: _margin(m) for trial, r in folds for m in r.models.values()}
