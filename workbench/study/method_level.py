@@ -56,7 +56,14 @@ from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning, ModelError
 from workbench.models.registry import METHOD_TITLES, REGISTRY
 from workbench.study.divergence import scored
-from workbench.study.paired import ALL_LABELS, MIN_SUBJECTS, difference_sentence, min_units, too_few_words
+from workbench.study.paired import (
+    ALL_LABELS,
+    MIN_SUBJECTS,
+    IntervalVerdict,
+    difference_sentence,
+    min_units,
+    too_few_words,
+)
 
 __all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "LeftOutSplit", "corrected_t",
            "decision_variance", "split_scores", "split_tasks", "method_differences", "fold_differences", "SPLITS",
@@ -86,7 +93,7 @@ _SPLIT_MAX_ITER = 200
 
 
 @dataclass(frozen=True)
-class MethodDifference:
+class MethodDifference(IntervalVerdict):
     """``method`` against ``baseline`` as methods: the mean over splits of ``1 − mean(method) / mean(baseline)``.
 
     Attributes
@@ -169,16 +176,6 @@ class MethodDifference:
     def splits_count(self) -> str:
         """"6", or "5 of 6" where drawn splits were left out (:class:`LeftOutSplit`)."""
         return f"{self.n_splits} of {self.n_drawn}" if self.n_drawn > self.n_splits else str(self.n_splits)
-
-    @property
-    def has_interval(self) -> bool:
-        """Whether the splits gave an interval (else ``no_interval`` says why)."""
-        return self.lo is not None and self.hi is not None
-
-    @property
-    def shown(self) -> bool:
-        """Whether there is an interval and it excludes zero."""
-        return self.has_interval and (self.lo > 0 or self.hi < 0)
 
     @property
     def identical(self) -> bool:

@@ -32,8 +32,8 @@ import scipy.stats
 from workbench.defaults import PAIRED_RESAMPLES
 from workbench.errors import DataError
 
-__all__ = ["PairedDifference", "difference_sentence", "MIN_SUBJECTS", "min_units", "too_few_words", "per_trial",
-           "paired_difference", "paired_differences", "ALL_LABELS"]
+__all__ = ["PairedDifference", "IntervalVerdict", "difference_sentence", "MIN_SUBJECTS", "min_units", "too_few_words",
+           "per_trial", "paired_difference", "paired_differences", "ALL_LABELS"]
 
 #: Fewest subjects whose resampling (a two-stage cluster bootstrap) gives usable intervals; with fewer, the
 #: trials are resampled within each subject.
@@ -65,8 +65,26 @@ def too_few_words(n: int, what: str, ci: float) -> str:
     return f"{n} {what}; {min_units(ci)} needed"
 
 
+class IntervalVerdict:
+    """What a difference with an optional interval (``lo``, ``hi``; ``None`` where the data give none) says: the
+    one rule shared by the paired and the method-level differences."""
+
+    lo: float | None
+    hi: float | None
+
+    @property
+    def has_interval(self) -> bool:
+        """Whether the data gave an interval (else ``no_interval`` says why)."""
+        return self.lo is not None and self.hi is not None
+
+    @property
+    def shown(self) -> bool:
+        """Whether there is an interval and it excludes zero, i.e. the data show a difference."""
+        return self.has_interval and (self.lo > 0 or self.hi < 0)
+
+
 @dataclass(frozen=True)
-class PairedDifference:
+class PairedDifference(IntervalVerdict):
     """``method`` against ``baseline`` on the same trials: the relative change of the mean per-trial ``metric``.
 
     Attributes
@@ -107,16 +125,6 @@ class PairedDifference:
     n_boot: int
     ci: float = 95.0
     no_interval: str = ""
-
-    @property
-    def has_interval(self) -> bool:
-        """Whether the data gave an interval (else ``no_interval`` says why)."""
-        return self.lo is not None and self.hi is not None
-
-    @property
-    def shown(self) -> bool:
-        """Whether there is an interval and it excludes zero, i.e. the data show a difference."""
-        return self.has_interval and (self.lo > 0 or self.hi < 0)
 
     def sentence(self) -> str:
         """The comparison in words, derived from the interval: "lower by 12 % [4 %, 19 %]", "higher by …", or
