@@ -127,7 +127,7 @@ def summary(path: Path, ci: float = 95.0) -> str:
         for J in (j for j in J_CHOICES if j <= min(len(r.changes) for r in runs)):
             iv = [run_interval(r, J, ci) for r in runs]
             # a run whose proposed method fell back in every split says so in words: right where the truth is 0
-            same = [all(c == 0.0 for c in r.changes[:J]) for r in runs]
+            same = [r.identical(J) for r in runs]
             means = np.array([m for m, _, _ in iv])
             covers = sum((abs(mu) <= 2 * se) if s else bool(lo <= mu <= hi)
                          for (_, lo, hi), s in zip(iv, same, strict=True))
@@ -159,7 +159,7 @@ def summary(path: Path, ci: float = 95.0) -> str:
             cells = []
             for _, f, decision in kinds:
                 iv = [run_interval(r, J, ci, factor=f, decision=decision) for r in runs]
-                same = [all(c == 0.0 for c in r.changes[:J]) for r in runs]
+                same = [r.identical(J) for r in runs]
                 k = sum((abs(mu) <= 2 * se) if s else bool(lo <= mu <= hi) for (_, lo, hi), s in zip(iv, same,
                                                                                                     strict=True))
                 w = [100 * (hi - lo) for _, lo, hi in iv if hi > lo]

@@ -387,3 +387,23 @@ def test_a_split_whose_refit_is_refused_is_named_with_its_cause_and_counted(monk
     legend = dict(res.statistics.legend())["method better?"]
     assert legend.startswith(f"{row.n_splits}–{other.n_splits} of {splits} refitted splits")
     assert f"| {row.splits_count()} ({row.n_train} / {row.n_test}) |" in res.statistics.text()
+
+
+def test_the_coverage_study_leaves_out_a_split_that_was_not_scored_as_evaluate_does():
+    # erratic seed 309000 (round 8): one split's refit was left out (NaN change), the other five fell back; the study
+    # judged the run by an interval of NaN ends (a miss) where evaluate prints "the same predictions" in words
+    from workbench.study.coverage import CoverageRun, method_rows, run_interval
+
+    nan = float("nan")
+    fell = CoverageRun("erratic", 1, 24, 6, (0.0, 0.0, 0.0, nan, 0.0, 0.0), (True, True, True, False, True, True),
+                       margins=(-1.5, 0.8, -1.7, nan, -0.3, -2.0))
+    assert fell.identical() and fell.scored()[0] == [0, 1, 2, 4, 5]
+    rng = np.random.default_rng(0)
+    changes = tuple(rng.normal(0.05, 0.02, 6))
+    whole = CoverageRun("x", 2, 24, 6, changes, (False,) * 6, margins=(3.0,) * 6)
+    holed = CoverageRun("x", 2, 24, 6, changes[:3] + (nan,) + changes[4:], (False,) * 6, margins=(3.0,) * 6)
+    dropped = CoverageRun("x", 2, 24, 6, changes[:3] + changes[4:], (False,) * 5, margins=(3.0,) * 5)
+    # a left-out split is as if it had not been drawn: the interval of the other five, finite
+    np.testing.assert_allclose(run_interval(holed), run_interval(dropped))
+    assert all(np.isfinite(run_interval(holed))) and run_interval(holed) != run_interval(whole)
+    assert len(method_rows(holed)) == 1 and method_rows(holed)[0].n_splits == 5

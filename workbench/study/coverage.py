@@ -76,6 +76,18 @@ class CoverageRun:
     self_changes: tuple[float, ...] = field(default=())
     margins: tuple[float, ...] = field(default=())
 
+    def scored(self, J: int | None = None) -> tuple[list[int], list[float]]:
+        """The first ``J`` splits (all by default) that were scored, and their changes: a split whose refit was
+        refused or whose rollout diverged has a NaN change and is left out, as ``evaluate`` leaves it out
+        (:class:`~workbench.study.method_level.LeftOutSplit`)."""
+        keep = [j for j, c in enumerate(self.changes[: J or None]) if np.isfinite(c)]
+        return keep, [float(self.changes[j]) for j in keep]
+
+    def identical(self, J: int | None = None) -> bool:
+        """Whether both methods predicted alike in every scored split of the first ``J`` (the proposed method fell
+        back to ``K̂x`` in each): ``evaluate`` then says so in words, with no interval."""
+        return all(c == 0.0 for c in self.scored(J)[1])
+
 
 def _pool_means(fitted: dict, pool) -> dict[str, float]:
     """Per method, the mean over trials of each trial's mean error over its windows (as a split scores)."""
@@ -143,12 +155,14 @@ def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_
     ``self_comparison``: the self-comparison's interval (each copy trained on half the split's training part; no
     decision term: both copies decide alike in law). ``factor``: the overlap term ``n_test/n_train`` multiplied by it
     (1: Nadeau & Bengio's), for a study that weighs other corrections."""
-    c = list(run.self_changes if self_comparison else run.changes)[: J or None]
+    keep, c = run.scored(J)
+    if self_comparison:
+        c = [x for x in run.self_changes[: J or None] if np.isfinite(x)]
     n_train = run.n_train // 2 if self_comparison else run.n_train
     extra = 0.0
     if decision and not self_comparison and run.margins:
         # against IOC-only a split's change is what keeping the variability model changed
-        extra = decision_variance(c, run.fell_back[: len(c)], run.margins[: len(c)])[1]
+        extra = decision_variance(c, [run.fell_back[j] for j in keep], [run.margins[j] for j in keep])[1]
     # the coverage study reads the statistic itself at every J it weighs, below min_units too
     mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1),
                                    least=MIN_SPLITS, extra_var=extra)
@@ -158,9 +172,8 @@ def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_
 def method_rows(run: CoverageRun, J: int | None = None) -> Sequence:
     """The run's first ``J`` splits as :class:`~workbench.study.method_level.MethodDifference` rows (what
     ``evaluate`` would print): for checking that no row has an interval of zero width."""
-    k = len(run.changes) if J is None else J
     margins = run.margins or (float("nan"),) * len(run.changes)
     rows = [(run.family, j, f"t{j}", m, v, run.fell_back[j], margins[j])
-            for j in range(k) for m, v in (("proposed", 1.0 - run.changes[j]), (BASELINE, 1.0))]
+            for j in run.scored(J)[0] for m, v in (("proposed", 1.0 - run.changes[j]), (BASELINE, 1.0))]
     scores = pd.DataFrame(rows, columns=["label", "split", "trial", "method", "value", "fell_back", "margin"])
     return method_differences(scores, {run.family: (run.n_train, run.n_test)}, METRIC, "proposed", [BASELINE])
