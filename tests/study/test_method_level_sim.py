@@ -71,7 +71,10 @@ def _seed(name: str, k: int) -> int:
 def pooled_threshold(n: int, bad: float = 0.90, fail: float = 0.90) -> int:
     """The fewest covering runs of ``n`` to pass: the smallest count that an interval of true coverage ``bad``
     reaches with probability at most ``1 − fail``."""
-    return int(next(c for c in range(n + 1) if sps.binom.sf(c - 1, n, bad) <= 1 - fail))
+    c = next((c for c in range(n + 1) if sps.binom.sf(c - 1, n, bad) <= 1 - fail), None)
+    if c is None:  # a lowered look (WORKBENCH_COVERAGE_RUNS): even n of n is too likely for a 90 % interval
+        pytest.skip(f"{n} runs cannot fail a {100 * bad:.0f} % interval with probability {fail:g}: no threshold")
+    return int(c)
 
 
 @functools.cache
