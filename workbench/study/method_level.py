@@ -66,8 +66,8 @@ from workbench.study.paired import (
 )
 
 __all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "LeftOutSplit", "corrected_t",
-           "decision_variance", "split_scores", "split_tasks", "method_differences", "fold_differences", "SPLITS",
-           "LOO_FOLDS", "MIN_SPLITS", "FALLBACK_METHOD"]
+           "decision_variance", "fallback_margin", "split_scores", "split_tasks", "method_differences",
+           "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS", "FALLBACK_METHOD"]
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
@@ -372,7 +372,7 @@ class SplitPlan:
 def _refit(plan: SplitPlan, train: DemonstrationSet,
            refused: dict[str, str] | None = None) -> tuple[dict[str, Any], bool]:
     """Every method of ``plan`` fitted on ``train`` with every choice made again on it; whether the proposed model
-    fell back to ``K̂x`` (its cross-validation's margin: :func:`_margin`). A method that cannot be fitted is left
+    fell back to ``K̂x`` (its cross-validation's margin: :func:`fallback_margin`). A method that cannot be fitted is left
     out, its ModelError's message in ``refused``."""
     from workbench.models.factory import make_models
     from workbench.models.fitting import shared_gains
@@ -403,7 +403,7 @@ def _refit(plan: SplitPlan, train: DemonstrationSet,
     return fitted, bool(auto is not None and auto.fallback)
 
 
-def _margin(model: Any) -> float:
+def fallback_margin(model: Any) -> float:
     """The fallback decision's margin of a fitted proposed model: its cross-validation's ``gain / gain_se``
     (:func:`decision_variance`); NaN where it did not choose its settings or the margin was not scored."""
     auto = getattr(model, "auto_", None) if model is not None and getattr(model, "chooses_settings", False) else None
@@ -416,8 +416,8 @@ def split_scores(task: tuple) -> pd.DataFrame:
     """One split (a task of the executor): rerun the method of its :class:`SplitPlan` on the training trials, score
     the test trials; rows ``label, split, trial, method, value, fell_back`` (value: the trial's mean ``metric`` over
     its windows; fell_back: whether this split's proposed model fell back to ``K̂x``; margin: its cross-validation's
-    margin, :func:`_margin`) with ``n_train`` / ``n_test`` in ``attrs``. A method that cannot be fitted, or whose
-    rollout diverged on the test trials, has no rows; its cause is in ``attrs["refused"]`` (method → one line;
+    margin, :func:`fallback_margin`) with ``n_train`` / ``n_test`` in ``attrs``. A method that cannot be fitted, or
+    whose rollout diverged on the test trials, has no rows; its cause is in ``attrs["refused"]`` (method → one line;
     ``"plant"`` where the plant could not be identified)."""
     from workbench.study import evaluate as ev
 
@@ -442,7 +442,7 @@ def split_scores(task: tuple) -> pd.DataFrame:
         out = pd.DataFrame(columns=cols)
         out.attrs.update(n_train=len(train), n_test=len(test), refused=refused)
         return out
-    margin = _margin(fitted.get(plan.methods[0]))
+    margin = fallback_margin(fitted.get(plan.methods[0]))
     table = ev.compare(fitted, test, n_steps=n_steps, samples=0, starts="initial" if stride is None else stride,
                        inputs=False)
     kept = scored(table)  # a method whose rollout diverged in this split is not compared on it
@@ -577,8 +577,8 @@ def fold_differences(table: pd.DataFrame, metric: str, method: str = "proposed",
         Training trials per fold of each label; by default one fewer than its scored trials (every fold scored).
         Where a fold was left out (:func:`workbench.study.pipeline.run_loso`) its trial still trained the others.
     margins : mapping trial → float, optional
-        The cross-validation's margin of the proposed model of the fold that left each trial out (:func:`_margin`;
-        the decision term of :func:`decision_variance`).
+        The cross-validation's margin of the proposed model of the fold that left each trial out
+        (:func:`fallback_margin`; the decision term of :func:`decision_variance`).
     """
     rows = table[table["metric"] == metric]
     if rows.empty:
@@ -730,5 +730,5 @@ def _own_scores(part: Any, label: str, metric: str, methods: Sequence[str]) -> p
     t = scored(part.table)
     rows = t[(t["metric"] == metric) & t["method"].isin(list(methods))]
     per = rows.groupby(["trial", "method"], sort=False)["value"].mean().reset_index()
-    return per.assign(label=label, split=0, fell_back=fell, margin=_margin(model))[
+    return per.assign(label=label, split=0, fell_back=fell, margin=fallback_margin(model))[
         ["label", "split", "trial", "method", "value", "fell_back", "margin"]]

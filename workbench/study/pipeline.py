@@ -636,12 +636,12 @@ def run_loso(
     last_plant = last.plant
     stride = _stride_steps(stride_s, demos.dt)
     from workbench.study.evaluate import primary_metric  # the folds are the method-level comparison: no refit more
-    from workbench.study.method_level import _margin, fold_differences
+    from workbench.study.method_level import fallback_margin, fold_differences
 
     # per trial a fold left out: whether its proposed model fell back to K̂x, and its cross-validation's margin
     fell_back = {trial: bool(m.chooses_settings and m.auto_ is not None and m.auto_.fallback)
                  for trial, r in folds for m in r.models.values()}
-    margins = {trial: _margin(m) for trial, r in folds for m in r.models.values()}
+    margins = {trial: fallback_margin(m) for trial, r in folds for m in r.models.values()}
     # every fold trains on all of its label's trials but one, also where another fold was left out
     n_train = {UNLABELED if lb is None else str(lb): len(demos if lb is None else demos.by_label(lb)) - 1
                for lb in (demos.labels or [None])}
