@@ -70,8 +70,9 @@ def own_columns(quad) -> list[list[int]]:
     return [next(list(s) for s, inputs in parts if i in inputs) for i in range(quad.m)]
 
 
-def choose(data: TimingData, quad, d_fixed: float | None = None, t_fixed: float | None = None
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, object]:
+def choose(
+    data: TimingData, quad, d_fixed: float | None = None, t_fixed: float | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, object]:
     """The rule: per input, ``True`` where its own part was chosen; the full and own held-out SSE; the chosen gain."""
     own = own_columns(quad)
     given = {} if d_fixed is None else {"delay_s": d_fixed, "lag_s": t_fixed}
@@ -115,14 +116,21 @@ def pilots(args) -> None:
         r = float(np.linalg.norm(Kc - K) / np.linalg.norm(K))
         att = float(Kc[0, 2] / K[0, 2])
         rows.append((r_full, r, att, *pick))
-        print(f"seed {first + k}: LIML {r_full:.3f} -> chosen {r:.3f} (K̂[u1, φ]/K {att:.2f}); own part chosen for "
-              + ", ".join(f"u{i + 1} {'yes' if p else 'no'} (held-out SSE own/full {s_own[i] / s_full[i]:.4f})"
-                          for i, p in enumerate(pick)), flush=True)
+        print(
+            f"seed {first + k}: LIML {r_full:.3f} -> chosen {r:.3f} (K̂[u1, φ]/K {att:.2f}); own part chosen for "
+            + ", ".join(
+                f"u{i + 1} {'yes' if p else 'no'} (held-out SSE own/full {s_own[i] / s_full[i]:.4f})"
+                for i, p in enumerate(pick)
+            ),
+            flush=True,
+        )
     a = np.array(rows)
     print(f"LIML (full): ≤ 0.2 on {share(a[:, 0] <= 0.2)}, median {np.median(a[:, 0]):.3f}")
-    print(f"chosen:      ≤ 0.2 on {share(a[:, 1] <= 0.2)}, median {np.median(a[:, 1]):.3f}; K̂[u1, φ] within 20 % on "
-          f"{share(np.abs(a[:, 2] - 1) <= 0.2)}; own part chosen: "
-          + ", ".join(f"u{i + 1} {int(a[:, 3 + i].sum())}/{len(a)}" for i in range(quad.m)))
+    print(
+        f"chosen:      ≤ 0.2 on {share(a[:, 1] <= 0.2)}, median {np.median(a[:, 1]):.3f}; K̂[u1, φ] within 20 % on "
+        f"{share(np.abs(a[:, 2] - 1) <= 0.2)}; own part chosen: "
+        + ", ".join(f"u{i + 1} {int(a[:, 3 + i].sum())}/{len(a)}" for i in range(quad.m))
+    )
 
 
 def cs1(args) -> None:
@@ -137,13 +145,22 @@ def cs1(args) -> None:
         data = TimingData(list(ds), quad.n, quad.m, quad.dt, "auto")
         for label, fixed in (("paper's timing (d = τ = 0)", (0.0, 0.0)), ("timed (refusal ignored)", (None, None))):
             pick, s_full, s_own, Kc, full = choose(data, quad, *fixed)
-            cross = {f"K[u{i + 1}, {NAMES[j]}]": full.K[i, j] for i, cols in enumerate(own_columns(quad))
-                     for j in range(quad.n) if j not in cols}
-            print(f"CS1 seed {s} ({args.trials} trials), {label}: start {data.start}, d {full.delay_s:.3f} τ "
-                  f"{full.lag_s:.3f}; own part chosen "
-                  + ", ".join(f"u{i + 1} {'yes' if p else 'no'} (own/full {s_own[i] / s_full[i]:.4f})"
-                              for i, p in enumerate(pick))
-                  + "; full LIML's cross entries " + ", ".join(f"{n} {v:+.3f}" for n, v in cross.items()), flush=True)
+            cross = {
+                f"K[u{i + 1}, {NAMES[j]}]": full.K[i, j]
+                for i, cols in enumerate(own_columns(quad))
+                for j in range(quad.n)
+                if j not in cols
+            }
+            print(
+                f"CS1 seed {s} ({args.trials} trials), {label}: start {data.start}, d {full.delay_s:.3f} τ "
+                f"{full.lag_s:.3f}; own part chosen "
+                + ", ".join(
+                    f"u{i + 1} {'yes' if p else 'no'} (own/full {s_own[i] / s_full[i]:.4f})" for i, p in enumerate(pick)
+                )
+                + "; full LIML's cross entries "
+                + ", ".join(f"{n} {v:+.3f}" for n, v in cross.items()),
+                flush=True,
+            )
 
 
 def main() -> None:
