@@ -31,11 +31,18 @@ cross entries the rule keeps.
     nice -n 10 .venv/bin/python bench/timing_structure_cv.py --seeds 13000 20 --plain
     nice -n 10 .venv/bin/python bench/timing_structure_cv.py --cs1 12500 2 --trials 120
     nice -n 10 .venv/bin/python bench/timing_structure_cv.py --cs1 12600 10
+
+Added after the rule was run (it changes nothing in it): ``--coupling c``, the timed pilot with a real cross entry
+``K[u2, φ] += c`` (:class:`CoupledPilot`: the thrust answers the roll angle; the lateral loop is untouched, so the
+pilot stays stable), to measure how large a real coupling must be for the rule to keep it.
+
+    nice -n 10 .venv/bin/python bench/timing_structure_cv.py --seeds 12000 20 --coupling 0.1
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import warnings
 from pathlib import Path
@@ -53,9 +60,21 @@ from workbench.errors import ModelError  # noqa: E402
 from workbench.method.structured import decoupled_parts  # noqa: E402
 from workbench.method.timing import TimingData, fit_timing  # noqa: E402
 from workbench.plant.system import planar_quadrotor  # noqa: E402
-from workbench.sim.operators import lqr_operator_demos  # noqa: E402
+from workbench.sim.operators import LQROperator, lqr_operator_demos  # noqa: E402
 
 N_FOLDS, FOLD_SEED = 5, 0
+
+
+@dataclasses.dataclass(frozen=True)
+class CoupledPilot(LQROperator):
+    """A pilot whose thrust also answers the roll angle: ``K[u2, φ]`` of its LQR gain plus ``coupling``."""
+
+    coupling: float = 0.0
+
+    def gain(self, plant) -> np.ndarray:
+        K = super().gain(plant).copy()
+        K[1, 2] += self.coupling
+        return K
 
 
 def held_out_sse(data: TimingData, test: np.ndarray, d: float, tau: float, K: np.ndarray) -> np.ndarray:
@@ -108,6 +127,8 @@ def pilots(args) -> None:
     rows = []
     for k in range(count):
         op = pilot(first + k, args.plain)
+        if args.coupling:
+            op = CoupledPilot(**dataclasses.asdict(op), coupling=args.coupling)
         demos = list(lqr_operator_demos(op, args.trials, seed=first + k, plant=quad))
         K = op.gain(quad)
         data = TimingData(demos, quad.n, quad.m, quad.dt, "auto")
@@ -116,6 +137,8 @@ def pilots(args) -> None:
         r = float(np.linalg.norm(Kc - K) / np.linalg.norm(K))
         att = float(Kc[0, 2] / K[0, 2])
         rows.append((r_full, r, att, *pick))
+        if args.coupling:
+            print(f"  K[u2, φ] true {K[1, 2]:+.3f}, LIML {full.K[1, 2]:+.3f}, chosen {Kc[1, 2]:+.3f}")
         print(
             f"seed {first + k}: LIML {r_full:.3f} -> chosen {r:.3f} (K̂[u1, φ]/K {att:.2f}); own part chosen for "
             + ", ".join(
@@ -169,6 +192,7 @@ def main() -> None:
     ap.add_argument("--plain", action="store_true")
     ap.add_argument("--cs1", nargs=2, type=int, metavar=("FIRST", "COUNT"))
     ap.add_argument("--trials", type=int, default=30)
+    ap.add_argument("--coupling", type=float, default=0.0, help="a real K[u2, φ] added to the timed pilot's gain")
     args = ap.parse_args()
     if args.seeds:
         pilots(args)
