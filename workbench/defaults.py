@@ -9,7 +9,7 @@ from __future__ import annotations
 __all__ = [
     "DEFAULT_N_COMPONENTS", "DT_PAPER_S", "GAIN_RESAMPLES", "HORIZON_S", "NOISE_HORIZON_S", "N_COMPONENTS",
     "N_STEPS", "OBJECTIVE_RESAMPLES", "ONLINE_HORIZON_S", "ONLINE_N_STEPS", "PAIRED_RESAMPLES", "PAPER_N_COMPONENTS",
-    "PAPER_SETTINGS", "REG_COVAR", "STUDY_SAMPLES", "TIMING", "DIVERGED_FACTOR", "STRUCTURE_FOLDS",
+    "PAPER_SETTINGS", "REG_COVAR", "STUDY_SAMPLES", "TIMING", "DIVERGED_FACTOR",
 ]
 
 N_COMPONENTS = 5  # G, Gaussian components of the TP-GMM / GMR (the paper's)
@@ -33,9 +33,6 @@ STUDY_N_COMPONENTS = DEFAULT_N_COMPONENTS
 # the pilot's reaction delay and lag (workbench.method.timing): identified per pilot and used by the gain, the
 # objective and prediction ("identify"), or none, the paper's u = K x ("none"); `timing=` of a model, `--timing`
 TIMING = "identify"
-# folds of whole trials by which the timed gain's structure (each input on all states or on its own decoupled part
-# of the plant) is chosen by held-out prediction of the pilot's input (workbench.method.gain_parts)
-STRUCTURE_FOLDS = 5
 PAPER_N_COMPONENTS = N_COMPONENTS  # G of the method paper's quadrotor study (the default is the paper's)
 NOISE_HORIZON_S = HORIZON_S  # seconds over which a model's input noise is judged (its rollouts' horizon)
 ONLINE_N_STEPS = round(ONLINE_HORIZON_S / DT_PAPER_S)  # the online rollout in grid steps: 20

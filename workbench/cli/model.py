@@ -144,21 +144,10 @@ def _print_gain_intervals(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: 
     ctx.say(f"bootstrap ({result.n_ok} of {result.n_boot} resamples fitted, 95 % intervals, {GAIN_INTERVAL}):")
     if result.timing is not None:
         ctx.say(f"  {result.timing.describe()}")
-    _say_gain_rows(ctx, plant, lo, hi, result.timing)
-    return result
-
-
-def _say_gain_rows(ctx: Context, plant: Any, lo: Any, hi: Any, timing: Any) -> None:
-    """K̂'s interval per entry; an entry the chosen structure holds at 0 has none, and says so in words
-    (:class:`~workbench.method.gain_parts.GainParts`), never as ``[0, 0]``."""
-    import numpy as np
-
-    parts = getattr(timing, "parts", None)
-    held = parts.held() if parts is not None else np.zeros(lo.shape, dtype=bool)
     for i, u in enumerate(plant.input_names):
         ctx.say(f"  K̂ row {u}: " + ", ".join(
-            f"{s} {parts.held_text(i)}" if held[i, j] else f"{s} [{lo[i, j]:.3g}, {hi[i, j]:.3g}]"
-            for j, s in enumerate(plant.state_names)))
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(plant.state_names, lo[i], hi[i], strict=True)))
+    return result
 
 
 def _physics_first(plant: Any, exc: Exception) -> str:
@@ -192,7 +181,10 @@ def _print_bootstrap(ctx: Context, ds: Any, plant: Any, n_boot: int, seed: int, 
                                 (plant.input_names, result.R_diag_lo, result.R_diag_hi, "R/λmax")):
         ctx.say(f"  diag {what}: " + ", ".join(
             f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(names, lo, hi, strict=True)))
-    _say_gain_rows(ctx, plant, result.K_lo, result.K_hi, result.timing)
+    for i, u in enumerate(plant.input_names):
+        ctx.say(f"  K̂ row {u}: " + ", ".join(
+            f"{s} [{a:.3g}, {b:.3g}]" for s, a, b in zip(plant.state_names, result.K_lo[i], result.K_hi[i],
+                                                         strict=True)))
     return result
 
 

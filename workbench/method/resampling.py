@@ -481,8 +481,7 @@ def bootstrap_gain(
             A, B = plant_matrices(plant.A, plant.B)
             loo = _leave_one_out(demos, plant, rule_gain_method(demo_blocks(list(demos), *B.shape), A, B))
         elif timed:  # the timing's estimator as decided on all trials (LIML, or least squares where asked for)
-            loo = _timed_leave_one_out(demos, plant, "direct" if out[5].method == "direct" else "iv", timing,
-                                       getattr(out[5].parts, "columns", None))
+            loo = _timed_leave_one_out(demos, plant, "direct" if out[5].method == "direct" else "iv", timing)
         else:
             loo = _leave_one_out(demos, plant, method)
     return GainBootstrap(K=readonly(K0), K_samples=readonly(np.array([f[0] for f in fits])), n_trials=n_trials,
@@ -492,19 +491,17 @@ def bootstrap_gain(
                          timing=out[5] if timed else None)
 
 
-def _timed_leave_one_out(demos: Any, plant: Any, method: GainMethod, timing: Any, columns: Any = None
-                         ) -> np.ndarray | None:
+def _timed_leave_one_out(demos: Any, plant: Any, method: GainMethod, timing: Any) -> np.ndarray | None:
     """:func:`_leave_one_out` of the gain with the pilot's timing (re-identified without each trial; with
     :data:`IDENTIFY_OR_NONE` the caller has decided on all trials that there is a timing, and by which estimator
-    (``method`` "direct": least squares, else LIML), and every set follows; ``columns``: the states each input's
-    row acts on, as decided on all trials, :attr:`PilotTiming.parts`)."""
+    (``method`` "direct": least squares, else LIML), and every set follows)."""
     from workbench.method.timing import TimingData, fit_timing
 
     given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
     data = TimingData(list(demos), plant.n, plant.m, plant.dt)
     how = "direct" if method == "direct" else "liml"
     try:
-        return np.array([fit_timing(data, how, counts=np.arange(data.n_trials) != j, columns=columns, **given).K
+        return np.array([fit_timing(data, how, counts=np.arange(data.n_trials) != j, **given).K
                          for j in range(data.n_trials)])
     except (ModelError, np.linalg.LinAlgError):
         return None

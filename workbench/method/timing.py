@@ -391,21 +391,6 @@ class _Metric:
             K[:, i, :] = -v[:, 1:] / v[:, :1]
         return crit, K
 
-    def gain_on(self, delay: float, lag_s: float, columns: Any) -> np.ndarray:
-        """LIML of eq. (T1) at ``(d, τ)`` with input ``i`` on the states ``columns[i]`` only, the others held at 0
-        (with all states: :meth:`evaluate`'s gain): ``(G_xx − κ R_xx) K_iᵀ = G_xc − κ R_xc`` on those columns."""
-        Hp, Hr = (self.blocks(kind, np.array([delay]), np.array([lag_s])) for kind in ("MP" if self.iv else "VV",
-                                                                                       "VV"))
-        K = np.zeros((self.data.m, self.data.n))
-        for i, cols in enumerate(columns):
-            idx = [0, *(int(c) + 1 for c in cols)]
-            Gp, Gr = _joint(Hp, i)[0][np.ix_(idx, idx)], _joint(Hr, i)[0][np.ix_(idx, idx)]
-            Li = np.linalg.inv(np.linalg.cholesky(Gr))
-            kappa = float(np.linalg.eigvalsh(Li @ Gp @ Li.T)[0]) if self.iv else 0.0
-            M = Gp - kappa * Gr
-            K[i, list(cols)] = np.linalg.solve(M[1:, 1:], M[1:, 0])
-        return K
-
     def relevance(self, delay: float, lag_s: float) -> float:
         """The smallest squared canonical correlation of the seen states ``x̃`` with the instruments, beyond what
         each trial's own rows give by chance (1 for least squares; NaN where not computed)."""
@@ -497,7 +482,7 @@ def _search(metric: _Metric, delay_s: float | None, lag_s: float | None
 
 
 def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None = None,
-               lag_s: float | None = None, counts: np.ndarray | None = None, columns: Any = None) -> TimingFit:
+               lag_s: float | None = None, counts: np.ndarray | None = None) -> TimingFit:
     """Fit eq. (T1): ``(d̂, τ̂)`` by the criterion (or the ones given), and ``K̂`` at them.
 
     Parameters
@@ -509,9 +494,6 @@ def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None 
         Fixed values instead of estimated ones (both 0: the paper's ``u = K x``).
     counts : ndarray, shape (n_trials,), optional
         Each trial's multiplicity (a bootstrap resample).
-    columns : sequence of sequences of int, optional
-        Per input, the states its row of ``K̂`` acts on, the others held at 0 (:mod:`workbench.method.gain_parts`);
-        the timing is searched with all states either way. Default: all states.
     """
     if method not in ("liml", "direct"):
         raise DataError(f"the timing is fitted by 'liml' or 'direct', not {method!r}")
@@ -522,8 +504,6 @@ def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None 
         metric = data.metric(counts, instruments=method == "liml")
         try:
             d_hat, t_hat, K, delays, profile = _search(metric, delay_s, lag_s)
-            if columns is not None:
-                K = metric.gain_on(d_hat, t_hat, columns)
         except np.linalg.LinAlgError as exc:
             raise ModelError(f"the timing fit ({method}) is singular: the demonstrations do not excite every state "
                              f"({exc})") from None
@@ -591,9 +571,6 @@ class PilotTiming:
     #: resamples whose own trials would have decided the rule (``fallback``) the other way; each followed the
     #: decision on all trials all the same (:func:`identify_timing`), so this says how sure that decision is
     n_otherwise: int = 0
-    #: the states each input's row acts on, chosen by held-out prediction (:class:`~workbench.method.gain_parts.
-    #: GainParts`); None: all states (least squares, a refused timing, ``structure="full"``)
-    parts: Any = None
 
     def describe(self) -> str:
         """One line for the terminal: the delay and the lag with their intervals, and how they were found."""
@@ -617,10 +594,9 @@ class PilotTiming:
                      f"have {other} on their own")
         if self.method == "none":
             return f"pilot timing: none ({self.reason.removeprefix('no timing: ')}); {boot}"
-        structure = self.parts.describe() if self.parts is not None else ""
         return (f"pilot timing: {part('reaction delay', 'delay', self.delay_s, self.delay_lo, self.delay_hi)}, "
                 f"{part('neuromuscular lag', 'lag', self.lag_s, self.lag_lo, self.lag_hi)} — by {how}, the trials "
-                f"starting {start}; {boot}" + (f"; {structure}" if structure else ""))
+                f"starting {start}; {boot}")
 
     def to_dict(self) -> dict[str, Any]:
         """The timing's numbers as plain JSON (for ``PilotTask.extra`` and a model file)."""
@@ -629,8 +605,7 @@ class PilotTiming:
                 "relevance": self.relevance, "reason": self.reason, "fixed": list(self.fixed),
                 "dead_zone": self.dead_zone,
                 "n_trials": self.n_trials,
-                "n_boot": self.n_boot, "n_failed": self.n_failed, "ci": self.ci,
-                "parts": None if self.parts is None else self.parts.to_dict()}
+                "n_boot": self.n_boot, "n_failed": self.n_failed, "ci": self.ci}
 
 
 def _interval(value: float, samples: np.ndarray, n_trials: int, ci: float) -> tuple[float, float]:
@@ -660,7 +635,6 @@ def identify_timing(
     ci: float = 95.0,
     progress: Callable[[int, int], None] | None = None,
     fallback: Callable[[np.ndarray], np.ndarray] | None = None,
-    structure: str = "choose",
 ) -> PilotTiming:
     """Identify the pilot's delay and lag with intervals, and the gain on the seen state (module docstring).
 
@@ -703,11 +677,6 @@ def identify_timing(
         JASA 67) — whose spread alone made K̂[u2, φ̇]'s interval [−20.3, 19.6] around the paper's gain −0.357. The
         interval is therefore conditional on the decision (the gain actually printed); how sure the decision is
         is said beside it: ``n_otherwise``, the resamples whose own trials would have decided the other way.
-    structure : {"choose", "full"}
-        ``"choose"``: where LIML's timing is identified on a plant with decoupled parts, each input's row acts on all
-        states or on its own part, as held-out prediction of the pilot's input decides
-        (:func:`workbench.method.gain_parts.choose_parts`), once on all trials; every resample follows the decision
-        (the interval is conditional on it, as on the rule's). ``"full"``: all states.
 
     Raises
     ------
@@ -721,8 +690,6 @@ def identify_timing(
         raise DataError(f"n_boot must be a non-negative integer, got {n_boot!r}")
     if method not in ("liml", "direct"):
         raise DataError(f"the timing is identified by 'liml' or 'direct', not {method!r}")
-    if structure not in ("choose", "full"):
-        raise DataError(f"the gain's structure is 'choose' or 'full', not {structure!r}")
     demos = list(demos)
     data = TimingData(demos, int(plant.n), int(plant.m), float(plant.dt), start)
     point = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s)
@@ -736,19 +703,6 @@ def identify_timing(
             raise ModelError(why)
         if why:  # the rule's other gain, and the reason
             K_point, timed, reason = np.asarray(fallback(np.ones(data.n_trials, dtype=int))), False, f"no timing: {why}"
-    parts, columns = None, None
-    if timed and method == "liml" and structure == "choose" and hasattr(plant, "A") and hasattr(plant, "B"):
-        from workbench.method.gain_parts import choose_parts
-
-        parts = choose_parts(data, plant, delay_s, lag_s)
-        if parts.restricted:  # the gain at the timing all trials found, on the chosen states
-            columns = parts.columns
-            with single_threaded_blas():
-                K_point = data.metric().gain_on(point.delay_s, point.lag_s, columns)
-            why = refusal(TimingFit(point.delay_s, point.lag_s, K_point, "liml", point.relevance, point.delays,
-                                    point.profile), plant, delay_s, lag_s)
-            if why:  # the chosen structure's gain does not close the loop: the full one, which did
-                parts, columns, K_point = None, None, point.K
     rng = np.random.default_rng(seed)
     J = data.n_trials
     fits, failed, K_all, otherwise = [], 0, [], 0
@@ -756,7 +710,7 @@ def identify_timing(
         counts = np.bincount(rng.integers(0, J, size=J), minlength=J)
         try:
             if timed:
-                fit = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts, columns=columns)
+                fit = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts)
                 if fallback is not None:  # the decision on all trials stands; how often this resample disagrees
                     otherwise += bool(refusal(fit, plant, delay_s, lag_s))
                 fits.append(fit)
@@ -779,8 +733,7 @@ def identify_timing(
         K_samples=readonly(np.array(K_all).reshape(len(K_all), data.m, data.n)),
         delay_samples=readonly(d_s), lag_samples=readonly(t_s), method=method if timed else "none", start=data.start,
         relevance=point.relevance, fixed=fixed, n_trials=J, n_boot=int(n_boot), n_failed=failed, ci=float(ci),
-        seed=int(seed), reason=reason, dead_zone=data.dead_zone, n_timed=len(fits), n_otherwise=otherwise,
-        parts=parts)
+        seed=int(seed), reason=reason, dead_zone=data.dead_zone, n_timed=len(fits), n_otherwise=otherwise)
 
 
 def _would_time(data: TimingData, method: str, delay_s: float | None, lag_s: float | None, counts: np.ndarray,
