@@ -161,7 +161,9 @@ def test_an_identified_timing_is_kept_in_every_resample(quad):
     assert g.timing.method == "liml" and g.timing.n_timed == 6 - g.n_failed and g.timing.n_otherwise >= 1
     assert f"{g.timing.n_otherwise} of them would have refused the timing" in g.timing.describe()
     data = tm.TimingData(ds, quad.n, quad.m, quad.dt)
-    timed = [tm.fit_timing(data, "liml", counts=c).K for c in _counts(0, 4, 6)]
+    from workbench.method.timing_parts import own_parts
+
+    timed = [tm.fit_timing(data, "liml", counts=c, own=own_parts(quad)).K for c in _counts(0, 4, 6)]
     np.testing.assert_allclose(g.K_samples, np.array(timed), atol=1e-9)
 
 

@@ -512,8 +512,12 @@ def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None 
                 from workbench.method.timing_parts import partial_liml
 
                 Hp, Hr = (metric.blocks(kind, np.array([d_hat]), np.array([t_hat])) for kind in ("MP", "VV"))
-                K = np.array([K[i] if cols is None else partial_liml(_joint(Hp, i)[0], _joint(Hr, i)[0], cols)
-                              for i, cols in enumerate(own)])
+                K = K.copy()
+                for i, cols in enumerate(own):
+                    try:  # (where the starts span the other parts' states, the row stays all instrumented)
+                        K[i] = K[i] if cols is None else partial_liml(_joint(Hp, i)[0], _joint(Hr, i)[0], cols)
+                    except np.linalg.LinAlgError:
+                        pass
         except np.linalg.LinAlgError as exc:
             raise ModelError(f"the timing fit ({method}) is singular: the demonstrations do not excite every state "
                              f"({exc})") from None

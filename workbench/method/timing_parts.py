@@ -34,6 +34,9 @@ import numpy as np
 
 __all__ = ["own_parts", "partial_liml"]
 
+#: Below this share of their raw variance, the other parts' states are taken as spanned by the starts.
+_SPAN_TOL = 1e-9
+
 
 def own_parts(plant: Any) -> tuple[tuple[int, ...] | None, ...] | None:
     """Per input, the states of its decoupled part of ``plant`` (None where that part holds every state); None where
@@ -64,11 +67,20 @@ def partial_liml(Gp: np.ndarray, Gr: np.ndarray, own: tuple[int, ...]) -> np.nda
     Returns
     -------
     ndarray, shape (n,)
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Where the starts alone already span the other parts' states (no more distinct trials than instruments: the
+        projection is the identity and nothing is left to partial); the caller keeps every state instrumented.
     """
     n = Gr.shape[0] - 1
     y = [0, *(int(c) + 1 for c in own)]
     w = [c + 1 for c in range(n) if c not in own]
     R = Gr - Gp  # a'M_Z b
+    r_ww = np.linalg.eigvalsh(R[np.ix_(w, w)])
+    if not r_ww[0] > _SPAN_TOL * np.linalg.eigvalsh(Gr[np.ix_(w, w)])[-1]:
+        raise np.linalg.LinAlgError("the trials' starts span the other parts' states: nothing left to partial")
     G_zw = Gp + R[:, w] @ np.linalg.solve(R[np.ix_(w, w)], R[w, :])  # a'P_[Z,W] b
     P_w = Gr[:, w] @ np.linalg.solve(Gr[np.ix_(w, w)], Gr[w, :])  # a'P_W b
     sel = np.ix_(y, y)
