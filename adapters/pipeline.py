@@ -28,7 +28,7 @@ import numpy as np
 
 from adapters.align import Series, align, check_grid, silence
 from adapters.clock import stream_times
-from adapters.events import event_name
+from adapters.events import flag_value_name
 from adapters.gps import follows_gps
 from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
@@ -615,10 +615,9 @@ def _ground_note(streams: Streams, m: ChannelMapping, series: list[Series]) -> s
         return ""
     air = sum(sp.end - sp.start for sp in intersect(kept, flying))
     rule = seg.landing.flag
-    named = rule.selector.source.startswith("EV.")  # DataFlash events: say their ArduPilot names
 
-    def values(vs: tuple[float, ...]) -> str:
-        return " or ".join(f"{v:g}" + (f" {event_name(v)}" if named else "") for v in vs)
+    def values(vs: tuple[float, ...]) -> str:  # named where the source is an enumeration (EV ids, MAV_STATE)
+        return " or ".join(f"{v:g} {flag_value_name(rule.selector.source, v)}".strip() for v in vs)
 
     modes = sorted({str(sp.meta["mode"]) for sp in kept if "mode" in sp.meta})
     where = f"armed in {', '.join(modes)}" if modes else "kept"
