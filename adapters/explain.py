@@ -55,8 +55,9 @@ def _landed(streams: Streams, m: ChannelMapping) -> tuple[list[Span] | tuple[Spa
         return " or ".join(f"{v:g} {flag_value_name(rule.selector.source, v)}".strip() for v in values)
 
     # both ends named: a log that begins on the ground (ArduCopter boots landed) has a take-off but no landing
-    return flying, (f"by its landed events: {rule.selector.source} = {said(rule.on)} on landing, "
-                    f"{said(rule.off)} on take-off")
+    return flying, (
+        f"by its landed events: {rule.selector.source} = {said(rule.on)} on landing, {said(rule.off)} on take-off"
+    )
 
 
 def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, float, str, str]]:
@@ -96,11 +97,16 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
             continue
         mode = span.meta.get("mode", "")
         armed_parts = intersect([Span(a, b)], armed)
-        out += [(x, y, "disarmed", f"{mode} while disarmed".strip())
-                for x, y in _minus(a, b, [(p.start, p.end) for p in armed_parts])]
+        out += [
+            (x, y, "disarmed", f"{mode} while disarmed".strip())
+            for x, y in _minus(a, b, [(p.start, p.end) for p in armed_parts])
+        ]
         parts = intersect(armed_parts, flying)
-        out += [(x, y, GROUND, f"{mode} on the ground ({landed})".strip())
-                for p in armed_parts for x, y in _minus(p.start, p.end, [(q.start, q.end) for q in parts])]
+        out += [
+            (x, y, GROUND, f"{mode} on the ground ({landed})".strip())
+            for p in armed_parts
+            for x, y in _minus(p.start, p.end, [(q.start, q.end) for q in parts])
+        ]
         for part in parts:
             covered = []
             for piece in align(series, part.start, part.end, m.dt, m.segment.gap):
@@ -125,6 +131,12 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
                         k = np.flatnonzero((d > m.segment.gap) & (s.t[:-1] < y) & (s.t[1:] > x))
                         if k.size:
                             silent.append(f"{s.name} ({float(d[k].max()):.1f} s)")
-                    out.append((x, y, "gap", f"no sample of {', '.join(silent) or 'a channel'}: longer than "
-                                             f"gap = {m.segment.gap:g} s"))
+                    out.append(
+                        (
+                            x,
+                            y,
+                            "gap",
+                            f"no sample of {', '.join(silent) or 'a channel'}: longer than gap = {m.segment.gap:g} s",
+                        )
+                    )
     return sorted(out)

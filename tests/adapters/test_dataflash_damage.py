@@ -34,10 +34,13 @@ def _flipped(path, seed: int):
     return out, np.sort(at)
 
 
-@pytest.mark.parametrize(("style", "seed", "stop"), [
-    ("old", 3, "the log has no GPS stream"),                         # a damaged GPS FMT: "dead-reckons"
-    ("new", 3, "the pilot's inputs u1, u2 are not in this log"),     # RCIN's FMT name read "RC}N"
-])
+@pytest.mark.parametrize(
+    ("style", "seed", "stop"),
+    [
+        ("old", 3, "the log has no GPS stream"),  # a damaged GPS FMT: "dead-reckons"
+        ("new", 3, "the pilot's inputs u1, u2 are not in this log"),  # RCIN's FMT name read "RC}N"
+    ],
+)
 def test_a_byte_flipped_dataflash_log_says_it_is_damaged_where_and_how_many_bytes(tmp_path, style, seed, stop):
     intact = dataflash_write.write_example(tmp_path / f"{style}.bin", style, "copter", seconds=60.0, seed=5)
     assert len(adapters.load(intact, "ardupilot_manual")) >= 1
@@ -54,11 +57,16 @@ def test_a_byte_flipped_dataflash_log_says_it_is_damaged_where_and_how_many_byte
         adapters.load(path, "ardupilot_manual")
     text = str(err.value)
     assert "\n" not in text
-    assert text.startswith(f"{path}: damaged log, {total} bytes in {len(regions)} runs that are no dataflash "
-                           f"message, at byte {regions[0][0]} (")
+    assert text.startswith(
+        f"{path}: damaged log, {total} bytes in {len(regions)} runs that are no dataflash "
+        f"message, at byte {regions[0][0]} ("
+    )
     # the stop it made of the damaged values follows, as what the import stopped on, not as the finding
-    assert re.search(rf"so what the import then stopped on may be the damage's\): mapping 'ardupilot_manual': "
-                     rf".*{re.escape(stop)}", text)
+    assert re.search(
+        rf"so what the import then stopped on may be the damage's\): mapping 'ardupilot_manual': "
+        rf".*{re.escape(stop)}",
+        text,
+    )
 
 
 def test_a_log_cut_off_mid_message_is_not_called_damaged(tmp_path):
