@@ -29,6 +29,7 @@ import numpy as np
 from adapters.align import Series, align, check_grid, silence
 from adapters.clock import stream_times
 from adapters.events import flag_value_name
+from adapters.formats import FORMATS, get_format
 from adapters.gps import follows_gps
 from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
@@ -288,16 +289,21 @@ def _damage_note(streams: Streams, m: ChannelMapping, found: list[tuple[Span, li
                  series: list[Series], skipped: Counter, log_start: float) -> str:
     """Where a damaged file's demonstrations part though their segment goes on, in one line; ``""`` for an intact
     file (:func:`~adapters.streams.damage_words`) or one whose demonstrations each start a trial or mode of their own.
+    In a checksummed format (:attr:`~adapters.formats.base.Format.checksummed`) only a silence is the damage's: a
+    field that reads otherwise between two segments there is the log's own reading.
 
     A piece that follows one of the same trial marker and mode was cut from it: by a silence of the channels longer
     than ``segment.gap`` (data the reader skipped) or by the segmentation's field reading other values between
     them (garbled bytes) — in an intact log the same flight would have been one demonstration.
     """
     kept = [(i, span, t) for i, (span, ts, _) in enumerate(found) for t in ts]
+    checked = get_format(streams.format).checksummed if streams.format in FORMATS else False
     cuts = []
     for (i, a, ta), (j, b, tb) in zip(kept[:-1], kept[1:], strict=True):
         if (a.meta.get("demo"), a.meta.get("mode")) != (b.meta.get("demo"), b.meta.get("mode")):
             continue  # a trial or mode of its own: a boundary the log states
+        if i != j and checked:
+            continue  # what read otherwise between them passed its checksum: another mode, disarmed, landed
         lo, hi = float(ta[-1]), float(tb[0])
         rule = "trial marker" if "demo" in a.meta else "flight mode" if "mode" in a.meta else "arming"
         why = silence(series, lo, hi, m.segment.gap) if i == j else ""

@@ -252,10 +252,11 @@ def test_a_log_without_landed_events_keeps_its_spans(tmp_path):
 # -------------------------------------------------------------------------------------------------- tlog
 
 
-def _tlog(tmp_path, name: str, rcmap: dict[str, float], status=None) -> tuple:
+def _tlog(tmp_path, name: str, rcmap: dict[str, float], status=None, between: str = "STABILIZE") -> tuple:
     """A tlog of simulated flights through ardupilot_manual, the roll stick on RC channel 2 (where ``rcmap`` says
     it is), the pitch stick on channel 1, NAV_CONTROLLER_OUTPUT's desired roll following the roll stick; ``status``
-    gives the HEARTBEATs' system_status from their times (default: MAV_STATE_ACTIVE, 4, throughout)."""
+    gives the HEARTBEATs' system_status from their times (default: MAV_STATE_ACTIVE, 4, throughout); the flights
+    are flown in STABILIZE, the pauses between them in ``between``."""
     flights = simulate_landings("CS1", 2, seed=3)
     numbers = {"roll": int(rcmap.get("RCMAP_ROLL", 1)), "throttle": 3}
     m = sticks._substitute(load_mapping("ardupilot_manual").for_format("tlog"), numbers, ())
@@ -273,7 +274,8 @@ def _tlog(tmp_path, name: str, rcmap: dict[str, float], status=None) -> tuple:
     spans = layout(flights, EPOCH, PAUSE)
     ml = mavutil.mavlink
     stab = mode_number("arducopter", "STABILIZE")
-    hb = [(t, stab, 129) for a, b in spans for t in np.arange(a - 1.0, b + 1.0, 1.0)]
+    other = mode_number("arducopter", between)
+    hb = [(t, stab if a <= t <= b else other, 129) for a, b in spans for t in np.arange(a - 1.0, b + 1.0, 1.0)]
     hb_t = np.array([h[0] for h in hb])
     streams["HEARTBEAT"] = pd.DataFrame({"t": [h[0] for h in hb], "type": ml.MAV_TYPE_QUADROTOR,
                                          "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA, "base_mode": [h[2] for h in hb],
@@ -346,6 +348,22 @@ def test_a_tlog_s_ground_time_is_cut_by_the_heartbeat_s_landed_state(tmp_path):
                                         r"events \(HEARTBEAT\.system_status = 3 MAV_STATE_STANDBY on landing, 4 "
                                         r"MAV_STATE_ACTIVE on take-off\)"):
         adapters.load(parked, "ardupilot_manual")
+
+
+def test_a_damaged_tlog_does_not_blame_the_damage_for_a_mode_the_log_states(tmp_path):
+    # dronekit_flight (1314 CRC failures) said its STABILIZE flights were cut by "data lost to the damage" where the
+    # pilot had switched to LOITER, RTL or disarmed: a frame whose checksum fails is dropped, never read garbled, so
+    # a mode that reads otherwise in a tlog is the log's own
+    path, flights = _tlog(tmp_path, "loiter.tlog", {"RCMAP_ROLL": 2.0}, between="LOITER")
+    damaged = tmp_path / "damaged.tlog"
+    data = bytearray(path.read_bytes())
+    data[len(data) // 4] ^= 0xFF  # the frame this byte falls in fails its checksum: the reader skips it
+    damaged.write_bytes(bytes(data))
+    ds = adapters.load(damaged, "ardupilot_manual")
+    assert len(ds) == len(flights) == 2
+    streams = adapters.read(damaged)
+    assert sum(streams.skipped.values()) > 0  # the file is damaged
+    assert not any("damaged" in d.meta for d in ds), ds[0].meta.get("damaged")
 
 
 # ---------------------------------------------------------------------------------------- the schema, the map
