@@ -34,8 +34,13 @@ class CoupledPilot(LQROperator):
 
 def timed_pilot(seed: int, coupling: float = 0.0) -> CoupledPilot:
     rng = np.random.default_rng([seed, 41])
-    return CoupledPilot(**SLOW_PILOT, delay_s=float(rng.uniform(0.15, 0.25)), lag_s=float(rng.uniform(0.05, 0.1)),
-                        start="rest", coupling=coupling)
+    return CoupledPilot(
+        **SLOW_PILOT,
+        delay_s=float(rng.uniform(0.15, 0.25)),
+        lag_s=float(rng.uniform(0.05, 0.1)),
+        start="rest",
+        coupling=coupling,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -76,8 +81,10 @@ def test_the_thrust_rows_roll_entry_is_no_longer_spread_by_the_weak_starts(quad)
     op = timed_pilot(12004)
     demos = list(lqr_operator_demos(op, 30, seed=12004, plant=quad))
     K = op.gain(quad)
-    rel = {ex: float(np.linalg.norm(identify_timing(demos, quad, n_boot=0, exogenous_parts=ex).K - K)
-                     / np.linalg.norm(K)) for ex in (True, False)}
+    rel = {
+        ex: float(np.linalg.norm(identify_timing(demos, quad, n_boot=0, exogenous_parts=ex).K - K) / np.linalg.norm(K))
+        for ex in (True, False)
+    }
     assert rel[False] > 0.2 >= rel[True]
 
 
