@@ -87,10 +87,8 @@ def test_a_slow_pilot_is_no_longer_fitted_soft(quad):
 
 def test_the_paper_pilot_is_found_without_timing(quad):
     # a pilot without either: the delay and the lag come out near 0, the gain as the instantaneous instruments give
-    # (every state instrumented: the default takes the other parts' states as exogenous, whose least-squares
-    # spread on these 20 trials puts K̂[u2, phi] at 0.2; the timing acceptance judges the default per seed)
     ds = lqr_operator_demos(LQROperator(), 20, seed=5, plant=quad)
-    timing = tm.identify_timing(ds, quad, n_boot=0, exogenous_parts=False)
+    timing = tm.identify_timing(ds, quad, n_boot=0)
     assert timing.delay_s < 0.03 and timing.lag_s < 0.03
     assert rel_error(timing.K, LQROperator().gain(quad)) < 0.1
 
@@ -161,9 +159,7 @@ def test_an_identified_timing_is_kept_in_every_resample(quad):
     assert g.timing.method == "liml" and g.timing.n_timed == 6 - g.n_failed and g.timing.n_otherwise >= 1
     assert f"{g.timing.n_otherwise} of them would have refused the timing" in g.timing.describe()
     data = tm.TimingData(ds, quad.n, quad.m, quad.dt)
-    from workbench.method.timing_parts import own_parts
-
-    timed = [tm.fit_timing(data, "liml", counts=c, own=own_parts(quad)).K for c in _counts(0, 4, 6)]
+    timed = [tm.fit_timing(data, "liml", counts=c).K for c in _counts(0, 4, 6)]
     np.testing.assert_allclose(g.K_samples, np.array(timed), atol=1e-9)
 
 

@@ -496,14 +496,12 @@ def _timed_leave_one_out(demos: Any, plant: Any, method: GainMethod, timing: Any
     :data:`IDENTIFY_OR_NONE` the caller has decided on all trials that there is a timing, and by which estimator
     (``method`` "direct": least squares, else LIML), and every set follows)."""
     from workbench.method.timing import TimingData, fit_timing
-    from workbench.method.timing_parts import own_parts
 
     given = {} if isinstance(timing, str) else {"delay_s": float(timing[0]), "lag_s": float(timing[1])}
     data = TimingData(list(demos), plant.n, plant.m, plant.dt)
     how = "direct" if method == "direct" else "liml"
-    own = own_parts(plant) if how == "liml" else None  # as identify_timing's
     try:
-        return np.array([fit_timing(data, how, counts=np.arange(data.n_trials) != j, own=own, **given).K
+        return np.array([fit_timing(data, how, counts=np.arange(data.n_trials) != j, **given).K
                          for j in range(data.n_trials)])
     except (ModelError, np.linalg.LinAlgError):
         return None

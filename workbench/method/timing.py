@@ -482,7 +482,7 @@ def _search(metric: _Metric, delay_s: float | None, lag_s: float | None
 
 
 def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None = None,
-               lag_s: float | None = None, counts: np.ndarray | None = None, own: Any = None) -> TimingFit:
+               lag_s: float | None = None, counts: np.ndarray | None = None) -> TimingFit:
     """Fit eq. (T1): ``(d̂, τ̂)`` by the criterion (or the ones given), and ``K̂`` at them.
 
     Parameters
@@ -494,10 +494,6 @@ def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None 
         Fixed values instead of estimated ones (both 0: the paper's ``u = K x``).
     counts : ndarray, shape (n_trials,), optional
         Each trial's multiplicity (a bootstrap resample).
-    own : sequence of (tuple of int or None), optional
-        Per input, the states of its own decoupled part of the plant (:func:`~workbench.method.timing_parts.
-        own_parts`): LIML's row then takes the other parts' states as exogenous (:func:`~workbench.method.
-        timing_parts.partial_liml`); None (a row, or all): every state instrumented. The timing's search is the same.
     """
     if method not in ("liml", "direct"):
         raise DataError(f"the timing is fitted by 'liml' or 'direct', not {method!r}")
@@ -508,16 +504,6 @@ def fit_timing(data: TimingData, method: str = "liml", *, delay_s: float | None 
         metric = data.metric(counts, instruments=method == "liml")
         try:
             d_hat, t_hat, K, delays, profile = _search(metric, delay_s, lag_s)
-            if own is not None and metric.iv:
-                from workbench.method.timing_parts import partial_liml
-
-                Hp, Hr = (metric.blocks(kind, np.array([d_hat]), np.array([t_hat])) for kind in ("MP", "VV"))
-                K = K.copy()
-                for i, cols in enumerate(own):
-                    try:  # (where the starts span the other parts' states, the row stays all instrumented)
-                        K[i] = K[i] if cols is None else partial_liml(_joint(Hp, i)[0], _joint(Hr, i)[0], cols)
-                    except np.linalg.LinAlgError:
-                        pass
         except np.linalg.LinAlgError as exc:
             raise ModelError(f"the timing fit ({method}) is singular: the demonstrations do not excite every state "
                              f"({exc})") from None
@@ -649,7 +635,6 @@ def identify_timing(
     ci: float = 95.0,
     progress: Callable[[int, int], None] | None = None,
     fallback: Callable[[np.ndarray], np.ndarray] | None = None,
-    exogenous_parts: bool = True,
 ) -> PilotTiming:
     """Identify the pilot's delay and lag with intervals, and the gain on the seen state (module docstring).
 
@@ -692,10 +677,6 @@ def identify_timing(
         JASA 67) — whose spread alone made K̂[u2, φ̇]'s interval [−20.3, 19.6] around the paper's gain −0.357. The
         interval is therefore conditional on the decision (the gain actually printed); how sure the decision is
         is said beside it: ``n_otherwise``, the resamples whose own trials would have decided the other way.
-    exogenous_parts : bool
-        On a plant with decoupled parts, LIML's row of each input takes the other parts' states as exogenous
-        (:mod:`workbench.method.timing_parts`: the pilot's variability uncorrelated across sticks of different
-        parts); False: every state instrumented.
 
     Raises
     ------
@@ -711,16 +692,12 @@ def identify_timing(
         raise DataError(f"the timing is identified by 'liml' or 'direct', not {method!r}")
     demos = list(demos)
     data = TimingData(demos, int(plant.n), int(plant.m), float(plant.dt), start)
-    from workbench.method.timing_parts import own_parts
-
-    own = own_parts(plant) if method == "liml" and exogenous_parts else None
-    point = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, own=own)
+    point = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s)
     reason = "least squares, as requested"
     K_point = point.K
     timed = True
     if method == "liml":
-        reason = f"instruments relevant: {relevance_text(point.relevance)} beyond chance" + (
-            "; each input's entries on the plant's other parts exogenous" if own is not None else "")
+        reason = f"instruments relevant: {relevance_text(point.relevance)} beyond chance"
         why = refusal(point, plant, delay_s, lag_s)
         if why and fallback is None:
             raise ModelError(why)
@@ -733,14 +710,14 @@ def identify_timing(
         counts = np.bincount(rng.integers(0, J, size=J), minlength=J)
         try:
             if timed:
-                fit = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts, own=own)
+                fit = fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts)
                 if fallback is not None:  # the decision on all trials stands; how often this resample disagrees
                     otherwise += bool(refusal(fit, plant, delay_s, lag_s))
                 fits.append(fit)
                 K_all.append(fit.K)
             else:  # the rule's gain, as on all trials (the fallback's own failure fails the resample)
                 K_all.append(np.asarray(fallback(counts)))
-                otherwise += _would_time(data, method, delay_s, lag_s, counts, plant, own)
+                otherwise += _would_time(data, method, delay_s, lag_s, counts, plant)
         except (ModelError, np.linalg.LinAlgError):
             failed += 1
         if progress is not None:
@@ -760,11 +737,11 @@ def identify_timing(
 
 
 def _would_time(data: TimingData, method: str, delay_s: float | None, lag_s: float | None, counts: np.ndarray,
-                plant: Any, own: Any = None) -> bool:
+                plant: Any) -> bool:
     """Whether a resample's own trials would have identified the timing that all trials refused (for
     :attr:`PilotTiming.n_otherwise` only: the resample takes the rule's gain either way)."""
     try:
-        return not refusal(fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts, own=own), plant,
-                           delay_s, lag_s)
+        return not refusal(fit_timing(data, method, delay_s=delay_s, lag_s=lag_s, counts=counts), plant, delay_s,
+                           lag_s)
     except (ModelError, np.linalg.LinAlgError):
         return False
