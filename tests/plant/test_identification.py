@@ -93,7 +93,13 @@ def test_auto_identifies_a_real_log_in_the_paper_s_layout_read_without_a_mode_ru
     ds = adapters.load(external_file("dronekit_flight.tlog"), str(_dronekit_mapping(tmp_path)))
     assert tuple(ds.state_names) == paper.state_names and ds.dt == paper.dt
     assert not any(d.meta.get("plant_group") for d in ds)
-    plant = choose_plant(ds, "auto")
+    # identified, not the paper's: and this mapping pairs the body roll with the world's east velocity on a vehicle
+    # that turns, so the identified plant is refused for its physics; `--plant free` takes it as fitted
+    from workbench.errors import ModelError
+
+    with pytest.raises(ModelError, match=r"^the identified plant is not physics: A\[xdot, phi\]"):
+        choose_plant(ds, "auto")
+    plant = choose_plant(ds, "free")
     assert plant.identification is not None
     reproduced, why = paper_reproduces(ds, paper)
     assert not reproduced and f"not the paper's plant: {why}" in plant.identification.describe()
@@ -134,3 +140,75 @@ def test_auto_keeps_the_paper_s_plant_for_its_own_trials(source):
     assert plant.identification is None
     np.testing.assert_array_equal(plant.A, paper.A)
     np.testing.assert_array_equal(plant.B, paper.B)
+
+
+def _angle_flights(k_first: float, k_rest: float):
+    """Simulated STABILIZE flights whose recorded across-velocity is off the tilt physics: each segment's xdot gets
+    ``−k · g·dt · Σ phi`` (the first segment ``k_first``, the others ``k_rest``), so it responds to the lean at
+    ``(1 − k) · g·dt`` — a velocity that drifts against the tilt (a dead-reckoned segment) or, with every segment at
+    k = 2, a lean of the wrong sign."""
+    import numpy as np
+
+    from workbench.plant.identification import GRAVITY
+    from workbench.sim.modes import ModeVehicle, fly
+
+    ds = fly(ModeVehicle(), "angle", seconds=20.0, n=4, seed=0)
+    ip, iv = ds.state_names.index("phi"), ds.state_names.index("xdot")
+
+    def off(d, k):
+        x = d.x.copy()
+        x[:, iv] -= k * GRAVITY * ds.dt * np.concatenate([[0.0], np.cumsum(x[:-1, ip])])
+        return type(d)(d.t, x, d.u, d.meta)
+
+    return ds.with_demos([off(d, k_first if i == 0 else k_rest) for i, d in enumerate(ds)])
+
+
+def test_a_plant_that_fails_its_physics_check_is_held_at_the_physics_where_the_data_agree():
+    # beastayyg 0039 / erle 15-12-2014/16 STABILIZE: the free fit put A[xdot, phi] at 0.09 and 0.24 × g·dt (16's short
+    # segment split the tilt between the lean and the stick, B[xdot, u1] 0.63), and fit wrote a model on that plant
+    import numpy as np
+
+    from workbench.plant.choice import choose_plant
+    from workbench.plant.identification import identify_plant
+
+    ds = _angle_flights(3.0, 0.0)  # one segment of four drifts against the tilt
+    (free,) = identify_plant(ds, hold=False)[3].checks
+    assert not free.within()  # the free fit fails its check
+    plant = choose_plant(ds, "auto")
+    report = plant.identification
+    (check,) = report.checks
+    i, j = free.at
+    assert plant.A[i, j] == free.expected and check.within() and not report.contradiction
+    assert report.free_checks[0].value == free.value  # the free fit is kept in the report
+    held = [f for f in report.fixed if f.startswith(f"{free.name} = {free.expected:.4g}")]
+    assert len(held) == 1 and "predicts the held-out xdot no better" in held[0]
+    assert f"(held; the free fit's {free.value:.4g}" in report.describe()
+    assert not any("tilt would" in w for w in report.warnings)
+    # the held plant predicts the held-out velocity no worse than the free one: that is the rule
+    assert report.one_step_rmse[i] <= identify_plant(ds, hold=False)[3].one_step_rmse[i]
+    # --plant free takes the least-squares plant as fitted
+    assert choose_plant(ds, "free").A[i, j] == free.value
+    assert np.isfinite(plant.A).all()
+
+
+def test_a_plant_whose_data_contradict_the_physics_is_refused_in_one_line():
+    # flug ZweiterFlugtag log_23 (A[xdot, phi] −3 × g·dt), peterbarker_1 (0.22 ×): held at g·dt the plant predicts the
+    # held-out velocity worse than the free fit, so no pilot model on either describes this vehicle
+    import re
+
+    from workbench.errors import ModelError
+    from workbench.plant.choice import choose_plant
+    from workbench.plant.identification import identify_plant
+
+    ds = _angle_flights(2.0, 2.0)  # every segment: the velocity answers the lean with the wrong sign
+    (free,) = identify_plant(ds, hold=False)[3].checks
+    assert free.ratio < 0
+    with pytest.raises(ModelError) as info:
+        choose_plant(ds, "auto")
+    line = str(info.value)
+    assert "\n" not in line
+    assert line.startswith(f"the identified plant is not physics: {free.name} is {free.ratio:.2g} × g·dt")
+    m = re.search(r"held at g·dt it predicts the held-out xdot worse, ([\d.e+-]+) against ([\d.e+-]+) RMSE", line)
+    assert m is not None and float(m.group(1)) > float(m.group(2))
+    assert "`--plant free` takes the plant as fitted" in line
+    assert choose_plant(ds, "free").A[free.at] == free.value  # the override

@@ -29,6 +29,7 @@ groups, and the caller identifies each group's plant from its own segments.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -99,6 +100,10 @@ class IdentificationReport:
     position_pull: float = 0.0  # max |A[i, p]| over positions p and the other rows i (0 when translation invariant)
     plant_group: str | None = None  # what the sticks command in these segments' modes (workbench.data.plant_groups)
     responses: tuple[StickResponse, ...] = ()  # what each stick commands in this plant (workbench.plant.physics)
+    #: the free fit's checks where it failed one and the failing entries were held at their physics (else ``()``)
+    free_checks: tuple[PhysicalCheck, ...] = ()
+    #: one line where the free fit fails a check and the data contradict the physics (see :func:`identify_plant`)
+    contradiction: str = ""
     #: why ``--plant auto`` identified data in the paper's layout and step (workbench.plant.choice.paper_reproduces)
     why: str = ""
 
@@ -155,7 +160,9 @@ class IdentificationReport:
             f"{self.spectral_radius_beyond_integrators:.6g}; cond of the normalized regressor "
             f"{self.condition_number:.3g}"
         )
-        lines += [f"  check: {c}" for c in self.checks]
+        free = {c.name: c for c in self.free_checks if not c.within()}
+        lines += [f"  check: {c}" + (f" (held; the free fit's {free[c.name].value:.4g}, ratio "
+                                     f"{free[c.name].ratio:.3g})" if c.name in free else "") for c in self.checks]
         lines += [f"  stick: {r}" for r in self.responses]
         if warning and self.warning:
             lines.append(f"  warning: {self.warning}")
@@ -200,6 +207,8 @@ class _Layout:
     dt: float
     pairs: tuple[tuple[int, int], ...]  # (position, velocity) state indices with kinematic rows
     invariant: bool = False  # no row but a position's own depends on an absolute position
+    #: entries of ``[A B]`` held at a value physics gives (row, column, value); the rest of their rows is fitted
+    held: tuple[tuple[int, int, float], ...] = ()
 
     @property
     def fixed_rows(self) -> list[int]:
@@ -222,16 +231,27 @@ class _Layout:
         for p, v in self.pairs:
             AB[p, p] = 1.0
             AB[p, v] = self.dt
+        for i, j, value in self.held:
+            AB[i, j] = value
         return AB
 
 
-
 def _fit(layout: _Layout, Z: np.ndarray, Xn: np.ndarray) -> np.ndarray:
+    """Least squares of the free rows, ``min ‖X' − [A B] [X; U]‖_F`` (eq. (1)); a row with held entries regresses
+    what they leave, ``x_i[k+1] − Σ_held AB[i, j] z_j[k]``, on its other columns (a grey-box row)."""
     AB = layout.base()
     rows, cols = layout.free_rows, layout.columns
-    if rows:
-        theta, *_ = np.linalg.lstsq(Z[:, cols], Xn[:, rows], rcond=None)
-        AB[np.ix_(rows, cols)] = theta.T
+    held_rows = {i for i, _, _ in layout.held}
+    plain = [i for i in rows if i not in held_rows]
+    if plain:
+        theta, *_ = np.linalg.lstsq(Z[:, cols], Xn[:, plain], rcond=None)
+        AB[np.ix_(plain, cols)] = theta.T
+    for i in sorted(held_rows & set(rows)):
+        fixed = [j for r, j, _ in layout.held if r == i]
+        own = [j for j in cols if j not in fixed]
+        target = Xn[:, i] - Z[:, fixed] @ AB[i, fixed]
+        theta, *_ = np.linalg.lstsq(Z[:, own], target, rcond=None)
+        AB[i, own] = theta
     return AB
 
 
@@ -313,7 +333,8 @@ def _beyond_integrators(A: np.ndarray, n_int: int) -> float:
 
 
 def identify_plant(
-    demos: DemonstrationSet, structure: str = "auto", horizon_s: float = HORIZON_S, translation_invariant: bool = False
+    demos: DemonstrationSet, structure: str = "auto", horizon_s: float = HORIZON_S, translation_invariant: bool = False,
+    hold: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
     """(A, B), the RMS one-step residual of the fit on all data, and the report (see the module docstring).
 
@@ -360,6 +381,46 @@ def identify_plant(
             f"(cond [X; U] = {np.linalg.cond(Z[:, cols]):.3g}): {_unexcited(Z[:, cols], [labels[j] for j in cols])}; "
             "record more varied demonstrations"
         )
+    free = _estimate(demos, layout, Z, Xn, r, structure, horizon_s, translation_invariant, group)
+    failed = [c for c in free[3].checks if not c.within() and c.at is not None]
+    if not failed or not hold:
+        return free
+    # grey box: the entries physics gives held at their value, the rest of their rows by least squares
+    held = dataclasses.replace(layout, held=tuple((*c.at, c.expected) for c in failed))
+    A, B, residual, report = _estimate(demos, held, Z, Xn, r, structure, horizon_s, translation_invariant, group)
+    rows = sorted({c.at[0] for c in failed})
+    free_err, held_err = free[3].one_step_rmse[rows], report.one_step_rmse[rows]
+    if np.all(held_err <= free_err):  # NaN (no held-out fold) compares False: nothing shows the data agree
+        said = tuple(f"{c.name} = {c.expected:.4g} ({c.note.split(':')[0]}; the free fit's {c.value:.3g}, "
+                     f"{c.ratio:.2g} × it, predicts the held-out {names[c.at[0]]} no better: "
+                     f"{_fmt(free_err[rows.index(c.at[0])])} against {_fmt(held_err[rows.index(c.at[0])])} RMSE, "
+                     "one step)" for c in failed)
+        return A, B, residual, dataclasses.replace(report, fixed=report.fixed + said, free_checks=free[3].checks)
+    c = failed[0]
+    k = rows.index(c.at[0])
+    why = (f"held at {c.note.split(':')[0]} it predicts the held-out {names[c.at[0]]} worse, "
+           f"{_fmt(held_err[k])} against {_fmt(free_err[k])} RMSE one step ahead: the recorded data contradict the "
+           "physics" if np.isfinite(held_err[k]) and np.isfinite(free_err[k]) else
+           "no segment could be held out to tell whether the data agree with the physics")
+    contradiction = (f"the identified plant is not physics: {'; '.join(_disagreement(x) for x in failed)}; {why}, so "
+                     "a pilot model fitted on it would describe another vehicle (`--plant free` takes the plant as "
+                     "fitted)")
+    return (*free[:3], dataclasses.replace(free[3], contradiction=contradiction))
+
+
+def _fmt(value: float) -> str:
+    return f"{value:.3g}" if np.isfinite(value) else "none (no held-out fold)"
+
+
+def _estimate(demos: DemonstrationSet, layout: _Layout, Z: np.ndarray, Xn: np.ndarray, r: ResolvedRoles,
+              structure: str, horizon_s: float, translation_invariant: bool,
+              group: str | None) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
+    """(A, B) of ``layout`` on the pairs ``Z → Xn``, their residual and report (held out, checks, warnings)."""
+    n, m, dt = layout.n, layout.m, layout.dt
+    names = tuple(demos.state_names)
+    roles = demos.roles
+    pairs = layout.pairs
+    cols = layout.columns
     AB = _fit(layout, Z, Xn)
     A, B = AB[:, :n], AB[:, n:]
     residual = float(np.sqrt(np.mean((Xn - Z @ AB.T) ** 2)))

@@ -42,6 +42,8 @@ class PhysicalCheck:
     expected: float
     note: str = ""
     cause: str = ""  # what usually makes this entry disagree; "" for the tilt check's own text
+    #: where the entry sits in ``[A B]`` (row, column), so that an identification can hold it at ``expected``
+    at: tuple[int, int] | None = None
 
     @property
     def ratio(self) -> float:
@@ -124,7 +126,7 @@ def _tilt(A: np.ndarray, r: ResolvedRoles, roles: Roles, state_names: Sequence[s
         return ()
     name = f"A[{state_names[v]}, {state_names[r.heading]}]"
     return (PhysicalCheck(name, float(A[v, r.heading]), GRAVITY * dt * per_unit,
-                          f"g·dt: tilting by the heading angle accelerates {state_names[v]}"),)
+                          f"g·dt: tilting by the heading angle accelerates {state_names[v]}", at=(v, r.heading)),)
 
 
 def _roll_kinematics(A: np.ndarray, roles: Roles, state_names: Sequence[str], r: ResolvedRoles, dt: float):
@@ -138,7 +140,8 @@ def _roll_kinematics(A: np.ndarray, roles: Roles, state_names: Sequence[str], r:
     return (PhysicalCheck(name, float(A[r.heading, rate]), dt,
                           f"dt: the bank angle integrates the roll rate {state_names[rate]}",
                           cause="the angle does not integrate its rate state: the rate is about another axis (a "
-                                "body rate against a tilt in a turning plane), in other units, or lags the angle"),)
+                                "body rate against a tilt in a turning plane), in other units, or lags the angle",
+                          at=(r.heading, rate)),)
 
 
 def _steady(A: np.ndarray, B: np.ndarray, loop: Sequence[int], dt: float) -> tuple[np.ndarray, float]:
