@@ -39,7 +39,9 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
     real vehicle is not the paper's linearized 0.25 kg quadrotor, whether its trials were flown in a vehicle's
     flight mode (each with a plant group) or read through a mapping without a mode rule in the paper's layout.
     Identification is kinematic (position rows fixed, :mod:`workbench.plant.identification`) whenever the data's
-    roles pair positions with velocities, and its report checks ``horizon_s`` seconds ahead.
+    roles pair positions with velocities, and its report checks ``horizon_s`` seconds ahead. A plant that fails its
+    physical check is held at its physics where the held-out data agree and refused (a ``ModelError`` in one line)
+    where they contradict it; ``free`` takes the least-squares plant as fitted.
     """
     if choice not in PLANT_CHOICES:
         raise DataError(f"unknown plant choice {choice!r}; known: {', '.join(PLANT_CHOICES)}")

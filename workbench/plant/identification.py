@@ -19,8 +19,16 @@ segment left out in turn (leave-one-segment-out; a log with fewer than three seg
 pieces first), against persistence (every state held, positions moved on at their recorded velocity); the
 spectral radius ρ(A), also without the integrators; the conditioning of the regressor; the physical checks
 of the segments' plant group and what each stick commands in it (:mod:`workbench.plant.physics`); and one warning
-line when the plant is unstable beyond its integrators, worse than persistence, or ill-conditioned. The checks are
-reported, never enforced.
+line when the plant is unstable beyond its integrators, worse than persistence, or ill-conditioned.
+
+A plant that fails a physical check is the wrong vehicle for a pilot model (a lean that does not accelerate the
+vehicle as a tilt does). Where the free fit fails one, the plant is identified again as a grey box: each failing
+entry held at what physics says it is (``A[xdot, phi] = g·dt``, where the roles name the pair; a plane's
+``A[phi, phidot] = dt``) and the rest of its row by least squares. The held plant is the plant unless it predicts the
+held-out segments' one-step states of those rows worse than the free fit, judged by the Diebold–Mariano comparison of
+the two forecasts' squared errors with a Newey–West interval (:data:`PHYSICS_CI`): then the data contradict the physics
+and the report carries one line saying so (``contradiction``), which :func:`workbench.plant.choice.choose_plant`
+raises (``--plant free`` takes the free fit as it is). A held plant says so in the report's ``fixed`` lines.
 
 One plant per kind of stick: demonstrations of different plant groups (:mod:`workbench.data.plant_groups`: a lean
 angle in STABILIZE, a velocity in LOITER) are never pooled into one (A, B); identification refuses them, naming the
@@ -64,6 +72,8 @@ ILL_CONDITIONED = 1e4
 #: |λ| above 1 + this counts as unstable (the paper's plant has eigenvalues exactly on the unit circle).
 UNSTABLE_TOL = 1e-6
 MIN_SEGMENTS = 3
+#: The interval (%) by which a plant held at its physics is judged to predict held-out samples worse than the free fit.
+PHYSICS_CI = 95.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -347,6 +357,10 @@ def identify_plant(
         Seconds of the multi-step check (the model's prediction horizon; the paper's is 3 s).
     translation_invariant : bool
         With ``"kinematic"``: also keep absolute positions out of every other row.
+    hold : bool
+        Where the fit fails a physical check, identify it again with the failing entries held at their physics and
+        take that plant unless the held-out data contradict it (the module docstring); ``False``: the free fit as it
+        is (``--plant free``).
 
     Raises
     ------
@@ -384,38 +398,71 @@ def identify_plant(
     free = _estimate(demos, layout, Z, Xn, r, structure, horizon_s, translation_invariant, group)
     failed = [c for c in free[3].checks if not c.within() and c.at is not None]
     if not failed or not hold:
-        return free
+        return free[:4]
     # grey box: the entries physics gives held at their value, the rest of their rows by least squares
-    held = dataclasses.replace(layout, held=tuple((*c.at, c.expected) for c in failed))
-    A, B, residual, report = _estimate(demos, held, Z, Xn, r, structure, horizon_s, translation_invariant, group)
+    held = _estimate(demos, dataclasses.replace(layout, held=tuple((*c.at, c.expected) for c in failed)), Z, Xn, r,
+                     structure, horizon_s, translation_invariant, group)
     rows = sorted({c.at[0] for c in failed})
-    free_err, held_err = free[3].one_step_rmse[rows], report.one_step_rmse[rows]
-    if np.all(held_err <= free_err):  # NaN (no held-out fold) compares False: nothing shows the data agree
-        said = tuple(f"{c.name} = {c.expected:.4g} ({c.note.split(':')[0]}; the free fit's {c.value:.3g}, "
-                     f"{c.ratio:.2g} × it, predicts the held-out {names[c.at[0]]} no better: "
-                     f"{_fmt(free_err[rows.index(c.at[0])])} against {_fmt(held_err[rows.index(c.at[0])])} RMSE, "
-                     "one step)" for c in failed)
-        return A, B, residual, dataclasses.replace(report, fixed=report.fixed + said, free_checks=free[3].checks)
-    c = failed[0]
-    k = rows.index(c.at[0])
-    why = (f"held at {c.note.split(':')[0]} it predicts the held-out {names[c.at[0]]} worse, "
-           f"{_fmt(held_err[k])} against {_fmt(free_err[k])} RMSE one step ahead: the recorded data contradict the "
-           "physics" if np.isfinite(held_err[k]) and np.isfinite(free_err[k]) else
-           "no segment could be held out to tell whether the data agree with the physics")
-    contradiction = (f"the identified plant is not physics: {'; '.join(_disagreement(x) for x in failed)}; {why}, so "
-                     "a pilot model fitted on it would describe another vehicle (`--plant free` takes the plant as "
-                     "fitted)")
+    verdict = _held_vs_free(held[4][:, rows], free[4][:, rows])
+    what = ", ".join(names[i] for i in rows)
+    if not verdict.worse:
+        said = tuple(f"{c.name} = {c.expected:.4g} ({c.note.split(':')[0]}; the free fit's {c.value:.3g} is "
+                     f"{c.ratio:.2g} × it) — {verdict.describe(what)}" for c in failed)
+        return (*held[:3], dataclasses.replace(held[3], fixed=held[3].fixed + said, free_checks=free[3].checks))
+    contradiction = (f"the identified plant is not physics: {'; '.join(_disagreement(c) for c in failed)}; and held "
+                     f"at its physics the plant predicts the held-out {what} worse — {verdict.describe(what)}: the "
+                     "recorded data contradict the physics, so a pilot model fitted on either plant would not "
+                     "describe this vehicle (`--plant free` takes the plant as fitted)")
     return (*free[:3], dataclasses.replace(free[3], contradiction=contradiction))
 
 
-def _fmt(value: float) -> str:
-    return f"{value:.3g}" if np.isfinite(value) else "none (no held-out fold)"
+@dataclass(frozen=True)
+class _Comparison:
+    """The held plant's held-out one-step squared error minus the free plant's, per sample: its mean and interval."""
+
+    mean_held: float
+    mean_free: float
+    lo: float
+    hi: float
+    n: int
+
+    @property
+    def worse(self) -> bool:
+        """The held plant predicts worse beyond the interval (its lower bound above 0); no interval is no verdict."""
+        return bool(np.isfinite(self.lo) and self.lo > 0.0)
+
+    def describe(self, what: str) -> str:
+        rms = f"held-out one-step RMSE of {what} {np.sqrt(self.mean_held):.3g} held, {np.sqrt(self.mean_free):.3g} free"
+        if not np.isfinite(self.lo):
+            return f"{rms} (no held-out samples to compare them by)"
+        return (f"{rms}; mean squared difference {self.mean_held - self.mean_free:.3g} [{self.lo:.3g}, {self.hi:.3g}] "
+                f"({PHYSICS_CI:g} % HAC interval over {self.n} held-out samples)")
+
+
+def _held_vs_free(held: np.ndarray, free: np.ndarray) -> _Comparison:
+    """Whether the held plant predicts the held-out samples worse than the free one: the Diebold–Mariano comparison of
+    two forecasts, ``d_k = Σ_rows e_held² − e_free²`` per held-out sample, its mean with a Newey–West (HAC) interval
+    (the one-step errors of a plant are autocorrelated; lags by the Newey–West rule ``⌊4 (T/100)^{2/9}⌋``)."""
+    d = (held**2).sum(axis=1) - (free**2).sum(axis=1)
+    n = len(d)
+    mean_held, mean_free = (float((e**2).sum(axis=1).mean()) if n else float("nan") for e in (held, free))
+    if n < 2 or not np.isfinite(d).all():
+        return _Comparison(mean_held, mean_free, float("nan"), float("nan"), n)
+    if not np.ptp(d) > 0:  # identical forecasts: no difference, no spread to judge one by
+        return _Comparison(mean_held, mean_free, float(d[0]), float(d[0]), n)
+    import statsmodels.api as sm  # here: identification without a failed check never needs it
+
+    lags = int(np.floor(4.0 * (n / 100.0) ** (2.0 / 9.0)))
+    fit = sm.OLS(d, np.ones(n)).fit(cov_type="HAC", cov_kwds={"maxlags": lags})
+    lo, hi = (float(v) for v in np.asarray(fit.conf_int(alpha=1.0 - PHYSICS_CI / 100.0))[0])
+    return _Comparison(mean_held, mean_free, lo, hi, n)
 
 
 def _estimate(demos: DemonstrationSet, layout: _Layout, Z: np.ndarray, Xn: np.ndarray, r: ResolvedRoles,
               structure: str, horizon_s: float, translation_invariant: bool,
-              group: str | None) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
-    """(A, B) of ``layout`` on the pairs ``Z → Xn``, their residual and report (held out, checks, warnings)."""
+              group: str | None) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport, np.ndarray]:
+    """(A, B) of ``layout`` on the pairs ``Z → Xn``, their residual and report (held out, checks, warnings), and the
+    held-out one-step errors (rows: the held-out samples of every fold in turn)."""
     n, m, dt = layout.n, layout.m, layout.dt
     names = tuple(demos.state_names)
     roles = demos.roles
@@ -486,4 +533,5 @@ def _estimate(demos: DemonstrationSet, layout: _Layout, Z: np.ndarray, Xn: np.nd
         spectral_radius_beyond_integrators=rho_free, n_integrators=n_int, condition_number=cond, fixed=fixed,
         checks=checks, warnings=tuple(warns), position_pull=pull, plant_group=group, responses=responses,
     )
-    return A, B, residual, report
+    one_step = np.concatenate(errs["one"]) if errs["one"] else np.empty((0, n))
+    return A, B, residual, report, one_step

@@ -1,6 +1,7 @@
 """The physics an identified plant is checked against, per plant group, and what each stick commands in it.
 
-Two kinds of result, both reported and never enforced (:class:`~workbench.plant.identification.IdentificationReport`):
+Two kinds of result (:class:`~workbench.plant.identification.IdentificationReport`; a failed check's entry is held at
+its physics where the data agree, the plant refused where they do not: :mod:`workbench.plant.identification`):
 
 :class:`PhysicalCheck`
     One identified entry against what physics says it is, within a factor 2. A multirotor of any group tilts to
@@ -35,7 +36,8 @@ GRAVITY = 9.80665  # m/s², standard gravity
 
 @dataclass(frozen=True)
 class PhysicalCheck:
-    """One physical expectation on an identified entry, reported (not enforced)."""
+    """One physical expectation on an identified entry (held at ``expected`` where the free fit fails it and the data
+    agree: :func:`~workbench.plant.identification.identify_plant`)."""
 
     name: str
     value: float
