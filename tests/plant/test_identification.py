@@ -214,7 +214,7 @@ def test_a_plant_whose_data_contradict_the_physics_is_refused_in_one_line():
     line = str(info.value)
     assert "\n" not in line
     assert line.startswith(f"the identified plant is not physics: {free.name} is {free.ratio:.2g} × g·dt")
-    m = re.search(r"predicts the held-out xdot worse — held-out one-step RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) "
+    m = re.search(r"predicts the held-out xdot worse \(held-out one-step RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) "
                   r"free; mean squared difference ([\d.e+-]+) \[([\d.e+-]+), ([\d.e+-]+)\]", line)
     assert m is not None and float(m.group(1)) > float(m.group(2)) and float(m.group(4)) > 0.0
     assert "`--plant free` takes the plant as fitted" in line

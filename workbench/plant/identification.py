@@ -50,6 +50,7 @@ from workbench.defaults import HORIZON_S
 from workbench.errors import ModelError
 from workbench.frozen import readonly
 from workbench.plant.physics import GRAVITY, PhysicalCheck, StickResponse, group_checks, stick_responses
+from workbench.plant.physics import cause as _cause
 from workbench.plant.physics import disagreement as _disagreement
 
 if TYPE_CHECKING:
@@ -409,10 +410,12 @@ def identify_plant(
         said = tuple(f"{c.name} = {c.expected:.4g} ({c.note.split(':')[0]}; the free fit's {c.value:.3g} is "
                      f"{c.ratio:.2g} × it) — {verdict.describe(what)}" for c in failed)
         return (*held[:3], dataclasses.replace(held[3], fixed=held[3].fixed + said, free_checks=free[3].checks))
-    contradiction = (f"the identified plant is not physics: {'; '.join(_disagreement(c) for c in failed)}; and held "
-                     f"at its physics the plant predicts the held-out {what} worse — {verdict.describe(what)}: the "
-                     "recorded data contradict the physics, so a pilot model fitted on either plant would not "
-                     "describe this vehicle (`--plant free` takes the plant as fitted)")
+    # one line, the measured facts first (a table cell or a terminal cuts a long line at its end)
+    ratios = "; ".join(f"{c.name} is {c.ratio:.2g} × {c.note.split(':')[0]}" for c in failed)
+    contradiction = (f"the identified plant is not physics: {ratios}, and held at its physics it predicts the held-out "
+                     f"{what} worse ({verdict.describe(what)}): the recorded data contradict the physics, so no pilot "
+                     f"model on this plant describes the vehicle; {_cause(failed[0])} (`--plant free` takes the plant "
+                     "as fitted)")
     return (*free[:3], dataclasses.replace(free[3], contradiction=contradiction))
 
 

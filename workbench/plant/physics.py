@@ -28,7 +28,7 @@ import numpy as np
 from workbench.data.plant_groups import PLANT_GROUPS
 from workbench.data.roles import ResolvedRoles, Roles
 
-__all__ = ["GRAVITY", "PhysicalCheck", "StickResponse", "group_checks", "stick_responses", "disagreement",
+__all__ = ["GRAVITY", "PhysicalCheck", "StickResponse", "group_checks", "stick_responses", "disagreement", "cause",
            "rate_state"]
 
 GRAVITY = 9.80665  # m/s², standard gravity
@@ -65,13 +65,20 @@ class PhysicalCheck:
 
 _TILT_CAUSE = ("the velocity does not respond to the angle as a tilt would; likely cause: the angle is not the tilt "
                "along that velocity's axis (a body roll paired with a world-frame velocity on a vehicle that turns: "
-               "declare the states in the heading frame), or the velocity is an estimate that does not follow the "
-               "tilt (no GPS, estimator not converged), or segments of different kinds of stick pooled in one plant")
+               "declare the states in the heading frame; in the heading frame, a vehicle that yaws while it moves "
+               "turns its forward velocity into that axis, yaw rate × forward speed, which no state carries), or the "
+               "velocity is an estimate that does not follow the tilt (no GPS, estimator not converged), or segments "
+               "of different kinds of stick pooled in one plant")
 
 
 def disagreement(c: PhysicalCheck) -> str:
     """A failed check as a warning that names the state pair and what usually makes it disagree."""
-    return f"{c.name} is {c.ratio:.2g} × {c.note.split(':')[0]} (physics: 1): {c.cause or _TILT_CAUSE}"
+    return f"{c.name} is {c.ratio:.2g} × {c.note.split(':')[0]} (physics: 1): {cause(c)}"
+
+
+def cause(c: PhysicalCheck) -> str:
+    """What usually makes ``c``'s entry disagree with its physics, in words."""
+    return c.cause or _TILT_CAUSE
 
 
 @dataclass(frozen=True)
