@@ -43,10 +43,10 @@ def drop_unfixed(streams: Streams, m: ChannelMapping, found: list, log_start: fl
     ``found`` holds ``(span, times, values)`` per flight-mode span, ``times`` one array per piece. A piece in which the
     log's GPS reports samples and not one of them has a fix (the mapping's ``[reference].fix``, a 3D fix) was flown
     on the estimator's dead reckoning: its position and velocity are the IMU's integral, which drifts (erle
-    6-11-2014/GPS_issues2: 46 s of ALT_HOLD with the GPS at 0 satellites, the EKF's speed drifting to 60 m/s), so no
-    plant identified from it can be physics. A piece without any GPS sample is dropped where the log writes its GPS
-    stream whenever a receiver reports (``[reference].always_logged``: an ArduPilot DataFlash log) and kept
-    otherwise (a telemetry log's GPS stream may be thinned by the radio)."""
+    6-11-2014/GPS_issues2: 46 s of ALT_HOLD with the GPS at 0 satellites (Status 0–1), the EKF's speed drifting to
+    60 m/s), so no plant identified from it can be physics. A piece without any GPS sample is dropped where the log
+    writes its GPS stream whenever a receiver reports (``[reference].always_logged``: an ArduPilot DataFlash log) and
+    kept otherwise (a telemetry log's GPS stream may be thinned by the radio)."""
     rows = _gps_rows(streams, m)
     if rows is None:
         return found, ""

@@ -499,7 +499,7 @@ def _mode_span(streams, name):
 
 @pytest.mark.parametrize("lost", ["no fix", "silent"])
 def test_a_segment_flown_without_a_gps_fix_is_dropped_and_named(tmp_path, lost):
-    # erle 6-11-2014/GPS_issues2.BIN: 46 s of ALT_HOLD with GPS.Status 0 (0 satellites); the EKF dead-reckoned, its
+    # erle 6-11-2014/GPS_issues2.BIN: 46 s of ALT_HOLD with GPS.Status 0–1 (0 satellites); the EKF dead-reckoned, its
     # speed drifted to 60 m/s against a GPS that read 0, and the plant identified from it had A[xdot, phi] −0.7 × g·dt
     clean_streams, _ = dataflash_write.example_streams("old", "copter", seconds=30.0, seed=3)
     a, b = _mode_span(clean_streams, "ALT_HOLD")

@@ -219,3 +219,29 @@ def test_a_plant_whose_data_contradict_the_physics_is_refused_in_one_line():
     assert m is not None and float(m.group(1)) > float(m.group(2)) and float(m.group(4)) > 0.0
     assert "`--plant free` takes the plant as fitted" in line
     assert choose_plant(ds, "free").A[free.at] == free.value  # the override
+
+
+def test_the_held_plant_is_judged_worse_only_beyond_its_autocorrelation_robust_interval():
+    # one-step errors of a plant are autocorrelated: the comparison's interval must widen with it (Newey–West), so
+    # a difference an iid interval would call significant is not a refusal
+    import numpy as np
+    from scipy import stats
+
+    from workbench.plant.identification import _held_vs_free
+
+    rng = np.random.default_rng(5)
+    n = 600
+    free = rng.normal(size=(n, 1))
+    slow = np.zeros(n)
+    for k in range(1, n):  # an AR(1) disturbance with 0.95 per step: slowly wandering errors
+        slow[k] = 0.95 * slow[k - 1] + 0.3 * rng.normal()
+    held = np.sqrt(np.maximum(free[:, 0] ** 2 + slow + 0.02, 0.0))[:, None]
+    d = held[:, 0] ** 2 - free[:, 0] ** 2
+    iid = stats.ttest_1samp(d, 0.0).confidence_interval(0.95)
+    verdict = _held_vs_free(held, free)
+    assert verdict.mean_held - verdict.mean_free == pytest.approx(d.mean())
+    assert verdict.hi - verdict.lo > iid.high - iid.low  # wider than the interval that ignores the autocorrelation
+    assert verdict.worse == (verdict.lo > 0.0)
+    # errors twice as large everywhere: worse beyond any interval
+    assert _held_vs_free(2.0 * free, free).worse
+    assert not _held_vs_free(free, free).worse  # the same forecasts: no difference
