@@ -18,7 +18,7 @@ each copy trained on its own half of every split's training part — the true di
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,7 +26,6 @@ import pandas as pd
 
 from workbench.errors import ConvergenceWarning, DegenerateFitWarning
 from workbench.study.method_level import (
-    MIN_SPLITS,
     SplitPlan,
     _refit,
     corrected_t,
@@ -148,10 +147,13 @@ def simulated_run(sim, family: str, seed: int, plant, *, n_trials: int = 30, tes
 
 
 def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_comparison: bool = False,
-                 factor: float = 1.0, decision: bool = True) -> tuple[float, float, float]:
+                 factor: float = 1.0, decision: bool = True,
+                 term: Callable[..., tuple[float, float]] = decision_variance) -> tuple[float, float, float]:
     """The interval of a run from its first ``J`` splits (all by default), as ``evaluate`` gives it: (mean, lo, hi);
-    NaN bounds where the splits did not vary. The corrected resampled t with the fallback's decision term
-    (:func:`~workbench.study.method_level.decision_variance`; ``decision=False``: Nadeau & Bengio's alone).
+    NaN bounds where ``evaluate`` prints none — the splits did not vary, or fewer than
+    :func:`~workbench.study.paired.min_units` of them were scored (6 at 95 %: "no interval (5 splits; 6 needed)").
+    The corrected resampled t with the fallback's decision term (``term``, by default
+    :func:`~workbench.study.method_level.decision_variance`; ``decision=False``: Nadeau & Bengio's alone).
     ``self_comparison``: the self-comparison's interval (each copy trained on half the split's training part; no
     decision term: both copies decide alike in law). ``factor``: the overlap term ``n_test/n_train`` multiplied by it
     (1: Nadeau & Bengio's), for a study that weighs other corrections."""
@@ -162,10 +164,10 @@ def run_interval(run: CoverageRun, J: int | None = None, ci: float = 95.0, self_
     extra = 0.0
     if decision and not self_comparison and run.margins:
         # against IOC-only a split's change is what keeping the variability model changed
-        extra = decision_variance(c, [run.fell_back[j] for j in keep], [run.margins[j] for j in keep])[1]
-    # the coverage study reads the statistic itself at every J it weighs, below min_units too
+        extra = term(c, [run.fell_back[j] for j in keep], [run.margins[j] for j in keep])[1]
+    # corrected_t's own floor (min_units of ci) is evaluate's: a run of fewer scored splits has no interval
     mean, lo, hi, *_ = corrected_t(c, n_train, run.n_test, ci, overlap=factor * run.n_test / max(n_train, 1),
-                                   least=MIN_SPLITS, extra_var=extra)
+                                   extra_var=extra)
     return mean, lo, hi
 
 
