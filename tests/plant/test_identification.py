@@ -245,3 +245,19 @@ def test_the_held_plant_is_judged_worse_only_beyond_its_autocorrelation_robust_i
     # errors twice as large everywhere: worse beyond any interval
     assert _held_vs_free(2.0 * free, free).worse
     assert not _held_vs_free(free, free).worse  # the same forecasts: no difference
+
+
+def test_a_horizon_no_held_out_piece_lasts_is_said_in_words_not_nan():
+    # erle 15-12-2014/16's STABILIZE group (82 samples in 3 held-out pieces, a 3 s horizon of 30 steps) printed
+    # "3 s (30 steps): plant nan, persistence nan" and a column of nan; its position rows printed 4.975e-17
+    from workbench.plant.identification import identify_plant
+    from workbench.sim.modes import ModeVehicle, fly
+
+    ds = fly(ModeVehicle(), "angle", seconds=10.0, n=3, seed=0)
+    horizon = 2 * ds.dt * max(len(d) for d in ds)  # longer than any piece
+    _, _, _, report = identify_plant(ds, horizon_s=horizon)
+    text = report.describe()
+    assert "nan" not in text.lower() and "e-1" not in text
+    assert f"({report.n_steps} steps): not scored: no held-out piece lasts that long" in text
+    _, _, _, scored = identify_plant(ds, horizon_s=1.0)  # pieces of 10 s hold a 1 s horizon
+    assert "not scored" not in scored.describe() and "—" not in scored.describe()

@@ -150,19 +150,20 @@ class IdentificationReport:
         ]
         lines += [f"  fixed: {f}" for f in self.fixed]
         lines += [f"  not the paper's plant: {self.why}"] if self.why else []
+        # said in words, never "nan": persistence has a score wherever a held-out piece lasts the horizon
+        horizon = (f"plant {self.horizon_score:.3g}, persistence {self.horizon_score_persistence:.3g}"
+                   if np.isfinite(self.horizon_score_persistence) else "not scored: no held-out piece lasts that long")
         lines.append(
             f"  normalized held-out RMSE, one step: plant {self.one_step_score:.3g}, persistence "
-            f"{self.one_step_score_persistence:.3g}; {self.horizon_s:g} s ({self.n_steps} steps): plant "
-            f"{self.horizon_score:.3g}, persistence {self.horizon_score_persistence:.3g}"
+            f"{self.one_step_score_persistence:.3g}; {self.horizon_s:g} s ({self.n_steps} steps): {horizon}"
         )
         width = max(len(s) for s in self.state_names)
         lines.append(f"  {'state':<{width}}  {'1-step':>9}  {'persist.':>9}  {f'{self.horizon_s:g} s':>9}  "
                      f"{'persist.':>9}")
         for i, s in enumerate(self.state_names):
-            lines.append(
-                f"  {s:<{width}}  {self.one_step_rmse[i]:>9.4g}  {self.one_step_rmse_persistence[i]:>9.4g}  "
-                f"{self.horizon_rmse[i]:>9.4g}  {self.horizon_rmse_persistence[i]:>9.4g}"
-            )
+            cells = (self.one_step_rmse[i], self.one_step_rmse_persistence[i], self.horizon_rmse[i],
+                     self.horizon_rmse_persistence[i])
+            lines.append(f"  {s:<{width}}  " + "  ".join(f"{_rmse_cell(v):>9}" for v in cells))
         if self.n_integrators:
             lines.append(f"  absolute position in the other rows: max |A[i, position]| = {self.position_pull:.3g} "
                          "(0 in free-flight physics; a pull the data ascribe to the plant)")
@@ -178,6 +179,14 @@ class IdentificationReport:
         if warning and self.warning:
             lines.append(f"  warning: {self.warning}")
         return "\n".join(lines)
+
+
+def _rmse_cell(v: float) -> str:
+    """An RMSE in the report's table: ``—`` where not scored; 0 where it is rounding (a row the physics fixes
+    exactly, such as the position's, leaves 1e-17 of floating-point error)."""
+    if not np.isfinite(v):
+        return "—"
+    return "0" if abs(v) < 1e-12 else f"{v:.4g}"
 
 
 # ----------------------------------------------------------------------------------------------- structure
