@@ -37,18 +37,20 @@ from adapters.modes import FIXED_WING_STICKS, autopilot_holds, mode_name, plant_
 from adapters.segment import (
     EVERYTHING,
     Span,
+    cut,
     demo_spans,
     event_spans,
     flag_spans,
     intersect,
     mode_spans,
     split_at_landing,
+    suspect_stretches,
 )
 from adapters.selection import Selected, channel_values, resolve_channel, select
 from adapters.sticks import check as check_sticks
 from adapters.sticks import describe as describe_sticks
 from adapters.sticks import resolve as resolve_sticks
-from adapters.streams import Streams, clean_series, damage_words, numeric, time_line
+from adapters.streams import Streams, clean_series, damage_words, damaged_regions, numeric, time_line
 from adapters.transforms import TRANSFORMS
 from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
@@ -66,7 +68,7 @@ def _same(a: Any, b: Any) -> bool:
 
 
 def _rule_series(sel: Selected, m: ChannelMapping, raw: bool = False, skipped: Counter | None = None,
-                 what: str = "") -> tuple[np.ndarray, np.ndarray]:
+                 what: str = "", streams: Streams | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A rule stream (demo field, mode, armed and landing flags, text markers) on its repaired time line.
 
     Rule streams decide where demonstrations start and end, so their clocks get the channels' robust repair
@@ -75,14 +77,20 @@ def _rule_series(sel: Selected, m: ChannelMapping, raw: bool = False, skipped: C
     in two. Order need not be strict (two records may share a stamp), a single bad stamp is repaired even in a
     sparse stream (a lost mode change would move a whole span), and no record is dropped for lying far from the
     others at an end (events, unlike samples, may).
+
+    The third array marks the records read from a message next to a damaged run of ``streams``' file
+    (``info["next_to_damage"]``, a DataFlash reader's): their values are suspect
+    (:func:`adapters.segment.suspect_stretches`).
     """
     t = stream_times(m.clock, sel.frame)[sel.rows]
     col = sel.columns[0]
     values = sel.frame[col].to_numpy()[sel.rows] if raw else numeric(sel.frame, col)[sel.rows]
+    after = np.zeros(len(sel.frame), dtype=bool)
+    after[list((streams.info.get("next_to_damage") or {}).get(sel.stream, ()) if streams is not None else ())] = True
     finite = np.isfinite(t)
-    t, values = t[finite], values[finite]
+    t, values, after = t[finite], values[finite], after[sel.rows][finite]
     index, fixed, dropped = time_line(t, strict=False, repair_one=True, ends=False)
-    values = values[index]
+    values, after = values[index], after[index]
     # A repaired record saying what a neighbour says belongs to that neighbour's run: one typical step from it, not
     # halfway to the other run, where it would open a span in a pause (the first record of a trial put inside the
     # pause before it) or stretch its run into the next.
@@ -98,27 +106,40 @@ def _rule_series(sel: Selected, m: ChannelMapping, raw: bool = False, skipped: C
     if skipped is not None:
         for cause, n in dropped.items():
             skipped[f"{what}: {cause}"] += n
-    return fixed, values
+    return fixed, values, after
 
 
-def _spans(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Span]:
+def _suspect_words(sel: Selected, t: np.ndarray, values: np.ndarray, stretches: list, named: Any = None) -> list[str]:
+    """``"MODE.ModeNum 0 (STABILIZE) at log time 131.8 s"`` per suspect stretch: the value it would have started."""
+    return [f"{sel.stream}.{sel.columns[0]} {values[j]:g}{f' ({n})' if named and (n := named(values[j])) else ''} "
+            f"at log time {t[j]:.1f} s" for _, _, j in stretches]
+
+
+def _spans(streams: Streams, m: ChannelMapping, skipped: Counter, suspects: list[str] | None = None) -> list[Span]:
+    """The spans every segmentation rule holds in, intersected. A mode, armed or landed value read from the first
+    message after a damaged run starts no span (:func:`adapters.segment.suspect_stretches`); each such value is
+    named in ``suspects``."""
     seg = m.segment
     spans: list[Span] | tuple[Span, ...] = EVERYTHING
     if seg.demo is not None:
         sel = select(seg.demo, streams, "segment.demo", m.name, n_columns=1)
-        t, values = _rule_series(sel, m, raw=True, skipped=skipped, what="segment.demo")
+        t, values, _ = _rule_series(sel, m, raw=True, skipped=skipped, what="segment.demo")
         spans = intersect(spans, demo_spans(t, values))
     if seg.mode is not None:
         sel = select(seg.mode.selector, streams, "segment.mode", m.name, n_columns=1)
-        t, modes = _rule_series(sel, m, skipped=skipped, what="segment.mode")
-        spans = intersect(spans, _mark_fixed_wing(sel, m, mode_spans(t, modes, seg.mode.keep, seg.mode.names)))
+        t, modes, after = _rule_series(sel, m, skipped=skipped, what="segment.mode", streams=streams)
+        odd = suspect_stretches(t, modes, after)
+        if suspects is not None:
+            suspects += _suspect_words(sel, t, modes, odd, lambda v: mode_name(seg.mode.names, v))
+        modes_kept = cut(mode_spans(t, modes, seg.mode.keep, seg.mode.names), odd)
+        spans = intersect(spans, _mark_fixed_wing(sel, m, modes_kept))
     if seg.armed is not None:
-        armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped)
+        armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped, suspects=suspects)
         spans = intersect(spans, armed if armed is not None else EVERYTHING)
     if seg.landing is not None and seg.landing.flag is not None:
         # no landed event is no evidence of ground time (a firmware that logs none, a log begun in the air)
         flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True,
-                             no_events_say_nothing=True)
+                             no_events_say_nothing=True, suspects=suspects)
         spans = intersect(spans, flying if flying is not None else EVERYTHING)
     return list(spans)
 
@@ -154,7 +175,8 @@ def _mark_fixed_wing(sel: Selected, m: ChannelMapping, spans: list[Span]) -> lis
 
 
 def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
-                invert: bool = False, no_events_say_nothing: bool = False) -> list[Span] | None:
+                invert: bool = False, no_events_say_nothing: bool = False,
+                suspects: list[str] | None = None) -> list[Span] | None:
     """The spans a flag rule holds in (``invert``: does not hold); ``None`` where an event rule's stream is not in
     the log at all (the firmware records no such events: old ArduPlane logs declare no ``EV``), so the rule says
     nothing. A stream the log declares but never wrote holds no event: no span — or, with
@@ -167,15 +189,21 @@ def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, 
     if rule.on and not any(h in streams for h in _heads(rule.selector)):
         return None if no_events_say_nothing else []  # declared, never written
     sel = select(rule.selector, streams, what, m.name, n_columns=1)
-    t, flags = _rule_series(sel, m, skipped=skipped, what=what)
+    t, flags, after = _rule_series(sel, m, skipped=skipped, what=what, streams=streams)
     if rule.on:
         events = rule.events(flags)
         if no_events_say_nothing and not events.any():
             return None
-        truth = rule.truth(flags[events])
-        return event_spans(t[events], ~truth if invert else truth)
-    truth = rule.truth(flags)
-    return flag_spans(t, ~truth if invert else truth)
+        t, flags, after = t[events], flags[events], after[events]
+        truth = rule.truth(flags)
+        spans = event_spans(t, ~truth if invert else truth)
+    else:
+        truth = rule.truth(flags)
+        spans = flag_spans(t, ~truth if invert else truth)
+    odd = suspect_stretches(t, truth, after)  # the stretch a suspect value opens is in no span
+    if suspects is not None:
+        suspects += _suspect_words(sel, t, flags, odd, lambda v: flag_value_name(rule.selector.source, v))
+    return cut(spans, odd)
 
 
 def _deciding_rule(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str) -> FlagRule:
@@ -213,7 +241,7 @@ def _metadata(streams: Streams, m: ChannelMapping) -> tuple[dict[str, dict], lis
         by_key.update(table_meta(sel.frame, sel.rows, m.meta.key, m.meta.fields))
     if m.meta.text is not None:
         sel = select(m.meta.text, streams, "meta.text", m.name, n_columns=1)
-        t, texts = _rule_series(sel, m, raw=True)
+        t, texts, _ = _rule_series(sel, m, raw=True)
         found, loose = text_meta(t, texts.tolist(), m.meta.fields, m.meta.prefix)
         for k, v in found.items():
             by_key[k] = {**by_key.get(k, {}), **v}
@@ -314,6 +342,18 @@ def _damage_note(streams: Streams, m: ChannelMapping, found: list[tuple[Span, li
     more = f" and {len(cuts) - _CUTS_SHOWN} more" if len(cuts) > _CUTS_SHOWN else ""
     return (f"{streams.path}: damaged file, {damage}; the flight is cut where it goes on, {len(kept)} demonstrations "
             f"in all: at {', '.join(cuts[:_CUTS_SHOWN])}{more} — data lost to the damage, not pauses in the flight")
+
+
+def _regions_note(streams: Streams, suspects: list[str]) -> str:
+    """A file with runs of bytes that are no message (:func:`~adapters.streams.damaged_regions`), in one line, naming
+    the segmentation values read from a message next to a run, which therefore started no segment; ``""`` for a
+    file without such runs (every intact one)."""
+    if not (regions := damaged_regions(streams)):
+        return ""
+    odd = (f"; not trusted, so starting no segment: {', '.join(suspects)} (each read from a message next to "
+           f"a damaged run)") if suspects else ""
+    return (f"{streams.path}: damaged log, {regions} (the {streams.format} format has no checksum: damaged values "
+            f"that still parse are read as data){odd}")
 
 
 def _still(streams: Streams, m: ChannelMapping, series: list[Series]) -> str:
@@ -444,7 +484,8 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     still = _still(streams, m, series)
     if still and not allow_still:
         raise DataError(still)
-    spans = _spans(streams, m, skipped)
+    suspects: list[str] = []
+    spans = _spans(streams, m, skipped, suspects)
     check_grid(series, [(s.start, s.end) for s in spans], m.dt, f"{streams.path}: mapping {m.name!r}")
     by_key, loose = _metadata(streams, m)
     n_states = len(m.state_names)
@@ -522,7 +563,10 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                    f"before this check: `workbench view` shows where)") if flips else ""
             raise DataError(still + cut)
     report = {**{k: int(v) for k, v in streams.skipped.items() if v}, **{k: int(v) for k, v in skipped.items() if v}}
-    damaged = _damage_note(streams, m, found, series, skipped, log_start)
+    # the runs the reader saw (every demonstration carries them: a value read as data may be the damage's), then
+    # where the damage cut a segment
+    notes = (_regions_note(streams, suspects), _damage_note(streams, m, found, series, skipped, log_start))
+    damaged = "; ".join(x.removeprefix(f"{streams.path}: ") if k else x for k, x in enumerate(x for x in notes if x))
     # a marker without a demo key belongs to the demonstration containing it, else to the next one
     by_span: dict[int, dict[str, Any]] = {}
     ends = [span.end for span, _, _ in found]
@@ -695,7 +739,7 @@ def check_rules(streams: Streams, m: ChannelMapping) -> None:
             )
     elif armed_rule is not None:
         sel = select(armed_rule.selector, streams, "segment.armed", m.name, n_columns=1)
-        _, flags = _rule_series(sel, m)
+        _, flags, _ = _rule_series(sel, m)
         if flags.size and not armed_rule.truth(flags).any():
             raise DataError(
                 f"{streams.path}: never armed: {sel.stream} ({armed_rule.selector.describe()}) says the vehicle was "
@@ -703,7 +747,7 @@ def check_rules(streams: Streams, m: ChannelMapping) -> None:
             )
     if seg.mode is not None:
         sel = select(seg.mode.selector, streams, "segment.mode", m.name, n_columns=1)
-        t, modes = _rule_series(sel, m)
+        t, modes, _ = _rule_series(sel, m)
         if t.size and not mode_spans(t, modes, seg.mode.keep, seg.mode.names):
             from adapters.mapping import suggest_mapping
             from adapters.summary import log_modes

@@ -26,7 +26,8 @@ import numpy as np
 
 from adapters.modes import mode_name
 
-__all__ = ["Span", "demo_spans", "flag_spans", "mode_spans", "intersect", "split_at_landing", "EVERYTHING"]
+__all__ = ["Span", "demo_spans", "flag_spans", "mode_spans", "intersect", "split_at_landing", "EVERYTHING",
+           "suspect_stretches", "cut"]
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,41 @@ def intersect(a: list[Span] | tuple[Span, ...], b: list[Span] | tuple[Span, ...]
         else:
             j += 1
     return out
+
+
+def suspect_stretches(t: np.ndarray, values: np.ndarray, suspect: np.ndarray) -> list[tuple[float, float, int]]:
+    """The stretches a suspect record opens: ``(start, end, index)`` from each record flagged ``suspect`` whose value
+    differs from the record's before it (the first record always does) to the next record (``inf`` after the last).
+
+    A record read from a message next to a damaged run of a log without a checksum may be a message whose type id
+    was damaged (beastayyg log 0039 with 200 bytes flipped: a 27-byte message read as a 14-byte MODE, ``ModeNum`` 0,
+    followed by a run of 13 bytes that are no message) or two bytes of a damaged payload that look like a head: what
+    it says (a mode, armed, landed) is not evidence, so it must not start a segment; a record repeating the value
+    before it changes nothing and opens none.
+    """
+    out = []
+    for j in np.flatnonzero(np.asarray(suspect, dtype=bool)).tolist():
+        if j > 0 and values[j] == values[j - 1]:
+            continue
+        out.append((float(t[j]), float(t[j + 1]) if j + 1 < len(t) else math.inf, j))
+    return out
+
+
+def cut(spans: list[Span], stretches: list[tuple[float, float, int]]) -> list[Span]:
+    """``spans`` without the stretches ``[start, end)``: a span that starts inside one starts at its end, one that
+    runs into one ends at its start (a span can be cut in two)."""
+    for a, b, _ in stretches:
+        out = []
+        for sp in spans:
+            if sp.end <= a or sp.start >= b:
+                out.append(sp)
+                continue
+            if sp.start < a:
+                out.append(Span(sp.start, a, dict(sp.meta)))
+            if sp.end > b:
+                out.append(Span(b, sp.end, dict(sp.meta)))
+        spans = out
+    return spans
 
 
 def split_at_landing(y: np.ndarray, below: float) -> tuple[list[tuple[int, int]], int]:

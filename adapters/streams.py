@@ -402,11 +402,11 @@ def damage_words(streams: Streams, channels: Mapping[str, int]) -> str:
 _REGIONS_SHOWN = 3
 
 
-def damaged_regions(streams: Streams) -> str:
+def damaged_regions(streams: Streams, shown: int = _REGIONS_SHOWN) -> str:
     """Where the reader found bytes inside the log that are no message (``info["damaged_regions"]``: offset,
     size, the log time before the run; a DataFlash log has no checksum, so these runs are the damage a reader can
-    see), in words: ``"565 bytes in 14 runs that are no message, at byte 41868 (log time 52.3 s, 35 bytes), …"``;
-    ``""`` for a file without any."""
+    see), in words: ``"565 bytes in 14 runs that are no message, at byte 41868 (log time 52.3 s, 35 bytes), …"``
+    (the first ``shown`` runs, then how many more); ``""`` for a file without any."""
     regions = streams.info.get("damaged_regions") or ()
     if not regions:
         return ""
@@ -415,6 +415,6 @@ def damaged_regions(streams: Streams) -> str:
     def one(at: int, size: int, t: float) -> str:
         return f"byte {int(at)} ({f'log time {t:.1f} s, ' if np.isfinite(t) else ''}{int(size)} bytes)"
 
-    more = f" and {len(regions) - _REGIONS_SHOWN} more" if len(regions) > _REGIONS_SHOWN else ""
+    more = f" and {len(regions) - shown} more" if len(regions) > shown else ""
     return (f"{total} bytes in {len(regions)} run{'s' if len(regions) > 1 else ''} that are no {streams.format} "
-            f"message, at {', '.join(one(*r) for r in regions[:_REGIONS_SHOWN])}{more}")
+            f"message, at {', '.join(one(*r) for r in regions[:shown])}{more}")

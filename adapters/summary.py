@@ -19,9 +19,12 @@ import numpy as np
 
 from adapters.modes import heartbeat_table, mode_name, vehicle_kind
 from adapters.segment import Span, flag_spans
-from adapters.streams import Streams, clean_series
+from adapters.streams import Streams, clean_series, damaged_regions
 
-__all__ = ["LogSummary", "StreamSummary", "ModeSpan", "summarize", "log_modes"]
+__all__ = ["LogSummary", "StreamSummary", "ModeSpan", "summarize", "log_modes", "DAMAGED_RUNS_SHOWN"]
+
+#: The damaged runs ``inspect`` lists before "and k more" (an import's warning names three).
+DAMAGED_RUNS_SHOWN = 20
 
 
 
@@ -66,6 +69,7 @@ class LogSummary:
     info: tuple[tuple[str, Any], ...]
     vehicle: str = ""  # what the modes were named by, e.g. "MAV_AUTOPILOT_ARDUPILOTMEGA MAV_TYPE_FIXED_WING"
     armed_known: bool = False  # the log says whether the vehicle was armed (so no armed span means never armed)
+    damaged: str = ""  # the runs of bytes inside the log that are no message (adapters.streams.damaged_regions)
 
     @property
     def duration(self) -> float:
@@ -78,6 +82,8 @@ class LogSummary:
         ]
         if self.skipped:
             lines.append("skipped: " + ", ".join(f"{k}: {v}" for k, v in self.skipped))
+        if self.damaged:
+            lines.append(f"damaged: {self.damaged}")
         width = max((len(s.name) for s in self.streams), default=6)
         lines.append(f"{'stream':<{width}}  {'count':>8}  {'rate Hz':>8}  {'from':>10}  {'to':>10}  fields")
         for s in self.streams:
@@ -298,4 +304,5 @@ def summarize(streams: Streams) -> LogSummary:
         info=info,
         vehicle=vehicle,
         armed_known=bool(vehicle) and _arming_recorded(streams),
+        damaged=damaged_regions(streams, shown=DAMAGED_RUNS_SHOWN),
     )

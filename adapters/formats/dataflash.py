@@ -52,7 +52,10 @@ or repeated name ``<name>_<i>`` / ``field_<i>``; a second type of an existing na
 length, format, columns), ``params`` (PARM name → value), ``n_messages`` and, for damaged logs,
 ``invalid_formats`` and ``damaged_regions``: ``(offset, bytes, log time before it)`` per run of bytes inside the
 log that are no message (DataFlash has no checksum: these runs are the damage the reader can see; the tail of a
-log cut off mid-message is not one).
+log cut off mid-message is not one), and ``next_to_damage``: per stream read, the row positions of its messages on
+either side of such a run (the one before may be a message whose type id was damaged into a shorter type's,
+the run being the rest of it; the one after, two bytes of a damaged payload that look like a head):
+their values are suspect.
 
 Time: ``t`` is the boot clock in seconds: the first field when it is ``TimeUS`` (× 1e-6) or ``TimeMS``
 (× 1e-3), or old GPS messages' ``T`` (ms); a message without a time field (FMT, PARM, MSG or EV in old logs)
@@ -646,4 +649,14 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
         # nothing of where (NaN); a flight's own times, spread over its length, all lie inside them
         info["damaged_regions"] = tuple((at, size, float(log.t[k]) if k >= 0 and lo <= log.t[k] <= hi else math.nan)
                                         for at, size, k in log.chain.regions)
+        first = np.array([j for _, _, k in log.chain.regions for j in (k, k + 1) if j >= 0], dtype=np.int64)
+        after: dict[str, tuple[int, ...]] = {}
+        for t, name in names.items():
+            parts = instances.get(t, {name: None})
+            for s in parts:
+                if s in frames:
+                    rows = log.index[t] if parts[s] is None else parts[s]
+                    if hit := np.flatnonzero(np.isin(rows, first)).tolist():
+                        after[s] = tuple(hit)
+        info["next_to_damage"] = after
     return Streams(where, "dataflash", frames, counts=counts, skipped=dict(log.chain.skipped), info=info)

@@ -78,3 +78,70 @@ def test_a_log_cut_off_mid_message_is_not_called_damaged(tmp_path):
     streams = adapters.read(cut)
     assert streams.skipped.get("truncated messages") == 1 and "damaged_regions" not in streams.info
     assert len(adapters.load(cut, "ardupilot_manual")) == len(adapters.load(intact, "ardupilot_manual"))
+
+
+def _mode_message_in(data: bytes, streams, t_lo: float, t_hi: float, mode_num: int) -> tuple[bytes, float]:
+    """``data`` with one message inside ``[t_lo, t_hi]`` whose type is longer than MODE turned into a MODE (its type
+    id damaged): a shorter message with the original's TimeUS, saying ``mode_num``, then the rest of the original,
+    bytes that are no message. Returns the damaged bytes and the MODE's log time."""
+    from adapters.formats.dataflash import HEAD1, HEAD2
+
+    formats = streams.info["formats"]
+    mode = formats["MODE"]
+    assert mode["format"].startswith("QMB")  # TimeUS, Mode, ModeNum: the fields the damaged message sets
+    longer = {f["type"]: f for f in formats.values() if f["length"] > mode["length"] and f["format"].startswith("Q")}
+    buf = np.frombuffer(data, np.uint8)
+    heads = np.flatnonzero((buf[:-2] == HEAD1) & (buf[1:-1] == HEAD2))
+    for at in heads.tolist():
+        f = longer.get(int(buf[at + 2]))
+        if f is None:
+            continue
+        t = int.from_bytes(data[at + 3:at + 11], "little") * 1e-6
+        if t_lo < t < t_hi:
+            out = bytearray(data)
+            out[at + 2] = mode["type"]
+            out[at + 11] = out[at + 12] = mode_num
+            return bytes(out), t
+    raise AssertionError("no message of a longer type in the window")
+
+
+def test_a_damaged_dataflash_import_that_succeeds_says_so_and_a_mode_read_next_to_the_damage_starts_no_segment(
+        tmp_path):
+    # beastayyg log 0039 with 200 bytes flipped (seed 1): a 27-byte message's type id read as MODE (14 bytes,
+    # ModeNum 0) filed 27 s of ALT_HOLD as STABILIZE, and the import said nothing of the damage
+    from adapters.modes import mode_number
+    from adapters.streams import damaged_regions
+
+    intact = dataflash_write.write_example(tmp_path / "new.bin", "new", "copter", seconds=60.0, seed=5)
+    good = adapters.load(intact, "ardupilot_manual")
+    assert not any("damaged" in d.meta for d in good)
+    assert not adapters.read(intact).info.get("next_to_damage")
+    held = [d for d in good if d.meta["mode"] != "STABILIZE"][0]  # a kept mode the phantom MODE is not
+    t0 = held.meta["t0"]
+    stabilize = mode_number("arducopter", "STABILIZE")
+    data, t_phantom = _mode_message_in(intact.read_bytes(), adapters.read(intact), t0 + float(held.t[-1]) / 2 - 1.0,
+                                       t0 + float(held.t[-1]) / 2 + 1.0, stabilize)
+    path = tmp_path / "damaged.bin"
+    path.write_bytes(data)
+    streams = adapters.read(path)
+    assert streams.info["damaged_regions"]
+    ds = adapters.load(path, "ardupilot_manual")
+    # every demonstration says the file is damaged, where, and which value it did not trust
+    for d in ds:
+        note = d.meta["damaged"]
+        assert note.startswith(f"{path}: damaged log, {damaged_regions(streams)} (")
+        assert f"MODE.ModeNum {stabilize} (STABILIZE) at log time {t_phantom:.1f} s" in note
+    # no time filed under a mode the intact log does not say: each demonstration lies inside one of the intact
+    # log's of the same mode; the held mode ends where the phantom was read
+    spans = {(d.meta["mode"], d.meta["t0"], d.meta["t0"] + float(d.t[-1])) for d in good}
+    for d in ds:
+        a, b = d.meta["t0"], d.meta["t0"] + float(d.t[-1])
+        assert any(mode == d.meta["mode"] and lo - 1e-9 <= a and b <= hi + 1e-9 for mode, lo, hi in spans), \
+            (d.meta["mode"], a, b)
+    ends = [d.meta["t0"] + float(d.t[-1]) for d in ds if d.meta["mode"] == held.meta["mode"]]
+    assert any(t_phantom - 2 * good.dt <= e <= t_phantom for e in ends), (ends, t_phantom)
+    # `inspect` lists the runs (an intact log none)
+    from adapters.summary import DAMAGED_RUNS_SHOWN
+
+    assert f"damaged: {damaged_regions(streams, shown=DAMAGED_RUNS_SHOWN)}" in str(adapters.inspect(path)).splitlines()
+    assert not adapters.inspect(intact).damaged

@@ -99,6 +99,8 @@ def cmd_inspect(ctx: Context) -> int:
         ctx.say(summary.armed_text)
     if summary.skipped:
         ctx.say("skipped: " + ", ".join(f"{k} {v}" for k, v in summary.skipped))
+    if summary.damaged:  # where: the runs of bytes that are no message (a DataFlash log has no checksum)
+        ctx.say(f"damaged: {summary.damaged}")
     return 0
 
 
