@@ -1,8 +1,9 @@
 """What a mapping keeps of a log and why it drops the rest, for the raw view's segment lane.
 
 It walks the import's own steps (:mod:`adapters.pipeline`: its channels, its segmentation rules, its landed flag,
-its alignment), so a piece drawn "kept" is exactly a demonstration the import makes (``tests/adapters/
-test_rawlog.py`` checks it on a real log), and every other stretch of a kept mode is named by its cause.
+its alignment, its rule that drops a piece flown without a GPS fix), so a piece drawn "kept" is exactly a
+demonstration the import makes (``tests/adapters/test_rawlog.py`` checks it on a real log), and every other stretch
+of a kept mode is named by its cause.
 """
 
 from __future__ import annotations
@@ -14,13 +15,15 @@ import numpy as np
 
 from adapters.align import align
 from adapters.events import flag_value_name
+from adapters.gps import unfixed
 from adapters.mapping import ChannelMapping
 from adapters.pipeline import _channels, _flag_spans, _spans
 from adapters.segment import EVERYTHING, Span, intersect
 from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams
+from workbench.palette import LANE_NO_FIX as NO_FIX
 
-__all__ = ["GROUND", "explain"]
+__all__ = ["GROUND", "NO_FIX", "explain"]
 
 #: the lane state of armed time in a kept mode that a landed rule says the vehicle spent on the ground
 GROUND = "on the ground"
@@ -65,7 +68,8 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
 
     Returns ``(start, end, state, reason)`` on the log clock, in time order, ``state`` one of ``"kept"``,
     ``"disarmed"``, :data:`GROUND` (armed, but a landed flag says on the ground: the import cuts it),
-    ``"too short"``, ``"gap"``, ``"missing channel"``, within the spans of the modes (and demo fields) the mapping
+    ``"too short"``, ``"gap"``, ``"missing channel"``, :data:`NO_FIX` (a piece the import drops as flown without a
+    GPS fix: :func:`adapters.gps.drop_unfixed`), within the spans of the modes (and demo fields) the mapping
     keeps. A mapping that cannot be applied at all gives one ``"missing channel"`` span over the whole log with the
     error as its reason. A landing rule on a state (touchdown below a height) is not drawn.
     """
@@ -116,6 +120,9 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
                     continue
                 if len(piece.t) < 2 or y - x < m.segment.min_duration - 1e-9:
                     out.append((x, y, "too short", f"{y - x:.1f} s, under min_duration = {m.segment.min_duration:g} s"))
+                elif why := unfixed(streams, m, [piece.t])[0]:  # the import drops it: dead reckoning
+                    out.append((x, y, NO_FIX, f"{mode} flown without a GPS fix ({why}): the estimator dead-reckons, "
+                               "the import drops it".strip()))
                 else:
                     out.append((x, y, "kept", mode or "kept"))
             for x, y in _minus(part.start, part.end, covered):

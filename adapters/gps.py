@@ -12,7 +12,7 @@ from adapters.selection import select
 from adapters.streams import Streams, numeric
 from workbench.errors import MappingError
 
-__all__ = ["MOTION_OVER_ACCURACY", "follows_gps", "drop_unfixed"]
+__all__ = ["MOTION_OVER_ACCURACY", "follows_gps", "drop_unfixed", "unfixed"]
 
 
 #: A flight's GPS speed must pass this many times the receiver's velocity accuracy somewhere in its kept segments for
@@ -37,6 +37,25 @@ def _gps_rows(streams: Streams, m: ChannelMapping):
     return stream_times(m.clock, gps.frame)[gps.rows], numeric(gps.frame, ref.fix[0])[gps.rows] >= ref.fix[1], gps
 
 
+def unfixed(streams: Streams, m: ChannelMapping, pieces: list[np.ndarray]) -> list[str]:
+    """Per piece (its sample times), why it was flown without a GPS fix (``"46 GPS samples, none with a fix"``,
+    ``"no GPS samples"``), ``""`` where it was not: the rule of :func:`drop_unfixed`, which the import drops such a
+    piece by and the raw view's segment lane draws (:func:`adapters.explain.explain`)."""
+    rows = _gps_rows(streams, m)
+    if rows is None:
+        return ["" for _ in pieces]
+    tg, fixed, _ = rows
+    out = []
+    for t in pieces:
+        inside = np.isfinite(tg) & (tg >= t[0]) & (tg <= t[-1])
+        # a log whose GPS stream is written whenever the receiver reports (``always_logged``) and holds none here
+        # had no receiver reporting: as without a fix
+        silent = not inside.any() and bool(m.reference is not None and m.reference.always_logged)
+        out.append(f"{inside.sum() or 'no'} GPS samples{'' if silent else ', none with a fix'}"
+                   if silent or (inside.any() and not fixed[inside].any()) else "")
+    return out
+
+
 def drop_unfixed(streams: Streams, m: ChannelMapping, found: list, log_start: float) -> tuple[list, str]:
     """The kept segments without those flown with no GPS fix, and one line naming each dropped one.
 
@@ -50,19 +69,14 @@ def drop_unfixed(streams: Streams, m: ChannelMapping, found: list, log_start: fl
     rows = _gps_rows(streams, m)
     if rows is None:
         return found, ""
-    tg, fixed, gps = rows
+    gps = rows[2]
     kept, dropped = [], []
     for span, ts, vs in found:
         keep_t, keep_v = [], []
-        for t, v in zip(ts, vs, strict=True):
-            inside = np.isfinite(tg) & (tg >= t[0]) & (tg <= t[-1])
-            # a log whose GPS stream is written whenever the receiver reports (``always_logged``) and holds none here
-            # had no receiver reporting: as without a fix
-            silent = not inside.any() and bool(m.reference is not None and m.reference.always_logged)
-            if silent or (inside.any() and not fixed[inside].any()):
+        for t, v, why in zip(ts, vs, unfixed(streams, m, ts), strict=True):
+            if why:
                 mode = f"{span.meta['mode']} " if span.meta.get("mode") else ""
-                dropped.append(f"the {mode}segment {t[0] - log_start:.1f}–{t[-1] - log_start:.1f} s "
-                               f"({inside.sum() or 'no'} GPS samples{'' if silent else ', none with a fix'})")
+                dropped.append(f"the {mode}segment {t[0] - log_start:.1f}–{t[-1] - log_start:.1f} s ({why})")
                 continue
             keep_t.append(t)
             keep_v.append(v)

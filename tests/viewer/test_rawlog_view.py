@@ -228,16 +228,18 @@ def test_the_raw_tab_opens_on_the_attitude_never_on_the_parameters():
     assert s.streams[first_stream(s)] == "IMU"
 
 
-def test_the_segment_lane_draws_the_ground_time_the_import_cuts(tmp_path):
+def test_the_segment_lane_draws_the_ground_time_and_the_unfixed_flight_the_import_cuts(tmp_path):
     """Armed time in a kept mode that the mapping's landed rule puts on the ground is cut by the import: the lane
-    draws it as a state of its own, not as "kept" (where the import's cut was invisible) nor as a mode."""
+    draws it as a state of its own, not as "kept" (where the import's cut was invisible) nor as a mode. So is a
+    flight whose GPS never had a fix, which the import drops (:func:`adapters.gps.drop_unfixed`): erle
+    6-11-2014/GPS_issues2's 46 s of ALT_HOLD were drawn "kept"."""
     import numpy as np
     import pandas as pd
     import rerun as rr
     from pymavlink import mavutil
 
     from adapters import sticks
-    from adapters.explain import GROUND, explain
+    from adapters.explain import GROUND, NO_FIX, explain
     from adapters.mapping import load_mapping
     from adapters.modes import mode_number
     from adapters.writer import demo_streams, layout
@@ -261,6 +263,10 @@ def test_the_segment_lane_draws_the_ground_time_the_import_cuts(tmp_path):
                                          "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA, "base_mode": 129,
                                          "custom_mode": mode_number("arducopter", "STABILIZE"),
                                          "system_status": np.where(hb < took_off, 3, 4), "mavlink_version": 3})
+    # the second flight's GPS reports without a fix (the first's none: a telemetry log's GPS may be thinned)
+    tg = np.arange(spans[1][0], spans[1][1], 0.2)
+    streams["GPS_RAW_INT"] = pd.DataFrame({"t": tg, "time_usec": np.rint((tg - epoch) * 1e6).astype(np.int64),
+                                           "fix_type": 1, "vel": 0, "cog": 0, "satellites_visible": 0})
     path = adapters.FORMATS["tlog"].write(tmp_path / "ground.tlog", streams)
     read = adapters.read(path)
     raw = raw_log(read)
@@ -280,11 +286,19 @@ def test_the_segment_lane_draws_the_ground_time_the_import_cuts(tmp_path):
     ground = [k for k, s in enumerate(states) if s == GROUND]
     assert len(ground) == 1 and t[ground[0]] < took_off - 1.0
     assert states[ground[0] + 1] == "kept" and t[ground[0] + 1] == pytest.approx(first_active, abs=m.dt)
-    assert sum(s == "kept" for s in states) == len(adapters.load(path, "ardupilot_manual"))
+    ds = adapters.load(path, "ardupilot_manual")
+    assert sum(s == "kept" for s in states) == len(ds)
+    # every kept bar starts where a demonstration does; the unfixed flight is drawn as such, where the import dropped it
+    starts = sorted(d.meta["t0"] for d in ds)
+    assert [t[k] for k, s in enumerate(states) if s == "kept"] == pytest.approx(starts, abs=m.dt)
+    no_fix = [k for k, s in enumerate(states) if s == NO_FIX]
+    assert no_fix and all(spans[1][0] <= t[k] < spans[1][1] for k in no_fix)
+    assert all(d.meta["t0"] < spans[1][0] for d in ds) and "unfixed" in ds[0].meta
     config = lane["static:StateConfiguration:values"][0]
     colors = dict(zip(config, lane["static:StateConfiguration:colors"][0], strict=True))
-    assert GROUND in config and colors[GROUND] not in {v for k, v in colors.items() if k != GROUND}
-    assert palette.LANE_STATES[GROUND] not in palette.MODE_COLORS
+    for state in (GROUND, NO_FIX):
+        assert state in config and colors[state] not in {v for k, v in colors.items() if k != state}
+        assert palette.LANE_STATES[state] not in palette.MODE_COLORS
     why = [str(x[0] if isinstance(x, list) else x) for x in read_rrd(out)["/log/segments/why"]["TextLog:text"]]
     assert any(f"dropped {first_active - t[ground[0]]:.1f} s: STABILIZE on the ground (by its landed events: "
                "HEARTBEAT.system_status = 3 MAV_STATE_STANDBY on landing, 4 MAV_STATE_ACTIVE on take-off)" in w

@@ -31,7 +31,7 @@ import pyarrow as pa
 import rerun as rr
 import rerun.blueprint as rrb
 
-from adapters.explain import GROUND
+from adapters.explain import GROUND, NO_FIX
 from adapters.rawlog import RawLog
 from workbench import palette
 from workbench.viewer import style
@@ -44,7 +44,7 @@ __all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_pilot", "lo
 
 RAW_APPLICATION_ID = "workbench_log_raw"
 #: the segment lane's states: what a mapping kept, and why a piece was dropped
-SEGMENT_STATES = {k: palette.LANE_STATES[k] for k in ("kept", "disarmed", GROUND, "too short", "gap",
+SEGMENT_STATES = {k: palette.LANE_STATES[k] for k in ("kept", "disarmed", GROUND, NO_FIX, "too short", "gap",
                                                           "missing channel", "not mapped")}
 # clock and time-stamp fields (time_boot_ms, timestamp_sample, armed_time_ms, TimeUS, stamp.sec, …): hidden by
 # default, since their ramp flattens every other line of a stream's plot
