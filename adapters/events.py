@@ -14,6 +14,7 @@ import math
 from typing import Any
 
 import numpy as np
+from pymavlink import mavutil
 
 from adapters.modes import mode_name
 
@@ -103,10 +104,9 @@ def event_name(event_id: Any) -> str:
 
 
 #: MAVLink's ``MAV_STATE`` (common.xml), which ArduCopter's ``HEARTBEAT.system_status`` sets to STANDBY while its
-#: land detector says landed and to ACTIVE in the air
-MAV_STATES = {0: "MAV_STATE_UNINIT", 1: "MAV_STATE_BOOT", 2: "MAV_STATE_CALIBRATING", 3: "MAV_STATE_STANDBY",
-              4: "MAV_STATE_ACTIVE", 5: "MAV_STATE_CRITICAL", 6: "MAV_STATE_EMERGENCY", 7: "MAV_STATE_POWEROFF",
-              8: "MAV_STATE_FLIGHT_TERMINATION"}
+#: land detector says landed and to ACTIVE in the air: pymavlink's table, never copied (as :mod:`adapters.modes`'),
+#: without its ``ENUM_END`` marker, which is no state
+MAV_STATES = {k: e.name for k, e in mavutil.mavlink.enums["MAV_STATE"].items() if not e.name.endswith("_ENUM_END")}
 
 
 def flag_value_name(source: str, value: Any) -> str:
