@@ -123,7 +123,10 @@ def load(
     A position or velocity that never moves in the whole log (no GPS), an estimated velocity that does not follow
     the log's GPS velocity (the mapping's ``[reference]``) or a log without the GPS stream the mapping says is always
     logged (dead reckoning) is an error naming it, unless ``allow_still`` (for looking at the log: the cause is then
-    in each demonstration's ``meta["still"]``). A segment is cut where the vehicle flipped (``meta["flipped"]``).
+    in each demonstration's ``meta["still"]``). A segment is cut where the vehicle flipped (``meta["flipped"]``);
+    one flown without a GPS fix is dropped (:func:`adapters.gps.drop_unfixed`, named in ``meta["unfixed"]``). A file
+    with runs of bytes that are no message (DataFlash, which has no checksum) says so in every demonstration's
+    ``meta["damaged"]``, and a mode, armed or landed value read next to such a run starts no segment.
 
     Only the streams the mapping names are read. Each demonstration's ``meta`` has ``id``, ``source``,
     ``format``, ``mapping``, ``t0`` (its start on the log clock), ``skipped`` (counts by cause for the file)
@@ -136,7 +139,9 @@ def load(
     MappingError
         The mapping is invalid or names a stream or field the log lacks (listing the nearest it has).
     DataError
-        The file is damaged beyond reading, or holds no demonstration under the mapping's rules.
+        The file is damaged beyond reading, or holds no demonstration under the mapping's rules (among them: every
+        segment flown without a GPS fix). Where the file has damaged runs, any stop of the import (a DataError or
+        MappingError, kept as its class) leads with them: "damaged log, N bytes in K runs …", then the cause.
     """
     from adapters.mapping import MappingError, load_mapping
     from adapters.pipeline import build
@@ -162,7 +167,8 @@ def load(
         if not (damage := damaged_regions(streams)):
             raise
         cause = str(exc).removeprefix(f"{streams.path}: ")
-        raise DataError(f"{path}: damaged log, {damage} (the {fmt.name} format has no checksum: damaged values "
+        # the class stays (a MappingError remains one, for a caller that tells a mapping's fault from the data's)
+        raise type(exc)(f"{path}: damaged log, {damage} (the {fmt.name} format has no checksum: damaged values "
                         f"that still parse are read as data, so what the import then stopped on may be the "
                         f"damage's): {cause}") from None
 
