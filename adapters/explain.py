@@ -17,7 +17,7 @@ from adapters.align import align
 from adapters.events import flag_value_name
 from adapters.gps import unfixed
 from adapters.mapping import ChannelMapping
-from adapters.pipeline import _channels, _flag_spans, _spans
+from adapters.pipeline import mapped_channels, rule_spans, segment_spans
 from adapters.segment import EVERYTHING, Span, intersect
 from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams
@@ -50,7 +50,7 @@ def _landed(streams: Streams, m: ChannelMapping) -> tuple[list[Span] | tuple[Spa
     if landing is None or landing.flag is None:
         return EVERYTHING, ""
     rule = landing.flag
-    flying = _flag_spans(streams, m, rule, "segment.landing", invert=True, no_events_say_nothing=True)
+    flying = rule_spans(streams, m, rule, "segment.landing", invert=True, no_events_say_nothing=True)
     if flying is None:
         return EVERYTHING, ""
 
@@ -80,13 +80,13 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
     try:
         m.check_complete()
         m = resolve_sticks(m, streams)
-        series = _channels(streams, m, skipped)
+        series = mapped_channels(streams, m, skipped)
         seg = m.segment
         rules = replace(m, segment=replace(seg, armed=None, landing=None))
-        spans = _spans(streams, rules, skipped)
+        spans = segment_spans(streams, rules, skipped)
         armed = EVERYTHING
         if seg.armed is not None:
-            armed = _flag_spans(streams, m, seg.armed, "segment.armed")
+            armed = rule_spans(streams, m, seg.armed, "segment.armed")
             armed = EVERYTHING if armed is None else armed
         flying, landed = _landed(streams, m)
     except WorkbenchError as exc:

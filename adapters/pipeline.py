@@ -56,7 +56,9 @@ from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
 from workbench.errors import AbsentSource, DataError, MappingError
 
-__all__ = ["build", "check_rules"]
+#: what the raw view's segment lane (:mod:`adapters.explain`) and the live link (:mod:`adapters.link.online`) share
+#: with the import, besides build
+__all__ = ["build", "check_rules", "mapped_channels", "segment_spans", "rule_spans", "valid_target"]
 
 
 def _same(a: Any, b: Any) -> bool:
@@ -115,9 +117,10 @@ def _suspect_words(sel: Selected, t: np.ndarray, values: np.ndarray, stretches: 
             f"at log time {t[j]:.1f} s" for _, _, j in stretches]
 
 
-def _spans(streams: Streams, m: ChannelMapping, skipped: Counter, suspects: list[str] | None = None) -> list[Span]:
-    """The spans every segmentation rule holds in, intersected. A mode, armed or landed value read from the first
-    message after a damaged run starts no span (:func:`adapters.segment.suspect_stretches`); each such value is
+def segment_spans(streams: Streams, m: ChannelMapping, skipped: Counter,
+                  suspects: list[str] | None = None) -> list[Span]:
+    """The spans every segmentation rule holds in, intersected. A mode, armed or landed value read from a message
+    next to a damaged run starts no span (:func:`adapters.segment.suspect_stretches`); each such value is
     named in ``suspects``."""
     seg = m.segment
     spans: list[Span] | tuple[Span, ...] = EVERYTHING
@@ -134,12 +137,12 @@ def _spans(streams: Streams, m: ChannelMapping, skipped: Counter, suspects: list
         modes_kept = cut(mode_spans(t, modes, seg.mode.keep, seg.mode.names), odd)
         spans = intersect(spans, _mark_fixed_wing(sel, m, modes_kept))
     if seg.armed is not None:
-        armed = _flag_spans(streams, m, seg.armed, "segment.armed", skipped, suspects=suspects)
+        armed = rule_spans(streams, m, seg.armed, "segment.armed", skipped, suspects=suspects)
         spans = intersect(spans, armed if armed is not None else EVERYTHING)
     if seg.landing is not None and seg.landing.flag is not None:
         # no landed event is no evidence of ground time (a firmware that logs none, a log begun in the air)
-        flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True,
-                             no_events_say_nothing=True, suspects=suspects)
+        flying = rule_spans(streams, m, seg.landing.flag, "segment.landing", skipped, invert=True,
+                            no_events_say_nothing=True, suspects=suspects)
         spans = intersect(spans, flying if flying is not None else EVERYTHING)
     return list(spans)
 
@@ -174,9 +177,9 @@ def _mark_fixed_wing(sel: Selected, m: ChannelMapping, spans: list[Span]) -> lis
     return spans
 
 
-def _flag_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
-                invert: bool = False, no_events_say_nothing: bool = False,
-                suspects: list[str] | None = None) -> list[Span] | None:
+def rule_spans(streams: Streams, m: ChannelMapping, rule: FlagRule, what: str, skipped: Counter | None = None,
+               invert: bool = False, no_events_say_nothing: bool = False,
+               suspects: list[str] | None = None) -> list[Span] | None:
     """The spans a flag rule holds in (``invert``: does not hold); ``None`` where an event rule's stream is not in
     the log at all (the firmware records no such events: old ArduPlane logs declare no ``EV``), so the rule says
     nothing. A stream the log declares but never wrote holds no event: no span — or, with
@@ -248,7 +251,9 @@ def _metadata(streams: Streams, m: ChannelMapping) -> tuple[dict[str, dict], lis
     return by_key, loose
 
 
-def _channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Series]:
+def mapped_channels(streams: Streams, m: ChannelMapping, skipped: Counter) -> list[Series]:
+    """Every channel of the mapping as a cleaned series on the mapping's clock (what it dropped counted in
+    ``skipped`` by ``"<channel>: <cause>"``); a MappingError names every channel the log lacks."""
     series = []
     clocked: list[bool] = []
     inputs = set(m.input_names)
@@ -480,12 +485,12 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     m = resolve_sticks(m, streams)  # a stick named by role, on the channel the log's RC map gives it
     skipped: Counter = Counter()
     check_rules(streams, m)  # a log never armed, or without a kept mode, says so before any channel is read
-    series = _channels(streams, m, skipped)
+    series = mapped_channels(streams, m, skipped)
     still = _still(streams, m, series)
     if still and not allow_still:
         raise DataError(still)
     suspects: list[str] = []
-    spans = _spans(streams, m, skipped, suspects)
+    spans = segment_spans(streams, m, skipped, suspects)
     check_grid(series, [(s.start, s.end) for s in spans], m.dt, f"{streams.path}: mapping {m.name!r}")
     by_key, loose = _metadata(streams, m)
     n_states = len(m.state_names)
@@ -623,7 +628,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     for demo_id, (_, t, v, meta) in zip(ids, rows, strict=True):
         meta["id"] = demo_id
         target = meta.get("target")
-        if target is not None and not _valid_target(target, n_states):
+        if target is not None and not valid_target(target, n_states):
             # a damaged or foreign target must not cost the demonstration; it is dropped and reported
             meta.pop("target")
             meta["skipped"] = {**meta["skipped"], "invalid targets": meta["skipped"].get("invalid targets", 0) + 1}
@@ -656,12 +661,12 @@ def _ground_note(streams: Streams, m: ChannelMapping, series: list[Series]) -> s
     seg = m.segment
     if seg.landing is None or seg.landing.flag is None:
         return ""
-    flying = _flag_spans(streams, m, seg.landing.flag, "segment.landing", invert=True, no_events_say_nothing=True)
+    flying = rule_spans(streams, m, seg.landing.flag, "segment.landing", invert=True, no_events_say_nothing=True)
     if flying is None:
         return ""
     lo, hi = min(float(x.t[0]) for x in series), max(float(x.t[-1]) for x in series)
     kept = [Span(max(sp.start, lo), min(sp.end, hi), sp.meta)
-            for sp in _spans(streams, replace(m, segment=replace(seg, landing=None)), Counter())
+            for sp in segment_spans(streams, replace(m, segment=replace(seg, landing=None)), Counter())
             if min(sp.end, hi) > max(sp.start, lo)]
     total = sum(sp.end - sp.start for sp in kept)
     if not total:
@@ -727,7 +732,7 @@ def check_rules(streams: Streams, m: ChannelMapping) -> None:
     _check_vehicle(streams, m)
     armed_rule = _deciding_rule(streams, m, seg.armed, "segment.armed") if seg.armed is not None else None
     if armed_rule is not None and armed_rule.on:
-        armed = _flag_spans(streams, m, armed_rule, "segment.armed")
+        armed = rule_spans(streams, m, armed_rule, "segment.armed")
         if armed is not None and not armed:
             heads = [h for h in _heads(armed_rule.selector) if h in streams or h in streams.counts]
             n = sum(int(streams.counts.get(h, 0)) for h in heads)
@@ -763,7 +768,8 @@ def check_rules(streams: Streams, m: ChannelMapping) -> None:
             )
 
 
-def _valid_target(target: Any, n: int) -> bool:
+def valid_target(target: Any, n: int) -> bool:
+    """Whether a trial's target is ``n`` finite numbers (a damaged or foreign one is dropped and counted)."""
     try:
         arr = np.asarray(target, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):

@@ -45,7 +45,7 @@ from adapters.align import GRID_TOLERANCE, Series, sample
 from adapters.mapping import Channel, ChannelMapping, Selector, load_mapping
 from adapters.meta import text_meta
 from adapters.modes import mode_name
-from adapters.pipeline import _valid_target
+from adapters.pipeline import valid_target
 from adapters.segment import demo_key
 from adapters.selection import channel_convert
 from adapters.sticks import with_defaults
@@ -440,7 +440,7 @@ class OnlineAligner:
         self._n_loose = len(loose)
         if self._meta is not None and self._meta.get("demo") in by_key:  # e.g. a target sent after the start
             extra = {k: v for k, v in by_key[self._meta["demo"]].items() if k != "id"}
-            if "target" in extra and (self._integrals or not _valid_target(extra["target"], self.n)):
+            if "target" in extra and (self._integrals or not valid_target(extra["target"], self.n)):
                 extra.pop("target")
             self._meta.update(extra)
 
@@ -648,7 +648,7 @@ class OnlineAligner:
             meta.update(self._by_key.get(key, {}))
             meta["demo"] = key
         target = meta.get("target")
-        if target is not None and not _valid_target(target, self.n):
+        if target is not None and not valid_target(target, self.n):
             meta.pop("target")
             self.skipped["invalid targets"] += 1
         elif target is not None and self._integrals:  # as offline (adapters.pipeline.build): no made-up goal
