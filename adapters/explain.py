@@ -21,12 +21,13 @@ from adapters.pipeline import mapped_channels, rule_spans, segment_spans
 from adapters.segment import EVERYTHING, Span, intersect
 from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams
+from workbench.palette import LANE_GROUND as GROUND
 from workbench.palette import LANE_NO_FIX as NO_FIX
 
 __all__ = ["GROUND", "NO_FIX", "explain"]
 
-#: the lane state of armed time in a kept mode that a landed rule says the vehicle spent on the ground
-GROUND = "on the ground"
+# the lane states of their own (GROUND: armed time a landed rule says the vehicle spent on the ground; NO_FIX) are
+# named where their colours are (workbench.palette), once
 
 
 def _minus(lo: float, hi: float, parts: list[tuple[float, float]]) -> list[tuple[float, float]]:

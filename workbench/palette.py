@@ -23,8 +23,8 @@ from __future__ import annotations
 
 __all__ = [
     "RGB", "OKABE_ITO", "METHOD_COLORS", "SPARE_METHOD_COLORS", "RECORDED_PAPER", "RECORDED_SCREEN",
-    "STRATEGY_COLORS", "BAND", "OUTLIER", "MODE_COLORS", "STICK_COLORS", "SETPOINT", "LANE_STATES", "LANE_NO_FIX",
-    "OUTCOME_COLORS",
+    "STRATEGY_COLORS", "BAND", "OUTLIER", "MODE_COLORS", "STICK_COLORS", "SETPOINT", "LANE_STATES",
+    "LANE_GROUND", "LANE_NO_FIX", "OUTCOME_COLORS",
     "ROLES",
     "hex_color", "strategy_color", "CVD_MATRICES", "simulate", "lab", "delta_e",
 ]
@@ -60,12 +60,14 @@ STICK_COLORS: dict[str, RGB] = {"roll": (204, 170, 255), "pitch": (153, 238, 204
                                 "yaw": (187, 204, 51)}
 SETPOINT: RGB = (238, 136, 102)
 #: lanes whose states are written on them: what a mapping kept or dropped, armed spans, no trial flown
+#: the segment lane's state of armed time in a kept mode that a landed rule says the vehicle spent on the ground
+LANE_GROUND = "on the ground"
 #: the segment lane's state of a piece the import drops because the log's GPS had no fix through it (dead reckoning)
 LANE_NO_FIX = "no GPS fix"
 LANE_STATES: dict[str, RGB] = {
     "kept": (210, 210, 210), "disarmed": (120, 120, 120), "too short": (95, 95, 95), "gap": (80, 80, 80),
     "missing channel": (105, 105, 105), "not mapped": (60, 60, 60), "armed": (200, 200, 200),
-    "no trial": (55, 55, 55), "on the ground": (140, 100, 60),  # earth brown: armed, landed, cut by the import
+    "no trial": (55, 55, 55), LANE_GROUND: (140, 100, 60),  # earth brown: armed, landed, cut by the import
     LANE_NO_FIX: (125, 95, 150),  # a muted violet: flown, mapped, dropped by the import for its drifting estimate
 }  # fmt: skip
 

@@ -303,3 +303,23 @@ def test_the_segment_lane_draws_the_ground_time_and_the_unfixed_flight_the_impor
     assert any(f"dropped {first_active - t[ground[0]]:.1f} s: STABILIZE on the ground (by its landed events: "
                "HEARTBEAT.system_status = 3 MAV_STATE_STANDBY on landing, 4 MAV_STATE_ACTIVE on take-off)" in w
                for w in why), why
+
+
+def test_each_lane_state_of_its_own_is_spelt_once():
+    """The lane states the segment lane adds to the import's ("on the ground", "no GPS fix") are named once, where
+    their colours are (palette.LANE_STATES): a second spelling drifts, and the lane then draws a state without its
+    colour."""
+    import ast
+    from pathlib import Path
+
+    from adapters.explain import GROUND, NO_FIX
+    from workbench import palette
+
+    repo = Path(__file__).resolve().parents[2]
+    spelt = {GROUND: 0, NO_FIX: 0}
+    for path in [*(repo / "adapters").rglob("*.py"), *(repo / "workbench").rglob("*.py")]:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Constant) and node.value in spelt:
+                spelt[node.value] += 1
+    assert spelt == {GROUND: 1, NO_FIX: 1}
+    assert {GROUND, NO_FIX} <= set(palette.LANE_STATES)
