@@ -140,7 +140,9 @@ def load(
     """
     from adapters.mapping import MappingError, load_mapping
     from adapters.pipeline import build
+    from adapters.streams import damaged_regions
     from adapters.summary import VEHICLE_STREAMS
+    from workbench.errors import DataError
 
     fmt = _format(path, format)
     if mapping is None:  # the shipped mapping made for the vehicle the log names (choose_mapping)
@@ -152,7 +154,17 @@ def load(
         raise MappingError(f"{path}: read as a {fmt.name} log: {e}") from None
     # the vehicle's own streams too, so that a mapping made for another vehicle is refused by name
     streams = fmt.read(path, [*m.stream_candidates(), *VEHICLE_STREAMS])
-    return build(streams, m, allow_still=allow_still)
+    try:
+        return build(streams, m, allow_still=allow_still)
+    except DataError as exc:
+        # a format without a checksum (DataFlash) reads damaged values that still parse as data: a stop on them
+        # (a stick that does not move with its setpoint, a velocity off the GPS's) is the damage's, not the flight's
+        if not (damage := damaged_regions(streams)):
+            raise
+        cause = str(exc).removeprefix(f"{streams.path}: ")
+        raise DataError(f"{path}: damaged log, {damage} (the {fmt.name} format has no checksum: damaged values "
+                        f"that still parse are read as data, so what the import then stopped on may be the "
+                        f"damage's): {cause}") from None
 
 
 def choose_mapping(path: str | os.PathLike, *, format: str | None = None) -> tuple[str, str]:

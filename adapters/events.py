@@ -17,7 +17,8 @@ import numpy as np
 
 from adapters.modes import mode_name
 
-__all__ = ["EVENTS", "ERROR_SUBSYSTEMS", "event_name", "error_text", "error_resolved", "as_int", "shown"]
+__all__ = ["EVENTS", "ERROR_SUBSYSTEMS", "MAV_STATES", "event_name", "flag_value_name", "error_text", "error_resolved",
+           "as_int", "shown"]
 
 #: ``EV`` ids (``LogEvent``)
 EVENTS = {
@@ -99,6 +100,23 @@ def event_name(event_id: Any) -> str:
     ``"event null"`` for a value that is no id (a log is not trusted to hold one)."""
     n = as_int(event_id)
     return EVENTS.get(n, f"event {n}") if n is not None else f"event {shown(event_id)}"
+
+
+#: MAVLink's ``MAV_STATE`` (common.xml), which ArduCopter's ``HEARTBEAT.system_status`` sets to STANDBY while its
+#: land detector says landed and to ACTIVE in the air
+MAV_STATES = {0: "MAV_STATE_UNINIT", 1: "MAV_STATE_BOOT", 2: "MAV_STATE_CALIBRATING", 3: "MAV_STATE_STANDBY",
+              4: "MAV_STATE_ACTIVE", 5: "MAV_STATE_CRITICAL", 6: "MAV_STATE_EMERGENCY", 7: "MAV_STATE_POWEROFF",
+              8: "MAV_STATE_FLIGHT_TERMINATION"}
+
+
+def flag_value_name(source: str, value: Any) -> str:
+    """The name of a flag rule's value where its source is an enumeration named here: a DataFlash ``EV`` id
+    (``"LAND_COMPLETE"``), a ``HEARTBEAT.system_status`` (``"MAV_STATE_STANDBY"``); ``""`` otherwise."""
+    if source.startswith("EV."):
+        return event_name(value)
+    if source == "HEARTBEAT.system_status":
+        return MAV_STATES.get(as_int(value), "")  # type: ignore[arg-type]
+    return ""
 
 
 def error_resolved(subsystem: Any, code: Any) -> bool:

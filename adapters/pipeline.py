@@ -28,7 +28,8 @@ import numpy as np
 
 from adapters.align import Series, align, check_grid, silence
 from adapters.clock import stream_times
-from adapters.events import event_name
+from adapters.events import flag_value_name
+from adapters.formats import FORMATS, get_format
 from adapters.gps import follows_gps
 from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
@@ -53,7 +54,7 @@ from workbench.data.demonstrations import Demonstration, DemonstrationSet
 from workbench.data.plant_groups import META_KEY as PLANT_GROUP_KEY
 from workbench.errors import AbsentSource, DataError, MappingError
 
-__all__ = ["build", "check_rules", "explain"]
+__all__ = ["build", "check_rules"]
 
 
 def _same(a: Any, b: Any) -> bool:
@@ -288,16 +289,21 @@ def _damage_note(streams: Streams, m: ChannelMapping, found: list[tuple[Span, li
                  series: list[Series], skipped: Counter, log_start: float) -> str:
     """Where a damaged file's demonstrations part though their segment goes on, in one line; ``""`` for an intact
     file (:func:`~adapters.streams.damage_words`) or one whose demonstrations each start a trial or mode of their own.
+    In a checksummed format (:attr:`~adapters.formats.base.Format.checksummed`) only a silence is the damage's: a
+    field that reads otherwise between two segments there is the log's own reading.
 
     A piece that follows one of the same trial marker and mode was cut from it: by a silence of the channels longer
     than ``segment.gap`` (data the reader skipped) or by the segmentation's field reading other values between
     them (garbled bytes) — in an intact log the same flight would have been one demonstration.
     """
     kept = [(i, span, t) for i, (span, ts, _) in enumerate(found) for t in ts]
+    checked = get_format(streams.format).checksummed if streams.format in FORMATS else False
     cuts = []
     for (i, a, ta), (j, b, tb) in zip(kept[:-1], kept[1:], strict=True):
         if (a.meta.get("demo"), a.meta.get("mode")) != (b.meta.get("demo"), b.meta.get("mode")):
             continue  # a trial or mode of its own: a boundary the log states
+        if i != j and checked:
+            continue  # what read otherwise between them passed its checksum: another mode, disarmed, landed
         lo, hi = float(ta[-1]), float(tb[0])
         rule = "trial marker" if "demo" in a.meta else "flight mode" if "mode" in a.meta else "arming"
         why = silence(series, lo, hi, m.segment.gap) if i == j else ""
@@ -615,10 +621,9 @@ def _ground_note(streams: Streams, m: ChannelMapping, series: list[Series]) -> s
         return ""
     air = sum(sp.end - sp.start for sp in intersect(kept, flying))
     rule = seg.landing.flag
-    named = rule.selector.source.startswith("EV.")  # DataFlash events: say their ArduPilot names
 
-    def values(vs: tuple[float, ...]) -> str:
-        return " or ".join(f"{v:g}" + (f" {event_name(v)}" if named else "") for v in vs)
+    def values(vs: tuple[float, ...]) -> str:  # named where the source is an enumeration (EV ids, MAV_STATE)
+        return " or ".join(f"{v:g} {flag_value_name(rule.selector.source, v)}".strip() for v in vs)
 
     modes = sorted({str(sp.meta["mode"]) for sp in kept if "mode" in sp.meta})
     where = f"armed in {', '.join(modes)}" if modes else "kept"
@@ -628,7 +633,7 @@ def _ground_note(streams: Streams, m: ChannelMapping, series: list[Series]) -> s
     shown = [Span(sp.start - lo, sp.end - lo, sp.meta) for sp in kept]
     return (f"{streams.path}: mapping {m.name!r}: no flight to import: the vehicle is on the ground through "
             f"{total - air:.1f} of the {total:.1f} s {where} ({_span_text(shown)}), by its landed events "
-            f"({rule.selector.describe()} = {values(rule.on)} on landing, {values(rule.off)} on take-off){rest}")
+            f"({rule.selector.source} = {values(rule.on)} on landing, {values(rule.off)} on take-off){rest}")
 
 
 def _span_text(spans: list[Span], n: int = 4) -> str:
@@ -717,81 +722,3 @@ def _valid_target(target: Any, n: int) -> bool:
     except (TypeError, ValueError):
         return False
     return arr.shape == (n,) and bool(np.isfinite(arr).all())
-
-
-def _minus(lo: float, hi: float, parts: list[tuple[float, float]]) -> list[tuple[float, float]]:
-    """``[lo, hi]`` without the sorted intervals ``parts``."""
-    out, at = [], lo
-    for a, b in sorted(parts):
-        if a > at:
-            out.append((at, min(a, hi)))
-        at = max(at, b)
-    if at < hi:
-        out.append((at, hi))
-    return [(a, b) for a, b in out if b > a]
-
-
-def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, float, str, str]]:
-    """What a mapping keeps of a log and why it drops the rest, for the raw view's segment lane.
-
-    Returns ``(start, end, state, reason)`` on the log clock, in time order, ``state`` one of ``"kept"``,
-    ``"disarmed"``, ``"too short"``, ``"gap"``, ``"missing channel"``, within the spans of the modes (and demo
-    fields) the mapping keeps. A mapping that cannot be applied at all gives one ``"missing channel"`` span over
-    the whole log with the error as its reason. The landing rule is not drawn.
-    """
-    from workbench.errors import WorkbenchError
-
-    m = mapping
-    skipped: Counter = Counter()
-    try:
-        m.check_complete()
-        m = resolve_sticks(m, streams)
-        series = _channels(streams, m, skipped)
-        seg = m.segment
-        rules = replace(m, segment=replace(seg, armed=None, landing=None))
-        spans = _spans(streams, rules, skipped)
-        armed = EVERYTHING
-        if seg.armed is not None:
-            armed = _flag_spans(streams, m, seg.armed, "segment.armed")
-            armed = EVERYTHING if armed is None else armed
-    except WorkbenchError as exc:
-        ends = [float(f["t"].min()) for f in streams.frames.values() if len(f)]
-        ends += [float(f["t"].max()) for f in streams.frames.values() if len(f)]
-        return [(min(ends), max(ends), "missing channel", str(exc))] if ends else []
-    lo, hi = min(float(x.t[0]) for x in series), max(float(x.t[-1]) for x in series)
-    out: list[tuple[float, float, str, str]] = []
-    for span in spans:
-        a, b = max(span.start, lo), min(span.end, hi)
-        if b <= a:
-            continue
-        mode = span.meta.get("mode", "")
-        parts = intersect([Span(a, b)], armed)
-        out += [(x, y, "disarmed", f"{mode} while disarmed".strip()) for x, y in _minus(a, b,
-                                                                                    [(p.start, p.end) for p in parts])]
-        for part in parts:
-            covered = []
-            for piece in align(series, part.start, part.end, m.dt, m.segment.gap):
-                x, y = float(piece.t[0]), float(piece.t[-1])
-                covered.append((x, y))
-                if y - x < m.dt:  # a lone grid point at a span's edge: an instant, not a piece worth a bar
-                    continue
-                if len(piece.t) < 2 or y - x < m.segment.min_duration - 1e-9:
-                    out.append((x, y, "too short", f"{y - x:.1f} s, under min_duration = {m.segment.min_duration:g} s"))
-                else:
-                    out.append((x, y, "kept", mode or "kept"))
-            for x, y in _minus(part.start, part.end, covered):
-                if y - x <= m.dt:
-                    continue
-                absent = [s.name for s in series if s.t[0] >= y or s.t[-1] <= x]
-                if absent:
-                    out.append((x, y, "missing channel", f"no {', '.join(absent)} in this {mode or 'span'}"))
-                else:
-                    silent = []
-                    for s in series:  # the channels whose silence longer than `gap` overlaps this hole
-                        d = np.diff(s.t)
-                        k = np.flatnonzero((d > m.segment.gap) & (s.t[:-1] < y) & (s.t[1:] > x))
-                        if k.size:
-                            silent.append(f"{s.name} ({float(d[k].max()):.1f} s)")
-                    out.append((x, y, "gap", f"no sample of {', '.join(silent) or 'a channel'}: longer than "
-                                             f"gap = {m.segment.gap:g} s"))
-    return sorted(out)

@@ -31,7 +31,7 @@ import numpy as np
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["Streams", "split_source", "candidate_streams", "nearest", "clean_series", "time_line"]
+__all__ = ["Streams", "split_source", "candidate_streams", "nearest", "clean_series", "time_line", "damaged_regions"]
 
 _INDEX = re.compile(r"\[(\d+)\]$")
 _ARRAY_COLUMN = re.compile(r"^(.+)\[(\d+)\]$")
@@ -396,3 +396,25 @@ def damage_words(streams: Streams, channels: Mapping[str, int]) -> str:
         parts.append("timestamps that do not increase or lie far off in "
                      + ", ".join(f"{k} ({v})" for k, v in off.items()))
     return "; ".join(parts)
+
+
+#: Runs of damaged bytes a stop names before "and k more".
+_REGIONS_SHOWN = 3
+
+
+def damaged_regions(streams: Streams) -> str:
+    """Where the reader found bytes inside the log that are no message (``info["damaged_regions"]``: offset,
+    size, the log time before the run; a DataFlash log has no checksum, so these runs are the damage a reader can
+    see), in words: ``"565 bytes in 14 runs that are no message, at byte 41868 (log time 52.3 s, 35 bytes), …"``;
+    ``""`` for a file without any."""
+    regions = streams.info.get("damaged_regions") or ()
+    if not regions:
+        return ""
+    total = sum(int(size) for _, size, _ in regions)
+
+    def one(at: int, size: int, t: float) -> str:
+        return f"byte {int(at)} ({f'log time {t:.1f} s, ' if np.isfinite(t) else ''}{int(size)} bytes)"
+
+    more = f" and {len(regions) - _REGIONS_SHOWN} more" if len(regions) > _REGIONS_SHOWN else ""
+    return (f"{total} bytes in {len(regions)} run{'s' if len(regions) > 1 else ''} that are no {streams.format} "
+            f"message, at {', '.join(one(*r) for r in regions[:_REGIONS_SHOWN])}{more}")

@@ -62,7 +62,7 @@ SETPOINT: RGB = (238, 136, 102)
 LANE_STATES: dict[str, RGB] = {
     "kept": (210, 210, 210), "disarmed": (120, 120, 120), "too short": (95, 95, 95), "gap": (80, 80, 80),
     "missing channel": (105, 105, 105), "not mapped": (60, 60, 60), "armed": (200, 200, 200),
-    "no trial": (55, 55, 55),
+    "no trial": (55, 55, 55), "on the ground": (140, 100, 60),  # earth brown: armed, landed, cut by the import
 }  # fmt: skip
 
 #: a collected trial's outcome (the testbed's experimenter's view): a green, a red, an ochre, a purple

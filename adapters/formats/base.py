@@ -52,6 +52,10 @@ class Format(ABC):
     rerun_importer : bool
         Whether ``rerun-importer-workbench`` claims the format's files for rerun's viewer (not MCAP, which rerun
         reads itself, nor a text format too common to claim).
+    checksummed : bool
+        Whether every message carries a checksum its reader verifies (MAVLink's CRC): a damaged message is dropped,
+        never read with wrong values, so a field that reads otherwise in a damaged file is the log's own reading,
+        not garbled bytes.
 
     A format that holds text messages (status text, logged messages, events) says which in :meth:`text_messages`;
     the raw view shows what it returns and names no stream itself.
@@ -63,6 +67,7 @@ class Format(ABC):
     order: ClassVar[int] = 50
     stdin: ClassVar[bool] = True
     rerun_importer: ClassVar[bool] = True
+    checksummed: ClassVar[bool] = False
 
     @abstractmethod
     def sniff(self, head: bytes) -> bool:

@@ -50,7 +50,9 @@ DFReader decodes them). Odd FMT columns are made usable: a field named ``t`` bec
 or repeated name ``<name>_<i>`` / ``field_<i>``; a second type of an existing name is ``NAME#<type id>``.
 ``counts`` has every stream of the file, read or not. ``info`` also holds ``formats`` (per stream: type id,
 length, format, columns), ``params`` (PARM name → value), ``n_messages`` and, for damaged logs,
-``invalid_formats``.
+``invalid_formats`` and ``damaged_regions``: ``(offset, bytes, log time before it)`` per run of bytes inside the
+log that are no message (DataFlash has no checksum: these runs are the damage the reader can see; the tail of a
+log cut off mid-message is not one).
 
 Time: ``t`` is the boot clock in seconds: the first field when it is ``TimeUS`` (× 1e-6) or ``TimeMS``
 (× 1e-3), or old GPS messages' ``T`` (ms); a message without a time field (FMT, PARM, MSG or EV in old logs)
@@ -118,6 +120,7 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import functools
+import math
 import os
 import struct
 from collections.abc import Iterable
@@ -254,6 +257,7 @@ class _Chain:
     types: dict[int, _Type]
     skipped: dict[str, int]
     invalid: list[str]
+    regions: tuple[tuple[int, int, int], ...] = ()  # bytes that are no message inside the log: (offset, size, after)
 
 
 def _walk(heads: np.ndarray, kinds: np.ndarray, lengths: np.ndarray, n: int,
@@ -377,13 +381,19 @@ def _scan(buf: np.ndarray) -> _Chain:
         else:
             cut = 0
         skipped["bytes"] = int(n - cut - int((ends - pos).sum()))
+        # runs before a message (not the tail, where a log cut off by power loss ends in a partial message): an
+        # intact log has none; a damaged one has a run at every damaged head (after: the chain index before it)
+        gaps = pos - np.r_[0, ends[:-1]]
+        at = np.flatnonzero(gaps > 0)
+        regions = tuple(zip((pos - gaps)[at].tolist(), gaps[at].tolist(), (at - 1).tolist(), strict=True))
     else:
         skipped["bytes"] = int(n)
+        regions = ()
     if n_invalid:
         skipped["invalid FMT"] = n_invalid
     if conflicts:
         skipped["conflicting FMT"] = conflicts
-    return _Chain(pos, kind, types, {k: v for k, v in skipped.items() if v}, invalid)
+    return _Chain(pos, kind, types, {k: v for k, v in skipped.items() if v}, invalid, regions)
 
 
 # ------------------------------------------------------------------------------------------------ decoding
@@ -629,4 +639,11 @@ def _streams(where: str, log: _Log, wanted: list[str] | None) -> Streams:
             rows = log.index[t] if parts[s] is None else parts[s]
             frames[s] = {"t": log.t[rows], **log.decode(t, rows)}
     info = log_info(log, names, instances)
+    if log.chain.regions:  # where: the byte offset, the run's size, the log time of the message before it
+        finite = log.t[np.isfinite(log.t)]
+        q1, q3 = np.percentile(finite, [25, 75]) if finite.size else (np.nan, np.nan)
+        lo, hi = q1 - 1.5 * (q3 - q1), q3 + 1.5 * (q3 - q1)  # Tukey's fences: a damaged time (10^13 s) says
+        # nothing of where (NaN); a flight's own times, spread over its length, all lie inside them
+        info["damaged_regions"] = tuple((at, size, float(log.t[k]) if k >= 0 and lo <= log.t[k] <= hi else math.nan)
+                                        for at, size, k in log.chain.regions)
     return Streams(where, "dataflash", frames, counts=counts, skipped=dict(log.chain.skipped), info=info)

@@ -12,10 +12,10 @@ from pymavlink import mavutil
 
 import adapters
 from adapters.draft import draft_mapping
+from adapters.explain import explain
 from adapters.formats import ulog
 from adapters.mapping import load_mapping
 from adapters.modes import mode_number
-from adapters.pipeline import explain
 from adapters.rawlog import raw_log
 from adapters.writer import demo_streams, layout
 from workbench.errors import DataError

@@ -252,9 +252,11 @@ def test_a_log_without_landed_events_keeps_its_spans(tmp_path):
 # -------------------------------------------------------------------------------------------------- tlog
 
 
-def _tlog(tmp_path, name: str, rcmap: dict[str, float]) -> tuple:
+def _tlog(tmp_path, name: str, rcmap: dict[str, float], status=None, between: str = "STABILIZE") -> tuple:
     """A tlog of simulated flights through ardupilot_manual, the roll stick on RC channel 2 (where ``rcmap`` says
-    it is), the pitch stick on channel 1, NAV_CONTROLLER_OUTPUT's desired roll following the roll stick."""
+    it is), the pitch stick on channel 1, NAV_CONTROLLER_OUTPUT's desired roll following the roll stick; ``status``
+    gives the HEARTBEATs' system_status from their times (default: MAV_STATE_ACTIVE, 4, throughout); the flights
+    are flown in STABILIZE, the pauses between them in ``between``."""
     flights = simulate_landings("CS1", 2, seed=3)
     numbers = {"roll": int(rcmap.get("RCMAP_ROLL", 1)), "throttle": 3}
     m = sticks._substitute(load_mapping("ardupilot_manual").for_format("tlog"), numbers, ())
@@ -272,10 +274,13 @@ def _tlog(tmp_path, name: str, rcmap: dict[str, float]) -> tuple:
     spans = layout(flights, EPOCH, PAUSE)
     ml = mavutil.mavlink
     stab = mode_number("arducopter", "STABILIZE")
-    hb = [(t, stab, 129) for a, b in spans for t in np.arange(a - 1.0, b + 1.0, 1.0)]
+    other = mode_number("arducopter", between)
+    hb = [(t, stab if a <= t <= b else other, 129) for a, b in spans for t in np.arange(a - 1.0, b + 1.0, 1.0)]
+    hb_t = np.array([h[0] for h in hb])
     streams["HEARTBEAT"] = pd.DataFrame({"t": [h[0] for h in hb], "type": ml.MAV_TYPE_QUADROTOR,
                                          "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA, "base_mode": [h[2] for h in hb],
-                                         "custom_mode": [h[1] for h in hb], "system_status": 4, "mavlink_version": 3})
+                                         "custom_mode": [h[1] for h in hb], "mavlink_version": 3,
+                                         "system_status": 4 if status is None else status(hb_t)})
     streams["PARAM_VALUE"] = pd.DataFrame({"t": EPOCH - 5.0, "param_id": list(rcmap),
                                            "param_value": np.float32(list(rcmap.values())), "param_type": 9,
                                            "param_count": len(rcmap), "param_index": np.arange(len(rcmap))})
@@ -305,6 +310,60 @@ def test_a_tlog_whose_rcmap_names_the_wrong_channel_is_stopped(tmp_path):
     with pytest.raises(DataError, match=r"u1 reads RC_CHANNELS\.chan1_raw, which does not move with "
                                         r"NAV_CONTROLLER_OUTPUT\.nav_roll.*the stick is on RC_CHANNELS\.chan2_raw"):
         adapters.load(path, copy)
+
+
+def test_a_tlog_s_ground_time_is_cut_by_the_heartbeat_s_landed_state(tmp_path):
+    # ArduCopter's HEARTBEAT says STANDBY (3) while its land detector says landed and ACTIVE (4) in the air; a
+    # failsafe's CRITICAL (5) hides it and says nothing. No tlog we have carries EXTENDED_SYS_STATE (checked with
+    # pymavlink on dronekit_flight, eaics_flight, uavlogviewer_fork_sample and uavlogviewer_vtol); dronekit_flight's
+    # heartbeats say STANDBY while armed for 12 s of its STABILIZE flights
+    path, flights = _tlog(tmp_path, "air.tlog", {"RCMAP_ROLL": 2.0})
+    spans = layout(flights, EPOCH, PAUSE)
+    (a0, b0), (_, b1) = spans[0], spans[1]
+    took_off, critical, landed = a0 + 3.0, (a0 + b0) / 2, b1 - 3.0
+
+    def status(t: np.ndarray) -> np.ndarray:
+        s = np.where((t < took_off) | (t >= landed), 3, 4)
+        s[np.argmin(np.abs(t - critical))] = 5  # a failsafe in flight: no landing
+        return s
+
+    ground, _ = _tlog(tmp_path, "ground.tlog", {"RCMAP_ROLL": 2.0}, status=status)
+    before = adapters.load(path, "ardupilot_manual")
+    ds = adapters.load(ground, "ardupilot_manual")
+    assert len(ds) == len(before) == 2
+    starts = [d.meta["t0"] for d in ds]
+    ends = [d.meta["t0"] + d.t[-1] for d in ds]
+    hb_t = np.array(sorted(t for a, b in spans for t in np.arange(a - 1.0, b + 1.0, 1.0)))
+    first_active = float(hb_t[np.searchsorted(hb_t, took_off)])  # the heartbeat that first says ACTIVE
+    assert first_active - ds.dt <= starts[0] and before[0].meta["t0"] < took_off - 1.0
+    assert starts[0] < critical < ends[0]  # the CRITICAL heartbeat cut nothing
+    assert ends[1] <= float(hb_t[np.searchsorted(hb_t, landed)]) < before[1].meta["t0"] + before[1].t[-1]
+    # heartbeats that never say STANDBY or ACTIVE say nothing about the ground: every span kept
+    hidden, _ = _tlog(tmp_path, "hidden.tlog", {"RCMAP_ROLL": 2.0}, status=lambda t: np.full(t.size, 5))
+    kept = adapters.load(hidden, "ardupilot_manual")
+    assert [d.meta["t0"] for d in kept] == [d.meta["t0"] for d in before]
+    # a tlog armed in STABILIZE only on the ground says so, the landed state named
+    parked, _ = _tlog(tmp_path, "parked.tlog", {"RCMAP_ROLL": 2.0}, status=lambda t: np.full(t.size, 3))
+    with pytest.raises(DataError, match=r"no flight to import: the vehicle is on the ground through .* by its landed "
+                                        r"events \(HEARTBEAT\.system_status = 3 MAV_STATE_STANDBY on landing, 4 "
+                                        r"MAV_STATE_ACTIVE on take-off\)"):
+        adapters.load(parked, "ardupilot_manual")
+
+
+def test_a_damaged_tlog_does_not_blame_the_damage_for_a_mode_the_log_states(tmp_path):
+    # dronekit_flight (1314 CRC failures) said its STABILIZE flights were cut by "data lost to the damage" where the
+    # pilot had switched to LOITER, RTL or disarmed: a frame whose checksum fails is dropped, never read garbled, so
+    # a mode that reads otherwise in a tlog is the log's own
+    path, flights = _tlog(tmp_path, "loiter.tlog", {"RCMAP_ROLL": 2.0}, between="LOITER")
+    damaged = tmp_path / "damaged.tlog"
+    data = bytearray(path.read_bytes())
+    data[len(data) // 4] ^= 0xFF  # the frame this byte falls in fails its checksum: the reader skips it
+    damaged.write_bytes(bytes(data))
+    ds = adapters.load(damaged, "ardupilot_manual")
+    assert len(ds) == len(flights) == 2
+    streams = adapters.read(damaged)
+    assert sum(streams.skipped.values()) > 0  # the file is damaged
+    assert not any("damaged" in d.meta for d in ds), ds[0].meta.get("damaged")
 
 
 # ---------------------------------------------------------------------------------------- the schema, the map

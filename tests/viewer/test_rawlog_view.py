@@ -226,3 +226,66 @@ def test_the_raw_tab_opens_on_the_attitude_never_on_the_parameters():
     s = LoggedRaw("log", "x.bin", streams=["FMT", "IMU", "PARM", "RCIN"],
                   rows={"FMT": 900, "IMU": 300, "PARM": 800, "RCIN": 40})
     assert s.streams[first_stream(s)] == "IMU"
+
+
+def test_the_segment_lane_draws_the_ground_time_the_import_cuts(tmp_path):
+    """Armed time in a kept mode that the mapping's landed rule puts on the ground is cut by the import: the lane
+    draws it as a state of its own, not as "kept" (where the import's cut was invisible) nor as a mode."""
+    import numpy as np
+    import pandas as pd
+    import rerun as rr
+    from pymavlink import mavutil
+
+    from adapters import sticks
+    from adapters.explain import GROUND, explain
+    from adapters.mapping import load_mapping
+    from adapters.modes import mode_number
+    from adapters.writer import demo_streams, layout
+    from workbench import palette
+    from workbench.sim.landing import simulate_landings
+    from workbench.viewer.rawlog import log_raw
+
+    from ..rrd import read_rrd
+
+    epoch, pause = 1e9, 2.0
+    flights = simulate_landings("CS1", 2, seed=3)
+    m = sticks._substitute(load_mapping("ardupilot_manual").for_format("tlog"), {"roll": 1, "throttle": 3}, ())
+    streams = demo_streams(flights, m, epoch=epoch, pause=pause)
+    for frame in streams.values():
+        frame["time_boot_ms"] = np.rint((frame["t"].to_numpy() - epoch) * 1000.0).astype(np.int64)
+    spans = layout(flights, epoch, pause)
+    hb = np.arange(spans[0][0] - 1.0, spans[-1][1] + 1.0, 0.5)
+    took_off = spans[0][0] + 3.0  # ArduCopter's HEARTBEAT: STANDBY (3) while landed, ACTIVE (4) in the air
+    ml = mavutil.mavlink
+    streams["HEARTBEAT"] = pd.DataFrame({"t": hb, "type": ml.MAV_TYPE_QUADROTOR,
+                                         "autopilot": ml.MAV_AUTOPILOT_ARDUPILOTMEGA, "base_mode": 129,
+                                         "custom_mode": mode_number("arducopter", "STABILIZE"),
+                                         "system_status": np.where(hb < took_off, 3, 4), "mavlink_version": 3})
+    path = adapters.FORMATS["tlog"].write(tmp_path / "ground.tlog", streams)
+    read = adapters.read(path)
+    raw = raw_log(read)
+    out = tmp_path / "ground.rrd"
+    rec = rr.RecordingStream("ground_test")
+    rec.save(out)
+    logged = log_raw(rec, raw, segments=explain(read, load_mapping("ardupilot_manual").for_format("tlog")))
+    rec.flush()
+    rec.disconnect()
+    assert logged.segments
+    lane = read_rrd(out)["/log/segments"]
+    order = np.argsort(np.asarray(lane["time"], dtype=float), kind="stable")
+    t = np.asarray(lane["time"], dtype=float)[order] + raw.t_start  # back on the log clock
+    states = [lane["StateChange:state"][k][0] for k in order]
+    # on the ground from the first mapped sample until the first ACTIVE heartbeat, then kept
+    first_active = float(hb[hb >= took_off][0])
+    ground = [k for k, s in enumerate(states) if s == GROUND]
+    assert len(ground) == 1 and t[ground[0]] < took_off - 1.0
+    assert states[ground[0] + 1] == "kept" and t[ground[0] + 1] == pytest.approx(first_active, abs=m.dt)
+    assert sum(s == "kept" for s in states) == len(adapters.load(path, "ardupilot_manual"))
+    config = lane["static:StateConfiguration:values"][0]
+    colors = dict(zip(config, lane["static:StateConfiguration:colors"][0], strict=True))
+    assert GROUND in config and colors[GROUND] not in {v for k, v in colors.items() if k != GROUND}
+    assert palette.LANE_STATES[GROUND] not in palette.MODE_COLORS
+    why = [str(x[0] if isinstance(x, list) else x) for x in read_rrd(out)["/log/segments/why"]["TextLog:text"]]
+    assert any(f"dropped {first_active - t[ground[0]]:.1f} s: STABILIZE on the ground (by its landed events: "
+               "HEARTBEAT.system_status = 3 MAV_STATE_STANDBY on landing, 4 MAV_STATE_ACTIVE on take-off)" in w
+               for w in why), why

@@ -204,8 +204,8 @@ def _raw_beside(rec: Any, streams: Any, mapping: str, ds: Any, origin: float | N
 
     ``origin``: the log's start as the session's segments reckon it (:func:`_log_origins`); else, as the session
     does without one, the first mapped sample's time."""
+    from adapters.explain import explain
     from adapters.mapping import load_mapping
-    from adapters.pipeline import explain
     from adapters.rawlog import raw_log
     from workbench.viewer.rawlog import log_raw, raw_views
 

@@ -377,7 +377,13 @@ def _objective_interval_notes(
     table: pd.DataFrame | None = None,
 ) -> list[str]:
     """What the intervals are, and the weight ratios inside coupled parts compared between strategies."""
-    from workbench.study.weights import compare_strategies, format_interval, gain_contrasts, identified_first
+    from workbench.study.weights import (
+        NOT_EXPLAINED,
+        compare_strategies,
+        format_interval,
+        gain_contrasts,
+        identified_first,
+    )
 
     if not objectives:
         return ["*No intervals: the study ran without bootstrap resamples (`--bootstrap 0`); the values above "
@@ -407,16 +413,20 @@ def _objective_interval_notes(
                "what a fit estimates directly: where a weight barely moves its gain, the ratio's interval has no "
                "upper end while the gains still compare.", "",
                _md_table(pd.DataFrame(contrasts)), ""]
+    def once(text: Any) -> Any:  # a part's mismatch is said once, in its part's line under the table
+        return f"{NOT_EXPLAINED} (its part's mismatch below)" if str(text).startswith(NOT_EXPLAINED) else text
+
     rows = []
     for r in table.itertuples():
+        note = once(r.note)
         row = {"ratio": r.ratio, "strategy": r.strategy, "estimate [interval]": format_interval(r.estimate, r.lo, r.hi),
-               "note": r.note}
+               "note": note}
         if len(ratios) > 1:
             factor = getattr(r, "factor", float("nan"))
             first = labels[0] if labels[0] in ratios else next(iter(ratios))
             row[f"× vs {first}"] = "" if not np.isfinite(factor) else format_interval(factor, r.factor_lo, r.factor_hi)
-            if r.strategy != first and r.factor_note and r.factor_note != r.note:
-                row["note"] = f"{r.note}; factor: {r.factor_note}" if r.note else f"factor: {r.factor_note}"
+            if r.strategy != first and r.factor_note and once(r.factor_note) != note:
+                row["note"] = f"{note}; factor: {once(r.factor_note)}" if note else f"factor: {once(r.factor_note)}"
         rows.append(row)
     fwd = ", ".join(f"{lb} {ratios[lb].forward_gain_error:.2g}" for lb in ratios)
     md += ["### Weight ratios inside coupled parts", "",

@@ -7,7 +7,8 @@ Entities, under a prefix (``log`` by default):
   are logged but hidden, since their ramp would flatten every other line of the plot;
 * ``<prefix>/mode`` — the flight-mode lane, every mode the log reports; ``<prefix>/armed`` — armed spans;
 * ``<prefix>/segments`` — with a mapping: what it kept and every dropped piece named by its reason (disarmed,
-  too short, a gap, a missing channel), and ``<prefix>/segments/why`` the same as text;
+  on the ground by the mapping's landed rule, too short, a gap, a missing channel), and ``<prefix>/segments/why``
+  the same as text;
 * ``<prefix>/messages`` — text messages as a rerun TextLog with their severity;
 * ``<prefix>/gps`` — the GPS track on rerun's map (``GeoPoints`` over time, the whole path as a line);
 * ``<prefix>/parameters`` — the parameters as a Markdown document (static).
@@ -30,6 +31,7 @@ import pyarrow as pa
 import rerun as rr
 import rerun.blueprint as rrb
 
+from adapters.explain import GROUND
 from adapters.rawlog import RawLog
 from workbench import palette
 from workbench.viewer import style
@@ -42,8 +44,8 @@ __all__ = ["RAW_APPLICATION_ID", "LoggedRaw", "SEGMENT_STATES", "log_pilot", "lo
 
 RAW_APPLICATION_ID = "workbench_log_raw"
 #: the segment lane's states: what a mapping kept, and why a piece was dropped
-SEGMENT_STATES = {k: palette.LANE_STATES[k] for k in ("kept", "disarmed", "too short", "gap", "missing channel",
-                                                          "not mapped")}
+SEGMENT_STATES = {k: palette.LANE_STATES[k] for k in ("kept", "disarmed", GROUND, "too short", "gap",
+                                                          "missing channel", "not mapped")}
 # clock and time-stamp fields (time_boot_ms, timestamp_sample, armed_time_ms, TimeUS, stamp.sec, …): hidden by
 # default, since their ramp flattens every other line of a stream's plot
 _CLOCKISH = re.compile(r"time|stamp", re.IGNORECASE)

@@ -17,6 +17,7 @@ class Tlog(Format):
     extensions = (".tlog",)
     description = "MAVLink telemetry log (ArduPilot, PX4 ground stations)"
     order = 40  # a heuristic (a timestamp, then a frame whose checksum holds): after the formats with magic bytes
+    checksummed = True  # the reader drops a frame whose CRC fails (counted as crc_failures)
 
     def sniff(self, head):
         from adapters.formats.tlog import looks_like_tlog
