@@ -12,7 +12,7 @@ from adapters.selection import select
 from adapters.streams import Streams, numeric
 from workbench.errors import MappingError
 
-__all__ = ["MOTION_OVER_ACCURACY", "follows_gps"]
+__all__ = ["MOTION_OVER_ACCURACY", "follows_gps", "drop_unfixed"]
 
 
 #: A flight's GPS speed must pass this many times the receiver's velocity accuracy somewhere in its kept segments for
@@ -20,6 +20,62 @@ __all__ = ["MOTION_OVER_ACCURACY", "follows_gps"]
 #: for a tilt's effect on the velocity to be told from it (a hover, a vehicle standing). A threshold, not a test that
 #: the slower velocities are noise: 0.5 m/s is five times the accuracy and real motion, only too little of it.
 MOTION_OVER_ACCURACY = 10.0
+
+
+def _gps_rows(streams: Streams, m: ChannelMapping):
+    """The reference GPS stream's sample times and whether each sample has a fix with a velocity; ``None`` where the
+    mapping declares no GPS with a fix field or the log lacks it."""
+    ref = m.reference
+    if ref is None or ref.fix is None:
+        return None
+    try:
+        gps = select(ref.gps, streams, "reference.gps", m.name, n_columns=2)
+    except MappingError:
+        return None
+    if ref.fix[0] not in gps.frame.columns:
+        return None
+    return stream_times(m.clock, gps.frame)[gps.rows], numeric(gps.frame, ref.fix[0])[gps.rows] >= ref.fix[1], gps
+
+
+def drop_unfixed(streams: Streams, m: ChannelMapping, found: list, log_start: float) -> tuple[list, str]:
+    """The kept segments without those flown with no GPS fix, and one line naming each dropped one.
+
+    ``found`` holds ``(span, times, values)`` per flight-mode span, ``times`` one array per piece. A piece in which the
+    log's GPS reports samples and not one of them has a fix (the mapping's ``[reference].fix``, a 3D fix) was flown
+    on the estimator's dead reckoning: its position and velocity are the IMU's integral, which drifts (erle
+    6-11-2014/GPS_issues2: 46 s of ALT_HOLD with the GPS at 0 satellites (Status 0–1), the EKF's speed drifting to
+    60 m/s), so no plant identified from it can be physics. A piece without any GPS sample is dropped where the log
+    writes its GPS stream whenever a receiver reports (``[reference].always_logged``: an ArduPilot DataFlash log) and
+    kept otherwise (a telemetry log's GPS stream may be thinned by the radio)."""
+    rows = _gps_rows(streams, m)
+    if rows is None:
+        return found, ""
+    tg, fixed, gps = rows
+    kept, dropped = [], []
+    for span, ts, vs in found:
+        keep_t, keep_v = [], []
+        for t, v in zip(ts, vs, strict=True):
+            inside = np.isfinite(tg) & (tg >= t[0]) & (tg <= t[-1])
+            # a log whose GPS stream is written whenever the receiver reports (``always_logged``) and holds none here
+            # had no receiver reporting: as without a fix
+            silent = not inside.any() and bool(m.reference is not None and m.reference.always_logged)
+            if silent or (inside.any() and not fixed[inside].any()):
+                mode = f"{span.meta['mode']} " if span.meta.get("mode") else ""
+                dropped.append(f"the {mode}segment {t[0] - log_start:.1f}–{t[-1] - log_start:.1f} s "
+                               f"({inside.sum() or 'no'} GPS samples{'' if silent else ', none with a fix'})")
+                continue
+            keep_t.append(t)
+            keep_v.append(v)
+        if keep_t:
+            kept.append((span, keep_t, keep_v))
+    if not dropped:
+        return found, ""
+    ref = m.reference
+    assert ref is not None and ref.fix is not None  # _gps_rows found the GPS stream and its fix field
+    least = f"{gps.stream}.{ref.fix[0]} below {ref.fix[1]:g} in every sample, or no sample"
+    return kept, (f"{streams.path}: mapping {m.name!r}: dropped {len(dropped)} segment(s) flown without a GPS fix "
+                  f"({least}): {'; '.join(dropped)} — the estimator dead-reckons there, its position and velocity "
+                  "drift; the plant's physics cannot be identified from them")
 
 
 def follows_gps(streams: Streams, m: ChannelMapping, windows: list[tuple[float, float]]) -> str:

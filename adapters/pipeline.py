@@ -30,7 +30,7 @@ from adapters.align import Series, align, check_grid, silence
 from adapters.clock import stream_times
 from adapters.events import flag_value_name
 from adapters.formats import FORMATS, get_format
-from adapters.gps import follows_gps
+from adapters.gps import drop_unfixed, follows_gps
 from adapters.mapping import Channel, ChannelMapping, FlagRule, Selector
 from adapters.meta import table_meta, text_meta
 from adapters.modes import FIXED_WING_STICKS, autopilot_holds, mode_name, plant_group
@@ -429,13 +429,12 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
     MappingError
         A source names a stream or field the file lacks (listing the nearest it has).
     DataError
-        No demonstration found (saying how many spans and pieces the rules gave), a channel without any
-        usable sample, or (unless ``allow_still``: a viewer shows such a log, with the cause in every
-        demonstration's ``meta["still"]``) a position or velocity that never moves in the whole log, a velocity that
-        does not follow the GPS's (:func:`adapters.gps.follows_gps`), or no GPS stream where the mapping says
-        there is always one;
-        nothing left once the segments are cut at the vehicle's flips (``meta["flipped"]`` names each cut).
-    """
+        No demonstration found (saying how many spans and pieces the rules gave), a channel without any usable
+        sample, or (unless ``allow_still``: a viewer shows such a log, with the cause in every demonstration's
+        ``meta["still"]``) a position or velocity that never moves in the whole log, a velocity that does not follow
+        the GPS's (:func:`adapters.gps.follows_gps`), or no GPS stream where the mapping says there is always one;
+        nothing left once the segments are cut at the vehicle's flips (``meta["flipped"]`` names each cut) or once
+        those flown without a GPS fix are dropped (:func:`adapters.gps.drop_unfixed`; ``meta["unfixed"]``)."""
     m = mapping
     m.check_complete()
     m = resolve_sticks(m, streams)  # a stick named by role, on the channel the log's RC map gives it
@@ -501,6 +500,9 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
             f"skipped: {dict(skipped) or 'nothing'}"
         )
 
+    found, unfixed = drop_unfixed(streams, m, found, log_start)  # flown on dead reckoning: no GPS fix
+    if not found:
+        raise DataError(unfixed)
     windows = [(float(t[0]), float(t[-1])) for _, ts, _ in found for t in ts]
     table = m.segment.mode.names if m.segment.mode is not None else None
     stick_cause, stick_note = check_sticks(m, streams, [
@@ -556,6 +558,7 @@ def build(streams: Streams, mapping: ChannelMapping, *, allow_still: bool = Fals
                 meta["sticks"] = sticks
             if flips:
                 meta["flipped"] = "; ".join(flips)
+            meta.update({"unfixed": unfixed} if unfixed else {})  # the segments dropped without a GPS fix
             if damaged:
                 meta["damaged"] = damaged
             if m.task:  # the mapping's [task]: what a fit of these trials regulates, relative to what

@@ -22,6 +22,7 @@ BIN = Path(sys.executable).parent
 LOGS = (".bin", ".BIN", ".tlog", ".ulg")
 GROUP_BLOCK = re.compile(r"plant identification \(plant group ([^,]+),")
 CHECK = re.compile(r"check: (A\[\w+, \w+\]) = (-?[\d.e+-]+), expected ([\d.e+-]+).*?ratio (-?[\d.e+-]+), (NOT )?within")
+HELD = re.compile(r"check: (A\[\w+, \w+\]) = .*? \(held; the free fit's [-\d.e+]+, ratio (-?[\d.e+-]+)\)")
 STICK = re.compile(r"stick: (\w+) → (\w+): (.*?) per full stick \(time constant ([\d.e+-]+) s\)"
                    r"|stick: (\w+) → (\w+): the (.*?) loop does not settle")
 # the loop judged: the regulator's A + BK̂, or the pilot's loop with its delay and lag (a timed gain)
@@ -90,7 +91,9 @@ def physics(out: str) -> str:
             continue
         seen.add(group)
         cells = []
-        if (c := CHECK.search(body)) is not None:
+        if (h := HELD.search(body)) is not None:  # the free fit failed its check; the entry is held at its physics
+            cells.append(f"{h.group(1)} held at its physics (the free fit's {h.group(2)}×)")
+        elif (c := CHECK.search(body)) is not None:
             cells.append(f"{c.group(1)} {c.group(4)}× ({'NOT ' if c.group(5) else ''}within ×2)")
         for s in STICK.finditer(body):
             cells.append(f"{s.group(1)}→{s.group(2)} {s.group(3)}, τ {s.group(4)} s" if s.group(1)

@@ -486,3 +486,54 @@ def test_a_gps_velocity_that_holds_one_value_is_judged_in_words_not_by_round_off
     v = np.column_stack([np.interp(tg, ekf["t"], ekf[k]) for k in ("VN", "VE")])
     rms = float(np.sqrt(((v - north_east[inside]) ** 2).sum(axis=1).mean()))
     assert f"in all {int(inside.sum())} GPS samples" in message and f"by {rms:.2g} m/s RMS" in message
+
+
+def _mode_span(streams, name):
+    """The first span of flight mode ``name`` (ArduCopter's mode number) in the example log's MODE stream."""
+    modes = streams["MODE"]
+    number = {"STABILIZE": 0, "ALT_HOLD": 2, "LOITER": 5}[name]
+    k = int(np.flatnonzero(modes["ModeNum"].to_numpy() == number)[0])
+    ends = [*modes["t"].to_numpy()[1:], np.inf]
+    return float(modes["t"].iloc[k]), float(ends[k])
+
+
+@pytest.mark.parametrize("lost", ["no fix", "silent"])
+def test_a_segment_flown_without_a_gps_fix_is_dropped_and_named(tmp_path, lost):
+    # erle 6-11-2014/GPS_issues2.BIN: 46 s of ALT_HOLD with GPS.Status 0–1 (0 satellites); the EKF dead-reckoned, its
+    # speed drifted to 60 m/s against a GPS that read 0, and the plant identified from it had A[xdot, phi] −0.7 × g·dt
+    clean_streams, _ = dataflash_write.example_streams("old", "copter", seconds=30.0, seed=3)
+    a, b = _mode_span(clean_streams, "ALT_HOLD")
+
+    def no_fix(streams, options):
+        gps = streams["GPS"]
+        inside = (gps["t"] >= a) & (gps["t"] <= b)
+        if lost == "no fix":
+            gps.loc[inside, "Status"] = 1  # a 2D fix at best: no velocity
+        else:
+            streams["GPS"] = gps[~inside].reset_index(drop=True)  # the receiver stopped reporting
+
+    clean = adapters.load(_copter_bin(tmp_path, "clean.bin")[0], "ardupilot_manual")
+    path, _ = _copter_bin(tmp_path, "no_fix.bin", no_fix)
+    ds = adapters.load(path, "ardupilot_manual")
+    modes = [d.meta["mode"] for d in ds]
+    assert "ALT_HOLD" in [d.meta["mode"] for d in clean] and "ALT_HOLD" not in modes
+    assert len(ds) == len(clean) - 1
+    note = ds[0].meta["unfixed"]
+    assert "\n" not in note and "dropped 1 segment(s) flown without a GPS fix" in note
+    said = r"\d+ GPS samples, none with a fix" if lost == "no fix" else "no GPS samples"
+    assert re.search(r"the ALT_HOLD segment [\d.]+–[\d.]+ s \(" + said + r"\)", note)
+    assert "dead-reckons" in note
+    assert not any(d.meta.get("unfixed") for d in clean)
+
+
+def test_a_flight_without_any_gps_fix_stops_in_one_line(tmp_path):
+    # erle 7-9-2014/11.BIN: 9 GPS samples in 900 s, one with a fix; its five STABILIZE segments gave a plant with
+    # A[xdot, phi] 0.25 × g·dt, and the fit stopped for that plant's physics
+    def no_fix(streams, options):
+        streams["GPS"]["Status"] = 0
+
+    path, _ = _copter_bin(tmp_path, "no_fix.bin", no_fix)
+    with pytest.raises(DataError, match=r"dropped \d+ segment\(s\) flown without a GPS fix \(GPS\.Status below 3 in "
+                                        r"every sample, or no sample\): the STABILIZE segment") as info:
+        adapters.load(path, "ardupilot_manual")
+    assert "\n" not in str(info.value)

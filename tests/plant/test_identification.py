@@ -93,7 +93,13 @@ def test_auto_identifies_a_real_log_in_the_paper_s_layout_read_without_a_mode_ru
     ds = adapters.load(external_file("dronekit_flight.tlog"), str(_dronekit_mapping(tmp_path)))
     assert tuple(ds.state_names) == paper.state_names and ds.dt == paper.dt
     assert not any(d.meta.get("plant_group") for d in ds)
-    plant = choose_plant(ds, "auto")
+    # identified, not the paper's: and this mapping pairs the body roll with the world's east velocity on a vehicle
+    # that turns, so the identified plant is refused for its physics; `--plant free` takes it as fitted
+    from workbench.errors import ModelError
+
+    with pytest.raises(ModelError, match=r"^the identified plant is not physics: A\[xdot, phi\]"):
+        choose_plant(ds, "auto")
+    plant = choose_plant(ds, "free")
     assert plant.identification is not None
     reproduced, why = paper_reproduces(ds, paper)
     assert not reproduced and f"not the paper's plant: {why}" in plant.identification.describe()
@@ -134,3 +140,124 @@ def test_auto_keeps_the_paper_s_plant_for_its_own_trials(source):
     assert plant.identification is None
     np.testing.assert_array_equal(plant.A, paper.A)
     np.testing.assert_array_equal(plant.B, paper.B)
+
+
+def _angle_flights(k_first: float, k_rest: float):
+    """Simulated STABILIZE flights whose recorded across-velocity is off the tilt physics: each segment's xdot gets
+    ``−k · g·dt · Σ phi`` (the first segment ``k_first``, the others ``k_rest``), so it responds to the lean at
+    ``(1 − k) · g·dt`` — a velocity that drifts against the tilt (a dead-reckoned segment) or, with every segment at
+    k = 2, a lean of the wrong sign."""
+    import numpy as np
+
+    from workbench.plant.identification import GRAVITY
+    from workbench.sim.modes import ModeVehicle, fly
+
+    ds = fly(ModeVehicle(), "angle", seconds=20.0, n=4, seed=0)
+    ip, iv = ds.state_names.index("phi"), ds.state_names.index("xdot")
+
+    def off(d, k):
+        x = d.x.copy()
+        x[:, iv] -= k * GRAVITY * ds.dt * np.concatenate([[0.0], np.cumsum(x[:-1, ip])])
+        return type(d)(d.t, x, d.u, d.meta)
+
+    return ds.with_demos([off(d, k_first if i == 0 else k_rest) for i, d in enumerate(ds)])
+
+
+def test_a_plant_that_fails_its_physics_check_is_held_at_the_physics_where_the_data_agree():
+    import re
+
+    # beastayyg 0039 / erle 15-12-2014/16 STABILIZE: the free fit put A[xdot, phi] at 0.09 and 0.24 × g·dt (16's short
+    # segment split the tilt between the lean and the stick, B[xdot, u1] 0.63), and fit wrote a model on that plant
+    import numpy as np
+
+    from workbench.plant.choice import choose_plant
+    from workbench.plant.identification import identify_plant
+
+    ds = _angle_flights(3.0, 0.0)  # one segment of four drifts against the tilt
+    (free,) = identify_plant(ds, hold=False)[3].checks
+    assert not free.within()  # the free fit fails its check
+    plant = choose_plant(ds, "auto")
+    report = plant.identification
+    (check,) = report.checks
+    i, j = free.at
+    assert plant.A[i, j] == free.expected and check.within() and not report.contradiction
+    assert report.free_checks[0].value == free.value  # the free fit is kept in the report
+    held = [f for f in report.fixed if f.startswith(f"{free.name} = {free.expected:.4g}")]
+    assert len(held) == 1
+    assert f"(held; the free fit's {free.value:.4g}" in report.describe()
+    assert not any("tilt would" in w for w in report.warnings)
+    # the rule: the held plant's held-out squared error is not above the free fit's beyond its interval
+    m = re.search(r"RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) free; mean squared difference ([\d.e+-]+) "
+                  r"\[([\d.e+-]+), ([\d.e+-]+)\] \(95 % HAC interval over (\d+) held-out samples\)", held[0])
+    assert m is not None and float(m.group(4)) <= 0.0
+    assert float(m.group(1)) == pytest.approx(report.one_step_rmse[i], rel=2e-3)
+    assert float(m.group(2)) == pytest.approx(identify_plant(ds, hold=False)[3].one_step_rmse[i], rel=2e-3)
+    # --plant free takes the least-squares plant as fitted
+    assert choose_plant(ds, "free").A[i, j] == free.value
+    assert np.isfinite(plant.A).all()
+
+
+def test_a_plant_whose_data_contradict_the_physics_is_refused_in_one_line():
+    # flug ZweiterFlugtag log_23 (A[xdot, phi] −3 × g·dt), peterbarker_1 (0.22 ×): held at g·dt the plant predicts the
+    # held-out velocity worse than the free fit, so no pilot model on either describes this vehicle
+    import re
+
+    from workbench.errors import ModelError
+    from workbench.plant.choice import choose_plant
+    from workbench.plant.identification import identify_plant
+
+    ds = _angle_flights(2.0, 2.0)  # every segment: the velocity answers the lean with the wrong sign
+    (free,) = identify_plant(ds, hold=False)[3].checks
+    assert free.ratio < 0
+    with pytest.raises(ModelError) as info:
+        choose_plant(ds, "auto")
+    line = str(info.value)
+    assert "\n" not in line
+    assert line.startswith(f"the identified plant is not physics: {free.name} is {free.ratio:.2g} × g·dt")
+    m = re.search(r"predicts the held-out xdot worse \(held-out one-step RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) "
+                  r"free; mean squared difference ([\d.e+-]+) \[([\d.e+-]+), ([\d.e+-]+)\]", line)
+    assert m is not None and float(m.group(1)) > float(m.group(2)) and float(m.group(4)) > 0.0
+    assert "`--plant free` takes the plant as fitted" in line
+    assert choose_plant(ds, "free").A[free.at] == free.value  # the override
+
+
+def test_the_held_plant_is_judged_worse_only_beyond_its_autocorrelation_robust_interval():
+    # one-step errors of a plant are autocorrelated: the comparison's interval must widen with it (Newey–West), so
+    # a difference an iid interval would call significant is not a refusal
+    import numpy as np
+    from scipy import stats
+
+    from workbench.plant.identification import _held_vs_free
+
+    rng = np.random.default_rng(5)
+    n = 600
+    free = rng.normal(size=(n, 1))
+    slow = np.zeros(n)
+    for k in range(1, n):  # an AR(1) disturbance with 0.95 per step: slowly wandering errors
+        slow[k] = 0.95 * slow[k - 1] + 0.3 * rng.normal()
+    held = np.sqrt(np.maximum(free[:, 0] ** 2 + slow + 0.02, 0.0))[:, None]
+    d = held[:, 0] ** 2 - free[:, 0] ** 2
+    iid = stats.ttest_1samp(d, 0.0).confidence_interval(0.95)
+    verdict = _held_vs_free(held, free)
+    assert verdict.mean_held - verdict.mean_free == pytest.approx(d.mean())
+    assert verdict.hi - verdict.lo > iid.high - iid.low  # wider than the interval that ignores the autocorrelation
+    assert verdict.worse == (verdict.lo > 0.0)
+    # errors twice as large everywhere: worse beyond any interval
+    assert _held_vs_free(2.0 * free, free).worse
+    assert not _held_vs_free(free, free).worse  # the same forecasts: no difference
+
+
+def test_a_horizon_no_held_out_piece_lasts_is_said_in_words_not_nan():
+    # erle 15-12-2014/16's STABILIZE group (82 samples in 3 held-out pieces, a 3 s horizon of 30 steps) printed
+    # "3 s (30 steps): plant nan, persistence nan" and a column of nan; its position rows printed 4.975e-17
+    from workbench.plant.identification import identify_plant
+    from workbench.sim.modes import ModeVehicle, fly
+
+    ds = fly(ModeVehicle(), "angle", seconds=10.0, n=3, seed=0)
+    horizon = 2 * ds.dt * max(len(d) for d in ds)  # longer than any piece
+    _, _, _, report = identify_plant(ds, horizon_s=horizon)
+    text = report.describe()
+    assert "nan" not in text.lower() and "e-1" not in text
+    assert f"({report.n_steps} steps): not scored: no held-out piece lasts that long" in text
+    _, _, _, scored = identify_plant(ds, horizon_s=1.0)  # pieces of 10 s hold a 1 s horizon
+    assert "not scored" not in scored.describe() and "—" not in scored.describe()

@@ -123,9 +123,12 @@ def _n_components_option(p: argparse.ArgumentParser, default: str | None, which:
 
 def _plant_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plant", "--system", dest="plant", action=_OldSpelling,
-                   choices=["auto", "paper", "identify"], default="auto",
+                   choices=["auto", "paper", "identify", "free"], default="auto",
                    help="plant (A, B): the paper's planar quadrotor, identified from the data by least squares, "
-                   "or auto (the paper's for its state layout at dt 0.05 s, else identified)")
+                   "or auto (the paper's for its state layout at dt 0.05 s, else identified). An identified plant "
+                   "that fails its physics check is identified again with the failing entries held at their physics "
+                   "where that predicts held-out segments no worse, and refused where it predicts them worse; free: "
+                   "take the least-squares plant as fitted, physics check or not")
 
 
 def _plant_group_option(p: argparse.ArgumentParser, what: str) -> None:

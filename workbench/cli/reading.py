@@ -61,6 +61,8 @@ def _warn_about(source: Source, ds: Any) -> None:
         print(f"warning: {source.shown}: {meta['flipped']}", file=sys.stderr)
     if meta.get("damaged"):  # the segments a damaged file's lost data cut into pieces
         print(f"warning: {meta['damaged']}", file=sys.stderr)
+    if meta.get("unfixed"):  # the segments flown without a GPS fix, on the estimator's dead reckoning
+        print(f"warning: {meta['unfixed']}", file=sys.stderr)
     skipped = {k: v for k, v in dict(meta.get("skipped") or {}).items() if v}
     if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
         what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())

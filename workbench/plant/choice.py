@@ -15,12 +15,12 @@ import numpy as np
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.data.plant_groups import plant_groups
 from workbench.defaults import HORIZON_S
-from workbench.errors import DataError
+from workbench.errors import DataError, ModelError
 from workbench.plant.system import LinearSystem, planar_quadrotor
 
 __all__ = ["PLANT_CHOICES", "PAPER_RESIDUAL_RATIO", "choose_plant", "paper_reproduces", "plant_rule"]
 
-PLANT_CHOICES = ("auto", "paper", "identify")
+PLANT_CHOICES = ("auto", "paper", "identify", "free")
 #: ``auto`` takes the paper's plant for data in its layout and step only where it reproduces their recorded steps: in
 #: every state, its one-step residual sum of squares at most this many times that of the least-squares plant of the
 #: same steps (:func:`paper_reproduces`). The paper's own trials leave only what storing them rounded, which no
@@ -39,7 +39,9 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
     real vehicle is not the paper's linearized 0.25 kg quadrotor, whether its trials were flown in a vehicle's
     flight mode (each with a plant group) or read through a mapping without a mode rule in the paper's layout.
     Identification is kinematic (position rows fixed, :mod:`workbench.plant.identification`) whenever the data's
-    roles pair positions with velocities, and its report checks ``horizon_s`` seconds ahead.
+    roles pair positions with velocities, and its report checks ``horizon_s`` seconds ahead. A plant that fails its
+    physical check is held at its physics where the held-out data agree and refused (a ``ModelError`` in one line)
+    where they contradict it; ``free`` takes the least-squares plant as fitted.
     """
     if choice not in PLANT_CHOICES:
         raise DataError(f"unknown plant choice {choice!r}; known: {', '.join(PLANT_CHOICES)}")
@@ -61,7 +63,9 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
             )
         return planar_quadrotor(dt=ds.dt)
     plant = LinearSystem.identify(ds, u_min=paper.u_min if layout else None, u_max=paper.u_max if layout else None,
-                                  structure="auto", horizon_s=horizon_s)
+                                  structure="auto", horizon_s=horizon_s, hold=choice != "free")
+    if plant.identification is not None and plant.identification.contradiction:
+        raise ModelError(plant.identification.contradiction)
     if why and plant.identification is not None:  # the report says why these data did not get the paper's plant
         return dataclasses.replace(plant, identification=dataclasses.replace(plant.identification, why=why))
     return plant

@@ -19,8 +19,16 @@ segment left out in turn (leave-one-segment-out; a log with fewer than three seg
 pieces first), against persistence (every state held, positions moved on at their recorded velocity); the
 spectral radius ρ(A), also without the integrators; the conditioning of the regressor; the physical checks
 of the segments' plant group and what each stick commands in it (:mod:`workbench.plant.physics`); and one warning
-line when the plant is unstable beyond its integrators, worse than persistence, or ill-conditioned. The checks are
-reported, never enforced.
+line when the plant is unstable beyond its integrators, worse than persistence, or ill-conditioned.
+
+A plant that fails a physical check is the wrong vehicle for a pilot model (a lean that does not accelerate the
+vehicle as a tilt does). Where the free fit fails one, the plant is identified again as a grey box: each failing
+entry held at what physics says it is (``A[xdot, phi] = g·dt``, where the roles name the pair; a plane's
+``A[phi, phidot] = dt``) and the rest of its row by least squares. The held plant is the plant unless it predicts the
+held-out segments' one-step states of those rows worse than the free fit, judged by the Diebold–Mariano comparison of
+the two forecasts' squared errors with a Newey–West interval (:data:`PHYSICS_CI`): then the data contradict the physics
+and the report carries one line saying so (``contradiction``), which :func:`workbench.plant.choice.choose_plant`
+raises (``--plant free`` takes the free fit as it is). A held plant says so in the report's ``fixed`` lines.
 
 One plant per kind of stick: demonstrations of different plant groups (:mod:`workbench.data.plant_groups`: a lean
 angle in STABILIZE, a velocity in LOITER) are never pooled into one (A, B); identification refuses them, naming the
@@ -29,6 +37,7 @@ groups, and the caller identifies each group's plant from its own segments.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -41,6 +50,7 @@ from workbench.defaults import HORIZON_S
 from workbench.errors import ModelError
 from workbench.frozen import readonly
 from workbench.plant.physics import GRAVITY, PhysicalCheck, StickResponse, group_checks, stick_responses
+from workbench.plant.physics import cause as _cause
 from workbench.plant.physics import disagreement as _disagreement
 
 if TYPE_CHECKING:
@@ -63,6 +73,8 @@ ILL_CONDITIONED = 1e4
 #: |λ| above 1 + this counts as unstable (the paper's plant has eigenvalues exactly on the unit circle).
 UNSTABLE_TOL = 1e-6
 MIN_SEGMENTS = 3
+#: The interval (%) by which a plant held at its physics is judged to predict held-out samples worse than the free fit.
+PHYSICS_CI = 95.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,6 +111,10 @@ class IdentificationReport:
     position_pull: float = 0.0  # max |A[i, p]| over positions p and the other rows i (0 when translation invariant)
     plant_group: str | None = None  # what the sticks command in these segments' modes (workbench.data.plant_groups)
     responses: tuple[StickResponse, ...] = ()  # what each stick commands in this plant (workbench.plant.physics)
+    #: the free fit's checks where it failed one and the failing entries were held at their physics (else ``()``)
+    free_checks: tuple[PhysicalCheck, ...] = ()
+    #: one line where the free fit fails a check and the data contradict the physics (see :func:`identify_plant`)
+    contradiction: str = ""
     #: why ``--plant auto`` identified data in the paper's layout and step (workbench.plant.choice.paper_reproduces)
     why: str = ""
 
@@ -134,19 +150,20 @@ class IdentificationReport:
         ]
         lines += [f"  fixed: {f}" for f in self.fixed]
         lines += [f"  not the paper's plant: {self.why}"] if self.why else []
+        # said in words, never "nan": persistence has a score wherever a held-out piece lasts the horizon
+        horizon = (f"plant {self.horizon_score:.3g}, persistence {self.horizon_score_persistence:.3g}"
+                   if np.isfinite(self.horizon_score_persistence) else "not scored: no held-out piece lasts that long")
         lines.append(
             f"  normalized held-out RMSE, one step: plant {self.one_step_score:.3g}, persistence "
-            f"{self.one_step_score_persistence:.3g}; {self.horizon_s:g} s ({self.n_steps} steps): plant "
-            f"{self.horizon_score:.3g}, persistence {self.horizon_score_persistence:.3g}"
+            f"{self.one_step_score_persistence:.3g}; {self.horizon_s:g} s ({self.n_steps} steps): {horizon}"
         )
         width = max(len(s) for s in self.state_names)
         lines.append(f"  {'state':<{width}}  {'1-step':>9}  {'persist.':>9}  {f'{self.horizon_s:g} s':>9}  "
                      f"{'persist.':>9}")
         for i, s in enumerate(self.state_names):
-            lines.append(
-                f"  {s:<{width}}  {self.one_step_rmse[i]:>9.4g}  {self.one_step_rmse_persistence[i]:>9.4g}  "
-                f"{self.horizon_rmse[i]:>9.4g}  {self.horizon_rmse_persistence[i]:>9.4g}"
-            )
+            cells = (self.one_step_rmse[i], self.one_step_rmse_persistence[i], self.horizon_rmse[i],
+                     self.horizon_rmse_persistence[i])
+            lines.append(f"  {s:<{width}}  " + "  ".join(f"{_rmse_cell(v):>9}" for v in cells))
         if self.n_integrators:
             lines.append(f"  absolute position in the other rows: max |A[i, position]| = {self.position_pull:.3g} "
                          "(0 in free-flight physics; a pull the data ascribe to the plant)")
@@ -155,11 +172,21 @@ class IdentificationReport:
             f"{self.spectral_radius_beyond_integrators:.6g}; cond of the normalized regressor "
             f"{self.condition_number:.3g}"
         )
-        lines += [f"  check: {c}" for c in self.checks]
+        free = {c.name: c for c in self.free_checks if not c.within()}
+        lines += [f"  check: {c}" + (f" (held; the free fit's {free[c.name].value:.4g}, ratio "
+                                     f"{free[c.name].ratio:.3g})" if c.name in free else "") for c in self.checks]
         lines += [f"  stick: {r}" for r in self.responses]
         if warning and self.warning:
             lines.append(f"  warning: {self.warning}")
         return "\n".join(lines)
+
+
+def _rmse_cell(v: float) -> str:
+    """An RMSE in the report's table: ``—`` where not scored; 0 where it is rounding (a row the physics fixes
+    exactly, such as the position's, leaves 1e-17 of floating-point error)."""
+    if not np.isfinite(v):
+        return "—"
+    return "0" if abs(v) < 1e-12 else f"{v:.4g}"
 
 
 # ----------------------------------------------------------------------------------------------- structure
@@ -200,6 +227,8 @@ class _Layout:
     dt: float
     pairs: tuple[tuple[int, int], ...]  # (position, velocity) state indices with kinematic rows
     invariant: bool = False  # no row but a position's own depends on an absolute position
+    #: entries of ``[A B]`` held at a value physics gives (row, column, value); the rest of their rows is fitted
+    held: tuple[tuple[int, int, float], ...] = ()
 
     @property
     def fixed_rows(self) -> list[int]:
@@ -222,16 +251,27 @@ class _Layout:
         for p, v in self.pairs:
             AB[p, p] = 1.0
             AB[p, v] = self.dt
+        for i, j, value in self.held:
+            AB[i, j] = value
         return AB
 
 
-
 def _fit(layout: _Layout, Z: np.ndarray, Xn: np.ndarray) -> np.ndarray:
+    """Least squares of the free rows, ``min ‖X' − [A B] [X; U]‖_F`` (eq. (1)); a row with held entries regresses
+    what they leave, ``x_i[k+1] − Σ_held AB[i, j] z_j[k]``, on its other columns (a grey-box row)."""
     AB = layout.base()
     rows, cols = layout.free_rows, layout.columns
-    if rows:
-        theta, *_ = np.linalg.lstsq(Z[:, cols], Xn[:, rows], rcond=None)
-        AB[np.ix_(rows, cols)] = theta.T
+    held_rows = {i for i, _, _ in layout.held}
+    plain = [i for i in rows if i not in held_rows]
+    if plain:
+        theta, *_ = np.linalg.lstsq(Z[:, cols], Xn[:, plain], rcond=None)
+        AB[np.ix_(plain, cols)] = theta.T
+    for i in sorted(held_rows & set(rows)):
+        fixed = [j for r, j, _ in layout.held if r == i]
+        own = [j for j in cols if j not in fixed]
+        target = Xn[:, i] - Z[:, fixed] @ AB[i, fixed]
+        theta, *_ = np.linalg.lstsq(Z[:, own], target, rcond=None)
+        AB[i, own] = theta
     return AB
 
 
@@ -313,7 +353,8 @@ def _beyond_integrators(A: np.ndarray, n_int: int) -> float:
 
 
 def identify_plant(
-    demos: DemonstrationSet, structure: str = "auto", horizon_s: float = HORIZON_S, translation_invariant: bool = False
+    demos: DemonstrationSet, structure: str = "auto", horizon_s: float = HORIZON_S, translation_invariant: bool = False,
+    hold: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport]:
     """(A, B), the RMS one-step residual of the fit on all data, and the report (see the module docstring).
 
@@ -326,6 +367,10 @@ def identify_plant(
         Seconds of the multi-step check (the model's prediction horizon; the paper's is 3 s).
     translation_invariant : bool
         With ``"kinematic"``: also keep absolute positions out of every other row.
+    hold : bool
+        Where the fit fails a physical check, identify it again with the failing entries held at their physics and
+        take that plant unless the held-out data contradict it (the module docstring); ``False``: the free fit as it
+        is (``--plant free``).
 
     Raises
     ------
@@ -360,6 +405,81 @@ def identify_plant(
             f"(cond [X; U] = {np.linalg.cond(Z[:, cols]):.3g}): {_unexcited(Z[:, cols], [labels[j] for j in cols])}; "
             "record more varied demonstrations"
         )
+    free = _estimate(demos, layout, Z, Xn, r, structure, horizon_s, translation_invariant, group)
+    failed = [c for c in free[3].checks if not c.within() and c.at is not None]
+    if not failed or not hold:
+        return free[:4]
+    # grey box: the entries physics gives held at their value, the rest of their rows by least squares
+    held = _estimate(demos, dataclasses.replace(layout, held=tuple((*c.at, c.expected) for c in failed)), Z, Xn, r,
+                     structure, horizon_s, translation_invariant, group)
+    rows = sorted({c.at[0] for c in failed})
+    verdict = _held_vs_free(held[4][:, rows], free[4][:, rows])
+    what = ", ".join(names[i] for i in rows)
+    if not verdict.worse:
+        said = tuple(f"{c.name} = {c.expected:.4g} ({c.note.split(':')[0]}; the free fit's {c.value:.3g} is "
+                     f"{c.ratio:.2g} × it) — {verdict.describe(what)}" for c in failed)
+        return (*held[:3], dataclasses.replace(held[3], fixed=held[3].fixed + said, free_checks=free[3].checks))
+    # one line, the measured facts first (a table cell or a terminal cuts a long line at its end)
+    ratios = "; ".join(f"{c.name} is {c.ratio:.2g} × {c.note.split(':')[0]}" for c in failed)
+    contradiction = (f"the identified plant is not physics: {ratios}, and held at its physics it predicts the held-out "
+                     f"{what} worse ({verdict.describe(what)}): the recorded data contradict the physics, so no pilot "
+                     f"model on this plant describes the vehicle; {_cause(failed[0])} (`--plant free` takes the plant "
+                     "as fitted)")
+    return (*free[:3], dataclasses.replace(free[3], contradiction=contradiction))
+
+
+@dataclass(frozen=True)
+class _Comparison:
+    """The held plant's held-out one-step squared error minus the free plant's, per sample: its mean and interval."""
+
+    mean_held: float
+    mean_free: float
+    lo: float
+    hi: float
+    n: int
+
+    @property
+    def worse(self) -> bool:
+        """The held plant predicts worse beyond the interval (its lower bound above 0); no interval is no verdict."""
+        return bool(np.isfinite(self.lo) and self.lo > 0.0)
+
+    def describe(self, what: str) -> str:
+        rms = f"held-out one-step RMSE of {what} {np.sqrt(self.mean_held):.3g} held, {np.sqrt(self.mean_free):.3g} free"
+        if not np.isfinite(self.lo):
+            return f"{rms} (no held-out samples to compare them by)"
+        return (f"{rms}; mean squared difference {self.mean_held - self.mean_free:.3g} [{self.lo:.3g}, {self.hi:.3g}] "
+                f"({PHYSICS_CI:g} % HAC interval over {self.n} held-out samples)")
+
+
+def _held_vs_free(held: np.ndarray, free: np.ndarray) -> _Comparison:
+    """Whether the held plant predicts the held-out samples worse than the free one: the Diebold–Mariano comparison of
+    two forecasts, ``d_k = Σ_rows e_held² − e_free²`` per held-out sample, its mean with a Newey–West (HAC) interval
+    (the one-step errors of a plant are autocorrelated; lags by the Newey–West rule ``⌊4 (T/100)^{2/9}⌋``)."""
+    d = (held**2).sum(axis=1) - (free**2).sum(axis=1)
+    n = len(d)
+    mean_held, mean_free = (float((e**2).sum(axis=1).mean()) if n else float("nan") for e in (held, free))
+    if n < 2 or not np.isfinite(d).all():
+        return _Comparison(mean_held, mean_free, float("nan"), float("nan"), n)
+    if not np.ptp(d) > 0:  # identical forecasts: no difference, no spread to judge one by
+        return _Comparison(mean_held, mean_free, float(d[0]), float(d[0]), n)
+    import statsmodels.api as sm  # here: identification without a failed check never needs it
+
+    lags = int(np.floor(4.0 * (n / 100.0) ** (2.0 / 9.0)))
+    fit = sm.OLS(d, np.ones(n)).fit(cov_type="HAC", cov_kwds={"maxlags": lags})
+    lo, hi = (float(v) for v in np.asarray(fit.conf_int(alpha=1.0 - PHYSICS_CI / 100.0))[0])
+    return _Comparison(mean_held, mean_free, lo, hi, n)
+
+
+def _estimate(demos: DemonstrationSet, layout: _Layout, Z: np.ndarray, Xn: np.ndarray, r: ResolvedRoles,
+              structure: str, horizon_s: float, translation_invariant: bool,
+              group: str | None) -> tuple[np.ndarray, np.ndarray, float, IdentificationReport, np.ndarray]:
+    """(A, B) of ``layout`` on the pairs ``Z → Xn``, their residual and report (held out, checks, warnings), and the
+    held-out one-step errors (rows: the held-out samples of every fold in turn)."""
+    n, m, dt = layout.n, layout.m, layout.dt
+    names = tuple(demos.state_names)
+    roles = demos.roles
+    pairs = layout.pairs
+    cols = layout.columns
     AB = _fit(layout, Z, Xn)
     A, B = AB[:, :n], AB[:, n:]
     residual = float(np.sqrt(np.mean((Xn - Z @ AB.T) ** 2)))
@@ -425,4 +545,5 @@ def identify_plant(
         spectral_radius_beyond_integrators=rho_free, n_integrators=n_int, condition_number=cond, fixed=fixed,
         checks=checks, warnings=tuple(warns), position_pull=pull, plant_group=group, responses=responses,
     )
-    return A, B, residual, report
+    one_step = np.concatenate(errs["one"]) if errs["one"] else np.empty((0, n))
+    return A, B, residual, report, one_step

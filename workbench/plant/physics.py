@@ -1,6 +1,7 @@
 """The physics an identified plant is checked against, per plant group, and what each stick commands in it.
 
-Two kinds of result, both reported and never enforced (:class:`~workbench.plant.identification.IdentificationReport`):
+Two kinds of result (:class:`~workbench.plant.identification.IdentificationReport`; a failed check's entry is held at
+its physics where the data agree, the plant refused where they do not: :mod:`workbench.plant.identification`):
 
 :class:`PhysicalCheck`
     One identified entry against what physics says it is, within a factor 2. A multirotor of any group tilts to
@@ -27,7 +28,7 @@ import numpy as np
 from workbench.data.plant_groups import PLANT_GROUPS
 from workbench.data.roles import ResolvedRoles, Roles
 
-__all__ = ["GRAVITY", "PhysicalCheck", "StickResponse", "group_checks", "stick_responses", "disagreement",
+__all__ = ["GRAVITY", "PhysicalCheck", "StickResponse", "group_checks", "stick_responses", "disagreement", "cause",
            "rate_state"]
 
 GRAVITY = 9.80665  # m/s², standard gravity
@@ -35,13 +36,16 @@ GRAVITY = 9.80665  # m/s², standard gravity
 
 @dataclass(frozen=True)
 class PhysicalCheck:
-    """One physical expectation on an identified entry, reported (not enforced)."""
+    """One physical expectation on an identified entry (held at ``expected`` where the free fit fails it and the data
+    agree: :func:`~workbench.plant.identification.identify_plant`)."""
 
     name: str
     value: float
     expected: float
     note: str = ""
     cause: str = ""  # what usually makes this entry disagree; "" for the tilt check's own text
+    #: where the entry sits in ``[A B]`` (row, column), so that an identification can hold it at ``expected``
+    at: tuple[int, int] | None = None
 
     @property
     def ratio(self) -> float:
@@ -61,13 +65,20 @@ class PhysicalCheck:
 
 _TILT_CAUSE = ("the velocity does not respond to the angle as a tilt would; likely cause: the angle is not the tilt "
                "along that velocity's axis (a body roll paired with a world-frame velocity on a vehicle that turns: "
-               "declare the states in the heading frame), or the velocity is an estimate that does not follow the "
-               "tilt (no GPS, estimator not converged), or segments of different kinds of stick pooled in one plant")
+               "declare the states in the heading frame; in the heading frame, a vehicle that yaws while it moves "
+               "turns its forward velocity into that axis, yaw rate × forward speed, which no state carries), or the "
+               "velocity is an estimate that does not follow the tilt (no GPS, estimator not converged), or segments "
+               "of different kinds of stick pooled in one plant")
 
 
 def disagreement(c: PhysicalCheck) -> str:
     """A failed check as a warning that names the state pair and what usually makes it disagree."""
-    return f"{c.name} is {c.ratio:.2g} × {c.note.split(':')[0]} (physics: 1): {c.cause or _TILT_CAUSE}"
+    return f"{c.name} is {c.ratio:.2g} × {c.note.split(':')[0]} (physics: 1): {cause(c)}"
+
+
+def cause(c: PhysicalCheck) -> str:
+    """What usually makes ``c``'s entry disagree with its physics, in words."""
+    return c.cause or _TILT_CAUSE
 
 
 @dataclass(frozen=True)
@@ -124,7 +135,7 @@ def _tilt(A: np.ndarray, r: ResolvedRoles, roles: Roles, state_names: Sequence[s
         return ()
     name = f"A[{state_names[v]}, {state_names[r.heading]}]"
     return (PhysicalCheck(name, float(A[v, r.heading]), GRAVITY * dt * per_unit,
-                          f"g·dt: tilting by the heading angle accelerates {state_names[v]}"),)
+                          f"g·dt: tilting by the heading angle accelerates {state_names[v]}", at=(v, r.heading)),)
 
 
 def _roll_kinematics(A: np.ndarray, roles: Roles, state_names: Sequence[str], r: ResolvedRoles, dt: float):
@@ -138,7 +149,8 @@ def _roll_kinematics(A: np.ndarray, roles: Roles, state_names: Sequence[str], r:
     return (PhysicalCheck(name, float(A[r.heading, rate]), dt,
                           f"dt: the bank angle integrates the roll rate {state_names[rate]}",
                           cause="the angle does not integrate its rate state: the rate is about another axis (a "
-                                "body rate against a tilt in a turning plane), in other units, or lags the angle"),)
+                                "body rate against a tilt in a turning plane), in other units, or lags the angle",
+                          at=(r.heading, rate)),)
 
 
 def _steady(A: np.ndarray, B: np.ndarray, loop: Sequence[int], dt: float) -> tuple[np.ndarray, float]:

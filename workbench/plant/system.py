@@ -174,6 +174,7 @@ class LinearSystem:
         structure: str = "auto",
         horizon_s: float = HORIZON_S,
         translation_invariant: bool = False,
+        hold: bool = True,
     ) -> LinearSystem:
         """Least-squares estimate of (A, B) from consecutive samples of every demonstration, with a report.
 
@@ -198,7 +199,7 @@ class LinearSystem:
         from workbench.plant.identification import identify_plant
 
         A, B, residual, report = identify_plant(
-            demos, structure=structure, horizon_s=horizon_s, translation_invariant=translation_invariant
+            demos, structure=structure, horizon_s=horizon_s, translation_invariant=translation_invariant, hold=hold
         )
         return cls(
             A,

@@ -211,8 +211,10 @@ class StudyStatistics:
         flips = [d.p_flip for d in ml if d.decision_var > 0 and d.p_flip == d.p_flip]
         if not flips:
             return ""
+        # a chance that rounds to 0 % is not 0: say it is below the printed digit
+        most = f"up to {100 * max(flips):.0f} %" if max(flips) >= 0.005 else "under 0.5 %"
         return (", and where the proposed model's fallback to K̂x was near its threshold, the chance that another "
-                f"sample of the operator decides it otherwise (up to {100 * max(flips):.0f} %, from each "
+                f"sample of the operator decides it otherwise ({most}, from each "
                 f"{'fold' if ml[0].loo else 'split'}'s cross-validation margin) times the difference that decision "
                 "makes, squared")
 
