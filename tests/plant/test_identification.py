@@ -187,7 +187,8 @@ def test_a_plant_that_fails_its_physics_check_is_held_at_the_physics_where_the_d
     assert f"(held; the free fit's {free.value:.4g}" in report.describe()
     assert not any("tilt would" in w for w in report.warnings)
     # the rule: the held plant's held-out squared error is not above the free fit's beyond its interval
-    m = re.search(r"RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) free; mean squared difference ([\d.e+-]+) "
+    m = re.search(r"RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) free; held [\d.e+-]+ % MSE \[[\d.e+-]+ %, "
+                  r"[\d.e+-]+ %\]; mean squared difference ([\d.e+-]+) "
                   r"\[([\d.e+-]+), ([\d.e+-]+)\] \(95 % HAC interval over (\d+) held-out samples\)", held[0])
     assert m is not None and float(m.group(4)) <= 0.0
     assert float(m.group(1)) == pytest.approx(report.one_step_rmse[i], rel=2e-3)
@@ -215,7 +216,8 @@ def test_a_plant_whose_data_contradict_the_physics_is_refused_in_one_line():
     assert "\n" not in line
     assert line.startswith(f"the identified plant is not physics: {free.name} is {free.ratio:.2g} × g·dt")
     m = re.search(r"predicts the held-out xdot worse \(held-out one-step RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) "
-                  r"free; mean squared difference ([\d.e+-]+) \[([\d.e+-]+), ([\d.e+-]+)\]", line)
+                  r"free; held \+[\d.e+-]+ % MSE \[\+[\d.e+-]+ %, \+[\d.e+-]+ %\]; "
+                  r"mean squared difference ([\d.e+-]+) \[([\d.e+-]+), ([\d.e+-]+)\]", line)
     assert m is not None and float(m.group(1)) > float(m.group(2)) and float(m.group(4)) > 0.0
     assert "`--plant free` takes the plant as fitted" in line
     assert choose_plant(ds, "free").A[free.at] == free.value  # the override
@@ -245,6 +247,32 @@ def test_the_held_plant_is_judged_worse_only_beyond_its_autocorrelation_robust_i
     # errors twice as large everywhere: worse beyond any interval
     assert _held_vs_free(2.0 * free, free).worse
     assert not _held_vs_free(free, free).worse  # the same forecasts: no difference
+
+
+def test_the_held_versus_free_comparison_says_too_little_in_words_and_gives_the_relative_difference():
+    # nofold.py: a plant whose folds could not be fitted printed "RMSE of xdot nan held, nan free (no held-out samples
+    # to compare them by)", and one held-out sample "1 held, 0.5 free (no held-out samples …)"
+    import re
+
+    import numpy as np
+
+    from workbench.plant.identification import _held_vs_free
+
+    none = _held_vs_free(np.empty((0, 1)), np.empty((0, 1))).describe("xdot")
+    assert "nan" not in none and none.startswith("no held-out samples of xdot")
+    one = _held_vs_free(np.array([[1.0]]), np.array([[0.5]])).describe("xdot")
+    assert "too few held-out samples to compare: 1" in one and "no held-out" not in one
+    rng = np.random.default_rng(3)
+    free = rng.normal(size=(400, 1))
+    held = 1.1 * free + 0.1 * rng.normal(size=(400, 1))
+    verdict = _held_vs_free(held, free)
+    text = verdict.describe("xdot")
+    m = re.search(r"; held ([+-][\d.e+-]+) % MSE \[([+-][\d.e+-]+) %, ([+-][\d.e+-]+) %\]", text)
+    assert m is not None
+    mse_held, mse_free = float(np.mean(held**2)), float(np.mean(free**2))
+    assert float(m.group(1)) == pytest.approx(100.0 * (mse_held - mse_free) / mse_free, rel=5e-3)
+    assert float(m.group(2)) == pytest.approx(100.0 * verdict.lo / mse_free, rel=5e-3)
+    assert float(m.group(3)) == pytest.approx(100.0 * verdict.hi / mse_free, rel=5e-3)
 
 
 def test_a_horizon_no_held_out_piece_lasts_is_said_in_words_not_nan():

@@ -443,12 +443,33 @@ class _Comparison:
         """The held plant predicts worse beyond the interval (its lower bound above 0); no interval is no verdict."""
         return bool(np.isfinite(self.lo) and self.lo > 0.0)
 
+    @property
+    def relative(self) -> tuple[float, float, float]:
+        """The held plant's mean squared error relative to the free fit's, ``100 (MSE_held − MSE_free) / MSE_free``
+        (%), with the interval of the difference on the same scale (the free fit's MSE taken as known)."""
+        scale = 100.0 / self.mean_free if self.mean_free > 0 else float("nan")
+        return ((self.mean_held - self.mean_free) * scale, self.lo * scale, self.hi * scale)
+
     def describe(self, what: str) -> str:
+        """The comparison in one clause: both RMSEs, the relative and absolute difference in mean squared error with
+        their interval; in words where there is nothing (no held-out sample) or too little (one) to compare by."""
+        if self.n == 0:
+            return f"no held-out samples of {what} to compare the held and the free plant by"
         rms = f"held-out one-step RMSE of {what} {np.sqrt(self.mean_held):.3g} held, {np.sqrt(self.mean_free):.3g} free"
+        if self.n < 2:
+            return f"{rms} (too few held-out samples to compare: {self.n})"
         if not np.isfinite(self.lo):
-            return f"{rms} (no held-out samples to compare them by)"
-        return (f"{rms}; mean squared difference {self.mean_held - self.mean_free:.3g} [{self.lo:.3g}, {self.hi:.3g}] "
-                f"({PHYSICS_CI:g} % HAC interval over {self.n} held-out samples)")
+            return f"{rms} (not compared: a held-out prediction diverges)"
+        rel, lo, hi = self.relative
+        relative = (f"held {_percent(rel)} % MSE [{_percent(lo)} %, {_percent(hi)} %]; " if np.isfinite(rel)
+                    else "")  # a free fit that predicts exactly has no scale for a relative difference
+        return (f"{rms}; {relative}mean squared difference {self.mean_held - self.mean_free:.3g} [{self.lo:.3g}, "
+                f"{self.hi:.3g}] ({PHYSICS_CI:g} % HAC interval over {self.n} held-out samples)")
+
+
+def _percent(v: float) -> str:
+    """A signed percentage in three figures, whole numbers from 1000 on (never ``+1.39e+04``)."""
+    return f"{v:+.3g}" if abs(v) < 1000 else f"{v:+.0f}"
 
 
 def _held_vs_free(held: np.ndarray, free: np.ndarray) -> _Comparison:
