@@ -94,12 +94,12 @@ def test_auto_identifies_a_real_log_in_the_paper_s_layout_read_without_a_mode_ru
     assert tuple(ds.state_names) == paper.state_names and ds.dt == paper.dt
     assert not any(d.meta.get("plant_group") for d in ds)
     # identified, not the paper's: and this mapping pairs the body roll with the world's east velocity on a vehicle
-    # that turns, so the identified plant is refused for its physics; `--plant free` takes it as fitted
+    # that turns, so the identified plant is refused for its physics; `--plant as-fitted` takes it as fitted
     from workbench.errors import ModelError
 
     with pytest.raises(ModelError, match=r"^the identified plant is not physics: A\[xdot, phi\]"):
         choose_plant(ds, "auto")
-    plant = choose_plant(ds, "free")
+    plant = choose_plant(ds, "as-fitted")
     assert plant.identification is not None
     reproduced, why = paper_reproduces(ds, paper)
     assert not reproduced and f"not the paper's plant: {why}" in plant.identification.describe()
@@ -193,8 +193,8 @@ def test_a_plant_that_fails_its_physics_check_is_held_at_the_physics_where_the_d
     assert m is not None and float(m.group(4)) <= 0.0
     assert float(m.group(1)) == pytest.approx(report.one_step_rmse[i], rel=2e-3)
     assert float(m.group(2)) == pytest.approx(identify_plant(ds, hold=False)[3].one_step_rmse[i], rel=2e-3)
-    # --plant free takes the least-squares plant as fitted
-    assert choose_plant(ds, "free").A[i, j] == free.value
+    # --plant as-fitted takes the least-squares plant as fitted
+    assert choose_plant(ds, "as-fitted").A[i, j] == free.value
     assert np.isfinite(plant.A).all()
 
 
@@ -219,8 +219,8 @@ def test_a_plant_whose_data_contradict_the_physics_is_refused_in_one_line():
                   r"free; held \+[\d.e+-]+ % MSE \[\+[\d.e+-]+ %, \+[\d.e+-]+ %\]; "
                   r"mean squared difference ([\d.e+-]+) \[([\d.e+-]+), ([\d.e+-]+)\]", line)
     assert m is not None and float(m.group(1)) > float(m.group(2)) and float(m.group(4)) > 0.0
-    assert "`--plant free` takes the plant as fitted" in line
-    assert choose_plant(ds, "free").A[free.at] == free.value  # the override
+    assert "`--plant as-fitted` takes the plant as fitted" in line
+    assert choose_plant(ds, "as-fitted").A[free.at] == free.value  # the override
 
 
 def test_the_held_plant_is_judged_worse_only_beyond_its_autocorrelation_robust_interval():

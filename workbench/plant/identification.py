@@ -28,7 +28,7 @@ entry held at what physics says it is (``A[xdot, phi] = g·dt``, where the roles
 held-out segments' one-step states of those rows worse than the free fit, judged by the Diebold–Mariano comparison of
 the two forecasts' squared errors with a Newey–West interval (:data:`PHYSICS_CI`): then the data contradict the physics
 and the report carries one line saying so (``contradiction``), which :func:`workbench.plant.choice.choose_plant`
-raises (``--plant free`` takes the free fit as it is). A held plant says so in the report's ``fixed`` lines.
+raises (``--plant as-fitted`` takes the free fit as it is). A held plant says so in the report's ``fixed`` lines.
 
 One plant per kind of stick: demonstrations of different plant groups (:mod:`workbench.data.plant_groups`: a lean
 angle in STABILIZE, a velocity in LOITER) are never pooled into one (A, B); identification refuses them, naming the
@@ -370,7 +370,7 @@ def identify_plant(
     hold : bool
         Where the fit fails a physical check, identify it again with the failing entries held at their physics and
         take that plant unless the held-out data contradict it (the module docstring); ``False``: the free fit as it
-        is (``--plant free``).
+        is (``--plant as-fitted``).
 
     Raises
     ------
@@ -423,8 +423,8 @@ def identify_plant(
     ratios = "; ".join(f"{c.name} is {c.ratio:.2g} × {c.note.split(':')[0]}" for c in failed)
     contradiction = (f"the identified plant is not physics: {ratios}, and held at its physics it predicts the held-out "
                      f"{what} worse ({verdict.describe(what)}): the recorded data contradict the physics, so no pilot "
-                     f"model on this plant describes the vehicle; {_cause(failed[0])} (`--plant free` takes the plant "
-                     "as fitted)")
+                     f"model on this plant describes the vehicle; {_cause(failed[0])} (`--plant as-fitted` takes the "
+                     "plant as fitted)")
     return (*free[:3], dataclasses.replace(free[3], contradiction=contradiction))
 
 
