@@ -15,7 +15,7 @@ import numpy as np
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.data.plant_groups import plant_groups
 from workbench.defaults import HORIZON_S, PLANT_CHOICES
-from workbench.errors import DataError, ModelError
+from workbench.errors import DataError, PlantRefused
 from workbench.plant.system import LinearSystem, planar_quadrotor
 
 __all__ = ["PLANT_CHOICES", "PAPER_RESIDUAL_RATIO", "choose_plant", "paper_reproduces", "plant_rule"]
@@ -64,7 +64,7 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
     plant = LinearSystem.identify(ds, u_min=paper.u_min if layout else None, u_max=paper.u_max if layout else None,
                                   structure="auto", horizon_s=horizon_s, hold=choice != "as-fitted")
     if plant.identification is not None and plant.identification.contradiction:
-        raise ModelError(plant.identification.contradiction)
+        raise PlantRefused(plant.identification.contradiction, plant.identification)
     if why and plant.identification is not None:  # the report says why these data did not get the paper's plant
         return dataclasses.replace(plant, identification=dataclasses.replace(plant.identification, why=why))
     return plant
