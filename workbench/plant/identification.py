@@ -134,6 +134,13 @@ class IdentificationReport:
         return "; ".join(_disagreement(c) for c in self.checks if not c.within())
 
     @property
+    def held(self) -> tuple[str, ...]:
+        """The ``fixed`` lines of the entries held at their physics because the free fit failed their check (the
+        kinematic rows' lines, fixed in every kinematic plant, left out); ``()`` for a plant taken as fitted."""
+        failed = [c.name for c in self.free_checks if not c.within()]
+        return tuple(f for f in self.fixed if any(f.startswith(f"{name} = ") for name in failed))
+
+    @property
     def horizon_s(self) -> float:
         return self.n_steps * self.dt
 
