@@ -243,7 +243,16 @@ def test_the_held_plant_is_judged_worse_only_beyond_its_autocorrelation_robust_i
     verdict = _held_vs_free(held, free)
     assert verdict.mean_held - verdict.mean_free == pytest.approx(d.mean())
     assert verdict.hi - verdict.lo > iid.high - iid.low  # wider than the interval that ignores the autocorrelation
-    assert verdict.worse == (verdict.lo > 0.0)
+    # the same wandering difference, shifted so that the iid interval lies above 0 by half its width: the HAC
+    # interval, wider by the autocorrelation, still holds 0, so the held plant is not judged worse
+    large = 5.0 + free  # squared errors far from 0, so that the shift leaves every held error real
+    d0 = slow - slow.mean()
+    half = (lambda c: (c.high - c.low) / 2.0)(stats.ttest_1samp(d0, 0.0).confidence_interval(0.95))
+    shifted = np.sqrt(large[:, 0] ** 2 + d0 + 1.5 * half)[:, None]
+    d = shifted[:, 0] ** 2 - large[:, 0] ** 2
+    assert stats.ttest_1samp(d, 0.0).confidence_interval(0.95).low > 0.0  # an iid interval would refuse the plant
+    close = _held_vs_free(shifted, large)
+    assert close.lo < 0.0 < close.hi and not close.worse
     # errors twice as large everywhere: worse beyond any interval
     assert _held_vs_free(2.0 * free, free).worse
     assert not _held_vs_free(free, free).worse  # the same forecasts: no difference
@@ -289,3 +298,22 @@ def test_a_horizon_no_held_out_piece_lasts_is_said_in_words_not_nan():
     assert f"({report.n_steps} steps): not scored: no held-out piece lasts that long" in text
     _, _, _, scored = identify_plant(ds, horizon_s=1.0)  # pieces of 10 s hold a 1 s horizon
     assert "not scored" not in scored.describe() and "—" not in scored.describe()
+
+
+def test_an_rmse_cell_says_diverges_and_its_rounding_floor_is_the_states_own_scale():
+    # an RMSE that overflowed printed "—" (as if not scored); the floor below which a value is rounding was 1e-12
+    # whatever the state's units, so a state measured in small units printed a real error of 1e-13 as 0
+    import numpy as np
+
+    from workbench.plant.identification import ROUNDING, _rms, _rmse_cell
+
+    assert _rmse_cell(np.inf, 1.0) == "diverges" and _rmse_cell(np.nan, 1.0) == "—"
+    tiny_state = 1e-9  # a state whose standard deviation is 1e-9 of its unit
+    error = 10.0 * ROUNDING * tiny_state
+    assert float(_rmse_cell(error, tiny_state)) == pytest.approx(error, rel=1e-3)
+    assert _rmse_cell(0.1 * ROUNDING * tiny_state, tiny_state) == "0"
+    with np.errstate(over="ignore", invalid="ignore"):
+        overflowed = np.array([[np.inf, 1.0], [-np.inf, 2.0]]) - np.array([[np.inf, 0.0], [0.0, 0.0]])
+    rms = _rms([overflowed], 2)
+    assert np.isinf(rms[0]) and rms[1] == pytest.approx(np.sqrt(2.5))  # scored and overflowed: diverges, not "—"
+    assert np.isnan(_rms([], 2)).all()  # not scored

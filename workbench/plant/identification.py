@@ -117,6 +117,8 @@ class IdentificationReport:
     contradiction: str = ""
     #: why ``--plant auto`` identified data in the paper's layout and step (workbench.plant.choice.paper_reproduces)
     why: str = ""
+    #: each state's standard deviation in the data (the scale the scores divide by; ``None``: 1)
+    state_scale: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for name in ("one_step_rmse", "one_step_rmse_persistence", "horizon_rmse", "horizon_rmse_persistence"):
@@ -158,10 +160,10 @@ class IdentificationReport:
         lines += [f"  fixed: {f}" for f in self.fixed]
         lines += [f"  not the paper's plant: {self.why}"] if self.why else []
         # said in words, never "nan": persistence has a score wherever a held-out piece lasts the horizon
-        horizon = (f"plant {self.horizon_score:.3g}, persistence {self.horizon_score_persistence:.3g}"
+        horizon = (f"plant {_score_text(self.horizon_score)}, persistence {self.horizon_score_persistence:.3g}"
                    if np.isfinite(self.horizon_score_persistence) else "not scored: no held-out piece lasts that long")
         lines.append(
-            f"  normalized held-out RMSE, one step: plant {self.one_step_score:.3g}, persistence "
+            f"  normalized held-out RMSE, one step: plant {_score_text(self.one_step_score)}, persistence "
             f"{self.one_step_score_persistence:.3g}; {self.horizon_s:g} s ({self.n_steps} steps): {horizon}"
         )
         width = max(len(s) for s in self.state_names)
@@ -170,7 +172,8 @@ class IdentificationReport:
         for i, s in enumerate(self.state_names):
             cells = (self.one_step_rmse[i], self.one_step_rmse_persistence[i], self.horizon_rmse[i],
                      self.horizon_rmse_persistence[i])
-            lines.append(f"  {s:<{width}}  " + "  ".join(f"{_rmse_cell(v):>9}" for v in cells))
+            scale = 1.0 if self.state_scale is None else float(self.state_scale[i])
+            lines.append(f"  {s:<{width}}  " + "  ".join(f"{_rmse_cell(v, scale):>9}" for v in cells))
         if self.n_integrators:
             lines.append(f"  absolute position in the other rows: max |A[i, position]| = {self.position_pull:.3g} "
                          "(0 in free-flight physics; a pull the data ascribe to the plant)")
@@ -188,12 +191,24 @@ class IdentificationReport:
         return "\n".join(lines)
 
 
-def _rmse_cell(v: float) -> str:
-    """An RMSE in the report's table: ``—`` where not scored; 0 where it is rounding (a row the physics fixes
-    exactly, such as the position's, leaves 1e-17 of floating-point error)."""
+def _score_text(v: float) -> str:
+    """A normalized score, ``diverges`` where a held-out rollout overflowed."""
+    return "diverges" if np.isinf(v) else f"{v:.3g}"
+
+
+#: An RMSE below this fraction of its state's standard deviation is floating-point rounding, not a prediction error.
+ROUNDING = 1e-12
+
+
+def _rmse_cell(v: float, scale: float = 1.0) -> str:
+    """An RMSE in the report's table: ``—`` where not scored, ``diverges`` where the rollout overflowed; 0 where it
+    is rounding, below :data:`ROUNDING` of the state's scale ``scale`` (a row the physics fixes exactly, such as the
+    position's, leaves 1e-17 of floating-point error; a state measured in small units is not rounding at 1e-13)."""
+    if np.isinf(v):
+        return "diverges"
     if not np.isfinite(v):
         return "—"
-    return "0" if abs(v) < 1e-12 else f"{v:.4g}"
+    return "0" if abs(v) < ROUNDING * scale else f"{v:.4g}"
 
 
 # ----------------------------------------------------------------------------------------------- structure
@@ -344,7 +359,11 @@ def _errors(A: np.ndarray, B: np.ndarray, x: np.ndarray, u: np.ndarray, h: int) 
 
 def _rms(errors: list[np.ndarray], n: int) -> np.ndarray:
     e = np.concatenate(errors) if errors else np.empty((0, n))
-    return np.sqrt(np.mean(e**2, axis=0)) if len(e) else np.full(n, np.nan)
+    if not len(e):
+        return np.full(n, np.nan)  # not scored
+    with np.errstate(over="ignore", invalid="ignore"):
+        rms = np.sqrt(np.mean(e**2, axis=0))
+    return np.where(np.isfinite(rms), rms, np.inf)  # scored, and a rollout overflowed (inf − inf is nan): diverges
 
 
 def _score(rmse: np.ndarray, sigma: np.ndarray) -> float:
@@ -572,6 +591,7 @@ def _estimate(demos: DemonstrationSet, layout: _Layout, Z: np.ndarray, Xn: np.nd
         horizon_score=scores["h"], horizon_score_persistence=scores["h_p"], spectral_radius=rho,
         spectral_radius_beyond_integrators=rho_free, n_integrators=n_int, condition_number=cond, fixed=fixed,
         checks=checks, warnings=tuple(warns), position_pull=pull, plant_group=group, responses=responses,
+        state_scale=sigma,
     )
     one_step = np.concatenate(errs["one"]) if errs["one"] else np.empty((0, n))
     return A, B, residual, report, one_step
