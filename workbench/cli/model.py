@@ -300,8 +300,16 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
     if auto is not None:
         # what was chosen and whether the model fell back to K̂x (said, never silent), then every candidate's score
         ctx.say(f"the default model: {auto.describe()}")
-        ctx.say(f"held-out {model.noise_horizon_s:g} s RMSE per candidate: " + ", ".join(
-            f"G{r['n_components']}/{r['reg_covar']:g} {r['heldout_rmse']:.3g}" for r in auto.scores))
+        ctx.say(candidate_scores(auto.scores, model.noise_horizon_s))
+
+
+def candidate_scores(scores: Any, horizon_s: float) -> str:
+    """The cross-validation's held-out RMSE per candidate in one line; a candidate some fold could not fit or score
+    (NaN, :class:`~workbench.models.autoconfig.AutoSettings`) is said to be not scored, never "nan"."""
+    return f"held-out {horizon_s:g} s RMSE per candidate: " + ", ".join(
+        f"G{r['n_components']}/{r['reg_covar']:g} "
+        + (f"{r['heldout_rmse']:.3g}" if math.isfinite(r["heldout_rmse"]) else "not scored on every fold")
+        for r in scores)
 
 
 def cmd_predict(ctx: Context) -> int:
