@@ -22,3 +22,4 @@ def test_a_refused_plant_names_file_and_group_after_its_report(tmp_path, capsys)
     assert error[0].startswith(f"error: {path}: plant group {group}: not fitted: the identified plant is not physics")
     report = err.index("plant identification (")
     assert report < err.index(error[0]) and "check: A[xdot, phi]" in err[report:err.index(error[0])]
+
