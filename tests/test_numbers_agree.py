@@ -61,7 +61,8 @@ def _terminal_forms(cell: str) -> list[str]:
     """Every way the terminal's self-narrowing table can print ``cell`` (:func:`narrowed_tables`' steps)."""
     from workbench.cli.context import _tight, fewer_digits
 
-    return [cell, _tight(cell), fewer_digits(cell), _tight(fewer_digits(cell))]
+    fewer = [fewer_digits(cell, d) for d in range(2, 7)]  # a row keeps the digits that tell its numbers apart
+    return [cell, _tight(cell), *fewer, *(_tight(f) for f in fewer)]
 
 
 def test_headline_error_is_the_same_in_report_terminal_and_recording(demo):

@@ -42,3 +42,25 @@ def test_a_folder_with_a_dataflash_log_imports_it(copter_log, tmp_path, capsys):
     assert main(["import", str(folder), "--mapping", "ardupilot_manual", "-o", f"{out}/"]) == 0
     assert "from 1 of 1 logs" in capsys.readouterr().out
     assert load_demonstrations(out).n_samples == expected.n_samples
+
+
+def test_a_demonstrations_file_names_the_log_its_import_skipped_data_of(capsys):
+    # fit demos.parquet printed "warning: demos.parquet: skipped bytes: 27613, crc failures: 1314", blaming a file
+    # that is not damaged: the counts are those of the log it was imported from, carried in its meta
+    from pathlib import Path
+
+    import numpy as np
+
+    from workbench.cli.inputs import Source
+    from workbench.cli.reading import _warn_about
+    from workbench.data import Demonstration, DemonstrationSet
+
+    meta = {"id": "f-000", "source": "flight.tlog", "skipped": {"bytes": 12, "crc_failures": 3}}
+    ds = DemonstrationSet([Demonstration(np.arange(5) * 0.1, np.zeros((5, 1)), np.zeros((5, 1)), meta)], ["x"], ["u"],
+                          dt=0.1)
+    _warn_about(Source("demos.parquet", Path("demos.parquet"), "demos.parquet", demos=True), ds)
+    said = capsys.readouterr().err
+    assert said.strip() == ("warning: demos.parquet (its import from flight.tlog): skipped bytes: 12, "
+                            "crc failures: 3"), said
+    _warn_about(Source("flight.tlog", Path("flight.tlog"), "flight.tlog", demos=False), ds)
+    assert capsys.readouterr().err.strip() == "warning: flight.tlog: skipped bytes: 12, crc failures: 3"

@@ -34,6 +34,15 @@ def test_fit_prints_the_task_and_an_override_wins_over_the_trials_goals(demos, t
     assert "closed loop on phi, xdot, ydot, phidot: ρ(A + BK̂) =" in r.stdout
     model = load_model(tmp_path / "z.npz")
     assert model.task_.regulated == ("phi", "xdot", "ydot", "phidot") and (model.K_[:, :2] == 0).all()
+    # a state the pilot does not regulate has no gain entry to print: "—", not a 0 that reads as a finding, in the
+    # gain table fit prints and in the viewer's summary of the model
+    from workbench.viewer.objective import model_summary
+
+    gain_rows = [ln.split() for ln in r.stdout.splitlines() if ln.startswith(("u1 ", "u2 "))]
+    assert len(gain_rows) == 2 and all(row[1:3] == ["—", "—"] and "—" not in row[3:] for row in gain_rows)
+    summary = model_summary("z", model, model.plant.state_names, model.plant.input_names)
+    table = [ln for ln in summary.splitlines() if ln.startswith("| **u")]
+    assert len(table) == 2 and all(ln.split(" | ")[1:3] == ["—", "—"] for ln in table), table
 
 
 def test_a_bad_task_is_a_usage_error(demos, tmp_path):

@@ -89,11 +89,16 @@ def test_a_wide_table_narrows_itself_before_it_turns_into_a_list():
 
 
 def test_narrowing_steps_shorten_headers_and_digits():
-    from workbench.cli.context import abbreviate, fewer_digits
+    from workbench.cli.context import abbreviate, fewer_digits, fewer_digits_row
 
     assert abbreviate("position RMSE") == "pos. RMSE"
     assert fewer_digits("0.1106 [0.072, 0.15]") == "0.11 [0.072, 0.15]"
     assert fewer_digits("8 (24 / 6)") == "8 (24 / 6)" and fewer_digits("u2") == "u2"
+    # two different errors of one row stay different (dronekit_flight's fitted models printed "1.4 | 1.4 | lower
+    # by 1 %"); a row whose numbers differ at 2 digits narrows as before
+    row = fewer_digits_row(["1.416", "1.436", "lower by 1% [0.5%,2%]"])
+    assert row[:2] == ["1.42", "1.44"] and row[2] == "lower by 1% [0.5%,2%]"
+    assert fewer_digits_row(["0.1106 [0.072, 0.15]", "0.2974"]) == ["0.11 [0.072, 0.15]", "0.3"]
 
 
 def test_a_combining_accent_takes_no_column_of_its_own():

@@ -414,6 +414,11 @@ def test_the_pooled_row_adds_each_strategys_decision_term_by_its_share_squared_a
     text = study_statistics(table, "rmse_position", "m", {}, windows_sentence(table, 60, None, 0.05), n_boot=300,
                             method_level=rare).text()
     assert "decides it otherwise (under 0.5 %" in text and "up to 0 %" not in text
+    # at exactly 0.005 the digit is still "0" (half to even): decided on the printed digit, not on the chance
+    edge = [replace(d, p_flip=d.p_flip * 0.005 / a.p_flip) for d in rows]
+    text = study_statistics(table, "rmse_position", "m", {}, windows_sentence(table, 60, None, 0.05), n_boot=300,
+                            method_level=edge).text()
+    assert "up to 0 %" not in text
 
 
 @pytest.mark.parametrize("held", [3, 0])  # seed 1: trial 0 is a test trial of the study's own split, 3 is not

@@ -278,8 +278,10 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
     o = None
     if model.has_gain:
         K = np.asarray(model.K_)
+        reg = set(getattr(model, "regulated_idx", range(K.shape[1])))  # "—": a state the pilot does not regulate
         ctx.say_table(["K̂ (u = K̂ x)", *ds.state_names],
-                      [[name, *(f"{v:.3g}" for v in row)] for name, row in zip(ds.input_names, K, strict=True)])
+                      [[name, *(f"{v:.3g}" if j in reg else "—" for j, v in enumerate(row))]
+                       for name, row in zip(ds.input_names, K, strict=True)])
         ctx.say(str(model.gain_choice_))
         if getattr(model, "stability_", None) is not None:
             ctx.say(model.stability_.describe())

@@ -66,7 +66,9 @@ def _warn_about(source: Source, ds: Any) -> None:
     skipped = {k: v for k, v in dict(meta.get("skipped") or {}).items() if v}
     if skipped:  # a damaged or partly unmapped file still gave data: say what was left out
         what = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in skipped.items())
-        print(f"warning: {source.shown}: skipped {what}", file=sys.stderr)
+        # a demonstrations file carries its import's counts: they are the log's, named as such
+        origin = f" (its import from {meta['source']})" if source.demos and meta.get("source") else ""
+        print(f"warning: {source.shown}{origin}: skipped {what}", file=sys.stderr)
 
 
 def read_demos(inputs: Inputs, progress: Any, *, select: bool = True) -> Read:

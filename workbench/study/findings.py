@@ -212,7 +212,8 @@ class StudyStatistics:
         if not flips:
             return ""
         # a chance that rounds to 0 % is not 0: say it is below the printed digit
-        most = f"up to {100 * max(flips):.0f} %" if max(flips) >= 0.005 else "under 0.5 %"
+        shown = f"{100 * max(flips):.0f}"  # decided on the printed digit: 0.005 itself rounds to "0" (half to even)
+        most = f"up to {shown} %" if shown != "0" else "under 0.5 %"
         return (", and where the proposed model's fallback to K̂x was near its threshold, the chance that another "
                 f"sample of the operator decides it otherwise ({most}, from each "
                 f"{'fold' if ml[0].loo else 'split'}'s cross-validation margin) times the difference that decision "

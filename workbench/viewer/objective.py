@@ -92,9 +92,12 @@ def text_colors(values: np.ndarray, vmax: float) -> np.ndarray:
     return np.where(luminance[:, None] > 0.45, np.array([[15, 15, 15]]), np.array([[245, 245, 245]])).astype(np.uint8)
 
 
-def _fmt_matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str]) -> str:
+def _fmt_matrix(M: np.ndarray, rows: Sequence[str], cols: Sequence[str], shown: Sequence[int] | None = None) -> str:
+    """A Markdown table of ``M``; a column not in ``shown`` (a state the pilot does not regulate) reads "—"."""
+    keep = set(range(len(cols)) if shown is None else shown)
     head = "| | " + " | ".join(cols) + " |\n|---|" + "---|" * len(cols) + "\n"
-    body = [f"| **{r}** | " + " | ".join(f"{v:.3g}" for v in row) + " |" for r, row in zip(rows, M, strict=True)]
+    body = [f"| **{r}** | " + " | ".join(f"{v:.3g}" if j in keep else "—" for j, v in enumerate(row)) + " |"
+            for r, row in zip(rows, M, strict=True)]
     return head + "\n".join(body)
 
 
@@ -107,7 +110,8 @@ def model_summary(name: str, model: Any, state_names: Sequence[str], input_names
         lines += [stability.describe(), ""] if stability is not None else []
     objective = None
     if model.has_gain:
-        lines += ["## Gain K̂ (u = K̂ x)", "", _fmt_matrix(np.asarray(model.K_), input_names, state_names), ""]
+        lines += ["## Gain K̂ (u = K̂ x)", "", _fmt_matrix(np.asarray(model.K_), input_names, state_names,
+                                                          getattr(model, "regulated_idx", None)), ""]
         objective = model.objective_
     if objective is not None:
         state_names = model.plant_regulated.state_names  # the objective weighs the regulated states
