@@ -94,5 +94,7 @@ def test_the_documented_table_is_the_table():
         number = re.match(r"[-\d.]+", shown.strip("`\" "))
         if isinstance(value, str):
             assert shown.strip("`\" ") == value, (name, shown)
+        elif isinstance(value, tuple):  # a set of choices: every one, in order
+            assert [v.strip("`\" ") for v in shown.split(",")] == list(value), (name, shown)
         else:
             assert number and float(number.group()) == float(value), (name, shown)

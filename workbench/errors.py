@@ -15,6 +15,7 @@ __all__ = [
     "AbsentSource",
     "RequestError",
     "ModelError",
+    "PlantRefused",
     "SolverError",
     "UsageError",
     "WorkbenchWarning",
@@ -46,6 +47,15 @@ class AbsentSource(MappingError):
 
 class ModelError(WorkbenchError, ValueError):
     """A model cannot be fitted or used: rank-deficient data, a non-stabilizing gain, a bad model file."""
+
+
+class PlantRefused(ModelError):
+    """An identified plant the recorded data show is not physics (:func:`workbench.plant.choice.choose_plant`): the
+    message is the one-line refusal, ``report`` the identification report it refers to (printed before it)."""
+
+    def __init__(self, message: str, report: object = None) -> None:
+        super().__init__(message)
+        self.report = report
 
 
 class SolverError(ModelError):

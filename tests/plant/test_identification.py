@@ -94,12 +94,12 @@ def test_auto_identifies_a_real_log_in_the_paper_s_layout_read_without_a_mode_ru
     assert tuple(ds.state_names) == paper.state_names and ds.dt == paper.dt
     assert not any(d.meta.get("plant_group") for d in ds)
     # identified, not the paper's: and this mapping pairs the body roll with the world's east velocity on a vehicle
-    # that turns, so the identified plant is refused for its physics; `--plant free` takes it as fitted
+    # that turns, so the identified plant is refused for its physics; `--plant as-fitted` takes it as fitted
     from workbench.errors import ModelError
 
     with pytest.raises(ModelError, match=r"^the identified plant is not physics: A\[xdot, phi\]"):
         choose_plant(ds, "auto")
-    plant = choose_plant(ds, "free")
+    plant = choose_plant(ds, "as-fitted")
     assert plant.identification is not None
     reproduced, why = paper_reproduces(ds, paper)
     assert not reproduced and f"not the paper's plant: {why}" in plant.identification.describe()
@@ -187,13 +187,14 @@ def test_a_plant_that_fails_its_physics_check_is_held_at_the_physics_where_the_d
     assert f"(held; the free fit's {free.value:.4g}" in report.describe()
     assert not any("tilt would" in w for w in report.warnings)
     # the rule: the held plant's held-out squared error is not above the free fit's beyond its interval
-    m = re.search(r"RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) free; mean squared difference ([\d.e+-]+) "
+    m = re.search(r"RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) free; held [\d.e+-]+ % MSE \[[\d.e+-]+ %, "
+                  r"[\d.e+-]+ %\]; mean squared difference ([\d.e+-]+) "
                   r"\[([\d.e+-]+), ([\d.e+-]+)\] \(95 % HAC interval over (\d+) held-out samples\)", held[0])
     assert m is not None and float(m.group(4)) <= 0.0
     assert float(m.group(1)) == pytest.approx(report.one_step_rmse[i], rel=2e-3)
     assert float(m.group(2)) == pytest.approx(identify_plant(ds, hold=False)[3].one_step_rmse[i], rel=2e-3)
-    # --plant free takes the least-squares plant as fitted
-    assert choose_plant(ds, "free").A[i, j] == free.value
+    # --plant as-fitted takes the least-squares plant as fitted
+    assert choose_plant(ds, "as-fitted").A[i, j] == free.value
     assert np.isfinite(plant.A).all()
 
 
@@ -215,10 +216,11 @@ def test_a_plant_whose_data_contradict_the_physics_is_refused_in_one_line():
     assert "\n" not in line
     assert line.startswith(f"the identified plant is not physics: {free.name} is {free.ratio:.2g} × g·dt")
     m = re.search(r"predicts the held-out xdot worse \(held-out one-step RMSE of xdot ([\d.e+-]+) held, ([\d.e+-]+) "
-                  r"free; mean squared difference ([\d.e+-]+) \[([\d.e+-]+), ([\d.e+-]+)\]", line)
+                  r"free; held \+[\d.e+-]+ % MSE \[\+[\d.e+-]+ %, \+[\d.e+-]+ %\]; "
+                  r"mean squared difference ([\d.e+-]+) \[([\d.e+-]+), ([\d.e+-]+)\]", line)
     assert m is not None and float(m.group(1)) > float(m.group(2)) and float(m.group(4)) > 0.0
-    assert "`--plant free` takes the plant as fitted" in line
-    assert choose_plant(ds, "free").A[free.at] == free.value  # the override
+    assert "`--plant as-fitted` takes the plant as fitted" in line
+    assert choose_plant(ds, "as-fitted").A[free.at] == free.value  # the override
 
 
 def test_the_held_plant_is_judged_worse_only_beyond_its_autocorrelation_robust_interval():
@@ -241,10 +243,45 @@ def test_the_held_plant_is_judged_worse_only_beyond_its_autocorrelation_robust_i
     verdict = _held_vs_free(held, free)
     assert verdict.mean_held - verdict.mean_free == pytest.approx(d.mean())
     assert verdict.hi - verdict.lo > iid.high - iid.low  # wider than the interval that ignores the autocorrelation
-    assert verdict.worse == (verdict.lo > 0.0)
+    # the same wandering difference, shifted so that the iid interval lies above 0 by half its width: the HAC
+    # interval, wider by the autocorrelation, still holds 0, so the held plant is not judged worse
+    large = 5.0 + free  # squared errors far from 0, so that the shift leaves every held error real
+    d0 = slow - slow.mean()
+    half = (lambda c: (c.high - c.low) / 2.0)(stats.ttest_1samp(d0, 0.0).confidence_interval(0.95))
+    shifted = np.sqrt(large[:, 0] ** 2 + d0 + 1.5 * half)[:, None]
+    d = shifted[:, 0] ** 2 - large[:, 0] ** 2
+    assert stats.ttest_1samp(d, 0.0).confidence_interval(0.95).low > 0.0  # an iid interval would refuse the plant
+    close = _held_vs_free(shifted, large)
+    assert close.lo < 0.0 < close.hi and not close.worse
     # errors twice as large everywhere: worse beyond any interval
     assert _held_vs_free(2.0 * free, free).worse
     assert not _held_vs_free(free, free).worse  # the same forecasts: no difference
+
+
+def test_the_held_versus_free_comparison_says_too_little_in_words_and_gives_the_relative_difference():
+    # nofold.py: a plant whose folds could not be fitted printed "RMSE of xdot nan held, nan free (no held-out samples
+    # to compare them by)", and one held-out sample "1 held, 0.5 free (no held-out samples …)"
+    import re
+
+    import numpy as np
+
+    from workbench.plant.identification import _held_vs_free
+
+    none = _held_vs_free(np.empty((0, 1)), np.empty((0, 1))).describe("xdot")
+    assert "nan" not in none and none.startswith("no held-out samples of xdot")
+    one = _held_vs_free(np.array([[1.0]]), np.array([[0.5]])).describe("xdot")
+    assert "too few held-out samples to compare: 1" in one and "no held-out" not in one
+    rng = np.random.default_rng(3)
+    free = rng.normal(size=(400, 1))
+    held = 1.1 * free + 0.1 * rng.normal(size=(400, 1))
+    verdict = _held_vs_free(held, free)
+    text = verdict.describe("xdot")
+    m = re.search(r"; held ([+-][\d.e+-]+) % MSE \[([+-][\d.e+-]+) %, ([+-][\d.e+-]+) %\]", text)
+    assert m is not None
+    mse_held, mse_free = float(np.mean(held**2)), float(np.mean(free**2))
+    assert float(m.group(1)) == pytest.approx(100.0 * (mse_held - mse_free) / mse_free, rel=5e-3)
+    assert float(m.group(2)) == pytest.approx(100.0 * verdict.lo / mse_free, rel=5e-3)
+    assert float(m.group(3)) == pytest.approx(100.0 * verdict.hi / mse_free, rel=5e-3)
 
 
 def test_a_horizon_no_held_out_piece_lasts_is_said_in_words_not_nan():
@@ -261,3 +298,22 @@ def test_a_horizon_no_held_out_piece_lasts_is_said_in_words_not_nan():
     assert f"({report.n_steps} steps): not scored: no held-out piece lasts that long" in text
     _, _, _, scored = identify_plant(ds, horizon_s=1.0)  # pieces of 10 s hold a 1 s horizon
     assert "not scored" not in scored.describe() and "—" not in scored.describe()
+
+
+def test_an_rmse_cell_says_diverges_and_its_rounding_floor_is_the_states_own_scale():
+    # an RMSE that overflowed printed "—" (as if not scored); the floor below which a value is rounding was 1e-12
+    # whatever the state's units, so a state measured in small units printed a real error of 1e-13 as 0
+    import numpy as np
+
+    from workbench.plant.identification import ROUNDING, _rms, _rmse_cell
+
+    assert _rmse_cell(np.inf, 1.0) == "diverges" and _rmse_cell(np.nan, 1.0) == "—"
+    tiny_state = 1e-9  # a state whose standard deviation is 1e-9 of its unit
+    error = 10.0 * ROUNDING * tiny_state
+    assert float(_rmse_cell(error, tiny_state)) == pytest.approx(error, rel=1e-3)
+    assert _rmse_cell(0.1 * ROUNDING * tiny_state, tiny_state) == "0"
+    with np.errstate(over="ignore", invalid="ignore"):
+        overflowed = np.array([[np.inf, 1.0], [-np.inf, 2.0]]) - np.array([[np.inf, 0.0], [0.0, 0.0]])
+    rms = _rms([overflowed], 2)
+    assert np.isinf(rms[0]) and rms[1] == pytest.approx(np.sqrt(2.5))  # scored and overflowed: diverges, not "—"
+    assert np.isnan(_rms([], 2)).all()  # not scored

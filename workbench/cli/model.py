@@ -12,6 +12,7 @@ from workbench.cli.context import Context
 from workbench.cli.inputs import resolve
 from workbench.cli.options import rollout_budget, steps_of
 from workbench.cli.reading import chosen_plant, demos_at_model_dt, per_group_path, plant_group_parts
+from workbench.cli.stdio import STDIN_NAME, is_stdio
 from workbench.cli.writing import print_plant
 from workbench.defaults import DEFAULT_N_COMPONENTS
 from workbench.errors import DataError, ModelError, UsageError
@@ -26,7 +27,10 @@ def cmd_fit(ctx: Context) -> int:
     if said:
         ctx.say(said)
     if len(parts) == 1:
-        _fit_one(ctx, parts[0][1], output)
+        group = parts[0][0]
+        source = STDIN_NAME if is_stdio(a.demos) else str(a.demos)
+        # the one error line names the file and group, as a group's warning does in a fit of several
+        _fit_one(ctx, parts[0][1], output, f"{source}: " + (f"plant group {group}: " if group else "") + "not fitted: ")
         ctx.say(f"wrote {'the model to standard output' if ctx.stdio.writes_stdout else a.output}")
         return 0  # the model is written: the fit succeeded, whatever its intervals could be computed from
     if ctx.stdio.writes_stdout:
@@ -50,10 +54,11 @@ def cmd_fit(ctx: Context) -> int:
     return 0
 
 
-def _fit_one(ctx: Context, ds: Any, output: Any) -> None:
-    """Fit, save and describe one model of one plant group's demonstrations (its own plant)."""
+def _fit_one(ctx: Context, ds: Any, output: Any, where: str = "") -> None:
+    """Fit, save and describe one model of one plant group's demonstrations (its own plant); a plant refused for its
+    physics is refused with ``where`` first (:func:`~workbench.cli.reading.chosen_plant`)."""
     a = ctx.args
-    plant = chosen_plant(ds, a.plant)
+    plant = chosen_plant(ds, a.plant, where=where)
     print_plant(ctx, plant)
     t0 = time.perf_counter()
     with ctx.progress() as progress:
@@ -297,8 +302,16 @@ def _print_model(ctx: Context, model: Any, ds: Any) -> None:
     if auto is not None:
         # what was chosen and whether the model fell back to K̂x (said, never silent), then every candidate's score
         ctx.say(f"the default model: {auto.describe()}")
-        ctx.say(f"held-out {model.noise_horizon_s:g} s RMSE per candidate: " + ", ".join(
-            f"G{r['n_components']}/{r['reg_covar']:g} {r['heldout_rmse']:.3g}" for r in auto.scores))
+        ctx.say(candidate_scores(auto.scores, model.noise_horizon_s))
+
+
+def candidate_scores(scores: Any, horizon_s: float) -> str:
+    """The cross-validation's held-out RMSE per candidate in one line; a candidate some fold could not fit or score
+    (NaN, :class:`~workbench.models.autoconfig.AutoSettings`) is said to be not scored, never "nan"."""
+    return f"held-out {horizon_s:g} s RMSE per candidate: " + ", ".join(
+        f"G{r['n_components']}/{r['reg_covar']:g} "
+        + (f"{r['heldout_rmse']:.3g}" if math.isfinite(r["heldout_rmse"]) else "not scored on every fold")
+        for r in scores)
 
 
 def cmd_predict(ctx: Context) -> int:

@@ -41,6 +41,7 @@ from workbench.defaults import (
     N_STEPS,
     OBJECTIVE_RESAMPLES,
     ONLINE_HORIZON_S,
+    PLANT_CHOICES,
     STUDY_SAMPLES,
     TIMING,
 )
@@ -123,12 +124,13 @@ def _n_components_option(p: argparse.ArgumentParser, default: str | None, which:
 
 def _plant_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plant", "--system", dest="plant", action=_OldSpelling,
-                   choices=["auto", "paper", "identify", "free"], default="auto",
+                   choices=PLANT_CHOICES, default="auto",
                    help="plant (A, B): the paper's planar quadrotor, identified from the data by least squares, "
                    "or auto (the paper's for its state layout at dt 0.05 s, else identified). An identified plant "
                    "that fails its physics check is identified again with the failing entries held at their physics "
-                   "where that predicts held-out segments no worse, and refused where it predicts them worse; free: "
-                   "take the least-squares plant as fitted, physics check or not")
+                   "unless held-out segments show it worse (the held plant's one-step squared error above the free "
+                   "fit's, 95 %% HAC interval), and refused where they do; as-fitted: take the least-squares plant as "
+                   "fitted, physics check or not")
 
 
 def _plant_group_option(p: argparse.ArgumentParser, what: str) -> None:

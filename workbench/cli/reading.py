@@ -144,10 +144,19 @@ def per_group_path(path: Path, group: str | None) -> Path:
     return path.with_name(f"{path.stem}.{group.replace(' ', '-')}{path.suffix}")
 
 
-def chosen_plant(ds: Any, choice: str = "auto", horizon_s: float = HORIZON_S):
+def chosen_plant(ds: Any, choice: str = "auto", horizon_s: float = HORIZON_S, where: str = ""):
+    """The plant of ``ds`` (:func:`workbench.plant.choice.choose_plant`). A plant refused for its physics has its
+    identification report printed to standard error first, the report its one-line refusal refers to, and the
+    refusal begins with ``where`` (the file and plant group, for a command whose error line would name neither)."""
+    from workbench.errors import PlantRefused
     from workbench.plant.choice import choose_plant
 
-    return choose_plant(ds, choice, horizon_s)
+    try:
+        return choose_plant(ds, choice, horizon_s)
+    except PlantRefused as exc:
+        if exc.report is not None:
+            print(exc.report.describe(warning=False), file=sys.stderr)
+        raise ModelError(f"{where}{exc}") from None
 
 
 def study_plant(choice: str, horizon_s: float = HORIZON_S) -> Callable[[Any], Any]:

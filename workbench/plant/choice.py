@@ -14,13 +14,12 @@ import numpy as np
 
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.data.plant_groups import plant_groups
-from workbench.defaults import HORIZON_S
-from workbench.errors import DataError, ModelError
+from workbench.defaults import HORIZON_S, PLANT_CHOICES
+from workbench.errors import DataError, PlantRefused
 from workbench.plant.system import LinearSystem, planar_quadrotor
 
 __all__ = ["PLANT_CHOICES", "PAPER_RESIDUAL_RATIO", "choose_plant", "paper_reproduces", "plant_rule"]
 
-PLANT_CHOICES = ("auto", "paper", "identify", "free")
 #: ``auto`` takes the paper's plant for data in its layout and step only where it reproduces their recorded steps: in
 #: every state, its one-step residual sum of squares at most this many times that of the least-squares plant of the
 #: same steps (:func:`paper_reproduces`). The paper's own trials leave only what storing them rounded, which no
@@ -41,7 +40,7 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
     Identification is kinematic (position rows fixed, :mod:`workbench.plant.identification`) whenever the data's
     roles pair positions with velocities, and its report checks ``horizon_s`` seconds ahead. A plant that fails its
     physical check is held at its physics where the held-out data agree and refused (a ``ModelError`` in one line)
-    where they contradict it; ``free`` takes the least-squares plant as fitted.
+    where they contradict it; ``as-fitted`` takes the least-squares plant as fitted.
     """
     if choice not in PLANT_CHOICES:
         raise DataError(f"unknown plant choice {choice!r}; known: {', '.join(PLANT_CHOICES)}")
@@ -63,9 +62,9 @@ def choose_plant(ds: DemonstrationSet, choice: str = "auto", horizon_s: float = 
             )
         return planar_quadrotor(dt=ds.dt)
     plant = LinearSystem.identify(ds, u_min=paper.u_min if layout else None, u_max=paper.u_max if layout else None,
-                                  structure="auto", horizon_s=horizon_s, hold=choice != "free")
+                                  structure="auto", horizon_s=horizon_s, hold=choice != "as-fitted")
     if plant.identification is not None and plant.identification.contradiction:
-        raise ModelError(plant.identification.contradiction)
+        raise PlantRefused(plant.identification.contradiction, plant.identification)
     if why and plant.identification is not None:  # the report says why these data did not get the paper's plant
         return dataclasses.replace(plant, identification=dataclasses.replace(plant.identification, why=why))
     return plant

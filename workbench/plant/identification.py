@@ -28,7 +28,7 @@ entry held at what physics says it is (``A[xdot, phi] = g·dt``, where the roles
 held-out segments' one-step states of those rows worse than the free fit, judged by the Diebold–Mariano comparison of
 the two forecasts' squared errors with a Newey–West interval (:data:`PHYSICS_CI`): then the data contradict the physics
 and the report carries one line saying so (``contradiction``), which :func:`workbench.plant.choice.choose_plant`
-raises (``--plant free`` takes the free fit as it is). A held plant says so in the report's ``fixed`` lines.
+raises (``--plant as-fitted`` takes the free fit as it is). A held plant says so in the report's ``fixed`` lines.
 
 One plant per kind of stick: demonstrations of different plant groups (:mod:`workbench.data.plant_groups`: a lean
 angle in STABILIZE, a velocity in LOITER) are never pooled into one (A, B); identification refuses them, naming the
@@ -117,6 +117,8 @@ class IdentificationReport:
     contradiction: str = ""
     #: why ``--plant auto`` identified data in the paper's layout and step (workbench.plant.choice.paper_reproduces)
     why: str = ""
+    #: each state's standard deviation in the data (the scale the scores divide by; ``None``: 1)
+    state_scale: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for name in ("one_step_rmse", "one_step_rmse_persistence", "horizon_rmse", "horizon_rmse_persistence"):
@@ -132,6 +134,13 @@ class IdentificationReport:
         """The failed physical checks, each naming its state pair, its ratio to g·dt and the likely cause;
         ``""`` where every check passes (a fit that fails on such a plant fails for this first)."""
         return "; ".join(_disagreement(c) for c in self.checks if not c.within())
+
+    @property
+    def held(self) -> tuple[str, ...]:
+        """The ``fixed`` lines of the entries held at their physics because the free fit failed their check (the
+        kinematic rows' lines, fixed in every kinematic plant, left out); ``()`` for a plant taken as fitted."""
+        failed = [c.name for c in self.free_checks if not c.within()]
+        return tuple(f for f in self.fixed if any(f.startswith(f"{name} = ") for name in failed))
 
     @property
     def horizon_s(self) -> float:
@@ -151,10 +160,10 @@ class IdentificationReport:
         lines += [f"  fixed: {f}" for f in self.fixed]
         lines += [f"  not the paper's plant: {self.why}"] if self.why else []
         # said in words, never "nan": persistence has a score wherever a held-out piece lasts the horizon
-        horizon = (f"plant {self.horizon_score:.3g}, persistence {self.horizon_score_persistence:.3g}"
+        horizon = (f"plant {_score_text(self.horizon_score)}, persistence {self.horizon_score_persistence:.3g}"
                    if np.isfinite(self.horizon_score_persistence) else "not scored: no held-out piece lasts that long")
         lines.append(
-            f"  normalized held-out RMSE, one step: plant {self.one_step_score:.3g}, persistence "
+            f"  normalized held-out RMSE, one step: plant {_score_text(self.one_step_score)}, persistence "
             f"{self.one_step_score_persistence:.3g}; {self.horizon_s:g} s ({self.n_steps} steps): {horizon}"
         )
         width = max(len(s) for s in self.state_names)
@@ -163,7 +172,8 @@ class IdentificationReport:
         for i, s in enumerate(self.state_names):
             cells = (self.one_step_rmse[i], self.one_step_rmse_persistence[i], self.horizon_rmse[i],
                      self.horizon_rmse_persistence[i])
-            lines.append(f"  {s:<{width}}  " + "  ".join(f"{_rmse_cell(v):>9}" for v in cells))
+            scale = 1.0 if self.state_scale is None else float(self.state_scale[i])
+            lines.append(f"  {s:<{width}}  " + "  ".join(f"{_rmse_cell(v, scale):>9}" for v in cells))
         if self.n_integrators:
             lines.append(f"  absolute position in the other rows: max |A[i, position]| = {self.position_pull:.3g} "
                          "(0 in free-flight physics; a pull the data ascribe to the plant)")
@@ -181,12 +191,24 @@ class IdentificationReport:
         return "\n".join(lines)
 
 
-def _rmse_cell(v: float) -> str:
-    """An RMSE in the report's table: ``—`` where not scored; 0 where it is rounding (a row the physics fixes
-    exactly, such as the position's, leaves 1e-17 of floating-point error)."""
+def _score_text(v: float) -> str:
+    """A normalized score, ``diverges`` where a held-out rollout overflowed."""
+    return "diverges" if np.isinf(v) else f"{v:.3g}"
+
+
+#: An RMSE below this fraction of its state's standard deviation is floating-point rounding, not a prediction error.
+ROUNDING = 1e-12
+
+
+def _rmse_cell(v: float, scale: float = 1.0) -> str:
+    """An RMSE in the report's table: ``—`` where not scored, ``diverges`` where the rollout overflowed; 0 where it
+    is rounding, below :data:`ROUNDING` of the state's scale ``scale`` (a row the physics fixes exactly, such as the
+    position's, leaves 1e-17 of floating-point error; a state measured in small units is not rounding at 1e-13)."""
+    if np.isinf(v):
+        return "diverges"
     if not np.isfinite(v):
         return "—"
-    return "0" if abs(v) < 1e-12 else f"{v:.4g}"
+    return "0" if abs(v) < ROUNDING * scale else f"{v:.4g}"
 
 
 # ----------------------------------------------------------------------------------------------- structure
@@ -337,7 +359,11 @@ def _errors(A: np.ndarray, B: np.ndarray, x: np.ndarray, u: np.ndarray, h: int) 
 
 def _rms(errors: list[np.ndarray], n: int) -> np.ndarray:
     e = np.concatenate(errors) if errors else np.empty((0, n))
-    return np.sqrt(np.mean(e**2, axis=0)) if len(e) else np.full(n, np.nan)
+    if not len(e):
+        return np.full(n, np.nan)  # not scored
+    with np.errstate(over="ignore", invalid="ignore"):
+        rms = np.sqrt(np.mean(e**2, axis=0))
+    return np.where(np.isfinite(rms), rms, np.inf)  # scored, and a rollout overflowed (inf − inf is nan): diverges
 
 
 def _score(rmse: np.ndarray, sigma: np.ndarray) -> float:
@@ -370,7 +396,7 @@ def identify_plant(
     hold : bool
         Where the fit fails a physical check, identify it again with the failing entries held at their physics and
         take that plant unless the held-out data contradict it (the module docstring); ``False``: the free fit as it
-        is (``--plant free``).
+        is (``--plant as-fitted``).
 
     Raises
     ------
@@ -423,8 +449,8 @@ def identify_plant(
     ratios = "; ".join(f"{c.name} is {c.ratio:.2g} × {c.note.split(':')[0]}" for c in failed)
     contradiction = (f"the identified plant is not physics: {ratios}, and held at its physics it predicts the held-out "
                      f"{what} worse ({verdict.describe(what)}): the recorded data contradict the physics, so no pilot "
-                     f"model on this plant describes the vehicle; {_cause(failed[0])} (`--plant free` takes the plant "
-                     "as fitted)")
+                     f"model on this plant describes the vehicle; {_cause(failed[0])} (`--plant as-fitted` takes the "
+                     "plant as fitted)")
     return (*free[:3], dataclasses.replace(free[3], contradiction=contradiction))
 
 
@@ -443,12 +469,33 @@ class _Comparison:
         """The held plant predicts worse beyond the interval (its lower bound above 0); no interval is no verdict."""
         return bool(np.isfinite(self.lo) and self.lo > 0.0)
 
+    @property
+    def relative(self) -> tuple[float, float, float]:
+        """The held plant's mean squared error relative to the free fit's, ``100 (MSE_held − MSE_free) / MSE_free``
+        (%), with the interval of the difference on the same scale (the free fit's MSE taken as known)."""
+        scale = 100.0 / self.mean_free if self.mean_free > 0 else float("nan")
+        return ((self.mean_held - self.mean_free) * scale, self.lo * scale, self.hi * scale)
+
     def describe(self, what: str) -> str:
+        """The comparison in one clause: both RMSEs, the relative and absolute difference in mean squared error with
+        their interval; in words where there is nothing (no held-out sample) or too little (one) to compare by."""
+        if self.n == 0:
+            return f"no held-out samples of {what} to compare the held and the free plant by"
         rms = f"held-out one-step RMSE of {what} {np.sqrt(self.mean_held):.3g} held, {np.sqrt(self.mean_free):.3g} free"
+        if self.n < 2:
+            return f"{rms} (too few held-out samples to compare: {self.n})"
         if not np.isfinite(self.lo):
-            return f"{rms} (no held-out samples to compare them by)"
-        return (f"{rms}; mean squared difference {self.mean_held - self.mean_free:.3g} [{self.lo:.3g}, {self.hi:.3g}] "
-                f"({PHYSICS_CI:g} % HAC interval over {self.n} held-out samples)")
+            return f"{rms} (not compared: a held-out prediction diverges)"
+        rel, lo, hi = self.relative
+        relative = (f"held {_percent(rel)} % MSE [{_percent(lo)} %, {_percent(hi)} %]; " if np.isfinite(rel)
+                    else "")  # a free fit that predicts exactly has no scale for a relative difference
+        return (f"{rms}; {relative}mean squared difference {self.mean_held - self.mean_free:.3g} [{self.lo:.3g}, "
+                f"{self.hi:.3g}] ({PHYSICS_CI:g} % HAC interval over {self.n} held-out samples)")
+
+
+def _percent(v: float) -> str:
+    """A signed percentage in three figures, whole numbers from 1000 on (never ``+1.39e+04``)."""
+    return f"{v:+.3g}" if abs(v) < 1000 else f"{v:+.0f}"
 
 
 def _held_vs_free(held: np.ndarray, free: np.ndarray) -> _Comparison:
@@ -544,6 +591,7 @@ def _estimate(demos: DemonstrationSet, layout: _Layout, Z: np.ndarray, Xn: np.nd
         horizon_score=scores["h"], horizon_score_persistence=scores["h_p"], spectral_radius=rho,
         spectral_radius_beyond_integrators=rho_free, n_integrators=n_int, condition_number=cond, fixed=fixed,
         checks=checks, warnings=tuple(warns), position_pull=pull, plant_group=group, responses=responses,
+        state_scale=sigma,
     )
     one_step = np.concatenate(errs["one"]) if errs["one"] else np.empty((0, n))
     return A, B, residual, report, one_step

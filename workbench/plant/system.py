@@ -188,7 +188,11 @@ class LinearSystem:
         roles are identified as before. The RMS one-step residual on all data is ``fit_residual``; the held-out
         check (leave-one-segment-out, ``horizon_s`` seconds ahead, against persistence), ρ(A), conditioning,
         physical checks and a one-line warning are in ``identification``
-        (:class:`~workbench.plant.identification.IdentificationReport`).
+        (:class:`~workbench.plant.identification.IdentificationReport`). With ``hold`` (the default) a plant that
+        fails a physical check is identified again with the failing entries held at their physics (``A[xdot, φ] =
+        g·dt``) and taken unless the held-out segments show it worse (95 % HAC interval; the report's ``fixed:``
+        lines), else the report carries the ``contradiction``; ``hold=False`` keeps the least-squares fit as it is
+        (``--plant as-fitted``).
 
         Raises
         ------

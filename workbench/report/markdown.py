@@ -459,6 +459,24 @@ def _predict(model: Any, demo: Demonstration, n_steps: int, samples: int, seed: 
     return model.predict(demo.x[0], n_steps, **kwargs)
 
 
+def _held_plant_notes(result: StudyResult) -> list[str]:
+    """Where the study's plant was held at its physics (the identification report's ``fixed:`` lines of held entries,
+    :attr:`~workbench.plant.identification.IdentificationReport.held`): the line itself for one plant; for the folds'
+    plants of leave-one-segment-out, each held entry with the number of folds that held it (the comparisons, one per
+    fold, are in ``workbench evaluate``'s output)."""
+    plants = list(result.plants.values()) if result.plants else [result.plant]
+    held = [getattr(getattr(p, "identification", None), "held", ()) for p in plants]
+    if len(plants) == 1:
+        return [f"plant fixed: {line}" for line in held[0]]
+    entries: dict[str, int] = {}
+    for lines in held:
+        for line in lines:  # "A[xdot, phi] = 0.9807 (g·dt; the free fit's …" → "A[xdot, phi] = 0.9807 (g·dt"
+            key = line.split(";")[0].split(" — ")[0]
+            entries[key] = entries.get(key, 0) + 1
+    return [f"plant fixed: {key.rstrip(')')}) in {k} of the {len(plants)} folds' plants (the free fit failing its "
+            "physics check; held where the held-out segments do not show it worse)" for key, k in entries.items()]
+
+
 def write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, title: str = "Workbench report",
                        vector: bool = True) -> Path:
     """``out_dir/report.md`` with figures under ``out_dir/figures`` (PNG, and SVG and PDF unless not ``vector``)."""
@@ -478,6 +496,7 @@ def _write_study_report(result: StudyResult, out_dir: str | os.PathLike, *, titl
     ]
     if getattr(result, "trials", ""):  # which of a collected session's trials were used, and what was left out
         notes.insert(0, result.trials)
+    notes += _held_plant_notes(result)
     cov = None
     if result.coverage is not None:
         cov = result.coverage.copy()

@@ -18,7 +18,7 @@ import numpy as np
 from workbench.data.demonstrations import DemonstrationSet
 from workbench.errors import DataError
 from workbench.study.method_level import MIN_SPLITS
-from workbench.study.paired import ALL_LABELS
+from workbench.study.paired import ALL_LABELS, min_units
 
 __all__ = ["TIME_SPLIT_PIECES", "split_in_time", "LeftOutFold", "still_test_trial", "too_few_folds"]
 
@@ -135,20 +135,27 @@ class LeftOutFold:
                 + "; ".join(f"fold {f.index} (testing {f.trial}): {f.reason}" for f in left_out))
 
 
-def too_few_folds(left_out: Sequence[LeftOutFold], test: Mapping[str, DemonstrationSet]) -> list[str]:
-    """Per strategy that lost folds, where fewer than :data:`~workbench.study.method_level.MIN_SPLITS` remain
-    scored: the methods are not compared there (the corrected resampled t has ``J − 1`` degrees of freedom, so one
-    fold gives no interval), said in words where a difference would stand."""
+def too_few_folds(left_out: Sequence[LeftOutFold], test: Mapping[str, DemonstrationSet],
+                  ci: float = 95.0) -> list[str]:
+    """Per strategy that lost folds, where fewer remain scored than the methods' difference needs for its interval
+    (:func:`~workbench.study.method_level.corrected_t`'s floor: :data:`~workbench.study.method_level.MIN_SPLITS`
+    and :func:`~workbench.study.paired.min_units` of ``ci``, 6 at 95 %), said in words where a difference would
+    stand: from fewer than ``MIN_SPLITS`` the methods are not compared, from fewer than ``min_units`` the difference
+    has its mean but no interval."""
+    need = max(MIN_SPLITS, min_units(ci))
     out = []
     for label in dict.fromkeys(f.label for f in left_out):
         scored_folds = len(test.get(label, ()))
-        if scored_folds >= MIN_SPLITS:
+        if scored_folds >= need:
             continue
         total = scored_folds + sum(f.label == label for f in left_out)
         where = f"On {label}, " if label not in ("", "None", ALL_LABELS) else ""
-        if scored_folds:
+        if scored_folds >= MIN_SPLITS:
+            what = (f"only {scored_folds} of the {total} folds were scored: the methods' difference has its mean but "
+                    f"no interval (an interval at {ci:g} % needs at least {need} scored folds).")
+        elif scored_folds:
             what = (f"only {scored_folds} of the {total} folds was scored: the methods are not compared (a "
-                    f"difference needs at least {MIN_SPLITS} scored folds for its interval); the errors above are that "
+                    f"difference needs at least {need} scored folds for its interval); the errors above are that "
                     "fold's test trial alone, without an interval.")
         else:
             what = f"none of the {total} folds was scored: nothing is compared."
