@@ -33,6 +33,7 @@ from adapters.mapping import (
     Channel,
     ChannelMapping,
     FlagRule,
+    LandingRule,
     Selector,
     load_mapping,
     shipped_mappings,
@@ -310,6 +311,7 @@ def draft_mapping(streams: Streams, name: str | None = None) -> Draft:
         undecided.append("armed: no armed flag found (a DataFlash log's arming is an EV event, not a held flag); "
                          "disarmed spans are not dropped")
         lines.append("# armed: no armed flag found in this log")
+    lines += _landing_lines(seg.landing, streams, template.state_names)
     lines += _reference_lines(template, streams, chosen)
     for u in undecided:
         lines.insert(3, _comment(f"undecided: {u}"))
@@ -416,6 +418,21 @@ def _reference_lines(template: ChannelMapping, streams: Streams, chosen: dict[st
            if gps is None else f"{estimate} must follow {gps} (the shipped {template.name!r} checks the same)")
     return ["", f"# the GPS's own velocity: {why}", "[reference]",
             *(f"{k} = {_toml_value(v)}" for k, v in table.items())]
+
+
+def _landing_lines(rule: LandingRule | None, streams: Streams, states: tuple[str, ...]) -> list[str]:
+    """The template's touchdown rule where the log has its source: without it a draft keeps the ground time the
+    template drops (the ArduCopter logs' LAND_COMPLETE events), and importing with the draft gave other segments
+    than the shipped mapping."""
+    if rule is None:
+        return []
+    if rule.flag is None:
+        return [f"landing = {_toml_value({'state': rule.state, 'below': rule.below})}"] if rule.state in states else []
+    for src in rule.flag.selector.sources:
+        one = replace(rule.flag, selector=replace(rule.flag.selector, source=src, alternatives=()))
+        if _has(one.selector, streams):
+            return [f"landing = {_toml_value(_flag_toml(one))}"]
+    return ["# landing: none of the template's touchdown sources is in this log; ground time is kept"]
 
 
 def _armed_rule(rule: FlagRule | None, streams: Streams) -> dict[str, object] | None:

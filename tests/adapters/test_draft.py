@@ -110,3 +110,25 @@ def test_the_draft_names_sticks_by_role_through_the_log_s_rc_map(tmp_path):
     path = tmp_path / "drafted.toml"
     path.write_text(draft.toml)
     assert "u1 (roll) = RCIN.C2 (RCMAP_ROLL = 2)" in adapters.load(log, path)[0].meta["sticks"]
+
+
+def test_the_draft_keeps_the_template_s_touchdown_rule(tmp_path):
+    # erle_pxf_copter_6-11-2014_GPS_issues1.BIN: the draft had no [segment] landing, so importing with it kept the
+    # ground time the shipped ardupilot_manual drops (7 demonstrations, 745 samples, against 6 and 602)
+    streams, options = dataflash_write.example_streams("old", "copter", seconds=30.0, seed=3)
+    ev = streams["EV"]
+    t0 = float(ev["t"].iloc[0])
+    # take-off (NOT_LANDED) 2 s into the first armed span, touchdown (LAND_COMPLETE) 10 s later, inside kept modes
+    extra = pd.DataFrame({"t": [t0 + 2.0, t0 + 12.0], "Id": np.array([28, 18], ev["Id"].dtype)})
+    streams["EV"] = pd.concat([ev, extra], ignore_index=True).sort_values("t", kind="stable", ignore_index=True)
+    log = dataflash_write.write(tmp_path / "landed.bin", streams, **options)
+    draft = draft_mapping(adapters.read(log), name="drafted")
+    shipped = adapters.load_mapping("ardupilot_manual").for_format("dataflash").segment.landing.flag
+    landing = tomllib.loads(draft.toml)["segment"]["landing"]
+    assert landing["source"] == shipped.selector.source
+    assert (landing["on"], landing["off"]) == (list(shipped.on), list(shipped.off))
+    path = tmp_path / "drafted.toml"
+    path.write_text(draft.toml)
+    ours, theirs = adapters.load(log, path), adapters.load(log, "ardupilot_manual")
+    spans = [(d.t[0], d.t[-1]) for d in theirs]
+    assert [(d.t[0], d.t[-1]) for d in ours] == spans and len(spans) > 0
