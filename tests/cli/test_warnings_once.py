@@ -89,3 +89,22 @@ def test_the_readme_flights_identify_fit_warns_once_and_only_of_what_failed(exte
             assert float(error) > float(bound)
         for value in re.findall(r"λmin\(M\) = (\S+) < 1", line):
             assert float(value) < 1
+
+
+def test_the_closing_count_names_each_repeated_warning(capsys):
+    """A fit of several plant groups warned "fitting on 2 distinct demonstration(s)" for its first group and then
+    only "… and 84 more of the warnings above": which warning recurred, and how often, is said."""
+    shown = cli_main._Warnings()
+    causes = {"HumanBehaviorModel.fit: fitting on 2 distinct demonstration(s)": 3,
+              "inverse LQR: the second stage failed with every solver": 5}
+    for cause, n in causes.items():
+        for k in range(n):
+            shown.show(f"{cause}; detail {k}", UserWarning, __file__, 1)
+    shown.show("a warning seen once", UserWarning, __file__, 1)
+    shown.close()
+    last = capsys.readouterr().err.splitlines()[-1]
+    assert f"{sum(causes.values()) - len(causes)} more" in last
+    for cause, n in causes.items():
+        assert f"{n - 1} × {cause}" in last
+    assert "seen once" not in last
+    warnings.resetwarnings()
