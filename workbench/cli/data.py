@@ -88,8 +88,9 @@ def cmd_inspect(ctx: Context) -> int:
     table = Table("stream", "messages", "mean rate [Hz]", "from [s]", "to [s]", "fields")
     for st in summary.streams:
         fields = ", ".join(st.fields[:8]) + (f", … (+{len(st.fields) - 8})" if len(st.fields) > 8 else "")
-        table.add_row(st.name, str(st.count), f"{st.rate_hz:.3g}", f"{st.t_start - t0:.2f}", f"{st.t_end - t0:.2f}",
-                      fields)
+        # no span, no rate: 395 untimed PARM messages at one stamp read "0 Hz", as if the stream were silent
+        rate = f"{st.rate_hz:.3g}" if st.count > 1 and st.t_end > st.t_start else "—"
+        table.add_row(st.name, str(st.count), rate, f"{st.t_start - t0:.2f}", f"{st.t_end - t0:.2f}", fields)
     ctx.say(table)
     if summary.modes:
         ctx.say(f"flight modes{f' ({summary.vehicle})' if summary.vehicle else ''}: " + "; ".join(

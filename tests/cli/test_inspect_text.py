@@ -1,0 +1,29 @@
+"""``workbench inspect``'s table and mode spans say only what the log's stamps support, and agree with themselves."""
+
+from __future__ import annotations
+
+from workbench.cli import app as cli_main
+
+
+def _rows(text: str) -> list[list[str]]:
+    return [[c.strip() for c in ln.split("│")[1:-1]] for ln in text.splitlines()
+            if ln.startswith("│") and ln.split("│")[1].strip()]
+
+
+def test_a_stream_without_a_time_span_has_no_rate(tmp_path, capsys, monkeypatch):
+    """An old DataFlash log's PARM messages carry no time stamp: 395 of them at one instant read "0 Hz" (erle
+    10-11-2014_105.BIN), as if the stream had been silent; a rate needs two stamps apart."""
+    from adapters.formats import dataflash_write
+
+    streams, options = dataflash_write.example_streams("old", "copter", seconds=30.0, seed=3)
+    log = dataflash_write.write(tmp_path / "old.bin", streams, **options)
+    monkeypatch.setenv("COLUMNS", "200")
+    assert cli_main.main(["inspect", str(log)]) == 0
+    rows = {r[0]: r for r in _rows(capsys.readouterr().out)}
+    spanless = [r for r in rows.values() if r[3] == r[4]]
+    assert spanless, rows  # the untimed streams
+    for name, count, rate, start, end, _ in rows.values():
+        if start == end:
+            assert rate == "—", (name, rate)
+        else:
+            assert float(rate) > 0 and int(count) > 1
