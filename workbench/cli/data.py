@@ -93,9 +93,10 @@ def cmd_inspect(ctx: Context) -> int:
         table.add_row(st.name, str(st.count), rate, f"{st.t_start - t0:.2f}", f"{st.t_end - t0:.2f}", fields)
     ctx.say(table)
     if summary.modes:
+        # the duration from the endpoints as shown: 85.04–95.64 s read "85.0–95.6 s (10.7 s)", which disagrees
+        spans = [(m.mode, round(m.start - t0, 1), round(min(m.end, summary.t_end) - t0, 1)) for m in summary.modes]
         ctx.say(f"flight modes{f' ({summary.vehicle})' if summary.vehicle else ''}: " + "; ".join(
-            f"{m.mode} {m.start - t0:.1f}–{min(m.end, summary.t_end) - t0:.1f} s "
-            f"({min(m.end, summary.t_end) - m.start:.1f} s)" for m in summary.modes))
+            f"{mode} {a:.1f}–{b:.1f} s ({b - a:.1f} s)" for mode, a, b in spans))
     if summary.armed_text:  # the armed spans, or "never armed" when the log says so
         ctx.say(summary.armed_text)
     if summary.skipped:
