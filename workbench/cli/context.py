@@ -27,11 +27,23 @@ from workbench.errors import UsageError
 __all__ = ["Context", "PIPE_WIDTH", "EXIT_ERROR", "EXIT_USAGE", "EXIT_INTERNAL", "narrowed_tables", "abbreviate",
            "fewer_digits", "fewer_digits_row", "shorter_words"]
 
-#: The width of output that goes to a pipe or a file (no terminal to ask; COLUMNS overrides it).
+#: The width of output that goes to a pipe or a file when no terminal is there to ask (COLUMNS overrides it).
 PIPE_WIDTH = 100
 EXIT_ERROR = 1
 EXIT_USAGE = 2  # argparse's status for bad arguments; a UsageError gets it too
 EXIT_INTERNAL = 3
+
+
+def pipe_width() -> int:
+    """The width of output that goes to a pipe or a file: the terminal's where standard error is one, as it is
+    under ``workbench inspect LOG | less`` (in an 80-column pane that drew a 100-column table, every row wrapped in
+    two), else :data:`PIPE_WIDTH`. Standard input is not asked: a test run from a terminal would then depend on it."""
+    try:
+        if os.isatty(2):
+            return max(40, os.get_terminal_size(2).columns)
+    except (OSError, ValueError):  # a closed or odd descriptor says nothing about a terminal
+        pass
+    return PIPE_WIDTH
 
 
 class Context:
@@ -48,7 +60,7 @@ class Context:
         self.out = Console(highlight=False, quiet=self.quiet, stderr=data_out)
         if not self.out.is_terminal and "COLUMNS" not in os.environ:
             # piped or captured: lines a pager or an editor shows whole (the full tables are in files)
-            self.out = Console(highlight=False, quiet=self.quiet, width=PIPE_WIDTH, stderr=data_out)
+            self.out = Console(highlight=False, quiet=self.quiet, width=pipe_width(), stderr=data_out)
         self.err = Console(stderr=True, highlight=False)
 
     def read(self, inputs: Inputs, *, select: bool = True) -> Read:
@@ -86,7 +98,7 @@ class Context:
     def say(self, *parts: Any, markup: bool = False) -> None:
         """Print: on a terminal, words wrapped at its width (never a line broken mid-word or running past it); to
         a pipe or a file, each message on one line, so a command or a path in it can be copied (a table is still
-        sized to :data:`PIPE_WIDTH`)."""
+        sized by :func:`pipe_width`)."""
         if self.out.is_terminal:
             self.out.print(*parts, markup=markup, overflow="fold")
         elif all(isinstance(p, str) for p in parts):  # an overflow mode would crop what soft wrapping leaves long
