@@ -197,3 +197,17 @@ def test_a_table_of_weight_ratios_keeps_a_line_per_row_at_80_columns():
     assert "not identifiable: at least 8.16, no upper bound" in wide
     assert shorter_words("no difference shown (reduction +26 %, 95 % interval [-10 %, +61 %] contains 0)") == (
         "not shown (reduction +26 % [-10 %, +61 %])")
+
+
+def test_a_title_wider_than_its_table_is_said_whole_above_it():
+    """rich wraps a table's title at the table's width: evaluate at 80 columns printed "held-out error predicting
+    the pilot's input (RMS over inputs, mean [95" over "%])" (GPS_issues1.BIN)."""
+    title = "held-out error predicting the pilot's input (RMS over inputs, mean [95 %])"
+    header = ["label", "method", "one step ahead", "over the horizon"]
+    rows = [["all", "proposed", "0.463 [0.31, 0.62]", "0.501 [0.094, 0.91]"]]
+    text = _printed(header, rows, 80, title)
+    assert any(title == line.strip() for line in text.splitlines()), text
+    assert "0.463 [0.31, 0.62]" in text and all(len(line) <= 80 for line in text.splitlines())
+    # a title the table is wide enough for stays its title, centred over it
+    short = _printed(header, rows, 80, "input error")
+    assert "input error" in short.splitlines()[0] and short.splitlines()[0].startswith(" ")

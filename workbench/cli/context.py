@@ -132,7 +132,12 @@ class Context:
         # numbers beside it); the first of equals (the least narrowed)
         fitting = [(n, k, t) for k, t in enumerate(narrowed_tables(header, cells, title)) if (n := _fits(t, width))]
         if fitting:
-            self.say(min(fitting, key=lambda f: (f[0], f[1]))[2])
+            chosen = min(fitting, key=lambda f: (f[0], f[1]))[2]
+            if title and _drawn_width(chosen, width) < len(title):
+                # rich wraps a title at its table's width: "… (RMS over inputs, mean [95" over "%])"; said above it
+                chosen.title = None
+                self.say(f"[bold]{escape(title)}[/bold]", markup=True)
+            self.say(chosen)
             return
         groups = list(dict.fromkeys(r[0] for r in cells))
         if len(header) > 2 and len(groups) < len(cells):
@@ -316,6 +321,21 @@ def shorter_words(cell: str) -> str:
 def _tight(cell: str) -> str:
     """``"83 % [31, 100]"`` → ``"83% [31,100]"``: the spaces a number's unit and an interval's comma can lose."""
     return re.sub(r"(\d) %", r"\1%", cell.replace(", ", ",")) if any(ch.isdigit() for ch in cell) else cell
+
+
+def _drawn_width(table: Any, width: int) -> int:
+    """The columns ``table`` takes when rich draws it within ``width``, its title left out."""
+    from rich.cells import cell_len
+    from rich.console import Console
+
+    title, table.title = table.title, None
+    try:
+        with open(os.devnull, "w") as sink:
+            console = Console(width=width, record=True, file=sink)
+            console.print(table)
+            return max((cell_len(line.rstrip()) for line in console.export_text().splitlines()), default=0)
+    finally:
+        table.title = title
 
 
 def _fits(table: Any, width: int) -> int:
