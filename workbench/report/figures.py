@@ -77,6 +77,25 @@ def _plane(roles: Roles | None, state_names: Sequence[str]) -> tuple[int, int] |
     return (roles or Roles()).resolve(state_names).plane
 
 
+def _broken(text: str, width_in: float) -> str:
+    """``text`` in lines that fit ``width_in`` inches of an axes title, broken after a space, ``_`` or ``-`` (a
+    trial id has no spaces); a title's mean character is taken as 0.62 of its font size (DejaVu Sans runs ~0.55)."""
+    import re
+
+    from matplotlib import rcParams
+    from matplotlib.font_manager import FontProperties
+
+    size = FontProperties(size=rcParams["axes.titlesize"]).get_size_in_points()
+    n = max(8, int(width_in * 72 / (0.62 * size)))
+    lines, line = [], ""
+    for piece in re.findall(r"[^ _-]*[ _-]?", text):
+        if line and len(line) + len(piece.rstrip()) > n:
+            lines.append(line.rstrip())
+            line = ""
+        line += piece
+    return "\n".join([*lines, line.rstrip()] if line.strip() else lines)
+
+
 def _titled(name: str, roles: Roles | None) -> str:
     """``name [unit]`` with the roles' unit, the bare name where none is declared."""
     unit = roles.unit(name) if roles else ""
@@ -336,7 +355,9 @@ def fig_predictions(
                 ax.plot(tp[: len(x)], x[:, j], lw=1.4, ms=3.5, markevery=every, label=title, **st)
         if ax_path is not None:
             ax_path.plot(demo.x[0, plane[0]], demo.x[0, plane[1]], "o", color=rec, ms=5)
-            ax_path.set_title(f"{demo.id} ({label}): path, {n_steps * dt:.1f} s")
+            # a flight's segment id ("erle_pxf_copter_10-11-2014_105-000 (all): path, 3.0 s") on one line ran
+            # past the figure's left edge, its first letters cut off: broken at its separators to the panel's width
+            ax_path.set_title(_broken(f"{demo.id} ({label}): path, {n_steps * dt:.1f} s", DOUBLE_WIDTH / n_cols))
             ax_path.set_xlabel(_titled(state_names[plane[0]], roles))
             ax_path.set_ylabel(_titled(state_names[plane[1]], roles))
         for ax, j in zip(ax_time, shown, strict=True):
