@@ -64,6 +64,7 @@ def test_the_headline_names_the_no_pilot_model_it_compares_with(scored):
     assert len(test) < min_units()
     for line in _headlines_name_their_no_pilot_model(table):
         assert f"no interval ({len(test)} test trials; {min_units()} needed)" in line and "[" not in line
+        assert line.count(f"{len(test)} test trials") == 1, line  # the report said it twice
     table_lines = input_lines(input_scores(table), "LQR")
     assert table_lines[0].startswith("| method | input error one step ahead")
     assert any(r.startswith("| no pilot (input held) |") for r in table_lines)
@@ -77,3 +78,4 @@ def test_with_enough_test_trials_the_headline_gives_the_interval():
     for line in _headlines_name_their_no_pilot_model(compare(models, test, n_steps=20, starts=10)):
         assert "no interval" not in line and ("lower by" in line or "higher by" in line
                                               or "no difference shown" in line) and " %]" in line
+        assert line.endswith(f"({len(test)} test trials)")  # with an interval the count is still said

@@ -130,10 +130,13 @@ def input_headlines(table: pd.DataFrame, method: str = "proposed", seed: int = 0
     out = []
     for label, metric, ref, d in input_differences(table, method, seed):
         where = f"{label}: " if label not in ("", "all") else ""
+        said = d.sentence()
+        # the count once: "no interval (4 test trials; 6 needed) (4 test trials)" said it twice
+        count = "" if f"{d.n_trials} test trials" in said else f" ({d.n_trials} test trials)"
         out.append(f"{where}predicting the pilot's own input {_WORDS[metric]}, {title(method)} "
                    f"{fmt(d.mean_method)} against {fmt(d.mean_baseline)} for the better model with no pilot, "
                    f"the plant with the input {'held' if ref == 'no_pilot_held' else 'at zero'}: "
-                   f"{d.sentence()} ({d.n_trials} test trials)")
+                   f"{said}{count}")
     return out
 
 
