@@ -53,3 +53,15 @@ def test_enough_distinct_demonstrations_fit_silently(trials):
         # two distinct trials plus a copy are still two
     with pytest.warns(DegenerateFitWarning, match="2 distinct"):
         IOCOnlyModel(planar_quadrotor(dt=trials.dt)).fit(trials[:2] + _copies(trials, 1))
+
+
+def test_persistence_learns_nothing_and_does_not_warn_of_what_it_lacks(trials):
+    """evaluate on a two-segment LOITER group warned "PersistenceModel.fit: fitting on 1 distinct demonstration(s);
+    the gain, the variability's mixture and its noise rest on fewer than 3 trials": persistence has none of them."""
+    from workbench.models.baselines import PersistenceModel
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DegenerateFitWarning)
+        PersistenceModel(planar_quadrotor(dt=trials.dt)).fit(trials[:1])
+    with pytest.warns(DegenerateFitWarning, match="1 distinct demonstration"):  # a model that learns still warns
+        IOCOnlyModel(planar_quadrotor(dt=trials.dt)).fit(trials[:1])

@@ -293,7 +293,7 @@ class PersistenceModel(BehaviorModel):
 
     def fit(self, demos: DemonstrationSet | Iterable[Demonstration]) -> PersistenceModel:
         """Nothing to learn but the shapes and the default target; checks the demonstrations like the others."""
-        ds = demo_list(demos, self.plant, "PersistenceModel.fit")
+        ds = demo_list(demos, self.plant, "PersistenceModel.fit", learns=False)
         m = self.plant.m
         self._fit_common(ds, getattr(demos, "labels", []))
         self.noise_scale_, self.noise_rho_ = np.ones(m), np.zeros(m)

@@ -50,8 +50,12 @@ ENVELOPE_MARGIN = 0.1
 MIN_DISTINCT_DEMOS = 3
 
 
-def demo_list(demos: DemonstrationSet | Iterable[Demonstration], plant: LinearSystem, where: str) -> list:
-    """The demonstrations as a list, checked against the plant (shapes, sampling step)."""
+def demo_list(demos: DemonstrationSet | Iterable[Demonstration], plant: LinearSystem, where: str, *,
+              learns: bool = True) -> list:
+    """The demonstrations as a list, checked against the plant (shapes, sampling step); fewer than
+    :data:`MIN_DISTINCT_DEMOS` distinct ones warned of where the model ``learns`` something from them (persistence
+    learns nothing, and its warning that "the gain, the variability's mixture and its noise" rest on too few trials
+    named parameters it does not have)."""
     if isinstance(demos, Demonstration):
         demos = [demos]
     try:
@@ -79,7 +83,7 @@ def demo_list(demos: DemonstrationSet | Iterable[Demonstration], plant: LinearSy
         )
     # identical copies (a file loaded twice, one trial repeated) add samples but no information
     distinct = len({(d.x.tobytes(), d.u.tobytes()) for d in out})
-    if distinct < MIN_DISTINCT_DEMOS:
+    if learns and distinct < MIN_DISTINCT_DEMOS:
         copies = f" ({len(out)} given; identical copies count once)" if distinct < len(out) else ""
         warnings.warn(
             f"{where}: fitting on {distinct} distinct demonstration(s){copies}; the gain, the variability's "
