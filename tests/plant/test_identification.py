@@ -317,3 +317,15 @@ def test_an_rmse_cell_says_diverges_and_its_rounding_floor_is_the_states_own_sca
     rms = _rms([overflowed], 2)
     assert np.isinf(rms[0]) and rms[1] == pytest.approx(np.sqrt(2.5))  # scored and overflowed: diverges, not "—"
     assert np.isnan(_rms([], 2)).all()  # not scored
+
+
+def test_the_report_of_a_plant_from_one_segment_says_segment():
+    """A PX4 log with one POSCTL segment printed "1008 sample pairs, 1 segments"."""
+    from workbench.plant.system import LinearSystem
+    from workbench.sim.modes import ModeVehicle, fly
+
+    one = fly(ModeVehicle(), "angle", seconds=20.0, n=1, seed=0)
+    first = LinearSystem.identify(one).identification.describe().splitlines()[0]
+    assert f"sample pairs, {len(one)} segment;" in first, first
+    two = fly(ModeVehicle(), "angle", seconds=10.0, n=2, seed=0)
+    assert f"sample pairs, {len(two)} segments;" in LinearSystem.identify(two).identification.describe().splitlines()[0]

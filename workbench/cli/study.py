@@ -87,7 +87,8 @@ def _evaluate_group(ctx: Context, ds: Any, output: Path | None, *, source: Any, 
                   if checks else "each fold's plant is identified from its training segments only") + (
                   f"; {left} fold{'s' if left > 1 else ''} left out, no plant from {'their' if left > 1 else 'its'} "
                   "training segments (below)" if left else "")
-        print_plant(ctx, chosen_plant(ds, a.plant, a.horizon_s), f"(plant from all {len(ds)} segments; {spread})")
+        whole = "the one segment" if len(ds) == 1 else f"all {len(ds)} segments"
+        print_plant(ctx, chosen_plant(ds, a.plant, a.horizon_s), f"(plant from {whole}; {spread})")
     else:
         print_plant(ctx, result.plant, "(plant from the training trials)")
     _print_study(ctx, result)

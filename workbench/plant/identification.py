@@ -155,7 +155,7 @@ class IdentificationReport:
         group = f"plant group {self.plant_group}, " if self.plant_group else ""
         lines = [
             f"plant identification ({group}{self.structure}, dt {self.dt:g} s, {self.n_pairs} sample pairs, "
-            f"{self.n_segments} segments; held out: {self.validation})",
+            f"{self.n_segments} segment{'' if self.n_segments == 1 else 's'}; held out: {self.validation})",
         ]
         lines += [f"  fixed: {f}" for f in self.fixed]
         lines += [f"  not the paper's plant: {self.why}"] if self.why else []
