@@ -31,3 +31,17 @@ def test_one_segment_becomes_contiguous_pieces_longer_than_the_horizon():
 def test_a_segment_too_short_for_two_pieces_says_so():
     with pytest.raises(DataError, match="too short to split into two pieces longer than the 3 s horizon"):
         split_in_time(_one(50), 30)
+
+
+def test_evaluate_of_one_segment_names_pieces_not_segments(tmp_path, capsys):
+    """flug LetzteTestsGerolfing log_27 (one POSCTL segment) printed "one manual segment (50.4 s): evaluated by a
+    time split inside it, 3 contiguous pieces …" and then "leave-one-segment-out over 3 segments"."""
+    from workbench.cli.app import main
+    from workbench.sim.modes import ModeVehicle, fly
+
+    one = fly(ModeVehicle(), "angle", seconds=30.0, n=1, seed=0)
+    path = one.save(tmp_path / "one.parquet")
+    assert main(["evaluate", str(path), "--samples", "0", "--no-efficiency", "--n-components", "1"]) == 0
+    out = capsys.readouterr().out
+    assert f"{TIME_SPLIT_PIECES} contiguous pieces" in out
+    assert f"over {TIME_SPLIT_PIECES} segments" not in out and "leave-one-segment-out over" not in out

@@ -108,7 +108,8 @@ def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0,
     from workbench.study import pipeline as study
 
     a = ctx.args
-    if len(ds) == 1:  # one manual segment: leave-one-segment-out would have nothing to train on
+    pieces = len(ds) == 1
+    if pieces:  # one manual segment: leave-one-segment-out would have nothing to train on
         duration = float(ds[0].t[-1] - ds[0].t[0])
         ds = study.split_in_time(ds, steps_of(a.horizon_s, ds.dt))
         ctx.say(f"one manual segment ({duration:.1f} s): evaluated by a time split inside it, {len(ds)} contiguous "
@@ -129,8 +130,10 @@ def _holdout_study(ctx: Context, ds: Any, *, bootstrap: int = 0, power: int = 0,
     # a split study's strategies are independent tasks (run side by side on local processes, as in report and demo)
     with ctx.executor(local_tasks=0 if loso else len(ds.labels)) as ex:
         if loso:
-            ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted on "
-                    "the others)")
+            # the pieces of one segment are said above; "over 3 segments" after "one manual segment" contradicted it
+            if not pieces:
+                ctx.say(f"leave-one-segment-out over {len(ds)} segments (each scored by models and a plant fitted "
+                        "on the others)")
             result = study.run_loso(
                 ds, study_plant(a.plant, a.horizon_s), n_steps=steps_of(a.horizon_s, ds.dt),
                 n_components=a.n_components,
