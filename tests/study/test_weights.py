@@ -641,3 +641,32 @@ def test_a_gain_entrys_standard_error_is_the_jackknifes_where_every_leave_one_ou
     assert nu == pytest.approx(effective_dof(dev[:, None])) and nu < n - 1  # unequal trials: fewer than n − 1
     se, nu = entry_error(SimpleNamespace(**{**vars(g), "K_loo": None}), 0, 0)
     assert se == pytest.approx(g.K_samples[:, 0, 0].std(ddof=1) * np.sqrt(n / (n - 1))) and nu == n - 1
+
+
+def test_a_cause_that_stops_both_gains_is_said_once(monkeypatch):
+    """GPS_issues1's fit printed "weight ratios: none (weight ratios with gain 'iv' failed: <cause>. weight ratios
+    with gain 'direct' failed: <the same cause>.)"; each cause is said once, naming the gains it stopped."""
+    from types import SimpleNamespace
+
+    from workbench.errors import ModelError
+    from workbench.method import resampling
+    from workbench.models import fitting
+    from workbench.study import power
+    from workbench.study.weights import ratio_bootstrap
+
+    cause = "the 100 resampled gains do not vary in every direction of the part's 8 gain entries"
+    monkeypatch.setattr(power, "as_fitted", lambda model, demos: demos)
+    monkeypatch.setattr(power, "regulated_plant", lambda model: None)
+    monkeypatch.setattr(fitting, "timing_setting", lambda model: None)
+
+    def fails(*args, method, **kwargs):
+        raise ModelError(cause if method == "iv" or same else f"{cause} ({method})")
+
+    monkeypatch.setattr(resampling, "bootstrap_gain", fails)
+    model = SimpleNamespace(gain_method_="direct")
+    same = True
+    ratios, _, note = ratio_bootstrap(model, [], n_boot=3)
+    assert ratios is None and note.count(cause) == 1 and "'iv' and 'direct'" in note, note
+    same = False  # two causes: each said, with its gain
+    _, _, note = ratio_bootstrap(model, [], n_boot=3)
+    assert note.count(cause) == 2 and "gain 'iv' failed" in note and "gain 'direct' failed" in note, note

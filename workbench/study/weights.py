@@ -692,16 +692,23 @@ def ratio_bootstrap(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: int =
 
     shifted = as_fitted(model, demos)
     plant = regulated_plant(model)
-    note = ""
+    failed: dict[str, list[str]] = {}  # cause → the gains it stopped, each cause said once
     timing = timing_setting(model)  # the gain the model has: on the seen state where it has the pilot's timing
     for gain in dict.fromkeys((ratio_gain, _used_gain(model))):
         try:
             gains = bootstrap_gain(shifted, plant, n_boot=n_boot, method=gain, seed=seed, progress=progress,
                                    timing=timing)
-            return weight_ratios(gains, plant, ci), gain, note.strip()
+            return weight_ratios(gains, plant, ci), gain, _failures(failed)
         except ModelError as exc:
-            note += f"weight ratios with gain {gain!r} failed: {exc}. "
-    return None, ratio_gain, note.strip()
+            failed.setdefault(str(exc).rstrip(". "), []).append(gain)
+    return None, ratio_gain, _failures(failed)
+
+
+def _failures(failed: dict[str, list[str]]) -> str:
+    """``"weight ratios with gain 'iv' and 'direct' failed: <cause>."``: one sentence per cause (the fit of a single
+    demonstration printed the same long cause twice, once per gain)."""
+    return " ".join(f"weight ratios with gain {' and '.join(repr(g) for g in gains)} failed: {cause}."
+                    for cause, gains in failed.items())
 
 
 def objective_intervals(model, demos, n_boot: int = OBJECTIVE_RESAMPLES, seed: int = 0, ratio_gain: str = "iv",
