@@ -55,10 +55,12 @@ def heldout_scores(table: pd.DataFrame, metrics: Sequence[str] = SCORE_METRICS, 
         if len(x) > 1:
             half = float(scipy.stats.t.ppf(0.5 + ci / 200.0, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)))
             lo, hi = mean - half, mean + half
-            if metric.startswith("rmse_"):
-                lo = max(lo, 0.0)  # an error is never negative
-            else:
+            if metric.startswith("band_"):
                 lo, hi = max(lo, 0.0), min(hi, 1.0)  # a share
+            else:
+                # an error (an RMSE, the input error of input_prediction) is never negative, and has no upper
+                # bound: taken for a share, the input error's interval was cut at 1 ("0.3 [0, 1]")
+                lo = max(lo, 0.0)
         else:
             lo = hi = float("nan")
         rows.append((str(label), str(method), str(metric), mean, lo, hi, len(x), ""))
