@@ -329,3 +329,22 @@ def test_the_report_of_a_plant_from_one_segment_says_segment():
     assert f"sample pairs, {len(one)} segment;" in first, first
     two = fly(ModeVehicle(), "angle", seconds=10.0, n=2, seed=0)
     assert f"sample pairs, {len(two)} segments;" in LinearSystem.identify(two).identification.describe().splitlines()[0]
+
+
+def test_a_fixed_row_s_one_step_score_is_said_to_be_persistence_s_rule():
+    """The plant's table printed "y 0.02324 0.02324" (plant, persistence) without a word: a fixed kinematic row
+    moves the position on at its recorded velocity, which is persistence's rule, so the two agree by construction."""
+    from workbench.plant.system import LinearSystem
+    from workbench.sim.modes import ModeVehicle, fly
+
+    report = LinearSystem.identify(fly(ModeVehicle(), "angle", seconds=10.0, n=3, seed=0)).identification
+    fixed = {f.split("[", 1)[0] for f in report.fixed}
+    assert fixed  # the test is about a plant with fixed rows
+    rows = {ln.split()[0]: ln for ln in report.describe().splitlines()[1:] if ln.startswith("  ") and
+            ln.split()[0] in report.state_names}
+    for name, line in rows.items():
+        assert line.endswith(" *") == (name in fixed), line
+        if name in fixed:
+            assert any(ln.startswith("  * a fixed row") for ln in report.describe().splitlines())
+            i = report.state_names.index(name)
+            assert report.one_step_rmse[i] == report.one_step_rmse_persistence[i]

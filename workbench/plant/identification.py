@@ -169,11 +169,18 @@ class IdentificationReport:
         width = max(len(s) for s in self.state_names)
         lines.append(f"  {'state':<{width}}  {'1-step':>9}  {'persist.':>9}  {f'{self.horizon_s:g} s':>9}  "
                      f"{'persist.':>9}")
+        # a fixed row moves a position on at its recorded velocity, persistence's own rule: at one step the two
+        # columns agree by construction ("y 0.02324 0.02324" read as a coincidence)
+        fixed = {f.split("[", 1)[0] for f in self.fixed}
         for i, s in enumerate(self.state_names):
             cells = (self.one_step_rmse[i], self.one_step_rmse_persistence[i], self.horizon_rmse[i],
                      self.horizon_rmse_persistence[i])
             scale = 1.0 if self.state_scale is None else float(self.state_scale[i])
-            lines.append(f"  {s:<{width}}  " + "  ".join(f"{_rmse_cell(v, scale):>9}" for v in cells))
+            lines.append(f"  {s:<{width}}  " + "  ".join(f"{_rmse_cell(v, scale):>9}" for v in cells)
+                         + (" *" if s in fixed else ""))
+        if fixed & set(self.state_names):
+            lines.append("  * a fixed row: moved on at its recorded velocity, persistence's rule, so one step ahead "
+                         "the two agree")
         if self.n_integrators:
             lines.append(f"  absolute position in the other rows: max |A[i, position]| = {self.position_pull:.3g} "
                          "(0 in free-flight physics; a pull the data ascribe to the plant)")
