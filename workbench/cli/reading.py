@@ -156,7 +156,7 @@ def chosen_plant(ds: Any, choice: str = "auto", horizon_s: float = HORIZON_S, wh
     except PlantRefused as exc:
         if exc.report is not None:
             print(exc.report.describe(warning=False), file=sys.stderr)
-        raise ModelError(f"{where}{exc}") from None
+        raise PlantRefused(f"{where}{exc}") from None  # still a refusal: a caller may name the file and group
 
 
 def study_plant(choice: str, horizon_s: float = HORIZON_S) -> Callable[[Any], Any]:

@@ -8,6 +8,7 @@ import math
 import os
 import re
 import shutil
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -19,11 +20,11 @@ from workbench.cli.context import Context
 from workbench.cli.inputs import resolve
 from workbench.cli.options import SAMPLE_LOGS, rollout_budget, steps_of
 from workbench.cli.reading import chosen_plant, per_group_path, plant_group_parts, require_proposed, study_plant
-from workbench.cli.stdio import refuse_stdio
+from workbench.cli.stdio import STDIN_NAME, is_stdio, refuse_stdio
 from workbench.cli.writing import print_plant, viewer_command
 from workbench.data.plant_groups import describe_groups
 from workbench.data.selection import recorded_test_ids, unrecorded_split
-from workbench.errors import DataError, ModelError, UsageError
+from workbench.errors import DataError, ModelError, PlantRefused, UsageError
 
 __all__ = []
 
@@ -52,9 +53,19 @@ def cmd_evaluate(ctx: Context) -> int:
 
 def for_each_group(ctx: Context, parts: list[tuple[str | None, Any]], done: str, run: Callable[[Any, Any], Any]) -> int:
     """Run a command's work on each plant group's demonstrations (its own plant and models), each under a heading
-    that names the group; with several groups, one group's failure is a warning and the others still run."""
+    that names the group; with several groups, one group's failure is a warning and the others still run. A plant
+    refused for its physics names the sources and the group in its one line, as ``fit``'s does."""
     if len(parts) == 1:
-        run(*parts[0])
+        group, part = parts[0]
+        try:
+            run(group, part)
+        except PlantRefused as exc:
+            if exc.report is not None:  # the report the one line refers to, before it (chosen_plant printed its own)
+                print(exc.report.describe(warning=False), file=sys.stderr)
+            given = getattr(ctx.args, "demos", None) or []
+            sources = ", ".join(STDIN_NAME if is_stdio(g) else str(g) for g in given)
+            where = (f"{sources}: " if sources else "") + (f"plant group {group}: " if group else "")
+            raise ModelError(f"{where}not {done}: {exc}") from None
         return 0
     failed = []
     for group, part in parts:
