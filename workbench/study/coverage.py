@@ -31,6 +31,7 @@ from workbench.study.method_level import (
     SplitPlan,
     _refit,
     corrected_t,
+    decision_inputs,
     decision_variance,
     method_differences,
     split_scores,
@@ -198,21 +199,16 @@ def joint_decision_variance(gaps: Sequence[float], fell_back: Sequence[bool],
     """
     from workbench.models.autoconfig import FALLBACK_SE
 
-    c = np.asarray(gaps, dtype=float)
-    fb = np.asarray(fell_back, dtype=bool)
-    z = np.asarray(margins, dtype=float)
-    ok = np.isfinite(z)
-    if not ok.any():
+    z, by_check, kept = decision_inputs(gaps, fell_back, margins)
+    if z.size == 0:
         return float("nan"), 0.0
-    # fell back although the margin cleared the threshold: the fitted check decided, at the threshold
-    zs = np.where(fb[ok] & (z[ok] > FALLBACK_SE), FALLBACK_SE, z[ok])
+    zs = np.where(by_check, FALLBACK_SE, z)  # the fitted check decided: at the threshold
     J = zs.size
     split_var = min(float(zs.var(ddof=1)), 1.0) if J > 1 else 0.0  # one margin: no split part to see
     tau2 = 2.0 * (1.0 - split_var) + split_var / J
     total = tau2 + split_var
     a = (float(zs.mean()) - FALLBACK_SE) / np.sqrt(total)
     p_keep = float(sps.norm.cdf(a))
-    kept = c[ok & ~fb & np.isfinite(c)]
     if kept.size == 0:
         return 1.0 - p_keep, 0.0
     rho = tau2 / total

@@ -66,8 +66,8 @@ from workbench.study.paired import (
 )
 
 __all__ = ["FLOOR_METHODS", "MethodDifference", "SplitPlan", "SplitJobs", "LeftOutSplit", "corrected_t",
-           "decision_variance", "fallback_margin", "split_scores", "split_tasks", "method_differences",
-           "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS", "FALLBACK_METHOD"]
+           "decision_inputs", "decision_variance", "fallback_margin", "split_scores", "split_tasks",
+           "method_differences", "fold_differences", "SPLITS", "LOO_FOLDS", "MIN_SPLITS", "FALLBACK_METHOD"]
 
 #: What the proposed model must beat before its predictions mean anything: the plain task objective and no operator
 #: (the baselines the verdicts judge it against, and the only ones the splits refit).
@@ -312,20 +312,30 @@ def decision_variance(gaps: Sequence[float], fell_back: Sequence[bool],
     """
     from workbench.models.autoconfig import FALLBACK_SE
 
+    z, by_check, kept = decision_inputs(gaps, fell_back, margins)
+    if z.size == 0:
+        return float("nan"), 0.0
+    pi = sps.norm.cdf((FALLBACK_SE - z) / np.sqrt(2.0))
+    pi = np.where(by_check, 0.5, pi)  # the fitted check decided, its margin unmeasured
+    p_flip = float(pi.mean())
+    if kept.size == 0:
+        return p_flip, 0.0
+    return p_flip, float(p_flip * (1.0 - p_flip) * kept.mean() ** 2)
+
+
+def decision_inputs(gaps: Sequence[float], fell_back: Sequence[bool],
+                    margins: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What a decision term reads of the splits (:func:`decision_variance` and the constructions the coverage study
+    weighs): the measured cross-validation margins, whether each of those splits fell back although its margin
+    cleared the threshold (the fitted check decided), and the gaps of the splits with a margin that kept the
+    variability model."""
+    from workbench.models.autoconfig import FALLBACK_SE
+
     c = np.asarray(gaps, dtype=float)
     fb = np.asarray(fell_back, dtype=bool)
     z = np.asarray(margins, dtype=float)
     ok = np.isfinite(z)
-    if not ok.any():
-        return float("nan"), 0.0
-    pi = sps.norm.cdf((FALLBACK_SE - z[ok]) / np.sqrt(2.0))
-    # fell back although the margin cleared the threshold: the fitted check decided, its margin unmeasured
-    pi = np.where(fb[ok] & (z[ok] > FALLBACK_SE), 0.5, pi)
-    p_flip = float(pi.mean())
-    kept = c[ok & ~fb & np.isfinite(c)]
-    if kept.size == 0:
-        return p_flip, 0.0
-    return p_flip, float(p_flip * (1.0 - p_flip) * kept.mean() ** 2)
+    return z[ok], fb[ok] & (z[ok] > FALLBACK_SE), c[ok & ~fb & np.isfinite(c)]
 
 
 def _units(ds: DemonstrationSet) -> tuple[list[list[int]], str]:
