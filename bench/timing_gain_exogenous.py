@@ -23,7 +23,6 @@ and least squares of the residual on ``W`` the others.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -33,12 +32,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from timing_gain_variants import pilot  # noqa: E402
-from timing_structure_cv import CoupledPilot, choose, own_columns, share  # noqa: E402
+from timing_structure_cv import choose, flown, own_columns, share  # noqa: E402
 
-from workbench.method.timing import TimingData, _joint  # noqa: E402
+from workbench.method.timing import _joint  # noqa: E402
 from workbench.plant.system import planar_quadrotor  # noqa: E402
-from workbench.sim.operators import lqr_operator_demos  # noqa: E402
 
 
 def exogenous_cross(metric, d: float, tau: float, own: list[list[int]]) -> np.ndarray:
@@ -88,12 +85,7 @@ def main() -> None:
     first, count = args.seeds
     rows = []
     for k in range(count):
-        op = pilot(first + k, args.plain)
-        if args.coupling:
-            op = CoupledPilot(**dataclasses.asdict(op), coupling=args.coupling)
-        demos = list(lqr_operator_demos(op, args.trials, seed=first + k, plant=quad))
-        K = op.gain(quad)
-        data = TimingData(demos, quad.n, quad.m, quad.dt, "auto")
+        K, data = flown(first + k, args, quad)
         _, _, _, Kcv, full = choose(data, quad)
         Kx = exogenous_cross(data.metric(), full.delay_s, full.lag_s, own)
         nK = np.linalg.norm(K)

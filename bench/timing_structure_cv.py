@@ -121,17 +121,22 @@ def share(flags: np.ndarray) -> str:
     return f"{int(flags.sum())}/{len(flags)} ({ci.low:.2f}-{ci.high:.2f})"
 
 
+def flown(seed: int, args, quad) -> tuple[np.ndarray, TimingData]:
+    """Seed ``seed``'s pilot (timed or ``--plain``, ``--coupling`` added) flown for ``--trials`` trials: its true
+    gain and the timing fit's data."""
+    op = pilot(seed, args.plain)
+    if args.coupling:
+        op = CoupledPilot(**dataclasses.asdict(op), coupling=args.coupling)
+    demos = list(lqr_operator_demos(op, args.trials, seed=seed, plant=quad))
+    return op.gain(quad), TimingData(demos, quad.n, quad.m, quad.dt, "auto")
+
+
 def pilots(args) -> None:
     quad = planar_quadrotor()
     first, count = args.seeds
     rows = []
     for k in range(count):
-        op = pilot(first + k, args.plain)
-        if args.coupling:
-            op = CoupledPilot(**dataclasses.asdict(op), coupling=args.coupling)
-        demos = list(lqr_operator_demos(op, args.trials, seed=first + k, plant=quad))
-        K = op.gain(quad)
-        data = TimingData(demos, quad.n, quad.m, quad.dt, "auto")
+        K, data = flown(first + k, args, quad)
         pick, s_full, s_own, Kc, full = choose(data, quad)
         r_full = float(np.linalg.norm(full.K - K) / np.linalg.norm(K))
         r = float(np.linalg.norm(Kc - K) / np.linalg.norm(K))
