@@ -18,7 +18,7 @@ from adapters.events import flag_value_name
 from adapters.gps import unfixed
 from adapters.mapping import ChannelMapping
 from adapters.pipeline import mapped_channels, rule_spans, segment_spans
-from adapters.segment import EVERYTHING, Span, intersect
+from adapters.segment import EVERYTHING, Span, intersect, minus
 from adapters.sticks import resolve as resolve_sticks
 from adapters.streams import Streams
 from workbench.palette import LANE_GROUND as GROUND
@@ -28,18 +28,6 @@ __all__ = ["GROUND", "NO_FIX", "explain"]
 
 # the lane states of their own (GROUND: armed time a landed rule says the vehicle spent on the ground; NO_FIX) are
 # named where their colours are (workbench.palette), once
-
-
-def _minus(lo: float, hi: float, parts: list[tuple[float, float]]) -> list[tuple[float, float]]:
-    """``[lo, hi]`` without the sorted intervals ``parts``."""
-    out, at = [], lo
-    for a, b in sorted(parts):
-        if a > at:
-            out.append((at, min(a, hi)))
-        at = max(at, b)
-    if at < hi:
-        out.append((at, hi))
-    return [(a, b) for a, b in out if b > a]
 
 
 def _landed(streams: Streams, m: ChannelMapping) -> tuple[list[Span] | tuple[Span, ...], str]:
@@ -104,13 +92,13 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
         armed_parts = intersect([Span(a, b)], armed)
         out += [
             (x, y, "disarmed", f"{mode} while disarmed".strip())
-            for x, y in _minus(a, b, [(p.start, p.end) for p in armed_parts])
+            for x, y in minus(a, b, [(p.start, p.end) for p in armed_parts])
         ]
         parts = intersect(armed_parts, flying)
         out += [
             (x, y, GROUND, f"{mode} on the ground ({landed})".strip())
             for p in armed_parts
-            for x, y in _minus(p.start, p.end, [(q.start, q.end) for q in parts])
+            for x, y in minus(p.start, p.end, [(q.start, q.end) for q in parts])
         ]
         for part in parts:
             covered = []
@@ -126,7 +114,7 @@ def explain(streams: Streams, mapping: ChannelMapping) -> list[tuple[float, floa
                                "the import drops it".strip()))
                 else:
                     out.append((x, y, "kept", mode or "kept"))
-            for x, y in _minus(part.start, part.end, covered):
+            for x, y in minus(part.start, part.end, covered):
                 if y - x <= m.dt:
                     continue
                 absent = [s.name for s in series if s.t[0] >= y or s.t[-1] <= x]

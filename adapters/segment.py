@@ -27,7 +27,7 @@ import numpy as np
 from adapters.modes import mode_name
 
 __all__ = ["Span", "demo_spans", "flag_spans", "mode_spans", "intersect", "split_at_landing", "EVERYTHING",
-           "suspect_stretches", "cut"]
+           "suspect_stretches", "cut", "minus"]
 
 
 @dataclass(frozen=True)
@@ -138,21 +138,29 @@ def suspect_stretches(t: np.ndarray, values: np.ndarray, suspect: np.ndarray) ->
     return out
 
 
+def minus(lo: float, hi: float, parts: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """``[lo, hi]`` without the intervals ``parts`` (in any order, overlapping or not)."""
+    out, at = [], lo
+    for a, b in sorted(parts):
+        if a > at:
+            out.append((at, min(a, hi)))
+        at = max(at, b)
+    if at < hi:
+        out.append((at, hi))
+    return [(a, b) for a, b in out if b > a]
+
+
 def cut(spans: list[Span], stretches: list[tuple[float, float, int]]) -> list[Span]:
     """``spans`` without the stretches ``[start, end)``: a span that starts inside one starts at its end, one that
     runs into one ends at its start (a span can be cut in two)."""
-    for a, b, _ in stretches:
-        out = []
-        for sp in spans:
-            if sp.end <= a or sp.start >= b:
-                out.append(sp)
-                continue
-            if sp.start < a:
-                out.append(Span(sp.start, a, dict(sp.meta)))
-            if sp.end > b:
-                out.append(Span(b, sp.end, dict(sp.meta)))
-        spans = out
-    return spans
+    holes = [(a, b) for a, b, _ in stretches]
+    out = []
+    for sp in spans:
+        if not any(a < sp.end and b > sp.start for a, b in holes):
+            out.append(sp)  # untouched
+        else:
+            out += [Span(x, y, dict(sp.meta)) for x, y in minus(sp.start, sp.end, holes)]
+    return out
 
 
 def split_at_landing(y: np.ndarray, below: float) -> tuple[list[tuple[int, int]], int]:
